@@ -1,0 +1,1 @@
+"""oos_drake.multibody."""
