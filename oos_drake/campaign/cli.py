@@ -1,0 +1,144 @@
+"""``oos campaign run|resume|rerun|report``: Monte Carlo campaigns from the command line.
+
+Examples::
+
+    oos campaign run campaigns/demo.toml --out out/demo --workers 2
+    oos campaign run campaigns/demo.toml --out out/demo --scheduler local     # local Dask cluster
+    oos campaign resume out/demo                  # after a crash or kill -9
+    oos campaign rerun out/demo --case 17         # recompute run 17, compare with the record
+    oos campaign report out/demo                  # figures + tables in out/demo/report
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+
+def _add_executor_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="worker processes (default: CPU count; 1 runs in this process)",
+    )
+    parser.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run on Dask: a scheduler address (tcp://host:8786) or 'local' "
+        "for a local cluster of --workers processes",
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _print_summary(summary) -> None:
+    counts = ", ".join(f"{k}: {v}" for k, v in sorted(summary.status_counts.items()))
+    print(
+        f"campaign {summary.directory}: {summary.n_runs} runs ({summary.executed} run now, "
+        f"{summary.skipped} already done); status {counts}; {summary.n_pass} passed every "
+        f"requirement"
+    )
+    print(f"results: {Path(summary.directory) / 'runs.parquet'}")
+
+
+def _run(args: argparse.Namespace) -> int:
+    from oos_drake.campaign.runner import run_campaign
+    from oos_drake.campaign.spec import load_spec
+
+    out = args.out
+    if out is None:
+        out = Path("out") / "campaigns" / load_spec(args.spec).name
+    summary = run_campaign(
+        args.spec,
+        out,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=not args.no_progress,
+    )
+    _print_summary(summary)
+    return 0
+
+
+def _resume(args: argparse.Namespace) -> int:
+    from oos_drake.campaign.runner import resume_campaign
+
+    summary = resume_campaign(
+        args.directory,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=not args.no_progress,
+    )
+    _print_summary(summary)
+    return 0
+
+
+def _rerun(args: argparse.Namespace) -> int:
+    from oos_drake.campaign.runner import rerun_case
+
+    result = rerun_case(args.directory, args.case)
+    row = result.row.iloc[0]
+    columns = [
+        c
+        for c in result.row.columns
+        if "[" in c or c.startswith("pass") or c in ("run_id", "seed", "status", "error")
+    ]
+    with pd.option_context("display.max_rows", None, "display.float_format", "{:.10g}".format):
+        print(row[columns].to_string())
+    if result.identical is None:
+        print(f"run {args.case} has no recorded result yet")
+        return 0
+    if result.identical:
+        print(f"run {args.case}: metrics and status reproduced exactly")
+        return 0
+    print(f"run {args.case}: DIFFERS from the recorded result", file=sys.stderr)
+    return 1
+
+
+def _report(args: argparse.Namespace) -> int:
+    from oos_drake.campaign.report import write_report
+
+    report = write_report(args.directory, worst=args.worst)
+    print(report.text)
+    print(f"report: {report.directory}")
+    return 0
+
+
+def register(subparsers) -> None:
+    """Add ``oos campaign ...`` to the ``oos`` parser."""
+    campaign = subparsers.add_parser(
+        "campaign",
+        help="Monte Carlo campaigns (run, resume, rerun, report)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    commands = campaign.add_subparsers(dest="campaign_command", metavar="ACTION", required=True)
+
+    run = commands.add_parser("run", help="validate a spec and run the campaign")
+    run.add_argument("spec", help="campaign spec (TOML), e.g. campaigns/demo.toml")
+    run.add_argument(
+        "--out",
+        default=None,
+        help="campaign directory (default: out/campaigns/<name>); must not exist",
+    )
+    _add_executor_options(run)
+    run.set_defaults(func=_run)
+
+    resume = commands.add_parser("resume", help="finish an interrupted campaign")
+    resume.add_argument("directory", help="campaign directory")
+    _add_executor_options(resume)
+    resume.set_defaults(func=_resume)
+
+    rerun = commands.add_parser("rerun", help="recompute one run and compare with its record")
+    rerun.add_argument("directory", help="campaign directory")
+    rerun.add_argument("--case", type=int, required=True, help="run id")
+    rerun.set_defaults(func=_rerun)
+
+    report = commands.add_parser("report", help="figures and summary tables")
+    report.add_argument("directory", help="campaign directory")
+    report.add_argument("--worst", type=int, default=5, help="worst runs to plot (default 5)")
+    report.set_defaults(func=_report)

@@ -1,0 +1,238 @@
+"""Executors: where the runs of a campaign are computed.
+
+All executors call :func:`execute_case` on the workers and hand the results back to the driver
+process, which is the only writer of the campaign directory (no file races between workers).
+Each worker builds its simulator once from the picklable recipe (:func:`build_simulator` is cached
+per process) and reuses it for every case it receives.
+
+- :class:`InlineExecutor`: in the calling process (``--workers 1``).
+- :class:`ProcessPoolExecutor`: a local pool of ``spawn`` ed processes (the default for
+  ``--workers N > 1``; ``spawn`` rather than ``fork``: Drake's threads do not survive a fork).
+- :class:`DaskExecutor`: a Dask distributed cluster, either an existing scheduler
+  (``--scheduler tcp://host:8786``) or a local one (``--scheduler local``).
+
+At most ``2 * workers`` cases are in flight at once, so a killed campaign loses little work and
+the progress bar moves steadily.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import multiprocessing
+import time
+import traceback
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from typing import Protocol
+
+import pandas as pd
+
+from oos_drake.campaign.simulator import (
+    RunCase,
+    SimulationDiverged,
+    SimulatorRecipe,
+    build_simulator,
+)
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """What a worker sends back for one case.
+
+    Attributes
+    ----------
+    run_id : int
+        The case's run id.
+    status : str
+        ``"ok"``, ``"diverged"`` (the simulator raised SimulationDiverged) or ``"failed"`` (any
+        other exception).
+    error : str
+        ``"ExceptionType: message"`` for a run that did not finish, else ``""``.
+    metrics : dict
+        Metric name -> value (empty when the run did not finish).
+    timeseries : pandas.DataFrame or None
+        Logged signals.
+    wall_time : float
+        Wall-clock time of the run on its worker [s].
+    """
+
+    run_id: int
+    status: str
+    error: str
+    metrics: dict
+    timeseries: pd.DataFrame | None
+    wall_time: float
+
+
+def execute_case(recipe: SimulatorRecipe, case: RunCase) -> RunResult:
+    """Run one case on this process' simulator; never raises for a failing run."""
+    start = time.perf_counter()
+    try:
+        simulator = build_simulator(recipe)
+        output = simulator.run(case)
+        status, error = "ok", ""
+        metrics = {k: float(v) for k, v in output.metrics.items()}
+        timeseries = output.timeseries
+    except SimulationDiverged as exc:
+        status, error, metrics, timeseries = "diverged", f"SimulationDiverged: {exc}", {}, None
+    except Exception as exc:  # noqa: BLE001 - a failing run is data, not a crash
+        last = traceback.extract_tb(exc.__traceback__)[-1:]
+        where = f" ({last[0].filename.rsplit('/', 1)[-1]}:{last[0].lineno})" if last else ""
+        status, error = "failed", f"{type(exc).__name__}: {exc}{where}"
+        metrics, timeseries = {}, None
+    return RunResult(case.run_id, status, error, metrics, timeseries, time.perf_counter() - start)
+
+
+def _warm_up(recipe: SimulatorRecipe) -> None:
+    build_simulator(recipe)
+
+
+class Executor(Protocol):
+    """Runs cases and yields their results as they complete (in any order)."""
+
+    def run(self, recipe: SimulatorRecipe, cases: Iterable[RunCase]) -> Iterator[RunResult]: ...
+
+    def close(self) -> None: ...
+
+
+class InlineExecutor:
+    """Runs the cases one after the other in the calling process."""
+
+    workers = 1
+
+    def start(self, recipe: SimulatorRecipe) -> None:
+        _warm_up(recipe)
+
+    def run(self, recipe: SimulatorRecipe, cases: Iterable[RunCase]) -> Iterator[RunResult]:
+        for case in cases:
+            yield execute_case(recipe, case)
+
+    def close(self) -> None:
+        pass
+
+
+def _bounded(submit: Callable, wait_one: Callable, cases: Iterable[RunCase], limit: int):
+    """Keep at most ``limit`` futures in flight; yield results as they complete."""
+    pending = set()
+    iterator = iter(cases)
+    exhausted = False
+    while True:
+        while not exhausted and len(pending) < limit:
+            try:
+                pending.add(submit(next(iterator)))
+            except StopIteration:
+                exhausted = True
+        if not pending:
+            return
+        done, pending = wait_one(pending)
+        for future in done:
+            yield future.result()
+
+
+class ProcessPoolExecutor:
+    """A local pool of ``workers`` spawned processes, each building the simulator once.
+
+    Parameters
+    ----------
+    workers : int
+        Number of worker processes (>= 1).
+    """
+
+    def __init__(self, workers: int):
+        if workers < 1:
+            raise ValueError(f"--workers {workers}: need at least 1 worker")
+        self.workers = workers
+        self._pool: concurrent.futures.ProcessPoolExecutor | None = None
+
+    def start(self, recipe: SimulatorRecipe) -> None:
+        """Start the processes and build the simulator in each (before any timing)."""
+        if self._pool is None:
+            self._pool = concurrent.futures.ProcessPoolExecutor(
+                max_workers=self.workers,
+                mp_context=multiprocessing.get_context("spawn"),
+                initializer=_warm_up,
+                initargs=(recipe,),
+            )
+            # force every worker up now: one warm-up task per worker
+            list(self._pool.map(_warm_up, [recipe] * self.workers))
+
+    def run(self, recipe: SimulatorRecipe, cases: Iterable[RunCase]) -> Iterator[RunResult]:
+        self.start(recipe)
+        pool = self._pool
+
+        def wait_one(pending):
+            return concurrent.futures.wait(pending, return_when=concurrent.futures.FIRST_COMPLETED)
+
+        yield from _bounded(
+            lambda case: pool.submit(execute_case, recipe, case), wait_one, cases, 2 * self.workers
+        )
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+
+class DaskExecutor:
+    """Dask distributed: an existing scheduler, or a local cluster.
+
+    Parameters
+    ----------
+    address : str or None
+        Scheduler address (``tcp://host:8786``); ``None`` or ``"local"`` starts a LocalCluster.
+    workers : int
+        Workers of the local cluster (one thread each).
+    processes : bool
+        Local cluster with worker processes (True) or threads in this process (False).
+    """
+
+    def __init__(self, address: str | None = None, workers: int = 2, processes: bool = True):
+        from dask.distributed import Client, LocalCluster
+
+        self._cluster = None
+        if address in (None, "local"):
+            self._cluster = LocalCluster(
+                n_workers=workers, threads_per_worker=1, processes=processes, dashboard_address=None
+            )
+            self._client = Client(self._cluster)
+        else:
+            try:
+                self._client = Client(address, timeout="10s")
+            except OSError as exc:
+                raise ValueError(f"--scheduler {address}: cannot connect: {exc}") from exc
+        self.workers = max(1, sum(self._client.nthreads().values()))
+
+    def start(self, recipe: SimulatorRecipe) -> None:
+        self._client.run(_warm_up, recipe)
+
+    def run(self, recipe: SimulatorRecipe, cases: Iterable[RunCase]) -> Iterator[RunResult]:
+        from dask.distributed import wait
+
+        client = self._client
+
+        def submit(case):
+            return client.submit(execute_case, recipe, case, pure=False)
+
+        def wait_one(pending):
+            result = wait(list(pending), return_when="FIRST_COMPLETED")
+            return set(result.done), set(result.not_done)
+
+        yield from _bounded(submit, wait_one, cases, 2 * self.workers)
+
+    def close(self) -> None:
+        self._client.close()
+        if self._cluster is not None:
+            self._cluster.close()
+
+
+def make_executor(
+    workers: int, scheduler: str | None
+) -> InlineExecutor | ProcessPoolExecutor | DaskExecutor:
+    """Executor for the CLI options ``--workers N`` and ``--scheduler ADDRESS``."""
+    if workers < 1:
+        raise ValueError(f"--workers {workers}: need at least 1 worker")
+    if scheduler:
+        return DaskExecutor(scheduler, workers=workers)
+    if workers == 1:
+        return InlineExecutor()
+    return ProcessPoolExecutor(workers)

@@ -1,0 +1,379 @@
+"""Campaign report: summary tables (Parquet + printed pandas) and figures (PNG).
+
+Estimates use the run weights (1 for Monte Carlo and Latin hypercube; the likelihood ratios of the
+mu-guided sampler), so failure probabilities are unbiased for the spec's dispersions:
+
+.. math::
+
+    \\hat P_{fail} = \\frac{1}{N} \\sum_i w_i\\, 1[\\text{run } i \\text{ fails}],
+    \\qquad \\mathrm{se} = \\sqrt{\\mathrm{var}(w_i 1[\\cdot]) / N}
+
+A run fails when it did not finish (``failed``/``diverged``) or violates a requirement.
+
+Files written in ``DIR/report/``:
+
+- ``summary.parquet``: per metric: runs, weighted mean, min, quantiles, max, requirement,
+  violations, estimated violation probability and its standard error;
+- ``status.parquet``: runs per status; ``worst_runs.parquet``: the worst runs by requirement
+  margin; ``regions.parquet`` (mu-guided): runs, failures and estimate per proposal region;
+- ``metric_distributions.png``, ``worst_runs.png``, ``pass_fail_vs_parameters.png``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from oos_drake.campaign import store  # noqa: E402
+from oos_drake.campaign.distributions import Fixed  # noqa: E402
+from oos_drake.campaign.executors import execute_case  # noqa: E402
+from oos_drake.campaign.runner import (  # noqa: E402
+    case_from_plan_row,
+    load_campaign,
+    metric_column,
+)
+from oos_drake.campaign.samplers import NOMINAL_COMPONENT  # noqa: E402
+
+
+@dataclass(frozen=True)
+class CampaignReport:
+    """What ``write_report`` produced.
+
+    Attributes
+    ----------
+    directory : Path
+        ``DIR/report``.
+    text : str
+        The printed summary.
+    figures : tuple of Path
+        PNG files.
+    tables : dict
+        Name -> DataFrame (also written as ``<name>.parquet``).
+    """
+
+    directory: Path
+    text: str
+    figures: tuple[Path, ...]
+    tables: dict
+
+
+def weighted_probability(weights: np.ndarray, indicator: np.ndarray) -> tuple[float, float]:
+    """Importance-sampling estimate of ``P(indicator)`` and its standard error."""
+    values = np.asarray(weights, float) * np.asarray(indicator, float)
+    n = values.size
+    if n == 0:
+        return math.nan, math.nan
+    se = float(np.std(values, ddof=1) / math.sqrt(n)) if n > 1 else math.nan
+    return float(values.mean()), se
+
+
+def weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
+    """Quantile ``q`` of the weighted empirical distribution (NaNs dropped)."""
+    values, weights = np.asarray(values, float), np.asarray(weights, float)
+    keep = np.isfinite(values)
+    values, weights = values[keep], weights[keep]
+    if values.size == 0:
+        return math.nan
+    order = np.argsort(values)
+    cumulative = np.cumsum(weights[order])
+    index = np.searchsorted(cumulative, q * cumulative[-1])
+    return float(values[order][min(index, values.size - 1)])
+
+
+def requirement_ratio(spec, runs: pd.DataFrame) -> pd.Series:
+    """Worst ``metric / bound`` over the max-requirements per run (> 1: violated; NaN: no run)."""
+    ratios = []
+    for requirement in spec.requirements:
+        if requirement.max is not None and requirement.max > 0:
+            ratios.append(runs[metric_column(spec, requirement.metric)] / requirement.max)
+    if not ratios:
+        return pd.Series(np.nan, index=runs.index)
+    return pd.concat(ratios, axis=1).max(axis=1, skipna=False)
+
+
+def _summary_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
+    weights = runs["weight"].to_numpy()
+    rows = []
+    for metric in spec.metrics:
+        column = metric_column(spec, metric)
+        values = runs[column].to_numpy(float)
+        finite = np.isfinite(values)
+        requirement = next((r for r in spec.requirements if r.metric == metric), None)
+        row = {
+            "metric": column,
+            "runs": int(finite.sum()),
+            "mean (weighted)": float(
+                np.sum(weights[finite] * values[finite]) / np.sum(weights[finite])
+            )
+            if finite.any()
+            else math.nan,
+            "min": float(np.nanmin(values)) if finite.any() else math.nan,
+            "p50": weighted_quantile(values, weights, 0.50),
+            "p95": weighted_quantile(values, weights, 0.95),
+            "p99": weighted_quantile(values, weights, 0.99),
+            "max": float(np.nanmax(values)) if finite.any() else math.nan,
+            "requirement": requirement.label if requirement else "",
+        }
+        if requirement is not None:
+            violated = ~runs[requirement.column].to_numpy(bool)
+            p, se = weighted_probability(weights, violated)
+            row.update({"violations": int(violated.sum()), "P(violation)": p, "se": se})
+        rows.append(row)
+    failed = ~runs["pass"].to_numpy(bool)
+    p, se = weighted_probability(weights, failed)
+    rows.append(
+        {
+            "metric": "any (requirement or run failure)",
+            "runs": len(runs),
+            "requirement": "all",
+            "violations": int(failed.sum()),
+            "P(violation)": p,
+            "se": se,
+        }
+    )
+    return pd.DataFrame(rows)
+
+
+def _regions_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
+    rows = [
+        {
+            "region": NOMINAL_COMPONENT,
+            "configuration": "nominal dispersions",
+            "time [s]": math.nan,
+            "mu_upper": math.nan,
+        }
+    ]
+    rows += [
+        {
+            "region": r.region,
+            "configuration": r.configuration,
+            "time [s]": r.time,
+            "mu_upper": r.mu_upper,
+        }
+        for r in spec.regions
+    ]
+    table = pd.DataFrame(rows)
+    n = len(runs)
+    failed = ~runs["pass"]
+    grouped = runs.assign(failed=failed, wf=runs["weight"] * failed).groupby("region")
+    table["runs"] = table["region"].map(grouped.size()).fillna(0).astype(int)
+    table["failures"] = table["region"].map(grouped["failed"].sum()).fillna(0).astype(int)
+    table["P(fail) contribution"] = table["region"].map(grouped["wf"].sum() / n).fillna(0.0)
+    return table
+
+
+def _worst_runs(spec, runs: pd.DataFrame, count: int) -> pd.DataFrame:
+    ratio = requirement_ratio(spec, runs)
+    not_ok = runs["status"] != "ok"
+    key = np.where(not_ok, np.inf, ratio.fillna(-np.inf))
+    order = np.argsort(-key, kind="stable")[:count]
+    table = runs.iloc[order].copy()
+    table.insert(1, "requirement ratio [-]", ratio.iloc[order].to_numpy())
+    return table.reset_index(drop=True)
+
+
+def _plot_distributions(spec, runs: pd.DataFrame, path: Path) -> Path:
+    metrics = list(spec.metrics)
+    fig, axes = plt.subplots(1, len(metrics), figsize=(4.6 * len(metrics), 3.8), squeeze=False)
+    weights = runs["weight"].to_numpy()
+    for ax, metric in zip(axes[0], metrics, strict=True):
+        column = metric_column(spec, metric)
+        values = runs[column].to_numpy(float)
+        finite = np.isfinite(values)
+        ax.hist(
+            values[finite],
+            bins=30,
+            weights=weights[finite],
+            color="tab:blue",
+            alpha=0.75,
+            label="runs (weighted)" if spec.sampler.kind == "mu-guided" else "runs",
+        )
+        for requirement in spec.requirements:
+            if requirement.metric != metric:
+                continue
+            for bound in (requirement.max, requirement.min):
+                if bound is not None:
+                    ax.axvline(
+                        bound,
+                        color="tab:red",
+                        linestyle="--",
+                        label=f"requirement {requirement.label}",
+                    )
+        ax.set_xlabel(column)
+        ax.set_ylabel(
+            "number of runs" + (" (weighted)" if spec.sampler.kind == "mu-guided" else "")
+        )
+        ax.set_title(f"{metric}: {int(finite.sum())} finished runs")
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"Campaign {spec.name}: metric distributions against requirements")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _series_for(directory: Path, spec, plan: pd.DataFrame, run_id: int) -> pd.DataFrame | None:
+    path = store.timeseries_file(directory, run_id)
+    if path.is_file():
+        return pd.read_parquet(path)
+    # not retained: recompute it (runs are deterministic given their plan row)
+    row = plan[plan["run_id"] == run_id].iloc[0]
+    return execute_case(spec.simulator, case_from_plan_row(spec, row)).timeseries
+
+
+def _plot_worst(
+    directory: Path, spec, plan: pd.DataFrame, worst: pd.DataFrame, path: Path
+) -> Path | None:
+    series = {}
+    for run_id, status in zip(worst["run_id"], worst["status"], strict=True):
+        data = _series_for(directory, spec, plan, int(run_id))
+        if data is not None and len(data):
+            series[int(run_id)] = (status, data)
+    if not series:
+        return None
+    columns = [c for c in next(iter(series.values()))[1].columns if c not in ("run_id", "time [s]")]
+    fig, axes = plt.subplots(
+        len(columns), 1, figsize=(9, 2.3 * len(columns)), sharex=True, squeeze=False
+    )
+    bounds = {}
+    metric_signals = spec.info.metric_signals
+    for requirement in spec.requirements:
+        signal = metric_signals.get(requirement.metric)
+        if signal and requirement.max is not None:
+            bounds[f"{signal} [{spec.info.signal_units[signal]}]"] = requirement
+    for ax, column in zip(axes[:, 0], columns, strict=True):
+        for run_id, (status, data) in series.items():
+            if column in data.columns:
+                ax.plot(
+                    data["time [s]"],
+                    data[column],
+                    lw=1.0,
+                    label=f"run {run_id}" + ("" if status == "ok" else f" ({status})"),
+                )
+        if column in bounds:
+            requirement = bounds[column]
+            for sign in (1, -1):
+                ax.axhline(
+                    sign * requirement.max,
+                    color="tab:red",
+                    ls="--",
+                    lw=1,
+                    label=f"requirement {requirement.label}" if sign > 0 else None,
+                )
+        ax.set_ylabel(column)
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7, ncol=3, loc="upper right")
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(f"Campaign {spec.name}: time histories of the {len(series)} worst runs")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _plot_pass_fail(spec, runs: pd.DataFrame, path: Path) -> Path | None:
+    parameters = [
+        p
+        for p in spec.info.parameters
+        if p.name in spec.dispersions and not isinstance(spec.dispersions[p.name], Fixed)
+    ]
+    if not parameters:
+        return None
+    ratio = requirement_ratio(spec, runs)
+    columns = min(3, len(parameters))
+    rows = math.ceil(len(parameters) / columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(4.4 * columns, 3.3 * rows), squeeze=False)
+    ok = runs["status"] == "ok"
+    passed = runs["pass"].to_numpy(bool)
+    finite_ratio = ratio[ok & np.isfinite(ratio)]
+    top = float(finite_ratio.max()) * 1.15 if len(finite_ratio) else 2.0
+    for ax, parameter in zip(axes.flat, parameters, strict=False):
+        x = runs[parameter.column]
+        ax.scatter(x[ok & passed], ratio[ok & passed], s=10, c="tab:blue", label="pass")
+        ax.scatter(x[ok & ~passed], ratio[ok & ~passed], s=14, c="tab:red", label="fail")
+        if (~ok).any():
+            ax.scatter(
+                x[~ok],
+                np.full((~ok).sum(), top),
+                marker="x",
+                c="black",
+                label="diverged/failed (plotted at top)",
+            )
+        ax.axhline(1.0, color="tab:red", ls="--", lw=1)
+        ax.set_xlabel(parameter.column)
+        ax.set_ylabel("worst metric / requirement [-]")
+        if spec.dispersions[parameter.name].kind == "log-uniform":
+            ax.set_xscale("log")
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(parameters) :]:
+        ax.set_visible(False)
+    axes.flat[0].legend(fontsize=7)
+    fig.suptitle(
+        f"Campaign {spec.name}: pass/fail against each dispersed parameter "
+        "(ratio > 1 violates a requirement)"
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def write_report(directory: str | Path, worst: int = 5) -> CampaignReport:
+    """Write the tables and figures of a campaign directory into ``DIR/report``.
+
+    Parameters
+    ----------
+    directory : path
+        Campaign directory (finished or not: the finished runs are reported).
+    worst : int
+        Number of worst runs whose time histories are plotted.
+    """
+    directory = Path(directory)
+    spec, plan = load_campaign(directory)
+    runs = store.load_runs(directory)
+    if runs.empty:
+        raise ValueError(f"{directory}: no finished run to report")
+    out = directory / store.REPORT_DIR
+    out.mkdir(exist_ok=True)
+
+    summary = _summary_table(spec, runs)
+    status = runs["status"].value_counts().rename_axis("status").reset_index(name="runs")
+    worst_table = _worst_runs(spec, runs, worst)
+    tables = {"summary": summary, "status": status, "worst_runs": worst_table}
+    if spec.sampler.kind == "mu-guided":
+        tables["regions"] = _regions_table(spec, runs)
+    for name, table in tables.items():
+        store.atomic_write_parquet(table, out / f"{name}.parquet")
+
+    figures = [
+        _plot_distributions(spec, runs, out / "metric_distributions.png"),
+        _plot_worst(directory, spec, plan, worst_table, out / "worst_runs.png"),
+        _plot_pass_fail(spec, runs, out / "pass_fail_vs_parameters.png"),
+    ]
+    figures = tuple(f for f in figures if f is not None)
+
+    with pd.option_context(
+        "display.width", 160, "display.max_columns", 20, "display.float_format", "{:.4g}".format
+    ):
+        parts = [
+            f"campaign {spec.name}: {len(runs)}/{len(plan)} runs finished, sampler "
+            f"{spec.sampler.kind}",
+            summary.to_string(index=False),
+            status.to_string(index=False),
+        ]
+        if "regions" in tables:
+            parts.append("runs per region:\n" + tables["regions"].to_string(index=False))
+        show = ["run_id", "requirement ratio [-]", "status"] + [
+            metric_column(spec, m) for m in spec.metrics
+        ]
+        parts.append("worst runs:\n" + worst_table[show].to_string(index=False))
+    return CampaignReport(out, "\n\n".join(parts), figures, tables)

@@ -1,0 +1,281 @@
+"""Run, resume and rerun campaigns (the engine behind ``oos campaign run|resume|rerun``).
+
+``run_campaign`` validates the spec and builds the whole plan *before* it creates the campaign
+directory, so a bad spec writes nothing. It then writes the resolved spec and the plan, and runs
+the pending cases on an executor; the driver process records each result as soon as it arrives
+(time series first, then the run row, each written atomically; see :mod:`.store`). ``resume``
+reads the directory back and runs exactly the cases without a run row. ``rerun`` recomputes one
+case from its plan row: the simulator is deterministic given (values, seed, window), so the
+metrics are identical.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from tqdm import tqdm
+
+from oos_drake.campaign import store
+from oos_drake.campaign.executors import RunResult, execute_case, make_executor
+from oos_drake.campaign.samplers import make_plan, region_counts
+from oos_drake.campaign.simulator import MissionWindow, RunCase
+from oos_drake.campaign.spec import CampaignSpec, load_spec, spec_to_toml
+
+#: Columns that hold the outcome of a run (after the plan columns and the metrics).
+STATUS_COLUMNS = ("pass", "status", "error", "wall_time [s]")
+
+
+def metric_column(spec: CampaignSpec, metric: str) -> str:
+    """``"ape [rad]"``: metric column name with its unit."""
+    return f"{metric} [{spec.info.metric_units[metric]}]"
+
+
+def case_from_plan_row(spec: CampaignSpec, row: pd.Series) -> RunCase:
+    """The :class:`RunCase` of one plan row (all values physical)."""
+    values = {p.name: float(row[p.column]) for p in spec.info.parameters}
+    window = MissionWindow(
+        float(row["window_start [s]"]), float(row["window_end [s]"]), str(row["window"])
+    )
+    return RunCase(int(row["run_id"]), int(row["seed"]), values, window)
+
+
+def result_row(spec: CampaignSpec, plan_row: pd.Series, result: RunResult) -> pd.DataFrame:
+    """One-row table of a finished run: plan columns, metrics, pass/fail, status, wall time."""
+    record = plan_row.to_dict()
+    passes = []
+    for metric in spec.metrics:
+        record[metric_column(spec, metric)] = float(result.metrics.get(metric, math.nan))
+    for requirement in spec.requirements:
+        ok = result.status == "ok" and requirement.passes(
+            float(result.metrics.get(requirement.metric, math.nan))
+        )
+        record[requirement.column] = ok
+        passes.append(ok)
+    record["pass"] = result.status == "ok" and all(passes)
+    record["status"] = result.status
+    record["error"] = result.error
+    record["wall_time [s]"] = float(result.wall_time)
+    table = pd.DataFrame([record])
+    for column in ("run_id", "seed", "region"):
+        table[column] = table[column].astype(np.int64)
+    return table
+
+
+def _keep_timeseries(
+    spec: CampaignSpec, row: pd.DataFrame, result: RunResult
+) -> pd.DataFrame | None:
+    if result.timeseries is None or spec.timeseries.keep == "none":
+        return None
+    if spec.timeseries.keep == "failed" and bool(row["pass"].iloc[0]):
+        return None
+    series = result.timeseries
+    if spec.timeseries.signals:
+        units = spec.info.signal_units
+        wanted = ["time [s]"] + [f"{s} [{units[s]}]" for s in spec.timeseries.signals]
+        series = series[[c for c in wanted if c in series.columns]]
+    series = series.copy()
+    series.insert(0, "run_id", np.int64(result.run_id))
+    return series
+
+
+def record_result(
+    directory: Path, spec: CampaignSpec, plan_row: pd.Series, result: RunResult
+) -> pd.DataFrame:
+    """Write one finished run: time series first, then the run row (each atomically)."""
+    row = result_row(spec, plan_row, result)
+    series = _keep_timeseries(spec, row, result)
+    if series is not None:
+        store.atomic_write_parquet(series, store.timeseries_file(directory, result.run_id))
+    store.atomic_write_parquet(row, store.run_file(directory, result.run_id))
+    return row
+
+
+@dataclass(frozen=True)
+class CampaignSummary:
+    """Outcome of ``run``/``resume``.
+
+    Attributes
+    ----------
+    directory : Path
+        The campaign directory.
+    n_runs : int
+        Planned runs.
+    executed : int
+        Runs computed by this call.
+    skipped : int
+        Runs already finished before this call (resume).
+    status_counts : dict
+        Status -> number of runs, over the whole campaign.
+    n_pass : int
+        Runs that passed every requirement.
+    """
+
+    directory: Path
+    n_runs: int
+    executed: int
+    skipped: int
+    status_counts: dict
+    n_pass: int
+
+
+def load_campaign(directory: str | Path) -> tuple[CampaignSpec, pd.DataFrame]:
+    """The resolved spec and the plan of an existing campaign directory."""
+    directory = Path(directory)
+    spec_path = directory / store.SPEC_FILE
+    plan_path = directory / store.PLAN_FILE
+    if not spec_path.is_file() or not plan_path.is_file():
+        raise ValueError(
+            f"{directory}: not a campaign directory (no {store.SPEC_FILE} and {store.PLAN_FILE})"
+        )
+    return load_spec(spec_path), pd.read_parquet(plan_path)
+
+
+def _execute(
+    directory: Path,
+    spec: CampaignSpec,
+    plan: pd.DataFrame,
+    workers: int,
+    scheduler: str | None,
+    progress: bool,
+) -> CampaignSummary:
+    store.remove_temporaries(directory)
+    finished = store.finished_run_ids(directory)
+    pending = plan[~plan["run_id"].isin(finished)]
+    by_id = {int(row.run_id): row for _, row in plan.iterrows()}
+    cases = [case_from_plan_row(spec, row) for _, row in pending.iterrows()]
+    executed = 0
+    if cases:
+        executor = make_executor(workers, scheduler)
+        bar = tqdm(
+            total=len(plan),
+            initial=len(finished),
+            unit="run",
+            desc=spec.name,
+            disable=not progress,
+            file=sys.stderr,
+            dynamic_ncols=True,
+        )
+        try:
+            for result in executor.run(spec.simulator, cases):
+                record_result(directory, spec, by_id[result.run_id], result)
+                executed += 1
+                bar.update(1)
+                if result.status != "ok":
+                    bar.write(
+                        f"run {result.run_id}: {result.status}: {result.error}", file=sys.stderr
+                    )
+        finally:
+            bar.close()
+            executor.close()
+    store.consolidate(directory)
+    runs = store.load_runs(directory)
+    return CampaignSummary(
+        directory=directory,
+        n_runs=len(plan),
+        executed=executed,
+        skipped=len(finished),
+        status_counts={str(k): int(v) for k, v in runs["status"].value_counts().items()},
+        n_pass=int(runs["pass"].sum()),
+    )
+
+
+def prepare_campaign(
+    spec_path: str | Path, out: str | Path
+) -> tuple[Path, CampaignSpec, pd.DataFrame]:
+    """Validate the spec, build the plan, then (only then) create the campaign directory."""
+    spec = load_spec(spec_path)
+    plan = make_plan(spec)
+    directory = Path(out)
+    if directory.exists() and any(directory.iterdir()):
+        if (directory / store.SPEC_FILE).exists():
+            raise ValueError(
+                f"{directory} already holds a campaign; continue it with "
+                f"'oos campaign resume {directory}' or choose another --out"
+            )
+        raise ValueError(f"--out {directory} exists and is not empty")
+    directory.mkdir(parents=True, exist_ok=True)
+    worst_cases_name = None
+    if spec.sampler.kind == "mu-guided":
+        worst_cases_name = store.WORST_CASES_FILE
+        shutil.copyfile(spec.sampler.worst_cases, directory / ".worst_cases.tmp")
+        (directory / ".worst_cases.tmp").replace(directory / worst_cases_name)
+    store.atomic_write_parquet(plan, directory / store.PLAN_FILE)
+    store.atomic_write_text(spec_to_toml(spec, worst_cases_name), directory / store.SPEC_FILE)
+    return directory, spec, plan
+
+
+def run_campaign(
+    spec_path: str | Path,
+    out: str | Path,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: bool = True,
+) -> CampaignSummary:
+    """Validate, plan and run a campaign into ``out`` (see the module docstring)."""
+    directory, _, _ = prepare_campaign(spec_path, out)
+    # run from the directory's own resolved spec: what resume and rerun will see
+    spec, plan = load_campaign(directory)
+    if spec.sampler.kind == "mu-guided" and progress:
+        counts = region_counts(plan, spec.regions)
+        print("runs per region:\n" + counts.to_string(index=False), file=sys.stderr)
+    return _execute(directory, spec, plan, workers, scheduler, progress)
+
+
+def resume_campaign(
+    directory: str | Path, workers: int = 1, scheduler: str | None = None, progress: bool = True
+) -> CampaignSummary:
+    """Finish a campaign: run exactly the planned cases that have no result row yet."""
+    spec, plan = load_campaign(directory)
+    return _execute(Path(directory), spec, plan, workers, scheduler, progress)
+
+
+@dataclass(frozen=True)
+class RerunResult:
+    """A recomputed run next to its recorded row.
+
+    Attributes
+    ----------
+    recorded : pandas.Series or None
+        The campaign's row for the run (None when it has not run yet).
+    row : pandas.DataFrame
+        The recomputed row (same columns).
+    timeseries : pandas.DataFrame or None
+        The recomputed time series (all signals).
+    identical : bool or None
+        Whether every recorded metric and the status are reproduced exactly (None if not run).
+    """
+
+    recorded: pd.Series | None
+    row: pd.DataFrame
+    timeseries: pd.DataFrame | None
+    identical: bool | None
+
+
+def rerun_case(directory: str | Path, run_id: int) -> RerunResult:
+    """Recompute run ``run_id`` of a campaign in this process and compare with the record."""
+    directory = Path(directory)
+    spec, plan = load_campaign(directory)
+    matches = plan[plan["run_id"] == run_id]
+    if matches.empty:
+        raise ValueError(f"--case {run_id}: no such run (the plan has runs 0..{len(plan) - 1})")
+    plan_row = matches.iloc[0]
+    result = execute_case(spec.simulator, case_from_plan_row(spec, plan_row))
+    row = result_row(spec, plan_row, result)
+    recorded = None
+    identical = None
+    path = store.run_file(directory, run_id)
+    if path.is_file():
+        recorded = pd.read_parquet(path).iloc[0]
+        columns = [metric_column(spec, m) for m in spec.metrics]
+        same_metrics = all(
+            (np.isnan(recorded[c]) and np.isnan(row[c].iloc[0])) or recorded[c] == row[c].iloc[0]
+            for c in columns
+        )
+        identical = bool(same_metrics and recorded["status"] == row["status"].iloc[0])
+    return RerunResult(recorded, row, result.timeseries, identical)

@@ -1,0 +1,252 @@
+"""Samplers: turn a spec into the campaign plan (every run's values, seed, weight and window).
+
+- ``monte-carlo``: i.i.d. draws from the dispersions (weight 1).
+- ``latin-hypercube``: each marginal stratified in ``n_runs`` equal-probability bins
+  (``scipy.stats.qmc.LatinHypercube``), mapped through the inverse CDFs (weight 1).
+- ``mu-guided``: importance sampling around the analysis' worst cases. The proposal is the
+  defensive mixture
+
+  .. math::
+
+      q(x) = \\alpha\\, p(x) + (1 - \\alpha) \\sum_r \\pi_r\\, g_r(x),
+      \\qquad g_r(x) = \\prod_{j \\in S_r} g_{rj}(x_j) \\prod_{j \\notin S_r} p_j(x_j)
+
+  with ``p`` the nominal (spec) density, ``alpha`` the ``defensive_fraction``, ``pi_r`` the
+  region shares (proportional to ``mu_upper`` or uniform), ``S_r`` the dispersed continuous blocks
+  with a worst-case value in region ``r`` and ``g_rj`` a normal centred on that value (std =
+  ``spread`` times the dispersion's width: its support, or 6 std for a normal law) truncated to the dispersion's support. Each run carries
+  the weight ``w = p(x) / q(x)`` evaluated with the whole mixture (not only the component it was
+  drawn from), so that for any function ``f``: ``E_q[w f] = E_p[f]`` (failure probabilities stay
+  unbiased) and ``w <= 1 / alpha`` (the estimate cannot be ruined by one huge weight).
+
+Seeds: ``SeedSequence(random_seed).spawn(n_runs + 1)``: child ``i < n_runs`` seeds run ``i``
+(identical to ``SeedSequence(random_seed).spawn(n_runs)[i]``), the last child drives the sampler.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+import scipy.stats.qmc
+
+from oos_drake.campaign.distributions import (
+    Distribution,
+    LogUniform,
+    TruncatedNormal,
+    Uniform,
+)
+from oos_drake.campaign.worst_cases import WorstCaseRegion
+
+#: Region id recorded for runs drawn from the nominal (defensive) component.
+NOMINAL_COMPONENT = -1
+
+
+def run_seeds(random_seed: int, n_runs: int) -> tuple[np.ndarray, np.random.Generator]:
+    """Per-run integer seeds (63-bit) and the sampler's generator, from one root seed."""
+    children = np.random.SeedSequence(random_seed).spawn(n_runs + 1)
+    seeds = np.array(
+        [int(c.generate_state(1, np.uint64)[0] >> np.uint64(1)) for c in children[:n_runs]],
+        dtype=np.int64,
+    )
+    return seeds, np.random.default_rng(children[n_runs])
+
+
+def uniform_variates(kind: str, n: int, d: int, rng: np.random.Generator) -> np.ndarray:
+    """``(n, d)`` variates in [0, 1): i.i.d. (``monte-carlo``) or Latin hypercube."""
+    if d == 0:
+        return np.empty((n, 0))
+    if kind == "latin-hypercube":
+        return scipy.stats.qmc.LatinHypercube(d=d, rng=rng).random(n)
+    return rng.random((n, d))
+
+
+def sample_dispersions(
+    dispersions: Mapping[str, Distribution], u: np.ndarray
+) -> dict[str, np.ndarray]:
+    """Map variates ``u`` (one column per dispersion, in order) to physical values."""
+    return {name: dist.ppf(u[:, j]) for j, (name, dist) in enumerate(dispersions.items())}
+
+
+def _scale(dist: Distribution) -> float:
+    """Width a proposal spread refers to: the support, or +-3 std for a (wide) normal law."""
+    low, high = dist.support
+    if isinstance(dist, TruncatedNormal):
+        return min(high - low, 6.0 * dist.std)
+    return high - low
+
+
+def _is_continuous(dist: Distribution) -> bool:
+    return isinstance(dist, Uniform | LogUniform | TruncatedNormal)
+
+
+@dataclass(frozen=True)
+class MuGuidedProposal:
+    """The defensive-mixture proposal of the ``mu-guided`` sampler (see the module docstring).
+
+    Attributes
+    ----------
+    dispersions : Mapping[str, Distribution]
+        Nominal distributions ``p_j`` (physical units).
+    regions : tuple of WorstCaseRegion
+        Worst-case regions.
+    defensive_fraction : float
+        Mixture weight ``alpha`` of the nominal density [-], in (0, 1).
+    spread : float
+        Proposal std as a fraction of each dispersion's width (support, or 6 std for a normal
+        law) [-].
+    region_weighting : str
+        ``"mu_upper"`` (shares proportional to mu's upper bound) or ``"uniform"``.
+    """
+
+    dispersions: Mapping[str, Distribution]
+    regions: tuple[WorstCaseRegion, ...]
+    defensive_fraction: float = 0.2
+    spread: float = 0.1
+    region_weighting: str = "mu_upper"
+
+    @property
+    def region_shares(self) -> np.ndarray:
+        """``pi_r``: shares of the guided runs per region (sum to 1)."""
+        if self.region_weighting == "uniform":
+            raw = np.ones(len(self.regions))
+        else:
+            raw = np.array([max(r.mu_upper, 0.0) for r in self.regions])
+            if raw.sum() <= 0:
+                raw = np.ones(len(self.regions))
+        return raw / raw.sum()
+
+    def components(self) -> list[dict[str, TruncatedNormal]]:
+        """Per region: dispersed block name -> proposal ``g_rj`` (blocks in ``S_r`` only)."""
+        out = []
+        for region in self.regions:
+            guided = {}
+            for name, value in region.perturbation.items():
+                dist = self.dispersions.get(name)
+                if dist is None or not _is_continuous(dist):
+                    continue
+                low, high = dist.support
+                centre = float(np.clip(value, low, high))
+                guided[name] = TruncatedNormal(centre, self.spread * _scale(dist), low, high)
+            out.append(guided)
+        return out
+
+    def sample(self, n: int, rng: np.random.Generator) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """Draw ``n`` points; returns (values per dispersion, component index per run).
+
+        The component is :data:`NOMINAL_COMPONENT` or the region id.
+        """
+        shares = np.concatenate(
+            [[self.defensive_fraction], (1 - self.defensive_fraction) * self.region_shares]
+        )
+        which = rng.choice(len(shares), size=n, p=shares)  # 0: nominal, r + 1: region r
+        u = rng.random((n, len(self.dispersions)))
+        values = sample_dispersions(self.dispersions, u)
+        for index, guided in enumerate(self.components()):
+            rows = np.flatnonzero(which == index + 1)
+            for name, proposal in guided.items():
+                values[name][rows] = proposal.ppf(rng.random(rows.size))
+        region_ids = np.array([NOMINAL_COMPONENT] + [r.region for r in self.regions])
+        return values, region_ids[which]
+
+    def weights(self, values: Mapping[str, np.ndarray]) -> np.ndarray:
+        """Likelihood ratios ``p(x) / q(x)`` of points ``values`` (same keys as the dispersions)."""
+        n = len(next(iter(values.values()))) if values else 0
+        mixture = np.full(n, self.defensive_fraction)
+        for share, guided in zip(self.region_shares, self.components(), strict=True):
+            ratio = np.ones(n)
+            for name, proposal in guided.items():
+                x = np.asarray(values[name], dtype=float)
+                ratio *= proposal.pdf(x) / self.dispersions[name].pdf(x)
+            mixture += (1 - self.defensive_fraction) * share * ratio
+        return 1.0 / mixture
+
+
+def make_plan(spec) -> pd.DataFrame:
+    """The campaign plan of a validated :class:`~oos_drake.campaign.spec.CampaignSpec`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per run: ``run_id``, ``seed``, ``region`` (-1: nominal draw), ``weight``,
+        ``window``, ``window_start [s]``, ``window_end [s]`` and one ``"name [unit]"`` column per
+        simulator parameter (dispersed value, or the nominal value).
+    """
+    info = spec.info
+    n = spec.n_runs
+    seeds, rng = run_seeds(spec.random_seed, n)
+    if spec.sampler.kind == "mu-guided":
+        proposal = MuGuidedProposal(
+            spec.dispersions,
+            spec.regions,
+            spec.sampler.defensive_fraction,
+            spec.sampler.spread,
+            spec.sampler.region_weighting,
+        )
+        values, region = proposal.sample(n, rng)
+        weight = proposal.weights(values)
+    else:
+        u = uniform_variates(spec.sampler.kind, n, len(spec.dispersions), rng)
+        values = sample_dispersions(spec.dispersions, u)
+        region = np.full(n, NOMINAL_COMPONENT)
+        weight = np.ones(n)
+
+    if spec.window.kind == "critical":
+        by_id = {r.region: r for r in spec.regions}
+        shares = MuGuidedProposal(
+            spec.dispersions, spec.regions, region_weighting=spec.sampler.region_weighting
+        ).region_shares
+        drawn = rng.choice([r.region for r in spec.regions], size=n, p=shares)
+        window_region = np.where(region == NOMINAL_COMPONENT, drawn, region)
+        windows = [spec.window.resolve(info, by_id[int(r)].time) for r in window_region]
+        labels = [f"region:{int(r)}" for r in window_region]
+    else:
+        windows = [spec.window.resolve(info)] * n
+        labels = [w.label for w in windows]
+
+    table = pd.DataFrame(
+        {
+            "run_id": np.arange(n, dtype=np.int64),
+            "seed": seeds,
+            "region": region.astype(np.int64),
+            "weight": weight.astype(float),
+            "window": labels,
+            "window_start [s]": [w.start for w in windows],
+            "window_end [s]": [w.end for w in windows],
+        }
+    )
+    for parameter in info.parameters:
+        column = values.get(parameter.name)
+        table[parameter.column] = (
+            np.asarray(column, dtype=float)
+            if column is not None
+            else np.full(n, float(parameter.nominal))
+        )
+    return table
+
+
+def region_counts(plan: pd.DataFrame, regions: Sequence[WorstCaseRegion]) -> pd.DataFrame:
+    """How many runs each proposal component got (nominal row first)."""
+    counts = plan["region"].value_counts()
+    rows = [
+        {
+            "region": NOMINAL_COMPONENT,
+            "configuration": "nominal dispersions",
+            "time [s]": np.nan,
+            "mu_upper": np.nan,
+            "runs": int(counts.get(NOMINAL_COMPONENT, 0)),
+        }
+    ]
+    rows += [
+        {
+            "region": r.region,
+            "configuration": r.configuration,
+            "time [s]": r.time,
+            "mu_upper": r.mu_upper,
+            "runs": int(counts.get(r.region, 0)),
+        }
+        for r in regions
+    ]
+    return pd.DataFrame(rows)

@@ -1,0 +1,512 @@
+"""Campaign specs: TOML files in ``campaigns/``, validated before any run starts.
+
+A spec names a simulator, disperses some of its parameters, chooses a sampler, a number of runs, a
+seed and a mission window, and states the requirements each run is checked against::
+
+    name = "demo"
+    n_runs = 64
+    random_seed = 20261121
+    sampler = "latin-hypercube"              # or a [sampler] table (mu-guided)
+    metrics = ["ape", "peak_torque"]        # default: every metric of the simulator
+
+    [simulator]
+    name = "flexible-attitude"
+    options = { control_rate = 10.0 }
+
+    [window]                                 # default: the whole mission
+    kind = "event"                           # "mission" | "event" | "critical" (mu-guided)
+    event = "capture"
+    before = 10.0                            # [s]
+    after = 90.0                             # [s]
+
+    [dispersions]
+    J_hub = { distribution = "uniform", low = 300.0, high = 700.0 }
+
+    [requirements]
+    ape = { max = 0.0079 }                   # [rad]
+    peak_torque = { max = 2.0 }              # [N m]
+
+    [timeseries]
+    keep = "all"                             # "all" | "failed" | "none"
+    signals = ["theta_hub", "torque_command"]
+
+Errors are one-line ``ValueError`` s naming the file and the key. :func:`load_spec` builds the
+simulator once (in the calling process) to check parameter names, ranges, metrics and events.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from oos_drake.campaign.distributions import Distribution, parse_distribution
+from oos_drake.campaign.simulator import (
+    MissionWindow,
+    SimulatorInfo,
+    SimulatorRecipe,
+    describe_simulator,
+)
+from oos_drake.campaign.worst_cases import WorstCaseRegion, read_worst_cases
+
+SAMPLERS = ("monte-carlo", "latin-hypercube", "mu-guided")
+WINDOW_KINDS = ("mission", "event", "critical")
+KEEP_TIMESERIES = ("all", "failed", "none")
+REGION_WEIGHTINGS = ("mu_upper", "uniform")
+_TOP_KEYS = {
+    "name",
+    "description",
+    "n_runs",
+    "random_seed",
+    "sampler",
+    "simulator",
+    "window",
+    "dispersions",
+    "metrics",
+    "requirements",
+    "timeseries",
+}
+
+
+@dataclass(frozen=True)
+class SamplerSpec:
+    """How the dispersed values are drawn."""
+
+    #: "monte-carlo" (i.i.d.), "latin-hypercube" (stratified marginals) or "mu-guided"
+    kind: str = "monte-carlo"
+    #: mu-guided: path of the analysis' worst_cases.parquet (relative paths: to the spec file)
+    worst_cases: Path | None = None
+    #: mu-guided: share of runs drawn from the nominal dispersions (bounds the weights by 1/share)
+    defensive_fraction: float = 0.2
+    #: mu-guided: proposal std around a worst case / dispersion width (support or 6 std) [-]
+    spread: float = 0.1
+    #: mu-guided: how runs are shared between regions: "mu_upper" (proportional) or "uniform"
+    region_weighting: str = "mu_upper"
+
+
+@dataclass(frozen=True)
+class WindowSpec:
+    """Which part of the mission each run simulates."""
+
+    #: "mission" (whole), "event" (around a named event), "critical" (around the run's region time)
+    kind: str = "mission"
+    #: event name for kind "event" (one of the simulator's events)
+    event: str | None = None
+    #: simulated time before the event / critical time [s]
+    before: float = 0.0
+    #: simulated time after the event / critical time [s]
+    after: float = 0.0
+
+    def resolve(self, info: SimulatorInfo, centre: float | None = None) -> MissionWindow:
+        """Concrete window; ``centre`` [s] is the region time for kind ``"critical"``."""
+        if self.kind == "mission":
+            return MissionWindow(0.0, info.duration, "mission")
+        if self.kind == "event":
+            centre, label = info.events[self.event], f"event:{self.event}"
+        else:
+            label = "critical"
+        start = max(0.0, centre - self.before)
+        end = min(info.duration, centre + self.after)
+        return MissionWindow(start, end, label)
+
+
+@dataclass(frozen=True)
+class Requirement:
+    """A bound a metric must satisfy for the run to pass."""
+
+    #: metric name (one of the spec's metrics)
+    metric: str
+    #: upper bound [metric unit], or None
+    max: float | None = None
+    #: lower bound [metric unit], or None
+    min: float | None = None
+    #: unit of the metric (filled from the simulator)
+    unit: str = ""
+
+    def passes(self, value: float) -> bool:
+        """True when ``value`` is finite and within the bounds."""
+        if not math.isfinite(value):
+            return False
+        return (self.max is None or value <= self.max) and (self.min is None or value >= self.min)
+
+    @property
+    def label(self) -> str:
+        """Human-readable bound, e.g. ``"ape <= 0.0079 rad"``."""
+        parts = []
+        if self.min is not None:
+            parts.append(f"{self.metric} >= {self.min:g} {self.unit}")
+        if self.max is not None:
+            parts.append(f"{self.metric} <= {self.max:g} {self.unit}")
+        return " and ".join(parts).strip()
+
+    @property
+    def column(self) -> str:
+        """Pass/fail column name in ``runs.parquet``."""
+        return f"pass_{self.metric}"
+
+
+@dataclass(frozen=True)
+class TimeseriesSpec:
+    """Which time series are kept on disk."""
+
+    #: "all" runs, only "failed" runs (status not ok or a requirement violated), or "none"
+    keep: str = "all"
+    #: signal names to keep (empty: every signal the simulator logs)
+    signals: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class CampaignSpec:
+    """A validated campaign spec (see the module docstring for the TOML form)."""
+
+    #: campaign name (used in report titles)
+    name: str
+    #: free text
+    description: str
+    #: number of runs (> 0)
+    n_runs: int
+    #: root seed: per-run seeds are SeedSequence(random_seed).spawn(n_runs)
+    random_seed: int
+    #: sampler settings
+    sampler: SamplerSpec
+    #: picklable simulator recipe (name + options)
+    simulator: SimulatorRecipe
+    #: simulated window
+    window: WindowSpec
+    #: dispersed parameter name -> distribution (physical units), in simulator parameter order
+    dispersions: Mapping[str, Distribution]
+    #: metrics recorded (simulator metric names)
+    metrics: tuple[str, ...]
+    #: requirements checked per run
+    requirements: tuple[Requirement, ...]
+    #: retained time series
+    timeseries: TimeseriesSpec
+    #: simulator declarations gathered at load time (not part of the TOML)
+    info: SimulatorInfo = field(compare=False, repr=False, default=None)
+    #: mu-guided: the regions read from worst_cases (not part of the TOML)
+    regions: tuple[WorstCaseRegion, ...] = field(compare=False, repr=False, default=())
+
+
+def _fail(where: str, message: str) -> ValueError:
+    return ValueError(f"{where}: {message}")
+
+
+def _check_keys(where: str, table: Any, allowed: set[str]) -> Mapping[str, Any]:
+    if not isinstance(table, Mapping):
+        raise _fail(where, "expected a table")
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise _fail(
+            where, f"unknown key(s) {', '.join(unknown)}; allowed: {', '.join(sorted(allowed))}"
+        )
+    return table
+
+
+def _positive_float(where: str, key: str, value: Any, allow_zero: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise _fail(where, f"{key} = {value!r} is not a finite number")
+    if value < 0 or (value == 0 and not allow_zero):
+        raise _fail(where, f"{key} = {value!r} must be {'>= 0' if allow_zero else '> 0'}")
+    return float(value)
+
+
+def load_spec(path: str | Path) -> CampaignSpec:
+    """Read and validate a campaign spec file.
+
+    Raises
+    ------
+    ValueError
+        On any problem, with a one-line message naming the file and the key.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"spec {path}: file not found")
+    return parse_spec(path.read_text(encoding="utf-8"), source=path)
+
+
+def parse_spec(text: str, source: Path) -> CampaignSpec:
+    """Validate spec ``text``; relative paths are resolved against ``source``'s folder."""
+    where = f"spec {source}"
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise _fail(where, f"TOML syntax error: {exc}") from exc
+    _check_keys(where, raw, _TOP_KEYS)
+    for key in ("n_runs", "random_seed", "simulator"):
+        if key not in raw:
+            raise _fail(where, f"missing required key {key!r}")
+
+    n_runs = raw["n_runs"]
+    if isinstance(n_runs, bool) or not isinstance(n_runs, int) or n_runs <= 0:
+        raise _fail(where, f"n_runs = {n_runs!r} must be a positive integer")
+    seed = raw["random_seed"]
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise _fail(where, f"random_seed = {seed!r} must be a non-negative integer")
+    name = raw.get("name", source.stem)
+    description = raw.get("description", "")
+    if not isinstance(name, str) or not isinstance(description, str):
+        raise _fail(where, "name and description must be strings")
+
+    # simulator -------------------------------------------------------------------------------
+    simulator_table = _check_keys(f"{where}: [simulator]", raw["simulator"], {"name", "options"})
+    simulator_name = simulator_table.get("name")
+    if not isinstance(simulator_name, str):
+        raise _fail(f"{where}: [simulator]", "missing name")
+    options = simulator_table.get("options", {})
+    if not isinstance(options, Mapping):
+        raise _fail(f"{where}: [simulator]", "options must be a table")
+    try:
+        recipe = SimulatorRecipe.create(simulator_name, options)
+    except ValueError as exc:
+        raise _fail(f"{where}: [simulator]", str(exc)) from exc
+    except TypeError as exc:
+        raise _fail(f"{where}: [simulator]", f"options are not plain values: {exc}") from exc
+    try:
+        info = describe_simulator(recipe)
+    except ValueError as exc:
+        raise _fail(f"{where}: [simulator]", str(exc)) from exc
+    parameters = info.by_name
+
+    # sampler ---------------------------------------------------------------------------------
+    sampler_raw = raw.get("sampler", "monte-carlo")
+    if isinstance(sampler_raw, str):
+        sampler_raw = {"kind": sampler_raw}
+    sw = f"{where}: [sampler]"
+    sampler_raw = _check_keys(
+        sw, sampler_raw, {"kind", "worst_cases", "defensive_fraction", "spread", "region_weighting"}
+    )
+    kind = sampler_raw.get("kind", "monte-carlo")
+    if kind not in SAMPLERS:
+        raise _fail(sw, f"unknown sampler {kind!r}; use one of {', '.join(SAMPLERS)}")
+    if kind != "mu-guided":
+        extra = sorted(set(sampler_raw) - {"kind"})
+        if extra:
+            raise _fail(sw, f"{', '.join(extra)} only apply to the mu-guided sampler")
+    worst_cases_path = None
+    regions: tuple[WorstCaseRegion, ...] = ()
+    defensive = sampler_raw.get("defensive_fraction", 0.2)
+    spread = sampler_raw.get("spread", 0.1)
+    weighting = sampler_raw.get("region_weighting", "mu_upper")
+    if kind == "mu-guided":
+        if "worst_cases" not in sampler_raw or not isinstance(sampler_raw["worst_cases"], str):
+            raise _fail(sw, 'mu-guided needs worst_cases = "path/to/worst_cases.parquet"')
+        worst_cases_path = Path(sampler_raw["worst_cases"])
+        if not worst_cases_path.is_absolute():
+            worst_cases_path = (source.parent / worst_cases_path).resolve()
+        if not worst_cases_path.is_file():
+            raise _fail(sw, f"worst_cases file {worst_cases_path} not found")
+        regions = read_worst_cases(worst_cases_path, info.parameters)
+        defensive = _positive_float(sw, "defensive_fraction", defensive)
+        if not defensive < 1:
+            raise _fail(sw, f"defensive_fraction = {defensive} must be in (0, 1)")
+        spread = _positive_float(sw, "spread", spread)
+        if weighting not in REGION_WEIGHTINGS:
+            raise _fail(sw, f"region_weighting {weighting!r} not in {', '.join(REGION_WEIGHTINGS)}")
+    sampler = SamplerSpec(kind, worst_cases_path, float(defensive), float(spread), weighting)
+
+    # window ----------------------------------------------------------------------------------
+    ww = f"{where}: [window]"
+    window_raw = _check_keys(
+        ww, raw.get("window", {"kind": "mission"}), {"kind", "event", "before", "after"}
+    )
+    window_kind = window_raw.get("kind", "mission")
+    if window_kind not in WINDOW_KINDS:
+        raise _fail(
+            ww, f"unknown window kind {window_kind!r}; use one of {', '.join(WINDOW_KINDS)}"
+        )
+    if window_kind == "mission":
+        extra = sorted(set(window_raw) - {"kind"})
+        if extra:
+            raise _fail(ww, f"{', '.join(extra)} do not apply to the whole-mission window")
+        window = WindowSpec("mission")
+    else:
+        before = _positive_float(ww, "before", window_raw.get("before", 0.0), allow_zero=True)
+        after = _positive_float(ww, "after", window_raw.get("after", 0.0), allow_zero=True)
+        if before + after <= 0:
+            raise _fail(ww, "before + after must be > 0 s")
+        event = window_raw.get("event")
+        if window_kind == "event":
+            if event not in info.events:
+                raise _fail(ww, f"unknown event {event!r}; known: {', '.join(info.events)}")
+        else:
+            if kind != "mu-guided":
+                raise _fail(ww, 'kind = "critical" needs the mu-guided sampler')
+            if event is not None:
+                raise _fail(ww, 'event does not apply to kind = "critical"')
+        window = WindowSpec(window_kind, event, before, after)
+
+    # dispersions -----------------------------------------------------------------------------
+    dispersions_raw = raw.get("dispersions", {})
+    if not isinstance(dispersions_raw, Mapping):
+        raise _fail(where, "[dispersions] must be a table")
+    for parameter_name in dispersions_raw:
+        if parameter_name not in parameters:
+            raise _fail(
+                f"{where}: dispersions.{parameter_name}",
+                f"unknown parameter; known: {', '.join(parameters)}",
+            )
+    dispersions = {
+        p.name: parse_distribution(f"{where}: dispersions.{p.name}", dispersions_raw[p.name], p)
+        for p in info.parameters
+        if p.name in dispersions_raw
+    }
+    if kind == "mu-guided":
+        guided = {n for r in regions for n in r.perturbation}
+        if not guided & set(dispersions):
+            raise _fail(sw, "no worst-case block of the worst_cases file is dispersed")
+
+    # metrics and requirements ----------------------------------------------------------------
+    metrics = raw.get("metrics", list(info.metric_units))
+    if not isinstance(metrics, list) or not metrics or not all(isinstance(m, str) for m in metrics):
+        raise _fail(where, "metrics must be a non-empty list of metric names")
+    for metric in metrics:
+        if metric not in info.metric_units:
+            raise _fail(where, f"unknown metric {metric!r}; known: {', '.join(info.metric_units)}")
+    requirements = []
+    requirements_raw = raw.get("requirements", {})
+    if not isinstance(requirements_raw, Mapping):
+        raise _fail(where, "[requirements] must be a table")
+    for metric, bounds in requirements_raw.items():
+        rw = f"{where}: requirements.{metric}"
+        if metric not in metrics:
+            raise _fail(rw, f"not one of the recorded metrics {', '.join(metrics)}")
+        bounds = _check_keys(rw, bounds, {"max", "min"})
+        if not bounds:
+            raise _fail(rw, "give max and/or min")
+        values = {}
+        for key, value in bounds.items():
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, int | float)
+                or not math.isfinite(value)
+            ):
+                raise _fail(rw, f"{key} = {value!r} is not a finite number")
+            values[key] = float(value)
+        if "max" in values and "min" in values and values["min"] > values["max"]:
+            raise _fail(rw, f"min {values['min']} exceeds max {values['max']}")
+        requirements.append(
+            Requirement(metric, values.get("max"), values.get("min"), info.metric_units[metric])
+        )
+
+    # time series -----------------------------------------------------------------------------
+    tw = f"{where}: [timeseries]"
+    ts_raw = _check_keys(tw, raw.get("timeseries", {}), {"keep", "signals"})
+    keep = ts_raw.get("keep", "all")
+    if keep not in KEEP_TIMESERIES:
+        raise _fail(tw, f"keep = {keep!r} not in {', '.join(KEEP_TIMESERIES)}")
+    signals = ts_raw.get("signals", [])
+    if not isinstance(signals, list) or not all(isinstance(s, str) for s in signals):
+        raise _fail(tw, "signals must be a list of signal names")
+    for signal in signals:
+        if signal not in info.signal_units:
+            raise _fail(tw, f"unknown signal {signal!r}; known: {', '.join(info.signal_units)}")
+
+    return CampaignSpec(
+        name=name,
+        description=description,
+        n_runs=int(n_runs),
+        random_seed=int(seed),
+        sampler=sampler,
+        simulator=recipe,
+        window=window,
+        dispersions=dispersions,
+        metrics=tuple(metrics),
+        requirements=tuple(requirements),
+        timeseries=TimeseriesSpec(keep, tuple(signals)),
+        info=info,
+        regions=regions,
+    )
+
+
+# --- writing the resolved spec -----------------------------------------------------------------
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, Mapping):
+        return (
+            "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items()) + " }"
+        )
+    raise TypeError(f"cannot write {value!r} to TOML")
+
+
+def _toml_key(key: str) -> str:
+    return key if key.replace("_", "").replace("-", "").isalnum() else json.dumps(key)
+
+
+def spec_to_toml(spec: CampaignSpec, worst_cases_name: str | None = None) -> str:
+    """The resolved spec as TOML (every default written out); reading it back gives ``spec``.
+
+    Parameters
+    ----------
+    worst_cases_name : str, optional
+        Path written for the mu-guided ``worst_cases`` (the campaign directory's copy).
+    """
+    lines = [
+        "# Resolved campaign spec written by oos campaign run (every default filled in).",
+        f"name = {_toml_value(spec.name)}",
+        f"description = {_toml_value(spec.description)}",
+        f"n_runs = {spec.n_runs}",
+        f"random_seed = {spec.random_seed}",
+        f"metrics = {_toml_value(list(spec.metrics))}",
+        "",
+        "[sampler]",
+        f"kind = {_toml_value(spec.sampler.kind)}",
+    ]
+    if spec.sampler.kind == "mu-guided":
+        path = worst_cases_name or str(spec.sampler.worst_cases)
+        lines += [
+            f"worst_cases = {_toml_value(path)}",
+            f"defensive_fraction = {_toml_value(spec.sampler.defensive_fraction)}",
+            f"spread = {_toml_value(spec.sampler.spread)}",
+            f"region_weighting = {_toml_value(spec.sampler.region_weighting)}",
+        ]
+    lines += [
+        "",
+        "[simulator]",
+        f"name = {_toml_value(spec.simulator.name)}",
+        f"options = {_toml_value(spec.simulator.option_dict)}",
+        "",
+        "[window]",
+        f"kind = {_toml_value(spec.window.kind)}",
+    ]
+    if spec.window.kind != "mission":
+        if spec.window.event is not None:
+            lines.append(f"event = {_toml_value(spec.window.event)}")
+        lines += [
+            f"before = {_toml_value(spec.window.before)}",
+            f"after = {_toml_value(spec.window.after)}",
+        ]
+    lines += ["", "[dispersions]"]
+    lines += [f"{_toml_key(n)} = {_toml_value(d.to_dict())}" for n, d in spec.dispersions.items()]
+    lines += ["", "[requirements]"]
+    for requirement in spec.requirements:
+        bounds = {
+            k: getattr(requirement, k)
+            for k in ("max", "min")
+            if getattr(requirement, k) is not None
+        }
+        lines.append(f"{_toml_key(requirement.metric)} = {_toml_value(bounds)}")
+    lines += [
+        "",
+        "[timeseries]",
+        f"keep = {_toml_value(spec.timeseries.keep)}",
+        f"signals = {_toml_value(list(spec.timeseries.signals))}",
+        "",
+    ]
+    return "\n".join(lines)

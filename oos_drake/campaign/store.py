@@ -1,0 +1,119 @@
+"""The campaign result directory and its crash-safe writes.
+
+Layout of a campaign directory::
+
+    spec.toml              the resolved spec (every default filled in), the campaign's identity
+    worst_cases.parquet    copy of the analysis regions (mu-guided campaigns only)
+    plan.parquet           every planned run: run id, seed, region, weight, window, all values
+    runs/run_000042.parquet   one finished run (one row), written when the run ends
+    timeseries/run_000042.parquet   its retained time series (written before the run row)
+    runs.parquet           consolidation of runs/ in run-id order (written at the end of run/resume)
+    report/                figures and tables of ``oos campaign report``
+
+Every file is written to a temporary name in the same directory, flushed and ``fsync``-ed, then
+renamed over its final name with :func:`os.replace` (atomic on POSIX): a reader (or a ``resume``
+after ``kill -9``) sees either the whole file or none of it. A run is finished exactly when its
+``runs/run_NNNNNN.parquet`` exists, and the time series is written before it, so a killed
+campaign loses at most the runs that were in flight, and ``resume`` redoes exactly those.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import pandas as pd
+
+SPEC_FILE = "spec.toml"
+PLAN_FILE = "plan.parquet"
+RUNS_FILE = "runs.parquet"
+WORST_CASES_FILE = "worst_cases.parquet"
+RUNS_DIR = "runs"
+TIMESERIES_DIR = "timeseries"
+REPORT_DIR = "report"
+
+
+def _atomic_write(path: Path, write) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            write(stream)
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(temporary, path)
+    except BaseException:
+        try:
+            os.unlink(temporary)
+        except FileNotFoundError:
+            pass
+        raise
+    return path
+
+
+def atomic_write_parquet(table: pd.DataFrame, path: Path) -> Path:
+    """Write ``table`` to ``path`` as Parquet, atomically."""
+    return _atomic_write(path, lambda stream: table.to_parquet(stream, index=False))
+
+
+def atomic_write_text(text: str, path: Path) -> Path:
+    """Write ``text`` (UTF-8) to ``path``, atomically."""
+    return _atomic_write(path, lambda stream: stream.write(text.encode("utf-8")))
+
+
+def run_file(directory: Path, run_id: int) -> Path:
+    """Path of one run's result row."""
+    return Path(directory) / RUNS_DIR / f"run_{run_id:06d}.parquet"
+
+
+def timeseries_file(directory: Path, run_id: int) -> Path:
+    """Path of one run's retained time series."""
+    return Path(directory) / TIMESERIES_DIR / f"run_{run_id:06d}.parquet"
+
+
+def finished_run_ids(directory: Path) -> set[int]:
+    """Ids of the runs whose result row exists (temporary leftovers are ignored)."""
+    folder = Path(directory) / RUNS_DIR
+    if not folder.is_dir():
+        return set()
+    return {int(p.stem.removeprefix("run_")) for p in folder.glob("run_*.parquet")}
+
+
+def remove_temporaries(directory: Path) -> int:
+    """Delete temporary files left by a killed writer; returns how many were removed."""
+    count = 0
+    for pattern in (f"{RUNS_DIR}/.*.tmp", f"{TIMESERIES_DIR}/.*.tmp", ".*.tmp"):
+        for path in Path(directory).glob(pattern):
+            path.unlink(missing_ok=True)
+            count += 1
+    return count
+
+
+def read_run_rows(directory: Path) -> pd.DataFrame:
+    """Concatenate the finished run rows in run-id order (empty frame when none)."""
+    folder = Path(directory) / RUNS_DIR
+    files = sorted(folder.glob("run_*.parquet")) if folder.is_dir() else []
+    if not files:
+        return pd.DataFrame()
+    frames = [pd.read_parquet(f) for f in files]
+    return pd.concat(frames, ignore_index=True).sort_values("run_id").reset_index(drop=True)
+
+
+def consolidate(directory: Path) -> Path:
+    """Write ``runs.parquet`` from the per-run rows (atomically) and return its path."""
+    table = read_run_rows(directory)
+    return atomic_write_parquet(table, Path(directory) / RUNS_FILE)
+
+
+def load_runs(directory: Path) -> pd.DataFrame:
+    """The campaign's run table: ``runs.parquet`` if up to date, else the per-run rows."""
+    directory = Path(directory)
+    consolidated = directory / RUNS_FILE
+    finished = finished_run_ids(directory)
+    if consolidated.is_file():
+        table = pd.read_parquet(consolidated)
+        if "run_id" in table.columns and set(table["run_id"]) == finished:
+            return table
+    return read_run_rows(directory)

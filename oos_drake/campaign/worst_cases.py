@@ -1,0 +1,211 @@
+"""The ``worst_cases.parquet`` file: where the mu analysis says the danger is.
+
+The robust analysis writes it; the ``mu-guided`` campaign sampler reads it. One row per critical
+*region* (a configuration / time of the mission at which a worst case was found).
+
+Schema
+------
+
+=========================  =======  ==========================================================
+column                     dtype    meaning
+=========================  =======  ==========================================================
+``region``                 int64    region id, unique (>= 0)
+``configuration``          string   configuration label (``"capture"``, ``"docked-2"``, ...)
+``time [s]``               float64  critical mission time [s] (>= 0)
+``frequency [Hz]``         float64  critical frequency of the mu peak [Hz] (>= 0)
+``mu_upper``               float64  upper bound of mu at the peak [-]
+``mu_lower``               float64  lower bound of mu at the peak [-] (<= ``mu_upper``)
+``subset``                 string   the uncertain blocks analyzed, comma-separated
+``wc:<block> [<unit>]``    float64  worst-case value of the named block, PHYSICAL units
+=========================  =======  ==========================================================
+
+A ``wc:`` column may be NaN in a row whose subset does not contain the block (the sampler then
+leaves that block at its nominal dispersion for that region). ``<block>`` must be a parameter of the
+campaign's simulator and ``<unit>`` its unit (checked by :func:`read_worst_cases`). For an LTI
+block (``Delta_add``, ``Delta_mul``) the value is the scalar that scales the stable realization of
+the worst-case perturbation (the simulator parameter of kind ``lti``).
+
+Example::
+
+    region configuration time [s] frequency [Hz] mu_upper mu_lower subset       wc:J_hub [kg m^2]
+    0      capture       100.0    0.21           1.31     1.27     J_hub,k_dock 262.0
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from oos_drake.campaign.simulator import Parameter
+
+#: Fixed columns and their pandas dtype kinds ("i" integer, "f" float, "O"/"U" string).
+BASE_COLUMNS: dict[str, str] = {
+    "region": "int64",
+    "configuration": "string",
+    "time [s]": "float64",
+    "frequency [Hz]": "float64",
+    "mu_upper": "float64",
+    "mu_lower": "float64",
+    "subset": "string",
+}
+
+_WC_COLUMN = re.compile(r"^wc:(?P<name>[^\s\[\]]+) \[(?P<unit>[^\]]*)\]$")
+
+
+@dataclass(frozen=True)
+class WorstCaseRegion:
+    """One critical region of the analysis.
+
+    Attributes
+    ----------
+    region : int
+        Region id.
+    configuration : str
+        Configuration label.
+    time : float
+        Critical mission time [s].
+    frequency : float
+        Critical frequency [Hz].
+    mu_upper, mu_lower : float
+        Bounds of mu at the peak [-].
+    subset : str
+        Blocks analyzed (comma-separated).
+    perturbation : Mapping[str, float]
+        Worst-case block values in physical units (only the blocks given for this region).
+    """
+
+    region: int
+    configuration: str
+    time: float
+    frequency: float
+    mu_upper: float
+    mu_lower: float
+    subset: str
+    perturbation: Mapping[str, float]
+
+
+def worst_case_column(parameter: Parameter) -> str:
+    """Column name of a parameter's worst-case value, e.g. ``"wc:J_hub [kg m^2]"``."""
+    return f"wc:{parameter.name} [{parameter.unit}]"
+
+
+def write_worst_cases(
+    regions: Sequence[WorstCaseRegion], parameters: Sequence[Parameter], path: str | Path
+) -> Path:
+    """Write regions to ``path`` in the schema above (atomically: temp file + rename)."""
+    from oos_drake.campaign.store import atomic_write_parquet
+
+    by_name = {p.name: p for p in parameters}
+    names = sorted({n for r in regions for n in r.perturbation})
+    for name in names:
+        if name not in by_name:
+            raise ValueError(f"worst cases: unknown block {name!r}")
+    table = pd.DataFrame(
+        {
+            "region": pd.array([r.region for r in regions], dtype="int64"),
+            "configuration": pd.array([r.configuration for r in regions], dtype="string"),
+            "time [s]": [float(r.time) for r in regions],
+            "frequency [Hz]": [float(r.frequency) for r in regions],
+            "mu_upper": [float(r.mu_upper) for r in regions],
+            "mu_lower": [float(r.mu_lower) for r in regions],
+            "subset": pd.array([r.subset for r in regions], dtype="string"),
+        }
+    )
+    for name in names:
+        table[worst_case_column(by_name[name])] = [
+            float(r.perturbation.get(name, np.nan)) for r in regions
+        ]
+    return atomic_write_parquet(table, Path(path))
+
+
+def read_worst_cases(
+    path: str | Path, parameters: Sequence[Parameter]
+) -> tuple[WorstCaseRegion, ...]:
+    """Read and validate a ``worst_cases.parquet`` against the simulator's parameters.
+
+    Raises
+    ------
+    ValueError
+        Missing file, missing column, unknown block or unit mismatch, duplicated region ids,
+        ``mu_lower > mu_upper``, negative time, or a worst-case value outside the block's range.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"worst cases file {path} not found (needed by the mu-guided sampler)")
+    try:
+        table = pd.read_parquet(path)
+    except Exception as exc:  # noqa: BLE001 - any reader error is a bad file for the user
+        raise ValueError(f"worst cases file {path}: cannot read Parquet: {exc}") from exc
+    missing = [c for c in BASE_COLUMNS if c not in table.columns]
+    if missing:
+        raise ValueError(f"worst cases file {path}: missing column(s) {', '.join(missing)}")
+    if table.empty:
+        raise ValueError(f"worst cases file {path}: no region")
+    by_name = {p.name: p for p in parameters}
+    blocks: dict[str, str] = {}
+    for column in table.columns:
+        if column in BASE_COLUMNS:
+            continue
+        match = _WC_COLUMN.match(column)
+        if not match:
+            raise ValueError(
+                f"worst cases file {path}: unexpected column {column!r} "
+                "(perturbations are 'wc:<block> [<unit>]')"
+            )
+        name, unit = match["name"], match["unit"]
+        if name not in by_name:
+            raise ValueError(
+                f"worst cases file {path}: unknown block {name!r} in {column!r}; "
+                f"known: {', '.join(by_name)}"
+            )
+        if unit != by_name[name].unit:
+            raise ValueError(
+                f"worst cases file {path}: {column!r} has unit {unit!r}, "
+                f"block {name} is in {by_name[name].unit!r}"
+            )
+        blocks[name] = column
+    if table["region"].duplicated().any():
+        raise ValueError(f"worst cases file {path}: duplicated region ids")
+    regions = []
+    for row in table.itertuples(index=False):
+        record = dict(zip(table.columns, row, strict=True))
+        region = int(record["region"])
+        where = f"worst cases file {path}: region {region}"
+        mu_upper, mu_lower = float(record["mu_upper"]), float(record["mu_lower"])
+        if not (np.isfinite(mu_upper) and np.isfinite(mu_lower)) or mu_lower > mu_upper * (
+            1 + 1e-9
+        ):
+            raise ValueError(f"{where}: mu_lower {mu_lower} must be <= mu_upper {mu_upper}")
+        time = float(record["time [s]"])
+        if not (np.isfinite(time) and time >= 0):
+            raise ValueError(f"{where}: time {time} s must be finite and >= 0")
+        perturbation = {}
+        for name, column in blocks.items():
+            value = float(record[column])
+            if np.isnan(value):
+                continue
+            parameter = by_name[name]
+            if not (parameter.lower <= value <= parameter.upper):
+                raise ValueError(
+                    f"{where}: {column} = {value:g} outside the range of {name} "
+                    f"[{parameter.lower:g}, {parameter.upper:g}]"
+                )
+            perturbation[name] = value
+        regions.append(
+            WorstCaseRegion(
+                region=region,
+                configuration=str(record["configuration"]),
+                time=time,
+                frequency=float(record["frequency [Hz]"]),
+                mu_upper=mu_upper,
+                mu_lower=mu_lower,
+                subset=str(record["subset"]),
+                perturbation=perturbation,
+            )
+        )
+    return tuple(regions)

@@ -1,0 +1,66 @@
+"""The paper's baseline attitude controller (section 3.1).
+
+.. math::
+
+    u = K_{att} \\begin{bmatrix} \\phi_{ref} - \\phi \\\\ \\omega_{ref} - \\omega \\end{bmatrix},
+    \\quad K_{att} = [\\omega_{att}^2 J_{tot},\\; 2 \\xi_{att} \\omega_{att} J_{tot}]
+
+tuned on the inertia ``J_tot`` of the coupled system at the first docking (t = 255 s), with
+``xi_att = 1`` and ``omega_att = 2 pi 0.01`` rad/s: a critically damped PD per principal axis.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from oos_drake.control.statespace import BatchedStateSpace
+
+#: Baseline natural frequency [rad/s] (paper: 0.01 Hz).
+OMEGA_ATT = 2.0 * np.pi * 0.01
+#: Baseline damping ratio [-] (paper: 1).
+XI_ATT = 1.0
+#: Time of the first docking, where the baseline is tuned [s].
+TUNING_TIME_S = 255.0
+
+
+def baseline_gains(J_tot, omega_att: float = OMEGA_ATT, xi_att: float = XI_ATT) -> np.ndarray:
+    """Return ``K_att = [omega^2 J_tot, 2 xi omega J_tot]`` (3x6).
+
+    Parameters
+    ----------
+    J_tot : array_like, shape (3, 3)
+        Total inertia of the coupled system at G1 in R_RH1 [kg m^2].
+    omega_att : float
+        Natural frequency [rad/s].
+    xi_att : float
+        Damping ratio [-].
+
+    Returns
+    -------
+    numpy.ndarray, shape (3, 6)
+        ``[K_p, K_d]``: ``K_p`` [N m/rad], ``K_d`` [N m s/rad].
+    """
+    J = np.asarray(J_tot, dtype=float)
+    if J.shape != (3, 3):
+        raise ValueError(f"baseline: J_tot must be 3x3, got shape {J.shape}")
+    if not np.allclose(J, J.T, rtol=1e-8, atol=1e-10) or np.linalg.eigvalsh(J).min() <= 0:
+        raise ValueError("baseline: J_tot must be symmetric positive definite")
+    if omega_att <= 0 or xi_att <= 0:
+        raise ValueError(f"baseline: omega_att and xi_att must be positive, got {omega_att}, {xi_att}")
+    return np.hstack([omega_att**2 * J, 2.0 * xi_att * omega_att * J])
+
+
+def inertia_from_plant(plant: BatchedStateSpace) -> np.ndarray:
+    """Inertia seen by the torques, ``J = G(0)^-1`` of the plant ``T -> wdot`` [kg m^2].
+
+    For a free-floating flexible spacecraft the static gain of ``T_ext -> wdot`` is the inverse
+    of the total inertia (the rotational Schur complement when the centre of mass is not at G1).
+    Batched over leading dimensions; symmetrized.
+    """
+    A, B, C, D = plant.A, plant.B, plant.C, plant.D
+    if plant.nstates:
+        G0 = D - C @ np.linalg.solve(A, B)
+    else:
+        G0 = D
+    J = np.linalg.inv(G0)
+    return 0.5 * (J + np.swapaxes(J, -1, -2))

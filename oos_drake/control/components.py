@@ -1,0 +1,179 @@
+"""Sensors, actuators, roll-off filter and the weights of the paper's control design (section 3).
+
+All values default to the paper's (Fig. controldesign, Eq. controlreq). Every component is a
+per-axis SISO model replicated on the three axes, returned as a named
+:class:`~oos_drake.control.statespace.BatchedStateSpace`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.signal
+
+from oos_drake.control.statespace import BatchedStateSpace, channel_names
+
+TWO_PI = 2.0 * np.pi
+
+
+@dataclass(frozen=True)
+class DesignSpecification:
+    """Sensor, actuator, filter and weight data of the attitude-control design.
+
+    Parameters
+    ----------
+    star_tracker_cutoff_hz : float
+        Star tracker first-order low-pass cut-off [Hz] (paper: 8).
+    gyro_cutoff_hz : float
+        Gyroscope first-order low-pass cut-off [Hz] (paper: 200).
+    wheel_frequency_hz : float
+        Reaction-wheel second-order natural frequency [Hz] (paper: 200).
+    wheel_damping : float
+        Reaction-wheel damping ratio [-] (paper: 0.7).
+    rolloff_order : int
+        Order of the Butterworth roll-off on the command (paper: 4).
+    rolloff_cutoff_hz : float
+        Roll-off cut-off [Hz] (paper: 0.7).
+    noise_gyro : float
+        Gyro noise weight W_n,gyro [rad/s] (paper: 9.1987e-4, times I3).
+    noise_star_tracker : float
+        Star-tracker noise weight W_n,sst [rad] (paper: 1.5343e-5, times I3).
+    disturbance_gains : tuple of float
+        Numerators of W_n,ext = diag(g_i) / (a s + b) [N m] (paper: 0.002577, 0.009685, 0.01239).
+    disturbance_denominator : tuple of float
+        ``(a, b)`` of W_n,ext's denominator [s, -] (paper: 2.236, 0.2236).
+    pointing_requirement : float
+        Absolute pointing error bound W_p [rad] (paper: 0.0079); ``e_p = phi / W_p``.
+    control_weight : float
+        W_u [1/(N m)] (paper: 0.5, i.e. a 2 N m bound); ``e_u = W_u u``.
+    additive_weight_db : float
+        W_add of Delta_add (full 3x3 LTI, analysis only) [dB] (paper: -75).
+    multiplicative_diagonal : float
+        W_mul,L on the diagonal LTI scalars of Delta_mul (analysis only) [-] (paper: 4e-2).
+    multiplicative_off_diagonal : float
+        W_mul,R on the off-diagonal LTI scalars of Delta_mul (analysis only) [-] (paper: 4e-3).
+    """
+
+    star_tracker_cutoff_hz: float = 8.0
+    gyro_cutoff_hz: float = 200.0
+    wheel_frequency_hz: float = 200.0
+    wheel_damping: float = 0.7
+    rolloff_order: int = 4
+    rolloff_cutoff_hz: float = 0.7
+    noise_gyro: float = 9.1987e-4
+    noise_star_tracker: float = 1.5343e-5
+    disturbance_gains: tuple[float, float, float] = (0.002577, 0.009685, 0.01239)
+    disturbance_denominator: tuple[float, float] = (2.236, 0.2236)
+    pointing_requirement: float = 0.0079
+    control_weight: float = 0.5
+    additive_weight_db: float = -75.0
+    multiplicative_diagonal: float = 4e-2
+    multiplicative_off_diagonal: float = 4e-3
+    extra: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def __post_init__(self):
+        for name in (
+            "star_tracker_cutoff_hz", "gyro_cutoff_hz", "wheel_frequency_hz", "wheel_damping",
+            "rolloff_cutoff_hz", "noise_gyro", "noise_star_tracker", "pointing_requirement",
+            "control_weight",
+        ):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f"DesignSpecification.{name} must be positive, got {value!r}")
+        if self.rolloff_order < 1:
+            raise ValueError(f"DesignSpecification.rolloff_order must be >= 1, got {self.rolloff_order}")
+        if len(self.disturbance_gains) != 3 or len(self.disturbance_denominator) != 2:
+            raise ValueError("DesignSpecification.disturbance_gains needs 3 values, denominator 2")
+
+    @property
+    def additive_weight(self) -> float:
+        """W_add as a gain [(rad/s^2)/(N m)] (10^(dB/20))."""
+        return 10.0 ** (self.additive_weight_db / 20.0)
+
+    def to_dict(self) -> dict:
+        """Return the specification as a JSON-ready dict."""
+        return {
+            k: (list(v) if isinstance(v, tuple) else v)
+            for k, v in self.__dict__.items()
+            if k != "extra"
+        }
+
+
+def first_order_lowpass(cutoff_hz: float) -> tuple[np.ndarray, ...]:
+    """Return ``(A, B, C, D)`` of ``1 / (s / w_c + 1)``, ``w_c = 2 pi cutoff_hz`` [rad/s]."""
+    wc = TWO_PI * cutoff_hz
+    return np.array([[-wc]]), np.array([[wc]]), np.array([[1.0]]), np.array([[0.0]])
+
+
+def second_order(frequency_hz: float, damping: float) -> tuple[np.ndarray, ...]:
+    """Return ``(A, B, C, D)`` of ``w^2 / (s^2 + 2 xi w s + w^2)`` (unit DC gain)."""
+    w = TWO_PI * frequency_hz
+    A = np.array([[0.0, w], [-w, -2.0 * damping * w]])
+    return A, np.array([[0.0], [w]]), np.array([[1.0, 0.0]]), np.array([[0.0]])
+
+
+def butterworth(order: int, cutoff_hz: float) -> tuple[np.ndarray, ...]:
+    """Return ``(A, B, C, D)`` of the analog Butterworth low-pass (scipy.signal.butter).
+
+    Realized from zeros/poles/gain, balanced by a diagonal similarity for conditioning.
+    """
+    z, p, k = scipy.signal.butter(order, TWO_PI * cutoff_hz, analog=True, output="zpk")
+    A, B, C, D = scipy.signal.zpk2ss(z, p, k)
+    # diagonal scaling: companion forms carry w_c^k entries
+    scale = np.abs(TWO_PI * cutoff_hz) ** np.arange(A.shape[0])[::-1]
+    T, Ti = np.diag(scale), np.diag(1.0 / scale)
+    return Ti @ A @ T, Ti @ B, C @ T, D
+
+
+def _axes(siso, name_in: str, name_out: str) -> BatchedStateSpace:
+    single = BatchedStateSpace(*siso, ("in",), ("out",))
+    return single.replicate(3, channel_names(name_in, 3), channel_names(name_out, 3))
+
+
+def star_tracker(spec: DesignSpecification, name_in="phi", name_out="phi_sst"):
+    """Star tracker ``SST``: first-order low-pass on each attitude angle [rad -> rad]."""
+    return _axes(first_order_lowpass(spec.star_tracker_cutoff_hz), name_in, name_out)
+
+
+def gyro(spec: DesignSpecification, name_in="w", name_out="w_gyro"):
+    """Gyroscope ``GYRO``: first-order low-pass on each rate [rad/s -> rad/s]."""
+    return _axes(first_order_lowpass(spec.gyro_cutoff_hz), name_in, name_out)
+
+
+def reaction_wheels(spec: DesignSpecification, name_in="u", name_out="T_rw"):
+    """Reaction wheels ``RW``: second-order torque response per axis [N m -> N m]."""
+    return _axes(second_order(spec.wheel_frequency_hz, spec.wheel_damping), name_in, name_out)
+
+
+def rolloff_filter(spec: DesignSpecification, name_in="u_K", name_out="u"):
+    """Roll-off ``F_ro``: Butterworth low-pass on each controller output [N m -> N m]."""
+    return _axes(butterworth(spec.rolloff_order, spec.rolloff_cutoff_hz), name_in, name_out)
+
+
+def disturbance_weight(spec: DesignSpecification, name_in="d_ext", name_out="T_dist"):
+    """``W_n,ext = diag(g_i) / (a s + b)``: normalized disturbance -> torque [N m]."""
+    a, b = spec.disturbance_denominator
+    gains = np.asarray(spec.disturbance_gains, dtype=float)
+    A = -(b / a) * np.eye(3)
+    B = np.eye(3)
+    C = np.diag(gains / a)
+    return BatchedStateSpace(
+        A, B, C, np.zeros((3, 3)), channel_names(name_in, 3), channel_names(name_out, 3)
+    )
+
+
+def integrator(name_in: str, name_out: str) -> BatchedStateSpace:
+    """Three integrators ``1/s`` (rate from acceleration, attitude from rate)."""
+    return BatchedStateSpace(
+        np.zeros((3, 3)), np.eye(3), np.eye(3), np.zeros((3, 3)),
+        channel_names(name_in, 3), channel_names(name_out, 3),
+    )
+
+
+def static_gain(gain, name_in: str, name_out: str) -> BatchedStateSpace:
+    """Static 3x3 gain (scalar times I3, or a matrix)."""
+    D = np.asarray(gain, dtype=float)
+    if D.ndim == 0:
+        D = D * np.eye(3)
+    return BatchedStateSpace.static(D, channel_names(name_in, 3), channel_names(name_out, 3))

@@ -1,0 +1,90 @@
+"""The multi-model H-infinity objective ``gamma(K) = max_i ||F_l(P_i, K)||_inf`` and its subgradient.
+
+For a static gain ``K`` and ``D22 = 0`` the closed loop is
+``T_i(s) = P11 + P12 K (I - P22 K)^-1 P21`` and its differential is
+``dT = G12 dK G21`` with ``G12 = C_cl (sI - A_cl)^-1 B2 + D12``,
+``G21 = C2 (sI - A_cl)^-1 B_cl + D21``. If ``sigma_max(T_i(j w0)) = gamma`` is simple with
+singular vectors ``u, v`` at the peak frequency ``w0``, Apkarian-Noll's (sub)gradient is
+
+.. math::
+
+    \\frac{\\partial \\gamma}{\\partial K} = \\mathrm{Re}\\left(G_{21}(j w_0)\\, v\\, u^H G_{12}(j w_0)\\right)^T .
+
+The objective is evaluated for the whole model array at once (:func:`peak_gain`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from oos_drake.control.interconnection import WeightedInterconnection
+from oos_drake.control.peak_gain import PeakGain, peak_gain
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Objective value, subgradient and per-model peak gains at one gain ``K``.
+
+    Attributes
+    ----------
+    gamma : float
+        ``max_i ||M_i||_inf`` (``inf`` if a closed loop is unstable).
+    gradient : numpy.ndarray, shape (3, 6)
+        Subgradient of ``gamma`` w.r.t. ``K`` (of the spectral abscissa when unstable).
+    peaks : PeakGain
+        Per-model peak gains and frequencies.
+    """
+
+    gamma: float
+    gradient: np.ndarray
+    peaks: PeakGain
+
+
+def peak_gradient(interconnection: WeightedInterconnection, K, index: int, omega: float):
+    """Gradient of ``sigma_max(M_index(j omega))`` w.r.t. ``K`` (3x6), at a simple peak."""
+    A, B1, B2, C1, C2, D11, D12, D21 = (M[index] for M in interconnection.partitions())
+    K = np.asarray(K, dtype=float)
+    A_cl = A + B2 @ K @ C2
+    B_cl = B1 + B2 @ K @ D21
+    C_cl = C1 + D12 @ K @ C2
+    D_cl = D11 + D12 @ K @ D21
+    n = A.shape[0]
+    X = np.linalg.solve(1j * omega * np.eye(n) - A_cl, np.hstack([B_cl, B2]).astype(complex))
+    nd = B1.shape[1]
+    T = C_cl @ X[:, :nd] + D_cl
+    G12 = C_cl @ X[:, nd:] + D12
+    G21 = C2 @ X[:, :nd] + D21
+    U, _, Vh = np.linalg.svd(T)
+    u, v = U[:, 0], np.conj(Vh[0])
+    M = G21 @ np.outer(v, np.conj(u)) @ G12
+    return np.real(M).T
+
+
+def abscissa_gradient(interconnection: WeightedInterconnection, K, index: int):
+    """Gradient of the spectral abscissa of model ``index`` w.r.t. ``K`` (simple eigenvalue)."""
+    A, _, B2, _, C2, *_ = (M[index] for M in interconnection.partitions())
+    A_cl = A + B2 @ np.asarray(K, dtype=float) @ C2
+    lam, V = np.linalg.eig(A_cl)
+    k = int(np.argmax(lam.real))
+    W = np.linalg.inv(V)
+    x, y = V[:, k], W[k, :]  # right and left eigenvectors, y x = 1
+    # d lambda = y B2 dK C2 x
+    return np.real(np.outer(B2.T @ y, C2 @ x).T).T
+
+
+def evaluate(interconnection: WeightedInterconnection, K, *, focus=0.2, **peak_options) -> Evaluation:
+    """Evaluate ``gamma(K)`` over the model array and a subgradient at the worst model.
+
+    ``focus`` (see :func:`peak_gain`) refines only the models near the maximum: ``gamma`` is
+    exact, the per-model values of the others are sampled lower bounds. ``focus=None`` refines all.
+    """
+    M = interconnection.close(K)
+    peaks = peak_gain(M.A, M.B, M.C, M.D, focus=focus, **peak_options)
+    worst = peaks.worst
+    if np.isfinite(peaks.gamma[worst]):
+        grad = peak_gradient(interconnection, K, worst, float(peaks.omega[worst]))
+        return Evaluation(float(peaks.gamma[worst]), grad, peaks)
+    k = int(np.argmax(peaks.spectral_abscissa))
+    return Evaluation(np.inf, abscissa_gradient(interconnection, K, k), peaks)

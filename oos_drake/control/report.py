@@ -1,0 +1,128 @@
+"""Synthesis outputs: controller JSON, closed-loop model array (.npz, .mat), per-model tables.
+
+Files written by :func:`write_synthesis` in ``out_dir``:
+
+``controller.json``
+    Gains with units, gamma (and the baseline's), the active models, the configuration list,
+    the worst cases found, a SHA-256 of the model data, the design weights and options.
+``closed_loop.npz`` / ``closed_loop.mat``
+    ``A, B, C, D`` of every closed loop ``d -> e`` of the final model set (leading dimension =
+    model), channel names, configuration index and parameter values.
+``models.parquet`` / ``models.csv``
+    One row per model: configuration, parameters, gamma_i, peak frequency, flags.
+``runs.csv``, ``worst_cases.csv``
+    Optimizer runs and worst-case searches.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import scipy.io
+
+from oos_drake.control.interconnection import DISTURBANCES, ERRORS, weighted_interconnection
+from oos_drake.control.plants import PlantArray
+from oos_drake.control.synthesis import SynthesisOptions, SynthesisResult
+
+
+def _json_ready(value):
+    if isinstance(value, dict):
+        return {str(k): _json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_ready(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _json_ready(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None if np.isnan(value) else ("inf" if value > 0 else "-inf")
+    return value
+
+
+def controller_record(result: SynthesisResult, plants: PlantArray, options=None) -> dict:
+    """Return the JSON-ready description of a synthesized controller."""
+    table = result.models
+    active = table[table["active"]]
+    return _json_ready({
+        "controller": {
+            "structure": "u_K = K y, y = [phi_ref - phi_sst; w_ref - w_gyro], u = F_ro u_K",
+            "K_p": {"value": result.K[:, :3], "unit": "N m/rad"},
+            "K_d": {"value": result.K[:, 3:], "unit": "N m s/rad"},
+            "K_p_baseline": {"value": result.K_start[:, :3], "unit": "N m/rad"},
+            "K_d_baseline": {"value": result.K_start[:, 3:], "unit": "N m s/rad"},
+            "rolloff": {
+                "type": "butterworth",
+                "order": result.spec.rolloff_order,
+                "cutoff_hz": result.spec.rolloff_cutoff_hz,
+            },
+        },
+        "gamma": result.gamma,
+        "gamma_baseline": result.gamma_start,
+        "requirement_met": bool(result.gamma < 1.0),
+        "active_models": active[["config", *result.parameter_names, "gamma",
+                                 "omega_peak_rad_s"]].to_dict(orient="records"),
+        "configurations": plants.configurations.to_dict(orient="list"),
+        "uncertain_parameters": [asdict(p) for p in plants.parameters],
+        "worst_cases": result.worst_cases.to_dict(orient="records"),
+        "model_source": plants.source,
+        "model_sha256": plants.fingerprint(),
+        "design_specification": result.spec.to_dict(),
+        "options": asdict(options) if options is not None else None,
+        "wall_time_s": result.wall_time_s,
+    })
+
+
+def closed_loop_array(result: SynthesisResult, plants: PlantArray):
+    """Closed loops ``d -> e`` of the final model set (a batched ``BatchedStateSpace``)."""
+    table = result.models
+    values = table[list(result.parameter_names)].to_numpy(dtype=float).reshape(len(table), -1)
+    plant = plants.evaluate(table["config"].to_numpy(), values)
+    return weighted_interconnection(plant, result.spec).close(result.K)
+
+
+def write_synthesis(
+    out_dir, result: SynthesisResult, plants: PlantArray, options: SynthesisOptions | None = None
+) -> dict[str, Path]:
+    """Write every synthesis output in ``out_dir`` (created); return name -> path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {}
+    record = controller_record(result, plants, options)
+    paths["controller"] = out / "controller.json"
+    paths["controller"].write_text(json.dumps(record, indent=2))
+    M = closed_loop_array(result, plants)
+    table = result.models
+    arrays = {
+        "A": M.A, "B": M.B, "C": M.C, "D": M.D,
+        "K": result.K,
+        "config": table["config"].to_numpy(),
+        "parameter_values": table[list(result.parameter_names)].to_numpy(dtype=float),
+        "gamma": table["gamma"].to_numpy(),
+        "omega_peak_rad_s": table["omega_peak_rad_s"].to_numpy(),
+    }
+    names = {
+        "inputs": np.array(DISTURBANCES), "outputs": np.array(ERRORS),
+        "parameter_names": np.array(result.parameter_names, dtype=str),
+    }
+    paths["npz"] = out / "closed_loop.npz"
+    np.savez_compressed(paths["npz"], **arrays, **names)
+    paths["mat"] = out / "closed_loop.mat"
+    scipy.io.savemat(
+        paths["mat"],
+        {**arrays, "inputs": np.array(DISTURBANCES, dtype=object),
+         "outputs": np.array(ERRORS, dtype=object),
+         "parameter_names": np.array(result.parameter_names, dtype=object)},
+        do_compression=True,
+    )
+    paths["parquet"] = out / "models.parquet"
+    table.to_parquet(paths["parquet"], index=False)
+    paths["csv"] = out / "models.csv"
+    table.to_csv(paths["csv"], index=False)
+    paths["runs"] = out / "runs.csv"
+    result.runs.to_csv(paths["runs"], index=False)
+    paths["worst_cases"] = out / "worst_cases.csv"
+    result.worst_cases.to_csv(paths["worst_cases"], index=False)
+    return paths

@@ -1,0 +1,372 @@
+"""Substituting values for uncertain blocks: ``usubs``, ``nominal``, ``usample``.
+
+Closing the Delta channels of a set ``s`` of blocks with ``w_s = Delta_s z_s`` gives
+
+.. math:: M' = M_{kk} + M_{ks} W, \\qquad (I - \\Delta_s M_{ss}) W = \\Delta_s M_{sk},
+
+for all models of a model array at once. For scalar blocks (``ureal``, ``ucomplex``) ``Delta_s`` is
+diagonal and the solve exploits the sparsity of ``M_ss``: its strongly connected components are
+ordered topologically once per LFR (cached), and ``W`` is then computed level by level, so an LFR
+whose occurrences do not form algebraic loops costs matrix products only. Full blocks
+(``ultidyn``) are closed afterwards with a dense batched solve.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from oos_drake.lfr.core import LFR
+
+
+def nominal(sys: LFR) -> LFR:
+    """The nominal model of ``sys``: every block at ``delta = 0`` (an LFR without blocks)."""
+    if sys.is_certain:
+        return sys
+    n, nz, nw = sys.nstates, sys.nz, sys.nw
+    rows = np.concatenate([np.arange(n), n + nz + np.arange(sys.noutputs)])
+    cols = np.concatenate([np.arange(n), n + nw + np.arange(sys.ninputs)])
+    return LFR(sys.M[..., rows[:, None], cols[None, :]], n, (),
+               input_names=sys.input_names, output_names=sys.output_names)
+
+
+def _ureal_table(sys: LFR):
+    """Cached arrays (name -> row, nominal, lower, upper, alpha, beta) of the ureal blocks."""
+    table = sys._cache.get("ureal_table")
+    if table is None:
+        specs = [e.spec for e in sys.block_entries if e.spec.kind == "ureal"]
+        table = {
+            "row": {spec.name: i for i, spec in enumerate(specs)},
+            "params": np.array([[sp.nominal, sp.lower, sp.upper, sp.alpha, sp.beta]
+                                for sp in specs]).reshape(-1, 5),
+        }
+        sys._cache["ureal_table"] = table
+    return table
+
+
+def _normalized_values(sys: LFR, values: Mapping, normalized: bool):
+    if not isinstance(values, Mapping):
+        raise ValueError(f"usubs: values must be a mapping name -> value, got {type(values).__name__}")
+    specs = sys.uncertainty
+    out = {}
+    fast = []
+    for name, value in values.items():
+        if name not in specs:
+            known = ", ".join(specs) or "none"
+            raise ValueError(f"usubs: unknown block name {name!r} (blocks: {known})")
+        spec = specs[name]
+        if isinstance(value, LFR) or hasattr(value, "A") and hasattr(value, "B"):
+            raise ValueError(f"usubs: block {name!r}: substituting systems is not supported; "
+                             "use lft() with the block's LFR")
+        if normalized:
+            out[name] = spec.check_normalized(value)
+        elif spec.kind == "ureal":
+            fast.append(name)
+        else:
+            out[name] = spec.to_normalized(value)
+    if fast:
+        out.update(_normalize_ureals(sys, specs, values, fast))
+    return out
+
+
+def _normalize_ureals(sys, specs, values, names):
+    """Vectorized physical -> normalized map of many ureal blocks (one numpy pass)."""
+    try:
+        arrays = np.broadcast_arrays(*(np.asarray(values[k]) for k in names))
+        if any(a.dtype.kind not in "biuf" for a in arrays):
+            raise TypeError("complex or non-numeric values: use the per-block path")
+        stacked = np.stack(arrays).astype(float)
+    except (ValueError, TypeError):
+        return {k: specs[k].to_normalized(values[k]) for k in names}
+    table = _ureal_table(sys)
+    rows = np.array([table["row"][k] for k in names])
+    nom, lo, hi, alpha, beta = (col.reshape((-1,) + (1,) * (stacked.ndim - 1))
+                                for col in table["params"][rows].T)
+    from oos_drake.lfr.blocks import RANGE_RTOL
+
+    slack = RANGE_RTOL * np.maximum(1.0, np.maximum(np.abs(lo), np.abs(hi)))
+    bad = ~np.isfinite(stacked) | (stacked < lo - slack) | (stacked > hi + slack)
+    if np.any(bad):
+        first = int(np.flatnonzero(bad.reshape(len(names), -1).any(axis=1))[0])
+        specs[names[first]].to_normalized(values[names[first]])  # raises with the message
+    delta = (stacked - nom) / (alpha - beta * stacked)
+    return {k: delta[i] for i, k in enumerate(names)}
+
+
+def usubs(sys: LFR, values: Mapping, *, normalized: bool = False) -> LFR:
+    """Substitute values for some or all uncertain blocks.
+
+    Parameters
+    ----------
+    sys : LFR
+        The uncertain model.
+    values : mapping str -> scalar or array
+        Block name -> PHYSICAL value (same unit as the block's nominal). ``ureal``/``ucomplex``:
+        a scalar or an array of shape ``batch`` (e.g. ``(N,)``); ``ultidyn``: a static matrix
+        ``(p, q)`` or an array ``batch + (p, q)``. Arrays of all blocks broadcast against each other
+        and against ``sys.batch_shape``; the result is a model array with that batch shape.
+    normalized : bool
+        If True the values are normalized ``delta`` (no range check), e.g. worst-case deltas from a
+        mu analysis.
+
+    Returns
+    -------
+    LFR
+        The remaining blocks only (no blocks when all were substituted; convert one model with
+        ``.to_ss()``).
+
+    Raises
+    ------
+    ValueError
+        Unknown block name, or a physical value outside its block's range (the message names the
+        block and the value).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from oos_drake.lfr import ureal, usubs
+    >>> k = ureal("k", 10.0, percent=20)
+    >>> usubs(3 * k, {"k": np.array([9.0, 11.0])}).M[:, 0, 0]
+    array([27., 33.])
+    """
+    deltas = _normalized_values(sys, values, normalized)
+    if not deltas:
+        return sys
+    return close_blocks(sys, deltas)
+
+
+def close_blocks(sys: LFR, deltas: Mapping) -> LFR:
+    """Close the named blocks with NORMALIZED values ``deltas`` (see :func:`usubs`)."""
+    specs = sys.uncertainty
+    unknown = [k for k in deltas if k not in specs]
+    if unknown:
+        raise ValueError(f"close_blocks: unknown block name {unknown[0]!r}")
+    scalar = {k: v for k, v in deltas.items() if specs[k].kind != "ultidyn"}
+    full = {k: v for k, v in deltas.items() if specs[k].kind == "ultidyn"}
+    if scalar:
+        sys = _close_scalar(sys, scalar)
+    if full:
+        sys = _close_full(sys, full)
+    return sys
+
+
+def _split(sys: LFR, names):
+    """Indices (into M's rows / cols) of the z / w channels of ``names`` and of everything else."""
+    n, nz, nw = sys.nstates, sys.nz, sys.nw
+    slices = sys.channel_slices()
+    z_sub, w_sub = [], []
+    for name in names:
+        zs, ws = slices[name]
+        z_sub.append(n + np.arange(zs.start, zs.stop))
+        w_sub.append(n + np.arange(ws.start, ws.stop))
+    z_sub = np.concatenate(z_sub)
+    w_sub = np.concatenate(w_sub)
+    rows_keep = np.setdiff1d(np.arange(sys.M.shape[-2]), z_sub)
+    cols_keep = np.setdiff1d(np.arange(sys.M.shape[-1]), w_sub)
+    del nz, nw
+    return z_sub, w_sub, rows_keep, cols_keep
+
+
+def _schedule(pattern: np.ndarray):
+    """Topological levels of the dependency graph ``w_i <- w_j`` for ``pattern[i, j] != 0``.
+
+    Returns a list of ``(level_indices, dense)`` where ``dense`` tells whether the level has
+    couplings other than self loops (then it needs a small solve).
+    """
+    size = pattern.shape[0]
+    graph = sp.csr_matrix(pattern.astype(bool))
+    ncomp, labels = connected_components(graph, directed=True, connection="strong")
+    # condensation DAG: comp(i) depends on comp(j) if pattern[i, j]
+    rows, cols = np.nonzero(pattern)
+    comp_edges = {(labels[i], labels[j]) for i, j in zip(rows, cols, strict=True)
+                  if labels[i] != labels[j]}
+    deps = [[] for _ in range(ncomp)]
+    for a, b in comp_edges:
+        deps[a].append(b)
+    depth = np.full(ncomp, -1)
+
+    def visit(c):
+        stack = [(c, False)]
+        while stack:
+            node, done = stack.pop()
+            if done:
+                depth[node] = 1 + max((depth[d] for d in deps[node]), default=-1)
+                continue
+            if depth[node] >= 0:
+                continue
+            stack.append((node, True))
+            stack.extend((d, False) for d in deps[node] if depth[d] < 0)
+
+    for c in range(ncomp):
+        if depth[c] < 0:
+            visit(c)
+    node_depth = depth[labels]
+    levels = []
+    for lev in range(int(node_depth.max(initial=-1)) + 1):
+        idx = np.flatnonzero(node_depth == lev)
+        block = pattern[np.ix_(idx, idx)].copy()
+        np.fill_diagonal(block, False)
+        levels.append((idx, bool(block.any())))
+    del size
+    return levels
+
+
+def _scalar_plan(sys: LFR, names):
+    """Static part of closing scalar blocks ``names``: partitions of ``M`` with the substituted
+    channels permuted into topological level order, and the level boundaries (cached per LFR)."""
+    key = ("scalar", tuple(names))
+    plan = sys._cache.get(key)
+    if plan is not None:
+        return plan
+    z_sub, w_sub, rows_keep, cols_keep = _split(sys, names)
+    M = sys.M
+    Mss = M[..., z_sub[:, None], w_sub[None, :]]
+    pattern = np.any(Mss != 0, axis=tuple(range(Mss.ndim - 2))) if Mss.ndim > 2 else Mss != 0
+    levels = _schedule(pattern)
+    perm = np.concatenate([idx for idx, _ in levels]) if levels else np.zeros(0, int)
+    bounds, start = [], 0
+    for idx, dense in levels:
+        stop = start + idx.size
+        coupled = bool(start) and bool(np.any(pattern[np.ix_(idx, perm[:start])]))
+        bounds.append((start, stop, dense, coupled))
+        start = stop
+    zp, wp = z_sub[perm], w_sub[perm]
+    plan = {
+        "perm": perm,
+        "bounds": bounds,
+        "Mss": M[..., zp[:, None], wp[None, :]],
+        "Msk": M[..., zp[:, None], cols_keep[None, :]],
+        "Mks": M[..., rows_keep[:, None], wp[None, :]],
+        "Mkk": M[..., rows_keep[:, None], cols_keep[None, :]],
+        "channel_block": None,
+    }
+    sys._cache[key] = plan
+    return plan
+
+
+def _close_scalar(sys: LFR, deltas: Mapping) -> LFR:
+    names = sorted(deltas)
+    plan = _scalar_plan(sys, names)
+    entries = {e.spec.name: e for e in sys.block_entries}
+    batch = sys.batch_shape
+    arrays = []
+    for name in names:
+        arr = np.asarray(deltas[name])
+        batch = np.broadcast_shapes(batch, arr.shape)
+        arrays.append((arr, entries[name].reps))
+    # per-channel normalized values in level order, shape batch + (ns,)
+    d = np.concatenate(
+        [np.broadcast_to(arr[..., None], batch + (reps,)) for arr, reps in arrays], axis=-1
+    )[..., plan["perm"]]
+    Mss, Msk, Mks, Mkk = plan["Mss"], plan["Msk"], plan["Mks"], plan["Mkk"]
+    dtype = np.result_type(Mss, d)
+    ns, nk = Mss.shape[-1], Msk.shape[-1]
+    W = np.empty(batch + (ns, nk), dtype=dtype)
+    for start, stop, dense, coupled in plan["bounds"]:
+        rhs = Msk[..., start:stop, :]
+        if coupled:
+            rhs = rhs + Mss[..., start:stop, :start] @ W[..., :start, :]
+        d_lev = d[..., start:stop]
+        if dense:
+            loop = np.eye(stop - start) - d_lev[..., :, None] * Mss[..., start:stop, start:stop]
+            try:
+                W[..., start:stop, :] = np.linalg.solve(loop, d_lev[..., :, None] * rhs)
+            except np.linalg.LinAlgError:
+                raise ValueError(
+                    "usubs: the substituted values make the LFR ill-posed "
+                    f"(I - Delta*Dzw singular) for blocks {names}"
+                ) from None
+        else:
+            diag = np.diagonal(Mss[..., start:stop, start:stop], axis1=-2, axis2=-1)
+            denom = 1.0 - d_lev * diag
+            if np.any(np.abs(denom) < 1e-14):
+                raise ValueError("usubs: the substituted values make the LFR ill-posed "
+                                 f"(1 - delta*Dzw = 0) for blocks {names}")
+            W[..., start:stop, :] = (d_lev / denom)[..., None] * rhs
+    new_M = Mkk + Mks @ W
+    new_M = np.broadcast_to(new_M, batch + new_M.shape[-2:])
+    remaining = tuple(e for e in sys.block_entries if e.spec.name not in deltas)
+    return LFR(new_M, sys.nstates, remaining, input_names=sys.input_names,
+               output_names=sys.output_names)
+
+
+def _close_full(sys: LFR, deltas: Mapping) -> LFR:
+    names = sorted(deltas)
+    z_sub, w_sub, rows_keep, cols_keep = _split(sys, names)
+    entries = {e.spec.name: e for e in sys.block_entries}
+    batch = sys.batch_shape
+    for name in names:
+        batch = np.broadcast_shapes(batch, np.asarray(deltas[name]).shape[:-2])
+    dtype = np.result_type(sys.M, *(np.asarray(deltas[k]) for k in names))
+    Delta = np.zeros(batch + (w_sub.size, z_sub.size), dtype=dtype)
+    w0 = z0 = 0
+    for name in names:
+        p, q = entries[name].spec.shape
+        value = np.broadcast_to(np.asarray(deltas[name]), batch + (p, q))
+        for _ in range(entries[name].reps):
+            Delta[..., w0:w0 + p, z0:z0 + q] = value
+            w0 += p
+            z0 += q
+    M = sys.M
+    Mss = M[..., z_sub[:, None], w_sub[None, :]]
+    Msk = M[..., z_sub[:, None], cols_keep[None, :]]
+    Mks = M[..., rows_keep[:, None], w_sub[None, :]]
+    Mkk = M[..., rows_keep[:, None], cols_keep[None, :]]
+    loop = np.eye(w_sub.size) - Delta @ Mss
+    try:
+        W = np.linalg.solve(loop, Delta @ Msk)
+    except np.linalg.LinAlgError:
+        raise ValueError(f"usubs: the substituted values make the LFR ill-posed for blocks {names}") \
+            from None
+    new_M = np.broadcast_to(Mkk, batch + Mkk.shape[-2:]) + Mks @ W
+    remaining = tuple(e for e in sys.block_entries if e.spec.name not in deltas)
+    return LFR(new_M, sys.nstates, remaining, input_names=sys.input_names,
+               output_names=sys.output_names)
+
+
+def usample(sys: LFR, n: int, rng, *, names=None):
+    """Draw ``n`` random instances of the blocks of ``sys`` (MATLAB ``usample``).
+
+    ``ureal`` values are uniform in their physical range, ``ucomplex`` uniform in the disc and
+    ``ultidyn`` static real gains with norm uniform in ``[0, bound]``.
+
+    Parameters
+    ----------
+    sys : LFR
+        Uncertain model.
+    n : int
+        Number of samples.
+    rng : numpy.random.Generator or int
+        Random generator (or a seed for ``numpy.random.default_rng``).
+    names : sequence of str, optional
+        Blocks to sample (default: all); the others stay uncertain.
+
+    Returns
+    -------
+    models : LFR
+        Model array with batch shape ``(n,)``.
+    values : pandas.DataFrame
+        One row per sample, one column per scalar block (physical values); ``ultidyn`` samples
+        are stored as objects (arrays).
+    """
+    import pandas as pd
+
+    if not isinstance(rng, np.random.Generator):
+        if rng is None:
+            raise ValueError("usample: pass a numpy.random.Generator (or a seed) explicitly")
+        rng = np.random.default_rng(rng)
+    n = int(n)
+    if n < 1:
+        raise ValueError(f"usample: number of samples must be >= 1, got {n}")
+    specs = sys.uncertainty
+    names = list(specs) if names is None else list(names)
+    for name in names:
+        if name not in specs:
+            raise ValueError(f"usample: unknown block name {name!r} (blocks: {', '.join(specs)})")
+    values = {name: specs[name].sample(rng, n) for name in names}
+    table = pd.DataFrame({k: (list(v) if v.ndim > 1 else v) for k, v in values.items()})
+    table.index.name = "sample"
+    return usubs(sys, values), table

@@ -1,0 +1,124 @@
+"""``oos validate`` (Drake twin vs TITOP model) and ``oos sdf generate|check``.
+
+Examples::
+
+    oos validate                      # moments 1-6, phase 7 and 8 sweeps; exit 1 on failure
+    oos validate --cases moments      # only the six moments
+    oos sdf generate                  # rewrite sdf/ from oos_drake/scenario/data/paper.toml
+    oos sdf check                     # exit 1 if the committed SDF files are stale
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+CASE_GROUPS = ("all", "moments", "phase7", "phase8")
+
+
+def _select(cases, group: str):
+    prefix = {"moments": "moment", "phase7": "phase 7", "phase8": "phase 8"}.get(group)
+    return cases if prefix is None else [c for c in cases if c.label.startswith(prefix)]
+
+
+def _validate(args: argparse.Namespace) -> int:
+    from oos_drake.multibody.cross_check import (
+        format_table,
+        frequency_grid,
+        run_validation,
+        validation_cases,
+    )
+    from oos_drake.scenario.data import load_scenario
+
+    scenario = load_scenario(args.scenario)
+    cases = _select(validation_cases(scenario), args.cases)
+    omega = frequency_grid(args.frequencies, args.f_min, args.f_max)
+    print(
+        f"Drake twin vs TITOP LFR: 6x6 [F; T]@G1 -> [a; wdot]@G1, {args.frequencies} frequencies "
+        f"{args.f_min:g}-{args.f_max:g} Hz; pass: response error <= {args.tolerance:g}, "
+        f"poles/zeros <= {args.root_tolerance:g}"
+    )
+    start = time.perf_counter()
+    results = run_validation(
+        scenario,
+        cases=cases,
+        omega=omega,
+        response_tolerance=args.tolerance,
+        root_tolerance=args.root_tolerance,
+        sdf_directory=args.sdf_dir,
+    )
+    print(format_table(results))
+    failed = [r.label for r in results if not r.passed]
+    elapsed = time.perf_counter() - start
+    if failed:
+        print(
+            f"FAILED: {len(failed)} of {len(results)} configurations ({', '.join(failed)}); "
+            f"{elapsed:.1f} s"
+        )
+        return 1
+    print(f"all {len(results)} configurations pass ({elapsed:.1f} s)")
+    return 0
+
+
+def _sdf_generate(args: argparse.Namespace) -> int:
+    from oos_drake.multibody.scenario_sdf import write_sdf
+    from oos_drake.scenario.data import load_scenario
+
+    paths = write_sdf(args.out, load_scenario(args.scenario))
+    for path in paths:
+        print(path)
+    return 0
+
+
+def _sdf_check(args: argparse.Namespace) -> int:
+    from oos_drake.multibody.scenario_sdf import stale_sdf_files
+    from oos_drake.scenario.data import load_scenario
+
+    stale = stale_sdf_files(args.out, load_scenario(args.scenario))
+    if stale:
+        print(
+            f"stale SDF files in {args.out}: {', '.join(stale)} (run `oos sdf generate`)",
+            file=sys.stderr,
+        )
+        return 1
+    print(f"SDF files in {args.out} are up to date")
+    return 0
+
+
+def register(subparsers) -> None:
+    """Add ``validate`` and ``sdf`` to the ``oos`` command line."""
+    from oos_drake.multibody.scenario_sdf import SDF_DIRECTORY
+
+    validate = subparsers.add_parser(
+        "validate",
+        help="cross-check the Drake twin against the TITOP LFR model (table; exit 1 on failure)",
+        description="Linearize the Drake twin and substitute the TITOP LFR at the six moments, "
+        "docking phase 7 over the stiffness sweep and docking phase 8, and compare frequency "
+        "responses, poles and transmission zeros.",
+    )
+    validate.add_argument("--cases", choices=CASE_GROUPS, default="all")
+    validate.add_argument("--frequencies", type=int, default=400, help="number of frequencies")
+    validate.add_argument("--f-min", type=float, default=0.01, help="lowest frequency [Hz]")
+    validate.add_argument("--f-max", type=float, default=100.0, help="highest frequency [Hz]")
+    validate.add_argument(
+        "--tolerance", type=float, default=1e-6, help="max relative frequency-response error"
+    )
+    validate.add_argument(
+        "--root-tolerance", type=float, default=1e-4, help="max relative pole/zero mismatch"
+    )
+    validate.add_argument("--scenario", type=Path, default=None, help="scenario TOML file")
+    validate.add_argument("--sdf-dir", type=Path, default=SDF_DIRECTORY, help="SDF directory")
+    validate.set_defaults(func=_validate)
+
+    sdf = subparsers.add_parser("sdf", help="generate or check the scenario's SDF files")
+    sdf_commands = sdf.add_subparsers(dest="sdf_command", metavar="SDF_COMMAND")
+    for name, func, text in (
+        ("generate", _sdf_generate, "write the SDF files from the scenario data file"),
+        ("check", _sdf_check, "exit 1 if the SDF files differ from the scenario data file"),
+    ):
+        command = sdf_commands.add_parser(name, help=text)
+        command.add_argument("--out", type=Path, default=SDF_DIRECTORY, help="SDF directory")
+        command.add_argument("--scenario", type=Path, default=None, help="scenario TOML file")
+        command.set_defaults(func=func)

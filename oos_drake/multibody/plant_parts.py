@@ -1,0 +1,127 @@
+"""Pieces added to a MultibodyPlant after parsing the SDF: modal residuals, floating joints, welds.
+
+All functions act on a plant that is not finalized yet.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import (
+    FixedOffsetFrame,
+    ModelInstanceIndex,
+    RigidBody,
+    RpyFloatingJoint,
+    SpatialInertia,
+    UnitInertia,
+)
+
+from oos_drake.multibody.appendage_sdf import MODE_JOINT, ROOT_LINK
+
+__all__ = [
+    "add_modal_residual",
+    "add_floating_joint",
+    "drake_spatial_inertia_to_matrix",
+]
+
+RESIDUAL_BODY = "modal_residual"
+
+
+def drake_spatial_inertia_to_matrix(M) -> np.ndarray:
+    """Convert a Drake ``SpatialInertia`` (``[rot; trans]``) to the ``[trans; rot]`` 6x6 matrix."""
+    K = M.CopyToFullMatrix6()
+    perm = [3, 4, 5, 0, 1, 2]
+    return K[np.ix_(perm, perm)]
+
+
+def add_modal_residual(plant: MultibodyPlant, model_instance: ModelInstanceIndex) -> RigidBody:
+    """Weld to the appendage's ``root`` a body of inertia ``-sum_i M_i`` (mode bodies at q = 0).
+
+    After this, ``root + residual + mode bodies`` has the rigid inertia that the SDF gives the
+    root link (the array's ``D_P``), and the appendage's effective-mass transfer is ``M_P(s)``
+    exactly. The residual is generally not a physical rigid-body inertia (negative mass): it is
+    built with ``skip_validity_check=True``.
+
+    Parameters
+    ----------
+    plant : MultibodyPlant
+        Plant with the appendage model parsed (not finalized).
+    model_instance : ModelInstanceIndex
+        The appendage's model instance (links ``root``, ``mode_i``; joints ``mode_i_hinge``).
+
+    Returns
+    -------
+    RigidBody
+        The residual body (named ``modal_residual`` in the instance).
+    """
+    root = plant.GetBodyByName(ROOT_LINK, model_instance)
+    total = SpatialInertia.Zero()
+    index = 1
+    while plant.HasJointNamed(MODE_JOINT.format(index), model_instance):
+        joint = plant.GetJointByName(MODE_JOINT.format(index), model_instance)
+        X_RF = joint.frame_on_parent().GetFixedPoseInBodyFrame()
+        X_BM = joint.frame_on_child().GetFixedPoseInBodyFrame()
+        X_RB = X_RF @ X_BM.inverse()  # joint at q = 0: M coincides with F
+        M_BBo_B = joint.child_body().default_spatial_inertia()
+        M_BBo_R = M_BBo_B.ReExpress(X_RB.rotation())
+        M_BRo_R = M_BBo_R.Shift(-X_RB.translation())
+        total += M_BRo_R
+        index += 1
+    if index == 1:
+        raise ValueError(
+            f"model {plant.GetModelInstanceName(model_instance)}: no joint "
+            f"'{MODE_JOINT.format(1)}' found, not a modal appendage"
+        )
+    mass = total.get_mass()
+    residual = SpatialInertia(
+        mass=-mass,
+        p_PScm_E=total.get_com(),
+        G_SP_E=UnitInertia(*_unit_inertia_moments(total)),
+        skip_validity_check=True,
+    )
+    body = plant.AddRigidBody(RESIDUAL_BODY, model_instance, residual)
+    plant.WeldFrames(root.body_frame(), body.body_frame(), RigidTransform())
+    return body
+
+
+def _unit_inertia_moments(M) -> tuple[float, ...]:
+    G = M.get_unit_inertia().CopyToFullMatrix3()
+    return (G[0, 0], G[1, 1], G[2, 2], G[0, 1], G[0, 2], G[1, 2])
+
+
+def add_floating_joint(
+    plant: MultibodyPlant,
+    body: RigidBody,
+    X_PB: RigidTransform,
+    name: str | None = None,
+    parent=None,
+) -> RpyFloatingJoint:
+    """Give ``body`` a roll-pitch-yaw floating joint whose zero is the pose ``X_PB``.
+
+    Parameters
+    ----------
+    plant : MultibodyPlant
+        Plant (not finalized).
+    body : RigidBody
+        The floating body.
+    X_PB : RigidTransform
+        Pose of ``body`` in the parent frame at ``q = 0`` (a Context parameter afterwards:
+        ``joint.frame_on_parent().SetPoseInParentFrame(context, X)``).
+    name : str, optional
+        Joint name (default ``<body>_floating``).
+    parent : Frame, optional
+        Parent frame (default: the world frame).
+
+    Notes
+    -----
+    The parent-side frame is a fixed offset frame at ``X_PB``, so the operating point has
+    ``rpy = 0`` (far from the pitch singularity) and the joint velocities are the body's angular
+    and linear velocity relative to the parent, expressed in the body frame at that point. A
+    quaternion joint would add two spurious near-zero eigenvalues to a linearization.
+    """
+    parent = plant.world_frame() if parent is None else parent
+    frame = plant.AddFrame(FixedOffsetFrame(f"{body.name()}_operating_frame", parent, X_PB))
+    return plant.AddJoint(
+        RpyFloatingJoint(name or f"{body.name()}_floating", frame, body.body_frame())
+    )

@@ -1,0 +1,249 @@
+"""Generate the scenario's SDF files from the scenario data file (the single source of truth).
+
+Files (in ``sdf/`` at the repository root)::
+
+    hub_RH1.sdf           chaser hub: link RH1 (frame R_RH1 at G1), frames P1, P2, J0, D1
+    hub_RH2.sdf           target hub: link RH2 (R_RH2 at G2), frames P3, P4, D2, D3
+    arm_ur5.sdf           UR5-like arm: links L0..L6 (R_Li at J_i), revolute joints
+                          alpha_1..alpha_6, frame J7 (arm tip / tool flange) on L6
+    array_SA1_2.sdf       chaser solar array (mode bodies, see oos_drake.multibody.appendage_sdf)
+    array_SA3_4.sdf       target solar array
+    oos_scenario.sdf      assembly: includes RH1, RH2, arm, SA1..SA4; revolute drive joints
+                          theta_SA1..theta_SA4 (axis y_P), fixed joint arm_mount (RH1 at J0 - L0);
+                          the target's default pose is its docked pose (D3 = D1).
+
+Not in SDF (Drake-specific, added by :mod:`oos_drake.multibody.scenario_plant`): the modal
+residual bodies, the hubs' floating joints, the docking bushings SM1 (J7 - D2) and SM2 (D1 - D3).
+Regenerate with ``oos sdf generate``; ``tests/multibody/test_sdf_files.py`` fails when the
+committed files are stale.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from oos_drake.multibody.appendage_sdf import appendage_model
+from oos_drake.multibody.sdf_writer import (
+    Frame,
+    Include,
+    Inertial,
+    Joint,
+    Link,
+    Model,
+    Pose,
+    pose_from_matrix,
+    to_sdf_text,
+)
+
+__all__ = [
+    "SDF_DIRECTORY",
+    "SDF_PACKAGE",
+    "ASSEMBLY_FILE",
+    "ARM_MODEL",
+    "generate_sdf_texts",
+    "write_sdf",
+    "stale_sdf_files",
+    "drive_joint_name",
+    "arm_joint_name",
+]
+
+SDF_DIRECTORY = Path(__file__).resolve().parents[2] / "sdf"
+ASSEMBLY_FILE = "oos_scenario.sdf"
+ASSEMBLY_MODEL = "oos_scenario"
+ARM_MODEL = "arm"
+ARM_TIP_FRAME = "J7"
+#: Package name under which ``sdf/`` is registered in Drake's PackageMap (includes use
+#: ``package://oos_sdf/<file>``; a relative URI would resolve against the working directory).
+SDF_PACKAGE = "oos_sdf"
+
+
+def _uri(file_name: str) -> str:
+    return f"package://{SDF_PACKAGE}/{file_name}"
+
+
+def drive_joint_name(array: str) -> str:
+    """Name of the drive joint of array ``array`` (``theta_SA1``)."""
+    return f"theta_{array}"
+
+
+def arm_joint_name(index: int) -> str:
+    """Name of arm joint ``index`` (1..6): ``alpha_1``."""
+    return f"alpha_{index}"
+
+
+def _hub_model(scenario, hub_name: str) -> Model:
+    hub = scenario.hubs[hub_name]
+    frames = []
+    for name, mount in scenario.arrays.items():
+        if mount.parent == hub_name:
+            frames.append(
+                Frame(f"P{name[2:]}", hub_name, pose_from_matrix(mount.R_G_P0, mount.p_G_P))
+            )
+    if scenario.arm.parent == hub_name:
+        frames.append(
+            Frame("J0", hub_name, pose_from_matrix(scenario.arm.R_G_L0, scenario.arm.p_G_J0))
+        )
+    for name, port in scenario.ports.items():
+        if port.body == hub_name:
+            frames.append(Frame(name, hub_name, pose_from_matrix(port.R_G_D, port.p_G_D)))
+    comment = (
+        f"Rigid hub {hub_name}: {hub.description}.",
+        f"Link frame = R_{hub_name} at the centre of mass G{hub_name[2:]}; port and mount frames",
+        "(P: array attachment R_SA0, J0: arm base R_L0, D: docking ports) are fixed in it.",
+    )
+    return Model(
+        name=f"hub_{hub_name}",
+        comment=comment,
+        links=(Link(hub_name, Inertial(hub.mass, hub.inertia)),),
+        frames=tuple(frames),
+        canonical_link=hub_name,
+    )
+
+
+def _arm_model(scenario) -> Model:
+    links, joints = [], []
+    previous = None
+    for index, link in enumerate(scenario.arm.links):
+        pose = (
+            Pose()
+            if previous is None
+            else Pose(tuple(previous.p_J_Jnext), relative_to=previous.name)
+        )
+        links.append(
+            Link(link.name, Inertial(link.mass, link.inertia, Pose(tuple(link.p_J_G))), pose)
+        )
+        if previous is not None:
+            joints.append(
+                Joint(
+                    arm_joint_name(index),
+                    "revolute",
+                    previous.name,
+                    link.name,
+                    axis=tuple(float(v) for v in link.joint_axis),
+                )
+            )
+        previous = link
+    last = scenario.arm.links[-1]
+    frames = (Frame(ARM_TIP_FRAME, last.name, Pose(tuple(last.p_J_Jnext))),)
+    comment = (
+        "UR5-like arm (ros-industrial ur5.urdf.xacro masses/inertias as printed in the paper).",
+        "Link frame R_Li at joint J_i; all link frames parallel at alpha = 0; joint alpha_i turns",
+        "R_Li about its axis relative to R_L(i-1). Frame J7 = arm tip (tool flange), axes of R_L6.",
+    )
+    return Model(
+        name="arm_ur5",
+        comment=comment,
+        links=tuple(links),
+        frames=frames,
+        joints=tuple(joints),
+        canonical_link=scenario.arm.links[0].name,
+    )
+
+
+def _array_models(scenario) -> dict[str, Model]:
+    out = {}
+    for name, model in scenario.array_models.items():
+        out[name] = appendage_model(
+            f"array_{name}",
+            model.mass,
+            model.p_P_S,
+            model.inertia,
+            model.omega,
+            model.damping_ratios,
+            model.participation,
+        )
+    return out
+
+
+def _docked_target_pose(scenario) -> tuple[np.ndarray, np.ndarray]:
+    """``(R_RH1_RH2, p_G1_G2)`` with D3 on D1 (frames coincide)."""
+    d1, d3 = scenario.ports["D1"], scenario.ports["D3"]
+    R = d1.R_G_D @ d3.R_G_D.T
+    p = d1.p_G_D - R @ d3.p_G_D
+    return R, p
+
+
+def _assembly_model(scenario, array_files: dict[str, str]) -> Model:
+    chaser = scenario.arm.parent
+    includes = [Include(_uri(f"hub_{chaser}.sdf"), chaser)]
+    others = [name for name in scenario.hubs if name != chaser]
+    for hub_name in others:
+        R, p = _docked_target_pose(scenario)
+        includes.append(
+            Include(_uri(f"hub_{hub_name}.sdf"), hub_name, pose_from_matrix(R, p, chaser))
+        )
+    includes.append(Include(_uri("arm_ur5.sdf"), ARM_MODEL, Pose(relative_to=f"{chaser}::J0")))
+    joints = [Joint("arm_mount", "fixed", f"{chaser}::{chaser}", f"{ARM_MODEL}::L0")]
+    for name, mount in scenario.arrays.items():
+        frame = f"{mount.parent}::P{name[2:]}"
+        includes.append(Include(_uri(array_files[mount.model.name]), name, Pose(relative_to=frame)))
+        joints.append(
+            Joint(
+                drive_joint_name(name),
+                "revolute",
+                f"{mount.parent}::{mount.parent}",
+                f"{name}::root",
+                axis=tuple(float(v) for v in mount.axis),
+            )
+        )
+    comment = (
+        f"Scenario '{scenario.name}': {scenario.description}.",
+        "Drive joints theta_SA* (arrays) and the arm joints are motion-driven in the mission;",
+        "hubs are free-floating (floating joints, modal residuals and docking bushings SM1 J7-D2,",
+        "SM2 D1-D3 are added by oos_drake.multibody.scenario_plant). Target default pose: docked.",
+    )
+    return Model(
+        name=ASSEMBLY_MODEL,
+        comment=comment,
+        includes=tuple(includes),
+        joints=tuple(joints),
+    )
+
+
+def generate_sdf_texts(scenario=None) -> dict[str, str]:
+    """Return ``{file name: SDF text}`` for every scenario SDF file.
+
+    Parameters
+    ----------
+    scenario : oos_drake.scenario.data.Scenario, optional
+        Default: ``load_scenario()`` (the paper's data file).
+    """
+    if scenario is None:
+        from oos_drake.scenario.data import load_scenario
+
+        scenario = load_scenario()
+    texts = {}
+    for hub_name in scenario.hubs:
+        texts[f"hub_{hub_name}.sdf"] = to_sdf_text(_hub_model(scenario, hub_name))
+    texts["arm_ur5.sdf"] = to_sdf_text(_arm_model(scenario))
+    array_files = {}
+    for name, model in _array_models(scenario).items():
+        array_files[name] = f"array_{name}.sdf"
+        texts[array_files[name]] = to_sdf_text(model)
+    texts[ASSEMBLY_FILE] = to_sdf_text(_assembly_model(scenario, array_files))
+    return texts
+
+
+def write_sdf(directory: str | Path = SDF_DIRECTORY, scenario=None) -> list[Path]:
+    """Write the scenario SDF files into ``directory``; return the paths written."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name, text in generate_sdf_texts(scenario).items():
+        path = directory / name
+        path.write_text(text)
+        paths.append(path)
+    return paths
+
+
+def stale_sdf_files(directory: str | Path = SDF_DIRECTORY, scenario=None) -> list[str]:
+    """Names of files in ``directory`` that are missing or differ from the generated text."""
+    directory = Path(directory)
+    stale = []
+    for name, text in generate_sdf_texts(scenario).items():
+        path = directory / name
+        if not path.is_file() or path.read_text() != text:
+            stale.append(name)
+    return stale

@@ -1,0 +1,238 @@
+"""Shared pieces of the LFR analyses: block maps, the Delta-channel response, frequency grids.
+
+For an LFR ``Fu(M, Delta)`` with state matrices ``A, Bw, Bu, Cz, ...`` the matrix seen by the
+uncertainty at frequency ``omega`` is ``M11(j omega) = Dzw + Cz (j omega I - A)^{-1} Bw``
+(``sum(q) x sum(p)``, MATLAB BLK order of :attr:`LFR.blk`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from oos_drake.robust.blocks import parse_blk
+
+
+@dataclass(frozen=True)
+class BlockMap:
+    """Where each named LFR block sits in the mussv structure.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Block names in channel order.
+    kinds : tuple of str
+        ``"ureal"``, ``"ucomplex"`` or ``"ultidyn"``.
+    specs : tuple
+        The block specs (with ``to_physical``).
+    blk_rows : tuple of tuple of int
+        Indices of the BLK rows of each block (one per block, several for repeated ultidyn).
+    z_slices, w_slices : tuple of slice
+        Rows of ``z`` / columns of ``w`` of each block.
+    blk : numpy.ndarray
+        BLK rows of all blocks.
+    """
+
+    names: tuple
+    kinds: tuple
+    specs: tuple
+    blk_rows: tuple
+    z_slices: tuple
+    w_slices: tuple
+    blk: np.ndarray
+
+    def subset(self, names) -> tuple[BlockMap, np.ndarray, np.ndarray]:
+        """Map restricted to ``names`` plus the z rows and w columns to keep."""
+        unknown = [n for n in names if n not in self.names]
+        if unknown:
+            raise ValueError(f"unknown uncertain block(s) {unknown} (blocks: {list(self.names)})")
+        keep = [i for i, n in enumerate(self.names) if n in set(names)]
+        zrows, wcols, rows, zs, ws, blk = [], [], [], [], [], []
+        z0 = w0 = 0
+        for i in keep:
+            zi = np.arange(self.z_slices[i].start, self.z_slices[i].stop)
+            wi = np.arange(self.w_slices[i].start, self.w_slices[i].stop)
+            zrows.append(zi)
+            wcols.append(wi)
+            zs.append(slice(z0, z0 + zi.size))
+            ws.append(slice(w0, w0 + wi.size))
+            z0 += zi.size
+            w0 += wi.size
+            idx = []
+            for r in self.blk_rows[i]:
+                idx.append(len(blk))
+                blk.append(self.blk[r])
+            rows.append(tuple(idx))
+        sub = BlockMap(
+            tuple(self.names[i] for i in keep),
+            tuple(self.kinds[i] for i in keep),
+            tuple(self.specs[i] for i in keep),
+            tuple(rows),
+            tuple(zs),
+            tuple(ws),
+            np.array(blk, dtype=int).reshape(-1, 2),
+        )
+        return sub, np.concatenate(zrows), np.concatenate(wcols)
+
+
+def block_map(sys) -> BlockMap:
+    """Block map of an LFR (see :class:`BlockMap`)."""
+    names, kinds, specs, rows, zs, ws, blk = [], [], [], [], [], [], []
+    slices = sys.channel_slices()
+    for entry in sys.block_entries:
+        spec = entry.spec
+        names.append(spec.name)
+        kinds.append(spec.kind)
+        specs.append(spec)
+        z, w = slices[spec.name]
+        zs.append(z)
+        ws.append(w)
+        if spec.kind == "ureal":
+            rows.append((len(blk),))
+            blk.append([-entry.reps, 0])
+        elif spec.kind == "ucomplex":
+            rows.append((len(blk),))
+            blk.append([entry.reps, 0])
+        else:
+            idx = []
+            for _ in range(entry.reps):
+                idx.append(len(blk))
+                blk.append(list(spec.shape))
+            rows.append(tuple(idx))
+    if not names:
+        raise ValueError("the LFR has no uncertain blocks to analyze")
+    return BlockMap(tuple(names), tuple(kinds), tuple(specs), tuple(rows), tuple(zs), tuple(ws),
+                    np.array(blk, dtype=int).reshape(-1, 2))
+
+
+def delta_channel_response(A, Bw, Cz, Dzw, omega) -> np.ndarray:
+    """``Dzw + Cz (j omega I - A)^{-1} Bw`` for batched matrices: ``batch + (F, nz, nw)``.
+
+    Uses the eigen-decomposition of ``A`` when it is well conditioned (``O(F n nz nw)``), else
+    batched solves.
+    """
+    A, Bw, Cz, Dzw = (np.asarray(x) for x in (A, Bw, Cz, Dzw))
+    omega = np.atleast_1d(np.asarray(omega, dtype=float))
+    batch = np.broadcast_shapes(A.shape[:-2], Bw.shape[:-2], Cz.shape[:-2], Dzw.shape[:-2])
+    n = A.shape[-1]
+    nz, nw = Dzw.shape[-2:]
+    A = np.broadcast_to(A, batch + (n, n)).reshape(-1, n, n)
+    Bw = np.broadcast_to(Bw, batch + (n, nw)).reshape(-1, n, nw)
+    Cz = np.broadcast_to(Cz, batch + (nz, n)).reshape(-1, nz, n)
+    Dzw = np.broadcast_to(Dzw, batch + (nz, nw)).reshape(-1, nz, nw)
+    nb = A.shape[0]
+    out = np.empty((nb, omega.size, nz, nw), dtype=complex)
+    if n == 0:
+        out[:] = Dzw[:, None]
+        return out.reshape(batch + out.shape[1:])
+    s = 1j * omega
+    for k in range(nb):
+        lam, V = np.linalg.eig(A[k])
+        cond = np.linalg.cond(V)
+        if np.isfinite(cond) and cond < 1e8:
+            CV = Cz[k] @ V
+            VB = np.linalg.solve(V, Bw[k])
+            inv = 1.0 / (s[:, None] - lam[None, :])  # (F, n)
+            out[k] = Dzw[k] + np.einsum("in,fn,nj->fij", CV, inv, VB)
+        else:
+            eye = np.eye(n)
+            X = np.linalg.solve(s[:, None, None] * eye - A[k], np.broadcast_to(Bw[k], (s.size, n, nw)))
+            out[k] = Dzw[k] + Cz[k] @ X
+    return out.reshape(batch + out.shape[1:])
+
+
+def frequency_grid(A, *, points_per_decade: int = 40, omega_range=None) -> np.ndarray:
+    """Frequencies [rad/s] that resolve the dynamics of ``A`` (or several ``A``).
+
+    A logarithmic grid from a decade below the slowest to a decade above the fastest non-zero
+    pole, plus, around each lightly damped pole (damping ratio ``zeta < 0.3``), a local grid of
+    spacing ``zeta * omega_n / 2`` over ``+-6 zeta omega_n`` so that resonances of damping 0.01 are
+    sampled at their peak.
+    """
+    A = np.asarray(A)
+    poles = np.linalg.eigvals(A.reshape((-1,) + A.shape[-2:])).ravel() if A.shape[-1] else np.array([])
+    mag = np.abs(poles)
+    nz = mag[mag > 1e-9 * max(1.0, mag.max(initial=0.0))]
+    if omega_range is None:
+        if nz.size == 0:
+            lo, hi = 1e-2, 1e2
+        else:
+            lo, hi = nz.min() / 10.0, nz.max() * 10.0
+    else:
+        lo, hi = omega_range
+    decades = max(np.log10(hi / lo), 1.0)
+    grid = [np.logspace(np.log10(lo), np.log10(hi), int(points_per_decade * decades) + 1)]
+    if nz.size:
+        p = poles[mag > 1e-9 * max(1.0, mag.max())]
+        wn = np.abs(p)
+        zeta = -p.real / wn
+        light = (zeta < 0.3) & (p.imag > 0)
+        offsets = np.arange(-12, 13) / 2.0  # in units of zeta * wn, +-6 zeta wn
+        for w0, z0 in zip(wn[light], np.maximum(zeta[light], 1e-4), strict=True):
+            grid.append(w0 * (1.0 + z0 * offsets))
+    grid = np.unique(np.concatenate(grid))
+    return grid[(grid > 0) & (grid >= lo * 0.999) & (grid <= hi * 1.001)]
+
+
+def worst_case_values(bmap: BlockMap, structure, delta: np.ndarray, omega: float) -> dict:
+    """Map a normalized perturbation (mussv ``delta``) to named, PHYSICAL block values.
+
+    ``ureal``: a float in the parameter's unit (bilinear/affine map of the block); ``ucomplex``:
+    a complex value; ``ultidyn``: a ``control.StateSpace`` (stable, all-pass factors) whose
+    response at ``omega`` [rad/s] equals the worst complex matrix, with H-infinity norm equal to
+    its norm (scaled by the block's bound).
+    """
+    values = {}
+    for name, kind, spec, rows in zip(bmap.names, bmap.kinds, bmap.specs, bmap.blk_rows, strict=True):
+        block = structure.blocks[rows[0]]
+        sub = delta[block.r_slice, block.c_slice]
+        if kind == "ureal":
+            values[name] = float(spec.to_physical(float(np.real(sub[0, 0]))))
+        elif kind == "ucomplex":
+            values[name] = complex(spec.to_physical(complex(sub[0, 0])))
+        else:
+            values[name] = realize_complex_matrix(spec.bound * sub, omega)
+    return values
+
+
+def _allpass_factor(c: complex, omega: float):
+    """Stable real first-order ``g(s) = k (s - a)/(s + a)`` (or a constant) with ``g(j omega) = c``."""
+    import control
+
+    mag = abs(c)
+    if mag == 0 or omega <= 0:
+        return control.ss([], [], [], [[float(np.real(c)) if omega <= 0 else 0.0]])
+    phase = np.angle(c)
+    sign = 1.0
+    # (j w - a)/(j w + a) has phase pi - 2 atan(w / a) in (0, pi); a negative gain adds pi
+    if phase < 0:
+        phase += np.pi
+        sign = -1.0
+    if phase < 1e-12:
+        return control.ss([], [], [], [[sign * mag]])
+    if phase > np.pi - 1e-12:
+        return control.ss([], [], [], [[-sign * mag]])
+    a = omega / np.tan((np.pi - phase) / 2.0)
+    return control.ss(control.tf([sign * mag, -sign * mag * a], [1.0, a]))
+
+
+def realize_complex_matrix(value: np.ndarray, omega: float):
+    """Stable real-rational system ``Delta(s)`` with ``Delta(j omega) = value``, ``||Delta||_inf = ||value||``.
+
+    Uses the rank-one form of the worst perturbation (``value = u v^*``, exact for the power
+    iteration's full blocks; otherwise its dominant singular pair, which keeps the norm) with
+    all-pass factors per entry.
+    """
+    import control
+
+    value = np.asarray(value, dtype=complex)
+    U, sv, Vh = np.linalg.svd(value)
+    u = U[:, 0] * sv[0]
+    v = Vh[0, :]  # value ~ u v (v is a row)
+    p, q = value.shape
+    left = control.append(*[_allpass_factor(ui, omega) for ui in u]) if p > 1 else _allpass_factor(u[0], omega)
+    right = control.append(*[_allpass_factor(vi, omega) for vi in v]) if q > 1 else _allpass_factor(v[0], omega)
+    # Delta(s) = diag(u_i(s)) 1_p 1_q^T diag(v_j(s))
+    ones = control.ss([], [], [], np.ones((p, q)))
+    return left * ones * right

@@ -1,0 +1,97 @@
+"""``oos model info`` (Delta block table) and ``oos model figures --out DIR`` (paper section 2).
+
+Examples::
+
+    oos model info                    # blocks of the mission LFR with occurrence counts
+    oos model info --phase 7          # the docking-phase-7 LFR instead
+    oos model figures --out figs      # sigma_moments, docking_sweeps, inertias, surface
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+
+def _info(args: argparse.Namespace) -> int:
+    from oos_drake.scenario.data import load_scenario
+    from oos_drake.scenario.model import (
+        PAPER_OCCURRENCES,
+        build_docking_model,
+        build_mission_model,
+        delta_block_table,
+    )
+
+    scenario = load_scenario(args.scenario)
+    start = time.perf_counter()
+    if args.phase == "mission":
+        model = build_mission_model(scenario)
+        title = "mission LFR: W_ext,G1 (6) -> xdd_G1 (6)"
+    else:
+        model = build_docking_model(args.phase, scenario)
+        title = f"docking phase {args.phase} LFR: W_ext,G1 (6) -> xdd_G1 (6)"
+    elapsed = time.perf_counter() - start
+    table = delta_block_table(model)
+    print(f"{title}; {model.nstates} states, {model.nz} Delta channels (built in {elapsed:.2f} s)")
+    columns = ["name", "group", "kind", "nominal", "range", "occurrences", "paper_occurrences"]
+    print(table[[c for c in columns if c in table.columns]].to_string(index=False))
+    if args.phase == "mission":
+        matches = model.occurrences == PAPER_OCCURRENCES
+        print(
+            f"occurrence counts {'equal' if matches else 'DIFFER FROM'} the paper's "
+            f"(total {sum(model.occurrences.values())})"
+        )
+        return 0 if matches else 1
+    return 0
+
+
+def _figures(args: argparse.Namespace) -> int:
+    from oos_drake.scenario.data import load_scenario
+    from oos_drake.scenario.figures import make_figures
+
+    start = time.perf_counter()
+    files = make_figures(
+        args.out,
+        load_scenario(args.scenario),
+        n_times=args.times,
+        n_frequencies=args.frequencies,
+        n_samples=args.samples,
+        seed=args.seed,
+    )
+    for name, (png, data) in files:
+        print(f"{name:15s} {png}  {data}")
+    print(f"done in {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def register(subparsers) -> None:
+    """Add ``oos model info`` and ``oos model figures``."""
+    parser = subparsers.add_parser("model", help="the TITOP LFR of the scenario: info and figures")
+    commands = parser.add_subparsers(dest="model_command", metavar="SUBCOMMAND")
+    parser.set_defaults(func=lambda args: (parser.print_help(), 1)[1])
+
+    info = commands.add_parser("info", help="Delta block table with occurrence counts")
+    info.add_argument(
+        "--phase",
+        choices=("mission", "7", "8"),
+        default="mission",
+        help="mission model (default) or a docking-phase model",
+    )
+    info.add_argument("--scenario", default=None, help="scenario TOML (default: the paper's)")
+    info.set_defaults(func=_info)
+
+    figures = commands.add_parser("figures", help="paper section-2 figures (PNG) and their data")
+    figures.add_argument("--out", required=True, help="output folder")
+    figures.add_argument("--times", type=int, default=330, help="mission grid size (default 330)")
+    figures.add_argument(
+        "--frequencies",
+        type=int,
+        default=500,
+        help="frequency grid size, 0.01-100 Hz (default 500)",
+    )
+    figures.add_argument(
+        "--samples", type=int, default=20, help="uncertain samples per moment (default 20)"
+    )
+    figures.add_argument("--seed", type=int, default=0, help="sampling seed")
+    figures.add_argument("--scenario", default=None, help="scenario TOML (default: the paper's)")
+    figures.set_defaults(func=_figures)

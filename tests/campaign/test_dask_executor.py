@@ -1,0 +1,41 @@
+"""Dask executor: a small local cluster gives the same runs as the in-process executor."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+
+pytest.importorskip("dask.distributed")
+
+from oos_drake.campaign.executors import DaskExecutor, InlineExecutor  # noqa: E402
+from oos_drake.campaign.runner import case_from_plan_row, run_campaign  # noqa: E402
+from oos_drake.campaign.samplers import make_plan  # noqa: E402
+from oos_drake.campaign.spec import load_spec  # noqa: E402
+
+
+def test_dask_local_cluster_threads_matches_inline(write_spec):
+    spec = load_spec(write_spec())
+    plan = make_plan(spec)
+    cases = [case_from_plan_row(spec, row) for _, row in plan.iterrows()]
+    executor = DaskExecutor(None, workers=2, processes=False)
+    try:
+        executor.start(spec.simulator)
+        dask_results = {r.run_id: r for r in executor.run(spec.simulator, cases)}
+    finally:
+        executor.close()
+    inline = {r.run_id: r for r in InlineExecutor().run(spec.simulator, cases)}
+    assert sorted(dask_results) == list(range(spec.n_runs))
+    for run_id, result in inline.items():
+        assert dask_results[run_id].status == result.status == "ok"
+        assert dask_results[run_id].metrics == result.metrics
+
+
+def test_campaign_on_a_local_dask_cluster_of_processes(write_spec, tmp_path):
+    spec = write_spec()
+    run_campaign(spec, tmp_path / "dask", workers=2, scheduler="local", progress=False)
+    run_campaign(spec, tmp_path / "inline", workers=1, progress=False)
+    dask = pd.read_parquet(tmp_path / "dask" / "runs.parquet")
+    inline = pd.read_parquet(tmp_path / "inline" / "runs.parquet")
+    pd.testing.assert_frame_equal(
+        dask.drop(columns="wall_time [s]"), inline.drop(columns="wall_time [s]")
+    )

@@ -1,0 +1,70 @@
+"""Report: tables agree with an independent count over runs.parquet; figures are written."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import matplotlib.image
+import numpy as np
+import pandas as pd
+
+from oos_drake.campaign.report import weighted_quantile, write_report
+from oos_drake.campaign.runner import run_campaign
+
+from .spec_texts import BASE_SPEC
+
+
+def test_report_tables_and_figures(write_spec, tmp_path):
+    # a wide initial-rate dispersion so that some runs violate the APE requirement
+    text = (
+        BASE_SPEC.replace("n_runs = 12", "n_runs = 40")
+        .replace(
+            "[requirements]",
+            'omega0 = { distribution = "uniform", low = -0.008, high = 0.008 }\n\n[requirements]',
+        )
+        .replace('keep = "all"', 'keep = "none"')
+    )
+    out = tmp_path / "c"
+    run_campaign(write_spec(text), out, progress=False)
+    runs = pd.read_parquet(out / "runs.parquet")
+    report = write_report(out, worst=3)
+
+    summary = report.tables["summary"].set_index("metric")
+    ape_fail = runs["ape [rad]"] > 0.0079
+    assert 0 < ape_fail.sum() < len(runs)
+    assert summary.loc["ape [rad]", "violations"] == ape_fail.sum()
+    assert summary.loc["ape [rad]", "P(violation)"] == ape_fail.mean()
+    assert summary.loc["ape [rad]", "max"] == runs["ape [rad]"].max()
+    any_fail = ~runs["pass"]
+    assert summary.loc["any (requirement or run failure)", "P(violation)"] == any_fail.mean()
+    worst = report.tables["worst_runs"]
+    assert worst["run_id"].iloc[0] == runs.loc[(runs["ape [rad]"] / 0.0079).idxmax(), "run_id"]
+
+    names = {p.name for p in report.figures}
+    # worst runs are plotted even though no time series was kept (recomputed from the plan)
+    assert names == {"metric_distributions.png", "worst_runs.png", "pass_fail_vs_parameters.png"}
+    for figure in report.figures:
+        image = matplotlib.image.imread(figure)
+        assert image.shape[0] > 200 and image.shape[1] > 400
+        assert image[..., :3].std() > 0.05  # not blank
+    for table in ("summary", "status", "worst_runs"):
+        assert (out / "report" / f"{table}.parquet").is_file()
+
+    cli = subprocess.run(
+        [sys.executable, "-m", "oos_drake.cli", "campaign", "report", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert cli.returncode == 0, cli.stderr
+    assert "P(violation)" in cli.stdout and "worst runs" in cli.stdout
+
+
+def test_weighted_quantile_against_repeated_samples():
+    values = np.array([3.0, 1.0, 2.0, 4.0])
+    weights = np.array([1.0, 2.0, 1.0, 0.0])  # same as the sample [1, 1, 2, 3]
+    assert weighted_quantile(values, weights, 0.5) == np.quantile(
+        [1, 1, 2, 3], 0.5, method="inverted_cdf"
+    )
+    assert weighted_quantile(values, weights, 0.9) == 3.0

@@ -1,0 +1,156 @@
+"""Runner reliability: failing/diverging runs recorded, kill -9 + resume, rerun reproducibility."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from oos_drake.campaign import store
+from oos_drake.campaign.attitude_sim import FlexibleAttitudeSimulator
+from oos_drake.campaign.runner import rerun_case, resume_campaign, run_campaign
+
+from .spec_texts import BASE_SPEC
+
+METRICS = ["ape [rad]", "peak_torque [N m]"]
+
+
+def _oos(*args, **kwargs):
+    return [sys.executable, "-m", "oos_drake.cli", "campaign", *map(str, args)]
+
+
+def test_diverging_run_is_recorded_and_the_campaign_goes_on(write_spec, tmp_path):
+    # omega0 = 0.1 rad/s against a 3 N m torque limit: the hub needs at least
+    # J w^2 / (2 u_max) = 600 * 0.01 / 6 = 1 rad to stop, beyond the 0.5 rad divergence limit
+    text = BASE_SPEC.replace(
+        "[requirements]",
+        'omega0 = { distribution = "choice", values = [0.0, 0.1] }\n\n[requirements]',
+    )
+    summary = run_campaign(write_spec(text), tmp_path / "c", progress=False)
+    runs = pd.read_parquet(tmp_path / "c" / "runs.parquet")
+    assert runs["run_id"].tolist() == list(range(12)) and summary.executed == 12
+    diverging = runs["omega0 [rad/s]"] == 0.1
+    assert 0 < diverging.sum() < 12
+    assert (runs.loc[diverging, "status"] == "diverged").all()
+    assert runs.loc[diverging, "error"].str.contains("divergence limit").all()
+    assert runs.loc[diverging, METRICS].isna().all().all()
+    assert not runs.loc[diverging, "pass"].any()
+    assert (runs.loc[~diverging, "status"] == "ok").all()
+    assert runs.loc[~diverging, METRICS].notna().all().all()
+    assert summary.status_counts == {
+        "diverged": int(diverging.sum()),
+        "ok": int((~diverging).sum()),
+    }
+
+
+def test_failing_run_is_recorded_with_its_error(write_spec, tmp_path, monkeypatch):
+    original = FlexibleAttitudeSimulator.run
+
+    def flaky(self, case):
+        if case.run_id == 3:
+            raise RuntimeError("solver exploded")
+        return original(self, case)
+
+    monkeypatch.setattr(FlexibleAttitudeSimulator, "run", flaky)
+    run_campaign(write_spec(), tmp_path / "c", progress=False)
+    runs = pd.read_parquet(tmp_path / "c" / "runs.parquet").set_index("run_id")
+    assert runs.loc[3, "status"] == "failed"
+    assert runs.loc[3, "error"].startswith("RuntimeError: solver exploded")
+    assert (runs.drop(index=3)["status"] == "ok").all() and len(runs) == 12
+
+
+def test_rerun_reproduces_metrics_exactly(write_spec, tmp_path):
+    run_campaign(write_spec(), tmp_path / "c", progress=False)
+    runs = pd.read_parquet(tmp_path / "c" / "runs.parquet")
+    for run_id in (0, 5, 11):
+        result = rerun_case(tmp_path / "c", run_id)
+        assert result.identical is True
+        recorded = runs[runs["run_id"] == run_id].iloc[0]
+        for column in METRICS:
+            assert result.row[column].iloc[0] == recorded[column]  # bit-identical
+        stored = pd.read_parquet(store.timeseries_file(tmp_path / "c", run_id))
+        np.testing.assert_array_equal(
+            stored["theta_hub [rad]"], result.timeseries["theta_hub [rad]"]
+        )
+    cli = subprocess.run(
+        _oos("rerun", tmp_path / "c", "--case", 4), capture_output=True, text=True, timeout=120
+    )
+    assert cli.returncode == 0, cli.stderr
+    assert "reproduced exactly" in cli.stdout
+    with pytest.raises(ValueError, match="--case 12: no such run"):
+        rerun_case(tmp_path / "c", 12)
+
+
+def test_kill_9_then_resume_loses_and_repeats_nothing(write_spec, tmp_path):
+    n_runs = 40
+    # ~40 ms per run so that the kill lands mid-campaign
+    text = BASE_SPEC.replace("n_runs = 12", f"n_runs = {n_runs}").replace(
+        "control_rate = 5.0", "control_rate = 50.0"
+    )
+    spec = write_spec(text)
+    killed = tmp_path / "killed"
+    process = subprocess.Popen(
+        _oos("run", spec, "--out", killed, "--workers", 1, "--no-progress"),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    deadline = time.monotonic() + 90
+    try:
+        while len(store.finished_run_ids(killed)) < 6:
+            assert process.poll() is None, "campaign ended before it could be killed"
+            assert time.monotonic() < deadline, "campaign did not start"
+            time.sleep(0.02)
+    finally:
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
+    done_before = store.finished_run_ids(killed)
+    assert 6 <= len(done_before) < n_runs
+    assert not (killed / "runs.parquet").exists()
+    mtimes = {i: store.run_file(killed, i).stat().st_mtime_ns for i in done_before}
+    # a half-written leftover of an interrupted write must be ignored and cleaned up
+    (killed / "runs" / ".run_000039.parquet.abc.tmp").write_bytes(b"PAR1 truncated")
+
+    result = subprocess.run(
+        _oos("resume", killed, "--workers", 1, "--no-progress"),
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
+    assert result.returncode == 0, result.stderr
+    assert f"{n_runs - len(done_before)} run now, {len(done_before)} already done" in result.stdout
+    assert not list((killed / "runs").glob("*.tmp"))
+    # finished runs were not redone
+    assert {i: store.run_file(killed, i).stat().st_mtime_ns for i in done_before} == mtimes
+
+    reference = tmp_path / "reference"
+    run_campaign(spec, reference, progress=False)
+    resumed = pd.read_parquet(killed / "runs.parquet")
+    uninterrupted = pd.read_parquet(reference / "runs.parquet")
+    assert resumed["run_id"].tolist() == list(range(n_runs))  # each run exactly once
+    for column in ["seed", "J_hub [kg m^2]", "k_dock [N m/rad]", *METRICS, "status", "pass"]:
+        assert resumed[column].tolist() == uninterrupted[column].tolist(), column
+    assert len(list((killed / "timeseries").glob("run_*.parquet"))) == n_runs
+
+
+def test_process_pool_matches_in_process_results(write_spec, tmp_path):
+    spec = write_spec()
+    run_campaign(spec, tmp_path / "pool", workers=2, progress=False)
+    run_campaign(spec, tmp_path / "inline", workers=1, progress=False)
+    pool = pd.read_parquet(tmp_path / "pool" / "runs.parquet")
+    inline = pd.read_parquet(tmp_path / "inline" / "runs.parquet")
+    pd.testing.assert_frame_equal(
+        pool.drop(columns="wall_time [s]"), inline.drop(columns="wall_time [s]")
+    )
+
+
+def test_resume_of_a_finished_campaign_runs_nothing(write_spec, tmp_path):
+    run_campaign(write_spec(), tmp_path / "c", progress=False)
+    summary = resume_campaign(tmp_path / "c", progress=False)
+    assert summary.executed == 0 and summary.skipped == 12

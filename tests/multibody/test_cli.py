@@ -1,0 +1,48 @@
+"""``oos validate`` and ``oos sdf generate|check`` through the real CLI entry point."""
+
+import pytest
+
+from oos_drake.cli import main
+
+
+@pytest.mark.drake
+def test_validate_moments_prints_table_and_passes(capsys):
+    status = main(["validate", "--cases", "moments", "--frequencies", "100"])
+    out = capsys.readouterr().out
+    assert status == 0
+    assert "configuration" in out and "max rel. error" in out
+    for name in "123456":
+        assert f"moment {name}" in out
+    assert out.count("PASS") == 6 and "FAIL" not in out
+
+
+@pytest.mark.drake
+def test_validate_exits_nonzero_when_a_configuration_fails(capsys):
+    # an impossible tolerance: every configuration must be reported as failing
+    status = main(["validate", "--cases", "moments", "--frequencies", "20", "--tolerance", "1e-30"])
+    out = capsys.readouterr().out
+    assert status == 1
+    assert out.count("FAIL") >= 6 and "FAILED: 6 of 6" in out
+
+
+def test_sdf_generate_and_check(tmp_path, capsys):
+    assert main(["sdf", "check"]) == 0
+    assert main(["sdf", "generate", "--out", str(tmp_path)]) == 0
+    assert main(["sdf", "check", "--out", str(tmp_path)]) == 0
+    path = tmp_path / "arm_ur5.sdf"
+    path.write_text(path.read_text().replace("<mass>8.393</mass>", "<mass>8.4</mass>"))
+    assert main(["sdf", "check", "--out", str(tmp_path)]) == 1
+    assert "arm_ur5.sdf" in capsys.readouterr().err
+
+
+def test_bad_sdf_gives_one_line_error_and_status_2(tmp_path, capsys):
+    assert main(["sdf", "generate", "--out", str(tmp_path)]) == 0
+    path = tmp_path / "hub_RH2.sdf"
+    path.write_text(path.read_text().replace('<frame name="D2"', '<frame name="X2"'))
+    status = main(
+        ["validate", "--cases", "moments", "--frequencies", "10", "--sdf-dir", str(tmp_path)]
+    )
+    err = capsys.readouterr().err.strip()
+    assert status == 2
+    assert len(err.splitlines()) == 1
+    assert "hub_RH2.sdf: port frame 'D2' missing" in err

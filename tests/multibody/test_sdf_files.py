@@ -1,0 +1,130 @@
+"""The committed SDF files: generated from the scenario data, parsed by Drake, validated."""
+
+import shutil
+
+import numpy as np
+import pytest
+
+from oos_drake.multibody.scenario_sdf import (
+    ASSEMBLY_FILE,
+    SDF_DIRECTORY,
+    generate_sdf_texts,
+    stale_sdf_files,
+    write_sdf,
+)
+from oos_drake.multibody.sdf_validation import SdfError, validate_sdf_tree
+from oos_drake.scenario.data import load_scenario
+
+SCENARIO = load_scenario()
+
+
+def test_committed_sdf_is_up_to_date():
+    stale = stale_sdf_files(SDF_DIRECTORY, SCENARIO)
+    assert not stale, f"stale SDF files {stale}: run `oos sdf generate`"
+
+
+def test_sdf_directory_holds_only_generated_files():
+    generated = set(generate_sdf_texts(SCENARIO))
+    present = {p.name for p in SDF_DIRECTORY.iterdir() if not p.name.startswith(".")}
+    assert present == generated
+
+
+def test_generation_is_deterministic_and_follows_the_data(tmp_path):
+    assert generate_sdf_texts(SCENARIO) == generate_sdf_texts(SCENARIO)
+    write_sdf(tmp_path, SCENARIO)
+    assert stale_sdf_files(tmp_path, SCENARIO) == []
+    text = (tmp_path / "hub_RH2.sdf").read_text()
+    (tmp_path / "hub_RH2.sdf").write_text(text.replace("<mass>24.96</mass>", "<mass>25.0</mass>"))
+    assert stale_sdf_files(tmp_path, SCENARIO) == ["hub_RH2.sdf"]
+
+
+def _copy_tree(tmp_path):
+    target = tmp_path / "sdf"
+    shutil.copytree(SDF_DIRECTORY, target)
+    return target
+
+
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        (
+            "<mass>24.96</mass>",
+            "<mass>-24.96</mass>",
+            r"hub_RH2\.sdf: link 'RH2': mass must be > 0",
+        ),
+        (
+            "<ixx>2.684</ixx>",
+            "<ixx>-2.684</ixx>",
+            r"hub_RH2\.sdf: link 'RH2': inertia not positive definite",
+        ),
+        (
+            "<izz>2.32</izz>",
+            "<izz>9.0</izz>",
+            r"hub_RH2\.sdf: link 'RH2': principal moments .* triangle",
+        ),
+    ],
+)
+def test_invalid_inertia_names_file_and_link(tmp_path, old, new, message):
+    directory = _copy_tree(tmp_path)
+    path = directory / "hub_RH2.sdf"
+    assert old in path.read_text()
+    path.write_text(path.read_text().replace(old, new))
+    with pytest.raises(SdfError, match=message) as error:
+        validate_sdf_tree(directory / ASSEMBLY_FILE)
+    assert "\n" not in str(error.value)
+
+
+@pytest.mark.parametrize(
+    "frame, file_name", [("D2", "hub_RH2.sdf"), ("D1", "hub_RH1.sdf"), ("J7", "arm_ur5.sdf")]
+)
+def test_missing_port_frame_names_file_and_frame(tmp_path, frame, file_name):
+    from oos_drake.multibody.scenario_plant import REQUIRED_FRAMES
+
+    directory = _copy_tree(tmp_path)
+    path = directory / file_name
+    text = path.read_text()
+    assert f'<frame name="{frame}"' in text
+    path.write_text(text.replace(f'<frame name="{frame}"', '<frame name="renamed"'))
+    with pytest.raises(SdfError, match=rf"{file_name}: port frame '{frame}' missing"):
+        validate_sdf_tree(directory / ASSEMBLY_FILE, REQUIRED_FRAMES)
+
+
+@pytest.mark.drake
+def test_builder_refuses_bad_sdf_before_drake_parses_it(tmp_path):
+    from oos_drake.multibody.scenario_plant import build_scenario_diagram
+
+    directory = _copy_tree(tmp_path)
+    path = directory / "arm_ur5.sdf"
+    path.write_text(path.read_text().replace("<mass>8.393</mass>", "<mass>0</mass>"))
+    with pytest.raises(ValueError, match=r"arm_ur5\.sdf: link 'L2': mass must be > 0"):
+        build_scenario_diagram("hub", sdf_directory=directory)
+
+
+@pytest.mark.drake
+def test_parsed_plant_has_the_data_masses_and_array_inertias():
+    """Drake's parse of sdf/ (plus modal residuals) carries the scenario's masses and D_P."""
+    from pydrake.multibody.tree import BodyIndex
+
+    from oos_drake.multibody.plant_parts import drake_spatial_inertia_to_matrix
+    from oos_drake.multibody.scenario_plant import ARRAYS, build_scenario_diagram
+
+    handles = build_scenario_diagram("free")
+    plant = handles.plant
+    context = plant.CreateDefaultContext()
+    expected_mass = (
+        sum(h.mass for h in SCENARIO.hubs.values())
+        + SCENARIO.arm.total_mass
+        + sum(m.model.mass for m in SCENARIO.arrays.values())
+    )
+    # mode bodies and modal residuals cancel: the parsed bodies sum to the data's masses
+    total = sum(plant.get_body(BodyIndex(i)).default_mass() for i in range(1, plant.num_bodies()))
+    np.testing.assert_allclose(total, expected_mass, rtol=1e-12)
+    for array in ARRAYS:
+        mount = SCENARIO.arrays[array]
+        instance = plant.GetModelInstanceByName(f"oos_scenario::{array}")
+        root = plant.GetBodyByName("root", instance)
+        indices = plant.GetBodyIndices(instance)
+        M = plant.CalcSpatialInertia(context, root.body_frame(), indices)
+        np.testing.assert_allclose(
+            drake_spatial_inertia_to_matrix(M), mount.model.rigid_spatial_inertia, atol=1e-9
+        )
