@@ -18,6 +18,7 @@ COMMAND_MODULES = (
     "oos_drake.multibody.cli",
     "oos_drake.control.cli",
     "oos_drake.robust.cli",
+    "oos_drake.analysis.cli",
     "oos_drake.campaign.cli",
     "oos_drake.pipeline",
 )
