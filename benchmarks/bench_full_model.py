@@ -35,6 +35,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
 
     start = time.perf_counter()
+    import control  # noqa: F401  (imported lazily by the LFR core; timed here, not in the build)
+
     from oos_drake.lfr import usubs
     from oos_drake.scenario.data import load_scenario
     from oos_drake.scenario.model import build_mission_model

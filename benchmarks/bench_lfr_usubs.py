@@ -37,41 +37,43 @@ def rotation_z(tau):
     """Rotation about z by theta, tau = tan(theta/4): R = [(I - tau N)^-1 (I + tau N)]^2 with
     N = skew(e_z) = U V^T (rank 2), so tau enters as tau*I2 per Cayley factor (4 occurrences)."""
     U = np.array([[1.0, 0.0], [0.0, 1.0], [0.0, 0.0]])
-    V = np.array([[0.0, -1.0], [1.0, 0.0], [0.0, 0.0]])       # U V^T = skew(e_z)
+    V = np.array([[0.0, -1.0], [1.0, 0.0], [0.0, 0.0]])  # U V^T = skew(e_z)
     tau_I2 = append(tau, tau)
     tau_N = U @ tau_I2 @ V.T
     cayley = inv(np.eye(3) - tau_N) * (np.eye(3) + tau_N)
-    cayley_T = (np.eye(3) - tau_N) * inv(np.eye(3) + tau_N)     # transpose of the factor
+    cayley_T = (np.eye(3) - tau_N) * inv(np.eye(3) + tau_N)  # transpose of the factor
     return cayley * cayley, cayley_T * cayley_T
 
 
 def flexible_spacecraft(n_appendages: int = 3, modes_per_appendage: int = 9, seed: int = 7):
     rng = np.random.default_rng(seed)
     integ = control.tf(1, [1, 0])
-    inertia = [ureal(f"J{axis}", nom, percent=10) for axis, nom in zip("xyz", (900.0, 1100.0,
-                                                                               700.0), strict=True)]
+    inertia = [
+        ureal(f"J{axis}", nom, percent=10)
+        for axis, nom in zip("xyz", (900.0, 1100.0, 700.0), strict=True)
+    ]
     appendages = []
     for i in range(n_appendages):
-        tau = ureal(f"tau{i}", 0.0, range=(-1.0, 1.0))            # scheduled angle parameter
+        tau = ureal(f"tau{i}", 0.0, range=(-1.0, 1.0))  # scheduled angle parameter
         R, R_T = rotation_z(tau)
         modes, gains, directions = [], [], []
         for j in range(modes_per_appendage):
-            w0 = 0.6 * (1.45 ** j) * (1 + 0.1 * i)                 # modal frequency [rad/s]
+            w0 = 0.6 * (1.45**j) * (1 + 0.1 * i)  # modal frequency [rad/s]
             w = ureal(f"w{i}_{j}", w0, percent=10)
-            xi = ureal(f"xi{i}_{j}", 0.005, range=(0.002, 0.01))   # asymmetric -> bilinear
+            xi = ureal(f"xi{i}_{j}", 0.005, range=(0.002, 0.01))  # asymmetric -> bilinear
             g = ureal(f"g{i}_{j}", 1.0, percent=20)
-            K = 2 * xi * w + w * w * integ                          # f = K v, v = (r - f)/s
+            K = 2 * xi * w + w * w * integ  # f = K v, v = (r - f)/s
             modes.append(feedback(K * integ, 1))
             gains.append(g)
             directions.append(rng.standard_normal(3) * np.sqrt(30.0 / (1 + j)))
-        L = np.stack(directions, axis=1)                           # 3 x modes participation
+        L = np.stack(directions, axis=1)  # 3 x modes participation
         Gm = append(*gains)
         appendages.append(R * L * Gm * append(*modes) * Gm * (-L.T) * R_T)
     torque = appendages[0]
     for app in appendages[1:]:
         torque = torque + app
     J_inv = append(*(inv(J) for J in inertia))
-    accel = feedback(J_inv, torque, sign=1)     # a = J^-1 (u + T_app(a)),  T_app = -R L g f ...
+    accel = feedback(J_inv, torque, sign=1)  # a = J^-1 (u + T_app(a)),  T_app = -R L g f ...
     double_integ = append(*([integ * integ] * 3))
     return double_integ * accel
 
@@ -87,8 +89,10 @@ def main(argv=None) -> int:
     sys = flexible_spacecraft()
     t_build = time.perf_counter() - t0
     n_occ = sum(sys.occurrences.values())
-    print(f"model: {sys.nstates} states, {sys.noutputs}x{sys.ninputs} I/O, "
-          f"{len(sys.occurrences)} blocks, {n_occ} Delta occurrences (built in {t_build:.2f} s)")
+    print(
+        f"model: {sys.nstates} states, {sys.noutputs}x{sys.ninputs} I/O, "
+        f"{len(sys.occurrences)} blocks, {n_occ} Delta occurrences (built in {t_build:.2f} s)"
+    )
 
     rng = np.random.default_rng(2026)
     specs = sys.uncertainty
@@ -123,10 +127,14 @@ def main(argv=None) -> int:
     print(f"{'vectorized usubs':44s} {t_subs:10.3f}")
     print(f"{'batched freqresp':44s} {t_fr:10.3f}")
     print(f"{'vectorized total':44s} {t_fast:10.3f}")
-    print(f"{'loop usubs+to_ss+control.frequency_response':44s} {t_base:10.3f}  "
-          f"(timed on {nb} samples: {t_base_subset:.3f} s, scaled x{args.samples / nb:.1f})")
-    print(f"speed-up: {t_base / t_fast:.1f}x   max relative difference on the {nb} common "
-          f"samples: {rel:.2e}")
+    print(
+        f"{'loop usubs+to_ss+control.frequency_response':44s} {t_base:10.3f}  "
+        f"(timed on {nb} samples: {t_base_subset:.3f} s, scaled x{args.samples / nb:.1f})"
+    )
+    print(
+        f"speed-up: {t_base / t_fast:.1f}x   max relative difference on the {nb} common "
+        f"samples: {rel:.2e}"
+    )
     return 0
 
 

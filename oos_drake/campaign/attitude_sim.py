@@ -15,7 +15,8 @@ A discrete PD controller at ``control_rate`` reads a star tracker (attitude, whi
 (rate, white noise) whose noise comes from the run seed, and commands the reaction wheel; the wheel
 torque saturates at ``torque_limit``. Between controller samples the plant is linear with a held
 input, so it is integrated exactly (zero-order hold: matrix exponential of the augmented
-matrix, :func:`expm_small`): the result does not depend on an ODE solver tolerance, and reruns are bit-identical.
+matrix, :func:`expm_small`): the result does not depend on an ODE solver tolerance, and reruns
+are bit-identical.
 
 Metrics: ``ape`` = max |hub attitude| over the window [rad], ``peak_torque`` = max |commanded
 torque| [N m], ``rms_attitude`` [rad]. A hub attitude beyond ``divergence_limit`` (lost attitude

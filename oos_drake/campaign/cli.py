@@ -92,6 +92,10 @@ def _rerun(args: argparse.Namespace) -> int:
     if result.identical is None:
         print(f"run {args.case} has no recorded result yet")
         return 0
+    with pd.option_context("display.float_format", "{:.17g}".format):
+        print(result.comparison.to_string())
+    for package, (then, now) in result.environment_changes.items():
+        print(f"note: {package} was {then} when the campaign ran, is {now} now")
     if result.identical:
         print(f"run {args.case}: metrics and status reproduced exactly")
         return 0
@@ -142,3 +146,24 @@ def register(subparsers) -> None:
     report.add_argument("directory", help="campaign directory")
     report.add_argument("--worst", type=int, default=5, help="worst runs to plot (default 5)")
     report.set_defaults(func=_report)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m oos_drake.campaign.cli campaign ...``: the campaign commands alone.
+
+    Same behaviour as ``oos campaign ...`` (a user-fixable error prints one line and returns 2),
+    without importing the other subpackages' commands.
+    """
+    parser = argparse.ArgumentParser(prog="oos")
+    register(parser.add_subparsers(dest="command", metavar="COMMAND", required=True))
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (ValueError, FileNotFoundError, KeyError) as exc:
+        message = exc.args[0] if exc.args else exc
+        print(f"oos {args.command}: error: {message}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.stats
+import scipy.special
 
 from oos_drake.campaign.simulator import Parameter
 
@@ -84,17 +84,30 @@ class TruncatedNormal:
     high: float
     kind = "normal"
 
-    @property
-    def _frozen(self):
+    def _bounds(self) -> tuple[float, float, float]:
+        """Standardized bounds (reflected into the lower half when above the mean) and sign."""
         a = (self.low - self.mean) / self.std
         b = (self.high - self.mean) / self.std
-        return scipy.stats.truncnorm(a, b, loc=self.mean, scale=self.std)
+        if a > 0:  # work in the lower tail, where Phi keeps its relative precision
+            return -b, -a, -1.0
+        return a, b, 1.0
 
     def ppf(self, u: np.ndarray) -> np.ndarray:
-        return self._frozen.ppf(np.asarray(u))
+        a, b, sign = self._bounds()
+        u = np.asarray(u, dtype=float)
+        if sign < 0:
+            u = 1.0 - u
+        cdf_a, cdf_b = scipy.special.ndtr(a), scipy.special.ndtr(b)
+        z = scipy.special.ndtri(cdf_a + u * (cdf_b - cdf_a))
+        return np.clip(self.mean + sign * self.std * z, self.low, self.high)
 
     def pdf(self, x: np.ndarray) -> np.ndarray:
-        return self._frozen.pdf(np.asarray(x, dtype=float))
+        a, b, _ = self._bounds()
+        x = np.asarray(x, dtype=float)
+        mass = scipy.special.ndtr(b) - scipy.special.ndtr(a)
+        z = (x - self.mean) / self.std
+        density = np.exp(-0.5 * z**2) / (math.sqrt(2 * math.pi) * self.std * mass)
+        return np.where((x >= self.low) & (x <= self.high), density, 0.0)
 
     @property
     def support(self) -> tuple[float, float]:

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import concurrent.futures
 import multiprocessing
+import os
+import socket
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
@@ -54,6 +56,10 @@ class RunResult:
         Logged signals.
     wall_time : float
         Wall-clock time of the run on its worker [s].
+    worker : str
+        ``"host:pid"`` of the process that ran it.
+    simulator_builds : int
+        Simulators built so far in that process (1 when the build-once-per-worker cache works).
     """
 
     run_id: int
@@ -62,6 +68,8 @@ class RunResult:
     metrics: dict
     timeseries: pd.DataFrame | None
     wall_time: float
+    worker: str = ""
+    simulator_builds: int = 0
 
 
 def execute_case(recipe: SimulatorRecipe, case: RunCase) -> RunResult:
@@ -80,7 +88,16 @@ def execute_case(recipe: SimulatorRecipe, case: RunCase) -> RunResult:
         where = f" ({last[0].filename.rsplit('/', 1)[-1]}:{last[0].lineno})" if last else ""
         status, error = "failed", f"{type(exc).__name__}: {exc}{where}"
         metrics, timeseries = {}, None
-    return RunResult(case.run_id, status, error, metrics, timeseries, time.perf_counter() - start)
+    return RunResult(
+        case.run_id,
+        status,
+        error,
+        metrics,
+        timeseries,
+        time.perf_counter() - start,
+        f"{socket.gethostname()}:{os.getpid()}",
+        build_simulator.cache_info().misses,
+    )
 
 
 def _warm_up(recipe: SimulatorRecipe) -> None:

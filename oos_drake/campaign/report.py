@@ -16,7 +16,9 @@ Files written in ``DIR/report/``:
   violations, estimated violation probability and its standard error;
 - ``status.parquet``: runs per status; ``worst_runs.parquet``: the worst runs by requirement
   margin; ``regions.parquet`` (mu-guided): runs, failures and estimate per proposal region;
-- ``metric_distributions.png``, ``worst_runs.png``, ``pass_fail_vs_parameters.png``.
+- ``metric_distributions.png``, ``worst_runs.png``, ``pass_fail_vs_parameters.png``, and for
+  mu-guided campaigns ``regions_prediction.png`` (mu bounds of each critical region against the
+  worst requirement ratio of the nonlinear runs drawn around it).
 """
 
 from __future__ import annotations
@@ -143,31 +145,75 @@ def _summary_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
 
 
 def _regions_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
-    rows = [
-        {
-            "region": NOMINAL_COMPONENT,
-            "configuration": "nominal dispersions",
-            "time [s]": math.nan,
-            "mu_upper": math.nan,
-        }
-    ]
+    """Runs, failures and estimate per proposal component, with the linear prediction (mu)."""
+    rows = [{"region": NOMINAL_COMPONENT, "configuration": "nominal dispersions"}]
     rows += [
         {
             "region": r.region,
             "configuration": r.configuration,
             "time [s]": r.time,
+            "frequency [Hz]": r.frequency,
             "mu_upper": r.mu_upper,
+            "mu_lower": r.mu_lower,
         }
         for r in spec.regions
     ]
     table = pd.DataFrame(rows)
     n = len(runs)
     failed = ~runs["pass"]
-    grouped = runs.assign(failed=failed, wf=runs["weight"] * failed).groupby("region")
+    ratio = requirement_ratio(spec, runs)
+    grouped = runs.assign(failed=failed, wf=runs["weight"] * failed, ratio=ratio).groupby("region")
     table["runs"] = table["region"].map(grouped.size()).fillna(0).astype(int)
     table["failures"] = table["region"].map(grouped["failed"].sum()).fillna(0).astype(int)
+    table["worst ratio (nonlinear) [-]"] = table["region"].map(grouped["ratio"].max())
     table["P(fail) contribution"] = table["region"].map(grouped["wf"].sum() / n).fillna(0.0)
     return table
+
+
+def _plot_regions(regions: pd.DataFrame, path: Path) -> Path | None:
+    """Linear prediction (mu bounds) against the nonlinear outcome of the runs near each region."""
+    guided = regions[regions["region"] != NOMINAL_COMPONENT]
+    if guided.empty:
+        return None
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    x = np.arange(len(guided))
+    ax.bar(
+        x - 0.2, guided["mu_upper"], width=0.4, color="tab:gray", label="mu upper bound (linear)"
+    )
+    ax.scatter(
+        x - 0.2,
+        guided["mu_lower"],
+        color="black",
+        marker="_",
+        s=400,
+        label="mu lower bound (linear)",
+    )
+    ax.bar(
+        x + 0.2,
+        guided["worst ratio (nonlinear) [-]"],
+        width=0.4,
+        color="tab:orange",
+        label="worst metric / requirement of its runs (nonlinear)",
+    )
+    ax.axhline(1.0, color="tab:red", ls="--", lw=1, label="requirement limit")
+    labels = [
+        f"region {int(r['region'])}\n{r['configuration']}, t = {r['time [s]']:g} s\n"
+        f"{int(r['failures'])}/{int(r['runs'])} runs fail"
+        for _, r in guided.iterrows()
+    ]
+    ax.set_xticks(x, labels, fontsize=8)
+    top = np.nanmax(
+        np.concatenate([guided["mu_upper"], guided["worst ratio (nonlinear) [-]"], [1.0]])
+    )
+    ax.set_ylim(0, 1.45 * top)
+    ax.set_ylabel("worst-case performance / requirement [-]")
+    ax.set_title("Linear prediction (mu) against nonlinear outcome at the critical cases")
+    ax.legend(fontsize=7, ncol=2, loc="upper center")
+    ax.grid(alpha=0.3, axis="y")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
 
 
 def _worst_runs(spec, runs: pd.DataFrame, count: int) -> pd.DataFrame:
@@ -184,18 +230,23 @@ def _plot_distributions(spec, runs: pd.DataFrame, path: Path) -> Path:
     metrics = list(spec.metrics)
     fig, axes = plt.subplots(1, len(metrics), figsize=(4.6 * len(metrics), 3.8), squeeze=False)
     weights = runs["weight"].to_numpy()
+    guided = runs["region"].to_numpy() != NOMINAL_COMPONENT
     for ax, metric in zip(axes[0], metrics, strict=True):
         column = metric_column(spec, metric)
         values = runs[column].to_numpy(float)
         finite = np.isfinite(values)
-        ax.hist(
-            values[finite],
-            bins=30,
-            weights=weights[finite],
-            color="tab:blue",
-            alpha=0.75,
-            label="runs (weighted)" if spec.sampler.kind == "mu-guided" else "runs",
-        )
+        if guided.any():
+            # raw run counts, split by where the sampler drew them (weights shown in the title)
+            ax.hist(
+                [values[finite & ~guided], values[finite & guided]],
+                bins=30,
+                stacked=True,
+                color=["tab:blue", "tab:orange"],
+                label=["drawn from the dispersions", "drawn around mu worst cases"],
+            )
+        else:
+            ax.hist(values[finite], bins=30, color="tab:blue", alpha=0.8, label="runs")
+        title = f"{metric}: {int(finite.sum())} finished runs"
         for requirement in spec.requirements:
             if requirement.metric != metric:
                 continue
@@ -207,12 +258,12 @@ def _plot_distributions(spec, runs: pd.DataFrame, path: Path) -> Path:
                         linestyle="--",
                         label=f"requirement {requirement.label}",
                     )
+            p, se = weighted_probability(weights, ~runs[requirement.column].to_numpy(bool))
+            title += f"\nP(violation) = {p:.3g} +- {se:.2g}"
         ax.set_xlabel(column)
-        ax.set_ylabel(
-            "number of runs" + (" (weighted)" if spec.sampler.kind == "mu-guided" else "")
-        )
-        ax.set_title(f"{metric}: {int(finite.sum())} finished runs")
-        ax.legend(fontsize=8)
+        ax.set_ylabel("number of runs")
+        ax.set_title(title, fontsize=10)
+        ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
     fig.suptitle(f"Campaign {spec.name}: metric distributions against requirements")
     fig.tight_layout()
@@ -359,6 +410,8 @@ def write_report(directory: str | Path, worst: int = 5) -> CampaignReport:
         _plot_worst(directory, spec, plan, worst_table, out / "worst_runs.png"),
         _plot_pass_fail(spec, runs, out / "pass_fail_vs_parameters.png"),
     ]
+    if "regions" in tables:
+        figures.append(_plot_regions(tables["regions"], out / "regions_prediction.png"))
     figures = tuple(f for f in figures if f is not None)
 
     with pd.option_context(
@@ -372,6 +425,11 @@ def write_report(directory: str | Path, worst: int = 5) -> CampaignReport:
         ]
         if "regions" in tables:
             parts.append("runs per region:\n" + tables["regions"].to_string(index=False))
+        if spec.window.kind == "critical":
+            parts.append(
+                "note: each run simulates the window around its region's critical time, so the "
+                "probabilities above mix windows; read them per region (regions.parquet)."
+            )
         show = ["run_id", "requirement ratio [-]", "status"] + [
             metric_column(spec, m) for m in spec.metrics
         ]

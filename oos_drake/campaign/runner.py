@@ -11,6 +11,7 @@ metrics are identical.
 
 from __future__ import annotations
 
+import json
 import math
 import shutil
 import sys
@@ -26,9 +27,6 @@ from oos_drake.campaign.executors import RunResult, execute_case, make_executor
 from oos_drake.campaign.samplers import make_plan, region_counts
 from oos_drake.campaign.simulator import MissionWindow, RunCase
 from oos_drake.campaign.spec import CampaignSpec, load_spec, spec_to_toml
-
-#: Columns that hold the outcome of a run (after the plan columns and the metrics).
-STATUS_COLUMNS = ("pass", "status", "error", "wall_time [s]")
 
 
 def metric_column(spec: CampaignSpec, metric: str) -> str:
@@ -61,6 +59,7 @@ def result_row(spec: CampaignSpec, plan_row: pd.Series, result: RunResult) -> pd
     record["status"] = result.status
     record["error"] = result.error
     record["wall_time [s]"] = float(result.wall_time)
+    record["worker"] = result.worker
     table = pd.DataFrame([record])
     for column in ("run_id", "seed", "region"):
         table[column] = table[column].astype(np.int64)
@@ -205,6 +204,9 @@ def prepare_campaign(
         worst_cases_name = store.WORST_CASES_FILE
         shutil.copyfile(spec.sampler.worst_cases, directory / ".worst_cases.tmp")
         (directory / ".worst_cases.tmp").replace(directory / worst_cases_name)
+    store.atomic_write_text(
+        json.dumps(store.environment(), indent=2) + "\n", directory / store.ENVIRONMENT_FILE
+    )
     store.atomic_write_parquet(plan, directory / store.PLAN_FILE)
     store.atomic_write_text(spec_to_toml(spec, worst_cases_name), directory / store.SPEC_FILE)
     return directory, spec, plan
@@ -249,12 +251,18 @@ class RerunResult:
         The recomputed time series (all signals).
     identical : bool or None
         Whether every recorded metric and the status are reproduced exactly (None if not run).
+    comparison : pandas.DataFrame
+        Per metric: recorded value, recomputed value, difference (empty if not run).
+    environment_changes : dict
+        Package -> (campaign version, current version) for the versions that differ.
     """
 
     recorded: pd.Series | None
     row: pd.DataFrame
     timeseries: pd.DataFrame | None
     identical: bool | None
+    comparison: pd.DataFrame
+    environment_changes: dict
 
 
 def rerun_case(directory: str | Path, run_id: int) -> RerunResult:
@@ -269,13 +277,28 @@ def rerun_case(directory: str | Path, run_id: int) -> RerunResult:
     row = result_row(spec, plan_row, result)
     recorded = None
     identical = None
+    comparison = pd.DataFrame()
     path = store.run_file(directory, run_id)
     if path.is_file():
         recorded = pd.read_parquet(path).iloc[0]
         columns = [metric_column(spec, m) for m in spec.metrics]
+        comparison = pd.DataFrame(
+            {
+                "recorded": [float(recorded[c]) for c in columns],
+                "recomputed": [float(row[c].iloc[0]) for c in columns],
+            },
+            index=columns,
+        )
+        comparison["difference"] = comparison["recomputed"] - comparison["recorded"]
         same_metrics = all(
-            (np.isnan(recorded[c]) and np.isnan(row[c].iloc[0])) or recorded[c] == row[c].iloc[0]
-            for c in columns
+            (np.isnan(a) and np.isnan(b)) or a == b
+            for a, b in zip(comparison["recorded"], comparison["recomputed"], strict=True)
         )
         identical = bool(same_metrics and recorded["status"] == row["status"].iloc[0])
-    return RerunResult(recorded, row, result.timeseries, identical)
+    changes = {}
+    environment_path = directory / store.ENVIRONMENT_FILE
+    if environment_path.is_file():
+        then = json.loads(environment_path.read_text())
+        now = store.environment()
+        changes = {k: (v, now.get(k)) for k, v in then.items() if now.get(k) != v}
+    return RerunResult(recorded, row, result.timeseries, identical, comparison, changes)

@@ -1,8 +1,8 @@
 """Samplers: turn a spec into the campaign plan (every run's values, seed, weight and window).
 
 - ``monte-carlo``: i.i.d. draws from the dispersions (weight 1).
-- ``latin-hypercube``: each marginal stratified in ``n_runs`` equal-probability bins
-  (``scipy.stats.qmc.LatinHypercube``), mapped through the inverse CDFs (weight 1).
+- ``latin-hypercube``: each marginal stratified in ``n_runs`` equal-probability bins (one point
+  per bin, bins shuffled independently per parameter), mapped through the inverse CDFs (weight 1).
 - ``mu-guided``: importance sampling around the analysis' worst cases. The proposal is the
   defensive mixture
 
@@ -14,9 +14,10 @@
   with ``p`` the nominal (spec) density, ``alpha`` the ``defensive_fraction``, ``pi_r`` the
   region shares (proportional to ``mu_upper`` or uniform), ``S_r`` the dispersed continuous blocks
   with a worst-case value in region ``r`` and ``g_rj`` a normal centred on that value (std =
-  ``spread`` times the dispersion's width: its support, or 6 std for a normal law) truncated to the dispersion's support. Each run carries
-  the weight ``w = p(x) / q(x)`` evaluated with the whole mixture (not only the component it was
-  drawn from), so that for any function ``f``: ``E_q[w f] = E_p[f]`` (failure probabilities stay
+  ``spread`` times the dispersion's width: its support, or 6 std for a normal law) truncated to
+  the dispersion's support. Each run carries the weight ``w = p(x) / q(x)`` evaluated with the
+  whole mixture (not only the component it was drawn from), so that for any function ``f``:
+  ``E_q[w f] = E_p[f]`` (failure probabilities stay
   unbiased) and ``w <= 1 / alpha`` (the estimate cannot be ruined by one huge weight).
 
 Seeds: ``SeedSequence(random_seed).spawn(n_runs + 1)``: child ``i < n_runs`` seeds run ``i``
@@ -30,7 +31,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-import scipy.stats.qmc
 
 from oos_drake.campaign.distributions import (
     Distribution,
@@ -59,7 +59,9 @@ def uniform_variates(kind: str, n: int, d: int, rng: np.random.Generator) -> np.
     if d == 0:
         return np.empty((n, 0))
     if kind == "latin-hypercube":
-        return scipy.stats.qmc.LatinHypercube(d=d, rng=rng).random(n)
+        # one point per stratum [k/n, (k+1)/n) of each marginal, strata shuffled per column
+        strata = np.argsort(rng.random((n, d)), axis=0)
+        return (strata + rng.random((n, d))) / n
     return rng.random((n, d))
 
 

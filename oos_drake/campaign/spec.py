@@ -92,7 +92,8 @@ class SamplerSpec:
 class WindowSpec:
     """Which part of the mission each run simulates."""
 
-    #: "mission" (whole), "event" (around a named event), "critical" (around the run's region time)
+    #: "mission" (whole), "event" (around a named event), "critical" (around the run's region
+    #: time; failure probabilities are then conditional on each region's window, see the report)
     kind: str = "mission"
     #: event name for kind "event" (one of the simulator's events)
     event: str | None = None

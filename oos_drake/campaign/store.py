@@ -4,6 +4,7 @@ Layout of a campaign directory::
 
     spec.toml              the resolved spec (every default filled in), the campaign's identity
     worst_cases.parquet    copy of the analysis regions (mu-guided campaigns only)
+    environment.json       versions of Python and the numerical packages that ran the campaign
     plan.parquet           every planned run: run id, seed, region, weight, window, all values
     runs/run_000042.parquet   one finished run (one row), written when the run ends
     timeseries/run_000042.parquet   its retained time series (written before the run row)
@@ -27,6 +28,7 @@ import pandas as pd
 
 SPEC_FILE = "spec.toml"
 PLAN_FILE = "plan.parquet"
+ENVIRONMENT_FILE = "environment.json"
 RUNS_FILE = "runs.parquet"
 WORST_CASES_FILE = "worst_cases.parquet"
 RUNS_DIR = "runs"
@@ -61,6 +63,20 @@ def atomic_write_parquet(table: pd.DataFrame, path: Path) -> Path:
 def atomic_write_text(text: str, path: Path) -> Path:
     """Write ``text`` (UTF-8) to ``path``, atomically."""
     return _atomic_write(path, lambda stream: stream.write(text.encode("utf-8")))
+
+
+def environment() -> dict[str, str]:
+    """Versions that determine the numbers (a rerun is bit-identical only on the same ones)."""
+    import importlib.metadata
+    import platform
+
+    versions = {"python": platform.python_version(), "machine": platform.machine()}
+    for package in ("oos_drake", "numpy", "scipy", "pandas", "pyarrow", "drake"):
+        try:
+            versions[package] = importlib.metadata.version(package)
+        except importlib.metadata.PackageNotFoundError:
+            versions[package] = "absent"
+    return versions
 
 
 def run_file(directory: Path, run_id: int) -> Path:

@@ -129,3 +129,153 @@ def minimize_nonsmooth(
             message = "step below tolerance"
             break
     return BfgsResult(x, float(f), it, evaluations, tuple(history), message)
+
+
+def _simplex_qp(Q, c):
+    """``min_{lam in simplex} 1/2 lam^T Q lam - c^T lam`` (small dense QP, SLSQP)."""
+    from scipy.optimize import minimize
+
+    k = c.size
+    if k == 1:
+        return np.ones(1)
+    lam0 = np.full(k, 1.0 / k)
+    res = minimize(
+        lambda lam: 0.5 * lam @ Q @ lam - c @ lam,
+        lam0,
+        jac=lambda lam: Q @ lam - c,
+        bounds=[(0.0, 1.0)] * k,
+        constraints=[{"type": "eq", "fun": lambda lam: lam.sum() - 1.0,
+                      "jac": lambda lam: np.ones_like(lam)}],
+        method="SLSQP",
+        options={"maxiter": 200, "ftol": 1e-14},
+    )
+    lam = np.clip(res.x, 0.0, None)
+    return lam / lam.sum()
+
+
+def minimize_bundle_bfgs(
+    fun: Callable,
+    x0,
+    *,
+    regrad: Callable | None = None,
+    max_iterations: int = 200,
+    rtol: float = 1e-6,
+    initial_step: float = 0.05,
+    max_backtracks: int = 30,
+    stall_window: int = 10,
+    stall_rtol: float = 1e-5,
+    max_enrich: int = 3,
+    merge: Callable | None = None,
+) -> BfgsResult:
+    """Minimize a max of smooth functions from its nearly active pieces (BFGS-SQP step).
+
+    At each iterate ``fun`` returns the objective ``f``, the values ``f_k`` and gradients
+    ``g_k`` of the pieces within a tolerance of the max (for the H-infinity norm: the peaks of
+    the worst models at their peak frequencies) and an identifier of the pieces. The step
+    minimizes the local model ``max_k (f_k + g_k^T d) + 1/2 d^T H^-1 d`` (solved in its dual over
+    the simplex), as in Apkarian-Noll's nonsmooth H-infinity method; ``H`` is a BFGS
+    inverse-Hessian estimate of the Lagrangian ``sum_k lambda_k f_k``: when ``regrad`` is given,
+    the gradients of the same pieces (same models, same frequencies) are recomputed at the new
+    point for the update, as in BFGS-SQP. A backtracking line search on the true ``f``
+    (``inf`` = unstable, rejected) accepts the step. Stops when the predicted decrease falls
+    below ``rtol * f``.
+
+    Parameters
+    ----------
+    fun : callable
+        ``x -> (f, values (k,), gradients (k, n), pieces)``.
+    x0 : array_like
+        Starting point (finite ``f``).
+    regrad : callable, optional
+        ``(x, pieces) -> (values (k,), gradients (k, n))`` of the given pieces at ``x``. Used
+        for the BFGS update and for *null steps*: when a trial point is rejected, the pieces
+        active there are evaluated at ``x`` and join the local model (at most ``max_enrich``
+        times per iteration) before backtracking, as bundle methods do.
+    merge : callable, optional
+        ``(pieces, more_pieces) -> pieces`` (default: concatenate tuples of arrays).
+    stall_window, stall_rtol : int, float
+        Also stop when ``f`` decreased by less than ``stall_rtol`` (relative) over the last
+        ``stall_window`` iterations.
+    """
+    if merge is None:
+        def merge(a, b):
+            return tuple(np.concatenate([u, v]) for u, v in zip(a, b, strict=True))
+    x = np.asarray(x0, dtype=float).copy()
+    f, vals, grads, pieces = fun(x)
+    evaluations = 1
+    if not np.isfinite(f):
+        raise ValueError("minimize_bundle_bfgs: the starting point is infeasible (f = inf)")
+    n = x.size
+
+    def fresh_metric(g):
+        return np.eye(n) * (initial_step / max(np.linalg.norm(g), 1e-300))
+
+    H = fresh_metric(grads[0])
+    fresh = True
+
+    def step(H, f, vals, grads):
+        lam = _simplex_qp(grads @ H @ grads.T, vals - f)
+        d = -H @ (lam @ grads)
+        model = np.max(vals + grads @ d)
+        return d, lam, f - model
+
+    d, lam, predicted = step(H, f, vals, grads)
+    history = [f]
+    message = "iteration limit"
+    iterations = 0
+    for iterations in range(1, max_iterations + 1):
+        if predicted <= rtol * abs(f):
+            message = "predicted decrease below tolerance (stationary)"
+            break
+        t, accepted, enriched = 1.0, False, 0
+        for _ in range(max_backtracks):
+            x_t = x + t * d
+            f_t, vals_t, grads_t, pieces_t = fun(x_t)
+            evaluations += 1
+            if np.isfinite(f_t) and f_t <= f - 1e-4 * t * predicted:
+                accepted = True
+                break
+            if regrad is not None and np.isfinite(f_t) and enriched < max_enrich:
+                # null step: the pieces that blocked the trial join the local model at x
+                vals_new, grads_new = regrad(x, pieces_t)
+                vals = np.concatenate([vals, vals_new])
+                grads = np.concatenate([grads, grads_new])
+                pieces = merge(pieces, pieces_t)
+                enriched += 1
+                d, lam, predicted = step(H, f, vals, grads)
+                if predicted <= rtol * abs(f):
+                    break
+                t = 1.0
+                continue
+            t *= 0.5
+        if not accepted:
+            if not fresh:
+                H = fresh_metric(lam @ grads)
+                fresh = True
+                d, lam, predicted = step(H, f, vals, grads)
+                continue
+            message = "line search failed"
+            break
+        s = x_t - x
+        if regrad is not None:
+            y = lam @ (regrad(x_t, pieces)[1] - grads)
+        else:
+            y = grads_t[0] - grads[0]
+        x, f, vals, grads, pieces = x_t, f_t, vals_t, grads_t, pieces_t
+        history.append(f)
+        sy = float(s @ y)
+        if sy > 1e-12 * np.linalg.norm(s) * np.linalg.norm(y):
+            if fresh:  # Nocedal-Wright (6.20): size the first metric from the curvature seen
+                H = np.eye(n) * (sy / float(y @ y))
+                fresh = False
+            rho = 1.0 / sy
+            Hy = H @ y
+            H = (H - rho * (np.outer(s, Hy) + np.outer(Hy, s))
+                 + (rho * rho * (y @ Hy) + rho) * np.outer(s, s))
+        d, lam, predicted = step(H, f, vals, grads)
+        if len(history) > stall_window and (
+            history[-stall_window - 1] - f <= stall_rtol * abs(f)
+        ):
+            message = f"stalled (< {stall_rtol:g} relative decrease in {stall_window} iterations)"
+            break
+    return BfgsResult(x, float(f), iterations, evaluations, tuple(history), message)

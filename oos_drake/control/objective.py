@@ -42,24 +42,99 @@ class Evaluation:
     peaks: PeakGain
 
 
-def peak_gradient(interconnection: WeightedInterconnection, K, index: int, omega: float):
-    """Gradient of ``sigma_max(M_index(j omega))`` w.r.t. ``K`` (3x6), at a simple peak."""
+def peak_gradients(interconnection: WeightedInterconnection, K, index, omega):
+    """Values and gradients of ``sigma_max(M_i(j w))`` w.r.t. ``K`` at given (model, frequency).
+
+    Parameters
+    ----------
+    interconnection : WeightedInterconnection
+        Batched over models.
+    K : array_like, shape (3, 6)
+    index : array_like of int, shape (k,)
+        Model indices.
+    omega : array_like, shape (k,)
+        Frequencies [rad/s].
+
+    Returns
+    -------
+    tuple
+        ``(sigma (k,), gradient (k, 3, 6))`` (exact LU solves).
+    """
+    index = np.atleast_1d(np.asarray(index, dtype=int))
+    omega = np.atleast_1d(np.asarray(omega, dtype=float))
     A, B1, B2, C1, C2, D11, D12, D21 = (M[index] for M in interconnection.partitions())
     K = np.asarray(K, dtype=float)
     A_cl = A + B2 @ K @ C2
     B_cl = B1 + B2 @ K @ D21
     C_cl = C1 + D12 @ K @ C2
     D_cl = D11 + D12 @ K @ D21
-    n = A.shape[0]
-    X = np.linalg.solve(1j * omega * np.eye(n) - A_cl, np.hstack([B_cl, B2]).astype(complex))
-    nd = B1.shape[1]
-    T = C_cl @ X[:, :nd] + D_cl
-    G12 = C_cl @ X[:, nd:] + D12
-    G21 = C2 @ X[:, :nd] + D21
-    U, _, Vh = np.linalg.svd(T)
-    u, v = U[:, 0], np.conj(Vh[0])
-    M = G21 @ np.outer(v, np.conj(u)) @ G12
-    return np.real(M).T
+    n = A.shape[-1]
+    rhs = np.concatenate([B_cl, B2], axis=-1).astype(complex)
+    X = np.linalg.solve(1j * omega[:, None, None] * np.eye(n) - A_cl, rhs)
+    nd = B1.shape[-1]
+    T = C_cl @ X[..., :nd] + D_cl
+    G12 = C_cl @ X[..., nd:] + D12
+    G21 = C2 @ X[..., :nd] + D21
+    U, S, Vh = np.linalg.svd(T)
+    u, v = U[..., :, 0], np.conj(Vh[..., 0, :])
+    M = (G21 @ v[..., None]) @ (np.conj(u)[..., None, :] @ G12)
+    return S[..., 0], np.swapaxes(np.real(M), -1, -2)
+
+
+def peak_gradient(interconnection: WeightedInterconnection, K, index: int, omega: float):
+    """Gradient of ``sigma_max(M_index(j omega))`` w.r.t. ``K`` (3x6), at a simple peak."""
+    return peak_gradients(interconnection, K, [index], [omega])[1][0]
+
+
+@dataclass(frozen=True)
+class ActiveSet:
+    """The nearly active peaks at one gain: the local model of ``gamma`` used by the bundle step.
+
+    Attributes
+    ----------
+    gamma : float
+        Objective value (``inf`` when a loop is unstable).
+    values : numpy.ndarray, shape (k,)
+        Peak values within ``eps`` of ``gamma`` (the first is the maximum).
+    gradients : numpy.ndarray, shape (k, 3, 6)
+        Their gradients w.r.t. ``K``.
+    models, omegas : numpy.ndarray, shape (k,)
+        Model index and frequency [rad/s] of each peak.
+    peaks : PeakGain
+    """
+
+    gamma: float
+    values: np.ndarray
+    gradients: np.ndarray
+    models: np.ndarray
+    omegas: np.ndarray
+    peaks: PeakGain
+
+
+def active_set(interconnection: WeightedInterconnection, K, *, eps: float = 0.05,
+               max_peaks: int = 24, focus: float = 0.2) -> ActiveSet:
+    """Evaluate ``gamma(K)`` and collect every local peak within ``eps`` (relative) of it."""
+    M = interconnection.close(K)
+    peaks = peak_gain(M.A, M.B, M.C, M.D, focus=max(focus, eps))
+    worst = peaks.worst
+    if not np.isfinite(peaks.gamma[worst]):
+        k = int(np.argmax(peaks.spectral_abscissa))
+        g = abscissa_gradient(interconnection, K, k)
+        return ActiveSet(np.inf, np.array([peaks.spectral_abscissa[k]]), g[None],
+                         np.array([k]), np.array([np.nan]), peaks)
+    gamma = float(peaks.gamma[worst])
+    sig = np.where(np.isnan(peaks.peak_sigma), -np.inf, peaks.peak_sigma)
+    rows, cols = np.nonzero(sig >= (1.0 - eps) * gamma)
+    order = np.argsort(-sig[rows, cols])[:max_peaks]
+    models = np.concatenate([[worst], rows[order]])
+    omegas = np.concatenate([[peaks.omega[worst]], peaks.peak_omega[rows[order], cols[order]]])
+    # drop repeats of the maximum (same model, same frequency)
+    keep = np.ones(models.size, dtype=bool)
+    keep[1:] = ~((models[1:] == worst) & np.isclose(omegas[1:], omegas[0], rtol=1e-6, atol=1e-12))
+    models, omegas = models[keep], omegas[keep]
+    values, grads = peak_gradients(interconnection, K, models, omegas)
+    values[0] = gamma
+    return ActiveSet(gamma, values, grads, models, omegas, peaks)
 
 
 def abscissa_gradient(interconnection: WeightedInterconnection, K, index: int):

@@ -34,11 +34,16 @@ class PeakGain:
         Peak frequency [rad/s] (``nan`` when unstable).
     spectral_abscissa : numpy.ndarray, shape (N,)
         ``max Re lambda(A_i)`` [1/s].
+    peak_omega, peak_sigma : numpy.ndarray, shape (N, k), optional
+        The refined local maxima of each model's gain curve (frequency [rad/s], modal-basis
+        value); ``nan`` where not computed. Used to build the synthesis' active set.
     """
 
     gamma: np.ndarray
     omega: np.ndarray
     spectral_abscissa: np.ndarray
+    peak_omega: np.ndarray | None = None
+    peak_sigma: np.ndarray | None = None
 
     @property
     def worst(self) -> int:
@@ -248,12 +253,17 @@ def peak_gain(
         sampled = values.max(axis=1)
         near = np.flatnonzero(sampled >= (1.0 - focus) * sampled.max())
         gamma, omega = sampled, grid[np.arange(N), np.argmax(values, axis=1)]
-    sub_omega = _refine_peaks(modal.take(near), grid[near], values[near], candidates, iterations)
+    sub_omega, cand_w, cand_s = _refine_peaks(
+        modal.take(near), grid[near], values[near], candidates, iterations
+    )
     gamma[near] = sigma_max_exact(A[near], B[near], C[near], D[near], sub_omega)
     omega[near] = sub_omega
+    peak_omega = np.full((N, cand_w.shape[1]), np.nan)
+    peak_sigma = np.full((N, cand_w.shape[1]), np.nan)
+    peak_omega[near], peak_sigma[near] = cand_w, cand_s
     gamma = np.where(unstable, np.inf, gamma)
     omega = np.where(unstable, np.nan, omega)
-    return PeakGain(gamma, omega, modal.spectral_abscissa)
+    return PeakGain(gamma, omega, modal.spectral_abscissa, peak_omega, peak_sigma)
 
 
 def _refine_peaks(modal: ModalResponse, grid, values, candidates: int, iterations: int):
@@ -270,16 +280,19 @@ def _refine_peaks(modal: ModalResponse, grid, values, candidates: int, iteration
     lo = np.take_along_axis(grid, np.maximum(top - 1, 0), axis=1)
     hi = np.take_along_axis(grid, np.minimum(top + 1, F - 1), axis=1)
     at_grid = np.take_along_axis(grid, top, axis=1)
+    at_values = np.take_along_axis(values, top, axis=1)
     if iterations > 0:
         refined = _golden_refine(modal, lo, hi, iterations)
-        candidates_w = np.concatenate([refined, at_grid], axis=1)
-        cand_values = np.concatenate(
-            [modal.sigma(refined), np.take_along_axis(values, top, axis=1)], axis=1
-        )
+        refined_values = modal.sigma(refined)
+        # keep the better of the refined point and its grid point, per candidate
+        better = refined_values >= at_values
+        peak_w = np.where(better, refined, at_grid)
+        peak_s = np.where(better, refined_values, at_values)
     else:
-        candidates_w, cand_values = at_grid, np.take_along_axis(values, top, axis=1)
-    best = np.argmax(cand_values, axis=1)
-    return candidates_w[np.arange(N), best]
+        peak_w, peak_s = at_grid, at_values
+    peak_s = np.where(np.isfinite(np.take_along_axis(score, top, axis=1)), peak_s, np.nan)
+    best = np.nanargmax(np.where(np.isnan(peak_s), -np.inf, peak_s), axis=1)
+    return peak_w[np.arange(N), best], peak_w, peak_s
 
 
 def hinfnorm_hamiltonian(A, B, C, D, *, rtol: float = 1e-7, max_iterations: int = 30):

@@ -30,8 +30,8 @@ import pandas as pd
 
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.interconnection import WeightedInterconnection, weighted_interconnection
-from oos_drake.control.nonsmooth_bfgs import minimize_nonsmooth
-from oos_drake.control.objective import evaluate
+from oos_drake.control.nonsmooth_bfgs import minimize_bundle_bfgs, minimize_nonsmooth
+from oos_drake.control.objective import active_set, evaluate, peak_gradients
 from oos_drake.control.peak_gain import peak_gain
 from oos_drake.control.plants import PlantArray
 
@@ -61,6 +61,8 @@ class SynthesisOptions:
         Relative increase of gamma that adds a worst case to the model set.
     seed : int
         Seed of the random restarts and samples.
+    method : str
+        ``"bundle"`` (BFGS-SQP on the active peaks) or ``"bfgs"`` (plain nonsmooth BFGS).
     """
 
     restarts: int = 2
@@ -72,6 +74,7 @@ class SynthesisOptions:
     worst_case_ascent_steps: int = 4
     worst_case_rtol: float = 1e-3
     seed: int = 0
+    method: str = "bundle"
 
 
 @dataclass(frozen=True)
@@ -147,19 +150,43 @@ def _gain_scale(K0: np.ndarray) -> np.ndarray:
     return np.hstack([np.full((3, 3), sp), np.full((3, 3), sd)])
 
 
-def tune(interconnection: WeightedInterconnection, K0, *, max_iterations=150, scale=None):
-    """Run nonsmooth BFGS on ``gamma(K)`` for one interconnection array from ``K0``.
+def tune(interconnection: WeightedInterconnection, K0, *, max_iterations=150, scale=None,
+         method: str = "bundle", eps: float = 0.1):
+    """Minimize ``gamma(K)`` over one interconnection array from ``K0``.
 
-    Returns ``(K, gamma, BfgsResult)``.
+    ``method="bundle"`` (default): BFGS-SQP steps on the nearly active peaks
+    (:func:`minimize_bundle_bfgs`); ``"bfgs"``: plain nonsmooth BFGS with one subgradient
+    (:func:`minimize_nonsmooth`). Returns ``(K, gamma, BfgsResult)``.
     """
     K0 = np.asarray(K0, dtype=float)
     scale = _gain_scale(K0) if scale is None else scale
+    x0 = (K0 / scale).ravel()
+    if method == "bundle":
 
-    def fun(x):
-        ev = evaluate(interconnection, x.reshape(3, 6) * scale)
-        return ev.gamma, (ev.gradient * scale).ravel()
+        def fun_active(x):
+            a = active_set(interconnection, x.reshape(3, 6) * scale, eps=eps)
+            grads = (a.gradients * scale).reshape(a.values.size, -1)
+            return a.gamma, a.values, grads, (a.models, a.omegas)
 
-    res = minimize_nonsmooth(fun, (K0 / scale).ravel(), max_iterations=max_iterations)
+        def regrad(x, pieces):
+            models, omegas = pieces
+            if not np.all(np.isfinite(omegas)):
+                return np.full(models.size, -np.inf), np.zeros((models.size, x.size))
+            values, grads = peak_gradients(
+                interconnection, x.reshape(3, 6) * scale, models, omegas
+            )
+            return values, (grads * scale).reshape(models.size, -1)
+
+        res = minimize_bundle_bfgs(fun_active, x0, regrad=regrad, max_iterations=max_iterations)
+    elif method == "bfgs":
+
+        def fun(x):
+            ev = evaluate(interconnection, x.reshape(3, 6) * scale)
+            return ev.gamma, (ev.gradient * scale).ravel()
+
+        res = minimize_nonsmooth(fun, x0, max_iterations=max_iterations)
+    else:
+        raise ValueError(f"tune: method must be 'bundle' or 'bfgs', got {method!r}")
     return res.x.reshape(3, 6) * scale, res.f, res
 
 
@@ -261,7 +288,8 @@ def synthesize(
                 runs.append(dict(round=round_, restart=r, gamma_start=g0, gamma_end=np.inf,
                                  iterations=0, evaluations=1, message="unstable start"))
                 continue
-            K, g, res = tune(W, Ks, max_iterations=options.max_iterations, scale=scale)
+            K, g, res = tune(W, Ks, max_iterations=options.max_iterations, scale=scale,
+                             method=options.method)
             runs.append(dict(round=round_, restart=r, gamma_start=g0, gamma_end=g,
                              iterations=res.iterations, evaluations=res.evaluations,
                              message=res.message))

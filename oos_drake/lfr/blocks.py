@@ -4,8 +4,8 @@ A block spec describes one named uncertain (or scheduled) element independently 
 occurs in a model. Every block is normalized so that ``delta = 0`` is the nominal value and
 ``|delta| <= 1`` covers the declared range, exactly as MATLAB's Robust Control Toolbox does:
 
-* ``ureal`` with a range ``[L, R]`` around the nominal ``N`` uses the bilinear (Moebius) map fixed by
-  ``p(-1) = L``, ``p(0) = N``, ``p(1) = R``:
+* ``ureal`` with a range ``[L, R]`` around the nominal ``N`` uses the bilinear (Moebius) map
+  fixed by ``p(-1) = L``, ``p(0) = N``, ``p(1) = R``:
 
   .. math:: p(\\delta) = \\frac{N + \\alpha \\delta}{1 + \\beta \\delta}, \\qquad
             \\beta = \\frac{2N - L - R}{R - L}, \\quad \\alpha = R (1 + \\beta) - N .
@@ -57,7 +57,8 @@ class UReal:
     lower, upper : float
         Range ``[lower, upper]`` with ``lower < nominal < upper``.
     mode : str
-        How the user specified the range (``"plusminus"``, ``"percent"`` or ``"range"``); display only.
+        How the user specified the range (``"plusminus"``, ``"percent"`` or ``"range"``);
+        display only.
     """
 
     name: str
@@ -70,7 +71,11 @@ class UReal:
 
     def __post_init__(self):
         _check_name(self.name)
-        for label, value in (("nominal", self.nominal), ("lower", self.lower), ("upper", self.upper)):
+        for label, value in (
+            ("nominal", self.nominal),
+            ("lower", self.lower),
+            ("upper", self.upper),
+        ):
             if not math.isfinite(value):
                 raise ValueError(f"ureal {self.name!r}: {label} must be finite, got {value!r}")
         if not self.lower < self.upper:
@@ -126,7 +131,9 @@ class UReal:
         value = np.asarray(value)
         if np.iscomplexobj(value):
             if np.any(value.imag != 0):
-                raise ValueError(f"ureal {self.name!r}: complex value {_fmt(value)} for a real block")
+                raise ValueError(
+                    f"ureal {self.name!r}: complex value {_fmt(value)} for a real block"
+                )
             value = value.real
         value = value.astype(float)
         if not np.all(np.isfinite(value)):
@@ -168,7 +175,10 @@ class UReal:
         return [-1, 0]
 
     def describe(self) -> str:
-        return f"ureal {self.name}: nominal {self.nominal:.6g}, range [{self.lower:.6g}, {self.upper:.6g}]"
+        return (
+            f"ureal {self.name}: nominal {self.nominal:.6g}, "
+            f"range [{self.lower:.6g}, {self.upper:.6g}]"
+        )
 
 
 @dataclass(frozen=True)
@@ -275,7 +285,9 @@ class ULTIDyn:
         if len(shape) == 1:
             shape = (shape[0], shape[0])
         if len(shape) != 2 or min(shape) < 1:
-            raise ValueError(f"ultidyn {self.name!r}: shape must be (p, q) >= 1, got {self.io_shape!r}")
+            raise ValueError(
+                f"ultidyn {self.name!r}: shape must be (p, q) >= 1, got {self.io_shape!r}"
+            )
         object.__setattr__(self, "io_shape", shape)
         if not (math.isfinite(self.bound) and self.bound > 0):
             raise ValueError(f"ultidyn {self.name!r}: bound must be > 0, got {self.bound!r}")
@@ -365,7 +377,9 @@ def same_block(first: Block, second: Block) -> bool:
         return np.isclose(first.nominal, second.nominal, rtol=1e-12, atol=0) and math.isclose(
             first.radius, second.radius, rel_tol=1e-12
         )
-    return first.io_shape == second.io_shape and math.isclose(first.bound, second.bound, rel_tol=1e-12)
+    return first.io_shape == second.io_shape and math.isclose(
+        first.bound, second.bound, rel_tol=1e-12
+    )
 
 
 def make_ureal_spec(name, nominal, *, percent=None, plusminus=None, range=None) -> UReal:  # noqa: A002
@@ -374,11 +388,18 @@ def make_ureal_spec(name, nominal, *, percent=None, plusminus=None, range=None) 
     try:
         nominal = float(nominal)
     except (TypeError, ValueError):
-        raise ValueError(f"ureal {name!r}: nominal must be a real number, got {nominal!r}") from None
-    given = [label for label, v in (("percent", percent), ("plusminus", plusminus), ("range", range))
-             if v is not None]
+        raise ValueError(
+            f"ureal {name!r}: nominal must be a real number, got {nominal!r}"
+        ) from None
+    given = [
+        label
+        for label, v in (("percent", percent), ("plusminus", plusminus), ("range", range))
+        if v is not None
+    ]
     if len(given) > 1:
-        raise ValueError(f"ureal {name!r}: give only one of percent, plusminus, range (got {given})")
+        raise ValueError(
+            f"ureal {name!r}: give only one of percent, plusminus, range (got {given})"
+        )
     if not given:
         plusminus = 1.0  # MATLAB default: PlusMinus [-1, 1]
 
@@ -396,7 +417,8 @@ def make_ureal_spec(name, nominal, *, percent=None, plusminus=None, range=None) 
             raise ValueError(f"ureal {name!r}: percent must be >= 0, got {scalar:.6g}")
         if scalar is None and (lo_pct > 0 or hi_pct < 0):
             raise ValueError(
-                f"ureal {name!r}: percent pair must be [-a, b] with a, b >= 0, got {list(percent)!r}"
+                f"ureal {name!r}: percent pair must be [-a, b] with a, b >= 0, "
+                f"got {list(percent)!r}"
             )
         if nominal == 0.0:
             raise ValueError(f"ureal {name!r}: percent uncertainty needs a nonzero nominal, got 0")

@@ -7,8 +7,8 @@ Storage is one constant matrix ``M`` (possibly with leading batch dimensions) pa
     [  y   ]   [ Cy  Dyw Dyu ] [ u ]
 
 so that the whole system is ``Fu(M, blkdiag(I/s, Delta))``. The internal channels (states, then the
-occurrences of each block in name order) all behave alike for the algebra: every interconnection is an
-``append`` of the operands followed by closing a static interconnection matrix on the external
+occurrences of each block in name order) all behave alike for the algebra: every interconnection
+is an ``append`` of the operands followed by closing a static interconnection matrix on the external
 channels (:func:`close_static`). Block occurrences of the same name are merged and kept contiguous.
 """
 
@@ -25,7 +25,7 @@ from oos_drake.lfr.blocks import Block, same_block
 
 @dataclass(frozen=True)
 class BlockEntry:
-    """One block of an LFR: its spec and how many times it occurs (``Delta_i = I_reps (x) delta``)."""
+    """One block of an LFR: its spec and its occurrences (``Delta_i = I_reps (x) delta``)."""
 
     spec: Block
     reps: int
@@ -63,9 +63,10 @@ def _names(names, count: int, label: str):
 class LFR:
     """Uncertain continuous-time linear system ``Fu(M, blkdiag(I/s, Delta))``.
 
-    Build one with :func:`~oos_drake.lfr.ureal` (and friends), :meth:`from_ss`, :meth:`from_matrix` or
-    :func:`~oos_drake.lfr.as_lfr`, and combine them with ``*`` (series, ``sys * other`` is ``sys`` after
-    ``other``), ``+``, ``-``, gains, :func:`~oos_drake.lfr.feedback`, :func:`~oos_drake.lfr.lft`, ...
+    Build one with :func:`~oos_drake.lfr.ureal` (and friends), :meth:`from_ss`,
+    :meth:`from_matrix` or :func:`~oos_drake.lfr.as_lfr`, and combine them with ``*`` (series,
+    ``sys * other`` is ``sys`` after ``other``), ``+``, ``-``, gains,
+    :func:`~oos_drake.lfr.feedback`, :func:`~oos_drake.lfr.lft`, ...
     The object is immutable; every operation returns a new LFR.
 
     Matrices may carry leading batch dimensions (a *model array*: all models share the block
@@ -86,8 +87,15 @@ class LFR:
     __slots__ = ("_M", "_n", "_blocks", "_input_names", "_output_names", "_cache")
     __array_ufunc__ = None  # numpy_array * lfr defers to LFR.__rmul__
 
-    def __init__(self, M, nstates: int, blocks: Sequence[BlockEntry] = (), *,
-                 input_names=None, output_names=None):
+    def __init__(
+        self,
+        M,
+        nstates: int,
+        blocks: Sequence[BlockEntry] = (),
+        *,
+        input_names=None,
+        output_names=None,
+    ):
         M = np.asarray(M)
         if M.ndim < 2:
             raise ValueError(f"LFR matrix M must be at least 2-D, got shape {M.shape}")
@@ -112,7 +120,9 @@ class LFR:
         object.__setattr__(self, "_n", nstates)
         object.__setattr__(self, "_blocks", blocks)
         object.__setattr__(self, "_input_names", _names(input_names, cols - nstates - nw, "inputs"))
-        object.__setattr__(self, "_output_names", _names(output_names, rows - nstates - nz, "outputs"))
+        object.__setattr__(
+            self, "_output_names", _names(output_names, rows - nstates - nz, "outputs")
+        )
         object.__setattr__(self, "_cache", {})
 
     def __setattr__(self, name, value):
@@ -176,10 +186,13 @@ class LFR:
         top = np.concatenate([np.asarray(A), np.asarray(Bw), np.asarray(Bu)], axis=-1)
         mid = np.concatenate([np.asarray(Cz), np.asarray(Dzw), np.asarray(Dzu)], axis=-1)
         bot = np.concatenate([np.asarray(Cy), np.asarray(Dyw), np.asarray(Dyu)], axis=-1)
-        entries = sorted((BlockEntry(spec, int(reps)) for spec, reps in blocks),
-                         key=lambda entry: entry.spec.name)
-        return cls(np.concatenate([top, mid, bot], axis=-2), np.asarray(A).shape[-1], entries,
-                   **names)
+        entries = sorted(
+            (BlockEntry(spec, int(reps)) for spec, reps in blocks),
+            key=lambda entry: entry.spec.name,
+        )
+        return cls(
+            np.concatenate([top, mid, bot], axis=-2), np.asarray(A).shape[-1], entries, **names
+        )
 
     # ------------------------------------------------------------------ sizes and partitions
     @property
@@ -260,17 +273,17 @@ class LFR:
     @property
     def B(self) -> np.ndarray:
         """``[Bw, Bu]``."""
-        return self._M[..., : self._n, self._n:]
+        return self._M[..., : self._n, self._n :]
 
     @property
     def C(self) -> np.ndarray:
         """``[Cz; Cy]``."""
-        return self._M[..., self._n:, : self._n]
+        return self._M[..., self._n :, : self._n]
 
     @property
     def D(self) -> np.ndarray:
         """``[[Dzw, Dzu], [Dyw, Dyu]]``."""
-        return self._M[..., self._n:, self._n:]
+        return self._M[..., self._n :, self._n :]
 
     # ------------------------------------------------------------------ block information
     @property
@@ -285,21 +298,23 @@ class LFR:
 
     @property
     def blocks(self):
-        """``pandas.DataFrame`` with one row per block: name, kind, repetitions, nominal, range, ..."""
+        """``pandas.DataFrame``, one row per block: name, kind, repetitions, nominal, range, ..."""
         import pandas as pd
 
         rows = []
         for entry in self._blocks:
             spec = entry.spec
-            rows.append({
-                "name": spec.name,
-                "kind": spec.kind,
-                "repetitions": entry.reps,
-                "nominal": spec.nominal,
-                "range": spec.range,
-                "radius": getattr(spec, "radius", getattr(spec, "bound", None)),
-                "shape": spec.shape,
-            })
+            rows.append(
+                {
+                    "name": spec.name,
+                    "kind": spec.kind,
+                    "repetitions": entry.reps,
+                    "nominal": spec.nominal,
+                    "range": spec.range,
+                    "radius": getattr(spec, "radius", getattr(spec, "bound", None)),
+                    "shape": spec.shape,
+                }
+            )
         columns = ["name", "kind", "repetitions", "nominal", "range", "radius", "shape"]
         return pd.DataFrame(rows, columns=columns)
 
@@ -331,8 +346,10 @@ class LFR:
     def __repr__(self) -> str:
         batch = f", batch {self.batch_shape}" if self.batch_shape else ""
         blocks = ", ".join(f"{e.spec.name}:{e.spec.kind}x{e.reps}" for e in self._blocks) or "none"
-        return (f"LFR({self.noutputs} outputs, {self.ninputs} inputs, {self._n} states{batch}; "
-                f"blocks: {blocks})")
+        return (
+            f"LFR({self.noutputs} outputs, {self.ninputs} inputs, {self._n} states{batch}; "
+            f"blocks: {blocks})"
+        )
 
     def model(self, index) -> LFR:
         """Model ``index`` of a model array (``sys.model(k)``; tuples for several batch dims)."""
@@ -340,8 +357,9 @@ class LFR:
             raise ValueError("model(): this LFR is not a model array (batch_shape is ())")
         index = index if isinstance(index, tuple) else (index,)
         if len(index) > len(self.batch_shape):
-            raise ValueError(f"model(): index {index} has more entries than batch_shape "
-                             f"{self.batch_shape}")
+            raise ValueError(
+                f"model(): index {index} has more entries than batch_shape {self.batch_shape}"
+            )
         return self._replace(self._M[index])
 
     def _replace(self, M, nstates=None, blocks=None, **names) -> LFR:
@@ -358,9 +376,13 @@ class LFR:
 
         A single string ``"u"`` for a ``k``-channel port expands to ``u[0], ..., u[k-1]``.
         """
-        return LFR(self._M, self._n, self._blocks,
-                   input_names=self._input_names if inputs is None else inputs,
-                   output_names=self._output_names if outputs is None else outputs)
+        return LFR(
+            self._M,
+            self._n,
+            self._blocks,
+            input_names=self._input_names if inputs is None else inputs,
+            output_names=self._output_names if outputs is None else outputs,
+        )
 
     @property
     def is_certain(self) -> bool:
@@ -370,7 +392,7 @@ class LFR:
     # ------------------------------------------------------------------ operators
     def __neg__(self) -> LFR:
         M = np.array(self._M)
-        M[..., self._n + self.nz:, :] *= -1
+        M[..., self._n + self.nz :, :] *= -1
         return self._replace(M)
 
     def __pos__(self) -> LFR:
@@ -379,7 +401,7 @@ class LFR:
     def __mul__(self, other) -> LFR:
         if _is_scalar(other):
             M = np.array(self._M, dtype=np.result_type(self._M, other))
-            M[..., self._n + self.nz:, :] *= other
+            M[..., self._n + self.nz :, :] *= other
             return self._replace(M)
         try:
             other = as_lfr(other)
@@ -465,9 +487,13 @@ class LFR:
         col_idx = np.concatenate([np.arange(n + nw), n + nw + cols])
         M = self._M[..., row_idx[:, None], col_idx[None, :]]
         return LFR(
-            M, n, self._blocks,
+            M,
+            n,
+            self._blocks,
             input_names=None if self._input_names is None else [self._input_names[c] for c in cols],
-            output_names=None if self._output_names is None else [self._output_names[r] for r in rows],
+            output_names=None
+            if self._output_names is None
+            else [self._output_names[r] for r in rows],
         )
 
     # ------------------------------------------------------------------ analysis entry points
@@ -496,11 +522,13 @@ class LFR:
 
         if self._blocks:
             names = ", ".join(self.occurrences)
-            raise ValueError(f"to_ss: LFR still has uncertain blocks ({names}); use usubs() or "
-                             ".nominal first")
+            raise ValueError(
+                f"to_ss: LFR still has uncertain blocks ({names}); use usubs() or .nominal first"
+            )
         if self.batch_shape:
-            raise ValueError(f"to_ss: LFR is a model array of shape {self.batch_shape}; pick one "
-                             "with .model(k)")
+            raise ValueError(
+                f"to_ss: LFR is a model array of shape {self.batch_shape}; pick one with .model(k)"
+            )
         n = self._n
         M = self._M
         kwargs = {}
@@ -528,8 +556,9 @@ def _rebuild(M, n, blocks, input_names, output_names):
 
 
 def _is_scalar(value) -> bool:
-    return isinstance(value, numbers.Number) or (isinstance(value, np.ndarray) and value.ndim == 0
-                                                 and value.dtype.kind in "biufc")
+    return isinstance(value, numbers.Number) or (
+        isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "biufc"
+    )
 
 
 def _index_list(key, size: int, label: str) -> np.ndarray:
@@ -569,14 +598,18 @@ def as_lfr(value) -> LFR:
 
     if isinstance(value, control.TransferFunction):
         if not value.isctime(strict=False):
-            raise ValueError(f"as_lfr: discrete-time transfer function (dt={value.dt}) not supported")
+            raise ValueError(
+                f"as_lfr: discrete-time transfer function (dt={value.dt}) not supported"
+            )
         for i in range(value.noutputs):
             for j in range(value.ninputs):
                 num = np.trim_zeros(np.atleast_1d(value.num_array[i, j]), "f")
                 den = np.trim_zeros(np.atleast_1d(value.den_array[i, j]), "f")
                 if len(num) > len(den):
-                    raise ValueError(f"as_lfr: improper transfer function entry ({i}, {j}); "
-                                     "LFRs need proper systems")
+                    raise ValueError(
+                        f"as_lfr: improper transfer function entry ({i}, {j}); "
+                        "LFRs need proper systems"
+                    )
         value = control.ss(value)
     if isinstance(value, control.StateSpace):
         if not value.isctime(strict=False):
@@ -658,16 +691,23 @@ def append_systems(systems: Sequence[LFR]) -> LFR:
     M = np.zeros(batch + (n + nz + ny, n + nw + nu), dtype=dtype)
     x0 = y0 = u0 = 0
     for sys, zmap, wmap in zip(systems, z_maps, w_maps, strict=True):
-        rows = np.concatenate([x0 + np.arange(sys.nstates), n + zmap,
-                               n + nz + y0 + np.arange(sys.noutputs)])
-        cols = np.concatenate([x0 + np.arange(sys.nstates), n + wmap,
-                               n + nw + u0 + np.arange(sys.ninputs)])
+        rows = np.concatenate(
+            [x0 + np.arange(sys.nstates), n + zmap, n + nz + y0 + np.arange(sys.noutputs)]
+        )
+        cols = np.concatenate(
+            [x0 + np.arange(sys.nstates), n + wmap, n + nw + u0 + np.arange(sys.ninputs)]
+        )
         M[..., rows[:, None], cols[None, :]] = sys.M
         x0 += sys.nstates
         y0 += sys.noutputs
         u0 += sys.ninputs
-    return LFR(M, n, merged, input_names=_concat_names(systems, "_input_names"),
-               output_names=_concat_names(systems, "_output_names"))
+    return LFR(
+        M,
+        n,
+        merged,
+        input_names=_concat_names(systems, "_input_names"),
+        output_names=_concat_names(systems, "_output_names"),
+    )
 
 
 def close_static(G: LFR, K, E, F, H, *, input_names=None, output_names=None) -> LFR:
@@ -679,8 +719,9 @@ def close_static(G: LFR, K, E, F, H, *, input_names=None, output_names=None) -> 
 
     Raises ``ValueError`` when the algebraic loop is ill-posed (``I - Dyu K`` singular).
     """
-    K, E, F, H = (np.asarray(x, dtype=float) if np.isrealobj(x) else np.asarray(x)
-                  for x in (K, E, F, H))
+    K, E, F, H = (
+        np.asarray(x, dtype=float) if np.isrealobj(x) else np.asarray(x) for x in (K, E, F, H)
+    )
     n_int_r = G.nstates + G.nz
     n_int_c = G.nstates + G.nw
     M = G.M
@@ -690,12 +731,14 @@ def close_static(G: LFR, K, E, F, H, *, input_names=None, output_names=None) -> 
     M22 = M[..., n_int_r:, n_int_c:]
     p_a, m_a = M22.shape[-2:]
     if K.shape != (m_a, p_a) or E.shape[0] != m_a or F.shape[1] != p_a:
-        raise ValueError(f"close_static: interconnection sizes do not match system shape {(p_a, m_a)}")
+        raise ValueError(
+            f"close_static: interconnection sizes do not match system shape {(p_a, m_a)}"
+        )
     if np.any(K):
         loop = np.eye(p_a) - M22 @ K
         _check_well_posed(loop)
-        S_M21 = np.linalg.solve(loop, M21)          # S M21
-        S_M22E = np.linalg.solve(loop, M22 @ E)     # S M22 E
+        S_M21 = np.linalg.solve(loop, M21)  # S M21
+        S_M22E = np.linalg.solve(loop, M22 @ E)  # S M22 E
         KS_M21 = K @ S_M21
         new11 = M11 + M12 @ KS_M21
         new12 = M12 @ (K @ S_M22E + E)
@@ -706,14 +749,30 @@ def close_static(G: LFR, K, E, F, H, *, input_names=None, output_names=None) -> 
         new12 = M12 @ E
         new21 = F @ M21
         new22 = F @ M22 @ E + H
-    batch = np.broadcast_shapes(new11.shape[:-2], new12.shape[:-2], new21.shape[:-2],
-                                new22.shape[:-2])
-    top = np.concatenate([np.broadcast_to(new11, batch + new11.shape[-2:]),
-                          np.broadcast_to(new12, batch + new12.shape[-2:])], axis=-1)
-    bottom = np.concatenate([np.broadcast_to(new21, batch + new21.shape[-2:]),
-                             np.broadcast_to(new22, batch + new22.shape[-2:])], axis=-1)
-    return LFR(np.concatenate([top, bottom], axis=-2), G.nstates, G.block_entries,
-               input_names=input_names, output_names=output_names)
+    batch = np.broadcast_shapes(
+        new11.shape[:-2], new12.shape[:-2], new21.shape[:-2], new22.shape[:-2]
+    )
+    top = np.concatenate(
+        [
+            np.broadcast_to(new11, batch + new11.shape[-2:]),
+            np.broadcast_to(new12, batch + new12.shape[-2:]),
+        ],
+        axis=-1,
+    )
+    bottom = np.concatenate(
+        [
+            np.broadcast_to(new21, batch + new21.shape[-2:]),
+            np.broadcast_to(new22, batch + new22.shape[-2:]),
+        ],
+        axis=-1,
+    )
+    return LFR(
+        np.concatenate([top, bottom], axis=-2),
+        G.nstates,
+        G.block_entries,
+        input_names=input_names,
+        output_names=output_names,
+    )
 
 
 def _check_well_posed(loop: np.ndarray) -> None:
@@ -762,22 +821,31 @@ def series(first: LFR, second: LFR) -> LFR:
     K[m1:, :p1] = np.eye(p1)
     E = np.vstack([np.eye(m1), np.zeros((m2, m1))])
     F = np.hstack([np.zeros((p2, p1)), np.eye(p2)])
-    return close_static(G, K, E, F, np.zeros((p2, m1)),
-                        input_names=first.input_names, output_names=second.output_names)
+    return close_static(
+        G,
+        K,
+        E,
+        F,
+        np.zeros((p2, m1)),
+        input_names=first.input_names,
+        output_names=second.output_names,
+    )
 
 
 def _scale_inputs(sys: LFR, gain: np.ndarray, input_names) -> LFR:
     n_int_c = sys.nstates + sys.nw
     M = np.concatenate([sys.M[..., :n_int_c], sys.M[..., n_int_c:] @ gain], axis=-1)
-    return LFR(M, sys.nstates, sys.block_entries, input_names=input_names,
-               output_names=sys.output_names)
+    return LFR(
+        M, sys.nstates, sys.block_entries, input_names=input_names, output_names=sys.output_names
+    )
 
 
 def _scale_outputs(sys: LFR, gain: np.ndarray, output_names) -> LFR:
     n_int_r = sys.nstates + sys.nz
     M = np.concatenate([sys.M[..., :n_int_r, :], gain @ sys.M[..., n_int_r:, :]], axis=-2)
-    return LFR(M, sys.nstates, sys.block_entries, input_names=sys.input_names,
-               output_names=output_names)
+    return LFR(
+        M, sys.nstates, sys.block_entries, input_names=sys.input_names, output_names=output_names
+    )
 
 
 def parallel(first: LFR, second: LFR, sign: float = 1.0) -> LFR:
@@ -795,9 +863,15 @@ def parallel(first: LFR, second: LFR, sign: float = 1.0) -> LFR:
     K = np.zeros((2 * m, 2 * p))
     E = np.vstack([np.eye(m), np.eye(m)])
     F = np.hstack([np.eye(p), sign * np.eye(p)])
-    return close_static(G, K, E, F, np.zeros((p, m)),
-                        input_names=first.input_names or second.input_names,
-                        output_names=first.output_names or second.output_names)
+    return close_static(
+        G,
+        K,
+        E,
+        F,
+        np.zeros((p, m)),
+        input_names=first.input_names or second.input_names,
+        output_names=first.output_names or second.output_names,
+    )
 
 
 def inverse(sys: LFR) -> LFR:
@@ -819,7 +893,17 @@ def inverse(sys: LFR) -> LFR:
     Di = np.linalg.inv(M22)
     Di_M21 = Di @ M21
     top = np.concatenate([M11 - M12 @ Di_M21, M12 @ Di], axis=-1)
-    bottom = np.concatenate([np.broadcast_to(-Di_M21, top.shape[:-2] + Di_M21.shape[-2:]),
-                             np.broadcast_to(Di, top.shape[:-2] + Di.shape[-2:])], axis=-1)
-    return LFR(np.concatenate([top, bottom], axis=-2), sys.nstates, sys.block_entries,
-               input_names=sys.output_names, output_names=sys.input_names)
+    bottom = np.concatenate(
+        [
+            np.broadcast_to(-Di_M21, top.shape[:-2] + Di_M21.shape[-2:]),
+            np.broadcast_to(Di, top.shape[:-2] + Di.shape[-2:]),
+        ],
+        axis=-1,
+    )
+    return LFR(
+        np.concatenate([top, bottom], axis=-2),
+        sys.nstates,
+        sys.block_entries,
+        input_names=sys.output_names,
+        output_names=sys.input_names,
+    )

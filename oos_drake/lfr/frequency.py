@@ -2,7 +2,8 @@
 
 For every model the state matrix is diagonalized once, ``A = V diag(lambda) V^-1``, and
 
-.. math:: G(j\\omega) = D + (C V) \\, \\mathrm{diag}\\big(1/(j\\omega - \\lambda)\\big) \\, (V^{-1} B)
+.. math:: G(j\\omega) = D + (C V) \\,
+          \\mathrm{diag}\\big(1/(j\\omega - \\lambda)\\big) \\, (V^{-1} B)
 
 is evaluated for all frequencies with one batched matrix product: one eigendecomposition plus
 ``O(F n ny nu)`` per model, with models processed in chunks to bound memory.
@@ -34,7 +35,7 @@ EIG_COND_LIMIT = 1e5
 #: Largest clustered block handled by the block method (larger: direct solve fallback).
 MAX_CLUSTER = 24
 #: Target size (complex entries) of temporary arrays per chunk.
-CHUNK_ENTRIES = 4_000_000
+CHUNK_ENTRIES = 400_000
 
 
 def freqresp(sys, omega) -> np.ndarray:
@@ -69,31 +70,86 @@ def freqresp(sys, omega) -> np.ndarray:
         out[:] = M[:, None, :, :]
         return out.reshape(batch + out.shape[1:])
     s = 1j * omega
-    per_model = omega.size * (n + 4 * ny * nu) + 6 * n * n
+    core, tail, powers = _integrator_tail(M[:, :n, :n])
+    n_core = core.size
+    per_model = omega.size * (n_core + 4 * ny * nu * (1 + powers)) + 6 * n * n
     chunk = max(1, CHUNK_ENTRIES // per_model)
     for start in range(0, nb, chunk):
-        stop = min(nb, start + chunk)
-        out[start:stop] = _chunk_response(M[start:stop], n, s)
+        part = M[start : min(nb, start + chunk)]
+        if tail.size:
+            out[start : start + part.shape[0]] = _tail_response(part, n, core, tail, powers, s)
+        else:
+            out[start : start + part.shape[0]] = _chunk_response(part, n, s)
     return out.reshape(batch + out.shape[1:])
 
 
-def _reciprocal(z: np.ndarray) -> np.ndarray:
-    """``1 / z`` for complex arrays (about 4x faster than numpy's complex division)."""
-    re, im = z.real, z.imag
-    scale = re * re + im * im
-    out = np.empty_like(z)
-    out.real = re / scale
-    out.imag = -im / scale
+def _tail_response(M, n, core, tail, powers, s):
+    """Response when the states split into a core and a nilpotent integrator tail."""
+    nb = M.shape[0]
+    ny, nu = M.shape[1] - n, M.shape[2] - n
+    A11 = M[:, core[:, None], core[None, :]]
+    A21 = M[:, tail[:, None], core[None, :]]
+    A22 = M[:, tail[:, None], tail[None, :]]
+    B1, B2 = M[:, core, n:], M[:, tail, n:]
+    C1, C2 = M[:, n:, core], M[:, n:, tail]
+    # C2 (sI - A22)^-1 = sum_p s^-(p+1) E_p,  E_p = C2 A22^p  (A22 nilpotent)
+    E = [C2]
+    for _ in range(1, powers):
+        E.append(E[-1] @ A22)
+    C_aug = np.concatenate([C1] + [Ep @ A21 for Ep in E], axis=1)
+    if core.size:
+        core_M = np.concatenate(
+            [
+                np.concatenate([A11, B1], axis=2),
+                np.concatenate([C_aug, np.zeros((nb, C_aug.shape[1], nu), dtype=M.dtype)], axis=2),
+            ],
+            axis=1,
+        )
+        core_resp = _chunk_response(core_M, core.size, s)  # (nb, F, ny(1+q), nu)
+    else:
+        core_resp = np.zeros((nb, s.size, C_aug.shape[1], nu), dtype=complex)
+    with np.errstate(all="ignore"):
+        out = core_resp[:, :, :ny, :] + M[:, None, n:, n:]
+        for p, Ep in enumerate(E):
+            block = core_resp[:, :, ny * (p + 1) : ny * (p + 2), :] + (Ep @ B2)[:, None]
+            out += block * (s ** -(p + 1))[None, :, None, None]
     return out
+
+
+def _integrator_tail(A: np.ndarray):
+    """Split states into a core and a downstream chain of pure integrators (structurally, over
+    the whole batch): tail states feed only later tail states, so ``A = [[A11, 0], [A21, A22]]``
+    with ``A22`` strictly lower triangular (nilpotent). Rigid-body ``1/s^2`` outputs are the typical
+    tail; removing them keeps the eigendecomposition free of their defective zero eigenvalues.
+
+    Returns ``(core, tail, q)`` index arrays and the nilpotency index ``q`` of ``A22``.
+    """
+    pattern = np.any(A != 0, axis=0)
+    n = pattern.shape[0]
+    in_tail = np.zeros(n, dtype=bool)
+    added = []
+    while True:
+        rows_free = ~in_tail
+        feeds_core = np.any(pattern[rows_free, :], axis=0)
+        new = np.flatnonzero(~feeds_core & ~in_tail)
+        if new.size == 0:
+            break
+        added.append(new)
+        in_tail[new] = True
+    if not added:
+        return np.arange(n), np.zeros(0, dtype=int), 0
+    tail = np.concatenate(added[::-1])
+    core = np.flatnonzero(~in_tail)
+    return core, tail, len(added)
 
 
 def _modal_sum(Ct, lam, Bt, s) -> np.ndarray:
     """``sum_i Ct[:, i] Bt[i, :] / (s - lam_i)`` for all models and frequencies."""
     g, ny, m = Ct.shape
     nu = Bt.shape[-1]
-    resolvent = _reciprocal(s[None, :, None] - lam[:, None, :])      # (g, F, m)
+    resolvent = np.reciprocal(s[None, :, None] - lam[:, None, :])  # (g, F, m)
     if ny * nu <= m:
-        residues = Ct.transpose(0, 2, 1)[:, :, :, None] * Bt[:, :, None, :]   # (g, m, ny, nu)
+        residues = Ct.transpose(0, 2, 1)[:, :, :, None] * Bt[:, :, None, :]  # (g, m, ny, nu)
         return (resolvent @ residues.reshape(g, m, ny * nu)).reshape(g, s.size, ny, nu)
     return np.einsum("gin,gfn,gnj->gfij", Ct, resolvent, Bt, optimize=True)
 
@@ -108,22 +164,28 @@ def _chunk_response(M: np.ndarray, n: int, s: np.ndarray) -> np.ndarray:
     direct = np.zeros(nb, dtype=bool)
     with np.errstate(all="ignore"):
         lam, V = np.linalg.eig(A)
-        Vinv, singular = _safe_inv(V)
-        kappa = np.linalg.norm(Vinv, axis=-1) * np.linalg.norm(V, axis=-2)   # per eigenvalue
+        # V^-1 [B, probes]: the random probes estimate the norms of the rows of V^-1 (left
+        # eigenvectors), i.e. each eigenvalue's condition number, without forming V^-1
+        probes = _probes(n)
+        X, singular = _safe_solve(
+            V, np.concatenate([B.astype(complex), np.broadcast_to(probes, (nb, n, 2))], axis=2)
+        )
+        kappa = np.sqrt(n) * np.max(np.abs(X[:, :, nu:]), axis=2) * np.linalg.norm(V, axis=-2)
         bad = ~np.isfinite(kappa) | (kappa > EIG_COND_LIMIT)
         bad[singular] = True
         nbad = bad.sum(axis=1)
         plain = np.flatnonzero(nbad == 0)
         if plain.size:
-            result[plain] = _modal_sum(C[plain] @ V[plain], lam[plain], Vinv[plain] @ B[plain], s)
+            result[plain] = _modal_sum(C[plain] @ V[plain], lam[plain], X[plain, :, :nu], s)
             result[plain] += D[plain][:, None, :, :]
         for k in np.unique(nbad[nbad > 0]):
             group = np.flatnonzero(nbad == k)
             if k > MAX_CLUSTER or k >= n:
                 direct[group] = True
                 continue
-            ok, resp = _clustered_response(A[group], B[group], C[group], lam[group], V[group],
-                                           bad[group], int(k), s)
+            ok, resp = _clustered_response(
+                A[group], B[group], C[group], lam[group], V[group], bad[group], int(k), s
+            )
             result[group[ok]] = resp[ok] + D[group[ok]][:, None, :, :]
             direct[group[~ok]] = True
     for k in np.flatnonzero(direct):
@@ -131,15 +193,23 @@ def _chunk_response(M: np.ndarray, n: int, s: np.ndarray) -> np.ndarray:
     return result
 
 
-def _safe_inv(V):
+def _probes(n: int) -> np.ndarray:
+    """Two fixed unit-norm complex Gaussian probe vectors (deterministic, seeded by ``n``)."""
+    rng = np.random.default_rng(20_240_601 + n)
+    probe = rng.standard_normal((n, 2)) + 1j * rng.standard_normal((n, 2))
+    return probe / np.linalg.norm(probe, axis=0)
+
+
+def _safe_solve(V, rhs):
+    """Batched ``V^-1 rhs``; exactly singular ``V`` give ``inf`` and are flagged."""
     try:
-        return np.linalg.inv(V), np.zeros(V.shape[0], dtype=bool)
+        return np.linalg.solve(V, rhs), np.zeros(V.shape[0], dtype=bool)
     except np.linalg.LinAlgError:
-        out = np.empty_like(V)
+        out = np.empty(rhs.shape, dtype=complex)
         singular = np.zeros(V.shape[0], dtype=bool)
         for k in range(V.shape[0]):
             try:
-                out[k] = np.linalg.inv(V[k])
+                out[k] = np.linalg.solve(V[k], rhs[k])
             except np.linalg.LinAlgError:
                 out[k] = np.inf
                 singular[k] = True
@@ -169,7 +239,7 @@ def _clustered_response(A, B, C, lam, V, bad, k, s):
     """
     g, n = A.shape[0], A.shape[-1]
     m = n - k
-    order = np.argsort(bad, axis=1, kind="stable")                # well-conditioned first
+    order = np.argsort(bad, axis=1, kind="stable")  # well-conditioned first
     lam_g = np.take_along_axis(lam, order, axis=1)[:, :m]
     V_g = np.take_along_axis(V, order[:, None, :], axis=2)[:, :, :m]
     Q, R = np.linalg.qr(V_g, mode="complete")
@@ -181,17 +251,18 @@ def _clustered_response(A, B, C, lam, V, bad, k, s):
     AQ_g = A @ Q_g
     AQ_b = A @ Q_b
     residual = np.linalg.norm(Q_bH @ AQ_g, axis=(-2, -1)) / np.maximum(
-        np.linalg.norm(A, axis=(-2, -1)), 1e-300)
+        np.linalg.norm(A, axis=(-2, -1)), 1e-300
+    )
     ok &= np.isfinite(residual) & (residual < 1e-10)
-    W = np.where(ok[:, None, None], W, np.eye(m))                  # keep the solves regular
+    W = np.where(ok[:, None, None], W, np.eye(m))  # keep the solves regular
     A_bb = Q_bH @ AQ_b
-    Bt = np.linalg.solve(W, Q_gH @ B)                              # (g, m, nu)
-    Ct = (C @ Q_g) @ W                                             # (g, ny, m)
+    Bt = np.linalg.solve(W, Q_gH @ B)  # (g, m, nu)
+    Ct = (C @ Q_g) @ W  # (g, ny, m)
     T = np.empty((g, k, k), dtype=complex)
     Z = np.empty((g, k, k), dtype=complex)
     for i in range(g):
         T[i], Z[i] = scipy.linalg.schur(A_bb[i], output="complex")
-    GtZ = np.linalg.solve(W, Q_gH @ AQ_b) @ Z                      # (g, m, k)
+    GtZ = np.linalg.solve(W, Q_gH @ AQ_b) @ Z  # (g, m, k)
     # X_z[n] = GtZ[n] (lambda_n I - T)^-1  (row vectors: forward substitution)
     X_z = np.empty((g, m, k), dtype=complex)
     for col in range(k):
@@ -199,17 +270,17 @@ def _clustered_response(A, B, C, lam, V, bad, k, s):
         if col:
             acc += np.einsum("gmi,gi->gm", X_z[:, :, :col], T[:, :col, col])
         X_z[:, :, col] = acc / (lam_g - T[:, col, col, None])
-    Bz = _ctranspose(Z) @ (Q_bH @ B)                               # (g, k, nu)
-    resp = _modal_sum(Ct, lam_g, Bt + X_z @ Bz, s)                 # (g, F, ny, nu)
+    Bz = _ctranspose(Z) @ (Q_bH @ B)  # (g, k, nu)
+    resp = _modal_sum(Ct, lam_g, Bt + X_z @ Bz, s)  # (g, F, ny, nu)
     # k-state block (C Q_b Z - Ct X_z) (sI - T)^-1 Bz: back substitution for all frequencies
     nf, nu, ny = s.size, B.shape[-1], C.shape[1]
     Yt = np.empty((g, k, nf, nu), dtype=complex)
     for row in range(k - 1, -1, -1):
         acc = np.broadcast_to(Bz[:, row, None, :], (g, nf, nu)).copy()
         if row + 1 < k:
-            acc += np.einsum("gj,gjfu->gfu", T[:, row, row + 1:], Yt[:, row + 1:])
+            acc += np.einsum("gj,gjfu->gfu", T[:, row, row + 1 :], Yt[:, row + 1 :])
         Yt[:, row] = acc / (s[None, :, None] - T[:, row, row, None, None])
-    C_blk = (C @ Q_b) @ Z - Ct @ X_z                               # (g, ny, k)
+    C_blk = (C @ Q_b) @ Z - Ct @ X_z  # (g, ny, k)
     resp += np.swapaxes((C_blk @ Yt.reshape(g, k, nf * nu)).reshape(g, ny, nf, nu), 1, 2)
     return ok, resp
 
@@ -219,8 +290,10 @@ def _solve_or_inf(lhs, rhs):
     try:
         return np.linalg.solve(lhs, rhs)
     except np.linalg.LinAlgError:
-        out = np.empty(np.broadcast_shapes(lhs.shape[:-2], rhs.shape[:-2]) + rhs.shape[-2:],
-                       dtype=np.result_type(lhs, rhs))
+        out = np.empty(
+            np.broadcast_shapes(lhs.shape[:-2], rhs.shape[:-2]) + rhs.shape[-2:],
+            dtype=np.result_type(lhs, rhs),
+        )
         lhs = np.broadcast_to(lhs, out.shape[:-2] + lhs.shape[-2:])
         rhs = np.broadcast_to(rhs, out.shape)
         for idx in np.ndindex(out.shape[:-2]):
@@ -248,5 +321,5 @@ def _direct_response(A, B, C, D, s, chunk: int = 64) -> np.ndarray:
                     try:
                         out[start + k] = C @ np.linalg.solve(sk * eye - A, B) + D
                     except np.linalg.LinAlgError:
-                        out[start + k] = np.inf   # s is a pole
+                        out[start + k] = np.inf  # s is a pole
     return out

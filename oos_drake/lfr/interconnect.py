@@ -48,8 +48,9 @@ def feedback(sys1, sys2=1, sign: int = -1) -> LFR:
     K[nu:, :ny] = np.eye(ny)
     E = np.vstack([np.eye(nu), np.zeros((ny, nu))])
     F = np.hstack([np.eye(ny), np.zeros((ny, nu))])
-    return close_static(G, K, E, F, np.zeros((ny, nu)),
-                        input_names=sys1.input_names, output_names=sys1.output_names)
+    return close_static(
+        G, K, E, F, np.zeros((ny, nu)), input_names=sys1.input_names, output_names=sys1.output_names
+    )
 
 
 def lft(upper, lower, nu: int | None = None, ny: int | None = None) -> LFR:
@@ -69,12 +70,14 @@ def lft(upper, lower, nu: int | None = None, ny: int | None = None) -> LFR:
     p2, m2 = lower.shape
     if nu is None and ny is None:
         if m2 <= p1 and p2 <= m1 and (p2 < m1 or m2 < p1 or (p1, m1) == (m2, p2)):
-            nu, ny = m2, p2      # lower LFT: lower closed completely
+            nu, ny = m2, p2  # lower LFT: lower closed completely
         elif p1 <= m2 and m1 <= p2:
-            nu, ny = p1, m1      # upper LFT: upper closed completely
+            nu, ny = p1, m1  # upper LFT: upper closed completely
         else:
-            raise ValueError(f"lft: cannot infer the loop sizes for shapes {upper.shape} and "
-                             f"{lower.shape}; pass nu and ny")
+            raise ValueError(
+                f"lft: cannot infer the loop sizes for shapes {upper.shape} and "
+                f"{lower.shape}; pass nu and ny"
+            )
     elif nu is None or ny is None:
         raise ValueError("lft: give both nu and ny, or neither")
     nu, ny = int(nu), int(ny)
@@ -84,8 +87,8 @@ def lft(upper, lower, nu: int | None = None, ny: int | None = None) -> LFR:
     # external inputs of G: [u1a (m1-ny), u1b (ny), u2a (nu), u2b (m2-nu)]
     # external outputs of G: [y1a (p1-nu), y1b (nu), y2a (ny), y2b (p2-ny)]
     K = np.zeros((m1 + m2, p1 + p2))
-    K[m1 - ny:m1, p1:p1 + ny] = np.eye(ny)          # u1b = y2a
-    K[m1:m1 + nu, p1 - nu:p1] = np.eye(nu)          # u2a = y1b
+    K[m1 - ny : m1, p1 : p1 + ny] = np.eye(ny)  # u1b = y2a
+    K[m1 : m1 + nu, p1 - nu : p1] = np.eye(nu)  # u2a = y1b
     free_in = np.concatenate([np.arange(m1 - ny), m1 + nu + np.arange(m2 - nu)])
     free_out = np.concatenate([np.arange(p1 - nu), p1 + ny + np.arange(p2 - ny)])
     E = np.zeros((m1 + m2, free_in.size))
@@ -94,8 +97,15 @@ def lft(upper, lower, nu: int | None = None, ny: int | None = None) -> LFR:
     F[np.arange(free_out.size), free_out] = 1.0
     in_names = _pick(G.input_names, free_in)
     out_names = _pick(G.output_names, free_out)
-    return close_static(G, K, E, F, np.zeros((free_out.size, free_in.size)),
-                        input_names=in_names, output_names=out_names)
+    return close_static(
+        G,
+        K,
+        E,
+        F,
+        np.zeros((free_out.size, free_in.size)),
+        input_names=in_names,
+        output_names=out_names,
+    )
 
 
 def _pick(names, index):
@@ -122,8 +132,15 @@ def hstack(systems: Sequence) -> LFR:
     m = G.ninputs
     K = np.zeros((m, G.noutputs))
     F = np.hstack([np.eye(ny)] * len(systems))
-    return close_static(G, K, np.eye(m), F, np.zeros((ny, m)), input_names=G.input_names,
-                        output_names=systems[0].output_names)
+    return close_static(
+        G,
+        K,
+        np.eye(m),
+        F,
+        np.zeros((ny, m)),
+        input_names=G.input_names,
+        output_names=systems[0].output_names,
+    )
 
 
 def vstack(systems: Sequence) -> LFR:
@@ -141,8 +158,15 @@ def vstack(systems: Sequence) -> LFR:
     p = G.noutputs
     K = np.zeros((G.ninputs, p))
     E = np.vstack([np.eye(nu)] * len(systems))
-    return close_static(G, K, E, np.eye(p), np.zeros((p, nu)),
-                        input_names=systems[0].input_names, output_names=G.output_names)
+    return close_static(
+        G,
+        K,
+        E,
+        np.eye(p),
+        np.zeros((p, nu)),
+        input_names=systems[0].input_names,
+        output_names=G.output_names,
+    )
 
 
 def inv(sys) -> LFR:
@@ -191,7 +215,8 @@ def connect(systems: Sequence, inputs: Sequence[str], outputs: Sequence[str]) ->
     """Interconnect named systems MATLAB-style.
 
     Each system needs ``input_names`` and ``output_names`` (see :meth:`LFR.with_names` and
-    :func:`sumblk`). A signal ``X`` is the sum of every block output named ``X`` plus, if ``X`` is in
+    :func:`sumblk`). A signal ``X`` is the sum of every block output named ``X`` plus, if
+    ``X`` is in
     ``inputs``, the external input ``X``. Every block input named ``X`` receives signal ``X``; every
     external output named ``X`` reads it. A vector name ``u`` stands for ``u[0], u[1], ...``.
 
@@ -210,8 +235,10 @@ def connect(systems: Sequence, inputs: Sequence[str], outputs: Sequence[str]) ->
     systems = [as_lfr(s) for s in systems]
     for k, sys in enumerate(systems):
         if sys.input_names is None and sys.ninputs or sys.output_names is None and sys.noutputs:
-            raise ValueError(f"connect: system {k} ({sys!r}) has unnamed inputs or outputs; "
-                             "use .with_names(inputs=..., outputs=...)")
+            raise ValueError(
+                f"connect: system {k} ({sys!r}) has unnamed inputs or outputs; "
+                "use .with_names(inputs=..., outputs=...)"
+            )
         names = (sys.input_names or ()) + (sys.output_names or ())
         if None in names:
             raise ValueError(f"connect: system {k} has partly unnamed inputs or outputs")
@@ -238,17 +265,25 @@ def connect(systems: Sequence, inputs: Sequence[str], outputs: Sequence[str]) ->
     sources = set(out_names) | set(ext_in)
     for name in in_names:
         if name not in sources:
-            raise ValueError(f"connect: block input {name!r} is driven by no block output and is "
-                             "not an external input")
+            raise ValueError(
+                f"connect: block input {name!r} is driven by no block output and is "
+                "not an external input"
+            )
     out_arr = np.array(out_names, dtype=object)
     in_arr = np.array(in_names, dtype=object)
-    K = (in_arr[:, None] == out_arr[None, :]).astype(float) if in_names and out_names else \
-        np.zeros((len(in_names), len(out_names)))
+    K = (
+        (in_arr[:, None] == out_arr[None, :]).astype(float)
+        if in_names and out_names
+        else np.zeros((len(in_names), len(out_names)))
+    )
     E = np.array([[1.0 if a == b else 0.0 for b in ext_in] for a in in_names]).reshape(
-        len(in_names), len(ext_in))
+        len(in_names), len(ext_in)
+    )
     F = np.array([[1.0 if a == b else 0.0 for b in out_names] for a in ext_out]).reshape(
-        len(ext_out), len(out_names))
+        len(ext_out), len(out_names)
+    )
     H = np.array([[1.0 if a == b else 0.0 for b in ext_in] for a in ext_out]).reshape(
-        len(ext_out), len(ext_in))
+        len(ext_out), len(ext_in)
+    )
     # an external output reading a signal that is also fed back must see the closed loop value
     return close_static(G, K, E, F, H, input_names=ext_in, output_names=ext_out)

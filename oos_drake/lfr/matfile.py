@@ -15,7 +15,8 @@ def to_mat(sys: LFR, path) -> None:
 
     Variables: ``A, B, C, D`` (partitioned as ``docs/DESIGN.md``: ``B = [Bw Bu]``,
     ``C = [Cz; Cy]``), ``nstates, nz, nw, ny, nu``, ``blk`` (BLK rows), ``block_names`` (cell),
-    ``block_kinds`` (cell), ``repetitions``, ``nominal``, ``lower``, ``upper`` (ureal ranges, NaN for
+    ``block_kinds`` (cell), ``repetitions``, ``nominal``, ``lower``, ``upper`` (ureal ranges,
+    NaN for
     other kinds), ``radius`` (ucomplex radius / ultidyn bound, NaN for ureal) and ``block_shape``
     (``p x q`` per block). Model arrays put the batch dimensions LAST, as MATLAB does
     (``A(:, :, k)``). In MATLAB, ``lft(blkdiag(eye(nstates)/s, Delta), ss(A, B, C, D))`` with
@@ -35,13 +36,17 @@ def to_mat(sys: LFR, path) -> None:
 
     def last(x):
         x = np.asarray(x)
-        return np.moveaxis(x, tuple(range(x.ndim - 2)), tuple(range(2, x.ndim))) if x.ndim > 2 else x
+        return (
+            np.moveaxis(x, tuple(range(x.ndim - 2)), tuple(range(2, x.ndim))) if x.ndim > 2 else x
+        )
 
     specs = [entry.spec for entry in sys.block_entries]
     lower = [s.range[0] if s.kind == "ureal" else np.nan for s in specs]
     upper = [s.range[1] if s.kind == "ureal" else np.nan for s in specs]
-    radius = [getattr(s, "radius", getattr(s, "bound", np.nan)) if s.kind != "ureal" else np.nan
-              for s in specs]
+    radius = [
+        getattr(s, "radius", getattr(s, "bound", np.nan)) if s.kind != "ureal" else np.nan
+        for s in specs
+    ]
     nominal = np.array([s.nominal for s in specs], dtype=complex) if specs else np.zeros(0)
     if np.all(nominal.imag == 0):
         nominal = nominal.real

@@ -1,7 +1,7 @@
 """Exact structured reduction of an LFR: remove unreachable/unobservable states and Delta channels.
 
-An LFR is the n-D system ``eta = M11 xi + M12 u``, ``y = M21 xi + M22 u`` closed by
-``xi = blkdiag(I/s, delta_1 I_r1, ..., delta_k I_rk) eta``. For a subspace ``V = V_0 (+) ... (+) V_k``
+An LFR is the n-D system ``eta = M11 xi + M12 u``, ``y = M21 xi + M22 u`` closed by ``xi =
+blkdiag(I/s, delta_1 I_r1, ..., delta_k I_rk) eta``. For a subspace ``V = V_0 (+) ... (+) V_k``
 that follows the channel groups (states, then each scalar block), contains ``Im M12`` and is
 invariant (``M11 V`` inside ``V`` group by group), every signal ``eta`` stays in ``V``, and because
 each group is a scalar times the identity, ``xi`` stays in ``V`` too. Projecting onto orthonormal
@@ -62,9 +62,12 @@ def _reachable(M: np.ndarray, n_int_r: int, n_int_c: int, groups, tol: float):
             bases.append(np.eye(rows.size, dtype=M.dtype))
     for _ in range(n_int_r + 1):
         # image of the current subspace through xi -> M11 xi
-        pieces = [M11[..., :, cols] @ basis for (_, cols, _, _), basis in zip(groups, bases,
-                                                                                strict=True)
-                  if basis.shape[1]]
+        pieces = []
+        for (_, cols, reducible, _), basis in zip(groups, bases, strict=True):
+            if not reducible:
+                pieces.append(M11[..., :, cols])  # full block: all of its w channels
+            elif basis.shape[1]:
+                pieces.append(M11[..., :, cols] @ basis)
         if not pieces:
             break
         image = np.concatenate(pieces, axis=-1)
@@ -98,12 +101,12 @@ def _project(sys: LFR, bases) -> LFR:
     k_r = sum(b.shape[1] for _, b in left_blocks)
     k_c = sum(b.shape[1] for _, b in right_blocks)
     dtype = np.result_type(M, *(b for _, b in left_blocks))
-    T_left = np.zeros((n_int_r, k_r), dtype=dtype)     # eta = T_left eta'
-    T_right = np.zeros((n_int_c, k_c), dtype=dtype)    # xi = T_right xi'
+    T_left = np.zeros((n_int_r, k_r), dtype=dtype)  # eta = T_left eta'
+    T_right = np.zeros((n_int_c, k_c), dtype=dtype)  # xi = T_right xi'
     r0 = c0 = 0
     for (rows, bl), (cols, br) in zip(left_blocks, right_blocks, strict=True):
-        T_left[rows, r0:r0 + bl.shape[1]] = bl
-        T_right[cols, c0:c0 + br.shape[1]] = br
+        T_left[rows, r0 : r0 + bl.shape[1]] = bl
+        T_right[cols, c0 : c0 + br.shape[1]] = br
         r0 += bl.shape[1]
         c0 += br.shape[1]
     M11 = M[..., :n_int_r, :n_int_c]
@@ -114,8 +117,13 @@ def _project(sys: LFR, bases) -> LFR:
     top = np.concatenate([TlH @ M11 @ T_right, TlH @ M12], axis=-1)
     bottom = np.concatenate([M21 @ T_right, M22], axis=-1)
     batch = np.broadcast_shapes(top.shape[:-2], bottom.shape[:-2])
-    new_M = np.concatenate([np.broadcast_to(top, batch + top.shape[-2:]),
-                            np.broadcast_to(bottom, batch + bottom.shape[-2:])], axis=-2)
+    new_M = np.concatenate(
+        [
+            np.broadcast_to(top, batch + top.shape[-2:]),
+            np.broadcast_to(bottom, batch + bottom.shape[-2:]),
+        ],
+        axis=-2,
+    )
     n_new = bases[0].shape[1]
     entries = []
     for (_, _, reducible, entry), basis in zip(groups[1:], bases[1:], strict=True):
@@ -138,8 +146,7 @@ def _transpose(sys: LFR) -> LFR:
             spec = ULTIDyn(spec.name, spec.io_shape[::-1], spec.bound)
         entries.append(BlockEntry(spec, entry.reps))
     MH = np.conj(np.swapaxes(sys.M, -1, -2))
-    return LFR(MH, sys.nstates, entries, input_names=sys.output_names,
-               output_names=sys.input_names)
+    return LFR(MH, sys.nstates, entries, input_names=sys.output_names, output_names=sys.input_names)
 
 
 def _reduce_reachable(sys: LFR, tol: float) -> LFR:
@@ -166,7 +173,9 @@ def reduce_lfr(sys: LFR, tol: float | None = None) -> LFR:
         influence the input-output map.
     """
     if tol is None:
-        tol = 1e-10 * max(1.0, float(np.linalg.norm(sys.M.reshape(-1))) / max(1, sys.nmodels) ** 0.5)
+        tol = 1e-10 * max(
+            1.0, float(np.linalg.norm(sys.M.reshape(-1))) / max(1, sys.nmodels) ** 0.5
+        )
     current = sys
     for _ in range(4):
         size_before = (current.nstates, current.nz, current.nw)

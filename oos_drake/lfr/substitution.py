@@ -21,6 +21,9 @@ from scipy.sparse.csgraph import connected_components
 
 from oos_drake.lfr.core import LFR
 
+#: Work-array size (entries) per chunk of models in the batched substitution.
+SUBS_CHUNK_ENTRIES = 1_000_000
+
 
 def nominal(sys: LFR) -> LFR:
     """The nominal model of ``sys``: every block at ``delta = 0`` (an LFR without blocks)."""
@@ -29,8 +32,13 @@ def nominal(sys: LFR) -> LFR:
     n, nz, nw = sys.nstates, sys.nz, sys.nw
     rows = np.concatenate([np.arange(n), n + nz + np.arange(sys.noutputs)])
     cols = np.concatenate([np.arange(n), n + nw + np.arange(sys.ninputs)])
-    return LFR(sys.M[..., rows[:, None], cols[None, :]], n, (),
-               input_names=sys.input_names, output_names=sys.output_names)
+    return LFR(
+        sys.M[..., rows[:, None], cols[None, :]],
+        n,
+        (),
+        input_names=sys.input_names,
+        output_names=sys.output_names,
+    )
 
 
 def _ureal_table(sys: LFR):
@@ -40,8 +48,9 @@ def _ureal_table(sys: LFR):
         specs = [e.spec for e in sys.block_entries if e.spec.kind == "ureal"]
         table = {
             "row": {spec.name: i for i, spec in enumerate(specs)},
-            "params": np.array([[sp.nominal, sp.lower, sp.upper, sp.alpha, sp.beta]
-                                for sp in specs]).reshape(-1, 5),
+            "params": np.array(
+                [[sp.nominal, sp.lower, sp.upper, sp.alpha, sp.beta] for sp in specs]
+            ).reshape(-1, 5),
         }
         sys._cache["ureal_table"] = table
     return table
@@ -49,7 +58,9 @@ def _ureal_table(sys: LFR):
 
 def _normalized_values(sys: LFR, values: Mapping, normalized: bool):
     if not isinstance(values, Mapping):
-        raise ValueError(f"usubs: values must be a mapping name -> value, got {type(values).__name__}")
+        raise ValueError(
+            f"usubs: values must be a mapping name -> value, got {type(values).__name__}"
+        )
     specs = sys.uncertainty
     out = {}
     fast = []
@@ -59,8 +70,10 @@ def _normalized_values(sys: LFR, values: Mapping, normalized: bool):
             raise ValueError(f"usubs: unknown block name {name!r} (blocks: {known})")
         spec = specs[name]
         if isinstance(value, LFR) or hasattr(value, "A") and hasattr(value, "B"):
-            raise ValueError(f"usubs: block {name!r}: substituting systems is not supported; "
-                             "use lft() with the block's LFR")
+            raise ValueError(
+                f"usubs: block {name!r}: substituting systems is not supported; "
+                "use lft() with the block's LFR"
+            )
         if normalized:
             out[name] = spec.check_normalized(value)
         elif spec.kind == "ureal":
@@ -83,8 +96,9 @@ def _normalize_ureals(sys, specs, values, names):
         return {k: specs[k].to_normalized(values[k]) for k in names}
     table = _ureal_table(sys)
     rows = np.array([table["row"][k] for k in names])
-    nom, lo, hi, alpha, beta = (col.reshape((-1,) + (1,) * (stacked.ndim - 1))
-                                for col in table["params"][rows].T)
+    nom, lo, hi, alpha, beta = (
+        col.reshape((-1,) + (1,) * (stacked.ndim - 1)) for col in table["params"][rows].T
+    )
     from oos_drake.lfr.blocks import RANGE_RTOL
 
     slack = RANGE_RTOL * np.maximum(1.0, np.maximum(np.abs(lo), np.abs(hi)))
@@ -173,16 +187,18 @@ def _split(sys: LFR, names):
 def _schedule(pattern: np.ndarray):
     """Topological levels of the dependency graph ``w_i <- w_j`` for ``pattern[i, j] != 0``.
 
-    Returns a list of ``(level_indices, dense)`` where ``dense`` tells whether the level has
-    couplings other than self loops (then it needs a small solve).
+    Returns a list of ``(level_indices, groups)`` where ``groups`` lists the positions (within
+    the level) of each strongly connected component with more than one node; those need a small
+    solve, the other nodes only a division.
     """
     size = pattern.shape[0]
     graph = sp.csr_matrix(pattern.astype(bool))
     ncomp, labels = connected_components(graph, directed=True, connection="strong")
     # condensation DAG: comp(i) depends on comp(j) if pattern[i, j]
     rows, cols = np.nonzero(pattern)
-    comp_edges = {(labels[i], labels[j]) for i, j in zip(rows, cols, strict=True)
-                  if labels[i] != labels[j]}
+    comp_edges = {
+        (labels[i], labels[j]) for i, j in zip(rows, cols, strict=True) if labels[i] != labels[j]
+    }
     deps = [[] for _ in range(ncomp)]
     for a, b in comp_edges:
         deps[a].append(b)
@@ -207,9 +223,9 @@ def _schedule(pattern: np.ndarray):
     levels = []
     for lev in range(int(node_depth.max(initial=-1)) + 1):
         idx = np.flatnonzero(node_depth == lev)
-        block = pattern[np.ix_(idx, idx)].copy()
-        np.fill_diagonal(block, False)
-        levels.append((idx, bool(block.any())))
+        comp = labels[idx]
+        groups = [np.flatnonzero(comp == c) for c in np.unique(comp)]
+        levels.append((idx, [g for g in groups if g.size > 1]))
     del size
     return levels
 
@@ -228,10 +244,13 @@ def _scalar_plan(sys: LFR, names):
     levels = _schedule(pattern)
     perm = np.concatenate([idx for idx, _ in levels]) if levels else np.zeros(0, int)
     bounds, start = [], 0
-    for idx, dense in levels:
+    for idx, groups in levels:
         stop = start + idx.size
         coupled = bool(start) and bool(np.any(pattern[np.ix_(idx, perm[:start])]))
-        bounds.append((start, stop, dense, coupled))
+        multi = np.zeros(idx.size, dtype=bool)
+        for grp in groups:
+            multi[grp] = True
+        bounds.append((start, stop, coupled, np.flatnonzero(~multi), groups))
         start = stop
     zp, wp = z_sub[perm], w_sub[perm]
     plan = {
@@ -241,8 +260,12 @@ def _scalar_plan(sys: LFR, names):
         "Msk": M[..., zp[:, None], cols_keep[None, :]],
         "Mks": M[..., rows_keep[:, None], wp[None, :]],
         "Mkk": M[..., rows_keep[:, None], cols_keep[None, :]],
-        "channel_block": None,
     }
+    if M.ndim == 2:
+        plan["cols_used"] = np.flatnonzero(np.any(plan["Msk"] != 0, axis=0))
+        plan["rows_used"] = np.flatnonzero(np.any(plan["Mks"] != 0, axis=1))
+        plan["Msk_used"] = np.ascontiguousarray(plan["Msk"][:, plan["cols_used"]])
+        plan["Mks_used"] = np.ascontiguousarray(plan["Mks"][plan["rows_used"]])
     sys._cache[key] = plan
     return plan
 
@@ -261,36 +284,102 @@ def _close_scalar(sys: LFR, deltas: Mapping) -> LFR:
     d = np.concatenate(
         [np.broadcast_to(arr[..., None], batch + (reps,)) for arr, reps in arrays], axis=-1
     )[..., plan["perm"]]
+    if sys.batch_shape == () and batch != ():
+        flat = d.reshape(-1, d.shape[-1])
+        Mkk = plan["Mkk"]
+        new_M = np.empty((flat.shape[0],) + Mkk.shape, dtype=np.result_type(Mkk, flat))
+        # chunks keep the work arrays cache-sized
+        step = max(1, SUBS_CHUNK_ENTRIES // max(1, flat.shape[1] * plan["Msk"].shape[1]))
+        for k in range(0, flat.shape[0], step):
+            new_M[k : k + step] = _close_scalar_values_batched(plan, flat[k : k + step], names)
+        new_M = new_M.reshape(batch + new_M.shape[-2:])
+    else:
+        new_M = _close_scalar_general(plan, d, batch, names)
+    remaining = tuple(e for e in sys.block_entries if e.spec.name not in deltas)
+    return LFR(
+        new_M, sys.nstates, remaining, input_names=sys.input_names, output_names=sys.output_names
+    )
+
+
+def _ill_posed(names):
+    return ValueError(
+        "usubs: the substituted values make the LFR ill-posed "
+        f"(I - Delta*Dzw singular) for blocks {names}"
+    )
+
+
+def _close_scalar_general(plan, d, batch, names):
     Mss, Msk, Mks, Mkk = plan["Mss"], plan["Msk"], plan["Mks"], plan["Mkk"]
     dtype = np.result_type(Mss, d)
     ns, nk = Mss.shape[-1], Msk.shape[-1]
     W = np.empty(batch + (ns, nk), dtype=dtype)
-    for start, stop, dense, coupled in plan["bounds"]:
+    for start, stop, coupled, singles, groups in plan["bounds"]:
         rhs = Msk[..., start:stop, :]
         if coupled:
             rhs = rhs + Mss[..., start:stop, :start] @ W[..., :start, :]
+        rhs = np.broadcast_to(rhs, batch + rhs.shape[-2:])
         d_lev = d[..., start:stop]
-        if dense:
-            loop = np.eye(stop - start) - d_lev[..., :, None] * Mss[..., start:stop, start:stop]
-            try:
-                W[..., start:stop, :] = np.linalg.solve(loop, d_lev[..., :, None] * rhs)
-            except np.linalg.LinAlgError:
-                raise ValueError(
-                    "usubs: the substituted values make the LFR ill-posed "
-                    f"(I - Delta*Dzw singular) for blocks {names}"
-                ) from None
-        else:
-            diag = np.diagonal(Mss[..., start:stop, start:stop], axis1=-2, axis2=-1)
-            denom = 1.0 - d_lev * diag
+        block = Mss[..., start:stop, start:stop]
+        if singles.size:
+            diag = np.diagonal(block, axis1=-2, axis2=-1)[..., singles]
+            denom = 1.0 - d_lev[..., singles] * diag
             if np.any(np.abs(denom) < 1e-14):
-                raise ValueError("usubs: the substituted values make the LFR ill-posed "
-                                 f"(1 - delta*Dzw = 0) for blocks {names}")
-            W[..., start:stop, :] = (d_lev / denom)[..., None] * rhs
+                raise _ill_posed(names)
+            W[..., start + singles, :] = (d_lev[..., singles] / denom)[..., None] * rhs[
+                ..., singles, :
+            ]
+        for grp in groups:
+            dg = d_lev[..., grp]
+            loop = np.eye(grp.size) - dg[..., :, None] * block[..., grp[:, None], grp[None, :]]
+            try:
+                W[..., start + grp, :] = np.linalg.solve(loop, dg[..., :, None] * rhs[..., grp, :])
+            except np.linalg.LinAlgError:
+                raise _ill_posed(names) from None
     new_M = Mkk + Mks @ W
-    new_M = np.broadcast_to(new_M, batch + new_M.shape[-2:])
-    remaining = tuple(e for e in sys.block_entries if e.spec.name not in deltas)
-    return LFR(new_M, sys.nstates, remaining, input_names=sys.input_names,
-               output_names=sys.output_names)
+    return np.broadcast_to(new_M, batch + new_M.shape[-2:])
+
+
+def _close_scalar_values_batched(plan, d, names):
+    """Hot path: one certain-structure LFR, ``N`` value sets ``d`` of shape ``(N, ns)``.
+
+    ``W`` is stored as ``(ns, N, nk)`` so that every coupling and the final product are single
+    large matrix products over all models at once.
+    """
+    Mss, Mkk = plan["Mss"], plan["Mkk"]
+    # only the columns of M_sk and the rows of M_ks that are not identically zero matter
+    cols, rows = plan["cols_used"], plan["rows_used"]
+    Msk, Mks = plan["Msk_used"], plan["Mks_used"]
+    N, ns = d.shape
+    nk = cols.size
+    dtype = np.result_type(Mss, d)
+    dt = np.ascontiguousarray(d.T)  # (ns, N)
+    W = np.empty((ns, N, nk), dtype=dtype)
+    for start, stop, coupled, singles, groups in plan["bounds"]:
+        size = stop - start
+        rhs = np.broadcast_to(Msk[start:stop, None, :], (size, N, nk))
+        if coupled:
+            prod = Mss[start:stop, :start] @ W[:start].reshape(start, N * nk)
+            rhs = rhs + prod.reshape(size, N, nk)
+        d_lev = dt[start:stop]  # (size, N)
+        block = Mss[start:stop, start:stop]
+        if singles.size:
+            denom = 1.0 - d_lev[singles] * np.diagonal(block)[singles, None]
+            if np.any(np.abs(denom) < 1e-14):
+                raise _ill_posed(names)
+            W[start + singles] = (d_lev[singles] / denom)[..., None] * rhs[singles]
+        for grp in groups:
+            dg = d_lev[grp].T  # (N, g)
+            loop = np.eye(grp.size) - dg[:, :, None] * block[np.ix_(grp, grp)]
+            rhs_g = np.swapaxes(rhs[grp], 0, 1) * dg[:, :, None]  # (N, g, nk)
+            try:
+                W[start + grp] = np.swapaxes(np.linalg.solve(loop, rhs_g), 0, 1)
+            except np.linalg.LinAlgError:
+                raise _ill_posed(names) from None
+    update = (Mks @ W.reshape(ns, N * nk)).reshape(rows.size, N, nk)
+    out = np.empty((N,) + Mkk.shape, dtype=np.result_type(Mkk, update))
+    out[:] = Mkk
+    out[:, rows[:, None], cols[None, :]] += np.swapaxes(update, 0, 1)
+    return out
 
 
 def _close_full(sys: LFR, deltas: Mapping) -> LFR:
@@ -307,7 +396,7 @@ def _close_full(sys: LFR, deltas: Mapping) -> LFR:
         p, q = entries[name].spec.shape
         value = np.broadcast_to(np.asarray(deltas[name]), batch + (p, q))
         for _ in range(entries[name].reps):
-            Delta[..., w0:w0 + p, z0:z0 + q] = value
+            Delta[..., w0 : w0 + p, z0 : z0 + q] = value
             w0 += p
             z0 += q
     M = sys.M
@@ -319,12 +408,14 @@ def _close_full(sys: LFR, deltas: Mapping) -> LFR:
     try:
         W = np.linalg.solve(loop, Delta @ Msk)
     except np.linalg.LinAlgError:
-        raise ValueError(f"usubs: the substituted values make the LFR ill-posed for blocks {names}") \
-            from None
+        raise ValueError(
+            f"usubs: the substituted values make the LFR ill-posed for blocks {names}"
+        ) from None
     new_M = np.broadcast_to(Mkk, batch + Mkk.shape[-2:]) + Mks @ W
     remaining = tuple(e for e in sys.block_entries if e.spec.name not in deltas)
-    return LFR(new_M, sys.nstates, remaining, input_names=sys.input_names,
-               output_names=sys.output_names)
+    return LFR(
+        new_M, sys.nstates, remaining, input_names=sys.input_names, output_names=sys.output_names
+    )
 
 
 def usample(sys: LFR, n: int, rng, *, names=None):

@@ -48,7 +48,7 @@ def ureal(name: str, nominal: float, *, percent=None, plusminus=None, range=None
 
 
 def ucomplex(name: str, nominal: complex, radius: float) -> LFR:
-    """Uncertain complex parameter ``nominal + radius * delta``, ``|delta| <= 1`` (MATLAB ``ucomplex``).
+    """Uncertain complex parameter ``nominal + radius * delta``, ``|delta| <= 1`` (``ucomplex``).
 
     Parameters
     ----------

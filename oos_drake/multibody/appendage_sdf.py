@@ -83,6 +83,7 @@ def appendage_model(
                 axis=tuple(float(v) for v in mode.axis),
                 damping=mode.damping,
                 spring_stiffness=mode.stiffness,
+                actuated=False,
             )
         )
     comment = (

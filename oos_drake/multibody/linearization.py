@@ -21,11 +21,11 @@ from dataclasses import dataclass
 
 import control
 import numpy as np
-from pydrake.multibody.plant import MultibodyPlant
 from pydrake.math import RollPitchYaw_
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
-from pydrake.systems.scalar_conversion import TemplateSystem
 from pydrake.systems.primitives import FirstOrderTaylorApproximation, MatrixGain, Multiplexer
+from pydrake.systems.scalar_conversion import TemplateSystem
 
 __all__ = [
     "HUB_OUTPUT_NAMES",
@@ -80,8 +80,10 @@ def HubWrenchToGeneralizedForce_(T):
             state = self.get_input_port(1).Eval(context)
             R = RollPitchYaw_[T](state[qs : qs + 3]).ToRotationMatrix().matrix()
             tau = np.zeros(nv, dtype=wrench.dtype) if T is float else np.array([T(0.0)] * nv)
-            tau[vs : vs + 3] = R @ wrench[3:]
-            tau[vs + 3 : vs + 6] = R @ wrench[:3]
+            # written out: works for AutoDiffXd objects and avoids BLAS on 3x3 blocks
+            for i in range(3):
+                tau[vs + i] = R[i, 0] * wrench[3] + R[i, 1] * wrench[4] + R[i, 2] * wrench[5]
+                tau[vs + 3 + i] = R[i, 0] * wrench[0] + R[i, 1] * wrench[1] + R[i, 2] * wrench[2]
             output.SetFromVector(tau)
 
     return Impl

@@ -78,8 +78,16 @@ def operating_point(configuration, spring_dampers=None, label: str = "") -> Oper
         ``{"SM1": (k, d), ...}`` -- uses spring-damper docking (both shear and torsion);
         bushings not listed are open. ``None``: rigid connections from ``delta_C1, delta_C2``.
     """
-    alpha = tuple(float(v) for v in np.asarray(configuration.alpha).reshape(6))
-    theta = tuple(float(v) for v in np.asarray(configuration.theta).reshape(4))
+    alpha, theta = np.asarray(configuration.alpha), np.asarray(configuration.theta)
+    if alpha.shape != (6,) or theta.shape != (4,):
+        raise ValueError(
+            f"operating_point needs one configuration (alpha (6,), theta (4,)), got alpha "
+            f"{alpha.shape} and theta {theta.shape}; index a batch first"
+        )
+    if not (np.all(np.isfinite(alpha)) and np.all(np.isfinite(theta))):
+        raise ValueError(f"operating_point: non-finite angles alpha={alpha}, theta={theta}")
+    alpha = tuple(float(v) for v in alpha)
+    theta = tuple(float(v) for v in theta)
     if spring_dampers:
         settings = tuple(
             (name, float(k), float(k), float(d), float(d))

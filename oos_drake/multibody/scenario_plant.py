@@ -25,9 +25,10 @@ SDF file it includes), then
 
 The arm joints ``alpha_1..6`` and the array drives ``theta_SA1..4`` stay revolute joints: the
 same diagram runs nonlinear simulations. For a linearization they are *motion-driven* (zero
-relative acceleration): :func:`set_operating_point` sets their angles and locks them in the
-context, and :func:`oos_drake.multibody.operating_point.linearize_at` drops their (constant)
-states. Diagrams, plants and contexts are not picklable: build one per process.
+relative acceleration): :func:`oos_drake.multibody.operating_point.set_operating_point` sets
+their angles and locks them in the context, and
+:func:`oos_drake.multibody.operating_point.linearize_at` drops their (constant) states.
+Diagrams, plants and contexts are not picklable: build one per process.
 """
 
 from __future__ import annotations

@@ -133,7 +133,11 @@ class Frame:
 
 @dataclass(frozen=True)
 class Joint:
-    """A revolute or fixed SDF joint; ``axis`` is expressed in the joint frame."""
+    """A revolute or fixed SDF joint; ``axis`` is expressed in the joint frame.
+
+    ``actuated=False`` writes a zero effort limit (no Drake ``JointActuator``): used for the
+    mode hinges, which are structural, not driven.
+    """
 
     name: str
     kind: str
@@ -143,6 +147,7 @@ class Joint:
     axis: tuple[float, float, float] | None = None
     damping: float = 0.0
     spring_stiffness: float = 0.0
+    actuated: bool = True
 
     def element(self) -> ET.Element:
         element = ET.Element("joint", name=self.name, type=self.kind)
@@ -155,6 +160,9 @@ class Joint:
             limit = ET.SubElement(axis, "limit")
             ET.SubElement(limit, "lower").text = "-1e16"
             ET.SubElement(limit, "upper").text = "1e16"
+            if not self.actuated:
+                # Drake's parser adds a JointActuator unless the effort limit is zero
+                ET.SubElement(limit, "effort").text = "0"
             dynamics = ET.SubElement(axis, "dynamics")
             ET.SubElement(dynamics, "damping").text = _num(self.damping)
             ET.SubElement(dynamics, "spring_reference").text = "0"

@@ -320,6 +320,7 @@ class UpperBoundResult:
     G: np.ndarray  # (B, r, c)
     worst_input: np.ndarray  # (B, r): direction in M's input space at the bound
     iterations: int
+    params: np.ndarray  # (B, n_params): raw scalings, a warm start for a neighbouring problem
 
 
 def mu_upper_bound(
@@ -327,9 +328,10 @@ def mu_upper_bound(
     structure: BlockStructure,
     *,
     max_iter: int = 200,
-    tol: float = 1e-5,
+    tol: float = 1e-7,
     temperatures=(30.0, 300.0, 3000.0),
     memory: int = 10,
+    x0: np.ndarray | None = None,
 ) -> UpperBoundResult:
     """D-G upper bound of mixed mu for a flat batch of matrices.
 
@@ -348,6 +350,9 @@ def mu_upper_bound(
         one sets the final smoothing bias ``<= log(n) / t`` (relative, on ``beta^2``).
     memory : int
         Number of L-BFGS correction pairs.
+    x0 : numpy.ndarray, optional
+        ``(B, n_params)`` starting scalings (``params`` of a previous result, e.g. at the
+        neighbouring frequency of a sweep) instead of Osborne balancing.
 
     Returns
     -------
@@ -361,6 +366,11 @@ def mu_upper_bound(
     x = _osborne_init(Mn, structure, layout)
     allidx = np.arange(nb)
     _, _, lmax0, _ = obj(x, allidx, np.ones(nb), need_grad=False)
+    if x0 is not None:  # warm start where it beats balancing (it may not, e.g. across a resonance)
+        xw = np.array(x0, dtype=float).reshape(nb, layout.n_params)
+        _, _, lw, _ = obj(xw, allidx, np.ones(nb), need_grad=False)
+        use = lw < lmax0
+        x[use], lmax0[use] = xw[use], lw[use]
     best_l = lmax0.copy()
     best_x = x.copy()
     p = layout.n_params
@@ -377,6 +387,7 @@ def mu_upper_bound(
             rho = np.zeros((nb, memory))
             active = np.ones(nb, dtype=bool)
             stall = np.zeros(nb, dtype=int)
+            fails = np.zeros(nb, dtype=int)
             for _ in range(per_stage):
                 idx = np.flatnonzero(active)
                 if idx.size == 0:
@@ -437,8 +448,13 @@ def mu_upper_bound(
                 stall[gi[small]] += 1
                 stall[gi[~small]] = 0
                 active[gi[stall[gi] >= 2]] = False
+                # a failed line search: forget the curvature pairs and retry along the gradient;
+                # give up after three failures in a row
                 failed = idx[~accepted]
-                active[failed] = False
+                fails[failed] += 1
+                fails[gi] = 0
+                S[failed], Y[failed], rho[failed] = 0.0, 0.0, 0.0
+                active[failed[fails[failed] >= 3]] = False
             if iters_done >= max_iter:
                 break
     # exact lambda_max at the best scalings, and the scalings themselves
@@ -451,7 +467,7 @@ def mu_upper_bound(
     # an eigenvalue of zero (mu = 0 bound) keeps its sign; normalize D so that max eig(D_r) = 1
     dnorm = np.linalg.norm(Dr, ord=2, axis=(1, 2))
     Dl, Dr, G = Dl / dnorm[:, None, None], Dr / dnorm[:, None, None], G / dnorm[:, None, None]
-    return UpperBoundResult(upper, Dl, Dr, G, top, iters_done)
+    return UpperBoundResult(upper, Dl, Dr, G, top, iters_done, best_x)
 
 
 def lmi_residual(M, beta, D_left, D_right, G) -> np.ndarray:

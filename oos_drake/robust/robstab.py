@@ -172,6 +172,31 @@ def _frequency_crossings(A, Bw, Cz, Dzw, structure, omega, up, lo, count=6, samp
     return np.array(out_w), np.array(out_lo), np.array(out_d)
 
 
+def _polish_peaks(A, Bw, Cz, Dzw, structure, omega, up, lo, count=4, rounds=2):
+    """Long runs of the upper bound at the highest peaks (the margin depends on the max only).
+
+    Ill-conditioned matrices (lightly damped modes with repeated real parameters) need hundreds
+    of iterations; spending them on a few frequencies keeps the sweep fast.
+    """
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    up = up.copy()
+    done = set()
+    for _ in range(rounds):
+        order = [int(i) for i in np.argsort(up)[::-1] if int(i) not in done][:count]
+        if not order:
+            break
+        Mk = delta_channel_response(A, Bw, Cz, Dzw, omega[order])
+        better = mu_upper_bound(Mk, structure, max_iter=600,
+                                temperatures=(30.0, 300.0, 3000.0)).upper
+        for i, value in zip(order, better, strict=True):
+            up[i] = max(min(up[i], value), lo[i])
+            done.add(i)
+        if int(np.argmax(up)) in done:
+            break
+    return up
+
+
 def mu_sweep(A, Bw, Cz, Dzw, blk, omega, *, refine_rounds=2, mu_options=None):
     """mu bounds of ``M11(j omega)`` on a grid refined around the peaks (single model).
 
@@ -197,6 +222,7 @@ def mu_sweep(A, Bw, Cz, Dzw, blk, omega, *, refine_rounds=2, mu_options=None):
         dl = np.concatenate([dl, rn.delta])
         order = np.argsort(omega)
         omega, up, lo, dl = omega[order], up[order], lo[order], dl[order]
+    up = _polish_peaks(A, Bw, Cz, Dzw, res.structure, omega, up, lo)
     if res.structure.has_real:
         wx, lx, dx = _frequency_crossings(A, Bw, Cz, Dzw, res.structure, omega, up, lo)
         if wx.size:

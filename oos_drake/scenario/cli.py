@@ -36,7 +36,13 @@ def _info(args: argparse.Namespace) -> int:
     columns = ["name", "group", "kind", "nominal", "range", "occurrences", "paper_occurrences"]
     print(table[[c for c in columns if c in table.columns]].to_string(index=False))
     if args.phase == "mission":
+        from oos_drake.scenario.model import paper_delta_table
+
         matches = model.occurrences == PAPER_OCCURRENCES
+        if matches:
+            print("\npaper's Delta_P = diag(...) (section 2):")
+            for row in paper_delta_table(model).itertuples(index=False):
+                print(f"  {row.sub_block:13s} {row.size:4d}  {row.content}")
         print(
             f"occurrence counts {'equal' if matches else 'DIFFER FROM'} the paper's "
             f"(total {sum(model.occurrences.values())})"

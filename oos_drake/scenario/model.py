@@ -69,6 +69,8 @@ __all__ = [
     "configuration_values",
     "mission_values",
     "delta_block_table",
+    "PAPER_DELTA_STRUCTURE",
+    "paper_delta_table",
 ]
 
 ARRAY_NAMES = ("SA1", "SA2", "SA3", "SA4")
@@ -85,6 +87,26 @@ PAPER_OCCURRENCES: dict[str, int] = {
     "Jyy_RH2": 1,
     "Jzz_RH2": 1,
 }
+
+#: The paper's ``Delta_P`` in its order: (sub-block, [(block name, repetitions), ...]).
+PAPER_DELTA_STRUCTURE: tuple[tuple[str, tuple[tuple[str, int], ...]], ...] = (
+    *((f"Delta_w{k}", ((f"w1_SA{k}", 2),)) for k in range(1, 5)),
+    *((f"Delta_theta{k}", ((f"tau_theta{k}", 16),)) for k in range(1, 5)),
+    ("Delta_RA", tuple((f"tau_alpha{i}", 16) for i in range(1, 7))),
+    ("Delta_C1", (("delta_C1", 12),)),
+    ("Delta_C2", (("delta_C2", 12),)),
+    (
+        "Delta_RH2",
+        (
+            ("m_RH2", 3),
+            ("Jxx_RH2", 1),
+            ("Jyy_RH2", 1),
+            ("Jzz_RH2", 1),
+            ("delta_C1", 4),
+            ("delta_C2", 4),
+        ),
+    ),
+)
 
 #: Paper name of the Delta_P sub-block each model block belongs to (for tables).
 DELTA_GROUPS: dict[str, str] = {
@@ -217,7 +239,9 @@ def _docking_switches(delta_c1: LFR, delta_c2: LFR, dcm_rh2_l6, dcm_rh2_rh1) -> 
 
 
 def build_mission_model(scenario=None) -> LFR:
-    """Full mission LFR (cached per scenario object; LFRs are immutable): external wrench at G1 (6) -> acceleration twist of RH1 at G1 (6).
+    """Full mission LFR: external wrench at G1 (6) -> acceleration twist of RH1 at G1 (6).
+
+    Cached per scenario object (LFRs are immutable).
 
     Parameters
     ----------
@@ -229,6 +253,17 @@ def build_mission_model(scenario=None) -> LFR:
     LFR
         48 states (4 arrays x 6 modes x 2); blocks and occurrences as in :data:`PAPER_OCCURRENCES`.
         Substitute the scheduled blocks with :func:`mission_values`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from oos_drake.lfr import usubs
+    >>> model = build_mission_model()
+    >>> model.occurrences["tau_alpha1"], model.occurrences["delta_C1"]
+    (16, 16)
+    >>> models = usubs(model, mission_values(np.linspace(0.0, 1500.0, 330))).nominal
+    >>> models.freqresp(2 * np.pi * np.logspace(-2, 2, 500)).shape
+    (330, 500, 6, 6)
     """
     return _mission_model(_scenario(scenario))
 
@@ -539,6 +574,34 @@ def delta_block_table(model: LFR):
     table["group"] = [DELTA_GROUPS.get(name, "") for name in table["name"]]
     table["paper_occurrences"] = [PAPER_OCCURRENCES.get(name, pd.NA) for name in table["name"]]
     return table
+
+
+def paper_delta_table(model: LFR):
+    """The paper's ``Delta_P`` sub-blocks with their sizes, checked against ``model``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns ``sub_block, content, size``; the last row is the total. Raises ``ValueError``
+        if the model's occurrences cannot be split into the paper's sub-blocks.
+    """
+    import pandas as pd
+
+    needed: dict[str, int] = {}
+    rows = []
+    for sub_block, entries in PAPER_DELTA_STRUCTURE:
+        content = ", ".join(f"{name} I{reps}" if reps > 1 else name for name, reps in entries)
+        rows.append(
+            {"sub_block": sub_block, "content": content, "size": sum(reps for _, reps in entries)}
+        )
+        for name, reps in entries:
+            needed[name] = needed.get(name, 0) + reps
+    occurrences = model.occurrences
+    wrong = {n: (occurrences.get(n, 0), r) for n, r in needed.items() if occurrences.get(n) != r}
+    if wrong:
+        raise ValueError(f"paper_delta_table: occurrences (model, paper) differ: {wrong}")
+    rows.append({"sub_block": "Delta_P", "content": "total", "size": sum(r["size"] for r in rows)})
+    return pd.DataFrame(rows)
 
 
 def configuration_names() -> Sequence[str]:

@@ -11,10 +11,16 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from oos_drake.lfr import LFR, append, as_lfr
+from oos_drake.lfr import LFR, append, as_lfr, hstack, vstack
 from oos_drake.titop.spatial import frame_change_matrix, kinematic_matrix, rank2_factors, skew
 
-__all__ = ["repeat", "kinematic_model", "frame_change", "uncertain_skew"]
+__all__ = [
+    "repeat",
+    "kinematic_model",
+    "kinematic_model_transposed",
+    "frame_change",
+    "uncertain_skew",
+]
 
 
 def repeat(value, count: int) -> LFR:
@@ -77,9 +83,22 @@ def kinematic_model(p_PB, terms: Sequence[tuple[LFR, Sequence[float]]] = ()) -> 
     if not terms:
         return as_lfr(kinematic_matrix(p_PB))
     s = uncertain_skew(p_PB, terms)
-    upper = hstack_lfr([as_lfr(np.eye(3)), s])
+    upper = hstack([as_lfr(np.eye(3)), s])
     lower = as_lfr(np.hstack([np.zeros((3, 3)), np.eye(3)]))
-    return vstack_lfr([upper, lower])
+    return vstack([upper, lower])
+
+
+def kinematic_model_transposed(p_PB, terms: Sequence[tuple[LFR, Sequence[float]]] = ()) -> LFR:
+    """``tau_PB^T = [[I3, 0], [skew(PB)^T, I3]]`` (6x6 LFR, same occurrences as ``tau_PB``).
+
+    Parameters are those of :func:`kinematic_model`; maps a wrench at ``P`` to ``B``.
+    """
+    if not terms:
+        return as_lfr(kinematic_matrix(p_PB).T)
+    s = uncertain_skew(p_PB, terms)
+    upper = as_lfr(np.hstack([np.eye(3), np.zeros((3, 3))]))
+    lower = hstack([-1.0 * s, as_lfr(np.eye(3))])  # skew^T = -skew
+    return vstack([upper, lower])
 
 
 def frame_change(dcm) -> LFR:
@@ -91,17 +110,3 @@ def frame_change(dcm) -> LFR:
         ``DCM_{B/A}`` with ``v_B = DCM_{B/A} v_A`` [-].
     """
     return as_lfr(frame_change_matrix(dcm))
-
-
-def hstack_lfr(systems) -> LFR:
-    """Horizontal concatenation (thin wrapper over :func:`oos_drake.lfr.hstack`)."""
-    from oos_drake.lfr import hstack
-
-    return hstack([as_lfr(s) for s in systems])
-
-
-def vstack_lfr(systems) -> LFR:
-    """Vertical concatenation (thin wrapper over :func:`oos_drake.lfr.vstack`)."""
-    from oos_drake.lfr import vstack
-
-    return vstack([as_lfr(s) for s in systems])

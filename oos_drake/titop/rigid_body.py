@@ -33,7 +33,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from oos_drake.lfr import LFR, append, as_lfr, hstack, inv, vstack
-from oos_drake.titop.kinematics import kinematic_model, repeat, uncertain_skew
+from oos_drake.titop.kinematics import kinematic_model, kinematic_model_transposed, repeat
 from oos_drake.titop.parameters import inertia_names, mass_name, relative_parameter
 from oos_drake.titop.spatial import kinematic_matrix
 
@@ -44,7 +44,6 @@ __all__ = [
     "rigid_body_inverse",
     "rigid_body_direct",
     "rigid_link",
-    "kinematic_model_transposed",
 ]
 
 
@@ -169,16 +168,6 @@ def rigid_body_inverse(mass, inertia_G, ports_GP: Sequence, *, body: str = "body
     gather = np.hstack([np.eye(6)] + [t.T for t in taus])
     spread = np.vstack([np.eye(6)] + taus)
     return spread @ d_inverse @ gather
-
-
-def kinematic_model_transposed(p_PB, terms=()) -> LFR:
-    """``tau_PB^T = [[I3, 0], [skew(PB)^T, I3]]`` (6x6 LFR; same occurrences as ``tau_PB``)."""
-    if not terms:
-        return as_lfr(kinematic_matrix(p_PB).T)
-    s = uncertain_skew(p_PB, terms)
-    upper = as_lfr(np.hstack([np.eye(3), np.zeros((3, 3))]))
-    lower = hstack([-1.0 * s, as_lfr(np.eye(3))])
-    return vstack([upper, lower])
 
 
 def rigid_body_direct(

@@ -118,5 +118,6 @@ def test_expm_small_matches_scipy():
     for scale in (1e-3, 0.3, 5.0, 60.0):
         matrix = rng.standard_normal((7, 7)) * scale
         expected = scipy.linalg.expm(matrix)
-        np.testing.assert_allclose(expm_small(matrix), expected, rtol=1e-10,
-                                   atol=1e-12 * np.abs(expected).max())
+        np.testing.assert_allclose(
+            expm_small(matrix), expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max()
+        )

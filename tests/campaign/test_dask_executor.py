@@ -30,12 +30,19 @@ def test_dask_local_cluster_threads_matches_inline(write_spec):
         assert dask_results[run_id].metrics == result.metrics
 
 
-def test_campaign_on_a_local_dask_cluster_of_processes(write_spec, tmp_path):
+def test_campaign_on_a_dask_scheduler_address(write_spec, tmp_path):
+    """``--scheduler ADDRESS``: a separate cluster of 2 worker processes, reached by address."""
+    from dask.distributed import LocalCluster
+
     spec = write_spec()
-    run_campaign(spec, tmp_path / "dask", workers=2, scheduler="local", progress=False)
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        run_campaign(spec, tmp_path / "dask", scheduler=cluster.scheduler_address, progress=False)
     run_campaign(spec, tmp_path / "inline", workers=1, progress=False)
     dask = pd.read_parquet(tmp_path / "dask" / "runs.parquet")
     inline = pd.read_parquet(tmp_path / "inline" / "runs.parquet")
     pd.testing.assert_frame_equal(
-        dask.drop(columns="wall_time [s]"), inline.drop(columns="wall_time [s]")
+        dask.drop(columns=["wall_time [s]", "worker"]),
+        inline.drop(columns=["wall_time [s]", "worker"]),
     )

@@ -18,7 +18,7 @@ from .spec_texts import BASE_SPEC
 def test_report_tables_and_figures(write_spec, tmp_path):
     # a wide initial-rate dispersion so that some runs violate the APE requirement
     text = (
-        BASE_SPEC.replace("n_runs = 12", "n_runs = 40")
+        BASE_SPEC.replace("n_runs = 12", "n_runs = 30")
         .replace(
             "[requirements]",
             'omega0 = { distribution = "uniform", low = -0.008, high = 0.008 }\n\n[requirements]',
@@ -52,7 +52,7 @@ def test_report_tables_and_figures(write_spec, tmp_path):
         assert (out / "report" / f"{table}.parquet").is_file()
 
     cli = subprocess.run(
-        [sys.executable, "-m", "oos_drake.cli", "campaign", "report", str(out)],
+        [sys.executable, "-m", "oos_drake.campaign.cli", "campaign", "report", str(out)],
         capture_output=True,
         text=True,
         timeout=120,

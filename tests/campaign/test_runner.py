@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -14,7 +15,15 @@ import pytest
 
 from oos_drake.campaign import store
 from oos_drake.campaign.attitude_sim import FlexibleAttitudeSimulator
-from oos_drake.campaign.runner import rerun_case, resume_campaign, run_campaign
+from oos_drake.campaign.executors import ProcessPoolExecutor
+from oos_drake.campaign.runner import (
+    case_from_plan_row,
+    rerun_case,
+    resume_campaign,
+    run_campaign,
+)
+from oos_drake.campaign.samplers import make_plan
+from oos_drake.campaign.spec import load_spec
 
 from .spec_texts import BASE_SPEC
 
@@ -22,7 +31,7 @@ METRICS = ["ape [rad]", "peak_torque [N m]"]
 
 
 def _oos(*args, **kwargs):
-    return [sys.executable, "-m", "oos_drake.cli", "campaign", *map(str, args)]
+    return [sys.executable, "-m", "oos_drake.campaign.cli", "campaign", *map(str, args)]
 
 
 def test_diverging_run_is_recorded_and_the_campaign_goes_on(write_spec, tmp_path):
@@ -88,10 +97,10 @@ def test_rerun_reproduces_metrics_exactly(write_spec, tmp_path):
 
 
 def test_kill_9_then_resume_loses_and_repeats_nothing(write_spec, tmp_path):
-    n_runs = 40
-    # ~40 ms per run so that the kill lands mid-campaign
+    n_runs = 30
+    # ~30 ms per run so that the kill lands mid-campaign
     text = BASE_SPEC.replace("n_runs = 12", f"n_runs = {n_runs}").replace(
-        "control_rate = 5.0", "control_rate = 50.0"
+        "control_rate = 5.0", "control_rate = 40.0"
     )
     spec = write_spec(text)
     killed = tmp_path / "killed"
@@ -115,7 +124,7 @@ def test_kill_9_then_resume_loses_and_repeats_nothing(write_spec, tmp_path):
     assert not (killed / "runs.parquet").exists()
     mtimes = {i: store.run_file(killed, i).stat().st_mtime_ns for i in done_before}
     # a half-written leftover of an interrupted write must be ignored and cleaned up
-    (killed / "runs" / ".run_000039.parquet.abc.tmp").write_bytes(b"PAR1 truncated")
+    (killed / "runs" / ".run_000029.parquet.abc.tmp").write_bytes(b"PAR1 truncated")
 
     result = subprocess.run(
         _oos("resume", killed, "--workers", 1, "--no-progress"),
@@ -146,8 +155,25 @@ def test_process_pool_matches_in_process_results(write_spec, tmp_path):
     pool = pd.read_parquet(tmp_path / "pool" / "runs.parquet")
     inline = pd.read_parquet(tmp_path / "inline" / "runs.parquet")
     pd.testing.assert_frame_equal(
-        pool.drop(columns="wall_time [s]"), inline.drop(columns="wall_time [s]")
+        pool.drop(columns=["wall_time [s]", "worker"]),
+        inline.drop(columns=["wall_time [s]", "worker"]),
     )
+    here = f"{socket.gethostname()}:{os.getpid()}"
+    assert set(inline["worker"]) == {here}
+    assert 1 <= pool["worker"].nunique() <= 2 and here not in set(pool["worker"])
+
+
+def test_pool_builds_the_simulator_once_per_worker_process(write_spec):
+    spec = load_spec(write_spec())
+    cases = [case_from_plan_row(spec, row) for _, row in make_plan(spec).iterrows()]
+    executor = ProcessPoolExecutor(2)
+    try:
+        results = list(executor.run(spec.simulator, cases))
+    finally:
+        executor.close()
+    assert sorted(r.run_id for r in results) == list(range(12))
+    assert {r.simulator_builds for r in results} == {1}
+    assert len({r.worker for r in results}) == 2
 
 
 def test_resume_of_a_finished_campaign_runs_nothing(write_spec, tmp_path):

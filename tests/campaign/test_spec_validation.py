@@ -149,7 +149,7 @@ def test_cli_bad_spec_writes_nothing(write_spec, tmp_path):
         [
             sys.executable,
             "-m",
-            "oos_drake.cli",
+            "oos_drake.campaign.cli",
             "campaign",
             "run",
             str(path),

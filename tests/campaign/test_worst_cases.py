@@ -111,6 +111,10 @@ def test_mu_guided_campaign_records_weights_regions_and_copies_worst_cases(write
     assert regions["runs"].sum() == 30
     assert regions.set_index("region").loc[0, "runs"] == (runs["region"] == 0).sum()
     assert "runs per region" in report.text
+    assert (out / "report" / "regions_prediction.png") in report.figures
+    observed = regions.set_index("region").loc[0, "worst ratio (nonlinear) [-]"]
+    near_ratio = np.maximum(near["ape [rad]"] / 0.0079, near["peak_torque [N m]"] / 2.0)
+    assert observed == near_ratio.max()
 
 
 def test_critical_window_centres_runs_on_region_times(write_spec, tmp_path):

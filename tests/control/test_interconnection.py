@@ -6,7 +6,10 @@ import pytest
 
 from oos_drake.control.baseline import baseline_gains
 from oos_drake.control.interconnection import (
-    DISTURBANCES, ERRORS, plant_statespace, weighted_interconnection,
+    DISTURBANCES,
+    ERRORS,
+    plant_statespace,
+    weighted_interconnection,
 )
 from oos_drake.control.plants import flexible_rotational_plant
 

@@ -35,8 +35,9 @@ def test_one_over_m_s2_closed_form():
     # nominal is 1/(2 s^2); the other ways to write it agree
     np.testing.assert_allclose(plant.nominal.freqresp(OMEGA)[:, 0, 0], -0.5 / OMEGA**2, rtol=1e-12)
     other = inv(m * control.tf([1, 0, 0], [1]) ** 0) * control.tf(1, [1, 0, 0])
-    np.testing.assert_allclose(usubs(other, {"m": 1.7}).freqresp(OMEGA)[:, 0, 0],
-                               -1 / (1.7 * OMEGA**2), rtol=1e-12)
+    np.testing.assert_allclose(
+        usubs(other, {"m": 1.7}).freqresp(OMEGA)[:, 0, 0], -1 / (1.7 * OMEGA**2), rtol=1e-12
+    )
 
 
 def test_blocks_merge_by_name_and_sort():
@@ -67,21 +68,22 @@ def test_series_parallel_feedback_match_control():
     sys = feedback(P * (g * K) + H, H, sign=-1) - 0.5 * P
     for value in (1.0, 1.2, 2.9):
         direct = control.feedback(P * (value * K) + H, H, sign=-1) - 0.5 * P
-        assert_response_close(usubs(sys, {"g": value}).freqresp(OMEGA),
-                              control_response(direct, OMEGA))
+        assert_response_close(
+            usubs(sys, {"g": value}).freqresp(OMEGA), control_response(direct, OMEGA)
+        )
 
 
 def test_numpy_array_on_the_left_and_gains():
     k = ureal("k", 2.0, plusminus=0.5)
     gain = np.array([[1.0], [3.0]])
-    left = gain * k            # numpy defers to LFR.__rmul__ (__array_ufunc__ = None)
+    left = gain * k  # numpy defers to LFR.__rmul__ (__array_ufunc__ = None)
     assert isinstance(left, LFR) and left.shape == (2, 1)
     np.testing.assert_allclose(usubs(left, {"k": 2.4}).M, gain * 2.4, rtol=1e-14)
     right = k * np.array([[1.0, -1.0]])
     np.testing.assert_allclose(usubs(right, {"k": 1.6}).M, [[1.6, -1.6]], rtol=1e-14)
     diag = k * np.eye(3)
     assert diag.occurrences == {"k": 3}
-    expanded = np.eye(2) + k          # 1x1 operand expands MATLAB-style (one occurrence)
+    expanded = np.eye(2) + k  # 1x1 operand expands MATLAB-style (one occurrence)
     assert expanded.shape == (2, 2) and expanded.occurrences == {"k": 1}
     np.testing.assert_allclose(usubs(expanded, {"k": 1.5}).M, np.eye(2) + 1.5, rtol=1e-14)
 
@@ -102,8 +104,9 @@ def test_statespace_and_tf_interop_on_both_sides():
     ]
     for sys, direct in cases:
         assert isinstance(sys, LFR)
-        assert_response_close(usubs(sys, {"k": 1.3}).freqresp(OMEGA),
-                              control_response(direct(1.3), OMEGA))
+        assert_response_close(
+            usubs(sys, {"k": 1.3}).freqresp(OMEGA), control_response(direct(1.3), OMEGA)
+        )
 
 
 def test_hstack_vstack_append_indexing():
@@ -119,15 +122,17 @@ def test_hstack_vstack_append_indexing():
     np.testing.assert_allclose(hv[..., :, :1], control_response(P1 * kv, OMEGA), rtol=1e-10)
     np.testing.assert_allclose(hv[..., :, 1:], control_response(P2, OMEGA), rtol=1e-10)
     vv = usubs(v, {"k": kv}).freqresp(OMEGA)
-    np.testing.assert_allclose(vv[..., :1, :], control_response(P1 * kv, OMEGA)[..., :1, :],
-                               rtol=1e-10)
+    np.testing.assert_allclose(
+        vv[..., :1, :], control_response(P1 * kv, OMEGA)[..., :1, :], rtol=1e-10
+    )
     av = usubs(a, {"k": kv}).freqresp(OMEGA)
     np.testing.assert_allclose(av[..., :2, :1], control_response(P1, OMEGA), rtol=1e-10)
     np.testing.assert_allclose(av[..., 2:, 1:], control_response(kv * P2, OMEGA), rtol=1e-10)
     np.testing.assert_allclose(av[..., :2, 1:], 0, atol=1e-14)
     sub = a[[3, 0], 1:]
-    np.testing.assert_allclose(usubs(sub, {"k": kv}).freqresp(OMEGA), av[..., [3, 0], 1:],
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        usubs(sub, {"k": kv}).freqresp(OMEGA), av[..., [3, 0], 1:], rtol=1e-12
+    )
     with pytest.raises(ValueError, match="output index"):
         a[4, 0]
 
@@ -141,8 +146,9 @@ def test_inverse_and_power():
     direct = control.ss(P * 2.5) ** -1
     assert_response_close(usubs(sys, {"k": 2.5}).freqresp(OMEGA), control_response(direct, OMEGA))
     sq = (P * k) ** 2
-    assert_response_close(usubs(sq, {"k": 0.6}).freqresp(OMEGA),
-                          control_response((P * 0.6) * (P * 0.6), OMEGA))
+    assert_response_close(
+        usubs(sq, {"k": 0.6}).freqresp(OMEGA), control_response((P * 0.6) * (P * 0.6), OMEGA)
+    )
     with pytest.raises(ValueError, match="singular"):
         inv(as_lfr(control.ss([[-1.0]], [[1.0]], [[1.0]], [[0.0]])))
     with pytest.raises(ValueError, match="square"):
@@ -160,9 +166,10 @@ def test_lower_lft_closes_a_controller():
     Pv = control.ss(P * 1.2)
     # independent: python-control interconnect of the loop u = K y
     P11, P12, P21, P22 = Pv[:2, :2], Pv[:2, 2:], Pv[2:, :2], Pv[2:, 2:]
-    direct = P11 + P12 * control.feedback(K, P22, sign=1) * P21   # P12 K (I - P22 K)^-1 P21
-    assert_response_close(usubs(closed, {"k": 1.2}).freqresp(OMEGA),
-                          control_response(direct, OMEGA), rtol=1e-8)
+    direct = P11 + P12 * control.feedback(K, P22, sign=1) * P21  # P12 K (I - P22 K)^-1 P21
+    assert_response_close(
+        usubs(closed, {"k": 1.2}).freqresp(OMEGA), control_response(direct, OMEGA), rtol=1e-8
+    )
 
 
 def test_upper_lft_with_delta_block():
@@ -170,7 +177,7 @@ def test_upper_lft_with_delta_block():
     D = ultidyn("D", (1, 1), bound=0.5)
     sys = lft(D, M)  # upper LFT: D closes the first channel of M
     assert sys.shape == (1, 1) and sys.occurrences == {"D": 1}
-    value = 0.4   # |value| <= bound
+    value = 0.4  # |value| <= bound
     expected = M[1, 1] + M[1, 0] * value * M[0, 1] / (1 - M[0, 0] * value)
     assert usubs(sys, {"D": [[value]]}).M[0, 0] == pytest.approx(expected, rel=1e-13)
 

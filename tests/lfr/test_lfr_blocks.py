@@ -15,7 +15,7 @@ def physical(block_lfr, delta):
 def test_percent_plusminus_range_match_matlab_definitions():
     spec = ureal("m", 2.0, percent=10).uncertainty["m"]
     assert spec.range == pytest.approx((1.8, 2.2), rel=1e-15)
-    spec = ureal("m", -2.0, percent=10).uncertainty["m"]   # |nominal| is used
+    spec = ureal("m", -2.0, percent=10).uncertainty["m"]  # |nominal| is used
     assert spec.range == pytest.approx((-2.2, -1.8), rel=1e-15)
     spec = ureal("c", 3.0, plusminus=0.5).uncertainty["c"]
     assert spec.range == (2.5, 3.5)
@@ -23,7 +23,7 @@ def test_percent_plusminus_range_match_matlab_definitions():
     assert spec.range == (2.5, 4.0)
     spec = ureal("c", 10.0, percent=[-10, 30]).uncertainty["c"]
     assert spec.range == pytest.approx((9.0, 13.0), rel=1e-15)
-    spec = ureal("k", 3.0).uncertainty["k"]                  # MATLAB default PlusMinus 1
+    spec = ureal("k", 3.0).uncertainty["k"]  # MATLAB default PlusMinus 1
     assert spec.range == (2.0, 4.0)
 
 

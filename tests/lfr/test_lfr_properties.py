@@ -14,7 +14,7 @@ OMEGA = np.array([0.07, 0.6, 3.1, 17.0])
 def _ureals():
     return [
         ureal("a", 1.0, percent=40),
-        ureal("b", 2.0, range=(1.0, 5.0)),           # asymmetric: bilinear
+        ureal("b", 2.0, range=(1.0, 5.0)),  # asymmetric: bilinear
         ureal("c", -0.5, plusminus=[-0.3, 0.2]),
     ]
 
@@ -24,8 +24,13 @@ def scenarios(draw):
     seed = draw(st.integers(0, 2**32 - 1))
     n1, n2, n3 = (draw(st.integers(0, 3)) for _ in range(3))
     size = draw(st.integers(1, 2))
-    ops = draw(st.lists(st.sampled_from(["series", "parallel", "feedback", "gain", "inverse",
-                                         "sub", "rmul"]), min_size=1, max_size=5))
+    ops = draw(
+        st.lists(
+            st.sampled_from(["series", "parallel", "feedback", "gain", "inverse", "sub", "rmul"]),
+            min_size=1,
+            max_size=5,
+        )
+    )
     deltas = draw(st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3))
     return seed, (n1, n2, n3), size, ops, deltas
 
@@ -63,8 +68,14 @@ def test_algebra_then_usubs_equals_control(scenario):
             lfr_expr = inv(lfr_expr + shift * blocks[1])
             ctl_expr = control.ss(ctl_expr + shift * values[1]) ** -1
     try:
-        closed = usubs(lfr_expr, {name: v for name, v in zip("abc", values, strict=True)
-                                  if name in lfr_expr.occurrences})
+        closed = usubs(
+            lfr_expr,
+            {
+                name: v
+                for name, v in zip("abc", values, strict=True)
+                if name in lfr_expr.occurrences
+            },
+        )
     except ValueError:
         assume(False)
     ctl_ss = control.ss(ctl_expr)

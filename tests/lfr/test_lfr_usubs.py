@@ -13,7 +13,7 @@ OMEGA = np.array([0.05, 0.5, 2.0, 11.0])
 def spring_mass():
     """x'' = (u - c x' - k x) / m built from the algebra; states (v, x)."""
     m = ureal("m", 2.0, percent=20)
-    c = ureal("c", 0.3, range=(0.1, 0.4))          # asymmetric -> bilinear
+    c = ureal("c", 0.3, range=(0.1, 0.4))  # asymmetric -> bilinear
     k = ureal("k", 5.0, plusminus=1.0)
     integ = control.tf(1, [1, 0])
     velocity = feedback(inv(m) * integ, c + k * integ)
@@ -28,8 +28,11 @@ def test_vectorized_equals_per_sample_loop():
     sys, _ = spring_mass()
     rng = np.random.default_rng(0)
     N = 7
-    values = {"m": rng.uniform(1.6, 2.4, N), "c": rng.uniform(0.1, 0.4, N),
-              "k": rng.uniform(4.0, 6.0, N)}
+    values = {
+        "m": rng.uniform(1.6, 2.4, N),
+        "c": rng.uniform(0.1, 0.4, N),
+        "k": rng.uniform(4.0, 6.0, N),
+    }
     batch = usubs(sys, values)
     assert batch.batch_shape == (N,) and batch.is_certain
     resp = batch.freqresp(OMEGA)
@@ -50,14 +53,17 @@ def test_partial_substitution_keeps_other_blocks():
     full = usubs(sys, {"k": np.array([4.5, 5.5]), "m": 2.2, "c": 0.15})
     np.testing.assert_allclose(rest.M, full.M, rtol=1e-12, atol=1e-13)
     for i, kv in enumerate((4.5, 5.5)):
-        assert_response_close(rest.model(i).freqresp(OMEGA),
-                              control_response(direct_spring_mass(2.2, 0.15, kv), OMEGA))
+        assert_response_close(
+            rest.model(i).freqresp(OMEGA),
+            control_response(direct_spring_mass(2.2, 0.15, kv), OMEGA),
+        )
 
 
 def test_nominal_is_delta_zero():
     sys, _ = spring_mass()
-    assert_response_close(sys.nominal.freqresp(OMEGA),
-                          control_response(direct_spring_mass(2.0, 0.3, 5.0), OMEGA))
+    assert_response_close(
+        sys.nominal.freqresp(OMEGA), control_response(direct_spring_mass(2.0, 0.3, 5.0), OMEGA)
+    )
     # freqresp of an uncertain model is its nominal response (MATLAB behaviour)
     np.testing.assert_allclose(sys.freqresp(OMEGA), sys.nominal.freqresp(OMEGA), rtol=1e-14)
 
@@ -131,3 +137,16 @@ def test_model_array_algebra_broadcasts():
     assert combo.batch_shape == (2,)
     np.testing.assert_allclose(usubs(combo, {"g": 1.5}).M[:, 0, 0], [1.9 * 1.5 + 1, 2.1 * 1.5 + 1])
     assert isinstance(arr.model(1), LFR)
+
+
+def test_pickle_round_trip_and_numpy_scalar_operands():
+    import pickle
+
+    sys, _ = spring_mass()
+    again = pickle.loads(pickle.dumps(sys))
+    assert again.occurrences == sys.occurrences
+    np.testing.assert_array_equal(again.M, sys.M)
+    k = ureal("k", 2.0)
+    scaled = np.float64(3.0) * k
+    assert isinstance(scaled, LFR)
+    assert usubs(scaled, {"k": 2.5}).M[0, 0] == pytest.approx(7.5)

@@ -212,7 +212,7 @@ def test_hub_wrench_input_is_a_body_frame_wrench_at_any_attitude():
     context = diagram.CreateDefaultContext()
     plant_context = plant.GetMyMutableContextFromRoot(context)
     rpy = RollPitchYaw(0.3, -0.5, 1.0)
-    joint.set_rpy(plant_context, rpy.vector())
+    joint.set_angles(plant_context, rpy.vector())
     W_B = np.array([1.0, -2.0, 0.5, 0.3, 0.7, -1.1])
     diagram.GetInputPort(ports.wrench_input).FixValue(context, W_B)
     vdot = plant.get_generalized_acceleration_output_port().Eval(plant_context)

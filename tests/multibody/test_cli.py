@@ -1,8 +1,25 @@
 """``oos validate`` and ``oos sdf generate|check`` through the real CLI entry point."""
 
+import argparse
+import sys
+
 import pytest
 
-from oos_drake.cli import main
+from oos_drake.multibody.cli import register
+
+
+def main(argv):
+    """``oos`` restricted to this package's commands, with the top-level CLI's error handling
+    (one-line message, status 2 for a ValueError), so these tests do not depend on the other
+    subpackages' command modules."""
+    parser = argparse.ArgumentParser(prog="oos")
+    register(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (ValueError, FileNotFoundError, KeyError) as exc:
+        print(f"oos {args.command}: error: {exc.args[0] if exc.args else exc}", file=sys.stderr)
+        return 2
 
 
 @pytest.mark.drake

@@ -128,3 +128,14 @@ def test_parsed_plant_has_the_data_masses_and_array_inertias():
         np.testing.assert_allclose(
             drake_spatial_inertia_to_matrix(M), mount.model.rigid_spatial_inertia, atol=1e-9
         )
+
+
+@pytest.mark.drake
+def test_only_arm_and_drive_joints_are_actuated():
+    """Mode hinges are structural (no actuator); arm and array drives can be driven in a sim."""
+    from oos_drake.multibody.scenario_plant import build_scenario_diagram
+
+    plant = build_scenario_diagram("hub").plant
+    names = sorted(plant.get_joint_actuator(i).name() for i in plant.GetJointActuatorIndices())
+    expected = sorted([f"alpha_{i}" for i in range(1, 7)] + [f"theta_SA{k}" for k in range(1, 5)])
+    assert names == expected

@@ -1,9 +1,10 @@
 """Figure data of the model against independent references, and the ``oos model`` commands."""
 
+import argparse
+
 import numpy as np
 import pytest
 
-from oos_drake.cli import main
 from oos_drake.scenario.figures import (
     docking_sweeps_data,
     inertia_history_data,
@@ -13,6 +14,16 @@ from oos_drake.scenario.figures import (
 from oos_drake.scenario.kinematics import inertia_history, rigid_spatial_inertia_at_G1
 from oos_drake.scenario.model import build_mission_model
 from oos_drake.scenario.timeline import mission_timeline
+
+
+def main(argv):
+    """Run ``oos <argv>`` with only this package's commands registered."""
+    from oos_drake.scenario.cli import register
+
+    parser = argparse.ArgumentParser(prog="oos")
+    register(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(argv)
+    return args.func(args)
 
 
 @pytest.fixture(scope="module")

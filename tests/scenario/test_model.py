@@ -164,3 +164,24 @@ def test_docking_phase_8_closed_loop_is_rigid_at_low_frequency(timeline):
 def test_docking_phase_name_is_checked():
     with pytest.raises(ValueError, match="phase must be '7' or '8'"):
         build_docking_model("9")
+
+
+def test_paper_delta_table_sizes(model):
+    from oos_drake.scenario.model import paper_delta_table
+
+    table = paper_delta_table(model).set_index("sub_block")["size"]
+    assert table["Delta_RA"] == 96 and table["Delta_RH2"] == 14 and table["Delta_P"] == 206
+    with pytest.raises(ValueError, match="occurrences .* differ"):
+        paper_delta_table(build_docking_model("7"))
+
+
+def test_well_posed_and_stable_over_the_mission_and_the_parameter_box(model):
+    from oos_drake.lfr import usample
+
+    along = usubs(model, mission_values(np.linspace(0.0, 1500.0, 61))).nominal
+    n = along.nstates
+    assert np.linalg.eigvals(along.M[..., :n, :n]).real.max() < 0
+    # every block (switches included) drawn in its range: the loops stay well posed, modes damped
+    box, _ = usample(model, 20, np.random.default_rng(7))
+    assert np.linalg.eigvals(box.M[..., :n, :n]).real.max() < 0
+    assert np.all(np.isfinite(box.freqresp(np.array([0.0, 4.0]))))

@@ -118,14 +118,19 @@ def test_revolute_connection_has_16_occurrences_and_is_t_and_t_transpose():
 
 def test_kinematic_model_with_switched_position():
     from oos_drake.titop import connection_parameter
+    from oos_drake.titop.kinematics import kinematic_model_transposed
 
     d1, d2 = connection_parameter("delta_C1"), connection_parameter("delta_C2")
     v1, v2 = np.array([0.3395, 0.0, 0.0]), np.array([0.0, 0.0, 0.3395])
     tau = kinematic_model(np.zeros(3), [(d1, v1), (d2, v2)])
+    tau_t = kinematic_model_transposed(np.zeros(3), [(d1, v1), (d2, v2)])
     assert tau.occurrences == {"delta_C1": 2, "delta_C2": 2}
+    assert tau_t.occurrences == {"delta_C1": 2, "delta_C2": 2}
     for c1, c2 in [(1.0, 0.0), (0.0, 1.0), (0.0, 0.0), (0.3, 0.6)]:
-        value = static_gain(usubs(tau, {"delta_C1": c1, "delta_C2": c2}))
-        np.testing.assert_allclose(value, kinematic_matrix(c1 * v1 + c2 * v2), atol=1e-14)
+        values = {"delta_C1": c1, "delta_C2": c2}
+        expected = kinematic_matrix(c1 * v1 + c2 * v2)
+        np.testing.assert_allclose(static_gain(usubs(tau, values)), expected, atol=1e-14)
+        np.testing.assert_allclose(static_gain(usubs(tau_t, values)), expected.T, atol=1e-14)
 
 
 def test_bad_inputs_raise_value_errors():

@@ -1,0 +1,127 @@
+"""robstab / wcgain / robust_sweep against margins found by sweeping parameters and tracking poles."""
+
+import control
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from oos_drake.lfr import feedback, ultidyn, ureal, usubs
+from oos_drake.robust import hinfnorm, robstab, robust_sweep, wcgain
+
+
+def _max_real_pole(sys, values):
+    """Largest real part of the closed-loop poles for NORMALIZED block values (arrays allowed)."""
+    closed = usubs(sys, values, normalized=True)
+    A = np.asarray(closed.A)
+    return np.max(np.linalg.eigvals(A).real, axis=-1)
+
+
+def _margin_by_pole_sweep(sys, names, n_boundary=400, hi=10.0):
+    """Smallest box size alpha (normalized, inf-norm) with an unstable point on its boundary.
+
+    Independent of mu: bisection on alpha, each step evaluates closed-loop poles on a dense grid
+    of the boundary of the box [-alpha, alpha]^k (one or two parameters).
+    """
+    t = np.linspace(-1.0, 1.0, n_boundary)
+    if len(names) == 1:
+        pts = [np.array([-1.0, 1.0])]
+    else:
+        one = np.ones_like(t)
+        pts = [np.concatenate([t, t, one, -one]), np.concatenate([one, -one, t, t])]
+
+    def unstable(alpha):
+        values = {n: alpha * p for n, p in zip(names, pts, strict=True)}
+        return np.any(_max_real_pole(sys, values) >= 0)
+
+    lo, hi_ = 0.0, hi
+    assert unstable(hi_)
+    for _ in range(50):
+        mid = 0.5 * (lo + hi_)
+        lo, hi_ = (lo, mid) if unstable(mid) else (mid, hi_)
+    return hi_
+
+
+def test_single_gain_margin_matches_pole_sweep():
+    k = ureal("k", 40.0, plusminus=10.0)
+    loop = feedback(k * control.tf(1, [1, 6, 11, 6]), 1)
+    exact = _margin_by_pole_sweep(loop, ["k"])
+    res = robstab(loop)
+    assert_allclose(res.upper, exact, rtol=1e-6)
+    assert res.lower <= exact * (1 + 1e-9)
+    assert res.lower >= 0.97 * exact
+    assert_allclose(res.critical_frequency, np.sqrt(11.0), rtol=1e-6)
+    assert_allclose(res.worst_case["k"], 60.0, rtol=1e-6)  # physical value
+    # the worst case puts a pole on the imaginary axis
+    assert abs(_max_real_pole(loop, res.worst_case_normalized)) < 1e-6
+
+
+def test_lightly_damped_mode_not_missed():
+    # flexible mode zeta = 0.01 with uncertain frequency (w appears 5 times) and loop gain:
+    # char. poly (s + 1)(s^2 + 2 zeta w s + w^2) + kk w^2, destabilized at the resonance
+    zeta = 0.01
+    w = ureal("w", 1.0, percent=20)
+    kk = ureal("kk", 0.02, plusminus=0.01)
+    integ = control.tf(1, [1, 0])
+    plant = feedback(integ * feedback(integ, 2 * zeta * w), w**2)
+    loop = feedback(kk * control.tf(1, [1, 1]) * (w**2) * plant, 1)
+    exact = _margin_by_pole_sweep(loop, ["kk", "w"], n_boundary=2001)
+    res = robstab(loop)
+    assert res.nominal_stable
+    assert_allclose(res.upper, exact, rtol=2e-3)
+    assert res.lower <= exact * (1 + 1e-6)
+    assert abs(res.critical_frequency - 1.0) < 0.05  # at the lightly damped resonance
+    assert abs(_max_real_pole(loop, res.worst_case_normalized)) < 1e-6
+
+
+def test_unstructured_margin_is_inverse_hinf_norm_and_worst_case_realization():
+    # multiplicative input uncertainty P (1 + 0.5 d): margin = 1 / ||0.5 T||_inf
+    P = control.tf([4.0], [1.0, 2.0, 1.0])
+    K = control.tf([1.0, 0.5], [1.0, 5.0])
+    d = ultidyn("d", (1, 1))
+    loop = feedback(P * (1 + 0.5 * d) * K, 1)
+    T = control.feedback(P * K, 1)
+    ref = 1.0 / hinfnorm(control.ss(0.5 * T)).norm
+    res = robstab(loop)
+    assert_allclose(res.upper, ref, rtol=2e-3)
+    assert res.lower <= res.upper
+    assert_allclose(res.lower, ref, rtol=2e-3)
+    wc = res.worst_case["d"]  # stable LTI system with ||wc||_inf = upper
+    assert_allclose(hinfnorm(wc).norm, res.upper, rtol=1e-6)
+    closed = control.feedback(P * (1 + 0.5 * wc) * K, 1)
+    assert abs(np.max(np.linalg.eigvals(control.ss(closed).A).real)) < 1e-6
+
+
+def test_nominally_unstable_is_reported():
+    k = ureal("k", 1.0, plusminus=0.1)
+    loop = feedback(k * control.tf(1, [1, -1]), -1, sign=1)  # positive feedback, unstable
+    res = robstab(loop)
+    assert not res.nominal_stable and res.upper == 0.0 and res.lower == 0.0
+
+
+def test_wcgain_matches_parameter_sweep():
+    zeta_c = 0.1
+    z = ureal("z", zeta_c, plusminus=0.05)
+    integ = control.tf(1, [1, 0])
+    sys = feedback(integ * feedback(integ, 2 * z), 1.0)  # 1/(s^2 + 2 z s + 1)
+    res = wcgain(sys)
+    exact = 1 / (2 * 0.05 * np.sqrt(1 - 0.05**2))  # z = 0.05 worst
+    assert res.lower <= exact * (1 + 1e-9)
+    assert res.lower >= exact * 0.995
+    assert res.upper >= res.lower
+    assert_allclose(res.worst_case["z"], 0.05, rtol=1e-3)
+
+
+def test_robust_sweep_table_and_consistency_with_robstab():
+    k = ureal("k", 40.0, plusminus=10.0)
+    g = ureal("g", 1.0, plusminus=0.2)
+    loop = feedback(k * g * control.tf(1, [1, 6, 11, 6]), 1)
+    arr = usubs(loop, {"g": np.array([0.9, 1.0, 1.1])})
+    omega = np.linspace(0.5, 6.0, 40)
+    df = robust_sweep(arr, omega, subsets={"k": ["k"]}, times=np.array([0.0, 10.0, 20.0]))
+    assert list(df.columns) == ["model", "time", "frequency", "mu_lower", "mu_upper", "subset", "refined"]
+    assert set(df.model) == {0, 1, 2}
+    assert np.all(df.mu_lower <= df.mu_upper * (1 + 1e-9))
+    assert_allclose(np.sort(df.frequency.unique())[:3] * 2 * np.pi, omega[:3])
+    assert df[df.model == 1].time.iloc[0] == 10.0
+    with pytest.raises(ValueError, match="unknown"):
+        robust_sweep(arr, omega, subsets={"bad": ["nope"]})
