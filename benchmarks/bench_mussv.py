@@ -121,22 +121,32 @@ def main(argv=None):
     rel = np.array([o[1] for o in ours_1]) / np.array(lmi_vals) - 1
     gap = res.upper / np.maximum(res.lower, 1e-300)
     chk = res.check(M)
-    print(f"structure: {len(PAPER_BLK)} blocks, M {s.n_cols} x {s.n_rows}; batch of {len(M)} "
-          "frequency-response matrices, 1 BLAS thread")
+    print(
+        f"structure: {len(PAPER_BLK)} blocks, M {s.n_cols} x {s.n_rows}; batch of {len(M)} "
+        "frequency-response matrices, 1 BLAS thread"
+    )
     print(f"{'':36}{'time/matrix [ms]':>18}")
     print(f"{'mussv, both bounds (batched)':36}{t_both * 1e3:18.2f}")
     print(f"{'  upper bound only (batched)':36}{t_up * 1e3:18.2f}")
     print(f"{'  lower bound only (batched)':36}{t_lo * 1e3:18.2f}")
     print(f"{'  upper bound, single-matrix call':36}{np.mean([o[0] for o in ours_1]) * 1e3:18.2f}")
     print(f"{'cvxpy LMI D-G bound (bisection)':36}{np.mean(lmi_times) * 1e3:18.2f}")
-    print(f"speed-up of the upper bound vs cvxpy: batched {np.mean(lmi_times) / t_up:.0f}x, "
-          f"single call {np.mean(lmi_times) / np.mean([o[0] for o in ours_1]):.0f}x")
-    print(f"upper bound vs cvxpy value: max rel. diff {np.max(np.abs(rel)):.2e} "
-          f"(ours - lmi)/lmi = {np.array2string(rel, precision=4)}")
-    print(f"upper/lower gap: median {np.median(gap):.4f}, max {np.max(gap):.4f}; "
-          f"lower = 0 at {(res.lower == 0).sum()} of {len(M)}")
-    print(f"certificates: max LMI eig {np.max(chk['lmi_max_eig']):.1e} (<= 0), "
-          f"max sigma_min(I - M delta) {np.nanmax(chk['singularity']):.1e}")
+    print(
+        f"speed-up of the upper bound vs cvxpy: batched {np.mean(lmi_times) / t_up:.0f}x, "
+        f"single call {np.mean(lmi_times) / np.mean([o[0] for o in ours_1]):.0f}x"
+    )
+    print(
+        f"upper bound vs cvxpy value: max rel. diff {np.max(np.abs(rel)):.2e} "
+        f"(ours - lmi)/lmi = {np.array2string(rel, precision=4)}"
+    )
+    print(
+        f"upper/lower gap: median {np.median(gap):.4f}, max {np.max(gap):.4f}; "
+        f"lower = 0 at {(res.lower == 0).sum()} of {len(M)}"
+    )
+    print(
+        f"certificates: max LMI eig {np.max(chk['lmi_max_eig']):.1e} (<= 0), "
+        f"max sigma_min(I - M delta) {np.nanmax(chk['singularity']):.1e}"
+    )
 
 
 if __name__ == "__main__":

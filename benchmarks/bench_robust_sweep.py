@@ -42,7 +42,9 @@ def paper_like_lfr(n_models: int, *, n_modes: int = 24, seed: int = 0) -> LFR:
     nz = nw = 26
     w0 = np.geomspace(0.3, 60.0, n_modes)
     zeta = rng.uniform(0.01, 0.05, n_modes)
-    drift = 1.0 + 0.3 * np.sin(np.linspace(0, np.pi, n_models))[:, None] * rng.uniform(-1, 1, n_modes)
+    drift = 1.0 + 0.3 * np.sin(np.linspace(0, np.pi, n_models))[:, None] * rng.uniform(
+        -1, 1, n_modes
+    )
     wn = w0[None, :] * drift
     A = np.zeros((n_models, n, n))
     for i in range(n_modes):
@@ -88,12 +90,18 @@ def main(argv=None):
     elapsed = time.perf_counter() - t0
     n_mat = len(table)
     per_matrix = elapsed * args.jobs / n_mat
-    print(f"{'models x frequencies':<28}{args.models} x {args.frequencies} (+{(table.refined).sum()} refined)")
+    print(
+        f"{'models x frequencies':<28}{args.models} x {args.frequencies} "
+        f"(+{table.refined.sum()} refined)"
+    )
     print(f"{'matrices (26 x 26)':<28}{n_mat}")
     print(f"{'wall time [s]':<28}{elapsed:.2f} on {args.jobs} process(es)")
     print(f"{'core time per matrix [ms]':<28}{per_matrix * 1e3:.2f}")
     full = 330 * args.frequencies * (n_mat / (args.models * args.frequencies))
-    print(f"{'extrapolated 330 models [s]':<28}{full * per_matrix / args.jobs:.0f} on {args.jobs} cores")
+    print(
+        f"{'extrapolated 330 models [s]':<28}{full * per_matrix / args.jobs:.0f} "
+        f"on {args.jobs} cores"
+    )
     gap = (table.mu_upper / np.maximum(table.mu_lower, 1e-300)).median()
     print(f"{'median upper/lower':<28}{gap:.3f}")
     print(f"{'peak mu upper':<28}{table.mu_upper.max():.4f}")

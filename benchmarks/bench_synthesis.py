@@ -61,16 +61,19 @@ def main(argv=None):
     print(f"{'method':44s} {'time [s]':>10s} {'speed-up':>9s}")
     print(f"{'ab13dd, one call per model (baseline)':44s} {t_ref:10.3f} {1.0:9.2f}")
     print(f"{'batched peak_gain, all models refined':44s} {t_batch:10.3f} {t_ref / t_batch:9.2f}")
-    print(f"{'batched peak_gain, objective mode (focus)':44s} {t_focus:10.3f} "
-          f"{t_ref / t_focus:9.2f}")
+    print(
+        f"{'batched peak_gain, objective mode (focus)':44s} {t_focus:10.3f} {t_ref / t_focus:9.2f}"
+    )
     print(f"max relative difference of the norms: {rel:.2e}")
     if args.synthesis:
         options = SynthesisOptions()
         t = time.perf_counter()
         result = synthesize(plants, K0, options=options)
         wall = time.perf_counter() - t
-        print(f"synthesis: gamma {result.gamma_start:.4g} -> {result.gamma:.4g}, "
-              f"{len(result.models)} models in the final set, wall time {wall:.1f} s")
+        print(
+            f"synthesis: gamma {result.gamma_start:.4g} -> {result.gamma:.4g}, "
+            f"{len(result.models)} models in the final set, wall time {wall:.1f} s"
+        )
 
 
 if __name__ == "__main__":

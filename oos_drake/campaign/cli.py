@@ -44,6 +44,7 @@ def _print_summary(summary) -> None:
         f"requirement"
     )
     print(f"results: {Path(summary.directory) / 'runs.parquet'}")
+    print(f"next: oos campaign report {summary.directory}")
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -92,22 +92,28 @@ class TruncatedNormal:
             return -b, -a, -1.0
         return a, b, 1.0
 
-    def ppf(self, u: np.ndarray) -> np.ndarray:
+    def _log_mass(self) -> tuple[float, float, float, float]:
+        """(a, b, sign, log(Phi(b) - Phi(a))), in log space so that far tails do not underflow."""
         a, b, sign = self._bounds()
+        log_a, log_b = scipy.special.log_ndtr(a), scipy.special.log_ndtr(b)
+        return a, b, sign, float(log_b + np.log1p(-np.exp(log_a - log_b)))
+
+    def ppf(self, u: np.ndarray) -> np.ndarray:
+        a, _, sign, log_mass = self._log_mass()
         u = np.asarray(u, dtype=float)
         if sign < 0:
             u = 1.0 - u
-        cdf_a, cdf_b = scipy.special.ndtr(a), scipy.special.ndtr(b)
-        z = scipy.special.ndtri(cdf_a + u * (cdf_b - cdf_a))
+        with np.errstate(divide="ignore"):
+            log_cdf = np.logaddexp(scipy.special.log_ndtr(a), np.log(u) + log_mass)
+        z = scipy.special.ndtri_exp(np.minimum(log_cdf, 0.0))
         return np.clip(self.mean + sign * self.std * z, self.low, self.high)
 
     def pdf(self, x: np.ndarray) -> np.ndarray:
-        a, b, _ = self._bounds()
+        _, _, _, log_mass = self._log_mass()
         x = np.asarray(x, dtype=float)
-        mass = scipy.special.ndtr(b) - scipy.special.ndtr(a)
         z = (x - self.mean) / self.std
-        density = np.exp(-0.5 * z**2) / (math.sqrt(2 * math.pi) * self.std * mass)
-        return np.where((x >= self.low) & (x <= self.high), density, 0.0)
+        log_density = -0.5 * z**2 - math.log(math.sqrt(2 * math.pi) * self.std) - log_mass
+        return np.where((x >= self.low) & (x <= self.high), np.exp(log_density), 0.0)
 
     @property
     def support(self) -> tuple[float, float]:

@@ -2,8 +2,9 @@
 
 All executors call :func:`execute_case` on the workers and hand the results back to the driver
 process, which is the only writer of the campaign directory (no file races between workers).
-Each worker builds its simulator once from the picklable recipe (:func:`build_simulator` is cached
-per process) and reuses it for every case it receives.
+Each worker builds its simulator once from the picklable recipe (:func:`build_simulator` caches it
+per worker thread, so threaded Dask workers never share a stateful simulator) and reuses it for
+every case it receives.
 
 - :class:`InlineExecutor`: in the calling process (``--workers 1``).
 - :class:`ProcessPoolExecutor`: a local pool of ``spawn`` ed processes (the default for
@@ -34,6 +35,7 @@ from oos_drake.campaign.simulator import (
     SimulationDiverged,
     SimulatorRecipe,
     build_simulator,
+    simulator_builds,
 )
 
 
@@ -96,11 +98,29 @@ def execute_case(recipe: SimulatorRecipe, case: RunCase) -> RunResult:
         timeseries,
         time.perf_counter() - start,
         f"{socket.gethostname()}:{os.getpid()}",
-        build_simulator.cache_info().misses,
+        simulator_builds(),
     )
 
 
 def _warm_up(recipe: SimulatorRecipe) -> None:
+    build_simulator(recipe)
+
+
+def _exit_with_parent(parent_pid: int, period: float = 1.0) -> None:
+    """Pool worker: exit when the driver dies (a ``kill -9`` of it leaves no orphan workers)."""
+    import threading
+
+    def watch() -> None:
+        while True:
+            time.sleep(period)
+            if os.getppid() != parent_pid:
+                os._exit(0)
+
+    threading.Thread(target=watch, name="oos-parent-watch", daemon=True).start()
+
+
+def _init_pool_worker(recipe: SimulatorRecipe, parent_pid: int) -> None:
+    _exit_with_parent(parent_pid)
     build_simulator(recipe)
 
 
@@ -167,10 +187,10 @@ class ProcessPoolExecutor:
             self._pool = concurrent.futures.ProcessPoolExecutor(
                 max_workers=self.workers,
                 mp_context=multiprocessing.get_context("spawn"),
-                initializer=_warm_up,
-                initargs=(recipe,),
+                initializer=_init_pool_worker,
+                initargs=(recipe, os.getpid()),
             )
-            # force every worker up now: one warm-up task per worker
+            # bring workers up now (one warm-up task each; the pool may reuse an idle one)
             list(self._pool.map(_warm_up, [recipe] * self.workers))
 
     def run(self, recipe: SimulatorRecipe, cases: Iterable[RunCase]) -> Iterator[RunResult]:

@@ -31,6 +31,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
@@ -364,6 +365,8 @@ def _plot_pass_fail(spec, runs: pd.DataFrame, path: Path) -> Path | None:
         ax.set_ylabel("worst metric / requirement [-]")
         if spec.dispersions[parameter.name].kind == "log-uniform":
             ax.set_xscale("log")
+        else:
+            ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(5))
         ax.grid(alpha=0.3)
     for ax in list(axes.flat)[len(parameters) :]:
         ax.set_visible(False)

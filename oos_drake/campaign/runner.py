@@ -132,7 +132,14 @@ def load_campaign(directory: str | Path) -> tuple[CampaignSpec, pd.DataFrame]:
         raise ValueError(
             f"{directory}: not a campaign directory (no {store.SPEC_FILE} and {store.PLAN_FILE})"
         )
-    return load_spec(spec_path), pd.read_parquet(plan_path)
+    spec, plan = load_spec(spec_path), pd.read_parquet(plan_path)
+    missing = [p.column for p in spec.info.parameters if p.column not in plan.columns]
+    if missing:
+        raise ValueError(
+            f"{plan_path}: no column {missing[0]!r}: simulator {spec.simulator.name!r} declares "
+            "parameters the plan does not have (it changed since the campaign was planned)"
+        )
+    return spec, plan
 
 
 def _execute(
@@ -223,7 +230,7 @@ def run_campaign(
     directory, _, _ = prepare_campaign(spec_path, out)
     # run from the directory's own resolved spec: what resume and rerun will see
     spec, plan = load_campaign(directory)
-    if spec.sampler.kind == "mu-guided" and progress:
+    if spec.sampler.kind == "mu-guided":
         counts = region_counts(plan, spec.regions)
         print("runs per region:\n" + counts.to_string(index=False), file=sys.stderr)
     return _execute(directory, spec, plan, workers, scheduler, progress)

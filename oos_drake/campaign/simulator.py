@@ -29,10 +29,10 @@ the simulator name.
 from __future__ import annotations
 
 import enum
-import functools
 import importlib
 import json
 import math
+import threading
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
@@ -181,7 +181,12 @@ class Simulator(Protocol):
         """Whole mission length [s]; the mission window is ``[0, duration]``."""
 
     def run(self, case: RunCase) -> RunOutput:
-        """Simulate one case; raise :class:`SimulationDiverged` when the run diverges."""
+        """Simulate one case; raise :class:`SimulationDiverged` when the run diverges.
+
+        The result must depend on ``case`` only (reset the context/state at the start of every
+        run, draw every random number from ``case.seed``): that is what makes ``rerun``
+        bit-identical and lets any worker run any case.
+        """
 
 
 @dataclass(frozen=True)
@@ -257,15 +262,34 @@ def _resolve_factory(name: str, path: str):
         raise ValueError(f"simulator {name!r}: cannot import factory {path!r}: {exc}") from exc
 
 
-@functools.lru_cache(maxsize=8)
+#: Per-thread cache of built simulators: a simulator (a Drake context, say) is never shared by
+#: two threads, and a worker process with one thread builds each recipe exactly once.
+_BUILT = threading.local()
+
+
 def build_simulator(recipe: SimulatorRecipe) -> Simulator:
-    """Build (once per process, cached) the simulator a recipe describes.
+    """The simulator a recipe describes, built once per worker thread and then reused.
 
     Raises
     ------
     ValueError
         Unknown simulator name, or options the factory rejects.
     """
+    cache = getattr(_BUILT, "simulators", None)
+    if cache is None:
+        cache = _BUILT.simulators = {}
+    if recipe not in cache:
+        cache[recipe] = _build(recipe)
+        _BUILT.builds = getattr(_BUILT, "builds", 0) + 1
+    return cache[recipe]
+
+
+def simulator_builds() -> int:
+    """How many simulators this thread has built (1 per recipe when the cache works)."""
+    return getattr(_BUILT, "builds", 0)
+
+
+def _build(recipe: SimulatorRecipe) -> Simulator:
     factory = _resolve_factory(recipe.name, recipe.factory)
     try:
         simulator = factory(**recipe.option_dict)
@@ -321,3 +345,72 @@ def describe_simulator(recipe: SimulatorRecipe) -> SimulatorInfo:
         events=dict(simulator.events()),
         duration=float(simulator.duration()),
     )
+
+
+def check_simulator(
+    simulator: Simulator, window: MissionWindow | None = None, seed: int = 1
+) -> RunOutput:
+    """Check that a simulator honours the protocol the campaign runner relies on.
+
+    For a new simulator (the Drake mission, say), call this in its tests. It checks the
+    declarations (unique parameter names, units, nominal values inside their ranges, events
+    inside the mission), runs the nominal case twice with the same seed and once with another,
+    and checks the outputs: every declared metric present and finite, time-series columns
+    ``"name [unit]"`` matching the declared signals plus ``"time [s]"``, and bit-identical metrics
+    for the same seed (what ``oos campaign rerun`` needs).
+
+    Parameters
+    ----------
+    simulator : Simulator
+        The simulator under test.
+    window : MissionWindow, optional
+        Window to simulate (default: the whole mission).
+    seed : int
+        Run seed of the nominal case.
+
+    Returns
+    -------
+    RunOutput
+        The nominal run's output.
+
+    Raises
+    ------
+    ValueError
+        The first violated expectation, in one line.
+    """
+    parameters = tuple(simulator.parameters())
+    names = [p.name for p in parameters]
+    if len(set(names)) != len(names):
+        raise ValueError(f"simulator: duplicated parameter names in {names}")
+    for parameter in parameters:
+        if not isinstance(parameter, Parameter) or not parameter.unit:
+            raise ValueError(f"simulator: parameter {parameter!r} needs a Parameter with a unit")
+    duration = float(simulator.duration())
+    if not (math.isfinite(duration) and duration > 0):
+        raise ValueError(f"simulator: duration {duration} s must be positive")
+    for event, time in simulator.events().items():
+        if not 0 <= time <= duration:
+            raise ValueError(f"simulator: event {event!r} at {time} s outside [0, {duration}] s")
+    window = window or MissionWindow(0.0, duration)
+    values = {p.name: p.nominal for p in parameters}
+    output = simulator.run(RunCase(0, seed, values, window))
+    metrics = dict(output.metrics)
+    declared = dict(simulator.metric_units())
+    if set(metrics) != set(declared):
+        raise ValueError(
+            f"simulator: metrics {sorted(metrics)} differ from declared {sorted(declared)}"
+        )
+    for name, value in metrics.items():
+        if not math.isfinite(float(value)):
+            raise ValueError(f"simulator: nominal metric {name} = {value} is not finite")
+    if output.timeseries is not None:
+        expected = {"time [s]"} | {f"{s} [{u}]" for s, u in simulator.signal_units().items()}
+        if set(output.timeseries.columns) != expected:
+            raise ValueError(
+                f"simulator: time-series columns {sorted(output.timeseries.columns)} differ from "
+                f"{sorted(expected)}"
+            )
+    again = simulator.run(RunCase(0, seed, values, window))
+    if dict(again.metrics) != metrics:
+        raise ValueError("simulator: two runs of the same case and seed differ (not reproducible)")
+    return output

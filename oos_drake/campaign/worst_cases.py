@@ -171,6 +171,10 @@ def read_worst_cases(
         blocks[name] = column
     if table["region"].duplicated().any():
         raise ValueError(f"worst cases file {path}: duplicated region ids")
+    if (table["region"] < 0).any():
+        raise ValueError(
+            f"worst cases file {path}: region ids must be >= 0 (-1 marks nominal runs)"
+        )
     regions = []
     for row in table.itertuples(index=False):
         record = dict(zip(table.columns, row, strict=True))

@@ -1,1 +1,49 @@
-"""oos_drake.control."""
+"""Attitude control design (paper section 3): weighted interconnection, baseline, synthesis.
+
+``from oos_drake.control import weighted_interconnection, baseline_gains, synthesize`` gives the
+main entry points:
+
+- :func:`weighted_interconnection` -- Fig. controldesign around a (batched) 3x3 plant
+  ``T_ext,G1 -> wdot`` (sensors, wheels, roll-off, noise/disturbance/performance weights);
+- :func:`baseline_gains` -- ``K_att = [w^2 J_tot, 2 xi w J_tot]``;
+- :func:`synthesize` -- multi-model structured H-infinity synthesis of the 3x6 static gain over
+  configurations and real uncertainty (nonsmooth BFGS-SQP, worst-case search);
+- :func:`peak_gain` -- batched H-infinity norms of model arrays;
+- :func:`closed_loop_lfr` -- the uncertain closed loop with Delta_add and Delta_mul for analysis;
+- :func:`write_synthesis` -- controller JSON, closed-loop arrays (.npz/.mat), per-model tables.
+
+This package never imports pydrake.
+"""
+
+from oos_drake.control.analysis_model import closed_loop_lfr, uncertain_plant
+from oos_drake.control.baseline import baseline_gains, inertia_from_plant
+from oos_drake.control.components import DesignSpecification
+from oos_drake.control.interconnection import WeightedInterconnection, weighted_interconnection
+from oos_drake.control.peak_gain import PeakGain, hinfnorm_hamiltonian, peak_gain
+from oos_drake.control.plants import PlantArray, UncertainParameter, from_lfr, from_statespace
+from oos_drake.control.report import write_synthesis
+from oos_drake.control.statespace import BatchedStateSpace, connect
+from oos_drake.control.synthesis import SynthesisOptions, SynthesisResult, synthesize
+
+__all__ = [
+    "BatchedStateSpace",
+    "DesignSpecification",
+    "PeakGain",
+    "PlantArray",
+    "SynthesisOptions",
+    "SynthesisResult",
+    "UncertainParameter",
+    "WeightedInterconnection",
+    "baseline_gains",
+    "closed_loop_lfr",
+    "connect",
+    "from_lfr",
+    "from_statespace",
+    "hinfnorm_hamiltonian",
+    "inertia_from_plant",
+    "peak_gain",
+    "synthesize",
+    "uncertain_plant",
+    "weighted_interconnection",
+    "write_synthesis",
+]

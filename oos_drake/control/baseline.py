@@ -46,7 +46,9 @@ def baseline_gains(J_tot, omega_att: float = OMEGA_ATT, xi_att: float = XI_ATT) 
     if not np.allclose(J, J.T, rtol=1e-8, atol=1e-10) or np.linalg.eigvalsh(J).min() <= 0:
         raise ValueError("baseline: J_tot must be symmetric positive definite")
     if omega_att <= 0 or xi_att <= 0:
-        raise ValueError(f"baseline: omega_att and xi_att must be positive, got {omega_att}, {xi_att}")
+        raise ValueError(
+            f"baseline: omega_att and xi_att must be positive, got {omega_att}, {xi_att}"
+        )
     return np.hstack([omega_att**2 * J, 2.0 * xi_att * omega_att * J])
 
 

@@ -58,15 +58,19 @@ def run_synth(args) -> int:
     """Run the synthesis and write the outputs; exit status 0."""
     plants = make_plants(args.plant, args.configurations)
     options = SynthesisOptions(
-        restarts=args.restarts, max_iterations=args.max_iterations,
-        worst_case_rounds=args.worst_case_rounds, seed=args.seed,
+        restarts=args.restarts,
+        max_iterations=args.max_iterations,
+        worst_case_rounds=args.worst_case_rounds,
+        seed=args.seed,
     )
     K0 = baseline_for(plants)
     result = synthesize(plants, K0, options=options, progress=print)
     paths = write_synthesis(args.out, result, plants, options)
     active = result.models[result.models["active"]]
-    print(f"gamma = {result.gamma:.6g} (baseline {result.gamma_start:.6g}), "
-          f"{len(active)} active model(s), {result.wall_time_s:.1f} s")
+    print(
+        f"gamma = {result.gamma:.6g} (baseline {result.gamma_start:.6g}), "
+        f"{len(active)} active model(s), {result.wall_time_s:.1f} s"
+    )
     print(f"K_p [N m/rad] =\n{np.array2string(result.K[:, :3], precision=5)}")
     print(f"K_d [N m s/rad] =\n{np.array2string(result.K[:, 3:], precision=5)}")
     for name, path in paths.items():
@@ -85,13 +89,22 @@ def register(subparsers) -> None:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     parser.add_argument("--out", required=True, help="output directory")
-    parser.add_argument("--plant", default="lfr", choices=["lfr", "drake", "synthetic"],
-                        help="source of the model array")
-    parser.add_argument("--configurations", type=int, default=200,
-                        help="equally spaced mission configurations")
+    parser.add_argument(
+        "--plant",
+        default="lfr",
+        choices=["lfr", "drake", "synthetic"],
+        help="source of the model array",
+    )
+    parser.add_argument(
+        "--configurations", type=int, default=200, help="equally spaced mission configurations"
+    )
     parser.add_argument("--restarts", type=int, default=2, help="random restarts")
     parser.add_argument("--max-iterations", type=int, default=150, help="BFGS iterations per run")
-    parser.add_argument("--worst-case-rounds", type=int, default=4,
-                        help="rounds of worst-case search over the real uncertainty")
+    parser.add_argument(
+        "--worst-case-rounds",
+        type=int,
+        default=4,
+        help="rounds of worst-case search over the real uncertainty",
+    )
     parser.add_argument("--seed", type=int, default=0, help="seed of restarts and samples")
     parser.set_defaults(func=run_synth)

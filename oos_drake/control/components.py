@@ -74,15 +74,23 @@ class DesignSpecification:
 
     def __post_init__(self):
         for name in (
-            "star_tracker_cutoff_hz", "gyro_cutoff_hz", "wheel_frequency_hz", "wheel_damping",
-            "rolloff_cutoff_hz", "noise_gyro", "noise_star_tracker", "pointing_requirement",
+            "star_tracker_cutoff_hz",
+            "gyro_cutoff_hz",
+            "wheel_frequency_hz",
+            "wheel_damping",
+            "rolloff_cutoff_hz",
+            "noise_gyro",
+            "noise_star_tracker",
+            "pointing_requirement",
             "control_weight",
         ):
             value = getattr(self, name)
             if not np.isfinite(value) or value <= 0:
                 raise ValueError(f"DesignSpecification.{name} must be positive, got {value!r}")
         if self.rolloff_order < 1:
-            raise ValueError(f"DesignSpecification.rolloff_order must be >= 1, got {self.rolloff_order}")
+            raise ValueError(
+                f"DesignSpecification.rolloff_order must be >= 1, got {self.rolloff_order}"
+            )
         if len(self.disturbance_gains) != 3 or len(self.disturbance_denominator) != 2:
             raise ValueError("DesignSpecification.disturbance_gains needs 3 values, denominator 2")
 
@@ -166,8 +174,12 @@ def disturbance_weight(spec: DesignSpecification, name_in="d_ext", name_out="T_d
 def integrator(name_in: str, name_out: str) -> BatchedStateSpace:
     """Three integrators ``1/s`` (rate from acceleration, attitude from rate)."""
     return BatchedStateSpace(
-        np.zeros((3, 3)), np.eye(3), np.eye(3), np.zeros((3, 3)),
-        channel_names(name_in, 3), channel_names(name_out, 3),
+        np.zeros((3, 3)),
+        np.eye(3),
+        np.eye(3),
+        np.zeros((3, 3)),
+        channel_names(name_in, 3),
+        channel_names(name_out, 3),
     )
 
 

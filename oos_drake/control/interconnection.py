@@ -72,8 +72,14 @@ class WeightedInterconnection:
         """Return ``(A, B1, B2, C1, C2, D11, D12, D21)`` (batched), ``D22 = 0``."""
         s = self.system
         return (
-            s.A, s.B[..., :, :9], s.B[..., :, 9:], s.C[..., :6, :], s.C[..., 6:, :],
-            s.D[..., :6, :9], s.D[..., :6, 9:], s.D[..., 6:, :9],
+            s.A,
+            s.B[..., :, :9],
+            s.B[..., :, 9:],
+            s.C[..., :6, :],
+            s.C[..., 6:, :],
+            s.D[..., :6, :9],
+            s.D[..., :6, 9:],
+            s.D[..., 6:, :9],
         )
 
     def close(self, K) -> BatchedStateSpace:
@@ -123,9 +129,20 @@ def weighted_interconnection(
     spec = spec or comp.DesignSpecification()
     if plant.inputs != PLANT_INPUTS or plant.outputs != PLANT_OUTPUTS:
         plant = plant_statespace(plant.A, plant.B, plant.C, plant.D)
+    system = connect(
+        [plant, *diagram_parts(spec)], DISTURBANCES + CONTROLS, ERRORS + MEASUREMENTS
+    )
+    return WeightedInterconnection(system, spec)
+
+
+def diagram_parts(spec: comp.DesignSpecification) -> list[BatchedStateSpace]:
+    """Every block of Fig. controldesign except the plant, as named systems for ``connect``.
+
+    The plant to add reads ``T[0..2]`` and produces ``wdot[0..2]`` (it may have more channels,
+    e.g. the ``w``/``z`` channels of its uncertain blocks, passed as external signals).
+    """
     v = channel_names
-    parts = [
-        plant,
+    return [
         comp.integrator("wdot", "w"),
         comp.integrator("w", "phi"),
         comp.star_tracker(spec, "phi", "phi_sst"),
@@ -141,5 +158,3 @@ def weighted_interconnection(
         comp.static_gain(1.0 / spec.pointing_requirement, "phi", "e_p"),
         comp.static_gain(spec.control_weight, "u", "e_u"),
     ]
-    system = connect(parts, DISTURBANCES + CONTROLS, ERRORS + MEASUREMENTS)
-    return WeightedInterconnection(system, spec)

@@ -102,7 +102,8 @@ def minimize_nonsmooth(
     history = [f]
     stalled = 0
     message = "iteration limit"
-    for it in range(1, max_iterations + 1):
+    it = 0
+    for it in range(1, max_iterations + 1):  # noqa: B007 - reported after the loop
         d = -H @ g
         if not float(g @ d) < 0:
             H = np.eye(n) * (initial_step / max(np.linalg.norm(g), 1e-300))
@@ -117,7 +118,11 @@ def minimize_nonsmooth(
         if sy > 1e-16 * np.linalg.norm(s) * np.linalg.norm(y):
             rho = 1.0 / sy
             Hy = H @ y
-            H = H - rho * (np.outer(s, Hy) + np.outer(Hy, s)) + (rho * rho * (y @ Hy) + rho) * np.outer(s, s)
+            H = (
+                H
+                - rho * (np.outer(s, Hy) + np.outer(Hy, s))
+                + (rho * rho * (y @ Hy) + rho) * np.outer(s, s)
+            )
         decrease = f - f_new
         x, f, g = x_new, f_new, g_new
         history.append(f)
@@ -144,8 +149,9 @@ def _simplex_qp(Q, c):
         lam0,
         jac=lambda lam: Q @ lam - c,
         bounds=[(0.0, 1.0)] * k,
-        constraints=[{"type": "eq", "fun": lambda lam: lam.sum() - 1.0,
-                      "jac": lambda lam: np.ones_like(lam)}],
+        constraints=[
+            {"type": "eq", "fun": lambda lam: lam.sum() - 1.0, "jac": lambda lam: np.ones_like(lam)}
+        ],
         method="SLSQP",
         options={"maxiter": 200, "ftol": 1e-14},
     )
@@ -198,8 +204,10 @@ def minimize_bundle_bfgs(
         ``stall_window`` iterations.
     """
     if merge is None:
+
         def merge(a, b):
             return tuple(np.concatenate([u, v]) for u, v in zip(a, b, strict=True))
+
     x = np.asarray(x0, dtype=float).copy()
     f, vals, grads, pieces = fun(x)
     evaluations = 1
@@ -223,7 +231,7 @@ def minimize_bundle_bfgs(
     history = [f]
     message = "iteration limit"
     iterations = 0
-    for iterations in range(1, max_iterations + 1):
+    for iterations in range(1, max_iterations + 1):  # noqa: B007 - reported after the loop
         if predicted <= rtol * abs(f):
             message = "predicted decrease below tolerance (stationary)"
             break
@@ -270,12 +278,13 @@ def minimize_bundle_bfgs(
                 fresh = False
             rho = 1.0 / sy
             Hy = H @ y
-            H = (H - rho * (np.outer(s, Hy) + np.outer(Hy, s))
-                 + (rho * rho * (y @ Hy) + rho) * np.outer(s, s))
+            H = (
+                H
+                - rho * (np.outer(s, Hy) + np.outer(Hy, s))
+                + (rho * rho * (y @ Hy) + rho) * np.outer(s, s)
+            )
         d, lam, predicted = step(H, f, vals, grads)
-        if len(history) > stall_window and (
-            history[-stall_window - 1] - f <= stall_rtol * abs(f)
-        ):
+        if len(history) > stall_window and (history[-stall_window - 1] - f <= stall_rtol * abs(f)):
             message = f"stalled (< {stall_rtol:g} relative decrease in {stall_window} iterations)"
             break
     return BfgsResult(x, float(f), iterations, evaluations, tuple(history), message)

@@ -1,4 +1,4 @@
-"""The multi-model H-infinity objective ``gamma(K) = max_i ||F_l(P_i, K)||_inf`` and its subgradient.
+"""Multi-model H-infinity objective ``gamma(K) = max_i ||F_l(P_i, K)||_inf`` and subgradients.
 
 For a static gain ``K`` and ``D22 = 0`` the closed loop is
 ``T_i(s) = P11 + P12 K (I - P22 K)^-1 P21`` and its differential is
@@ -8,7 +8,8 @@ singular vectors ``u, v`` at the peak frequency ``w0``, Apkarian-Noll's (sub)gra
 
 .. math::
 
-    \\frac{\\partial \\gamma}{\\partial K} = \\mathrm{Re}\\left(G_{21}(j w_0)\\, v\\, u^H G_{12}(j w_0)\\right)^T .
+    \\frac{\\partial \\gamma}{\\partial K} =
+    \\mathrm{Re}\\left(G_{21}(j w_0)\\, v\\, u^H G_{12}(j w_0)\\right)^T .
 
 The objective is evaluated for the whole model array at once (:func:`peak_gain`).
 """
@@ -42,7 +43,7 @@ class Evaluation:
     peaks: PeakGain
 
 
-def peak_gradients(interconnection: WeightedInterconnection, K, index, omega):
+def peak_gradients(interconnection: WeightedInterconnection, K, index, omega, which=None):
     """Values and gradients of ``sigma_max(M_i(j w))`` w.r.t. ``K`` at given (model, frequency).
 
     Parameters
@@ -54,6 +55,9 @@ def peak_gradients(interconnection: WeightedInterconnection, K, index, omega):
         Model indices.
     omega : array_like, shape (k,)
         Frequencies [rad/s].
+    which : array_like of int, shape (k,), optional
+        Which singular value (0 = largest, default); the others give the extra pieces of a
+        multiple largest singular value.
 
     Returns
     -------
@@ -76,9 +80,11 @@ def peak_gradients(interconnection: WeightedInterconnection, K, index, omega):
     G12 = C_cl @ X[..., nd:] + D12
     G21 = C2 @ X[..., :nd] + D21
     U, S, Vh = np.linalg.svd(T)
-    u, v = U[..., :, 0], np.conj(Vh[..., 0, :])
+    which = np.zeros(index.size, dtype=int) if which is None else np.asarray(which, dtype=int)
+    rows = np.arange(index.size)
+    u, v = U[rows, :, which], np.conj(Vh[rows, which, :])
     M = (G21 @ v[..., None]) @ (np.conj(u)[..., None, :] @ G12)
-    return S[..., 0], np.swapaxes(np.real(M), -1, -2)
+    return S[rows, which], np.swapaxes(np.real(M), -1, -2)
 
 
 def peak_gradient(interconnection: WeightedInterconnection, K, index: int, omega: float):
@@ -109,10 +115,17 @@ class ActiveSet:
     models: np.ndarray
     omegas: np.ndarray
     peaks: PeakGain
+    which: np.ndarray | None = None
 
 
-def active_set(interconnection: WeightedInterconnection, K, *, eps: float = 0.05,
-               max_peaks: int = 24, focus: float = 0.2) -> ActiveSet:
+def active_set(
+    interconnection: WeightedInterconnection,
+    K,
+    *,
+    eps: float = 0.05,
+    max_peaks: int = 24,
+    focus: float = 0.2,
+) -> ActiveSet:
     """Evaluate ``gamma(K)`` and collect every local peak within ``eps`` (relative) of it."""
     M = interconnection.close(K)
     peaks = peak_gain(M.A, M.B, M.C, M.D, focus=max(focus, eps))
@@ -120,8 +133,14 @@ def active_set(interconnection: WeightedInterconnection, K, *, eps: float = 0.05
     if not np.isfinite(peaks.gamma[worst]):
         k = int(np.argmax(peaks.spectral_abscissa))
         g = abscissa_gradient(interconnection, K, k)
-        return ActiveSet(np.inf, np.array([peaks.spectral_abscissa[k]]), g[None],
-                         np.array([k]), np.array([np.nan]), peaks)
+        return ActiveSet(
+            np.inf,
+            np.array([peaks.spectral_abscissa[k]]),
+            g[None],
+            np.array([k]),
+            np.array([np.nan]),
+            peaks,
+        )
     gamma = float(peaks.gamma[worst])
     sig = np.where(np.isnan(peaks.peak_sigma), -np.inf, peaks.peak_sigma)
     rows, cols = np.nonzero(sig >= (1.0 - eps) * gamma)
@@ -132,9 +151,16 @@ def active_set(interconnection: WeightedInterconnection, K, *, eps: float = 0.05
     keep = np.ones(models.size, dtype=bool)
     keep[1:] = ~((models[1:] == worst) & np.isclose(omegas[1:], omegas[0], rtol=1e-6, atol=1e-12))
     models, omegas = models[keep], omegas[keep]
-    values, grads = peak_gradients(interconnection, K, models, omegas)
+    # second singular values close to the first: a multiple sigma_max is nonsmooth even at a
+    # fixed frequency, its subdifferential is spanned by the pieces of each singular pair
+    second, _ = peak_gradients(interconnection, K, models, omegas, np.ones(models.size, int))
+    multiple = second >= (1.0 - eps) * gamma
+    models = np.concatenate([models, models[multiple]])
+    omegas = np.concatenate([omegas, omegas[multiple]])
+    which = np.concatenate([np.zeros(keep.sum(), int), np.ones(int(multiple.sum()), int)])
+    values, grads = peak_gradients(interconnection, K, models, omegas, which)
     values[0] = gamma
-    return ActiveSet(gamma, values, grads, models, omegas, peaks)
+    return ActiveSet(gamma, values, grads, models, omegas, peaks, which)
 
 
 def abscissa_gradient(interconnection: WeightedInterconnection, K, index: int):
@@ -149,7 +175,9 @@ def abscissa_gradient(interconnection: WeightedInterconnection, K, index: int):
     return np.real(np.outer(B2.T @ y, C2 @ x).T).T
 
 
-def evaluate(interconnection: WeightedInterconnection, K, *, focus=0.2, **peak_options) -> Evaluation:
+def evaluate(
+    interconnection: WeightedInterconnection, K, *, focus=0.2, **peak_options
+) -> Evaluation:
     """Evaluate ``gamma(K)`` over the model array and a subgradient at the worst model.
 
     ``focus`` (see :func:`peak_gain`) refines only the models near the maximum: ``gamma`` is

@@ -170,7 +170,9 @@ class ModalResponse:
         damped = np.abs(self.lam.imag)
         N = self.lam.shape[0]
         grid = np.sort(
-            np.concatenate([np.zeros((N, 1)), np.broadcast_to(log_grid, (N, count)), damped], axis=1),
+            np.concatenate(
+                [np.zeros((N, 1)), np.broadcast_to(log_grid, (N, count)), damped], axis=1
+            ),
             axis=1,
         )
         # repeated points (conjugate pairs, real poles, identical per-axis filters) would give
@@ -207,8 +209,16 @@ def _golden_refine(modal: ModalResponse, lo, hi, iterations: int):
 
 
 def peak_gain(
-    A, B, C, D, *, points_per_decade: int = 20, candidates: int = 4, iterations: int = 30,
-    modal: ModalResponse | None = None, focus: float | None = None,
+    A,
+    B,
+    C,
+    D,
+    *,
+    points_per_decade: int = 20,
+    candidates: int = 4,
+    iterations: int = 30,
+    modal: ModalResponse | None = None,
+    focus: float | None = None,
 ) -> PeakGain:
     """H-infinity norms of a model array ``(A_i, B_i, C_i, D_i)``, vectorized.
 
@@ -325,9 +335,7 @@ def hinfnorm_hamiltonian(A, B, C, D, *, rtol: float = 1e-7, max_iterations: int 
         S = g * g * np.eye(D.shape[0]) - D @ D.T
         Ri = np.linalg.inv(R)
         Ah = A + B @ Ri @ D.T @ C
-        H = np.block(
-            [[Ah, B @ Ri @ B.T], [-C.T @ (g * g * np.linalg.inv(S)) @ C, -Ah.T]]
-        )
+        H = np.block([[Ah, B @ Ri @ B.T], [-C.T @ (g * g * np.linalg.inv(S)) @ C, -Ah.T]])
         ev = np.linalg.eigvals(H)
         scale = max(1.0, np.abs(ev).max(initial=0.0))
         imag = np.sort(np.abs(ev[np.abs(ev.real) < 1e-8 * scale].imag))

@@ -105,7 +105,9 @@ class PlantArray:
         tol = 1e-9 * np.maximum(1.0, np.abs(upper - lower))
         if np.any(values < lower - tol) or np.any(values > upper + tol):
             bad = int(np.argmax(np.any((values < lower - tol) | (values > upper + tol), axis=0)))
-            raise ValueError(f"value of uncertain parameter {self.parameters[bad].name!r} out of range")
+            raise ValueError(
+                f"value of uncertain parameter {self.parameters[bad].name!r} out of range"
+            )
         return plant_statespace(*self.build(index, values))
 
     def nominal(self) -> BatchedStateSpace:
@@ -236,7 +238,9 @@ def synthetic_flexible_plants(
         R = rotation_z(angles[index])
         carried = docked[index, None, None] * (1.0 - 0.6 * phase[index, None, None])
         J_tot = base + carried * inertia_scale[:, None, None] * (R @ target @ np.swapaxes(R, 1, 2))
-        weights = np.sqrt(np.array([12.0, 9.0, 6.0, 4.0, 3.0, 2.0][:modes] + [2.0] * max(0, modes - 6)))
+        weights = np.sqrt(
+            np.array([12.0, 9.0, 6.0, 4.0, 3.0, 2.0][:modes] + [2.0] * max(0, modes - 6))
+        )
         L = (R @ L_dirs) * weights
         w = 2 * np.pi * mode_hz * (1.0 + 0.25 * np.sin(np.pi * phase[index]))[:, None]
         w = w.copy()
@@ -303,11 +307,15 @@ def from_lfr(
     N = next(iter(sizes))[0]
     scheduled = usubs(model, configuration_values)
     if scheduled.batch_shape != (N,):
-        scheduled = scheduled.model(np.zeros(N, dtype=int)) if not scheduled.batch_shape else scheduled
+        scheduled = (
+            scheduled.model(np.zeros(N, dtype=int)) if not scheduled.batch_shape else scheduled
+        )
     blocks = scheduled.blocks
     kinds = set(blocks["kind"]) - {"ureal"}
     if kinds:
-        raise ValueError(f"from_lfr: only ureal blocks may remain for synthesis, found {sorted(kinds)}")
+        raise ValueError(
+            f"from_lfr: only ureal blocks may remain for synthesis, found {sorted(kinds)}"
+        )
     parameters = tuple(
         UncertainParameter(row.name, float(row.nominal), float(row.range[0]), float(row.range[1]))
         for row in blocks.itertuples()

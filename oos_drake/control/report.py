@@ -46,33 +46,36 @@ def controller_record(result: SynthesisResult, plants: PlantArray, options=None)
     """Return the JSON-ready description of a synthesized controller."""
     table = result.models
     active = table[table["active"]]
-    return _json_ready({
-        "controller": {
-            "structure": "u_K = K y, y = [phi_ref - phi_sst; w_ref - w_gyro], u = F_ro u_K",
-            "K_p": {"value": result.K[:, :3], "unit": "N m/rad"},
-            "K_d": {"value": result.K[:, 3:], "unit": "N m s/rad"},
-            "K_p_baseline": {"value": result.K_start[:, :3], "unit": "N m/rad"},
-            "K_d_baseline": {"value": result.K_start[:, 3:], "unit": "N m s/rad"},
-            "rolloff": {
-                "type": "butterworth",
-                "order": result.spec.rolloff_order,
-                "cutoff_hz": result.spec.rolloff_cutoff_hz,
+    return _json_ready(
+        {
+            "controller": {
+                "structure": "u_K = K y, y = [phi_ref - phi_sst; w_ref - w_gyro], u = F_ro u_K",
+                "K_p": {"value": result.K[:, :3], "unit": "N m/rad"},
+                "K_d": {"value": result.K[:, 3:], "unit": "N m s/rad"},
+                "K_p_baseline": {"value": result.K_start[:, :3], "unit": "N m/rad"},
+                "K_d_baseline": {"value": result.K_start[:, 3:], "unit": "N m s/rad"},
+                "rolloff": {
+                    "type": "butterworth",
+                    "order": result.spec.rolloff_order,
+                    "cutoff_hz": result.spec.rolloff_cutoff_hz,
+                },
             },
-        },
-        "gamma": result.gamma,
-        "gamma_baseline": result.gamma_start,
-        "requirement_met": bool(result.gamma < 1.0),
-        "active_models": active[["config", *result.parameter_names, "gamma",
-                                 "omega_peak_rad_s"]].to_dict(orient="records"),
-        "configurations": plants.configurations.to_dict(orient="list"),
-        "uncertain_parameters": [asdict(p) for p in plants.parameters],
-        "worst_cases": result.worst_cases.to_dict(orient="records"),
-        "model_source": plants.source,
-        "model_sha256": plants.fingerprint(),
-        "design_specification": result.spec.to_dict(),
-        "options": asdict(options) if options is not None else None,
-        "wall_time_s": result.wall_time_s,
-    })
+            "gamma": result.gamma,
+            "gamma_baseline": result.gamma_start,
+            "requirement_met": bool(result.gamma < 1.0),
+            "active_models": active[
+                ["config", *result.parameter_names, "gamma", "omega_peak_rad_s"]
+            ].to_dict(orient="records"),
+            "configurations": plants.configurations.to_dict(orient="list"),
+            "uncertain_parameters": [asdict(p) for p in plants.parameters],
+            "worst_cases": result.worst_cases.to_dict(orient="records"),
+            "model_source": plants.source,
+            "model_sha256": plants.fingerprint(),
+            "design_specification": result.spec.to_dict(),
+            "options": asdict(options) if options is not None else None,
+            "wall_time_s": result.wall_time_s,
+        }
+    )
 
 
 def closed_loop_array(result: SynthesisResult, plants: PlantArray):
@@ -96,7 +99,10 @@ def write_synthesis(
     M = closed_loop_array(result, plants)
     table = result.models
     arrays = {
-        "A": M.A, "B": M.B, "C": M.C, "D": M.D,
+        "A": M.A,
+        "B": M.B,
+        "C": M.C,
+        "D": M.D,
         "K": result.K,
         "config": table["config"].to_numpy(),
         "parameter_values": table[list(result.parameter_names)].to_numpy(dtype=float),
@@ -104,7 +110,8 @@ def write_synthesis(
         "omega_peak_rad_s": table["omega_peak_rad_s"].to_numpy(),
     }
     names = {
-        "inputs": np.array(DISTURBANCES), "outputs": np.array(ERRORS),
+        "inputs": np.array(DISTURBANCES),
+        "outputs": np.array(ERRORS),
         "parameter_names": np.array(result.parameter_names, dtype=str),
     }
     paths["npz"] = out / "closed_loop.npz"
@@ -112,9 +119,12 @@ def write_synthesis(
     paths["mat"] = out / "closed_loop.mat"
     scipy.io.savemat(
         paths["mat"],
-        {**arrays, "inputs": np.array(DISTURBANCES, dtype=object),
-         "outputs": np.array(ERRORS, dtype=object),
-         "parameter_names": np.array(result.parameter_names, dtype=object)},
+        {
+            **arrays,
+            "inputs": np.array(DISTURBANCES, dtype=object),
+            "outputs": np.array(ERRORS, dtype=object),
+            "parameter_names": np.array(result.parameter_names, dtype=object),
+        },
         do_compression=True,
     )
     paths["parquet"] = out / "models.parquet"

@@ -63,7 +63,8 @@ class BatchedStateSpace:
         n, m, p = A.shape[-1], D.shape[-1], D.shape[-2]
         if A.shape[-2] != n or B.shape[-2:] != (n, m) or C.shape[-2:] != (p, n):
             raise ValueError(
-                f"BatchedStateSpace: inconsistent shapes A{A.shape} B{B.shape} C{C.shape} D{D.shape}"
+                f"BatchedStateSpace: inconsistent shapes "
+                f"A{A.shape} B{B.shape} C{C.shape} D{D.shape}"
             )
         if len(self.inputs) != m or len(self.outputs) != p:
             raise ValueError(
@@ -93,13 +94,17 @@ class BatchedStateSpace:
         batch = D.shape[:-2]
         p, m = D.shape[-2:]
         return cls(
-            np.zeros(batch + (0, 0)), np.zeros(batch + (0, m)), np.zeros(batch + (p, 0)), D,
-            inputs, outputs,
+            np.zeros(batch + (0, 0)),
+            np.zeros(batch + (0, m)),
+            np.zeros(batch + (p, 0)),
+            D,
+            inputs,
+            outputs,
         )
 
     @classmethod
     def from_control(cls, sys, inputs, outputs) -> BatchedStateSpace:
-        """Return the model of a python-control ``StateSpace``/``TransferFunction`` (SISO or MIMO)."""
+        """Return the model of a python-control ``StateSpace`` or ``TransferFunction``."""
         import control
 
         ss = control.ss(sys)
@@ -136,8 +141,12 @@ class BatchedStateSpace:
         """Return the sub-model from the named inputs to the named outputs."""
         rows, cols = self.index_outputs(outputs), self.index_inputs(inputs)
         return BatchedStateSpace(
-            self.A, self.B[..., :, cols], self.C[..., rows, :], self.D[..., rows, :][..., :, cols],
-            tuple(inputs), tuple(outputs),
+            self.A,
+            self.B[..., :, cols],
+            self.C[..., rows, :],
+            self.D[..., rows, :][..., :, cols],
+            tuple(inputs),
+            tuple(outputs),
         )
 
     def take(self, index) -> BatchedStateSpace:

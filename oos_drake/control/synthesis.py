@@ -1,13 +1,16 @@
-"""Multi-model structured H-infinity synthesis of the static 3x6 attitude gain (paper Eq. controlreq).
+"""Multi-model structured H-infinity synthesis of the static 3x6 attitude gain (Eq. controlreq).
 
 .. math::
 
     \\min_{K \\in \\mathbb{R}^{3 \\times 6}} \\gamma, \\qquad
-    \\gamma = \\max_{i,\\;\\delta \\in \\Delta_{real}} \\| F_l(P_{tot}(\\text{config}_i, \\delta), K) \\|_\\infty
+    \\gamma = \\max_{i,\\;\\delta \\in \\Delta_{real}}
+    \\| F_l(P_{tot}(\\text{config}_i, \\delta), K) \\|_\\infty
 
 Algorithm (MATLAB systune-like, in the open):
 
-1. The *model set* starts with every configuration at nominal parameters.
+1. The *working set* starts with evenly spaced configurations at nominal parameters; after
+   each optimizer run every configuration is checked and those above gamma join it (neighbouring
+   configurations are similar, so few rounds are needed), so gamma holds for all of them.
 2. Nonsmooth BFGS (:mod:`nonsmooth_bfgs`) on ``gamma(K)`` over the model set, in gains scaled
    by the baseline, from the baseline and from a few random restarts (log-normal perturbations);
    the Apkarian-Noll subgradient comes from the singular vectors at the peak frequency of the
@@ -15,7 +18,7 @@ Algorithm (MATLAB systune-like, in the open):
 3. Worst-case search over ``Delta_real`` (dynamic sampling): for the worst configurations,
    sample the parameter box (vertices and random points), then climb by projected
    finite-difference ascent; if a sample raises ``gamma`` by more than ``worst_case_rtol``, add
-   it to the model set and go back to 2 (warm start). Stop when the worst case no longer
+   it to the working set and go back to 2 (warm start). Stop when the worst case no longer
    increases ``gamma``.
 """
 
@@ -63,6 +66,16 @@ class SynthesisOptions:
         Seed of the random restarts and samples.
     method : str
         ``"bundle"`` (BFGS-SQP on the active peaks) or ``"bfgs"`` (plain nonsmooth BFGS).
+    working_set : int
+        Configurations in the initial working set of the optimizer (evenly spaced, plus the
+        worst one); ``0`` means all. After each run every configuration is checked and the
+        ones above gamma join the set, so the result holds for all of them.
+    configurations_per_round : int
+        Largest number of violating configurations added per round.
+    rtol_add : float
+        Relative excess over gamma that makes a configuration a violator.
+    max_rounds : int
+        Total rounds (optimizer run + checks).
     """
 
     restarts: int = 2
@@ -75,6 +88,10 @@ class SynthesisOptions:
     worst_case_rtol: float = 1e-3
     seed: int = 0
     method: str = "bundle"
+    working_set: int = 25
+    configurations_per_round: int = 5
+    rtol_add: float = 1e-3
+    max_rounds: int = 12
 
 
 @dataclass(frozen=True)
@@ -150,8 +167,15 @@ def _gain_scale(K0: np.ndarray) -> np.ndarray:
     return np.hstack([np.full((3, 3), sp), np.full((3, 3), sd)])
 
 
-def tune(interconnection: WeightedInterconnection, K0, *, max_iterations=150, scale=None,
-         method: str = "bundle", eps: float = 0.1):
+def tune(
+    interconnection: WeightedInterconnection,
+    K0,
+    *,
+    max_iterations=150,
+    scale=None,
+    method: str = "bundle",
+    eps: float = 0.1,
+):
     """Minimize ``gamma(K)`` over one interconnection array from ``K0``.
 
     ``method="bundle"`` (default): BFGS-SQP steps on the nearly active peaks
@@ -166,14 +190,15 @@ def tune(interconnection: WeightedInterconnection, K0, *, max_iterations=150, sc
         def fun_active(x):
             a = active_set(interconnection, x.reshape(3, 6) * scale, eps=eps)
             grads = (a.gradients * scale).reshape(a.values.size, -1)
-            return a.gamma, a.values, grads, (a.models, a.omegas)
+            which = a.which if a.which is not None else np.zeros(a.values.size, int)
+            return a.gamma, a.values, grads, (a.models, a.omegas, which)
 
         def regrad(x, pieces):
-            models, omegas = pieces
+            models, omegas, which = pieces
             if not np.all(np.isfinite(omegas)):
                 return np.full(models.size, -np.inf), np.zeros((models.size, x.size))
             values, grads = peak_gradients(
-                interconnection, x.reshape(3, 6) * scale, models, omegas
+                interconnection, x.reshape(3, 6) * scale, models, omegas, which
             )
             return values, (grads * scale).reshape(models.size, -1)
 
@@ -268,52 +293,114 @@ def synthesize(
         raise ValueError(f"synthesize: start gain K0 must be 3x6, got {K0.shape}")
     N = plants.size
     P = len(plants.parameters)
-    models = ModelSet(np.arange(N), np.broadcast_to(plants.nominal_values, (N, P)).copy())
-    added = np.zeros(N, dtype=bool)
-    gamma_start = float(np.max(gamma_over(plants, models, K0, spec).gamma))
+    nominal = np.broadcast_to(plants.nominal_values, (N, P)).copy()
+    all_configs = ModelSet(np.arange(N), nominal)
+    start_peaks = gamma_over(plants, all_configs, K0, spec)
+    gamma_start = float(np.max(start_peaks.gamma))
     if not np.isfinite(gamma_start):
         raise ValueError("synthesize: the start gain K0 does not stabilize every configuration")
     log(f"start gamma = {gamma_start:.6g} over {N} configurations")
+    if 0 < options.working_set < N:
+        chosen = np.unique(
+            np.concatenate(
+                [
+                    np.round(np.linspace(0, N - 1, options.working_set)).astype(int),
+                    [int(np.argmax(start_peaks.gamma))],
+                ]
+            )
+        )
+    else:
+        chosen = np.arange(N)
+    working = ModelSet(chosen, nominal[chosen])
+    worst = ModelSet(np.zeros(0, dtype=int), np.zeros((0, P)))
     scale = _gain_scale(K0)
     runs, worst_rows = [], []
     K_best, gamma_best = K0, gamma_start
-    for round_ in range(options.worst_case_rounds + 1):
-        W = _interconnect(plants, models, spec)
+    worst_case_rounds = 0
+    for round_ in range(options.max_rounds):
+        W = _interconnect(plants, working, spec)
         starts = [K_best]
         for _ in range(options.restarts if round_ == 0 else 0):
             starts.append(K_best * np.exp(options.restart_spread * rng.normal(size=K0.shape)))
         for r, Ks in enumerate(starts):
             g0 = evaluate(W, Ks).gamma
             if not np.isfinite(g0):
-                runs.append(dict(round=round_, restart=r, gamma_start=g0, gamma_end=np.inf,
-                                 iterations=0, evaluations=1, message="unstable start"))
+                runs.append(
+                    dict(
+                        round=round_,
+                        restart=r,
+                        models=len(working.config_index),
+                        gamma_start=g0,
+                        gamma_end=np.inf,
+                        iterations=0,
+                        evaluations=1,
+                        message="unstable start",
+                    )
+                )
                 continue
-            K, g, res = tune(W, Ks, max_iterations=options.max_iterations, scale=scale,
-                             method=options.method)
-            runs.append(dict(round=round_, restart=r, gamma_start=g0, gamma_end=g,
-                             iterations=res.iterations, evaluations=res.evaluations,
-                             message=res.message))
-            log(f"round {round_} run {r}: gamma {g0:.6g} -> {g:.6g} ({res.iterations} it)")
+            K, g, res = tune(
+                W, Ks, max_iterations=options.max_iterations, scale=scale, method=options.method
+            )
+            runs.append(
+                dict(
+                    round=round_,
+                    restart=r,
+                    models=len(working.config_index),
+                    gamma_start=g0,
+                    gamma_end=g,
+                    iterations=res.iterations,
+                    evaluations=res.evaluations,
+                    message=res.message,
+                )
+            )
+            log(
+                f"round {round_} run {r}: gamma {g0:.6g} -> {g:.6g} over "
+                f"{len(working.config_index)} models ({res.iterations} it, {res.message})"
+            )
             if r == 0 or g < gamma_best:
                 K_best, gamma_best = K, g
-        if P == 0 or round_ == options.worst_case_rounds:
+        # 1. every configuration at nominal parameters: add the violators to the working set
+        peaks = gamma_over(plants, all_configs, K_best, spec)
+        in_set = np.zeros(N, dtype=bool)
+        in_set[
+            working.config_index[np.all(working.values == nominal[working.config_index], axis=1)]
+        ] = True
+        violators = np.flatnonzero(~in_set & (peaks.gamma > gamma_best * (1 + options.rtol_add)))
+        if violators.size:
+            add = violators[np.argsort(-peaks.gamma[violators])][: options.configurations_per_round]
+            working = working.extend(add, nominal[add])
+            log(
+                f"round {round_}: {violators.size} configuration(s) above gamma "
+                f"(max {peaks.gamma.max():.6g}); {add.size} added"
+            )
+            continue
+        # 2. worst case over the real uncertainty
+        if P == 0 or worst_case_rounds >= options.worst_case_rounds:
             break
-        peaks = gamma_over(plants, models, K_best, spec)
-        nominal_gamma = peaks.gamma[:N]
-        configs = np.argsort(-nominal_gamma)[: options.worst_case_configurations]
+        worst_case_rounds += 1
+        configs = np.argsort(-peaks.gamma)[: options.worst_case_configurations]
         values, gwc = _worst_case_search(plants, configs, K_best, spec, options, rng)
         for c, v, gv in zip(configs, values, gwc, strict=True):
-            worst_rows.append(dict(round=round_, config=int(c), gamma=float(gv),
-                                   **dict(zip([p.name for p in plants.parameters], v, strict=True))))
+            worst_rows.append(
+                dict(
+                    round=round_,
+                    config=int(c),
+                    gamma=float(gv),
+                    **dict(zip([p.name for p in plants.parameters], v, strict=True)),
+                )
+            )
         new = gwc > gamma_best * (1.0 + options.worst_case_rtol)
-        log(f"round {round_}: worst case gamma {gwc.max():.6g} vs {gamma_best:.6g}; "
-            f"{int(new.sum())} model(s) added")
+        log(
+            f"round {round_}: worst case gamma {gwc.max():.6g} vs {gamma_best:.6g}; "
+            f"{int(new.sum())} model(s) added"
+        )
         if not np.any(new):
             break
-        models = models.extend(configs[new], values[new])
-        added = np.concatenate([added, np.ones(int(new.sum()), dtype=bool)])
-        gamma_best = float(np.max(gamma_over(plants, models, K_best, spec).gamma))
+        working = working.extend(configs[new], values[new])
+        worst = worst.extend(configs[new], values[new])
 
+    models = all_configs.extend(worst.config_index, worst.values)
+    added = np.concatenate([np.zeros(N, dtype=bool), np.ones(worst.config_index.size, dtype=bool)])
     final = gamma_over(plants, models, K_best, spec)
     gamma = float(np.max(final.gamma))
     table = pd.DataFrame({"config": models.config_index})
@@ -327,8 +414,14 @@ def synthesize(
     table["worst_case"] = added
     table["active"] = final.gamma >= gamma * (1.0 - 1e-3)
     return SynthesisResult(
-        K=K_best, gamma=gamma, K_start=K0, gamma_start=gamma_start, models=table,
-        runs=pd.DataFrame(runs), worst_cases=pd.DataFrame(worst_rows),
-        wall_time_s=time.perf_counter() - start_time, spec=spec,
+        K=K_best,
+        gamma=gamma,
+        K_start=K0,
+        gamma_start=gamma_start,
+        models=table,
+        runs=pd.DataFrame(runs),
+        worst_cases=pd.DataFrame(worst_rows),
+        wall_time_s=time.perf_counter() - start_time,
+        spec=spec,
         parameter_names=tuple(p.name for p in plants.parameters),
     )

@@ -71,6 +71,8 @@ class UReal:
 
     def __post_init__(self):
         _check_name(self.name)
+        for label in ("nominal", "lower", "upper"):
+            object.__setattr__(self, label, float(getattr(self, label)))
         for label, value in (
             ("nominal", self.nominal),
             ("lower", self.lower),

@@ -8,22 +8,25 @@ For every model the state matrix is diagonalized once, ``A = V diag(lambda) V^-1
 is evaluated for all frequencies with one batched matrix product: one eigendecomposition plus
 ``O(F n ny nu)`` per model, with models processed in chunks to bound memory.
 
-Defective or nearly defective eigenvalues (rigid-body double integrators ``1/(J s^2)`` are the
-everyday case in spacecraft models) have ill-conditioned eigenvectors, and the modal sum would lose
-accuracy. Those eigenvalues (flagged by their condition number ``||v_i|| ||w_i||``) are handled as
-one group: an orthonormal basis ``Q_c`` of their invariant subspace is taken from the span of their
-eigenvectors and refined by Newton steps on the invariant-subspace (Sylvester) equation, which
-makes the transformed ``A`` block upper triangular,
+Two structures would spoil the modal sum and are handled exactly instead:
 
-.. math:: U^H A U = \\begin{bmatrix} A_{11} & A_{12} \\\\ 0 & A_{22} \\end{bmatrix},\\quad
-          U = [Q_c, Q_\\perp],
+* Integrator tails. States that only feed later integrators (rigid-body ``1/(J s^2)`` outputs, the
+  everyday case in spacecraft models) are found from the sparsity pattern of ``A`` over the whole
+  batch: ``A = [[A11, 0], [A21, A22]]`` with ``A22`` nilpotent, so ``(sI - A22)^-1`` is a
+  polynomial in ``1/s`` and only ``A11`` is diagonalized. The ``s^-(p+1)`` factors are folded into
+  the modal residues by partial fractions when the poles of ``A11`` are not small.
+* Ill-conditioned eigenvalues (defective or nearly defective, flagged by their condition number
+  ``||v_i|| ||w_i||``, estimated with two random probes). With ``Q = [Q_g, Q_b]`` from a QR
+  factorization of the well-conditioned eigenvectors, ``Q^H A Q`` is block upper triangular; the
+  good block is diagonal in the projected eigenvectors and the small bad block is solved through
+  its complex Schur form by back substitution for all frequencies at once.
 
-with ``A_22`` diagonalized by the (well-conditioned) projected eigenvectors ``Q_perp^H V_good``.
-The small ``k x k`` block ``A_11`` is then solved directly at each frequency (batched). Models where
-even this fails use an exact direct solve ``(j omega I - A) X = B``.
+Models where even this fails use an exact direct solve ``(j omega I - A) X = B``.
 """
 
 from __future__ import annotations
+
+import functools
 
 import numpy as np
 import scipy.linalg
@@ -35,7 +38,7 @@ EIG_COND_LIMIT = 1e5
 #: Largest clustered block handled by the block method (larger: direct solve fallback).
 MAX_CLUSTER = 24
 #: Target size (complex entries) of temporary arrays per chunk.
-CHUNK_ENTRIES = 400_000
+CHUNK_ENTRIES = 1_500_000
 
 
 def freqresp(sys, omega) -> np.ndarray:
@@ -96,23 +99,22 @@ def _tail_response(M, n, core, tail, powers, s):
     E = [C2]
     for _ in range(1, powers):
         E.append(E[-1] @ A22)
-    C_aug = np.concatenate([C1] + [Ep @ A21 for Ep in E], axis=1)
-    if core.size:
-        core_M = np.concatenate(
-            [
-                np.concatenate([A11, B1], axis=2),
-                np.concatenate([C_aug, np.zeros((nb, C_aug.shape[1], nu), dtype=M.dtype)], axis=2),
-            ],
-            axis=1,
-        )
-        core_resp = _chunk_response(core_M, core.size, s)  # (nb, F, ny(1+q), nu)
-    else:
-        core_resp = np.zeros((nb, s.size, C_aug.shape[1], nu), dtype=complex)
+    tail_C = [Ep @ A21 for Ep in E]
     with np.errstate(all="ignore"):
-        out = core_resp[:, :, :ny, :] + M[:, None, n:, n:]
+        if core.size:
+            core_M = np.concatenate(
+                [
+                    np.concatenate([A11, B1], axis=2),
+                    np.concatenate([C1, np.zeros((nb, ny, nu), dtype=M.dtype)], axis=2),
+                ],
+                axis=1,
+            )
+            out = _chunk_response(core_M, core.size, s, tail_C)  # C1 X1 + sum s^-(p+1) C_p X1
+        else:
+            out = np.zeros((nb, s.size, ny, nu), dtype=complex)
+        out += M[:, None, n:, n:]
         for p, Ep in enumerate(E):
-            block = core_resp[:, :, ny * (p + 1) : ny * (p + 2), :] + (Ep @ B2)[:, None]
-            out += block * (s ** -(p + 1))[None, :, None, None]
+            out += (Ep @ B2)[:, None] * (s ** -(p + 1))[None, :, None, None]
     return out
 
 
@@ -154,7 +156,11 @@ def _modal_sum(Ct, lam, Bt, s) -> np.ndarray:
     return np.einsum("gin,gfn,gnj->gfij", Ct, resolvent, Bt, optimize=True)
 
 
-def _chunk_response(M: np.ndarray, n: int, s: np.ndarray) -> np.ndarray:
+def _chunk_response(M: np.ndarray, n: int, s: np.ndarray, tail_C=None) -> np.ndarray:
+    """``C (sI - A)^-1 B + D`` for a chunk of models; with ``tail_C = [C_0, C_1, ...]`` the
+    result is ``C X + sum_p s^-(p+1) C_p X + D``, ``X = (sI - A)^-1 B`` (integrator tail)."""
+    if tail_C:
+        return _chunk_response_tail(M, n, s, tail_C)
     A = M[:, :n, :n]
     B = M[:, :n, n:]
     C = M[:, n:, :n]
@@ -193,11 +199,68 @@ def _chunk_response(M: np.ndarray, n: int, s: np.ndarray) -> np.ndarray:
     return result
 
 
+def _chunk_response_tail(M, n, s, tail_C, safe_ratio: float = 1e6):
+    """Tail version of :func:`_chunk_response`. Models whose eigenvalues are all well conditioned
+    and not small fold the ``s^-(p+1)`` factors into the modal residues by partial fractions,
+
+    ``s^-(p+1) / (s - l) = l^-(p+1) / (s - l) - sum_{r=1}^{p+1} l^-(p+2-r) s^-r``,
+
+    so one modal sum of ``ny x nu`` residues suffices; the others use an augmented output."""
+    q = len(tail_C)
+    nb, ny, nu = M.shape[0], M.shape[1] - n, M.shape[2] - n
+    A, B, C = M[:, :n, :n], M[:, :n, n:], M[:, n:, :n]
+    result = np.empty((nb, s.size, ny, nu), dtype=complex)
+    lam, V = np.linalg.eig(A)
+    probes = _probes(n)
+    X, singular = _safe_solve(
+        V, np.concatenate([B.astype(complex), np.broadcast_to(probes, (nb, n, 2))], axis=2)
+    )
+    kappa = np.sqrt(n) * np.max(np.abs(X[:, :, nu:]), axis=2) * np.linalg.norm(V, axis=-2)
+    well = np.all(np.isfinite(kappa) & (kappa <= EIG_COND_LIMIT), axis=1) & ~singular
+    lam_min = np.min(np.abs(lam), axis=1)
+    smax = np.max(np.abs(s)) if s.size else 0.0
+    with np.errstate(all="ignore"):
+        fast = well & (lam_min > 0) & ((smax / lam_min) ** q < safe_ratio)
+    idx = np.flatnonzero(fast)
+    if idx.size:
+        Vf, lamf, Bt = V[idx], lam[idx], X[idx, :, :nu]
+        CpV = [Cp[idx] @ Vf for Cp in tail_C]
+        inv_lam = 1.0 / lamf
+        Ct = C[idx] @ Vf
+        for p, cpv in enumerate(CpV):
+            Ct = Ct + cpv * (inv_lam ** (p + 1))[:, None, :]
+        resp = _modal_sum(Ct, lamf, Bt, s) + M[idx, None, n:, n:]
+        for p, cpv in enumerate(CpV):
+            for r in range(1, p + 2):
+                coef = (cpv * (inv_lam ** (p + 2 - r))[:, None, :]) @ Bt
+                resp -= coef[:, None] * (s**-r)[None, :, None, None]
+        result[idx] = resp
+    rest = np.flatnonzero(~fast)
+    if rest.size:
+        C_aug = np.concatenate([C[rest]] + [Cp[rest] for Cp in tail_C], axis=1)
+        M_aug = np.concatenate(
+            [
+                np.concatenate([A[rest], B[rest]], axis=2),
+                np.concatenate([C_aug, np.zeros((rest.size, C_aug.shape[1], nu))], axis=2),
+            ],
+            axis=1,
+        )
+        aug = _chunk_response(M_aug, n, s)
+        out = aug[:, :, :ny, :] + M[rest, None, n:, n:]
+        for p in range(q):
+            out += aug[:, :, ny * (p + 1) : ny * (p + 2), :] * (s ** -(p + 1))[None, :, None, None]
+        result[rest] = out
+    return result
+
+
+@functools.lru_cache(maxsize=64)
 def _probes(n: int) -> np.ndarray:
     """Two fixed unit-norm complex Gaussian probe vectors (deterministic, seeded by ``n``)."""
     rng = np.random.default_rng(20_240_601 + n)
     probe = rng.standard_normal((n, 2)) + 1j * rng.standard_normal((n, 2))
-    return probe / np.linalg.norm(probe, axis=0)
+    probe = probe / np.linalg.norm(probe, axis=0)
+    probe.flags.writeable = False
+    return probe
 
 
 def _safe_solve(V, rhs):
@@ -283,25 +346,6 @@ def _clustered_response(A, B, C, lam, V, bad, k, s):
     C_blk = (C @ Q_b) @ Z - Ct @ X_z  # (g, ny, k)
     resp += np.swapaxes((C_blk @ Yt.reshape(g, k, nf * nu)).reshape(g, ny, nf, nu), 1, 2)
     return ok, resp
-
-
-def _solve_or_inf(lhs, rhs):
-    """Batched solve; systems that are exactly singular (s is a pole) give ``inf``."""
-    try:
-        return np.linalg.solve(lhs, rhs)
-    except np.linalg.LinAlgError:
-        out = np.empty(
-            np.broadcast_shapes(lhs.shape[:-2], rhs.shape[:-2]) + rhs.shape[-2:],
-            dtype=np.result_type(lhs, rhs),
-        )
-        lhs = np.broadcast_to(lhs, out.shape[:-2] + lhs.shape[-2:])
-        rhs = np.broadcast_to(rhs, out.shape)
-        for idx in np.ndindex(out.shape[:-2]):
-            try:
-                out[idx] = np.linalg.solve(lhs[idx], rhs[idx])
-            except np.linalg.LinAlgError:
-                out[idx] = np.inf
-        return out
 
 
 def _direct_response(A, B, C, D, s, chunk: int = 64) -> np.ndarray:

@@ -69,11 +69,8 @@ def _normalized_values(sys: LFR, values: Mapping, normalized: bool):
             known = ", ".join(specs) or "none"
             raise ValueError(f"usubs: unknown block name {name!r} (blocks: {known})")
         spec = specs[name]
-        if isinstance(value, LFR) or hasattr(value, "A") and hasattr(value, "B"):
-            raise ValueError(
-                f"usubs: block {name!r}: substituting systems is not supported; "
-                "use lft() with the block's LFR"
-            )
+        if _is_system(value):
+            raise ValueError(f"usubs: block {name!r}: a system value needs an ultidyn block")
         if normalized:
             out[name] = spec.check_normalized(value)
         elif spec.kind == "ureal":
@@ -120,8 +117,10 @@ def usubs(sys: LFR, values: Mapping, *, normalized: bool = False) -> LFR:
     values : mapping str -> scalar or array
         Block name -> PHYSICAL value (same unit as the block's nominal). ``ureal``/``ucomplex``:
         a scalar or an array of shape ``batch`` (e.g. ``(N,)``); ``ultidyn``: a static matrix
-        ``(p, q)`` or an array ``batch + (p, q)``. Arrays of all blocks broadcast against each other
-        and against ``sys.batch_shape``; the result is a model array with that batch shape.
+        ``(p, q)``, an array ``batch + (p, q)``, or an LTI system (LFR, ``control.StateSpace`` or
+        ``TransferFunction``; its gain is not checked against the bound). Arrays of all blocks
+        broadcast against each other and against ``sys.batch_shape``; the result is a model array
+        with that batch shape.
     normalized : bool
         If True the values are normalized ``delta`` (no range check), e.g. worst-case deltas from a
         mu analysis.
@@ -146,10 +145,57 @@ def usubs(sys: LFR, values: Mapping, *, normalized: bool = False) -> LFR:
     >>> usubs(3 * k, {"k": np.array([9.0, 11.0])}).M[:, 0, 0]
     array([27., 33.])
     """
+    if isinstance(values, Mapping):
+        dynamic = {k: v for k, v in values.items() if _is_system(v)}
+        if dynamic:
+            static = {k: v for k, v in values.items() if k not in dynamic}
+            return _substitute_systems(
+                usubs(sys, static, normalized=normalized), dynamic, normalized
+            )
     deltas = _normalized_values(sys, values, normalized)
     if not deltas:
         return sys
     return close_blocks(sys, deltas)
+
+
+def _is_system(value) -> bool:
+    import control
+
+    return isinstance(value, LFR | control.StateSpace | control.TransferFunction)
+
+
+def _substitute_systems(sys: LFR, systems: Mapping, normalized: bool) -> LFR:
+    """Close ``ultidyn`` blocks with LTI systems (not checked against the bound) via ``lftdata``."""
+    from oos_drake.lfr.core import append_systems, as_lfr
+    from oos_drake.lfr.interconnect import lft
+
+    specs = sys.uncertainty
+    for name in systems:
+        if name not in specs:
+            raise ValueError(f"usubs: unknown block name {name!r} (blocks: {', '.join(specs)})")
+        if specs[name].kind != "ultidyn":
+            raise ValueError(
+                f"usubs: block {name!r} is a {specs[name].kind}; only ultidyn blocks "
+                "can be replaced by a system"
+            )
+    names = sorted(systems)
+    M, _ = lftdata(sys, names)
+    pieces = []
+    for entry in sys.block_entries:
+        if entry.spec.name not in systems:
+            continue
+        value = as_lfr(systems[entry.spec.name])
+        if value.shape != entry.spec.shape:
+            raise ValueError(
+                f"usubs: system for ultidyn {entry.spec.name!r} has shape "
+                f"{value.shape}, expected {entry.spec.shape}"
+            )
+        scaled = value if normalized else value * (1.0 / entry.spec.bound)
+        pieces.extend([scaled] * entry.reps)
+    # Delta's outputs (w) drive M's first inputs, M's first outputs (z) drive Delta's inputs
+    n_w = M.ninputs - sys.ninputs
+    n_z = M.noutputs - sys.noutputs
+    return lft(append_systems(pieces), M, nu=n_w, ny=n_z)
 
 
 def close_blocks(sys: LFR, deltas: Mapping) -> LFR:
@@ -461,3 +507,76 @@ def usample(sys: LFR, n: int, rng, *, names=None):
     table = pd.DataFrame({k: (list(v) if v.ndim > 1 else v) for k, v in values.items()})
     table.index.name = "sample"
     return usubs(sys, values), table
+
+
+def lftdata(sys: LFR, names=None):
+    """Split ``sys`` into a certain part and normalized blocks (MATLAB ``lftdata``).
+
+    Parameters
+    ----------
+    sys : LFR
+        Uncertain model (model arrays allowed).
+    names : sequence of str, optional
+        Blocks to pull out (default: all). The others stay inside ``M``.
+
+    Returns
+    -------
+    M : LFR
+        Inputs ``[w_sel; u]`` and outputs ``[z_sel; y]`` (the pulled-out Delta channels first, in
+        block name order), holding the remaining blocks.
+    Delta : LFR
+        Block-diagonal normalized blocks (``ureal(name, 0, range=(-1, 1))``,
+        ``ucomplex(name, 0, 1)``, ``ultidyn(name, shape, 1)``), each repeated as often as it occurs,
+        so that ``lft(Delta, M)`` is ``sys`` in normalized coordinates.
+    """
+    from oos_drake.lfr.blocks import UComplex, ULTIDyn, UReal
+    from oos_drake.lfr.core import BlockEntry, append_systems
+
+    specs = sys.uncertainty
+    names = sorted(specs) if names is None else sorted(names)
+    for name in names:
+        if name not in specs:
+            raise ValueError(f"lftdata: unknown block name {name!r} (blocks: {', '.join(specs)})")
+    n = sys.nstates
+    z_sub, w_sub, rows_keep, cols_keep = (
+        _split(sys, names)
+        if names
+        else (
+            np.zeros(0, int),
+            np.zeros(0, int),
+            np.arange(sys.M.shape[-2]),
+            np.arange(sys.M.shape[-1]),
+        )
+    )
+    n_int_r = n + sys.nz - z_sub.size
+    n_int_c = n + sys.nw - w_sub.size
+    rows = np.concatenate([rows_keep[:n_int_r], z_sub, rows_keep[n_int_r:]])
+    cols = np.concatenate([cols_keep[:n_int_c], w_sub, cols_keep[n_int_c:]])
+    remaining = tuple(e for e in sys.block_entries if e.spec.name not in names)
+    out_names = in_names = None
+    if sys.output_names is not None:
+        out_names = [None] * z_sub.size + list(sys.output_names)
+    if sys.input_names is not None:
+        in_names = [None] * w_sub.size + list(sys.input_names)
+    M = LFR(
+        sys.M[..., rows[:, None], cols[None, :]],
+        n,
+        remaining,
+        input_names=in_names,
+        output_names=out_names,
+    )
+    atoms = []
+    for entry in sys.block_entries:
+        if entry.spec.name not in names:
+            continue
+        spec = entry.spec
+        if isinstance(spec, UReal):
+            unit = UReal(spec.name, 0.0, -1.0, 1.0)
+        elif isinstance(spec, UComplex):
+            unit = UComplex(spec.name, 0.0, 1.0)
+        else:
+            unit = ULTIDyn(spec.name, spec.io_shape, 1.0)
+        atom = LFR(unit.atom(), 0, (BlockEntry(unit, 1),))
+        atoms.extend([atom] * entry.reps)
+    Delta = append_systems(atoms) if atoms else LFR.from_matrix(np.zeros((0, 0)))
+    return M, Delta

@@ -106,7 +106,9 @@ class BlockStructure:
             ``(..., sum(r), sum(c))`` complex block-diagonal ``Delta``.
         """
         if len(values) != len(self.blocks):
-            raise ValueError(f"assemble: expected {len(self.blocks)} block values, got {len(values)}")
+            raise ValueError(
+                f"assemble: expected {len(self.blocks)} block values, got {len(values)}"
+            )
         batch = ()
         for block, value in zip(self.blocks, values, strict=True):
             value = np.asarray(value)
@@ -206,7 +208,10 @@ def check_matrix(M, structure: BlockStructure) -> np.ndarray:
     """
     M = np.asarray(M)
     if M.ndim < 2:
-        raise ValueError(f"M: expected a matrix (..., {structure.n_cols}, {structure.n_rows}), got shape {M.shape}")
+        raise ValueError(
+            f"M: expected a matrix (..., {structure.n_cols}, {structure.n_rows}), "
+            f"got shape {M.shape}"
+        )
     if M.shape[-2:] != structure.m_shape:
         raise ValueError(
             f"M: shape {M.shape[-2:]} does not match blk (needs sum(c) x sum(r) = "

@@ -56,10 +56,15 @@ def _as_matrices(sys):
         A, B, C, D = (np.asarray(x) for x in (sys.A, sys.B, sys.C, sys.D))
     elif hasattr(sys, "to_ss") or hasattr(sys, "nominal"):
         if getattr(sys, "occurrences", None):
-            raise ValueError("hinfnorm: the LFR still has uncertain blocks; use wcgain or usubs first")
+            raise ValueError(
+                "hinfnorm: the LFR still has uncertain blocks; use wcgain or usubs first"
+            )
         A, B, C, D = (np.asarray(x) for x in _lfr_matrices(sys))
     else:
-        raise ValueError(f"hinfnorm: expected (A, B, C, D), a control.StateSpace or an LFR, got {type(sys).__name__}")
+        raise ValueError(
+            "hinfnorm: expected (A, B, C, D), a control.StateSpace or an LFR, "
+            f"got {type(sys).__name__}"
+        )
     if A.ndim < 2 or A.shape[-1] != A.shape[-2]:
         raise ValueError(f"hinfnorm: A must be square (..., n, n), got shape {A.shape}")
     n = A.shape[-1]
@@ -97,7 +102,9 @@ def sigma_max_at(A, B, C, D, omega):
     n = A.shape[-1]
     eye = np.eye(n)
     jw = 1j * omega[..., None, None]
-    X = np.linalg.solve(jw * eye - A[:, None], np.broadcast_to(B[:, None], omega.shape + B.shape[-2:]))
+    X = np.linalg.solve(
+        jw * eye - A[:, None], np.broadcast_to(B[:, None], omega.shape + B.shape[-2:])
+    )
     G = C[:, None] @ X + D[:, None]
     return np.linalg.norm(G, ord=2, axis=(-2, -1))
 
@@ -159,7 +166,14 @@ def hinfnorm(sys, *, tol: float = 1e-8, max_iter: int = 50) -> HinfResult:
     wp = np.abs(pl)
     damping = -pl.real / np.maximum(wp, 1e-300)
     order = np.argsort(damping, axis=1)[:, : min(n, 12)]
-    wtest = np.concatenate([np.zeros((live.size, 1)), np.take_along_axis(np.abs(pl.imag), order, 1), np.take_along_axis(wp, order, 1)], axis=1)
+    wtest = np.concatenate(
+        [
+            np.zeros((live.size, 1)),
+            np.take_along_axis(np.abs(pl.imag), order, 1),
+            np.take_along_axis(wp, order, 1),
+        ],
+        axis=1,
+    )
     Al, Bl, Cl, Dl = A[live], B[live], C[live], D[live]
     s = sigma_max_at(Al, Bl, Cl, Dl, wtest)
     best = np.argmax(s, axis=1)
@@ -189,7 +203,9 @@ def hinfnorm(sys, *, tol: float = 1e-8, max_iter: int = 50) -> HinfResult:
                 continue
             mids = 0.5 * (w[:-1] + w[1:]) if w.size > 1 else w
             mids = np.concatenate([mids, w])
-            sm = sigma_max_at(Al[i : i + 1], Bl[i : i + 1], Cl[i : i + 1], Dl[i : i + 1], mids[None])[0]
+            sm = sigma_max_at(
+                Al[i : i + 1], Bl[i : i + 1], Cl[i : i + 1], Dl[i : i + 1], mids[None]
+            )[0]
             k = int(np.argmax(sm))
             if sm[k] <= glb[i] * (1 + tol):
                 gub[i] = gamma[j]

@@ -11,8 +11,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from oos_drake.robust.blocks import parse_blk
-
 
 @dataclass(frozen=True)
 class BlockMap:
@@ -102,8 +100,15 @@ def block_map(sys) -> BlockMap:
             rows.append(tuple(idx))
     if not names:
         raise ValueError("the LFR has no uncertain blocks to analyze")
-    return BlockMap(tuple(names), tuple(kinds), tuple(specs), tuple(rows), tuple(zs), tuple(ws),
-                    np.array(blk, dtype=int).reshape(-1, 2))
+    return BlockMap(
+        tuple(names),
+        tuple(kinds),
+        tuple(specs),
+        tuple(rows),
+        tuple(zs),
+        tuple(ws),
+        np.array(blk, dtype=int).reshape(-1, 2),
+    )
 
 
 def delta_channel_response(A, Bw, Cz, Dzw, omega) -> np.ndarray:
@@ -137,7 +142,9 @@ def delta_channel_response(A, Bw, Cz, Dzw, omega) -> np.ndarray:
             out[k] = Dzw[k] + np.einsum("in,fn,nj->fij", CV, inv, VB)
         else:
             eye = np.eye(n)
-            X = np.linalg.solve(s[:, None, None] * eye - A[k], np.broadcast_to(Bw[k], (s.size, n, nw)))
+            X = np.linalg.solve(
+                s[:, None, None] * eye - A[k], np.broadcast_to(Bw[k], (s.size, n, nw))
+            )
             out[k] = Dzw[k] + Cz[k] @ X
     return out.reshape(batch + out.shape[1:])
 
@@ -151,7 +158,9 @@ def frequency_grid(A, *, points_per_decade: int = 40, omega_range=None) -> np.nd
     sampled at their peak.
     """
     A = np.asarray(A)
-    poles = np.linalg.eigvals(A.reshape((-1,) + A.shape[-2:])).ravel() if A.shape[-1] else np.array([])
+    poles = (
+        np.linalg.eigvals(A.reshape((-1,) + A.shape[-2:])).ravel() if A.shape[-1] else np.array([])
+    )
     mag = np.abs(poles)
     nz = mag[mag > 1e-9 * max(1.0, mag.max(initial=0.0))]
     if omega_range is None:
@@ -184,7 +193,9 @@ def worst_case_values(bmap: BlockMap, structure, delta: np.ndarray, omega: float
     its norm (scaled by the block's bound).
     """
     values = {}
-    for name, kind, spec, rows in zip(bmap.names, bmap.kinds, bmap.specs, bmap.blk_rows, strict=True):
+    for name, kind, spec, rows in zip(
+        bmap.names, bmap.kinds, bmap.specs, bmap.blk_rows, strict=True
+    ):
         block = structure.blocks[rows[0]]
         sub = delta[block.r_slice, block.c_slice]
         if kind == "ureal":
@@ -197,7 +208,7 @@ def worst_case_values(bmap: BlockMap, structure, delta: np.ndarray, omega: float
 
 
 def _allpass_factor(c: complex, omega: float):
-    """Stable real first-order ``g(s) = k (s - a)/(s + a)`` (or a constant) with ``g(j omega) = c``."""
+    """Stable real ``g(s) = k (s - a)/(s + a)`` (or a constant) with ``g(j omega) = c``."""
     import control
 
     mag = abs(c)
@@ -218,7 +229,7 @@ def _allpass_factor(c: complex, omega: float):
 
 
 def realize_complex_matrix(value: np.ndarray, omega: float):
-    """Stable real-rational system ``Delta(s)`` with ``Delta(j omega) = value``, ``||Delta||_inf = ||value||``.
+    """Stable real-rational ``Delta(s)``: ``Delta(j omega) = value``, ``||Delta||_inf = ||value||``.
 
     Uses the rank-one form of the worst perturbation (``value = u v^*``, exact for the power
     iteration's full blocks; otherwise its dominant singular pair, which keeps the norm) with
@@ -231,8 +242,16 @@ def realize_complex_matrix(value: np.ndarray, omega: float):
     u = U[:, 0] * sv[0]
     v = Vh[0, :]  # value ~ u v (v is a row)
     p, q = value.shape
-    left = control.append(*[_allpass_factor(ui, omega) for ui in u]) if p > 1 else _allpass_factor(u[0], omega)
-    right = control.append(*[_allpass_factor(vi, omega) for vi in v]) if q > 1 else _allpass_factor(v[0], omega)
+    left = (
+        control.append(*[_allpass_factor(ui, omega) for ui in u])
+        if p > 1
+        else _allpass_factor(u[0], omega)
+    )
+    right = (
+        control.append(*[_allpass_factor(vi, omega) for vi in v])
+        if q > 1
+        else _allpass_factor(v[0], omega)
+    )
     # Delta(s) = diag(u_i(s)) 1_p 1_q^T diag(v_j(s))
     ones = control.ss([], [], [], np.ones((p, q)))
     return left * ones * right

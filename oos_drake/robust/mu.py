@@ -2,7 +2,8 @@ r"""Structured singular value bounds: :func:`mussv` (MATLAB ``mussv`` semantics,
 
 .. math::
 
-    \mu_\Delta(M) = \frac{1}{\min\{\bar\sigma(\Delta) : \Delta \in \mathbf{\Delta},\ \det(I - M\Delta) = 0\}}
+    \mu_\Delta(M) = \frac{1}{\min\{\bar\sigma(\Delta) : \Delta \in \mathbf{\Delta},\
+        \det(I - M\Delta) = 0\}}
 
 with ``mu = 0`` when no structured ``Delta`` makes ``I - M Delta`` singular.
 
@@ -133,6 +134,10 @@ def mussv(
     batch = M.shape[:-2]
     c, r = structure.m_shape
     flat = M.reshape((-1, c, r))
+    # exact power-of-two scaling to entries of order one (no overflow for huge or tiny M)
+    peak = np.max(np.abs(flat), axis=(1, 2))
+    scale = np.where(peak > 0, np.exp2(np.round(np.log2(np.where(peak > 0, peak, 1.0)))), 1.0)
+    flat = flat / scale[:, None, None]
     up = mu_upper_bound(flat, structure, max_iter=upper_iterations)
     lo = mu_lower_bound(
         flat,
@@ -142,11 +147,11 @@ def mussv(
         iters=lower_iterations,
         rng=rng,
     )
-    lower = lo.lower
+    lower = lo.lower * scale
     # both bounds are certified; where they meet (full block, rank one) round-off may put the
     # lower one a few ulps above: raising a valid upper bound keeps it valid
-    upper = np.maximum(up.upper, lower)
-    delta = lo.delta
+    upper = np.maximum(up.upper * scale, lower)
+    delta = lo.delta / scale[:, None, None]
     resid = lo.residual
 
     def shape(x, tail=()):
@@ -159,7 +164,7 @@ def mussv(
         delta=delta.reshape(batch + (r, c)),
         D_left=up.D_left.reshape(batch + (c, c)),
         D_right=up.D_right.reshape(batch + (r, r)),
-        G=up.G.reshape(batch + (r, c)),
+        G=(up.G * scale[:, None, None]).reshape(batch + (r, c)),
         structure=structure,
         certificate_residual=shape(resid),
     )

@@ -1,7 +1,8 @@
 r"""Lower bound of the mixed structured singular value by a power iteration, with a certificate.
 
 Any ``Delta`` in the block structure with ``||Delta|| <= 1`` and a real eigenvalue ``lambda`` of
-``M Delta`` gives ``mu(M) >= |lambda|``: ``delta = Delta / lambda`` makes ``I - M delta`` singular and
+``M Delta`` gives ``mu(M) >= |lambda|``: ``delta = Delta / lambda`` makes ``I - M delta`` singular
+and
 has norm ``1 / |lambda|`` (for purely complex structures any eigenvalue works, its phase is absorbed
 in the complex blocks). The search for a good ``Delta`` is a mixed power iteration in the spirit of
 Young & Doyle (1997): with right/left eigenvectors ``a``, ``z`` of ``M Delta`` and ``w = M^* z``,
@@ -36,9 +37,13 @@ class LowerBoundResult:
     """Raw result of :func:`mu_lower_bound` for a flat batch ``(B, c, r)``."""
 
     lower: np.ndarray  # (B,)
-    delta: np.ndarray  # (B, r, c): destabilizing perturbation, ||delta|| = 1/lower (zeros if lower=0)
+    delta: (
+        np.ndarray
+    )  # (B, r, c): destabilizing perturbation, ||delta|| = 1/lower (zeros if lower=0)
     residual: np.ndarray  # (B,) sigma_min(I - M delta) / (1 + ||M delta||)
-    raw_delta: np.ndarray | None = None  # (B, r, c) best unit perturbation, eigenvalue maybe complex
+    raw_delta: np.ndarray | None = (
+        None  # (B, r, c) best unit perturbation, eigenvalue maybe complex
+    )
     raw_lambda: np.ndarray | None = None  # (B,) its eigenvalue of M raw_delta
 
 
@@ -147,9 +152,7 @@ def _power_iteration(M, structure, a, z, iters, kappa, rng):
             params.append(np.ones(nb, dtype=complex))
     za = np.sum(np.conj(z) * a, axis=1)
     phi = np.zeros(nb)
-    params, phi = _update_blocks(
-        structure, params, phi, a, w, za, np.zeros(nb, dtype=complex), 0.0
-    )
+    params, phi = _update_blocks(structure, params, phi, a, w, za, np.zeros(nb, dtype=complex), 0.0)
     real_only = all(b.kind == REAL for b in structure.blocks)
     real_pos = [k for k, b in enumerate(structure.blocks) if b.kind == REAL]
     for it in range(iters):
@@ -307,8 +310,12 @@ def mu_lower_bound(
         starts_a.append(a0)
         starts_z.append(a0)
     for _ in range(max(restarts, 0)):
-        starts_a.append(_normalize(rng.standard_normal((nb, c)) + 1j * rng.standard_normal((nb, c))))
-        starts_z.append(_normalize(rng.standard_normal((nb, c)) + 1j * rng.standard_normal((nb, c))))
+        starts_a.append(
+            _normalize(rng.standard_normal((nb, c)) + 1j * rng.standard_normal((nb, c)))
+        )
+        starts_z.append(
+            _normalize(rng.standard_normal((nb, c)) + 1j * rng.standard_normal((nb, c)))
+        )
     if not starts_a:
         starts_a.append(_normalize(np.ones((nb, c), dtype=complex)))
         starts_z.append(starts_a[0])
@@ -384,5 +391,7 @@ def mu_lower_bound(
         if block.kind == REAL:
             idx = np.arange(block.rows)
             d = raw[:, block.row_offset, block.col_offset].real
-            raw[:, block.row_offset + idx, block.col_offset + idx] = np.where(d < 0, -1.0, 1.0)[:, None]
+            raw[:, block.row_offset + idx, block.col_offset + idx] = np.where(d < 0, -1.0, 1.0)[
+                :, None
+            ]
     return LowerBoundResult(lower, out_delta, out_resid, raw, lam_raw[best_raw])

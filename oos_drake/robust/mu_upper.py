@@ -403,7 +403,11 @@ def mu_upper_bound(
                     Y[idx[bad]] = 0.0
                     rho[idx[bad]] = 0.0
                 # cap the step: log-scalings beyond e^{+-2} per iteration are never useful
-                dmax = np.max(np.abs(d[:, layout.log_par]), axis=1) if layout.log_par.size else np.zeros(len(d))
+                dmax = (
+                    np.max(np.abs(d[:, layout.log_par]), axis=1)
+                    if layout.log_par.size
+                    else np.zeros(len(d))
+                )
                 d *= np.minimum(1.0, 2.0 / np.maximum(dmax, 1e-300))[:, None]
                 alpha = np.ones(idx.size)
                 pending = np.ones(idx.size, dtype=bool)
@@ -485,9 +489,15 @@ def lmi_residual(M, beta, D_left, D_right, G) -> np.ndarray:
         ``(...)`` largest eigenvalue, relative to ``max eig(beta^2 D_r)``.
     """
     M = np.asarray(M, dtype=complex)
+    beta = np.asarray(beta, dtype=float)
+    # the LMI is homogeneous in (M, beta, G): divide by a power of two to avoid overflow
+    peak = np.max(np.abs(M), axis=(-2, -1))
+    sc = np.where(peak > 0, np.exp2(np.round(np.log2(np.where(peak > 0, peak, 1.0)))), 1.0)
+    M = M / sc[..., None, None]
+    beta = beta / sc
+    G = np.asarray(G) / sc[..., None, None]
     MH = np.conj(np.swapaxes(M, -1, -2))
     GM = G @ M
-    beta = np.asarray(beta, dtype=float)
     Hm = MH @ D_left @ M + 1j * (GM - np.conj(np.swapaxes(GM, -1, -2)))
     Hm = Hm - (beta**2)[..., None, None] * D_right
     Hm = 0.5 * (Hm + np.conj(np.swapaxes(Hm, -1, -2)))

@@ -69,7 +69,7 @@ class RobStabResult:
 
 
 def _refine(omega, values, count=4, points=12):
-    """New frequencies between the neighbours of the ``count`` highest local maxima of ``values``."""
+    """New frequencies next to the ``count`` highest local maxima of ``values``."""
     if omega.size < 3:
         return np.zeros(0)
     interior = (values[1:-1] >= values[:-2]) & (values[1:-1] >= values[2:])
@@ -93,8 +93,7 @@ def _eig_near(Mw, delta, target):
     return ev[np.argmin(np.abs(ev - target))]
 
 
-def _frequency_crossings(A, Bw, Cz, Dzw, structure, omega, up, lo, count=6, samples=16,
-                         window=8):
+def _frequency_crossings(A, Bw, Cz, Dzw, structure, omega, up, lo, count=6, samples=16, window=8):
     """Lower-bound candidates that also move the frequency.
 
     With real blocks, mu can be discontinuous in omega: a destabilizing ``Delta`` gives a real
@@ -121,8 +120,11 @@ def _frequency_crossings(A, Bw, Cz, Dzw, structure, omega, up, lo, count=6, samp
             continue
         # the upper bound smears a real-parameter peak over neighbouring points: search wider
         lo_i, hi_i = max(k - window, 0), min(k + window, omega.size - 1)
-        ws = np.unique(np.concatenate([omega[lo_i : hi_i + 1],
-                                       np.linspace(omega[lo_i], omega[hi_i], samples + 1)]))
+        ws = np.unique(
+            np.concatenate(
+                [omega[lo_i : hi_i + 1], np.linspace(omega[lo_i], omega[hi_i], samples + 1)]
+            )
+        )
         Ms = delta_channel_response(A, Bw, Cz, Dzw, ws)
         evs = np.linalg.eigvals(Ms @ D)  # (S, n)
         best = (0.0, None, None)
@@ -187,8 +189,9 @@ def _polish_peaks(A, Bw, Cz, Dzw, structure, omega, up, lo, count=4, rounds=2):
         if not order:
             break
         Mk = delta_channel_response(A, Bw, Cz, Dzw, omega[order])
-        better = mu_upper_bound(Mk, structure, max_iter=600,
-                                temperatures=(30.0, 300.0, 3000.0)).upper
+        better = mu_upper_bound(
+            Mk, structure, max_iter=600, temperatures=(30.0, 300.0, 3000.0)
+        ).upper
         for i, value in zip(order, better, strict=True):
             up[i] = max(min(up[i], value), lo[i])
             done.add(i)
@@ -227,8 +230,9 @@ def mu_sweep(A, Bw, Cz, Dzw, blk, omega, *, refine_rounds=2, mu_options=None):
         wx, lx, dx = _frequency_crossings(A, Bw, Cz, Dzw, res.structure, omega, up, lo)
         if wx.size:
             # mu_upper at the crossing frequencies too, so that lower <= upper holds pointwise
-            ux = np.atleast_1d(mussv(delta_channel_response(A, Bw, Cz, Dzw, wx), res.structure,
-                                     **mu_options).upper)
+            ux = np.atleast_1d(
+                mussv(delta_channel_response(A, Bw, Cz, Dzw, wx), res.structure, **mu_options).upper
+            )
             omega = np.concatenate([omega, wx])
             up = np.concatenate([up, np.maximum(ux, lx)])
             lo = np.concatenate([lo, lx])
@@ -238,8 +242,15 @@ def mu_sweep(A, Bw, Cz, Dzw, blk, omega, *, refine_rounds=2, mu_options=None):
     return omega, up, lo, dl, res.structure
 
 
-def robstab(sys, omega=None, *, blocks=None, points_per_decade: int = 40, refine_rounds: int = 2,
-            mu_options: dict | None = None) -> RobStabResult:
+def robstab(
+    sys,
+    omega=None,
+    *,
+    blocks=None,
+    points_per_decade: int = 40,
+    refine_rounds: int = 2,
+    mu_options: dict | None = None,
+) -> RobStabResult:
     """Robust stability margin of an uncertain LFR.
 
     Parameters
@@ -311,6 +322,10 @@ def robstab(sys, omega=None, *, blocks=None, points_per_decade: int = 40, refine
             b = structure.blocks[rows[0]]
             sub = dl[k][b.r_slice, b.c_slice]
             worst_norm[name] = (
-                float(sub[0, 0].real) if kind == "ureal" else complex(sub[0, 0]) if kind == "ucomplex" else sub
+                float(sub[0, 0].real)
+                if kind == "ureal"
+                else complex(sub[0, 0])
+                if kind == "ucomplex"
+                else sub
             )
     return RobStabResult(lower, upper, wc, worst, worst_norm, True, omega, up, lo)

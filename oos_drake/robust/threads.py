@@ -35,8 +35,10 @@ def limit_blas_threads(n: int = 1) -> int:
     import scipy
 
     count = 0
-    dirs = [os.path.join(os.path.dirname(os.path.dirname(m.__file__)), f"{m.__name__}.libs")
-            for m in (numpy, scipy)]
+    dirs = [
+        os.path.join(os.path.dirname(os.path.dirname(m.__file__)), f"{m.__name__}.libs")
+        for m in (numpy, scipy)
+    ]
     for path in sorted({p for d in dirs for p in glob.glob(os.path.join(d, "*openblas*.so*"))}):
         try:
             lib = ctypes.CDLL(path)

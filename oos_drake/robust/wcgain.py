@@ -134,7 +134,9 @@ def skewed_gain_bounds(M, nz, nw, blk, *, tol=1e-3, upper_iterations=60, rng=Non
         lb = mu_lower_bound(Mg, s_aug, rng=rng)
         d_unc = lb.delta[:, :nw, :nz]
         norms = np.linalg.norm(d_unc, ord=2, axis=(-2, -1))
-        d_unit = np.where((norms > 0)[:, None, None], d_unc / np.maximum(norms, 1e-300)[:, None, None], 0.0)
+        d_unit = np.where(
+            (norms > 0)[:, None, None], d_unc / np.maximum(norms, 1e-300)[:, None, None], 0.0
+        )
         gains = _closed_gain(M11[live], M12[live], M21[live], M22[live], d_unit)
         better = np.isfinite(gains) & (gains > lower[live])
         lower[live[better]] = gains[better]
@@ -149,8 +151,16 @@ def skewed_gain_bounds(M, nz, nw, blk, *, tol=1e-3, upper_iterations=60, rng=Non
     return lower, upper, delta_best, nominal
 
 
-def wcgain(sys, omega=None, *, blocks=None, tol: float = 1e-3, points_per_decade: int = 30,
-           refine_rounds: int = 1, upper_iterations: int = 60) -> WcGainResult:
+def wcgain(
+    sys,
+    omega=None,
+    *,
+    blocks=None,
+    tol: float = 1e-3,
+    points_per_decade: int = 30,
+    refine_rounds: int = 1,
+    upper_iterations: int = 60,
+) -> WcGainResult:
     """Worst-case peak gain of an uncertain LFR over its uncertainty (unit normalized size).
 
     Parameters
@@ -216,7 +226,9 @@ def wcgain(sys, omega=None, *, blocks=None, tol: float = 1e-3, points_per_decade
     for _ in range(refine_rounds):
         fin_up = np.where(np.isfinite(up), up, np.nanmax(np.where(np.isfinite(up), up, 0)) * 10 + 1)
         fin_lo = np.where(np.isfinite(lo), lo, np.nanmax(np.where(np.isfinite(lo), lo, 0)) * 10 + 1)
-        new = np.setdiff1d(np.unique(np.concatenate([_refine(omega, fin_up), _refine(omega, fin_lo)])), omega)
+        new = np.setdiff1d(
+            np.unique(np.concatenate([_refine(omega, fin_up), _refine(omega, fin_lo)])), omega
+        )
         if new.size == 0:
             break
         l2, u2, d2, n2 = evaluate(new)
@@ -231,7 +243,19 @@ def wcgain(sys, omega=None, *, blocks=None, tol: float = 1e-3, points_per_decade
     for name, kind, rows in zip(bmap.names, bmap.kinds, bmap.blk_rows, strict=True):
         b = structure.blocks[rows[0]]
         sub = dl[k][b.r_slice, b.c_slice]
-        worst_norm[name] = float(sub[0, 0].real) if kind == "ureal" else (
-            complex(sub[0, 0]) if kind == "ucomplex" else sub)
-    return WcGainResult(float(lo[k]), float(up.max()), float(omega[k]), worst, worst_norm,
-                        float(nom.max()), omega, lo, up)
+        worst_norm[name] = (
+            float(sub[0, 0].real)
+            if kind == "ureal"
+            else (complex(sub[0, 0]) if kind == "ucomplex" else sub)
+        )
+    return WcGainResult(
+        float(lo[k]),
+        float(up.max()),
+        float(omega[k]),
+        worst,
+        worst_norm,
+        float(nom.max()),
+        omega,
+        lo,
+        up,
+    )

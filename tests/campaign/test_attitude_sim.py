@@ -121,3 +121,24 @@ def test_expm_small_matches_scipy():
         np.testing.assert_allclose(
             expm_small(matrix), expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max()
         )
+
+
+def test_cheap_simulator_passes_the_protocol_check():
+    from oos_drake.campaign.simulator import check_simulator
+
+    output = check_simulator(FlexibleAttitudeSimulator(control_rate=5.0))
+    assert output.metrics["ape"] > 0
+
+
+def test_protocol_check_catches_a_non_reproducible_simulator():
+    from oos_drake.campaign.simulator import RunOutput, check_simulator
+
+    class Drifting(FlexibleAttitudeSimulator):
+        calls = [0]
+
+        def run(self, case):
+            self.calls[0] += 1
+            return RunOutput({"ape": 1.0 * self.calls[0], "peak_torque": 1.0, "rms_attitude": 1.0})
+
+    with pytest.raises(ValueError, match="not reproducible"):
+        check_simulator(Drifting())

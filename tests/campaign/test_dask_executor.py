@@ -25,6 +25,8 @@ def test_dask_local_cluster_threads_matches_inline(write_spec):
         executor.close()
     inline = {r.run_id: r for r in InlineExecutor().run(spec.simulator, cases)}
     assert sorted(dask_results) == list(range(spec.n_runs))
+    # each worker thread built its own simulator exactly once
+    assert {r.simulator_builds for r in dask_results.values()} == {1}
     for run_id, result in inline.items():
         assert dask_results[run_id].status == result.status == "ok"
         assert dask_results[run_id].metrics == result.metrics

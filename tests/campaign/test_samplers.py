@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import math
 
+import hypothesis
+import hypothesis.strategies as st
 import numpy as np
 import pytest
+import scipy.integrate
 import scipy.stats
 
 from oos_drake.campaign.distributions import Choice, LogUniform, TruncatedNormal, Uniform
@@ -146,3 +149,33 @@ def test_plan_columns_and_nominal_values(write_spec):
     assert (plan["window_start [s]"] == 95.0).all() and (plan["window_end [s]"] == 140.0).all()
     # same seed, same plan
     assert make_plan(spec).equals(plan)
+
+
+def test_truncated_normal_far_tail_matches_scipy():
+    q = np.linspace(0.0, 1.0, 11)
+    dist = TruncatedNormal(0.3, 0.01, 0.35, 0.4)  # 5 to 10 std above the mean
+    reference = scipy.stats.truncnorm(5.0, 10.0, loc=0.3, scale=0.01)
+    np.testing.assert_allclose(dist.ppf(q), reference.ppf(q), rtol=1e-9)
+    x = np.linspace(0.351, 0.399, 7)
+    np.testing.assert_allclose(dist.pdf(x), reference.pdf(x), rtol=1e-9)
+    # 40 std away from the mean: still a proper density (no underflow to 0/0)
+    far = TruncatedNormal(0.0, 0.05, 2.0, 2.5)
+    assert np.all(np.isfinite(far.pdf(np.array([2.0, 2.01, 2.2])))) and far.pdf(2.0) > 0
+    assert 2.0 <= far.ppf(np.array([0.5]))[0] <= 2.01
+
+
+@hypothesis.settings(max_examples=40, deadline=None)
+@hypothesis.given(
+    mean=st.floats(-5, 5),
+    std=st.floats(0.05, 5),
+    low=st.floats(-6, 5.9),
+    width=st.floats(0.1, 8),
+)
+def test_truncated_normal_is_a_density_on_its_support(mean, std, low, width):
+    high = low + width
+    dist = TruncatedNormal(mean, std, low, high)
+    total, _ = scipy.integrate.quad(dist.pdf, low, high, points=[min(max(mean, low), high)])
+    assert total == pytest.approx(1.0, rel=1e-6)
+    u = np.linspace(0.0, 1.0, 21)
+    x = dist.ppf(u)
+    assert np.all(np.diff(x) >= 0) and x[0] >= low and x[-1] <= high

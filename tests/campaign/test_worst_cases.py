@@ -64,6 +64,7 @@ def test_round_trip_and_schema(tmp_path):
             "outside the range of J_hub",
         ),
         (lambda t: t.assign(region=[1, 1]), "duplicated region ids"),
+        (lambda t: t.assign(region=[-1, 1]), "region ids must be >= 0"),
     ],
 )
 def test_bad_worst_cases_rejected(tmp_path, mutate, message):

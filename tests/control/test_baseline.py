@@ -21,8 +21,12 @@ def test_gains_are_the_paper_formula():
 def test_rigid_loop_is_critically_damped_at_omega_att():
     # J phi'' = -K_p phi - K_d phi'  ->  phi'' + 2 w phi' + w^2 phi = 0: double poles at -w
     K = baseline_gains(J)
-    A = np.block([[np.zeros((3, 3)), np.eye(3)],
-                  [-np.linalg.solve(J, K[:, :3]), -np.linalg.solve(J, K[:, 3:])]])
+    A = np.block(
+        [
+            [np.zeros((3, 3)), np.eye(3)],
+            [-np.linalg.solve(J, K[:, :3]), -np.linalg.solve(J, K[:, 3:])],
+        ]
+    )
     poles = np.linalg.eigvals(A)
     np.testing.assert_allclose(poles.real, -OMEGA_ATT, rtol=1e-5)
     np.testing.assert_allclose(poles.imag, 0.0, atol=1e-5)

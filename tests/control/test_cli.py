@@ -11,8 +11,23 @@ from oos_drake.cli import main
 
 def test_synth_writes_every_output(tmp_path):
     out = tmp_path / "synth"
-    status = main(["synth", "--plant", "synthetic", "--configurations", "3", "--restarts", "0",
-                   "--max-iterations", "5", "--worst-case-rounds", "0", "--out", str(out)])
+    status = main(
+        [
+            "synth",
+            "--plant",
+            "synthetic",
+            "--configurations",
+            "3",
+            "--restarts",
+            "0",
+            "--max-iterations",
+            "5",
+            "--worst-case-rounds",
+            "0",
+            "--out",
+            str(out),
+        ]
+    )
     assert status == 0
     record = json.loads((out / "controller.json").read_text())
     K_p = np.array(record["controller"]["K_p"]["value"])

@@ -30,7 +30,8 @@ def test_sensors_and_wheels_match_their_transfer_functions():
     )
     np.testing.assert_allclose(
         siso_response(comp.second_order(200.0, 0.7), w),
-        w200**2 / (s**2 + 2 * 0.7 * w200 * s + w200**2), rtol=1e-12,
+        w200**2 / (s**2 + 2 * 0.7 * w200 * s + w200**2),
+        rtol=1e-12,
     )
 
 

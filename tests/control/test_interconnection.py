@@ -28,26 +28,44 @@ def reference_closed_loop(plant: control.StateSpace, K):
     w8, w200 = 2 * np.pi * 8, 2 * np.pi * 200
     sst = control.ss(1 / (s / w8 + 1) * I3, inputs=sig("phi"), outputs=sig("phi_m"))
     gyro = control.ss(1 / (s / w200 + 1) * I3, inputs=sig("w"), outputs=sig("w_m"))
-    rw = control.ss(w200**2 / (s**2 + 1.4 * w200 * s + w200**2) * I3, inputs=sig("u"),
-                    outputs=sig("T_rw"))
+    rw = control.ss(
+        w200**2 / (s**2 + 1.4 * w200 * s + w200**2) * I3, inputs=sig("u"), outputs=sig("T_rw")
+    )
     import scipy.signal
+
     b, a = scipy.signal.butter(4, 2 * np.pi * 0.7, analog=True)
     ro = control.ss(control.tf(b, a) * I3, inputs=sig("u_K"), outputs=sig("u"))
     wext = control.ss(
         control.tf([1], [2.236, 0.2236]) * np.diag([0.002577, 0.009685, 0.01239]),
-        inputs=sig("d_ext"), outputs=sig("T_dist"))
+        inputs=sig("d_ext"),
+        outputs=sig("T_dist"),
+    )
     sum_T = control.summing_junction(inputs=["T_rw", "T_dist"], output="T", dimension=3)
-    ctrl = control.ss([], [], [], np.asarray(K), inputs=sig("y_att") + sig("y_rate"),
-                      outputs=sig("u_K"))
-    meas_att = control.ss([], [], [], np.hstack([-I3, -1.5343e-5 * I3]),
-                          inputs=sig("phi_m") + sig("n_sst"), outputs=sig("y_att"))
-    meas_rate = control.ss([], [], [], np.hstack([-I3, -9.1987e-4 * I3]),
-                           inputs=sig("w_m") + sig("n_gyro"), outputs=sig("y_rate"))
+    ctrl = control.ss(
+        [], [], [], np.asarray(K), inputs=sig("y_att") + sig("y_rate"), outputs=sig("u_K")
+    )
+    meas_att = control.ss(
+        [],
+        [],
+        [],
+        np.hstack([-I3, -1.5343e-5 * I3]),
+        inputs=sig("phi_m") + sig("n_sst"),
+        outputs=sig("y_att"),
+    )
+    meas_rate = control.ss(
+        [],
+        [],
+        [],
+        np.hstack([-I3, -9.1987e-4 * I3]),
+        inputs=sig("w_m") + sig("n_gyro"),
+        outputs=sig("y_rate"),
+    )
     e_p = control.ss([], [], [], I3 / 0.0079, inputs=sig("phi"), outputs=sig("e_p"))
     e_u = control.ss([], [], [], 0.5 * I3, inputs=sig("u"), outputs=sig("e_u"))
     return control.interconnect(
         [P, integ1, integ2, sst, gyro, rw, ro, wext, sum_T, ctrl, meas_att, meas_rate, e_p, e_u],
-        inputs=sig("d_ext") + sig("n_sst") + sig("n_gyro"), outputs=sig("e_p") + sig("e_u"),
+        inputs=sig("d_ext") + sig("n_sst") + sig("n_gyro"),
+        outputs=sig("e_p") + sig("e_u"),
     )
 
 
@@ -65,8 +83,7 @@ def test_closed_loop_matches_python_control_interconnect():
 
 
 def test_batched_plants_give_batched_interconnection():
-    A, B, C, D = flexible_rotational_plant(
-        np.stack([J, 2 * J]) - L @ L.T, L, [8.0, 20.0], 0.01)
+    A, B, C, D = flexible_rotational_plant(np.stack([J, 2 * J]) - L @ L.T, L, [8.0, 20.0], 0.01)
     W = weighted_interconnection(plant_statespace(A, B, C, D))
     assert W.system.batch_shape == (2,)
     single = weighted_interconnection(plant_statespace(A[1], B[1], C[1], D[1]))

@@ -15,7 +15,8 @@ L = np.array([[3.0, 0.5], [0.2, 2.5], [0.4, -0.3]])
 @pytest.fixture(scope="module")
 def problem():
     A, B, C, D = flexible_rotational_plant(
-        np.stack([J, 1.4 * J]) - L @ L.T, L, np.array([[9.0, 25.0], [8.0, 22.0]]), 0.01)
+        np.stack([J, 1.4 * J]) - L @ L.T, L, np.array([[9.0, 25.0], [8.0, 22.0]]), 0.01
+    )
     W = weighted_interconnection(plant_statespace(A, B, C, D))
     K = baseline_gains(J) * np.array([12, 12, 12, 3, 3, 3])
     K = K + 0.05 * np.abs(K).mean() * np.random.default_rng(0).normal(size=K.shape)
@@ -31,8 +32,10 @@ def test_gradient_matches_finite_differences(problem):
     for _ in range(3):
         direction = rng.normal(size=K.shape) * scale
         h = 1e-6
-        fd = (evaluate(W, K + h * direction, focus=None).gamma
-              - evaluate(W, K - h * direction, focus=None).gamma) / (2 * h)
+        fd = (
+            evaluate(W, K + h * direction, focus=None).gamma
+            - evaluate(W, K - h * direction, focus=None).gamma
+        ) / (2 * h)
         assert np.sum(ev.gradient * direction) == pytest.approx(fd, rel=1e-4, abs=1e-9 * scale)
 
 

@@ -47,6 +47,9 @@ def test_connect_output_feeds_every_input_of_that_name_and_vector_names():
     g3 = LFR.from_matrix(np.array([[5.0]]), input_names=["b"], output_names=["d"])
     out = connect([g1, g2, g3], inputs=["a"], outputs=["c", "d", "b"])
     np.testing.assert_allclose(out.M, [[6.0], [10.0], [2.0]])
+    # an external input named like an internal signal is injected there (MATLAB connect)
+    inj = connect([g1, g2], inputs=["a", "b"], outputs=["c"])
+    np.testing.assert_allclose(inj.M, [[6.0, 3.0]])
     vec = LFR.from_matrix(np.diag([1.0, 2.0]), input_names="v", output_names="w")
     assert vec.input_names == ("v[0]", "v[1]")
     out = connect([vec], inputs=["v"], outputs=["w"])
@@ -91,6 +94,19 @@ def test_reduce_removes_redundant_occurrences_and_states():
         np.testing.assert_allclose(
             usubs(r, {"m": mv}).freqresp(OMEGA), usubs(twice, {"m": mv}).freqresp(OMEGA), rtol=1e-10
         )
+
+
+def test_reduce_model_array_common_basis():
+    m = ureal("m", 2.0, percent=10)
+    k = ureal("k", 1.0, percent=10)
+    s = control.tf("s")
+    P = inv(m) * (1 / s**2)
+    arr = usubs(P + P * k + P * k, {"k": np.array([0.9, 1.0, 1.1])})
+    red = arr.reduce()
+    assert arr.nstates == 6 and red.nstates == 2 and red.occurrences == {"m": 1}
+    np.testing.assert_allclose(
+        usubs(red, {"m": 2.1}).freqresp(OMEGA), usubs(arr, {"m": 2.1}).freqresp(OMEGA), rtol=1e-10
+    )
 
 
 def test_reduce_random_algebra_keeps_response():

@@ -62,3 +62,64 @@ def test_chunking_gives_same_result(monkeypatch):
 
     monkeypatch.setattr(fr, "CHUNK_ENTRIES", 1)
     np.testing.assert_allclose(fr.freqresp(batch, OMEGA), full, rtol=1e-14)
+
+
+def test_integrator_tail_paths_match_direct_solve():
+    """Rigid-body-like outputs (integrator chains) with stable, slow and defective cores."""
+    import oos_drake.lfr.frequency as fr
+
+    rng = np.random.default_rng(5)
+    cores = [
+        random_ss(rng, 4, 2, 2).A - 5.0 * np.eye(4),  # |poles| >= 5: partial fractions
+        np.array([[-1e-4, 1.0], [0.0, -2.0]]),  # slow pole: augmented path
+        np.array([[-1.0, 1.0], [0.0, -1.0]]),  # defective core: clustered path
+    ]
+    for A11 in cores:
+        m = A11.shape[0]
+        n = m + 3
+        A = np.zeros((n, n))
+        A[:m, :m] = A11
+        A[m:, :m] = rng.standard_normal((3, m))
+        A[m + 1, m] = 1.0
+        A[m + 2, m + 1] = 1.0  # chain of three integrators
+        B = rng.standard_normal((n, 2))
+        C = rng.standard_normal((2, n))
+        D = rng.standard_normal((2, 2))
+        sys = LFR.from_ss(A, B, C, D)
+        core, tail, q = fr._integrator_tail(A[None])
+        assert tail.size == 3 and q == 3
+        if A11.shape[0] == 4:  # this core takes the partial-fraction path
+            assert (OMEGA.max() / np.abs(np.linalg.eigvals(A11)).min()) ** q < 1e6
+        expected = fr._direct_response(A, B, C, D, 1j * OMEGA)
+        np.testing.assert_allclose(sys.freqresp(OMEGA), expected, rtol=1e-9, atol=1e-12)
+
+
+def test_clustered_path_for_defective_eigenvalues_inside_the_spectrum(monkeypatch):
+    import oos_drake.lfr.frequency as fr
+
+    rng = np.random.default_rng(8)
+    R = random_ss(rng, 4, 1, 1).A
+    A = np.zeros((6, 6))
+    A[:2, :2] = [[-0.5, 1.0], [0.0, -0.5]]  # Jordan block (defective)
+    A[2:, 2:] = R
+    A[:2, 2:] = rng.standard_normal((2, 4))
+    A[2:, :2] = 0.0  # keep the Jordan block exact
+    T = np.linalg.qr(rng.standard_normal((6, 6)))[0]  # hide the structure from the pattern
+    A = T @ A @ T.T
+    B = rng.standard_normal((6, 2))
+    C = rng.standard_normal((3, 6))
+    D = np.zeros((3, 2))
+    core, tail, _ = fr._integrator_tail(A[None])
+    assert tail.size == 0
+    lam, V = np.linalg.eig(A)
+    X = np.linalg.solve(V, fr._probes(6))
+    kappa = np.sqrt(6) * np.max(np.abs(X), axis=1) * np.linalg.norm(V, axis=0)
+    assert 0 < np.sum(kappa > fr.EIG_COND_LIMIT) < 6  # a proper cluster is flagged
+    expected = fr._direct_response(A, B, C, D, 1j * OMEGA)
+
+    def no_fallback(*args, **kwargs):
+        raise AssertionError("the clustered path should handle this model")
+
+    monkeypatch.setattr(fr, "_direct_response", no_fallback)
+    sys = LFR.from_ss(np.stack([A, A]), B, C, D)
+    np.testing.assert_allclose(sys.freqresp(OMEGA), np.stack([expected, expected]), rtol=1e-9)

@@ -86,3 +86,48 @@ def test_algebra_then_usubs_equals_control(scenario):
     poles = np.linalg.eigvals(ctl_ss.A) if ctl_ss.nstates else np.zeros(0)
     assume(np.all(np.min(np.abs(1j * OMEGA[:, None] - poles[None, :]), axis=1, initial=1.0) > 1e-3))
     assert_response_close(closed.freqresp(OMEGA), expected, rtol=1e-9)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(scenarios())
+def test_reduce_preserves_the_substituted_response(scenario):
+    seed, orders, size, ops, deltas = scenario
+    rng = np.random.default_rng(seed)
+    blocks = _ureals()
+    systems = [random_ss(rng, n, size, size, d_scale=0.2) for n in orders]
+    expr = systems[0] * blocks[0]
+    for k, op in enumerate(ops):
+        other = systems[(k + 1) % 3]
+        j = k % 3
+        if op in ("series", "gain"):
+            expr = expr * (blocks[j] * other)
+        elif op in ("parallel", "rmul"):
+            expr = expr + other * blocks[j] + other * blocks[j]  # deliberately redundant
+        elif op == "sub":
+            expr = blocks[j] * other - expr
+        elif op == "feedback":
+            expr = feedback(expr, blocks[j] * other)
+        elif op == "inverse":
+            expr = inv(expr + 3.0 * np.eye(size) * blocks[1])
+    try:
+        red = expr.reduce()
+    except ValueError:
+        assume(False)
+    assert red.nstates <= expr.nstates
+    for name, reps in red.occurrences.items():
+        assert reps <= expr.occurrences[name]
+    values = {
+        name: np.array([-1.0, d, 1.0])
+        for name, d in zip("abc", deltas, strict=True)
+        if name in expr.occurrences
+    }
+    try:
+        full = usubs(expr, values, normalized=True).freqresp(OMEGA)
+    except ValueError:
+        assume(False)
+    small = usubs(
+        red, {k: v for k, v in values.items() if k in red.occurrences}, normalized=True
+    ).freqresp(OMEGA)
+    assume(np.all(np.isfinite(full)) and np.max(np.abs(full)) < 1e6)
+    scale = np.max(np.abs(full), axis=(-2, -1), keepdims=True) + 1e-12
+    assert np.max(np.abs(small - full) / scale) < 1e-7

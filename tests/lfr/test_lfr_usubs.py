@@ -150,3 +150,30 @@ def test_pickle_round_trip_and_numpy_scalar_operands():
     scaled = np.float64(3.0) * k
     assert isinstance(scaled, LFR)
     assert usubs(scaled, {"k": 2.5}).M[0, 0] == pytest.approx(7.5)
+
+
+def test_lftdata_round_trip_and_dynamic_ultidyn_substitution():
+    from oos_drake.lfr import lft, lftdata
+
+    rng = np.random.default_rng(4)
+    P = random_ss(rng, 2, 1, 1)
+    D = ultidyn("D", (2, 1), bound=0.5)
+    k = ureal("k", 1.0, range=(0.5, 3.0))
+    sys = P * k * (1 + np.ones((1, 2)) @ D)
+    M, Delta = lftdata(sys)
+    assert M.is_certain and M.shape == (1 + 1 + 1, 1 + 2 + 1)  # z: k, D(1);  w: k, D(2)
+    assert Delta.occurrences == {"D": 1, "k": 1}
+    vals = {"k": 0.4, "D": [[0.3], [-0.6]]}
+    np.testing.assert_allclose(
+        usubs(lft(Delta, M), vals, normalized=True).freqresp(OMEGA),
+        usubs(sys, vals, normalized=True).freqresp(OMEGA),
+        rtol=1e-12,
+    )
+    # a dynamic value for the ultidyn block (physical: includes the bound)
+    dyn = control.ss([[-2.0]], [[1.0]], [[0.2], [0.1]], [[0.0], [0.05]])
+    out = usubs(sys, {"D": dyn, "k": 2.0})
+    direct = control.series(dyn, control.ss([], [], [], np.ones((1, 2))))  # [1 1] * dyn
+    expected = control_response(P * 2.0 * (1 + direct), OMEGA)
+    np.testing.assert_allclose(out.freqresp(OMEGA), expected, rtol=1e-10)
+    with pytest.raises(ValueError, match="only ultidyn"):
+        usubs(sys, {"k": dyn})

@@ -18,7 +18,7 @@ block_row = st.one_of(
     blk=st.lists(block_row, min_size=1, max_size=4),
     seed=st.integers(0, 2**32 - 1),
     real_matrix=st.booleans(),
-    scale=st.sampled_from([1e-3, 1.0, 1e3]),
+    scale=st.sampled_from([1e-150, 1e-3, 1.0, 1e3, 1e150]),
 )
 def test_bounds_ordered_and_certified(blk, seed, real_matrix, scale):
     structure = parse_blk(blk)

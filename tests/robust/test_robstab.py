@@ -1,4 +1,4 @@
-"""robstab / wcgain / robust_sweep against margins found by sweeping parameters and tracking poles."""
+"""robstab, wcgain, robust_sweep against margins from parameter sweeps tracking the poles."""
 
 import control
 import numpy as np
@@ -118,10 +118,37 @@ def test_robust_sweep_table_and_consistency_with_robstab():
     arr = usubs(loop, {"g": np.array([0.9, 1.0, 1.1])})
     omega = np.linspace(0.5, 6.0, 40)
     df = robust_sweep(arr, omega, subsets={"k": ["k"]}, times=np.array([0.0, 10.0, 20.0]))
-    assert list(df.columns) == ["model", "time", "frequency", "mu_lower", "mu_upper", "subset", "refined"]
+    assert list(df.columns) == [
+        "model",
+        "time",
+        "frequency",
+        "mu_lower",
+        "mu_upper",
+        "subset",
+        "refined",
+    ]
     assert set(df.model) == {0, 1, 2}
     assert np.all(df.mu_lower <= df.mu_upper * (1 + 1e-9))
     assert_allclose(np.sort(df.frequency.unique())[:3] * 2 * np.pi, omega[:3])
     assert df[df.model == 1].time.iloc[0] == 10.0
     with pytest.raises(ValueError, match="unknown"):
         robust_sweep(arr, omega, subsets={"bad": ["nope"]})
+
+
+def test_complex_scalar_margin_matches_dense_frequency_sweep():
+    # loop 1 + c P(s) = 0 with c = 1 + 0.5 delta (ucomplex): the smallest destabilizing |delta|
+    # at frequency w solves 1 + (1 + 0.5 delta) P(jw) = 0, i.e. delta = -2 (1 + 1/P(jw))
+    from oos_drake.lfr import ucomplex
+
+    P = control.tf([4.0], [1.0, 2.0, 1.0])
+    c = ucomplex("c", 1.0, 0.5)
+    loop = feedback(c * P, 1)
+    w = np.linspace(0.0, 20.0, 400001)
+    Pjw = 4.0 / (1j * w + 1.0) ** 2
+    exact = np.min(np.abs(2.0 * (1.0 + 1.0 / Pjw)))
+    res = robstab(loop)
+    assert_allclose(res.upper, exact, rtol=1e-4)
+    assert_allclose(res.lower, exact, rtol=1e-3)
+    c_wc = res.worst_case["c"]  # physical complex value
+    P_crit = 4.0 / (1j * res.critical_frequency + 1.0) ** 2
+    assert abs(1.0 + c_wc * P_crit) < 1e-8

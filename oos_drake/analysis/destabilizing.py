@@ -1,0 +1,266 @@
+r"""Destabilizing perturbations by a direct search: a lower bound of mu for real-parameter sets.
+
+The power iteration of mussv's lower bound struggles with real parameters (mu is discontinuous
+in frequency for them). Stability gives another route: for real blocks ``delta_r`` (normalized,
+one scalar per block, repeated on its channels) the closed loop
+
+.. math:: A(\Delta) = A + B_w \Delta (I - D_{zw} \Delta)^{-1} C_z
+
+is unstable beyond the smallest ``alpha`` for which ``A(alpha diag(d))`` has a pole on the
+imaginary axis. This module
+
+1. searches the sign vertices ``d in {-1, 1}^n`` (all of them up to 2^10, else random ones),
+   bisecting ``alpha`` on the spectral abscissa and polishing the crossing by the secant method;
+2. adds the complex blocks (``ultidyn``): at the real part ``alpha d`` it closes the real
+   channels and asks the complex-mu power iteration for a complex perturbation of size
+   ``<= alpha`` that makes ``I - M(j omega) Delta`` singular on a frequency grid, bisecting
+   ``alpha`` again.
+
+Whatever it returns is checked: ``sigma_min(I - M(j omega) delta)`` at round-off level, so
+``1 / ||delta||`` is a certified lower bound of mu (``||delta|| = max block norm``).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from oos_drake.robust.blocks import REAL, parse_blk
+from oos_drake.robust.lfr_analysis import delta_channel_response
+
+
+@dataclass(frozen=True)
+class Destabilizer:
+    """A destabilizing structured perturbation.
+
+    Attributes
+    ----------
+    mu_lower : float
+        ``1 / ||delta||`` (0 when none was found within ``alpha_max``).
+    omega : float
+        Frequency [rad/s] at which ``det(I - M(j omega) delta) = 0`` (closed-loop pole ``j omega``).
+    delta : numpy.ndarray
+        Perturbation in the mussv layout of the structure.
+    residual : float
+        ``sigma_min(I - M delta) / (1 + ||M delta||)`` at ``omega``.
+    """
+
+    mu_lower: float
+    omega: float
+    delta: np.ndarray
+    residual: float
+
+
+def _expand(structure, real_values, complex_blocks=None):
+    """Perturbation matrix from one value per real block and matrices for the complex ones."""
+    delta = np.zeros((structure.n_rows, structure.n_cols), dtype=complex)
+    k = 0
+    c = 0
+    for block in structure.blocks:
+        if block.kind == REAL:
+            idx = np.arange(block.rows)
+            delta[block.row_offset + idx, block.col_offset + idx] = real_values[k]
+            k += 1
+        elif complex_blocks is not None:
+            delta[block.r_slice, block.c_slice] = complex_blocks[c]
+            c += 1
+        else:
+            c += 1
+    return delta
+
+
+def _closed_A(A, Bw, Cz, Dzw, delta):
+    n = delta.shape[0]
+    X = np.linalg.solve(np.eye(Dzw.shape[0]) - Dzw @ delta, Cz)
+    return A + Bw @ delta @ X
+
+
+def _abscissa(A, Bw, Cz, Dzw, delta):
+    try:
+        ev = np.linalg.eigvals(_closed_A(A, Bw, Cz, Dzw, delta))
+    except np.linalg.LinAlgError:
+        return np.inf, 0.0
+    k = int(np.argmax(ev.real))
+    return float(ev[k].real), float(abs(ev[k].imag))
+
+
+def real_vertex_search(A, Bw, Cz, Dzw, blk, *, alpha_max: float = 8.0, max_vertices: int = 1024,
+                       rng: np.random.Generator | None = None):
+    """Smallest ``alpha`` over sign vertices with a closed-loop pole on the imaginary axis.
+
+    Only the real blocks of ``blk`` are perturbed (complex blocks at zero).
+
+    Returns
+    -------
+    alpha : float
+        ``inf`` if no vertex destabilizes within ``alpha_max``.
+    signs : numpy.ndarray
+        The vertex (one sign per real block).
+    omega : float
+        Crossing frequency [rad/s].
+    """
+    structure = parse_blk(blk)
+    n_real = sum(1 for b in structure.blocks if b.kind == REAL)
+    if n_real == 0:
+        return np.inf, np.zeros(0), np.nan
+    if 2**n_real <= max_vertices:
+        vertices = np.array(list(itertools.product([-1.0, 1.0], repeat=n_real)))
+    else:
+        rng = rng or np.random.default_rng(0)
+        vertices = rng.choice([-1.0, 1.0], size=(max_vertices, n_real))
+    best = (np.inf, np.zeros(n_real), np.nan)
+    for d in vertices:
+        hi = min(alpha_max, best[0])
+        a_hi, _ = _abscissa(A, Bw, Cz, Dzw, _expand(structure, hi * d))
+        if a_hi < 0:
+            continue
+        lo, a_lo = 0.0, _abscissa(A, Bw, Cz, Dzw, _expand(structure, 0 * d))[0]
+        for _ in range(22):
+            mid = 0.5 * (lo + hi)
+            a_mid, _ = _abscissa(A, Bw, Cz, Dzw, _expand(structure, mid * d))
+            if a_mid >= 0:
+                hi, a_hi = mid, a_mid
+            else:
+                lo, a_lo = mid, a_mid
+        # secant polish of the crossing: abscissa(alpha) = 0
+        for _ in range(8):
+            if not (np.isfinite(a_hi) and np.isfinite(a_lo)) or a_hi == a_lo:
+                break
+            mid = hi - a_hi * (hi - lo) / (a_hi - a_lo)
+            if not lo < mid < hi:
+                break
+            a_mid, _ = _abscissa(A, Bw, Cz, Dzw, _expand(structure, mid * d))
+            if a_mid >= 0:
+                hi, a_hi = mid, a_mid
+            else:
+                lo, a_lo = mid, a_mid
+            if abs(a_mid) < 1e-11:
+                break
+        _, w = _abscissa(A, Bw, Cz, Dzw, _expand(structure, hi * d))
+        if hi < best[0]:
+            best = (hi, d.copy(), w)
+    return best
+
+
+def _residual(M, delta):
+    from oos_drake.robust.mu_lower import certificate_residual
+
+    return float(certificate_residual(M[None], delta[None])[0])
+
+
+def _real_crossing_delta(A, Bw, Cz, Dzw, structure, alpha, signs):
+    """Perturbation and frequency of a real crossing, with its singularity residual."""
+    delta = _expand(structure, alpha * signs)
+    ev = np.linalg.eigvals(_closed_A(A, Bw, Cz, Dzw, delta))
+    k = int(np.argmax(ev.real))
+    w = abs(ev[k].imag)
+    M = delta_channel_response(A, Bw, Cz, Dzw, [w])[0]
+    return delta, w, _residual(M, delta)
+
+
+def _complex_part(A, Bw, Cz, Dzw, structure, real_part, omega):
+    """Complex-mu lower bound of the complex channels with the real ones closed at ``real_part``.
+
+    Returns ``(mu_c (F,), complex blocks per frequency)``.
+    """
+    from oos_drake.robust.mu_lower import mu_lower_bound
+
+    rows_r, cols_r, rows_c, cols_c, cblk = [], [], [], [], []
+    for block in structure.blocks:
+        r = list(range(block.row_offset, block.row_offset + block.rows))
+        c = list(range(block.col_offset, block.col_offset + block.cols))
+        if block.kind == REAL:
+            rows_r += r
+            cols_r += c
+        else:
+            rows_c += r
+            cols_c += c
+            cblk.append([block.rows, block.cols] if block.kind == "full" else [block.rows, 0])
+    M = delta_channel_response(A, Bw, Cz, Dzw, omega)  # (F, c, r): z rows x w cols
+    # w = Delta z, Delta rows = w channels (M columns), Delta cols = z channels (M rows)
+    Mzz_cc = M[:, cols_c][:, :, rows_c]
+    if rows_r:
+        D_r = real_part[np.ix_(rows_r, cols_r)]
+        M_rr = M[:, cols_r][:, :, rows_r]
+        M_rc = M[:, cols_r][:, :, rows_c]
+        M_cr = M[:, cols_c][:, :, rows_r]
+        X = np.linalg.solve(np.eye(len(cols_r)) - M_rr @ D_r, M_rc)
+        Mzz_cc = Mzz_cc + M_cr @ D_r @ X
+    cstruct = parse_blk(cblk)
+    res = mu_lower_bound(Mzz_cc, cstruct, restarts=3, iters=60)
+    return res.lower, res.delta, (rows_c, cols_c)
+
+
+def destabilizing_perturbation(A, Bw, Cz, Dzw, blk, omega_hint, *, alpha_max: float = 8.0,
+                               complex_points: int = 61) -> Destabilizer:
+    """Best destabilizing perturbation found by the vertex and complex searches.
+
+    Parameters
+    ----------
+    A, Bw, Cz, Dzw : numpy.ndarray
+        One closed-loop model restricted to the analyzed subset's Delta channels.
+    blk : array_like
+        BLK rows of the subset.
+    omega_hint : array_like
+        Frequencies [rad/s] around the mu peak (used for the complex blocks).
+    alpha_max : float
+        Largest perturbation size searched (mu lower bounds below ``1 / alpha_max`` are not found).
+    complex_points : int
+        Frequencies of the complex search (spread over ``omega_hint``'s span and the real crossing).
+    """
+    structure = parse_blk(blk)
+    has_real = structure.has_real
+    has_complex = any(b.kind != REAL for b in structure.blocks)
+    best = Destabilizer(0.0, float("nan"), np.zeros((structure.n_rows, structure.n_cols), complex),
+                        float("nan"))
+    signs = np.zeros(sum(1 for b in structure.blocks if b.kind == REAL))
+    alpha_r = np.inf
+    if has_real:
+        alpha_r, signs, w_r = real_vertex_search(A, Bw, Cz, Dzw, blk, alpha_max=alpha_max)
+        if np.isfinite(alpha_r):
+            delta, w, res = _real_crossing_delta(A, Bw, Cz, Dzw, structure, alpha_r, signs)
+            best = Destabilizer(1.0 / alpha_r, float(w), delta, res)
+    if not has_complex:
+        return best
+    omega_hint = np.asarray(omega_hint, dtype=float)
+    lo_w, hi_w = omega_hint.min(), omega_hint.max()
+    grid = np.geomspace(lo_w, hi_w, complex_points)
+    if np.isfinite(best.omega):
+        grid = np.unique(np.concatenate([grid, best.omega * np.geomspace(0.97, 1.03, 9)]))
+
+    def trial(alpha):
+        real_part = _expand(structure, alpha * signs) if has_real else \
+            np.zeros((structure.n_rows, structure.n_cols), complex)
+        mu_c, deltas, (rows_c, cols_c) = _complex_part(A, Bw, Cz, Dzw, structure, real_part, grid)
+        k = int(np.argmax(mu_c))
+        if mu_c[k] <= 0:
+            return False, None
+        full = real_part.copy()
+        full[np.ix_(rows_c, cols_c)] = deltas[k]
+        return mu_c[k] * alpha >= 1.0, (full, grid[k], 1.0 / mu_c[k])
+
+    hi = alpha_r if np.isfinite(alpha_r) else alpha_max
+    ok, found = trial(hi)
+    if not ok and not np.isfinite(alpha_r):
+        return best
+    lo = 0.0
+    cand = found if ok else None
+    for _ in range(18):
+        mid = 0.5 * (lo + hi)
+        ok, f = trial(mid)
+        if ok:
+            hi, cand = mid, f
+        else:
+            lo = mid
+    if cand is None:
+        return best
+    delta, w, cnorm = cand
+    # complex blocks at size cnorm <= hi, real ones at hi: the perturbation's size is hi
+    size = float(np.max(structure.block_norms(delta[None]))) if delta.size else hi
+    M = delta_channel_response(A, Bw, Cz, Dzw, [w])[0]
+    res = _residual(M, delta)
+    if res <= 1e-6 and size > 0 and 1.0 / size > best.mu_lower:
+        best = Destabilizer(1.0 / size, float(w), delta, res)
+    return best

@@ -1,0 +1,129 @@
+"""Closed-loop model arrays of the analysis: the mission (paper M_330) and the docking phases.
+
+``mission_closed_loop`` substitutes the scheduled blocks (arm angles, array angles, connection
+switches) of the scenario LFR at equally spaced mission times and closes the loop with the
+controller and ``Delta_add``, ``Delta_mul``: ``Delta_tot`` stays uncertain.
+``docking_closed_loop`` does the same with the spring-damper LFRs of the docking phases, the
+configuration frozen at the phase's instant and the active spring-damper's stiffness swept.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from oos_drake.analysis.controller import Controller
+from oos_drake.analysis.loop import close_loop
+from oos_drake.lfr import LFR, usubs
+
+
+@dataclass(frozen=True)
+class ModelArray:
+    """Uncertain closed loops along one scheduling variable.
+
+    Attributes
+    ----------
+    system : LFR
+        Model array ``(N,)``: ``d -> e`` with the blocks of ``Delta_tot``.
+    values : numpy.ndarray
+        Scheduling value of each model: mission time [s] or stiffness [N/m, N m/rad].
+    label : str
+        Name of the scheduling variable with its unit (``"time [s]"``, ``"stiffness [N/m]"``).
+    study : str
+        ``"mission"``, ``"docking-7"`` or ``"docking-8"``.
+    """
+
+    system: LFR
+    values: np.ndarray
+    label: str
+    study: str
+
+
+def _scenario(scenario):
+    if scenario is None:
+        from oos_drake.scenario.data import load_scenario
+
+        return load_scenario()
+    return scenario
+
+
+def mission_times(n_configurations: int, scenario=None) -> np.ndarray:
+    """``n`` equally spaced times over the mission [s] (paper: 330)."""
+    from oos_drake.scenario.timeline import mission_timeline
+
+    if n_configurations < 1:
+        raise ValueError(f"configurations must be >= 1, got {n_configurations}")
+    timeline = mission_timeline(_scenario(scenario))
+    if n_configurations == 1:
+        return np.array([timeline.t_start])
+    return np.linspace(timeline.t_start, timeline.t_end, n_configurations)
+
+
+def mission_closed_loop(controller: Controller, times, scenario=None) -> ModelArray:
+    """``M_hat_N``: the uncertain closed loop at mission ``times`` [s]."""
+    from oos_drake.scenario.model import build_mission_model, mission_values
+
+    scenario = _scenario(scenario)
+    times = np.atleast_1d(np.asarray(times, dtype=float))
+    plant = usubs(build_mission_model(scenario), mission_values(times, scenario))
+    if not plant.batch_shape:
+        plant = plant.model(np.zeros(times.size, dtype=int)) if plant.batch_shape else plant
+    system = close_loop(plant, controller.K, controller.spec)
+    return ModelArray(system, times, "time [s]", "mission")
+
+
+def phase_configuration(phase: str, scenario=None):
+    """Named configuration of docking phase ``"7"`` or ``"8"`` (timeline)."""
+    from oos_drake.scenario.timeline import mission_timeline
+
+    phases = mission_timeline(_scenario(scenario)).docking_phases
+    if str(phase) not in phases:
+        raise ValueError(f"docking phase must be one of {sorted(phases)}, got {phase!r}")
+    return phases[str(phase)]
+
+
+def docking_closed_loop(controller: Controller, phase: str, stiffness, *, damping=None,
+                        scenario=None) -> ModelArray:
+    """Uncertain closed loop of docking phase 7 or 8 for each swept stiffness.
+
+    Phase 7: SM1 (arm tip J7 / target port D2) has stiffness ``k`` (shear [N/m] and torsion
+    [N m/rad] alike) and damping ``damping``; SM2 is open. Phase 8: SM2 (D1 / D3) is swept, SM1
+    is the already rigid connection (scenario ``rigid_stiffness``, ``rigid_damping``).
+
+    Parameters
+    ----------
+    controller : Controller
+    phase : {"7", "8"}
+    stiffness : array_like
+        Swept stiffness values (paper: 300 values, 0.1 .. 1e5, log spaced).
+    damping : float, optional
+        Damping of the swept spring-damper [N s/m, N m s/rad] (default: scenario, paper 100).
+    scenario : Scenario, optional
+    """
+    from oos_drake.scenario.model import build_docking_model, configuration_values
+
+    scenario = _scenario(scenario)
+    phase = str(phase)
+    stiffness = np.atleast_1d(np.asarray(stiffness, dtype=float))
+    if np.any(stiffness < 0) or not np.all(np.isfinite(stiffness)):
+        raise ValueError("docking: stiffness values must be finite and >= 0")
+    settings = scenario.docking
+    damping = float(settings.damping if damping is None else damping)
+    model = build_docking_model(phase, scenario)
+    named = phase_configuration(phase, scenario)
+    cfg = named.configuration
+    values = configuration_values(cfg.alpha, cfg.theta, cfg.delta_C1, cfg.delta_C2)
+    swept = "SM1" if phase == "7" else "SM2"
+    values.update({f"k_shear_{swept}": stiffness, f"k_tors_{swept}": stiffness,
+                   f"d_shear_{swept}": np.full(stiffness.size, damping),
+                   f"d_tors_{swept}": np.full(stiffness.size, damping)})
+    if phase == "8":
+        values.update({"k_shear_SM1": settings.rigid_stiffness,
+                       "k_tors_SM1": settings.rigid_stiffness,
+                       "d_shear_SM1": settings.rigid_damping, "d_tors_SM1": settings.rigid_damping})
+    present = model.uncertainty
+    values = {k: v for k, v in values.items() if k in present}
+    plant = usubs(model, values)
+    system = close_loop(plant, controller.K, controller.spec)
+    return ModelArray(system, stiffness, "stiffness [N/m or N m/rad]", f"docking-{phase}")

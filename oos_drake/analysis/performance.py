@@ -1,0 +1,129 @@
+r"""Worst-case performance: gains of ``d -> e_p`` (APE) and ``d -> e_u`` (effort) per subset.
+
+For each analyzed configuration, frequency and uncertainty subset, the worst-case gain
+``max_{||Delta|| <= 1} sigma_max(F_u(M(j omega), Delta))`` of a performance channel is bounded by
+the skewed-mu bisection of :func:`oos_drake.robust.wcgain.skewed_gain_bounds` (upper bound) and
+the exact gain of the perturbation it finds (lower bound). Channels are the weighted errors of
+the design: ``e_p = phi / W_p`` (the APE requirement is gain 1) and ``e_u = W_u u`` (the 2 N m
+bound is gain 1), from the normalized disturbances ``d``.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+import pandas as pd
+
+from oos_drake.analysis.stability import _init_worker, subset_parts
+from oos_drake.robust.lfr_analysis import delta_channel_response
+
+#: Performance channels: name -> rows of ``e``.
+CHANNELS = {"e_p": (0, 1, 2), "e_u": (3, 4, 5)}
+
+#: Columns of the performance table.
+PERFORMANCE_COLUMNS = ["channel", "subset", "model", "time [s]", "frequency [Hz]",
+                       "gain_nominal [-]", "gain_lower [-]", "gain_upper [-]"]
+
+
+def _channel_task(task):
+    from oos_drake.robust.wcgain import skewed_gain_bounds
+
+    (A, B, C, D, nz, nw, blk, omega, tol, iterations) = task
+    nm = A.shape[0]
+    M = delta_channel_response(A, B, C, D, omega)  # (nm, F, nz+ny, nw+nu)
+    flat = M.reshape((-1,) + M.shape[2:])
+    lo, up, delta, nom = skewed_gain_bounds(flat, nz, nw, blk, tol=tol,
+                                            upper_iterations=iterations)
+    F = omega.size
+    return (lo.reshape(nm, F), up.reshape(nm, F), nom.reshape(nm, F),
+            delta.reshape((nm, F) + delta.shape[1:]))
+
+
+def worst_case_gains(sys, models, omega, subsets: dict, *, times=None, tol: float = 0.02,
+                     upper_iterations: int = 40, n_jobs: int = 2, progress: bool = True):
+    """Worst-case gain bounds of ``e_p`` and ``e_u`` for chosen models, per subset.
+
+    Parameters
+    ----------
+    sys : LFR
+        Closed-loop model array ``d -> e`` (6 outputs ``[e_p; e_u]``).
+    models : array_like of int
+        Indices of the analyzed models.
+    omega : array_like
+        Frequencies [rad/s].
+    subsets : dict
+        Subset name -> block names.
+    times : array_like, optional
+        Scheduling value of every model of ``sys`` (stored in ``time [s]``).
+    tol : float
+        Relative accuracy of the bisection.
+    upper_iterations : int
+        BFGS iterations of each mu upper bound.
+    n_jobs : int
+        Worker processes.
+    progress : bool
+        tqdm bar over (channel, subset) tasks.
+
+    Returns
+    -------
+    table : pandas.DataFrame
+        Columns :data:`PERFORMANCE_COLUMNS`.
+    deltas : dict
+        ``(channel, subset) -> (models, F, nw, nz)`` normalized worst perturbations (unit size).
+    """
+    from tqdm.auto import tqdm
+
+    models = np.atleast_1d(np.asarray(models, dtype=int))
+    omega = np.unique(np.asarray(omega, dtype=float))
+    n_all = sys.batch_shape[0] if sys.batch_shape else 1
+    times = np.full(n_all, np.nan) if times is None else np.asarray(times, dtype=float)
+    A = np.asarray(sys.A).reshape((n_all,) + sys.A.shape[-2:])[models]
+    Bw = np.asarray(sys.Bw).reshape((n_all,) + sys.Bw.shape[-2:])[models]
+    Bu = np.asarray(sys.Bu).reshape((n_all,) + sys.Bu.shape[-2:])[models]
+    Cz = np.asarray(sys.Cz).reshape((n_all,) + sys.Cz.shape[-2:])[models]
+    Cy = np.asarray(sys.Cy).reshape((n_all,) + sys.Cy.shape[-2:])[models]
+    Dzw = np.asarray(sys.Dzw).reshape((n_all,) + sys.Dzw.shape[-2:])[models]
+    Dzu = np.asarray(sys.Dzu).reshape((n_all,) + sys.Dzu.shape[-2:])[models]
+    Dyw = np.asarray(sys.Dyw).reshape((n_all,) + sys.Dyw.shape[-2:])[models]
+    Dyu = np.asarray(sys.Dyu).reshape((n_all,) + sys.Dyu.shape[-2:])[models]
+    parts = subset_parts(sys, subsets)
+    tasks, keys = [], []
+    for channel, rows in CHANNELS.items():
+        rows = list(rows)
+        for name, (zr, wc, blk) in parts.items():
+            B = np.concatenate([Bw[:, :, wc], Bu], axis=2)
+            C = np.concatenate([Cz[:, zr, :], Cy[:, rows, :]], axis=1)
+            D = np.concatenate([
+                np.concatenate([Dzw[:, zr][:, :, wc], Dzu[:, zr, :]], axis=2),
+                np.concatenate([Dyw[:, rows][:, :, wc], Dyu[:, rows, :]], axis=2)], axis=1)
+            tasks.append((A, B, C, D, zr.size, wc.size, blk, omega, tol, upper_iterations))
+            keys.append((channel, name))
+    bar = tqdm(total=len(tasks), desc="worst-case gains", unit="task", disable=not progress)
+    results = []
+    if n_jobs <= 1:
+        _init_worker()
+        for t in tasks:
+            results.append(_channel_task(t))
+            bar.update(1)
+    else:
+        import multiprocessing as mp
+
+        method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
+        with ProcessPoolExecutor(n_jobs, mp_context=mp.get_context(method),
+                                 initializer=_init_worker) as pool:
+            for r in pool.map(_channel_task, tasks):
+                results.append(r)
+                bar.update(1)
+    bar.close()
+    frames, deltas = [], {}
+    hz = omega / (2 * np.pi)
+    for (channel, name), (lo, up, nom, dl) in zip(keys, results, strict=True):
+        deltas[(channel, name)] = dl
+        for j, m in enumerate(models):
+            frames.append(pd.DataFrame({
+                "channel": channel, "subset": name, "model": int(m),
+                "time [s]": times[m], "frequency [Hz]": hz,
+                "gain_nominal [-]": nom[j], "gain_lower [-]": lo[j], "gain_upper [-]": up[j],
+            }))
+    return pd.concat(frames, ignore_index=True)[PERFORMANCE_COLUMNS], deltas

@@ -1,0 +1,374 @@
+"""Flight software of the mission simulation as one periodic discrete Drake system.
+
+Every component of the paper's control loop (Fig. controldesign) that is not the plant runs in a
+single :class:`FlightSoftware` ``LeafSystem`` with **one periodic discrete update** at the control
+rate, vectorized with small numpy products: Python systems dominate the run time of a Drake
+simulation, and a system whose output depends only on its discrete state is evaluated once per
+sample (Drake caches the output), never inside the integrator's derivative evaluations.
+
+At each sample ``t_k`` the update reads the plant state and computes, for the three axes at once,
+
+.. math::
+
+    y_{att} = -(\\mathrm{SST}\\,\\phi + W_{n,sst}\\,n_{sst}), \\quad
+    y_{rate} = -(\\mathrm{GYRO}\\,\\omega + W_{n,gyro}\\,n_{gyro}), \\quad
+    u_K = K \\begin{bmatrix} y_{att} \\\\ y_{rate} \\end{bmatrix}, \\quad
+    u = F_{ro}\\, u_K,
+
+    T_{rw} = \\mathrm{RW}\\, \\mathrm{sat}_{T_{max}}(u), \\quad
+    T = (I + \\delta_{mul} W_{mul}\\, a(s))\\, T_{rw}
+        + \\delta_{add} J_{ref} W_{add}\\, a(s)\\, T_{rw} + W_{n,ext}\\, d_{ext},
+
+with ``phi`` the hub roll-pitch-yaw angles (attitude reference zero), ``omega`` the hub body rate,
+``n`` unit white Gaussian sequences scaled by the paper's noise levels, ``a(s) = (p - s)/(p + s)``
+a unit all-pass (the stable realization of the LTI perturbations ``Delta_mul``, ``Delta_add``,
+scaled by the dispersed scalars ``delta_mul``, ``delta_add`` in [-1, 1]) and ``d_ext`` a unit
+white sequence shaped by ``W_n,ext``. The torque ``T`` (hub axes) is held over the sample period
+(zero-order hold) and applied to the hub's floating joint as ``R_WB T``.
+
+Each linear block is discretized with the bilinear (Tustin) transform at the control rate, so a
+block with a bandwidth above the sample rate (gyro, wheels at 200 Hz) reduces to its DC gain with
+no artificial one-sample delay.
+
+The discrete state also carries the run's metrics (running maxima of ``|phi|`` and ``|u|``,
+sum of squares), so they are computed at the control rate without any logging.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+from pydrake.common.value import AbstractValue
+from pydrake.math import RollPitchYaw
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from oos_drake.control import components as comp
+
+__all__ = [
+    "DiscreteBlock",
+    "FlightSoftwareDesign",
+    "FlightSoftware",
+    "NOISE_CHANNELS",
+    "LOG_SIGNALS",
+    "METRIC_SLOTS",
+    "allpass",
+    "discretize",
+]
+
+#: Columns of the per-sample noise table: star tracker (3), gyro (3), external disturbance (3).
+NOISE_CHANNELS = 9
+#: Signals of the ``log`` output port, in order (3 axes each).
+LOG_SIGNALS = ("u", "T_rw", "T", "T_dist")
+#: Slots of the metrics part of the discrete state.
+METRIC_SLOTS = ("max_phi", "max_u", "sumsq_phi", "max_T")
+
+
+@dataclass(frozen=True, eq=False)
+class DiscreteBlock:
+    """A discrete state-space block ``x+ = A x + B u``, ``y = C x + D u``.
+
+    Attributes
+    ----------
+    A, B, C, D : ndarray
+        Discrete-time matrices (sample period of the flight software).
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+
+    @property
+    def nstates(self) -> int:
+        """Number of states."""
+        return int(self.A.shape[0])
+
+
+def discretize(A, B, C, D, period: float) -> DiscreteBlock:
+    """Bilinear (Tustin) discretization of a continuous block at ``period`` [s]."""
+    A, B, C, D = (np.atleast_2d(np.asarray(m, dtype=float)) for m in (A, B, C, D))
+    if A.size == 0:
+        return DiscreteBlock(np.zeros((0, 0)), np.zeros((0, B.shape[1])), np.zeros((C.shape[0], 0)), D)
+    Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), period, method="bilinear")
+    return DiscreteBlock(Ad, Bd, Cd, Dd)
+
+
+def _per_axis(A, B, C, D) -> tuple[np.ndarray, ...]:
+    """Block-diagonal replication of a SISO realization on three axes."""
+    eye = np.eye(3)
+    return tuple(np.kron(eye, np.atleast_2d(np.asarray(m, dtype=float))) for m in (A, B, C, D))
+
+
+def allpass(frequency_hz: float) -> tuple[np.ndarray, ...]:
+    """``(A, B, C, D)`` of the unit all-pass ``a(s) = (p - s)/(p + s)``, ``p = 2 pi f`` [rad/s].
+
+    Stable, ``|a(j w)| = 1`` at every frequency, ``a(0) = 1``, phase -180 deg at high frequency:
+    the standard realization of a unit-norm LTI perturbation with a phase that turns at ``f``.
+    """
+    p = 2.0 * np.pi * float(frequency_hz)
+    return np.array([[-p]]), np.array([[1.0]]), np.array([[-2.0 * p]]), np.array([[1.0]])
+
+
+@dataclass(frozen=True, eq=False)
+class FlightSoftwareDesign:
+    """Discretized components of the control loop (three axes each).
+
+    Attributes
+    ----------
+    period : float
+        Sample period [s].
+    K : ndarray, shape (3, 6)
+        Static gain ``[K_p, K_d]`` [N m/rad, N m s/rad].
+    star_tracker, gyro, rolloff, wheels, disturbance, perturbation : DiscreteBlock
+        SST, GYRO, F_ro, RW, W_n,ext and the all-pass of the LTI perturbations.
+    noise_star_tracker : float
+        Star tracker noise level W_n,sst [rad] (std of one sample).
+    noise_gyro : float
+        Gyro noise level W_n,gyro [rad/s] (std of one sample).
+    torque_limit : float
+        Wheel command saturation [N m].
+    W_mul : ndarray, shape (3, 3)
+        Multiplicative weight (paper: 4e-2 diagonal, 4e-3 off-diagonal) [-].
+    W_add : float
+        Additive weight [(rad/s^2)/(N m)] (paper: -75 dB).
+    J_ref : ndarray, shape (3, 3)
+        Inertia turning the additive acceleration perturbation into a hub torque [kg m^2].
+    """
+
+    period: float
+    K: np.ndarray
+    star_tracker: DiscreteBlock
+    gyro: DiscreteBlock
+    rolloff: DiscreteBlock
+    wheels: DiscreteBlock
+    disturbance: DiscreteBlock
+    perturbation: DiscreteBlock
+    noise_star_tracker: float
+    noise_gyro: float
+    torque_limit: float
+    W_mul: np.ndarray
+    W_add: float
+    J_ref: np.ndarray
+
+    @classmethod
+    def create(
+        cls,
+        K,
+        control_rate: float,
+        *,
+        spec: comp.DesignSpecification | None = None,
+        torque_limit: float = 2.0,
+        perturbation_frequency_hz: float = 0.55,
+        J_ref=None,
+    ) -> FlightSoftwareDesign:
+        """Discretize the paper's components at ``control_rate`` [Hz].
+
+        Parameters
+        ----------
+        K : array_like, shape (3, 6)
+            Controller gain ``[K_p, K_d]``.
+        control_rate : float
+            Sample rate of the flight software [Hz].
+        spec : DesignSpecification, optional
+            Component data and weights (paper values by default).
+        torque_limit : float
+            Wheel torque limit [N m] (paper: 2).
+        perturbation_frequency_hz : float
+            Corner of the all-pass realizing Delta_add / Delta_mul [Hz] (default: the analysis'
+            critical frequency, 0.55 Hz).
+        J_ref : array_like, shape (3, 3), optional
+            Inertia for the additive perturbation [kg m^2] (default identity).
+        """
+        K = np.asarray(K, dtype=float)
+        if K.shape != (3, 6) or not np.all(np.isfinite(K)):
+            raise ValueError(f"flight software: controller gain K must be a finite 3x6, got {K.shape}")
+        if not (np.isfinite(control_rate) and control_rate > 0):
+            raise ValueError(f"flight software: control_rate must be > 0 Hz, got {control_rate}")
+        if not torque_limit > 0:
+            raise ValueError(f"flight software: torque_limit must be > 0 N m, got {torque_limit}")
+        spec = spec or comp.DesignSpecification()
+        T = 1.0 / float(control_rate)
+        a, b = spec.disturbance_denominator
+        gains = np.asarray(spec.disturbance_gains, dtype=float)
+        disturbance = discretize(
+            -(b / a) * np.eye(3), np.eye(3), np.diag(gains / a), np.zeros((3, 3)), T
+        )
+        W_mul = np.full((3, 3), spec.multiplicative_off_diagonal)
+        np.fill_diagonal(W_mul, spec.multiplicative_diagonal)
+        return cls(
+            period=T,
+            K=K,
+            star_tracker=discretize(*_per_axis(*comp.first_order_lowpass(spec.star_tracker_cutoff_hz)), T),
+            gyro=discretize(*_per_axis(*comp.first_order_lowpass(spec.gyro_cutoff_hz)), T),
+            rolloff=discretize(*_per_axis(*comp.butterworth(spec.rolloff_order, spec.rolloff_cutoff_hz)), T),
+            wheels=discretize(*_per_axis(*comp.second_order(spec.wheel_frequency_hz, spec.wheel_damping)), T),
+            disturbance=disturbance,
+            perturbation=discretize(*_per_axis(*allpass(perturbation_frequency_hz)), T),
+            noise_star_tracker=float(spec.noise_star_tracker),
+            noise_gyro=float(spec.noise_gyro),
+            torque_limit=float(torque_limit),
+            W_mul=W_mul,
+            W_add=float(spec.additive_weight),
+            J_ref=np.eye(3) if J_ref is None else np.asarray(J_ref, dtype=float),
+        )
+
+    @property
+    def block_order(self) -> tuple[str, ...]:
+        """Blocks whose states make up the filter part of the discrete state, in order."""
+        return ("star_tracker", "gyro", "rolloff", "wheels", "disturbance", "mul", "add")
+
+    def slices(self) -> dict[str, slice]:
+        """Block name -> slice of the discrete state (filters, held outputs, metrics, counter)."""
+        sizes = {
+            "star_tracker": self.star_tracker.nstates,
+            "gyro": self.gyro.nstates,
+            "rolloff": self.rolloff.nstates,
+            "wheels": self.wheels.nstates,
+            "disturbance": self.disturbance.nstates,
+            "mul": self.perturbation.nstates,
+            "add": self.perturbation.nstates,
+            "tau_W": 3,
+            "log": 3 * len(LOG_SIGNALS),
+            "metrics": 3 * len(METRIC_SLOTS),
+            "counter": 1,
+        }
+        out, start = {}, 0
+        for name, size in sizes.items():
+            out[name] = slice(start, start + size)
+            start += size
+        return out
+
+
+class FlightSoftware(LeafSystem):
+    """Sensors, controller, roll-off, wheels, perturbations and disturbances (one discrete update).
+
+    Ports
+    -----
+    input ``plant_state`` (nq + nv): the MultibodyPlant state.
+    output ``generalized_force`` (nv): the held hub torque on the hub's floating joint.
+    output ``log`` (12): ``[u; T_rw; T; T_dist]`` held values [N m].
+
+    Context
+    -------
+    numeric parameter 0 (2): ``[delta_mul, delta_add]`` [-], the LTI perturbation scalars.
+    abstract parameter 0: ``(n_samples, 9)`` array of unit noise ``[n_sst; n_gyro; d_ext]``
+    (row ``k`` is used at the k-th sample after the start; rows wrap around).
+    """
+
+    def __init__(self, design: FlightSoftwareDesign, nq: int, nv: int, hub_q_start: int,
+                 hub_v_start: int):
+        super().__init__()
+        self._design = design
+        self._nq, self._nv = nq, nv
+        self._qs, self._vs = hub_q_start, hub_v_start
+        self._slices = design.slices()
+        size = self._slices["counter"].stop
+        self._state_index = self.DeclareDiscreteState(size)
+        self._plant_state = self.DeclareVectorInputPort("plant_state", nq + nv)
+        self._perturbation_index = self.DeclareNumericParameter(BasicVector(np.zeros(2)))
+        self._noise_index = self.DeclareAbstractParameter(
+            AbstractValue.Make(np.zeros((1, NOISE_CHANNELS)))
+        )
+        self.DeclarePeriodicDiscreteUpdateEvent(design.period, 0.0, self._update)
+        ticket = {self.xd_ticket()}
+        self.DeclareVectorOutputPort(
+            "generalized_force", nv, self._calc_force, prerequisites_of_calc=ticket
+        )
+        self.DeclareVectorOutputPort(
+            "log", 3 * len(LOG_SIGNALS), self._calc_log, prerequisites_of_calc=ticket
+        )
+        d = design
+        self._sst, self._gyro, self._ro, self._rw = d.star_tracker, d.gyro, d.rolloff, d.wheels
+        self._dist, self._ap = d.disturbance, d.perturbation
+        self._Kp, self._Kd = d.K[:, :3], d.K[:, 3:]
+        self._J_Wadd = d.J_ref * d.W_add
+
+    @property
+    def design(self) -> FlightSoftwareDesign:
+        """The discretized components."""
+        return self._design
+
+    @property
+    def state_slices(self) -> dict[str, slice]:
+        """Named slices of the discrete state."""
+        return dict(self._slices)
+
+    def set_perturbations(self, context, delta_mul: float, delta_add: float) -> None:
+        """Set the LTI perturbation scalars ``delta_mul``, ``delta_add`` (in [-1, 1])."""
+        context.get_mutable_numeric_parameter(self._perturbation_index).SetFromVector(
+            [float(delta_mul), float(delta_add)]
+        )
+
+    def set_noise(self, context, noise: np.ndarray) -> None:
+        """Set the per-sample unit noise table (``(n, 9)``) of a run."""
+        noise = np.asarray(noise, dtype=float)
+        if noise.ndim != 2 or noise.shape[1] != NOISE_CHANNELS or noise.shape[0] < 1:
+            raise ValueError(f"flight software: noise table must be (n, 9), got {noise.shape}")
+        context.get_mutable_abstract_parameter(self._noise_index).set_value(noise)
+
+    def metrics(self, context) -> dict[str, np.ndarray]:
+        """Running metrics: ``max_phi`` [rad], ``max_u`` [N m], ``sumsq_phi`` [rad^2],
+        ``max_T`` [N m] (3 axes each) and ``samples``."""
+        x = context.get_discrete_state(self._state_index).get_value()
+        m = x[self._slices["metrics"]].reshape(len(METRIC_SLOTS), 3)
+        out = {name: m[i].copy() for i, name in enumerate(METRIC_SLOTS)}
+        out["samples"] = float(x[self._slices["counter"]][0])
+        return out
+
+    # -- Drake callbacks ------------------------------------------------------------------------
+    def _update(self, context, discrete_state):
+        s = self._slices
+        x = context.get_discrete_state(self._state_index).get_value()
+        new = x.copy()
+        plant_x = self._plant_state.Eval(context)
+        qs, vs = self._qs, self._nq + self._vs
+        rpy = plant_x[qs : qs + 3]
+        R_WB = RollPitchYaw(rpy).ToRotationMatrix().matrix()
+        w_B = R_WB.T @ plant_x[vs : vs + 3]
+        k = int(x[s["counter"]][0])
+        noise_table = context.get_abstract_parameter(self._noise_index).get_value()
+        noise = noise_table[k % noise_table.shape[0]]
+        delta_mul, delta_add = context.get_numeric_parameter(self._perturbation_index).get_value()
+
+        def step(block: DiscreteBlock, name: str, u: np.ndarray) -> np.ndarray:
+            xb = x[s[name]]
+            new[s[name]] = block.A @ xb + block.B @ u
+            return block.C @ xb + block.D @ u
+
+        d = self._design
+        phi_sst = step(self._sst, "star_tracker", rpy)
+        w_gyro = step(self._gyro, "gyro", w_B)
+        y_att = -(phi_sst + d.noise_star_tracker * noise[0:3])
+        y_rate = -(w_gyro + d.noise_gyro * noise[3:6])
+        u_K = self._Kp @ y_att + self._Kd @ y_rate
+        u = step(self._ro, "rolloff", u_K)
+        T_rw = step(self._rw, "wheels", np.clip(u, -d.torque_limit, d.torque_limit))
+        T_dist = step(self._dist, "disturbance", noise[6:9])
+        a_mul = step(self._ap, "mul", T_rw)
+        a_add = step(self._ap, "add", T_rw)
+        T = T_rw + delta_mul * (d.W_mul @ a_mul) + delta_add * (self._J_Wadd @ a_add) + T_dist
+        new[s["tau_W"]] = R_WB @ T
+        new[s["log"]] = np.concatenate([u, T_rw, T, T_dist])
+        m = x[s["metrics"]].reshape(len(METRIC_SLOTS), 3)
+        abs_phi = np.abs(rpy)
+        metrics = np.stack(
+            [np.maximum(m[0], abs_phi), np.maximum(m[1], np.abs(u)), m[2] + rpy**2,
+             np.maximum(m[3], np.abs(T))]
+        )
+        if not np.all(np.isfinite(metrics)):
+            metrics = np.full_like(metrics, np.inf)
+        new[s["metrics"]] = metrics.ravel()
+        new[s["counter"]] = k + 1
+        discrete_state.get_mutable_vector(self._state_index).SetFromVector(new)
+
+    def _calc_force(self, context, output):
+        x = context.get_discrete_state(self._state_index).get_value()
+        tau = np.zeros(self._nv)
+        tau[self._vs : self._vs + 3] = x[self._slices["tau_W"]]
+        output.SetFromVector(tau)
+
+    def _calc_log(self, context, output):
+        x = context.get_discrete_state(self._state_index).get_value()
+        output.SetFromVector(x[self._slices["log"]])

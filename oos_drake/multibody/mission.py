@@ -1,0 +1,434 @@
+"""Factory of the closed-loop mission diagram: the Drake twin following the mission timeline.
+
+``make_mission_diagram(options)`` builds, from the same SDF files and modal residuals as
+:func:`oos_drake.multibody.scenario_plant.build_scenario_diagram`,
+
+- a **continuous** MultibodyPlant (no gravity): chaser hub RH1 on a roll-pitch-yaw floating joint
+  whose zero is the world frame (its angles are the attitude error, the reference being zero),
+  target hub RH2 on its own roll-pitch-yaw floating joint in the world, the four arrays with their
+  exact modal realizations, docking bushings SM1 (J7 - D2) and SM2 (D1 - D3) whose stiffness and
+  damping are Context parameters (open by default);
+- **motion-driven** arm joints ``alpha_1..6`` and array drives ``theta_SA1..4``: each tracks its
+  fifth-order trajectory (:class:`~pydrake.systems.primitives.TrajectorySource` of the exact
+  quintic segments) through a stiff joint-space PD (``omega_joint = 200 rad/s`` by default on the
+  joint's inertia), built from C++ primitives only (``MatrixGain``, ``Adder``) so that no Python
+  runs inside the integrator; the tracking error is ~1e-9 rad and the hub feels the reactions of
+  the joint torques;
+- the :class:`~oos_drake.multibody.flight_software.FlightSoftware` (periodic discrete update at
+  ``control_rate``) whose held hub torque is added to the joint torques;
+- C++ loggers (``VectorLogSink``) of the plant state and of the flight software's torques at
+  ``log_rate``.
+
+The stiff parts (joint PDs, bushings up to 1e5 N/m on the 0.19 kg wrist, modes up to 28 Hz) make
+the continuous system stiff: :mod:`oos_drake.multibody.mission_sim` integrates it with Radau3
+(L-stable, error controlled) whose steps are bounded only by the flight-software samples.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+
+import numpy as np
+from pydrake.math import RigidTransform
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import ForceElementIndex, LinearBushingRollPitchYaw, RevoluteSpring
+from pydrake.polynomial import Polynomial
+from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.primitives import (
+    Adder,
+    LogVectorOutput,
+    MatrixGain,
+    Multiplexer,
+    TrajectorySource,
+)
+from pydrake.trajectories import PiecewisePolynomial
+
+from oos_drake.control.baseline import baseline_gains
+from oos_drake.multibody.flight_software import FlightSoftware, FlightSoftwareDesign
+from oos_drake.multibody.plant_parts import add_floating_joint, add_modal_residual
+from oos_drake.multibody.scenario_sdf import (
+    ARM_MODEL,
+    ASSEMBLY_FILE,
+    ASSEMBLY_MODEL,
+    SDF_DIRECTORY,
+    SDF_PACKAGE,
+    arm_joint_name,
+    drive_joint_name,
+)
+from oos_drake.scenario.data import Scenario, load_scenario
+from oos_drake.scenario.kinematics import rigid_spatial_inertia_at_G1
+from oos_drake.scenario.timeline import MissionTimeline, QuinticTrajectory, mission_timeline
+
+__all__ = [
+    "ARRAYS",
+    "MissionDiagram",
+    "MissionOptions",
+    "controller_gain",
+    "effective_inertia",
+    "make_mission_diagram",
+    "quintic_piecewise_polynomial",
+]
+
+ARRAYS = ("SA1", "SA2", "SA3", "SA4")
+#: Modes per array in the SDF (mode_1_hinge .. mode_6_hinge).
+MODE_JOINT = "mode_{}_hinge"
+
+
+@dataclass(frozen=True)
+class MissionOptions:
+    """Options of the mission diagram and simulation (plain values: picklable, JSON-able).
+
+    Attributes
+    ----------
+    control_rate : float
+        Flight-software sample rate [Hz].
+    log_rate : float
+        Logging rate of the time series [Hz] (must divide ``control_rate``).
+    controller : str or None
+        Path of a synthesis ``controller.json`` (gains ``K_p``, ``K_d``); ``None``: the paper's
+        baseline tuned on the coupled inertia at the first docking.
+    torque_limit : float
+        Reaction-wheel torque limit [N m].
+    joint_bandwidth : float
+        Natural frequency of the motion-driving joint PDs [rad/s].
+    joint_damping_ratio : float
+        Damping ratio of the joint PDs [-].
+    arm_min_inertia : float
+        Lower bound of the inertia used to size an arm joint's PD [kg m^2] (the wrist alone is
+        light; the gains must hold the captured target).
+    ramp_duration : float
+        Duration of each docking stiffness ramp [s].
+    ramp_steps : int
+        Piecewise-constant steps of a ramp (log-spaced stiffness).
+    ramp_start_stiffness : float
+        First stiffness of a ramp [N/m, N m/rad] (paper: 0.1).
+    integrator : str
+        Drake integrator name (``"radau3"``, ``"implicit_euler"``, ``"runge_kutta3"``, ...).
+    accuracy : float
+        Integrator target accuracy [-].
+    perturbation_frequency_hz : float
+        Corner of the all-pass realizing Delta_add / Delta_mul [Hz].
+    divergence_limit : float
+        Hub attitude beyond which a run is declared diverged [rad].
+    check_interval : float
+        Simulated time between divergence checks [s].
+    """
+
+    control_rate: float = 10.0
+    log_rate: float = 1.0
+    controller: str | None = None
+    torque_limit: float = 2.0
+    joint_bandwidth: float = 200.0
+    joint_damping_ratio: float = 0.7
+    arm_min_inertia: float = 1.0
+    ramp_duration: float = 2.0
+    ramp_steps: int = 10
+    ramp_start_stiffness: float = 0.1
+    integrator: str = "radau3"
+    accuracy: float = 1e-3
+    perturbation_frequency_hz: float = 0.55
+    divergence_limit: float = 0.5
+    check_interval: float = 50.0
+
+    def __post_init__(self):
+        for name in ("control_rate", "log_rate", "torque_limit", "joint_bandwidth",
+                     "joint_damping_ratio", "ramp_duration", "ramp_start_stiffness", "accuracy",
+                     "perturbation_frequency_hz", "divergence_limit", "check_interval"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
+                raise ValueError(f"mission option {name} must be a positive number, got {value!r}")
+        ratio = self.control_rate / self.log_rate
+        if abs(ratio - round(ratio)) > 1e-9:
+            raise ValueError(
+                f"mission option log_rate {self.log_rate} Hz must divide control_rate "
+                f"{self.control_rate} Hz"
+            )
+        if int(self.ramp_steps) < 1:
+            raise ValueError(f"mission option ramp_steps must be >= 1, got {self.ramp_steps}")
+
+
+@dataclass(frozen=True, eq=False)
+class MissionDiagram:
+    """Handles of a built mission diagram (not picklable: build one per process).
+
+    Attributes
+    ----------
+    diagram : Diagram
+    plant : MultibodyPlant
+    flight_software : FlightSoftware
+    options : MissionOptions
+    scenario : Scenario
+    timeline : MissionTimeline
+    K : ndarray, shape (3, 6)
+        Controller gain in use.
+    hub_joint, target_joint : RpyFloatingJoint
+    arm_joints, drive_joints : tuple of RevoluteJoint
+    mode_joints : Mapping[str, tuple of RevoluteJoint]
+        Array name -> its 6 mode hinges (the modal coordinates, scaled).
+    mode_springs : Mapping[str, tuple of RevoluteSpring]
+        Array name -> the springs of its mode hinges.
+    bushings : Mapping[str, LinearBushingRollPitchYaw]
+        ``{"SM1": J7 - D2, "SM2": D1 - D3}``.
+    frames : Mapping[str, Frame]
+        ``G1, G2, D1, D2, D3, J7``.
+    target_body : RigidBody
+    state_logger, torque_logger : VectorLogSink
+    """
+
+    diagram: Diagram
+    plant: MultibodyPlant
+    flight_software: FlightSoftware
+    options: MissionOptions
+    scenario: Scenario
+    timeline: MissionTimeline
+    K: np.ndarray
+    hub_joint: object
+    target_joint: object
+    arm_joints: tuple
+    drive_joints: tuple
+    mode_joints: Mapping[str, tuple] = field(default_factory=dict)
+    mode_springs: Mapping[str, tuple] = field(default_factory=dict)
+    bushings: Mapping[str, LinearBushingRollPitchYaw] = field(default_factory=dict)
+    frames: Mapping[str, object] = field(default_factory=dict)
+    target_body: object = None
+    state_logger: object = None
+    torque_logger: object = None
+
+
+def quintic_piecewise_polynomial(trajectory: QuinticTrajectory) -> PiecewisePolynomial:
+    """The exact Drake ``PiecewisePolynomial`` of a :class:`QuinticTrajectory`.
+
+    Segment ``k``: ``q_k + (q_{k+1} - q_k) (10 u^3 - 15 u^4 + 6 u^5)``, ``u = (t - t_k)/h_k``;
+    Drake evaluates each segment's polynomial in ``t - t_k``.
+    """
+    times = np.asarray(trajectory.times, dtype=float)
+    values = np.asarray(trajectory.values, dtype=float)
+    polynomials = []
+    for k in range(len(times) - 1):
+        h = times[k + 1] - times[k]
+        shape = np.array([0.0, 0.0, 0.0, 10.0 / h**3, -15.0 / h**4, 6.0 / h**5])
+        matrix = np.empty((values.shape[1], 1), dtype=object)
+        for i in range(values.shape[1]):
+            coefficients = shape * (values[k + 1, i] - values[k, i])
+            coefficients[0] = values[k, i]
+            matrix[i, 0] = Polynomial(coefficients)
+        polynomials.append(matrix)
+    return PiecewisePolynomial(polynomials, list(times))
+
+
+def effective_inertia(D_G1: np.ndarray) -> np.ndarray:
+    """Rotational inertia seen by a torque on a free body: the Schur complement of ``D_G1``.
+
+    ``J = D_rr - D_rt D_tt^-1 D_tr`` [kg m^2] (the inverse of the static gain torque -> wdot).
+    """
+    D = np.asarray(D_G1, dtype=float)
+    return D[3:, 3:] - D[3:, :3] @ np.linalg.solve(D[:3, :3], D[:3, 3:])
+
+
+def controller_gain(path: str | Path | None, scenario: Scenario | None = None) -> np.ndarray:
+    """Controller gain ``[K_p, K_d]`` (3x6) from a synthesis ``controller.json`` or the baseline.
+
+    Parameters
+    ----------
+    path : str, Path or None
+        ``controller.json`` written by ``oos synth``; ``None``: the paper's baseline
+        (``omega = 2 pi 0.01 rad/s``, ``xi = 1``) on the rigid coupled inertia at t = 255 s.
+
+    Raises
+    ------
+    ValueError
+        Missing file or gains of the wrong shape.
+    """
+    if path is None:
+        scenario = scenario or load_scenario()
+        timeline = mission_timeline(scenario)
+        configuration = timeline.configuration(float(scenario.mission.first_docking_time))
+        J = effective_inertia(rigid_spatial_inertia_at_G1(scenario, configuration))
+        return baseline_gains(0.5 * (J + J.T))
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"controller file {path} not found")
+    record = json.loads(path.read_text())
+    try:
+        K_p = np.asarray(record["controller"]["K_p"]["value"], dtype=float)
+        K_d = np.asarray(record["controller"]["K_d"]["value"], dtype=float)
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"controller file {path}: no controller.K_p/K_d values ({exc})") from exc
+    K = np.hstack([K_p, K_d])
+    if K.shape != (3, 6):
+        raise ValueError(f"controller file {path}: K must be 3x6, got {K.shape}")
+    return K
+
+
+def _add_plant(builder: DiagramBuilder, sdf_directory: Path):
+    plant = builder.AddNamedSystem("plant", MultibodyPlant(time_step=0.0))
+    plant.mutable_gravity_field().set_gravity_vector(np.zeros(3))
+    parser = Parser(plant)
+    parser.package_map().Add(SDF_PACKAGE, str(sdf_directory))
+    parser.AddModels(str(sdf_directory / ASSEMBLY_FILE))
+
+    def instance(name: str):
+        return plant.GetModelInstanceByName(f"{ASSEMBLY_MODEL}::{name}")
+
+    for array in ARRAYS:
+        add_modal_residual(plant, instance(array))
+    chaser = plant.GetBodyByName("RH1", instance("RH1"))
+    target = plant.GetBodyByName("RH2", instance("RH2"))
+    frames = {
+        "G1": chaser.body_frame(),
+        "G2": target.body_frame(),
+        "D1": plant.GetFrameByName("D1", instance("RH1")),
+        "D2": plant.GetFrameByName("D2", instance("RH2")),
+        "D3": plant.GetFrameByName("D3", instance("RH2")),
+        "J7": plant.GetFrameByName("J7", instance(ARM_MODEL)),
+    }
+    hub_joint = add_floating_joint(plant, chaser, RigidTransform(), name="RH1_floating")
+    target_joint = add_floating_joint(plant, target, RigidTransform(), name="RH2_floating")
+    zeros = [0.0] * 3
+    bushings = {
+        name: plant.AddForceElement(
+            LinearBushingRollPitchYaw(frames[a], frames[c], zeros, zeros, zeros, zeros)
+        )
+        for name, (a, c) in {"SM1": ("J7", "D2"), "SM2": ("D1", "D3")}.items()
+    }
+    plant.Finalize()
+    arm = instance(ARM_MODEL)
+    arm_joints = tuple(plant.GetJointByName(arm_joint_name(i), arm) for i in range(1, 7))
+    drive_joints = tuple(plant.GetJointByName(drive_joint_name(a), instance(a)) for a in ARRAYS)
+    mode_joints, mode_springs = {}, {}
+    elements = (plant.get_force_element(ForceElementIndex(i)) for i in range(plant.num_force_elements()))
+    springs = [e for e in elements if isinstance(e, RevoluteSpring)]
+    by_joint = {s.joint().index(): s for s in springs}
+    for array in ARRAYS:
+        joints = []
+        index = 1
+        while plant.HasJointNamed(MODE_JOINT.format(index), instance(array)):
+            joints.append(plant.GetJointByName(MODE_JOINT.format(index), instance(array)))
+            index += 1
+        mode_joints[array] = tuple(joints)
+        mode_springs[array] = tuple(by_joint[j.index()] for j in joints)
+    return dict(
+        plant=plant, hub_joint=hub_joint, target_joint=target_joint, arm_joints=arm_joints,
+        drive_joints=drive_joints, mode_joints=mode_joints, mode_springs=mode_springs,
+        bushings=bushings, frames=frames, target_body=target,
+    )
+
+
+def make_mission_diagram(
+    options: MissionOptions = MissionOptions(),
+    *,
+    scenario: Scenario | None = None,
+    K=None,
+    sdf_directory: str | Path = SDF_DIRECTORY,
+) -> MissionDiagram:
+    """Build the closed-loop mission diagram (see the module docstring).
+
+    Parameters
+    ----------
+    options : MissionOptions
+        Rates, controller file, joint PD, integrator settings.
+    scenario : Scenario, optional
+        Scenario data (trajectories, inertias); default the paper's.
+    K : array_like, shape (3, 6), optional
+        Controller gain overriding ``options.controller``.
+    sdf_directory : str or Path
+        Directory of ``oos_scenario.sdf``.
+
+    Returns
+    -------
+    MissionDiagram
+    """
+    scenario = scenario or load_scenario()
+    timeline = mission_timeline(scenario)
+    K = controller_gain(options.controller, scenario) if K is None else np.asarray(K, float)
+    builder = DiagramBuilder()
+    parts = _add_plant(builder, Path(sdf_directory))
+    plant = parts["plant"]
+    nq, nv = plant.num_positions(), plant.num_velocities()
+
+    # motion-driven joints: r = [alpha(6), alpha_dot(6), theta_12(2), theta_12_dot(2)]
+    arm_source = builder.AddNamedSystem(
+        "arm_trajectory",
+        TrajectorySource(quintic_piecewise_polynomial(timeline.arm), output_derivative_order=1),
+    )
+    array_source = builder.AddNamedSystem(
+        "array_trajectory",
+        TrajectorySource(quintic_piecewise_polynomial(timeline.arrays), output_derivative_order=1),
+    )
+    reference = builder.AddNamedSystem("joint_reference", Multiplexer([12, 4]))
+    builder.Connect(arm_source.get_output_port(), reference.get_input_port(0))
+    builder.Connect(array_source.get_output_port(), reference.get_input_port(1))
+
+    sizing_context = plant.CreateDefaultContext()
+    grasp = timeline.configuration(float(scenario.mission.first_docking_time))
+    for joint, angle in zip(parts["arm_joints"], grasp.alpha, strict=True):
+        joint.set_angle(sizing_context, angle)
+    M = plant.CalcMassMatrix(sizing_context)
+    K_state = np.zeros((nv, nq + nv))
+    K_ref = np.zeros((nv, 16))
+    w, zeta = options.joint_bandwidth, options.joint_damping_ratio
+    for i, joint in enumerate(parts["arm_joints"] + parts["drive_joints"]):
+        qi, vi = joint.position_start(), joint.velocity_start()
+        inertia = M[vi, vi]
+        if i < 6:
+            inertia = max(inertia, options.arm_min_inertia)
+        kp, kd = w**2 * inertia, 2.0 * zeta * w * inertia
+        K_state[vi, qi], K_state[vi, nq + vi] = -kp, -kd
+        if i < 6:
+            K_ref[vi, i], K_ref[vi, 6 + i] = kp, kd
+        elif i < 8:  # chaser arrays follow theta_1,2; target arrays held at their fixed angle
+            K_ref[vi, 12 + i - 6], K_ref[vi, 14 + i - 6] = kp, kd
+    joint_state_gain = builder.AddNamedSystem("joint_pd_state", MatrixGain(K_state))
+    joint_ref_gain = builder.AddNamedSystem("joint_pd_reference", MatrixGain(K_ref))
+    builder.Connect(plant.get_state_output_port(), joint_state_gain.get_input_port())
+    builder.Connect(reference.get_output_port(), joint_ref_gain.get_input_port())
+
+    configuration = timeline.configuration(float(scenario.mission.first_docking_time))
+    J_ref = effective_inertia(rigid_spatial_inertia_at_G1(scenario, configuration))
+    design = FlightSoftwareDesign.create(
+        K, options.control_rate, torque_limit=options.torque_limit,
+        perturbation_frequency_hz=options.perturbation_frequency_hz, J_ref=J_ref,
+    )
+    hub = parts["hub_joint"]
+    fsw = builder.AddNamedSystem(
+        "flight_software", FlightSoftware(design, nq, nv, hub.position_start(), hub.velocity_start())
+    )
+    builder.Connect(plant.get_state_output_port(), fsw.get_input_port(0))
+    forces = builder.AddNamedSystem("generalized_forces", Adder(3, nv))
+    builder.Connect(joint_state_gain.get_output_port(), forces.get_input_port(0))
+    builder.Connect(joint_ref_gain.get_output_port(), forces.get_input_port(1))
+    builder.Connect(fsw.GetOutputPort("generalized_force"), forces.get_input_port(2))
+    builder.Connect(forces.get_output_port(), plant.get_applied_generalized_force_input_port())
+
+    period = 1.0 / options.log_rate
+    state_logger = LogVectorOutput(plant.get_state_output_port(), builder, period)
+    state_logger.set_name("state_logger")
+    torque_logger = LogVectorOutput(fsw.GetOutputPort("log"), builder, period)
+    torque_logger.set_name("torque_logger")
+    diagram = builder.Build()
+    diagram.set_name("oos_mission")
+    return MissionDiagram(
+        diagram=diagram,
+        plant=plant,
+        flight_software=fsw,
+        options=options,
+        scenario=scenario,
+        timeline=timeline,
+        K=K,
+        hub_joint=hub,
+        target_joint=parts["target_joint"],
+        arm_joints=parts["arm_joints"],
+        drive_joints=parts["drive_joints"],
+        mode_joints=MappingProxyType(parts["mode_joints"]),
+        mode_springs=MappingProxyType(parts["mode_springs"]),
+        bushings=MappingProxyType(parts["bushings"]),
+        frames=MappingProxyType(parts["frames"]),
+        target_body=parts["target_body"],
+        state_logger=state_logger,
+        torque_logger=torque_logger,
+    )

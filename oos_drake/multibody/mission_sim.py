@@ -1,0 +1,516 @@
+"""Run one closed-loop mission simulation: dispersed values in, metrics and time series out.
+
+:class:`MissionSimulation` builds the mission diagram once (:func:`make_mission_diagram`) and
+runs any window of the mission from a fresh context: the run is a pure function of
+``(values, seed, window)``, so a rerun reproduces its metrics exactly.
+
+Mission events (paper data, ``oos_drake/scenario/data/paper.toml``):
+
+============  ========  ====================================================================
+event         time [s]  what happens in the simulation
+============  ========  ====================================================================
+``capture``   255       the (free, decoupled) target is placed so that D2 meets the arm tip J7
+                        with J7's velocity; SM1 stiffness ramps log-linearly from 0.1 to its
+                        dispersed value (``k_shear_SM1``, ``k_tors_SM1``) over ``ramp_duration``
+                        with damping ``d_shear_SM1``, ``d_tors_SM1`` from the contact on
+``docking``   880       SM2 (D1 - D3) ramps up the same way, then SM1 ramps down to 0
+                        (the arm is released and retreats)
+``tilt``      1100      the chaser arrays start their half-turn
+============  ========  ====================================================================
+
+A window that starts after an event starts in the corresponding connected state (target on the
+arm tip, or on the hub). The hub starts at the dispersed attitude and body rate errors.
+"""
+
+from __future__ import annotations
+
+import math
+import time as _time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+
+import numpy as np
+import pandas as pd
+from pydrake.math import RollPitchYaw
+from pydrake.multibody.tree import RotationalInertia, SpatialInertia
+from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+
+from oos_drake.multibody.flight_software import NOISE_CHANNELS
+from oos_drake.multibody.mission import ARRAYS, MissionDiagram, MissionOptions, make_mission_diagram
+
+__all__ = [
+    "MissionDiverged",
+    "MissionParameter",
+    "MissionResult",
+    "MissionSimulation",
+    "METRIC_UNITS",
+    "SIGNAL_UNITS",
+    "mission_parameters",
+]
+
+AXES = ("x", "y", "z")
+
+
+class MissionDiverged(RuntimeError):
+    """The run left the model's domain (attitude beyond the limit, integrator failure)."""
+
+
+@dataclass(frozen=True)
+class MissionParameter:
+    """A dispersible parameter of the mission simulation.
+
+    Attributes
+    ----------
+    name : str
+        Uncertain-block name (as in the LFR model) or initial-condition / seed name.
+    unit : str
+        Unit of the physical value.
+    nominal, lower, upper : float
+        Nominal value and valid range [unit].
+    kind : str
+        ``real_block``, ``stiffness``, ``initial_condition``, ``seed`` or ``lti``.
+    description : str
+        One line.
+    """
+
+    name: str
+    unit: str
+    nominal: float
+    lower: float
+    upper: float
+    kind: str
+    description: str
+
+
+def mission_parameters(scenario) -> tuple[MissionParameter, ...]:
+    """Every dispersible parameter, with nominal values and ranges from the scenario data."""
+    target = scenario.hubs["RH2"]
+    params = []
+    r = target.mass_uncertainty_percent / 100.0
+    params.append(MissionParameter("m_RH2", "kg", target.mass, target.mass * (1 - r),
+                                   target.mass * (1 + r), "real_block", "target hub mass"))
+    for i, axis in enumerate(("xx", "yy", "zz")):
+        J = float(target.inertia[i, i])
+        r = float(target.inertia_uncertainty_percent[i]) / 100.0
+        params.append(MissionParameter(f"J{axis}_RH2", "kg m^2", J, J * (1 - r), J * (1 + r),
+                                       "real_block", f"target hub inertia J{axis} at G2"))
+    for array in ARRAYS:
+        model = scenario.arrays[array].model
+        w = float(model.omega[0])
+        r = model.first_mode_uncertainty_percent / 100.0
+        params.append(MissionParameter(f"w1_{array}", "rad/s", w, w * (1 - r), w * (1 + r),
+                                       "real_block", f"first cantilever mode frequency of {array}"))
+    k, d = scenario.docking.rigid_stiffness, scenario.docking.damping
+    for sm in ("SM1", "SM2"):
+        params += [
+            MissionParameter(f"k_shear_{sm}", "N/m", k, 0.1, 1e6, "stiffness",
+                             f"{sm} final shear stiffness"),
+            MissionParameter(f"k_tors_{sm}", "N m/rad", k, 0.1, 1e6, "stiffness",
+                             f"{sm} final torsional stiffness"),
+            MissionParameter(f"d_shear_{sm}", "N s/m", d, 0.0, 1e4, "stiffness",
+                             f"{sm} shear damping"),
+            MissionParameter(f"d_tors_{sm}", "N m s/rad", d, 0.0, 1e4, "stiffness",
+                             f"{sm} torsional damping"),
+        ]
+    for axis in AXES:
+        params.append(MissionParameter(f"phi0_{axis}", "rad", 0.0, -0.05, 0.05,
+                                       "initial_condition", f"initial hub attitude error ({axis})"))
+    for axis in AXES:
+        params.append(MissionParameter(f"w0_{axis}", "rad/s", 0.0, -0.01, 0.01,
+                                       "initial_condition", f"initial hub body rate error ({axis})"))
+    params.append(MissionParameter("noise_seed", "-", 0.0, 0.0, 2.0**31, "seed",
+                                   "seed of sensor noise and disturbances (0: the run seed)"))
+    params.append(MissionParameter("Delta_mul", "-", 0.0, -1.0, 1.0, "lti",
+                                   "scale of the multiplicative actuator all-pass perturbation"))
+    params.append(MissionParameter("Delta_add", "-", 0.0, -1.0, 1.0, "lti",
+                                   "scale of the additive plant all-pass perturbation"))
+    return tuple(params)
+
+
+METRIC_UNITS = MappingProxyType({
+    "ape": "rad",
+    "rms_attitude": "rad",
+    "peak_torque": "N m",
+    "peak_applied_torque": "N m",
+    "max_force_SM1": "N",
+    "max_force_SM2": "N",
+    "max_tracking_error": "rad",
+})
+
+
+def _signal_units() -> dict[str, str]:
+    units = {}
+    for prefix, unit in (("phi", "rad"), ("w", "rad/s"), ("u", "N m"), ("T_rw", "N m"),
+                         ("T", "N m"), ("T_dist", "N m")):
+        units.update({f"{prefix}_{a}": unit for a in AXES})
+    for sm in ("SM1", "SM2"):
+        units[f"F_{sm}"] = "N"
+        units[f"M_{sm}"] = "N m"
+    for array in ARRAYS:
+        units.update({f"q{i}_{array}": "rad" for i in range(1, 7)})
+    return units
+
+
+SIGNAL_UNITS = MappingProxyType(_signal_units())
+
+
+@dataclass(frozen=True, eq=False)
+class MissionResult:
+    """Outcome of one run.
+
+    Attributes
+    ----------
+    metrics : Mapping[str, float]
+        See :data:`METRIC_UNITS`.
+    timeseries : pandas.DataFrame
+        ``"time [s]"`` and one ``"name [unit]"`` column per :data:`SIGNAL_UNITS` entry.
+    wall_time : float
+        Wall-clock time of the simulation [s] (without building the context and the log table).
+    cpu_time : float
+        Processor time of this process over the same span [s] (the one-core figure on a shared
+        machine).
+    steps : int
+        Integrator steps taken.
+    """
+
+    metrics: Mapping[str, float]
+    timeseries: pd.DataFrame
+    wall_time: float
+    cpu_time: float
+    steps: int
+
+
+@dataclass(frozen=True)
+class _Schedule:
+    """Docking bushing settings over time (piecewise constant)."""
+
+    t_capture: float
+    t_docking: float
+    duration: float
+    steps: int
+    k0: float
+    values: Mapping[str, float]
+
+    def _ramp(self, t, t0, k_from, k_to):
+        i = min(int(math.floor((t - t0) / self.duration * self.steps + 1e-9)), self.steps - 1)
+        frac = i / (self.steps - 1) if self.steps > 1 else 1.0
+        return k_from * (k_to / k_from) ** frac
+
+    def settings(self, t: float) -> dict[str, tuple[float, float, float, float]]:
+        """``{"SM1": (k_shear, k_tors, d_shear, d_tors), "SM2": ...}`` at time ``t``."""
+        v, k0, R = self.values, self.k0, self.duration
+        out = {"SM1": (0.0, 0.0, 0.0, 0.0), "SM2": (0.0, 0.0, 0.0, 0.0)}
+        sm1 = (v["k_shear_SM1"], v["k_tors_SM1"], v["d_shear_SM1"], v["d_tors_SM1"])
+        sm2 = (v["k_shear_SM2"], v["k_tors_SM2"], v["d_shear_SM2"], v["d_tors_SM2"])
+        if t < self.t_capture:
+            return out
+        if t < self.t_capture + R:
+            out["SM1"] = (self._ramp(t, self.t_capture, k0, sm1[0]),
+                          self._ramp(t, self.t_capture, k0, sm1[1]), sm1[2], sm1[3])
+            return out
+        if t < self.t_docking:
+            out["SM1"] = sm1
+            return out
+        if t < self.t_docking + R:
+            out["SM1"] = sm1
+            out["SM2"] = (self._ramp(t, self.t_docking, k0, sm2[0]),
+                          self._ramp(t, self.t_docking, k0, sm2[1]), sm2[2], sm2[3])
+            return out
+        out["SM2"] = sm2
+        if t < self.t_docking + 2 * R:
+            t1 = self.t_docking + R
+            out["SM1"] = (self._ramp(t, t1, sm1[0], k0), self._ramp(t, t1, sm1[1], k0),
+                          sm1[2], sm1[3])
+        return out
+
+    def breakpoints(self, start: float, end: float) -> list[float]:
+        """Times in ``(start, end)`` where the settings change."""
+        R, n = self.duration, self.steps
+        times = [self.t_capture + i * R / n for i in range(n + 1)]
+        times += [self.t_docking + i * R / n for i in range(2 * n + 1)]
+        return sorted(t for t in set(times) if start < t < end)
+
+
+class MissionSimulation:
+    """The mission diagram of one process and the runs on it.
+
+    Parameters
+    ----------
+    options : MissionOptions
+        Diagram and simulation options.
+    handles : MissionDiagram, optional
+        An already built diagram (default: build one from ``options``).
+    """
+
+    def __init__(self, options: MissionOptions = MissionOptions(), handles: MissionDiagram | None = None):
+        self.handles = handles or make_mission_diagram(options)
+        self.options = self.handles.options
+        scenario = self.handles.scenario
+        self.parameters = mission_parameters(scenario)
+        self._by_name = {p.name: p for p in self.parameters}
+        mission = scenario.mission
+        self.events = MappingProxyType({
+            "capture": float(mission.first_docking_time),
+            "docking": float(mission.second_docking_time),
+            "tilt": float(mission.tilt_start_time),
+        })
+        self.duration = float(mission.t_end - mission.t_start)
+        plant = self.handles.plant
+        default = plant.CreateDefaultContext()
+        self._default_springs = {
+            a: (s[0].GetStiffness(default), self.handles.mode_joints[a][0].GetDamping(default))
+            for a, s in self.handles.mode_springs.items()
+        }
+        target = self.handles.target_body
+        self._target_inertia = target.default_spatial_inertia()
+
+    # -- values ---------------------------------------------------------------------------------
+    def resolve(self, values: Mapping[str, float] | None) -> dict[str, float]:
+        """Nominal values overridden by ``values``; unknown names or values out of range raise."""
+        out = {p.name: float(p.nominal) for p in self.parameters}
+        for name, value in dict(values or {}).items():
+            if name not in self._by_name:
+                raise ValueError(f"mission: unknown parameter {name!r}; known: {', '.join(out)}")
+            p = self._by_name[name]
+            value = float(value)
+            if not (math.isfinite(value) and p.lower <= value <= p.upper):
+                raise ValueError(
+                    f"mission: {name} = {value:g} {p.unit} outside [{p.lower:g}, {p.upper:g}]"
+                )
+            out[name] = value
+        return out
+
+    def schedule(self, values: Mapping[str, float]) -> _Schedule:
+        """Docking bushing schedule of a run."""
+        o = self.options
+        return _Schedule(self.events["capture"], self.events["docking"], o.ramp_duration,
+                         int(o.ramp_steps), o.ramp_start_stiffness, dict(values))
+
+    def apply_parameters(self, context, values: Mapping[str, float]) -> None:
+        """Write the model parameters (target inertia, mode frequencies, perturbations) into a
+        root ``context``."""
+        h = self.handles
+        pc = h.plant.GetMyMutableContextFromRoot(context)
+        M0 = self._target_inertia
+        I = M0.CalcRotationalInertia().CopyToFullMatrix3()
+        I[0, 0], I[1, 1], I[2, 2] = values["Jxx_RH2"], values["Jyy_RH2"], values["Jzz_RH2"]
+        inertia = RotationalInertia(I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])
+        h.target_body.SetSpatialInertiaInBodyFrame(
+            pc, SpatialInertia.MakeFromCentralInertia(values["m_RH2"], M0.get_com(), inertia)
+        )
+        for array in ARRAYS:
+            stiffness, damping = self._default_springs[array]
+            ratio = values[f"w1_{array}"] / self._by_name[f"w1_{array}"].nominal
+            h.mode_springs[array][0].SetStiffness(pc, stiffness * ratio**2)
+            h.mode_joints[array][0].SetDamping(pc, damping * ratio)
+        h.flight_software.set_perturbations(
+            h.flight_software.GetMyMutableContextFromRoot(context),
+            values["Delta_mul"], values["Delta_add"],
+        )
+
+    def _set_bushings(self, context, settings) -> None:
+        pc = self.handles.plant.GetMyMutableContextFromRoot(context)
+        for name, (ks, kt, ds, dt) in settings.items():
+            bushing = self.handles.bushings[name]
+            bushing.SetForceStiffnessConstants(pc, [ks] * 3)
+            bushing.SetTorqueStiffnessConstants(pc, [kt] * 3)
+            bushing.SetForceDampingConstants(pc, [ds] * 3)
+            bushing.SetTorqueDampingConstants(pc, [dt] * 3)
+
+    def _place_target(self, context, on: str) -> None:
+        """Put the target so that D2 = J7 (``on="arm"``) or D3 = D1 (``on="hub"``), moving with
+        that frame."""
+        h = self.handles
+        pc = h.plant.GetMyMutableContextFromRoot(context)
+        f = h.frames
+        port, mate = ("D2", "J7") if on == "arm" else ("D3", "D1")
+        X_WM = f[mate].CalcPoseInWorld(pc)
+        X_WG2 = X_WM @ f[port].GetFixedPoseInBodyFrame().inverse()
+        h.target_joint.SetPose(pc, X_WG2)
+        V_WM = f[mate].CalcSpatialVelocityInWorld(pc)
+        p_MG2_W = X_WG2.translation() - X_WM.translation()
+        V_WG2 = V_WM.Shift(p_MG2_W)
+        h.target_joint.set_angular_velocity(pc, V_WG2.rotational())
+        h.target_joint.set_translational_velocity(pc, V_WG2.translational())
+
+    def initial_context(self, values: Mapping[str, float], seed: int, start: float, end: float,
+                        noise_table: np.ndarray | None = None):
+        """A root context at the window start with every value applied (see the module doc).
+
+        ``noise_table`` (``(n, 9)``: unit ``[n_sst; n_gyro; d_ext]`` per sample) replaces the
+        seeded Gaussian noise (deterministic inputs for tests).
+        """
+        h = self.handles
+        values = self.resolve(values)
+        context = h.diagram.CreateDefaultContext()
+        context.SetTime(float(start))
+        pc = h.plant.GetMyMutableContextFromRoot(context)
+        self.apply_parameters(context, values)
+        t = float(start)
+        config = h.timeline.configuration(t)
+        rates = h.timeline.rates(t)
+        for joint, angle, rate in zip(h.arm_joints, config.alpha, rates.alpha_dot, strict=True):
+            joint.set_angle(pc, angle)
+            joint.set_angular_rate(pc, rate)
+        for joint, angle, rate in zip(h.drive_joints, config.theta, rates.theta_dot, strict=True):
+            joint.set_angle(pc, angle)
+            joint.set_angular_rate(pc, rate)
+        phi0 = np.array([values[f"phi0_{a}"] for a in AXES])
+        w0_B = np.array([values[f"w0_{a}"] for a in AXES])
+        h.hub_joint.set_angles(pc, phi0)
+        R_WB = RollPitchYaw(phi0).ToRotationMatrix().matrix()
+        h.hub_joint.set_angular_velocity(pc, R_WB @ w0_B)
+        schedule = self.schedule(values)
+        if t < self.events["capture"]:
+            # decoupled: put the target at its grasp pose (it is reset at the capture anyway)
+            grasp = h.timeline.configuration(self.events["capture"])
+            saved = [j.get_angle(pc) for j in h.arm_joints]
+            for joint, angle in zip(h.arm_joints, grasp.alpha, strict=True):
+                joint.set_angle(pc, angle)
+            self._place_target(context, "arm")
+            h.target_joint.set_angular_velocity(pc, np.zeros(3))
+            h.target_joint.set_translational_velocity(pc, np.zeros(3))
+            for joint, angle in zip(h.arm_joints, saved, strict=True):
+                joint.set_angle(pc, angle)
+        elif t < self.events["docking"] + self.options.ramp_duration:
+            self._place_target(context, "arm")
+        else:
+            self._place_target(context, "hub")
+        self._set_bushings(context, schedule.settings(t))
+        fsw = h.flight_software
+        fsw_context = fsw.GetMyMutableContextFromRoot(context)
+        noise_seed = int(values["noise_seed"]) or int(seed)
+        n = int(math.ceil((end - start) * self.options.control_rate)) + 2
+        if noise_table is None:
+            noise_table = np.random.default_rng(noise_seed).standard_normal((n, NOISE_CHANNELS))
+        fsw.set_noise(fsw_context, noise_table)
+        # sensor filters start at their steady state for the initial measurement
+        state = fsw_context.get_mutable_discrete_state(0).get_mutable_value()
+        s = fsw.state_slices
+        d = fsw.design
+        for block, name, u in ((d.star_tracker, "star_tracker", phi0), (d.gyro, "gyro", w0_B)):
+            state[s[name]] = np.linalg.solve(np.eye(block.nstates) - block.A, block.B @ u)
+        return context, values, schedule
+
+    # -- run ------------------------------------------------------------------------------------
+    def run(self, values: Mapping[str, float] | None = None, seed: int = 0,
+            start: float = 0.0, end: float | None = None, *, log: bool = True,
+            noise_table: np.ndarray | None = None) -> MissionResult:
+        """Simulate ``[start, end]`` of the mission (default: all of it).
+
+        ``values`` are physical parameter values (missing ones nominal), ``seed`` seeds the
+        sensor noise and disturbance (unless ``noise_seed`` is dispersed), ``noise_table``
+        replaces them by a given ``(n, 9)`` unit table (see :meth:`initial_context`).
+
+        Raises
+        ------
+        MissionDiverged
+            Hub attitude beyond ``divergence_limit``, non-finite state or integrator failure.
+        ValueError
+            Unknown parameter, value out of range, or a window outside the mission.
+        """
+        end = self.duration if end is None else float(end)
+        start = float(start)
+        if not (0.0 <= start < end <= self.duration + 1e-9):
+            raise ValueError(f"mission window [{start}, {end}] s outside [0, {self.duration}] s")
+        h, o = self.handles, self.options
+        context, values, schedule = self.initial_context(values, seed, start, end, noise_table)
+        simulator = Simulator(h.diagram, context)
+        ResetIntegratorFromFlags(simulator, o.integrator, 1.0 / o.control_rate)
+        integrator = simulator.get_mutable_integrator()
+        integrator.set_target_accuracy(o.accuracy)
+        simulator.Initialize()
+        fsw = h.flight_software
+        fsw_context = fsw.GetMyContextFromRoot(context)
+        stops = set(schedule.breakpoints(start, end))
+        stops.update(np.arange(start + o.check_interval, end, o.check_interval).tolist())
+        if start < self.events["capture"] < end:
+            stops.add(self.events["capture"])
+        stops = sorted(stops) + [end]
+        t_wall, t_cpu = _time.perf_counter(), _time.process_time()
+        for stop in stops:
+            try:
+                simulator.AdvanceTo(stop)
+            except RuntimeError as exc:
+                raise MissionDiverged(
+                    f"integrator failed near t = {context.get_time():.3f} s: "
+                    f"{str(exc).splitlines()[0]}"
+                ) from exc
+            max_phi = fsw.metrics(fsw_context)["max_phi"]
+            if not np.all(np.isfinite(max_phi)) or max_phi.max() > o.divergence_limit:
+                raise MissionDiverged(
+                    f"hub attitude {max_phi.max():.3g} rad beyond the {o.divergence_limit} rad "
+                    f"limit by t = {stop:.1f} s"
+                )
+            if stop == self.events["capture"]:
+                self._place_target(context, "arm")
+            if stop < end:
+                self._set_bushings(context, schedule.settings(stop))
+        wall, cpu = _time.perf_counter() - t_wall, _time.process_time() - t_cpu
+        metrics_raw = fsw.metrics(fsw_context)
+        timeseries = self._timeseries(context, schedule) if log else pd.DataFrame()
+        samples = max(metrics_raw["samples"], 1.0)
+        metrics = {
+            "ape": float(metrics_raw["max_phi"].max()),
+            "rms_attitude": float(np.sqrt(metrics_raw["sumsq_phi"].sum() / (3.0 * samples))),
+            "peak_torque": float(metrics_raw["max_u"].max()),
+            "peak_applied_torque": float(metrics_raw["max_T"].max()),
+            "max_force_SM1": float(timeseries["F_SM1 [N]"].max()) if log else math.nan,
+            "max_force_SM2": float(timeseries["F_SM2 [N]"].max()) if log else math.nan,
+            "max_tracking_error": self._tracking_error(context) if log else math.nan,
+        }
+        return MissionResult(MappingProxyType(metrics), timeseries, wall, cpu,
+                             int(integrator.get_num_steps_taken()))
+
+    def _logs(self, context):
+        h = self.handles
+        state_log = h.state_logger.FindLog(context)
+        torque_log = h.torque_logger.FindLog(context)
+        return state_log.sample_times(), state_log.data(), torque_log.data()
+
+    def _tracking_error(self, context) -> float:
+        h = self.handles
+        times, x, _ = self._logs(context)
+        if times.size == 0:
+            return math.nan
+        q_arm = np.stack([x[j.position_start()] for j in h.arm_joints], axis=1)
+        reference = h.timeline.arm(np.clip(times, 0.0, self.duration))
+        return float(np.abs(q_arm - reference).max())
+
+    def _timeseries(self, context, schedule: _Schedule) -> pd.DataFrame:
+        h = self.handles
+        plant = h.plant
+        times, x, torques = self._logs(context)
+        nq = plant.num_positions()
+        qs, vs = h.hub_joint.position_start(), nq + h.hub_joint.velocity_start()
+        columns = {"time [s]": times}
+        rpy = x[qs : qs + 3]
+        w_W = x[vs : vs + 3]
+        w_B = np.empty_like(w_W)
+        for k in range(times.size):
+            R = RollPitchYaw(rpy[:, k]).ToRotationMatrix().matrix()
+            w_B[:, k] = R.T @ w_W[:, k]
+        for i, a in enumerate(AXES):
+            columns[f"phi_{a} [rad]"] = rpy[i]
+            columns[f"w_{a} [rad/s]"] = w_B[i]
+        for j, prefix in enumerate(("u", "T_rw", "T", "T_dist")):
+            for i, a in enumerate(AXES):
+                columns[f"{prefix}_{a} [N m]"] = torques[3 * j + i]
+        root = h.diagram.CreateDefaultContext()
+        forces = {sm: np.zeros((2, times.size)) for sm in h.bushings}
+        pc_root = plant.GetMyMutableContextFromRoot(root)
+        for k, t in enumerate(times):
+            plant.SetPositionsAndVelocities(pc_root, x[:, k])
+            self._set_bushings(root, schedule.settings(float(t)))
+            for sm, bushing in h.bushings.items():
+                F = bushing.CalcBushingSpatialForceOnFrameC(pc_root)
+                forces[sm][0, k] = np.linalg.norm(F.translational())
+                forces[sm][1, k] = np.linalg.norm(F.rotational())
+        for sm in h.bushings:
+            columns[f"F_{sm} [N]"] = forces[sm][0]
+            columns[f"M_{sm} [N m]"] = forces[sm][1]
+        for array in ARRAYS:
+            for i, joint in enumerate(h.mode_joints[array], start=1):
+                columns[f"q{i}_{array} [rad]"] = x[joint.position_start()]
+        return pd.DataFrame(columns)
