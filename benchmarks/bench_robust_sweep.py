@@ -51,7 +51,7 @@ def paper_like_lfr(n_models: int, *, n_modes: int = 24, seed: int = 0) -> LFR:
         A[:, 2 * i, 2 * i + 1] = wn[:, i]
         A[:, 2 * i + 1, 2 * i] = -wn[:, i]
         A[:, 2 * i + 1, 2 * i + 1] = -2 * zeta[i] * wn[:, i]
-    Bw = rng.standard_normal((n, nw)) * 0.05
+    Bw = rng.standard_normal((n, nw)) * 0.004  # mu peaks of order one
     Cz = rng.standard_normal((nz, n)) * np.repeat(np.sqrt(zeta), 2)[None, :]
     Dzw = rng.standard_normal((nz, nw)) * 0.05
     Bu = rng.standard_normal((n, 1))
@@ -75,7 +75,7 @@ def main(argv=None):
     from oos_drake.robust.threads import limit_blas_threads
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--models", type=int, default=6, help="models actually run")
+    parser.add_argument("--models", type=int, default=40, help="models actually run")
     parser.add_argument("--frequencies", type=int, default=500)
     parser.add_argument("--jobs", type=int, default=2)
     args = parser.parse_args(argv)

@@ -18,13 +18,16 @@ the progress bar moves steadily.
 
 from __future__ import annotations
 
+import collections
 import concurrent.futures
+import math
 import multiprocessing
 import os
 import socket
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -194,15 +197,58 @@ class ProcessPoolExecutor:
             list(self._pool.map(_warm_up, [recipe] * self.workers))
 
     def run(self, recipe: SimulatorRecipe, cases: Iterable[RunCase]) -> Iterator[RunResult]:
-        self.start(recipe)
-        pool = self._pool
+        """Run the cases; a case that kills its worker process is recorded as ``"failed"``.
 
-        def wait_one(pending):
-            return concurrent.futures.wait(pending, return_when=concurrent.futures.FIRST_COMPLETED)
+        A worker that dies (segmentation fault in a native simulator, ``os._exit``, out of
+        memory) breaks the whole pool, and every case then in flight is suspect. The pool is
+        restarted and the suspects are rerun one at a time: the one that kills its worker alone
+        is the culprit and gets a ``"failed"`` result; the others complete normally (runs are
+        deterministic, so rerunning them changes nothing).
+        """
+        queue = collections.deque(cases)
+        suspects: collections.deque[RunCase] = collections.deque()
+        limit = 2 * self.workers
+        while queue or suspects:
+            self.start(recipe)
+            pool = self._pool
+            if suspects:
+                case = suspects.popleft()
+                try:
+                    result = pool.submit(execute_case, recipe, case).result()
+                except BrokenProcessPool as exc:
+                    self._discard_pool()
+                    result = RunResult(
+                        case.run_id,
+                        "failed",
+                        f"WorkerDied: its worker process died ({exc})",
+                        {},
+                        None,
+                        math.nan,
+                    )
+                yield result
+                continue
+            pending: dict[concurrent.futures.Future, RunCase] = {}
+            try:
+                while queue or pending:
+                    while queue and len(pending) < limit:
+                        # submit raises BrokenProcessPool too: pop the case only once submitted
+                        future = pool.submit(execute_case, recipe, queue[0])
+                        pending[future] = queue.popleft()
+                    done, _ = concurrent.futures.wait(
+                        pending, return_when=concurrent.futures.FIRST_COMPLETED
+                    )
+                    for future in done:
+                        result = future.result()  # raises BrokenProcessPool if a worker died
+                        del pending[future]
+                        yield result
+            except BrokenProcessPool:
+                suspects.extend(pending.values())
+                self._discard_pool()
 
-        yield from _bounded(
-            lambda case: pool.submit(execute_case, recipe, case), wait_one, cases, 2 * self.workers
-        )
+    def _discard_pool(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
 
     def close(self) -> None:
         if self._pool is not None:

@@ -324,7 +324,7 @@ def _close_scalar(sys: LFR, deltas: Mapping) -> LFR:
     arrays = []
     for name in names:
         arr = np.asarray(deltas[name])
-        batch = np.broadcast_shapes(batch, arr.shape)
+        batch = _broadcast(batch, arr.shape, name)
         arrays.append((arr, entries[name].reps))
     # per-channel normalized values in level order, shape batch + (ns,)
     d = np.concatenate(
@@ -345,6 +345,16 @@ def _close_scalar(sys: LFR, deltas: Mapping) -> LFR:
     return LFR(
         new_M, sys.nstates, remaining, input_names=sys.input_names, output_names=sys.output_names
     )
+
+
+def _broadcast(batch, shape, name):
+    try:
+        return np.broadcast_shapes(batch, shape)
+    except ValueError:
+        raise ValueError(
+            f"usubs: values of block {name!r} with batch shape {shape} do not broadcast with the "
+            f"other values / model array (batch {batch})"
+        ) from None
 
 
 def _ill_posed(names):
@@ -434,7 +444,7 @@ def _close_full(sys: LFR, deltas: Mapping) -> LFR:
     entries = {e.spec.name: e for e in sys.block_entries}
     batch = sys.batch_shape
     for name in names:
-        batch = np.broadcast_shapes(batch, np.asarray(deltas[name]).shape[:-2])
+        batch = _broadcast(batch, np.asarray(deltas[name]).shape[:-2], name)
     dtype = np.result_type(sys.M, *(np.asarray(deltas[k]) for k in names))
     Delta = np.zeros(batch + (w_sub.size, z_sub.size), dtype=dtype)
     w0 = z0 = 0

@@ -32,7 +32,7 @@ def _polish_model_peaks(M, blk, up, lo, count):
     return up
 
 
-def _warm_sweep(M, blk, *, warm_iterations=20, lower_restarts=1, lower_iterations=30):
+def _warm_sweep(M, blk, *, warm_iterations=20, lower_restarts=2, lower_iterations=40):
     """Bounds for ``M`` ``(nm, F, c, r)`` walking up the frequency axis with warm starts.
 
     The first frequency starts from Osborne balancing (80 iterations); each next one from the
@@ -165,7 +165,7 @@ def robust_sweep(
         iterations per frequency instead of 40-80; the grid must be fine enough for the
         scalings to change little between neighbours). False: independent ``mussv`` calls.
     chunk_size : int, optional
-        Models per task (default: spread evenly over ``4 * n_jobs`` tasks).
+        Models per task (default: one task per worker).
     mu_options : dict, optional
         Options of :func:`~oos_drake.robust.mussv` for the grid pass; default
         ``upper_iterations=40, lower_restarts=2, lower_iterations=40`` (about 1 % on the upper
@@ -218,8 +218,8 @@ def robust_sweep(
         **dict(mu_options or {}),
     }
     n_jobs = max(1, int(n_jobs))
-    if chunk_size is None:
-        chunk_size = max(1, int(np.ceil(n_models / (4 * n_jobs))))
+    if chunk_size is None:  # one task per worker: big batches share the Python overhead
+        chunk_size = max(1, int(np.ceil(n_models / n_jobs)))
     tasks = [
         (
             A[i : i + chunk_size],

@@ -110,7 +110,7 @@ def _live_group_members(group: int) -> set[int]:
     return members
 
 
-@pytest.mark.parametrize("workers", [1, 2])
+@pytest.mark.parametrize("workers", [1, pytest.param(2, marks=pytest.mark.slow)])
 def test_kill_9_then_resume_loses_and_repeats_nothing(write_spec, tmp_path, workers):
     n_runs = 30
     # ~30 ms per run so that the kill lands mid-campaign
@@ -223,3 +223,23 @@ def test_only_failed_runs_keep_their_selected_signals(write_spec, tmp_path):
     # the APE metric is the peak of the retained attitude signal
     ape = runs.set_index("run_id").loc[min(failing), "ape [rad]"]
     assert series["theta_hub [rad]"].abs().max() == ape
+
+
+def test_a_run_that_kills_its_worker_is_recorded_and_the_others_complete(write_spec, tmp_path):
+    text = BASE_SPEC.replace(
+        'name = "flexible-attitude"', 'name = "campaign.crashing_sim:make_simulator"'
+    )
+    spec = write_spec(text)
+    run_campaign(spec, tmp_path / "c", workers=2, progress=False)
+    runs = pd.read_parquet(tmp_path / "c" / "runs.parquet")
+    assert runs["run_id"].tolist() == list(range(12))
+    crashing = runs["run_id"] == 5
+    assert (runs.loc[crashing, "status"] == "failed").all()
+    assert runs.loc[crashing, "error"].str.startswith("WorkerDied").all()
+    assert (runs.loc[~crashing, "status"] == "ok").all()
+    # the surviving runs are exactly those of the ordinary simulator
+    reference = BASE_SPEC
+    run_campaign(write_spec(reference, name="ref"), tmp_path / "ref", progress=False)
+    ref = pd.read_parquet(tmp_path / "ref" / "runs.parquet")
+    for column in METRICS:
+        assert runs.loc[~crashing, column].tolist() == ref.loc[~crashing, column].tolist()

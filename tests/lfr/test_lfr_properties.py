@@ -129,5 +129,8 @@ def test_reduce_preserves_the_substituted_response(scenario):
         red, {k: v for k, v in values.items() if k in red.occurrences}, normalized=True
     ).freqresp(OMEGA)
     assume(np.all(np.isfinite(full)) and np.max(np.abs(full)) < 1e6)
-    scale = np.max(np.abs(full), axis=(-2, -1), keepdims=True) + 1e-12
-    assert np.max(np.abs(small - full) / scale) < 1e-7
+    scale = np.max(np.abs(full), axis=(-2, -1), keepdims=True)
+    # the rank decisions use an absolute threshold 1e-10 ||M||: directions below it may be dropped,
+    # so tiny responses (products of small random feedthroughs) are compared absolutely
+    slack = 1e-9 * max(1.0, float(np.linalg.norm(expr.M)))
+    assert np.all(np.abs(small - full) <= 1e-7 * scale + slack)

@@ -177,3 +177,10 @@ def test_lftdata_round_trip_and_dynamic_ultidyn_substitution():
     np.testing.assert_allclose(out.freqresp(OMEGA), expected, rtol=1e-10)
     with pytest.raises(ValueError, match="only ultidyn"):
         usubs(sys, {"k": dyn})
+
+
+def test_mismatched_batch_shapes_name_the_block():
+    k = ureal("k", 1.0, percent=50)
+    g = ureal("g", 3.0, percent=10)
+    with pytest.raises(ValueError, match="block 'k'"):
+        usubs(k * g, {"g": np.array([2.8, 3.1]), "k": np.array([1.0, 1.1, 1.2])})

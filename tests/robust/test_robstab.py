@@ -133,6 +133,14 @@ def test_robust_sweep_table_and_consistency_with_robstab():
     assert df[df.model == 1].time.iloc[0] == 10.0
     with pytest.raises(ValueError, match="unknown"):
         robust_sweep(arr, omega, subsets={"bad": ["nope"]})
+    # independent mussv calls per frequency (no warm start) agree on the peaks
+    cold = robust_sweep(arr, omega, subsets={"k": ["k"]}, warm_start=False, n_jobs=2)
+    assert_allclose(
+        cold.groupby("model").mu_upper.max().values,
+        df.groupby("model").mu_upper.max().values,
+        rtol=1e-2,
+    )
+
 
 
 def test_complex_scalar_margin_matches_dense_frequency_sweep():

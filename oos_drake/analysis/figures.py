@@ -1,0 +1,167 @@
+"""PNG figures of the analysis (paper Figs. muanalysis, performance, mu_analysis_SM, unc_sensitivity)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from oos_drake.analysis.subsets import SUBSET_ORDER
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _ordered(names):
+    return [s for s in SUBSET_ORDER if s in set(names)] + sorted(set(names) - set(SUBSET_ORDER))
+
+
+def mu_mission_figure(sweep: pd.DataFrame, common_hz, peaks: pd.DataFrame, path) -> Path:
+    """(a) surface of the total-set upper bound over time and frequency; (b) side views per subset."""
+    plt = _plt()
+    fig = plt.figure(figsize=(15, 5.2))
+    total = sweep[(sweep["subset"] == "total") & ~sweep["refined"]]
+    total = total[np.isin(total["frequency [Hz]"].to_numpy(), common_hz)]
+    grid = total.pivot_table(index="time [s]", columns="frequency [Hz]", values="mu_upper")
+    ax = fig.add_subplot(1, 3, 1, projection="3d")
+    T, F = np.meshgrid(grid.index.to_numpy(), np.log10(grid.columns.to_numpy()), indexing="ij")
+    ax.plot_surface(T, F, grid.to_numpy(), cmap="viridis", linewidth=0, antialiased=True)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("log10 frequency [Hz]")
+    ax.set_zlabel("mu upper bound [-]")
+    ax.set_title("(a) mu upper bound, Delta_tot")
+    ax2 = fig.add_subplot(1, 3, 2)
+    ax3 = fig.add_subplot(1, 3, 3)
+    for name in _ordered(sweep["subset"].unique()):
+        part = sweep[sweep["subset"] == name]
+        by_f = part.groupby("frequency [Hz]")["mu_upper"].max()
+        by_t = part.groupby("time [s]")["mu_upper"].max()
+        ax2.semilogx(by_f.index, by_f.to_numpy(), label=name, lw=1.2)
+        ax3.plot(by_t.index, by_t.to_numpy(), label=name, lw=1.2)
+    for _, row in peaks.iterrows():
+        if row["subset"] == "total":
+            ax2.plot(row["frequency [Hz]"], row["mu_lower"], "kv", ms=7, label="certified lower")
+            ax3.plot(row["time [s]"], row["mu_lower"], "kv", ms=7)
+    ax2.set_xlabel("frequency [Hz]")
+    ax2.set_ylabel("max over time of mu upper bound [-]")
+    ax2.set_title("(b) side view: frequency")
+    ax3.set_xlabel("time [s]")
+    ax3.set_ylabel("max over frequency of mu upper bound [-]")
+    ax3.set_title("(b) side view: time")
+    for a in (ax2, ax3):
+        a.grid(True, which="both", alpha=0.3)
+        a.axhline(1.0, color="r", ls="--", lw=0.8)
+    ax2.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return Path(path)
+
+
+def performance_figure(table: pd.DataFrame, path) -> Path:
+    """Worst-case gain upper bounds per subset, max over the analyzed configurations."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(13, 4.8))
+    titles = {"e_p": "(a) d -> e_p (APE / requirement)", "e_u": "(b) d -> e_u (torque / 2 N m)"}
+    for ax, channel in zip(axes, ["e_p", "e_u"], strict=True):
+        part = table[table["channel"] == channel]
+        nominal = part.groupby("frequency [Hz]")["gain_nominal [-]"].max()
+        ax.loglog(nominal.index, nominal.to_numpy(), "k--", lw=1.5, label="nominal")
+        for name in _ordered(part["subset"].unique()):
+            g = part[part["subset"] == name].groupby("frequency [Hz]")["gain_upper [-]"].max()
+            ax.loglog(g.index, g.to_numpy(), lw=1.2, label=name)
+        ax.axhline(1.0, color="r", ls=":", lw=0.8, label="requirement")
+        ax.set_xlabel("frequency [Hz]")
+        ax.set_ylabel("worst-case gain upper bound [-]")
+        ax.set_title(titles[channel])
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return Path(path)
+
+
+def docking_figure(sweeps: dict, peaks: dict, path) -> Path:
+    """Side views of mu (Delta_tot) over the swept stiffness and over frequency, per phase."""
+    plt = _plt()
+    n = len(sweeps)
+    fig, axes = plt.subplots(n, 2, figsize=(13, 4.2 * n), squeeze=False)
+    for row, (phase, sweep) in enumerate(sweeps.items()):
+        part = sweep[sweep["subset"] == "total"]
+        by_k = part.groupby("time [s]")["mu_upper"].max()
+        by_f = part.groupby("frequency [Hz]")["mu_upper"].max()
+        ax1, ax2 = axes[row]
+        ax1.semilogx(by_k.index, by_k.to_numpy(), lw=1.3)
+        ax2.semilogx(by_f.index, by_f.to_numpy(), lw=1.3)
+        pk = peaks.get(phase)
+        if pk is not None:
+            ax1.plot(pk["stiffness"], pk["mu_lower"], "kv", ms=7, label="certified lower")
+            ax2.plot(pk["frequency [Hz]"], pk["mu_lower"], "kv", ms=7, label="certified lower")
+            ax1.legend(fontsize=8)
+        ax1.set_xlabel("stiffness of the swept spring-damper [N/m or N m/rad]")
+        ax2.set_xlabel("frequency [Hz]")
+        for a in (ax1, ax2):
+            a.set_ylabel("mu upper bound, Delta_tot [-]")
+            a.axhline(1.0, color="r", ls="--", lw=0.8)
+            a.grid(True, which="both", alpha=0.3)
+            a.set_title(f"docking phase {phase}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return Path(path)
+
+
+def sensitivity_figure(table: pd.DataFrame, path) -> Path:
+    """Bars: drop of the peak without each block, and its mu-sensitivity."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(13, 4.8))
+    t = table.sort_values("drop [%]", ascending=True)
+    axes[0].barh(t["block"], t["drop [%]"])
+    axes[0].set_xlabel("drop of the mu peak with the block nominal [%]")
+    t2 = table.sort_values("sensitivity [-]", ascending=True)
+    axes[1].barh(t2["block"], t2["sensitivity [-]"], color="tab:orange")
+    axes[1].set_xlabel("mu-sensitivity (d mu / mu) / (d r / r) [-]")
+    for a in axes:
+        a.grid(True, axis="x", alpha=0.3)
+    fig.suptitle("Which uncertainty moves the worst-case mu (critical configuration)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return Path(path)
+
+
+def time_check_figure(signals: pd.DataFrame, summary: pd.DataFrame, path) -> Path:
+    """Pointing error and torque of the perturbed closed loops against the requirements."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(13, 4.8))
+    for case, part in signals.groupby("case", sort=False):
+        t = part["t [s]"].to_numpy()
+        phi = np.abs(part[[f"phi_{a} [rad]" for a in "xyz"]].to_numpy()).max(axis=1)
+        u = np.abs(part[[f"u_{a} [N m]" for a in "xyz"]].to_numpy()).max(axis=1)
+        axes[0].plot(t, phi, lw=1.0, label=case)
+        axes[1].plot(t, u, lw=1.0, label=case)
+    if len(summary):
+        axes[0].axhline(summary["ape_requirement [rad]"].iloc[0], color="r", ls="--",
+                        label="APE requirement")
+        axes[1].axhline(summary["torque_requirement [N m]"].iloc[0], color="r", ls="--",
+                        label="torque bound")
+    axes[0].set_ylabel("max_axis |phi| [rad]")
+    axes[1].set_ylabel("max_axis |u| [N m]")
+    for a in axes:
+        a.set_xlabel("time [s]")
+        a.set_yscale("log")
+        a.grid(True, which="both", alpha=0.3)
+        a.legend(fontsize=7)
+    fig.suptitle("Linear time-domain check: d_ext = step + sine at the critical frequency")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return Path(path)

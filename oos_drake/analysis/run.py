@@ -1,0 +1,415 @@
+"""The whole worst-case analysis (paper section 4) as one function: tables, figures, summary.
+
+Files written in ``out_dir`` (Parquet tables are tidy, units in column names):
+
+``mu_mission.parquet``          mu bounds: subset x configuration x frequency (Fig. muanalysis)
+``stability_peaks.parquet``     certified peak per subset: time, frequency, bounds, gap, margin
+``worst_perturbations.parquet`` destabilizing perturbation of every peak, per block (physical)
+``performance.parquet``         worst-case gains of d -> e_p, d -> e_u per subset (Fig. performance)
+``docking_<7|8>.parquet``       mu (Delta_tot) over the swept stiffness x frequency (Fig. mu_analysis_SM)
+``sensitivity.parquet``         which block moves the worst-case mu most (Fig. unc_sensitivity)
+``time_check.parquet``          APE / torque of the perturbed closed loops vs the requirements
+``time_signals.parquet``        the simulated signals
+``worst_cases.parquet``         critical regions for the mu-guided campaign (campaign schema)
+``summary.json``                controller, key numbers, paper values, timings
+``*.png``                       the figures
+"""
+
+from __future__ import annotations
+
+import json
+import time as _time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from oos_drake.analysis.controller import Controller
+from oos_drake.analysis.stability import SweepOptions
+
+#: The paper's numbers (section 4) for the comparison in the summary.
+PAPER = {
+    "mission_mu_peak": 0.79, "mission_peak_time_s": 275.0, "mission_peak_frequency_hz": 0.55,
+    "mission_margin_percent": 26.0, "docking7_mu_peak": 1.04, "docking7_peak_stiffness": 2.5e3,
+    "docking7_peak_frequency_hz": 0.58, "performance_ep_peak_frequency_hz": 0.08,
+}
+
+
+@dataclass(frozen=True)
+class AnalysisOptions:
+    """What the analysis computes and how finely.
+
+    Attributes
+    ----------
+    configurations : int
+        Equally spaced mission configurations (paper: 330).
+    frequency_range_hz : tuple of float
+        Span of the common frequency grid [Hz].
+    points_per_decade : int
+        Density of the common logarithmic grid.
+    sweep : SweepOptions
+        Accuracy and parallelism of the mu sweeps.
+    docking_phases : tuple of str
+        Docking phases studied (``"7"``, ``"8"``).
+    docking_points : int
+        Stiffness values per phase (paper: 300).
+    stiffness_range : tuple of float
+        Swept stiffness span [N/m or N m/rad] (paper: 0.1 .. 1e5, log spaced).
+    performance_models : int
+        Configurations of the worst-case gain study (the critical one plus equally spaced ones).
+    performance_points : int
+        Frequencies of the worst-case gain study.
+    sensitivity : bool
+        Compute the sensitivity table.
+    time_check : bool
+        Run the time-domain check.
+    time_check_duration : float
+        Simulated time [s].
+    progress : bool
+        tqdm progress bars.
+    """
+
+    configurations: int = 330
+    frequency_range_hz: tuple = (0.005, 5.0)
+    points_per_decade: int = 25
+    sweep: SweepOptions = field(default_factory=SweepOptions)
+    docking_phases: tuple = ("7", "8")
+    docking_points: int = 300
+    stiffness_range: tuple = (0.1, 1.0e5)
+    performance_models: int = 6
+    performance_points: int = 24
+    sensitivity: bool = True
+    time_check: bool = True
+    time_check_duration: float = 600.0
+    progress: bool = True
+
+    def grid(self) -> np.ndarray:
+        """Common frequency grid [rad/s]."""
+        lo, hi = self.frequency_range_hz
+        if not 0 < lo < hi:
+            raise ValueError(f"frequency_range_hz must be 0 < low < high, got {self.frequency_range_hz}")
+        n = max(int(round(self.points_per_decade * np.log10(hi / lo))) + 1, 3)
+        return 2 * np.pi * np.geomspace(lo, hi, n)
+
+
+def _certify(array, sweep, subsets, peaks_grid, *, configuration_label):
+    """Certified peak and destabilizing perturbation per subset (robstab-like + direct search)."""
+    from oos_drake.analysis.destabilizing import destabilizing_perturbation
+    from oos_drake.analysis.stability import certify_peak
+    from oos_drake.robust.lfr_analysis import block_map
+
+    sys = array.system
+    rows, perturbation_rows, certificates = [], [], {}
+    for _, pk in peaks_grid.iterrows():
+        name, model = pk["subset"], int(pk["model"])
+        members = subsets[name]
+        cert = certify_peak(sys, name, members, model, float(pk["frequency [Hz]"]),
+                            time=float(array.values[model]))
+        one = sys.model(model) if sys.batch_shape else sys
+        if np.max(np.linalg.eigvals(np.asarray(one.A)).real) > -1e-9:
+            one = one.reduce()  # spurious near-zero modes (unreachable and unobservable)
+        bmap = block_map(one)
+        sub, zr, wc = bmap.subset(list(members))
+        A = np.asarray(one.A)
+        Bw, Cz = np.asarray(one.Bw)[:, wc], np.asarray(one.Cz)[zr]
+        Dzw = np.asarray(one.Dzw)[np.ix_(zr, wc)]
+        w0 = 2 * np.pi * float(pk["frequency [Hz]"])
+        direct = destabilizing_perturbation(A, Bw, Cz, Dzw, sub.blk,
+                                            [w0 * 0.5, w0 * 2.0])
+        lower, freq, delta, method = cert.mu_lower, cert.frequency, cert.delta, "power iteration"
+        if direct.mu_lower > lower:
+            lower, freq, delta, method = direct.mu_lower, direct.omega / (2 * np.pi), \
+                direct.delta, "direct search"
+        from oos_drake.robust.blocks import parse_blk
+
+        structure = parse_blk(sub.blk)
+        normalized = {}
+        for bname, kind, brows in zip(sub.names, sub.kinds, sub.blk_rows, strict=True):
+            b = structure.blocks[brows[0]]
+            block = delta[b.r_slice, b.c_slice]
+            normalized[bname] = float(block[0, 0].real) if kind == "ureal" else block.copy()
+        upper = max(cert.mu_upper, lower)
+        grid_upper = float(sweep.loc[sweep["subset"] == name, "mu_upper"].max())
+        rows.append({
+            "study": array.study, "subset": name, "model": model,
+            array.label: float(array.values[model]),
+            "frequency [Hz]": float(freq), "mu_upper": upper, "mu_lower": float(lower),
+            "mu_upper_grid": grid_upper,
+            "gap [%]": 100.0 * (upper - lower) / upper if upper > 0 else 0.0,
+            "margin [-]": 1.0 / max(upper, grid_upper) if upper > 0 else np.inf,
+            "method": method, "configuration": configuration_label(model),
+        })
+        certificates[name] = (model, freq, lower, upper, normalized)
+        specs = one.uncertainty
+        from oos_drake.analysis.worst_cases import physical_values
+
+        phys = physical_values(one, normalized, 1.0)
+        phys_unit = physical_values(one, normalized, lower)
+        for bname, value in normalized.items():
+            arr = np.atleast_2d(np.asarray(value, dtype=complex))
+            perturbation_rows.append({
+                "study": array.study, "subset": name, "block": bname,
+                "kind": specs[bname].kind,
+                "normalized_norm [-]": float(np.linalg.norm(arr, ord=2)),
+                "normalized_real [-]": float(arr[0, 0].real),
+                "normalized_imag [-]": float(arr[0, 0].imag),
+                "destabilizing_value [unit]": phys[bname] if specs[bname].kind == "ureal"
+                else float(np.linalg.norm(arr, ord=2)) * specs[bname].bound,
+                "in_set_value [unit]": phys_unit[bname],
+                "unit": _unit(bname),
+            })
+    return pd.DataFrame(rows), pd.DataFrame(perturbation_rows), certificates
+
+
+def _unit(name):
+    from oos_drake.analysis.subsets import block_unit
+
+    return block_unit(name)
+
+
+def _moment_label(times, scenario=None):
+    from oos_drake.scenario.timeline import mission_timeline
+
+    try:
+        named = mission_timeline(scenario).moments
+        moments = sorted((m.time, k) for k, m in named.items())
+    except Exception:  # noqa: BLE001 - labels are cosmetic
+        moments = []
+
+    def label(model):
+        t = float(times[model])
+        if not moments:
+            return f"mission t={t:.0f}s"
+        tm, name = min(moments, key=lambda m: abs(m[0] - t))
+        return f"mission t={t:.0f}s (near moment {name} at {tm:.0f}s)"
+
+    return label
+
+
+def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | None = None,
+                 scenario=None, log=print) -> dict:
+    """Run the worst-case analysis and write every table and figure in ``out_dir``.
+
+    Parameters
+    ----------
+    controller : Controller
+        From :func:`~oos_drake.analysis.controller.load_controller` (or the labeled baseline).
+    out_dir : str or Path
+        Output directory (created).
+    options : AnalysisOptions, optional
+    scenario : Scenario, optional
+        Default: the paper's.
+    log : callable
+        Progress messages.
+
+    Returns
+    -------
+    dict
+        The summary written to ``summary.json`` (key numbers, paths, timings).
+    """
+    from oos_drake.analysis import figures
+    from oos_drake.analysis.models import docking_closed_loop, mission_closed_loop, mission_times
+    from oos_drake.analysis.stability import mu_sweep, peaks_table
+    from oos_drake.analysis.subsets import uncertainty_subsets
+    from oos_drake.analysis.worst_cases import Region, write_regions
+    from oos_drake.robust.threads import limit_blas_threads
+
+    limit_blas_threads(1)
+    options = options or AnalysisOptions()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    timings = {}
+    paths = {}
+    clock = _time.perf_counter()
+    t_start = clock
+
+    def lap(name):
+        nonlocal clock
+        now = _time.perf_counter()
+        timings[name] = round(now - clock, 2)
+        clock = now
+
+    omega = options.grid()
+    # ------------------------------------------------------------------ mission stability
+    times = mission_times(options.configurations, scenario)
+    mission = mission_closed_loop(controller, times, scenario)
+    subsets = uncertainty_subsets(mission.system.uncertainty)
+    abscissa = np.linalg.eigvals(np.asarray(mission.system.A)).real.max(axis=-1)
+    lap("build mission models")
+    log(f"mission: {times.size} configurations, {omega.size} grid frequencies, "
+        f"subsets {list(subsets)}; nominal loops stable: {int((abscissa < 0).sum())}/{times.size}")
+    sweep = mu_sweep(mission.system, omega, subsets, times=times, options=options.sweep,
+                     progress=options.progress, description="mu mission")
+    sweep.to_parquet(out / "mu_mission.parquet", index=False)
+    paths["mu_mission"] = out / "mu_mission.parquet"
+    lap("mu sweep mission")
+    label = _moment_label(times, scenario)
+    peaks_grid = peaks_table(sweep)
+    peaks, perturbations, certs = _certify(mission, sweep, subsets, peaks_grid,
+                                           configuration_label=label)
+    lap("certify mission peaks")
+    # ------------------------------------------------------------------ docking
+    docking_sweeps, docking_peaks, docking_tables = {}, {}, []
+    docking_perturbations, docking_certs = [], {}
+    stiffness = np.geomspace(*options.stiffness_range, options.docking_points)
+    for phase in options.docking_phases:
+        arr = docking_closed_loop(controller, phase, stiffness, scenario=scenario)
+        tot = {"total": uncertainty_subsets(arr.system.uncertainty)["total"]}
+        dsweep = mu_sweep(arr.system, omega, tot, times=stiffness, options=options.sweep,
+                          progress=options.progress, description=f"mu docking {phase}")
+        dsweep = dsweep.rename(columns={"time [s]": "stiffness [N/m or N m/rad]"})
+        dsweep.to_parquet(out / f"docking_{phase}.parquet", index=False)
+        paths[f"docking_{phase}"] = out / f"docking_{phase}.parquet"
+        pg = peaks_table(dsweep.rename(columns={"stiffness [N/m or N m/rad]": "time [s]"}))
+        dp, dpert, dc = _certify(arr, dsweep, tot, pg,
+                                 configuration_label=lambda m, ph=phase: f"docking-{ph} "
+                                 f"k={stiffness[m]:.3g}")
+        docking_tables.append(dp)
+        docking_perturbations.append(dpert)
+        docking_certs[phase] = (arr, dc["total"])
+        docking_sweeps[phase] = dsweep.rename(columns={"stiffness [N/m or N m/rad]": "time [s]"})
+        docking_peaks[phase] = {"stiffness": float(dp["stiffness [N/m or N m/rad]"].iloc[0]),
+                                "frequency [Hz]": float(dp["frequency [Hz]"].iloc[0]),
+                                "mu_lower": float(dp["mu_lower"].iloc[0]),
+                                "mu_upper": float(dp["mu_upper"].iloc[0])}
+        lap(f"docking phase {phase}")
+    all_peaks = pd.concat([peaks] + docking_tables, ignore_index=True)
+    all_peaks.to_parquet(out / "stability_peaks.parquet", index=False)
+    paths["stability_peaks"] = out / "stability_peaks.parquet"
+    all_pert = pd.concat([perturbations] + docking_perturbations, ignore_index=True)
+    all_pert.to_parquet(out / "worst_perturbations.parquet", index=False)
+    paths["worst_perturbations"] = out / "worst_perturbations.parquet"
+    # ------------------------------------------------------------------ worst cases file
+    regions = []
+    for _, row in peaks.iterrows():
+        model, freq, lower, upper, normalized = certs[row["subset"]]
+        regions.append(Region(label(model), float(times[model]), float(freq), float(upper),
+                              float(lower), ",".join(subsets[row["subset"]]), normalized))
+    paths["worst_cases"] = write_regions(regions, mission.system, out / "worst_cases.parquet")
+    # ------------------------------------------------------------------ performance
+    crit_model = certs["total"][0]
+    spread = np.linspace(0, times.size - 1, max(options.performance_models - 1, 1)).round()
+    models = np.unique(np.concatenate([[crit_model], spread.astype(int)]))
+    lo_hz, hi_hz = options.frequency_range_hz
+    w_perf = 2 * np.pi * np.geomspace(max(lo_hz, 0.005), min(hi_hz, 3.0),
+                                      options.performance_points)
+    w_perf = np.unique(np.concatenate([w_perf, [2 * np.pi * certs["total"][1]]]))
+    from oos_drake.analysis.performance import worst_case_gains
+
+    perf, perf_deltas = worst_case_gains(mission.system, models, w_perf, subsets, times=times,
+                                         n_jobs=options.sweep.n_jobs,
+                                         progress=options.progress)
+    perf.to_parquet(out / "performance.parquet", index=False)
+    paths["performance"] = out / "performance.parquet"
+    lap("worst-case performance")
+    # ------------------------------------------------------------------ sensitivity
+    sens = None
+    if options.sensitivity:
+        from oos_drake.analysis.sensitivity import mu_sensitivity
+
+        part = sweep[(sweep["subset"] == "total") & (sweep["model"] == crit_model)]
+        top = part.nlargest(24, "mu_upper")["frequency [Hz]"].to_numpy()
+        w_s = np.unique(np.concatenate([2 * np.pi * top,
+                                        2 * np.pi * certs["total"][1] * np.geomspace(0.9, 1.1, 9)]))
+        sens = mu_sensitivity(mission.system, crit_model, w_s,
+                              options=SweepOptions(upper_iterations=options.sweep.upper_iterations))
+        sens.to_parquet(out / "sensitivity.parquet", index=False)
+        paths["sensitivity"] = out / "sensitivity.parquet"
+        lap("sensitivity")
+    # ------------------------------------------------------------------ time-domain check
+    tsum = pd.DataFrame()
+    if options.time_check:
+        from oos_drake.analysis.time_check import check_case
+
+        rows, signals = [], []
+        one = mission.system.model(crit_model)
+        model, freq, lower, upper, normalized = certs["total"]
+        w_c = 2 * np.pi * freq
+        cases = [("nominal", {}, 1.0, w_c),
+                 ("worst stability (unit size)", normalized, lower, w_c)]
+        pk = perf[(perf["channel"] == "e_p") & (perf["subset"] == "total")
+                  & (perf["model"] == crit_model)]
+        if len(pk):
+            j = int(np.argmax(pk["gain_lower [-]"].to_numpy()))
+            wj = 2 * np.pi * float(pk["frequency [Hz]"].iloc[j])
+            k_model = int(np.flatnonzero(models == crit_model)[0])
+            dl = perf_deltas[("e_p", "total")][k_model, j]
+            from oos_drake.robust.blocks import parse_blk
+            from oos_drake.robust.lfr_analysis import block_map
+
+            bmap = block_map(one)
+            structure = parse_blk(bmap.blk)
+            norm_p = {}
+            for bname, kind, brows in zip(bmap.names, bmap.kinds, bmap.blk_rows, strict=True):
+                b = structure.blocks[brows[0]]
+                blk = dl[b.r_slice, b.c_slice]
+                norm_p[bname] = float(blk[0, 0].real) if kind == "ureal" else blk.copy()
+            cases.append(("worst APE gain (unit size)", norm_p, 1.0, wj))
+        for case, values, scale, w in cases:
+            scaled = {k: v * scale for k, v in values.items()}  # unit size: inside the set
+            row, sig = check_case(one, scaled, w, controller.spec, case=case, study="mission",
+                                  model=crit_model, time=float(times[crit_model]), scale=scale,
+                                  duration=options.time_check_duration)
+            rows.append(row)
+            signals.append(sig)
+        tsum = pd.DataFrame(rows)
+        tsum.to_parquet(out / "time_check.parquet", index=False)
+        sig_all = pd.concat(signals, ignore_index=True)
+        sig_all.to_parquet(out / "time_signals.parquet", index=False)
+        paths["time_check"] = out / "time_check.parquet"
+        figures.time_check_figure(sig_all, tsum, out / "time_check.png")
+        paths["time_check_png"] = out / "time_check.png"
+        lap("time-domain check")
+    # ------------------------------------------------------------------ figures
+    common_hz = omega / (2 * np.pi)
+    paths["mu_mission_png"] = figures.mu_mission_figure(sweep, common_hz, peaks,
+                                                        out / "mu_mission.png")
+    paths["performance_png"] = figures.performance_figure(perf, out / "performance.png")
+    if docking_sweeps:
+        paths["docking_png"] = figures.docking_figure(docking_sweeps, docking_peaks,
+                                                      out / "mu_docking.png")
+    if sens is not None:
+        paths["sensitivity_png"] = figures.sensitivity_figure(sens, out / "sensitivity.png")
+    lap("figures")
+    timings["total"] = round(_time.perf_counter() - t_start, 2)
+    tot = peaks[peaks["subset"] == "total"].iloc[0]
+    ep = perf[perf["channel"] == "e_p"]
+    ep_peak = ep.loc[ep["gain_upper [-]"].idxmax()]
+    summary = {
+        "controller": {"label": controller.label, "source": controller.source,
+                       "gamma": controller.gamma, "K": controller.K.tolist()},
+        "mission": {
+            "configurations": int(times.size), "grid_frequencies": int(omega.size),
+            "nominal_stable_models": int((abscissa < 0).sum()),
+            "mu_peak_upper": float(max(tot["mu_upper"], tot["mu_upper_grid"])),
+            "mu_peak_upper_refined": float(tot["mu_upper"]),
+            "mu_peak_lower": float(tot["mu_lower"]),
+            "peak_time_s": float(tot["time [s]"]), "peak_frequency_hz": float(tot["frequency [Hz]"]),
+            "stability_margin": float(tot["margin [-]"]),
+        },
+        "subsets": peaks.drop(columns=["study"]).to_dict(orient="records"),
+        "docking": docking_peaks,
+        "performance": {"e_p_peak_gain_upper": float(ep_peak["gain_upper [-]"]),
+                        "e_p_peak_frequency_hz": float(ep_peak["frequency [Hz]"]),
+                        "e_u_peak_gain_upper": float(perf.loc[perf["channel"] == "e_u",
+                                                              "gain_upper [-]"].max())},
+        "time_check": tsum.to_dict(orient="records"),
+        "paper": PAPER,
+        "options": {k: (asdict(v) if hasattr(v, "__dataclass_fields__") else v)
+                    for k, v in options.__dict__.items()},
+        "timings_s": timings,
+        "files": {k: str(v) for k, v in paths.items()},
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
+    return summary
+
+
+def _json_default(value):
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (np.bool_,)):
+        return bool(value)
+    return str(value)

@@ -1,0 +1,99 @@
+"""Flight software components and the exact quintic trajectories (no simulation)."""
+
+import numpy as np
+import pytest
+import scipy.signal
+
+pytestmark = pytest.mark.drake
+pytest.importorskip("pydrake")
+
+from oos_drake.control import components as comp  # noqa: E402
+from oos_drake.multibody.flight_software import (  # noqa: E402
+    FlightSoftwareDesign,
+    allpass,
+    discretize,
+)
+from oos_drake.multibody.mission import (  # noqa: E402
+    MissionOptions,
+    controller_gain,
+    effective_inertia,
+    quintic_piecewise_polynomial,
+)
+from oos_drake.scenario.timeline import mission_timeline  # noqa: E402
+
+
+def _dc_gain(block):
+    n = block.A.shape[0]
+    return block.C @ np.linalg.solve(np.eye(n) - block.A, block.B) + block.D
+
+
+@pytest.mark.parametrize("rate", [5.0, 10.0, 50.0])
+def test_discretized_blocks_keep_dc_gain_and_match_the_continuous_response(rate):
+    design = FlightSoftwareDesign.create(np.ones((3, 6)), rate)
+    for block in (design.star_tracker, design.gyro, design.rolloff, design.wheels):
+        np.testing.assert_allclose(_dc_gain(block), np.eye(3), atol=1e-9)
+    a, b = comp.DesignSpecification().disturbance_denominator
+    gains = np.asarray(comp.DesignSpecification().disturbance_gains)
+    np.testing.assert_allclose(_dc_gain(design.disturbance), np.diag(gains / b), rtol=1e-9)
+    # Tustin: H_d(e^{j w T}) = H_c(j (2/T) tan(w T / 2)); check the roll-off at 0.3 Hz
+    T = 1.0 / rate
+    w = 2 * np.pi * 0.3
+    A, B, C, D = comp.butterworth(4, 0.7)
+    warped = 2.0 / T * np.tan(w * T / 2.0)
+    hc = (C @ np.linalg.solve(1j * warped * np.eye(4) - A, B) + D)[0, 0]
+    z = np.exp(1j * w * T)
+    ro = design.rolloff
+    hd = (ro.C @ np.linalg.solve(z * np.eye(ro.nstates) - ro.A, ro.B) + ro.D)[0, 0]
+    np.testing.assert_allclose(hd, hc, rtol=1e-9)
+
+
+def test_allpass_has_unit_gain_and_is_stable():
+    A, B, C, D = allpass(0.55)
+    _, h = scipy.signal.freqresp((A, B, C, D), np.logspace(-3, 3, 50))
+    np.testing.assert_allclose(np.abs(h), 1.0, rtol=1e-12)
+    assert np.all(np.linalg.eigvals(A).real < 0)
+    block = discretize(A, B, C, D, 0.1)
+    assert np.all(np.abs(np.linalg.eigvals(block.A)) < 1)
+
+
+def test_design_rejects_bad_inputs():
+    with pytest.raises(ValueError, match="3x6"):
+        FlightSoftwareDesign.create(np.ones((3, 3)), 10.0)
+    with pytest.raises(ValueError, match="control_rate"):
+        FlightSoftwareDesign.create(np.ones((3, 6)), 0.0)
+    with pytest.raises(ValueError, match="log_rate"):
+        MissionOptions(control_rate=10.0, log_rate=3.0)
+    with pytest.raises(ValueError, match="accuracy"):
+        MissionOptions(accuracy=-1.0)
+
+
+def test_quintic_polynomial_equals_the_timeline_trajectory():
+    timeline = mission_timeline()
+    pp = quintic_piecewise_polynomial(timeline.arm)
+    times = np.linspace(0.0, 1500.0, 301)
+    values = np.stack([pp.value(t).ravel() for t in times])
+    rates = np.stack([pp.EvalDerivative(t, 1).ravel() for t in times])
+    np.testing.assert_allclose(values, timeline.arm(times), atol=1e-12)
+    np.testing.assert_allclose(rates, timeline.arm(times, 1), atol=1e-12)
+
+
+def test_baseline_gain_from_the_coupled_inertia(tmp_path):
+    K = controller_gain(None)
+    omega = 2 * np.pi * 0.01
+    Kp, Kd = K[:, :3], K[:, 3:]
+    np.testing.assert_allclose(Kd, 2 * omega * Kp / omega**2, rtol=1e-12)
+    assert np.all(np.linalg.eigvalsh(0.5 * (Kp + Kp.T)) > 0)
+    # effective inertia of a point mass offset from G1: J = D_rr - D_rt D_tt^-1 D_tr
+    m, r = 2.0, np.array([1.0, 0.0, 0.0])
+    D = np.zeros((6, 6))
+    D[:3, :3] = m * np.eye(3)
+    S = np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
+    D[:3, 3:], D[3:, :3], D[3:, 3:] = -m * S, m * S, -m * S @ S
+    np.testing.assert_allclose(effective_inertia(D), np.zeros((3, 3)), atol=1e-12)
+    (tmp_path / "c.json").write_text(
+        '{"controller": {"K_p": {"value": [[1,0,0],[0,1,0],[0,0,1]]},'
+        ' "K_d": {"value": [[2,0,0],[0,2,0],[0,0,2]]}}}'
+    )
+    np.testing.assert_allclose(controller_gain(tmp_path / "c.json"), np.hstack([np.eye(3), 2 * np.eye(3)]))
+    with pytest.raises(ValueError, match="not found"):
+        controller_gain(tmp_path / "missing.json")
