@@ -15,9 +15,9 @@ Run as a script (short by default; the machine is shared)::
    worst APE found, requirement violations, and the two estimates of P(APE violation).
 
 The worst cases used in part 3 stand in for the robust analysis' file: a vertex search of the
-cheap simulator (noise-free runs at the corners of the dispersion box, normal laws at +-2 std),
-whose three worst corners (differing in at least three blocks) become regions with
-``mu_upper`` := worst APE / requirement.
+cheap simulator (noise-free runs at the corners of the dispersion box, normal laws at +-3 std:
+the box a mu analysis covers), whose three worst corners (differing in at least three blocks)
+become regions with ``mu_upper`` := worst APE / requirement.
 """
 
 from __future__ import annotations
@@ -124,8 +124,8 @@ def vertex_worst_cases(n_regions: int = 3) -> tuple[WorstCaseRegion, ...]:
         if isinstance(dist, Fixed) or dist.kind == "choice":
             continue
         if isinstance(dist, TruncatedNormal):
-            low = max(dist.low, dist.mean - 2 * dist.std)
-            high = min(dist.high, dist.mean + 2 * dist.std)
+            low = max(dist.low, dist.mean - 3 * dist.std)
+            high = min(dist.high, dist.mean + 3 * dist.std)
         else:
             low, high = dist.support
         corners[name] = (low, high)

@@ -3,7 +3,8 @@
 Run ``python benchmarks/bench_synthesis.py [--plant synthetic|lfr] [--models 200]
 [--synthesis]``. The baseline (ab13dd, the routine behind MATLAB's ``norm(sys, inf)`` and
 python-control's ``hinfnorm``) is measured in the same run on the same closed loops; the table
-shows both times, their ratio and the largest relative difference of the norms.
+shows both times, their ratio and the largest relative difference of the norms. Both run with
+one OpenBLAS thread (see :mod:`oos_drake.control.blas_threads`).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import time
 import numpy as np
 from slycot import ab13dd
 
+from oos_drake.control.blas_threads import single_threaded_blas
 from oos_drake.control.cli import baseline_for, make_plants
 from oos_drake.control.interconnection import weighted_interconnection
 from oos_drake.control.peak_gain import peak_gain
@@ -54,7 +56,8 @@ def main(argv=None):
     M = W.close(K)
     t_batch, ours = best_of(lambda: peak_gain(M.A, M.B, M.C, M.D).gamma, args.repeats)
     t_focus, _ = best_of(lambda: peak_gain(M.A, M.B, M.C, M.D, focus=0.2).gamma, args.repeats)
-    t_ref, ref = best_of(lambda: ab13dd_all(M), args.repeats)
+    with single_threaded_blas():  # same BLAS setting as the synthesis for the baseline
+        t_ref, ref = best_of(lambda: ab13dd_all(M), args.repeats)
     finite = np.isfinite(ref) & np.isfinite(ours)
     rel = np.max(np.abs(ours[finite] - ref[finite]) / ref[finite]) if finite.any() else np.nan
     print(f"plant={args.plant} models={M.A.shape[0]} closed-loop states={M.A.shape[-1]}")

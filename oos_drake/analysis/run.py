@@ -228,6 +228,7 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         nonlocal clock
         now = _time.perf_counter()
         timings[name] = round(now - clock, 2)
+        log(f"  [{name}: {now - clock:.1f} s]")
         clock = now
 
     omega = options.grid()

@@ -45,10 +45,11 @@ def close_with_perturbation(sys: LFR, normalized: dict, omega: float) -> LFR:
     from oos_drake.robust.lfr_analysis import realize_complex_matrix
 
     kinds = {name: spec.kind for name, spec in sys.uncertainty.items()}
-    reals = {k: float(np.real(v)) for k, v in normalized.items() if kinds.get(k) == "ureal"}
     unknown = [k for k in normalized if k not in kinds]
     if unknown:
         raise ValueError(f"close_with_perturbation: unknown block(s) {unknown}")
+    reals = {k: float(np.real(normalized.get(k, 0.0))) for k, kind in kinds.items()
+             if kind == "ureal"}
     out = usubs(sys, reals, normalized=True) if reals else sys
     # blocks left: ultidyn; those not given are nominal (zero)
     left = [e for e in out.block_entries]

@@ -145,8 +145,8 @@ def paper_worst_cases(scenario=None):
         "Jzz_RH2": bounds["Jzz_RH2"][1],
         "w1_SA1": bounds["w1_SA1"][0],
         "w1_SA2": bounds["w1_SA2"][0],
-        "Delta_mul": 1.0,
         "Delta_add": 1.0,
+        **{f"Delta_mul_{a}{a}": 1.0 for a in "xyz"},
     }
     soft = dict(heavy, k_shear_SM1=2.5e3, k_tors_SM1=2.5e3)
     return (

@@ -26,6 +26,7 @@ import os
 import socket
 import time
 import traceback
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -176,12 +177,18 @@ class ProcessPoolExecutor:
     ----------
     workers : int
         Number of worker processes (>= 1).
+    timeout : float, optional
+        Wall-clock limit of one run [s]; a run that exceeds it is stopped (its worker process is
+        killed and replaced) and recorded as ``"failed"`` with a ``Timeout`` error.
     """
 
-    def __init__(self, workers: int):
+    def __init__(self, workers: int, timeout: float | None = None):
         if workers < 1:
             raise ValueError(f"--workers {workers}: need at least 1 worker")
+        if timeout is not None and not timeout > 0:
+            raise ValueError(f"run timeout {timeout} s must be positive")
         self.workers = workers
+        self.timeout = timeout
         self._pool: concurrent.futures.ProcessPoolExecutor | None = None
 
     def start(self, recipe: SimulatorRecipe) -> None:
@@ -197,63 +204,101 @@ class ProcessPoolExecutor:
             list(self._pool.map(_warm_up, [recipe] * self.workers))
 
     def run(self, recipe: SimulatorRecipe, cases: Iterable[RunCase]) -> Iterator[RunResult]:
-        """Run the cases; a case that kills its worker process is recorded as ``"failed"``.
+        """Run the cases; a case that kills its worker or times out is recorded as ``"failed"``.
 
         A worker that dies (segmentation fault in a native simulator, ``os._exit``, out of
         memory) breaks the whole pool, and every case then in flight is suspect. The pool is
         restarted and the suspects are rerun one at a time: the one that kills its worker alone
         is the culprit and gets a ``"failed"`` result; the others complete normally (runs are
-        deterministic, so rerunning them changes nothing).
+        deterministic, so rerunning them changes nothing). With a timeout, at most one case per
+        worker is in flight, so a case's clock starts when it starts; an overdue case is the
+        culprit, the other cases in flight are requeued.
         """
         queue = collections.deque(cases)
         suspects: collections.deque[RunCase] = collections.deque()
-        limit = 2 * self.workers
+        limit = self.workers if self.timeout else 2 * self.workers
         while queue or suspects:
             self.start(recipe)
             pool = self._pool
             if suspects:
-                case = suspects.popleft()
-                try:
-                    result = pool.submit(execute_case, recipe, case).result()
-                except BrokenProcessPool as exc:
-                    self._discard_pool()
-                    result = RunResult(
-                        case.run_id,
-                        "failed",
-                        f"WorkerDied: its worker process died ({exc})",
-                        {},
-                        None,
-                        math.nan,
-                    )
-                yield result
+                yield self._run_alone(recipe, suspects.popleft())
                 continue
             pending: dict[concurrent.futures.Future, RunCase] = {}
+            submitted: dict[concurrent.futures.Future, float] = {}
             try:
                 while queue or pending:
                     while queue and len(pending) < limit:
                         # submit raises BrokenProcessPool too: pop the case only once submitted
                         future = pool.submit(execute_case, recipe, queue[0])
                         pending[future] = queue.popleft()
+                        submitted[future] = time.monotonic()
+                    wait = None
+                    if self.timeout:
+                        oldest = min(submitted[f] for f in pending)
+                        wait = max(0.0, oldest + self.timeout - time.monotonic())
                     done, _ = concurrent.futures.wait(
-                        pending, return_when=concurrent.futures.FIRST_COMPLETED
+                        pending, timeout=wait, return_when=concurrent.futures.FIRST_COMPLETED
                     )
+                    if not done:  # timeout: the overdue cases are the culprits
+                        now = time.monotonic()
+                        overdue = [f for f in pending if now - submitted[f] >= self.timeout]
+                        self._kill_pool()
+                        for future in overdue:
+                            yield _timeout_result(pending.pop(future), self.timeout)
+                        queue.extendleft(reversed(list(pending.values())))
+                        pending.clear()
+                        break
                     for future in done:
                         result = future.result()  # raises BrokenProcessPool if a worker died
                         del pending[future]
                         yield result
             except BrokenProcessPool:
                 suspects.extend(pending.values())
-                self._discard_pool()
+                self._kill_pool()
 
-    def _discard_pool(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
-            self._pool = None
+    def _run_alone(self, recipe: SimulatorRecipe, case: RunCase) -> RunResult:
+        """Run one suspect case with nothing else in flight."""
+        try:
+            return self._pool.submit(execute_case, recipe, case).result(timeout=self.timeout)
+        except concurrent.futures.TimeoutError:
+            self._kill_pool()
+            return _timeout_result(case, self.timeout)
+        except BrokenProcessPool as exc:
+            self._kill_pool()
+            return RunResult(
+                case.run_id,
+                "failed",
+                f"WorkerDied: its worker process died ({exc})",
+                {},
+                None,
+                math.nan,
+            )
+
+    def _kill_pool(self) -> None:
+        """Stop every worker process now and forget the pool (the next ``start`` makes one)."""
+        if self._pool is None:
+            return
+        # concurrent.futures offers no way to stop a running task: kill its processes
+        for process in list(getattr(self._pool, "_processes", {}).values()):
+            process.kill()
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._pool = None
 
     def close(self) -> None:
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
+
+
+def _timeout_result(case: RunCase, timeout: float) -> RunResult:
+    return RunResult(
+        case.run_id,
+        "failed",
+        f"Timeout: the run exceeded {timeout:g} s and was stopped",
+        {},
+        None,
+        float(timeout),
+    )
 
 
 class DaskExecutor:
@@ -309,13 +354,20 @@ class DaskExecutor:
 
 
 def make_executor(
-    workers: int, scheduler: str | None
+    workers: int, scheduler: str | None, timeout: float | None = None
 ) -> InlineExecutor | ProcessPoolExecutor | DaskExecutor:
-    """Executor for the CLI options ``--workers N`` and ``--scheduler ADDRESS``."""
+    """Executor for the CLI options ``--workers N`` and ``--scheduler ADDRESS``.
+
+    A run ``timeout`` [s] needs worker processes that can be stopped: with it, one worker runs
+    in a pool of one process rather than in this process. Dask does not stop running tasks, so
+    the timeout is not enforced there (a warning says so).
+    """
     if workers < 1:
         raise ValueError(f"--workers {workers}: need at least 1 worker")
     if scheduler:
+        if timeout:
+            warnings.warn(f"run_timeout = {timeout} s is not enforced on Dask", stacklevel=2)
         return DaskExecutor(scheduler, workers=workers)
-    if workers == 1:
+    if workers == 1 and not timeout:
         return InlineExecutor()
-    return ProcessPoolExecutor(workers)
+    return ProcessPoolExecutor(workers, timeout)

@@ -68,6 +68,12 @@ class CampaignReport:
     tables: dict
 
 
+def _save(fig, path: Path) -> None:
+    """Save a figure as PNG atomically (temp file + rename) and close it."""
+    store.atomic_write_bytes(path, lambda stream: fig.savefig(stream, format="png", dpi=110))
+    plt.close(fig)
+
+
 def weighted_probability(weights: np.ndarray, indicator: np.ndarray) -> tuple[float, float]:
     """Importance-sampling estimate of ``P(indicator)`` and its standard error."""
     values = np.asarray(weights, float) * np.asarray(indicator, float)
@@ -212,8 +218,7 @@ def _plot_regions(regions: pd.DataFrame, path: Path) -> Path | None:
     ax.legend(fontsize=7, ncol=2, loc="upper center")
     ax.grid(alpha=0.3, axis="y")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
     return path
 
 
@@ -268,8 +273,7 @@ def _plot_distributions(spec, runs: pd.DataFrame, path: Path) -> Path:
         ax.grid(alpha=0.3)
     fig.suptitle(f"Campaign {spec.name}: metric distributions against requirements")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
     return path
 
 
@@ -327,8 +331,7 @@ def _plot_worst(
     axes[-1, 0].set_xlabel("time [s]")
     fig.suptitle(f"Campaign {spec.name}: time histories of the {len(series)} worst runs")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
     return path
 
 
@@ -376,8 +379,7 @@ def _plot_pass_fail(spec, runs: pd.DataFrame, path: Path) -> Path | None:
         "(ratio > 1 violates a requirement)"
     )
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
     return path
 
 

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -157,7 +156,7 @@ def _execute(
     cases = [case_from_plan_row(spec, row) for _, row in pending.iterrows()]
     executed = 0
     if cases:
-        executor = make_executor(workers, scheduler)
+        executor = make_executor(workers, scheduler, spec.run_timeout)
         bar = tqdm(
             total=len(plan),
             initial=len(finished),
@@ -209,8 +208,8 @@ def prepare_campaign(
     worst_cases_name = None
     if spec.sampler.kind == "mu-guided":
         worst_cases_name = store.WORST_CASES_FILE
-        shutil.copyfile(spec.sampler.worst_cases, directory / ".worst_cases.tmp")
-        (directory / ".worst_cases.tmp").replace(directory / worst_cases_name)
+        source = Path(spec.sampler.worst_cases).read_bytes()
+        store.atomic_write_bytes(directory / worst_cases_name, lambda stream: stream.write(source))
     store.atomic_write_text(
         json.dumps(store.environment(), indent=2) + "\n", directory / store.ENVIRONMENT_FILE
     )

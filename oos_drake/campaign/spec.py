@@ -8,6 +8,7 @@ seed and a mission window, and states the requirements each run is checked again
     random_seed = 20261121
     sampler = "latin-hypercube"              # or a [sampler] table (mu-guided)
     metrics = ["ape", "peak_torque"]        # default: every metric of the simulator
+    run_timeout = 600.0                      # [s] per run (optional; local process pool)
 
     [simulator]
     name = "flexible-attitude"
@@ -58,6 +59,7 @@ WINDOW_KINDS = ("mission", "event", "critical")
 KEEP_TIMESERIES = ("all", "failed", "none")
 REGION_WEIGHTINGS = ("mu_upper", "uniform")
 _TOP_KEYS = {
+    "run_timeout",
     "name",
     "description",
     "n_runs",
@@ -186,6 +188,8 @@ class CampaignSpec:
     requirements: tuple[Requirement, ...]
     #: retained time series
     timeseries: TimeseriesSpec
+    #: wall-clock limit of one run [s] (None: no limit); an overdue run is stopped, "failed"
+    run_timeout: float | None = None
     #: simulator declarations gathered at load time (not part of the TOML)
     info: SimulatorInfo = field(compare=False, repr=False, default=None)
     #: mu-guided: the regions read from worst_cases (not part of the TOML)
@@ -247,6 +251,9 @@ def parse_spec(text: str, source: Path) -> CampaignSpec:
     seed = raw["random_seed"]
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise _fail(where, f"random_seed = {seed!r} must be a non-negative integer")
+    run_timeout = raw.get("run_timeout")
+    if run_timeout is not None:
+        run_timeout = _positive_float(where, "run_timeout", run_timeout)
     name = raw.get("name", source.stem)
     description = raw.get("description", "")
     if not isinstance(name, str) or not isinstance(description, str):
@@ -418,6 +425,7 @@ def parse_spec(text: str, source: Path) -> CampaignSpec:
         metrics=tuple(metrics),
         requirements=tuple(requirements),
         timeseries=TimeseriesSpec(keep, tuple(signals)),
+        run_timeout=run_timeout,
         info=info,
         regions=regions,
     )
@@ -465,6 +473,7 @@ def spec_to_toml(spec: CampaignSpec, worst_cases_name: str | None = None) -> str
         f"n_runs = {spec.n_runs}",
         f"random_seed = {spec.random_seed}",
         f"metrics = {_toml_value(list(spec.metrics))}",
+        *([f"run_timeout = {_toml_value(spec.run_timeout)}"] if spec.run_timeout else []),
         "",
         "[sampler]",
         f"kind = {_toml_value(spec.sampler.kind)}",

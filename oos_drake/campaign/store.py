@@ -36,6 +36,16 @@ TIMESERIES_DIR = "timeseries"
 REPORT_DIR = "report"
 
 
+def _file_mode() -> int:
+    """Mode of a newly created file under the current umask (mkstemp would give 0600)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+_FILE_MODE = _file_mode()
+
+
 def _atomic_write(path: Path, write) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -45,6 +55,7 @@ def _atomic_write(path: Path, write) -> Path:
             write(stream)
             stream.flush()
             os.fsync(stream.fileno())
+        os.chmod(temporary, _FILE_MODE)
         os.replace(temporary, path)
     except BaseException:
         try:
@@ -58,6 +69,11 @@ def _atomic_write(path: Path, write) -> Path:
 def atomic_write_parquet(table: pd.DataFrame, path: Path) -> Path:
     """Write ``table`` to ``path`` as Parquet, atomically."""
     return _atomic_write(path, lambda stream: table.to_parquet(stream, index=False))
+
+
+def atomic_write_bytes(path: Path, write) -> Path:
+    """Call ``write(binary_stream)`` into a temporary file, then rename it to ``path``."""
+    return _atomic_write(path, write)
 
 
 def atomic_write_text(text: str, path: Path) -> Path:

@@ -5,7 +5,8 @@ weighted interconnection of Fig. controldesign closed by the static gain, around
 
 .. math::
 
-    \\hat P = P\\,(I_3 + W_{mul,L} \\Delta_{mul,L} + W_{mul,R} \\Delta_{mul,R}) + W_{add} \\Delta_{add}
+    \\hat P = P\\,(I_3 + W_{mul,L} \\Delta_{mul,L} + W_{mul,R} \\Delta_{mul,R})
+    + W_{add} \\Delta_{add}
 
 (paper Eqs. for Delta_add and Delta_mul): ``Delta_add`` a full 3x3 ``ultidyn`` scaled by
 ``W_add = -75 dB``; ``Delta_mul`` nine scalar ``ultidyn`` blocks, ``mul_xx, mul_yy, mul_zz``

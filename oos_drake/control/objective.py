@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from oos_drake.control.blas_threads import with_single_threaded_blas
 from oos_drake.control.interconnection import WeightedInterconnection
 from oos_drake.control.peak_gain import PeakGain, peak_gain
 
@@ -43,6 +44,7 @@ class Evaluation:
     peaks: PeakGain
 
 
+@with_single_threaded_blas
 def peak_gradients(interconnection: WeightedInterconnection, K, index, omega, which=None):
     """Values and gradients of ``sigma_max(M_i(j w))`` w.r.t. ``K`` at given (model, frequency).
 

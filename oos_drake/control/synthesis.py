@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from oos_drake.control.blas_threads import with_single_threaded_blas
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.interconnection import WeightedInterconnection, weighted_interconnection
 from oos_drake.control.nonsmooth_bfgs import minimize_bundle_bfgs, minimize_nonsmooth
@@ -167,6 +168,7 @@ def _gain_scale(K0: np.ndarray) -> np.ndarray:
     return np.hstack([np.full((3, 3), sp), np.full((3, 3), sd)])
 
 
+@with_single_threaded_blas
 def tune(
     interconnection: WeightedInterconnection,
     K0,
@@ -257,6 +259,7 @@ def _worst_case_search(plants: PlantArray, configs, K, spec, options, rng):
     return x, fx
 
 
+@with_single_threaded_blas
 def synthesize(
     plants: PlantArray,
     K0,

@@ -16,13 +16,14 @@ At each sample ``t_k`` the update reads the plant state and computes, for the th
     u = F_{ro}\\, u_K,
 
     T_{rw} = \\mathrm{RW}\\, \\mathrm{sat}_{T_{max}}(u), \\quad
-    T = (I + \\delta_{mul} W_{mul}\\, a(s))\\, T_{rw}
+    T = (I + (W_{mul} \\circ \\Delta_{mul})\\, a(s))\\, T_{rw}
         + \\delta_{add} J_{ref} W_{add}\\, a(s)\\, T_{rw} + W_{n,ext}\\, d_{ext},
 
 with ``phi`` the hub roll-pitch-yaw angles (attitude reference zero), ``omega`` the hub body rate,
 ``n`` unit white Gaussian sequences scaled by the paper's noise levels, ``a(s) = (p - s)/(p + s)``
-a unit all-pass (the stable realization of the LTI perturbations ``Delta_mul``, ``Delta_add``,
-scaled by the dispersed scalars ``delta_mul``, ``delta_add`` in [-1, 1]) and ``d_ext`` a unit
+a unit all-pass (the stable realization of the LTI perturbations: ``Delta_mul`` is the 3x3
+matrix of the dispersed scalars ``Delta_mul_xx .. Delta_mul_zz``, weighted entry by entry by
+``W_mul``, ``delta_add`` = ``Delta_add``, all in [-1, 1]) and ``d_ext`` a unit
 white sequence shaped by ``W_n,ext``. The torque ``T`` (hub axes) is held over the sample period
 (zero-order hold) and applied to the hub's floating joint as ``R_WB T``.
 
@@ -90,7 +91,9 @@ def discretize(A, B, C, D, period: float) -> DiscreteBlock:
     """Bilinear (Tustin) discretization of a continuous block at ``period`` [s]."""
     A, B, C, D = (np.atleast_2d(np.asarray(m, dtype=float)) for m in (A, B, C, D))
     if A.size == 0:
-        return DiscreteBlock(np.zeros((0, 0)), np.zeros((0, B.shape[1])), np.zeros((C.shape[0], 0)), D)
+        return DiscreteBlock(
+            np.zeros((0, 0)), np.zeros((0, B.shape[1])), np.zeros((C.shape[0], 0)), D
+        )
     Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), period, method="bilinear")
     return DiscreteBlock(Ad, Bd, Cd, Dd)
 
@@ -183,7 +186,9 @@ class FlightSoftwareDesign:
         """
         K = np.asarray(K, dtype=float)
         if K.shape != (3, 6) or not np.all(np.isfinite(K)):
-            raise ValueError(f"flight software: controller gain K must be a finite 3x6, got {K.shape}")
+            raise ValueError(
+                f"flight software: controller gain K must be a finite 3x6, got {K.shape}"
+            )
         if not (np.isfinite(control_rate) and control_rate > 0):
             raise ValueError(f"flight software: control_rate must be > 0 Hz, got {control_rate}")
         if not torque_limit > 0:
@@ -200,10 +205,16 @@ class FlightSoftwareDesign:
         return cls(
             period=T,
             K=K,
-            star_tracker=discretize(*_per_axis(*comp.first_order_lowpass(spec.star_tracker_cutoff_hz)), T),
+            star_tracker=discretize(
+                *_per_axis(*comp.first_order_lowpass(spec.star_tracker_cutoff_hz)), T
+            ),
             gyro=discretize(*_per_axis(*comp.first_order_lowpass(spec.gyro_cutoff_hz)), T),
-            rolloff=discretize(*_per_axis(*comp.butterworth(spec.rolloff_order, spec.rolloff_cutoff_hz)), T),
-            wheels=discretize(*_per_axis(*comp.second_order(spec.wheel_frequency_hz, spec.wheel_damping)), T),
+            rolloff=discretize(
+                *_per_axis(*comp.butterworth(spec.rolloff_order, spec.rolloff_cutoff_hz)), T
+            ),
+            wheels=discretize(
+                *_per_axis(*comp.second_order(spec.wheel_frequency_hz, spec.wheel_damping)), T
+            ),
             disturbance=disturbance,
             perturbation=discretize(*_per_axis(*allpass(perturbation_frequency_hz)), T),
             noise_star_tracker=float(spec.noise_star_tracker),
@@ -252,13 +263,15 @@ class FlightSoftware(LeafSystem):
 
     Context
     -------
-    numeric parameter 0 (2): ``[delta_mul, delta_add]`` [-], the LTI perturbation scalars.
+    numeric parameter 0 (10): ``[delta_add, Delta_mul (3x3, row-major)]`` [-], the LTI
+    perturbation scalars.
     abstract parameter 0: ``(n_samples, 9)`` array of unit noise ``[n_sst; n_gyro; d_ext]``
     (row ``k`` is used at the k-th sample after the start; rows wrap around).
     """
 
-    def __init__(self, design: FlightSoftwareDesign, nq: int, nv: int, hub_q_start: int,
-                 hub_v_start: int):
+    def __init__(
+        self, design: FlightSoftwareDesign, nq: int, nv: int, hub_q_start: int, hub_v_start: int
+    ):
         super().__init__()
         self._design = design
         self._nq, self._nv = nq, nv
@@ -267,7 +280,7 @@ class FlightSoftware(LeafSystem):
         size = self._slices["counter"].stop
         self._state_index = self.DeclareDiscreteState(size)
         self._plant_state = self.DeclareVectorInputPort("plant_state", nq + nv)
-        self._perturbation_index = self.DeclareNumericParameter(BasicVector(np.zeros(2)))
+        self._perturbation_index = self.DeclareNumericParameter(BasicVector(np.zeros(10)))
         self._noise_index = self.DeclareAbstractParameter(
             AbstractValue.Make(np.zeros((1, NOISE_CHANNELS)))
         )
@@ -295,10 +308,12 @@ class FlightSoftware(LeafSystem):
         """Named slices of the discrete state."""
         return dict(self._slices)
 
-    def set_perturbations(self, context, delta_mul: float, delta_add: float) -> None:
-        """Set the LTI perturbation scalars ``delta_mul``, ``delta_add`` (in [-1, 1])."""
+    def set_perturbations(self, context, delta_mul, delta_add: float) -> None:
+        """Set the LTI perturbation scalars: ``delta_mul`` (3x3 matrix or a scalar for every
+        entry) and ``delta_add`` [-], each in [-1, 1]."""
+        matrix = np.broadcast_to(np.asarray(delta_mul, dtype=float), (3, 3))
         context.get_mutable_numeric_parameter(self._perturbation_index).SetFromVector(
-            [float(delta_mul), float(delta_add)]
+            np.concatenate([[float(delta_add)], matrix.ravel()])
         )
 
     def set_noise(self, context, noise: np.ndarray) -> None:
@@ -330,7 +345,8 @@ class FlightSoftware(LeafSystem):
         k = int(x[s["counter"]][0])
         noise_table = context.get_abstract_parameter(self._noise_index).get_value()
         noise = noise_table[k % noise_table.shape[0]]
-        delta_mul, delta_add = context.get_numeric_parameter(self._perturbation_index).get_value()
+        perturbation = context.get_numeric_parameter(self._perturbation_index).get_value()
+        delta_add, delta_mul = perturbation[0], perturbation[1:].reshape(3, 3)
 
         def step(block: DiscreteBlock, name: str, u: np.ndarray) -> np.ndarray:
             xb = x[s[name]]
@@ -348,14 +364,18 @@ class FlightSoftware(LeafSystem):
         T_dist = step(self._dist, "disturbance", noise[6:9])
         a_mul = step(self._ap, "mul", T_rw)
         a_add = step(self._ap, "add", T_rw)
-        T = T_rw + delta_mul * (d.W_mul @ a_mul) + delta_add * (self._J_Wadd @ a_add) + T_dist
+        T = T_rw + (d.W_mul * delta_mul) @ a_mul + delta_add * (self._J_Wadd @ a_add) + T_dist
         new[s["tau_W"]] = R_WB @ T
         new[s["log"]] = np.concatenate([u, T_rw, T, T_dist])
         m = x[s["metrics"]].reshape(len(METRIC_SLOTS), 3)
         abs_phi = np.abs(rpy)
         metrics = np.stack(
-            [np.maximum(m[0], abs_phi), np.maximum(m[1], np.abs(u)), m[2] + rpy**2,
-             np.maximum(m[3], np.abs(T))]
+            [
+                np.maximum(m[0], abs_phi),
+                np.maximum(m[1], np.abs(u)),
+                m[2] + rpy**2,
+                np.maximum(m[3], np.abs(T)),
+            ]
         )
         if not np.all(np.isfinite(metrics)):
             metrics = np.full_like(metrics, np.inf)

@@ -136,9 +136,19 @@ class MissionOptions:
     check_interval: float = 50.0
 
     def __post_init__(self):
-        for name in ("control_rate", "log_rate", "torque_limit", "joint_bandwidth",
-                     "joint_damping_ratio", "ramp_duration", "ramp_start_stiffness", "accuracy",
-                     "perturbation_frequency_hz", "divergence_limit", "check_interval"):
+        for name in (
+            "control_rate",
+            "log_rate",
+            "torque_limit",
+            "joint_bandwidth",
+            "joint_damping_ratio",
+            "ramp_duration",
+            "ramp_start_stiffness",
+            "accuracy",
+            "perturbation_frequency_hz",
+            "divergence_limit",
+            "check_interval",
+        ):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
                 raise ValueError(f"mission option {name} must be a positive number, got {value!r}")
@@ -301,7 +311,9 @@ def _add_plant(builder: DiagramBuilder, sdf_directory: Path):
     arm_joints = tuple(plant.GetJointByName(arm_joint_name(i), arm) for i in range(1, 7))
     drive_joints = tuple(plant.GetJointByName(drive_joint_name(a), instance(a)) for a in ARRAYS)
     mode_joints, mode_springs = {}, {}
-    elements = (plant.get_force_element(ForceElementIndex(i)) for i in range(plant.num_force_elements()))
+    elements = (
+        plant.get_force_element(ForceElementIndex(i)) for i in range(plant.num_force_elements())
+    )
     springs = [e for e in elements if isinstance(e, RevoluteSpring)]
     by_joint = {s.joint().index(): s for s in springs}
     for array in ARRAYS:
@@ -313,14 +325,21 @@ def _add_plant(builder: DiagramBuilder, sdf_directory: Path):
         mode_joints[array] = tuple(joints)
         mode_springs[array] = tuple(by_joint[j.index()] for j in joints)
     return dict(
-        plant=plant, hub_joint=hub_joint, target_joint=target_joint, arm_joints=arm_joints,
-        drive_joints=drive_joints, mode_joints=mode_joints, mode_springs=mode_springs,
-        bushings=bushings, frames=frames, target_body=target,
+        plant=plant,
+        hub_joint=hub_joint,
+        target_joint=target_joint,
+        arm_joints=arm_joints,
+        drive_joints=drive_joints,
+        mode_joints=mode_joints,
+        mode_springs=mode_springs,
+        bushings=bushings,
+        frames=frames,
+        target_body=target,
     )
 
 
 def make_mission_diagram(
-    options: MissionOptions = MissionOptions(),
+    options: MissionOptions | None = None,
     *,
     scenario: Scenario | None = None,
     K=None,
@@ -330,8 +349,8 @@ def make_mission_diagram(
 
     Parameters
     ----------
-    options : MissionOptions
-        Rates, controller file, joint PD, integrator settings.
+    options : MissionOptions, optional
+        Rates, controller file, joint PD, integrator settings (default: ``MissionOptions()``).
     scenario : Scenario, optional
         Scenario data (trajectories, inertias); default the paper's.
     K : array_like, shape (3, 6), optional
@@ -343,6 +362,7 @@ def make_mission_diagram(
     -------
     MissionDiagram
     """
+    options = options or MissionOptions()
     scenario = scenario or load_scenario()
     timeline = mission_timeline(scenario)
     K = controller_gain(options.controller, scenario) if K is None else np.asarray(K, float)
@@ -391,12 +411,16 @@ def make_mission_diagram(
     configuration = timeline.configuration(float(scenario.mission.first_docking_time))
     J_ref = effective_inertia(rigid_spatial_inertia_at_G1(scenario, configuration))
     design = FlightSoftwareDesign.create(
-        K, options.control_rate, torque_limit=options.torque_limit,
-        perturbation_frequency_hz=options.perturbation_frequency_hz, J_ref=J_ref,
+        K,
+        options.control_rate,
+        torque_limit=options.torque_limit,
+        perturbation_frequency_hz=options.perturbation_frequency_hz,
+        J_ref=J_ref,
     )
     hub = parts["hub_joint"]
     fsw = builder.AddNamedSystem(
-        "flight_software", FlightSoftware(design, nq, nv, hub.position_start(), hub.velocity_start())
+        "flight_software",
+        FlightSoftware(design, nq, nv, hub.position_start(), hub.velocity_start()),
     )
     builder.Connect(plant.get_state_output_port(), fsw.get_input_port(0))
     forces = builder.AddNamedSystem("generalized_forces", Adder(3, nv))

@@ -88,61 +88,153 @@ def mission_parameters(scenario) -> tuple[MissionParameter, ...]:
     target = scenario.hubs["RH2"]
     params = []
     r = target.mass_uncertainty_percent / 100.0
-    params.append(MissionParameter("m_RH2", "kg", target.mass, target.mass * (1 - r),
-                                   target.mass * (1 + r), "real_block", "target hub mass"))
+    params.append(
+        MissionParameter(
+            "m_RH2",
+            "kg",
+            target.mass,
+            target.mass * (1 - r),
+            target.mass * (1 + r),
+            "real_block",
+            "target hub mass",
+        )
+    )
     for i, axis in enumerate(("xx", "yy", "zz")):
         J = float(target.inertia[i, i])
         r = float(target.inertia_uncertainty_percent[i]) / 100.0
-        params.append(MissionParameter(f"J{axis}_RH2", "kg m^2", J, J * (1 - r), J * (1 + r),
-                                       "real_block", f"target hub inertia J{axis} at G2"))
+        params.append(
+            MissionParameter(
+                f"J{axis}_RH2",
+                "kg m^2",
+                J,
+                J * (1 - r),
+                J * (1 + r),
+                "real_block",
+                f"target hub inertia J{axis} at G2",
+            )
+        )
     for array in ARRAYS:
         model = scenario.arrays[array].model
         w = float(model.omega[0])
         r = model.first_mode_uncertainty_percent / 100.0
-        params.append(MissionParameter(f"w1_{array}", "rad/s", w, w * (1 - r), w * (1 + r),
-                                       "real_block", f"first cantilever mode frequency of {array}"))
+        params.append(
+            MissionParameter(
+                f"w1_{array}",
+                "rad/s",
+                w,
+                w * (1 - r),
+                w * (1 + r),
+                "real_block",
+                f"first cantilever mode frequency of {array}",
+            )
+        )
     k, d = scenario.docking.rigid_stiffness, scenario.docking.damping
     for sm in ("SM1", "SM2"):
         params += [
-            MissionParameter(f"k_shear_{sm}", "N/m", k, 0.1, 1e6, "stiffness",
-                             f"{sm} final shear stiffness"),
-            MissionParameter(f"k_tors_{sm}", "N m/rad", k, 0.1, 1e6, "stiffness",
-                             f"{sm} final torsional stiffness"),
-            MissionParameter(f"d_shear_{sm}", "N s/m", d, 0.0, 1e4, "stiffness",
-                             f"{sm} shear damping"),
-            MissionParameter(f"d_tors_{sm}", "N m s/rad", d, 0.0, 1e4, "stiffness",
-                             f"{sm} torsional damping"),
+            MissionParameter(
+                f"k_shear_{sm}", "N/m", k, 0.1, 1e6, "stiffness", f"{sm} final shear stiffness"
+            ),
+            MissionParameter(
+                f"k_tors_{sm}",
+                "N m/rad",
+                k,
+                0.1,
+                1e6,
+                "stiffness",
+                f"{sm} final torsional stiffness",
+            ),
+            MissionParameter(
+                f"d_shear_{sm}", "N s/m", d, 0.0, 1e4, "stiffness", f"{sm} shear damping"
+            ),
+            MissionParameter(
+                f"d_tors_{sm}", "N m s/rad", d, 0.0, 1e4, "stiffness", f"{sm} torsional damping"
+            ),
         ]
     for axis in AXES:
-        params.append(MissionParameter(f"phi0_{axis}", "rad", 0.0, -0.05, 0.05,
-                                       "initial_condition", f"initial hub attitude error ({axis})"))
+        params.append(
+            MissionParameter(
+                f"phi0_{axis}",
+                "rad",
+                0.0,
+                -0.05,
+                0.05,
+                "initial_condition",
+                f"initial hub attitude error ({axis})",
+            )
+        )
     for axis in AXES:
-        params.append(MissionParameter(f"w0_{axis}", "rad/s", 0.0, -0.01, 0.01,
-                                       "initial_condition", f"initial hub body rate error ({axis})"))
-    params.append(MissionParameter("noise_seed", "-", 0.0, 0.0, 2.0**31, "seed",
-                                   "seed of sensor noise and disturbances (0: the run seed)"))
-    params.append(MissionParameter("Delta_mul", "-", 0.0, -1.0, 1.0, "lti",
-                                   "scale of the multiplicative actuator all-pass perturbation"))
-    params.append(MissionParameter("Delta_add", "-", 0.0, -1.0, 1.0, "lti",
-                                   "scale of the additive plant all-pass perturbation"))
+        params.append(
+            MissionParameter(
+                f"w0_{axis}",
+                "rad/s",
+                0.0,
+                -0.01,
+                0.01,
+                "initial_condition",
+                f"initial hub body rate error ({axis})",
+            )
+        )
+    params.append(
+        MissionParameter(
+            "noise_seed",
+            "-",
+            0.0,
+            0.0,
+            2.0**31,
+            "seed",
+            "seed of sensor noise and disturbances (0: the run seed)",
+        )
+    )
+    for row in AXES:
+        for col in AXES:
+            params.append(
+                MissionParameter(
+                    f"Delta_mul_{row}{col}",
+                    "-",
+                    0.0,
+                    -1.0,
+                    1.0,
+                    "lti",
+                    f"entry {row}{col} of the multiplicative actuator all-pass perturbation",
+                )
+            )
+    params.append(
+        MissionParameter(
+            "Delta_add",
+            "-",
+            0.0,
+            -1.0,
+            1.0,
+            "lti",
+            "scale of the additive plant all-pass perturbation",
+        )
+    )
     return tuple(params)
 
 
-METRIC_UNITS = MappingProxyType({
-    "ape": "rad",
-    "rms_attitude": "rad",
-    "peak_torque": "N m",
-    "peak_applied_torque": "N m",
-    "max_force_SM1": "N",
-    "max_force_SM2": "N",
-    "max_tracking_error": "rad",
-})
+METRIC_UNITS = MappingProxyType(
+    {
+        "ape": "rad",
+        "rms_attitude": "rad",
+        "peak_torque": "N m",
+        "peak_applied_torque": "N m",
+        "max_force_SM1": "N",
+        "max_force_SM2": "N",
+        "max_tracking_error": "rad",
+    }
+)
 
 
 def _signal_units() -> dict[str, str]:
     units = {}
-    for prefix, unit in (("phi", "rad"), ("w", "rad/s"), ("u", "N m"), ("T_rw", "N m"),
-                         ("T", "N m"), ("T_dist", "N m")):
+    for prefix, unit in (
+        ("phi", "rad"),
+        ("w", "rad/s"),
+        ("u", "N m"),
+        ("T_rw", "N m"),
+        ("T", "N m"),
+        ("T_dist", "N m"),
+    ):
         units.update({f"{prefix}_{a}": unit for a in AXES})
     for sm in ("SM1", "SM2"):
         units[f"F_{sm}"] = "N"
@@ -206,22 +298,34 @@ class _Schedule:
         if t < self.t_capture:
             return out
         if t < self.t_capture + R:
-            out["SM1"] = (self._ramp(t, self.t_capture, k0, sm1[0]),
-                          self._ramp(t, self.t_capture, k0, sm1[1]), sm1[2], sm1[3])
+            out["SM1"] = (
+                self._ramp(t, self.t_capture, k0, sm1[0]),
+                self._ramp(t, self.t_capture, k0, sm1[1]),
+                sm1[2],
+                sm1[3],
+            )
             return out
         if t < self.t_docking:
             out["SM1"] = sm1
             return out
         if t < self.t_docking + R:
             out["SM1"] = sm1
-            out["SM2"] = (self._ramp(t, self.t_docking, k0, sm2[0]),
-                          self._ramp(t, self.t_docking, k0, sm2[1]), sm2[2], sm2[3])
+            out["SM2"] = (
+                self._ramp(t, self.t_docking, k0, sm2[0]),
+                self._ramp(t, self.t_docking, k0, sm2[1]),
+                sm2[2],
+                sm2[3],
+            )
             return out
         out["SM2"] = sm2
         if t < self.t_docking + 2 * R:
             t1 = self.t_docking + R
-            out["SM1"] = (self._ramp(t, t1, sm1[0], k0), self._ramp(t, t1, sm1[1], k0),
-                          sm1[2], sm1[3])
+            out["SM1"] = (
+                self._ramp(t, t1, sm1[0], k0),
+                self._ramp(t, t1, sm1[1], k0),
+                sm1[2],
+                sm1[3],
+            )
         return out
 
     def breakpoints(self, start: float, end: float) -> list[float]:
@@ -243,18 +347,22 @@ class MissionSimulation:
         An already built diagram (default: build one from ``options``).
     """
 
-    def __init__(self, options: MissionOptions = MissionOptions(), handles: MissionDiagram | None = None):
-        self.handles = handles or make_mission_diagram(options)
+    def __init__(
+        self, options: MissionOptions | None = None, handles: MissionDiagram | None = None
+    ):
+        self.handles = handles or make_mission_diagram(options or MissionOptions())
         self.options = self.handles.options
         scenario = self.handles.scenario
         self.parameters = mission_parameters(scenario)
         self._by_name = {p.name: p for p in self.parameters}
         mission = scenario.mission
-        self.events = MappingProxyType({
-            "capture": float(mission.first_docking_time),
-            "docking": float(mission.second_docking_time),
-            "tilt": float(mission.tilt_start_time),
-        })
+        self.events = MappingProxyType(
+            {
+                "capture": float(mission.first_docking_time),
+                "docking": float(mission.second_docking_time),
+                "tilt": float(mission.tilt_start_time),
+            }
+        )
         self.duration = float(mission.t_end - mission.t_start)
         plant = self.handles.plant
         default = plant.CreateDefaultContext()
@@ -284,8 +392,14 @@ class MissionSimulation:
     def schedule(self, values: Mapping[str, float]) -> _Schedule:
         """Docking bushing schedule of a run."""
         o = self.options
-        return _Schedule(self.events["capture"], self.events["docking"], o.ramp_duration,
-                         int(o.ramp_steps), o.ramp_start_stiffness, dict(values))
+        return _Schedule(
+            self.events["capture"],
+            self.events["docking"],
+            o.ramp_duration,
+            int(o.ramp_steps),
+            o.ramp_start_stiffness,
+            dict(values),
+        )
 
     def apply_parameters(self, context, values: Mapping[str, float]) -> None:
         """Write the model parameters (target inertia, mode frequencies, perturbations) into a
@@ -306,7 +420,8 @@ class MissionSimulation:
             h.mode_joints[array][0].SetDamping(pc, damping * ratio)
         h.flight_software.set_perturbations(
             h.flight_software.GetMyMutableContextFromRoot(context),
-            values["Delta_mul"], values["Delta_add"],
+            [[values[f"Delta_mul_{r}{c}"] for c in AXES] for r in AXES],
+            values["Delta_add"],
         )
 
     def _set_bushings(self, context, settings) -> None:
@@ -334,8 +449,14 @@ class MissionSimulation:
         h.target_joint.set_angular_velocity(pc, V_WG2.rotational())
         h.target_joint.set_translational_velocity(pc, V_WG2.translational())
 
-    def initial_context(self, values: Mapping[str, float], seed: int, start: float, end: float,
-                        noise_table: np.ndarray | None = None):
+    def initial_context(
+        self,
+        values: Mapping[str, float],
+        seed: int,
+        start: float,
+        end: float,
+        noise_table: np.ndarray | None = None,
+    ):
         """A root context at the window start with every value applied (see the module doc).
 
         ``noise_table`` (``(n, 9)``: unit ``[n_sst; n_gyro; d_ext]`` per sample) replaces the
@@ -394,9 +515,16 @@ class MissionSimulation:
         return context, values, schedule
 
     # -- run ------------------------------------------------------------------------------------
-    def run(self, values: Mapping[str, float] | None = None, seed: int = 0,
-            start: float = 0.0, end: float | None = None, *, log: bool = True,
-            noise_table: np.ndarray | None = None) -> MissionResult:
+    def run(
+        self,
+        values: Mapping[str, float] | None = None,
+        seed: int = 0,
+        start: float = 0.0,
+        end: float | None = None,
+        *,
+        log: bool = True,
+        noise_table: np.ndarray | None = None,
+    ) -> MissionResult:
         """Simulate ``[start, end]`` of the mission (default: all of it).
 
         ``values`` are physical parameter values (missing ones nominal), ``seed`` seeds the
@@ -460,8 +588,9 @@ class MissionSimulation:
             "max_force_SM2": float(timeseries["F_SM2 [N]"].max()) if log else math.nan,
             "max_tracking_error": self._tracking_error(context) if log else math.nan,
         }
-        return MissionResult(MappingProxyType(metrics), timeseries, wall, cpu,
-                             int(integrator.get_num_steps_taken()))
+        return MissionResult(
+            MappingProxyType(metrics), timeseries, wall, cpu, int(integrator.get_num_steps_taken())
+        )
 
     def _logs(self, context):
         h = self.handles
@@ -513,4 +642,5 @@ class MissionSimulation:
         for array in ARRAYS:
             for i, joint in enumerate(h.mode_joints[array], start=1):
                 columns[f"q{i}_{array} [rad]"] = x[joint.position_start()]
-        return pd.DataFrame(columns)
+        order = ["time [s]"] + [f"{name} [{unit}]" for name, unit in SIGNAL_UNITS.items()]
+        return pd.DataFrame(columns)[order]

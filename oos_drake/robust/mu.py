@@ -92,6 +92,20 @@ class MuResult:
         }
 
 
+#: Matrices per internal batch (memory: about 1 MB per 26 x 26 matrix in flight).
+CHUNK = 2048
+
+
+class _Joined:
+    """Concatenate the array fields of per-chunk results."""
+
+    def __init__(self, parts):
+        self._parts = parts
+
+    def __getattr__(self, name):
+        return np.concatenate([getattr(p, name) for p in self._parts], axis=0)
+
+
 def mussv(
     M,
     blk,
@@ -138,15 +152,22 @@ def mussv(
     peak = np.max(np.abs(flat), axis=(1, 2))
     scale = np.where(peak > 0, np.exp2(np.round(np.log2(np.where(peak > 0, peak, 1.0)))), 1.0)
     flat = flat / scale[:, None, None]
-    up = mu_upper_bound(flat, structure, max_iter=upper_iterations)
-    lo = mu_lower_bound(
-        flat,
-        structure,
-        start_inputs=up.worst_input,
-        restarts=lower_restarts,
-        iters=lower_iterations,
-        rng=rng,
-    )
+    ups, los = [], []
+    for start in range(0, flat.shape[0], CHUNK):  # bounded memory for very large batches
+        part = flat[start : start + CHUNK]
+        ups.append(mu_upper_bound(part, structure, max_iter=upper_iterations))
+        los.append(
+            mu_lower_bound(
+                part,
+                structure,
+                start_inputs=ups[-1].worst_input,
+                restarts=lower_restarts,
+                iters=lower_iterations,
+                rng=rng,
+            )
+        )
+    up = _Joined(ups)
+    lo = _Joined(los)
     lower = lo.lower * scale
     # both bounds are certified; where they meet (full block, rank one) round-off may put the
     # lower one a few ulps above: raising a valid upper bound keeps it valid

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import time
 
 from oos_drake.campaign.attitude_sim import FlexibleAttitudeSimulator
 
@@ -18,3 +19,16 @@ class CrashingSimulator(FlexibleAttitudeSimulator):
 
 def make_simulator(**options) -> CrashingSimulator:
     return CrashingSimulator(**options)
+
+
+class HangingSimulator(FlexibleAttitudeSimulator):
+    """Never finishes run 4 (like a stalled integrator)."""
+
+    def run(self, case):
+        if case.run_id == 4:
+            time.sleep(3600)
+        return super().run(case)
+
+
+def make_hanging_simulator(**options) -> HangingSimulator:
+    return HangingSimulator(**options)

@@ -26,6 +26,7 @@ from oos_drake.campaign.runner import (
 from oos_drake.campaign.samplers import make_plan
 from oos_drake.campaign.spec import load_spec
 
+from . import crashing_sim
 from .spec_texts import BASE_SPEC
 
 METRICS = ["ape [rad]", "peak_torque [N m]"]
@@ -185,6 +186,7 @@ def test_process_pool_matches_in_process_results(write_spec, tmp_path):
     assert 1 <= pool["worker"].nunique() <= 2 and here not in set(pool["worker"])
 
 
+@pytest.mark.slow  # (the Dask thread test checks the same cache, quickly)
 def test_pool_builds_the_simulator_once_per_worker_process(write_spec):
     spec = load_spec(write_spec())
     cases = [case_from_plan_row(spec, row) for _, row in make_plan(spec).iterrows()]
@@ -227,7 +229,7 @@ def test_only_failed_runs_keep_their_selected_signals(write_spec, tmp_path):
 
 def test_a_run_that_kills_its_worker_is_recorded_and_the_others_complete(write_spec, tmp_path):
     text = BASE_SPEC.replace(
-        'name = "flexible-attitude"', 'name = "campaign.crashing_sim:make_simulator"'
+        'name = "flexible-attitude"', f'name = "{crashing_sim.__name__}:make_simulator"'
     )
     spec = write_spec(text)
     run_campaign(spec, tmp_path / "c", workers=2, progress=False)
@@ -243,3 +245,17 @@ def test_a_run_that_kills_its_worker_is_recorded_and_the_others_complete(write_s
     ref = pd.read_parquet(tmp_path / "ref" / "runs.parquet")
     for column in METRICS:
         assert runs.loc[~crashing, column].tolist() == ref.loc[~crashing, column].tolist()
+
+
+def test_a_run_over_the_timeout_is_stopped_and_recorded(write_spec, tmp_path):
+    text = BASE_SPEC.replace(
+        'name = "flexible-attitude"', f'name = "{crashing_sim.__name__}:make_hanging_simulator"'
+    ).replace("random_seed = 7", "random_seed = 7\nrun_timeout = 2.0")
+    start = time.monotonic()
+    run_campaign(write_spec(text), tmp_path / "c", workers=1, progress=False)
+    assert time.monotonic() - start < 60
+    runs = pd.read_parquet(tmp_path / "c" / "runs.parquet").set_index("run_id")
+    assert runs.loc[4, "status"] == "failed"
+    assert runs.loc[4, "error"].startswith("Timeout: the run exceeded 2 s")
+    assert (runs.drop(index=4)["status"] == "ok").all() and len(runs) == 12
+    assert "run_timeout = 2.0" in (tmp_path / "c" / "spec.toml").read_text()

@@ -112,6 +112,10 @@ BAD_SPECS = {
         _replace('kind = "event"\nevent = "capture"', 'kind = "critical"'),
         r"kind = \"critical\" needs the mu-guided sampler",
     ),
+    "negative run timeout": (
+        _replace("random_seed = 7", "random_seed = 7\nrun_timeout = -1"),
+        r"run_timeout = -1 must be > 0",
+    ),
     "TOML syntax": (BASE_SPEC + "\n[dispersions\n", r"TOML syntax error"),
 }
 
@@ -178,3 +182,12 @@ def test_existing_campaign_directory_is_not_overwritten(write_spec, tmp_path):
     with pytest.raises(ValueError, match="already holds a campaign"):
         run_campaign(path, out, progress=False)
     assert sorted(p.name for p in (out / "runs").iterdir()) == before
+
+
+@pytest.mark.parametrize("name", ["demo.toml", "demo_mu.toml"])
+def test_shipped_demo_specs_are_valid(name):
+    from pathlib import Path
+
+    spec = load_spec(Path(__file__).resolve().parents[2] / "campaigns" / name)
+    assert spec.simulator.name == "flexible-attitude" and spec.n_runs > 0
+    assert [r.label for r in spec.requirements] == ["ape <= 0.0079 rad", "peak_torque <= 2 N m"]

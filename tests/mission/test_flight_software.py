@@ -94,6 +94,8 @@ def test_baseline_gain_from_the_coupled_inertia(tmp_path):
         '{"controller": {"K_p": {"value": [[1,0,0],[0,1,0],[0,0,1]]},'
         ' "K_d": {"value": [[2,0,0],[0,2,0],[0,0,2]]}}}'
     )
-    np.testing.assert_allclose(controller_gain(tmp_path / "c.json"), np.hstack([np.eye(3), 2 * np.eye(3)]))
+    np.testing.assert_allclose(
+        controller_gain(tmp_path / "c.json"), np.hstack([np.eye(3), 2 * np.eye(3)])
+    )
     with pytest.raises(ValueError, match="not found"):
         controller_gain(tmp_path / "missing.json")
