@@ -93,72 +93,49 @@ class AnalysisOptions:
         return 2 * np.pi * np.geomspace(lo, hi, n)
 
 
-def _certify(array, sweep, subsets, peaks_grid, *, configuration_label):
-    """Certified peak and destabilizing perturbation per subset (robstab-like + direct search)."""
-    from oos_drake.analysis.destabilizing import destabilizing_perturbation
+def _certify(array, sweep, subsets, peaks_grid, *, configuration_label, upper_iterations=300):
+    """Certified peak and destabilizing perturbation per subset (local refinement + search)."""
     from oos_drake.analysis.stability import certify_peak
-    from oos_drake.robust.lfr_analysis import block_map
+    from oos_drake.analysis.worst_cases import physical_values
 
     sys = array.system
     rows, perturbation_rows, certificates = [], [], {}
     for _, pk in peaks_grid.iterrows():
         name, model = pk["subset"], int(pk["model"])
-        members = subsets[name]
-        cert = certify_peak(sys, name, members, model, float(pk["frequency [Hz]"]),
-                            time=float(array.values[model]))
-        one = sys.model(model) if sys.batch_shape else sys
-        if np.max(np.linalg.eigvals(np.asarray(one.A)).real) > -1e-9:
-            one = one.reduce()  # spurious near-zero modes (unreachable and unobservable)
-        bmap = block_map(one)
-        sub, zr, wc = bmap.subset(list(members))
-        A = np.asarray(one.A)
-        Bw, Cz = np.asarray(one.Bw)[:, wc], np.asarray(one.Cz)[zr]
-        Dzw = np.asarray(one.Dzw)[np.ix_(zr, wc)]
-        w0 = 2 * np.pi * float(pk["frequency [Hz]"])
-        direct = destabilizing_perturbation(A, Bw, Cz, Dzw, sub.blk,
-                                            [w0 * 0.5, w0 * 2.0])
-        lower, freq, delta, method = cert.mu_lower, cert.frequency, cert.delta, "power iteration"
-        if direct.mu_lower > lower:
-            lower, freq, delta, method = direct.mu_lower, direct.omega / (2 * np.pi), \
-                direct.delta, "direct search"
-        from oos_drake.robust.blocks import parse_blk
-
-        structure = parse_blk(sub.blk)
-        normalized = {}
-        for bname, kind, brows in zip(sub.names, sub.kinds, sub.blk_rows, strict=True):
-            b = structure.blocks[brows[0]]
-            block = delta[b.r_slice, b.c_slice]
-            normalized[bname] = float(block[0, 0].real) if kind == "ureal" else block.copy()
-        upper = max(cert.mu_upper, lower)
+        cert = certify_peak(sys, name, subsets[name], model, float(pk["frequency [Hz]"]),
+                            time=float(array.values[model]), upper_iterations=upper_iterations)
         grid_upper = float(sweep.loc[sweep["subset"] == name, "mu_upper"].max())
+        upper, lower = cert.mu_upper, cert.mu_lower
         rows.append({
             "study": array.study, "subset": name, "model": model,
             array.label: float(array.values[model]),
-            "frequency [Hz]": float(freq), "mu_upper": upper, "mu_lower": float(lower),
+            "frequency [Hz]": cert.frequency, "mu_upper": upper, "mu_lower": lower,
             "mu_upper_grid": grid_upper,
-            "gap [%]": 100.0 * (upper - lower) / upper if upper > 0 else 0.0,
+            "gap [%]": 100.0 * cert.gap,
             "margin [-]": 1.0 / max(upper, grid_upper) if upper > 0 else np.inf,
-            "method": method, "configuration": configuration_label(model),
+            "configuration": configuration_label(model),
         })
-        certificates[name] = (model, freq, lower, upper, normalized)
+        normalized = cert.worst_case_normalized
+        certificates[name] = (model, cert.frequency, lower, upper, normalized)
+        one = sys.model(model) if sys.batch_shape else sys
         specs = one.uncertainty
-        from oos_drake.analysis.worst_cases import physical_values
-
-        phys = physical_values(one, normalized, 1.0)
-        phys_unit = physical_values(one, normalized, lower)
+        phys = physical_values(one, normalized, 1.0) if lower > 0 else {}
+        phys_unit = physical_values(one, normalized, lower) if lower > 0 else {}
         for bname, value in normalized.items():
             arr = np.atleast_2d(np.asarray(value, dtype=complex))
+            kind = specs[bname].kind
+            destab = float(specs[bname].to_physical(float(arr[0, 0].real))) if kind == "ureal" \
+                else float(np.linalg.norm(arr, ord=2)) * specs[bname].bound
             perturbation_rows.append({
-                "study": array.study, "subset": name, "block": bname,
-                "kind": specs[bname].kind,
+                "study": array.study, "subset": name, "block": bname, "kind": kind,
+                "unit": _unit(bname),
                 "normalized_norm [-]": float(np.linalg.norm(arr, ord=2)),
                 "normalized_real [-]": float(arr[0, 0].real),
                 "normalized_imag [-]": float(arr[0, 0].imag),
-                "destabilizing_value [unit]": phys[bname] if specs[bname].kind == "ureal"
-                else float(np.linalg.norm(arr, ord=2)) * specs[bname].bound,
-                "in_set_value [unit]": phys_unit[bname],
-                "unit": _unit(bname),
+                "destabilizing_value [unit]": destab,
+                "in_set_value [unit]": phys_unit.get(bname, np.nan),
             })
+        del phys
     return pd.DataFrame(rows), pd.DataFrame(perturbation_rows), certificates
 
 
@@ -248,7 +225,8 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
     label = _moment_label(times, scenario)
     peaks_grid = peaks_table(sweep)
     peaks, perturbations, certs = _certify(mission, sweep, subsets, peaks_grid,
-                                           configuration_label=label)
+                                           configuration_label=label,
+                                           upper_iterations=options.sweep.refine_iterations)
     lap("certify mission peaks")
     # ------------------------------------------------------------------ docking
     docking_sweeps, docking_peaks, docking_tables = {}, {}, []
@@ -265,7 +243,8 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         pg = peaks_table(dsweep.rename(columns={"stiffness [N/m or N m/rad]": "time [s]"}))
         dp, dpert, dc = _certify(arr, dsweep, tot, pg,
                                  configuration_label=lambda m, ph=phase: f"docking-{ph} "
-                                 f"k={stiffness[m]:.3g}")
+                                 f"k={stiffness[m]:.3g}",
+                                 upper_iterations=options.sweep.refine_iterations)
         docking_tables.append(dp)
         docking_perturbations.append(dpert)
         docking_certs[phase] = (arr, dc["total"])

@@ -303,9 +303,14 @@ class PeakCertificate:
 
 
 def certify_peak(sys, subset: str, members, model: int, frequency_hz: float, *,
-                 time: float = float("nan"), span: float = 0.15, points: int = 41,
-                 refine_rounds: int = 3, mu_options: dict | None = None) -> PeakCertificate:
+                 time: float = float("nan"), span: float = 0.25, points: int = 41,
+                 upper_iterations: int = 300, search_band: float = 2.0) -> PeakCertificate:
     """Bounds of the mu peak of one model near ``frequency_hz``, with the worst perturbation.
+
+    The upper bound is recomputed with ``upper_iterations`` BFGS iterations on a local grid;
+    the lower bound is the best of the power iteration on that grid and of the direct search
+    for a destabilizing perturbation (:func:`oos_drake.analysis.destabilizing.destabilizing_perturbation`),
+    whose frequency may lie anywhere in ``frequency_hz * [1/search_band, search_band]``.
 
     Parameters
     ----------
@@ -319,41 +324,59 @@ def certify_peak(sys, subset: str, members, model: int, frequency_hz: float, *,
         Model index.
     frequency_hz : float
         Approximate peak frequency [Hz] (from the sweep).
+    time : float
+        Scheduling value of the model (label).
     span : float
         Relative half-width of the local grid around ``frequency_hz``.
     points : int
         Points of the local grid (log spaced).
-    refine_rounds : int
-        Refinement rounds of :func:`oos_drake.robust.robstab.mu_sweep`.
-    mu_options : dict, optional
-        Options of ``mussv`` (default: 120 upper iterations, 6 lower restarts).
+    upper_iterations : int
+        BFGS iterations of the local upper bounds.
+    search_band : float
+        Frequency band factor of the direct search.
     """
-    from oos_drake.robust.robstab import mu_sweep as local_sweep
+    from oos_drake.analysis.destabilizing import destabilizing_perturbation
 
     one = sys.model(model) if sys.batch_shape else sys
+    A_full = np.asarray(one.A)
+    if A_full.size and np.max(np.linalg.eigvals(A_full).real) > -1e-9:
+        one = one.reduce()  # spurious near-zero modes that neither inputs nor Delta reach
     bmap = block_map(one)
     sub, zrows, wcols = bmap.subset(list(members))
     A = np.asarray(one.A)
-    Bw, Cz, Dzw = np.asarray(one.Bw)[:, wcols], np.asarray(one.Cz)[zrows, :], \
-        np.asarray(one.Dzw)[np.ix_(zrows, wcols)]
+    Bw, Cz = np.asarray(one.Bw)[:, wcols], np.asarray(one.Cz)[zrows, :]
+    Dzw = np.asarray(one.Dzw)[np.ix_(zrows, wcols)]
     w0 = 2 * np.pi * frequency_hz
     omega = w0 * np.geomspace(1 - span, 1 + span, points)
-    options = {"upper_iterations": 120, "lower_restarts": 6, "lower_iterations": 80}
-    options.update(mu_options or {})
-    omega, up, lo, dl, structure = local_sweep(A, Bw, Cz, Dzw, sub.blk, omega,
-                                               refine_rounds=refine_rounds, mu_options=options)
-    k = int(np.argmax(lo))
-    peak_up = float(up.max())
-    normalized = {}
-    worst = {}
-    if lo[k] > 0:
-        worst = worst_case_values(sub, structure, dl[k], float(omega[k]))
+    M = delta_channel_response(A, Bw, Cz, Dzw, omega)
+    opts = SweepOptions(upper_iterations=upper_iterations, lower_restarts=4, lower_iterations=60)
+    structure = parse_blk(sub.blk)
+    from oos_drake.robust.mu_lower import mu_lower_bound
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    up_res = mu_upper_bound(np.ascontiguousarray(M), structure, max_iter=upper_iterations)
+    up = up_res.upper
+    lo_res = mu_lower_bound(M, structure, start_inputs=up_res.worst_input,
+                            restarts=opts.lower_restarts, iters=opts.lower_iterations)
+    k = int(np.argmax(lo_res.lower))
+    lower, w_crit, delta = float(lo_res.lower[k]), float(omega[k]), lo_res.delta[k]
+    direct = destabilizing_perturbation(A, Bw, Cz, Dzw, sub.blk,
+                                        [w0 / search_band, w0 * search_band])
+    if direct.mu_lower > lower:
+        lower, w_crit, delta = direct.mu_lower, direct.omega, direct.delta
+        # the upper bound at the critical frequency too (lower <= upper pointwise)
+        Mc = delta_channel_response(A, Bw, Cz, Dzw, [w_crit])
+        up = np.append(up, mu_upper_bound(Mc, structure, max_iter=upper_iterations).upper)
+    peak_up = float(max(up.max(), lower))
+    normalized, worst = {}, {}
+    if lower > 0:
+        worst = worst_case_values(sub, structure, delta, w_crit)
         for name, kind, rows in zip(sub.names, sub.kinds, sub.blk_rows, strict=True):
             b = structure.blocks[rows[0]]
-            block = dl[k][b.r_slice, b.c_slice]
+            block = delta[b.r_slice, b.c_slice]
             normalized[name] = float(block[0, 0].real) if kind == "ureal" else block.copy()
-    return PeakCertificate(subset, int(model), float(time), float(omega[k] / (2 * np.pi)),
-                           peak_up, float(lo[k]), dl[k], worst, normalized)
+    return PeakCertificate(subset, int(model), float(time), float(w_crit / (2 * np.pi)),
+                           peak_up, lower, delta, worst, normalized)
 
 
 def peaks_table(sweep: pd.DataFrame) -> pd.DataFrame:

@@ -60,6 +60,7 @@ def _run(args: argparse.Namespace) -> int:
         workers=args.workers,
         scheduler=args.scheduler,
         progress=not args.no_progress,
+        worst_cases=args.worst_cases,
     )
     _print_summary(summary)
     return 0
@@ -129,6 +130,12 @@ def register(subparsers) -> None:
         "--out",
         default=None,
         help="campaign directory (default: out/campaigns/<name>); must not exist",
+    )
+    run.add_argument(
+        "--worst-cases",
+        default=None,
+        metavar="PARQUET",
+        help="mu-guided: use this worst_cases.parquet (e.g. from oos analyze) instead of the spec's",
     )
     _add_executor_options(run)
     run.set_defaults(func=_run)

@@ -84,6 +84,12 @@ def weighted_probability(weights: np.ndarray, indicator: np.ndarray) -> tuple[fl
     return float(values.mean()), se
 
 
+def effective_sample_size(weights: np.ndarray) -> float:
+    """Kish's effective sample size ``(sum w)^2 / sum w^2`` of importance weights [runs]."""
+    weights = np.asarray(weights, float)
+    return float(weights.sum() ** 2 / np.sum(weights**2)) if weights.size else 0.0
+
+
 def weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
     """Quantile ``q`` of the weighted empirical distribution (NaNs dropped)."""
     values, weights = np.asarray(values, float), np.asarray(weights, float)
@@ -430,6 +436,12 @@ def write_report(directory: str | Path, worst: int = 5) -> CampaignReport:
         ]
         if "regions" in tables:
             parts.append("runs per region:\n" + tables["regions"].to_string(index=False))
+            ess = effective_sample_size(runs["weight"].to_numpy())
+            parts.append(
+                f"importance sampling: effective sample size {ess:.1f} of {len(runs)} runs "
+                f"(max weight {runs['weight'].max():.3g}); a small value means the estimates "
+                "rest on few runs (widen spread or guide fewer blocks)"
+            )
         if spec.window.kind == "critical":
             parts.append(
                 "note: each run simulates the window around its region's critical time, so the "

@@ -25,7 +25,7 @@ from oos_drake.campaign import store
 from oos_drake.campaign.executors import RunResult, execute_case, make_executor
 from oos_drake.campaign.samplers import make_plan, region_counts
 from oos_drake.campaign.simulator import MissionWindow, RunCase
-from oos_drake.campaign.spec import CampaignSpec, load_spec, spec_to_toml
+from oos_drake.campaign.spec import CampaignSpec, load_spec, parse_spec, spec_to_toml
 
 
 def metric_column(spec: CampaignSpec, metric: str) -> str:
@@ -191,10 +191,21 @@ def _execute(
 
 
 def prepare_campaign(
-    spec_path: str | Path, out: str | Path
+    spec_path: str | Path, out: str | Path, worst_cases: str | Path | None = None
 ) -> tuple[Path, CampaignSpec, pd.DataFrame]:
-    """Validate the spec, build the plan, then (only then) create the campaign directory."""
+    """Validate the spec, build the plan, then (only then) create the campaign directory.
+
+    ``worst_cases`` replaces the mu-guided sampler's ``worst_cases`` file of the spec (e.g. the
+    output of ``oos analyze``); the substituted spec is validated again.
+    """
     spec = load_spec(spec_path)
+    if worst_cases is not None:
+        if spec.sampler.kind != "mu-guided":
+            raise ValueError(f"--worst-cases given but spec {spec_path} is not mu-guided")
+        worst_cases = Path(worst_cases).resolve()
+        if not worst_cases.is_file():
+            raise ValueError(f"--worst-cases {worst_cases}: file not found")
+        spec = parse_spec(spec_to_toml(spec, str(worst_cases)), source=Path(spec_path))
     plan = make_plan(spec)
     directory = Path(out)
     if directory.exists() and any(directory.iterdir()):
@@ -224,9 +235,10 @@ def run_campaign(
     workers: int = 1,
     scheduler: str | None = None,
     progress: bool = True,
+    worst_cases: str | Path | None = None,
 ) -> CampaignSummary:
     """Validate, plan and run a campaign into ``out`` (see the module docstring)."""
-    directory, _, _ = prepare_campaign(spec_path, out)
+    directory, _, _ = prepare_campaign(spec_path, out, worst_cases)
     # run from the directory's own resolved spec: what resume and rerun will see
     spec, plan = load_campaign(directory)
     if spec.sampler.kind == "mu-guided":

@@ -160,8 +160,9 @@ class ModalResponse:
         values[keep] = _sigma_max(H[keep])
         return values
 
-    def default_grid(self, points_per_decade: int = 20) -> np.ndarray:
-        """Per-model grid: 0, a log grid over the pole magnitudes, and the damped frequencies."""
+    def default_grid(self, points_per_decade: int = 8) -> np.ndarray:
+        """Per-model grid: 0, a log grid over the pole magnitudes, the damped frequencies
+        and half-power points of the lightly damped poles."""
         mag = np.abs(self.lam)
         mag = np.where(mag > 1e-12, mag, np.nan)
         low = np.nanmin(mag, axis=-1, initial=np.inf)
@@ -171,11 +172,19 @@ class ModalResponse:
         lo, hi = np.log10(0.05 * low).min(), np.log10(20.0 * high).max()
         count = int(np.ceil((hi - lo) * points_per_decade)) + 1
         log_grid = np.logspace(lo, hi, count)
-        damped = np.abs(self.lam.imag)
+        # damped frequency of each pole (upper half plane) and, for the lightly damped ones,
+        # their half-power points w_d (1 -+ zeta): tight brackets around sharp resonances
+        upper = self.lam.imag > 0
+        damped = np.where(upper, self.lam.imag, 0.0)
+        zeta = -self.lam.real / np.maximum(np.abs(self.lam), 1e-300)
+        light = upper & (zeta < 0.5)
+        below = np.where(light, damped * (1.0 - zeta), 0.0)
+        above = np.where(light, damped * (1.0 + zeta), 0.0)
         N = self.lam.shape[0]
         grid = np.sort(
             np.concatenate(
-                [np.zeros((N, 1)), np.broadcast_to(log_grid, (N, count)), damped], axis=1
+                [np.zeros((N, 1)), np.broadcast_to(log_grid, (N, count)), damped, below, above],
+                axis=1,
             ),
             axis=1,
         )
@@ -219,9 +228,9 @@ def peak_gain(
     C,
     D,
     *,
-    points_per_decade: int = 20,
-    candidates: int = 4,
-    iterations: int = 30,
+    points_per_decade: int = 8,
+    candidates: int = 2,
+    iterations: int = 25,
     modal: ModalResponse | None = None,
     focus: float | None = None,
 ) -> PeakGain:

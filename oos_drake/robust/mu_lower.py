@@ -22,11 +22,14 @@ otherwise that candidate is dropped (and the bound lowered, to 0 if no candidate
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from oos_drake.robust.blocks import FULL, REAL, BlockStructure
+
+#: Matrices per internal batch of :func:`mu_lower_bound` (bounds the memory of huge batches).
+CHUNK = 1024
 
 #: Relative tolerance on ``sigma_min(I - M delta)`` accepted as "singular".
 CERTIFICATE_RTOL = 1e-7
@@ -303,6 +306,22 @@ def mu_lower_bound(
     LowerBoundResult
     """
     rng = np.random.default_rng(0) if rng is None else rng
+    if M.shape[0] > CHUNK:  # bounded memory: (restarts + 1) copies of the batch are in flight
+        parts = [
+            mu_lower_bound(
+                M[i : i + CHUNK],
+                structure,
+                start_inputs=None if start_inputs is None else start_inputs[i : i + CHUNK],
+                restarts=restarts,
+                iters=iters,
+                kappa=kappa,
+                rng=rng,
+            )
+            for i in range(0, M.shape[0], CHUNK)
+        ]
+        return LowerBoundResult(
+            *(np.concatenate([getattr(q, f.name) for q in parts]) for f in fields(LowerBoundResult))
+        )
     nb, c, r = M.shape
     starts_a, starts_z = [], []
     if start_inputs is not None:

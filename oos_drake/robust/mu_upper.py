@@ -29,11 +29,14 @@ bound is always valid; the scalings are returned so that the LMI can be checked 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from oos_drake.robust.blocks import REAL, BlockStructure
+
+#: Matrices per internal batch of :func:`mu_upper_bound` (bounds the memory of huge batches).
+CHUNK = 2048
 
 
 @dataclass(frozen=True)
@@ -61,6 +64,13 @@ class _Layout:
     g_map: np.ndarray  # (n_g_params, n_g_pos) complex: Gh[pos] = x_g @ g_map
     g_par: np.ndarray  # indices of G parameters in x
     block_log_par: tuple  # per block: log-params of its diagonal (for initialization)
+    lrow_col: np.ndarray  # (c, k): T_l as padded rows (column, entry); pad entry = n_entries
+    lrow_ent: np.ndarray
+    grow_col: np.ndarray  # (r, k): Gh as padded rows (column, position); pad = n_g_positions
+    grow_pos: np.ndarray
+    tcol_row: np.ndarray  # (r, k): rows of the non-zeros of each column of T_r^{-1}
+    tcol_ok: np.ndarray  # (r, k): which of them are real (not padding)
+    inv_groups: tuple  # ((size, (n_blocks, size) indices), ...): diagonal blocks of T_r
 
 
 def _layout(structure: BlockStructure) -> _Layout:
@@ -138,6 +148,39 @@ def _layout(structure: BlockStructure) -> _Layout:
     g_par = np.arange(n_par, n_par + len(g_cols))
     n_par += len(g_cols)
 
+    def padded_rows(rows, cols, ents, n, pad):
+        """Per row: the (column, entry) pairs, padded to equal length with ``pad`` entries."""
+        per = [[] for _ in range(n)]
+        for i, j, e in zip(rows, cols, ents, strict=True):
+            per[i].append((j, e))
+        k = max(1, max(len(v) for v in per))
+        col = np.zeros((n, k), dtype=int)
+        ent = np.full((n, k), pad, dtype=int)
+        for i, v in enumerate(per):
+            for q, (j, e) in enumerate(v):
+                col[i, q], ent[i, q] = j, e
+        return col, ent
+
+    lrow_col, lrow_ent = padded_rows(l_row, l_col, l_ent, structure.n_cols, n_ent)
+    # T_r^{-1} has the pattern of T_r: per column j, the rows i >= j of its diagonal block
+    tcol_row, _ = padded_rows(r_col, r_row, r_ent, structure.n_rows, n_ent)
+    tcol_ok = np.zeros(tcol_row.shape, dtype=bool)
+    counts = np.bincount(np.asarray(r_col, dtype=int), minlength=structure.n_rows)
+    for j, cnt in enumerate(counts):
+        tcol_ok[j, :cnt] = True
+    # diagonal blocks of T_r grouped by size, for batched small inverses
+    sizes = {}
+    for block in structure.blocks:
+        if block.repeated:
+            sizes.setdefault(block.rows, []).append(block.row_offset + np.arange(block.rows))
+        else:
+            for a in range(block.rows):
+                sizes.setdefault(1, []).append(np.array([block.row_offset + a]))
+    inv_groups = tuple((n, np.array(v)) for n, v in sorted(sizes.items()))
+    grow_col, grow_pos = padded_rows(
+        g_row, g_col, list(range(len(g_row))), structure.n_rows, len(g_row)
+    )
+
     def sel(ent):
         s = np.zeros((len(ent), n_ent))
         s[np.arange(len(ent)), ent] = 1.0
@@ -166,6 +209,13 @@ def _layout(structure: BlockStructure) -> _Layout:
         g_map=g_map,
         g_par=g_par,
         block_log_par=tuple(block_log_par),
+        lrow_col=lrow_col,
+        lrow_ent=lrow_ent,
+        grow_col=grow_col,
+        grow_pos=grow_pos,
+        tcol_row=tcol_row,
+        tcol_ok=tcol_ok,
+        inv_groups=inv_groups,
     )
 
 
@@ -197,17 +247,34 @@ class _Objective:
         return E, Tl, Tr, Gh
 
     def __call__(self, x, idx, t, need_grad=True):
-        """Return ``(f, grad, lam_max, top_vec, parts)`` for the batch rows ``idx``."""
+        """Return ``(f, grad, lam_max, top_vec)`` for the batch rows ``idx``."""
         L = self.L
         M = self.M[idx]
         E, Tl, Tr, Gh = self.scalings(x, idx)
-        Tri = np.linalg.inv(Tr)
+        nb = len(idx)
+        Tri = np.zeros_like(Tr)
+        for n, rows in L.inv_groups:  # block-diagonal: invert the small blocks, size by size
+            if n == 1:
+                d = rows[:, 0]
+                Tri[:, d, d] = 1.0 / Tr[:, d, d]
+            else:
+                ii, jj = rows[:, :, None], rows[:, None, :]
+                Tri[:, ii, jj] = np.linalg.inv(Tr[:, ii, jj])
         X = M @ Tri
-        Mh = Tl @ X
+        # Mh = T_l X with T_l block-diagonal lower-triangular: a few row gathers, no matmul
+        Epad = np.concatenate([E, np.zeros((nb, 1), dtype=complex)], axis=1)
+        Tv = Epad[:, L.lrow_ent]
+        Mh = Tv[:, :, 0, None] * X[:, L.lrow_col[:, 0], :]
+        for k in range(1, Tv.shape[2]):
+            Mh = Mh + Tv[:, :, k, None] * X[:, L.lrow_col[:, k], :]
         MhH = np.conj(np.swapaxes(Mh, -1, -2))
         H = MhH @ Mh
         if len(L.g_par):
-            Q = Gh @ Mh
+            gv = np.concatenate([x[:, L.g_par] @ L.g_map, np.zeros((nb, 1), dtype=complex)], 1)
+            Gv = gv[:, L.grow_pos]
+            Q = Gv[:, :, 0, None] * Mh[:, L.grow_col[:, 0], :]
+            for k in range(1, Gv.shape[2]):
+                Q = Q + Gv[:, :, k, None] * Mh[:, L.grow_col[:, k], :]
             H = H + 1j * (Q - np.conj(np.swapaxes(Q, -1, -2)))
         if not need_grad:
             lam = np.linalg.eigvalsh(H)
@@ -221,15 +288,22 @@ class _Objective:
         ssum = z.sum(axis=1)
         f = lmax + np.log(ssum) / t
         p = z / ssum[:, None]
-        W = (V * p[:, None, :]) @ np.conj(np.swapaxes(V, -1, -2))
-        Gam = W @ MhH
+        # W = V diag(p) V^* has numerical rank K (the eigenvalues near the top): thin products
+        K = int(np.max(np.sum(p > 1e-15, axis=1)))
+        Vk = V[:, :, -K:]
+        pk = p[:, -K:]
+        VkH = np.conj(np.swapaxes(Vk, -1, -2))
+        MV = Mh @ Vk  # (B, c, K)
+        Zs = np.conj(np.swapaxes(MV, -1, -2))  # Vk^* Mh^*
         if len(L.g_par):
-            Gam = Gam + 1j * (W @ Gh)
-        Gam = 2.0 * Gam
+            Zs = Zs + 1j * (VkH @ Gh)
+        Zs = 2.0 * pk[:, :, None] * Zs  # Gam = Vk Zs,  (B, K, c)
         # coefficients of dT_l at its entry positions: (X Gam)[col, row]
-        coef_l = np.einsum("bpk,bkp->bp", X[:, L.l_col, :], Gam[:, :, L.l_row])
-        GM = Gam @ Mh
-        coef_r = np.einsum("bpk,bkp->bp", Tri[:, L.r_col, :], GM[:, :, L.r_row])
+        XV = X[:, L.l_col, :] @ Vk  # (B, npos, K)
+        coef_l = np.einsum("bpk,bkp->bp", XV, Zs[:, :, L.l_row])
+        ZM = Zs @ Mh  # Gam Mh = Vk (Zs Mh)
+        TV = Tri[:, L.r_col, :] @ Vk
+        coef_r = np.einsum("bpk,bkp->bp", TV, ZM[:, :, L.r_row])
         gT = coef_l @ L.sel_l - coef_r @ L.sel_r
         grad = np.zeros_like(x)
         grad[:, L.log_par] = np.real(gT[:, L.log_ent] * E[:, L.log_ent])
@@ -240,7 +314,10 @@ class _Objective:
             grad[:, L.lin_re_par] = np.real(gT[:, L.lin_ent]) * rowscale
             grad[:, L.lin_im_par] = -np.imag(gT[:, L.lin_ent]) * rowscale
         if len(L.g_par):
-            coef_g = 2j * np.einsum("bpk,bkp->bp", Mh[:, L.g_col, :], W[:, :, L.g_row])
+            # Psi = 2j Mh W = 2j (Mh Vk) diag(pk) Vk^*, needed at the G positions only
+            coef_g = 2j * np.einsum(
+                "bpk,bkp->bp", MV[:, L.g_col, :] * pk[:, None, :], VkH[:, :, L.g_row]
+            )
             grad[:, L.g_par] = np.real(coef_g @ L.g_map.T)
         top = Tri @ V[:, :, -1:]
         return f, grad, lmax, top[:, :, 0]
@@ -358,6 +435,27 @@ def mu_upper_bound(
     -------
     UpperBoundResult
     """
+    if M.shape[0] > CHUNK:  # bounded memory: temporaries are ~50 matrices per input matrix
+        parts = [
+            mu_upper_bound(
+                M[i : i + CHUNK],
+                structure,
+                max_iter=max_iter,
+                tol=tol,
+                temperatures=temperatures,
+                memory=memory,
+                x0=None if x0 is None else x0[i : i + CHUNK],
+            )
+            for i in range(0, M.shape[0], CHUNK)
+        ]
+        return UpperBoundResult(
+            *(
+                max(getattr(q, f.name) for q in parts)
+                if f.name == "iterations"
+                else np.concatenate([getattr(q, f.name) for q in parts])
+                for f in fields(UpperBoundResult)
+            )
+        )
     nb, c, r = M.shape
     layout = _layout(structure)
     scale = np.linalg.norm(M, axis=(1, 2)) + 1e-300

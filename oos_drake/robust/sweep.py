@@ -53,9 +53,7 @@ def _warm_sweep(M, blk, *, warm_iterations=20, lower_restarts=2, lower_iteration
         if x is None:
             res = mu_upper_bound(M[:, f], s, max_iter=80)
         else:
-            res = mu_upper_bound(
-                M[:, f], s, max_iter=warm_iterations, temperatures=(1000.0,), x0=x
-            )
+            res = mu_upper_bound(M[:, f], s, max_iter=warm_iterations, temperatures=(1000.0,), x0=x)
         x = res.params
         up[:, f] = res.upper
         worst[:, f] = res.worst_input

@@ -61,3 +61,11 @@ def test_weighted_quantile_against_repeated_samples():
         [1, 1, 2, 3], 0.5, method="inverted_cdf"
     )
     assert weighted_quantile(values, weights, 0.9) == 3.0
+
+
+def test_effective_sample_size():
+    from oos_drake.campaign.report import effective_sample_size
+
+    assert effective_sample_size(np.ones(10)) == 10.0
+    # one dominant weight: about one effective run
+    assert effective_sample_size(np.array([1e6, 1.0, 1.0])) < 1.001

@@ -53,6 +53,18 @@ def test_lightly_damped_mode_peak_and_frequency():
     assert_allclose(res.peak_frequency, wn * np.sqrt(1 - 2 * zeta**2), rtol=1e-6)
 
 
+def test_lfr_model_array_input():
+    from oos_drake.lfr import feedback, ureal, usubs
+
+    k = ureal("k", 2.0, plusminus=1.0)
+    arr = usubs(feedback(k * control.tf(1, [1, 3, 2]), 1), {"k": np.array([1.0, 2.0, 3.0])})
+    ref = [
+        hinfnorm(control.ss(control.feedback(kk * control.tf(1, [1, 3, 2]), 1))).norm
+        for kk in (1.0, 2.0, 3.0)
+    ]
+    assert_allclose(hinfnorm(arr).norm, ref, rtol=1e-8)
+
+
 def test_unstable_is_infinite_and_bad_input_raises():
     res = hinfnorm((np.array([[1.0]]), np.ones((1, 1)), np.ones((1, 1)), np.zeros((1, 1))))
     assert np.isinf(res.norm)

@@ -71,6 +71,10 @@ def test_lightly_damped_mode_not_missed():
     assert res.lower <= exact * (1 + 1e-6)
     assert abs(res.critical_frequency - 1.0) < 0.05  # at the lightly damped resonance
     assert abs(_max_real_pole(loop, res.worst_case_normalized)) < 1e-6
+    # the gain alone (w nominal): the same margin here, since k_crit(w) is smallest at w = 1
+    only_k = robstab(loop, blocks=["kk"])
+    assert_allclose(only_k.upper, _margin_by_pole_sweep(loop, ["kk"]), rtol=1e-4)
+    assert set(only_k.worst_case) == {"kk"}
 
 
 def test_unstructured_margin_is_inverse_hinf_norm_and_worst_case_realization():
@@ -140,7 +144,6 @@ def test_robust_sweep_table_and_consistency_with_robstab():
         df.groupby("model").mu_upper.max().values,
         rtol=1e-2,
     )
-
 
 
 def test_complex_scalar_margin_matches_dense_frequency_sweep():
