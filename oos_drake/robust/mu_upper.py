@@ -68,8 +68,6 @@ class _Layout:
     lrow_ent: np.ndarray
     grow_col: np.ndarray  # (r, k): Gh as padded rows (column, position); pad = n_g_positions
     grow_pos: np.ndarray
-    tcol_row: np.ndarray  # (r, k): rows of the non-zeros of each column of T_r^{-1}
-    tcol_ok: np.ndarray  # (r, k): which of them are real (not padding)
     inv_groups: tuple  # ((size, (n_blocks, size) indices), ...): diagonal blocks of T_r
 
 
@@ -162,12 +160,6 @@ def _layout(structure: BlockStructure) -> _Layout:
         return col, ent
 
     lrow_col, lrow_ent = padded_rows(l_row, l_col, l_ent, structure.n_cols, n_ent)
-    # T_r^{-1} has the pattern of T_r: per column j, the rows i >= j of its diagonal block
-    tcol_row, _ = padded_rows(r_col, r_row, r_ent, structure.n_rows, n_ent)
-    tcol_ok = np.zeros(tcol_row.shape, dtype=bool)
-    counts = np.bincount(np.asarray(r_col, dtype=int), minlength=structure.n_rows)
-    for j, cnt in enumerate(counts):
-        tcol_ok[j, :cnt] = True
     # diagonal blocks of T_r grouped by size, for batched small inverses
     sizes = {}
     for block in structure.blocks:
@@ -213,8 +205,6 @@ def _layout(structure: BlockStructure) -> _Layout:
         lrow_ent=lrow_ent,
         grow_col=grow_col,
         grow_pos=grow_pos,
-        tcol_row=tcol_row,
-        tcol_ok=tcol_ok,
         inv_groups=inv_groups,
     )
 
