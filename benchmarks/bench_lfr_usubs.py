@@ -8,30 +8,44 @@ bilinear, 1 occurrence) and participation gain (2 occurrences). Inputs: 3 hub to
 outputs: 3 hub attitude angles [rad]. That is 60 states and about 200 Delta occurrences.
 
 Fast path: ``usubs`` with arrays of N value sets (one model array, no Python loop per model) and
-``freqresp`` of the array (no Python loop per frequency). Baseline: for each value set, ``usubs``
-with scalars, ``to_ss()`` and ``control.frequency_response``. The baseline is timed on a subset
-of the samples (half before, half after the fast path, since the machine is shared) and scaled
-linearly to N; it is a loop of identical iterations. The script also times numpy's ``eig`` of every
-model's ``A`` alone: the batched response needs one eigendecomposition per model, so that line is
-a floor for the fast path.
+``freqresp`` of the array (no Python loop per frequency; real models use LAPACK ``dgeev``'s real
+eigenvector basis and a real pairwise modal sum, one matrix product per model). It is timed with
+1 worker thread and with 2 worker threads (``oos_drake.lfr.frequency.WORKERS`` /
+``oos_drake.lfr.substitution.WORKERS``: chunks of models on a thread pool; LAPACK/BLAS release the
+GIL). BLAS itself is single-threaded everywhere (``OPENBLAS_NUM_THREADS=OMP_NUM_THREADS=1``, set
+below before numpy is imported), so the baseline loop is single-threaded.
 
-Run: ``python benchmarks/bench_lfr_usubs.py [--samples 1000] [--baseline-samples 40]``
+Baseline: for each value set, ``usubs`` with scalars, ``to_ss()`` and
+``control.frequency_response``. The baseline is timed on a subset of the samples (half before,
+half after the fast paths, since the machine is shared) and scaled linearly to N; it is a loop of
+identical iterations. Each repeat measures all three in the same window and gives its own ratios;
+the script prints every repeat, the spread, wall-clock and CPU (process) times and the load
+average. The script also times the eigendecomposition of every model's state matrix alone
+(LAPACK ``dgeev``, one thread): the modal response needs one per model, so that line is a floor.
+
+Run: ``python benchmarks/bench_lfr_usubs.py [--samples 1000] [--baseline-samples 40] [--repeats 3]``
 """
 
 from __future__ import annotations
 
 import os
 
-# One BLAS thread: the machine is shared, and OpenBLAS threads spinning on small matrices under
-# contention slow both paths down erratically. Set before numpy is imported; both paths use it.
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# Explicit thread settings, before numpy is imported: BLAS/LAPACK single-threaded in both paths
+# (OpenBLAS threads spinning on small matrices under contention slow everything erratically);
+# the fast path's parallelism, when asked for, is its own thread pool over chunks of models.
+os.environ["OPENBLAS_NUM_THREADS"] = "1"
+os.environ["OMP_NUM_THREADS"] = "1"
+os.environ["MKL_NUM_THREADS"] = "1"
 
 import argparse  # noqa: E402
 import time  # noqa: E402
 
 import control  # noqa: E402
 import numpy as np  # noqa: E402
+from scipy.linalg import lapack  # noqa: E402
 
+import oos_drake.lfr.frequency as lfr_frequency  # noqa: E402
+import oos_drake.lfr.substitution as lfr_substitution  # noqa: E402
 from oos_drake.lfr import append, feedback, inv, ureal, usubs  # noqa: E402
 
 
@@ -80,13 +94,57 @@ def flexible_spacecraft(n_appendages: int = 3, modes_per_appendage: int = 9, see
     return double_integ * accel
 
 
+class Clock:
+    """Wall-clock and process CPU time of a block (CPU time sums all threads of the process)."""
+
+    def __enter__(self):
+        self.wall0, self.cpu0 = time.perf_counter(), time.process_time()
+        return self
+
+    def __exit__(self, *exc):
+        self.wall = time.perf_counter() - self.wall0
+        self.cpu = time.process_time() - self.cpu0
+
+
+def set_workers(count: int) -> None:
+    lfr_frequency.WORKERS = count
+    lfr_substitution.WORKERS = count
+
+
+def fast_path(sys, values, omega, workers):
+    set_workers(workers)
+    try:
+        with Clock() as c_subs:
+            models = usubs(sys, values)
+        with Clock() as c_fr:
+            resp = models.freqresp(omega)
+    finally:
+        set_workers(1)
+    return models, resp, c_subs, c_fr
+
+
+def relative_difference(resp, ref):
+    """Max over samples and frequencies of ||G - G_ref||_F / ||G_ref||_F."""
+    nb, nf = ref.shape[:2]
+    err = np.linalg.norm((resp - ref).reshape(nb, nf, -1), axis=-1)
+    return float(np.max(err / np.linalg.norm(ref.reshape(nb, nf, -1), axis=-1)))
+
+
+def spread(values):
+    v = np.asarray(values)
+    return f"median {np.median(v):6.1f}x  (min {v.min():.1f}x, max {v.max():.1f}x)"
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=1000)
     parser.add_argument("--baseline-samples", type=int, default=40)
     parser.add_argument("--frequencies", type=int, default=500)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--threads", type=int, default=2, help="worker threads of the fast path")
     args = parser.parse_args(argv)
 
+    load0 = os.getloadavg()
     t0 = time.perf_counter()
     sys = flexible_spacecraft()
     t_build = time.perf_counter() - t0
@@ -95,73 +153,108 @@ def main(argv=None) -> int:
         f"model: {sys.nstates} states, {sys.noutputs}x{sys.ninputs} I/O, "
         f"{len(sys.occurrences)} blocks, {n_occ} Delta occurrences (built in {t_build:.2f} s)"
     )
+    print(
+        f"threads: BLAS/LAPACK OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']} "
+        f"OMP_NUM_THREADS={os.environ['OMP_NUM_THREADS']}; baseline loop 1 thread; fast path "
+        f"1 and {args.threads} worker threads; os.cpu_count()={os.cpu_count()}"
+    )
+    print(f"load average at start: {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}")
 
     rng = np.random.default_rng(2026)
     specs = sys.uncertainty
     values = {name: spec.sample(rng, args.samples) for name, spec in specs.items()}
     omega = np.logspace(-2, 2, args.frequencies)
-
     nb = min(args.baseline_samples, args.samples)
-    first = list(range(0, nb, 2))
-    second = list(range(1, nb, 2))
-    baseline = {}
-    loop_times = {"usubs+to_ss": 0.0, "frequency_response": 0.0}
-
-    def run_baseline(indices):
-        for k in indices:
-            t0 = time.perf_counter()
-            ss_k = usubs(sys, {name: v[k] for name, v in values.items()}).to_ss()
-            t1 = time.perf_counter()
-            fr = control.frequency_response(ss_k, omega, squeeze=False)
-            baseline[k] = np.moveaxis(np.asarray(fr.complex), -1, 0)
-            t2 = time.perf_counter()
-            loop_times["usubs+to_ss"] += t1 - t0
-            loop_times["frequency_response"] += t2 - t1
-
-    # the machine is shared: time half the baseline before and half after the vectorized path
-    run_baseline(first)
-    t0 = time.perf_counter()
-    models = usubs(sys, values)
-    t_subs = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    resp = models.freqresp(omega)
-    t_fr = time.perf_counter() - t0
-    t_fast = t_subs + t_fr
-    run_baseline(second)
-    t_base_subset = sum(loop_times.values())
     scale = args.samples / nb
-    t_base = t_base_subset * scale
+    configs = [1] if args.threads <= 1 else [1, args.threads]
 
-    # reference floor: one LAPACK eigendecomposition of A per model (what freqresp must do)
+    def run_baseline(indices, store):
+        wall = cpu = 0.0
+        for k in indices:
+            with Clock() as c:
+                ss_k = usubs(sys, {name: v[k] for name, v in values.items()}).to_ss()
+                fr = control.frequency_response(ss_k, omega, squeeze=False)
+                store[k] = np.moveaxis(np.asarray(fr.complex), -1, 0)
+            wall += c.wall
+            cpu += c.cpu
+        return wall, cpu
+
+    rows = []
+    reference = {}
+    for rep in range(args.repeats):
+        # a different subset of baseline samples per repeat, half before and half after
+        subset = [(rep * nb + i) % args.samples for i in range(nb)]
+        wall_a, cpu_a = run_baseline(subset[0::2], reference)
+        fast = {w: fast_path(sys, values, omega, w) for w in configs}
+        wall_b, cpu_b = run_baseline(subset[1::2], reference)
+        base_wall, base_cpu = (wall_a + wall_b) * scale, (cpu_a + cpu_b) * scale
+        ref = np.stack([reference[k] for k in subset])
+        row = {"base_wall": base_wall, "base_cpu": base_cpu, "load": os.getloadavg()[0]}
+        for w, (_, resp, c_subs, c_fr) in fast.items():
+            row[w] = {
+                "subs": c_subs.wall,
+                "fr": c_fr.wall,
+                "wall": c_subs.wall + c_fr.wall,
+                "cpu": c_subs.cpu + c_fr.cpu,
+                "rel": relative_difference(resp[subset], ref),
+            }
+        if len(configs) > 1:
+            row["same"] = bool(np.array_equal(fast[configs[0]][1], fast[configs[-1]][1]))
+        rows.append(row)
+        models = fast[1][0]
+
+    # floor: one dgeev (eigenvalues + right eigenvectors) of every model's state matrix
     n = models.nstates
-    t0 = time.perf_counter()
-    np.linalg.eig(models.M[:, :n, :n])
-    t_eig = time.perf_counter() - t0
+    A = models.M[:, :n, :n]
+    with Clock() as c_eig:
+        for a in A:
+            lapack.dgeev(np.array(a, order="F"), compute_vl=0, overwrite_a=1)
 
-    ref_resp = np.stack([baseline[k] for k in range(nb)])
-    err = np.linalg.norm((resp[:nb] - ref_resp).reshape(nb, omega.size, -1), axis=-1)
-    ref = np.linalg.norm(ref_resp.reshape(nb, omega.size, -1), axis=-1)
-    rel = float(np.max(err / ref))
-
-    print(f"{args.samples} value sets x {omega.size} frequencies")
-    print(f"{'path':46s} {'time [s]':>10s}")
-    print(f"{'vectorized usubs (one model array)':46s} {t_subs:10.3f}")
-    print(f"{'batched freqresp of the model array':46s} {t_fr:10.3f}")
-    print(f"{'vectorized total':46s} {t_fast:10.3f}")
-    print(f"{'  (floor: numpy eig of every A alone)':46s} {t_eig:10.3f}")
     print(
-        f"{'loop: usubs + to_ss + frequency_response':46s} {t_base:10.3f}  "
-        f"(timed on {nb} samples, {t_base_subset:.3f} s, scaled x{scale:.1f})"
+        f"\n{args.samples} value sets x {omega.size} frequencies; baseline timed on {nb} samples "
+        f"per repeat and scaled x{scale:.1f}"
     )
-    print(f"{'  of which usubs + to_ss':46s} {loop_times['usubs+to_ss'] * scale:10.3f}")
+    header = f"{'repeat':>6s} {'load':>5s} {'baseline':>9s}"
+    for w in configs:
+        header += f" | {w}T usubs {w}T freqresp {w}T total {w}T ratio"
+    print(header + "   [wall-clock seconds]")
+    for i, row in enumerate(rows):
+        line = f"{i:6d} {row['load']:5.1f} {row['base_wall']:9.2f}"
+        for w in configs:
+            r = row[w]
+            line += (
+                f" | {r['subs']:8.3f} {r['fr']:11.3f} {r['wall']:8.3f} "
+                f"{row['base_wall'] / r['wall']:7.1f}x"
+            )
+        print(line)
+    print("\nspeed-up over the per-sample loop (same run, wall-clock):")
+    for w in configs:
+        ratios = [row["base_wall"] / row[w]["wall"] for row in rows]
+        print(f"  fast path, {w} worker thread(s): {spread(ratios)}")
+    print("CPU time (process time, summed over threads) — less sensitive to the machine load:")
+    base_cpu = np.median([row["base_cpu"] for row in rows])
+    print(f"  baseline loop: median {base_cpu:.2f} s")
+    for w in configs:
+        cpu = [row[w]["cpu"] for row in rows]
+        ratios = [row["base_cpu"] / row[w]["cpu"] for row in rows]
+        print(f"  fast path, {w} thread(s): median {np.median(cpu):.3f} s, ratio {spread(ratios)}")
     print(
-        f"{'  of which control.frequency_response':46s} "
-        f"{loop_times['frequency_response'] * scale:10.3f}"
+        f"floor: LAPACK dgeev of every {n}x{n} state matrix, 1 thread: {c_eig.wall:.3f} s wall, "
+        f"{c_eig.cpu:.3f} s CPU (the integrator tail leaves a smaller core to diagonalize)"
     )
+    rel = max(row[w]["rel"] for row in rows for w in configs)
     print(
-        f"speed-up: {t_base / t_fast:.1f}x   max relative difference on the {nb} common "
-        f"samples: {rel:.2e}"
+        f"agreement with python-control on the {nb * args.repeats} baseline samples: max relative "
+        f"difference {rel:.2e}"
+        + (
+            f"; {configs[-1]}-thread result bitwise equal to 1-thread: "
+            f"{all(row['same'] for row in rows)}"
+            if len(configs) > 1
+            else ""
+        )
     )
+    load1 = os.getloadavg()
+    print(f"load average at end: {load1[0]:.2f} {load1[1]:.2f} {load1[2]:.2f}")
     return 0
 
 

@@ -146,7 +146,7 @@ def active_set(
     gamma = float(peaks.gamma[worst])
     sig = np.where(np.isnan(peaks.peak_sigma), -np.inf, peaks.peak_sigma)
     rows, cols = np.nonzero(sig >= (1.0 - eps) * gamma)
-    order = np.argsort(-sig[rows, cols])[:max_peaks]
+    order = np.argsort(-sig[rows, cols])[: 4 * max_peaks]
     models = np.concatenate([[worst], rows[order]])
     omegas = np.concatenate([[peaks.omega[worst]], peaks.peak_omega[rows[order], cols[order]]])
     # drop repeats of the maximum (same model, same frequency)
@@ -162,7 +162,18 @@ def active_set(
     which = np.concatenate([np.zeros(keep.sum(), int), np.ones(int(multiple.sum()), int)])
     values, grads = peak_gradients(interconnection, K, models, omegas, which)
     values[0] = gamma
-    return ActiveSet(gamma, values, grads, models, omegas, peaks, which)
+    # configurations often share a peak (e.g. the DC disturbance rejection does not depend on
+    # the inertia): keep one copy of each (value, gradient) so the cap keeps distinct pieces
+    scale = max(np.abs(grads).max(), 1e-300)
+    signature = np.round(
+        np.concatenate([values[:, None] / gamma, grads.reshape(values.size, -1) / scale], axis=1),
+        8,
+    )
+    _, first = np.unique(signature, axis=0, return_index=True)
+    first = np.sort(first)[:max_peaks]  # keeps index 0 (the maximum) and the value order
+    return ActiveSet(
+        gamma, values[first], grads[first], models[first], omegas[first], peaks, which[first]
+    )
 
 
 def abscissa_gradient(interconnection: WeightedInterconnection, K, index: int):

@@ -161,42 +161,51 @@ class ModalResponse:
         return values
 
     def default_grid(self, points_per_decade: int = 8) -> np.ndarray:
-        """Per-model grid: 0, a log grid over the pole magnitudes, the damped frequencies
-        and half-power points of the lightly damped poles."""
+        """Per-model frequency grid [rad/s], shape (N, F), increasing along each row.
+
+        ``0``; a log grid from ``0.05 min|lambda|`` to ``2 max|lambda|`` (beyond, a stable
+        model's gain tends to ``sigma(D)``: one far point covers it); the damped frequency
+        ``|Im lambda|`` of every pole with damping below 0.5 and, for damping below 0.05,
+        its half-power points ``|Im lambda| (1 -+ zeta)`` (tight brackets around sharp
+        resonances). Rows are padded with their last point (flagged as repeats).
+        """
         mag = np.abs(self.lam)
         mag = np.where(mag > 1e-12, mag, np.nan)
         low = np.nanmin(mag, axis=-1, initial=np.inf)
         high = np.nanmax(mag, axis=-1, initial=-np.inf)
         low = np.where(np.isfinite(low), low, 1.0)
         high = np.where(np.isfinite(high), high, 1.0)
-        lo, hi = np.log10(0.05 * low).min(), np.log10(20.0 * high).max()
+        lo, hi = np.log10(0.05 * low).min(), np.log10(2.0 * high).max()
         count = int(np.ceil((hi - lo) * points_per_decade)) + 1
         log_grid = np.logspace(lo, hi, count)
-        # damped frequency of each pole (upper half plane) and, for the lightly damped ones,
-        # their half-power points w_d (1 -+ zeta): tight brackets around sharp resonances
-        upper = self.lam.imag > 0
-        damped = np.where(upper, self.lam.imag, 0.0)
-        zeta = -self.lam.real / np.maximum(np.abs(self.lam), 1e-300)
-        light = upper & (zeta < 0.5)
-        below = np.where(light, damped * (1.0 - zeta), 0.0)
-        above = np.where(light, damped * (1.0 + zeta), 0.0)
         N = self.lam.shape[0]
+        upper = self.lam.imag > 0
+        zeta = -self.lam.real / np.maximum(np.abs(self.lam), 1e-300)
+        damped = np.where(upper & (zeta < 0.5), self.lam.imag, np.nan)
+        sharp = upper & (zeta < 0.05)
+        below = np.where(sharp, self.lam.imag * (1.0 - zeta), np.nan)
+        above = np.where(sharp, self.lam.imag * (1.0 + zeta), np.nan)
+        far = np.full((N, 1), 1e3 * 10.0**hi)
         grid = np.sort(
             np.concatenate(
-                [np.zeros((N, 1)), np.broadcast_to(log_grid, (N, count)), damped, below, above],
+                [
+                    np.zeros((N, 1)),
+                    np.broadcast_to(log_grid, (N, count)),
+                    damped,
+                    below,
+                    above,
+                    far,
+                ],
                 axis=1,
             ),
             axis=1,
-        )
-        # repeated points (conjugate pairs, real poles, identical per-axis filters) would give
-        # empty refinement brackets: replace them by points of a half-step shifted log grid
+        )  # nan last
         repeated = np.zeros(grid.shape, dtype=bool)
         repeated[:, 1:] = grid[:, 1:] <= grid[:, :-1] * (1.0 + 1e-12)
-        if np.any(repeated):
-            shifted = np.logspace(lo + 0.5 / points_per_decade, hi, grid.shape[1])
-            filler = np.broadcast_to(shifted, grid.shape)
-            grid = np.sort(np.where(repeated, filler, grid), axis=1)
-        return grid
+        grid = np.sort(np.where(repeated, np.nan, grid), axis=1)
+        width = int(np.max(np.sum(~np.isnan(grid), axis=1)))
+        grid = grid[:, :width]
+        return np.where(np.isnan(grid), np.nanmax(grid, axis=1, keepdims=True), grid)
 
 
 def _golden_refine(modal: ModalResponse, lo, hi, iterations: int):

@@ -11,10 +11,15 @@ Algorithm (MATLAB systune-like, in the open):
 1. The *working set* starts with evenly spaced configurations at nominal parameters; after
    each optimizer run every configuration is checked and those above gamma join it (neighbouring
    configurations are similar, so few rounds are needed), so gamma holds for all of them.
-2. Nonsmooth BFGS (:mod:`nonsmooth_bfgs`) on ``gamma(K)`` over the model set, in gains scaled
-   by the baseline, from the baseline and from a few random restarts (log-normal perturbations);
-   the Apkarian-Noll subgradient comes from the singular vectors at the peak frequency of the
-   worst model (:mod:`objective`); unstable loops give ``gamma = inf`` (stability enforced).
+2. Nonsmooth minimization of ``gamma(K)`` over the working set, in gains scaled by the
+   baseline, from the baseline and from a few random restarts (log-normal perturbations).
+   Default method: BFGS-SQP bundle steps (:func:`~oos_drake.control.nonsmooth_bfgs.
+   minimize_bundle_bfgs`): the local model is the max of the linearizations of every peak
+   within 10 % of gamma (each model's refined local maxima, and the second singular value when
+   it nearly coalesces with the first), with Apkarian-Noll gradients from the singular vectors
+   (:mod:`objective`), plus the pieces that block a rejected trial (null steps). The BFGS
+   metric is updated with the gradients of the same peaks at fixed frequencies. Unstable
+   loops give ``gamma = inf`` and are rejected by the line search (stability enforced).
 3. Worst-case search over ``Delta_real`` (dynamic sampling): for the worst configurations,
    sample the parameter box (vertices and random points), then climb by projected
    finite-difference ascent; if a sample raises ``gamma`` by more than ``worst_case_rtol``, add

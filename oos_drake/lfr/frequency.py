@@ -22,14 +22,32 @@ Two structures would spoil the modal sum and are handled exactly instead:
   its complex Schur form by back substitution for all frequencies at once.
 
 Models where even this fails use an exact direct solve ``(j omega I - A) X = B``.
+
+Real models (the hot path of Monte Carlo arrays) take a faster route first: LAPACK ``dgeev``
+returns the eigenvectors of a real ``A`` as a REAL basis ``T`` (real and imaginary parts of each
+conjugate pair), so ``T^-1 B`` is a real solve, and the modal terms are summed two by two over
+conjugate (or real) eigenvalue pairs,
+
+.. math:: \\frac{r_1}{s - \\lambda_1} + \\frac{r_2}{s - \\lambda_2}
+          = \\frac{s (r_1 + r_2) - (r_1 \\lambda_2 + r_2 \\lambda_1)}
+                 {s^2 - (\\lambda_1 + \\lambda_2) s + \\lambda_1 \\lambda_2},
+
+whose coefficients are all real: the frequency sum becomes one real matrix product per model
+over half as many terms. Models that this route cannot treat exactly (ill-conditioned or
+defective eigenvalues, small poles next to an integrator tail, complex data) fall back to the
+general path above, model by model. Chunks of models can be processed by :data:`WORKERS`
+threads (LAPACK and BLAS release the GIL); the result does not depend on the thread count.
 """
 
 from __future__ import annotations
 
 import functools
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import scipy.linalg
+from scipy.linalg import lapack
 
 from oos_drake.lfr.core import as_lfr
 
@@ -39,6 +57,28 @@ EIG_COND_LIMIT = 1e5
 MAX_CLUSTER = 24
 #: Target size (complex entries) of temporary arrays per chunk.
 CHUNK_ENTRIES = 1_500_000
+#: Threads evaluating chunks of a model array in parallel (1: single-threaded). Results are
+#: bitwise independent of this setting; set it (e.g. to ``os.cpu_count()``) for large arrays.
+WORKERS = 1
+#: Use the real-arithmetic pairwise modal route for real models (False: general path only).
+REAL_PAIR_PATH = True
+
+
+class _Workspace:
+    """Scratch arrays reused from chunk to chunk (one per worker thread). Large temporaries
+    freshly allocated for every chunk come from ``mmap`` and cost a page fault per 4 KiB on first
+    touch, which on this workload doubled the time spent outside LAPACK."""
+
+    def __init__(self):
+        self._arrays = {}
+
+    def get(self, name, shape, dtype=float):
+        arr = self._arrays.get(name)
+        size = int(np.prod(shape))
+        if arr is None or arr.dtype != np.dtype(dtype) or arr.size < size:
+            arr = np.empty(size, dtype=dtype)
+            self._arrays[name] = arr
+        return arr[:size].reshape(shape)
 
 
 def freqresp(sys, omega) -> np.ndarray:
@@ -72,18 +112,234 @@ def freqresp(sys, omega) -> np.ndarray:
     if n == 0:
         out[:] = M[:, None, :, :]
         return out.reshape(batch + out.shape[1:])
-    s = 1j * omega
     core, tail, powers = _integrator_tail(M[:, :n, :n])
     n_core = core.size
     per_model = omega.size * (n_core + 4 * ny * nu * (1 + powers)) + 6 * n * n
     chunk = max(1, CHUNK_ENTRIES // per_model)
-    for start in range(0, nb, chunk):
-        part = M[start : min(nb, start + chunk)]
-        if tail.size:
-            out[start : start + part.shape[0]] = _tail_response(part, n, core, tail, powers, s)
-        else:
-            out[start : start + part.shape[0]] = _chunk_response(part, n, s)
+    starts = range(0, nb, chunk)
+    local = threading.local()
+
+    def work(start):
+        stop = min(nb, start + chunk)
+        if not hasattr(local, "ws"):
+            local.ws = _Workspace()
+        _block_response(M[start:stop], n, core, tail, powers, omega, out[start:stop], local.ws)
+
+    workers = max(1, int(WORKERS))
+    if workers > 1 and len(starts) > 1:
+        with ThreadPoolExecutor(max_workers=min(workers, len(starts))) as pool:
+            for _ in pool.map(work, starts):
+                pass
+    else:
+        for start in starts:
+            work(start)
     return out.reshape(batch + out.shape[1:])
+
+
+def _block_response(M, n, core, tail, powers, omega, out, ws=None):
+    """Response of one chunk of models into ``out``: the real pairwise route where it applies,
+    the general path (:func:`_tail_response` / :func:`_chunk_response`) for the other models."""
+    s = 1j * omega
+    if REAL_PAIR_PATH and core.size and not np.iscomplexobj(M):
+        _, ok = _real_pair_response(M, n, core, tail, powers, omega, out, ws)
+        rest = np.flatnonzero(~ok)
+        if rest.size:
+            out[rest] = _general_response(M[rest], n, core, tail, powers, s)
+    else:
+        out[:] = _general_response(M, n, core, tail, powers, s)
+
+
+def _general_response(M, n, core, tail, powers, s):
+    if tail.size:
+        return _tail_response(M, n, core, tail, powers, s)
+    return _chunk_response(M, n, s)
+
+
+def _real_eig(A, ws=None):
+    """``dgeev`` of every real ``A[k]``: eigenvalues ``(g, m)`` (complex) and the real basis ``T``
+    ``(g, m, m)`` (columns ``j, j+1`` are the real and imaginary parts of the eigenvector of a
+    conjugate pair, positive imaginary part first). ``ok[k]`` is False if LAPACK failed."""
+    g, m = A.shape[0], A.shape[-1]
+    ws = _Workspace() if ws is None else ws
+    lam = np.empty((g, m), dtype=complex)
+    T = ws.get("eig_T", (g, m, m))
+    ok = np.ones(g, dtype=bool)
+    for k in range(g):
+        a = np.array(A[k], order="F")
+        wr, wi, _, vr, info = lapack.dgeev(a, compute_vl=0, compute_vr=1, overwrite_a=1)
+        if info != 0:
+            ok[k] = False
+            lam[k] = 1.0
+            T[k] = np.eye(m)
+            continue
+        lam[k].real = wr
+        lam[k].imag = wi
+        T[k] = vr
+    return lam, T, ok
+
+
+def _real_pair_response(
+    M, n, core, tail, powers, omega, out=None, ws=None, safe_ratio: float = 1e6
+):
+    """Real-arithmetic modal response of real models (see the module notes).
+
+    Returns ``(out, ok)`` (``out`` is filled in place when given, C-contiguous of shape
+    ``(g, F, ny, nu)``): ``out[k]`` is valid where ``ok[k]``; the other models need the general
+    path (failed or ill-conditioned eigendecomposition, or small poles beside an integrator tail
+    that would make the partial fractions inaccurate).
+    """
+    g = M.shape[0]
+    ny, nu = M.shape[1] - n, M.shape[2] - n
+    m = core.size
+    nf = omega.size
+    ws = _Workspace() if ws is None else ws
+    A11 = M[:, core[:, None], core[None, :]]
+    B1, C1, D = M[:, core, n:], M[:, n:, core], M[:, n:, n:]
+    tail_C, tail_B = [], []  # C2 A22^p A21 and C2 A22^p B2, p = 0 .. q-1
+    if tail.size:
+        A21 = M[:, tail[:, None], core[None, :]]
+        A22 = M[:, tail[:, None], tail[None, :]]
+        Ep = M[:, n:, tail]
+        B2 = M[:, tail, n:]
+        for _ in range(powers):
+            tail_C.append(Ep @ A21)
+            tail_B.append(Ep @ B2)
+            Ep = Ep @ A22
+    lam, T, ok = _real_eig(A11, ws)
+    with np.errstate(all="ignore"):
+        # reals first (stable sort keeps each conjugate pair adjacent, positive part first);
+        # an odd count of reals gets a zero-residue companion so that slots pair up evenly
+        is_cplx = lam.imag != 0
+        order = np.argsort(is_cplx, axis=1, kind="stable")
+        lam = np.take_along_axis(lam, order, axis=1)
+        T = np.take_along_axis(T, order[:, None, :], axis=2)
+        is_cplx = np.take_along_axis(is_cplx, order, axis=1)
+        X, singular = _safe_solve(
+            T, np.concatenate([B1, np.broadcast_to(_real_probes(m), (g, m, 2))], axis=2)
+        )
+        ok &= ~singular
+        first = is_cplx & (lam.imag > 0)
+        second = is_cplx & (lam.imag < 0)
+        # complex right eigenvector projections C v_j and left projections w_j^H B
+        CT = [C1 @ T] + [Cp @ T for Cp in tail_C]
+        cv = [_pair_columns(Y, first, second, sign=1.0) for Y in CT]
+        XB = np.swapaxes(X[:, :, :nu], 1, 2)  # (g, nu, m)
+        wb = (
+            np.swapaxes(_pair_columns(XB, first, second, sign=-1.0), 1, 2)
+            * np.where(is_cplx, 0.5, 1.0)[:, :, None]
+        )  # (g, m, nu)
+        # eigenvalue condition estimate ||v_j|| ||w_j|| (probes estimate the rows of T^-1)
+        rows = np.sqrt(m) * np.max(np.abs(X[:, :, nu:]), axis=2)
+        cols = np.linalg.norm(T, axis=1)
+        partner_rows = _partner(rows, first, second)
+        partner_cols = _partner(cols, first, second)
+        kappa = np.hypot(rows, partner_rows) * np.hypot(cols, partner_cols)
+        kappa = np.where(is_cplx, 0.5 * kappa, kappa)
+        ok &= np.all(np.isfinite(kappa) & (kappa <= EIG_COND_LIMIT), axis=1)
+        lam_min = np.min(np.abs(lam), axis=1)
+        # slots pair up as (real, real) or (lambda, conj(lambda)): the number of real eigenvalues
+        # has the parity of m, so an odd m gets one leading zero-residue real companion
+        if m % 2:
+            lam = np.concatenate([np.full((g, 1), -1.0 + 0j), lam], axis=1)
+            cv = [np.concatenate([np.zeros((g, ny, 1)), c], axis=2) for c in cv]
+            wb = np.concatenate([np.zeros((g, 1, nu)), wb], axis=1)
+        l1, l2 = lam[:, 0::2], lam[:, 1::2]
+        paired = ((l1.imag == 0) & (l2.imag == 0)) | ((l1.imag > 0) & (l2 == np.conj(l1)))
+        ok &= np.all(paired, axis=1)
+        # tail: fold s^-(p+1) into the residues by partial fractions (poles must not be small)
+        q = len(tail_C)
+        inv_lam = 1.0 / lam
+        if q:
+            smax = float(np.max(omega)) if nf else 0.0
+            ok &= (lam_min > 0) & ((smax / lam_min) ** q < safe_ratio)
+            eff = cv[0].copy()
+            for p in range(q):
+                eff += cv[p + 1] * (inv_lam ** (p + 1))[:, None, :]
+        else:
+            eff = cv[0]
+        # residues r_j = (C v_j)(w_j^H B), flattened (ny*nu); pair slots -> real coefficients
+        r = (np.swapaxes(eff, 1, 2)[:, :, :, None] * wb[:, :, None, :]).reshape(g, -1, ny * nu)
+        # pair slots (lambda_1, lambda_2): r_1/(s - l_1) + r_2/(s - l_2) = (s P + Q) / d(s)
+        r1, r2 = r[:, 0::2], r[:, 1::2]
+        P = (r1 + r2).real
+        Q = -(r1 * l2[:, :, None] + r2 * l1[:, :, None]).real
+        tr = (l1 + l2).real  # (g, h)
+        det = (l1 * l2).real
+        k = ny * nu
+        h = tr.shape[1]
+        q = len(tail_B)
+        # polynomial part sum_r K_r s^-r of the tail: C2 A22^(r-1) B2 minus the partial-fraction
+        # terms (real up to rounding)
+        K = np.zeros((g, q, ny, nu))
+        for p in range(q):
+            K[:, p] += tail_B[p]
+            for rr in range(1, p + 2):
+                weighted = cv[p + 1] * (inv_lam ** (p + 2 - rr))[:, None, :]
+                K[:, rr - 1] -= (weighted @ wb).real
+        # One real product per model gives G(jw) in complex storage. With d(jw) = (det - w^2)
+        # - j tr w = 1/(U + jV) per pair slot: G = sum (jw P + Q)(U + jV) + D + sum K_r (jw)^-r,
+        # i.e. Re G = Q U - P wV + D + ..., Im G = Q V + P wU + ...; the left factor is
+        # L = [U, V, wU, wV, 1, w^-1 .. w^-q] and the right factor interleaves Re/Im columns.
+        L = ws.get("L", (g, nf, 4 * h + 1 + q))
+        re = np.subtract(
+            det[:, None, :], (omega * omega)[None, :, None], out=ws.get("re", (g, nf, h))
+        )
+        im = np.multiply(tr[:, None, :], omega[None, :, None], out=ws.get("im", (g, nf, h)))
+        den = np.multiply(re, re, out=ws.get("den", (g, nf, h)))
+        den += np.multiply(im, im, out=L[:, :, :h])  # scratch, overwritten below
+        np.reciprocal(den, out=den)
+        U = np.multiply(re, den, out=L[:, :, :h])
+        V = np.multiply(im, den, out=L[:, :, h : 2 * h])
+        wcol = omega[None, :, None]
+        np.multiply(U, wcol, out=L[:, :, 2 * h : 3 * h])
+        np.multiply(V, wcol, out=L[:, :, 3 * h : 4 * h])
+        L[:, :, 4 * h] = 1.0
+        for r in range(1, q + 1):
+            L[:, :, 4 * h + r] = omega ** (-r)
+        Rm = ws.get("Rm", (g, 4 * h + 1 + q, k, 2))
+        Rm[...] = 0.0
+        Rm[:, :h, :, 0] = Q
+        Rm[:, h : 2 * h, :, 1] = Q
+        Rm[:, 2 * h : 3 * h, :, 1] = P
+        Rm[:, 3 * h : 4 * h, :, 0] = -P
+        Rm[:, 4 * h, :, 0] = D.reshape(g, k)
+        for r in range(1, q + 1):  # (jw)^-r = (-j)^r w^-r
+            part, sign = ((1, -1.0), (0, -1.0), (1, 1.0), (0, 1.0))[(r - 1) % 4]
+            Rm[:, 4 * h + r, :, part] = sign * K[:, r - 1].reshape(g, k)
+        out = np.empty((g, nf, ny, nu), dtype=complex) if out is None else out
+        np.matmul(L, Rm.reshape(g, -1, 2 * k), out=out.view(float).reshape(g, nf, 2 * k))
+        ok &= np.all(np.isfinite(Rm), axis=(1, 2, 3)) & np.isfinite(
+            out.view(float).reshape(g, -1).sum(axis=1)
+        )
+    return out, ok
+
+
+def _partner(x, first, second):
+    """Value of the other member of each conjugate pair along axis 1 (0 for real eigenvalues)."""
+    return np.where(first, np.roll(x, -1, 1), np.where(second, np.roll(x, 1, 1), 0.0))
+
+
+def _pair_columns(Y, first, second, sign):
+    """Complex columns from the real pair storage along the last axis of ``Y``:
+    ``Y_j + i sign Y_{j+1}`` for the first member of a pair, ``Y_{j-1} - i sign Y_j`` for the
+    second, ``Y_j`` for a real eigenvalue (``first``/``second``: ``(g, m)`` masks)."""
+    nxt = np.roll(Y, -1, axis=-1)
+    prv = np.roll(Y, 1, axis=-1)
+    fm, sm = first[:, None, :], second[:, None, :]
+    out = Y.astype(complex)
+    out.imag = np.where(fm, sign * nxt, np.where(sm, -sign * Y, 0.0))
+    out.real = np.where(sm, prv, Y)
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _real_probes(n: int) -> np.ndarray:
+    """Two fixed unit-norm real Gaussian probe vectors (deterministic, seeded by ``n``)."""
+    rng = np.random.default_rng(20_240_602 + n)
+    probe = rng.standard_normal((n, 2))
+    probe = probe / np.linalg.norm(probe, axis=0)
+    probe.flags.writeable = False
+    return probe
 
 
 def _tail_response(M, n, core, tail, powers, s):
@@ -268,7 +524,7 @@ def _safe_solve(V, rhs):
     try:
         return np.linalg.solve(V, rhs), np.zeros(V.shape[0], dtype=bool)
     except np.linalg.LinAlgError:
-        out = np.empty(rhs.shape, dtype=complex)
+        out = np.empty(rhs.shape, dtype=np.result_type(V, rhs))
         singular = np.zeros(V.shape[0], dtype=bool)
         for k in range(V.shape[0]):
             try:

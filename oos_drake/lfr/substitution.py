@@ -14,6 +14,7 @@ whose occurrences do not form algebraic loops costs matrix products only. Full b
 from __future__ import annotations
 
 from collections.abc import Mapping
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import scipy.sparse as sp
@@ -23,6 +24,9 @@ from oos_drake.lfr.core import LFR
 
 #: Work-array size (entries) per chunk of models in the batched substitution.
 SUBS_CHUNK_ENTRIES = 1_000_000
+#: Threads closing chunks of a model array in parallel (1: single-threaded). Results do not
+#: depend on this setting (numpy releases the GIL in its array loops and BLAS calls).
+WORKERS = 1
 
 
 def nominal(sys: LFR) -> LFR:
@@ -336,8 +340,19 @@ def _close_scalar(sys: LFR, deltas: Mapping) -> LFR:
         new_M = np.empty((flat.shape[0],) + Mkk.shape, dtype=np.result_type(Mkk, flat))
         # chunks keep the work arrays cache-sized
         step = max(1, SUBS_CHUNK_ENTRIES // max(1, flat.shape[1] * plan["Msk"].shape[1]))
-        for k in range(0, flat.shape[0], step):
+        starts = range(0, flat.shape[0], step)
+
+        def work(k):
             new_M[k : k + step] = _close_scalar_values_batched(plan, flat[k : k + step], names)
+
+        workers = max(1, int(WORKERS))
+        if workers > 1 and len(starts) > 1:
+            with ThreadPoolExecutor(max_workers=min(workers, len(starts))) as pool:
+                for _ in pool.map(work, starts):
+                    pass
+        else:
+            for k in starts:
+                work(k)
         new_M = new_M.reshape(batch + new_M.shape[-2:])
     else:
         new_M = _close_scalar_general(plan, d, batch, names)

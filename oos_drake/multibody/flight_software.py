@@ -29,7 +29,9 @@ white sequence shaped by ``W_n,ext``. The torque ``T`` (hub axes) is held over t
 
 Each linear block is discretized with the bilinear (Tustin) transform at the control rate, so a
 block with a bandwidth above the sample rate (gyro, wheels at 200 Hz) reduces to its DC gain with
-no artificial one-sample delay.
+no artificial one-sample delay. The blocks before the torque saturation and those after it are
+merged into two linear stages (their matrices are obtained once by probing the block-by-block
+reference chain with unit vectors), so an update costs two small matrix products.
 
 The discrete state also carries the run's metrics (running maxima of ``|phi|`` and ``|u|``,
 sum of squares), so they are computed at the control rate without any logging.
@@ -252,6 +254,12 @@ class FlightSoftwareDesign:
         return out
 
 
+def _consecutive(sizes) -> tuple[slice, ...]:
+    """Consecutive slices of the given sizes."""
+    bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+    return tuple(slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True))
+
+
 class FlightSoftware(LeafSystem):
     """Sensors, controller, roll-off, wheels, perturbations and disturbances (one discrete update).
 
@@ -297,6 +305,7 @@ class FlightSoftware(LeafSystem):
         self._dist, self._ap = d.disturbance, d.perturbation
         self._Kp, self._Kd = d.K[:, :3], d.K[:, 3:]
         self._J_Wadd = d.J_ref * d.W_add
+        self._build_stages()
 
     @property
     def design(self) -> FlightSoftwareDesign:
@@ -332,6 +341,74 @@ class FlightSoftware(LeafSystem):
         out["samples"] = float(x[self._slices["counter"]][0])
         return out
 
+    # -- the two linear stages ------------------------------------------------------------------
+    def _stage1_reference(self, x1, z1):
+        """Sensors, gain and roll-off, block by block: ``z1 = [phi; w_B; n_sst; n_gyro]``,
+        ``x1 = [SST; GYRO; F_ro]`` -> ``(x1+, u)``."""
+        d, s = self._design, self._stage1_slices
+        rpy, w_B, n_sst, n_gyro = z1[0:3], z1[3:6], z1[6:9], z1[9:12]
+        out = np.empty_like(x1)
+        sst, gyro, ro = d.star_tracker, d.gyro, d.rolloff
+        out[s[0]] = sst.A @ x1[s[0]] + sst.B @ rpy
+        phi_sst = sst.C @ x1[s[0]] + sst.D @ rpy
+        out[s[1]] = gyro.A @ x1[s[1]] + gyro.B @ w_B
+        w_gyro = gyro.C @ x1[s[1]] + gyro.D @ w_B
+        y_att = -(phi_sst + d.noise_star_tracker * n_sst)
+        y_rate = -(w_gyro + d.noise_gyro * n_gyro)
+        u_K = self._Kp @ y_att + self._Kd @ y_rate
+        out[s[2]] = ro.A @ x1[s[2]] + ro.B @ u_K
+        return out, ro.C @ x1[s[2]] + ro.D @ u_K
+
+    def _stage2_reference(self, x2, z2):
+        """Wheels, disturbance and all-passes: ``z2 = [sat(u); d_ext]``,
+        ``x2 = [RW; W_n,ext; a_mul; a_add]`` -> ``(x2+, [T_rw; T_dist; a_mul; a_add])``."""
+        d, s = self._design, self._stage2_slices
+        sat_u, d_ext = z2[0:3], z2[3:6]
+        out = np.empty_like(x2)
+        rw, dist, ap = d.wheels, d.disturbance, d.perturbation
+        out[s[0]] = rw.A @ x2[s[0]] + rw.B @ sat_u
+        T_rw = rw.C @ x2[s[0]] + rw.D @ sat_u
+        out[s[1]] = dist.A @ x2[s[1]] + dist.B @ d_ext
+        T_dist = dist.C @ x2[s[1]] + dist.D @ d_ext
+        out[s[2]] = ap.A @ x2[s[2]] + ap.B @ T_rw
+        a_mul = ap.C @ x2[s[2]] + ap.D @ T_rw
+        out[s[3]] = ap.A @ x2[s[3]] + ap.B @ T_rw
+        a_add = ap.C @ x2[s[3]] + ap.D @ T_rw
+        return out, np.concatenate([T_rw, T_dist, a_mul, a_add])
+
+    @staticmethod
+    def _probe(function, nx: int, nz: int) -> tuple[np.ndarray, ...]:
+        """``(A, B, C, D)`` of a linear map ``(x, z) -> (x+, y)`` from its unit responses."""
+        columns = [function(e, np.zeros(nz)) for e in np.eye(nx)]
+        inputs = [function(np.zeros(nx), e) for e in np.eye(nz)]
+        A = np.column_stack([c[0] for c in columns]) if nx else np.zeros((0, 0))
+        C = np.column_stack([c[1] for c in columns])
+        B = np.column_stack([c[0] for c in inputs])
+        D = np.column_stack([c[1] for c in inputs])
+        return A, B, C, D
+
+    def _build_stages(self) -> None:
+        d, s = self._design, self._slices
+        sizes1 = (d.star_tracker.nstates, d.gyro.nstates, d.rolloff.nstates)
+        self._stage1_slices = _consecutive(sizes1)
+        sizes2 = (
+            d.wheels.nstates,
+            d.disturbance.nstates,
+            d.perturbation.nstates,
+            d.perturbation.nstates,
+        )
+        self._stage2_slices = _consecutive(sizes2)
+        self._x1 = slice(s["star_tracker"].start, s["rolloff"].stop)
+        self._x2 = slice(s["wheels"].start, s["add"].stop)
+        assert self._x1.stop - self._x1.start == sum(sizes1)
+        assert self._x2.stop - self._x2.start == sum(sizes2)
+        A1, B1, C1, D1 = self._probe(self._stage1_reference, sum(sizes1), 12)
+        A2, B2, C2, D2 = self._probe(self._stage2_reference, sum(sizes2), 6)
+        # one product per stage: [x+; y] = M [x; z]
+        self._M1 = np.block([[A1, B1], [C1, D1]])
+        self._M2 = np.block([[A2, B2], [C2, D2]])
+        self._n1, self._n2 = sum(sizes1), sum(sizes2)
+
     # -- Drake callbacks ------------------------------------------------------------------------
     def _update(self, context, discrete_state):
         s = self._slices
@@ -347,31 +424,22 @@ class FlightSoftware(LeafSystem):
         noise = noise_table[k % noise_table.shape[0]]
         perturbation = context.get_numeric_parameter(self._perturbation_index).get_value()
         delta_add, delta_mul = perturbation[0], perturbation[1:].reshape(3, 3)
-
-        def step(block: DiscreteBlock, name: str, u: np.ndarray) -> np.ndarray:
-            xb = x[s[name]]
-            new[s[name]] = block.A @ xb + block.B @ u
-            return block.C @ xb + block.D @ u
-
         d = self._design
-        phi_sst = step(self._sst, "star_tracker", rpy)
-        w_gyro = step(self._gyro, "gyro", w_B)
-        y_att = -(phi_sst + d.noise_star_tracker * noise[0:3])
-        y_rate = -(w_gyro + d.noise_gyro * noise[3:6])
-        u_K = self._Kp @ y_att + self._Kd @ y_rate
-        u = step(self._ro, "rolloff", u_K)
-        T_rw = step(self._rw, "wheels", np.clip(u, -d.torque_limit, d.torque_limit))
-        T_dist = step(self._dist, "disturbance", noise[6:9])
-        a_mul = step(self._ap, "mul", T_rw)
-        a_add = step(self._ap, "add", T_rw)
+
+        out1 = self._M1 @ np.concatenate([x[self._x1], rpy, w_B, noise[0:6]])
+        new[self._x1] = out1[: self._n1]
+        u = out1[self._n1 :]
+        limit = d.torque_limit
+        out2 = self._M2 @ np.concatenate([x[self._x2], np.clip(u, -limit, limit), noise[6:9]])
+        new[self._x2] = out2[: self._n2]
+        T_rw, T_dist, a_mul, a_add = out2[self._n2 :].reshape(4, 3)
         T = T_rw + (d.W_mul * delta_mul) @ a_mul + delta_add * (self._J_Wadd @ a_add) + T_dist
         new[s["tau_W"]] = R_WB @ T
         new[s["log"]] = np.concatenate([u, T_rw, T, T_dist])
         m = x[s["metrics"]].reshape(len(METRIC_SLOTS), 3)
-        abs_phi = np.abs(rpy)
-        metrics = np.stack(
+        metrics = np.concatenate(
             [
-                np.maximum(m[0], abs_phi),
+                np.maximum(m[0], np.abs(rpy)),
                 np.maximum(m[1], np.abs(u)),
                 m[2] + rpy**2,
                 np.maximum(m[3], np.abs(T)),
@@ -379,7 +447,7 @@ class FlightSoftware(LeafSystem):
         )
         if not np.all(np.isfinite(metrics)):
             metrics = np.full_like(metrics, np.inf)
-        new[s["metrics"]] = metrics.ravel()
+        new[s["metrics"]] = metrics
         new[s["counter"]] = k + 1
         discrete_state.get_mutable_vector(self._state_index).SetFromVector(new)
 

@@ -260,11 +260,14 @@ class _Objective:
         MhH = np.conj(np.swapaxes(Mh, -1, -2))
         H = MhH @ Mh
         if len(L.g_par):
+            # G is the unscaled multiplier: Gh Mh = T_r^{-*} (G M) T_r^{-1} = T_r^{-*} (G X).
+            # (A scaled G would couple D and G and stall the descent on ill-conditioned M.)
             gv = np.concatenate([x[:, L.g_par] @ L.g_map, np.zeros((nb, 1), dtype=complex)], 1)
             Gv = gv[:, L.grow_pos]
-            Q = Gv[:, :, 0, None] * Mh[:, L.grow_col[:, 0], :]
+            GX = Gv[:, :, 0, None] * X[:, L.grow_col[:, 0], :]
             for k in range(1, Gv.shape[2]):
-                Q = Q + Gv[:, :, k, None] * Mh[:, L.grow_col[:, k], :]
+                GX = GX + Gv[:, :, k, None] * X[:, L.grow_col[:, k], :]
+            Q = np.conj(np.swapaxes(Tri, -1, -2)) @ GX
             H = H + 1j * (Q - np.conj(np.swapaxes(Q, -1, -2)))
         if not need_grad:
             lam = np.linalg.eigvalsh(H)
@@ -278,23 +281,24 @@ class _Objective:
         ssum = z.sum(axis=1)
         f = lmax + np.log(ssum) / t
         p = z / ssum[:, None]
-        # W = V diag(p) V^* has numerical rank K (the eigenvalues near the top): thin products
+        # W = df/dH = V diag(p) V^* has numerical rank K (eigenvalues near the top): with
+        # H = T_r^{-*} A T_r^{-1}, A = M^* D_l M + j (G M - M^* G^*), the gradient is
+        #   d/dT_l: 2 (X V) p (Mh V)^*,  d/dT_r: -2 (T_r^{-1} V) p lam V^*,
+        #   d/dG: 2j (X V) p (T_r^{-1} V)^*
         K = int(np.max(np.sum(p > 1e-15, axis=1)))
         Vk = V[:, :, -K:]
         pk = p[:, -K:]
-        VkH = np.conj(np.swapaxes(Vk, -1, -2))
-        MV = Mh @ Vk  # (B, c, K)
-        Zs = np.conj(np.swapaxes(MV, -1, -2))  # Vk^* Mh^*
-        if len(L.g_par):
-            Zs = Zs + 1j * (VkH @ Gh)
-        Zs = 2.0 * pk[:, :, None] * Zs  # Gam = Vk Zs,  (B, K, c)
-        # coefficients of dT_l at its entry positions: (X Gam)[col, row]
-        XV = X[:, L.l_col, :] @ Vk  # (B, npos, K)
-        coef_l = np.einsum("bpk,bkp->bp", XV, Zs[:, :, L.l_row])
-        ZM = Zs @ Mh  # Gam Mh = Vk (Zs Mh)
-        TV = Tri[:, L.r_col, :] @ Vk
-        coef_r = np.einsum("bpk,bkp->bp", TV, ZM[:, :, L.r_row])
-        gT = coef_l @ L.sel_l - coef_r @ L.sel_r
+        lk = lam[:, -K:]
+        TV = Tri @ Vk  # (B, r, K)
+        XV = M @ TV  # X Vk
+        MV = Mh @ Vk
+        coef_l = 2.0 * np.einsum(
+            "bpk,bpk->bp", XV[:, L.l_col, :] * pk[:, None, :], np.conj(MV[:, L.l_row, :])
+        )
+        coef_r = -2.0 * np.einsum(
+            "bpk,bpk->bp", TV[:, L.r_col, :] * (pk * lk)[:, None, :], np.conj(Vk[:, L.r_row, :])
+        )
+        gT = coef_l @ L.sel_l + coef_r @ L.sel_r
         grad = np.zeros_like(x)
         grad[:, L.log_par] = np.real(gT[:, L.log_ent] * E[:, L.log_ent])
         if len(L.lin_ent):
@@ -304,13 +308,11 @@ class _Objective:
             grad[:, L.lin_re_par] = np.real(gT[:, L.lin_ent]) * rowscale
             grad[:, L.lin_im_par] = -np.imag(gT[:, L.lin_ent]) * rowscale
         if len(L.g_par):
-            # Psi = 2j Mh W = 2j (Mh Vk) diag(pk) Vk^*, needed at the G positions only
             coef_g = 2j * np.einsum(
-                "bpk,bkp->bp", MV[:, L.g_col, :] * pk[:, None, :], VkH[:, :, L.g_row]
+                "bpk,bpk->bp", XV[:, L.g_col, :] * pk[:, None, :], np.conj(TV[:, L.g_row, :])
             )
             grad[:, L.g_par] = np.real(coef_g @ L.g_map.T)
-        top = Tri @ V[:, :, -1:]
-        return f, grad, lmax, top[:, :, 0]
+        return f, grad, lmax, TV[:, :, -1]
 
 
 def _osborne_init(M: np.ndarray, structure: BlockStructure, layout: _Layout, iters: int = 20):
@@ -555,7 +557,7 @@ def mu_upper_bound(
     upper = scale * np.sqrt(np.maximum(lmax, 0.0))
     Dl = np.conj(np.swapaxes(Tl, -1, -2)) @ Tl
     Dr = np.conj(np.swapaxes(Tr, -1, -2)) @ Tr
-    G = scale[:, None, None] * (np.conj(np.swapaxes(Tr, -1, -2)) @ Gh @ Tl)
+    G = scale[:, None, None] * Gh  # the multiplier G itself (not scaled by T)
     # an eigenvalue of zero (mu = 0 bound) keeps its sign; normalize D so that max eig(D_r) = 1
     dnorm = np.linalg.norm(Dr, ord=2, axis=(1, 2))
     Dl, Dr, G = Dl / dnorm[:, None, None], Dr / dnorm[:, None, None], G / dnorm[:, None, None]

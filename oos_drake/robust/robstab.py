@@ -98,7 +98,8 @@ def _frequency_crossings(A, Bw, Cz, Dzw, structure, omega, up, lo, count=6, samp
 
     With real blocks, mu can be discontinuous in omega: a destabilizing ``Delta`` gives a real
     eigenvalue of ``M(j omega) Delta`` only at isolated frequencies that a grid never hits. For
-    the best unit perturbation found at a peak of the upper bound, follow the eigenvalues of
+    the best unit perturbation found at a peak (of the upper bound or of the unconstrained
+    power-iteration gain), follow the eigenvalues of
     ``M(j omega) Delta`` over the neighbouring interval and solve ``Im(lambda(omega)) = 0``
     (Illinois regula falsi); each root gives a certified bound ``|lambda| / ||Delta||`` at that
     frequency. Returns ``(omega_new, lower_new, delta_new)``.
@@ -107,26 +108,34 @@ def _frequency_crossings(A, Bw, Cz, Dzw, structure, omega, up, lo, count=6, samp
 
     if omega.size < 2:
         return np.zeros(0), np.zeros(0), np.zeros((0, structure.n_rows, structure.n_cols))
-    interior = np.r_[True, up[1:] >= up[:-1]] & np.r_[up[:-1] >= up[1:], True]
-    peaks = np.flatnonzero(interior)
-    peaks = peaks[np.argsort(up[peaks])[::-1][:count]]
-    Mk = delta_channel_response(A, Bw, Cz, Dzw, omega[peaks])
-    raw = mu_lower_bound(Mk, structure, restarts=3)
+
+    def top_peaks(values):
+        interior = np.r_[True, values[1:] >= values[:-1]] & np.r_[values[:-1] >= values[1:], True]
+        peaks = np.flatnonzero(interior)
+        return peaks[np.argsort(values[peaks])[::-1][:count]]
+
+    # candidates: peaks of the upper bound, and peaks of |lambda| of the best unit perturbation
+    # (real parameters at a vertex) whatever its phase: continuous in omega where mu is not
+    Mall = delta_channel_response(A, Bw, Cz, Dzw, omega)
+    raw = mu_lower_bound(Mall, structure, restarts=2, iters=40)
+    dn_all = np.max(structure.block_norms(raw.raw_delta), axis=1)
+    score = np.where(dn_all > 0, np.abs(raw.raw_lambda) / np.maximum(dn_all, 1e-300), 0.0)
+    score = np.where(np.isfinite(score), score, 0.0)
+    peaks = np.unique(np.concatenate([top_peaks(up), top_peaks(score)]))
     out_w, out_lo, out_d = [], [], []
-    for j, k in enumerate(peaks):
-        D = raw.raw_delta[j]
-        dn = float(np.max(structure.block_norms(D)))
-        if dn <= 0 or not np.isfinite(raw.raw_lambda[j]):
+    for k in peaks:
+        D = raw.raw_delta[k]
+        dn = float(dn_all[k])
+        if dn <= 0 or not np.isfinite(raw.raw_lambda[k]):
             continue
-        # the upper bound smears a real-parameter peak over neighbouring points: search wider
+        # follow the eigenvalues over the whole grid (plus a dense patch around the peak): the
+        # crossing of the real axis need not be next to the peak
         lo_i, hi_i = max(k - window, 0), min(k + window, omega.size - 1)
-        ws = np.unique(
-            np.concatenate(
-                [omega[lo_i : hi_i + 1], np.linspace(omega[lo_i], omega[hi_i], samples + 1)]
-            )
-        )
+        ws = np.unique(np.concatenate([omega, np.linspace(omega[lo_i], omega[hi_i], samples + 1)]))
         Ms = delta_channel_response(A, Bw, Cz, Dzw, ws)
         evs = np.linalg.eigvals(Ms @ D)  # (S, n)
+        if ws[0] == 0.0:  # at omega = 0 a real M gives real eigenvalues: no sign to compare
+            ws, evs = ws[1:], evs[1:]
         best = (0.0, None, None)
         for i0 in range(evs.shape[1]):  # follow every eigenvalue of the first sample
             lam = evs[0, i0]

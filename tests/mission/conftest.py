@@ -15,8 +15,8 @@ def mission():
 
 @pytest.fixture(scope="session")
 def mission_10hz_log():
-    """A :class:`MissionSimulation` logging at the control rate, tight integrator accuracy."""
+    """A :class:`MissionSimulation` logging at the control rate (default integrator settings)."""
     from oos_drake.multibody.mission import MissionOptions
     from oos_drake.multibody.mission_sim import MissionSimulation
 
-    return MissionSimulation(MissionOptions(log_rate=10.0, accuracy=1e-6))
+    return MissionSimulation(MissionOptions(log_rate=10.0))

@@ -99,3 +99,21 @@ def test_baseline_gain_from_the_coupled_inertia(tmp_path):
     )
     with pytest.raises(ValueError, match="not found"):
         controller_gain(tmp_path / "missing.json")
+
+
+def test_merged_stages_equal_the_block_by_block_chain():
+    from oos_drake.multibody.flight_software import FlightSoftware
+
+    design = FlightSoftwareDesign.create(np.arange(18.0).reshape(3, 6) / 7.0, 10.0)
+    fsw = FlightSoftware(design, nq=12, nv=12, hub_q_start=0, hub_v_start=0)
+    rng = np.random.default_rng(0)
+    for stage, reference, nz in (
+        (fsw._M1, fsw._stage1_reference, 12),
+        (fsw._M2, fsw._stage2_reference, 6),
+    ):
+        nx = stage.shape[1] - nz
+        x, z = rng.standard_normal(nx), rng.standard_normal(nz)
+        x_next, y = reference(x, z)
+        np.testing.assert_allclose(
+            stage @ np.concatenate([x, z]), np.concatenate([x_next, y]), rtol=1e-12, atol=1e-12
+        )
