@@ -75,11 +75,11 @@ def register(subparsers) -> None:
                         help="equally spaced mission configurations")
     parser.add_argument("--fmin", type=float, default=0.005, help="lowest grid frequency [Hz]")
     parser.add_argument("--fmax", type=float, default=5.0, help="highest grid frequency [Hz]")
-    parser.add_argument("--points-per-decade", type=int, default=25,
+    parser.add_argument("--points-per-decade", type=int, default=12,
                         help="common grid density (plus points on lightly damped poles)")
-    parser.add_argument("--iterations", type=int, default=100,
+    parser.add_argument("--iterations", type=int, default=30,
                         help="BFGS iterations of the mu upper bound on the grid")
-    parser.add_argument("--refine-iterations", type=int, default=300,
+    parser.add_argument("--refine-iterations", type=int, default=100,
                         help="BFGS iterations at the peak refinement points")
     parser.add_argument("--docking", default="7,8", help="docking phases (comma-separated)")
     parser.add_argument("--docking-points", type=int, default=300, help="stiffness values")

@@ -60,6 +60,10 @@ class AnalysisOptions:
         Configurations of the worst-case gain study (the critical one plus equally spaced ones).
     performance_points : int
         Frequencies of the worst-case gain study.
+    certify_iterations : int
+        BFGS iterations of the upper bound on the local grid of each peak.
+    certify_points : int
+        Points of that local grid.
     sensitivity : bool
         Compute the sensitivity table.
     time_check : bool
@@ -72,13 +76,15 @@ class AnalysisOptions:
 
     configurations: int = 330
     frequency_range_hz: tuple = (0.005, 5.0)
-    points_per_decade: int = 25
+    points_per_decade: int = 12
     sweep: SweepOptions = field(default_factory=SweepOptions)
     docking_phases: tuple = ("7", "8")
     docking_points: int = 300
     stiffness_range: tuple = (0.1, 1.0e5)
     performance_models: int = 6
     performance_points: int = 24
+    certify_iterations: int = 300
+    certify_points: int = 41
     sensitivity: bool = True
     time_check: bool = True
     time_check_duration: float = 600.0
@@ -93,7 +99,8 @@ class AnalysisOptions:
         return 2 * np.pi * np.geomspace(lo, hi, n)
 
 
-def _certify(array, sweep, subsets, peaks_grid, *, configuration_label, upper_iterations=300):
+def _certify(array, sweep, subsets, peaks_grid, *, configuration_label, upper_iterations=300,
+             points=41):
     """Certified peak and destabilizing perturbation per subset (local refinement + search)."""
     from oos_drake.analysis.stability import certify_peak
     from oos_drake.analysis.worst_cases import physical_values
@@ -103,7 +110,8 @@ def _certify(array, sweep, subsets, peaks_grid, *, configuration_label, upper_it
     for _, pk in peaks_grid.iterrows():
         name, model = pk["subset"], int(pk["model"])
         cert = certify_peak(sys, name, subsets[name], model, float(pk["frequency [Hz]"]),
-                            time=float(array.values[model]), upper_iterations=upper_iterations)
+                            time=float(array.values[model]), upper_iterations=upper_iterations,
+                            points=points)
         grid_upper = float(sweep.loc[sweep["subset"] == name, "mu_upper"].max())
         upper, lower = cert.mu_upper, cert.mu_lower
         rows.append({
@@ -226,7 +234,8 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
     peaks_grid = peaks_table(sweep)
     peaks, perturbations, certs = _certify(mission, sweep, subsets, peaks_grid,
                                            configuration_label=label,
-                                           upper_iterations=options.sweep.refine_iterations)
+                                           upper_iterations=options.certify_iterations,
+                                 points=options.certify_points)
     lap("certify mission peaks")
     # ------------------------------------------------------------------ docking
     docking_sweeps, docking_peaks, docking_tables = {}, {}, []
@@ -244,7 +253,8 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         dp, dpert, dc = _certify(arr, dsweep, tot, pg,
                                  configuration_label=lambda m, ph=phase: f"docking-{ph} "
                                  f"k={stiffness[m]:.3g}",
-                                 upper_iterations=options.sweep.refine_iterations)
+                                 upper_iterations=options.certify_iterations,
+                                 points=options.certify_points)
         docking_tables.append(dp)
         docking_perturbations.append(dpert)
         docking_certs[phase] = (arr, dc["total"])
@@ -289,11 +299,11 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         from oos_drake.analysis.sensitivity import mu_sensitivity
 
         part = sweep[(sweep["subset"] == "total") & (sweep["model"] == crit_model)]
-        top = part.nlargest(24, "mu_upper")["frequency [Hz]"].to_numpy()
+        top = part.nlargest(8, "mu_upper")["frequency [Hz]"].to_numpy()
         w_s = np.unique(np.concatenate([2 * np.pi * top,
-                                        2 * np.pi * certs["total"][1] * np.geomspace(0.9, 1.1, 9)]))
+                                        2 * np.pi * certs["total"][1] * np.geomspace(0.95, 1.05, 5)]))
         sens = mu_sensitivity(mission.system, crit_model, w_s,
-                              options=SweepOptions(upper_iterations=options.sweep.upper_iterations))
+                              iterations=options.certify_iterations)
         sens.to_parquet(out / "sensitivity.parquet", index=False)
         paths["sensitivity"] = out / "sensitivity.parquet"
         lap("sensitivity")

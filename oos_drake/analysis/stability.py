@@ -49,7 +49,7 @@ class SweepOptions:
     lower_restarts, lower_iterations : int
         Random restarts and power-iteration steps of the grid lower bound.
     refine_points : int
-        Extra frequencies between the neighbours of each of the two highest peaks (0: off).
+        Extra frequencies between the neighbours of the highest peak of each model (0: off).
     refine_iterations : int
         BFGS iterations at the refinement frequencies.
     pole_points : int
@@ -60,12 +60,12 @@ class SweepOptions:
         Worker processes (1: in this process).
     """
 
-    upper_iterations: int = 100
+    upper_iterations: int = 30
     lower_restarts: int = 1
     lower_iterations: int = 20
-    refine_points: int = 4
-    refine_iterations: int = 300
-    pole_points: int = 3
+    refine_points: int = 3
+    refine_iterations: int = 100
+    pole_points: int = 1
     chunk_size: int = 10
     n_jobs: int = 2
 
@@ -105,7 +105,7 @@ def grid_bounds(M, blk, options: "SweepOptions"):
     return up.upper, np.minimum(lo.lower, up.upper)
 
 
-def model_grid(A, omega, *, band=None, max_damping: float = 0.2, points: int = 3) -> np.ndarray:
+def model_grid(A, omega, *, band=None, max_damping: float = 0.05, points: int = 1) -> np.ndarray:
     """``omega`` plus, per lightly damped closed-loop pole in ``band``, points on its peak.
 
     Parameters
@@ -134,7 +134,7 @@ def model_grid(A, omega, *, band=None, max_damping: float = 0.2, points: int = 3
 def _peak_frequencies(omega, values, points):
     from oos_drake.robust.robstab import _refine
 
-    return np.setdiff1d(_refine(omega, values, count=2, points=points), omega)
+    return np.setdiff1d(_refine(omega, values, count=1, points=points), omega)
 
 
 def _sweep_chunk(task):

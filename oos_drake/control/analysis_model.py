@@ -126,8 +126,16 @@ def closed_loop_lfr(plant, K, spec: DesignSpecification | None = None, *, analys
     C = G.C[..., :nout, :] + Dzu @ K @ Cy
     D = G.D[..., :nout, :nin] + Dzu @ K @ Dyw
     return LFR.from_parts(
-        A, B[..., :, :nw], B[..., :, nw:], C[..., :nz, :], C[..., nz:, :],
-        D[..., :nz, :nw], D[..., :nz, nw:], D[..., nz:, :nw], D[..., nz:, nw:],
+        A,
+        B[..., :, :nw],
+        B[..., :, nw:],
+        C[..., :nz, :],
+        C[..., nz:, :],
+        D[..., :nz, :nw],
+        D[..., :nz, nw:],
+        D[..., nz:, :nw],
+        D[..., nz:, nw:],
         [(entry.spec, entry.reps) for entry in P.block_entries],
-        input_names=list(DISTURBANCES), output_names=list(ERRORS),
+        input_names=list(DISTURBANCES),
+        output_names=list(ERRORS),
     )

@@ -129,9 +129,7 @@ def weighted_interconnection(
     spec = spec or comp.DesignSpecification()
     if plant.inputs != PLANT_INPUTS or plant.outputs != PLANT_OUTPUTS:
         plant = plant_statespace(plant.A, plant.B, plant.C, plant.D)
-    system = connect(
-        [plant, *diagram_parts(spec)], DISTURBANCES + CONTROLS, ERRORS + MEASUREMENTS
-    )
+    system = connect([plant, *diagram_parts(spec)], DISTURBANCES + CONTROLS, ERRORS + MEASUREMENTS)
     return WeightedInterconnection(system, spec)
 
 

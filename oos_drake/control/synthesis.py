@@ -39,7 +39,7 @@ import pandas as pd
 from oos_drake.control.blas_threads import with_single_threaded_blas
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.interconnection import WeightedInterconnection, weighted_interconnection
-from oos_drake.control.nonsmooth_bfgs import minimize_bundle_bfgs, minimize_nonsmooth
+from oos_drake.control.nonsmooth_bfgs import BfgsResult, minimize_bundle_bfgs, minimize_nonsmooth
 from oos_drake.control.objective import active_set, evaluate, peak_gradients
 from oos_drake.control.peak_gain import peak_gain
 from oos_drake.control.plants import PlantArray
@@ -182,8 +182,14 @@ def tune(
     scale=None,
     method: str = "bundle",
     eps: float = 0.1,
+    restart_every: int = 50,
+    restart_rtol: float = 1e-4,
 ):
     """Minimize ``gamma(K)`` over one interconnection array from ``K0``.
+
+    ``max_iterations`` is the total budget; with the bundle method the BFGS metric is reset
+    every ``restart_every`` iterations until a cycle improves gamma by less than
+    ``restart_rtol`` (relative).
 
     ``method="bundle"`` (default): BFGS-SQP steps on the nearly active peaks
     (:func:`minimize_bundle_bfgs`); ``"bfgs"``: plain nonsmooth BFGS with one subgradient
@@ -209,7 +215,32 @@ def tune(
             )
             return values, (grads * scale).reshape(models.size, -1)
 
-        res = minimize_bundle_bfgs(fun_active, x0, regrad=regrad, max_iterations=max_iterations)
+        # the metric learnt along nonsmooth valleys goes stale: restart it every
+        # `restart_every` iterations until a cycle no longer improves gamma by `restart_rtol`
+        x, used, history, evaluations, messages = x0, 0, [], 0, []
+        while used < max_iterations:
+            res = minimize_bundle_bfgs(
+                fun_active,
+                x,
+                regrad=regrad,
+                max_iterations=min(restart_every, max_iterations - used),
+            )
+            improved = not history or res.f < history[-1] * (1.0 - restart_rtol)
+            used += res.iterations
+            evaluations += res.evaluations
+            history.extend(res.history if not history else res.history[1:])
+            messages.append(res.message)
+            x = res.x
+            if not improved or res.iterations == 0:
+                break
+        res = BfgsResult(
+            x,
+            history[-1],
+            used,
+            evaluations,
+            tuple(history),
+            f"{len(messages)} metric cycle(s); last: {messages[-1]}",
+        )
     elif method == "bfgs":
 
         def fun(x):

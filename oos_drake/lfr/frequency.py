@@ -158,15 +158,18 @@ def _general_response(M, n, core, tail, powers, s):
 def _real_eig(A, ws=None):
     """``dgeev`` of every real ``A[k]``: eigenvalues ``(g, m)`` (complex) and the real basis ``T``
     ``(g, m, m)`` (columns ``j, j+1`` are the real and imaginary parts of the eigenvector of a
-    conjugate pair, positive imaginary part first). ``ok[k]`` is False if LAPACK failed."""
+    conjugate pair, positive imaginary part first). ``ok[k]`` is False if ``A[k]`` is not finite
+    or LAPACK failed (the caller then uses the general path)."""
     g, m = A.shape[0], A.shape[-1]
     ws = _Workspace() if ws is None else ws
     lam = np.empty((g, m), dtype=complex)
     T = ws.get("eig_T", (g, m, m))
-    ok = np.ones(g, dtype=bool)
+    ok = np.all(np.isfinite(A), axis=(1, 2))
     for k in range(g):
-        a = np.array(A[k], order="F")
-        wr, wi, _, vr, info = lapack.dgeev(a, compute_vl=0, compute_vr=1, overwrite_a=1)
+        info = 1
+        if ok[k]:
+            a = np.array(A[k], order="F")
+            wr, wi, _, vr, info = lapack.dgeev(a, compute_vl=0, compute_vr=1, overwrite_a=1)
         if info != 0:
             ok[k] = False
             lam[k] = 1.0

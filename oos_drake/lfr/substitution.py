@@ -413,6 +413,18 @@ def _close_scalar_general(plan, d, batch, names):
 def _close_scalar_values_batched(plan, d, names):
     """Hot path: one certain-structure LFR, ``N`` value sets ``d`` of shape ``(N, ns)``.
 
+    The recursion runs on the narrower side: over the used columns of ``M_sk``
+    (:func:`_close_scalar_values_right`) or over the used rows of ``M_ks``
+    (:func:`_close_scalar_values_left`); both give the same ``M'``.
+    """
+    if plan["rows_used"].size < plan["cols_used"].size:
+        return _close_scalar_values_left(plan, d, names)
+    return _close_scalar_values_right(plan, d, names)
+
+
+def _close_scalar_values_right(plan, d, names):
+    """``M' = M_kk + M_ks W`` with ``(I - Delta M_ss) W = Delta M_sk`` solved level by level.
+
     ``W`` is stored as ``(ns, N, nk)`` so that every coupling and the final product are single
     large matrix products over all models at once.
     """
@@ -450,6 +462,58 @@ def _close_scalar_values_batched(plan, d, names):
     out = np.empty((N,) + Mkk.shape, dtype=np.result_type(Mkk, update))
     out[:] = Mkk
     out[:, rows[:, None], cols[None, :]] += np.swapaxes(update, 0, 1)
+    return out
+
+
+def _close_scalar_values_left(plan, d, names):
+    """Transposed hot path: ``M' = M_kk + Z M_sk`` with ``Z = M_ks Delta (I - M_ss Delta)^-1``.
+
+    Since ``(I - Delta M_ss)^-1 Delta = Delta (I - M_ss Delta)^-1``, this equals the right-hand
+    recursion of :func:`_close_scalar_values_batched`. Row ``j`` of ``Z^T`` (one per channel)
+    satisfies ``Z_j (1 - d_j M_jj) = d_j (M_ks[:, j] + sum_{i != j} Z_i M_ss[i, j])``, so the
+    levels are visited in REVERSE topological order, coupled components by a small transposed
+    solve. ``Z`` is stored as ``(ns, N, nr)`` with ``nr`` the used rows of ``M_ks``.
+    """
+    Mss, Mkk = plan["Mss"], plan["Mkk"]
+    cols, rows = plan["cols_used"], plan["rows_used"]
+    Msk, Mks = plan["Msk_used"], plan["Mks_used"]
+    N, ns = d.shape
+    nr = rows.size
+    dtype = np.result_type(Mss, d)
+    dt = np.ascontiguousarray(d.T)  # (ns, N)
+    coupled_below = plan.get("coupled_below")
+    if coupled_below is None:
+        coupled_below = [bool(np.any(Mss[stop:, start:stop])) for start, stop, *_ in plan["bounds"]]
+        plan["coupled_below"] = coupled_below
+    MksT = np.ascontiguousarray(Mks.T)  # (ns, nr)
+    Z = np.empty((ns, N, nr), dtype=dtype)
+    for (start, stop, _, singles, groups), coupled in zip(
+        reversed(plan["bounds"]), reversed(coupled_below), strict=True
+    ):
+        size = stop - start
+        rhs = np.broadcast_to(MksT[start:stop, None, :], (size, N, nr))
+        if coupled:
+            prod = Mss[stop:, start:stop].T @ Z[stop:].reshape(ns - stop, N * nr)
+            rhs = rhs + prod.reshape(size, N, nr)
+        d_lev = dt[start:stop]  # (size, N)
+        block = Mss[start:stop, start:stop]
+        if singles.size:
+            denom = 1.0 - d_lev[singles] * np.diagonal(block)[singles, None]
+            if np.any(np.abs(denom) < 1e-14):
+                raise _ill_posed(names)
+            Z[start + singles] = (d_lev[singles] / denom)[..., None] * rhs[singles]
+        for grp in groups:
+            dg = d_lev[grp].T  # (N, g)
+            loop = np.eye(grp.size) - dg[:, :, None] * block[np.ix_(grp, grp)].T
+            rhs_g = np.swapaxes(rhs[grp], 0, 1) * dg[:, :, None]  # (N, g, nr)
+            try:
+                Z[start + grp] = np.swapaxes(np.linalg.solve(loop, rhs_g), 0, 1)
+            except np.linalg.LinAlgError:
+                raise _ill_posed(names) from None
+    update = (Z.reshape(ns, N * nr).T @ Msk).reshape(N, nr, cols.size)
+    out = np.empty((N,) + Mkk.shape, dtype=np.result_type(Mkk, update))
+    out[:] = Mkk
+    out[:, rows[:, None], cols[None, :]] += update
     return out
 
 

@@ -12,19 +12,22 @@ is non-zero only on the real blocks, with
 same full Hermitian positive definite ``D_k`` (``r x r``), for a full block ``d_k I``. ``G`` is
 ``sum(r) x sum(c)`` with Hermitian ``G_k`` on the real blocks.
 
-Method (no LMI solver): write ``D = T^* T`` with block lower-triangular ``T``; with
-``Mh = T_l M T_r^{-1}`` and ``Gh = T_r^{-*} G T_l^{-1}`` the smallest feasible ``beta`` for given
+Method (no LMI solver): write ``D = T^* T`` with block lower-triangular ``T`` (``T = diag(e^s)
+(I + N)`` per block); with ``Mh = T_l M T_r^{-1}`` the smallest feasible ``beta`` for given
 scalings is
 
 .. math::
 
-    \beta^2(T, Gh) = \lambda_{\max}\big(Mh^* Mh + j (Gh\, Mh - Mh^* Gh^*)\big),
+    \beta^2(T, G) = \lambda_{\max}\big(T_r^{-*} [M^* D_l M + j (G M - M^* G^*)] T_r^{-1}\big),
 
-which is minimized over ``(T, Gh)``. ``lambda_max`` is smoothed by the log-sum-exp of the
-eigenvalues (with a temperature raised in stages) and minimized by BFGS, batched over all
-matrices at once. Initialization: Osborne balancing of the block norms of ``|M|``. Whatever the
-optimizer reaches, the returned value is the exact ``lambda_max`` at the returned scalings, so the
-bound is always valid; the scalings are returned so that the LMI can be checked independently.
+which is minimized over ``(T, G)`` (``G`` itself, not scaled by ``T``: a scaled ``G`` couples
+the two and stalls on ill-conditioned matrices). ``lambda_max`` is smoothed by the log-sum-exp of
+the eigenvalues (temperature raised in stages) and minimized by a batched L-BFGS over all
+matrices at once; the gradient uses only the few eigenvectors that carry the smoothed maximum.
+Initialization: Osborne balancing of ``|M|`` (one scaling per full block and per channel of a
+repeated block), or a warm start. Whatever the optimizer reaches, the returned value is the
+exact ``lambda_max`` at the returned scalings, so the bound is always valid; the scalings are
+returned so that the LMI can be checked independently (:func:`lmi_residual`).
 """
 
 from __future__ import annotations

@@ -123,6 +123,7 @@ def _frequency_crossings(A, Bw, Cz, Dzw, structure, omega, up, lo, count=6, samp
     score = np.where(np.isfinite(score), score, 0.0)
     peaks = np.unique(np.concatenate([top_peaks(up), top_peaks(score)]))
     out_w, out_lo, out_d = [], [], []
+    floor = float(np.max(lo)) if lo.size else 0.0
     for k in peaks:
         D = raw.raw_delta[k]
         dn = float(dn_all[k])
@@ -147,6 +148,9 @@ def _frequency_crossings(A, Bw, Cz, Dzw, structure, omega, up, lo, count=6, samp
             for s in np.flatnonzero(np.sign(track.imag[:-1]) * np.sign(track.imag[1:]) < 0):
                 wl, wr, fl, fr = ws[s], ws[s + 1], track[s].imag, track[s + 1].imag
                 ll, lr = track[s], track[s + 1]
+                # a crossing only matters if it can beat the best lower bound known so far
+                if 1.5 * max(abs(ll), abs(lr)) / dn <= max(best[0], floor):
+                    continue
                 lam_m, side = ll, 0
                 for _ in range(60):
                     wm = wr - fr * (wr - wl) / (fr - fl)

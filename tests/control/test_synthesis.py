@@ -75,7 +75,7 @@ def test_perturbed_starts_reach_the_same_gamma():
     plants = synthetic_flexible_plants(6, modes=2, uncertain=False)
     J = inertia_from_plant(plants.evaluate([1]))[0]
     K0 = baseline_gains(J)
-    options = SynthesisOptions(restarts=0, max_iterations=300, worst_case_rounds=0)
+    options = SynthesisOptions(restarts=0, max_iterations=400, worst_case_rounds=0, working_set=0)
     reference = synthesize(plants, K0, options=options).gamma
     rng = np.random.default_rng(11)
     for _ in range(2):

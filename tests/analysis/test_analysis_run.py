@@ -1,0 +1,131 @@
+"""A small, fast configuration of the whole analysis: files, documented columns, certificates."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from oos_drake.analysis.controller import baseline_controller
+from oos_drake.analysis.loop import rotational_channels
+from oos_drake.analysis.run import AnalysisOptions, run_analysis
+from oos_drake.analysis.stability import SweepOptions
+
+FAST = AnalysisOptions(
+    configurations=3,
+    frequency_range_hz=(0.05, 2.0),
+    points_per_decade=4,
+    sweep=SweepOptions(upper_iterations=20, refine_iterations=30, n_jobs=1, refine_points=2),
+    docking_phases=("7",),
+    docking_points=3,
+    performance_models=1,
+    performance_points=4,
+    certify_iterations=120,
+    certify_points=15,
+    sensitivity=True,
+    time_check=True,
+    time_check_duration=60.0,
+    progress=False,
+)
+
+
+@pytest.fixture(scope="module")
+def analysis(tmp_path_factory):
+    from oos_drake.lfr import usubs
+    from oos_drake.scenario.model import build_mission_model, mission_values
+
+    plant = usubs(build_mission_model(), mission_values([255.0])).model(0)
+    controller = baseline_controller(rotational_channels(plant).nominal)
+    out = tmp_path_factory.mktemp("analysis")
+    summary = run_analysis(controller, out, FAST, log=lambda *_: None)
+    return out, summary, controller
+
+
+def test_files_and_summary(analysis):
+    out, summary, _ = analysis
+    for name in ("mu_mission.parquet", "stability_peaks.parquet", "worst_perturbations.parquet",
+                 "performance.parquet", "docking_7.parquet", "sensitivity.parquet",
+                 "time_check.parquet", "worst_cases.parquet", "summary.json", "mu_mission.png",
+                 "performance.png", "mu_docking.png", "sensitivity.png", "time_check.png"):
+        assert (out / name).is_file(), name
+    saved = json.loads((out / "summary.json").read_text())
+    assert saved["controller"]["label"] == "baseline"
+    assert saved["mission"]["configurations"] == 3
+
+
+def test_tables_have_documented_columns(analysis):
+    out, _, _ = analysis
+    from oos_drake.analysis.performance import PERFORMANCE_COLUMNS
+    from oos_drake.analysis.sensitivity import SENSITIVITY_COLUMNS
+    from oos_drake.analysis.stability import SWEEP_COLUMNS
+    from oos_drake.analysis.time_check import TIME_COLUMNS
+
+    assert list(pd.read_parquet(out / "mu_mission.parquet").columns) == SWEEP_COLUMNS
+    assert list(pd.read_parquet(out / "performance.parquet").columns) == PERFORMANCE_COLUMNS
+    assert list(pd.read_parquet(out / "sensitivity.parquet").columns) == SENSITIVITY_COLUMNS
+    assert list(pd.read_parquet(out / "time_check.parquet").columns) == TIME_COLUMNS
+    peaks = pd.read_parquet(out / "stability_peaks.parquet")
+    for col in ("subset", "time [s]", "frequency [Hz]", "mu_upper", "mu_lower", "gap [%]",
+                "margin [-]", "stiffness [N/m or N m/rad]"):
+        assert col in peaks.columns, col
+    sweep = pd.read_parquet(out / "mu_mission.parquet")
+    assert set(sweep["subset"]) == {"total", "real", "modal", "mechanical", "additive",
+                                    "multiplicative"}
+    assert np.all(sweep["mu_lower"] <= sweep["mu_upper"] * (1 + 1e-9))
+
+
+def test_worst_cases_file_reads_back_with_the_campaign_schema(analysis):
+    out, _, _ = analysis
+    from oos_drake.analysis.models import mission_closed_loop
+    from oos_drake.analysis.worst_cases import block_parameters
+    from oos_drake.campaign.worst_cases import read_worst_cases
+
+    _, _, controller = analysis
+    params = block_parameters(mission_closed_loop(controller, [0.0]).system)
+    regions = read_worst_cases(out / "worst_cases.parquet", params)
+    assert {r.subset.split(",")[0] for r in regions}
+    table = pd.read_parquet(out / "worst_cases.parquet")
+    assert "wc:w1_SA3 [rad/s]" in table.columns and "wc:Delta_add [-]" in table.columns
+
+
+def test_additive_peak_is_certified_exactly(analysis):
+    """A single full block: mu = sigma_max, so the bounds must meet (within 1 %)."""
+    out, _, _ = analysis
+    peaks = pd.read_parquet(out / "stability_peaks.parquet")
+    add = peaks[peaks["subset"] == "additive"].iloc[0]
+    assert add["gap [%]"] < 1.0
+
+
+def test_time_check_nominal_is_stable(analysis):
+    out, _, _ = analysis
+    t = pd.read_parquet(out / "time_check.parquet")
+    assert bool(t.loc[t["case"] == "nominal", "stable"].iloc[0])
+    assert np.all(t["torque_requirement [N m]"] == 2.0)
+
+
+def test_worst_perturbation_destabilizes_at_the_reported_frequency(analysis):
+    """Independent check with usubs: the certified total-set perturbation (size = margin)
+    puts a closed-loop pole on j omega_crit; 90 % of it leaves the loop stable."""
+    from oos_drake.analysis.models import mission_closed_loop, mission_times
+    from oos_drake.analysis.stability import certify_peak
+    from oos_drake.analysis.subsets import uncertainty_subsets
+    from oos_drake.lfr import usubs
+
+    out, _, controller = analysis
+    peaks = pd.read_parquet(out / "stability_peaks.parquet")
+    total = peaks[(peaks["study"] == "mission") & (peaks["subset"] == "total")].iloc[0]
+    times = mission_times(FAST.configurations)
+    arr = mission_closed_loop(controller, times).system
+    members = uncertainty_subsets(arr.uncertainty)["total"]
+    cert = certify_peak(arr, "total", members, int(total["model"]), float(total["frequency [Hz]"]),
+                        points=9, upper_iterations=60)
+    assert cert.mu_lower > 0
+    np.testing.assert_allclose(cert.mu_lower, total["mu_lower"], rtol=0.02)
+    one = arr.model(int(total["model"]))
+    closed = usubs(one, cert.worst_case_normalized, normalized=True)
+    poles = np.linalg.eigvals(np.asarray(closed.A))
+    w = 2 * np.pi * cert.frequency
+    assert np.min(np.abs(poles - 1j * w)) < 1e-3 * max(w, 1.0)
+    smaller = {k: 0.9 * v for k, v in cert.worst_case_normalized.items()}
+    inside = usubs(one, smaller, normalized=True)
+    assert np.max(np.linalg.eigvals(np.asarray(inside.A)).real) < 0
