@@ -32,8 +32,10 @@ conjugate (or real) eigenvalue pairs,
           = \\frac{s (r_1 + r_2) - (r_1 \\lambda_2 + r_2 \\lambda_1)}
                  {s^2 - (\\lambda_1 + \\lambda_2) s + \\lambda_1 \\lambda_2},
 
-whose coefficients are all real: the frequency sum becomes one real matrix product per model
-over half as many terms. Models that this route cannot treat exactly (ill-conditioned or
+whose coefficients are all real: with ``1/d(j omega) = U + jV`` per pair, the whole response
+(modal part, feedthrough and integrator-tail polynomial) is ONE real matrix product per model,
+``[U, V, omega U, omega V, 1, omega^-r] @ R``, written straight into the complex output.
+Models that this route cannot treat exactly (ill-conditioned or
 defective eigenvalues, small poles next to an integrator tail, complex data) fall back to the
 general path above, model by model. Chunks of models can be processed by :data:`WORKERS`
 threads (LAPACK and BLAS release the GIL); the result does not depend on the thread count.
