@@ -47,7 +47,8 @@ def run_analyze(args) -> int:
     summary = run_analysis(controller, args.out, options)
     m = summary["mission"]
     print(f"controller: {controller.label} ({controller.source})")
-    print(f"mission: mu peak <= {m['mu_peak_upper']:.4g} (refined {m['mu_peak_upper_refined']:.4g}, "
+    print(f"mission: mu peak <= {m['mu_peak_upper']:.4g} "
+          f"(refined {m['mu_peak_upper_refined']:.4g}, "
           f"certified >= {m['mu_peak_lower']:.4g}) at t = {m['peak_time_s']:.1f} s, "
           f"f = {m['peak_frequency_hz']:.3g} Hz; stability margin {m['stability_margin']:.3g} "
           f"(paper: mu < 0.79 at 275 s, 0.55 Hz)")

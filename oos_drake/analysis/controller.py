@@ -44,7 +44,8 @@ class Controller:
     def __post_init__(self):
         K = np.array(self.K, dtype=float)
         if K.shape != (3, 6) or not np.all(np.isfinite(K)):
-            raise ValueError(f"controller {self.source}: K must be a finite 3x6 gain, got {K.shape}")
+            raise ValueError(f"controller {self.source}: K must be a finite 3x6 gain, "
+                             f"got shape {K.shape}")
         K.setflags(write=False)
         object.__setattr__(self, "K", K)
 
@@ -108,8 +109,13 @@ def baseline_controller(plant_rotational, spec: DesignSpecification | None = Non
     spec : DesignSpecification, optional
         Paper values by default.
     """
-    from oos_drake.control.baseline import OMEGA_ATT, TUNING_TIME_S, XI_ATT, baseline_gains
-    from oos_drake.control.baseline import inertia_from_plant
+    from oos_drake.control.baseline import (
+        OMEGA_ATT,
+        TUNING_TIME_S,
+        XI_ATT,
+        baseline_gains,
+        inertia_from_plant,
+    )
     from oos_drake.control.interconnection import plant_statespace
 
     n = plant_rotational.nstates

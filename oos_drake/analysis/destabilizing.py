@@ -10,7 +10,8 @@ is unstable beyond the smallest ``alpha`` for which ``A(alpha diag(d))`` has a p
 imaginary axis. This module
 
 1. searches the sign vertices ``d in {-1, 1}^n`` (all of them up to 2^10, else random ones),
-   bisecting ``alpha`` on the spectral abscissa and polishing the crossing by the secant method;
+   bisecting ``alpha`` on the spectral abscissa and polishing the crossing by the secant method,
+   then moves off the vertex coordinate by coordinate (:func:`refine_direction`);
 2. adds the complex blocks (``ultidyn``): at the real part ``alpha d`` it closes the real
    channels and asks the complex-mu power iteration for a complex perturbation of size
    ``<= alpha`` that makes ``I - M(j omega) Delta`` singular on a frequency grid, bisecting
@@ -72,7 +73,6 @@ def _expand(structure, real_values, complex_blocks=None):
 
 
 def _closed_A(A, Bw, Cz, Dzw, delta):
-    n = delta.shape[0]
     X = np.linalg.solve(np.eye(Dzw.shape[0]) - Dzw @ delta, Cz)
     return A + Bw @ delta @ X
 
@@ -142,6 +142,54 @@ def real_vertex_search(A, Bw, Cz, Dzw, blk, *, alpha_max: float = 8.0, max_verti
         if hi < best[0]:
             best = (hi, d.copy(), w)
     return best
+
+
+def _alpha_along(A, Bw, Cz, Dzw, structure, d, hi):
+    """Smallest ``alpha <= hi`` with ``abscissa(A(alpha d)) >= 0`` (inf if none), bisection."""
+    a_hi, _ = _abscissa(A, Bw, Cz, Dzw, _expand(structure, hi * d))
+    if a_hi < 0:
+        return np.inf
+    lo = 0.0
+    for _ in range(26):
+        mid = 0.5 * (lo + hi)
+        if _abscissa(A, Bw, Cz, Dzw, _expand(structure, mid * d))[0] >= 0:
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
+def refine_direction(A, Bw, Cz, Dzw, blk, alpha, signs, *, levels=(-1.0, -0.5, 0.0, 0.5, 1.0),
+                     passes: int = 2):
+    """Coordinate search off the vertices: the worst direction need not be a vertex.
+
+    A direction ``d`` (``max |d_i| = 1``) with a smaller crossing ``alpha`` gives a larger lower
+    bound ``1 / alpha``. Each coordinate is tried at ``levels`` in turn (the others fixed).
+
+    Returns ``(alpha, d)``.
+    """
+    structure = parse_blk(blk)
+    best_a, best_d = alpha, np.asarray(signs, dtype=float).copy()
+    if not np.isfinite(best_a) or best_d.size < 2:
+        return best_a, best_d
+    for _ in range(passes):
+        improved = False
+        for i in range(best_d.size):
+            for level in levels:
+                if level == best_d[i]:
+                    continue
+                d = best_d.copy()
+                d[i] = level
+                norm = np.max(np.abs(d))
+                if norm == 0:
+                    continue
+                d /= norm
+                a = _alpha_along(A, Bw, Cz, Dzw, structure, d, best_a * 0.999)
+                if a < best_a:
+                    best_a, best_d, improved = a, d, True
+        if not improved:
+            break
+    return best_a, best_d
 
 
 def _residual(M, delta):
@@ -219,6 +267,7 @@ def destabilizing_perturbation(A, Bw, Cz, Dzw, blk, omega_hint, *, alpha_max: fl
     alpha_r = np.inf
     if has_real:
         alpha_r, signs, w_r = real_vertex_search(A, Bw, Cz, Dzw, blk, alpha_max=alpha_max)
+        alpha_r, signs = refine_direction(A, Bw, Cz, Dzw, blk, alpha_r, signs)
         if np.isfinite(alpha_r):
             delta, w, res = _real_crossing_delta(A, Bw, Cz, Dzw, structure, alpha_r, signs)
             best = Destabilizer(1.0 / alpha_r, float(w), delta, res)

@@ -1,4 +1,4 @@
-"""PNG figures of the analysis (paper Figs. muanalysis, performance, mu_analysis_SM, unc_sensitivity)."""
+"""PNG figures of the analysis (paper Figs. muanalysis, performance, mu_analysis_SM, ...)."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ def _ordered(names):
 
 
 def mu_mission_figure(sweep: pd.DataFrame, common_hz, peaks: pd.DataFrame, path) -> Path:
-    """(a) surface of the total-set upper bound over time and frequency; (b) side views per subset."""
+    """(a) surface of the total-set upper bound over time x frequency; (b) side views."""
     plt = _plt()
     fig = plt.figure(figsize=(15, 5.2))
     total = sweep[(sweep["subset"] == "total") & ~sweep["refined"]]
@@ -158,6 +158,8 @@ def time_check_figure(signals: pd.DataFrame, summary: pd.DataFrame, path) -> Pat
     for a in axes:
         a.set_xlabel("time [s]")
         a.set_yscale("log")
+        top = a.get_ylim()[1]
+        a.set_ylim(top * 1e-4, top)
         a.grid(True, which="both", alpha=0.3)
         a.legend(fontsize=7)
     fig.suptitle("Linear time-domain check: d_ext = step + sine at the critical frequency")

@@ -5,7 +5,8 @@ scenario LFR) the analysis adds
 
 .. math::
 
-    \hat P = (P + W_{add} \Delta_{add})\,(I_3 + W_{mul_L} \Delta_{mul_L} + W_{mul_R} \Delta_{mul_R}),
+    \hat P = (P + W_{add} \Delta_{add})
+             \,(I_3 + W_{mul_L} \Delta_{mul_L} + W_{mul_R} \Delta_{mul_R}),
 
 with ``Delta_add`` a full 3x3 ``ultidyn`` (``W_add = -75 dB``: it covers unknown inverse inertia
 [(rad/s^2)/(N m)]) and ``Delta_mul`` nine scalar ``ultidyn`` blocks (diagonal ``W_mul_L = 4e-2``,
@@ -48,7 +49,8 @@ def rotational_channels(model: LFR) -> LFR:
     if model.shape == (3, 3):
         return model
     if model.shape != (6, 6):
-        raise ValueError(f"plant must be 3x3 (T -> wdot) or 6x6 (wrench -> twist), got {model.shape}")
+        raise ValueError(f"plant must be 3x3 (T -> wdot) or 6x6 (wrench -> twist), "
+                         f"got {model.shape}")
     return model[3:6, 3:6]
 
 

@@ -6,7 +6,7 @@ Files written in ``out_dir`` (Parquet tables are tidy, units in column names):
 ``stability_peaks.parquet``     certified peak per subset: time, frequency, bounds, gap, margin
 ``worst_perturbations.parquet`` destabilizing perturbation of every peak, per block (physical)
 ``performance.parquet``         worst-case gains of d -> e_p, d -> e_u per subset (Fig. performance)
-``docking_<7|8>.parquet``       mu (Delta_tot) over the swept stiffness x frequency (Fig. mu_analysis_SM)
+``docking_<7|8>.parquet``       mu (Delta_tot), stiffness x frequency (Fig. mu_analysis_SM)
 ``sensitivity.parquet``         which block moves the worst-case mu most (Fig. unc_sensitivity)
 ``time_check.parquet``          APE / torque of the perturbed closed loops vs the requirements
 ``time_signals.parquet``        the simulated signals
@@ -64,6 +64,9 @@ class AnalysisOptions:
         BFGS iterations of the upper bound on the local grid of each peak.
     certify_points : int
         Points of that local grid.
+    tighten_batch : int
+        Highest grid points recomputed per round with ``certify_iterations`` (see
+        :func:`~oos_drake.analysis.stability.tighten`).
     sensitivity : bool
         Compute the sensitivity table.
     time_check : bool
@@ -85,6 +88,7 @@ class AnalysisOptions:
     performance_points: int = 24
     certify_iterations: int = 300
     certify_points: int = 41
+    tighten_batch: int = 120
     sensitivity: bool = True
     time_check: bool = True
     time_check_duration: float = 600.0
@@ -94,7 +98,8 @@ class AnalysisOptions:
         """Common frequency grid [rad/s]."""
         lo, hi = self.frequency_range_hz
         if not 0 < lo < hi:
-            raise ValueError(f"frequency_range_hz must be 0 < low < high, got {self.frequency_range_hz}")
+            raise ValueError("frequency_range_hz must be 0 < low < high, got "
+                             f"{self.frequency_range_hz}")
         n = max(int(round(self.points_per_decade * np.log10(hi / lo))) + 1, 3)
         return 2 * np.pi * np.geomspace(lo, hi, n)
 
@@ -195,7 +200,7 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
     """
     from oos_drake.analysis import figures
     from oos_drake.analysis.models import docking_closed_loop, mission_closed_loop, mission_times
-    from oos_drake.analysis.stability import mu_sweep, peaks_table
+    from oos_drake.analysis.stability import mu_sweep, peaks_table, tighten
     from oos_drake.analysis.subsets import uncertainty_subsets
     from oos_drake.analysis.worst_cases import Region, write_regions
     from oos_drake.robust.threads import limit_blas_threads
@@ -227,6 +232,8 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         f"subsets {list(subsets)}; nominal loops stable: {int((abscissa < 0).sum())}/{times.size}")
     sweep = mu_sweep(mission.system, omega, subsets, times=times, options=options.sweep,
                      progress=options.progress, description="mu mission")
+    sweep = tighten(mission.system, sweep, subsets, iterations=options.certify_iterations,
+                    batch=options.tighten_batch, progress=options.progress)
     sweep.to_parquet(out / "mu_mission.parquet", index=False)
     paths["mu_mission"] = out / "mu_mission.parquet"
     lap("mu sweep mission")
@@ -246,6 +253,8 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         tot = {"total": uncertainty_subsets(arr.system.uncertainty)["total"]}
         dsweep = mu_sweep(arr.system, omega, tot, times=stiffness, options=options.sweep,
                           progress=options.progress, description=f"mu docking {phase}")
+        dsweep = tighten(arr.system, dsweep, tot, iterations=options.certify_iterations,
+                         batch=options.tighten_batch, progress=options.progress)
         dsweep = dsweep.rename(columns={"time [s]": "stiffness [N/m or N m/rad]"})
         dsweep.to_parquet(out / f"docking_{phase}.parquet", index=False)
         paths[f"docking_{phase}"] = out / f"docking_{phase}.parquet"
@@ -299,11 +308,11 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         from oos_drake.analysis.sensitivity import mu_sensitivity
 
         part = sweep[(sweep["subset"] == "total") & (sweep["model"] == crit_model)]
-        top = part.nlargest(8, "mu_upper")["frequency [Hz]"].to_numpy()
-        w_s = np.unique(np.concatenate([2 * np.pi * top,
-                                        2 * np.pi * certs["total"][1] * np.geomspace(0.95, 1.05, 5)]))
+        top = part.nlargest(6, "mu_upper")["frequency [Hz]"].to_numpy()
+        w_crit = 2 * np.pi * certs["total"][1]
+        w_s = np.unique(np.concatenate([2 * np.pi * top, w_crit * np.geomspace(0.97, 1.03, 3)]))
         sens = mu_sensitivity(mission.system, crit_model, w_s,
-                              iterations=options.certify_iterations)
+                              iterations=max(options.certify_iterations // 2, 20))
         sens.to_parquet(out / "sensitivity.parquet", index=False)
         paths["sensitivity"] = out / "sensitivity.parquet"
         lap("sensitivity")
@@ -375,7 +384,8 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
             "mu_peak_upper": float(max(tot["mu_upper"], tot["mu_upper_grid"])),
             "mu_peak_upper_refined": float(tot["mu_upper"]),
             "mu_peak_lower": float(tot["mu_lower"]),
-            "peak_time_s": float(tot["time [s]"]), "peak_frequency_hz": float(tot["frequency [Hz]"]),
+            "peak_time_s": float(tot["time [s]"]),
+            "peak_frequency_hz": float(tot["frequency [Hz]"]),
             "stability_margin": float(tot["margin [-]"]),
         },
         "subsets": peaks.drop(columns=["study"]).to_dict(orient="records"),

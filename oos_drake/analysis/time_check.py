@@ -2,7 +2,8 @@ r"""Linear time-domain check of the worst cases: APE and torque against the requ
 
 At a critical configuration the uncertain closed loop is closed with a perturbation (real
 blocks by value, each ``ultidyn`` block by a stable real-rational realization of its worst
-complex value at the critical frequency, :func:`oos_drake.robust.lfr_analysis.realize_complex_matrix`)
+complex value at the critical frequency,
+:func:`oos_drake.robust.lfr_analysis.realize_complex_matrix`)
 and simulated (exact zero-order-hold discretization) for a disturbance ``d_ext``: a unit step of
 the normalized disturbance on the three axes (the torque ``W_n,ext`` of the design) plus a unit
 sine at the critical frequency. Outputs are unweighted: ``phi = W_p e_p`` [rad] against the APE
@@ -55,7 +56,6 @@ def close_with_perturbation(sys: LFR, normalized: dict, omega: float) -> LFR:
     left = [e for e in out.block_entries]
     if not left:
         return out
-    n = out.nstates
     A, Bw, Bu = np.asarray(out.A), np.asarray(out.Bw), np.asarray(out.Bu)
     Cz, Cy = np.asarray(out.Cz), np.asarray(out.Cy)
     D = np.block([[np.asarray(out.Dzw), np.asarray(out.Dzu)],
@@ -71,8 +71,8 @@ def close_with_perturbation(sys: LFR, normalized: dict, omega: float) -> LFR:
         if value is None:
             parts.append(control.ss([], [], [], np.zeros((p, q))))
         else:
-            parts.append(realize_complex_matrix(spec.bound * np.asarray(value, complex).reshape(p, q),
-                                                omega))
+            value = spec.bound * np.asarray(value, complex).reshape(p, q)
+            parts.append(realize_complex_matrix(value, omega))
     delta_sys = control.append(*parts) if len(parts) > 1 else parts[0]
     nw, nz = out.nw, out.nz
     return lft(delta_sys, open_sys, nw, nz).with_names(inputs=sys.input_names,

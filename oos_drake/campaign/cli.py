@@ -7,6 +7,7 @@ Examples::
     oos campaign resume out/demo                  # after a crash or kill -9
     oos campaign rerun out/demo --case 17         # recompute run 17, compare with the record
     oos campaign report out/demo                  # figures + tables in out/demo/report
+    oos campaign replay out/demo --case 17        # 3D replay in out/demo/replay/case_17.html
 """
 
 from __future__ import annotations
@@ -114,11 +115,26 @@ def _report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _replay(args: argparse.Namespace) -> int:
+    from oos_drake.multibody.replay import replay_case
+
+    result = replay_case(args.directory, args.case, speed=args.speed)
+    span = f"t = {result.start:g} .. {result.end:g} s"
+    print(
+        f"run {result.run_id}: {span}, {result.frames} frames at {result.frame_rate:g} Hz, "
+        f"played at {result.speed:g}x ({result.bytes / 1e6:.1f} MB)"
+    )
+    if result.status != "ok":
+        print(f"note: run {result.run_id} {result.status}: {result.error}")
+    print(f"replay: {result.path}")
+    return 0
+
+
 def register(subparsers) -> None:
     """Add ``oos campaign ...`` to the ``oos`` parser."""
     campaign = subparsers.add_parser(
         "campaign",
-        help="Monte Carlo campaigns (run, resume, rerun, report)",
+        help="Monte Carlo campaigns (run, resume, rerun, report, replay)",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -154,6 +170,19 @@ def register(subparsers) -> None:
     report.add_argument("directory", help="campaign directory")
     report.add_argument("--worst", type=int, default=5, help="worst runs to plot (default 5)")
     report.set_defaults(func=_report)
+
+    replay = commands.add_parser(
+        "replay", help="self-contained HTML 3D replay of one run (Drake mission, Meshcat)"
+    )
+    replay.add_argument("directory", help="campaign directory")
+    replay.add_argument("--case", type=int, required=True, help="run id")
+    replay.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        help="playback speed: simulated seconds per second of animation (default 1)",
+    )
+    replay.set_defaults(func=_replay)
 
 
 def main(argv: list[str] | None = None) -> int:

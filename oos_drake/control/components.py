@@ -7,7 +7,7 @@ per-axis SISO model replicated on the three axes, returned as a named
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.signal
@@ -70,7 +70,6 @@ class DesignSpecification:
     additive_weight_db: float = -75.0
     multiplicative_diagonal: float = 4e-2
     multiplicative_off_diagonal: float = 4e-3
-    extra: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self):
         for name in (
@@ -101,11 +100,7 @@ class DesignSpecification:
 
     def to_dict(self) -> dict:
         """Return the specification as a JSON-ready dict."""
-        return {
-            k: (list(v) if isinstance(v, tuple) else v)
-            for k, v in self.__dict__.items()
-            if k != "extra"
-        }
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
 
 
 def first_order_lowpass(cutoff_hz: float) -> tuple[np.ndarray, ...]:

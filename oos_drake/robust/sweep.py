@@ -169,7 +169,7 @@ def robust_sweep(
         iterations per frequency instead of 40-80; the grid must be fine enough for the
         scalings to change little between neighbours). False: independent ``mussv`` calls.
     chunk_size : int, optional
-        Models per task (default: one task per worker).
+        Models per task (default: ``n_models / n_jobs``, at most 40).
     mu_options : dict, optional
         Options of :func:`~oos_drake.robust.mussv` for the refinement points and, with
         ``warm_start=False``, for the grid; default ``upper_iterations=40, lower_restarts=2,
@@ -223,8 +223,10 @@ def robust_sweep(
         **dict(mu_options or {}),
     }
     n_jobs = max(1, int(n_jobs))
-    if chunk_size is None:  # one task per worker: big batches share the Python overhead
-        chunk_size = max(1, int(np.ceil(n_models / n_jobs)))
+    if chunk_size is None:
+        # big batches share the Python overhead of the iterations; 40 models x 500 frequencies
+        # of 26 x 26 matrices are ~200 MB per copy, which bounds the memory of a worker
+        chunk_size = max(1, min(int(np.ceil(n_models / n_jobs)), 40))
     tasks = [
         (
             A[i : i + chunk_size],

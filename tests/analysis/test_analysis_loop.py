@@ -31,7 +31,7 @@ def test_nominal_loop_equals_control_interconnection():
 
 
 def test_additive_and_multiplicative_blocks_act_as_documented():
-    """Delta_add = X, Delta_mul_xy = m: the loop equals the control loop around (P + W X)(I + W_R m E_xy)."""
+    """Delta_add = X, Delta_mul_xy = m: the control loop around (P + W X)(I + W_R m E_xy)."""
     A, B, C, D = _plant()
     spec = DesignSpecification()
     closed = close_loop(LFR.from_ss(A, B, C, D), K, spec)

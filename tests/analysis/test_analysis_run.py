@@ -22,6 +22,7 @@ FAST = AnalysisOptions(
     performance_points=4,
     certify_iterations=120,
     certify_points=15,
+    tighten_batch=20,
     sensitivity=True,
     time_check=True,
     time_check_duration=60.0,

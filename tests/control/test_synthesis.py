@@ -72,14 +72,20 @@ def test_unstabilizing_start_is_refused(small_problem):
 
 @pytest.mark.slow
 def test_perturbed_starts_reach_the_same_gamma():
+    # the synthesis as used (best of the start and two random restarts, like systune's
+    # RandomStart) must not depend on the start point: baseline vs perturbed baselines
     plants = synthetic_flexible_plants(6, modes=2, uncertain=False)
     J = inertia_from_plant(plants.evaluate([1]))[0]
     K0 = baseline_gains(J)
-    options = SynthesisOptions(restarts=0, max_iterations=400, worst_case_rounds=0, working_set=0)
-    reference = synthesize(plants, K0, options=options).gamma
-    rng = np.random.default_rng(11)
-    for _ in range(2):
-        start = K0 * np.exp(0.3 * rng.normal(size=K0.shape))
-        assert synthesize(plants, start, options=options).gamma == pytest.approx(
-            reference, rel=1e-2
+
+    def run(start, seed):
+        options = SynthesisOptions(
+            restarts=2, max_iterations=250, worst_case_rounds=0, working_set=0, seed=seed
         )
+        return synthesize(plants, start, options=options).gamma
+
+    reference = run(K0, 0)
+    rng = np.random.default_rng(11)
+    for seed in (1, 2):
+        start = K0 * np.exp(0.3 * rng.normal(size=K0.shape))
+        assert run(start, seed) == pytest.approx(reference, rel=1e-2)

@@ -117,3 +117,31 @@ def test_merged_stages_equal_the_block_by_block_chain():
         np.testing.assert_allclose(
             stage @ np.concatenate([x, z]), np.concatenate([x_next, y]), rtol=1e-12, atol=1e-12
         )
+
+
+def test_docking_schedule_ramps_and_releases():
+    from oos_drake.multibody.mission_sim import _Schedule
+
+    values = {
+        "k_shear_SM1": 1e5, "k_tors_SM1": 2e4, "d_shear_SM1": 100.0, "d_tors_SM1": 50.0,
+        "k_shear_SM2": 3e4, "k_tors_SM2": 1e5, "d_shear_SM2": 80.0, "d_tors_SM2": 90.0,
+    }  # fmt: skip
+    schedule = _Schedule(255.0, 880.0, 2.0, 10, 0.1, values)
+    assert schedule.settings(254.9) == {"SM1": (0, 0, 0, 0), "SM2": (0, 0, 0, 0)}
+    first = schedule.settings(255.0)["SM1"]
+    assert first == pytest.approx((0.1, 0.1, 100.0, 50.0))
+    last_step = schedule.settings(256.95)["SM1"]
+    assert last_step == pytest.approx((1e5, 2e4, 100.0, 50.0))
+    # log-spaced: ten steps from 0.1 to 1e5 -> ratio (1e6)^(1/9) per step
+    k = [schedule.settings(255.0 + 0.2 * i + 0.01)["SM1"][0] for i in range(10)]
+    np.testing.assert_allclose(np.diff(np.log(k)), np.log(1e6) / 9, rtol=1e-9)
+    assert schedule.settings(500.0) == {"SM1": (1e5, 2e4, 100.0, 50.0), "SM2": (0, 0, 0, 0)}
+    docking = schedule.settings(880.0)
+    assert docking["SM1"] == (1e5, 2e4, 100.0, 50.0)
+    assert docking["SM2"] == pytest.approx((0.1, 0.1, 80.0, 90.0))
+    releasing = schedule.settings(882.0)
+    assert releasing["SM2"] == (3e4, 1e5, 80.0, 90.0)
+    assert releasing["SM1"] == pytest.approx((1e5, 2e4, 100.0, 50.0))
+    assert schedule.settings(883.95)["SM1"] == pytest.approx((0.1, 0.1, 100.0, 50.0))
+    assert schedule.settings(884.0) == {"SM1": (0, 0, 0, 0), "SM2": (3e4, 1e5, 80.0, 90.0)}
+    assert schedule.breakpoints(250.0, 300.0) == pytest.approx([255.0 + 0.2 * i for i in range(11)])

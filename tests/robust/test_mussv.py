@@ -98,11 +98,9 @@ def test_rank_one_mixed_matches_young_formula(blk):
         a, b = _crandn(rng, c), _crandn(rng, r)
         M = np.outer(a, b.conj())
         mu = _young_rank_one(a, b, blk)
-        # rank one is the degenerate case for the scalings (optimal D at infinity): allow more
-        # iterations than the default; the descent then gets within 2 % of the exact value
-        res = mussv(M, blk, upper_iterations=1500)
+        res = mussv(M, blk)
         assert res.upper >= mu * (1 - 1e-6)
-        assert res.upper <= mu * 1.02  # the D-G bound is exact for rank one (Young 1994)
+        assert res.upper <= mu * 1.01  # the D-G bound is exact for rank one (Young 1994)
         assert res.lower <= mu * (1 + 1e-6)
         assert res.lower >= 0.9 * mu
 
@@ -208,3 +206,59 @@ def test_batch_shape_and_certificates():
 def test_bad_input_raises_clear_value_error(blk, M, match):
     with pytest.raises(ValueError, match=match):
         mussv(M, blk)
+
+
+def _lmi_dg_bound(M, blk, rtol=1e-4):
+    """The same D-G bound from an SDP solver (cvxpy), bisection on beta: an independent check."""
+    cp = pytest.importorskip("cvxpy")
+    from oos_drake.robust import parse_blk
+
+    s = parse_blk(blk)
+    r = s.n_rows
+    beta2 = cp.Parameter(nonneg=True)
+    cons, quad, right, gterm = [], 0, 0, 0
+    for b in s.blocks:
+        Mk = M[b.c_slice, :]
+        Er = np.zeros((r, b.rows))
+        Er[b.r_slice, :] = np.eye(b.rows)
+        if b.repeated:
+            Dk = cp.Variable((b.rows, b.rows), hermitian=True)
+            cons.append(Dk >> np.eye(b.rows))
+            quad, right = quad + Mk.conj().T @ Dk @ Mk, right + Er @ Dk @ Er.T
+            if b.kind == "real":
+                GM = Er @ cp.Variable((b.rows, b.rows), hermitian=True) @ Mk
+                gterm = gterm + 1j * (GM - GM.H)
+        else:
+            dk = cp.Variable(nonneg=True)
+            cons.append(dk >= 1)
+            quad, right = quad + dk * (Mk.conj().T @ Mk), right + dk * (Er @ Er.T)
+    lmi = quad + gterm - beta2 * right
+    prob = cp.Problem(cp.Minimize(0), cons + [(lmi + lmi.H) / 2 << 0])
+    lo, hi = 0.0, float(np.linalg.norm(M, 2))
+    while hi - lo > rtol * hi:
+        beta2.value = (0.5 * (lo + hi)) ** 2
+        try:
+            prob.solve(solver="CLARABEL")
+            feasible = prob.status in ("optimal", "optimal_inaccurate")
+        except cp.error.SolverError:  # numerical failure right at the boundary: infeasible
+            feasible = False
+        if feasible:
+            hi = 0.5 * (lo + hi)
+        else:
+            lo = 0.5 * (lo + hi)
+    return hi
+
+
+@pytest.mark.parametrize("blk", [[[-2, 0], [1, 1], [2, 1]], [[-1, 0], [-2, 0], [1, 0]]])
+def test_upper_bound_matches_lmi_solver(blk):
+    import warnings
+
+    rng = np.random.default_rng(8)
+    c = sum(abs(x) if cc == 0 else cc for x, cc in blk)
+    r = sum(abs(x) if cc == 0 else x for x, cc in blk)
+    M = _crandn(rng, 2, c, r)
+    res = mussv(M, blk)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = [_lmi_dg_bound(M[k], blk) for k in range(2)]
+    assert_allclose(res.upper, ref, rtol=5e-3)

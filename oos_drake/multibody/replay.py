@@ -1,0 +1,381 @@
+"""Self-contained HTML 3D replay of one campaign run (``oos campaign replay DIR --case N``).
+
+:func:`replay_case` re-simulates run ``N`` of a campaign exactly as the campaign ran it (same
+simulator options, dispersed values, seed and mission window, read back from the campaign
+directory), then plays the logged plant states into a Meshcat recording and writes
+``meshcat.StaticHtml()`` atomically to ``DIR/replay/case_N.html``: one file, no server, that any
+browser opens (scene, animation, play/pause and time-scale controls under *Animations*).
+
+The SDF models carry no visual geometry, so the replay draws simple shapes on the plant's bodies
+(nothing is added to the plant, the simulated dynamics are the campaign's):
+
+- hubs ``RH1``, ``RH2`` and each array's panel: the **equivalent-inertia box** of the body, i.e.
+  the uniform box with the body's mass and central principal inertia, ``a_i = sqrt(6 (I_j + I_k -
+  I_i) / m)``, oriented along the principal axes at the centre of mass (chaser hub 1.27 x 1.17
+  x 1.05 m, target hub 0.86 x 0.75 x 0.63 m, arrays 2.11 x 1.00 m and 1.44 x 0.60 m plates, as
+  the scenario data's comments state; thin sides are drawn at least 2 cm);
+- arm links ``L0..L6``: cylinders (radius 5 cm) from each link's joint to the next joint (the
+  wrist link to the arm tip J7);
+- the docking frames ``D1``, ``D2``, ``D3`` and the arm tip ``J7``: small spheres.
+
+Each body is a Meshcat path whose world pose is set at every logged sample of the run
+(``time_in_recording``); the shapes hang below it at fixed offsets. The frames are the samples
+of the simulation's state logger (``log_rate`` of the campaign's simulator options), so the
+recording holds ``duration x log_rate + 1`` frames (inclusive ends) played at ``speed`` times
+real time. The camera starts looking at the midpoint of the two hubs; Meshcat's floor grid is
+laid 3 m below it as a reference for the hubs' drift. The arrays are drawn rigid: their modal
+bodies are fictitious (the modal coordinates are in the campaign's time series).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["ReplayResult", "equivalent_box", "replay_case", "replay_path"]
+
+#: Meshcat root path of the replay's objects.
+ROOT = "/oos"
+#: Radius of the arm-link cylinders [m].
+LINK_RADIUS = 0.05
+#: Radius of the docking-frame spheres [m].
+PORT_RADIUS = 0.04
+#: Initial camera position relative to the midpoint of the two hubs [m] (world frame).
+CAMERA_OFFSET = (7.0, -9.0, 5.0)
+#: Height of Meshcat's floor grid relative to that midpoint [m].
+GRID_DEPTH = -3.0
+#: Thinnest side of a drawn box [m] (the arrays are thin plates).
+MIN_SIDE = 0.02
+
+_COLORS = {
+    "RH1": (0.75, 0.75, 0.78, 1.0),
+    "RH2": (0.85, 0.55, 0.2, 1.0),
+    "SA1": (0.15, 0.25, 0.65, 1.0),
+    "SA2": (0.15, 0.25, 0.65, 1.0),
+    "SA3": (0.2, 0.45, 0.75, 1.0),
+    "SA4": (0.2, 0.45, 0.75, 1.0),
+    "arm": (0.9, 0.9, 0.92, 1.0),
+    "port": (0.9, 0.1, 0.1, 1.0),
+}
+
+
+@dataclass(frozen=True)
+class ReplayResult:
+    """What :func:`replay_case` wrote.
+
+    Attributes
+    ----------
+    path : Path
+        The HTML file (``DIR/replay/case_N.html``).
+    run_id : int
+        Replayed run.
+    start, end : float
+        Simulated window [s] (``end`` is the last logged sample when the run diverged).
+    frame_rate : float
+        Logged samples per simulated second [Hz] (the simulator's ``log_rate``).
+    frames : int
+        Frames in the recording (``round((end - start) * frame_rate) + 1``).
+    speed : float
+        Playback speed (simulated seconds per second of animation) [-].
+    status : str
+        ``"ok"`` or ``"diverged"`` (the replay shows the run up to the divergence).
+    error : str
+        Divergence message (empty if ``ok``).
+    bytes : int
+        Size of the HTML file [B].
+    """
+
+    path: Path
+    run_id: int
+    start: float
+    end: float
+    frame_rate: float
+    frames: int
+    speed: float
+    status: str
+    error: str
+    bytes: int
+
+
+def replay_path(directory: str | Path, run_id: int) -> Path:
+    """``DIR/replay/case_N.html``: where the replay of run ``run_id`` goes."""
+    return Path(directory) / "replay" / f"case_{int(run_id)}.html"
+
+
+def equivalent_box(mass: float, inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sides and axes of the uniform box with a body's mass and central inertia.
+
+    Parameters
+    ----------
+    mass : float
+        Body mass [kg].
+    inertia : ndarray, shape (3, 3)
+        Rotational inertia about the centre of mass [kg m^2].
+
+    Returns
+    -------
+    sides : ndarray, shape (3,)
+        Box sides along the principal axes [m] (``a_i = sqrt(6 (I_j + I_k - I_i) / m)``, at
+        least :data:`MIN_SIDE`).
+    axes : ndarray, shape (3, 3)
+        Principal axes as columns (a proper rotation, body frame).
+    """
+    if not (mass > 0.0):
+        raise ValueError(f"equivalent box: mass must be positive, got {mass!r} kg")
+    moments, axes = np.linalg.eigh(0.5 * (inertia + inertia.T))
+    if np.linalg.det(axes) < 0:
+        axes[:, 2] = -axes[:, 2]
+    total = moments.sum()
+    squares = 6.0 * (total - 2.0 * moments) / mass
+    return np.sqrt(np.maximum(squares, MIN_SIDE**2)), axes
+
+
+class _Capture:
+    """Keeps the root context of the last run of a :class:`MissionSimulation` (its logs)."""
+
+    def __init__(self, simulation):
+        from oos_drake.multibody.mission_sim import MissionSimulation
+
+        class _Capturing(MissionSimulation):
+            def initial_context(inner, *args, **kwargs):  # noqa: N805 - closure over self
+                context, values, schedule = super().initial_context(*args, **kwargs)
+                self.context = context
+                return context, values, schedule
+
+        self.context = None
+        self.simulation = _Capturing(simulation.options, handles=simulation.handles)
+
+    def states(self) -> tuple[np.ndarray, np.ndarray]:
+        log = self.simulation.handles.state_logger.FindLog(self.context)
+        return np.array(log.sample_times()), np.array(log.data())
+
+
+def _load_case(directory: Path, run_id: int):
+    from oos_drake.campaign.runner import case_from_plan_row, load_campaign
+
+    spec, plan = load_campaign(directory)
+    matches = plan[plan["run_id"] == int(run_id)]
+    if matches.empty:
+        raise ValueError(
+            f"--case {run_id}: no such run in {directory} (the plan has runs 0..{len(plan) - 1})"
+        )
+    return spec, case_from_plan_row(spec, matches.iloc[0])
+
+
+def _mission_simulation(spec):
+    from oos_drake.campaign.drake_simulator import DrakeMissionSimulator
+    from oos_drake.campaign.simulator import build_simulator
+
+    simulator = build_simulator(spec.simulator)
+    if not isinstance(simulator, DrakeMissionSimulator):
+        raise ValueError(
+            f"simulator {spec.simulator.name!r} has no 3D model to replay (replay needs the Drake "
+            "mission simulator oos_drake.campaign.drake_simulator:make_simulator)"
+        )
+    return simulator.simulation
+
+
+def _visuals(handles):
+    """``[(path, body, shape, X_BS, rgba)]`` and ``{path: body}`` of the drawn bodies."""
+    from pydrake.geometry import Box, Cylinder, Sphere
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    plant = handles.plant
+    shapes, bodies = [], {}
+
+    def body_path(body):
+        instance = plant.GetModelInstanceName(body.model_instance()).split("::")[-1]
+        return f"{ROOT}/{instance}/{body.name()}", instance
+
+    def add(body, name, shape, X_BS, rgba):
+        path, _ = body_path(body)
+        bodies[path] = body
+        shapes.append((f"{path}/{name}", shape, X_BS, rgba))
+
+    # hubs and array panels: equivalent-inertia boxes at the centre of mass
+    hub_bodies = [handles.hub_joint.child_body(), handles.target_body]
+    panels = [joint.child_body() for joint in handles.drive_joints]
+    for body in hub_bodies + panels:
+        M = body.default_spatial_inertia()
+        mass = M.get_mass()
+        com = M.get_com()
+        inertia = M.Shift(com).CalcRotationalInertia().CopyToFullMatrix3()
+        sides, axes = equivalent_box(mass, inertia)
+        _, instance = body_path(body)
+        add(
+            body,
+            "box",
+            Box(*sides),
+            RigidTransform(RotationMatrix(axes), com),
+            _COLORS.get(instance, _COLORS["arm"]),
+        )
+    # arm links: a cylinder from each link's joint to the next joint (the wrist to J7)
+    arm = list(handles.arm_joints)
+    links = [arm[0].parent_body()] + [joint.child_body() for joint in arm]
+    ends = [joint.frame_on_parent() for joint in arm] + [handles.frames["J7"]]
+    for link, end in zip(links, ends, strict=True):
+        p = end.GetFixedPoseInBodyFrame().translation() if end.body() is link else np.zeros(3)
+        length = float(np.linalg.norm(p))
+        if length < 1e-6:
+            continue
+        z = p / length
+        helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        x = np.cross(helper, z)
+        x /= np.linalg.norm(x)
+        R = np.column_stack([x, np.cross(z, x), z])
+        add(
+            link,
+            "link",
+            Cylinder(LINK_RADIUS, length),
+            RigidTransform(RotationMatrix(R), 0.5 * p),
+            _COLORS["arm"],
+        )
+    for name in ("D1", "D2", "D3", "J7"):
+        frame = handles.frames[name]
+        add(
+            frame.body(),
+            f"port_{name}",
+            Sphere(PORT_RADIUS),
+            frame.GetFixedPoseInBodyFrame(),
+            _COLORS["port"],
+        )
+    return shapes, bodies
+
+
+def record(meshcat, handles, times: np.ndarray, states: np.ndarray, speed: float = 1.0) -> int:
+    """Draw the scene and record one animation frame per logged state.
+
+    Parameters
+    ----------
+    meshcat : pydrake.geometry.Meshcat
+    handles : MissionDiagram
+        The diagram the states belong to.
+    times : ndarray, shape (n,)
+        Sample times [s], uniformly spaced.
+    states : ndarray, shape (nq + nv, n)
+        Plant states at ``times``.
+    speed : float
+        Playback speed [-]: simulated seconds per animation second.
+
+    Returns
+    -------
+    int
+        Frames recorded (``n``).
+    """
+    from pydrake.geometry import Rgba
+    from pydrake.math import RigidTransform
+
+    plant = handles.plant
+    nq = plant.num_positions()
+    n = times.size
+    rate = (n - 1) / (times[-1] - times[0]) if n > 1 else 1.0
+    fps = rate * speed
+    shapes, bodies = _visuals(handles)
+    meshcat.Delete(ROOT)
+    for path, shape, X_BS, rgba in shapes:
+        meshcat.SetObject(path, shape, Rgba(*rgba))
+        meshcat.SetTransform(path, X_BS)
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, states[:nq, 0])
+    centre = 0.5 * (
+        plant.EvalBodyPoseInWorld(context, handles.hub_joint.child_body()).translation()
+        + plant.EvalBodyPoseInWorld(context, handles.target_body).translation()
+    )
+    meshcat.SetCameraPose(centre + np.array(CAMERA_OFFSET), centre)
+    # the default floor grid would cut through the hub: lay it below the spacecraft
+    meshcat.SetTransform("/Grid", RigidTransform(centre + np.array([0.0, 0.0, GRID_DEPTH])))
+    meshcat.StartRecording(frames_per_second=fps, set_visualizations_while_recording=False)
+    for k in range(n):
+        plant.SetPositions(context, states[:nq, k])
+        index = round((times[k] - times[0]) * rate)
+        # a quarter frame past the frame's start, so floor(time * fps) is the index exactly
+        time_in_recording = (index + 0.25) / fps
+        for path, body in bodies.items():
+            meshcat.SetTransform(path, plant.EvalBodyPoseInWorld(context, body), time_in_recording)
+    meshcat.StopRecording()
+    return n
+
+
+def replay_case(
+    directory: str | Path, run_id: int, *, speed: float = 1.0, meshcat=None
+) -> ReplayResult:
+    """Re-simulate run ``run_id`` of a campaign and write its HTML 3D replay.
+
+    Parameters
+    ----------
+    directory : str or Path
+        Campaign directory (``oos campaign run --out``).
+    run_id : int
+        Run to replay (``--case``).
+    speed : float
+        Playback speed [-] (simulated seconds per second of animation; the viewer's *Animations*
+        panel can change it further).
+    meshcat : pydrake.geometry.Meshcat, optional
+        Visualizer to record into (default: a new one on a free local port, closed after).
+
+    Returns
+    -------
+    ReplayResult
+
+    Raises
+    ------
+    ValueError
+        Not a campaign directory, unknown run id, a simulator without a 3D model, or a bad
+        ``speed``; nothing is written then.
+    """
+    from oos_drake.multibody.mission_sim import MissionDiverged
+
+    directory = Path(directory)
+    if not (isinstance(speed, int | float) and math.isfinite(speed) and speed > 0):
+        raise ValueError(f"replay speed must be a positive number, got {speed!r}")
+    spec, case = _load_case(directory, run_id)
+    capture = _Capture(_mission_simulation(spec))
+    status, error = "ok", ""
+    try:
+        capture.simulation.run(
+            dict(case.values),
+            seed=case.seed,
+            start=case.window.start,
+            end=case.window.end,
+            log=False,
+        )
+    except MissionDiverged as exc:
+        status, error = "diverged", str(exc)
+    if capture.context is None:
+        raise ValueError(f"run {run_id}: the simulation did not start ({error})")
+    times, states = capture.states()
+    if times.size == 0:
+        raise ValueError(f"run {run_id}: no logged state to replay ({error or 'empty window'})")
+    owned = meshcat is None
+    if owned:
+        from pydrake.geometry import Meshcat, MeshcatParams
+
+        params = MeshcatParams()
+        params.host = "localhost"
+        meshcat = Meshcat(params)
+    try:
+        frames = record(meshcat, capture.simulation.handles, times, states, float(speed))
+        meshcat.PublishRecording()
+        html = meshcat.StaticHtml()
+    finally:
+        if owned:
+            del meshcat
+    from oos_drake.campaign.store import atomic_write_text
+
+    path = atomic_write_text(html, replay_path(directory, case.run_id))
+    size = len(html.encode("utf-8"))
+    return ReplayResult(
+        path=path,
+        run_id=case.run_id,
+        start=float(times[0]),
+        end=float(times[-1]),
+        frame_rate=float(capture.simulation.options.log_rate),
+        frames=frames,
+        speed=float(speed),
+        status=status,
+        error=error,
+        bytes=size,
+    )
