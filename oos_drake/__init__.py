@@ -1,6 +1,7 @@
 """oos_drake: from flexible multi-body spacecraft data to a certified attitude controller.
 
-Data flows one way: physical data -> LFR model -> analysis/synthesis -> campaign -> tables & figures.
+Data flows one way:
+physical data -> LFR model -> analysis/synthesis -> campaign -> tables & figures.
 
 Subpackages
 -----------

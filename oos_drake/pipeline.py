@@ -99,7 +99,10 @@ def run_pipeline(args: argparse.Namespace) -> int:
 
     controller_key = _digest(model_key, source_key("control", "robust"), *quick)
     run_stage(
-        "controller", out / "controller", controller_key, lambda d: _oos("synth", "--out", d, *quick)
+        "controller",
+        out / "controller",
+        controller_key,
+        lambda d: _oos("synth", "--out", d, *quick),
     )
     controller = out / "controller" / "controller.json"
 

@@ -18,12 +18,17 @@ def test_core_package_does_not_import_pydrake(package):
         "        importlib.import_module(info.name)\n"
         "print('pydrake' in sys.modules)\n"
     )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    )
     assert result.stdout.strip() == "False", f"{package} imports pydrake"
 
 
 def test_cli_help_lists_commands():
     result = subprocess.run(
-        [sys.executable, "-m", "oos_drake.cli", "--help"], capture_output=True, text=True, check=True
+        [sys.executable, "-m", "oos_drake.cli", "--help"],
+        capture_output=True,
+        text=True,
+        check=True,
     )
     assert "usage: oos" in result.stdout

@@ -123,6 +123,7 @@ def _certify(array, sweep, subsets, peaks_grid, *, configuration_label, upper_it
             "study": array.study, "subset": name, "model": model,
             array.label: float(array.values[model]),
             "frequency [Hz]": cert.frequency, "mu_upper": upper, "mu_lower": lower,
+            "mu_upper_at_critical": cert.mu_upper_critical,
             "mu_upper_grid": grid_upper,
             "gap [%]": 100.0 * cert.gap,
             "margin [-]": 1.0 / max(upper, grid_upper) if upper > 0 else np.inf,
@@ -269,6 +270,8 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         docking_certs[phase] = (arr, dc["total"])
         docking_sweeps[phase] = dsweep.rename(columns={"stiffness [N/m or N m/rad]": "time [s]"})
         docking_peaks[phase] = {"stiffness": float(dp["stiffness [N/m or N m/rad]"].iloc[0]),
+                                "gap [%]": float(dp["gap [%]"].iloc[0]),
+                                "mu_upper_grid": float(dp["mu_upper_grid"].iloc[0]),
                                 "frequency [Hz]": float(dp["frequency [Hz]"].iloc[0]),
                                 "mu_lower": float(dp["mu_lower"].iloc[0]),
                                 "mu_upper": float(dp["mu_upper"].iloc[0])}
@@ -384,6 +387,8 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
             "mu_peak_upper": float(max(tot["mu_upper"], tot["mu_upper_grid"])),
             "mu_peak_upper_refined": float(tot["mu_upper"]),
             "mu_peak_lower": float(tot["mu_lower"]),
+            "mu_upper_at_critical": float(tot["mu_upper_at_critical"]),
+            "gap_at_critical_percent": float(tot["gap [%]"]),
             "peak_time_s": float(tot["time [s]"]),
             "peak_frequency_hz": float(tot["frequency [Hz]"]),
             "stability_margin": float(tot["margin [-]"]),

@@ -33,6 +33,9 @@ import pandas as pd
 from oos_drake.robust.blocks import parse_blk
 from oos_drake.robust.lfr_analysis import block_map, delta_channel_response, worst_case_values
 
+#: Smoothing stages of the converged upper bounds (one more than mussv's default).
+CONVERGED_TEMPERATURES = (30.0, 300.0, 3000.0, 30000.0)
+
 #: Columns of the sweep table (``tightened``: upper bound recomputed with many iterations).
 SWEEP_COLUMNS = ["subset", "model", "time [s]", "frequency [Hz]", "mu_upper", "mu_lower",
                  "refined", "tightened"]
@@ -296,7 +299,8 @@ def tighten(sys, sweep: pd.DataFrame, subsets: dict, *, iterations: int = 300,
                 Ms.append((rows.index.to_numpy(), M[:, zrows][:, :, wcols]))
             index = np.concatenate([i for i, _ in Ms])
             M = np.concatenate([m for _, m in Ms])
-            new = mu_upper_bound(np.ascontiguousarray(M), structure, max_iter=iterations).upper
+            new = mu_upper_bound(np.ascontiguousarray(M), structure, max_iter=iterations,
+                                 temperatures=CONVERGED_TEMPERATURES).upper
             old = table.loc[index, "mu_upper"].to_numpy()
             table.loc[index, "mu_upper"] = np.maximum(np.minimum(old, new),
                                                       table.loc[index, "mu_lower"].to_numpy())
@@ -319,6 +323,9 @@ class PeakCertificate:
         Critical frequency [Hz] (of the lower bound's destabilizing perturbation).
     mu_upper, mu_lower : float
         Peak bounds over the analyzed frequencies [-].
+    mu_upper_critical : float
+        Upper bound AT the critical frequency, converged (1000+ BFGS iterations, four
+        smoothing stages): the bound the lower one is compared with (``gap``).
     delta : numpy.ndarray
         Normalized destabilizing perturbation (mussv structure of the subset), ``||delta|| =
         1 / mu_lower``: ``det(I - M11(j 2 pi frequency) delta) = 0``.
@@ -335,14 +342,16 @@ class PeakCertificate:
     frequency: float
     mu_upper: float
     mu_lower: float
+    mu_upper_critical: float
     delta: np.ndarray
     worst_case: dict
     worst_case_normalized: dict
 
     @property
     def gap(self) -> float:
-        """Relative gap ``(upper - lower) / upper`` [-]."""
-        return (self.mu_upper - self.mu_lower) / self.mu_upper if self.mu_upper > 0 else 0.0
+        """Relative gap of the bounds at the critical frequency ``(upper - lower) / upper`` [-]."""
+        up = self.mu_upper_critical
+        return (up - self.mu_lower) / up if up > 0 else 0.0
 
     @property
     def margin(self) -> float:
@@ -413,9 +422,12 @@ def certify_peak(sys, subset: str, members, model: int, frequency_hz: float, *,
                                         [w0 / search_band, w0 * search_band])
     if direct.mu_lower > lower:
         lower, w_crit, delta = direct.mu_lower, direct.omega, direct.delta
-        # the upper bound at the critical frequency too (lower <= upper pointwise)
-        Mc = delta_channel_response(A, Bw, Cz, Dzw, [w_crit])
-        up = np.append(up, mu_upper_bound(Mc, structure, max_iter=upper_iterations).upper)
+    # the converged upper bound at the critical frequency (the certificate's other side)
+    Mc = delta_channel_response(A, Bw, Cz, Dzw, [w_crit])
+    up_crit = float(mu_upper_bound(Mc, structure, max_iter=max(1000, upper_iterations),
+                                   temperatures=CONVERGED_TEMPERATURES).upper[0])
+    up_crit = max(up_crit, lower)
+    up = np.append(up, up_crit)
     peak_up = float(max(up.max(), lower))
     normalized, worst = {}, {}
     if lower > 0:
@@ -425,7 +437,7 @@ def certify_peak(sys, subset: str, members, model: int, frequency_hz: float, *,
             block = delta[b.r_slice, b.c_slice]
             normalized[name] = float(block[0, 0].real) if kind == "ureal" else block.copy()
     return PeakCertificate(subset, int(model), float(time), float(w_crit / (2 * np.pi)),
-                           peak_up, lower, delta, worst, normalized)
+                           peak_up, lower, up_crit, delta, worst, normalized)
 
 
 def peaks_table(sweep: pd.DataFrame) -> pd.DataFrame:

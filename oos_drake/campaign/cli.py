@@ -151,7 +151,7 @@ def register(subparsers) -> None:
         "--worst-cases",
         default=None,
         metavar="PARQUET",
-        help="mu-guided: use this worst_cases.parquet (e.g. from oos analyze) instead of the spec's",
+        help="mu-guided: use this worst_cases.parquet (e.g. from oos analyze), not the spec's",
     )
     _add_executor_options(run)
     run.set_defaults(func=_run)
@@ -179,8 +179,9 @@ def register(subparsers) -> None:
     replay.add_argument(
         "--speed",
         type=float,
-        default=1.0,
-        help="playback speed: simulated seconds per second of animation (default 1)",
+        default=None,
+        help="playback speed: simulated seconds per second of animation (default: the "
+        "smallest of 1, 2, 5, 10, 25, 50, 100 x that plays the run within a minute)",
     )
     replay.set_defaults(func=_replay)
 

@@ -22,9 +22,10 @@ Each body is a Meshcat path whose world pose is set at every logged sample of th
 (``time_in_recording``); the shapes hang below it at fixed offsets. The frames are the samples
 of the simulation's state logger (``log_rate`` of the campaign's simulator options), so the
 recording holds ``duration x log_rate + 1`` frames (inclusive ends) played at ``speed`` times
-real time. The camera starts looking at the midpoint of the two hubs; Meshcat's floor grid is
-laid 3 m below it as a reference for the hubs' drift. The arrays are drawn rigid: their modal
-bodies are fictitious (the modal coordinates are in the campaign's time series).
+real time (default: the window within a minute, see :func:`default_speed`). The camera starts
+looking at the midpoint of the two hubs; Meshcat's floor grid is laid 3 m below it as a reference
+for the hubs' drift. The arrays are drawn rigid: their modal bodies are fictitious (the modal
+coordinates are in the campaign's time series).
 """
 
 from __future__ import annotations
@@ -35,7 +36,14 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["ReplayResult", "equivalent_box", "replay_case", "replay_path"]
+__all__ = [
+    "ReplayResult",
+    "default_speed",
+    "equivalent_box",
+    "record",
+    "replay_case",
+    "replay_path",
+]
 
 #: Meshcat root path of the replay's objects.
 ROOT = "/oos"
@@ -47,6 +55,10 @@ PORT_RADIUS = 0.04
 CAMERA_OFFSET = (7.0, -9.0, 5.0)
 #: Height of Meshcat's floor grid relative to that midpoint [m].
 GRID_DEPTH = -3.0
+#: Playback speeds tried by :func:`default_speed` [-].
+SPEEDS = (1, 2, 5, 10, 25, 50, 100)
+#: Longest default playback [s].
+PLAYBACK_TARGET = 60.0
 #: Thinnest side of a drawn box [m] (the arrays are thin plates).
 MIN_SIDE = 0.02
 
@@ -287,6 +299,7 @@ def record(meshcat, handles, times: np.ndarray, states: np.ndarray, speed: float
     meshcat.SetCameraPose(centre + np.array(CAMERA_OFFSET), centre)
     # the default floor grid would cut through the hub: lay it below the spacecraft
     meshcat.SetTransform("/Grid", RigidTransform(centre + np.array([0.0, 0.0, GRID_DEPTH])))
+    meshcat.DeleteRecording()
     meshcat.StartRecording(frames_per_second=fps, set_visualizations_while_recording=False)
     for k in range(n):
         plant.SetPositions(context, states[:nq, k])
@@ -299,8 +312,20 @@ def record(meshcat, handles, times: np.ndarray, states: np.ndarray, speed: float
     return n
 
 
+def default_speed(duration: float) -> float:
+    """Playback speed that shows ``duration`` [s] in at most :data:`PLAYBACK_TARGET` seconds.
+
+    The smallest of :data:`SPEEDS` that does (the largest if none does): a 6 s window plays in
+    real time, the 1500 s mission at 25x (one minute).
+    """
+    for speed in SPEEDS:
+        if duration / speed <= PLAYBACK_TARGET + 1e-9:
+            return float(speed)
+    return float(SPEEDS[-1])
+
+
 def replay_case(
-    directory: str | Path, run_id: int, *, speed: float = 1.0, meshcat=None
+    directory: str | Path, run_id: int, *, speed: float | None = None, meshcat=None
 ) -> ReplayResult:
     """Re-simulate run ``run_id`` of a campaign and write its HTML 3D replay.
 
@@ -310,9 +335,9 @@ def replay_case(
         Campaign directory (``oos campaign run --out``).
     run_id : int
         Run to replay (``--case``).
-    speed : float
+    speed : float, optional
         Playback speed [-] (simulated seconds per second of animation; the viewer's *Animations*
-        panel can change it further).
+        panel can change it further). Default: :func:`default_speed` of the window.
     meshcat : pydrake.geometry.Meshcat, optional
         Visualizer to record into (default: a new one on a free local port, closed after).
 
@@ -329,7 +354,9 @@ def replay_case(
     from oos_drake.multibody.mission_sim import MissionDiverged
 
     directory = Path(directory)
-    if not (isinstance(speed, int | float) and math.isfinite(speed) and speed > 0):
+    if speed is not None and not (
+        isinstance(speed, int | float) and math.isfinite(speed) and speed > 0
+    ):
         raise ValueError(f"replay speed must be a positive number, got {speed!r}")
     spec, case = _load_case(directory, run_id)
     capture = _Capture(_mission_simulation(spec))
@@ -349,6 +376,8 @@ def replay_case(
     times, states = capture.states()
     if times.size == 0:
         raise ValueError(f"run {run_id}: no logged state to replay ({error or 'empty window'})")
+    if speed is None:
+        speed = default_speed(case.window.end - case.window.start)
     owned = meshcat is None
     if owned:
         from pydrake.geometry import Meshcat, MeshcatParams
@@ -356,13 +385,11 @@ def replay_case(
         params = MeshcatParams()
         params.host = "localhost"
         meshcat = Meshcat(params)
-    try:
-        frames = record(meshcat, capture.simulation.handles, times, states, float(speed))
-        meshcat.PublishRecording()
-        html = meshcat.StaticHtml()
-    finally:
-        if owned:
-            del meshcat
+    frames = record(meshcat, capture.simulation.handles, times, states, float(speed))
+    meshcat.PublishRecording()
+    html = meshcat.StaticHtml()
+    if owned:
+        meshcat = None  # closes the server and its port
     from oos_drake.campaign.store import atomic_write_text
 
     path = atomic_write_text(html, replay_path(directory, case.run_id))

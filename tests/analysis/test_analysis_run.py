@@ -67,7 +67,7 @@ def test_tables_have_documented_columns(analysis):
     assert list(pd.read_parquet(out / "time_check.parquet").columns) == TIME_COLUMNS
     peaks = pd.read_parquet(out / "stability_peaks.parquet")
     for col in ("subset", "time [s]", "frequency [Hz]", "mu_upper", "mu_lower", "gap [%]",
-                "margin [-]", "stiffness [N/m or N m/rad]"):
+                "margin [-]", "stiffness [N/m or N m/rad]", "mu_upper_at_critical"):
         assert col in peaks.columns, col
     sweep = pd.read_parquet(out / "mu_mission.parquet")
     assert set(sweep["subset"]) == {"total", "real", "modal", "mechanical", "additive",
@@ -87,6 +87,17 @@ def test_worst_cases_file_reads_back_with_the_campaign_schema(analysis):
     assert {r.subset.split(",")[0] for r in regions}
     table = pd.read_parquet(out / "worst_cases.parquet")
     assert "wc:w1_SA3 [rad/s]" in table.columns and "wc:Delta_add [-]" in table.columns
+
+
+def test_total_peak_bounds_meet_within_five_percent(analysis):
+    """At the critical frequency the converged upper bound and the certified lower one meet."""
+    out, summary, _ = analysis
+    peaks = pd.read_parquet(out / "stability_peaks.parquet")
+    for _, row in peaks[peaks["subset"].isin(["total", "modal"])].iterrows():
+        assert row["mu_lower"] > 0
+        assert row["mu_lower"] <= row["mu_upper_at_critical"] * (1 + 1e-9)
+        assert row["gap [%]"] < 5.0, (row["study"], row["subset"], row["gap [%]"])
+    assert summary["mission"]["gap_at_critical_percent"] < 5.0
 
 
 def test_additive_peak_is_certified_exactly(analysis):

@@ -242,3 +242,19 @@ def test_noise_seed_is_reproducible_and_effective(mission):
     assert dict(run()) == dict(
         mission.run({"noise_seed": 3}, seed=99, start=1050.0, end=1070.0, log=False).metrics
     )
+
+
+@pytest.mark.parametrize("sm, time", [("SM1", 500.0), ("SM2", 1000.0)])
+def test_every_bushing_value_reaches_the_context(mission, sm, time):
+    """The four constants of the connected bushing, read back from the plant context."""
+    values = {f"k_shear_{sm}": 1.5e4, f"k_tors_{sm}": 2.5e4, f"d_shear_{sm}": 35.0,
+              f"d_tors_{sm}": 45.0}  # fmt: skip
+    context, _, _ = mission.initial_context(values, 0, time, time + 1.0)
+    pc = mission.handles.plant.GetMyContextFromRoot(context)
+    bushing = mission.handles.bushings[sm]
+    np.testing.assert_array_equal(bushing.GetForceStiffnessConstants(pc), [1.5e4] * 3)
+    np.testing.assert_array_equal(bushing.GetTorqueStiffnessConstants(pc), [2.5e4] * 3)
+    np.testing.assert_array_equal(bushing.GetForceDampingConstants(pc), [35.0] * 3)
+    np.testing.assert_array_equal(bushing.GetTorqueDampingConstants(pc), [45.0] * 3)
+    other = mission.handles.bushings["SM2" if sm == "SM1" else "SM1"]
+    np.testing.assert_array_equal(other.GetForceStiffnessConstants(pc), [0.0] * 3)

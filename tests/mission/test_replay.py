@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import re
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -14,6 +15,7 @@ pytestmark = pytest.mark.drake
 
 msgpack = pytest.importorskip("msgpack")
 
+CAMPAIGNS = Path(__file__).resolve().parents[2] / "campaigns"
 LOG_RATE = 2.0  # [Hz]
 BEFORE, AFTER = 2.0, 4.0  # [s] around the capture (255 s)
 
@@ -83,6 +85,7 @@ def test_replay_writes_scene_and_animation_matching_the_run(campaign):
 
     run_id = 1
     result = replay_case(campaign, run_id)
+    assert result.speed == 1.0  # a 6 s window plays in real time by default
     path = replay_path(campaign, run_id)
     assert result.path == path == campaign / "replay" / "case_1.html"
     assert result.status == "ok"
@@ -183,6 +186,33 @@ def test_bad_case_or_directory_is_rejected_and_writes_nothing(campaign, tmp_path
         replay_case(campaign, 0, speed=0.0)
     assert main(["campaign", "replay", str(campaign), "--case", "7"]) == 2
     assert not replay_path(campaign, 7).exists()
+
+
+def test_campaign_without_a_3d_model_is_rejected(tmp_path):
+    """The demo campaign's single-axis simulator has no bodies to draw."""
+    from oos_drake.campaign.runner import run_campaign
+    from oos_drake.multibody.replay import replay_case, replay_path
+
+    demo = (CAMPAIGNS / "demo.toml").read_text()
+    assert "n_runs = 200" in demo and "after = 130.0" in demo
+    spec = tmp_path / "demo.toml"
+    spec.write_text(
+        demo.replace("n_runs = 200", "n_runs = 1").replace("after = 130.0", "after = 5.0")
+    )
+    run_campaign(spec, tmp_path / "demo", workers=1, progress=False)
+    with pytest.raises(ValueError, match="flexible-attitude.*no 3D model"):
+        replay_case(tmp_path / "demo", 0)
+    assert not replay_path(tmp_path / "demo", 0).exists()
+
+
+def test_default_speed_plays_within_a_minute():
+    from oos_drake.multibody.replay import default_speed
+
+    assert default_speed(6.0) == 1.0
+    assert default_speed(60.0) == 1.0
+    assert default_speed(61.0) == 2.0
+    assert default_speed(1500.0) == 25.0  # the whole mission in one minute
+    assert default_speed(1.0e5) == 100.0
 
 
 def test_equivalent_box_has_the_body_inertia():
