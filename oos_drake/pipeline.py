@@ -134,6 +134,8 @@ def run_pipeline(args: argparse.Namespace) -> int:
             args.workers,
             "--worst-cases",
             out / "analysis" / "worst_cases.parquet",
+            "--simulator-option",
+            f"controller={controller.resolve()}",
         )
     _oos("campaign", "report", campaign)
 

@@ -13,6 +13,7 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
@@ -48,6 +49,20 @@ def _print_summary(summary) -> None:
     print(f"next: oos campaign report {summary.directory}")
 
 
+def _parse_options(pairs: list[str] | None) -> dict:
+    """``KEY=VALUE`` strings -> dict; a VALUE that parses as JSON is taken as JSON."""
+    options = {}
+    for pair in pairs or ():
+        key, sep, value = pair.partition("=")
+        if not sep or not key:
+            raise ValueError(f"--simulator-option {pair!r}: expected KEY=VALUE")
+        try:
+            options[key] = json.loads(value)
+        except json.JSONDecodeError:
+            options[key] = value
+    return options
+
+
 def _run(args: argparse.Namespace) -> int:
     from oos_drake.campaign.runner import run_campaign
     from oos_drake.campaign.spec import load_spec
@@ -62,6 +77,7 @@ def _run(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         progress=not args.no_progress,
         worst_cases=args.worst_cases,
+        simulator_options=_parse_options(args.simulator_option),
     )
     _print_summary(summary)
     return 0
@@ -152,6 +168,12 @@ def register(subparsers) -> None:
         default=None,
         metavar="PARQUET",
         help="mu-guided: use this worst_cases.parquet (e.g. from oos analyze), not the spec's",
+    )
+    run.add_argument(
+        "--simulator-option",
+        action="append",
+        metavar="KEY=VALUE",
+        help="override a simulator option of the spec (repeatable; VALUE may be JSON)",
     )
     _add_executor_options(run)
     run.set_defaults(func=_run)

@@ -14,8 +14,10 @@ from __future__ import annotations
 import json
 import math
 import sys
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -24,7 +26,7 @@ from tqdm import tqdm
 from oos_drake.campaign import store
 from oos_drake.campaign.executors import RunResult, execute_case, make_executor
 from oos_drake.campaign.samplers import make_plan, region_counts
-from oos_drake.campaign.simulator import MissionWindow, RunCase
+from oos_drake.campaign.simulator import MissionWindow, RunCase, SimulatorRecipe
 from oos_drake.campaign.spec import CampaignSpec, load_spec, parse_spec, spec_to_toml
 
 
@@ -191,12 +193,16 @@ def _execute(
 
 
 def prepare_campaign(
-    spec_path: str | Path, out: str | Path, worst_cases: str | Path | None = None
+    spec_path: str | Path,
+    out: str | Path,
+    worst_cases: str | Path | None = None,
+    simulator_options: Mapping[str, Any] | None = None,
 ) -> tuple[Path, CampaignSpec, pd.DataFrame]:
     """Validate the spec, build the plan, then (only then) create the campaign directory.
 
     ``worst_cases`` replaces the mu-guided sampler's ``worst_cases`` file of the spec (e.g. the
-    output of ``oos analyze``); the substituted spec is validated again.
+    output of ``oos analyze``); ``simulator_options`` update the spec's simulator options (e.g. a
+    synthesized ``controller``). The modified spec is validated again.
     """
     spec = load_spec(spec_path)
     if worst_cases is not None:
@@ -205,7 +211,12 @@ def prepare_campaign(
         worst_cases = Path(worst_cases).resolve()
         if not worst_cases.is_file():
             raise ValueError(f"--worst-cases {worst_cases}: file not found")
-        spec = parse_spec(spec_to_toml(spec, str(worst_cases)), source=Path(spec_path))
+    if simulator_options:
+        options = {**spec.simulator.option_dict, **simulator_options}
+        spec = replace(spec, simulator=SimulatorRecipe.create(spec.simulator.name, options))
+    if worst_cases is not None or simulator_options:
+        toml = spec_to_toml(spec, str(worst_cases) if worst_cases is not None else None)
+        spec = parse_spec(toml, source=Path(spec_path))
     plan = make_plan(spec)
     directory = Path(out)
     if directory.exists() and any(directory.iterdir()):
@@ -236,9 +247,10 @@ def run_campaign(
     scheduler: str | None = None,
     progress: bool = True,
     worst_cases: str | Path | None = None,
+    simulator_options: Mapping[str, Any] | None = None,
 ) -> CampaignSummary:
     """Validate, plan and run a campaign into ``out`` (see the module docstring)."""
-    directory, _, _ = prepare_campaign(spec_path, out, worst_cases)
+    directory, _, _ = prepare_campaign(spec_path, out, worst_cases, simulator_options)
     # run from the directory's own resolved spec: what resume and rerun will see
     spec, plan = load_campaign(directory)
     if spec.sampler.kind == "mu-guided":

@@ -238,6 +238,7 @@ class SimulatorRecipe:
 #: Built-in simulators: name -> "module:factory". Other packages add theirs with register_simulator.
 _REGISTRY: dict[str, str] = {
     "flexible-attitude": "oos_drake.campaign.attitude_sim:make_simulator",
+    "drake-mission": "oos_drake.campaign.drake_simulator:make_simulator",
 }
 
 

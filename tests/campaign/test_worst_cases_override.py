@@ -25,3 +25,20 @@ def test_override_on_plain_monte_carlo_is_refused(tmp_path):
     with pytest.raises(ValueError, match="not mu-guided"):
         prepare_campaign(CAMPAIGNS / "demo.toml", tmp_path / "out", tmp_path / "x.parquet")
     assert not (tmp_path / "out").exists()
+
+
+def test_simulator_option_override_reaches_the_resolved_spec(tmp_path):
+    _, spec, _ = prepare_campaign(
+        CAMPAIGNS / "demo.toml", tmp_path / "out", simulator_options={"torque_limit": 1.5}
+    )
+    assert spec.simulator.option_dict["torque_limit"] == 1.5
+    assert spec.simulator.option_dict["control_rate"] == 10.0  # untouched options kept
+    assert "torque_limit = 1.5" in (tmp_path / "out" / "spec.toml").read_text()
+
+
+def test_unknown_simulator_option_is_refused_before_anything_is_written(tmp_path):
+    with pytest.raises(ValueError, match="no_such_option"):
+        prepare_campaign(
+            CAMPAIGNS / "demo.toml", tmp_path / "out", simulator_options={"no_such_option": 1}
+        )
+    assert not (tmp_path / "out").exists()
