@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 run: $(STAMP)
-	$(VENV)/bin/oos run --out $(OUT)
+	$(VENV)/bin/oos run --out $(OUT) $(ARGS)
 
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest -q
