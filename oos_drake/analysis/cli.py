@@ -50,7 +50,8 @@ def run_analyze(args) -> int:
     print(f"mission: mu peak <= {m['mu_peak_upper']:.4g} "
           f"(refined {m['mu_peak_upper_refined']:.4g}, "
           f"certified >= {m['mu_peak_lower']:.4g}) at t = {m['peak_time_s']:.1f} s, "
-          f"f = {m['peak_frequency_hz']:.3g} Hz (upper bound there {m['mu_upper_at_critical']:.4g}, "
+          f"f = {m['peak_frequency_hz']:.3g} Hz "
+          f"(upper bound there {m['mu_upper_at_critical']:.4g}, "
           f"gap {m['gap_at_critical_percent']:.2g} %); stability margin "
           f"{m['stability_margin']:.3g} "
           f"(paper: mu < 0.79 at 275 s, 0.55 Hz)")

@@ -167,3 +167,28 @@ def time_check_figure(signals: pd.DataFrame, summary: pd.DataFrame, path) -> Pat
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return Path(path)
+
+
+def open_loop_figure(table: pd.DataFrame, title: str, path) -> Path:
+    """One panel per subset: sampled gains (grey) over the nominal (black)."""
+    plt = _plt()
+    names = _ordered([s for s in table["subset"].unique() if s != "nominal"])
+    cols = 3
+    rows = int(np.ceil(len(names) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(14, 3.6 * rows), squeeze=False)
+    nominal = table[table["subset"] == "nominal"]
+    for ax, name in zip(axes.ravel(), names, strict=False):
+        for _, part in table[table["subset"] == name].groupby("sample"):
+            ax.semilogx(part["frequency [Hz]"], part["gain [dB]"], color="0.6", lw=0.6)
+        ax.semilogx(nominal["frequency [Hz]"], nominal["gain [dB]"], "k", lw=1.3)
+        ax.set_title(name)
+        ax.set_xlabel("frequency [Hz]")
+        ax.set_ylabel("gain [dB]")
+        ax.grid(True, which="both", alpha=0.3)
+    for ax in axes.ravel()[len(names):]:
+        ax.set_visible(False)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return Path(path)

@@ -11,6 +11,7 @@ Files written in ``out_dir`` (Parquet tables are tidy, units in column names):
 ``time_check.parquet``          APE / torque of the perturbed closed loops vs the requirements
 ``time_signals.parquet``        the simulated signals
 ``worst_cases.parquet``         critical regions for the mu-guided campaign (campaign schema)
+``open_loop_effects.parquet``   sampled open-loop gains per uncertainty set (Fig. unc_sensitivity)
 ``summary.json``                controller, key numbers, paper values, timings
 ``*.png``                       the figures
 """
@@ -64,9 +65,11 @@ class AnalysisOptions:
         BFGS iterations of the upper bound on the local grid of each peak.
     certify_points : int
         Points of that local grid.
-    tighten_batch : int
-        Highest grid points recomputed per round with ``certify_iterations`` (see
-        :func:`~oos_drake.analysis.stability.tighten`).
+    open_loop_samples : int
+        Samples per uncertainty set of the open-loop figure (0: skip).
+    tighten_batch, tighten_rounds, tighten_iterations : int
+        Highest grid points recomputed per round, rounds, and BFGS iterations (four smoothing
+        stages) of :func:`~oos_drake.analysis.stability.tighten`.
     sensitivity : bool
         Compute the sensitivity table.
     time_check : bool
@@ -88,7 +91,10 @@ class AnalysisOptions:
     performance_points: int = 24
     certify_iterations: int = 300
     certify_points: int = 41
-    tighten_batch: int = 120
+    tighten_batch: int = 300
+    tighten_rounds: int = 6
+    tighten_iterations: int = 150
+    open_loop_samples: int = 20
     sensitivity: bool = True
     time_check: bool = True
     time_check_duration: float = 600.0
@@ -151,6 +157,12 @@ def _certify(array, sweep, subsets, peaks_grid, *, configuration_label, upper_it
             })
         del phys
     return pd.DataFrame(rows), pd.DataFrame(perturbation_rows), certificates
+
+
+def _moment_time(name, scenario=None) -> float:
+    from oos_drake.scenario.timeline import mission_timeline
+
+    return float(mission_timeline(scenario).moments[name].time)
 
 
 def _unit(name):
@@ -233,8 +245,9 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         f"subsets {list(subsets)}; nominal loops stable: {int((abscissa < 0).sum())}/{times.size}")
     sweep = mu_sweep(mission.system, omega, subsets, times=times, options=options.sweep,
                      progress=options.progress, description="mu mission")
-    sweep = tighten(mission.system, sweep, subsets, iterations=options.certify_iterations,
-                    batch=options.tighten_batch, progress=options.progress)
+    sweep = tighten(mission.system, sweep, subsets, iterations=options.tighten_iterations,
+                    batch=options.tighten_batch, rounds=options.tighten_rounds,
+                    n_jobs=options.sweep.n_jobs, progress=options.progress)
     sweep.to_parquet(out / "mu_mission.parquet", index=False)
     paths["mu_mission"] = out / "mu_mission.parquet"
     lap("mu sweep mission")
@@ -254,8 +267,9 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         tot = {"total": uncertainty_subsets(arr.system.uncertainty)["total"]}
         dsweep = mu_sweep(arr.system, omega, tot, times=stiffness, options=options.sweep,
                           progress=options.progress, description=f"mu docking {phase}")
-        dsweep = tighten(arr.system, dsweep, tot, iterations=options.certify_iterations,
-                         batch=options.tighten_batch, progress=options.progress)
+        dsweep = tighten(arr.system, dsweep, tot, iterations=options.tighten_iterations,
+                         batch=options.tighten_batch, rounds=options.tighten_rounds,
+                         n_jobs=options.sweep.n_jobs, progress=options.progress)
         dsweep = dsweep.rename(columns={"time [s]": "stiffness [N/m or N m/rad]"})
         dsweep.to_parquet(out / f"docking_{phase}.parquet", index=False)
         paths[f"docking_{phase}"] = out / f"docking_{phase}.parquet"
@@ -363,6 +377,26 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         figures.time_check_figure(sig_all, tsum, out / "time_check.png")
         paths["time_check_png"] = out / "time_check.png"
         lap("time-domain check")
+    # ------------------------------------------------------------------ open-loop effects
+    if options.open_loop_samples > 0:
+        from oos_drake.analysis.loop import uncertain_plant
+        from oos_drake.analysis.open_loop import uncertainty_effects
+        from oos_drake.lfr import usubs
+        from oos_drake.scenario.model import build_mission_model, mission_values
+
+        t_moment = _moment_time("2", scenario)
+        plant = usubs(build_mission_model(scenario), mission_values([t_moment], scenario)).model(0)
+        p_hat = uncertain_plant(plant, controller.spec)
+        effects = uncertainty_effects(p_hat, uncertainty_subsets(p_hat.uncertainty),
+                                      2 * np.pi * np.geomspace(0.05, 20.0, 300),
+                                      samples=options.open_loop_samples,
+                                      rng=np.random.default_rng(0))
+        effects.to_parquet(out / "open_loop_effects.parquet", index=False)
+        paths["open_loop_effects"] = out / "open_loop_effects.parquet"
+        paths["open_loop_png"] = figures.open_loop_figure(
+            effects, f"T_ext,G1{{1}} -> wdot{{1}} at moment 2 (t = {t_moment:g} s): samples of "
+            "each uncertainty set", out / "open_loop_effects.png")
+        lap("open-loop effects")
     # ------------------------------------------------------------------ figures
     common_hz = omega / (2 * np.pi)
     paths["mu_mission_png"] = figures.mu_mission_figure(sweep, common_hz, peaks,

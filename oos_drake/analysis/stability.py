@@ -261,8 +261,17 @@ def mu_sweep(sys, omega, subsets: dict, *, times=None, options: SweepOptions | N
     return table.sort_values(["subset", "model", "frequency [Hz]"], ignore_index=True)
 
 
+def _tighten_task(task):
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    M, blk, iterations = task
+    return mu_upper_bound(np.ascontiguousarray(M), parse_blk(blk), max_iter=iterations,
+                          temperatures=CONVERGED_TEMPERATURES).upper
+
+
 def tighten(sys, sweep: pd.DataFrame, subsets: dict, *, iterations: int = 300,
-            batch: int = 120, rounds: int = 4, progress: bool = True) -> pd.DataFrame:
+            batch: int = 120, rounds: int = 4, n_jobs: int = 1,
+            progress: bool = True) -> pd.DataFrame:
     """Recompute the highest upper bounds with many iterations until the peak is a tight one.
 
     Every grid value is a valid bound, but a cheap one can sit far above the converged D-G
@@ -278,14 +287,18 @@ def tighten(sys, sweep: pd.DataFrame, subsets: dict, *, iterations: int = 300,
     """
     from tqdm.auto import tqdm
 
-    from oos_drake.robust.mu_upper import mu_upper_bound
-
     table = sweep.copy()
     A, Bw, Cz, Dzw = delta_matrices(sys)
     parts = subset_parts(sys, subsets)
+    pool = None
+    if n_jobs > 1:
+        import multiprocessing as mp
+
+        method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
+        pool = ProcessPoolExecutor(n_jobs, mp_context=mp.get_context(method),
+                                   initializer=_init_worker)
     for name in tqdm(list(parts), desc="tighten peaks", disable=not progress):
         zrows, wcols, blk = parts[name]
-        structure = parse_blk(blk)
         for _ in range(rounds):
             part = table[(table["subset"] == name) & ~table["tightened"]]
             top_all = table.loc[table["subset"] == name, "mu_upper"].idxmax()
@@ -299,12 +312,18 @@ def tighten(sys, sweep: pd.DataFrame, subsets: dict, *, iterations: int = 300,
                 Ms.append((rows.index.to_numpy(), M[:, zrows][:, :, wcols]))
             index = np.concatenate([i for i, _ in Ms])
             M = np.concatenate([m for _, m in Ms])
-            new = mu_upper_bound(np.ascontiguousarray(M), structure, max_iter=iterations,
-                                 temperatures=CONVERGED_TEMPERATURES).upper
+            if pool is None:
+                new = _tighten_task((M, blk, iterations))
+            else:
+                chunks = np.array_split(np.arange(M.shape[0]), n_jobs)
+                new = np.concatenate(list(pool.map(
+                    _tighten_task, [(M[c], blk, iterations) for c in chunks if c.size])))
             old = table.loc[index, "mu_upper"].to_numpy()
             table.loc[index, "mu_upper"] = np.maximum(np.minimum(old, new),
                                                       table.loc[index, "mu_lower"].to_numpy())
             table.loc[index, "tightened"] = True
+    if pool is not None:
+        pool.shutdown()
     return table
 
 
@@ -412,7 +431,8 @@ def certify_peak(sys, subset: str, members, model: int, frequency_hz: float, *,
     from oos_drake.robust.mu_lower import mu_lower_bound
     from oos_drake.robust.mu_upper import mu_upper_bound
 
-    up_res = mu_upper_bound(np.ascontiguousarray(M), structure, max_iter=upper_iterations)
+    up_res = mu_upper_bound(np.ascontiguousarray(M), structure, max_iter=upper_iterations,
+                            temperatures=CONVERGED_TEMPERATURES)
     up = up_res.upper
     lo_res = mu_lower_bound(M, structure, start_inputs=up_res.worst_input,
                             restarts=opts.lower_restarts, iters=opts.lower_iterations)

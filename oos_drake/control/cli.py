@@ -99,7 +99,12 @@ def register(subparsers) -> None:
         "--configurations", type=int, default=200, help="equally spaced mission configurations"
     )
     parser.add_argument("--restarts", type=int, default=2, help="random restarts")
-    parser.add_argument("--max-iterations", type=int, default=150, help="BFGS iterations per run")
+    parser.add_argument(
+        "--max-iterations",
+        type=int,
+        default=150,
+        help="optimizer iterations per run (total, metric restarts included)",
+    )
     parser.add_argument(
         "--worst-case-rounds",
         type=int,

@@ -159,10 +159,13 @@ def _interconnect(plants: PlantArray, models: ModelSet, spec) -> WeightedInterco
     return weighted_interconnection(plants.evaluate(models.config_index, models.values), spec)
 
 
-def gamma_over(plants: PlantArray, models: ModelSet, K, spec=None):
-    """Per-model peak gains of the closed loops with gain ``K`` (a :class:`PeakGain`)."""
+def gamma_over(plants: PlantArray, models: ModelSet, K, spec=None, *, certify=False):
+    """Per-model peak gains of the closed loops with gain ``K`` (a :class:`PeakGain`).
+
+    ``certify`` checks each value with the Hamiltonian test (see :func:`peak_gain`).
+    """
     M = _interconnect(plants, models, spec).close(K)
-    return peak_gain(M.A, M.B, M.C, M.D)
+    return peak_gain(M.A, M.B, M.C, M.D, certify=certify)
 
 
 def _gain_scale(K0: np.ndarray) -> np.ndarray:
@@ -399,7 +402,7 @@ def synthesize(
             if r == 0 or g < gamma_best:
                 K_best, gamma_best = K, g
         # 1. every configuration at nominal parameters: add the violators to the working set
-        peaks = gamma_over(plants, all_configs, K_best, spec)
+        peaks = gamma_over(plants, all_configs, K_best, spec, certify=True)
         in_set = np.zeros(N, dtype=bool)
         in_set[
             working.config_index[np.all(working.values == nominal[working.config_index], axis=1)]
@@ -440,7 +443,7 @@ def synthesize(
 
     models = all_configs.extend(worst.config_index, worst.values)
     added = np.concatenate([np.zeros(N, dtype=bool), np.ones(worst.config_index.size, dtype=bool)])
-    final = gamma_over(plants, models, K_best, spec)
+    final = gamma_over(plants, models, K_best, spec, certify=True)
     gamma = float(np.max(final.gamma))
     table = pd.DataFrame({"config": models.config_index})
     for j, p in enumerate(plants.parameters):

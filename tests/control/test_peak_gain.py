@@ -61,3 +61,13 @@ def test_unstable_model_has_infinite_gain():
     result = peak_gain(A, B, C, D)
     assert np.isinf(result.gamma[0])
     assert result.gamma[1] == pytest.approx(1.0, rel=1e-9)  # 1/(s+1) peaks at DC
+
+
+def test_certified_peak_gain_agrees_with_ab13dd_and_bounds_the_grid():
+    rng = np.random.default_rng(5)
+    A, B, C, D = lightly_damped_models(rng, N=6, n_modes=8)
+    coarse = peak_gain(A, B, C, D, points_per_decade=2, candidates=1, iterations=0)
+    certified = peak_gain(A, B, C, D, points_per_decade=2, candidates=1, iterations=0, certify=True)
+    assert np.all(certified.gamma >= coarse.gamma * (1 - 1e-12))
+    for i in range(A.shape[0]):
+        assert certified.gamma[i] == pytest.approx(ab13dd_norm(A[i], B[i], C[i], D[i])[0], rel=1e-6)
