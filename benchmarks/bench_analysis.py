@@ -44,8 +44,14 @@ def main() -> None:
     omega = 2 * np.pi * np.geomspace(0.005, 5.0, int(3 * args.ppd) + 1)
 
     t0 = time.perf_counter()
-    ours = mu_sweep(arr, omega, total, times=times,
-                    options=SweepOptions(n_jobs=1, pole_points=0), progress=False)
+    ours = mu_sweep(
+        arr,
+        omega,
+        total,
+        times=times,
+        options=SweepOptions(n_jobs=1, pole_points=0),
+        progress=False,
+    )
     t_ours = time.perf_counter() - t0
     t0 = time.perf_counter()
     base = robust_sweep(arr, omega, subsets=total, times=times, n_jobs=1, refine_points=3)
@@ -66,15 +72,21 @@ def main() -> None:
     t_mussv = time.perf_counter() - t0
 
     print(f"{'method':44s} {'wall [s]':>9s} {'matrices':>9s} {'ms/matrix':>10s} {'peak':>8s}")
-    for name, table, t in (("analysis.mu_sweep (batched, 30 it + refine)", ours, t_ours),
-                           ("robust.robust_sweep (mussv defaults)", base, t_base)):
-        print(f"{name:44s} {t:9.2f} {len(table):9d} {1e3 * t / len(table):10.2f} "
-              f"{table['mu_upper'].max():8.4f}")
+    for name, table, t in (
+        ("analysis.mu_sweep (batched, 30 it + refine)", ours, t_ours),
+        ("robust.robust_sweep (mussv defaults)", base, t_base),
+    ):
+        print(
+            f"{name:44s} {t:9.2f} {len(table):9d} {1e3 * t / len(table):10.2f} "
+            f"{table['mu_upper'].max():8.4f}"
+        )
     print(f"speed-up per matrix: {(t_base / len(base)) / (t_ours / len(ours)):.1f}x")
     print(f"{'lower bound at the peak model':44s} {'wall [s]':>9s} {'mu_lower':>10s}")
     print(f"{'direct destabilizing search':44s} {t_direct:9.2f} {direct.mu_lower:10.4f}")
-    print(f"{'mussv power iteration (21 local points)':44s} {t_mussv:9.2f} "
-          f"{float(np.max(ref.lower)):10.4f}")
+    print(
+        f"{'mussv power iteration (21 local points)':44s} {t_mussv:9.2f} "
+        f"{float(np.max(ref.lower)):10.4f}"
+    )
 
 
 if __name__ == "__main__":

@@ -2,15 +2,17 @@
 
 Modules, in the order of the data flow:
 
-``controller``     read the controller JSON of ``oos synth`` (or the labeled baseline)
+``controller``     the controller JSON of ``oos synth`` (or the labeled baseline)
 ``loop``           the uncertain closed loop ``d -> e`` with ``Delta_tot = diag(Delta_real,
                    Delta_add, Delta_mul)`` around the scenario LFR
-``subsets``        the named uncertainty subsets (total, real, modal, mechanical, additive,
-                   multiplicative) and physical units of the blocks
-``stability``      mu bounds over configurations x frequencies x subsets, peaks, certificates
+``models``         closed-loop model arrays: mission (M_330) and docking phases 7 / 8
+``subsets``        the uncertainty subsets (total, real, modal, mechanical, additive,
+                   multiplicative) and the physical units of the blocks
+``stability``      mu bounds over models x frequencies x subsets, tightening, certified peaks
+``destabilizing``  direct search of destabilizing perturbations (real vertices + complex blocks)
 ``performance``    worst-case gains ``d -> e_p`` and ``d -> e_u`` per subset
-``docking``        phase-7 / phase-8 spring-damper studies over the stiffness
-``sensitivity``    which uncertain parameter moves worst-case mu most
+``sensitivity``    which uncertain parameter moves the worst-case mu most
+``open_loop``      sampled open-loop gains per uncertainty set (Fig. unc_sensitivity)
 ``time_check``     linear time-domain simulation of the worst cases against the requirements
 ``worst_cases``    the ``worst_cases.parquet`` of the mu-guided campaign
 ``figures``        PNG figures; ``run`` the whole analysis; ``cli`` ``oos analyze``

@@ -27,10 +27,13 @@ def run_analyze(args) -> int:
 
     controller = _controller(args.controller)
     if controller.label == "baseline":
-        print("WARNING: no --controller given: analyzing the BASELINE PD controller "
-              "(paper section 3.1), not a synthesized one")
-    sweep = SweepOptions(upper_iterations=args.iterations, n_jobs=args.jobs,
-                         refine_iterations=args.refine_iterations)
+        print(
+            "WARNING: no --controller given: analyzing the BASELINE PD controller "
+            "(paper section 3.1), not a synthesized one"
+        )
+    sweep = SweepOptions(
+        upper_iterations=args.iterations, n_jobs=args.jobs, refine_iterations=args.refine_iterations
+    )
     options = AnalysisOptions(
         configurations=args.configurations,
         frequency_range_hz=(args.fmin, args.fmax),
@@ -47,17 +50,21 @@ def run_analyze(args) -> int:
     summary = run_analysis(controller, args.out, options)
     m = summary["mission"]
     print(f"controller: {controller.label} ({controller.source})")
-    print(f"mission: mu peak <= {m['mu_peak_upper']:.4g} "
-          f"(refined {m['mu_peak_upper_refined']:.4g}, "
-          f"certified >= {m['mu_peak_lower']:.4g}) at t = {m['peak_time_s']:.1f} s, "
-          f"f = {m['peak_frequency_hz']:.3g} Hz "
-          f"(upper bound there {m['mu_upper_at_critical']:.4g}, "
-          f"gap {m['gap_at_critical_percent']:.2g} %); stability margin "
-          f"{m['stability_margin']:.3g} "
-          f"(paper: mu < 0.79 at 275 s, 0.55 Hz)")
+    print(
+        f"mission: mu peak <= {m['mu_peak_upper']:.4g} "
+        f"(refined {m['mu_peak_upper_refined']:.4g}, "
+        f"certified >= {m['mu_peak_lower']:.4g}) at t = {m['peak_time_s']:.1f} s, "
+        f"f = {m['peak_frequency_hz']:.3g} Hz "
+        f"(upper bound there {m['mu_upper_at_critical']:.4g}, "
+        f"gap {m['gap_at_critical_percent']:.2g} %); stability margin "
+        f"{m['stability_margin']:.3g} "
+        f"(paper: mu < 0.79 at 275 s, 0.55 Hz)"
+    )
     for phase, pk in summary["docking"].items():
-        print(f"docking {phase}: mu in [{pk['mu_lower']:.4g}, {pk['mu_upper']:.4g}] at "
-              f"k = {pk['stiffness']:.3g}, f = {pk['frequency [Hz]']:.3g} Hz")
+        print(
+            f"docking {phase}: mu in [{pk['mu_lower']:.4g}, {pk['mu_upper']:.4g}] at "
+            f"k = {pk['stiffness']:.3g}, f = {pk['frequency [Hz]']:.3g} Hz"
+        )
     print(f"total time {summary['timings_s']['total']:.1f} s; outputs in {args.out}")
     return 0
 
@@ -72,25 +79,49 @@ def register(subparsers) -> None:
         "writes Parquet tables, PNG figures and worst_cases.parquet.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument("--controller", default=None,
-                        help="controller JSON from `oos synth` (default: the BASELINE PD)")
+    parser.add_argument(
+        "--controller",
+        default=None,
+        help="controller JSON from `oos synth` (default: the BASELINE PD)",
+    )
     parser.add_argument("--out", required=True, help="output directory")
-    parser.add_argument("--configurations", type=int, default=330,
-                        help="equally spaced mission configurations")
+    parser.add_argument(
+        "--configurations", type=int, default=330, help="equally spaced mission configurations"
+    )
     parser.add_argument("--fmin", type=float, default=0.005, help="lowest grid frequency [Hz]")
     parser.add_argument("--fmax", type=float, default=5.0, help="highest grid frequency [Hz]")
-    parser.add_argument("--points-per-decade", type=int, default=12,
-                        help="common grid density (plus points on lightly damped poles)")
-    parser.add_argument("--iterations", type=int, default=30,
-                        help="BFGS iterations of the mu upper bound on the grid")
-    parser.add_argument("--refine-iterations", type=int, default=100,
-                        help="BFGS iterations at the peak refinement points")
+    parser.add_argument(
+        "--points-per-decade",
+        type=int,
+        default=12,
+        help="common grid density (plus points on lightly damped poles)",
+    )
+    parser.add_argument(
+        "--iterations",
+        type=int,
+        default=30,
+        help="BFGS iterations of the mu upper bound on the grid",
+    )
+    parser.add_argument(
+        "--refine-iterations",
+        type=int,
+        default=100,
+        help="BFGS iterations at the peak refinement points",
+    )
     parser.add_argument("--docking", default="7,8", help="docking phases (comma-separated)")
     parser.add_argument("--docking-points", type=int, default=300, help="stiffness values")
-    parser.add_argument("--performance-models", type=int, default=6,
-                        help="configurations of the worst-case gain study")
-    parser.add_argument("--performance-points", type=int, default=24,
-                        help="frequencies of the worst-case gain study")
+    parser.add_argument(
+        "--performance-models",
+        type=int,
+        default=6,
+        help="configurations of the worst-case gain study",
+    )
+    parser.add_argument(
+        "--performance-points",
+        type=int,
+        default=24,
+        help="frequencies of the worst-case gain study",
+    )
     parser.add_argument("--no-sensitivity", action="store_true", help="skip the sensitivity table")
     parser.add_argument("--no-time-check", action="store_true", help="skip the time-domain check")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes")

@@ -44,8 +44,9 @@ class Controller:
     def __post_init__(self):
         K = np.array(self.K, dtype=float)
         if K.shape != (3, 6) or not np.all(np.isfinite(K)):
-            raise ValueError(f"controller {self.source}: K must be a finite 3x6 gain, "
-                             f"got shape {K.shape}")
+            raise ValueError(
+                f"controller {self.source}: K must be a finite 3x6 gain, got shape {K.shape}"
+            )
         K.setflags(write=False)
         object.__setattr__(self, "K", K)
 
@@ -90,8 +91,9 @@ def load_controller(path) -> Controller:
     except (KeyError, TypeError) as exc:
         raise ValueError(f"controller file {path}: missing field controller.K_p/K_d.value") from exc
     if K_p.shape != (3, 3) or K_d.shape != (3, 3):
-        raise ValueError(f"controller file {path}: K_p and K_d must be 3x3, got "
-                         f"{K_p.shape} and {K_d.shape}")
+        raise ValueError(
+            f"controller file {path}: K_p and K_d must be 3x3, got {K_p.shape} and {K_d.shape}"
+        )
     gamma = record.get("gamma")
     gamma = float(gamma) if isinstance(gamma, (int, float)) else float("nan")
     spec = _spec_from_record(record.get("design_specification"))
@@ -123,6 +125,10 @@ def baseline_controller(plant_rotational, spec: DesignSpecification | None = Non
     sys = plant_statespace(M[:n, :n], M[:n, n:], M[n:, :n], M[n:, n:])
     J = inertia_from_plant(sys)
     K = baseline_gains(J, OMEGA_ATT, XI_ATT)
-    return Controller(K, spec or DesignSpecification(), "baseline",
-                      f"baseline PD (omega_att = 0.01 Hz, xi_att = 1) tuned at t = "
-                      f"{TUNING_TIME_S:g} s; NOT a synthesized controller")
+    return Controller(
+        K,
+        spec or DesignSpecification(),
+        "baseline",
+        f"baseline PD (omega_att = 0.01 Hz, xi_att = 1) tuned at t = "
+        f"{TUNING_TIME_S:g} s; NOT a synthesized controller",
+    )

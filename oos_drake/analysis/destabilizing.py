@@ -86,8 +86,17 @@ def _abscissa(A, Bw, Cz, Dzw, delta):
     return float(ev[k].real), float(abs(ev[k].imag))
 
 
-def real_vertex_search(A, Bw, Cz, Dzw, blk, *, alpha_max: float = 8.0, max_vertices: int = 1024,
-                       rng: np.random.Generator | None = None):
+def real_vertex_search(
+    A,
+    Bw,
+    Cz,
+    Dzw,
+    blk,
+    *,
+    alpha_max: float = 8.0,
+    max_vertices: int = 1024,
+    rng: np.random.Generator | None = None,
+):
     """Smallest ``alpha`` over sign vertices with a closed-loop pole on the imaginary axis.
 
     Only the real blocks of ``blk`` are perturbed (complex blocks at zero).
@@ -159,8 +168,9 @@ def _alpha_along(A, Bw, Cz, Dzw, structure, d, hi):
     return hi
 
 
-def refine_direction(A, Bw, Cz, Dzw, blk, alpha, signs, *, levels=(-1.0, -0.5, 0.0, 0.5, 1.0),
-                     passes: int = 2):
+def refine_direction(
+    A, Bw, Cz, Dzw, blk, alpha, signs, *, levels=(-1.0, -0.5, 0.0, 0.5, 1.0), passes: int = 2
+):
     """Coordinate search off the vertices: the worst direction need not be a vertex.
 
     A direction ``d`` (``max |d_i| = 1``) with a smaller crossing ``alpha`` gives a larger lower
@@ -241,8 +251,9 @@ def _complex_part(A, Bw, Cz, Dzw, structure, real_part, omega):
     return res.lower, res.delta, (rows_c, cols_c)
 
 
-def destabilizing_perturbation(A, Bw, Cz, Dzw, blk, omega_hint, *, alpha_max: float = 8.0,
-                               complex_points: int = 61) -> Destabilizer:
+def destabilizing_perturbation(
+    A, Bw, Cz, Dzw, blk, omega_hint, *, alpha_max: float = 8.0, complex_points: int = 61
+) -> Destabilizer:
     """Best destabilizing perturbation found by the vertex and complex searches.
 
     Parameters
@@ -261,8 +272,9 @@ def destabilizing_perturbation(A, Bw, Cz, Dzw, blk, omega_hint, *, alpha_max: fl
     structure = parse_blk(blk)
     has_real = structure.has_real
     has_complex = any(b.kind != REAL for b in structure.blocks)
-    best = Destabilizer(0.0, float("nan"), np.zeros((structure.n_rows, structure.n_cols), complex),
-                        float("nan"))
+    best = Destabilizer(
+        0.0, float("nan"), np.zeros((structure.n_rows, structure.n_cols), complex), float("nan")
+    )
     signs = np.zeros(sum(1 for b in structure.blocks if b.kind == REAL))
     alpha_r = np.inf
     if has_real:
@@ -280,8 +292,11 @@ def destabilizing_perturbation(A, Bw, Cz, Dzw, blk, omega_hint, *, alpha_max: fl
         grid = np.unique(np.concatenate([grid, best.omega * np.geomspace(0.97, 1.03, 9)]))
 
     def trial(alpha):
-        real_part = _expand(structure, alpha * signs) if has_real else \
-            np.zeros((structure.n_rows, structure.n_cols), complex)
+        real_part = (
+            _expand(structure, alpha * signs)
+            if has_real
+            else np.zeros((structure.n_rows, structure.n_cols), complex)
+        )
         mu_c, deltas, (rows_c, cols_c) = _complex_part(A, Bw, Cz, Dzw, structure, real_part, grid)
         k = int(np.argmax(mu_c))
         if mu_c[k] <= 0:

@@ -149,10 +149,12 @@ def time_check_figure(signals: pd.DataFrame, summary: pd.DataFrame, path) -> Pat
         axes[0].plot(t, phi, lw=1.0, label=case)
         axes[1].plot(t, u, lw=1.0, label=case)
     if len(summary):
-        axes[0].axhline(summary["ape_requirement [rad]"].iloc[0], color="r", ls="--",
-                        label="APE requirement")
-        axes[1].axhline(summary["torque_requirement [N m]"].iloc[0], color="r", ls="--",
-                        label="torque bound")
+        axes[0].axhline(
+            summary["ape_requirement [rad]"].iloc[0], color="r", ls="--", label="APE requirement"
+        )
+        axes[1].axhline(
+            summary["torque_requirement [N m]"].iloc[0], color="r", ls="--", label="torque bound"
+        )
     axes[0].set_ylabel("max_axis |phi| [rad]")
     axes[1].set_ylabel("max_axis |u| [N m]")
     for a in axes:
@@ -185,7 +187,7 @@ def open_loop_figure(table: pd.DataFrame, title: str, path) -> Path:
         ax.set_xlabel("frequency [Hz]")
         ax.set_ylabel("gain [dB]")
         ax.grid(True, which="both", alpha=0.3)
-    for ax in axes.ravel()[len(names):]:
+    for ax in axes.ravel()[len(names) :]:
         ax.set_visible(False)
     fig.suptitle(title)
     fig.tight_layout()

@@ -49,13 +49,19 @@ def rotational_channels(model: LFR) -> LFR:
     if model.shape == (3, 3):
         return model
     if model.shape != (6, 6):
-        raise ValueError(f"plant must be 3x3 (T -> wdot) or 6x6 (wrench -> twist), "
-                         f"got {model.shape}")
+        raise ValueError(
+            f"plant must be 3x3 (T -> wdot) or 6x6 (wrench -> twist), got {model.shape}"
+        )
     return model[3:6, 3:6]
 
 
-def uncertain_plant(plant: LFR, spec: comp.DesignSpecification | None = None, *,
-                    additive: bool = True, multiplicative: bool = True) -> LFR:
+def uncertain_plant(
+    plant: LFR,
+    spec: comp.DesignSpecification | None = None,
+    *,
+    additive: bool = True,
+    multiplicative: bool = True,
+) -> LFR:
     """``P_hat = (P + W_add Delta_add)(I + W_mul Delta_mul)`` (3x3, blocks added by name).
 
     Parameters
@@ -115,8 +121,14 @@ def weighted_interconnection_open(spec: comp.DesignSpecification | None = None) 
     return LFR.from_ss(H.A, H.B, H.C, H.D, input_names=list(inputs), output_names=list(outputs))
 
 
-def close_loop(plant: LFR, K, spec: comp.DesignSpecification | None = None, *,
-               additive: bool = True, multiplicative: bool = True) -> LFR:
+def close_loop(
+    plant: LFR,
+    K,
+    spec: comp.DesignSpecification | None = None,
+    *,
+    additive: bool = True,
+    multiplicative: bool = True,
+) -> LFR:
     """Uncertain closed loop ``d (9) -> e (6)`` with ``Delta_tot`` (batched like ``plant``).
 
     Parameters

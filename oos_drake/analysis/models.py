@@ -83,8 +83,9 @@ def phase_configuration(phase: str, scenario=None):
     return phases[str(phase)]
 
 
-def docking_closed_loop(controller: Controller, phase: str, stiffness, *, damping=None,
-                        scenario=None) -> ModelArray:
+def docking_closed_loop(
+    controller: Controller, phase: str, stiffness, *, damping=None, scenario=None
+) -> ModelArray:
     """Uncertain closed loop of docking phase 7 or 8 for each swept stiffness.
 
     Phase 7: SM1 (arm tip J7 / target port D2) has stiffness ``k`` (shear [N/m] and torsion
@@ -115,13 +116,23 @@ def docking_closed_loop(controller: Controller, phase: str, stiffness, *, dampin
     cfg = named.configuration
     values = configuration_values(cfg.alpha, cfg.theta, cfg.delta_C1, cfg.delta_C2)
     swept = "SM1" if phase == "7" else "SM2"
-    values.update({f"k_shear_{swept}": stiffness, f"k_tors_{swept}": stiffness,
-                   f"d_shear_{swept}": np.full(stiffness.size, damping),
-                   f"d_tors_{swept}": np.full(stiffness.size, damping)})
+    values.update(
+        {
+            f"k_shear_{swept}": stiffness,
+            f"k_tors_{swept}": stiffness,
+            f"d_shear_{swept}": np.full(stiffness.size, damping),
+            f"d_tors_{swept}": np.full(stiffness.size, damping),
+        }
+    )
     if phase == "8":
-        values.update({"k_shear_SM1": settings.rigid_stiffness,
-                       "k_tors_SM1": settings.rigid_stiffness,
-                       "d_shear_SM1": settings.rigid_damping, "d_tors_SM1": settings.rigid_damping})
+        values.update(
+            {
+                "k_shear_SM1": settings.rigid_stiffness,
+                "k_tors_SM1": settings.rigid_stiffness,
+                "d_shear_SM1": settings.rigid_damping,
+                "d_tors_SM1": settings.rigid_damping,
+            }
+        )
     present = model.uncertainty
     values = {k: v for k, v in values.items() if k in present}
     plant = usubs(model, values)

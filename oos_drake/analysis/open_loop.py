@@ -12,8 +12,9 @@ import pandas as pd
 OPEN_LOOP_COLUMNS = ["subset", "sample", "frequency [Hz]", "gain [dB]"]
 
 
-def uncertainty_effects(plant_hat, subsets: dict, omega, *, samples: int = 20,
-                        rng: np.random.Generator, channel=(0, 0)) -> pd.DataFrame:
+def uncertainty_effects(
+    plant_hat, subsets: dict, omega, *, samples: int = 20, rng: np.random.Generator, channel=(0, 0)
+) -> pd.DataFrame:
     """Gains of one plant channel for random samples of each uncertainty subset.
 
     Parameters
@@ -43,12 +44,28 @@ def uncertainty_effects(plant_hat, subsets: dict, omega, *, samples: int = 20,
     hz = omega / (2 * np.pi)
     frames = []
     nominal = np.abs(sys.nominal.freqresp(omega)[..., 0, 0])
-    frames.append(pd.DataFrame({"subset": "nominal", "sample": -1, "frequency [Hz]": hz,
-                                "gain [dB]": 20 * np.log10(np.maximum(nominal, 1e-300))}))
+    frames.append(
+        pd.DataFrame(
+            {
+                "subset": "nominal",
+                "sample": -1,
+                "frequency [Hz]": hz,
+                "gain [dB]": 20 * np.log10(np.maximum(nominal, 1e-300)),
+            }
+        )
+    )
     for name, members in subsets.items():
         models, _ = usample(sys, samples, rng, names=list(members))
         H = np.abs(models.nominal.freqresp(omega)[..., 0, 0])  # (samples, F)
         for k in range(samples):
-            frames.append(pd.DataFrame({"subset": name, "sample": k, "frequency [Hz]": hz,
-                                        "gain [dB]": 20 * np.log10(np.maximum(H[k], 1e-300))}))
+            frames.append(
+                pd.DataFrame(
+                    {
+                        "subset": name,
+                        "sample": k,
+                        "frequency [Hz]": hz,
+                        "gain [dB]": 20 * np.log10(np.maximum(H[k], 1e-300)),
+                    }
+                )
+            )
     return pd.concat(frames, ignore_index=True)[OPEN_LOOP_COLUMNS]

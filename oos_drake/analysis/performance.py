@@ -22,8 +22,16 @@ from oos_drake.robust.lfr_analysis import delta_channel_response
 CHANNELS = {"e_p": (0, 1, 2), "e_u": (3, 4, 5)}
 
 #: Columns of the performance table.
-PERFORMANCE_COLUMNS = ["channel", "subset", "model", "time [s]", "frequency [Hz]",
-                       "gain_nominal [-]", "gain_lower [-]", "gain_upper [-]"]
+PERFORMANCE_COLUMNS = [
+    "channel",
+    "subset",
+    "model",
+    "time [s]",
+    "frequency [Hz]",
+    "gain_nominal [-]",
+    "gain_lower [-]",
+    "gain_upper [-]",
+]
 
 
 def _channel_task(task):
@@ -33,15 +41,28 @@ def _channel_task(task):
     nm = A.shape[0]
     M = delta_channel_response(A, B, C, D, omega)  # (nm, F, nz+ny, nw+nu)
     flat = M.reshape((-1,) + M.shape[2:])
-    lo, up, delta, nom = skewed_gain_bounds(flat, nz, nw, blk, tol=tol,
-                                            upper_iterations=iterations)
+    lo, up, delta, nom = skewed_gain_bounds(flat, nz, nw, blk, tol=tol, upper_iterations=iterations)
     F = omega.size
-    return (lo.reshape(nm, F), up.reshape(nm, F), nom.reshape(nm, F),
-            delta.reshape((nm, F) + delta.shape[1:]))
+    return (
+        lo.reshape(nm, F),
+        up.reshape(nm, F),
+        nom.reshape(nm, F),
+        delta.reshape((nm, F) + delta.shape[1:]),
+    )
 
 
-def worst_case_gains(sys, models, omega, subsets: dict, *, times=None, tol: float = 0.02,
-                     upper_iterations: int = 40, n_jobs: int = 2, progress: bool = True):
+def worst_case_gains(
+    sys,
+    models,
+    omega,
+    subsets: dict,
+    *,
+    times=None,
+    tol: float = 0.02,
+    upper_iterations: int = 40,
+    n_jobs: int = 2,
+    progress: bool = True,
+):
     """Worst-case gain bounds of ``e_p`` and ``e_u`` for chosen models, per subset.
 
     Parameters
@@ -94,9 +115,13 @@ def worst_case_gains(sys, models, omega, subsets: dict, *, times=None, tol: floa
         for name, (zr, wc, blk) in parts.items():
             B = np.concatenate([Bw[:, :, wc], Bu], axis=2)
             C = np.concatenate([Cz[:, zr, :], Cy[:, rows, :]], axis=1)
-            D = np.concatenate([
-                np.concatenate([Dzw[:, zr][:, :, wc], Dzu[:, zr, :]], axis=2),
-                np.concatenate([Dyw[:, rows][:, :, wc], Dyu[:, rows, :]], axis=2)], axis=1)
+            D = np.concatenate(
+                [
+                    np.concatenate([Dzw[:, zr][:, :, wc], Dzu[:, zr, :]], axis=2),
+                    np.concatenate([Dyw[:, rows][:, :, wc], Dyu[:, rows, :]], axis=2),
+                ],
+                axis=1,
+            )
             tasks.append((A, B, C, D, zr.size, wc.size, blk, omega, tol, upper_iterations))
             keys.append((channel, name))
     bar = tqdm(total=len(tasks), desc="worst-case gains", unit="task", disable=not progress)
@@ -110,8 +135,9 @@ def worst_case_gains(sys, models, omega, subsets: dict, *, times=None, tol: floa
         import multiprocessing as mp
 
         method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-        with ProcessPoolExecutor(n_jobs, mp_context=mp.get_context(method),
-                                 initializer=_init_worker) as pool:
+        with ProcessPoolExecutor(
+            n_jobs, mp_context=mp.get_context(method), initializer=_init_worker
+        ) as pool:
             for r in pool.map(_channel_task, tasks):
                 results.append(r)
                 bar.update(1)
@@ -121,9 +147,18 @@ def worst_case_gains(sys, models, omega, subsets: dict, *, times=None, tol: floa
     for (channel, name), (lo, up, nom, dl) in zip(keys, results, strict=True):
         deltas[(channel, name)] = dl
         for j, m in enumerate(models):
-            frames.append(pd.DataFrame({
-                "channel": channel, "subset": name, "model": int(m),
-                "time [s]": times[m], "frequency [Hz]": hz,
-                "gain_nominal [-]": nom[j], "gain_lower [-]": lo[j], "gain_upper [-]": up[j],
-            }))
+            frames.append(
+                pd.DataFrame(
+                    {
+                        "channel": channel,
+                        "subset": name,
+                        "model": int(m),
+                        "time [s]": times[m],
+                        "frequency [Hz]": hz,
+                        "gain_nominal [-]": nom[j],
+                        "gain_lower [-]": lo[j],
+                        "gain_upper [-]": up[j],
+                    }
+                )
+            )
     return pd.concat(frames, ignore_index=True)[PERFORMANCE_COLUMNS], deltas

@@ -31,9 +31,14 @@ from oos_drake.analysis.stability import SweepOptions
 
 #: The paper's numbers (section 4) for the comparison in the summary.
 PAPER = {
-    "mission_mu_peak": 0.79, "mission_peak_time_s": 275.0, "mission_peak_frequency_hz": 0.55,
-    "mission_margin_percent": 26.0, "docking7_mu_peak": 1.04, "docking7_peak_stiffness": 2.5e3,
-    "docking7_peak_frequency_hz": 0.58, "performance_ep_peak_frequency_hz": 0.08,
+    "mission_mu_peak": 0.79,
+    "mission_peak_time_s": 275.0,
+    "mission_peak_frequency_hz": 0.55,
+    "mission_margin_percent": 26.0,
+    "docking7_mu_peak": 1.04,
+    "docking7_peak_stiffness": 2.5e3,
+    "docking7_peak_frequency_hz": 0.58,
+    "performance_ep_peak_frequency_hz": 0.08,
 }
 
 
@@ -104,14 +109,16 @@ class AnalysisOptions:
         """Common frequency grid [rad/s]."""
         lo, hi = self.frequency_range_hz
         if not 0 < lo < hi:
-            raise ValueError("frequency_range_hz must be 0 < low < high, got "
-                             f"{self.frequency_range_hz}")
+            raise ValueError(
+                f"frequency_range_hz must be 0 < low < high, got {self.frequency_range_hz}"
+            )
         n = max(int(round(self.points_per_decade * np.log10(hi / lo))) + 1, 3)
         return 2 * np.pi * np.geomspace(lo, hi, n)
 
 
-def _certify(array, sweep, subsets, peaks_grid, *, configuration_label, upper_iterations=300,
-             points=41):
+def _certify(
+    array, sweep, subsets, peaks_grid, *, configuration_label, upper_iterations=300, points=41
+):
     """Certified peak and destabilizing perturbation per subset (local refinement + search)."""
     from oos_drake.analysis.stability import certify_peak
     from oos_drake.analysis.worst_cases import physical_values
@@ -120,21 +127,34 @@ def _certify(array, sweep, subsets, peaks_grid, *, configuration_label, upper_it
     rows, perturbation_rows, certificates = [], [], {}
     for _, pk in peaks_grid.iterrows():
         name, model = pk["subset"], int(pk["model"])
-        cert = certify_peak(sys, name, subsets[name], model, float(pk["frequency [Hz]"]),
-                            time=float(array.values[model]), upper_iterations=upper_iterations,
-                            points=points)
+        cert = certify_peak(
+            sys,
+            name,
+            subsets[name],
+            model,
+            float(pk["frequency [Hz]"]),
+            time=float(array.values[model]),
+            upper_iterations=upper_iterations,
+            points=points,
+        )
         grid_upper = float(sweep.loc[sweep["subset"] == name, "mu_upper"].max())
         upper, lower = cert.mu_upper, cert.mu_lower
-        rows.append({
-            "study": array.study, "subset": name, "model": model,
-            array.label: float(array.values[model]),
-            "frequency [Hz]": cert.frequency, "mu_upper": upper, "mu_lower": lower,
-            "mu_upper_at_critical": cert.mu_upper_critical,
-            "mu_upper_grid": grid_upper,
-            "gap [%]": 100.0 * cert.gap,
-            "margin [-]": 1.0 / max(upper, grid_upper) if upper > 0 else np.inf,
-            "configuration": configuration_label(model),
-        })
+        rows.append(
+            {
+                "study": array.study,
+                "subset": name,
+                "model": model,
+                array.label: float(array.values[model]),
+                "frequency [Hz]": cert.frequency,
+                "mu_upper": upper,
+                "mu_lower": lower,
+                "mu_upper_at_critical": cert.mu_upper_critical,
+                "mu_upper_grid": grid_upper,
+                "gap [%]": 100.0 * cert.gap,
+                "margin [-]": 1.0 / max(upper, grid_upper) if upper > 0 else np.inf,
+                "configuration": configuration_label(model),
+            }
+        )
         normalized = cert.worst_case_normalized
         certificates[name] = (model, cert.frequency, lower, upper, normalized)
         one = sys.model(model) if sys.batch_shape else sys
@@ -144,17 +164,25 @@ def _certify(array, sweep, subsets, peaks_grid, *, configuration_label, upper_it
         for bname, value in normalized.items():
             arr = np.atleast_2d(np.asarray(value, dtype=complex))
             kind = specs[bname].kind
-            destab = float(specs[bname].to_physical(float(arr[0, 0].real))) if kind == "ureal" \
+            destab = (
+                float(specs[bname].to_physical(float(arr[0, 0].real)))
+                if kind == "ureal"
                 else float(np.linalg.norm(arr, ord=2)) * specs[bname].bound
-            perturbation_rows.append({
-                "study": array.study, "subset": name, "block": bname, "kind": kind,
-                "unit": _unit(bname),
-                "normalized_norm [-]": float(np.linalg.norm(arr, ord=2)),
-                "normalized_real [-]": float(arr[0, 0].real),
-                "normalized_imag [-]": float(arr[0, 0].imag),
-                "destabilizing_value [unit]": destab,
-                "in_set_value [unit]": phys_unit.get(bname, np.nan),
-            })
+            )
+            perturbation_rows.append(
+                {
+                    "study": array.study,
+                    "subset": name,
+                    "block": bname,
+                    "kind": kind,
+                    "unit": _unit(bname),
+                    "normalized_norm [-]": float(np.linalg.norm(arr, ord=2)),
+                    "normalized_real [-]": float(arr[0, 0].real),
+                    "normalized_imag [-]": float(arr[0, 0].imag),
+                    "destabilizing_value [unit]": destab,
+                    "in_set_value [unit]": phys_unit.get(bname, np.nan),
+                }
+            )
         del phys
     return pd.DataFrame(rows), pd.DataFrame(perturbation_rows), certificates
 
@@ -190,8 +218,13 @@ def _moment_label(times, scenario=None):
     return label
 
 
-def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | None = None,
-                 scenario=None, log=print) -> dict:
+def run_analysis(
+    controller: Controller,
+    out_dir,
+    options: AnalysisOptions | None = None,
+    scenario=None,
+    log=print,
+) -> dict:
     """Run the worst-case analysis and write every table and figure in ``out_dir``.
 
     Parameters
@@ -241,22 +274,43 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
     subsets = uncertainty_subsets(mission.system.uncertainty)
     abscissa = np.linalg.eigvals(np.asarray(mission.system.A)).real.max(axis=-1)
     lap("build mission models")
-    log(f"mission: {times.size} configurations, {omega.size} grid frequencies, "
-        f"subsets {list(subsets)}; nominal loops stable: {int((abscissa < 0).sum())}/{times.size}")
-    sweep = mu_sweep(mission.system, omega, subsets, times=times, options=options.sweep,
-                     progress=options.progress, description="mu mission")
-    sweep = tighten(mission.system, sweep, subsets, iterations=options.tighten_iterations,
-                    batch=options.tighten_batch, rounds=options.tighten_rounds,
-                    n_jobs=options.sweep.n_jobs, progress=options.progress)
+    log(
+        f"mission: {times.size} configurations, {omega.size} grid frequencies, "
+        f"subsets {list(subsets)}; nominal loops stable: {int((abscissa < 0).sum())}/{times.size}"
+    )
+    sweep = mu_sweep(
+        mission.system,
+        omega,
+        subsets,
+        times=times,
+        options=options.sweep,
+        progress=options.progress,
+        description="mu mission",
+    )
+    sweep = tighten(
+        mission.system,
+        sweep,
+        subsets,
+        iterations=options.tighten_iterations,
+        batch=options.tighten_batch,
+        rounds=options.tighten_rounds,
+        n_jobs=options.sweep.n_jobs,
+        progress=options.progress,
+    )
     sweep.to_parquet(out / "mu_mission.parquet", index=False)
     paths["mu_mission"] = out / "mu_mission.parquet"
     lap("mu sweep mission")
     label = _moment_label(times, scenario)
     peaks_grid = peaks_table(sweep)
-    peaks, perturbations, certs = _certify(mission, sweep, subsets, peaks_grid,
-                                           configuration_label=label,
-                                           upper_iterations=options.certify_iterations,
-                                 points=options.certify_points)
+    peaks, perturbations, certs = _certify(
+        mission,
+        sweep,
+        subsets,
+        peaks_grid,
+        configuration_label=label,
+        upper_iterations=options.certify_iterations,
+        points=options.certify_points,
+    )
     lap("certify mission peaks")
     # ------------------------------------------------------------------ docking
     docking_sweeps, docking_peaks, docking_tables = {}, {}, []
@@ -265,30 +319,50 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
     for phase in options.docking_phases:
         arr = docking_closed_loop(controller, phase, stiffness, scenario=scenario)
         tot = {"total": uncertainty_subsets(arr.system.uncertainty)["total"]}
-        dsweep = mu_sweep(arr.system, omega, tot, times=stiffness, options=options.sweep,
-                          progress=options.progress, description=f"mu docking {phase}")
-        dsweep = tighten(arr.system, dsweep, tot, iterations=options.tighten_iterations,
-                         batch=options.tighten_batch, rounds=options.tighten_rounds,
-                         n_jobs=options.sweep.n_jobs, progress=options.progress)
+        dsweep = mu_sweep(
+            arr.system,
+            omega,
+            tot,
+            times=stiffness,
+            options=options.sweep,
+            progress=options.progress,
+            description=f"mu docking {phase}",
+        )
+        dsweep = tighten(
+            arr.system,
+            dsweep,
+            tot,
+            iterations=options.tighten_iterations,
+            batch=options.tighten_batch,
+            rounds=options.tighten_rounds,
+            n_jobs=options.sweep.n_jobs,
+            progress=options.progress,
+        )
         dsweep = dsweep.rename(columns={"time [s]": "stiffness [N/m or N m/rad]"})
         dsweep.to_parquet(out / f"docking_{phase}.parquet", index=False)
         paths[f"docking_{phase}"] = out / f"docking_{phase}.parquet"
         pg = peaks_table(dsweep.rename(columns={"stiffness [N/m or N m/rad]": "time [s]"}))
-        dp, dpert, dc = _certify(arr, dsweep, tot, pg,
-                                 configuration_label=lambda m, ph=phase: f"docking-{ph} "
-                                 f"k={stiffness[m]:.3g}",
-                                 upper_iterations=options.certify_iterations,
-                                 points=options.certify_points)
+        dp, dpert, dc = _certify(
+            arr,
+            dsweep,
+            tot,
+            pg,
+            configuration_label=lambda m, ph=phase: f"docking-{ph} k={stiffness[m]:.3g}",
+            upper_iterations=options.certify_iterations,
+            points=options.certify_points,
+        )
         docking_tables.append(dp)
         docking_perturbations.append(dpert)
         docking_certs[phase] = (arr, dc["total"])
         docking_sweeps[phase] = dsweep.rename(columns={"stiffness [N/m or N m/rad]": "time [s]"})
-        docking_peaks[phase] = {"stiffness": float(dp["stiffness [N/m or N m/rad]"].iloc[0]),
-                                "gap [%]": float(dp["gap [%]"].iloc[0]),
-                                "mu_upper_grid": float(dp["mu_upper_grid"].iloc[0]),
-                                "frequency [Hz]": float(dp["frequency [Hz]"].iloc[0]),
-                                "mu_lower": float(dp["mu_lower"].iloc[0]),
-                                "mu_upper": float(dp["mu_upper"].iloc[0])}
+        docking_peaks[phase] = {
+            "stiffness": float(dp["stiffness [N/m or N m/rad]"].iloc[0]),
+            "gap [%]": float(dp["gap [%]"].iloc[0]),
+            "mu_upper_grid": float(dp["mu_upper_grid"].iloc[0]),
+            "frequency [Hz]": float(dp["frequency [Hz]"].iloc[0]),
+            "mu_lower": float(dp["mu_lower"].iloc[0]),
+            "mu_upper": float(dp["mu_upper"].iloc[0]),
+        }
         lap(f"docking phase {phase}")
     all_peaks = pd.concat([peaks] + docking_tables, ignore_index=True)
     all_peaks.to_parquet(out / "stability_peaks.parquet", index=False)
@@ -300,22 +374,38 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
     regions = []
     for _, row in peaks.iterrows():
         model, freq, lower, upper, normalized = certs[row["subset"]]
-        regions.append(Region(label(model), float(times[model]), float(freq), float(upper),
-                              float(lower), ",".join(subsets[row["subset"]]), normalized))
+        regions.append(
+            Region(
+                label(model),
+                float(times[model]),
+                float(freq),
+                float(upper),
+                float(lower),
+                ",".join(subsets[row["subset"]]),
+                normalized,
+            )
+        )
     paths["worst_cases"] = write_regions(regions, mission.system, out / "worst_cases.parquet")
     # ------------------------------------------------------------------ performance
     crit_model = certs["total"][0]
     spread = np.linspace(0, times.size - 1, max(options.performance_models - 1, 1)).round()
     models = np.unique(np.concatenate([[crit_model], spread.astype(int)]))
     lo_hz, hi_hz = options.frequency_range_hz
-    w_perf = 2 * np.pi * np.geomspace(max(lo_hz, 0.005), min(hi_hz, 3.0),
-                                      options.performance_points)
+    w_perf = (
+        2 * np.pi * np.geomspace(max(lo_hz, 0.005), min(hi_hz, 3.0), options.performance_points)
+    )
     w_perf = np.unique(np.concatenate([w_perf, [2 * np.pi * certs["total"][1]]]))
     from oos_drake.analysis.performance import worst_case_gains
 
-    perf, perf_deltas = worst_case_gains(mission.system, models, w_perf, subsets, times=times,
-                                         n_jobs=options.sweep.n_jobs,
-                                         progress=options.progress)
+    perf, perf_deltas = worst_case_gains(
+        mission.system,
+        models,
+        w_perf,
+        subsets,
+        times=times,
+        n_jobs=options.sweep.n_jobs,
+        progress=options.progress,
+    )
     perf.to_parquet(out / "performance.parquet", index=False)
     paths["performance"] = out / "performance.parquet"
     lap("worst-case performance")
@@ -328,8 +418,9 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         top = part.nlargest(6, "mu_upper")["frequency [Hz]"].to_numpy()
         w_crit = 2 * np.pi * certs["total"][1]
         w_s = np.unique(np.concatenate([2 * np.pi * top, w_crit * np.geomspace(0.97, 1.03, 3)]))
-        sens = mu_sensitivity(mission.system, crit_model, w_s,
-                              iterations=max(options.certify_iterations // 2, 20))
+        sens = mu_sensitivity(
+            mission.system, crit_model, w_s, iterations=max(options.certify_iterations // 2, 20)
+        )
         sens.to_parquet(out / "sensitivity.parquet", index=False)
         paths["sensitivity"] = out / "sensitivity.parquet"
         lap("sensitivity")
@@ -342,10 +433,10 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         one = mission.system.model(crit_model)
         model, freq, lower, upper, normalized = certs["total"]
         w_c = 2 * np.pi * freq
-        cases = [("nominal", {}, 1.0, w_c),
-                 ("worst stability (unit size)", normalized, lower, w_c)]
-        pk = perf[(perf["channel"] == "e_p") & (perf["subset"] == "total")
-                  & (perf["model"] == crit_model)]
+        cases = [("nominal", {}, 1.0, w_c), ("worst stability (unit size)", normalized, lower, w_c)]
+        pk = perf[
+            (perf["channel"] == "e_p") & (perf["subset"] == "total") & (perf["model"] == crit_model)
+        ]
         if len(pk):
             j = int(np.argmax(pk["gain_lower [-]"].to_numpy()))
             wj = 2 * np.pi * float(pk["frequency [Hz]"].iloc[j])
@@ -364,9 +455,18 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
             cases.append(("worst APE gain (unit size)", norm_p, 1.0, wj))
         for case, values, scale, w in cases:
             scaled = {k: v * scale for k, v in values.items()}  # unit size: inside the set
-            row, sig = check_case(one, scaled, w, controller.spec, case=case, study="mission",
-                                  model=crit_model, time=float(times[crit_model]), scale=scale,
-                                  duration=options.time_check_duration)
+            row, sig = check_case(
+                one,
+                scaled,
+                w,
+                controller.spec,
+                case=case,
+                study="mission",
+                model=crit_model,
+                time=float(times[crit_model]),
+                scale=scale,
+                duration=options.time_check_duration,
+            )
             rows.append(row)
             signals.append(sig)
         tsum = pd.DataFrame(rows)
@@ -387,24 +487,32 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         t_moment = _moment_time("2", scenario)
         plant = usubs(build_mission_model(scenario), mission_values([t_moment], scenario)).model(0)
         p_hat = uncertain_plant(plant, controller.spec)
-        effects = uncertainty_effects(p_hat, uncertainty_subsets(p_hat.uncertainty),
-                                      2 * np.pi * np.geomspace(0.05, 20.0, 300),
-                                      samples=options.open_loop_samples,
-                                      rng=np.random.default_rng(0))
+        effects = uncertainty_effects(
+            p_hat,
+            uncertainty_subsets(p_hat.uncertainty),
+            2 * np.pi * np.geomspace(0.05, 20.0, 300),
+            samples=options.open_loop_samples,
+            rng=np.random.default_rng(0),
+        )
         effects.to_parquet(out / "open_loop_effects.parquet", index=False)
         paths["open_loop_effects"] = out / "open_loop_effects.parquet"
         paths["open_loop_png"] = figures.open_loop_figure(
-            effects, f"T_ext,G1{{1}} -> wdot{{1}} at moment 2 (t = {t_moment:g} s): samples of "
-            "each uncertainty set", out / "open_loop_effects.png")
+            effects,
+            f"T_ext,G1{{1}} -> wdot{{1}} at moment 2 (t = {t_moment:g} s): samples of "
+            "each uncertainty set",
+            out / "open_loop_effects.png",
+        )
         lap("open-loop effects")
     # ------------------------------------------------------------------ figures
     common_hz = omega / (2 * np.pi)
-    paths["mu_mission_png"] = figures.mu_mission_figure(sweep, common_hz, peaks,
-                                                        out / "mu_mission.png")
+    paths["mu_mission_png"] = figures.mu_mission_figure(
+        sweep, common_hz, peaks, out / "mu_mission.png"
+    )
     paths["performance_png"] = figures.performance_figure(perf, out / "performance.png")
     if docking_sweeps:
-        paths["docking_png"] = figures.docking_figure(docking_sweeps, docking_peaks,
-                                                      out / "mu_docking.png")
+        paths["docking_png"] = figures.docking_figure(
+            docking_sweeps, docking_peaks, out / "mu_docking.png"
+        )
     if sens is not None:
         paths["sensitivity_png"] = figures.sensitivity_figure(sens, out / "sensitivity.png")
     lap("figures")
@@ -413,10 +521,15 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
     ep = perf[perf["channel"] == "e_p"]
     ep_peak = ep.loc[ep["gain_upper [-]"].idxmax()]
     summary = {
-        "controller": {"label": controller.label, "source": controller.source,
-                       "gamma": controller.gamma, "K": controller.K.tolist()},
+        "controller": {
+            "label": controller.label,
+            "source": controller.source,
+            "gamma": controller.gamma,
+            "K": controller.K.tolist(),
+        },
         "mission": {
-            "configurations": int(times.size), "grid_frequencies": int(omega.size),
+            "configurations": int(times.size),
+            "grid_frequencies": int(omega.size),
             "nominal_stable_models": int((abscissa < 0).sum()),
             "mu_peak_upper": float(max(tot["mu_upper"], tot["mu_upper_grid"])),
             "mu_peak_upper_refined": float(tot["mu_upper"]),
@@ -429,14 +542,19 @@ def run_analysis(controller: Controller, out_dir, options: AnalysisOptions | Non
         },
         "subsets": peaks.drop(columns=["study"]).to_dict(orient="records"),
         "docking": docking_peaks,
-        "performance": {"e_p_peak_gain_upper": float(ep_peak["gain_upper [-]"]),
-                        "e_p_peak_frequency_hz": float(ep_peak["frequency [Hz]"]),
-                        "e_u_peak_gain_upper": float(perf.loc[perf["channel"] == "e_u",
-                                                              "gain_upper [-]"].max())},
+        "performance": {
+            "e_p_peak_gain_upper": float(ep_peak["gain_upper [-]"]),
+            "e_p_peak_frequency_hz": float(ep_peak["frequency [Hz]"]),
+            "e_u_peak_gain_upper": float(
+                perf.loc[perf["channel"] == "e_u", "gain_upper [-]"].max()
+            ),
+        },
         "time_check": tsum.to_dict(orient="records"),
         "paper": PAPER,
-        "options": {k: (asdict(v) if hasattr(v, "__dataclass_fields__") else v)
-                    for k, v in options.__dict__.items()},
+        "options": {
+            k: (asdict(v) if hasattr(v, "__dataclass_fields__") else v)
+            for k, v in options.__dict__.items()
+        },
         "timings_s": timings,
         "files": {k: str(v) for k, v in paths.items()},
     }

@@ -21,9 +21,17 @@ from oos_drake.analysis.subsets import block_unit, is_lti, is_modal
 from oos_drake.robust.lfr_analysis import block_map, delta_channel_response
 
 #: Columns of the sensitivity table.
-SENSITIVITY_COLUMNS = ["block", "group", "unit", "mu_upper_total [-]", "mu_upper_alone [-]",
-                       "mu_upper_without [-]", "drop [%]", "sensitivity [-]",
-                       "frequency [Hz]"]
+SENSITIVITY_COLUMNS = [
+    "block",
+    "group",
+    "unit",
+    "mu_upper_total [-]",
+    "mu_upper_alone [-]",
+    "mu_upper_without [-]",
+    "drop [%]",
+    "sensitivity [-]",
+    "frequency [Hz]",
+]
 
 
 def _group(name: str) -> str:
@@ -34,8 +42,9 @@ def _group(name: str) -> str:
     return "modal" if is_modal(name) else "mechanical"
 
 
-def mu_sensitivity(sys, model: int, omega, *, iterations: int = 300,
-                   step: float = 0.1) -> pd.DataFrame:
+def mu_sensitivity(
+    sys, model: int, omega, *, iterations: int = 300, step: float = 0.1
+) -> pd.DataFrame:
     """Sensitivity of the peak of mu (total set) to each block, at one model.
 
     Parameters
@@ -64,8 +73,9 @@ def mu_sensitivity(sys, model: int, omega, *, iterations: int = 300,
     one = sys.model(model) if sys.batch_shape else sys
     bmap = block_map(one)
     omega = np.asarray(omega, dtype=float)
-    M = delta_channel_response(np.asarray(one.A), np.asarray(one.Bw), np.asarray(one.Cz),
-                               np.asarray(one.Dzw), omega)
+    M = delta_channel_response(
+        np.asarray(one.A), np.asarray(one.Bw), np.asarray(one.Cz), np.asarray(one.Dzw), omega
+    )
     structure = parse_blk(bmap.blk)
     base = mu_upper_bound(np.ascontiguousarray(M), structure, max_iter=iterations)
     total = base.upper
@@ -82,18 +92,21 @@ def mu_sensitivity(sys, model: int, omega, *, iterations: int = 300,
             without, _ = grid_bounds(M[:, zr_o][:, :, wc_o], sub_o.blk, options)
         scaled = M.copy()
         scaled[:, :, bmap.w_slices[i]] *= 1.0 + step
-        grown = mu_upper_bound(scaled, structure, max_iter=max(iterations // 5, 10),
-                               x0=base.params).upper
-        rows.append({
-            "block": name,
-            "group": _group(name),
-            "unit": block_unit(name),
-            "mu_upper_total [-]": peak,
-            "mu_upper_alone [-]": float(alone.max()),
-            "mu_upper_without [-]": float(without.max()),
-            "drop [%]": 100.0 * (peak - float(without.max())) / peak if peak > 0 else 0.0,
-            "sensitivity [-]": ((float(grown.max()) - peak) / peak / step) if peak > 0 else 0.0,
-            "frequency [Hz]": float(omega[int(np.argmax(alone))] / (2 * np.pi)),
-        })
+        grown = mu_upper_bound(
+            scaled, structure, max_iter=max(iterations // 5, 10), x0=base.params
+        ).upper
+        rows.append(
+            {
+                "block": name,
+                "group": _group(name),
+                "unit": block_unit(name),
+                "mu_upper_total [-]": peak,
+                "mu_upper_alone [-]": float(alone.max()),
+                "mu_upper_without [-]": float(without.max()),
+                "drop [%]": 100.0 * (peak - float(without.max())) / peak if peak > 0 else 0.0,
+                "sensitivity [-]": ((float(grown.max()) - peak) / peak / step) if peak > 0 else 0.0,
+                "frequency [Hz]": float(omega[int(np.argmax(alone))] / (2 * np.pi)),
+            }
+        )
     table = pd.DataFrame(rows)[SENSITIVITY_COLUMNS]
     return table.sort_values("drop [%]", ascending=False, ignore_index=True)

@@ -37,8 +37,16 @@ from oos_drake.robust.lfr_analysis import block_map, delta_channel_response, wor
 CONVERGED_TEMPERATURES = (30.0, 300.0, 3000.0, 30000.0)
 
 #: Columns of the sweep table (``tightened``: upper bound recomputed with many iterations).
-SWEEP_COLUMNS = ["subset", "model", "time [s]", "frequency [Hz]", "mu_upper", "mu_lower",
-                 "refined", "tightened"]
+SWEEP_COLUMNS = [
+    "subset",
+    "model",
+    "time [s]",
+    "frequency [Hz]",
+    "mu_upper",
+    "mu_lower",
+    "refined",
+    "tightened",
+]
 
 
 @dataclass(frozen=True)
@@ -81,8 +89,10 @@ class SweepOptions:
 def delta_matrices(sys):
     """``(A, Bw, Cz, Dzw)`` of an LFR model array as ``(N, ...)`` arrays."""
     n_models = sys.batch_shape[0] if sys.batch_shape else 1
-    return tuple(np.asarray(x).reshape((n_models,) + np.shape(x)[-2:])
-                 for x in (sys.A, sys.Bw, sys.Cz, sys.Dzw))
+    return tuple(
+        np.asarray(x).reshape((n_models,) + np.shape(x)[-2:])
+        for x in (sys.A, sys.Bw, sys.Cz, sys.Dzw)
+    )
 
 
 def subset_parts(sys, subsets: dict) -> dict:
@@ -103,8 +113,13 @@ def grid_bounds(M, blk, options: SweepOptions):
     structure = parse_blk(blk)
     M = np.ascontiguousarray(M)
     up = mu_upper_bound(M, structure, max_iter=options.upper_iterations)
-    lo = mu_lower_bound(M, structure, start_inputs=up.worst_input,
-                        restarts=options.lower_restarts, iters=options.lower_iterations)
+    lo = mu_lower_bound(
+        M,
+        structure,
+        start_inputs=up.worst_input,
+        restarts=options.lower_restarts,
+        iters=options.lower_iterations,
+    )
     return up.upper, np.minimum(lo.lower, up.upper)
 
 
@@ -130,8 +145,9 @@ def model_grid(A, omega, *, band=None, max_damping: float = 0.05, points: int = 
     zeta = -p.real / np.maximum(wn, 1e-300)
     keep = (p.imag > 0) & (zeta < max_damping) & (wn >= lo) & (wn <= hi)
     offsets = np.linspace(-1.0, 1.0, points) if points > 1 else np.zeros(1)
-    extra = [w0 * (1.0 + max(z0, 1e-3) * offsets)
-             for w0, z0 in zip(wn[keep], zeta[keep], strict=True)]
+    extra = [
+        w0 * (1.0 + max(z0, 1e-3) * offsets) for w0, z0 in zip(wn[keep], zeta[keep], strict=True)
+    ]
     return np.unique(np.concatenate([omega] + extra)) if extra else omega
 
 
@@ -145,8 +161,10 @@ def _sweep_chunk(task):
     """Worker: every subset and frequency of a chunk of models (arrays in, tuples out)."""
     A, Bw, Cz, Dzw, first, omega, parts, opt = task
     nm = A.shape[0]
-    grids = [model_grid(A[j], omega, points=opt.pole_points) if opt.pole_points else omega
-             for j in range(nm)]
+    grids = [
+        model_grid(A[j], omega, points=opt.pole_points) if opt.pole_points else omega
+        for j in range(nm)
+    ]
     Ms = [delta_channel_response(A[j], Bw[j], Cz[j], Dzw[j], grids[j]) for j in range(nm)]
     out = []
     for name, (zrows, wcols, blk) in parts.items():
@@ -165,11 +183,15 @@ def _sweep_chunk(task):
         have = [j for j in range(nm) if extra[j].size]
         if not have:
             continue
-        Mr = np.concatenate([
-            delta_channel_response(A[j], Bw[j], Cz[j], Dzw[j], extra[j])[:, zrows][:, :, wcols]
-            for j in have])
-        refine = SweepOptions(upper_iterations=opt.refine_iterations, lower_restarts=2,
-                              lower_iterations=40)
+        Mr = np.concatenate(
+            [
+                delta_channel_response(A[j], Bw[j], Cz[j], Dzw[j], extra[j])[:, zrows][:, :, wcols]
+                for j in have
+            ]
+        )
+        refine = SweepOptions(
+            upper_iterations=opt.refine_iterations, lower_restarts=2, lower_iterations=40
+        )
         ur, lr = grid_bounds(Mr, blk, refine)
         k = 0
         for j in have:
@@ -185,8 +207,16 @@ def _init_worker():
     limit_blas_threads(1)
 
 
-def mu_sweep(sys, omega, subsets: dict, *, times=None, options: SweepOptions | None = None,
-             progress: bool = True, description: str = "mu sweep") -> pd.DataFrame:
+def mu_sweep(
+    sys,
+    omega,
+    subsets: dict,
+    *,
+    times=None,
+    options: SweepOptions | None = None,
+    progress: bool = True,
+    description: str = "mu sweep",
+) -> pd.DataFrame:
     """mu bounds for every model of ``sys``, frequency of ``omega`` and subset.
 
     Parameters
@@ -224,8 +254,10 @@ def mu_sweep(sys, omega, subsets: dict, *, times=None, options: SweepOptions | N
         raise ValueError(f"mu_sweep: times has shape {times.shape}, expected ({n_models},)")
     parts = subset_parts(sys, subsets)
     cs = options.chunk_size
-    tasks = [(A[i : i + cs], Bw[i : i + cs], Cz[i : i + cs], Dzw[i : i + cs], i, omega, parts,
-              options) for i in range(0, n_models, cs)]
+    tasks = [
+        (A[i : i + cs], Bw[i : i + cs], Cz[i : i + cs], Dzw[i : i + cs], i, omega, parts, options)
+        for i in range(0, n_models, cs)
+    ]
     results = []
     bar = tqdm(total=n_models, desc=description, unit="model", disable=not progress)
     if options.n_jobs == 1 or len(tasks) == 1:
@@ -237,8 +269,9 @@ def mu_sweep(sys, omega, subsets: dict, *, times=None, options: SweepOptions | N
         import multiprocessing as mp
 
         method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-        with ProcessPoolExecutor(options.n_jobs, mp_context=mp.get_context(method),
-                                 initializer=_init_worker) as pool:
+        with ProcessPoolExecutor(
+            options.n_jobs, mp_context=mp.get_context(method), initializer=_init_worker
+        ) as pool:
             futures = {pool.submit(_sweep_chunk, t): t[0].shape[0] for t in tasks}
             for fut in as_completed(futures):
                 results.append(fut.result())
@@ -247,16 +280,20 @@ def mu_sweep(sys, omega, subsets: dict, *, times=None, options: SweepOptions | N
     frames = []
     for rows in results:
         for name, model, w, up, lo, refined in rows:
-            frames.append(pd.DataFrame({
-                "subset": name,
-                "model": np.full(w.size, model, dtype=int),
-                "time [s]": np.full(w.size, times[model]),
-                "frequency [Hz]": w / (2 * np.pi),
-                "mu_upper": up,
-                "mu_lower": lo,
-                "refined": np.full(w.size, refined),
-                "tightened": np.zeros(w.size, dtype=bool),
-            }))
+            frames.append(
+                pd.DataFrame(
+                    {
+                        "subset": name,
+                        "model": np.full(w.size, model, dtype=int),
+                        "time [s]": np.full(w.size, times[model]),
+                        "frequency [Hz]": w / (2 * np.pi),
+                        "mu_upper": up,
+                        "mu_lower": lo,
+                        "refined": np.full(w.size, refined),
+                        "tightened": np.zeros(w.size, dtype=bool),
+                    }
+                )
+            )
     table = pd.concat(frames, ignore_index=True)[SWEEP_COLUMNS]
     return table.sort_values(["subset", "model", "frequency [Hz]"], ignore_index=True)
 
@@ -265,13 +302,25 @@ def _tighten_task(task):
     from oos_drake.robust.mu_upper import mu_upper_bound
 
     M, blk, iterations = task
-    return mu_upper_bound(np.ascontiguousarray(M), parse_blk(blk), max_iter=iterations,
-                          temperatures=CONVERGED_TEMPERATURES).upper
+    return mu_upper_bound(
+        np.ascontiguousarray(M),
+        parse_blk(blk),
+        max_iter=iterations,
+        temperatures=CONVERGED_TEMPERATURES,
+    ).upper
 
 
-def tighten(sys, sweep: pd.DataFrame, subsets: dict, *, iterations: int = 300,
-            batch: int = 120, rounds: int = 4, n_jobs: int = 1,
-            progress: bool = True) -> pd.DataFrame:
+def tighten(
+    sys,
+    sweep: pd.DataFrame,
+    subsets: dict,
+    *,
+    iterations: int = 300,
+    batch: int = 120,
+    rounds: int = 4,
+    n_jobs: int = 1,
+    progress: bool = True,
+) -> pd.DataFrame:
     """Recompute the highest upper bounds with many iterations until the peak is a tight one.
 
     Every grid value is a valid bound, but a cheap one can sit far above the converged D-G
@@ -295,8 +344,9 @@ def tighten(sys, sweep: pd.DataFrame, subsets: dict, *, iterations: int = 300,
         import multiprocessing as mp
 
         method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-        pool = ProcessPoolExecutor(n_jobs, mp_context=mp.get_context(method),
-                                   initializer=_init_worker)
+        pool = ProcessPoolExecutor(
+            n_jobs, mp_context=mp.get_context(method), initializer=_init_worker
+        )
     for name in tqdm(list(parts), desc="tighten peaks", disable=not progress):
         zrows, wcols, blk = parts[name]
         for _ in range(rounds):
@@ -316,11 +366,15 @@ def tighten(sys, sweep: pd.DataFrame, subsets: dict, *, iterations: int = 300,
                 new = _tighten_task((M, blk, iterations))
             else:
                 chunks = np.array_split(np.arange(M.shape[0]), n_jobs)
-                new = np.concatenate(list(pool.map(
-                    _tighten_task, [(M[c], blk, iterations) for c in chunks if c.size])))
+                new = np.concatenate(
+                    list(
+                        pool.map(_tighten_task, [(M[c], blk, iterations) for c in chunks if c.size])
+                    )
+                )
             old = table.loc[index, "mu_upper"].to_numpy()
-            table.loc[index, "mu_upper"] = np.maximum(np.minimum(old, new),
-                                                      table.loc[index, "mu_lower"].to_numpy())
+            table.loc[index, "mu_upper"] = np.maximum(
+                np.minimum(old, new), table.loc[index, "mu_lower"].to_numpy()
+            )
             table.loc[index, "tightened"] = True
     if pool is not None:
         pool.shutdown()
@@ -378,9 +432,19 @@ class PeakCertificate:
         return 1.0 / self.mu_upper if self.mu_upper > 0 else float("inf")
 
 
-def certify_peak(sys, subset: str, members, model: int, frequency_hz: float, *,
-                 time: float = float("nan"), span: float = 0.25, points: int = 41,
-                 upper_iterations: int = 300, search_band: float = 2.0) -> PeakCertificate:
+def certify_peak(
+    sys,
+    subset: str,
+    members,
+    model: int,
+    frequency_hz: float,
+    *,
+    time: float = float("nan"),
+    span: float = 0.25,
+    points: int = 41,
+    upper_iterations: int = 300,
+    search_band: float = 2.0,
+) -> PeakCertificate:
     """Bounds of the mu peak of one model near ``frequency_hz``, with the worst perturbation.
 
     The upper bound is recomputed with ``upper_iterations`` BFGS iterations on a local grid;
@@ -431,21 +495,34 @@ def certify_peak(sys, subset: str, members, model: int, frequency_hz: float, *,
     from oos_drake.robust.mu_lower import mu_lower_bound
     from oos_drake.robust.mu_upper import mu_upper_bound
 
-    up_res = mu_upper_bound(np.ascontiguousarray(M), structure, max_iter=upper_iterations,
-                            temperatures=CONVERGED_TEMPERATURES)
+    up_res = mu_upper_bound(
+        np.ascontiguousarray(M),
+        structure,
+        max_iter=upper_iterations,
+        temperatures=CONVERGED_TEMPERATURES,
+    )
     up = up_res.upper
-    lo_res = mu_lower_bound(M, structure, start_inputs=up_res.worst_input,
-                            restarts=opts.lower_restarts, iters=opts.lower_iterations)
+    lo_res = mu_lower_bound(
+        M,
+        structure,
+        start_inputs=up_res.worst_input,
+        restarts=opts.lower_restarts,
+        iters=opts.lower_iterations,
+    )
     k = int(np.argmax(lo_res.lower))
     lower, w_crit, delta = float(lo_res.lower[k]), float(omega[k]), lo_res.delta[k]
-    direct = destabilizing_perturbation(A, Bw, Cz, Dzw, sub.blk,
-                                        [w0 / search_band, w0 * search_band])
+    direct = destabilizing_perturbation(
+        A, Bw, Cz, Dzw, sub.blk, [w0 / search_band, w0 * search_band]
+    )
     if direct.mu_lower > lower:
         lower, w_crit, delta = direct.mu_lower, direct.omega, direct.delta
     # the converged upper bound at the critical frequency (the certificate's other side)
     Mc = delta_channel_response(A, Bw, Cz, Dzw, [w_crit])
-    up_crit = float(mu_upper_bound(Mc, structure, max_iter=max(1000, upper_iterations),
-                                   temperatures=CONVERGED_TEMPERATURES).upper[0])
+    up_crit = float(
+        mu_upper_bound(
+            Mc, structure, max_iter=max(1000, upper_iterations), temperatures=CONVERGED_TEMPERATURES
+        ).upper[0]
+    )
     up_crit = max(up_crit, lower)
     up = np.append(up, up_crit)
     peak_up = float(max(up.max(), lower))
@@ -456,8 +533,18 @@ def certify_peak(sys, subset: str, members, model: int, frequency_hz: float, *,
             b = structure.blocks[rows[0]]
             block = delta[b.r_slice, b.c_slice]
             normalized[name] = float(block[0, 0].real) if kind == "ureal" else block.copy()
-    return PeakCertificate(subset, int(model), float(time), float(w_crit / (2 * np.pi)),
-                           peak_up, lower, up_crit, delta, worst, normalized)
+    return PeakCertificate(
+        subset,
+        int(model),
+        float(time),
+        float(w_crit / (2 * np.pi)),
+        peak_up,
+        lower,
+        up_crit,
+        delta,
+        worst,
+        normalized,
+    )
 
 
 def peaks_table(sweep: pd.DataFrame) -> pd.DataFrame:
@@ -466,12 +553,14 @@ def peaks_table(sweep: pd.DataFrame) -> pd.DataFrame:
     for name, group in sweep.groupby("subset", sort=False, observed=True):
         iu = group["mu_upper"].idxmax()
         il = group["mu_lower"].idxmax()
-        rows.append({
-            "subset": name,
-            "model": int(group.at[iu, "model"]),
-            "time [s]": float(group.at[iu, "time [s]"]),
-            "frequency [Hz]": float(group.at[iu, "frequency [Hz]"]),
-            "mu_upper": float(group.at[iu, "mu_upper"]),
-            "mu_lower_grid": float(group.at[il, "mu_lower"]),
-        })
+        rows.append(
+            {
+                "subset": name,
+                "model": int(group.at[iu, "model"]),
+                "time [s]": float(group.at[iu, "time [s]"]),
+                "frequency [Hz]": float(group.at[iu, "frequency [Hz]"]),
+                "mu_upper": float(group.at[iu, "mu_upper"]),
+                "mu_lower_grid": float(group.at[il, "mu_lower"]),
+            }
+        )
     return pd.DataFrame(rows)

@@ -19,9 +19,19 @@ import scipy.linalg
 from oos_drake.lfr import LFR, lft, usubs
 
 #: Columns of the time-domain summary.
-TIME_COLUMNS = ["case", "study", "model", "time [s]", "scale [-]", "frequency [Hz]",
-                "ape_max [rad]", "ape_requirement [rad]", "torque_max [N m]",
-                "torque_requirement [N m]", "stable"]
+TIME_COLUMNS = [
+    "case",
+    "study",
+    "model",
+    "time [s]",
+    "scale [-]",
+    "frequency [Hz]",
+    "ape_max [rad]",
+    "ape_requirement [rad]",
+    "torque_max [N m]",
+    "torque_requirement [N m]",
+    "stable",
+]
 
 
 def close_with_perturbation(sys: LFR, normalized: dict, omega: float) -> LFR:
@@ -49,8 +59,9 @@ def close_with_perturbation(sys: LFR, normalized: dict, omega: float) -> LFR:
     unknown = [k for k in normalized if k not in kinds]
     if unknown:
         raise ValueError(f"close_with_perturbation: unknown block(s) {unknown}")
-    reals = {k: float(np.real(normalized.get(k, 0.0))) for k, kind in kinds.items()
-             if kind == "ureal"}
+    reals = {
+        k: float(np.real(normalized.get(k, 0.0))) for k, kind in kinds.items() if kind == "ureal"
+    }
     out = usubs(sys, reals, normalized=True) if reals else sys
     # blocks left: ultidyn; those not given are nominal (zero)
     left = [e for e in out.block_entries]
@@ -58,8 +69,9 @@ def close_with_perturbation(sys: LFR, normalized: dict, omega: float) -> LFR:
         return out
     A, Bw, Bu = np.asarray(out.A), np.asarray(out.Bw), np.asarray(out.Bu)
     Cz, Cy = np.asarray(out.Cz), np.asarray(out.Cy)
-    D = np.block([[np.asarray(out.Dzw), np.asarray(out.Dzu)],
-                  [np.asarray(out.Dyw), np.asarray(out.Dyu)]])
+    D = np.block(
+        [[np.asarray(out.Dzw), np.asarray(out.Dzu)], [np.asarray(out.Dyw), np.asarray(out.Dyu)]]
+    )
     open_sys = LFR.from_ss(A, np.hstack([Bw, Bu]), np.vstack([Cz, Cy]), D)
     import control
 
@@ -75,8 +87,9 @@ def close_with_perturbation(sys: LFR, normalized: dict, omega: float) -> LFR:
             parts.append(realize_complex_matrix(value, omega))
     delta_sys = control.append(*parts) if len(parts) > 1 else parts[0]
     nw, nz = out.nw, out.nz
-    return lft(delta_sys, open_sys, nw, nz).with_names(inputs=sys.input_names,
-                                                      outputs=sys.output_names)
+    return lft(delta_sys, open_sys, nw, nz).with_names(
+        inputs=sys.input_names, outputs=sys.output_names
+    )
 
 
 def simulate(closed: LFR, frequency_hz: float, *, duration: float = 600.0, dt: float = 0.05):
@@ -111,8 +124,20 @@ def simulate(closed: LFR, frequency_hz: float, *, duration: float = 600.0, dt: f
     return t, e, stable
 
 
-def check_case(sys: LFR, normalized: dict, omega: float, spec, *, case: str, study: str,
-               model: int, time: float, scale: float, duration: float = 600.0, dt: float = 0.05):
+def check_case(
+    sys: LFR,
+    normalized: dict,
+    omega: float,
+    spec,
+    *,
+    case: str,
+    study: str,
+    model: int,
+    time: float,
+    scale: float,
+    duration: float = 600.0,
+    dt: float = 0.05,
+):
     """Simulate one perturbed closed loop and summarize APE and torque (a table row + signals)."""
     closed = close_with_perturbation(sys, normalized, omega)
     f_hz = omega / (2 * np.pi) if np.isfinite(omega) and omega > 0 else 0.01
@@ -120,15 +145,24 @@ def check_case(sys: LFR, normalized: dict, omega: float, spec, *, case: str, stu
     phi = e[:, :3] * spec.pointing_requirement
     u = e[:, 3:] / spec.control_weight
     row = {
-        "case": case, "study": study, "model": int(model), "time [s]": float(time),
-        "scale [-]": float(scale), "frequency [Hz]": float(f_hz),
+        "case": case,
+        "study": study,
+        "model": int(model),
+        "time [s]": float(time),
+        "scale [-]": float(scale),
+        "frequency [Hz]": float(f_hz),
         "ape_max [rad]": float(np.nanmax(np.abs(phi))) if np.isfinite(phi).any() else np.inf,
         "ape_requirement [rad]": spec.pointing_requirement,
         "torque_max [N m]": float(np.nanmax(np.abs(u))) if np.isfinite(u).any() else np.inf,
         "torque_requirement [N m]": 1.0 / spec.control_weight,
         "stable": stable,
     }
-    signals = pd.DataFrame({"case": case, "t [s]": t,
-                            **{f"phi_{a} [rad]": phi[:, i] for i, a in enumerate("xyz")},
-                            **{f"u_{a} [N m]": u[:, i] for i, a in enumerate("xyz")}})
+    signals = pd.DataFrame(
+        {
+            "case": case,
+            "t [s]": t,
+            **{f"phi_{a} [rad]": phi[:, i] for i, a in enumerate("xyz")},
+            **{f"u_{a} [N m]": u[:, i] for i, a in enumerate("xyz")},
+        }
+    )
     return row, signals

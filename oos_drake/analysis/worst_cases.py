@@ -38,13 +38,34 @@ def block_parameters(sys):
     for name, spec in sys.uncertainty.items():
         if spec.kind == "ureal":
             lo, hi = spec.range
-            kind = ParameterKind.STIFFNESS if name.startswith(("k_", "d_")) else \
-                ParameterKind.REAL_BLOCK
-            params.append(Parameter(name, block_unit(name), float(spec.nominal), float(lo),
-                                    float(hi), kind, f"uncertain block {name}"))
+            kind = (
+                ParameterKind.STIFFNESS
+                if name.startswith(("k_", "d_"))
+                else ParameterKind.REAL_BLOCK
+            )
+            params.append(
+                Parameter(
+                    name,
+                    block_unit(name),
+                    float(spec.nominal),
+                    float(lo),
+                    float(hi),
+                    kind,
+                    f"uncertain block {name}",
+                )
+            )
         else:
-            params.append(Parameter(name, "-", 0.0, 0.0, float(spec.bound), ParameterKind.LTI,
-                                    f"LTI block {name}: norm of the worst-case realization"))
+            params.append(
+                Parameter(
+                    name,
+                    "-",
+                    0.0,
+                    0.0,
+                    float(spec.bound),
+                    ParameterKind.LTI,
+                    f"LTI block {name}: norm of the worst-case realization",
+                )
+            )
     return params
 
 
@@ -73,7 +94,16 @@ def write_regions(regions, sys, path) -> Path:
     for i, r in enumerate(regions):
         scale = r.mu_lower if r.mu_lower > 0 else 0.0
         values = physical_values(sys, r.normalized, scale) if scale > 0 else {}
-        out.append(WorstCaseRegion(i, r.configuration, float(max(r.time, 0.0)),
-                                   float(r.frequency_hz), float(r.mu_upper),
-                                   float(min(r.mu_lower, r.mu_upper)), r.subset, values))
+        out.append(
+            WorstCaseRegion(
+                i,
+                r.configuration,
+                float(max(r.time, 0.0)),
+                float(r.frequency_hz),
+                float(r.mu_upper),
+                float(min(r.mu_lower, r.mu_upper)),
+                r.subset,
+                values,
+            )
+        )
     return write_worst_cases(out, params, Path(path))

@@ -9,9 +9,14 @@ from oos_drake.analysis.controller import load_controller
 
 
 def _write(path, K_p, K_d, **extra):
-    record = {"controller": {"K_p": {"value": K_p, "unit": "N m/rad"},
-                             "K_d": {"value": K_d, "unit": "N m s/rad"}},
-              "gamma": 0.4, **extra}
+    record = {
+        "controller": {
+            "K_p": {"value": K_p, "unit": "N m/rad"},
+            "K_d": {"value": K_d, "unit": "N m s/rad"},
+        },
+        "gamma": 0.4,
+        **extra,
+    }
     path.write_text(json.dumps(record))
     return path
 
@@ -19,9 +24,16 @@ def _write(path, K_p, K_d, **extra):
 def test_gains_spec_and_label(tmp_path):
     K_p = np.diag([1.0, 2.0, 3.0]).tolist()
     K_d = (10 * np.eye(3)).tolist()
-    _write(tmp_path / "controller.json", K_p, K_d,
-                  design_specification={"additive_weight_db": -70.0, "rolloff_order": 4,
-                                        "disturbance_gains": [0.1, 0.2, 0.3]})
+    _write(
+        tmp_path / "controller.json",
+        K_p,
+        K_d,
+        design_specification={
+            "additive_weight_db": -70.0,
+            "rolloff_order": 4,
+            "disturbance_gains": [0.1, 0.2, 0.3],
+        },
+    )
     c = load_controller(tmp_path)  # a directory works too
     np.testing.assert_array_equal(c.K, np.hstack([K_p, K_d]))
     assert c.label == "synthesized" and c.gamma == 0.4

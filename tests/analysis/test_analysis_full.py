@@ -10,8 +10,9 @@ from oos_drake.analysis.run import AnalysisOptions, run_analysis
 
 @pytest.mark.slow
 def test_full_analysis(tmp_path):
-    summary = run_analysis(_controller(None), tmp_path, AnalysisOptions(progress=False),
-                           log=lambda *_: None)
+    summary = run_analysis(
+        _controller(None), tmp_path, AnalysisOptions(progress=False), log=lambda *_: None
+    )
     m = summary["mission"]
     assert m["configurations"] == 330 and m["nominal_stable_models"] == 330
     assert 0 < m["mu_peak_lower"] <= m["mu_peak_upper"]

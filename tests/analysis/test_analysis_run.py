@@ -45,11 +45,24 @@ def analysis(tmp_path_factory):
 
 def test_files_and_summary(analysis):
     out, summary, _ = analysis
-    for name in ("mu_mission.parquet", "stability_peaks.parquet", "worst_perturbations.parquet",
-                 "performance.parquet", "docking_7.parquet", "sensitivity.parquet",
-                 "time_check.parquet", "worst_cases.parquet", "summary.json", "mu_mission.png",
-                 "performance.png", "mu_docking.png", "sensitivity.png", "time_check.png",
-                 "open_loop_effects.parquet", "open_loop_effects.png"):
+    for name in (
+        "mu_mission.parquet",
+        "stability_peaks.parquet",
+        "worst_perturbations.parquet",
+        "performance.parquet",
+        "docking_7.parquet",
+        "sensitivity.parquet",
+        "time_check.parquet",
+        "worst_cases.parquet",
+        "summary.json",
+        "mu_mission.png",
+        "performance.png",
+        "mu_docking.png",
+        "sensitivity.png",
+        "time_check.png",
+        "open_loop_effects.parquet",
+        "open_loop_effects.png",
+    ):
         assert (out / name).is_file(), name
     saved = json.loads((out / "summary.json").read_text())
     assert saved["controller"]["label"] == "baseline"
@@ -68,12 +81,27 @@ def test_tables_have_documented_columns(analysis):
     assert list(pd.read_parquet(out / "sensitivity.parquet").columns) == SENSITIVITY_COLUMNS
     assert list(pd.read_parquet(out / "time_check.parquet").columns) == TIME_COLUMNS
     peaks = pd.read_parquet(out / "stability_peaks.parquet")
-    for col in ("subset", "time [s]", "frequency [Hz]", "mu_upper", "mu_lower", "gap [%]",
-                "margin [-]", "stiffness [N/m or N m/rad]", "mu_upper_at_critical"):
+    for col in (
+        "subset",
+        "time [s]",
+        "frequency [Hz]",
+        "mu_upper",
+        "mu_lower",
+        "gap [%]",
+        "margin [-]",
+        "stiffness [N/m or N m/rad]",
+        "mu_upper_at_critical",
+    ):
         assert col in peaks.columns, col
     sweep = pd.read_parquet(out / "mu_mission.parquet")
-    assert set(sweep["subset"]) == {"total", "real", "modal", "mechanical", "additive",
-                                    "multiplicative"}
+    assert set(sweep["subset"]) == {
+        "total",
+        "real",
+        "modal",
+        "mechanical",
+        "additive",
+        "multiplicative",
+    }
     assert np.all(sweep["mu_lower"] <= sweep["mu_upper"] * (1 + 1e-9))
 
 
@@ -138,8 +166,15 @@ def test_worst_perturbation_destabilizes_at_the_reported_frequency(analysis):
     times = mission_times(FAST.configurations)
     arr = mission_closed_loop(controller, times).system
     members = uncertainty_subsets(arr.uncertainty)["total"]
-    cert = certify_peak(arr, "total", members, int(total["model"]), float(total["frequency [Hz]"]),
-                        points=5, upper_iterations=30)
+    cert = certify_peak(
+        arr,
+        "total",
+        members,
+        int(total["model"]),
+        float(total["frequency [Hz]"]),
+        points=5,
+        upper_iterations=30,
+    )
     assert cert.mu_lower > 0 and cert.mu_lower <= cert.mu_upper * (1 + 1e-9)
     one = arr.model(int(total["model"]))
     closed = usubs(one, cert.worst_case_normalized, normalized=True)
