@@ -16,3 +16,15 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip_slow)
+
+
+# Property tests draw new examples on every developer run; CI replays a fixed set (derandomized)
+# so that a green CI means the same thing twice.
+try:
+    import hypothesis
+
+    hypothesis.settings.register_profile("ci", derandomize=True, print_blob=True)
+    if os.environ.get("CI"):
+        hypothesis.settings.load_profile("ci")
+except ImportError:  # pragma: no cover
+    pass

@@ -26,8 +26,14 @@ from __future__ import annotations
 import numpy as np
 
 from oos_drake.control import components as comp
-from oos_drake.control.interconnection import CONTROLS, DISTURBANCES, ERRORS, MEASUREMENTS
-from oos_drake.control.statespace import channel_names, connect, sum_block
+from oos_drake.control.interconnection import (
+    CONTROLS,
+    DISTURBANCES,
+    ERRORS,
+    MEASUREMENTS,
+    diagram_parts,
+)
+from oos_drake.control.statespace import channel_names, connect
 from oos_drake.lfr import LFR, as_lfr, lft, ultidyn
 
 #: Name of the full 3x3 additive LTI block.
@@ -98,23 +104,7 @@ def weighted_interconnection_open(spec: comp.DesignSpecification | None = None) 
         components and signs as :func:`oos_drake.control.interconnection.weighted_interconnection`).
     """
     spec = spec or comp.DesignSpecification()
-    v = channel_names
-    parts = [
-        comp.integrator("wdot", "w"),
-        comp.integrator("w", "phi"),
-        comp.star_tracker(spec, "phi", "phi_sst"),
-        comp.gyro(spec, "w", "w_gyro"),
-        comp.rolloff_filter(spec, "u_K", "u"),
-        comp.reaction_wheels(spec, "u", "T_rw"),
-        comp.disturbance_weight(spec, "d_ext", "T_dist"),
-        sum_block(v("T", 3), [v("T_rw", 3), v("T_dist", 3)], [1.0, 1.0]),
-        comp.static_gain(spec.noise_star_tracker, "n_sst", "n_sst_w"),
-        comp.static_gain(spec.noise_gyro, "n_gyro", "n_gyro_w"),
-        sum_block(v("y_att", 3), [v("phi_sst", 3), v("n_sst_w", 3)], [-1.0, -1.0]),
-        sum_block(v("y_rate", 3), [v("w_gyro", 3), v("n_gyro_w", 3)], [-1.0, -1.0]),
-        comp.static_gain(1.0 / spec.pointing_requirement, "phi", "e_p"),
-        comp.static_gain(spec.control_weight, "u", "e_u"),
-    ]
+    parts = diagram_parts(spec)
     inputs = DISTURBANCES + PLANT_OUT + CONTROLS
     outputs = ERRORS + PLANT_IN + MEASUREMENTS
     H = connect(parts, inputs, outputs)
