@@ -194,7 +194,13 @@ def read_worst_cases(
             if np.isnan(value):
                 continue
             parameter = by_name[name]
-            if not (parameter.lower <= value <= parameter.upper):
+            # a vertex of the uncertainty box written in physical units may miss its bound by
+            # round-off: accept (and clip) within 1e-9 of the range's scale
+            lo, hi = parameter.lower, parameter.upper
+            tol = 1e-9 * max(abs(lo), abs(hi), hi - lo)
+            if lo - tol <= value <= hi + tol:
+                value = min(max(value, lo), hi)
+            else:
                 raise ValueError(
                     f"{where}: {column} = {value:g} outside the range of {name} "
                     f"[{parameter.lower:g}, {parameter.upper:g}]"

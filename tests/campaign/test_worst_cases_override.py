@@ -42,3 +42,24 @@ def test_unknown_simulator_option_is_refused_before_anything_is_written(tmp_path
             CAMPAIGNS / "demo.toml", tmp_path / "out", simulator_options={"no_such_option": 1}
         )
     assert not (tmp_path / "out").exists()
+
+
+def test_worst_case_value_at_a_bound_up_to_round_off_is_accepted_and_clipped(tmp_path):
+    from oos_drake.campaign.spec import load_spec
+
+    base = pd.read_parquet(CAMPAIGNS / "demo_worst_cases.parquet")
+    spec = load_spec(CAMPAIGNS / "demo_mu.toml")
+    column = next(c for c in base.columns if c.startswith("wc:"))
+    name = column[3:].split(" [")[0]
+    parameter = next(p for p in spec.info.parameters if p.name == name)
+    for value, accepted in ((parameter.lower * (1 - 1e-13), True), (parameter.lower * 0.9, False)):
+        table = base.copy()
+        table[column] = value
+        path = tmp_path / f"wc_{accepted}.parquet"
+        table.to_parquet(path)
+        if accepted:
+            _, spec2, _ = prepare_campaign(CAMPAIGNS / "demo_mu.toml", tmp_path / "ok", path)
+            assert min(r.perturbation[name] for r in spec2.regions) == parameter.lower
+        else:
+            with pytest.raises(ValueError, match="outside the range"):
+                prepare_campaign(CAMPAIGNS / "demo_mu.toml", tmp_path / "bad", path)
