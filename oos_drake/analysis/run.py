@@ -556,7 +556,7 @@ def run_analysis(
             for k, v in options.__dict__.items()
         },
         "timings_s": timings,
-        "files": {k: str(v) for k, v in paths.items()},
+        "files": {k: Path(v).name for k, v in paths.items()},  # relative to the output folder
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
     return summary
