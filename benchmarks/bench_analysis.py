@@ -32,9 +32,9 @@ def main() -> None:
     from oos_drake.analysis.models import mission_closed_loop
     from oos_drake.analysis.stability import SweepOptions, mu_sweep
     from oos_drake.analysis.subsets import uncertainty_subsets
+    from oos_drake.blas import limit_blas_threads
     from oos_drake.robust import mussv, robust_sweep
     from oos_drake.robust.lfr_analysis import block_map, delta_channel_response
-    from oos_drake.robust.threads import limit_blas_threads
 
     limit_blas_threads(1)
     controller = _controller(None)

@@ -35,8 +35,8 @@ def modal_models(n_models, n_states, n_in=3, n_out=3, seed=0):
 def main(argv=None):
     import slycot
 
+    from oos_drake.blas import limit_blas_threads
     from oos_drake.robust import hinfnorm
-    from oos_drake.robust.threads import limit_blas_threads
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--models", type=int, default=50)

@@ -83,11 +83,11 @@ def main(argv=None):
 
     from bench_robust_sweep import PAPER_BLK, paper_like_lfr
 
+    from oos_drake.blas import limit_blas_threads
     from oos_drake.robust import mussv
     from oos_drake.robust.lfr_analysis import delta_channel_response
     from oos_drake.robust.mu_lower import mu_lower_bound
     from oos_drake.robust.mu_upper import mu_upper_bound
-    from oos_drake.robust.threads import limit_blas_threads
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--matrices", type=int, default=200)

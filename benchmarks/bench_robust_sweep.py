@@ -85,8 +85,8 @@ def _load() -> float:
 
 
 def main(argv=None):
+    from oos_drake.blas import limit_blas_threads
     from oos_drake.robust import robust_sweep
-    from oos_drake.robust.threads import limit_blas_threads
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--models", type=int, default=40, help="models actually run")

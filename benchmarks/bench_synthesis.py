@@ -4,7 +4,7 @@ Run ``python benchmarks/bench_synthesis.py [--plant synthetic|lfr] [--models 200
 [--synthesis]``. The baseline (ab13dd, the routine behind MATLAB's ``norm(sys, inf)`` and
 python-control's ``hinfnorm``) is measured in the same run on the same closed loops; the table
 shows both times, their ratio and the largest relative difference of the norms. Both run with
-one OpenBLAS thread (see :mod:`oos_drake.control.blas_threads`).
+one OpenBLAS thread (see :mod:`oos_drake.blas`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import time
 import numpy as np
 from slycot import ab13dd
 
-from oos_drake.control.blas_threads import single_threaded_blas
+from oos_drake.blas import single_threaded_blas
 from oos_drake.control.cli import baseline_for, make_plants
 from oos_drake.control.interconnection import weighted_interconnection
 from oos_drake.control.peak_gain import peak_gain

@@ -249,7 +249,7 @@ def run_analysis(
     from oos_drake.analysis.stability import mu_sweep, peaks_table, tighten
     from oos_drake.analysis.subsets import uncertainty_subsets
     from oos_drake.analysis.worst_cases import Region, write_regions
-    from oos_drake.robust.threads import limit_blas_threads
+    from oos_drake.blas import limit_blas_threads
 
     limit_blas_threads(1)
     options = options or AnalysisOptions()

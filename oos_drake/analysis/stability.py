@@ -202,7 +202,7 @@ def _sweep_chunk(task):
 
 
 def _init_worker():
-    from oos_drake.robust.threads import limit_blas_threads
+    from oos_drake.blas import limit_blas_threads
 
     limit_blas_threads(1)
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from oos_drake.control.blas_threads import with_single_threaded_blas
+from oos_drake.blas import with_single_threaded_blas
 from oos_drake.control.interconnection import WeightedInterconnection
 from oos_drake.control.peak_gain import PeakGain, peak_gain
 

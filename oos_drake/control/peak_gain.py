@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from oos_drake.control.blas_threads import with_single_threaded_blas
+from oos_drake.blas import with_single_threaded_blas
 
 #: Eigenvector basis condition number above which the exact (LU) response is used instead
 #: (below it the modal response is accurate to ~cond * 1e-16, enough to locate peaks; the

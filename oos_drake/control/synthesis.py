@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from oos_drake.control.blas_threads import with_single_threaded_blas
+from oos_drake.blas import with_single_threaded_blas
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.interconnection import WeightedInterconnection, weighted_interconnection
 from oos_drake.control.nonsmooth_bfgs import BfgsResult, minimize_bundle_bfgs, minimize_nonsmooth

@@ -248,7 +248,7 @@ def robust_sweep(
     else:
         import multiprocessing as mp
 
-        from oos_drake.robust.threads import limit_blas_threads
+        from oos_drake.blas import limit_blas_threads
 
         # fork where available (no __main__ guard needed in user scripts); one BLAS thread per
         # worker: batched small-matrix kernels only lose from more
