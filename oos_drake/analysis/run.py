@@ -278,25 +278,30 @@ def run_analysis(
         f"mission: {times.size} configurations, {omega.size} grid frequencies, "
         f"subsets {list(subsets)}; nominal loops stable: {int((abscissa < 0).sum())}/{times.size}"
     )
-    sweep = mu_sweep(
-        mission.system,
-        omega,
-        subsets,
-        times=times,
-        options=options.sweep,
-        progress=options.progress,
-        description="mu mission",
-    )
-    sweep = tighten(
-        mission.system,
-        sweep,
-        subsets,
-        iterations=options.tighten_iterations,
-        batch=options.tighten_batch,
-        rounds=options.tighten_rounds,
-        n_jobs=options.sweep.n_jobs,
-        progress=options.progress,
-    )
+
+    def sweep_and_tighten(system, sets, grid, description):
+        """mu bounds on the common grid, then the highest points recomputed more tightly."""
+        table = mu_sweep(
+            system,
+            omega,
+            sets,
+            times=grid,
+            options=options.sweep,
+            progress=options.progress,
+            description=description,
+        )
+        return tighten(
+            system,
+            table,
+            sets,
+            iterations=options.tighten_iterations,
+            batch=options.tighten_batch,
+            rounds=options.tighten_rounds,
+            n_jobs=options.sweep.n_jobs,
+            progress=options.progress,
+        )
+
+    sweep = sweep_and_tighten(mission.system, subsets, times, "mu mission")
     sweep.to_parquet(out / "mu_mission.parquet", index=False)
     paths["mu_mission"] = out / "mu_mission.parquet"
     lap("mu sweep mission")
@@ -319,25 +324,7 @@ def run_analysis(
     for phase in options.docking_phases:
         arr = docking_closed_loop(controller, phase, stiffness, scenario=scenario)
         tot = {"total": uncertainty_subsets(arr.system.uncertainty)["total"]}
-        dsweep = mu_sweep(
-            arr.system,
-            omega,
-            tot,
-            times=stiffness,
-            options=options.sweep,
-            progress=options.progress,
-            description=f"mu docking {phase}",
-        )
-        dsweep = tighten(
-            arr.system,
-            dsweep,
-            tot,
-            iterations=options.tighten_iterations,
-            batch=options.tighten_batch,
-            rounds=options.tighten_rounds,
-            n_jobs=options.sweep.n_jobs,
-            progress=options.progress,
-        )
+        dsweep = sweep_and_tighten(arr.system, tot, stiffness, f"mu docking {phase}")
         dsweep = dsweep.rename(columns={"time [s]": "stiffness [N/m or N m/rad]"})
         dsweep.to_parquet(out / f"docking_{phase}.parquet", index=False)
         paths[f"docking_{phase}"] = out / f"docking_{phase}.parquet"
