@@ -48,10 +48,21 @@ def _stage_done(folder: Path, key: str) -> bool:
     return stamp.is_file() and json.loads(stamp.read_text()).get("key") == key
 
 
-def run_stage(name: str, folder: Path, key: str, work: Callable[[Path], None]) -> bool:
-    """Run ``work(tmp_folder)`` unless ``folder`` is stamped with ``key``; True if it ran."""
+def run_stage(
+    name: str,
+    folder: Path,
+    key: str,
+    work: Callable[[Path], None],
+    timings: dict[str, float | None] | None = None,
+) -> bool:
+    """Run ``work(tmp_folder)`` unless ``folder`` is stamped with ``key``; True if it ran.
+
+    ``timings[name]`` receives the stage's wall time in seconds, or None when it was skipped.
+    """
+    timings = {} if timings is None else timings
     if _stage_done(folder, key):
         print(f"[oos run] {name}: up to date in {folder} (skipped)")
+        timings[name] = None
         return False
     print(f"[oos run] {name} -> {folder}")
     start = time.perf_counter()
@@ -64,7 +75,8 @@ def run_stage(name: str, folder: Path, key: str, work: Callable[[Path], None]) -
     )
     shutil.rmtree(folder, ignore_errors=True)
     tmp.rename(folder)
-    print(f"[oos run] {name}: done in {time.perf_counter() - start:.1f} s")
+    timings[name] = time.perf_counter() - start
+    print(f"[oos run] {name}: done in {timings[name]:.1f} s")
     return True
 
 
@@ -79,11 +91,13 @@ def _oos(*argv: str) -> None:
 
 def run_pipeline(args: argparse.Namespace) -> int:
     """Run every stage of the main job into ``args.out``; returns the exit status."""
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     campaign_spec = Path(args.campaign)
     if not campaign_spec.is_file():
         raise ValueError(f"campaign spec {campaign_spec}: file not found")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    timings: dict[str, float | None] = {}
+    start = time.perf_counter()
     quick = ["--configurations", "40"] if args.quick else []
 
     model_key = source_key("lfr", "titop", "scenario")
@@ -92,10 +106,11 @@ def run_pipeline(args: argparse.Namespace) -> int:
         out / "model",
         model_key,
         lambda d: (_oos("model", "info"), _oos("model", "figures", "--out", d)),
+        timings,
     )
 
     multibody_key = _digest(model_key, source_key("multibody"))
-    run_stage("validate", out / "validate", multibody_key, lambda d: _validate(d))
+    run_stage("validate", out / "validate", multibody_key, _validate, timings)
 
     controller_key = _digest(model_key, source_key("control", "robust"), *quick)
     run_stage(
@@ -103,6 +118,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
         out / "controller",
         controller_key,
         lambda d: _oos("synth", "--out", d, *quick),
+        timings,
     )
     controller = out / "controller" / "controller.json"
 
@@ -112,12 +128,14 @@ def run_pipeline(args: argparse.Namespace) -> int:
         out / "analysis",
         analysis_key,
         lambda d: _oos("analyze", "--controller", controller, "--out", d, *quick),
+        timings,
     )
 
     campaign_key = _digest(
         analysis_key, multibody_key, source_key("campaign"), campaign_spec.read_bytes()
     )
     campaign = out / f"campaign-{campaign_key[:10]}"
+    campaign_start = time.perf_counter()
     if (campaign / "spec.toml").is_file():
         print(f"[oos run] campaign: resuming {campaign}")
         _oos("campaign", "resume", campaign, "--workers", args.workers)
@@ -138,7 +156,17 @@ def run_pipeline(args: argparse.Namespace) -> int:
             f"controller={controller.resolve()}",
         )
     _oos("campaign", "report", campaign)
+    timings["campaign + report"] = time.perf_counter() - campaign_start
+    total = time.perf_counter() - start
+    (out / "timings.json").write_text(
+        json.dumps({"stages_s": timings, "total_s": total}, indent=1) + "\n"
+    )
 
+    print("\n[oos run] wall time per stage:")
+    for name, seconds in timings.items():
+        shown = "skipped (up to date)" if seconds is None else f"{seconds:8.1f} s"
+        print(f"  {name:28s} {shown}")
+    print(f"  {'total':28s} {total:8.1f} s")
     print("\n[oos run] finished. Where to look:")
     for label, path in (
         ("model figures", out / "model"),
