@@ -8,22 +8,29 @@ bilinear, 1 occurrence) and participation gain (2 occurrences). Inputs: 3 hub to
 outputs: 3 hub attitude angles [rad]. That is 60 states and about 200 Delta occurrences.
 
 Fast path: ``usubs`` with arrays of N value sets (one model array, no Python loop per model) and
-``freqresp`` of the array (no Python loop per frequency; real models use LAPACK ``dgeev``'s real
-eigenvector basis and a real pairwise modal sum, one matrix product per model). It is timed with
-1 worker thread and with 2 worker threads (``oos_drake.lfr.frequency.WORKERS`` /
-``oos_drake.lfr.substitution.WORKERS``: chunks of models on a thread pool; LAPACK/BLAS release the
-GIL). BLAS itself is single-threaded everywhere (``OPENBLAS_NUM_THREADS=OMP_NUM_THREADS=1``, set
-below before numpy is imported), so the baseline loop is single-threaded.
+``freqresp`` of the array (no Python loop per frequency). The state matrix of this model is, like
+that of every flexible spacecraft in modal coordinates, 2x2-block diagonal (one block per mode)
+up to a rank-3 coupling through the hub, and its inputs and outputs sit on the hub: ``freqresp``
+detects this and evaluates ``C (sI - A)^-1 B`` with the Woodbury identity, without any
+eigendecomposition (``oos_drake.lfr.coupled_modes``: one real matrix product and closed-form 3x3
+solves per model); models it cannot treat take the modal route (one LAPACK ``dgeev`` per model).
+The script prints how many models took each route. It is timed with 1 worker thread and with 2
+worker threads (``oos_drake.lfr.frequency.WORKERS`` / ``oos_drake.lfr.substitution.WORKERS``:
+chunks of models on a thread pool; numpy's LAPACK/BLAS calls and array loops release the GIL).
+BLAS itself is single-threaded everywhere (``OPENBLAS_NUM_THREADS=OMP_NUM_THREADS=1``, set below
+before numpy is imported), so the baseline loop is single-threaded.
 
 Baseline: for each value set, ``usubs`` with scalars, ``to_ss()`` and
 ``control.frequency_response``. The baseline is timed on a subset of the samples (half before,
 half after the fast paths, since the machine is shared) and scaled linearly to N; it is a loop of
 identical iterations. Each repeat measures all three in the same window and gives its own ratios;
 the script prints every repeat, the spread, wall-clock and CPU (process) times and the load
-average. The script also times the eigendecomposition of every model's state matrix alone
-(LAPACK ``dgeev``, one thread): the modal response needs one per model, so that line is a floor.
+average. For scale it also times the eigendecomposition of every model's state matrix alone
+(LAPACK ``dgeev``, one thread), which the modal route needs once per model (the floor of that
+route, not of the block + low-rank route).
 
-Run: ``python benchmarks/bench_lfr_usubs.py [--samples 1000] [--baseline-samples 40] [--repeats 3]``
+Run: ``python benchmarks/bench_lfr_usubs.py [--samples 1000] [--baseline-samples 40] [--repeats 7]``
+(``--models`` is an alias of ``--samples``; use e.g. ``--models 200 --repeats 1`` while iterating).
 """
 
 from __future__ import annotations
@@ -137,10 +144,10 @@ def spread(values):
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--samples", type=int, default=1000)
+    parser.add_argument("--samples", "--models", type=int, default=1000, help="value sets (models)")
     parser.add_argument("--baseline-samples", type=int, default=40)
     parser.add_argument("--frequencies", type=int, default=500)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--threads", type=int, default=2, help="worker threads of the fast path")
     args = parser.parse_args(argv)
 
@@ -203,10 +210,27 @@ def main(argv=None) -> int:
         rows.append(row)
         models = fast[1][0]
 
-    # floor: one dgeev (eigenvalues + right eigenvectors) of every model's state matrix, on the
-    # core that freqresp diagonalizes (the rigid-body integrator tail is handled in closed form)
+    # which route answered: one more (untimed) freqresp, counting what the block + low-rank
+    # route accepted; the other models took the modal route (one dgeev per model)
     n = models.nstates
     core, _, _ = lfr_frequency._integrator_tail(models.M[:, :n, :n])
+    accepted = []
+    route = lfr_frequency.coupled_response
+
+    def counting_route(*route_args, **route_kwargs):
+        ok = route(*route_args, **route_kwargs)
+        accepted.append(int(np.sum(ok)))
+        return ok
+
+    lfr_frequency.coupled_response = counting_route
+    try:
+        models.freqresp(omega)
+    finally:
+        lfr_frequency.coupled_response = route
+    taken = sum(accepted)
+    # for scale: one dgeev (eigenvalues + right eigenvectors) of every model's state matrix, on
+    # the core that the modal route diagonalizes (the rigid-body integrator tail is handled in
+    # closed form)
     A = models.M[:, core[:, None], core[None, :]]
     with Clock() as c_eig:
         for a in A:
@@ -241,9 +265,14 @@ def main(argv=None) -> int:
         ratios = [row["base_cpu"] / row[w]["cpu"] for row in rows]
         print(f"  fast path, {w} thread(s): median {np.median(cpu):.3f} s, ratio {spread(ratios)}")
     print(
-        f"floor: LAPACK dgeev of every model's {core.size}x{core.size} core state matrix "
-        f"(of {n} states), 1 thread: {c_eig.wall:.3f} s wall, {c_eig.cpu:.3f} s CPU; "
-        f"baseline / floor = {np.median([row['base_cpu'] for row in rows]) / c_eig.cpu:.1f}x CPU"
+        f"routes: {taken} of {args.samples} models by the block + low-rank route "
+        f"(no eigendecomposition), {args.samples - taken} by the modal route"
+    )
+    print(
+        f"for scale: LAPACK dgeev of every model's {core.size}x{core.size} core state matrix "
+        f"(of {n} states; what the modal route needs), 1 thread: {c_eig.wall:.3f} s wall, "
+        f"{c_eig.cpu:.3f} s CPU; baseline / that = "
+        f"{np.median([row['base_cpu'] for row in rows]) / c_eig.cpu:.1f}x CPU"
     )
     rel = max(row[w]["rel"] for row in rows for w in configs)
     print(

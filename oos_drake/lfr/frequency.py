@@ -23,7 +23,10 @@ Two structures would spoil the modal sum and are handled exactly instead:
 
 Models where even this fails use an exact direct solve ``(j omega I - A) X = B``.
 
-Real models (the hot path of Monte Carlo arrays) take a faster route first: LAPACK ``dgeev``
+Real models whose state matrix is 2x2-block diagonal up to a low-rank coupling (flexible modes
+on a hub: the Monte Carlo arrays of the paper) first try the eigendecomposition-free route of
+:mod:`oos_drake.lfr.coupled_modes` (Woodbury identity, one real matrix product and closed-form
+``r x r`` solves per model). The other real models take the modal route next: LAPACK ``dgeev``
 returns the eigenvectors of a real ``A`` as a REAL basis ``T`` (real and imaginary parts of each
 conjugate pair), so ``T^-1 B`` is a real solve, and the modal terms are summed two by two over
 conjugate (or real) eigenvalue pairs,
@@ -51,36 +54,30 @@ import numpy as np
 import scipy.linalg
 from scipy.linalg import lapack
 
+from oos_drake.blas import single_threaded_blas
 from oos_drake.lfr.core import as_lfr
+from oos_drake.lfr.coupled_modes import block_pairs, coupled_response
+from oos_drake.lfr.workspace import Workspace
 
 #: Eigenvalues whose condition number ``||v|| ||w||`` exceeds this go to the clustered block.
 EIG_COND_LIMIT = 1e5
+#: A well-conditioned eigenvalue closer than this (relative) to a clustered one: direct solve.
+CLUSTER_SEP_RTOL = 1e-6
 #: Largest clustered block handled by the block method (larger: direct solve fallback).
 MAX_CLUSTER = 24
 #: Target size (complex entries) of temporary arrays per chunk.
 CHUNK_ENTRIES = 1_500_000
 #: Threads evaluating chunks of a model array in parallel (1: single-threaded). Results are
 #: bitwise independent of this setting; set it (e.g. to ``os.cpu_count()``) for large arrays.
+#: Each worker runs its BLAS calls single-threaded (:func:`oos_drake.blas.single_threaded_blas`).
 WORKERS = 1
 #: Use the real-arithmetic pairwise modal route for real models (False: general path only).
 REAL_PAIR_PATH = True
-
-
-class _Workspace:
-    """Scratch arrays reused from chunk to chunk (one per worker thread). Large temporaries
-    freshly allocated for every chunk come from ``mmap`` and cost a page fault per 4 KiB on first
-    touch, which on this workload doubled the time spent outside LAPACK."""
-
-    def __init__(self):
-        self._arrays = {}
-
-    def get(self, name, shape, dtype=float):
-        arr = self._arrays.get(name)
-        size = int(np.prod(shape))
-        if arr is None or arr.dtype != np.dtype(dtype) or arr.size < size:
-            arr = np.empty(size, dtype=dtype)
-            self._arrays[name] = arr
-        return arr[:size].reshape(shape)
+#: Try the eigendecomposition-free route of :mod:`oos_drake.lfr.coupled_modes` first for real
+#: models whose state matrix is 2x2-block diagonal up to a low-rank coupling.
+COUPLED_PATH = True
+#: Models per chunk on the block + low-rank route (at most; chunks come in even numbers).
+COUPLED_CHUNK = 64
 
 
 def freqresp(sys, omega) -> np.ndarray:
@@ -114,23 +111,41 @@ def freqresp(sys, omega) -> np.ndarray:
     if n == 0:
         out[:] = M[:, None, :, :]
         return out.reshape(batch + out.shape[1:])
-    core, tail, powers = _integrator_tail(M[:, :n, :n])
+    pattern = np.logical_or.reduce(M[:, :n, :n], axis=0)  # nonzero anywhere in the batch
+    core, tail, powers = _integrator_tail(M[:, :n, :n], pattern)
+    pairs = None
+    if COUPLED_PATH and core.size and not np.iscomplexobj(M):
+        pairs = block_pairs(pattern[np.ix_(core, core)])
     n_core = core.size
     per_model = omega.size * (n_core + 4 * ny * nu * (1 + powers)) + 6 * n * n
-    chunk = max(1, CHUNK_ENTRIES // per_model)
+    sub = max(1, CHUNK_ENTRIES // per_model)
+    # the block + low-rank route has small per-model temporaries (it sub-chunks its frequency
+    # part itself): larger chunks amortize its per-chunk work; the fallback routes keep ``sub``
+    chunk = sub
+    if pairs is not None:
+        # an even number of equal chunks (balanced on two worker threads; the chunking must
+        # not depend on WORKERS, so that results are bitwise independent of it)
+        pieces = 2 * max(1, -(-nb // (2 * max(sub, COUPLED_CHUNK))))
+        chunk = max(1, -(-nb // pieces))
     starts = range(0, nb, chunk)
     local = threading.local()
 
     def work(start):
         stop = min(nb, start + chunk)
         if not hasattr(local, "ws"):
-            local.ws = _Workspace()
-        _block_response(M[start:stop], n, core, tail, powers, omega, out[start:stop], local.ws)
+            local.ws = Workspace()
+        _block_response(
+            M[start:stop], n, core, tail, powers, omega, out[start:stop], local.ws, pairs, sub
+        )
+
+    def threaded_work(start):
+        with single_threaded_blas():  # this thread's BLAS calls: no nested BLAS threads
+            work(start)
 
     workers = max(1, int(WORKERS))
     if workers > 1 and len(starts) > 1:
         with ThreadPoolExecutor(max_workers=min(workers, len(starts))) as pool:
-            for _ in pool.map(work, starts):
+            for _ in pool.map(threaded_work, starts):
                 pass
     else:
         for start in starts:
@@ -138,9 +153,28 @@ def freqresp(sys, omega) -> np.ndarray:
     return out.reshape(batch + out.shape[1:])
 
 
-def _block_response(M, n, core, tail, powers, omega, out, ws=None):
-    """Response of one chunk of models into ``out``: the real pairwise route where it applies,
-    the general path (:func:`_tail_response` / :func:`_chunk_response`) for the other models."""
+def _block_response(M, n, core, tail, powers, omega, out, ws=None, pairs=None, sub=None):
+    """Response of one chunk of models into ``out``: the block + low-rank route
+    (:mod:`oos_drake.lfr.coupled_modes`, when ``pairs`` is given), then the real pairwise modal
+    route, then the general path (:func:`_tail_response` / :func:`_chunk_response`), each for
+    the models the previous one could not treat (in pieces of at most ``sub`` models)."""
+    todo = np.arange(M.shape[0])
+    if COUPLED_PATH and pairs is not None and core.size and not np.iscomplexobj(M):
+        ok = coupled_response(M, n, core, tail, powers, omega, pairs, out, ws)
+        todo = np.flatnonzero(~ok)
+    sub = M.shape[0] if sub is None else max(1, int(sub))
+    for start in range(0, todo.size, sub):
+        idx = todo[start : start + sub]
+        if idx.size == M.shape[0]:
+            _fallback_response(M, n, core, tail, powers, omega, out, ws)
+        else:
+            part = np.empty((idx.size,) + out.shape[1:], dtype=complex)
+            _fallback_response(M[idx], n, core, tail, powers, omega, part, ws)
+            out[idx] = part
+
+
+def _fallback_response(M, n, core, tail, powers, omega, out, ws=None):
+    """The real pairwise modal route where it applies, the general path for the other models."""
     s = 1j * omega
     if REAL_PAIR_PATH and core.size and not np.iscomplexobj(M):
         _, ok = _real_pair_response(M, n, core, tail, powers, omega, out, ws)
@@ -163,7 +197,7 @@ def _real_eig(A, ws=None):
     conjugate pair, positive imaginary part first). ``ok[k]`` is False if ``A[k]`` is not finite
     or LAPACK failed (the caller then uses the general path)."""
     g, m = A.shape[0], A.shape[-1]
-    ws = _Workspace() if ws is None else ws
+    ws = Workspace() if ws is None else ws
     lam = np.empty((g, m), dtype=complex)
     T = ws.get("eig_T", (g, m, m))
     ok = np.all(np.isfinite(A), axis=(1, 2))
@@ -197,7 +231,7 @@ def _real_pair_response(
     ny, nu = M.shape[1] - n, M.shape[2] - n
     m = core.size
     nf = omega.size
-    ws = _Workspace() if ws is None else ws
+    ws = Workspace() if ws is None else ws
     A11 = M[:, core[:, None], core[None, :]]
     B1, C1, D = M[:, core, n:], M[:, n:, core], M[:, n:, n:]
     tail_C, tail_B = [], []  # C2 A22^p A21 and C2 A22^p B2, p = 0 .. q-1
@@ -379,15 +413,17 @@ def _tail_response(M, n, core, tail, powers, s):
     return out
 
 
-def _integrator_tail(A: np.ndarray):
+def _integrator_tail(A: np.ndarray, pattern: np.ndarray | None = None):
     """Split states into a core and a downstream chain of pure integrators (structurally, over
     the whole batch): tail states feed only later tail states, so ``A = [[A11, 0], [A21, A22]]``
     with ``A22`` strictly lower triangular (nilpotent). Rigid-body ``1/s^2`` outputs are the typical
     tail; removing them keeps the eigendecomposition free of their defective zero eigenvalues.
 
+    ``pattern`` (optional) is the precomputed boolean ``(n, n)`` union of the nonzero patterns.
     Returns ``(core, tail, q)`` index arrays and the nilpotency index ``q`` of ``A22``.
     """
-    pattern = np.any(A != 0, axis=0)
+    if pattern is None:
+        pattern = np.any(A != 0, axis=0)
     n = pattern.shape[0]
     in_tail = np.zeros(n, dtype=bool)
     added = []
@@ -586,6 +622,12 @@ def _clustered_response(A, B, C, lam, V, bad, k, s):
     Z = np.empty((g, k, k), dtype=complex)
     for i in range(g):
         T[i], Z[i] = scipy.linalg.schur(A_bb[i], output="complex")
+    # the partial fractions divide by lambda_good - lambda_bad: a good eigenvalue (nearly) equal
+    # to a clustered one (repeated eigenvalues of duplicated subsystems) needs the direct solve
+    diag_T = np.diagonal(T, axis1=1, axis2=2)  # (g, k)
+    sep = np.min(np.abs(lam_g[:, :, None] - diag_T[:, None, :]), axis=(1, 2))
+    scale = np.maximum(np.max(np.abs(lam_g), axis=1), np.max(np.abs(diag_T), axis=1))
+    ok &= sep > CLUSTER_SEP_RTOL * np.maximum(scale, 1e-300)
     GtZ = np.linalg.solve(W, Q_gH @ AQ_b) @ Z  # (g, m, k)
     # X_z[n] = GtZ[n] (lambda_n I - T)^-1  (row vectors: forward substitution)
     X_z = np.empty((g, m, k), dtype=complex)

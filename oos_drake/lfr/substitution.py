@@ -20,12 +20,14 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from oos_drake.blas import single_threaded_blas
 from oos_drake.lfr.core import LFR
 
 #: Work-array size (entries) per chunk of models in the batched substitution.
 SUBS_CHUNK_ENTRIES = 1_000_000
 #: Threads closing chunks of a model array in parallel (1: single-threaded). Results do not
-#: depend on this setting (numpy releases the GIL in its array loops and BLAS calls).
+#: depend on this setting (numpy releases the GIL in its array loops and BLAS calls); each worker
+#: runs its BLAS calls single-threaded (:func:`oos_drake.blas.single_threaded_blas`).
 WORKERS = 1
 
 
@@ -345,10 +347,14 @@ def _close_scalar(sys: LFR, deltas: Mapping) -> LFR:
         def work(k):
             new_M[k : k + step] = _close_scalar_values_batched(plan, flat[k : k + step], names)
 
+        def threaded_work(k):
+            with single_threaded_blas():  # this thread's BLAS calls: no nested BLAS threads
+                work(k)
+
         workers = max(1, int(WORKERS))
         if workers > 1 and len(starts) > 1:
             with ThreadPoolExecutor(max_workers=min(workers, len(starts))) as pool:
-                for _ in pool.map(work, starts):
+                for _ in pool.map(threaded_work, starts):
                     pass
         else:
             for k in starts:
@@ -425,40 +431,16 @@ def _close_scalar_values_batched(plan, d, names):
 def _close_scalar_values_right(plan, d, names):
     """``M' = M_kk + M_ks W`` with ``(I - Delta M_ss) W = Delta M_sk`` solved level by level.
 
-    ``W`` is stored as ``(ns, N, nk)`` so that every coupling and the final product are single
-    large matrix products over all models at once.
+    ``W`` is stored as ``(ns, N, nk)`` (``nk`` used columns of ``M_sk``) so that every coupling
+    and the final product are single large matrix products over all models at once.
     """
-    Mss, Mkk = plan["Mss"], plan["Mkk"]
-    # only the columns of M_sk and the rows of M_ks that are not identically zero matter
+    Mkk = plan["Mkk"]
     cols, rows = plan["cols_used"], plan["rows_used"]
-    Msk, Mks = plan["Msk_used"], plan["Mks_used"]
-    N, ns = d.shape
-    nk = cols.size
-    dtype = np.result_type(Mss, d)
-    dt = np.ascontiguousarray(d.T)  # (ns, N)
-    W = np.empty((ns, N, nk), dtype=dtype)
-    for start, stop, coupled, singles, groups in plan["bounds"]:
-        size = stop - start
-        rhs = np.broadcast_to(Msk[start:stop, None, :], (size, N, nk))
-        if coupled:
-            prod = Mss[start:stop, :start] @ W[:start].reshape(start, N * nk)
-            rhs = rhs + prod.reshape(size, N, nk)
-        d_lev = dt[start:stop]  # (size, N)
-        block = Mss[start:stop, start:stop]
-        if singles.size:
-            denom = 1.0 - d_lev[singles] * np.diagonal(block)[singles, None]
-            if np.any(np.abs(denom) < 1e-14):
-                raise _ill_posed(names)
-            W[start + singles] = (d_lev[singles] / denom)[..., None] * rhs[singles]
-        for grp in groups:
-            dg = d_lev[grp].T  # (N, g)
-            loop = np.eye(grp.size) - dg[:, :, None] * block[np.ix_(grp, grp)]
-            rhs_g = np.swapaxes(rhs[grp], 0, 1) * dg[:, :, None]  # (N, g, nk)
-            try:
-                W[start + grp] = np.swapaxes(np.linalg.solve(loop, rhs_g), 0, 1)
-            except np.linalg.LinAlgError:
-                raise _ill_posed(names) from None
-    update = (Mks @ W.reshape(ns, N * nk)).reshape(rows.size, N, nk)
+    N = d.shape[0]
+    W = _level_recursion(
+        plan["Mss"], plan["Msk_used"], np.ascontiguousarray(d.T), plan["bounds"], names
+    )
+    update = (plan["Mks_used"] @ W.reshape(W.shape[0], -1)).reshape(rows.size, N, cols.size)
     out = np.empty((N,) + Mkk.shape, dtype=np.result_type(Mkk, update))
     out[:] = Mkk
     out[:, rows[:, None], cols[None, :]] += np.swapaxes(update, 0, 1)
@@ -468,53 +450,125 @@ def _close_scalar_values_right(plan, d, names):
 def _close_scalar_values_left(plan, d, names):
     """Transposed hot path: ``M' = M_kk + Z M_sk`` with ``Z = M_ks Delta (I - M_ss Delta)^-1``.
 
-    Since ``(I - Delta M_ss)^-1 Delta = Delta (I - M_ss Delta)^-1``, this equals the right-hand
-    recursion of :func:`_close_scalar_values_batched`. Row ``j`` of ``Z^T`` (one per channel)
-    satisfies ``Z_j (1 - d_j M_jj) = d_j (M_ks[:, j] + sum_{i != j} Z_i M_ss[i, j])``, so the
-    levels are visited in REVERSE topological order, coupled components by a small transposed
-    solve. ``Z`` is stored as ``(ns, N, nr)`` with ``nr`` the used rows of ``M_ks``.
+    Since ``(I - Delta M_ss)^-1 Delta = Delta (I - M_ss Delta)^-1``, this equals
+    :func:`_close_scalar_values_right`. ``Z^T`` solves the transposed system
+    ``(I - Delta M_ss^T) Z^T = Delta M_ks^T``, whose dependencies run the other way: with the
+    channel order reversed it is the same level recursion (:func:`_level_recursion`) on
+    ``M_ss^T``, with the rows of ``M_ks`` (``nr`` used ones) in place of the columns of ``M_sk``.
     """
-    Mss, Mkk = plan["Mss"], plan["Mkk"]
+    Mkk = plan["Mkk"]
     cols, rows = plan["cols_used"], plan["rows_used"]
-    Msk, Mks = plan["Msk_used"], plan["Mks_used"]
-    N, ns = d.shape
-    nr = rows.size
-    dtype = np.result_type(Mss, d)
-    dt = np.ascontiguousarray(d.T)  # (ns, N)
-    coupled_below = plan.get("coupled_below")
-    if coupled_below is None:
-        coupled_below = [bool(np.any(Mss[stop:, start:stop])) for start, stop, *_ in plan["bounds"]]
-        plan["coupled_below"] = coupled_below
-    MksT = np.ascontiguousarray(Mks.T)  # (ns, nr)
-    Z = np.empty((ns, N, nr), dtype=dtype)
+    N = d.shape[0]
+    tr = plan.get("transposed")
+    if tr is None:
+        tr = plan["transposed"] = _transposed_plan(plan)
+    d_rev = np.ascontiguousarray(d[:, ::-1].T)
+    Z = _level_recursion(tr["Mss"], tr["rhs"], d_rev, tr["bounds"], names)  # (ns, N, nr) reversed
+    update = (Z.reshape(Z.shape[0], -1).T @ tr["lhs"]).reshape(N, rows.size, cols.size)
+    out = np.empty((N,) + Mkk.shape, dtype=np.result_type(Mkk, update))
+    out[:] = Mkk
+    out[:, rows[:, None], cols[None, :]] += update
+    return out
+
+
+def _transposed_plan(plan):
+    """The transposed problem of :func:`_close_scalar_values_left` with the channel order
+    reversed (so that its levels again depend only on earlier ones): ``M_ss^T``, the used rows
+    of ``M_ks`` as right-hand side, the used columns of ``M_sk`` (reversed) for the final
+    product, and the level bounds mirrored (built once per plan)."""
+    ns = plan["Mss"].shape[0]
+    bounds = []
     for (start, stop, _, singles, groups), coupled in zip(
-        reversed(plan["bounds"]), reversed(coupled_below), strict=True
+        reversed(plan["bounds"]), reversed(_coupled_below(plan)), strict=True
     ):
+        last = stop - start - 1  # position p within the level becomes last - p
+        bounds.append(
+            (ns - stop, ns - start, coupled, last - singles[::-1], [last - g[::-1] for g in groups])
+        )
+    return {
+        "Mss": np.ascontiguousarray(plan["Mss"][::-1, ::-1].T),
+        "rhs": np.ascontiguousarray(plan["Mks_used"][:, ::-1].T),
+        "lhs": np.ascontiguousarray(plan["Msk_used"][::-1]),
+        "bounds": bounds,
+    }
+
+
+def _coupled_below(plan):
+    """Per level: does any later level depend on it (``M_ss[stop:, start:stop] != 0``)?"""
+    Mss = plan["Mss"]
+    return [bool(np.any(Mss[stop:, start:stop])) for start, stop, *_ in plan["bounds"]]
+
+
+def _level_recursion(Mss, rhs0, dt, bounds, names):
+    """``W`` with ``(I - Delta M_ss) W = Delta R`` for ``N`` value sets, level by level.
+
+    Parameters
+    ----------
+    Mss : numpy.ndarray
+        ``(ns, ns)`` channel coupling, channels in topological level order (a level depends
+        only on earlier ones, and on itself through its strongly connected groups).
+    rhs0 : numpy.ndarray
+        ``(ns, k)`` right-hand side ``R``.
+    dt : numpy.ndarray
+        ``(ns, N)`` normalized values per channel and model.
+    bounds : list
+        ``(start, stop, coupled, singles, groups)`` per level: ``coupled`` if the level depends
+        on earlier ones; ``singles`` / ``groups`` positions (within the level) of the channels
+        that need a division / a small solve.
+    names : list of str
+        Block names (for the ill-posedness message).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``W`` stored as ``(ns, N, k)``: every coupling is one large matrix product.
+    """
+    ns, N = dt.shape
+    k = rhs0.shape[1]
+    W = np.empty((ns, N, k), dtype=np.result_type(Mss, dt))
+    for start, stop, coupled, singles, groups in bounds:
         size = stop - start
-        rhs = np.broadcast_to(MksT[start:stop, None, :], (size, N, nr))
+        rhs = np.broadcast_to(rhs0[start:stop, None, :], (size, N, k))
         if coupled:
-            prod = Mss[stop:, start:stop].T @ Z[stop:].reshape(ns - stop, N * nr)
-            rhs = rhs + prod.reshape(size, N, nr)
+            prod = Mss[start:stop, :start] @ W[:start].reshape(start, N * k)
+            rhs = rhs + prod.reshape(size, N, k)
         d_lev = dt[start:stop]  # (size, N)
         block = Mss[start:stop, start:stop]
         if singles.size:
             denom = 1.0 - d_lev[singles] * np.diagonal(block)[singles, None]
             if np.any(np.abs(denom) < 1e-14):
                 raise _ill_posed(names)
-            Z[start + singles] = (d_lev[singles] / denom)[..., None] * rhs[singles]
+            W[start + singles] = (d_lev[singles] / denom)[..., None] * rhs[singles]
         for grp in groups:
+            if grp.size == 2:  # closed form (Cramer), no per-model LAPACK call
+                W[start + grp] = _solve_pair(block[np.ix_(grp, grp)], d_lev[grp], rhs[grp], names)
+                continue
             dg = d_lev[grp].T  # (N, g)
-            loop = np.eye(grp.size) - dg[:, :, None] * block[np.ix_(grp, grp)].T
-            rhs_g = np.swapaxes(rhs[grp], 0, 1) * dg[:, :, None]  # (N, g, nr)
+            loop = np.eye(grp.size) - dg[:, :, None] * block[np.ix_(grp, grp)]
+            rhs_g = np.swapaxes(rhs[grp], 0, 1) * dg[:, :, None]  # (N, g, k)
             try:
-                Z[start + grp] = np.swapaxes(np.linalg.solve(loop, rhs_g), 0, 1)
+                W[start + grp] = np.swapaxes(np.linalg.solve(loop, rhs_g), 0, 1)
             except np.linalg.LinAlgError:
                 raise _ill_posed(names) from None
-    update = (Z.reshape(ns, N * nr).T @ Msk).reshape(N, nr, cols.size)
-    out = np.empty((N,) + Mkk.shape, dtype=np.result_type(Mkk, update))
-    out[:] = Mkk
-    out[:, rows[:, None], cols[None, :]] += update
-    return out
+    return W
+
+
+def _solve_pair(block, d, rhs, names):
+    """``(I - diag(d) B) X = diag(d) R`` for a 2-channel loop ``B (2, 2)``, values ``d (2, N)``
+    and ``R (2, N, k)``, all models at once: ``X (2, N, k)``."""
+    a = 1.0 - d[0] * block[0, 0]
+    b = -d[0] * block[0, 1]
+    c = -d[1] * block[1, 0]
+    e = 1.0 - d[1] * block[1, 1]
+    det = a * e - b * c
+    if np.any(np.abs(det) < 1e-14):
+        raise _ill_posed(names)
+    r0 = d[0][:, None] * rhs[0]
+    r1 = d[1][:, None] * rhs[1]
+    inv = (1.0 / det)[:, None]
+    return np.stack(
+        [(e[:, None] * r0 - b[:, None] * r1) * inv, (a[:, None] * r1 - c[:, None] * r0) * inv]
+    )
 
 
 def _close_full(sys: LFR, deltas: Mapping) -> LFR:

@@ -232,3 +232,27 @@ def test_left_and_right_substitution_recursions_agree_with_the_general_solve():
     scale = np.abs(general).max()
     np.testing.assert_allclose(left, general, rtol=0, atol=1e-12 * scale)
     np.testing.assert_allclose(right, general, rtol=0, atol=1e-12 * scale)
+
+
+def test_duplicated_subsystems_use_an_exact_path(monkeypatch):
+    """Redundant LFR algebra (``P b + P b`` in parallel, then in series; found by hypothesis):
+    repeated eigenvalues, some flagged ill-conditioned and some not. The clustered-block method
+    would divide by their (near-zero) separation (1e-7 errors); such models take the direct
+    solve and match it to 1e-9."""
+    rng = np.random.default_rng(0)
+    a, b = ureal("a", 1.0, percent=40), ureal("b", 2.0, range=(1.0, 5.0))
+    first, second, _ = (random_ss(rng, k, 1, 1, d_scale=0.2) for k in (1, 2, 0))
+    expr = first * a
+    expr = expr + second * b + second * b
+    expr = expr * (a * first)
+    expr = expr * (b * second)
+    models = usubs(
+        expr, {"a": np.array([-1.0, 0.0, 1.0]), "b": np.array([-1.0, 0.0, 1.0])}, normalized=True
+    )
+    n = models.nstates
+    monkeypatch.setattr(fr, "COUPLED_PATH", False)
+    resp = freqresp(models, OMEGA)
+    for k in range(3):
+        M = models.M[k]
+        direct = fr._direct_response(M[:n, :n], M[:n, n:], M[n:, :n], M[n:, n:], 1j * OMEGA)
+        assert_response_close(resp[k], direct, rtol=RTOL)
