@@ -1,165 +1,263 @@
-"""Drake mission simulation benchmark: speed, integrator choice, parallel efficiency.
+"""Drake mission simulation benchmark: speed, where the time goes, integrators, parallel pools.
 
 Run as a script (the machine is shared: the default is short)::
 
-    .venv/bin/python benchmarks/bench_mission_sim.py            # all parts
+    .venv/bin/python benchmarks/bench_mission_sim.py                 # parts 1, 3, 4
+    .venv/bin/python benchmarks/bench_mission_sim.py --profile       # + part 2
     .venv/bin/python benchmarks/bench_mission_sim.py --skip-full --runs 6
 
 1. One whole 1500 s mission with all 24 flexible modes, the arm, the captured and docked target,
-   the 10 Hz flight software: wall time and processor time of this process (the one-core figure
-   when other jobs share the machine), as multiples of real time.
-2. Integrator choice on the same 5 s window before the capture: Radau3 (the default) against the
-   explicit Runge-Kutta 3 (baseline measured in the same run); the explicit integrator is limited
-   by the stiff joint PDs and bushings. ``--accuracy-study`` adds the attitude error of each
-   Radau3 accuracy against a 1e-7 reference.
-3. Parallel efficiency ``T(1 worker) / (2 T(2 workers))`` of the campaign's local process pool with
-   the Drake simulator: both pools warm (simulator built in each worker before timing), the same
-   cases, interleaved repeats, best of each. By default each worker runs in its own session (see
-   :func:`isolated_simulator`: Linux autogroup scheduling otherwise caps a whole pool at one
-   session's share on a shared machine); ``--same-session`` measures the plain pool.
+   the 10 Hz flight software: wall time and processor time of this process, as multiples of
+   real time and as **processor seconds per simulated second** (the figure that other jobs on a
+   shared machine inflate least), with the integrator's work (steps, derivative evaluations,
+   Newton-Raphson iterations). One OpenBLAS thread, as in a campaign worker.
+2. ``--profile``: where the processor time of that run goes. The cost of one time-derivative
+   evaluation of the diagram (the MultibodyPlant's articulated-body algorithm with the joint
+   PDs and bushings) and of one flight-software update (the Python ``LeafSystem``) are measured
+   in isolation and multiplied by the counts of the run; the remainder is the integrator's own
+   work (Newton solves, factorizations) and the simulator's event handling. A cProfile of a
+   window lists the Python functions.
+3. Integrator choice on the same 2 s window before the capture: Radau3 (the default: fixed steps
+   of one control period, Newton tolerance 1e-7) against the explicit Runge-Kutta 3 with error
+   control (baseline measured in the same run); the explicit integrator is limited by the stiff
+   joint PDs and bushings. ``--accuracy-study`` adds the attitude error of Radau3 settings
+   against a converged reference on three windows (arm motion, capture, second docking).
+   ``--window-start-study`` compares windows that start with the hub at rest with the mission
+   run from t = 0.
+4. Parallel efficiency of the campaign's process pool with this simulator, 2 workers against 1,
+   on wall time and on processor time (``bench_campaign.parallel_efficiency``).
 """
 
 from __future__ import annotations
 
 import argparse
+import cProfile
+import io
 import os
+import pstats
 import sys
 import time
 
 import numpy as np
 import pandas as pd
 
-from oos_drake.campaign.drake_simulator import FACTORY_PATH
-from oos_drake.campaign.executors import ProcessPoolExecutor
-from oos_drake.campaign.simulator import MissionWindow, RunCase, SimulatorRecipe
+from oos_drake.blas import limit_blas_threads
 from oos_drake.multibody.mission import MissionOptions
 from oos_drake.multibody.mission_sim import MissionSimulation
 
-# spawned pool workers import this module by name for the isolated factory below
+# bench_campaign (part 4) is a sibling script; its pool workers import it by name
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 
-def isolated_simulator(**options):
-    """Benchmark-only factory: the worker leaves its session first (``os.setsid``).
-
-    Linux's autogroup scheduler gives each *session* one fair share of the CPUs: on a machine
-    shared with other users' sessions, every worker of a pool started from one shell competes
-    for that single share, so adding a worker cannot speed anything up and the measured
-    efficiency says nothing about the code. A worker in its own session gets its own share,
-    as it would on a dedicated machine.
-    """
-    try:
-        os.setsid()
-    except OSError:
-        pass  # already a session leader
-    from oos_drake.campaign.drake_simulator import make_simulator
-
-    return make_simulator(**options)
-
-
-def full_mission() -> dict:
-    """Time one whole mission; return the table row."""
-    simulation = MissionSimulation(MissionOptions())
-    result = simulation.run({}, seed=1)
+def _row(case: str, duration: float, result) -> dict:
+    s = result.statistics
     return {
-        "case": "full mission 0-1500 s, radau3, 10 Hz FSW",
-        "sim [s]": simulation.duration,
+        "case": case,
+        "sim [s]": duration,
         "wall [s]": result.wall_time,
         "cpu [s]": result.cpu_time,
-        "x RT (wall)": simulation.duration / result.wall_time,
-        "x RT (cpu)": simulation.duration / result.cpu_time,
+        "cpu/sim [ms/s]": 1e3 * result.cpu_time / duration,
+        "x RT (wall)": duration / result.wall_time,
+        "x RT (cpu)": duration / result.cpu_time,
         "steps": result.steps,
+        "f evals": int(s.get("integrator_num_derivative_evaluations", 0)),
+        "NR iters": int(s.get("integrator_num_newton_raphson_iterations", 0)),
         "APE [rad]": result.metrics["ape"],
     }
 
 
-def integrators(start: float = 100.0, end: float = 105.0) -> list[dict]:
+def full_mission(simulation: MissionSimulation) -> tuple[dict, object]:
+    """Time one whole mission; return the table row and the result."""
+    result = simulation.run({}, seed=1)
+    case = "full mission 0-1500 s, radau3 fixed 0.1 s steps, 10 Hz FSW"
+    return _row(case, simulation.duration, result), result
+
+
+def derivative_cost(simulation: MissionSimulation, n: int = 2000) -> float:
+    """Processor time of one time-derivative evaluation of the mission diagram [s].
+
+    At a mid-mission state (arm holding the target), cycling through 50 perturbed states so
+    that every evaluation recomputes the plant's kinematics and articulated-body caches.
+    """
+    context, _, _ = simulation.initial_context({}, 1, 300.0, 310.0)
+    diagram = simulation.handles.diagram
+    derivatives = diagram.AllocateTimeDerivatives()
+    x0 = context.get_continuous_state_vector().CopyToVector()
+    rng = np.random.default_rng(0)
+    states = [x0 + 1e-4 * rng.standard_normal(x0.size) for _ in range(50)]
+    best = np.inf
+    for _ in range(3):
+        start = time.process_time()
+        for i in range(n):
+            context.SetContinuousState(states[i % 50])
+            diagram.CalcTimeDerivatives(context, derivatives)
+        best = min(best, (time.process_time() - start) / n)
+    return best
+
+
+def update_cost(simulation: MissionSimulation, n: int = 3000) -> float:
+    """Processor time of one flight-software update (the Python discrete update) [s]."""
+    context, _, _ = simulation.initial_context({}, 1, 300.0, 310.0)
+    diagram = simulation.handles.diagram
+    best = np.inf
+    for _ in range(3):
+        start = time.process_time()
+        for i in range(n):
+            context.SetTime(300.0 + 1e-6 * i)  # invalidates the cached update
+            diagram.EvalUniquePeriodicDiscreteUpdate(context)
+        best = min(best, (time.process_time() - start) / n)
+    return best
+
+
+def profile(simulation: MissionSimulation, result) -> None:
+    """Print where the processor time of the whole-mission run goes (part 2)."""
+    s = result.statistics
+    evals = s["integrator_num_derivative_evaluations"]
+    samples = simulation.duration * simulation.options.control_rate
+    f_cost, u_cost = derivative_cost(simulation), update_cost(simulation)
+    rows = [
+        {
+            "part": "plant + joint PDs: time derivatives (C++)",
+            "count": int(evals),
+            "each [us]": 1e6 * f_cost,
+            "cpu [s]": evals * f_cost,
+        },
+        {
+            "part": "flight software update (Python LeafSystem)",
+            "count": int(samples),
+            "each [us]": 1e6 * u_cost,
+            "cpu [s]": samples * u_cost,
+        },
+    ]
+    rest = result.cpu_time - sum(r["cpu [s]"] for r in rows)
+    rows.append(
+        {
+            "part": "integrator linear algebra, events, logging (rest)",
+            "count": int(result.steps),
+            "each [us]": 1e6 * rest / result.steps,
+            "cpu [s]": rest,
+        }
+    )
+    table = pd.DataFrame(rows)
+    table["share"] = table["cpu [s]"] / result.cpu_time
+    print(f"\nwhere the {result.cpu_time:.1f} s of processor time of the whole mission go")
+    print(table.to_string(index=False, float_format="{:.3g}".format))
+    newton = s["integrator_num_newton_raphson_iterations"] / result.steps
+    newton_error = s["integrator_num_error_estimator_newton_raphson_iterations"] / result.steps
+    print(
+        "integrator work per step: "
+        f"{evals / result.steps:.1f} derivative evaluations, {newton:.1f} Newton-Raphson "
+        f"iterations ({newton_error:.1f} of them for the error estimate); "
+        f"{int(s['integrator_num_jacobian_evaluations'])} "
+        f"Jacobians and {int(s['integrator_num_iteration_matrix_factorizations'])} "
+        "factorizations in the whole run"
+    )
+    profiler = cProfile.Profile()
+    profiler.enable()
+    simulation.run({}, seed=1, start=250.0, end=350.0)
+    profiler.disable()
+    stream = io.StringIO()
+    pstats.Stats(profiler, stream=stream).sort_stats("tottime").print_stats(8)
+    print("cProfile of the window 250-350 s (Python view; AdvanceTo is the C++ simulator):")
+    print("\n".join(stream.getvalue().splitlines()[4:]))
+
+
+def integrators(start: float = 100.0, end: float = 102.0) -> list[dict]:
     """Radau3 against RK3 on the same window."""
     rows = []
     for name in ("radau3", "runge_kutta3"):
         simulation = MissionSimulation(MissionOptions(integrator=name))
         result = simulation.run({}, seed=1, start=start, end=end, log=False)
-        rows.append(
-            {
-                "case": f"window {start:g}-{end:g} s, {name}",
-                "sim [s]": end - start,
-                "wall [s]": result.wall_time,
-                "cpu [s]": result.cpu_time,
-                "x RT (wall)": (end - start) / result.wall_time,
-                "x RT (cpu)": (end - start) / result.cpu_time,
-                "steps": result.steps,
-                "APE [rad]": result.metrics["ape"],
-            }
-        )
+        mode = "fixed steps" if simulation.options.fixed_step else "error control"
+        rows.append(_row(f"window {start:g}-{end:g} s, {name}, {mode}", end - start, result))
     return rows
 
 
-def accuracy_study(start: float = 200.0, end: float = 230.0) -> None:
-    """Attitude error of the default Radau3 accuracy against a 1e-7 reference (arm moving)."""
-    rows, reference = [], None
-    for accuracy in (1e-7, 1e-6, 1e-5, 1e-4, 1e-3):
-        simulation = MissionSimulation(MissionOptions(accuracy=accuracy))
-        result = simulation.run({}, seed=1, start=start, end=end)
-        phi = result.timeseries[[f"phi_{a} [rad]" for a in "xyz"]].to_numpy()
-        reference = phi if reference is None else reference
-        rows.append(
-            {
-                "accuracy": accuracy,
-                "max |phi - phi_ref| [rad]": np.abs(phi - reference).max(),
-                "relative to peak": np.abs(phi - reference).max() / np.abs(reference).max(),
-                "cpu [s]": result.cpu_time,
-                "x RT (cpu)": (end - start) / result.cpu_time,
-                "steps": result.steps,
-            }
-        )
-    print(f"Radau3 accuracy on the window {start:g}-{end:g} s (reference: 1e-7)")
+def accuracy_study(windows=((400.0, 440.0), (250.0, 275.0), (870.0, 900.0))) -> None:
+    """Attitude error of integrator settings against a converged reference.
+
+    Windows: the arm moving the captured target (400-440 s), the SM1 stiffness ramp of the
+    capture (250-275 s) and the second docking (870-900 s, SM2 up then SM1 down). Reference:
+    fixed Radau3 steps of 12.5 ms (1.6 ms in the ramps), Newton tolerance 1e-9 (it agrees with
+    error-controlled Radau3 at 1e-8 on the arm-motion window, and with 25 ms steps to 0.05 %).
+    """
+    settings = (
+        ("default: fixed 0.1 s, 1e-7, ramps 4 substeps", {}),
+        ("fixed 0.1 s, 1e-6", {"accuracy": 1e-6}),
+        ("fixed 0.1 s, 1e-7, ramps 16 substeps", {"ramp_substeps": 16}),
+        ("fixed 0.1 s, 1e-7, no ramp substeps", {"ramp_substeps": 1}),
+        ("session 1: error control 1e-5", {"error_control": True, "accuracy": 1e-5}),
+    )
+    rows = []
+    for start, end in windows:
+
+        def attitude(start=start, end=end, **options):
+            simulation = MissionSimulation(MissionOptions(log_rate=10.0, **options))
+            result = simulation.run({}, seed=1, start=start, end=end)
+            phi = result.timeseries[[f"phi_{a} [rad]" for a in "xyz"]].to_numpy()
+            return result, phi
+
+        reference, phi_ref = attitude(max_step=0.0125, accuracy=1e-9, ramp_substeps=64)
+        peak = np.abs(phi_ref).max()
+        for label, options in settings:
+            result, phi = attitude(**options)
+            error = np.abs(phi - phi_ref).max()
+            rows.append(
+                {
+                    "window [s]": f"{start:g}-{end:g}",
+                    "setting": label,
+                    "max |phi - phi_ref| [rad]": error,
+                    "relative to peak": error / peak,
+                    "APE error": abs(result.metrics["ape"] / reference.metrics["ape"] - 1),
+                    "cpu/sim [ms/s]": 1e3 * result.cpu_time / (end - start),
+                    "steps": result.steps,
+                }
+            )
+    print("Radau3 settings against a converged reference (10 Hz logging)")
     print(pd.DataFrame(rows).to_string(index=False, float_format="{:.3g}".format))
 
 
-def parallel_efficiency(n_runs: int, window: float, repeats: int, isolate: bool) -> float:
-    """Same cases on 1 and 2 warm pool workers; print the table; return the efficiency."""
-    factory = "bench_mission_sim:isolated_simulator" if isolate else FACTORY_PATH
-    recipe = SimulatorRecipe.create(factory, {"control_rate": 10.0, "log_rate": 1.0})
-    cases = [
-        RunCase(i, 1000 + i, {"phi0_x": 1e-3 * (i % 3)}, MissionWindow(255.0, 255.0 + window))
-        for i in range(n_runs)
-    ]
-    pools = {"pool, 1 worker": ProcessPoolExecutor(1), "pool, 2 workers": ProcessPoolExecutor(2)}
-    for pool in pools.values():
-        pool.start(recipe)
-    timings = {label: np.inf for label in pools}
-    for _ in range(repeats):
-        for label, pool in pools.items():
-            start = time.perf_counter()
-            results = list(pool.run(recipe, cases))
-            timings[label] = min(timings[label], time.perf_counter() - start)
-            assert [r.status for r in results] == ["ok"] * n_runs, [r.error for r in results]
-    for pool in pools.values():
-        pool.close()
-    rows = [
-        {
-            "executor": label,
-            "runs": n_runs,
-            "window [s]": window,
-            "best wall [s]": t,
-            "runs/s": n_runs / t,
-        }
-        for label, t in timings.items()
-    ]
-    efficiency = timings["pool, 1 worker"] / (2 * timings["pool, 2 workers"])
-    print(pd.DataFrame(rows).to_string(index=False, float_format="{:.3f}".format))
-    print(
-        f"parallel efficiency 2 workers vs 1: {100 * efficiency:.0f}% (speed-up "
-        f"{timings['pool, 1 worker'] / timings['pool, 2 workers']:.2f}x, best of {repeats}; "
-        f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; workers in "
-        f"{'their own sessions' if isolate else 'the driver session'})"
-    )
-    return efficiency
+def window_start_study(events=(("capture", 255.0), ("pull-in", 600.0)), leads=(20.0, 60.0)):
+    """Windows starting at rest against the whole mission from t = 0 (nominal, no noise).
+
+    Prints, per event and lead time, the APE over ``[t, t + 60]`` s from both runs, the largest
+    attitude difference and the hub rate the whole-mission run has at the window start.
+    """
+    simulation = MissionSimulation(MissionOptions())
+    axes = "xyz"
+
+    def run(start: float, end: float) -> pd.DataFrame:
+        n = int((end - start) * simulation.options.control_rate) + 2
+        result = simulation.run({}, seed=1, start=start, end=end, noise_table=np.zeros((n, 9)))
+        return result.timeseries.set_index("time [s]")
+
+    rows = []
+    for event, t0 in events:
+        full = run(0.0, t0 + 60.0)
+        for lead in leads:
+            window = run(t0 - lead, t0 + 60.0)
+            common = window.index[(window.index >= t0) & (window.index <= t0 + 60.0)]
+            phi = [f"phi_{a} [rad]" for a in axes]
+            a, b = full.loc[common, phi].to_numpy(), window.loc[common, phi].to_numpy()
+            rate = full.loc[t0 - lead, [f"w_{a} [rad/s]" for a in axes]].to_numpy()
+            rows.append(
+                {
+                    "event": event,
+                    "window start [s]": t0 - lead,
+                    "APE from t=0 [rad]": np.abs(a).max(),
+                    "APE from window [rad]": np.abs(b).max(),
+                    "max |dphi| [rad]": np.abs(a - b).max(),
+                    "|w_hub| at start, run from 0 [rad/s]": np.linalg.norm(rate),
+                }
+            )
+    print("windows starting at rest vs the mission from t = 0 (APE over [t, t + 60] s)")
+    print(pd.DataFrame(rows).to_string(index=False, float_format="{:.3g}".format))
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--skip-full", action="store_true", help="skip the whole-mission run")
+    parser.add_argument("--profile", action="store_true", help="part 2: where the time goes")
     parser.add_argument("--runs", type=int, default=6, help="cases of the parallel benchmark")
     parser.add_argument("--window", type=float, default=40.0, help="window of each case [s]")
     parser.add_argument("--repeats", type=int, default=2, help="interleaved repeats")
@@ -167,18 +265,39 @@ def main() -> None:
     parser.add_argument(
         "--same-session",
         action="store_true",
-        help="keep the pool workers in the driver's session (see isolated_simulator)",
+        help="keep the pool workers in the driver's session (see bench_campaign)",
     )
-    parser.add_argument("--only-parallel", action="store_true", help="only part 3")
+    parser.add_argument(
+        "--window-start-study",
+        action="store_true",
+        help="also compare windows starting at rest with the mission from t = 0",
+    )
+    parser.add_argument("--only-parallel", action="store_true", help="only part 4")
+    parser.add_argument("--skip-parallel", action="store_true", help="skip part 4")
     args = parser.parse_args()
+    limit_blas_threads(1)  # as in a campaign worker: one process per core
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     if not args.only_parallel:
-        rows = [] if args.skip_full else [full_mission()]
+        rows = []
+        if not args.skip_full or args.profile:
+            simulation = MissionSimulation(MissionOptions())
+            row, result = full_mission(simulation)
+            rows.append(row)
         rows += integrators()
         print(pd.DataFrame(rows).to_string(index=False, float_format="{:.4g}".format))
+        if args.profile:
+            profile(simulation, result)
         if args.accuracy_study:
             accuracy_study()
-    parallel_efficiency(args.runs, args.window, args.repeats, isolate=not args.same_session)
+        if args.window_start_study:
+            window_start_study()
+    if not args.skip_parallel:
+        from bench_campaign import parallel_efficiency
+
+        print("\nparallel efficiency of the campaign's process pool (Drake mission simulator)")
+        parallel_efficiency(
+            args.runs, args.window, args.repeats, "drake-mission", isolate=not args.same_session
+        )
 
 
 if __name__ == "__main__":

@@ -34,6 +34,7 @@ from typing import Protocol
 
 import pandas as pd
 
+from oos_drake.blas import limit_blas_threads, single_threaded_blas
 from oos_drake.campaign.simulator import (
     RunCase,
     SimulationDiverged,
@@ -66,6 +67,10 @@ class RunResult:
         ``"host:pid"`` of the process that ran it.
     simulator_builds : int
         Simulators built so far in that process (1 when the build-once-per-worker cache works).
+    cpu_time : float
+        Processor time of the worker process over the run [s] (all its threads). Unlike the wall
+        time it does not grow when other jobs share the cores, so comparing it between 1- and
+        2-worker campaigns separates the code's parallel overhead from machine contention.
     """
 
     run_id: int
@@ -76,14 +81,20 @@ class RunResult:
     wall_time: float
     worker: str = ""
     simulator_builds: int = 0
+    cpu_time: float = math.nan
 
 
 def execute_case(recipe: SimulatorRecipe, case: RunCase) -> RunResult:
-    """Run one case on this process' simulator; never raises for a failing run."""
-    start = time.perf_counter()
+    """Run one case on this process' simulator; never raises for a failing run.
+
+    The run uses one OpenBLAS thread (the parallelism of a campaign is one process per core;
+    a multi-threaded BLAS in each worker would oversubscribe the cores).
+    """
+    start, cpu_start = time.perf_counter(), time.process_time()
     try:
         simulator = build_simulator(recipe)
-        output = simulator.run(case)
+        with single_threaded_blas():
+            output = simulator.run(case)
         status, error = "ok", ""
         metrics = {k: float(v) for k, v in output.metrics.items()}
         timeseries = output.timeseries
@@ -103,10 +114,12 @@ def execute_case(recipe: SimulatorRecipe, case: RunCase) -> RunResult:
         time.perf_counter() - start,
         f"{socket.gethostname()}:{os.getpid()}",
         simulator_builds(),
+        time.process_time() - cpu_start,
     )
 
 
 def _warm_up(recipe: SimulatorRecipe) -> None:
+    """Build the simulator of a worker (process or Dask worker) before any case runs."""
     build_simulator(recipe)
 
 
@@ -125,7 +138,8 @@ def _exit_with_parent(parent_pid: int, period: float = 1.0) -> None:
 
 def _init_pool_worker(recipe: SimulatorRecipe, parent_pid: int) -> None:
     _exit_with_parent(parent_pid)
-    build_simulator(recipe)
+    limit_blas_threads(1)  # one process per core: no BLAS threads competing with the workers
+    _warm_up(recipe)
 
 
 class Executor(Protocol):

@@ -436,11 +436,19 @@ def write_report(directory: str | Path, worst: int = 5) -> CampaignReport:
         ]
         if "regions" in tables:
             parts.append("runs per region:\n" + tables["regions"].to_string(index=False))
-            ess = effective_sample_size(runs["weight"].to_numpy())
+            weights = runs["weight"].to_numpy()
+            ess = effective_sample_size(weights)
+            guided = runs["region"].to_numpy() >= 0
+            guided_share = weights[guided].sum() / weights.sum()
             parts.append(
                 f"importance sampling: effective sample size {ess:.1f} of {len(runs)} runs "
                 f"(max weight {runs['weight'].max():.3g}); a small value means the estimates "
-                "rest on few runs (widen spread or guide fewer blocks)"
+                "rest on few runs (widen spread or guide fewer blocks). The "
+                f"{int((~guided).sum())} runs drawn from the dispersions carry "
+                f"{100 * (1 - guided_share):.1f} % of the total weight, the {int(guided.sum())} "
+                f"guided runs {100 * guided_share:.2g} %: a guided draw that moves many blocks "
+                "near their worst-case values is improbable under the dispersions, so the guided "
+                "runs search the worst cases and the probabilities rest on the others."
             )
         if spec.window.kind == "critical":
             parts.append(

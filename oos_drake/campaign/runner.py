@@ -60,6 +60,7 @@ def result_row(spec: CampaignSpec, plan_row: pd.Series, result: RunResult) -> pd
     record["status"] = result.status
     record["error"] = result.error
     record["wall_time [s]"] = float(result.wall_time)
+    record["cpu_time [s]"] = float(result.cpu_time)
     record["worker"] = result.worker
     table = pd.DataFrame([record])
     for column in ("run_id", "seed", "region"):

@@ -21,7 +21,17 @@
 
 The stiff parts (joint PDs, bushings up to 1e5 N/m on the 0.19 kg wrist, modes up to 28 Hz) make
 the continuous system stiff: :mod:`oos_drake.multibody.mission_sim` integrates it with Radau3
-(L-stable, error controlled) whose steps are bounded only by the flight-software samples.
+(L-stable) in fixed steps of one flight-software period (a quarter period while a docking
+stiffness ramps) and a tight Newton tolerance (see ``MissionOptions.accuracy``).
+
+Where the processor time goes (``benchmarks/bench_mission_sim.py --profile``, whole mission,
+about 17 s on one core, i.e. 11 ms per simulated second): 73 % in the MultibodyPlant's time
+derivatives (about 44 us per evaluation: the articulated-body algorithm over 42 bodies, 24 of
+them modal; ~18 evaluations per step: ~7 Newton-Raphson iterations of Radau3's two stages and
+~3.5 of the implicit-trapezoid error estimate, which Drake computes in fixed-step mode too, with
+Jacobians reused over hundreds of steps), 24 % in the integrator's own linear algebra and the
+simulator's event handling, 3 % in the Python flight software. Gravity is disabled per model
+instance (the field is zero in orbit) so its element costs nothing.
 """
 
 from __future__ import annotations
@@ -36,7 +46,12 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import ForceElementIndex, LinearBushingRollPitchYaw, RevoluteSpring
+from pydrake.multibody.tree import (
+    ForceElementIndex,
+    LinearBushingRollPitchYaw,
+    ModelInstanceIndex,
+    RevoluteSpring,
+)
 from pydrake.polynomial import Polynomial
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import (
@@ -66,6 +81,7 @@ from oos_drake.scenario.timeline import MissionTimeline, QuinticTrajectory, miss
 
 __all__ = [
     "ARRAYS",
+    "IMPLICIT_INTEGRATORS",
     "MissionDiagram",
     "MissionOptions",
     "controller_gain",
@@ -75,6 +91,8 @@ __all__ = [
 ]
 
 ARRAYS = ("SA1", "SA2", "SA3", "SA4")
+#: Drake integrators (``ResetIntegratorFromFlags`` names) that are stable on the stiff mission.
+IMPLICIT_INTEGRATORS = frozenset({"radau1", "radau3", "implicit_euler", "velocity_implicit_euler"})
 #: Modes per array in the SDF (mode_1_hinge .. mode_6_hinge).
 MODE_JOINT = "mode_{}_hinge"
 
@@ -107,13 +125,32 @@ class MissionOptions:
         Piecewise-constant steps of a ramp (log-spaced stiffness).
     ramp_start_stiffness : float
         First stiffness of a ramp [N/m, N m/rad] (paper: 0.1).
+    ramp_substeps : int
+        Integrator steps per control period while a docking stiffness ramps (the bushing
+        stiffness jumps at every ramp step; finer steps there cost little, the ramps are short).
     integrator : str
         Drake integrator name (``"radau3"``, ``"implicit_euler"``, ``"runge_kutta3"``, ...).
+    max_step : float or None
+        Longest integrator step [s]; ``None``: one control period (a reference solution takes a
+        fraction of it).
+    error_control : bool or None
+        ``False``: fixed steps of one flight-software period (shorter only where an event or a
+        failed Newton iteration needs it); ``True``: error-controlled steps of at most one
+        period. ``None`` (default): fixed for the implicit integrators, error-controlled for
+        the explicit ones (which the stiff joint PDs and bushings would make unstable).
     accuracy : float
-        Integrator target accuracy [-]. Drake's error norm is absolute for states below 1, so
-        this is about the attitude error per step [rad]: 1e-5 keeps the attitude within ~1 % of
-        a 1e-7 reference on the arm-motion windows; 1e-3 does not (errors as large as the
-        signal), at the same number of steps.
+        Integrator accuracy [-]. Drake's implicit integrators use it as the Newton-Raphson
+        convergence tolerance of every step (and, with error control, as the target of the
+        error estimate); the error norm is absolute for states below 1, so it is about the
+        attitude error per step [rad]. With fixed Radau3 steps of one 10 Hz period the Newton
+        tolerance, not the step, bounds the attitude error away from the dockings. Against a
+        converged reference (fixed steps of 25 ms, 6 ms in the ramps, tolerance 1e-9), the
+        default (fixed steps, 1e-7, ``ramp_substeps`` 4) is within 0.08 % of the peak attitude
+        on an arm-motion window (400-440 s), 0.03 % at the capture ramp (250-275 s) and 1.4 % at
+        the second docking (870-900 s: the SM2 and SM1 ramps excite the 1e5 N/m bushings at
+        ~100 Hz; ``ramp_substeps`` 16 gives 0.08 %); session 1's error-controlled 1e-5 was
+        7.4 %, 0.03 % and 3.5 % off on the same windows at about the same cost
+        (``benchmarks/bench_mission_sim.py --accuracy-study``).
     perturbation_frequency_hz : float
         Corner of the all-pass realizing Delta_add / Delta_mul [Hz].
     divergence_limit : float
@@ -132,8 +169,11 @@ class MissionOptions:
     ramp_duration: float = 2.0
     ramp_steps: int = 10
     ramp_start_stiffness: float = 0.1
+    ramp_substeps: int = 4
     integrator: str = "radau3"
-    accuracy: float = 1e-5
+    max_step: float | None = None
+    error_control: bool | None = None
+    accuracy: float = 1e-7
     perturbation_frequency_hz: float = 0.55
     divergence_limit: float = 0.5
     check_interval: float = 50.0
@@ -161,8 +201,38 @@ class MissionOptions:
                 f"mission option log_rate {self.log_rate} Hz must divide control_rate "
                 f"{self.control_rate} Hz"
             )
+        if not (isinstance(self.ramp_substeps, int) and self.ramp_substeps >= 1):
+            raise ValueError(
+                f"mission option ramp_substeps must be an integer >= 1, got {self.ramp_substeps!r}"
+            )
         if int(self.ramp_steps) < 1:
             raise ValueError(f"mission option ramp_steps must be >= 1, got {self.ramp_steps}")
+        if self.max_step is not None and not (
+            isinstance(self.max_step, int | float)
+            and np.isfinite(self.max_step)
+            and self.max_step > 0
+        ):
+            raise ValueError(
+                f"mission option max_step must be a positive number, got {self.max_step!r}"
+            )
+        if self.error_control not in (None, True, False):
+            raise ValueError(
+                f"mission option error_control must be true, false or unset, got "
+                f"{self.error_control!r}"
+            )
+
+    @property
+    def step(self) -> float:
+        """Integrator step outside the docking ramps [s]: ``max_step``, at most one period."""
+        period = 1.0 / self.control_rate
+        return period if self.max_step is None else min(float(self.max_step), period)
+
+    @property
+    def fixed_step(self) -> bool:
+        """Whether the integrator takes fixed steps of one control period (see the class doc)."""
+        if self.error_control is None:
+            return self.integrator in IMPLICIT_INTEGRATORS
+        return not self.error_control
 
 
 @dataclass(frozen=True, eq=False)
@@ -309,6 +379,10 @@ def _add_plant(builder: DiagramBuilder, sdf_directory: Path):
         )
         for name, (a, c) in {"SM1": ("J7", "D2"), "SM2": ("D1", "D3")}.items()
     }
+    # no gravity in orbit: the gravity vector is zero, and disabling the element per model
+    # instance also skips computing its (zero) generalized forces at every derivative evaluation
+    for index in range(plant.num_model_instances()):
+        plant.set_gravity_enabled(ModelInstanceIndex(index), False)
     plant.Finalize()
     arm = instance(ARM_MODEL)
     arm_joints = tuple(plant.GetJointByName(arm_joint_name(i), arm) for i in range(1, 7))

@@ -20,14 +20,28 @@ event         time [s]  what happens in the simulation
 
 A window that starts after an event starts in the corresponding connected state (target on the
 arm tip, or on the hub). The hub starts at the dispersed attitude and body rate errors.
+
+Window starts are not momentum-continuations of a run from t = 0: the arm, arrays and target
+start on their trajectories (joint angles and rates of the timeline), the hub at the dispersed
+attitude ``phi0`` and rate ``w0`` (nominal: at rest), whereas a run from t = 0 reaches the same
+time with the hub carrying what the earlier motions and the controller left. Measured on the
+nominal case without noise, baseline gains (``benchmarks/bench_mission_sim.py
+--window-start-study``): the run from t = 0 has a hub rate of 1.2e-4 rad/s at 235 s and
+1e-6 rad/s at 580 s; the APE over [255, 315] s is 1.45 mrad from t = 0, 1.87 mrad (+29 %) from
+a window starting at 235 s and 1.37 mrad (-6 %) from 195 s; over [600, 660] s 0.28 mrad from
+t = 0, 0.21 mrad from 580 s and 0.26 mrad from 540 s. The largest attitude difference is
+0.5 mrad with a 20 s lead (6 % of the 7.9 mrad requirement) and 0.1 mrad with a 60 s lead. The
+campaign's initial-error dispersions (``phi0`` std 1 mrad, ``w0`` std 1e-4 rad/s in
+``campaigns/paper.toml``) are of the size of this residual; a longer ``before`` in the window
+brings a window closer to the continuation, at the price of simulated time.
 """
 
 from __future__ import annotations
 
 import math
 import time as _time
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from types import MappingProxyType
 
 import numpy as np
@@ -264,6 +278,10 @@ class MissionResult:
         machine).
     steps : int
         Integrator steps taken.
+    statistics : Mapping[str, float]
+        Drake's integrator statistics of the run (``GetStatisticsSummary``: derivative
+        evaluations, Newton-Raphson iterations, Jacobian evaluations, matrix factorizations,
+        each for the integrator and its error estimator).
     """
 
     metrics: Mapping[str, float]
@@ -271,6 +289,7 @@ class MissionResult:
     wall_time: float
     cpu_time: float
     steps: int
+    statistics: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
 
 
 @dataclass(frozen=True)
@@ -327,6 +346,12 @@ class _Schedule:
                 sm1[3],
             )
         return out
+
+    def ramp_intervals(self) -> list[tuple[float, float]]:
+        """``[(start, end)]`` of the stiffness ramps [s]: capture (SM1 up), docking (SM2 up,
+        then SM1 down)."""
+        R = self.duration
+        return [(self.t_capture, self.t_capture + R), (self.t_docking, self.t_docking + 2 * R)]
 
     def breakpoints(self, start: float, end: float) -> list[float]:
         """Times in ``(start, end)`` where the settings change."""
@@ -524,12 +549,16 @@ class MissionSimulation:
         *,
         log: bool = True,
         noise_table: np.ndarray | None = None,
+        on_start: Callable[[object], None] | None = None,
     ) -> MissionResult:
         """Simulate ``[start, end]`` of the mission (default: all of it).
 
         ``values`` are physical parameter values (missing ones nominal), ``seed`` seeds the
         sensor noise and disturbance (unless ``noise_seed`` is dispersed), ``noise_table``
         replaces them by a given ``(n, 9)`` unit table (see :meth:`initial_context`).
+        ``on_start(context)`` is called with the run's root context before the first step; a
+        caller that keeps it can read the logs afterwards with :meth:`state_log`, also when the
+        run diverged (the replay does this).
 
         Raises
         ------
@@ -544,10 +573,13 @@ class MissionSimulation:
             raise ValueError(f"mission window [{start}, {end}] s outside [0, {self.duration}] s")
         h, o = self.handles, self.options
         context, values, schedule = self.initial_context(values, seed, start, end, noise_table)
+        if on_start is not None:
+            on_start(context)
         simulator = Simulator(h.diagram, context)
-        ResetIntegratorFromFlags(simulator, o.integrator, 1.0 / o.control_rate)
+        ResetIntegratorFromFlags(simulator, o.integrator, o.step)
         integrator = simulator.get_mutable_integrator()
         integrator.set_target_accuracy(o.accuracy)
+        integrator.set_fixed_step_mode(o.fixed_step)
         simulator.Initialize()
         fsw = h.flight_software
         fsw_context = fsw.GetMyContextFromRoot(context)
@@ -556,8 +588,14 @@ class MissionSimulation:
         if start < self.events["capture"] < end:
             stops.add(self.events["capture"])
         stops = sorted(stops) + [end]
+        step, ramp_step = o.step, min(o.step, 1.0 / (o.control_rate * o.ramp_substeps))
+        ramps = schedule.ramp_intervals()
         t_wall, t_cpu = _time.perf_counter(), _time.process_time()
         for stop in stops:
+            # the stops include the ramp ends, so a segment is inside a ramp or outside all
+            now = context.get_time()
+            in_ramp = any(a - 1e-9 <= now and stop <= b + 1e-9 for a, b in ramps)
+            integrator.set_maximum_step_size(ramp_step if in_ramp else step)
             try:
                 simulator.AdvanceTo(stop)
             except RuntimeError as exc:
@@ -588,9 +626,30 @@ class MissionSimulation:
             "max_force_SM2": float(timeseries["F_SM2 [N]"].max()) if log else math.nan,
             "max_tracking_error": self._tracking_error(context) if log else math.nan,
         }
-        return MissionResult(
-            MappingProxyType(metrics), timeseries, wall, cpu, int(integrator.get_num_steps_taken())
+        statistics = MappingProxyType(
+            {str(k): float(v) for k, v in integrator.GetStatisticsSummary()}
         )
+        return MissionResult(
+            MappingProxyType(metrics),
+            timeseries,
+            wall,
+            cpu,
+            int(integrator.get_num_steps_taken()),
+            statistics,
+        )
+
+    def state_log(self, context) -> tuple[np.ndarray, np.ndarray]:
+        """Logged plant states of the run that owns root ``context``.
+
+        Returns
+        -------
+        times : ndarray, shape (n,)
+            Sample times [s] (every ``1 / log_rate`` s from the window start).
+        states : ndarray, shape (nq + nv, n)
+            MultibodyPlant state ``[q; v]`` at those times.
+        """
+        log = self.handles.state_logger.FindLog(context)
+        return np.array(log.sample_times()), np.array(log.data())
 
     def _logs(self, context):
         h = self.handles

@@ -149,20 +149,14 @@ class _Capture:
     """Keeps the root context of the last run of a :class:`MissionSimulation` (its logs)."""
 
     def __init__(self, simulation):
-        from oos_drake.multibody.mission_sim import MissionSimulation
-
-        class _Capturing(MissionSimulation):
-            def initial_context(inner, *args, **kwargs):  # noqa: N805 - closure over self
-                context, values, schedule = super().initial_context(*args, **kwargs)
-                self.context = context
-                return context, values, schedule
-
         self.context = None
-        self.simulation = _Capturing(simulation.options, handles=simulation.handles)
+        self.simulation = simulation
+
+    def __call__(self, context) -> None:
+        self.context = context
 
     def states(self) -> tuple[np.ndarray, np.ndarray]:
-        log = self.simulation.handles.state_logger.FindLog(self.context)
-        return np.array(log.sample_times()), np.array(log.data())
+        return self.simulation.state_log(self.context)
 
 
 def _load_case(directory: Path, run_id: int):
@@ -368,6 +362,7 @@ def replay_case(
             start=case.window.start,
             end=case.window.end,
             log=False,
+            on_start=capture,
         )
     except MissionDiverged as exc:
         status, error = "diverged", str(exc)

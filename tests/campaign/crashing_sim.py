@@ -32,3 +32,23 @@ class HangingSimulator(FlexibleAttitudeSimulator):
 
 def make_hanging_simulator(**options) -> HangingSimulator:
     return HangingSimulator(**options)
+
+
+class ProbeSimulator(FlexibleAttitudeSimulator):
+    """Burns 0.2 s of processor time, sleeps 0.3 s and reports its OpenBLAS thread counts."""
+
+    def run(self, case):
+        from oos_drake.blas import _global_pair, _libraries
+
+        start = time.process_time()
+        while time.process_time() - start < 0.2:
+            pass
+        time.sleep(0.3)
+        threads = [pair[1]() for pair in map(_global_pair, _libraries()) if pair is not None]
+        from oos_drake.campaign.simulator import RunOutput
+
+        return RunOutput(metrics={"blas_threads": float(max(threads, default=-1))})
+
+
+def make_probe_simulator(**options) -> ProbeSimulator:
+    return ProbeSimulator(**options)

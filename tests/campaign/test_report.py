@@ -69,3 +69,30 @@ def test_effective_sample_size():
     assert effective_sample_size(np.ones(10)) == 10.0
     # one dominant weight: about one effective run
     assert effective_sample_size(np.array([1e6, 1.0, 1.0])) < 1.001
+
+
+def test_mu_guided_report_states_the_weight_shares(tmp_path):
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2] / "campaigns"
+    text = (
+        (root / "demo_mu.toml")
+        .read_text()
+        .replace("n_runs = 200", "n_runs = 24")
+        .replace('keep = "all"', 'keep = "none"')
+        .replace('"demo_worst_cases.parquet"', f'"{root / "demo_worst_cases.parquet"}"')
+    )
+    spec = tmp_path / "mu.toml"
+    spec.write_text(text)
+    run_campaign(spec, tmp_path / "c", progress=False)
+    runs = pd.read_parquet(tmp_path / "c" / "runs.parquet")
+    report = write_report(tmp_path / "c", worst=2)
+    w = runs["weight"].to_numpy()
+    defensive = runs["region"].to_numpy() < 0
+    assert 0 < defensive.sum() < len(runs)
+    expected = 100 * w[defensive].sum() / w.sum()
+    assert (
+        f"The {defensive.sum()} runs drawn from the dispersions carry {expected:.1f} % "
+        "of the total weight" in report.text
+    )
+    assert f"effective sample size {w.sum() ** 2 / (w**2).sum():.1f} of 24" in report.text

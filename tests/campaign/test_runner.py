@@ -178,8 +178,8 @@ def test_process_pool_matches_in_process_results(write_spec, tmp_path):
     pool = pd.read_parquet(tmp_path / "pool" / "runs.parquet")
     inline = pd.read_parquet(tmp_path / "inline" / "runs.parquet")
     pd.testing.assert_frame_equal(
-        pool.drop(columns=["wall_time [s]", "worker"]),
-        inline.drop(columns=["wall_time [s]", "worker"]),
+        pool.drop(columns=["wall_time [s]", "cpu_time [s]", "worker"]),
+        inline.drop(columns=["wall_time [s]", "cpu_time [s]", "worker"]),
     )
     here = f"{socket.gethostname()}:{os.getpid()}"
     assert set(inline["worker"]) == {here}
@@ -259,3 +259,24 @@ def test_a_run_over_the_timeout_is_stopped_and_recorded(write_spec, tmp_path):
     assert runs.loc[4, "error"].startswith("Timeout: the run exceeded 2 s")
     assert (runs.drop(index=4)["status"] == "ok").all() and len(runs) == 12
     assert "run_timeout = 2.0" in (tmp_path / "c" / "spec.toml").read_text()
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_runs_report_processor_time_and_use_one_blas_thread(workers):
+    """Processor time counts the busy part of a run, not its sleep; the run sees one OpenBLAS
+    thread, in the calling process (inline) and in a pool worker."""
+    from oos_drake.campaign.executors import InlineExecutor
+    from oos_drake.campaign.simulator import MissionWindow, RunCase, SimulatorRecipe
+
+    recipe = SimulatorRecipe.create("tests.campaign.crashing_sim:make_probe_simulator", {})
+    executor = InlineExecutor() if workers == 1 else ProcessPoolExecutor(1)
+    try:
+        executor.start(recipe)
+        (result,) = executor.run(recipe, [RunCase(0, 1, {}, MissionWindow(0.0, 1.0))])
+    finally:
+        executor.close()
+    assert result.status == "ok", result.error
+    assert 0.2 <= result.cpu_time < 0.45, result.cpu_time  # the 0.3 s sleep is not counted
+    assert result.wall_time >= 0.5
+    if result.metrics["blas_threads"] >= 0:  # an OpenBLAS with a thread getter is loaded
+        assert result.metrics["blas_threads"] == 1

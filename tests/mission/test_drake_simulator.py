@@ -126,3 +126,24 @@ def test_whole_mission_runs_with_every_event(simulator):
     # the arrays tilt from 1100 s: their modes are excited then
     assert ts.loc[ts["time [s]"] > 1100, "q1_SA1 [rad]"].abs().max() > 0
     assert result.metrics["ape"] < 0.5
+
+
+def test_start_hook_gives_the_run_context_and_its_state_log(mission):
+    """``on_start`` receives the run's root context before the first step; ``state_log`` then
+    reads the logged plant states: one sample per ``1 / log_rate`` over the window, starting at
+    the dispersed initial attitude, with the integrator statistics in the result."""
+    contexts = []
+    phi0 = {"phi0_x": 2e-3, "phi0_y": -1e-3, "phi0_z": 5e-4}
+    result = mission.run(phi0, seed=3, start=300.0, end=305.0, on_start=contexts.append)
+    assert len(contexts) == 1
+    times, states = mission.state_log(contexts[0])
+    np.testing.assert_allclose(times, 300.0 + np.arange(6.0) / mission.options.log_rate)
+    q = mission.handles.hub_joint.position_start()
+    np.testing.assert_allclose(states[q : q + 3, 0], list(phi0.values()), atol=1e-15)
+    # the same samples as the run's own time series
+    np.testing.assert_allclose(
+        states[q : q + 3].T, result.timeseries[["phi_x [rad]", "phi_y [rad]", "phi_z [rad]"]]
+    )
+    stats = result.statistics
+    assert stats["integrator_num_steps_taken"] == result.steps > 0
+    assert stats["integrator_num_derivative_evaluations"] >= result.steps

@@ -145,3 +145,82 @@ def test_docking_schedule_ramps_and_releases():
     assert schedule.settings(883.95)["SM1"] == pytest.approx((0.1, 0.1, 100.0, 50.0))
     assert schedule.settings(884.0) == {"SM1": (0, 0, 0, 0), "SM2": (3e4, 1e5, 80.0, 90.0)}
     assert schedule.breakpoints(250.0, 300.0) == pytest.approx([255.0 + 0.2 * i for i in range(11)])
+
+
+def test_rpy_rotation_equals_drake_convention():
+    from pydrake.math import RollPitchYaw
+
+    from oos_drake.multibody.flight_software import rpy_to_rotation
+
+    rng = np.random.default_rng(3)
+    for rpy in rng.uniform(-3.0, 3.0, size=(50, 3)):
+        expected = RollPitchYaw(rpy).ToRotationMatrix().matrix()
+        np.testing.assert_allclose(rpy_to_rotation(*rpy), expected, rtol=0, atol=1e-15)
+
+
+def test_update_equals_the_block_by_block_chain_with_perturbations():
+    """One discrete update against an independent evaluation of the equations of the module doc
+    (stage references, saturation, torque mixing, rotation, metrics), for two perturbation sets in
+    a row (the mixing matrix is cached per perturbation value)."""
+    from pydrake.math import RollPitchYaw
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import ConstantVectorSource
+
+    from oos_drake.multibody.flight_software import FlightSoftware
+
+    rng = np.random.default_rng(7)
+    K = 40.0 * rng.standard_normal((3, 6))  # large: the saturation is active on some axes
+    design = FlightSoftwareDesign.create(K, 10.0, J_ref=np.diag([500.0, 100.0, 300.0]))
+    nq = nv = 12
+    builder = DiagramBuilder()
+    fsw = builder.AddSystem(FlightSoftware(design, nq, nv, hub_q_start=3, hub_v_start=6))
+    plant_x = rng.standard_normal(nq + nv) * 0.3
+    source = builder.AddSystem(ConstantVectorSource(plant_x))
+    builder.Connect(source.get_output_port(), fsw.get_input_port(0))
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    fc = fsw.GetMyMutableContextFromRoot(context)
+    noise = rng.standard_normal((5, 9))
+    fsw.set_noise(fc, noise)
+    s = fsw.state_slices
+    for delta_mul, delta_add in ((rng.uniform(-1, 1, (3, 3)), 0.7), (np.eye(3) * -0.4, -1.0)):
+        fsw.set_perturbations(fc, delta_mul, delta_add)
+        x = rng.standard_normal(s["counter"].stop)
+        x[s["metrics"]] = np.abs(x[s["metrics"]])
+        x[s["counter"]] = 2.0
+        fc.get_mutable_discrete_state(0).SetFromVector(x)
+        new = diagram.EvalUniquePeriodicDiscreteUpdate(context).get_vector(0).CopyToVector()
+        rpy = plant_x[3:6]
+        R = RollPitchYaw(rpy).ToRotationMatrix().matrix()
+        w_B = R.T @ plant_x[nq + 6 : nq + 9]
+        n = noise[2]
+        x1 = x[s["star_tracker"].start : s["rolloff"].stop]
+        x1_next, u = fsw._stage1_reference(x1, np.concatenate([rpy, w_B, n[0:6]]))
+        sat = np.clip(u, -design.torque_limit, design.torque_limit)
+        x2 = x[s["wheels"].start : s["add"].stop]
+        x2_next, y2 = fsw._stage2_reference(x2, np.concatenate([sat, n[6:9]]))
+        T_rw, T_dist, a_mul, a_add = y2.reshape(4, 3)
+        T = (
+            T_rw
+            + (design.W_mul * delta_mul) @ a_mul
+            + delta_add * design.W_add * (design.J_ref @ a_add)
+            + T_dist
+        )
+        np.testing.assert_allclose(
+            new[s["star_tracker"].start : s["rolloff"].stop], x1_next, atol=1e-12
+        )
+        np.testing.assert_allclose(new[s["wheels"].start : s["add"].stop], x2_next, atol=1e-12)
+        np.testing.assert_allclose(new[s["tau_W"]], R @ T, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(new[s["log"]], np.concatenate([u, T_rw, T, T_dist]), atol=1e-12)
+        m = x[s["metrics"]].reshape(4, 3)
+        expected = np.concatenate(
+            [
+                np.maximum(m[0], abs(rpy)),
+                np.maximum(m[1], abs(u)),
+                m[2] + rpy**2,
+                np.maximum(m[3], abs(T)),
+            ]
+        )
+        np.testing.assert_allclose(new[s["metrics"]], expected, atol=1e-12)
+        assert new[s["counter"]][0] == 3.0
+        assert np.any(np.abs(u) > design.torque_limit)  # the saturation was exercised
