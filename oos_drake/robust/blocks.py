@@ -140,6 +140,10 @@ class BlockStructure:
         return np.stack(
             [
                 np.linalg.norm(delta[..., b.r_slice, b.c_slice], ord=2, axis=(-2, -1))
+                if b.kind == FULL
+                else np.max(
+                    np.abs(np.diagonal(delta[..., b.r_slice, b.c_slice], 0, -2, -1)), axis=-1
+                )
                 for b in self.blocks
             ],
             axis=-1,

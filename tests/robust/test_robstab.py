@@ -130,6 +130,7 @@ def test_robust_sweep_table_and_consistency_with_robstab():
         "mu_upper",
         "subset",
         "refined",
+        "tightened",
     ]
     assert set(df.model) == {0, 1, 2}
     assert np.all(df.mu_lower <= df.mu_upper * (1 + 1e-9))
@@ -138,8 +139,12 @@ def test_robust_sweep_table_and_consistency_with_robstab():
     assert df[df.model == 1].time.iloc[0] == 10.0
     with pytest.raises(ValueError, match="unknown"):
         robust_sweep(arr, omega, subsets={"bad": ["nope"]})
-    # independent mussv calls per frequency (no warm start) agree on the peaks
-    cold = robust_sweep(arr, omega, subsets={"k": ["k"]}, warm_start=False, n_jobs=2)
+    # peak mode (default): untightened frequencies cannot hold a model's peak
+    best = df.groupby("model").mu_lower.transform("max")
+    assert np.all(df.mu_upper[~df.tightened] <= best[~df.tightened] * (1 + 1e-12))
+    # independent mussv calls per frequency (full mode, no warm start) agree on the peaks
+    cold = robust_sweep(arr, omega, subsets={"k": ["k"]}, mode="full", warm_start=False, n_jobs=2)
+    assert cold.tightened.all()
     assert_allclose(
         cold.groupby("model").mu_upper.max().values,
         df.groupby("model").mu_upper.max().values,
