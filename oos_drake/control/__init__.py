@@ -9,16 +9,20 @@ main entry points:
 - :func:`synthesize` -- multi-model structured H-infinity synthesis of the 3x6 static gain over
   configurations and real uncertainty (nonsmooth BFGS-SQP, worst-case search);
 - :func:`peak_gain` -- batched H-infinity norms of model arrays;
+- :class:`LoopResponse` -- closed-loop responses from the plant's modal form (the fast path of
+  every gamma evaluation: closed-loop eigenvalues only, no eigenvectors);
 - :func:`closed_loop_lfr` -- the uncertain closed loop with Delta_add and Delta_mul for analysis;
 - :func:`write_synthesis` -- controller JSON, closed-loop arrays (.npz/.mat), per-model tables.
 
-This package never imports pydrake.
+This package never imports pydrake (``oos synth --plant drake`` imports
+:mod:`oos_drake.multibody.synthesis_plants` lazily from :mod:`oos_drake.control.cli`).
 """
 
 from oos_drake.control.analysis_model import closed_loop_lfr, uncertain_plant
 from oos_drake.control.baseline import baseline_gains, inertia_from_plant
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.interconnection import WeightedInterconnection, weighted_interconnection
+from oos_drake.control.loop_response import LoopResponse, LoopSigma
 from oos_drake.control.peak_gain import PeakGain, hinfnorm_hamiltonian, peak_gain
 from oos_drake.control.plants import PlantArray, UncertainParameter, from_lfr, from_statespace
 from oos_drake.control.report import write_synthesis
@@ -28,6 +32,8 @@ from oos_drake.control.synthesis import SynthesisOptions, SynthesisResult, synth
 __all__ = [
     "BatchedStateSpace",
     "DesignSpecification",
+    "LoopResponse",
+    "LoopSigma",
     "PeakGain",
     "PlantArray",
     "SynthesisOptions",

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import os
+import time
 
 import numpy as np
 import pandas as pd
@@ -24,22 +26,35 @@ def scenario_plants(configurations: int) -> PlantArray:
             "--plant lfr needs the scenario model (oos_drake.scenario.model), which is not "
             "available; use --plant synthetic"
         ) from exc
-    times = np.linspace(0.0, MISSION_DURATION_S, configurations)
+    times = mission_times(configurations)
     model = build_mission_model()
     return from_lfr(model, mission_values(times), pd.DataFrame({"time_s": times}), source="lfr")
 
 
+def mission_times(configurations: int) -> np.ndarray:
+    """The synthesis configurations: ``configurations`` equally spaced mission times [s]."""
+    if configurations < 1:
+        raise ValueError(f"--configurations must be >= 1, got {configurations}")
+    return np.linspace(0.0, MISSION_DURATION_S, configurations)
+
+
+def drake_plants(configurations: int) -> PlantArray:
+    """The same model array from Drake linearizations of the twin (imports pydrake lazily)."""
+    try:
+        from oos_drake.multibody.synthesis_plants import drake_plant_array
+    except ModuleNotFoundError as exc:
+        raise ValueError(f"--plant drake needs pydrake ({exc}); use --plant lfr") from exc
+    return drake_plant_array(mission_times(configurations))
+
+
 def make_plants(kind: str, configurations: int) -> PlantArray:
-    """Plant array for ``--plant`` (``lfr``, ``synthetic``; ``drake`` not available yet)."""
+    """Plant array for ``--plant`` (``lfr``, ``drake`` or ``synthetic``)."""
     if kind == "lfr":
         return scenario_plants(configurations)
+    if kind == "drake":
+        return drake_plants(configurations)
     if kind == "synthetic":
         return synthetic_flexible_plants(configurations)
-    if kind == "drake":
-        raise ValueError(
-            "--plant drake: Drake-linearized model arrays are not wired into the synthesis yet; "
-            "use --plant lfr"
-        )
     raise ValueError(f"--plant must be lfr, drake or synthetic, got {kind!r}")
 
 
@@ -56,12 +71,19 @@ def baseline_for(plants: PlantArray) -> np.ndarray:
 
 def run_synth(args) -> int:
     """Run the synthesis and write the outputs; exit status 0."""
+    wall, cpu = time.perf_counter(), time.process_time()
     plants = make_plants(args.plant, args.configurations)
+    print(
+        f"model array: {plants.size} configurations from {plants.source!r}, "
+        f"{len(plants.parameters)} real parameter(s), built in {time.perf_counter() - wall:.1f} s "
+        f"({time.process_time() - cpu:.1f} s CPU)"
+    )
     options = SynthesisOptions(
         restarts=args.restarts,
         max_iterations=args.max_iterations,
         worst_case_rounds=args.worst_case_rounds,
         seed=args.seed,
+        workers=args.workers,
     )
     K0 = baseline_for(plants)
     result = synthesize(plants, K0, options=options, progress=print)
@@ -93,7 +115,8 @@ def register(subparsers) -> None:
         "--plant",
         default="lfr",
         choices=["lfr", "drake", "synthetic"],
-        help="source of the model array",
+        help="source of the model array: lfr (TITOP LFR substitution), drake (linearizations "
+        "of the Drake twin, same configurations and real parameters), synthetic (test plants)",
     )
     parser.add_argument(
         "--configurations", type=int, default=200, help="equally spaced mission configurations"
@@ -112,4 +135,10 @@ def register(subparsers) -> None:
         help="rounds of worst-case search over the real uncertainty",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of restarts and samples")
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=min(2, os.cpu_count() or 1),
+        help="threads for the per-model eigendecompositions",
+    )
     parser.set_defaults(func=run_synth)

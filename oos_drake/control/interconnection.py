@@ -20,6 +20,7 @@ paper's ``u = K_att [phi_ref - phi; w_ref - w]``. The closed loop ``M = F_l(P_to
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,10 +47,26 @@ class WeightedInterconnection:
         ``ERRORS + MEASUREMENTS``.
     spec : DesignSpecification
         The weights and component data used.
+    plant : BatchedStateSpace, optional
+        The plant array it was built around (enables :attr:`loop`).
     """
 
     system: BatchedStateSpace
     spec: comp.DesignSpecification
+    plant: BatchedStateSpace | None = None
+
+    @functools.cached_property
+    def loop(self):
+        """:class:`~oos_drake.control.loop_response.LoopResponse` of the plant array, or None.
+
+        Closed-loop responses from the plant's modal form (computed once, reused for every
+        gain); ``None`` for a single model or when the plant is unknown.
+        """
+        from oos_drake.control.loop_response import LoopResponse
+
+        if self.plant is None or self.plant.A.ndim != 3:
+            return None
+        return LoopResponse(self.plant, self.spec)
 
     def __post_init__(self):
         sys = self.system
@@ -130,7 +147,7 @@ def weighted_interconnection(
     if plant.inputs != PLANT_INPUTS or plant.outputs != PLANT_OUTPUTS:
         plant = plant_statespace(plant.A, plant.B, plant.C, plant.D)
     system = connect([plant, *diagram_parts(spec)], DISTURBANCES + CONTROLS, ERRORS + MEASUREMENTS)
-    return WeightedInterconnection(system, spec)
+    return WeightedInterconnection(system, spec, plant)
 
 
 def diagram_parts(spec: comp.DesignSpecification) -> list[BatchedStateSpace]:

@@ -22,6 +22,7 @@ import numpy as np
 
 from oos_drake.blas import with_single_threaded_blas
 from oos_drake.control.interconnection import WeightedInterconnection
+from oos_drake.control.loop_response import LoopSigma
 from oos_drake.control.peak_gain import PeakGain, peak_gain
 
 
@@ -44,6 +45,16 @@ class Evaluation:
     peaks: PeakGain
 
 
+def loop_sigma(interconnection: WeightedInterconnection, K):
+    """The fast sampler of the closed-loop gains at ``K`` (None when unavailable).
+
+    See :mod:`oos_drake.control.loop_response`: the plant's modal form replaces the per-gain
+    closed-loop eigenvectors.
+    """
+    loop = interconnection.loop
+    return None if loop is None else LoopSigma(loop, K)
+
+
 @with_single_threaded_blas
 def peak_gradients(interconnection: WeightedInterconnection, K, index, omega, which=None):
     """Values and gradients of ``sigma_max(M_i(j w))`` w.r.t. ``K`` at given (model, frequency).
@@ -64,12 +75,19 @@ def peak_gradients(interconnection: WeightedInterconnection, K, index, omega, wh
     Returns
     -------
     tuple
-        ``(sigma (k,), gradient (k, 3, 6))`` (exact LU solves).
+        ``(sigma (k,), gradient (k, 3, 6))``: from the plant's modal form when the
+        interconnection has one (:meth:`LoopResponse.gain_sensitivity`), else by LU solves on
+        the closed loop.
     """
     index = np.atleast_1d(np.asarray(index, dtype=int))
     omega = np.atleast_1d(np.asarray(omega, dtype=float))
-    A, B1, B2, C1, C2, D11, D12, D21 = (M[index] for M in interconnection.partitions())
     K = np.asarray(K, dtype=float)
+    which = np.zeros(index.size, dtype=int) if which is None else np.asarray(which, dtype=int)
+    loop = interconnection.loop
+    if loop is not None:
+        T, G12, G21 = loop.gain_sensitivity(K, omega, index)
+        return _gradients(T, G12, G21, which)
+    A, B1, B2, C1, C2, D11, D12, D21 = (M[index] for M in interconnection.partitions())
     A_cl = A + B2 @ K @ C2
     B_cl = B1 + B2 @ K @ D21
     C_cl = C1 + D12 @ K @ C2
@@ -81,9 +99,13 @@ def peak_gradients(interconnection: WeightedInterconnection, K, index, omega, wh
     T = C_cl @ X[..., :nd] + D_cl
     G12 = C_cl @ X[..., nd:] + D12
     G21 = C2 @ X[..., :nd] + D21
+    return _gradients(T, G12, G21, which)
+
+
+def _gradients(T, G12, G21, which):
+    """Singular value ``which`` of ``T`` and its gradient ``Re(G21 v u^H G12)^T``."""
     U, S, Vh = np.linalg.svd(T)
-    which = np.zeros(index.size, dtype=int) if which is None else np.asarray(which, dtype=int)
-    rows = np.arange(index.size)
+    rows = np.arange(T.shape[0])
     u, v = U[rows, :, which], np.conj(Vh[rows, which, :])
     M = (G21 @ v[..., None]) @ (np.conj(u)[..., None, :] @ G12)
     return S[rows, which], np.swapaxes(np.real(M), -1, -2)
@@ -127,10 +149,22 @@ def active_set(
     eps: float = 0.05,
     max_peaks: int = 24,
     focus: float = 0.2,
+    workers: int = 1,
 ) -> ActiveSet:
-    """Evaluate ``gamma(K)`` and collect every local peak within ``eps`` (relative) of it."""
+    """Evaluate ``gamma(K)`` and collect every local peak within ``eps`` (relative) of it.
+
+    ``workers``: threads of the eigendecompositions (see :func:`peak_gain`).
+    """
     M = interconnection.close(K)
-    peaks = peak_gain(M.A, M.B, M.C, M.D, focus=max(focus, eps))
+    peaks = peak_gain(
+        M.A,
+        M.B,
+        M.C,
+        M.D,
+        focus=max(focus, eps),
+        workers=workers,
+        evaluator=loop_sigma(interconnection, K),
+    )
     worst = peaks.worst
     if not np.isfinite(peaks.gamma[worst]):
         k = int(np.argmax(peaks.spectral_abscissa))
@@ -197,6 +231,7 @@ def evaluate(
     exact, the per-model values of the others are sampled lower bounds. ``focus=None`` refines all.
     """
     M = interconnection.close(K)
+    peak_options.setdefault("evaluator", loop_sigma(interconnection, K))
     peaks = peak_gain(M.A, M.B, M.C, M.D, focus=focus, **peak_options)
     worst = peaks.worst
     if np.isfinite(peaks.gamma[worst]):

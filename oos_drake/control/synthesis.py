@@ -19,7 +19,11 @@ Algorithm (MATLAB systune-like, in the open):
    it nearly coalesces with the first), with Apkarian-Noll gradients from the singular vectors
    (:mod:`objective`), plus the pieces that block a rejected trial (null steps). The BFGS
    metric is updated with the gradients of the same peaks at fixed frequencies. Unstable
-   loops give ``gamma = inf`` and are rejected by the line search (stability enforced).
+   loops give ``gamma = inf`` and are rejected by the line search (stability enforced). The
+   metric is reset every 50 iterations; a stall (line search failed at a kink) is retried twice
+   from a small deterministic perturbation of the best point. Each gamma evaluation samples the
+   closed loops from the plants' modal form (:mod:`oos_drake.control.loop_response`): only the
+   closed-loop eigenvalues are computed per gain.
 3. Worst-case search over ``Delta_real`` (dynamic sampling): for the worst configurations,
    sample the parameter box (vertices and random points), then climb by projected
    finite-difference ascent; if a sample raises ``gamma`` by more than ``worst_case_rtol``, add
@@ -40,7 +44,7 @@ from oos_drake.blas import with_single_threaded_blas
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.interconnection import WeightedInterconnection, weighted_interconnection
 from oos_drake.control.nonsmooth_bfgs import BfgsResult, minimize_bundle_bfgs, minimize_nonsmooth
-from oos_drake.control.objective import active_set, evaluate, peak_gradients
+from oos_drake.control.objective import active_set, evaluate, loop_sigma, peak_gradients
 from oos_drake.control.peak_gain import peak_gain
 from oos_drake.control.plants import PlantArray
 
@@ -82,6 +86,9 @@ class SynthesisOptions:
         Relative excess over gamma that makes a configuration a violator.
     max_rounds : int
         Total rounds (optimizer run + checks).
+    workers : int
+        Threads for the per-model eigendecompositions of every gamma evaluation (2 on the
+        paper's 2-core target machine).
     """
 
     restarts: int = 2
@@ -98,6 +105,7 @@ class SynthesisOptions:
     configurations_per_round: int = 5
     rtol_add: float = 1e-3
     max_rounds: int = 12
+    workers: int = 1
 
 
 @dataclass(frozen=True)
@@ -159,13 +167,19 @@ def _interconnect(plants: PlantArray, models: ModelSet, spec) -> WeightedInterco
     return weighted_interconnection(plants.evaluate(models.config_index, models.values), spec)
 
 
-def gamma_over(plants: PlantArray, models: ModelSet, K, spec=None, *, certify=False):
+def gamma_over(
+    plants: PlantArray, models: ModelSet, K, spec=None, *, certify=False, workers: int = 1
+):
     """Per-model peak gains of the closed loops with gain ``K`` (a :class:`PeakGain`).
 
-    ``certify`` checks each value with the Hamiltonian test (see :func:`peak_gain`).
+    ``certify`` checks each value with the Hamiltonian test (see :func:`peak_gain`);
+    ``workers`` threads share the eigendecompositions.
     """
-    M = _interconnect(plants, models, spec).close(K)
-    return peak_gain(M.A, M.B, M.C, M.D, certify=certify)
+    W = _interconnect(plants, models, spec)
+    M = W.close(K)
+    return peak_gain(
+        M.A, M.B, M.C, M.D, certify=certify, workers=workers, evaluator=loop_sigma(W, K)
+    )
 
 
 def _gain_scale(K0: np.ndarray) -> np.ndarray:
@@ -187,16 +201,22 @@ def tune(
     eps: float = 0.1,
     restart_every: int = 50,
     restart_rtol: float = 1e-4,
+    workers: int = 1,
+    kicks: int = 2,
+    kick: float = 0.05,
 ):
     """Minimize ``gamma(K)`` over one interconnection array from ``K0``.
 
     ``max_iterations`` is the total budget; with the bundle method the BFGS metric is reset
     every ``restart_every`` iterations until a cycle improves gamma by less than
-    ``restart_rtol`` (relative).
+    ``restart_rtol`` (relative); then up to ``kicks`` cycles restart from the best point
+    perturbed by ``kick`` (relative, Gaussian, seeded by the iteration count: deterministic)
+    and the best point is kept (escapes stalls of the line search at kinks).
 
     ``method="bundle"`` (default): BFGS-SQP steps on the nearly active peaks
     (:func:`minimize_bundle_bfgs`); ``"bfgs"``: plain nonsmooth BFGS with one subgradient
-    (:func:`minimize_nonsmooth`). Returns ``(K, gamma, BfgsResult)``.
+    (:func:`minimize_nonsmooth`). ``workers``: threads of the eigendecompositions.
+    Returns ``(K, gamma, BfgsResult)``.
     """
     K0 = np.asarray(K0, dtype=float)
     scale = _gain_scale(K0) if scale is None else scale
@@ -204,7 +224,7 @@ def tune(
     if method == "bundle":
 
         def fun_active(x):
-            a = active_set(interconnection, x.reshape(3, 6) * scale, eps=eps)
+            a = active_set(interconnection, x.reshape(3, 6) * scale, eps=eps, workers=workers)
             grads = (a.gradients * scale).reshape(a.values.size, -1)
             which = a.which if a.which is not None else np.zeros(a.values.size, int)
             return a.gamma, a.values, grads, (a.models, a.omegas, which)
@@ -219,8 +239,11 @@ def tune(
             return values, (grads * scale).reshape(models.size, -1)
 
         # the metric learnt along nonsmooth valleys goes stale: restart it every
-        # `restart_every` iterations until a cycle no longer improves gamma by `restart_rtol`
-        x, used, history, evaluations, messages = x0, 0, [], 0, []
+        # `restart_every` iterations until a cycle no longer improves gamma by `restart_rtol`;
+        # then (a stall at a kink: "line search failed") restart up to `kicks` times from a small
+        # deterministic perturbation of the best point and keep what improves
+        x = x_best = x0
+        f_best, used, history, evaluations, messages, kicks_left = None, 0, [], 0, [], kicks
         while used < max_iterations:
             res = minimize_bundle_bfgs(
                 fun_active,
@@ -228,14 +251,27 @@ def tune(
                 regrad=regrad,
                 max_iterations=min(restart_every, max_iterations - used),
             )
-            improved = not history or res.f < history[-1] * (1.0 - restart_rtol)
             used += res.iterations
             evaluations += res.evaluations
-            history.extend(res.history if not history else res.history[1:])
             messages.append(res.message)
-            x = res.x
-            if not improved or res.iterations == 0:
+            improved = f_best is None or res.f < f_best * (1.0 - restart_rtol)
+            if f_best is None or res.f < f_best:
+                history.extend(res.history if not history else (res.f,))
+                x_best, f_best = res.x, res.f
+            if improved and res.iterations > 0:
+                x = x_best
+                continue
+            x = None
+            while kicks_left > 0 and x is None:
+                kicks_left -= 1
+                rng = np.random.default_rng([used, kicks_left])
+                trial = x_best + kick * np.abs(x_best).mean() * rng.normal(size=x_best.shape)
+                evaluations += 1
+                if np.isfinite(fun_active(trial)[0]):  # else it destabilized a loop
+                    x = trial
+            if x is None:
                 break
+        x = x_best
         res = BfgsResult(
             x,
             history[-1],
@@ -247,7 +283,7 @@ def tune(
     elif method == "bfgs":
 
         def fun(x):
-            ev = evaluate(interconnection, x.reshape(3, 6) * scale)
+            ev = evaluate(interconnection, x.reshape(3, 6) * scale, workers=workers)
             return ev.gamma, (ev.gradient * scale).ravel()
 
         res = minimize_nonsmooth(fun, x0, max_iterations=max_iterations)
@@ -272,7 +308,8 @@ def _worst_case_search(plants: PlantArray, configs, K, spec, options, rng):
     S = samples.shape[0]
     idx = np.repeat(np.asarray(configs), S)
     vals = np.tile(samples, (C, 1))
-    g = gamma_over(plants, ModelSet(idx, vals), K, spec).gamma.reshape(C, S)
+    workers = options.workers
+    g = gamma_over(plants, ModelSet(idx, vals), K, spec, workers=workers).gamma.reshape(C, S)
     best = np.argmax(g, axis=1)
     x = samples[best]
     fx = g[np.arange(C), best]
@@ -284,13 +321,17 @@ def _worst_case_search(plants: PlantArray, configs, K, spec, options, rng):
         plus = np.clip(x[:, None, :] + np.eye(P) * h, lower, upper)
         minus = np.clip(x[:, None, :] - np.eye(P) * h, lower, upper)
         pts = np.concatenate([plus, minus], axis=1).reshape(-1, P)
-        gp = gamma_over(plants, ModelSet(np.repeat(configs, 2 * P), pts), K, spec).gamma
+        gp = gamma_over(
+            plants, ModelSet(np.repeat(configs, 2 * P), pts), K, spec, workers=workers
+        ).gamma
         gp = gp.reshape(C, 2, P)
         denom = (plus - minus)[:, np.arange(P), np.arange(P)]
         grad = np.where(denom > 0, (gp[:, 0] - gp[:, 1]) / np.where(denom > 0, denom, 1), 0.0)
         grad = np.where(np.isfinite(grad), grad, 0.0)
         trial = np.clip(x + step * np.sign(grad), lower, upper)
-        ft = gamma_over(plants, ModelSet(np.asarray(configs), trial), K, spec).gamma
+        ft = gamma_over(
+            plants, ModelSet(np.asarray(configs), trial), K, spec, workers=workers
+        ).gamma
         better = ft > fx
         x = np.where(better[:, None], trial, x)
         fx = np.where(better, ft, fx)
@@ -337,7 +378,8 @@ def synthesize(
     P = len(plants.parameters)
     nominal = np.broadcast_to(plants.nominal_values, (N, P)).copy()
     all_configs = ModelSet(np.arange(N), nominal)
-    start_peaks = gamma_over(plants, all_configs, K0, spec)
+    workers = options.workers
+    start_peaks = gamma_over(plants, all_configs, K0, spec, workers=workers)
     gamma_start = float(np.max(start_peaks.gamma))
     if not np.isfinite(gamma_start):
         raise ValueError("synthesize: the start gain K0 does not stabilize every configuration")
@@ -365,7 +407,7 @@ def synthesize(
         for _ in range(options.restarts if round_ == 0 else 0):
             starts.append(K_best * np.exp(options.restart_spread * rng.normal(size=K0.shape)))
         for r, Ks in enumerate(starts):
-            g0 = evaluate(W, Ks).gamma
+            g0 = evaluate(W, Ks, workers=workers).gamma
             if not np.isfinite(g0):
                 runs.append(
                     dict(
@@ -381,7 +423,12 @@ def synthesize(
                 )
                 continue
             K, g, res = tune(
-                W, Ks, max_iterations=options.max_iterations, scale=scale, method=options.method
+                W,
+                Ks,
+                max_iterations=options.max_iterations,
+                scale=scale,
+                method=options.method,
+                workers=workers,
             )
             runs.append(
                 dict(
@@ -402,7 +449,7 @@ def synthesize(
             if r == 0 or g < gamma_best:
                 K_best, gamma_best = K, g
         # 1. every configuration at nominal parameters: add the violators to the working set
-        peaks = gamma_over(plants, all_configs, K_best, spec, certify=True)
+        peaks = gamma_over(plants, all_configs, K_best, spec, certify=True, workers=workers)
         in_set = np.zeros(N, dtype=bool)
         in_set[
             working.config_index[np.all(working.values == nominal[working.config_index], axis=1)]
@@ -443,7 +490,7 @@ def synthesize(
 
     models = all_configs.extend(worst.config_index, worst.values)
     added = np.concatenate([np.zeros(N, dtype=bool), np.ones(worst.config_index.size, dtype=bool)])
-    final = gamma_over(plants, models, K_best, spec, certify=True)
+    final = gamma_over(plants, models, K_best, spec, certify=True, workers=workers)
     gamma = float(np.max(final.gamma))
     table = pd.DataFrame({"config": models.config_index})
     for j, p in enumerate(plants.parameters):

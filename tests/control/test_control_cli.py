@@ -42,9 +42,3 @@ def test_synth_writes_every_output(tmp_path):
     mat = scipy.io.loadmat(out / "closed_loop.mat")
     np.testing.assert_allclose(mat["A"], npz["A"])
     assert pd.read_csv(out / "models.csv").shape[0] == 3
-
-
-def test_synth_drake_plant_is_a_clear_error(tmp_path, capsys):
-    status = main(["synth", "--plant", "drake", "--out", str(tmp_path)])
-    assert status == 2
-    assert "drake" in capsys.readouterr().err

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from slycot import ab13dd
 
-from oos_drake.control.peak_gain import hinfnorm_hamiltonian, peak_gain
+from oos_drake.control.peak_gain import ModalResponse, eigenvalues, hinfnorm_hamiltonian, peak_gain
 
 
 def ab13dd_norm(A, B, C, D):
@@ -71,3 +71,35 @@ def test_certified_peak_gain_agrees_with_ab13dd_and_bounds_the_grid():
     assert np.all(certified.gamma >= coarse.gamma * (1 - 1e-12))
     for i in range(A.shape[0]):
         assert certified.gamma[i] == pytest.approx(ab13dd_norm(A[i], B[i], C[i], D[i])[0], rel=1e-6)
+
+
+@pytest.mark.parametrize("refine", ["slope", "golden"])
+def test_both_refinements_agree_with_ab13dd(refine):
+    rng = np.random.default_rng(11)
+    A, B, C, D = lightly_damped_models(rng, N=8, n_modes=6)
+    result = peak_gain(A, B, C, D, refine=refine, candidates=1)
+    for i in range(A.shape[0]):
+        assert result.gamma[i] == pytest.approx(ab13dd_norm(A[i], B[i], C[i], D[i])[0], rel=1e-8)
+
+
+def test_threaded_eigendecompositions_give_the_same_gains():
+    rng = np.random.default_rng(2)
+    A, B, C, D = lightly_damped_models(rng, N=9)
+    one = peak_gain(A, B, C, D)
+    two = peak_gain(A, B, C, D, workers=2)
+    np.testing.assert_allclose(two.gamma, one.gamma, rtol=1e-12)
+    np.testing.assert_allclose(eigenvalues(A, 2), eigenvalues(A, 1), rtol=1e-12)
+    with pytest.raises(ValueError, match="workers"):
+        peak_gain(A, B, C, D, workers=0)
+
+
+def test_slope_is_the_derivative_of_sigma():
+    rng = np.random.default_rng(4)
+    A, B, C, D = lightly_damped_models(rng, N=3, p=2, m=3)
+    modal = ModalResponse(A, B, C, D)
+    omega = np.array([[0.3, 2.0], [1.1, 7.0], [0.05, 40.0]])
+    h = 1e-6 * omega
+    sigma, slope = modal.sigma_and_slope(omega)
+    numeric = (modal.sigma(omega + h) - modal.sigma(omega - h)) / (2 * h)
+    np.testing.assert_allclose(sigma, modal.sigma(omega), rtol=1e-12)
+    np.testing.assert_allclose(slope, numeric, rtol=1e-5, atol=1e-9 * np.abs(numeric).max())

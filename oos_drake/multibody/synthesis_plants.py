@@ -1,0 +1,351 @@
+"""Drake-linearized plant arrays for the H-infinity synthesis (``oos synth --plant drake``).
+
+The synthesis (:mod:`oos_drake.control.synthesis`) needs, for every mission configuration ``i``
+and every value of the real uncertain parameters ``Delta_real``, the rotational plant
+``T_ext,G1 -> wdot`` as state-space matrices (a :class:`oos_drake.control.plants.PlantArray`).
+This module builds it from the Drake twin instead of the TITOP LFR:
+
+- configuration ``i`` (mission time ``t_i``): the twin is placed at the timeline's configuration
+  (arm and array drive angles locked, connection from the docking switches) and linearized by
+  :func:`oos_drake.multibody.operating_point.linearize_at`; the unreachable and unobservable
+  states (chaser rigid-body motion, a free target) are pruned structurally and the 3x3 block
+  ``[T] -> [wdot]`` is kept;
+- real parameters (physical values, the same names, nominal values and ranges as the LFR's
+  ``ureal`` blocks, taken from the scenario data): they are written into the **Context
+  parameters** of the cached diagram, no rebuild:
+
+  ===============================  ==============================================================
+  ``m_RH2``, ``J{xx,yy,zz}_RH2``   target hub spatial inertia (link frame at its centre of mass
+                                   G2, products of inertia nominal),
+                                   ``RigidBody.SetSpatialInertiaInBodyFrame``
+  ``w1_SA<k>``                     first cantilever mode of array k: the mode body's hinge spring
+                                   ``k^2 w^2`` and damping ``2 xi w k^2`` scaled by
+                                   ``(w / w_0)^2`` and ``w / w_0`` (same ``xi``, same participation:
+                                   the LFR's ``w1`` block occurs in both terms)
+  ===============================  ==============================================================
+
+- every model of the array has the same number of states (the largest pruned order, 48 for the
+  paper): models with fewer states (free target: the target's modes are not reachable) are padded
+  with decoupled states at ``-1 rad/s`` (``B = 0``, ``C = 0``): the transfer function, hence every
+  closed-loop H-infinity norm, is unchanged. The LFR array carries those target modes as
+  decoupled states too.
+
+The nominal linearizations are computed once when the array is built (one Taylor approximation per
+configuration, ~10 ms each); perturbed ones are computed on demand and kept in a bounded cache
+(the worst-case search evaluates the same parameter points repeatedly).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import OrderedDict
+from collections.abc import Callable, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+from pydrake.multibody.tree import RevoluteSpring, RotationalInertia, SpatialInertia
+
+from oos_drake.control.plants import PlantArray, UncertainParameter
+from oos_drake.multibody.appendage_sdf import MODE_JOINT
+from oos_drake.multibody.linearization import structural_prune
+from oos_drake.multibody.operating_point import linearize_at, operating_point
+from oos_drake.multibody.scenario_plant import ScenarioDiagram, cached_scenario_diagram
+from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL
+
+__all__ = [
+    "PADDING_POLE",
+    "uncertain_parameters",
+    "apply_physical_values",
+    "rotational_plant",
+    "DrakePlantSource",
+    "drake_plant_array",
+]
+
+#: Pole [rad/s] of the decoupled states that pad lower-order models to the array's order.
+PADDING_POLE = -1.0
+
+
+def _scenario(scenario):
+    if scenario is None:
+        from oos_drake.scenario.data import load_scenario
+
+        return load_scenario()
+    return scenario
+
+
+def uncertain_parameters(scenario=None) -> tuple[UncertainParameter, ...]:
+    """The real uncertain parameters ``Delta_real`` of the scenario, sorted by name.
+
+    Same names, nominal values and ranges as the blocks the mission LFR keeps after the
+    configuration substitution (``m_<hub>``, ``J{xx,yy,zz}_<hub>``, ``w1_<array>``), computed
+    from the scenario data: ``value = nominal (1 +- percent / 100)``.
+
+    Parameters
+    ----------
+    scenario : Scenario, optional
+        Default: the paper's (``oos_drake.scenario.load_scenario()``).
+    """
+    from oos_drake.titop.parameters import inertia_names, mass_name, mode_frequency_name
+
+    scenario = _scenario(scenario)
+    parameters = []
+
+    def add(name, nominal, percent):
+        r = float(percent) / 100.0
+        if r > 0:
+            parameters.append(
+                UncertainParameter(name, float(nominal), nominal * (1 - r), nominal * (1 + r))
+            )
+
+    for hub in scenario.hubs.values():
+        add(mass_name(hub.name), hub.mass, hub.mass_uncertainty_percent)
+        diagonal = np.diag(np.asarray(hub.inertia, dtype=float))
+        percents = np.broadcast_to(np.asarray(hub.inertia_uncertainty_percent, float), (3,))
+        for name, value, percent in zip(inertia_names(hub.name), diagonal, percents, strict=True):
+            add(name, value, percent)
+    for mount in scenario.arrays.values():
+        model = mount.model
+        add(
+            mode_frequency_name(mount.name, 1),
+            float(model.omega[0]),
+            model.first_mode_uncertainty_percent,
+        )
+    return tuple(sorted(parameters, key=lambda p: p.name))
+
+
+def _mode_spring(handles: ScenarioDiagram, joint) -> RevoluteSpring:
+    plant = handles.plant
+    for i in range(plant.num_force_elements()):
+        element = plant.get_force_element(_force_element_index(i))
+        if isinstance(element, RevoluteSpring) and element.joint().index() == joint.index():
+            return element
+    raise ValueError(f"no RevoluteSpring on joint {joint.name()!r} of the Drake twin")
+
+
+def _force_element_index(i: int):
+    from pydrake.multibody.tree import ForceElementIndex
+
+    return ForceElementIndex(i)
+
+
+def apply_physical_values(
+    handles: ScenarioDiagram, context, values: Mapping[str, float], scenario=None
+) -> None:
+    """Write real-parameter values into a root ``context`` of ``handles.diagram`` (no rebuild).
+
+    Parameters
+    ----------
+    handles : ScenarioDiagram
+        A cached scenario diagram.
+    context : Context
+        Its root context (other parameters keep their values; call on a fresh context).
+    values : Mapping[str, float]
+        Physical values by block name: ``m_RH2`` [kg], ``Jxx_RH2``/``Jyy_RH2``/``Jzz_RH2``
+        [kg m^2] (diagonal of the inertia at G2 in ``R_RH2``), ``w1_SA<k>`` [rad/s].
+
+    Raises
+    ------
+    ValueError
+        Unknown parameter name, or a non-finite or non-positive value.
+    """
+    from oos_drake.titop.parameters import inertia_names, mass_name, mode_frequency_name
+
+    scenario = _scenario(scenario)
+    plant = handles.plant
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    hub_names = {}
+    for hub in scenario.hubs.values():
+        hub_names[mass_name(hub.name)] = (hub, "mass", None)
+        for axis, name in enumerate(inertia_names(hub.name)):
+            hub_names[name] = (hub, "inertia", axis)
+    array_names = {mode_frequency_name(m.name, 1): m for m in scenario.arrays.values()}
+    hubs_touched = {}
+    for name, value in values.items():
+        value = float(value)
+        if not (np.isfinite(value) and value > 0):
+            raise ValueError(f"physical value of {name!r} must be finite and > 0, got {value}")
+        if name in hub_names:
+            hub, kind, axis = hub_names[name]
+            mass, inertia = hubs_touched.get(
+                hub.name, (float(hub.mass), np.array(hub.inertia, dtype=float))
+            )
+            if kind == "mass":
+                mass = value
+            else:
+                inertia[axis, axis] = value
+            hubs_touched[hub.name] = (mass, inertia)
+        elif name in array_names:
+            mount = array_names[name]
+            instance = plant.GetModelInstanceByName(f"{ASSEMBLY_MODEL}::{mount.name}")
+            joint = plant.GetJointByName(MODE_JOINT.format(1), instance)
+            spring = _mode_spring(handles, joint)
+            ratio = value / float(mount.model.omega[0])
+            spring.SetStiffness(plant_context, spring.default_stiffness() * ratio**2)
+            joint.SetDampingVector(plant_context, joint.default_damping_vector() * ratio)
+        else:
+            known = sorted(hub_names) + sorted(array_names)
+            raise ValueError(f"unknown real parameter {name!r} for the Drake twin; known: {known}")
+    for hub_name, (mass, inertia) in hubs_touched.items():
+        instance = plant.GetModelInstanceByName(f"{ASSEMBLY_MODEL}::{hub_name}")
+        body = plant.GetBodyByName(hub_name, instance)
+        I = RotationalInertia(
+            inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]
+        )
+        # the hub link frame is at its centre of mass (SDF writer), so the CoM offset is zero
+        body.SetSpatialInertiaInBodyFrame(
+            plant_context, SpatialInertia.MakeFromCentralInertia(mass, np.zeros(3), I)
+        )
+
+
+def rotational_plant(
+    configuration, values: Mapping[str, float] | None = None, scenario=None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Linearize the twin at one configuration: pruned ``T_ext,G1 -> wdot`` (3x3).
+
+    Parameters
+    ----------
+    configuration : oos_drake.scenario.timeline.Configuration
+        One (non-batch) configuration; rigid connections from its switches.
+    values : Mapping[str, float], optional
+        Physical values of real parameters (see :func:`apply_physical_values`); others nominal.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(A, B, C, D)``: inputs ``Tx, Ty, Tz`` [N m], outputs ``wdot_x..z`` [rad/s^2].
+    """
+    point = operating_point(configuration)
+    handles = cached_scenario_diagram(point.connection)
+    context = handles.diagram.CreateDefaultContext()
+    if values:
+        apply_physical_values(handles, context, values, scenario)
+    system = structural_prune(linearize_at(point, handles, context)[3:6, 3:6])
+    return tuple(np.asarray(M, dtype=float) for M in (system.A, system.B, system.C, system.D))
+
+
+def _pad(A, B, C, D, order: int):
+    n = A.shape[0]
+    if n > order:
+        raise ValueError(f"Drake plant has {n} states, more than the array order {order}")
+    if n == order:
+        return A, B, C, D
+    k = order - n
+    A2 = np.zeros((order, order))
+    A2[:n, :n] = A
+    A2[n:, n:] = PADDING_POLE * np.eye(k)
+    B2 = np.vstack([B, np.zeros((k, B.shape[1]))])
+    C2 = np.hstack([C, np.zeros((C.shape[0], k))])
+    return A2, B2, C2, D
+
+
+class DrakePlantSource:
+    """Per-configuration Drake linearizations with real-parameter values, cached.
+
+    Parameters
+    ----------
+    times : array_like, shape (N,)
+        Mission times [s] of the configurations.
+    scenario : Scenario, optional
+        Default: the paper's (must match the SDF files under ``sdf/``).
+    cache_size : int
+        Largest number of perturbed linearizations kept in memory.
+    progress : callable, optional
+        ``progress(done, total)`` during the nominal linearizations.
+
+    Attributes
+    ----------
+    nominal_matrices : tuple of numpy.ndarray
+        ``(A, B, C, D)`` batched over the configurations (padded to :attr:`order`).
+    build_time_s, build_cpu_s : float
+        Wall and CPU time of the nominal linearizations [s].
+    """
+
+    def __init__(
+        self,
+        times: Sequence[float],
+        scenario=None,
+        *,
+        cache_size: int = 4096,
+        progress: Callable | None = None,
+    ):
+        from oos_drake.scenario.timeline import mission_timeline
+
+        self.scenario = _scenario(scenario)
+        self.times = np.asarray(times, dtype=float).ravel()
+        if self.times.size == 0 or not np.all(np.isfinite(self.times)):
+            raise ValueError(f"DrakePlantSource: times must be finite and non-empty, got {times}")
+        timeline = mission_timeline(self.scenario)
+        batch = timeline.configuration(self.times)
+        self.configurations = [
+            type(batch)(
+                time=batch.time[i],
+                alpha=batch.alpha[i],
+                theta=batch.theta[i],
+                delta_C1=batch.delta_C1[i],
+                delta_C2=batch.delta_C2[i],
+            )
+            for i in range(self.times.size)
+        ]
+        self.parameters = uncertain_parameters(self.scenario)
+        self.cache_size = int(cache_size)
+        self._cache: OrderedDict = OrderedDict()
+        self.linearizations = 0
+        wall, cpu = time.perf_counter(), time.process_time()
+        raw = []
+        for i, configuration in enumerate(self.configurations):
+            raw.append(rotational_plant(configuration, scenario=self.scenario))
+            if progress is not None:
+                progress(i + 1, self.times.size)
+        self.linearizations += len(raw)
+        self.order = max(m[0].shape[0] for m in raw)
+        padded = [_pad(*m, self.order) for m in raw]
+        self.nominal_matrices = tuple(np.stack([m[k] for m in padded]) for k in range(4))
+        self.build_time_s = time.perf_counter() - wall
+        self.build_cpu_s = time.process_time() - cpu
+
+    def matrices(self, index: int, values: np.ndarray):
+        """``(A, B, C, D)`` of configuration ``index`` at physical parameter ``values`` (P,)."""
+        values = np.asarray(values, dtype=float)
+        nominal = np.array([p.nominal for p in self.parameters])
+        if values.size == 0 or np.array_equal(values, nominal):
+            return tuple(M[index] for M in self.nominal_matrices)
+        key = (int(index), values.tobytes())
+        if key in self._cache:
+            self._cache.move_to_end(key)
+            return self._cache[key]
+        changed = {
+            p.name: float(v) for p, v in zip(self.parameters, values, strict=True) if v != p.nominal
+        }
+        result = _pad(
+            *rotational_plant(self.configurations[index], changed, self.scenario), self.order
+        )
+        self.linearizations += 1
+        self._cache[key] = result
+        if len(self._cache) > self.cache_size:
+            self._cache.popitem(last=False)
+        return result
+
+    def build(self, index, values):
+        """The :class:`~oos_drake.control.plants.PlantArray` ``build`` callable (batched)."""
+        index = np.asarray(index, dtype=int)
+        values = np.asarray(values, dtype=float).reshape(index.size, len(self.parameters))
+        if len(self.parameters) == 0 or np.all(values == self.nominal_values):
+            return tuple(M[index] for M in self.nominal_matrices)
+        parts = [self.matrices(i, v) for i, v in zip(index, values, strict=True)]
+        return tuple(np.stack([p[k] for p in parts]) for k in range(4))
+
+    @property
+    def nominal_values(self) -> np.ndarray:
+        """Nominal parameter values (P,)."""
+        return np.array([p.nominal for p in self.parameters], dtype=float)
+
+    def plant_array(self) -> PlantArray:
+        """The synthesis' plant array (configurations table with ``time_s``)."""
+        return PlantArray(
+            pd.DataFrame({"time_s": self.times}), self.parameters, self.build, source="drake"
+        )
+
+
+def drake_plant_array(times, scenario=None, *, progress=None) -> PlantArray:
+    """Plant array of the Drake twin at mission ``times`` [s] (see :class:`DrakePlantSource`)."""
+    return DrakePlantSource(times, scenario, progress=progress).plant_array()
