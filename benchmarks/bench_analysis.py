@@ -1,92 +1,116 @@
-"""Benchmark of the analysis' mu sweep against the robust package's sweep, same run, same models.
+"""Benchmark of the analysis' mu sweep: cold grid vs continuation grid vs certified sweep.
 
-Run: ``.venv/bin/python benchmarks/bench_analysis.py [--models 6] [--ppd 8]``
+Run: ``.venv/bin/python benchmarks/bench_analysis.py [--models 40] [--first 40] [--jobs 1]``
 
-Prints, for a small mission model array (baseline controller, total uncertainty set):
+On ``--models`` consecutive mission configurations of the paper's 330 (starting at index
+``--first``; the default slice holds the first docking at 255 s), synthesized controller if
+``--controller`` is given (else the baseline PD), total uncertainty set, common 12/decade grid:
 
-* wall time and per-matrix time of :func:`oos_drake.analysis.stability.mu_sweep` (batched D-G
-  upper bound, power-iteration lower bound, one refinement) and of the baseline
-  :func:`oos_drake.robust.robust_sweep` (mussv with its default accuracy) on the SAME grid;
-* the peak upper bound each finds (lower is better: both are valid bounds);
-* the certified lower bound of the direct destabilizing search vs mussv's lower bound at the peak.
+* ``cold grid``: every point from Osborne balancing, 30 BFGS iterations (the session-1 sweep);
+* ``continuation grid``: the first model converged, every next one started from its
+  predecessor's scalings (15 iterations), spikes re-solved from frequency neighbours;
+* ``certified sweep``: the continuation grid plus spike resolution and the certified peak.
 
-Timings on the shared machine are noisy: read the ratio, measured in the same run.
+For each: wall and CPU time (this process and its workers), the largest upper bound and the
+number of "spikes" (upper bound above 1.03 x the certified lower bound: points that would
+need tightening). Timings on a shared machine are noisy: read the ratios of the same run.
 """
 
 from __future__ import annotations
 
 import argparse
+import resource
 import time
 
 import numpy as np
 
 
+def _cpu() -> float:
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--models", type=int, default=4)
-    parser.add_argument("--ppd", type=int, default=8, help="grid points per decade")
+    parser.add_argument("--models", type=int, default=40)
+    parser.add_argument("--first", type=int, default=40)
+    parser.add_argument("--jobs", type=int, default=1)
+    parser.add_argument("--controller", default=None, help="controller.json (default: baseline)")
     args = parser.parse_args()
 
     from oos_drake.analysis.cli import _controller
-    from oos_drake.analysis.destabilizing import destabilizing_perturbation
-    from oos_drake.analysis.models import mission_closed_loop
-    from oos_drake.analysis.stability import SweepOptions, mu_sweep
+    from oos_drake.analysis.models import mission_closed_loop, mission_times
+    from oos_drake.analysis.stability import SweepOptions, certified_sweep, mu_sweep
     from oos_drake.analysis.subsets import uncertainty_subsets
     from oos_drake.blas import limit_blas_threads
-    from oos_drake.robust import mussv, robust_sweep
-    from oos_drake.robust.lfr_analysis import block_map, delta_channel_response
 
     limit_blas_threads(1)
-    controller = _controller(None)
-    times = np.linspace(255.0, 1400.0, args.models)
+    controller = _controller(args.controller)
+    times = mission_times(330)[args.first : args.first + args.models]
     arr = mission_closed_loop(controller, times).system
     total = {"total": uncertainty_subsets(arr.uncertainty)["total"]}
-    omega = 2 * np.pi * np.geomspace(0.005, 5.0, int(3 * args.ppd) + 1)
+    omega = 2 * np.pi * np.geomspace(0.005, 5.0, 37)
 
-    t0 = time.perf_counter()
-    ours = mu_sweep(
-        arr,
-        omega,
-        total,
-        times=times,
-        options=SweepOptions(n_jobs=1, pole_points=0),
-        progress=False,
-    )
-    t_ours = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    base = robust_sweep(arr, omega, subsets=total, times=times, n_jobs=1, refine_points=3)
-    t_base = time.perf_counter() - t0
-
-    k = int(ours["mu_upper"].idxmax())
-    model = int(ours.at[k, "model"])
-    w_peak = 2 * np.pi * float(ours.at[k, "frequency [Hz]"])
-    one = arr.model(model)
-    bmap = block_map(one)
-    A, Bw, Cz, Dzw = (np.asarray(x) for x in (one.A, one.Bw, one.Cz, one.Dzw))
-    t0 = time.perf_counter()
-    direct = destabilizing_perturbation(A, Bw, Cz, Dzw, bmap.blk, [w_peak / 2, w_peak * 2])
-    t_direct = time.perf_counter() - t0
-    local = w_peak * np.geomspace(0.8, 1.25, 21)
-    t0 = time.perf_counter()
-    ref = mussv(delta_channel_response(A, Bw, Cz, Dzw, local), bmap.blk)
-    t_mussv = time.perf_counter() - t0
-
-    print(f"{'method':44s} {'wall [s]':>9s} {'matrices':>9s} {'ms/matrix':>10s} {'peak':>8s}")
-    for name, table, t in (
-        ("analysis.mu_sweep (batched, 30 it + refine)", ours, t_ours),
-        ("robust.robust_sweep (mussv defaults)", base, t_base),
+    runs = []
+    for name, fn in (
+        (
+            "cold grid (30 it, session 1)",
+            lambda: mu_sweep(
+                arr,
+                omega,
+                total,
+                times=times,
+                options=SweepOptions(n_jobs=args.jobs, continuation_iterations=0),
+                progress=False,
+            ),
+        ),
+        (
+            "continuation grid",
+            lambda: mu_sweep(
+                arr,
+                omega,
+                total,
+                times=times,
+                options=SweepOptions(n_jobs=args.jobs),
+                progress=False,
+            ),
+        ),
+        (
+            "certified sweep (grid + spikes + peak)",
+            lambda: certified_sweep(
+                arr,
+                omega,
+                total,
+                times=times,
+                options=SweepOptions(n_jobs=args.jobs),
+                progress=False,
+            ),
+        ),
     ):
-        print(
-            f"{name:44s} {t:9.2f} {len(table):9d} {1e3 * t / len(table):10.2f} "
-            f"{table['mu_upper'].max():8.4f}"
-        )
-    print(f"speed-up per matrix: {(t_base / len(base)) / (t_ours / len(ours)):.1f}x")
-    print(f"{'lower bound at the peak model':44s} {'wall [s]':>9s} {'mu_lower':>10s}")
-    print(f"{'direct destabilizing search':44s} {t_direct:9.2f} {direct.mu_lower:10.4f}")
+        w0, c0 = time.perf_counter(), _cpu()
+        out = fn()
+        runs.append((name, out, time.perf_counter() - w0, _cpu() - c0))
+    cert = runs[-1][1].certificates["total"]
+    lower = cert.mu_lower
     print(
-        f"{'mussv power iteration (21 local points)':44s} {t_mussv:9.2f} "
-        f"{float(np.max(ref.lower)):10.4f}"
+        f"{args.models} configurations from t = {times[0]:.0f} s, {controller.label} controller; "
+        f"certified mu in [{lower:.4f}, {cert.mu_upper:.4f}] (gap {100 * cert.gap:.2f} %) at "
+        f"t = {cert.time:.0f} s, {cert.frequency:.3f} Hz"
     )
+    print(
+        f"{'method':40s} {'wall [s]':>9s} {'CPU [s]':>9s} {'points':>7s} {'max upper':>10s} "
+        f"{'spikes':>7s}"
+    )
+    for name, out, wall, cpu in runs:
+        table = out if hasattr(out, "columns") else out.table
+        spikes = int(np.sum(table["mu_upper"].to_numpy() > 1.03 * lower))
+        print(
+            f"{name:40s} {wall:9.1f} {cpu:9.1f} {len(table):7d} "
+            f"{table['mu_upper'].max():10.4f} {spikes:7d}"
+        )
+    cold, cont = runs[0], runs[1]
+    print(f"continuation vs cold grid: CPU ratio {cold[3] / max(cont[3], 1e-9):.2f}x")
 
 
 if __name__ == "__main__":

@@ -8,7 +8,10 @@ Modules, in the order of the data flow:
 ``models``         closed-loop model arrays: mission (M_330) and docking phases 7 / 8
 ``subsets``        the uncertainty subsets (total, real, modal, mechanical, additive,
                    multiplicative) and the physical units of the blocks
-``stability``      mu bounds over models x frequencies x subsets, tightening, certified peaks
+``workers``        bounds at arbitrary (model, frequency) points in worker processes
+``stability``      mu bounds over models x frequencies x subsets (continuation grid),
+                   certified peaks per subset (``certified_sweep``)
+``tightening``     resolving upper-bound spikes: warm passes, local refinement, searches
 ``destabilizing``  direct search of destabilizing perturbations (real vertices + complex blocks)
 ``performance``    worst-case gains ``d -> e_p`` and ``d -> e_u`` per subset
 ``sensitivity``    which uncertain parameter moves the worst-case mu most

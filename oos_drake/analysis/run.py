@@ -28,6 +28,7 @@ import pandas as pd
 
 from oos_drake.analysis.controller import Controller
 from oos_drake.analysis.stability import SweepOptions
+from oos_drake.analysis.tightening import TightenOptions
 
 #: The paper's numbers (section 4) for the comparison in the summary.
 PAPER = {
@@ -67,16 +68,17 @@ class AnalysisOptions:
     performance_points : int
         Frequencies of the worst-case gain study.
     certify_iterations : int
-        BFGS iterations of the upper bound on the local grid of each peak.
-    certify_points : int
-        Points of that local grid.
+        BFGS iterations of the upper bound at the critical frequency of each certificate
+        (the sensitivity study uses half).
     open_loop_samples : int
         Samples per uncertainty set of the open-loop figure (0: skip).
-    tighten_batch, tighten_rounds, tighten_iterations : int
-        Highest grid points recomputed per round, rounds, and BFGS iterations (four smoothing
-        stages) of :func:`~oos_drake.analysis.stability.tighten`.
+    tighten : TightenOptions
+        Target gap of the certified peaks and effort of the spike resolution
+        (:mod:`oos_drake.analysis.tightening`).
     sensitivity : bool
         Compute the sensitivity table.
+    sensitivity_iterations : int
+        BFGS iterations of its upper bounds.
     time_check : bool
         Run the time-domain check.
     time_check_duration : float
@@ -94,13 +96,11 @@ class AnalysisOptions:
     stiffness_range: tuple = (0.1, 1.0e5)
     performance_models: int = 6
     performance_points: int = 24
-    certify_iterations: int = 300
-    certify_points: int = 41
-    tighten_batch: int = 300
-    tighten_rounds: int = 6
-    tighten_iterations: int = 150
+    certify_iterations: int = 1000
+    tighten: TightenOptions = field(default_factory=TightenOptions)
     open_loop_samples: int = 20
     sensitivity: bool = True
+    sensitivity_iterations: int = 150
     time_check: bool = True
     time_check_duration: float = 600.0
     progress: bool = True
@@ -116,28 +116,15 @@ class AnalysisOptions:
         return 2 * np.pi * np.geomspace(lo, hi, n)
 
 
-def _certify(
-    array, sweep, subsets, peaks_grid, *, configuration_label, upper_iterations=300, points=41
-):
-    """Certified peak and destabilizing perturbation per subset (local refinement + search)."""
-    from oos_drake.analysis.stability import certify_peak
+def _certify(array, study, subsets, *, configuration_label):
+    """Peak table rows and destabilizing perturbations from a :class:`StudyResult`."""
     from oos_drake.analysis.worst_cases import physical_values
 
     sys = array.system
     rows, perturbation_rows, certificates = [], [], {}
-    for _, pk in peaks_grid.iterrows():
-        name, model = pk["subset"], int(pk["model"])
-        cert = certify_peak(
-            sys,
-            name,
-            subsets[name],
-            model,
-            float(pk["frequency [Hz]"]),
-            time=float(array.values[model]),
-            upper_iterations=upper_iterations,
-            points=points,
-        )
-        grid_upper = float(sweep.loc[sweep["subset"] == name, "mu_upper"].max())
+    for name, cert in study.certificates.items():
+        report = study.reports[name]
+        model = cert.model
         upper, lower = cert.mu_upper, cert.mu_lower
         rows.append(
             {
@@ -149,9 +136,17 @@ def _certify(
                 "mu_upper": upper,
                 "mu_lower": lower,
                 "mu_upper_at_critical": cert.mu_upper_critical,
-                "mu_upper_grid": grid_upper,
+                "mu_upper_grid": upper,
                 "gap [%]": 100.0 * cert.gap,
-                "margin [-]": 1.0 / max(upper, grid_upper) if upper > 0 else np.inf,
+                "gap_at_critical [%]": 100.0 * cert.gap_critical,
+                "margin [-]": 1.0 / upper if upper > 0 else np.inf,
+                "peak_model": cert.peak_model,
+                f"peak {array.label}": float(array.values[cert.peak_model]),
+                "peak_frequency [Hz]": cert.peak_frequency,
+                "lower_source": cert.source,
+                "spike_rounds": report.rounds,
+                "spikes_left": cert.spikes_left,
+                "refinement_points": report.points_added,
                 "configuration": configuration_label(model),
             }
         )
@@ -159,7 +154,6 @@ def _certify(
         certificates[name] = (model, cert.frequency, lower, upper, normalized)
         one = sys.model(model) if sys.batch_shape else sys
         specs = one.uncertainty
-        phys = physical_values(one, normalized, 1.0) if lower > 0 else {}
         phys_unit = physical_values(one, normalized, lower) if lower > 0 else {}
         for bname, value in normalized.items():
             arr = np.atleast_2d(np.asarray(value, dtype=complex))
@@ -183,7 +177,6 @@ def _certify(
                     "in_set_value [unit]": phys_unit.get(bname, np.nan),
                 }
             )
-        del phys
     return pd.DataFrame(rows), pd.DataFrame(perturbation_rows), certificates
 
 
@@ -246,7 +239,7 @@ def run_analysis(
     """
     from oos_drake.analysis import figures
     from oos_drake.analysis.models import docking_closed_loop, mission_closed_loop, mission_times
-    from oos_drake.analysis.stability import mu_sweep, peaks_table, tighten
+    from oos_drake.analysis.stability import certified_sweep
     from oos_drake.analysis.subsets import uncertainty_subsets
     from oos_drake.analysis.worst_cases import Region, write_regions
     from oos_drake.blas import limit_blas_threads
@@ -279,44 +272,28 @@ def run_analysis(
         f"subsets {list(subsets)}; nominal loops stable: {int((abscissa < 0).sum())}/{times.size}"
     )
 
-    def sweep_and_tighten(system, sets, grid, description):
-        """mu bounds on the common grid, then the highest points recomputed more tightly."""
-        table = mu_sweep(
+    def study(system, sets, grid, description):
+        """mu bounds on the common grid, spikes resolved, a certified peak per subset."""
+        return certified_sweep(
             system,
             omega,
             sets,
             times=grid,
             options=options.sweep,
+            tighten=options.tighten,
+            critical_iterations=options.certify_iterations,
             progress=options.progress,
             description=description,
         )
-        return tighten(
-            system,
-            table,
-            sets,
-            iterations=options.tighten_iterations,
-            batch=options.tighten_batch,
-            rounds=options.tighten_rounds,
-            n_jobs=options.sweep.n_jobs,
-            progress=options.progress,
-        )
 
-    sweep = sweep_and_tighten(mission.system, subsets, times, "mu mission")
+    result = study(mission.system, subsets, times, "mu mission")
+    sweep = result.table
     sweep.to_parquet(out / "mu_mission.parquet", index=False)
     paths["mu_mission"] = out / "mu_mission.parquet"
-    lap("mu sweep mission")
+    lap("mu sweep mission (grid + certified peaks)")
+    timings["mu mission detail"] = {k: round(v, 2) for k, v in result.timings.items()}
     label = _moment_label(times, scenario)
-    peaks_grid = peaks_table(sweep)
-    peaks, perturbations, certs = _certify(
-        mission,
-        sweep,
-        subsets,
-        peaks_grid,
-        configuration_label=label,
-        upper_iterations=options.certify_iterations,
-        points=options.certify_points,
-    )
-    lap("certify mission peaks")
+    peaks, perturbations, certs = _certify(mission, result, subsets, configuration_label=label)
     # ------------------------------------------------------------------ docking
     docking_sweeps, docking_peaks, docking_tables = {}, {}, []
     docking_perturbations, docking_certs = [], {}
@@ -324,32 +301,33 @@ def run_analysis(
     for phase in options.docking_phases:
         arr = docking_closed_loop(controller, phase, stiffness, scenario=scenario)
         tot = {"total": uncertainty_subsets(arr.system.uncertainty)["total"]}
-        dsweep = sweep_and_tighten(arr.system, tot, stiffness, f"mu docking {phase}")
-        dsweep = dsweep.rename(columns={"time [s]": "stiffness [N/m or N m/rad]"})
+        dres = study(arr.system, tot, stiffness, f"mu docking {phase}")
+        dsweep = dres.table.rename(columns={"time [s]": "stiffness [N/m or N m/rad]"})
         dsweep.to_parquet(out / f"docking_{phase}.parquet", index=False)
         paths[f"docking_{phase}"] = out / f"docking_{phase}.parquet"
-        pg = peaks_table(dsweep.rename(columns={"stiffness [N/m or N m/rad]": "time [s]"}))
         dp, dpert, dc = _certify(
             arr,
-            dsweep,
+            dres,
             tot,
-            pg,
             configuration_label=lambda m, ph=phase: f"docking-{ph} k={stiffness[m]:.3g}",
-            upper_iterations=options.certify_iterations,
-            points=options.certify_points,
         )
         docking_tables.append(dp)
         docking_perturbations.append(dpert)
         docking_certs[phase] = (arr, dc["total"])
-        docking_sweeps[phase] = dsweep.rename(columns={"stiffness [N/m or N m/rad]": "time [s]"})
+        docking_sweeps[phase] = dres.table
+        row = dp.iloc[0]
         docking_peaks[phase] = {
-            "stiffness": float(dp["stiffness [N/m or N m/rad]"].iloc[0]),
-            "gap [%]": float(dp["gap [%]"].iloc[0]),
-            "mu_upper_grid": float(dp["mu_upper_grid"].iloc[0]),
-            "frequency [Hz]": float(dp["frequency [Hz]"].iloc[0]),
-            "mu_lower": float(dp["mu_lower"].iloc[0]),
-            "mu_upper": float(dp["mu_upper"].iloc[0]),
+            "stiffness": float(row["stiffness [N/m or N m/rad]"]),
+            "gap [%]": float(row["gap [%]"]),
+            "mu_upper_grid": float(row["mu_upper_grid"]),
+            "frequency [Hz]": float(row["frequency [Hz]"]),
+            "mu_lower": float(row["mu_lower"]),
+            "mu_upper": float(row["mu_upper"]),
+            "peak_stiffness": float(row["peak stiffness [N/m or N m/rad]"]),
+            "peak_frequency [Hz]": float(row["peak_frequency [Hz]"]),
+            "spikes_left": int(row["spikes_left"]),
         }
+        timings[f"docking {phase} detail"] = {k: round(v, 2) for k, v in dres.timings.items()}
         lap(f"docking phase {phase}")
     all_peaks = pd.concat([peaks] + docking_tables, ignore_index=True)
     all_peaks.to_parquet(out / "stability_peaks.parquet", index=False)
@@ -406,7 +384,7 @@ def run_analysis(
         w_crit = 2 * np.pi * certs["total"][1]
         w_s = np.unique(np.concatenate([2 * np.pi * top, w_crit * np.geomspace(0.97, 1.03, 3)]))
         sens = mu_sensitivity(
-            mission.system, crit_model, w_s, iterations=max(options.certify_iterations // 2, 20)
+            mission.system, crit_model, w_s, iterations=options.sensitivity_iterations
         )
         sens.to_parquet(out / "sensitivity.parquet", index=False)
         paths["sensitivity"] = out / "sensitivity.parquet"
@@ -518,14 +496,18 @@ def run_analysis(
             "configurations": int(times.size),
             "grid_frequencies": int(omega.size),
             "nominal_stable_models": int((abscissa < 0).sum()),
-            "mu_peak_upper": float(max(tot["mu_upper"], tot["mu_upper_grid"])),
+            "mu_peak_upper": float(tot["mu_upper"]),
             "mu_peak_upper_refined": float(tot["mu_upper"]),
             "mu_peak_lower": float(tot["mu_lower"]),
             "mu_upper_at_critical": float(tot["mu_upper_at_critical"]),
-            "gap_at_critical_percent": float(tot["gap [%]"]),
+            "gap_percent": float(tot["gap [%]"]),
+            "gap_at_critical_percent": float(tot["gap_at_critical [%]"]),
             "peak_time_s": float(tot["time [s]"]),
             "peak_frequency_hz": float(tot["frequency [Hz]"]),
+            "upper_peak_time_s": float(tot["peak time [s]"]),
+            "upper_peak_frequency_hz": float(tot["peak_frequency [Hz]"]),
             "stability_margin": float(tot["margin [-]"]),
+            "spikes_left": int(tot["spikes_left"]),
         },
         "subsets": peaks.drop(columns=["study"]).to_dict(orient="records"),
         "docking": docking_peaks,

@@ -1,4 +1,4 @@
-r"""Robust stability over the mission: mu bounds over configurations x frequencies x subsets.
+r"""Robust stability over a model array: mu bounds over configurations x frequencies x subsets.
 
 For the uncertain closed loop ``F_u(M, Delta)`` of every configuration, the matrix seen by the
 uncertainty ``M11(j omega)`` is evaluated on a frequency grid (modal form, one eigen-decomposition
@@ -10,31 +10,33 @@ bounds are computed:
 * upper bound: the D-G bound of :func:`oos_drake.robust.mu_upper.mu_upper_bound`, all models
   and frequencies of a chunk in one batch (every value is a valid bound whatever the iterations);
 * lower bound: the power iteration of :func:`oos_drake.robust.mu_lower.mu_lower_bound` started
-  from the upper bound's worst direction (certified: ``det(I - M delta) = 0``);
-* peak refinement: around the two highest local maxima of every model and subset, extra
-  frequencies with more BFGS iterations.
+  from the upper bound's worst direction (certified: ``det(I - M delta) = 0``).
 
-The peaks are then certified (:func:`certify_peak`): on the critical model the local grid is
-refined again and the real-parameter lower bound follows the destabilizing eigenvalue across
-frequency (``Im lambda(omega) = 0``, :func:`oos_drake.robust.robstab.mu_sweep`), so that the
-lower bound meets the upper one (a worst case, not only a bound).
+:func:`certified_sweep` then resolves the upper-bound spikes of every subset
+(:mod:`oos_drake.analysis.tightening`: warm-started passes, local frequency refinement,
+lower-bound searches) until the peak upper bound is within the target gap of the best certified
+lower bound, and returns a :class:`PeakCertificate` per subset: a worst case, not only a bound.
 
 Chunks of models run in worker processes (fork; one BLAS thread each) with a tqdm bar.
 """
 
 from __future__ import annotations
 
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
+from oos_drake.analysis.tightening import (
+    LowerCertificate,
+    SubsetPoints,
+    TightenOptions,
+    neighbours,
+    resolve_spikes,
+)
+from oos_drake.analysis.workers import CONVERGED_TEMPERATURES, ModelPool, PointTask
 from oos_drake.robust.blocks import parse_blk
 from oos_drake.robust.lfr_analysis import block_map, delta_channel_response, worst_case_values
-
-#: Smoothing stages of the converged upper bounds (one more than mussv's default).
-CONVERGED_TEMPERATURES = (30.0, 300.0, 3000.0, 30000.0)
 
 #: Columns of the sweep table (``tightened``: upper bound recomputed with many iterations).
 SWEEP_COLUMNS = [
@@ -60,30 +62,54 @@ class SweepOptions:
     lower_restarts, lower_iterations : int
         Random restarts and power-iteration steps of the grid lower bound.
     refine_points : int
-        Extra frequencies between the neighbours of the highest peak of each model (0: off).
+        Extra frequencies between the neighbours of the highest peak of each model (0: off;
+        the spike resolution of :func:`certified_sweep` refines where the peak may be).
     refine_iterations : int
         BFGS iterations at the refinement frequencies.
+    continuation_iterations : int
+        BFGS iterations of every model but the first of a chunk, started from the previous
+        model's scalings (0: every model from Osborne balancing with ``upper_iterations``).
     pole_points : int
         Extra grid points per lightly damped closed-loop pole of each model (0: common grid).
+    converge_passes, converge_iterations : int
+        Frequency-continuation passes and their BFGS iterations on the first model of a range.
+    spike_ratio, despike_points : float, int
+        The ``despike_points`` highest continued bounds above ``spike_ratio`` times both
+        frequency neighbours are recomputed from the neighbours' scalings.
+    jump_ratio : float
+        A model whose ``M11`` differs from its predecessor's by more than this (relative, at
+        some frequency) is converged from scratch: a configuration switch (docking) breaks
+        the continuation.
+    lower_points : int
+        Grid lower bounds are computed at this many highest upper bounds of every model.
     chunk_size : int
-        Models per worker task.
+        Models per worker task (0: one contiguous range per worker, the fewest cold starts).
     n_jobs : int
         Worker processes (1: in this process).
     """
 
     upper_iterations: int = 30
-    lower_restarts: int = 1
-    lower_iterations: int = 20
-    refine_points: int = 3
+    lower_restarts: int = 2
+    lower_iterations: int = 40
+    refine_points: int = 0
     refine_iterations: int = 100
+    continuation_iterations: int = 15
+    converge_passes: int = 1
+    converge_iterations: int = 150
+    spike_ratio: float = 1.1
+    despike_points: int = 4
+    jump_ratio: float = 0.5
+    lower_points: int = 3
     pole_points: int = 1
-    chunk_size: int = 10
+    chunk_size: int = 0
     n_jobs: int = 2
 
     def __post_init__(self):
-        for name in ("upper_iterations", "lower_iterations", "chunk_size", "n_jobs"):
+        for name in ("upper_iterations", "lower_iterations", "n_jobs"):
             if getattr(self, name) < 1:
                 raise ValueError(f"SweepOptions.{name} must be >= 1, got {getattr(self, name)}")
+        if self.chunk_size < 0:
+            raise ValueError(f"SweepOptions.chunk_size must be >= 0, got {self.chunk_size}")
 
 
 def delta_matrices(sys):
@@ -151,60 +177,330 @@ def model_grid(A, omega, *, band=None, max_damping: float = 0.05, points: int = 
     return np.unique(np.concatenate([omega] + extra)) if extra else omega
 
 
+def _init_worker():
+    from oos_drake.blas import limit_blas_threads
+
+    limit_blas_threads(1)
+
+
 def _peak_frequencies(omega, values, points):
     from oos_drake.robust.robstab import _refine
 
     return np.setdiff1d(_refine(omega, values, count=1, points=points), omega)
 
 
+def _nearest(grid_from, grid_to):
+    """Index in ``grid_from`` of the nearest (log) frequency of every point of ``grid_to``."""
+    lf, lt = np.log(grid_from), np.log(grid_to)
+    if lf.size == 1:
+        return np.zeros(lt.size, dtype=int)
+    k = np.clip(np.searchsorted(lf, lt), 1, lf.size - 1)
+    return np.where(np.abs(lt - lf[k - 1]) <= np.abs(lf[k] - lt), k - 1, k)
+
+
+def _converge_model(M, structure, opt):
+    """Converged upper bounds on one model's grid: cold start, then frequency continuation.
+
+    Each pass restarts every frequency from its own scalings and from those of both frequency
+    neighbours (``converge_iterations`` each, four smoothing stages) and keeps the smallest
+    bound: started cold, the optimizer often stalls far above the converged value near lightly
+    damped modes; a neighbour's converged scalings do not.
+    """
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    res = mu_upper_bound(M, structure, max_iter=opt.upper_iterations)
+    upper, params, worst = res.upper.copy(), res.params.copy(), res.worst_input.copy()
+    if M.shape[0] < 2:
+        return upper, params, worst
+    for _ in range(opt.converge_passes):
+        for shift in (1, -1, 0):
+            x0 = params[np.clip(np.arange(M.shape[0]) - shift, 0, M.shape[0] - 1)]
+            r = mu_upper_bound(
+                M,
+                structure,
+                max_iter=opt.converge_iterations,
+                temperatures=CONVERGED_TEMPERATURES,
+                x0=x0,
+            )
+            better = r.upper < upper
+            upper[better], params[better] = r.upper[better], r.params[better]
+            worst[better] = r.worst_input[better]
+    return upper, params, worst
+
+
+def local_spikes(upper: np.ndarray, ratio: float) -> np.ndarray:
+    """Indices of values above ``ratio`` times both neighbours (one neighbour at the ends)."""
+    if upper.size < 2:
+        return np.zeros(0, dtype=int)
+    left = np.r_[upper[1], upper[:-1]]
+    right = np.r_[upper[1:], upper[-2]]
+    return np.flatnonzero(upper > ratio * np.maximum(left, right))
+
+
+def _despike(M, structure, upper, params, worst, opt):
+    """Recompute one model's highest local spikes from their frequency neighbours' scalings.
+
+    Continuation can carry a stalled point from model to model; a genuine resonance peak is
+    only recomputed (the smaller bound is kept: both are valid).
+    """
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    spikes = local_spikes(upper, opt.spike_ratio)
+    if spikes.size == 0 or opt.despike_points <= 0:
+        return upper, params, worst
+    spikes = spikes[np.argsort(-upper[spikes])][: opt.despike_points]
+    n = upper.size
+    idx = np.concatenate([spikes, spikes])
+    src = np.concatenate([np.maximum(spikes - 1, 0), np.minimum(spikes + 1, n - 1)])
+    src = np.where(src == idx, np.where(idx == 0, 1, n - 2), src)
+    r = mu_upper_bound(
+        M[idx],
+        structure,
+        max_iter=opt.converge_iterations,
+        temperatures=CONVERGED_TEMPERATURES,
+        x0=params[src],
+    )
+    upper, params, worst = upper.copy(), params.copy(), worst.copy()
+    for k, i in enumerate(idx):
+        if r.upper[k] < upper[i]:
+            upper[i], params[i], worst[i] = r.upper[k], r.params[k], r.worst_input[k]
+    return upper, params, worst
+
+
+def _jump(M_prev, M, nearest) -> float:
+    """Largest relative change of ``M11`` between consecutive models over the grid [-].
+
+    Channels that are numerically zero (a body not connected yet: norms below 1e-6) never
+    count as a jump.
+    """
+    norm = np.linalg.norm(M, axis=(1, 2))
+    if norm.size == 0 or np.max(norm) < 1e-6:
+        return 0.0
+    diff = np.linalg.norm(M - M_prev[nearest], axis=(1, 2))
+    return float(np.max(diff / np.maximum(norm, 1e-6 * np.max(norm))))
+
+
+def _continued_upper(subs, grids, structure, opt, tick):
+    """Upper bounds of consecutive models, each started from its predecessor's scalings.
+
+    The first model of the chunk, and any model after a jump of the configuration, is
+    converged (:func:`_converge_model`); model ``j`` starts
+    from model ``j - 1``'s scalings at the nearest frequency, or from balancing where that is
+    better, for ``continuation_iterations`` at one high smoothing temperature. Neighbouring
+    configurations are close problems: measured on the mission, this is four times cheaper than
+    a cold start and leaves no spike. ``continuation_iterations = 0``: every model cold.
+    """
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    ups, pars, worsts, prev = [], [], [], None
+    for j, M in enumerate(subs):
+        if opt.continuation_iterations <= 0:
+            r = mu_upper_bound(M, structure, max_iter=opt.upper_iterations)
+            u, p, w = r.upper, r.params, r.worst_input
+        elif prev is None or _jump(subs[j - 1], M, near := _nearest(grids[j - 1], grids[j])) > (
+            opt.jump_ratio
+        ):
+            u, p, w = _converge_model(M, structure, opt)  # first model, or a switch
+        else:
+            r = mu_upper_bound(
+                M,
+                structure,
+                max_iter=opt.continuation_iterations,
+                temperatures=(1000.0,),
+                x0=prev[near],
+            )
+            u, p, w = _despike(M, structure, r.upper, r.params, r.worst_input, opt)
+        prev = p
+        ups.append(u)
+        pars.append(p)
+        worsts.append(w)
+        tick()
+    return np.concatenate(ups), np.concatenate(pars), worsts
+
+
+def _top_points(upper, model_of, count):
+    """Indices of the ``count`` largest values of ``upper`` per model."""
+    order = np.lexsort((-upper, model_of))
+    first = np.searchsorted(model_of[order], model_of[order], side="left")
+    return np.sort(order[(np.arange(order.size) - first) < count])
+
+
 def _sweep_chunk(task):
-    """Worker: every subset and frequency of a chunk of models (arrays in, tuples out)."""
-    A, Bw, Cz, Dzw, first, omega, parts, opt = task
-    nm = A.shape[0]
+    """Worker: every subset and frequency of a range of models (model arrays in the worker).
+
+    Returns, per subset, the rows ``(model, omega, upper, lower, params, refined)`` and the best
+    lower bound of the range with its perturbation. Lower bounds are computed at the
+    ``lower_points`` highest upper bounds of every model (0 elsewhere: a valid, trivial bound).
+    """
+    from oos_drake.analysis.workers import _ARRAYS
+    from oos_drake.robust.mu_lower import mu_lower_bound
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    first, last, omega, parts, opt = task
+    A, Bw, Cz, Dzw = _ARRAYS["models"]
+    queue = _ARRAYS.get("queue")
+
+    def tick():
+        if queue is not None:
+            queue.put(1)
+
+    models = range(first, last)
     grids = [
         model_grid(A[j], omega, points=opt.pole_points) if opt.pole_points else omega
-        for j in range(nm)
+        for j in models
     ]
-    Ms = [delta_channel_response(A[j], Bw[j], Cz[j], Dzw[j], grids[j]) for j in range(nm)]
-    out = []
+    Ms = [
+        delta_channel_response(A[j], Bw[j], Cz[j], Dzw[j], g)
+        for j, g in zip(models, grids, strict=True)
+    ]
+    model_of = np.concatenate([np.full(g.size, j) for j, g in zip(models, grids, strict=True)])
+    omega_of = np.concatenate(grids)
+    out = {}
     for name, (zrows, wcols, blk) in parts.items():
-        flat = np.concatenate([M[:, zrows][:, :, wcols] for M in Ms])
-        up, lo = grid_bounds(flat, blk, opt)
-        k = 0
-        ups = []
-        for j in range(nm):
-            F = grids[j].size
-            out.append((name, first + j, grids[j], up[k : k + F], lo[k : k + F], False))
-            ups.append(up[k : k + F])
-            k += F
-        if opt.refine_points <= 0:
-            continue
-        extra = [_peak_frequencies(grids[j], ups[j], opt.refine_points) for j in range(nm)]
-        have = [j for j in range(nm) if extra[j].size]
-        if not have:
-            continue
-        Mr = np.concatenate(
-            [
-                delta_channel_response(A[j], Bw[j], Cz[j], Dzw[j], extra[j])[:, zrows][:, :, wcols]
-                for j in have
-            ]
+        structure = parse_blk(blk)
+        subs = [M[:, zrows][:, :, wcols] for M in Ms]
+        flat = np.concatenate(subs)
+        upper, params, worsts = _continued_upper(subs, grids, structure, opt, tick)
+        lower = np.zeros(flat.shape[0])
+        top = _top_points(upper, model_of, max(opt.lower_points, 1))
+        lo = mu_lower_bound(
+            flat[top],
+            structure,
+            start_inputs=np.concatenate(worsts)[top],
+            restarts=opt.lower_restarts,
+            iters=opt.lower_iterations,
         )
-        refine = SweepOptions(
-            upper_iterations=opt.refine_iterations, lower_restarts=2, lower_iterations=40
+        lower[top] = np.minimum(lo.lower, upper[top])
+        rows = [(model_of, omega_of, upper, lower, params, np.zeros(flat.shape[0], bool))]
+        k = int(np.argmax(lower[top]))
+        best = LowerCertificate(
+            float(lower[top][k]),
+            int(model_of[top][k]),
+            float(omega_of[top][k]),
+            lo.delta[k],
+            "grid",
         )
-        ur, lr = grid_bounds(Mr, blk, refine)
-        k = 0
-        for j in have:
-            e = extra[j]
-            out.append((name, first + j, e, ur[k : k + e.size], lr[k : k + e.size], True))
-            k += e.size
+        if opt.refine_points > 0:
+            extra_m, extra_w = [], []
+            for j, g in zip(models, grids, strict=True):
+                sel = model_of == j
+                e = _peak_frequencies(g, upper[sel], opt.refine_points)
+                extra_m.append(np.full(e.size, j))
+                extra_w.append(e)
+            em, ew = np.concatenate(extra_m), np.concatenate(extra_w)
+            if em.size:
+                Mr = np.concatenate(
+                    [
+                        delta_channel_response(A[j], Bw[j], Cz[j], Dzw[j], ew[em == j])[:, zrows][
+                            :, :, wcols
+                        ]
+                        for j in np.unique(em)
+                    ]
+                )
+                order = np.argsort(em, kind="stable")  # np.unique order = sorted by model
+                em, ew = em[order], ew[order]
+                ur = mu_upper_bound(Mr, structure, max_iter=opt.refine_iterations)
+                lr = mu_lower_bound(
+                    Mr, structure, start_inputs=ur.worst_input, restarts=2, iters=40
+                )
+                lower_r = np.minimum(lr.lower, ur.upper)
+                rows.append((em, ew, ur.upper, lower_r, ur.params, np.ones(em.size, bool)))
+                k = int(np.argmax(lower_r))
+                if lower_r[k] > best.value:
+                    best = LowerCertificate(
+                        float(lower_r[k]), int(em[k]), float(ew[k]), lr.delta[k], "grid"
+                    )
+        out[name] = (rows, best)
     return out
 
 
-def _init_worker():
-    from oos_drake.blas import limit_blas_threads
+def _collect(results, parts):
+    """Merge the chunks' rows into one :class:`SubsetPoints` and best lower bound per subset."""
+    points, lowers = {}, {}
+    for name in parts:
+        rows = [r for res in results for r in res[name][0]]
+        pts = SubsetPoints(
+            np.concatenate([r[0] for r in rows]).astype(int),
+            np.concatenate([r[1] for r in rows]).astype(float),
+            np.concatenate([r[2] for r in rows]),
+            np.concatenate([r[3] for r in rows]),
+            np.concatenate([r[4] for r in rows]),
+            np.concatenate([r[5] for r in rows]),
+            np.zeros(sum(r[0].size for r in rows), dtype=bool),
+        )
+        pts.upper = np.maximum(pts.upper, pts.lower)
+        pts.sort()
+        points[name] = pts
+        lowers[name] = max((res[name][1] for res in results), key=lambda c: c.value)
+    return points, lowers
 
-    limit_blas_threads(1)
+
+def _grid_points(pool, n_models, omega, parts, options, progress, description):
+    """The grid sweep: contiguous model ranges (one per worker task), a bar over models."""
+    import queue as _queue
+
+    from tqdm.auto import tqdm
+
+    size = options.chunk_size or int(np.ceil(n_models / pool.n_jobs))
+    tasks = [(i, min(i + size, n_models), omega, parts, options) for i in range(0, n_models, size)]
+    bar = tqdm(
+        total=n_models,
+        desc=description,
+        disable=not progress,
+        bar_format="{l_bar}{bar}| {n:.0f}/{total} models [{elapsed}<{remaining}]",
+    )
+    step = 1.0 / max(len(parts), 1)
+    results = []
+    if pool._pool is None:
+        for task in tasks:
+            results.append(_sweep_chunk(task))
+            bar.update(task[1] - task[0])
+    else:
+        futures = [pool._pool.submit(_sweep_chunk, t) for t in tasks]
+        while not all(f.done() for f in futures):
+            try:
+                pool.queue.get(timeout=0.5)
+                bar.update(step)
+            except _queue.Empty:
+                pass
+        results = [f.result() for f in futures]
+    bar.n = n_models
+    bar.refresh()
+    bar.close()
+    return _collect(results, parts)
+
+
+def _table(points: dict, times) -> pd.DataFrame:
+    frames = []
+    for name, pts in points.items():
+        frames.append(
+            pd.DataFrame(
+                {
+                    "subset": name,
+                    "model": pts.model,
+                    "time [s]": times[pts.model],
+                    "frequency [Hz]": pts.omega / (2 * np.pi),
+                    "mu_upper": pts.upper,
+                    "mu_lower": pts.lower,
+                    "refined": pts.refined,
+                    "tightened": pts.tightened,
+                }
+            )
+        )
+    table = pd.concat(frames, ignore_index=True)[SWEEP_COLUMNS]
+    return table.sort_values(["subset", "model", "frequency [Hz]"], ignore_index=True)
+
+
+def _check_sweep_input(sys, omega, times):
+    omega = np.unique(np.asarray(omega, dtype=float))
+    if omega.size == 0 or np.any(omega <= 0) or not np.all(np.isfinite(omega)):
+        raise ValueError("mu_sweep: omega must hold finite frequencies > 0 [rad/s]")
+    arrays = delta_matrices(sys)
+    n_models = arrays[0].shape[0]
+    times = np.full(n_models, np.nan) if times is None else np.asarray(times, dtype=float)
+    if times.shape != (n_models,):
+        raise ValueError(f"mu_sweep: times has shape {times.shape}, expected ({n_models},)")
+    return omega, arrays, times
 
 
 def mu_sweep(
@@ -217,14 +513,14 @@ def mu_sweep(
     progress: bool = True,
     description: str = "mu sweep",
 ) -> pd.DataFrame:
-    """mu bounds for every model of ``sys``, frequency of ``omega`` and subset.
+    """mu bounds for every model of ``sys``, frequency of ``omega`` and subset (no tightening).
 
     Parameters
     ----------
     sys : LFR
         Uncertain closed loop, a model array ``(N,)`` (or one model).
     omega : array_like
-        Frequency grid [rad/s] (> 0), refined per model around its peaks.
+        Frequency grid [rad/s] (> 0), plus per model points on its lightly damped poles.
     subsets : dict
         Subset name -> block names.
     times : array_like, optional
@@ -239,146 +535,281 @@ def mu_sweep(
     -------
     pandas.DataFrame
         Columns :data:`SWEEP_COLUMNS`: ``subset``, ``model`` (index), ``time [s]``,
-        ``frequency [Hz]``, ``mu_upper``, ``mu_lower`` (certified), ``refined``.
+        ``frequency [Hz]``, ``mu_upper``, ``mu_lower`` (certified), ``refined``, ``tightened``.
     """
-    from tqdm.auto import tqdm
-
     options = options or SweepOptions()
-    omega = np.unique(np.asarray(omega, dtype=float))
-    if omega.size == 0 or np.any(omega <= 0) or not np.all(np.isfinite(omega)):
-        raise ValueError("mu_sweep: omega must hold finite frequencies > 0 [rad/s]")
-    A, Bw, Cz, Dzw = delta_matrices(sys)
-    n_models = A.shape[0]
-    times = np.full(n_models, np.nan) if times is None else np.asarray(times, dtype=float)
-    if times.shape != (n_models,):
-        raise ValueError(f"mu_sweep: times has shape {times.shape}, expected ({n_models},)")
+    omega, arrays, times = _check_sweep_input(sys, omega, times)
     parts = subset_parts(sys, subsets)
-    cs = options.chunk_size
-    tasks = [
-        (A[i : i + cs], Bw[i : i + cs], Cz[i : i + cs], Dzw[i : i + cs], i, omega, parts, options)
-        for i in range(0, n_models, cs)
-    ]
-    results = []
-    bar = tqdm(total=n_models, desc=description, unit="model", disable=not progress)
-    if options.n_jobs == 1 or len(tasks) == 1:
-        _init_worker()
-        for task in tasks:
-            results.append(_sweep_chunk(task))
-            bar.update(task[0].shape[0])
-    else:
-        import multiprocessing as mp
-
-        method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-        with ProcessPoolExecutor(
-            options.n_jobs, mp_context=mp.get_context(method), initializer=_init_worker
-        ) as pool:
-            futures = {pool.submit(_sweep_chunk, t): t[0].shape[0] for t in tasks}
-            for fut in as_completed(futures):
-                results.append(fut.result())
-                bar.update(futures[fut])
-    bar.close()
-    frames = []
-    for rows in results:
-        for name, model, w, up, lo, refined in rows:
-            frames.append(
-                pd.DataFrame(
-                    {
-                        "subset": name,
-                        "model": np.full(w.size, model, dtype=int),
-                        "time [s]": np.full(w.size, times[model]),
-                        "frequency [Hz]": w / (2 * np.pi),
-                        "mu_upper": up,
-                        "mu_lower": lo,
-                        "refined": np.full(w.size, refined),
-                        "tightened": np.zeros(w.size, dtype=bool),
-                    }
-                )
-            )
-    table = pd.concat(frames, ignore_index=True)[SWEEP_COLUMNS]
-    return table.sort_values(["subset", "model", "frequency [Hz]"], ignore_index=True)
+    with ModelPool(arrays, options.n_jobs) as pool:
+        points, _ = _grid_points(
+            pool, arrays[0].shape[0], omega, parts, options, progress, description
+        )
+    return _table(points, times)
 
 
-def _tighten_task(task):
-    from oos_drake.robust.mu_upper import mu_upper_bound
+def _search_task(task):
+    """Worker: direct destabilizing search on one model (matrices in the task)."""
+    from oos_drake.analysis.destabilizing import destabilizing_perturbation
 
-    M, blk, iterations = task
-    return mu_upper_bound(
-        np.ascontiguousarray(M),
-        parse_blk(blk),
-        max_iter=iterations,
-        temperatures=CONVERGED_TEMPERATURES,
-    ).upper
+    A, Bw, Cz, Dzw, blk, band, alpha_max = task
+    return destabilizing_perturbation(A, Bw, Cz, Dzw, blk, band, alpha_max=alpha_max)
 
 
-def tighten(
+def _analysis_model(sys, model: int, members):
+    """One model restricted to a subset: ``(A, Bw, Cz, Dzw, blk, sub_map, reduced)``.
+
+    Models with spurious near-zero modes that neither the inputs nor Delta reach (the phase-8
+    closed kinematic loop) are reduced first: the direct search looks at eigenvalues.
+    """
+    one = sys.model(model) if sys.batch_shape else sys
+    A_full = np.asarray(one.A)
+    reduced = bool(A_full.size and np.max(np.linalg.eigvals(A_full).real) > -1e-9)
+    if reduced:
+        one = one.reduce()
+    bmap = block_map(one)
+    sub, zrows, wcols = bmap.subset(list(members))
+    A = np.asarray(one.A)
+    Bw, Cz = np.asarray(one.Bw)[:, wcols], np.asarray(one.Cz)[zrows, :]
+    Dzw = np.asarray(one.Dzw)[np.ix_(zrows, wcols)]
+    return A, Bw, Cz, Dzw, sub.blk, sub, reduced
+
+
+@dataclass(frozen=True)
+class StudyResult:
+    """mu bounds of one study (model array) with the certified peak of every subset.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        Columns :data:`SWEEP_COLUMNS` (grid points plus the refinement points).
+    certificates : dict
+        Subset name -> :class:`PeakCertificate`.
+    reports : dict
+        Subset name -> :class:`~oos_drake.analysis.tightening.TightenReport`.
+    timings : dict
+        Seconds spent in ``grid``, ``tighten`` and ``certify``.
+    """
+
+    table: pd.DataFrame
+    certificates: dict
+    reports: dict
+    timings: dict = field(default_factory=dict)
+
+
+def certified_sweep(
     sys,
-    sweep: pd.DataFrame,
+    omega,
     subsets: dict,
     *,
-    iterations: int = 300,
-    batch: int = 120,
-    rounds: int = 4,
-    n_jobs: int = 1,
+    times=None,
+    options: SweepOptions | None = None,
+    tighten: TightenOptions | None = None,
+    critical_iterations: int = 1000,
     progress: bool = True,
-) -> pd.DataFrame:
-    """Recompute the highest upper bounds with many iterations until the peak is a tight one.
+    description: str = "mu sweep",
+) -> StudyResult:
+    """Grid sweep, spike resolution and certified peak of every subset.
 
-    Every grid value is a valid bound, but a cheap one can sit far above the converged D-G
-    bound (spikes on lightly damped poles). Per subset, the ``batch`` highest not yet tightened
-    points are recomputed with ``iterations`` BFGS iterations (the new value replaces the old one
-    only where lower: both are valid bounds), until the maximum of the subset is a tightened
-    point or ``rounds`` is reached.
+    Parameters
+    ----------
+    sys : LFR
+        Uncertain closed loop, a model array ``(N,)`` (or one model).
+    omega : array_like
+        Common frequency grid [rad/s].
+    subsets : dict
+        Subset name -> block names.
+    times : array_like, optional
+        Scheduling value of each model (label ``time [s]``).
+    options : SweepOptions, optional
+        Accuracy of the grid sweep and workers.
+    tighten : TightenOptions, optional
+        Target gap and effort of the spike resolution.
+    critical_iterations : int
+        BFGS iterations of the upper bound at the critical frequency of each certificate.
+    progress : bool
+        Progress bars.
+    description : str
+        Label of the progress bars.
 
     Returns
     -------
-    pandas.DataFrame
-        A copy of ``sweep`` with updated ``mu_upper`` and the ``tightened`` flags.
+    StudyResult
     """
+    import time as _time
+
     from tqdm.auto import tqdm
 
-    table = sweep.copy()
-    A, Bw, Cz, Dzw = delta_matrices(sys)
+    options = options or SweepOptions()
+    tighten = tighten or TightenOptions()
+    omega, arrays, times = _check_sweep_input(sys, omega, times)
+    n_models = arrays[0].shape[0]
     parts = subset_parts(sys, subsets)
-    pool = None
-    if n_jobs > 1:
-        import multiprocessing as mp
+    bmap_all = block_map(sys)
+    timings = {}
+    clock = _time.perf_counter()
+    certificates, reports = {}, {}
+    with ModelPool(arrays, options.n_jobs) as pool:
+        points, lowers = _grid_points(pool, n_models, omega, parts, options, progress, description)
+        timings["grid"] = _time.perf_counter() - clock
+        clock = _time.perf_counter()
+        cache = {}
 
-        method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-        pool = ProcessPoolExecutor(
-            n_jobs, mp_context=mp.get_context(method), initializer=_init_worker
+        def model_parts(model, name):
+            key = (model, name)
+            if key not in cache:
+                cache[key] = _analysis_model(sys, model, subsets[name])
+            return cache[key]
+
+        bar = tqdm(
+            total=len(parts), desc=f"{description}: certify", unit="subset", disable=not progress
         )
-    for name in tqdm(list(parts), desc="tighten peaks", disable=not progress):
-        zrows, wcols, blk = parts[name]
-        for _ in range(rounds):
-            part = table[(table["subset"] == name) & ~table["tightened"]]
-            top_all = table.loc[table["subset"] == name, "mu_upper"].idxmax()
-            if bool(table.at[top_all, "tightened"]) or part.empty:
-                break
-            pick = part.nlargest(batch, "mu_upper")
-            Ms = []
-            for model, rows in pick.groupby("model", sort=False):
-                w = 2 * np.pi * rows["frequency [Hz]"].to_numpy()
-                M = delta_channel_response(A[model], Bw[model], Cz[model], Dzw[model], w)
-                Ms.append((rows.index.to_numpy(), M[:, zrows][:, :, wcols]))
-            index = np.concatenate([i for i, _ in Ms])
-            M = np.concatenate([m for _, m in Ms])
-            if pool is None:
-                new = _tighten_task((M, blk, iterations))
-            else:
-                chunks = np.array_split(np.arange(M.shape[0]), n_jobs)
-                new = np.concatenate(
-                    list(
-                        pool.map(_tighten_task, [(M[c], blk, iterations) for c in chunks if c.size])
-                    )
-                )
-            old = table.loc[index, "mu_upper"].to_numpy()
-            table.loc[index, "mu_upper"] = np.maximum(
-                np.minimum(old, new), table.loc[index, "mu_lower"].to_numpy()
+        for name in parts:
+            pts = points[name]
+
+            def search(requests, name=name, pts=pts):
+                tasks = []
+                for model, w_peak in requests:
+                    A, Bw, Cz, Dzw, blk, _, _ = model_parts(model, name)
+                    u_model = float(pts.upper[pts.model == model].max())
+                    alpha_max = max(8.0, 4.0 / max(u_model, 1e-9))
+                    band = [w_peak / tighten.search_band, w_peak * tighten.search_band]
+                    tasks.append((A, Bw, Cz, Dzw, blk, band, alpha_max))
+                found = pool.map(_search_task, tasks)
+                return [
+                    LowerCertificate(float(d.mu_lower), int(m), float(d.omega), d.delta, "search")
+                    if d.mu_lower > 0 and np.isfinite(d.omega)
+                    else LowerCertificate()
+                    for (m, _), d in zip(requests, found, strict=True)
+                ]
+
+            def note(rnd, spikes, name=name):
+                bar.set_postfix_str(f"{name}: round {rnd}, {spikes} spike(s)")
+
+            lower, report = resolve_spikes(
+                pool, pts, parts[name], lowers[name], search, tighten, progress=note
             )
-            table.loc[index, "tightened"] = True
-    if pool is not None:
-        pool.shutdown()
-    return table
+            reports[name] = report
+            certificates[name] = _certificate(
+                pool,
+                name,
+                pts,
+                parts[name],
+                lower,
+                times,
+                model_parts,
+                bmap_all.subset(list(subsets[name]))[0],
+                critical_iterations,
+                tighten.target_gap,
+            )
+            bar.update(1)
+        bar.close()
+    timings["tighten+certify"] = _time.perf_counter() - clock
+    return StudyResult(_table(points, times), certificates, reports, timings)
+
+
+def _certificate(
+    pool, name, pts, parts, lower, times, model_parts, grid_map, iterations, target_gap
+):
+    """The :class:`PeakCertificate` of one subset from its resolved points and best lower bound."""
+    zrows, wcols, blk = parts
+    pts.sort()
+    ipk = int(np.argmax(pts.upper))
+    # polish the two points that make the certificate: the largest upper bound and the
+    # critical point of the lower bound. Upper: from the point's own, its frequency
+    # neighbours' and cold scalings; lower: power iteration with restarts from the result.
+    targets = [(int(pts.model[ipk]), float(pts.omega[ipk]))]
+    if lower.model >= 0:
+        targets.append((lower.model, lower.omega))
+    nb = neighbours(pts.model, pts.omega)
+    models, omegas, sources, owners = [], [], [], []
+    for t, (m, w) in enumerate(targets):
+        same = np.flatnonzero(pts.model == m)
+        gap = np.abs(np.log(pts.omega[same] / max(w, 1e-9 * float(pts.omega.min()))))
+        j = same[np.argmin(gap)] if same.size else ipk
+        for src in (j, nb[j, 0], nb[j, 1]):
+            if src >= 0:
+                models.append(m)
+                omegas.append(w)
+                sources.append(src)
+                owners.append(t)
+    owners = np.array(owners)
+    warm = pool.bounds(
+        PointTask(
+            np.array(models),
+            np.array(omegas),
+            pts.params[np.array(sources)],
+            zrows,
+            wcols,
+            blk,
+            iterations,
+            lower_restarts=8,
+            lower_iterations=100,
+        )
+    )
+    cold = pool.bounds(
+        PointTask(
+            np.array([m for m, _ in targets]),
+            np.array([w for _, w in targets]),
+            None,
+            zrows,
+            wcols,
+            blk,
+            iterations,
+        )
+    )
+    best_up = [
+        min(float(np.min(warm.upper[owners == t])), float(cold.upper[t]))
+        for t in range(len(targets))
+    ]
+    if warm.best >= 0 and warm.lower[warm.best] > lower.value:
+        k = warm.best
+        lower = LowerCertificate(
+            float(warm.lower[k]), int(models[k]), float(omegas[k]), warm.best_delta, "grid"
+        )
+    if best_up[0] < pts.upper[ipk]:
+        pts.upper[ipk] = max(best_up[0], pts.lower[ipk])
+    peak_upper = float(np.max(pts.upper))
+    ipk = int(np.argmax(pts.upper))
+    if lower.model < 0:
+        # no destabilizing perturbation at all (mu = 0 everywhere the search looked)
+        model, w_crit = int(pts.model[ipk]), float(pts.omega[ipk])
+        up_crit = best_up[0]
+    else:
+        model, w_crit = lower.model, lower.omega
+        at_crit = [
+            best_up[t] for t, (m, w) in enumerate(targets) if m == model and np.isclose(w, w_crit)
+        ]
+        up_crit = min(at_crit) if at_crit else best_up[-1]
+        if not at_crit:  # the lower bound moved to the peak point during the polish
+            up_crit = best_up[0]
+    up_crit = max(up_crit, lower.value)
+    threshold = (1.0 + target_gap) * lower.value * (1 + 1e-12)
+    normalized, worst = {}, {}
+    if lower.value > 0 and lower.delta is not None:
+        sub = model_parts(model, name)[5] if lower.source == "search" else grid_map
+        structure = parse_blk(sub.blk)
+        worst = worst_case_values(sub, structure, lower.delta, w_crit)
+        for bname, kind, rows in zip(sub.names, sub.kinds, sub.blk_rows, strict=True):
+            b = structure.blocks[rows[0]]
+            block = lower.delta[b.r_slice, b.c_slice]
+            normalized[bname] = float(block[0, 0].real) if kind == "ureal" else block.copy()
+    return PeakCertificate(
+        name,
+        int(model),
+        float(times[model]),
+        float(w_crit / (2 * np.pi)),
+        max(peak_upper, up_crit),
+        float(lower.value),
+        up_crit,
+        lower.delta if lower.delta is not None else np.zeros((0, 0), complex),
+        worst,
+        normalized,
+        peak_model=int(pts.model[ipk]),
+        peak_time=float(times[pts.model[ipk]]),
+        peak_frequency=float(pts.omega[ipk] / (2 * np.pi)),
+        source=lower.source,
+        spikes_left=int(np.sum(pts.upper > threshold)) + int(up_crit > threshold),
+    )
 
 
 @dataclass(frozen=True)
@@ -407,6 +838,14 @@ class PeakCertificate:
         ``control.StateSpace`` realizing the complex matrix at the critical frequency).
     worst_case_normalized : dict
         Block name -> normalized value (float for ureal, complex matrix for ultidyn).
+    peak_model : int
+        Model of the largest upper bound (-1: same as ``model``).
+    peak_time, peak_frequency : float
+        Its scheduling value and frequency [Hz].
+    source : str
+        Where the lower bound comes from: ``"grid"`` (power iteration) or ``"search"``.
+    spikes_left : int
+        Analyzed points whose upper bound still exceeds ``(1 + target gap) mu_lower``.
     """
 
     subset: str
@@ -419,10 +858,21 @@ class PeakCertificate:
     delta: np.ndarray
     worst_case: dict
     worst_case_normalized: dict
+    peak_model: int = -1
+    peak_time: float = float("nan")
+    peak_frequency: float = float("nan")
+    source: str = "search"
+    spikes_left: int = 0
 
     @property
     def gap(self) -> float:
-        """Relative gap of the bounds at the critical frequency ``(upper - lower) / upper`` [-]."""
+        """Honest gap of the peak: ``(max upper - best lower) / max upper`` over everything [-]."""
+        up = self.mu_upper
+        return (up - self.mu_lower) / up if up > 0 else 0.0
+
+    @property
+    def gap_critical(self) -> float:
+        """Gap at the critical frequency ``(upper there - lower) / upper there`` [-]."""
         up = self.mu_upper_critical
         return (up - self.mu_lower) / up if up > 0 else 0.0
 

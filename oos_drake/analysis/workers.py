@@ -1,0 +1,244 @@
+"""mu bounds at arbitrary (model, frequency) points of a model array, in worker processes.
+
+The model array's Delta-channel matrices ``(A, Bw, Cz, Dzw)`` are handed to the workers once,
+when the pool starts (fork: inherited, not pickled), so that a task is only a list of points:
+model indices, frequencies [rad/s], starting scalings of the upper bound, the subset's channels.
+Every worker uses one BLAS thread (:mod:`oos_drake.blas`): the parallelism is one process per
+core over batches of small matrices.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from oos_drake.robust.blocks import parse_blk
+from oos_drake.robust.lfr_analysis import delta_channel_response
+
+#: Smoothing stages of the converged upper bounds (one more than mussv's default).
+CONVERGED_TEMPERATURES = (30.0, 300.0, 3000.0, 30000.0)
+
+_ARRAYS: dict = {}
+
+
+def _install(arrays, queue=None) -> None:
+    """Worker initializer: keep the model array (and a progress queue), one BLAS thread."""
+    from oos_drake.blas import limit_blas_threads
+
+    limit_blas_threads(1)
+    _ARRAYS["models"] = arrays
+    _ARRAYS["queue"] = queue
+
+
+def responses(models, omega, zrows, wcols) -> np.ndarray:
+    """``M11(j omega_i)`` of model ``models[i]`` restricted to a subset: ``(n, len(zrows), ...)``.
+
+    One eigen-decomposition per distinct model (arrays installed by :func:`_install`).
+    """
+    A, Bw, Cz, Dzw = _ARRAYS["models"]
+    models = np.asarray(models, dtype=int)
+    omega = np.asarray(omega, dtype=float)
+    out = np.empty((models.size, len(zrows), len(wcols)), dtype=complex)
+    for m in np.unique(models):
+        sel = np.flatnonzero(models == m)
+        M = delta_channel_response(A[m], Bw[m], Cz[m], Dzw[m], omega[sel])
+        out[sel] = M[:, zrows][:, :, wcols]
+    return out
+
+
+@dataclass(frozen=True)
+class PointTask:
+    """Bounds to compute at points of one subset.
+
+    Attributes
+    ----------
+    models : numpy.ndarray
+        ``(n,)`` model index of each point.
+    omega : numpy.ndarray
+        ``(n,)`` frequency of each point [rad/s].
+    x0 : numpy.ndarray or None
+        ``(n, p)`` starting scalings of the upper bound (``params`` of a neighbour), or None
+        (Osborne balancing).
+    zrows, wcols : numpy.ndarray
+        Delta channels of the subset.
+    blk : numpy.ndarray
+        BLK rows of the subset.
+    iterations : int
+        BFGS iterations of the upper bound (0: no upper bound).
+    temperatures : tuple of float
+        Smoothing stages of the upper bound.
+    lower_restarts, lower_iterations : int
+        Power-iteration lower bound (``lower_iterations = 0``: none).
+    """
+
+    models: np.ndarray
+    omega: np.ndarray
+    x0: np.ndarray | None
+    zrows: np.ndarray
+    wcols: np.ndarray
+    blk: np.ndarray
+    iterations: int
+    temperatures: tuple = CONVERGED_TEMPERATURES
+    lower_restarts: int = 0
+    lower_iterations: int = 0
+
+
+@dataclass(frozen=True)
+class PointBounds:
+    """Result of a :class:`PointTask`.
+
+    Attributes
+    ----------
+    upper : numpy.ndarray
+        ``(n,)`` upper bounds (NaN where not computed).
+    params : numpy.ndarray or None
+        ``(n, p)`` scalings at the upper bounds (warm starts for neighbours).
+    lower : numpy.ndarray
+        ``(n,)`` certified lower bounds (0 where not computed).
+    best : int
+        Index of the largest lower bound (-1 if none).
+    best_delta : numpy.ndarray or None
+        Its perturbation (mussv layout of the subset), ``||delta|| = 1 / lower[best]``.
+    """
+
+    upper: np.ndarray
+    params: np.ndarray | None
+    lower: np.ndarray
+    best: int
+    best_delta: np.ndarray | None
+
+
+def point_bounds(task: PointTask) -> PointBounds:
+    """Upper (warm started) and lower bounds at the points of ``task``."""
+    from oos_drake.robust.mu_lower import mu_lower_bound
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    structure = parse_blk(task.blk)
+    n = task.models.size
+    M = responses(task.models, task.omega, task.zrows, task.wcols)
+    upper, params, start = np.full(n, np.nan), None, None
+    if task.iterations > 0:
+        res = mu_upper_bound(
+            M,
+            structure,
+            max_iter=task.iterations,
+            temperatures=task.temperatures,
+            x0=task.x0,
+        )
+        upper, params, start = res.upper, res.params, res.worst_input
+    lower, best, best_delta = np.zeros(n), -1, None
+    if task.lower_iterations > 0:
+        lo = mu_lower_bound(
+            M,
+            structure,
+            start_inputs=start,
+            restarts=task.lower_restarts,
+            iters=task.lower_iterations,
+        )
+        lower = lo.lower if task.iterations <= 0 else np.minimum(lo.lower, upper)
+        if np.any(lower > 0):
+            best = int(np.argmax(lower))
+            best_delta = lo.delta[best]
+    return PointBounds(upper, params, lower, best, best_delta)
+
+
+def _run_chunk(task: PointTask) -> PointBounds:
+    return point_bounds(task)
+
+
+class ModelPool:
+    """Worker processes holding one model array; evaluates :class:`PointTask` lists.
+
+    Use as a context manager. ``n_jobs = 1`` evaluates in this process.
+
+    Parameters
+    ----------
+    arrays : tuple of numpy.ndarray
+        ``(A, Bw, Cz, Dzw)`` of the model array, each ``(N, ...)``.
+    n_jobs : int
+        Worker processes.
+    """
+
+    def __init__(self, arrays, n_jobs: int = 2):
+        if n_jobs < 1:
+            raise ValueError(f"ModelPool: n_jobs must be >= 1, got {n_jobs}")
+        self.arrays = arrays
+        self.n_jobs = n_jobs
+        self._pool = None
+        self.queue = None
+
+    def __enter__(self):
+        if self.n_jobs > 1:
+            import multiprocessing as mp
+
+            method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
+            context = mp.get_context(method)
+            self.queue = context.Queue()
+            self._pool = ProcessPoolExecutor(
+                self.n_jobs,
+                mp_context=context,
+                initializer=_install,
+                initargs=(self.arrays, self.queue),
+            )
+        else:
+            self._previous = (_ARRAYS.get("models"), _ARRAYS.get("queue"))
+            _install(self.arrays)
+        return self
+
+    def __exit__(self, *exc):
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+        elif getattr(self, "_previous", None) is not None:
+            _ARRAYS["models"], _ARRAYS["queue"] = self._previous
+        return False
+
+    def map(self, fn, tasks):
+        """``[fn(t) for t in tasks]`` in the workers (order kept)."""
+        if self._pool is None:
+            return [fn(t) for t in tasks]
+        return list(self._pool.map(fn, tasks))
+
+    def bounds(self, task: PointTask, *, min_chunk: int = 16) -> PointBounds:
+        """:func:`point_bounds` of ``task``, its points split over the workers."""
+        n = task.models.size
+        if n == 0:
+            return PointBounds(np.zeros(0), None, np.zeros(0), -1, None)
+        k = max(1, min(self.n_jobs, n // min_chunk)) if self._pool is not None else 1
+        if k == 1:
+            return self.map(_run_chunk, [task])[0]
+        # split by model (one eigen-decomposition per model and chunk), balanced in points
+        order = np.argsort(task.models, kind="stable")
+        parts = np.array_split(order, k)
+        tasks = [
+            PointTask(
+                task.models[p],
+                task.omega[p],
+                None if task.x0 is None else task.x0[p],
+                task.zrows,
+                task.wcols,
+                task.blk,
+                task.iterations,
+                task.temperatures,
+                task.lower_restarts,
+                task.lower_iterations,
+            )
+            for p in parts
+        ]
+        results = self.map(_run_chunk, tasks)
+        upper = np.full(n, np.nan)
+        lower = np.zeros(n)
+        params = None
+        best, best_delta, best_value = -1, None, 0.0
+        for p, r in zip(parts, results, strict=True):
+            upper[p] = r.upper
+            lower[p] = r.lower
+            if r.params is not None:
+                if params is None:
+                    params = np.zeros((n, r.params.shape[1]))
+                params[p] = r.params
+            if r.best >= 0 and r.lower[r.best] > best_value:
+                best, best_delta, best_value = int(p[r.best]), r.best_delta, r.lower[r.best]
+        return PointBounds(upper, params, lower, best, best_delta)
