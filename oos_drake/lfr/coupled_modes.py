@@ -202,16 +202,7 @@ def _coupled_response(M, n, core, tail, powers, omega, pairs, out, ws):
         return ok
     r = U.shape[2]
     # tail: C_p = C2 A22^p A21 (rows weighted by s^-(p+1)) and C2 A22^p B2 (polynomial part)
-    tail_C, tail_B = [], []
-    if tail.size:
-        A21 = Mp[:, tail[:, None], col_order[None, :]]
-        A22 = M[:, tail[:, None], tail[None, :]]
-        Ep = M[:, n:, tail]
-        B2 = M[:, tail, n:]
-        for _ in range(powers):
-            tail_C.append(Ep @ A21)
-            tail_B.append(Ep @ B2)
-            Ep = Ep @ A22
+    tail_C, tail_B = tail_terms(M, Mp[:, tail[:, None], col_order[None, :]], tail, n, powers)
     q = len(tail_C)
     crows = np.concatenate([C] + tail_C, axis=1)  # (g, ny (1 + q), 2h)
     with np.errstate(all="ignore"):
@@ -492,3 +483,22 @@ def _solve_small(Hwu, rhs, out, ws):
             acc += np.multiply(cof[j][i][:, None, :], rhs[:, j], out=prod)
         np.multiply(acc, inv_det[:, None, :], out=out[:, i])
     return out
+
+
+def tail_terms(M, A21, tail, n, powers):
+    """Markov-like terms of the nilpotent tail: ``C2 A22^p A21`` and ``C2 A22^p B2``, p < powers.
+
+    ``M`` is the batch of ``[[A, B], [C, D]]`` (``n`` states), ``tail`` the tail's state indices and
+    ``A21`` the tail rows of ``A`` restricted to the core columns.
+    Empty lists when there is no tail.
+    """
+    tail_C, tail_B = [], []
+    if tail.size:
+        A22 = M[:, tail[:, None], tail[None, :]]
+        Ep = M[:, n:, tail]
+        B2 = M[:, tail, n:]
+        for _ in range(powers):
+            tail_C.append(Ep @ A21)
+            tail_B.append(Ep @ B2)
+            Ep = Ep @ A22
+    return tail_C, tail_B

@@ -56,7 +56,7 @@ from scipy.linalg import lapack
 
 from oos_drake.blas import single_threaded_blas
 from oos_drake.lfr.core import as_lfr
-from oos_drake.lfr.coupled_modes import block_pairs, coupled_response
+from oos_drake.lfr.coupled_modes import block_pairs, coupled_response, tail_terms
 from oos_drake.lfr.workspace import Workspace
 
 #: Eigenvalues whose condition number ``||v|| ||w||`` exceeds this go to the clustered block.
@@ -234,16 +234,7 @@ def _real_pair_response(
     ws = Workspace() if ws is None else ws
     A11 = M[:, core[:, None], core[None, :]]
     B1, C1, D = M[:, core, n:], M[:, n:, core], M[:, n:, n:]
-    tail_C, tail_B = [], []  # C2 A22^p A21 and C2 A22^p B2, p = 0 .. q-1
-    if tail.size:
-        A21 = M[:, tail[:, None], core[None, :]]
-        A22 = M[:, tail[:, None], tail[None, :]]
-        Ep = M[:, n:, tail]
-        B2 = M[:, tail, n:]
-        for _ in range(powers):
-            tail_C.append(Ep @ A21)
-            tail_B.append(Ep @ B2)
-            Ep = Ep @ A22
+    tail_C, tail_B = tail_terms(M, M[:, tail[:, None], core[None, :]], tail, n, powers)
     lam, T, ok = _real_eig(A11, ws)
     with np.errstate(all="ignore"):
         # reals first (stable sort keeps each conjugate pair adjacent, positive part first);
