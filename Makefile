@@ -11,6 +11,8 @@ $(STAMP): pyproject.toml
 	@test -x $(VENV)/bin/python || $(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
 	$(VENV)/bin/python -m pip install --quiet --upgrade pip
 	$(VENV)/bin/python -m pip install --quiet -e ".[test]"
+	@# compile the numba kernels of the mu bounds once (cached on disk next to the module)
+	$(VENV)/bin/python -c "from oos_drake.robust.mu_kernels import warm_up; print(f'mu kernels compiled in {warm_up():.0f} s')"
 	@touch $(STAMP)
 
 venv: $(STAMP)

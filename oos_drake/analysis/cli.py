@@ -43,6 +43,7 @@ def run_analyze(args) -> int:
         points_per_decade=args.points_per_decade,
         sweep=sweep,
         tighten=tighten,
+        spike_budget=args.spike_budget,
         docking_phases=tuple(p for p in args.docking.split(",") if p),
         docking_points=args.docking_points,
         performance_models=args.performance_models,
@@ -66,13 +67,15 @@ def run_analyze(args) -> int:
         print(
             f"  {s['subset']:>14s}: mu in [{s['mu_lower']:.4g}, {s['mu_upper']:.4g}] "
             f"(gap {s['gap [%]']:.2g} %) at t = {s['time [s]']:.0f} s, "
-            f"{s['frequency [Hz]']:.3g} Hz; spikes left {s['spikes_left']}"
+            f"{s['frequency [Hz]']:.3g} Hz; spikes left {s['spikes_left']} "
+            f"({s['spike_stop']}{', BUDGET EXHAUSTED' if s['budget_exhausted'] else ''})"
         )
     for phase, pk in summary["docking"].items():
         print(
             f"docking {phase}: mu in [{pk['mu_lower']:.4g}, {pk['mu_upper']:.4g}] "
             f"(gap {pk['gap [%]']:.2g} %) at k = {pk['stiffness']:.3g}, "
-            f"f = {pk['frequency [Hz]']:.3g} Hz; spikes left {pk['spikes_left']}"
+            f"f = {pk['frequency [Hz]']:.3g} Hz; spikes left {pk['spikes_left']} "
+            f"({pk['spike_stop']}{', BUDGET EXHAUSTED' if pk['budget_exhausted'] else ''})"
         )
     print(f"total time {summary['timings_s']['total']:.1f} s; outputs in {args.out}")
     return 0
@@ -125,6 +128,13 @@ def register(subparsers) -> None:
     )
     parser.add_argument(
         "--spike-rounds", type=int, default=6, help="rounds of the spike resolution per subset"
+    )
+    parser.add_argument(
+        "--spike-budget",
+        type=float,
+        default=240.0,
+        help="wall-clock budget of the spike resolution of the whole analysis [s] (each subset "
+        "also stops after 90 s); where it is spent, the peaks table says so",
     )
     parser.add_argument("--docking", default="7,8", help="docking phases (comma-separated)")
     parser.add_argument("--docking-points", type=int, default=300, help="stiffness values")

@@ -251,6 +251,29 @@ def _complex_part(A, Bw, Cz, Dzw, structure, real_part, omega):
     return res.lower, res.delta, (rows_c, cols_c)
 
 
+def _pole_points(A, Bw, Cz, Dzw, real_part, lo_w, hi_w, max_damping: float = 0.2):
+    """Frequencies [rad/s] on the lightly damped poles of the loop closed through ``real_part``.
+
+    Three points per pole with damping ratio below ``max_damping`` and natural frequency within
+    ``[lo_w / 1.5, 1.5 hi_w]``: the damped frequency and ``+-`` half its real part (the peak of
+    a resonance of damping ``zeta`` is ``zeta omega_n`` wide).
+    """
+    try:
+        ev = np.linalg.eigvals(_closed_A(A, Bw, Cz, Dzw, real_part))
+    except np.linalg.LinAlgError:
+        return np.zeros(0)
+    wn = np.abs(ev)
+    keep = (
+        (ev.imag > 0)
+        & (-ev.real < max_damping * np.maximum(wn, 1e-300))
+        & (wn >= lo_w / 1.5)
+        & (wn <= 1.5 * hi_w)
+    )
+    w, sigma = ev.imag[keep], np.abs(ev.real[keep])
+    pts = np.concatenate([w, w - 0.5 * sigma, w + 0.5 * sigma])
+    return pts[pts > 0]
+
+
 def destabilizing_perturbation(
     A, Bw, Cz, Dzw, blk, omega_hint, *, alpha_max: float = 8.0, complex_points: int = 61
 ) -> Destabilizer:
@@ -297,13 +320,21 @@ def destabilizing_perturbation(
             if has_real
             else np.zeros((structure.n_rows, structure.n_cols), complex)
         )
-        mu_c, deltas, (rows_c, cols_c) = _complex_part(A, Bw, Cz, Dzw, structure, real_part, grid)
+        # the complex channels see the loop closed through the real part: its lightly damped
+        # poles (just left of the axis when alpha nears the real crossing) make mu_c peak in
+        # a band as narrow as their damping, which a fixed grid misses: add them
+        trial_grid = np.unique(
+            np.concatenate([grid, _pole_points(A, Bw, Cz, Dzw, real_part, lo_w, hi_w)])
+        )
+        mu_c, deltas, (rows_c, cols_c) = _complex_part(
+            A, Bw, Cz, Dzw, structure, real_part, trial_grid
+        )
         k = int(np.argmax(mu_c))
         if mu_c[k] <= 0:
             return False, None
         full = real_part.copy()
         full[np.ix_(rows_c, cols_c)] = deltas[k]
-        return mu_c[k] * alpha >= 1.0, (full, grid[k], 1.0 / mu_c[k])
+        return mu_c[k] * alpha >= 1.0, (full, trial_grid[k], 1.0 / mu_c[k])
 
     hi = alpha_r if np.isfinite(alpha_r) else alpha_max
     ok, found = trial(hi)

@@ -75,6 +75,11 @@ class AnalysisOptions:
     tighten : TightenOptions
         Target gap of the certified peaks and effort of the spike resolution
         (:mod:`oos_drake.analysis.tightening`).
+    spike_budget : float
+        Wall-clock budget of the spike resolution of the whole analysis [s] (all studies and
+        subsets; each subset also keeps ``tighten.time_budget``). With the grid sweeps, it
+        bounds the run time whatever the controller; where it cuts the resolution short, the
+        peaks table says so (``budget_exhausted``, ``spike_stop``).
     sensitivity : bool
         Compute the sensitivity table.
     sensitivity_iterations : int
@@ -98,6 +103,7 @@ class AnalysisOptions:
     performance_points: int = 24
     certify_iterations: int = 1000
     tighten: TightenOptions = field(default_factory=TightenOptions)
+    spike_budget: float = 240.0
     open_loop_samples: int = 20
     sensitivity: bool = True
     sensitivity_iterations: int = 150
@@ -146,7 +152,13 @@ def _certify(array, study, subsets, *, configuration_label):
                 "lower_source": cert.source,
                 "spike_rounds": report.rounds,
                 "spikes_left": cert.spikes_left,
+                "spikes_converged": report.converged,
                 "refinement_points": report.points_added,
+                "searched_models": len(report.searched_models),
+                "spike_stop": report.stop,
+                "budget_exhausted": bool(report.budget_exhausted),
+                "spike_time [s]": round(report.seconds, 2),
+                "spike_work [point-iterations]": float(report.work),
                 "configuration": configuration_label(model),
             }
         )
@@ -272,9 +284,11 @@ def run_analysis(
         f"subsets {list(subsets)}; nominal loops stable: {int((abscissa < 0).sum())}/{times.size}"
     )
 
+    spike_seconds = [0.0]
+
     def study(system, sets, grid, description):
         """mu bounds on the common grid, spikes resolved, a certified peak per subset."""
-        return certified_sweep(
+        res = certified_sweep(
             system,
             omega,
             sets,
@@ -284,7 +298,10 @@ def run_analysis(
             critical_iterations=options.certify_iterations,
             progress=options.progress,
             description=description,
+            time_budget=max(options.spike_budget - spike_seconds[0], 1e-3),
         )
+        spike_seconds[0] += sum(r.seconds for r in res.reports.values())
+        return res
 
     result = study(mission.system, subsets, times, "mu mission")
     sweep = result.table
@@ -326,6 +343,8 @@ def run_analysis(
             "peak_stiffness": float(row["peak stiffness [N/m or N m/rad]"]),
             "peak_frequency [Hz]": float(row["peak_frequency [Hz]"]),
             "spikes_left": int(row["spikes_left"]),
+            "spike_stop": str(row["spike_stop"]),
+            "budget_exhausted": bool(row["budget_exhausted"]),
         }
         timings[f"docking {phase} detail"] = {k: round(v, 2) for k, v in dres.timings.items()}
         lap(f"docking phase {phase}")
@@ -481,6 +500,7 @@ def run_analysis(
     if sens is not None:
         paths["sensitivity_png"] = figures.sensitivity_figure(sens, out / "sensitivity.png")
     lap("figures")
+    timings["spike resolution, all studies"] = round(spike_seconds[0], 2)
     timings["total"] = round(_time.perf_counter() - t_start, 2)
     tot = peaks[peaks["subset"] == "total"].iloc[0]
     ep = perf[perf["channel"] == "e_p"]
@@ -508,6 +528,8 @@ def run_analysis(
             "upper_peak_frequency_hz": float(tot["peak_frequency [Hz]"]),
             "stability_margin": float(tot["margin [-]"]),
             "spikes_left": int(tot["spikes_left"]),
+            "spike_stop": str(tot["spike_stop"]),
+            "budget_exhausted": bool(tot["budget_exhausted"]),
         },
         "subsets": peaks.drop(columns=["study"]).to_dict(orient="records"),
         "docking": docking_peaks,

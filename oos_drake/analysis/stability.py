@@ -607,6 +607,7 @@ def certified_sweep(
     critical_iterations: int = 1000,
     progress: bool = True,
     description: str = "mu sweep",
+    time_budget: float = float("inf"),
 ) -> StudyResult:
     """Grid sweep, spike resolution and certified peak of every subset.
 
@@ -630,11 +631,16 @@ def certified_sweep(
         Progress bars.
     description : str
         Label of the progress bars.
+    time_budget : float
+        Wall-clock budget of the spike resolution of all subsets together [s]: each subset
+        gets ``min(tighten.time_budget, what is left)`` (reported in its
+        :class:`~oos_drake.analysis.tightening.TightenReport`).
 
     Returns
     -------
     StudyResult
     """
+    import dataclasses
     import time as _time
 
     from tqdm.auto import tqdm
@@ -663,6 +669,7 @@ def certified_sweep(
         bar = tqdm(
             total=len(parts), desc=f"{description}: certify", unit="subset", disable=not progress
         )
+        spent = 0.0
         for name in parts:
             pts = points[name]
 
@@ -685,9 +692,19 @@ def certified_sweep(
             def note(rnd, spikes, name=name):
                 bar.set_postfix_str(f"{name}: round {rnd}, {spikes} spike(s)")
 
+            # the critical points of the subsets done so far: where mu peaks for a larger or
+            # smaller set is a good place to look for this one's exact peak
+            hints = [
+                (c.model, 2 * np.pi * c.frequency)
+                for c in certificates.values()
+                if c.mu_lower > 0 and np.isfinite(c.frequency) and c.frequency > 0
+            ]
+            left = max(time_budget - spent, 1e-3)
+            own = dataclasses.replace(tighten, time_budget=min(tighten.time_budget, left))
             lower, report = resolve_spikes(
-                pool, pts, parts[name], lowers[name], search, tighten, progress=note
+                pool, pts, parts[name], lowers[name], search, own, progress=note, hints=hints
             )
+            spent += report.seconds
             reports[name] = report
             certificates[name] = _certificate(
                 pool,

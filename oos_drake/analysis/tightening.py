@@ -14,11 +14,25 @@ Per subset, with ``L*`` the best certified lower bound found so far:
 * the others ("spikes") are recomputed with more iterations, started from their own scalings and
   from those of every neighbour with a lower bound (the smallest result is kept: all are valid);
   iterations grow from round to round;
-* where a spike survives, the frequency grid is refined locally (log midpoints towards both
-  neighbours, warm started), the power-iteration lower bound runs again with restarts from the
-  new worst direction, and the direct destabilizing search
-  (:func:`oos_drake.analysis.destabilizing.destabilizing_perturbation`) runs on the spike's model;
-* until no spike is left or the rounds are spent. What is left is reported, not hidden.
+* where a spike survives, the power-iteration lower bound runs again with restarts from the
+  new worst direction, the direct destabilizing search
+  (:func:`oos_drake.analysis.destabilizing.destabilizing_perturbation`) runs on the spike's model,
+  and the frequency grid is refined locally (log midpoints towards both neighbours, warm
+  started) around the few highest spikes;
+* a point whose upper bound no longer moves when re-solved with many iterations from its own and
+  its neighbours' scalings is *converged*: what separates it from ``L*`` is the conservatism of
+  the D-G bound itself (typical of real parameters), not the optimizer. It is never re-solved,
+  and the points below the highest converged one cannot change the gap of the peak
+  ``(max U - L*) / max U``: they are not worked on either (top-down resolution);
+* until no spike is left, every remaining spike is converged, or the rounds or the budget
+  (BFGS work, searches, seconds) are spent. What is left is reported
+  (:class:`TightenReport`), not hidden.
+
+Why the top-down rule matters: with a controller whose real-parameter mu ridge is flat over the
+mission (the baseline PD), the converged D-G bound sits 3-4 % above the exact real mu on a
+thousand points; resolving every one of them (and refining around each) made the number of
+points grow from round to round (1 000 -> 7 000) and took minutes per subset for no change of
+the certified gap.
 """
 
 from __future__ import annotations
@@ -54,6 +68,29 @@ class TightenOptions:
         both neighbours: the peak may sit between grid points).
     search_band : float
         Frequency band factor of the direct search around the model's spike.
+    max_points : int
+        At most this many spikes (the highest unconverged ones) are re-solved per round.
+    refine_spikes : int
+        Local refinement, from the second round on, around at most this many of the highest
+        surviving spikes (local maxima of their model).
+    converged_ratio : float
+        A re-solve with at least ``converged_iterations`` that lowers a point's upper bound by
+        less than this (relative) marks it converged [-].
+    converged_iterations : int
+        See ``converged_ratio``; a re-solve with ``iterations[-1]`` always marks it converged.
+    settle_ratio : float
+        Unconverged spikes less than this (relative) above the highest converged spike are
+        left alone, and a pass of ``converged_iterations`` or more that lowers the largest
+        upper bound by less than this (with no better lower bound) marks every spike
+        converged: the ridge has settled, more passes would change the gap by less [-].
+    max_searches : int
+        Direct destabilizing searches per subset (the seed search included).
+    max_work : float
+        Budget of upper-bound work per subset, in point-iterations (sum over the re-solved
+        candidates of their BFGS iterations; refinement points included): deterministic.
+    time_budget : float
+        Wall-clock budget of the resolution per subset [s] (a safety net: a step that started
+        finishes; ``inf``: none).
     """
 
     target_gap: float = 0.03
@@ -65,6 +102,14 @@ class TightenOptions:
     search_models: int = 2
     search_band: float = 2.0
     peak_levels: int = 4
+    max_points: int = 120
+    refine_spikes: int = 4
+    converged_ratio: float = 0.002
+    converged_iterations: int = 150
+    settle_ratio: float = 0.005
+    max_searches: int = 8
+    max_work: float = 1.5e6
+    time_budget: float = 90.0
 
     def __post_init__(self):
         if not self.target_gap >= 0:
@@ -75,11 +120,23 @@ class TightenOptions:
             raise ValueError(
                 f"TightenOptions.iterations must be positive counts, got {self.iterations}"
             )
+        for name in ("max_points", "max_searches", "refine_spikes", "peak_levels"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"TightenOptions.{name} must be >= 0, got {getattr(self, name)}")
+        if not self.settle_ratio >= 0:
+            raise ValueError(f"TightenOptions.settle_ratio must be >= 0, got {self.settle_ratio}")
+        for name in ("max_work", "time_budget"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"TightenOptions.{name} must be > 0, got {getattr(self, name)}")
 
 
 @dataclass
 class SubsetPoints:
-    """Mutable working set of one subset (internal): one entry per (model, frequency)."""
+    """Mutable working set of one subset (internal): one entry per (model, frequency).
+
+    ``converged`` (optional, created on first use) marks points whose upper bound no longer
+    moves when re-solved (see :func:`resolve_spikes`).
+    """
 
     model: np.ndarray
     omega: np.ndarray
@@ -88,10 +145,17 @@ class SubsetPoints:
     params: np.ndarray
     refined: np.ndarray
     tightened: np.ndarray
+    converged: np.ndarray | None = None
+
+    _FIELDS = ("model", "omega", "upper", "lower", "params", "refined", "tightened", "converged")
+
+    def __post_init__(self):
+        if self.converged is None:
+            self.converged = np.zeros(np.asarray(self.model).size, dtype=bool)
 
     def sort(self):
         order = np.lexsort((self.omega, self.model))
-        for name in ("model", "omega", "upper", "lower", "params", "refined", "tightened"):
+        for name in self._FIELDS:
             setattr(self, name, getattr(self, name)[order])
 
     def append(self, model, omega, upper, lower, params):
@@ -103,6 +167,7 @@ class SubsetPoints:
         self.params = np.concatenate([self.params, params])
         self.refined = np.concatenate([self.refined, np.ones(n, bool)])
         self.tightened = np.concatenate([self.tightened, np.ones(n, bool)])
+        self.converged = np.concatenate([self.converged, np.zeros(n, bool)])
 
 
 @dataclass(frozen=True)
@@ -145,6 +210,19 @@ class TightenReport:
         Models given the direct search.
     evaluations : int
         Upper-bound problems solved (all candidates of all points).
+    work : float
+        Point-iterations spent (see :attr:`TightenOptions.max_work`).
+    converged : int
+        Spikes left whose upper bound is converged (the D-G bound's own gap).
+    points_left : int
+        Spikes left (``U > (1 + target) L*``) at the end.
+    stop : str
+        Why the resolution stopped: ``"target met"``; ``"converged"`` (every spike that could
+        change the gap is converged, and no model is left to search); ``"search budget"``
+        (the same, but ``max_searches`` direct searches were spent: more could raise ``L*``);
+        ``"rounds"``, ``"work budget"``, ``"time budget"`` (spikes still open).
+    seconds : float
+        Wall-clock time of the resolution [s].
     """
 
     rounds: int = 0
@@ -152,6 +230,17 @@ class TightenReport:
     points_added: int = 0
     searched_models: tuple = ()
     evaluations: int = 0
+    work: float = 0.0
+    converged: int = 0
+    points_left: int = 0
+    stop: str = "target met"
+    seconds: float = 0.0
+
+    @property
+    def budget_exhausted(self) -> bool:
+        """True when a budget (work, time, rounds) stopped the resolution with spikes left."""
+        budgets = ("rounds", "work budget", "time budget", "search budget")
+        return self.stop in budgets and self.points_left > 0
 
 
 def neighbours(model: np.ndarray, omega: np.ndarray) -> np.ndarray:
@@ -188,8 +277,16 @@ def neighbours(model: np.ndarray, omega: np.ndarray) -> np.ndarray:
     return out
 
 
-def _warm_pass(pool, pts, act, parts, iterations, lower):
-    """Recompute the points ``act`` from their own and their lower neighbours' scalings."""
+def _warm_pass(pool, pts, act, parts, iterations, lower, converged=None):
+    """Recompute the points ``act`` from their own and their lower neighbours' scalings.
+
+    ``converged = (ratio, min_iterations, last_iterations)``: points whose bound dropped by less
+    than ``ratio`` (relative) in a pass of at least ``min_iterations`` (or any pass of
+    ``last_iterations``) are marked converged.
+
+    Returns ``(evaluations, found)``: upper-bound problems solved and a better lower bound.
+    """
+    before = pts.upper[act].copy()
     zrows, wcols, blk = parts
     nb = neighbours(pts.model, pts.omega)
     owner = [act]
@@ -222,6 +319,13 @@ def _warm_pass(pool, pts, act, parts, iterations, lower):
     pts.params[who[improved]] = res.params[win][improved]
     pts.tightened[who] = True
     evaluations = owner.size
+    if converged is not None:
+        ratio, min_it, last_it = converged
+        if iterations >= last_it:
+            pts.converged[act] = True
+        elif iterations >= min_it:
+            drop = (before - pts.upper[act]) / np.maximum(before, 1e-300)
+            pts.converged[act[drop < ratio]] = True
     found = None
     if lower is not None:
         still = act[pts.upper[act] > lower[0]]
@@ -306,8 +410,15 @@ def resolve_spikes(
     search,
     options: TightenOptions,
     progress=None,
+    hints=(),
 ):
-    """Tighten, refine and search until ``max U <= (1 + target) L*`` (or the rounds are spent).
+    """Tighten, refine and search until ``max U <= (1 + target) L*`` (or nothing can help).
+
+    Top-down: only spikes above the highest *converged* spike can still change the gap of the
+    peak ``(max U - L*) / max U``, so only they are re-solved (the ``max_points`` highest per
+    round); the direct search goes to the models of the highest spikes not searched yet. The
+    work is bounded by :attr:`TightenOptions.max_work` (point-iterations, deterministic),
+    ``max_searches`` and ``time_budget`` (wall clock); the report says what stopped it.
 
     Parameters
     ----------
@@ -325,32 +436,111 @@ def resolve_spikes(
     options : TightenOptions
     progress : callable, optional
         ``progress(round, spikes)``.
+    hints : sequence of (int, float)
+        ``(model, omega)`` worth a direct search besides the largest upper bound (e.g. the
+        critical points of the other subsets: a ridge of mu that is flat over the models puts
+        the exact peak anywhere on it, not necessarily where the upper bound is largest).
 
     Returns
     -------
     (LowerCertificate, TightenReport)
     """
+    import time as _time
+
+    start = _time.perf_counter()
     searched: list[int] = []
     spikes_hist = []
     added = 0
     evaluations = 0
+    work = 0.0
     rounds_run = 0
     levels = 0
+    stop = "rounds"
     pts.sort()
-    if pts.upper.size and options.search_models > 0 and np.max(pts.upper) > lower.value:
-        # seed: the direct search on the model of the largest upper bound
-        i = int(np.argmax(pts.upper))
-        searched.append(int(pts.model[i]))
-        for cand in search([(int(pts.model[i]), float(pts.omega[i]))]):
+
+    def threshold():
+        return (1.0 + options.target_gap) * lower.value
+
+    def open_spikes():
+        """Unconverged spikes clearly above every converged spike (the only ones that matter:
+        resolving the others could lower the gap of the peak by ``settle_ratio`` at most)."""
+        above = pts.upper > threshold()
+        done = above & pts.converged
+        floor = (
+            float(np.max(pts.upper[done])) * (1.0 + options.settle_ratio)
+            if np.any(done)
+            else -np.inf
+        )
+        return np.flatnonzero(above & ~pts.converged & (pts.upper > floor))
+
+    def run_search(requests):
+        nonlocal lower
+        for cand in search(requests) if requests else []:
             if cand.value > lower.value:
                 lower = cand
+
+    def next_requests(order, count=None):
+        requests = []
+        count = options.search_models if count is None else count
+        for i in order:
+            if len(requests) >= count or len(searched) >= options.max_searches:
+                break
+            m = int(pts.model[i])
+            if m in searched:
+                continue
+            searched.append(m)
+            requests.append((m, float(pts.omega[i])))
+        return requests
+
+    def spread_requests(order):
+        """Direct searches for the spikes ``order`` (highest first): half on the highest spikes'
+        models, half on models far from every model searched so far (the best grid lower
+        bound there, else the highest upper bound): on a ridge of mu that is flat over the
+        models, the exact peak need not be under the largest upper bound."""
+        half = max(options.search_models // 2, 1)
+        requests = next_requests(order, half)
+        count = options.search_models - len(requests)
+        if count <= 0:
+            return requests
+        models = np.unique(pts.model)
+        span = max(int(np.ceil(models.size / 20)), 1)  # 5 % of the models
+        taken = np.array(searched) if searched else np.zeros(0, int)
+        far = np.ones(pts.model.size, dtype=bool)
+        for m in taken:
+            far &= np.abs(pts.model - m) > span
+        cand = np.flatnonzero(far & (pts.upper > threshold()))
+        if cand.size:
+            key = np.lexsort((-pts.upper[cand], -pts.lower[cand]))
+            requests += next_requests(cand[key], count)
+        return requests
+
+    if (
+        pts.upper.size
+        and options.search_models > 0
+        and options.max_searches > 0
+        and np.max(pts.upper) > lower.value
+    ):
+        # seed: the direct search on the model of the largest upper bound (and the hints)
+        seed = next_requests([int(np.argmax(pts.upper))], 1)
+        for m, w in hints:
+            if len(seed) > options.search_models or len(searched) >= options.max_searches:
+                break
+            if 0 <= int(m) and int(m) in set(pts.model.tolist()) and int(m) not in searched:
+                searched.append(int(m))
+                seed.append((int(m), float(w)))
+        run_search(seed)
+    converged_rule = (options.converged_ratio, options.converged_iterations, options.iterations[-1])
     for rnd in range(options.rounds):
         pts.sort()
-        threshold = (1.0 + options.target_gap) * lower.value
-        act = np.flatnonzero(pts.upper > threshold)
-        spikes_hist.append(int(act.size))
+        spikes_hist.append(int(np.sum(pts.upper > threshold())))
         if progress is not None:
-            progress(rnd, act.size)
+            progress(rnd, spikes_hist[-1])
+        if _time.perf_counter() - start > options.time_budget:
+            stop = "time budget"
+            break
+        if work >= options.max_work:
+            stop = "work budget"
+            break
         if levels < options.peak_levels:
             # the peak may sit between grid points: midpoints around the largest upper bound
             top = np.array([int(np.argmax(pts.upper))])
@@ -360,56 +550,83 @@ def resolve_spikes(
             levels += 1
             added += n_new
             evaluations += n_new
+            work += n_new * options.iterations[-1]
             if found is not None and found.value > lower.value:
                 lower = found
             pts.sort()
-            threshold = (1.0 + options.target_gap) * lower.value
-            act = np.flatnonzero(pts.upper > threshold)
+        act = open_spikes()
         if act.size == 0:
             if levels >= options.peak_levels:
-                break
+                stop = "target met" if not np.any(pts.upper > threshold()) else "converged"
+                pending = np.flatnonzero(pts.upper > threshold())
+                pending = pending[np.argsort(-pts.upper[pending])]
+                requests = spread_requests(pending) if stop == "converged" else []
+                if not requests:
+                    if stop == "converged" and len(searched) >= options.max_searches:
+                        stop = "search budget"  # more models could still raise L*
+                    break
+                run_search(requests)
             continue
+        act = act[np.argsort(-pts.upper[act])][: options.max_points]
         rounds_run += 1
         iterations = options.iterations[min(rnd, len(options.iterations) - 1)]
+        top_before, lower_before = float(np.max(pts.upper)), lower.value
         n_eval, found = _warm_pass(
             pool,
             pts,
             act,
             parts,
             iterations,
-            (threshold, options.lower_restarts, options.lower_iterations) if rnd > 0 else None,
+            (threshold(), options.lower_restarts, options.lower_iterations) if rnd > 0 else None,
+            converged_rule,
         )
         evaluations += n_eval
+        work += n_eval * iterations
         if found is not None and found.value > lower.value:
             lower = found
-        threshold = (1.0 + options.target_gap) * lower.value
+        if (
+            iterations >= options.converged_iterations
+            and float(np.max(pts.upper)) > top_before * (1.0 - options.settle_ratio)
+            and lower.value <= lower_before
+        ):
+            # a pass of converged_iterations did not move the peak: the ridge has settled,
+            # more passes would lower the gap by less than settle_ratio
+            pts.converged[pts.upper > threshold()] = True
         # direct search on the models of the highest surviving spikes
-        still = act[pts.upper[act] > threshold]
+        still = act[pts.upper[act] > threshold()]
         if still.size:
+            run_search(spread_requests(still[np.argsort(-pts.upper[still])]))
+            still = act[pts.upper[act] > threshold()]
+        if still.size and rnd > 0 and options.refine_spikes > 0:
+            # local refinement around the highest surviving spikes only (distinct models)
             order = still[np.argsort(-pts.upper[still])]
-            requests = []
-            for i in order:
-                m = int(pts.model[i])
-                if len(requests) >= options.search_models:
-                    break
-                if m in searched:
-                    continue
-                searched.append(m)
-                requests.append((m, float(pts.omega[i])))
-            for cand in search(requests) if requests else []:
-                if cand.value > lower.value:
-                    lower = cand
-            threshold = (1.0 + options.target_gap) * lower.value
-            still = act[pts.upper[act] > threshold]
-        if still.size and rnd > 0:
-            pts.sort()
-            still = np.flatnonzero(pts.upper > threshold)
-            n_new, found = _refine(pool, pts, still, parts, iterations, options, lower.value)
+            _, first = np.unique(pts.model[order], return_index=True)
+            chosen = order[np.sort(first)][: options.refine_spikes]
+            n_new, found = _refine(pool, pts, chosen, parts, iterations, options, lower.value)
             added += n_new
             evaluations += n_new
+            work += n_new * iterations
             if found is not None and found.value > lower.value:
                 lower = found
+    else:
+        if not np.any(pts.upper > threshold()):
+            stop = "target met"
+        elif open_spikes().size == 0:
+            stop = "converged" if len(searched) < options.max_searches else "search budget"
     pts.sort()
-    final = int(np.sum(pts.upper > (1.0 + options.target_gap) * lower.value))
-    spikes_hist.append(final)
-    return lower, TightenReport(rounds_run, tuple(spikes_hist), added, tuple(searched), evaluations)
+    left = pts.upper > threshold()
+    spikes_hist.append(int(np.sum(left)))
+    if not np.any(left):
+        stop = "target met"
+    return lower, TightenReport(
+        rounds_run,
+        tuple(spikes_hist),
+        added,
+        tuple(searched),
+        evaluations,
+        work=float(work),
+        converged=int(np.sum(left & pts.converged)),
+        points_left=int(np.sum(left)),
+        stop=stop,
+        seconds=_time.perf_counter() - start,
+    )

@@ -18,6 +18,9 @@ the first-order gain of ``Re(lambda)`` is ``Re(w_k^* dDelta_k a_k)``. Each step
 Several starts run at once (the worst direction of the upper bound and random vectors). The
 returned ``delta`` is checked: ``sigma_min(I - M delta)`` must be at the round-off level,
 otherwise that candidate is dropped (and the bound lowered, to 0 if no candidate passes).
+
+With numba installed the power iteration runs compiled, matrix by matrix
+(:func:`oos_drake.robust.mu_kernels.power_iteration`, the same arithmetic).
 """
 
 from __future__ import annotations
@@ -26,11 +29,15 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from oos_drake.robust import mu_kernels
 from oos_drake.robust.blocks import FULL, REAL, BlockStructure
 from oos_drake.robust.memory import reuse_freed_memory
 
 #: Matrices per internal batch of :func:`mu_lower_bound` (bounds the memory of huge batches).
 CHUNK = 1024
+
+#: Use the compiled power iteration (:mod:`mu_kernels`) when numba is available.
+USE_COMPILED = True
 
 #: Relative tolerance on ``sigma_min(I - M delta)`` accepted as "singular".
 CERTIFICATE_RTOL = 1e-7
@@ -49,6 +56,7 @@ class LowerBoundResult:
         None  # (B, r, c) best unit perturbation, eigenvalue maybe complex
     )
     raw_lambda: np.ndarray | None = None  # (B,) its eigenvalue of M raw_delta
+    vector: np.ndarray | None = None  # (B, c): eigenvector of M delta of the returned candidate
 
 
 def _assemble(structure: BlockStructure, params, nb):
@@ -180,6 +188,31 @@ class _BlockDiag:
 def _power_iteration(M, structure, a, z, iters, kappa, rng):
     """Run the mixed power iteration from vectors ``a`` (c-space) and ``z`` (c-space)."""
     nb = M.shape[0]
+    if mu_kernels.HAVE_NUMBA and USE_COMPILED:  # the same iteration, compiled per matrix
+        real0 = [rng.uniform(-1.0, 1.0, nb) for b in structure.blocks if b.kind == REAL]
+        real0 = np.stack(real0, axis=1) if real0 else np.zeros((nb, 0))
+        kinds = {REAL: 0, FULL: 2}
+        blocks = np.array(
+            [
+                [kinds.get(b.kind, 1), b.rows, b.cols, b.row_offset, b.col_offset]
+                for b in structure.blocks
+            ],
+            dtype=np.int64,
+        ).T.copy()
+        delta = np.empty((nb, structure.n_rows, structure.n_cols), dtype=complex)
+        a_out = np.empty((nb, structure.n_cols), dtype=complex)
+        mu_kernels.power_iteration(
+            np.require(M, complex, ["C", "W"]),  # one compiled signature (read-only copied)
+            np.ascontiguousarray(a, dtype=complex),
+            np.ascontiguousarray(z, dtype=complex),
+            real0,
+            blocks,
+            int(iters),
+            float(kappa),
+            delta,
+            a_out,
+        )
+        return delta, a_out
     MH = np.ascontiguousarray(np.conj(np.swapaxes(M, -1, -2)))
     w = _mv(MH, z)
     bd = _BlockDiag(structure)
@@ -332,6 +365,7 @@ def mu_lower_bound(
     structure: BlockStructure,
     *,
     start_inputs: np.ndarray | None = None,
+    start_vectors: np.ndarray | None = None,
     restarts: int = 4,
     iters: int = 60,
     kappa: float = 0.5,
@@ -348,8 +382,11 @@ def mu_lower_bound(
     start_inputs : numpy.ndarray, optional
         ``(B, sum(r))`` starting directions in ``M``'s input space (e.g. the worst direction of
         the upper bound); used for the first start.
+    start_vectors : numpy.ndarray, optional
+        ``(B, k, sum(c))`` further starts in ``M``'s output space, e.g. the ``vector`` of the
+        results at neighbouring frequencies (continuation).
     restarts : int
-        Number of random starts besides ``start_inputs``.
+        Number of random starts besides ``start_inputs`` and ``start_vectors``.
     iters : int
         Power-iteration steps per start.
     kappa : float
@@ -372,6 +409,7 @@ def mu_lower_bound(
                 M[i : i + CHUNK],
                 structure,
                 start_inputs=None if start_inputs is None else start_inputs[i : i + CHUNK],
+                start_vectors=None if start_vectors is None else start_vectors[i : i + CHUNK],
                 restarts=restarts,
                 iters=iters,
                 kappa=kappa,
@@ -389,6 +427,11 @@ def mu_lower_bound(
         a0 = _normalize(_mv(M, start_inputs))
         starts_a.append(a0)
         starts_z.append(a0)
+    if start_vectors is not None:
+        for k in range(start_vectors.shape[1]):
+            a0 = _normalize(np.asarray(start_vectors[:, k], dtype=complex))
+            starts_a.append(a0)
+            starts_z.append(a0)
     for _ in range(max(restarts, 0)):
         starts_a.append(
             _normalize(rng.standard_normal((nb, c)) + 1j * rng.standard_normal((nb, c)))
@@ -486,4 +529,4 @@ def mu_lower_bound(
             raw[:, block.row_offset + idx, block.col_offset + idx] = np.where(d < 0, -1.0, 1.0)[
                 :, None
             ]
-    return LowerBoundResult(lower, out_delta, out_resid, raw, lam_raw[best_raw])
+    return LowerBoundResult(lower, out_delta, out_resid, raw, lam_raw[best_raw], a[pick])

@@ -1,4 +1,15 @@
-"""The full analysis (330 configurations, 2 x 300 docking stiffnesses): slow."""
+"""The full analysis (330 configurations, 2 x 300 docking stiffnesses) of the BASELINE PD: slow.
+
+Issue 7's claims for a controller other than the synthesized one: every certified peak has its
+bounds within 5 % (a worst case, not only a bound), the spike resolution is not cut short by a
+time or work budget, the certified perturbation really destabilizes (checked independently with
+``usubs``), and the whole analysis fits in 10 minutes on 2 cores (CPU time <= 2 x 600 s; the
+wall time is asserted when the machine is not shared).
+"""
+
+import os
+import resource
+import time
 
 import numpy as np
 import pandas as pd
@@ -8,20 +19,65 @@ from oos_drake.analysis.cli import _controller
 from oos_drake.analysis.run import AnalysisOptions, run_analysis
 
 
+def _cpu() -> float:
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
 @pytest.mark.slow
-def test_full_analysis(tmp_path):
+def test_full_analysis_of_the_baseline_controller(tmp_path):
+    from oos_drake.analysis.models import mission_closed_loop, mission_times
+    from oos_drake.lfr import usubs
+
+    controller = _controller(None)
+    load = os.getloadavg()[0]
+    wall, cpu = time.perf_counter(), _cpu()
     summary = run_analysis(
-        _controller(None), tmp_path, AnalysisOptions(progress=False), log=lambda *_: None
+        controller, tmp_path, AnalysisOptions(progress=False), log=lambda *_: None
     )
+    wall, cpu = time.perf_counter() - wall, _cpu() - cpu
+    load = max(load, os.getloadavg()[0])
     m = summary["mission"]
     assert m["configurations"] == 330 and m["nominal_stable_models"] == 330
     assert 0 < m["mu_peak_lower"] <= m["mu_peak_upper"]
     peaks = pd.read_parquet(tmp_path / "stability_peaks.parquet")
+    assert set(peaks["study"]) == {"mission", "docking-7", "docking-8"}
     assert np.all(peaks["mu_lower"] <= peaks["mu_upper"] * (1 + 1e-9))
-    # every certified peak (mission subsets, docking phases): bounds within 5 %, no spike left
     for _, row in peaks.iterrows():
-        assert row["gap [%]"] < 5.0, (row["study"], row["subset"], row["gap [%]"])
-        assert row["spikes_left"] == 0, (row["study"], row["subset"])
+        key = (row["study"], row["subset"])
+        up, lo = row["mu_upper"], row["mu_lower"]
+        # the gap column is the honest one: (largest upper bound anywhere - best lower) / upper
+        np.testing.assert_allclose(row["gap [%]"], 100 * (up - lo) / up, rtol=1e-9, atol=1e-9)
+        assert row["gap [%]"] < 5.0, (key, row["gap [%]"])
+        # no time or work budget cut the resolution short: spikes may only be left where the
+        # D-G bound is converged (its own conservatism) once the direct searches were made
+        assert row["spike_stop"] in ("target met", "converged", "search budget"), key
+        if row["spike_stop"] == "target met":
+            assert row["spikes_left"] == 0 and row["gap [%]"] <= 3.0 + 1e-9, key
+        else:
+            assert row["spikes_converged"] > 0, key
+    sweep = pd.read_parquet(tmp_path / "mu_mission.parquet")
+    for _, row in peaks[peaks["study"] == "mission"].iterrows():
+        sub = sweep[sweep["subset"] == row["subset"]]
+        assert sub["mu_upper"].max() <= row["mu_upper"] * (1 + 1e-9)
+        assert np.all(sub["mu_upper"] < row["mu_lower"] / 0.95)  # every point within 5 %
+    # the certified real-parameter perturbation (named, normalized values in the table) puts a
+    # closed-loop pole on j omega: independent check with usubs, the other blocks nominal
+    real = peaks[(peaks["study"] == "mission") & (peaks["subset"] == "real")].iloc[0]
+    worst = pd.read_parquet(tmp_path / "worst_perturbations.parquet")
+    worst = worst[(worst["study"] == "mission") & (worst["subset"] == "real")]
+    assert set(worst["kind"]) == {"ureal"}
+    values = dict(zip(worst["block"], worst["normalized_real [-]"], strict=True))
+    one = mission_closed_loop(controller, mission_times(330)[[int(real["model"])]]).system
+    poles = np.linalg.eigvals(np.asarray(usubs(one.model(0), values, normalized=True).A))
+    w0 = 2 * np.pi * real["frequency [Hz]"]
+    assert np.min(np.abs(poles - 1j * w0)) < 1e-3 * max(w0, 1.0)
+    assert np.isclose(np.max(np.abs(list(values.values()))), 1 / real["mu_lower"], rtol=1e-6)
     docking = pd.read_parquet(tmp_path / "docking_7.parquet")
     assert docking["model"].nunique() == 300
     assert summary["timings_s"]["total"] > 0
+    # 10 minutes on 2 cores: the CPU work always, the wall time on an unshared machine
+    assert cpu < 2 * 600.0, cpu
+    if load < 2.5:
+        assert wall < 600.0, (wall, load)

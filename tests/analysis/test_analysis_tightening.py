@@ -143,3 +143,99 @@ def test_bad_options_are_refused():
         TightenOptions(target_gap=-0.1)
     with pytest.raises(ValueError, match="chunk_size"):
         SweepOptions(chunk_size=-1)
+
+
+class _FlatRidgePool:
+    """Stand-in for :class:`ModelPool`: every re-solved upper bound lands on a flat ridge.
+
+    Whatever the start and the iterations, the bound of a point is ``ridge`` (its converged
+    D-G value, above ``(1 + gap) L*``: the conservatism of the bound itself); no lower bound.
+    Counts the points it was asked to solve.
+    """
+
+    def __init__(self, ridge):
+        self.ridge = ridge
+        self.solved = 0
+
+    def bounds(self, task):
+        from oos_drake.analysis.workers import PointBounds
+
+        n = task.models.size
+        self.solved += n
+        p = 1 if task.x0 is None else task.x0.shape[1]
+        return PointBounds(np.full(n, self.ridge), np.zeros((n, p)), np.zeros(n), -1, None)
+
+
+PARTS = (np.array([0]), np.array([0]), np.array([[-1, 0]]))  # one real scalar (unused)
+
+
+def _ridge_points(n_models, n_freq, ridge, inflated, rng):
+    model = np.repeat(np.arange(n_models), n_freq)
+    omega = np.tile(np.geomspace(0.1, 10.0, n_freq), n_models)
+    upper = np.full(model.size, ridge)
+    upper[rng.choice(model.size, inflated, replace=False)] = 1.5 * ridge
+    z = np.zeros(model.size, bool)
+    return SubsetPoints(model, omega, upper, np.zeros(model.size), np.zeros((model.size, 1)), z, z)
+
+
+@pytest.mark.parametrize(
+    ("n_models", "max_searches", "stop"), [(50, 6, "search budget"), (3, 8, "converged")]
+)
+def test_a_converged_ridge_stops_the_resolution_quickly(n_models, max_searches, stop):
+    """Points on a ridge 10 % above the exact lower bound, 40 of them inflated stalls.
+
+    Only the stalls (above the ridge) can change the gap of the peak: they are re-solved, the
+    ridge is recognized as converged after one pass of ``converged_iterations``, and the
+    resolution stops with every spike left reported: "converged" when every model with a spike
+    was searched, "search budget" (a budget, flagged) when searches were left to do.
+    """
+    rng = np.random.default_rng(1)
+    n_freq = 1000 // n_models
+    pts = _ridge_points(n_models, n_freq, 1.10, 40, rng)
+    pool = _FlatRidgePool(1.10)
+    calls = []
+
+    def search(requests):
+        calls.extend(requests)
+        return [LowerCertificate(1.0, m, w, np.zeros((1, 1)), "search") for m, w in requests]
+
+    options = TightenOptions(target_gap=0.03, rounds=10, max_searches=max_searches, max_points=100)
+    lower, report = resolve_spikes(pool, pts, PARTS, LowerCertificate(), search, options)
+    assert lower.value == 1.0
+    assert np.isclose(pts.upper.max(), 1.10)  # the stalls were resolved down to the ridge
+    assert report.stop == stop
+    assert report.budget_exhausted == (stop == "search budget")
+    assert report.points_left == int(np.sum(pts.upper > 1.03)) >= n_models * n_freq
+    assert report.converged >= 40
+    # top-down: at most max_points spikes per pass (own + 4 neighbour starts) until the
+    # pass of converged_iterations (the third), plus the refinement midpoints; resolving every
+    # spike in every round would be 1000 x 5 x 10
+    assert pool.solved <= 3 * options.max_points * 5 + 10 * 2 * (1 + options.refine_spikes)
+    searched = [m for m, _ in calls]
+    assert len(set(searched)) == len(searched) == min(max_searches, n_models)
+
+
+def test_budgets_stop_the_resolution_and_say_so():
+    """A zero-second time budget or a tiny work budget stops with the spikes reported."""
+    rng = np.random.default_rng(2)
+
+    def search(requests):
+        return [LowerCertificate(1.0, m, w, np.zeros((1, 1)), "search") for m, w in requests]
+
+    for options, reason in (
+        (TightenOptions(time_budget=1e-9, peak_levels=0), "time budget"),
+        (TightenOptions(max_work=1.0, peak_levels=0), "work budget"),
+    ):
+        pts = _ridge_points(10, 10, 1.10, 20, rng)
+        _, report = resolve_spikes(
+            _FlatRidgePool(1.10), pts, PARTS, LowerCertificate(), search, options
+        )
+        assert report.stop == reason and report.budget_exhausted
+        assert report.points_left == int(np.sum(pts.upper > 1.03)) > 0
+
+
+def test_budget_options_are_checked():
+    with pytest.raises(ValueError, match="time_budget"):
+        TightenOptions(time_budget=0.0)
+    with pytest.raises(ValueError, match="max_points"):
+        TightenOptions(max_points=-1)
