@@ -151,23 +151,16 @@ def _upper_bound(part, structure, iterations, tol, *, continuation=False):
     nb = part.shape[0]
     stride = CONTINUATION_STRIDE
     compiled = mu_kernels.HAVE_NUMBA and mu_upper.USE_COMPILED
+    cold_options = dict(
+        max_iter=iterations, tol=tol, temperatures=UPPER_TEMPERATURES, patience=UPPER_PATIENCE
+    )
     if not continuation or (nb <= stride and not compiled) or nb < 2:
-        return mu_upper_bound(
-            part,
-            structure,
-            max_iter=iterations,
-            tol=tol,
-            temperatures=UPPER_TEMPERATURES,
-            patience=UPPER_PATIENCE,
-        )
+        return mu_upper_bound(part, structure, **cold_options)
     if compiled:  # chain matrix by matrix
         return mu_upper_bound(
             part,
             structure,
-            max_iter=iterations,
-            tol=tol,
-            temperatures=UPPER_TEMPERATURES,
-            patience=UPPER_PATIENCE,
+            **cold_options,
             chain=True,
             chain_temperatures=(CONTINUATION_TEMPERATURE,),
             chain_patience=CONTINUATION_PATIENCE,
@@ -176,14 +169,7 @@ def _upper_bound(part, structure, iterations, tol, *, continuation=False):
     cold = np.arange(0, nb, stride)
     warm = np.setdiff1d(np.arange(nb), cold)
     near = np.clip(np.round(warm / stride).astype(int), 0, cold.size - 1)
-    first = mu_upper_bound(
-        part[cold],
-        structure,
-        max_iter=iterations,
-        tol=tol,
-        temperatures=UPPER_TEMPERATURES,
-        patience=UPPER_PATIENCE,
-    )
+    first = mu_upper_bound(part[cold], structure, **cold_options)
     second = mu_upper_bound(
         part[warm],
         structure,

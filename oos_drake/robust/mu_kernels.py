@@ -73,6 +73,61 @@ WEIGHT_FLOOR = 1e-5
 
 
 @_jit
+def _unpack_layout(lay_i):
+    """The 19 index arrays packed in ``lay_i`` (see :func:`pack_layout`), as views:
+    ``log_par, log_ent, re_par, im_par, lin_ent, lin_row, l_row, l_col, l_ent, r_row, r_col,
+    r_ent, rb_start, rb_size, g_row, g_col, gq_par, gq_pos1, gq_pos2``."""
+    o = lay_i[1:]
+    n_log, n_lin, n_l, n_r, n_rb, n_g, n_gq = o[0], o[1], o[2], o[3], o[4], o[5], o[6]
+    lengths = (
+        n_log,
+        n_log,
+        n_lin,
+        n_lin,
+        n_lin,
+        n_lin,
+        n_l,
+        n_l,
+        n_l,
+        n_r,
+        n_r,
+        n_r,
+        n_rb,
+        n_rb,
+        n_g,
+        n_g,
+        n_gq,
+        n_gq,
+        n_gq,
+    )
+    starts = np.zeros(20, dtype=np.int64)
+    starts[0] = 7
+    for k in range(19):
+        starts[k + 1] = starts[k] + lengths[k]
+    return (
+        o[starts[0] : starts[1]],
+        o[starts[1] : starts[2]],
+        o[starts[2] : starts[3]],
+        o[starts[3] : starts[4]],
+        o[starts[4] : starts[5]],
+        o[starts[5] : starts[6]],
+        o[starts[6] : starts[7]],
+        o[starts[7] : starts[8]],
+        o[starts[8] : starts[9]],
+        o[starts[9] : starts[10]],
+        o[starts[10] : starts[11]],
+        o[starts[11] : starts[12]],
+        o[starts[12] : starts[13]],
+        o[starts[13] : starts[14]],
+        o[starts[14] : starts[15]],
+        o[starts[15] : starts[16]],
+        o[starts[16] : starts[17]],
+        o[starts[17] : starts[18]],
+        o[starts[18] : starts[19]],
+    )
+
+
+@_jit
 def _scalings(x, lay_i, lay_c, Tl, Tri, G):
     """Fill ``T_l`` (c x c), ``T_r^{-1}`` (r x r) and ``G`` (r x c) from the parameters ``x``.
 
@@ -80,47 +135,28 @@ def _scalings(x, lay_i, lay_c, Tl, Tri, G):
     coefficients of the ``G`` parameters. Returns the entry values ``E`` of ``T``.
     """
     n_ent = lay_i[0]
-    o = lay_i[1:]
-    # offsets into o (see pack_layout): counts then arrays
-    n_log, n_lin, n_l, n_r, n_rb, n_g, n_gq = o[0], o[1], o[2], o[3], o[4], o[5], o[6]
-    p = 7
-    log_par = o[p : p + n_log]
-    p += n_log
-    log_ent = o[p : p + n_log]
-    p += n_log
-    re_par = o[p : p + n_lin]
-    p += n_lin
-    im_par = o[p : p + n_lin]
-    p += n_lin
-    lin_ent = o[p : p + n_lin]
-    p += n_lin
-    lin_row = o[p : p + n_lin]
-    p += n_lin
-    l_row = o[p : p + n_l]
-    p += n_l
-    l_col = o[p : p + n_l]
-    p += n_l
-    l_ent = o[p : p + n_l]
-    p += n_l
-    r_row = o[p : p + n_r]
-    p += n_r
-    r_col = o[p : p + n_r]
-    p += n_r
-    r_ent = o[p : p + n_r]
-    p += n_r
-    rb_start = o[p : p + n_rb]
-    p += n_rb
-    rb_size = o[p : p + n_rb]
-    p += n_rb
-    g_row = o[p : p + n_g]
-    p += n_g
-    g_col = o[p : p + n_g]
-    p += n_g
-    gq_par = o[p : p + n_gq]
-    p += n_gq
-    gq_pos1 = o[p : p + n_gq]
-    p += n_gq
-    gq_pos2 = o[p : p + n_gq]
+    n_log, n_lin, n_l, n_r, n_rb, n_g, n_gq = lay_i[1:8]
+    (
+        log_par,
+        log_ent,
+        re_par,
+        im_par,
+        lin_ent,
+        lin_row,
+        l_row,
+        l_col,
+        l_ent,
+        r_row,
+        r_col,
+        r_ent,
+        rb_start,
+        rb_size,
+        g_row,
+        g_col,
+        gq_par,
+        gq_pos1,
+        gq_pos2,
+    ) = _unpack_layout(lay_i)
     E = np.zeros(n_ent, dtype=np.complex128)
     for k in range(n_log):
         E[log_ent[k]] = np.exp(min(max(x[log_par[k]], -60.0), 60.0))
@@ -373,42 +409,28 @@ def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax,
     """
     nb, c, r = M.shape
     n_ent = lay_i[0]
-    o = lay_i[1:]
-    n_log, n_lin, n_l, n_r, n_rb, n_g, n_gq = o[0], o[1], o[2], o[3], o[4], o[5], o[6]
-    p = 7
-    log_par = o[p : p + n_log]
-    p += n_log
-    log_ent = o[p : p + n_log]
-    p += n_log
-    re_par = o[p : p + n_lin]
-    p += n_lin
-    im_par = o[p : p + n_lin]
-    p += n_lin
-    lin_ent = o[p : p + n_lin]
-    p += n_lin
-    lin_row = o[p : p + n_lin]
-    p += n_lin
-    l_row = o[p : p + n_l]
-    p += n_l
-    l_col = o[p : p + n_l]
-    p += n_l
-    l_ent = o[p : p + n_l]
-    p += n_l
-    r_row = o[p : p + n_r]
-    p += n_r
-    r_col = o[p : p + n_r]
-    p += n_r
-    r_ent = o[p : p + n_r]
-    p += n_r + 2 * n_rb
-    g_row = o[p : p + n_g]
-    p += n_g
-    g_col = o[p : p + n_g]
-    p += n_g
-    gq_par = o[p : p + n_gq]
-    p += n_gq
-    gq_pos1 = o[p : p + n_gq]
-    p += n_gq
-    gq_pos2 = o[p : p + n_gq]
+    n_log, n_lin, n_l, n_r, n_rb, n_g, n_gq = lay_i[1:8]
+    (
+        log_par,
+        log_ent,
+        re_par,
+        im_par,
+        lin_ent,
+        lin_row,
+        l_row,
+        l_col,
+        l_ent,
+        r_row,
+        r_col,
+        r_ent,
+        _,
+        _,
+        g_row,
+        g_col,
+        gq_par,
+        gq_pos1,
+        gq_pos2,
+    ) = _unpack_layout(lay_i)
     g_coef1 = lay_c[:n_gq]
     g_coef2 = lay_c[n_gq:]
     cb_start, cb_size = cb[0], cb[1]
