@@ -238,7 +238,8 @@ class TightenReport:
 
     @property
     def budget_exhausted(self) -> bool:
-        """True when a budget (work, time, rounds) stopped the resolution with spikes left."""
+        """True when a budget (work, time, rounds, searches) stopped the resolution with spikes
+        left."""
         budgets = ("rounds", "work budget", "time budget", "search budget")
         return self.stop in budgets and self.points_left > 0
 

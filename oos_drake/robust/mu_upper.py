@@ -305,7 +305,6 @@ class _Objective:
         top = np.empty((nb, self.s.n_rows), dtype=complex)
         x = np.ascontiguousarray(x, dtype=float)
         t = np.ascontiguousarray(np.broadcast_to(t, (nb,)), dtype=float)
-        M = np.ascontiguousarray(M)
         with single_threaded_blas():  # threads on 26 x 26 LAPACK calls: 100x slower
             mu_kernels.dg_objective(M, x, t, need_grad, *self.packed, f, grad, lmax, top)
         if not need_grad:
