@@ -20,6 +20,7 @@ committed files are stale.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -238,12 +239,33 @@ def write_sdf(directory: str | Path = SDF_DIRECTORY, scenario=None) -> list[Path
     return paths
 
 
+#: Relative tolerance on the numbers of a committed SDF file: the generated values come out of
+#: eigen-decompositions and products whose last digits depend on the BLAS/LAPACK build.
+SDF_RTOL = 1e-9
+#: Absolute floor of that comparison [SI units]: values that are zero up to round-off.
+SDF_ATOL = 1e-13
+
+_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+
+
+def same_sdf_text(committed: str, generated: str, rtol: float = SDF_RTOL) -> bool:
+    """True if the texts are equal but for numbers that agree to ``rtol`` (relative, with an
+    absolute floor of :data:`SDF_ATOL` for values that are zero up to round-off)."""
+    parts_a, parts_b = _NUMBER.split(committed), _NUMBER.split(generated)
+    if parts_a != parts_b:
+        return False
+    a = np.array([float(v) for v in _NUMBER.findall(committed)])
+    b = np.array([float(v) for v in _NUMBER.findall(generated)])
+    return bool(np.all(np.abs(a - b) <= rtol * np.abs(b) + SDF_ATOL))
+
+
 def stale_sdf_files(directory: str | Path = SDF_DIRECTORY, scenario=None) -> list[str]:
-    """Names of files in ``directory`` that are missing or differ from the generated text."""
+    """Names of files in ``directory`` that are missing or differ from the generated text
+    (numbers compared to :data:`SDF_RTOL`: see :func:`same_sdf_text`)."""
     directory = Path(directory)
     stale = []
     for name, text in generate_sdf_texts(scenario).items():
         path = directory / name
-        if not path.is_file() or path.read_text() != text:
+        if not path.is_file() or not same_sdf_text(path.read_text(), text):
             stale.append(name)
     return stale

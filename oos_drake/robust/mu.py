@@ -8,13 +8,14 @@ r"""Structured singular value bounds: :func:`mussv` (MATLAB ``mussv`` semantics,
 with ``mu = 0`` when no structured ``Delta`` makes ``I - M Delta`` singular.
 
 Cost (paper-sized problem: 26 x 26, 16 blocks, one core, ``benchmarks/bench_mussv.py``): the
-upper bound takes about 54 Hermitian eigenvalue problems per matrix (two smoothing stages,
-per-matrix stopping; each about 40-50 us in the compiled kernels of :mod:`mu_kernels`, most of
-it LAPACK's tridiagonalization) and lands within ~0.2 % (at most ~0.7 %) of the fully converged
-D-G bound; with ``continuation=True`` (frequency responses) about 22-30. The lower bound runs
-two power-iteration starts per matrix and three more only where the gap still exceeds 2 %,
-polishes the most promising start of each matrix, and certifies each ``delta`` with a residual
-vector (an SVD only when that is inconclusive).
+upper bound takes about 53 Hermitian eigenvalue problems per matrix (two smoothing stages,
+per-matrix stopping) and lands within ~0.2 % (at most ~0.7 %) of the fully converged D-G
+bound; with ``continuation=True`` (frequency responses) about 22-30. Batches of four or more
+matrices are optimized eight at a time in SIMD lanes (:mod:`mu_lanes`, about 20 us per matrix
+and evaluation); smaller ones matrix by matrix (:mod:`mu_kernels`, about 40 us). The lower
+bound runs two power-iteration starts per matrix and three more only where the gap still
+exceeds 2 %, polishes the most promising start of each matrix, and certifies each ``delta``
+with a residual vector (an SVD only when that is inconclusive).
 
 Example
 -------

@@ -8,10 +8,17 @@ the batched fancy-indexing temporaries:
 * the scalings are block diagonal with blocks of size <= 3: ``X = M T_r^{-1}``,
   ``Mh = T_l X`` and ``Y X = T_r^{-*} G X`` are formed block by block (``O(n^2)``), and
   ``H = Mh^* Mh + j (Y X - (Y X)^*)`` costs one dense product;
-* the eigen-problem uses LAPACK directly (scipy's ``cython_lapack``): Householder
-  tridiagonalization (``zhetrd``), all eigenvalues by ``dsterf`` (``O(n^2)``) and eigenvectors
-  only for the few eigenvalues that carry the smoothed maximum (``dstein`` + ``zunmtr``). For
-  26 x 26 this is about 30-36 us instead of 60 us for a full ``eigh``.
+* ``H`` is formed as a lower triangle with real and imaginary parts apart, and reduced to a
+  real tridiagonal by our own Householder loop (the arithmetic of LAPACK's ``zhetd2``; split
+  parts vectorize, LAPACK's level-2 calls on 26 x 26 are dominated by call overheads); all
+  eigenvalues by LAPACK's ``dsterf`` (scipy's ``cython_lapack``), eigenvectors only for the few
+  eigenvalues that carry the smoothed maximum (``dstein`` on the tridiagonal, then our own
+  back-transformation). About 36 us per 26 x 26 evaluation (LAPACK ``zhetrd``/``zunmtr``:
+  40 us; a full ``eigh``: 60 us).
+
+Batches of matrices are better served by :mod:`oos_drake.robust.mu_lanes` (eight matrices
+per evaluation, in SIMD lanes); these per-matrix kernels remain for small batches, the final
+evaluations of ``mu_upper`` and the fallback of a lane.
 
 If the eigenvector step fails (``dstein`` not converged) the kernel falls back to a full
 ``numpy.linalg.eigh`` for that matrix. Whatever the kernel returns only steers the optimizer:
@@ -37,7 +44,7 @@ try:  # numba is optional: without it mu_upper uses its numpy objective
 except ImportError:  # pragma: no cover - exercised only without numba
     HAVE_NUMBA = False
 
-_LAPACK = ("zhetrd", "dsterf", "dstein", "zunmtr", "zheevd")
+_LAPACK = ("dsterf", "dstein", "zheevd")
 _BLAS = ("zherk", "zgemm")
 
 if HAVE_NUMBA:
@@ -53,10 +60,8 @@ if HAVE_NUMBA:
     _zheevd = types.ExternalFunction("oosd_zheevd", types.void(*([_P] * 13)))
     _zherk = types.ExternalFunction("oosd_zherk", types.void(*([_P] * 10)))
     _zgemm = types.ExternalFunction("oosd_zgemm", types.void(*([_P] * 13)))
-    _zhetrd = types.ExternalFunction("oosd_zhetrd", types.void(*([_P] * 10)))
     _dsterf = types.ExternalFunction("oosd_dsterf", types.void(*([_P] * 4)))
     _dstein = types.ExternalFunction("oosd_dstein", types.void(*([_P] * 13)))
-    _zunmtr = types.ExternalFunction("oosd_zunmtr", types.void(*([_P] * 13)))
     _jit = numba.njit(cache=True, nogil=True, fastmath=False)
     # reassociation lets LLVM vectorize the real dot products of the split complex products
     _jit_fast = numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
@@ -211,105 +216,6 @@ def _lower_tri_times(Tl, X, cb_start, cb_size, out):
 
 
 @_jit
-def _eig_top(H, t, K_max, w_all, Vk, work, d, e, tau, ev, wsel, zr, rwork, iwork, ifail, ints):
-    """Eigenvalues of Hermitian ``H`` (overwritten) and eigenvectors of the top ones.
-
-    Returns ``(K, ok)``: ``Vk[:, :K]`` holds the eigenvectors of the ``K`` largest eigenvalues
-    (ascending, ``w_all`` all eigenvalues ascending) whose smoothed-max weight at temperature
-    ``t`` exceeds :data:`WEIGHT_FLOOR`; ``K = 0`` means eigenvalues only were requested
-    (``K_max = 0``). ``ok`` is False when LAPACK failed.
-    """
-    n = H.shape[0]
-    # ints: [n, lwork, info, K, side/uplo/trans chars as bytes]
-    ints[0] = n
-    ints[2] = 0
-    # LAPACK reads the C-ordered H as its transpose, conj(H): eigenvalues are the same and the
-    # eigenvectors come back conjugated (undone below)
-    _zhetrd(
-        ints[4:5].ctypes,
-        ints[0:1].ctypes,
-        H.ctypes,
-        ints[0:1].ctypes,
-        d.ctypes,
-        e.ctypes,
-        tau.ctypes,
-        work.ctypes,
-        ints[1:2].ctypes,
-        ints[2:3].ctypes,
-    )
-    if ints[2] != 0:
-        return 0, False
-    w_all[:] = d
-    ev[:] = e
-    _dsterf(ints[0:1].ctypes, w_all.ctypes, ev.ctypes, ints[2:3].ctypes)
-    if ints[2] != 0:
-        return 0, False
-    if K_max == 0:
-        return 0, True
-    lmax = w_all[n - 1]
-    K = 0
-    ssum = 0.0
-    for i in range(n):
-        ssum += np.exp(t * (w_all[i] - lmax))
-    for i in range(n - 1, -1, -1):
-        if np.exp(t * (w_all[i] - lmax)) / ssum > WEIGHT_FLOOR and K < K_max:
-            K += 1
-        else:
-            break
-    for k in range(K):
-        wsel[k] = w_all[n - K + k]
-    ints[3] = K
-    ints[5] = 1  # iblock entries (all in one block)
-    iblock = iwork[n : n + K]
-    iblock[:] = 1
-    isplit = iwork[2 * n : 3 * n]
-    isplit[:] = 0
-    isplit[0] = n
-    _dstein(
-        ints[0:1].ctypes,
-        d.ctypes,
-        e.ctypes,
-        ints[3:4].ctypes,
-        wsel.ctypes,
-        iblock.ctypes,
-        isplit.ctypes,
-        zr.ctypes,
-        ints[0:1].ctypes,
-        rwork.ctypes,
-        iwork.ctypes,
-        ifail.ctypes,
-        ints[2:3].ctypes,
-    )
-    if ints[2] != 0:
-        return K, False
-    for k in range(K):
-        for i in range(n):
-            Vk[k, i] = zr[k, i]
-    # apply Q of the tridiagonalization: the K vectors are Fortran columns = C rows of Vk
-    _zunmtr(
-        ints[6:7].ctypes,
-        ints[4:5].ctypes,
-        ints[7:8].ctypes,
-        ints[0:1].ctypes,
-        ints[3:4].ctypes,
-        H.ctypes,
-        ints[0:1].ctypes,
-        tau.ctypes,
-        Vk.ctypes,
-        ints[0:1].ctypes,
-        work.ctypes,
-        ints[1:2].ctypes,
-        ints[2:3].ctypes,
-    )
-    if ints[2] != 0:
-        return K, False
-    for k in range(K):
-        for i in range(n):
-            Vk[k, i] = np.conj(Vk[k, i])
-    return K, True
-
-
-@_jit
 def _form_h(Mh, Tri, GX, realb, H, ints, reals):
     """``H = Mh^* Mh + j (Y X - (Y X)^*)`` with ``Y X = T_r^{-*} G X`` (``GX`` = ``G X``).
 
@@ -344,10 +250,251 @@ def _form_h(Mh, Tri, GX, realb, H, ints, reals):
                 H[k, ro + a] -= 1j * np.conj(yx[k])
 
 
+@_jit_fast
+def _form_h_split(Mh, Tri, GX, realb, Hr, Hi):
+    """Lower triangle of ``H = Mh^* Mh + j (Y X - (Y X)^*)`` (``Y X = T_r^{-*} G X``, ``GX`` =
+    ``G X``) with real and imaginary parts apart (``Hr``, ``Hi``; row ``i``: columns ``<= i``):
+    the input of :func:`_tridiag_split`. Same value as :func:`_form_h`."""
+    c, r = Mh.shape
+    # column i of Mh as a contiguous row of its transpose, real and imaginary parts apart:
+    # H[i, j] = sum_q conj(Mh[q, i]) Mh[q, j] is then a dot product that vectorizes
+    tr_ = np.empty((r, c))
+    ti_ = np.empty((r, c))
+    for q in range(c):
+        for i in range(r):
+            tr_[i, q] = Mh[q, i].real
+            ti_[i, q] = Mh[q, i].imag
+    for i in range(r):
+        ar = tr_[i]
+        ai = ti_[i]
+        for j in range(i + 1):
+            br = tr_[j]
+            bi = ti_[j]
+            sr = 0.0
+            si = 0.0
+            for q in range(c):
+                sr += ar[q] * br[q] + ai[q] * bi[q]
+                si += ar[q] * bi[q] - ai[q] * br[q]
+            Hr[i, j] = sr
+            Hi[i, j] = si
+    for q in range(realb.shape[1]):
+        ro, m = realb[0, q], realb[2, q]
+        for a in range(m):  # row i = ro + a of Y X; (T_r^{-*})[i, ro + bb] = conj(Tri[ro + bb, i])
+            i = ro + a
+            for k in range(r):
+                yr = 0.0
+                yi = 0.0
+                for bb in range(a, m):
+                    tr = Tri[ro + bb, i].real
+                    ti = -Tri[ro + bb, i].imag
+                    gr = GX[ro + bb, k].real
+                    gi = GX[ro + bb, k].imag
+                    yr += tr * gr - ti * gi
+                    yi += tr * gi + ti * gr
+                if k <= i:  # H[i, k] += j yx[k]
+                    Hr[i, k] -= yi
+                    Hi[i, k] += yr
+                if k >= i:  # H[k, i] -= j conj(yx[k])
+                    Hr[k, i] -= yi
+                    Hi[k, i] -= yr
+
+
+@_jit_fast
+def _tridiag_split(Ar, Ai, d, e, taur, taui, pr, pi, vr, vi):
+    """Householder tridiagonalization of a Hermitian matrix given by the lower triangle of
+    ``Ar + j Ai`` (the arithmetic of LAPACK's ``zhetd2`` with ``uplo = 'L'``, in C order and
+    with real and imaginary parts apart so that the loops vectorize).
+
+    On return ``d``, ``e`` hold the real tridiagonal (``e[n-1] = 0``); the reflector
+    ``H_k = I - tau_k v_k v_k^*`` (``v_k[k+1] = 1``) has its other entries below the subdiagonal
+    of column ``k`` and ``tau_k`` in ``taur[k] + j taui[k]``: ``A = Q T Q^*``,
+    ``Q = H_0 H_1 ... H_{n-2}``. ``pr, pi, vr, vi``: work vectors of length ``n``.
+    """
+    n = Ar.shape[0]
+    for k in range(n - 1):
+        o = k + 1
+        m = n - o
+        ar = Ar[o, k]
+        ai = Ai[o, k]
+        xn = 0.0
+        for i in range(o + 1, n):
+            xn += Ar[i, k] * Ar[i, k] + Ai[i, k] * Ai[i, k]
+        d[k] = Ar[k, k]
+        if xn == 0.0 and ai == 0.0:  # nothing to annihilate: H_k = I
+            taur[k] = 0.0
+            taui[k] = 0.0
+            e[k] = ar
+            for i in range(o + 1, n):
+                Ar[i, k] = 0.0
+                Ai[i, k] = 0.0
+            continue
+        beta = -np.copysign(np.sqrt(ar * ar + ai * ai + xn), ar)
+        tr = (beta - ar) / beta
+        ti = -ai / beta
+        taur[k] = tr
+        taui[k] = ti
+        dr = ar - beta
+        den = dr * dr + ai * ai
+        sr = dr / den  # 1 / (alpha - beta)
+        si = -ai / den
+        vr[0] = 1.0
+        vi[0] = 0.0
+        for i in range(1, m):
+            xr = Ar[o + i, k]
+            xi = Ai[o + i, k]
+            a_ = xr * sr - xi * si
+            b_ = xr * si + xi * sr
+            vr[i] = a_
+            vi[i] = b_
+            Ar[o + i, k] = a_
+            Ai[o + i, k] = b_
+        e[k] = beta
+        # p = A22 v from the lower triangle (row i: a dot product and an axpy)
+        for i in range(m):
+            pr[i] = 0.0
+            pi[i] = 0.0
+        for i in range(m):
+            rowr = Ar[o + i]
+            rowi = Ai[o + i]
+            v_r = vr[i]
+            v_i = vi[i]
+            s_r = rowr[o + i] * v_r
+            s_i = rowr[o + i] * v_i
+            for j in range(i):
+                a_r = rowr[o + j]
+                a_i = rowi[o + j]
+                s_r += a_r * vr[j] - a_i * vi[j]
+                s_i += a_r * vi[j] + a_i * vr[j]
+                pr[j] += a_r * v_r + a_i * v_i
+                pi[j] += a_r * v_i - a_i * v_r
+            pr[i] += s_r
+            pi[i] += s_i
+        # p = tau p; w = p - tau (p^* v) v / 2
+        hr = 0.0
+        hi = 0.0
+        for i in range(m):
+            a_ = tr * pr[i] - ti * pi[i]
+            b_ = tr * pi[i] + ti * pr[i]
+            pr[i] = a_
+            pi[i] = b_
+            hr += a_ * vr[i] + b_ * vi[i]
+            hi += a_ * vi[i] - b_ * vr[i]
+        al_r = -0.5 * (tr * hr - ti * hi)
+        al_i = -0.5 * (tr * hi + ti * hr)
+        for i in range(m):
+            pr[i] += al_r * vr[i] - al_i * vi[i]
+            pi[i] += al_r * vi[i] + al_i * vr[i]
+        # A22 -= v w^* + w v^* (lower triangle)
+        for i in range(m):
+            v_r = vr[i]
+            v_i = vi[i]
+            w_r = pr[i]
+            w_i = pi[i]
+            rowr = Ar[o + i]
+            rowi = Ai[o + i]
+            for j in range(i + 1):
+                rowr[o + j] -= v_r * pr[j] + v_i * pi[j] + w_r * vr[j] + w_i * vi[j]
+                rowi[o + j] -= v_i * pr[j] - v_r * pi[j] + w_i * vr[j] - w_r * vi[j]
+    d[n - 1] = Ar[n - 1, n - 1]
+    e[n - 1] = 0.0
+
+
+@_jit_fast
+def _backtransform_split(Ar, Ai, taur, taui, Z, K, Vk):
+    """``Vk[q] = Q Z[q]`` for the first ``K`` rows of ``Z`` (real eigenvectors of the
+    tridiagonal, length ``n``), with ``Q`` the reflectors left by :func:`_tridiag_split`."""
+    n = Ar.shape[0]
+    yr = np.empty(n)
+    yi = np.empty(n)
+    for q in range(K):
+        for i in range(n):
+            yr[i] = Z[q, i]
+            yi[i] = 0.0
+        for k in range(n - 2, -1, -1):  # y = H_0 (H_1 (... H_{n-2} z))
+            tr = taur[k]
+            ti = taui[k]
+            if tr == 0.0 and ti == 0.0:
+                continue
+            o = k + 1
+            sr = yr[o]  # s = v^* y
+            si = yi[o]
+            for i in range(o + 1, n):
+                a_r = Ar[i, k]
+                a_i = Ai[i, k]
+                sr += a_r * yr[i] + a_i * yi[i]
+                si += a_r * yi[i] - a_i * yr[i]
+            cr = tr * sr - ti * si  # y -= tau s v
+            ci = tr * si + ti * sr
+            yr[o] -= cr
+            yi[o] -= ci
+            for i in range(o + 1, n):
+                a_r = Ar[i, k]
+                a_i = Ai[i, k]
+                yr[i] -= cr * a_r - ci * a_i
+                yi[i] -= cr * a_i + ci * a_r
+        for i in range(n):
+            Vk[q, i] = yr[i] + 1j * yi[i]
+
+
+@_jit
+def _eig_top_split(
+    Hr, Hi, t, K_max, w_all, Vk, d, e, taur, taui, pr, pi, vr, vi, ev, wsel, zr, rwork,
+    iwork, ifail, ints,
+):  # fmt: skip
+    """Eigenvalues of the Hermitian matrix in the split lower triangle of
+    :func:`_form_h_split` (overwritten) and eigenvectors of the top ones.
+
+    Own tridiagonalization (:func:`_tridiag_split`) and back-transformation, LAPACK's
+    ``dsterf`` (all eigenvalues, into ``w_all``, ascending) and ``dstein`` (eigenvectors of the
+    tridiagonal). Returns ``(K, ok)``: ``Vk[:K]`` holds the eigenvectors of the ``K`` largest
+    eigenvalues (ascending) whose smoothed-max weight at temperature ``t`` exceeds
+    :data:`WEIGHT_FLOOR` (``K = 0`` when ``K_max = 0``: eigenvalues only); ``ok`` is False
+    when LAPACK failed.
+    """
+    n = Hr.shape[0]
+    _tridiag_split(Hr, Hi, d, e, taur, taui, pr, pi, vr, vi)
+    ints[0] = n
+    ints[2] = 0
+    w_all[:] = d
+    ev[:] = e
+    _dsterf(ints[0:1].ctypes, w_all.ctypes, ev.ctypes, ints[2:3].ctypes)
+    if ints[2] != 0:
+        return 0, False
+    if K_max == 0:
+        return 0, True
+    lmax = w_all[n - 1]
+    K = 0
+    ssum = 0.0
+    for i in range(n):
+        ssum += np.exp(t * (w_all[i] - lmax))
+    for i in range(n - 1, -1, -1):
+        if np.exp(t * (w_all[i] - lmax)) / ssum > WEIGHT_FLOOR and K < K_max:
+            K += 1
+        else:
+            break
+    for k in range(K):
+        wsel[k] = w_all[n - K + k]
+    ints[3] = K
+    iblock = iwork[n : n + K]
+    iblock[:] = 1
+    isplit = iwork[2 * n : 3 * n]
+    isplit[:] = 0
+    isplit[0] = n
+    _dstein(
+        ints[0:1].ctypes, d.ctypes, e.ctypes, ints[3:4].ctypes, wsel.ctypes, iblock.ctypes,
+        isplit.ctypes, zr.ctypes, ints[0:1].ctypes, rwork.ctypes, iwork.ctypes, ifail.ctypes,
+        ints[2:3].ctypes,
+    )  # fmt: skip
+    if ints[2] != 0:
+        return K, False
+    _backtransform_split(Hr, Hi, taur, taui, zr, K, Vk)
+    return K, True
+
+
 @_jit
 def _eig_full(H, w_all, Vk, K_max, t, ints):
     """All eigenvalues and the top eigenvectors (weight > :data:`WEIGHT_FLOOR`) by ``zheevd``
-    (the fallback of :func:`_eig_top`). Returns ``(K, ok)``."""
+    (the fallback of :func:`_eig_top_split`). Returns ``(K, ok)``."""
     n = H.shape[0]
     lwork = 2 * n + n * n
     lrwork = 1 + 5 * n + 2 * n * n
@@ -443,12 +590,9 @@ def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax,
     Mh = np.zeros((c, r), dtype=np.complex128)
     GX = np.zeros((r, r), dtype=np.complex128)
     H = np.zeros((r, r), dtype=np.complex128)
-    lwork = 64 * n
-    work = np.zeros(lwork, dtype=np.complex128)
     d = np.zeros(n)
     e = np.zeros(n)
     ev = np.zeros(n)
-    tau = np.zeros(n, dtype=np.complex128)
     w_all = np.zeros(n)
     K_max = n
     Vk = np.zeros((K_max, n), dtype=np.complex128)
@@ -458,10 +602,17 @@ def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax,
     iwork = np.zeros(3 * n, dtype=np.int32)
     ifail = np.zeros(n, dtype=np.int32)
     ints = np.zeros(8, dtype=np.int32)
-    ints[1] = lwork
     ints[4] = ord("L")
     ints[6] = ord("L")
     ints[7] = ord("N")
+    Hr = np.zeros((r, r))
+    Hi = np.zeros((r, r))
+    taur = np.zeros(n)
+    taui = np.zeros(n)
+    pr = np.zeros(n)
+    pi = np.zeros(n)
+    vr = np.zeros(n)
+    vi = np.zeros(n)
     gT = np.zeros(n_ent, dtype=np.complex128)
     reals = np.array([1.0, 0.0])
     creals = np.array([1.0 + 0.0j, 0.0j])
@@ -490,11 +641,11 @@ def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax,
                     gab = G[ro + a, co + bb]
                     for k in range(r):
                         GX[ro + a, k] += gab * X[co + bb, k]
-        _form_h(Mh, Tri, GX, realb, H, ints, reals)
+        _form_h_split(Mh, Tri, GX, realb, Hr, Hi)
         tb = t[b]
-        K, ok = _eig_top(
-            H, tb, K_max if need_grad else 0, w_all, Vk, work, d, e, tau, ev, wsel, zr,
-            rwork, iwork, ifail, ints,
+        K, ok = _eig_top_split(
+            Hr, Hi, tb, K_max if need_grad else 0, w_all, Vk, d, e, taur, taui, pr, pi, vr,
+            vi, ev, wsel, zr, rwork, iwork, ifail, ints,
         )  # fmt: skip
         if not ok:  # rebuild H (overwritten) and use a full eigendecomposition
             fallbacks += 1
@@ -1133,8 +1284,9 @@ def warm_up() -> float:
     ``make`` calls it after installing, so that the one-time compilation (20-40 s on a fresh
     clone) is paid at setup, not inside the first analysis or inside several worker processes
     at once. It runs :func:`oos_drake.robust.mussv` on small matrices with the paper's block
-    structure (repeated real, full complex and complex scalar blocks), cold and with
-    continuation, which reaches every compiled path.
+    structure (repeated real, full complex and complex scalar blocks), on 3 and on 9 matrices
+    (the per-matrix and the lane optimizer), cold and with continuation, which reaches every
+    compiled path.
     """
     import time
 
@@ -1143,9 +1295,10 @@ def warm_up() -> float:
     start = time.perf_counter()
     blk = [[-3, 0], [-2, 0], [3, 3], [1, 0], [1, 0]]
     rng = np.random.default_rng(0)
-    M = rng.standard_normal((3, 10, 10)) + 1j * rng.standard_normal((3, 10, 10))
-    mussv(M, blk)
-    mussv(M, blk, continuation=True)
+    M = rng.standard_normal((9, 10, 10)) + 1j * rng.standard_normal((9, 10, 10))
+    for part in (M[:3], M):  # matrix by matrix (small batches) and in SIMD lanes (mu_lanes)
+        mussv(part, blk)
+        mussv(part, blk, continuation=True)
     for only in ([[-3, 0], [-2, 0], [-5, 0]], [[3, 3], [1, 0], [6, 0]]):  # real only, complex only
         mussv(M, only)
     return time.perf_counter() - start

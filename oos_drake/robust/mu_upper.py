@@ -43,7 +43,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from oos_drake.blas import single_threaded_blas
-from oos_drake.robust import mu_kernels
+from oos_drake.robust import mu_kernels, mu_lanes
 from oos_drake.robust.blocks import REAL, BlockStructure
 from oos_drake.robust.memory import reuse_freed_memory
 
@@ -54,6 +54,12 @@ CHUNK = 512
 #: Use the compiled kernels (:mod:`mu_kernels`) when numba is available; False forces the
 #: numpy implementation (same algorithm, used for cross-checks).
 USE_COMPILED = True
+
+#: Run the compiled optimizer eight matrices at a time (:mod:`mu_lanes`, 2.3x faster per
+#: matrix on the paper-sized benchmark) for batches of at least :data:`LANES_MIN_BATCH`
+#: matrices; smaller batches, where most lanes would idle, run matrix by matrix.
+USE_LANES = True
+LANES_MIN_BATCH = 4
 
 
 @dataclass(frozen=True)
@@ -90,6 +96,7 @@ class _Layout:
 
 _LAYOUTS: dict = {}  # BLK -> _Layout
 _PACKED: dict = {}  # BLK -> (_Layout, packed arrays of mu_kernels.pack_layout)
+_LANE_ROWS: dict = {}  # BLK -> row maps of mu_lanes.lane_layout
 
 
 def _layout(structure: BlockStructure) -> _Layout:
@@ -294,6 +301,16 @@ class _Objective:
                     _PACKED.clear()
                 _PACKED[key] = (layout, mu_kernels.pack_layout(layout, self.c_groups))
             self.packed = _PACKED[key][1]
+
+    @property
+    def lane_rows(self):
+        """Row maps of the lane kernels (:func:`mu_lanes.lane_layout`), cached per BLK."""
+        key = (self.s.blk.shape, self.s.blk.tobytes())
+        if key not in _LANE_ROWS:
+            if len(_LANE_ROWS) > 64:
+                _LANE_ROWS.clear()
+            _LANE_ROWS[key] = mu_lanes.lane_layout(self.packed, self.s)
+        return _LANE_ROWS[key]
 
     def _compiled(self, x, idx, t, need_grad):
         """The same evaluation by the compiled kernel (:mod:`mu_kernels`)."""
@@ -588,7 +605,13 @@ def mu_upper_bound(
     obj = _Objective(Mn, structure, layout)
     x = _osborne_init(Mn, structure, layout)
     allidx = np.arange(nb)
-    if max_iter > 0 or x0 is not None:
+    p = layout.n_params
+    lanes = (
+        obj.compiled and USE_LANES and p > 0 and max_iter > 0 and nb >= LANES_MIN_BATCH
+    )
+    if lanes and x0 is None:  # the lane optimizer evaluates the start itself
+        lmax0 = np.full(nb, np.inf)
+    elif max_iter > 0 or x0 is not None:
         _, _, lmax0, _ = obj(x, allidx, np.ones(nb), need_grad=False)
     else:  # balancing alone: the final evaluation below gives the value
         lmax0 = np.full(nb, np.inf)
@@ -599,9 +622,34 @@ def mu_upper_bound(
         x[use], lmax0[use] = xw[use], lw[use]
     best_l = lmax0.copy()
     best_x = x.copy()
-    p = layout.n_params
     iters_done = 0
-    if p > 0 and max_iter > 0 and obj.compiled:  # the same optimizer, compiled per matrix
+    if lanes:  # the same optimizer, compiled, eight matrices in lock-step (mu_lanes)
+        its = np.zeros(nb, dtype=np.int64)
+        n_evals = np.zeros(nb, dtype=np.int64)
+        rows = obj.lane_rows
+        with single_threaded_blas(), mu_lanes.compile_with_slp():
+            mu_lanes.dg_minimize_lanes(
+                obj.M,
+                np.ascontiguousarray(x),
+                np.asarray(temperatures, dtype=float),
+                int(max_iter),
+                tols,
+                int(patience),
+                int(memory),
+                layout.log_par.astype(np.int64),
+                *obj.packed,
+                *rows,
+                best_x,
+                best_l,
+                its,
+                n_evals,
+                bool(chain),
+                np.asarray(chain_temperatures, dtype=float),
+                int(chain_patience),
+            )
+        iters_done = int(its.max(initial=0))
+        obj.count += n_evals
+    elif p > 0 and max_iter > 0 and obj.compiled:  # the same optimizer, compiled per matrix
         its = np.zeros(nb, dtype=np.int64)
         n_evals = np.zeros(nb, dtype=np.int64)
         with single_threaded_blas():  # threads on 26 x 26 LAPACK calls: 100x slower

@@ -1,0 +1,1129 @@
+r"""The D-G upper bound optimizer, compiled, eight matrices in lock-step (one per SIMD lane).
+
+:func:`dg_minimize_lanes` runs the algorithm of :func:`mu_kernels.dg_minimize` (smoothed
+``lambda_max``, temperature stages, L-BFGS with Armijo backtracking, patience stopping) on
+every matrix of a batch, eight at a time: each lane runs its own optimizer (a small state
+machine that asks for the next point to evaluate) and one evaluation serves the eight lanes.
+The linear algebra of an evaluation then works on 8-vectors, one entry per matrix, which the
+compiler maps onto SIMD registers (AVX-512: one register; AVX2: two) instead of the short,
+latency-bound loops of one 26 x 26 problem:
+
+* ``H = Mh^* Mh + j (Y X - (Y X)^*)`` (lower triangle, real and imaginary parts apart);
+* Householder tridiagonalization of ``H`` (the arithmetic of LAPACK's ``zhetd2``);
+* all eigenvalues by implicit symmetric QR with Wilkinson shifts, chasing the bulges of the
+  eight tridiagonals in one loop (each lane deflates its own bottom rows; a lane that is done,
+  or whose active block does not cover position ``k``, applies the identity). The rotations
+  are recorded and applied afterwards only to the unit vectors of the top eigenvalues, then
+  the Householder reflectors (eigenvectors of the top eigenvalues);
+* the gradient of :func:`mu_kernels.dg_objective`.
+
+The 8-vectors are tuples handled by the small inlined helpers below (``_ld``, ``_fma``, ...):
+tuples are values, not memory, so all loads of a step come before its stores and LLVM's SLP
+vectorizer can pack them (numba leaves it off by default: :func:`compile_with_slp`). A lane
+whose QR does not converge within the step budget (never seen) is evaluated again by the
+per-matrix kernel :func:`mu_kernels.dg_objective` (``zheevd`` fallback). Whatever the
+optimizer does, ``mu_upper`` re-evaluates the bound exactly at the returned scalings.
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import numpy as np
+
+from oos_drake.robust import mu_kernels
+from oos_drake.robust.mu_kernels import HAVE_NUMBA, WEIGHT_FLOOR, _unpack_layout
+
+#: Matrices evaluated together (8 doubles: one AVX-512 register).
+W = 8
+#: QR rotation steps allowed per evaluation, per row squared (a lane needs about 1.1 n^2).
+QR_STEP_BUDGET = 8
+_FM = {"reassoc", "contract", "nsz", "arcp"}
+
+if HAVE_NUMBA:
+    import numba
+
+    # error_model="numpy": no zero-check branch on every division (it blocks vectorization)
+    _jit = numba.njit(cache=True, nogil=True, fastmath=_FM, error_model="numpy")
+    _vec = numba.njit(inline="always", fastmath=_FM, error_model="numpy")
+    _jit_exact = numba.njit(cache=True, nogil=True, error_model="numpy")
+else:  # pragma: no cover
+
+    def _jit(f):
+        return f
+
+    _vec = _jit_exact = _jit
+
+
+@contextlib.contextmanager
+def compile_with_slp():
+    """Turn on LLVM's SLP vectorizer while the lane kernels compile (numba's default is off;
+    the cached machine code keeps it). Process-wide for the duration: other code compiled
+    meanwhile only gets the same, semantics-preserving, optimization."""
+    if not HAVE_NUMBA:
+        yield
+        return
+    old = numba.config.SLP_VECTORIZE
+    numba.config.SLP_VECTORIZE = 1
+    try:
+        yield
+    finally:
+        numba.config.SLP_VECTORIZE = old
+
+
+# -- 8-vector helpers (tuples of 8 floats; inlined) -----------------------------------------
+
+
+@_vec
+def _ld(a):
+    return (a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7])
+
+
+@_vec
+def _st(a, v):
+    a[0] = v[0]
+    a[1] = v[1]
+    a[2] = v[2]
+    a[3] = v[3]
+    a[4] = v[4]
+    a[5] = v[5]
+    a[6] = v[6]
+    a[7] = v[7]
+
+
+@_vec
+def _splat(s):
+    return (s, s, s, s, s, s, s, s)
+
+
+@_vec
+def _add(a, b):
+    return (a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3],
+            a[4] + b[4], a[5] + b[5], a[6] + b[6], a[7] + b[7])  # fmt: skip
+
+
+@_vec
+def _sub(a, b):
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2], a[3] - b[3],
+            a[4] - b[4], a[5] - b[5], a[6] - b[6], a[7] - b[7])  # fmt: skip
+
+
+@_vec
+def _mul(a, b):
+    return (a[0] * b[0], a[1] * b[1], a[2] * b[2], a[3] * b[3],
+            a[4] * b[4], a[5] * b[5], a[6] * b[6], a[7] * b[7])  # fmt: skip
+
+
+@_vec
+def _div(a, b):
+    return (a[0] / b[0], a[1] / b[1], a[2] / b[2], a[3] / b[3],
+            a[4] / b[4], a[5] / b[5], a[6] / b[6], a[7] / b[7])  # fmt: skip
+
+
+@_vec
+def _fma(a, b, c):
+    """``a b + c``."""
+    return (a[0] * b[0] + c[0], a[1] * b[1] + c[1], a[2] * b[2] + c[2],
+            a[3] * b[3] + c[3], a[4] * b[4] + c[4], a[5] * b[5] + c[5],
+            a[6] * b[6] + c[6], a[7] * b[7] + c[7])  # fmt: skip
+
+
+@_vec
+def _fnma(a, b, c):
+    """``c - a b``."""
+    return (c[0] - a[0] * b[0], c[1] - a[1] * b[1], c[2] - a[2] * b[2],
+            c[3] - a[3] * b[3], c[4] - a[4] * b[4], c[5] - a[5] * b[5],
+            c[6] - a[6] * b[6], c[7] - a[7] * b[7])  # fmt: skip
+
+
+@_vec
+def _sqrt(a):
+    return (np.sqrt(a[0]), np.sqrt(a[1]), np.sqrt(a[2]), np.sqrt(a[3]),
+            np.sqrt(a[4]), np.sqrt(a[5]), np.sqrt(a[6]), np.sqrt(a[7]))  # fmt: skip
+
+
+@_vec
+def _sel(m, a, b):
+    """``a`` where the mask ``m`` is true, else ``b``."""
+    return (a[0] if m[0] else b[0], a[1] if m[1] else b[1], a[2] if m[2] else b[2],
+            a[3] if m[3] else b[3], a[4] if m[4] else b[4], a[5] if m[5] else b[5],
+            a[6] if m[6] else b[6], a[7] if m[7] else b[7])  # fmt: skip
+
+
+@_vec
+def _cmac(ar, ai, br, bi, cr, ci):
+    """``c + a b`` (complex 8-vectors as real and imaginary tuples)."""
+    return _fnma(ai, bi, _fma(ar, br, cr)), _fma(ai, br, _fma(ar, bi, ci))
+
+
+@_vec
+def _cjmac(ar, ai, br, bi, cr, ci):
+    """``c + conj(a) b``."""
+    return _fma(ai, bi, _fma(ar, br, cr)), _fnma(ai, br, _fma(ar, bi, ci))
+
+
+@_vec
+def _neg(a):
+    return (-a[0], -a[1], -a[2], -a[3], -a[4], -a[5], -a[6], -a[7])
+
+
+@_vec
+def _mcopysign(a, b):
+    """``-copysign(a, b)``."""
+    return (-np.copysign(a[0], b[0]), -np.copysign(a[1], b[1]), -np.copysign(a[2], b[2]),
+            -np.copysign(a[3], b[3]), -np.copysign(a[4], b[4]), -np.copysign(a[5], b[5]),
+            -np.copysign(a[6], b[6]), -np.copysign(a[7], b[7]))  # fmt: skip
+
+
+@_vec
+def _both_zero(a, b):
+    return (a[0] == 0.0 and b[0] == 0.0, a[1] == 0.0 and b[1] == 0.0,
+            a[2] == 0.0 and b[2] == 0.0, a[3] == 0.0 and b[3] == 0.0,
+            a[4] == 0.0 and b[4] == 0.0, a[5] == 0.0 and b[5] == 0.0,
+            a[6] == 0.0 and b[6] == 0.0, a[7] == 0.0 and b[7] == 0.0)  # fmt: skip
+
+
+@_vec
+def _in_block(lo, hi, k):
+    """Lanes whose active block ``[lo, hi]`` has a rotation at position ``k``."""
+    return (lo[0] <= k < hi[0], lo[1] <= k < hi[1], lo[2] <= k < hi[2],
+            lo[3] <= k < hi[3], lo[4] <= k < hi[4], lo[5] <= k < hi[5],
+            lo[6] <= k < hi[6], lo[7] <= k < hi[7])  # fmt: skip
+
+
+@_vec
+def _past_start(act, lo, k):
+    """Active lanes for which ``k`` is past the start of the block (a bulge is chased)."""
+    return (act[0] and k > lo[0], act[1] and k > lo[1], act[2] and k > lo[2],
+            act[3] and k > lo[3], act[4] and k > lo[4], act[5] and k > lo[5],
+            act[6] and k > lo[6], act[7] and k > lo[7])  # fmt: skip
+
+
+@_vec
+def _positive(act, a):
+    return (act[0] and a[0] > 0.0, act[1] and a[1] > 0.0, act[2] and a[2] > 0.0,
+            act[3] and a[3] > 0.0, act[4] and a[4] > 0.0, act[5] and a[5] > 0.0,
+            act[6] and a[6] > 0.0, act[7] and a[7] > 0.0)  # fmt: skip
+
+
+# -- evaluation kernels ---------------------------------------------------------------------
+
+
+@_jit
+def _row_starts(n, starts, sizes):
+    """Per row: the first row of its diagonal block (blocks given by ``starts``, ``sizes``)."""
+    out = np.arange(n)
+    for b in range(starts.size):
+        for i in range(starts[b], starts[b] + sizes[b]):
+            out[i] = starts[b]
+    return out
+
+
+@_jit
+def _lane_scalings(x, lay_i, lay_c, rs, cs, gco, Tlr, Tli, Tir, Tii, Gr, Gi, Er, Ei, Trr, Tri):
+    """``T_l``, ``T_r^{-1}`` and ``G`` of the eight lanes from the parameters ``x`` (p, 8).
+
+    Block-diagonal matrices are stored by rows: ``T[i, j] = T_[i, j - start(i)]`` for ``j`` in
+    the block of row ``i`` (``rs``/``cs``: block start of each r-/c-space row); ``G`` likewise
+    with ``gco`` (column offset of the real block of each r-space row). ``Er, Ei`` receive the
+    entries of ``T`` (n_ent, 8).
+    """
+    (
+        log_par, log_ent, re_par, im_par, lin_ent, lin_row, l_row, l_col, l_ent,
+        r_row, r_col, r_ent, rb_start, rb_size, g_row, g_col, gq_par, gq_pos1, gq_pos2,
+    ) = _unpack_layout(lay_i)  # fmt: skip
+    n_gq = gq_par.size
+    for k in range(log_par.size):
+        for w in range(W):
+            Er[log_ent[k], w] = np.exp(min(max(x[log_par[k], w], -60.0), 60.0))
+            Ei[log_ent[k], w] = 0.0
+    for k in range(lin_ent.size):
+        for w in range(W):
+            sc = np.exp(min(max(x[lin_row[k], w], -60.0), 60.0))
+            Er[lin_ent[k], w] = sc * x[re_par[k], w]
+            Ei[lin_ent[k], w] = sc * x[im_par[k], w]
+    Tlr[:] = 0.0
+    Tli[:] = 0.0
+    for k in range(l_row.size):
+        i = l_row[k]
+        q = l_col[k] - cs[i]
+        _st(Tlr[i, q], _ld(Er[l_ent[k]]))
+        _st(Tli[i, q], _ld(Ei[l_ent[k]]))
+    Trr[:] = 0.0
+    Tri[:] = 0.0
+    for k in range(r_row.size):
+        i = r_row[k]
+        q = r_col[k] - rs[i]
+        _st(Trr[i, q], _ld(Er[r_ent[k]]))
+        _st(Tri[i, q], _ld(Ei[r_ent[k]]))
+    # inverse of each lower-triangular diagonal block of T_r (real positive diagonal)
+    Tir[:] = 0.0
+    Tii[:] = 0.0
+    one = _splat(1.0)
+    zero = _splat(0.0)
+    for b in range(rb_start.size):
+        s, m = rb_start[b], rb_size[b]
+        for j in range(s, s + m):
+            _st(Tir[j, j - s], _div(one, _ld(Trr[j, j - s])))
+            for i in range(j + 1, s + m):
+                ar = zero
+                ai = zero
+                for q in range(j, i):
+                    ar, ai = _cmac(
+                        _ld(Trr[i, q - s]), _ld(Tri[i, q - s]), _ld(Tir[q, j - s]),
+                        _ld(Tii[q, j - s]), ar, ai,
+                    )  # fmt: skip
+                inv = _div(one, _ld(Trr[i, i - s]))
+                _st(Tir[i, j - s], _neg(_mul(ar, inv)))
+                _st(Tii[i, j - s], _neg(_mul(ai, inv)))
+    Gr[:] = 0.0
+    Gi[:] = 0.0
+    coef1 = lay_c[:n_gq]
+    coef2 = lay_c[n_gq:]
+    for q in range(n_gq):
+        v = _ld(x[gq_par[q]])
+        for kk in range(2):
+            pos = gq_pos1[q] if kk == 0 else gq_pos2[q]
+            if pos < 0:
+                continue
+            cf = coef1[q] if kk == 0 else coef2[q]
+            i, j = g_row[pos], g_col[pos] - gco[g_row[pos]]
+            _st(Gr[i, j], _fma(v, _splat(cf.real), _ld(Gr[i, j])))
+            _st(Gi[i, j], _fma(v, _splat(cf.imag), _ld(Gi[i, j])))
+
+
+@_jit
+def _lane_form_h(
+    Mr, Mi, rs, rsz, cs, gco, rgsz, Tlr, Tli, Tir, Tii, Gr, Gi, Xr, Xi, MTr, MTi, GXr, GXi,
+    Hr, Hi,
+):  # fmt: skip
+    """Lower triangle of ``H = Mh^* Mh + j (Y X - (Y X)^*)`` for the eight lanes, with
+    ``X = M T_r^{-1}``, ``Mh = T_l X`` (kept transposed in ``MT``) and ``Y = T_r^{-*} G``."""
+    c, r, _ = Mr.shape
+    zero = _splat(0.0)
+    for i in range(c):  # X[i, j] = sum_{k >= j in the block of j} M[i, k] Tinv[k, j]
+        for j in range(r):
+            s = rs[j]
+            xr = zero
+            xi = zero
+            for k in range(j, s + rsz[j]):
+                xr, xi = _cmac(
+                    _ld(Mr[i, k]), _ld(Mi[i, k]), _ld(Tir[k, j - s]), _ld(Tii[k, j - s]), xr, xi
+                )
+            _st(Xr[i, j], xr)
+            _st(Xi[i, j], xi)
+    for i in range(c):  # Mh[i, j] = sum_{q = cs[i]}^{i} T_l[i, q] X[q, j], stored as MT[j, i]
+        s = cs[i]
+        for j in range(r):
+            yr = zero
+            yi = zero
+            for q in range(s, i + 1):
+                yr, yi = _cmac(
+                    _ld(Tlr[i, q - s]), _ld(Tli[i, q - s]), _ld(Xr[q, j]), _ld(Xi[q, j]), yr, yi
+                )
+            _st(MTr[j, i], yr)
+            _st(MTi[j, i], yi)
+    for i in range(r):  # H[i, j] = sum_q conj(Mh[q, i]) Mh[q, j]
+        for j in range(i + 1):
+            sr = zero
+            si = zero
+            for q in range(c):
+                sr, si = _cjmac(
+                    _ld(MTr[i, q]), _ld(MTi[i, q]), _ld(MTr[j, q]), _ld(MTi[j, q]), sr, si
+                )
+            _st(Hr[i, j], sr)
+            _st(Hi[i, j], si)
+    for i in range(r):  # GX = G X on the rows of the real blocks
+        if rgsz[i] == 0:
+            continue
+        co = gco[i]
+        for j in range(r):
+            gr = zero
+            gi = zero
+            for b in range(rgsz[i]):
+                gr, gi = _cmac(
+                    _ld(Gr[i, b]), _ld(Gi[i, b]), _ld(Xr[co + b, j]), _ld(Xi[co + b, j]), gr, gi
+                )
+            _st(GXr[i, j], gr)
+            _st(GXi[i, j], gi)
+    # (Y X)[i, j] = sum_{k >= i in the block} conj(Tinv[k, i]) GX[k, j]: j (Y X)[i, j] goes to
+    # H[i, j] and -j conj((Y X)[i, j]) to H[j, i] (each in the stored lower triangle)
+    for i in range(r):
+        if rgsz[i] == 0:
+            continue
+        s = rs[i]
+        for j in range(r):
+            yr = zero
+            yi = zero
+            for k in range(i, s + rsz[i]):
+                yr, yi = _cjmac(
+                    _ld(Tir[k, i - s]), _ld(Tii[k, i - s]), _ld(GXr[k, j]), _ld(GXi[k, j]), yr, yi
+                )
+            if j <= i:
+                _st(Hr[i, j], _sub(_ld(Hr[i, j]), yi))
+                _st(Hi[i, j], _add(_ld(Hi[i, j]), yr))
+            if j >= i:
+                _st(Hr[j, i], _sub(_ld(Hr[j, i]), yi))
+                _st(Hi[j, i], _sub(_ld(Hi[j, i]), yr))
+
+
+@_jit
+def _lane_tridiag(Ar, Ai, d, e, taur, taui, pr, pi, vr, vi):
+    """Householder tridiagonalization of the eight Hermitian matrices (lower triangles of
+    ``Ar + j Ai``, (n, n, 8)): ``d``, ``e`` (n, 8; ``e[n-1] = 0``), the reflectors below the
+    subdiagonal (``v[0] = 1`` implicit) and ``tau`` (the arithmetic of ``zhetd2``)."""
+    n = Ar.shape[0]
+    zero = _splat(0.0)
+    one = _splat(1.0)
+    mhalf = _splat(-0.5)
+    for k in range(n - 1):
+        o = k + 1
+        m = n - o
+        ar = _ld(Ar[o, k])
+        ai = _ld(Ai[o, k])
+        xn = zero
+        for i in range(o + 1, n):
+            a_r = _ld(Ar[i, k])
+            a_i = _ld(Ai[i, k])
+            xn = _fma(a_r, a_r, _fma(a_i, a_i, xn))
+        _st(d[k], _ld(Ar[k, k]))
+        nothing = _both_zero(xn, ai)  # nothing to annihilate: H_k = I
+        beta = _mcopysign(_sqrt(_fma(ar, ar, _fma(ai, ai, xn))), ar)
+        bs = _sel(nothing, one, beta)
+        tr = _sel(nothing, zero, _div(_sub(beta, ar), bs))
+        ti = _sel(nothing, zero, _div(_neg(ai), bs))
+        _st(taur[k], tr)
+        _st(taui[k], ti)
+        _st(e[k], _sel(nothing, ar, beta))
+        dr = _sub(ar, beta)
+        den = _sel(nothing, one, _fma(dr, dr, _mul(ai, ai)))
+        hr = _sel(nothing, zero, _div(dr, den))  # 1 / (alpha - beta)
+        hi = _sel(nothing, zero, _div(_neg(ai), den))
+        _st(vr[0], one)
+        _st(vi[0], zero)
+        for i in range(1, m):
+            xr = _ld(Ar[o + i, k])
+            xi = _ld(Ai[o + i, k])
+            a_ = _fnma(xi, hi, _mul(xr, hr))
+            b_ = _fma(xi, hr, _mul(xr, hi))
+            _st(vr[i], a_)
+            _st(vi[i], b_)
+            _st(Ar[o + i, k], a_)
+            _st(Ai[o + i, k], b_)
+        for i in range(m):  # p = A22 v from the lower triangle
+            _st(pr[i], zero)
+            _st(pi[i], zero)
+        for i in range(m):
+            v_r = _ld(vr[i])
+            v_i = _ld(vi[i])
+            dg = _ld(Ar[o + i, o + i])
+            sr = _mul(dg, v_r)
+            si = _mul(dg, v_i)
+            for j in range(i):
+                a_r = _ld(Ar[o + i, o + j])
+                a_i = _ld(Ai[o + i, o + j])
+                sr, si = _cmac(a_r, a_i, _ld(vr[j]), _ld(vi[j]), sr, si)
+                qr, qi = _cjmac(a_r, a_i, v_r, v_i, _ld(pr[j]), _ld(pi[j]))
+                _st(pr[j], qr)
+                _st(pi[j], qi)
+            _st(pr[i], _add(_ld(pr[i]), sr))
+            _st(pi[i], _add(_ld(pi[i]), si))
+        hr = zero  # p = tau p, h = p^* v
+        hi = zero
+        for i in range(m):
+            p_r = _ld(pr[i])
+            p_i = _ld(pi[i])
+            a_ = _fnma(ti, p_i, _mul(tr, p_r))
+            b_ = _fma(ti, p_r, _mul(tr, p_i))
+            _st(pr[i], a_)
+            _st(pi[i], b_)
+            hr, hi = _cjmac(a_, b_, _ld(vr[i]), _ld(vi[i]), hr, hi)
+        alr = _mul(mhalf, _fnma(ti, hi, _mul(tr, hr)))  # alpha = -tau h / 2
+        ali = _mul(mhalf, _fma(ti, hr, _mul(tr, hi)))
+        for i in range(m):  # w = p + alpha v
+            q_r, q_i = _cmac(alr, ali, _ld(vr[i]), _ld(vi[i]), _ld(pr[i]), _ld(pi[i]))
+            _st(pr[i], q_r)
+            _st(pi[i], q_i)
+        for i in range(m):  # A22 -= v w^* + w v^*
+            v_r = _ld(vr[i])
+            v_i = _ld(vi[i])
+            w_r = _ld(pr[i])
+            w_i = _ld(pi[i])
+            for j in range(i + 1):
+                pjr = _ld(pr[j])
+                pji = _ld(pi[j])
+                vjr = _ld(vr[j])
+                vji = _ld(vi[j])
+                re = _fma(w_i, vji, _fma(w_r, vjr, _fma(v_i, pji, _mul(v_r, pjr))))
+                im = _fnma(w_r, vji, _fma(w_i, vjr, _fnma(v_r, pji, _mul(v_i, pjr))))
+                _st(Ar[o + i, o + j], _sub(_ld(Ar[o + i, o + j]), re))
+                _st(Ai[o + i, o + j], _sub(_ld(Ai[o + i, o + j]), im))
+    _st(d[n - 1], _ld(Ar[n - 1, n - 1]))
+    _st(e[n - 1], zero)
+
+
+@_jit
+def _lane_qr(d, e, rot_k, rot_c, rot_s, lo, hi, x0, z0, ok):
+    """All eigenvalues of the eight symmetric tridiagonals ``(d, e)`` (``d`` receives them,
+    unsorted) by implicit QR with Wilkinson shifts, in lock-step.
+
+    Step ``q`` rotates rows ``rot_k[q]``, ``rot_k[q] + 1`` of every lane by
+    ``(rot_c[q], rot_s[q])`` (the identity where a lane is not active). Returns the number of
+    steps; ``ok[w]`` is False for a lane that needed more than ``rot_k.size`` steps.
+    """
+    n = d.shape[0]
+    cap = rot_k.size
+    nsteps = 0
+    tol = np.empty(W)
+    for w in range(W):
+        nrm = 0.0
+        for i in range(n):
+            nrm = max(nrm, abs(d[i, w]) + abs(e[i, w]) + (abs(e[i - 1, w]) if i > 0 else 0.0))
+        tol[w] = 4.0 * 2.220446049250313e-16 * nrm
+        hi[w] = n - 1
+        ok[w] = True
+    zero = _splat(0.0)
+    one = _splat(1.0)
+    two = _splat(2.0)
+    while True:
+        kmin = n
+        kmax = 0
+        for w in range(W):  # deflate at the bottom, find the unreduced block, Wilkinson shift
+            m = hi[w]
+            while m > 0 and abs(e[m - 1, w]) <= tol[w]:
+                e[m - 1, w] = 0.0
+                m -= 1
+            hi[w] = m
+            if m == 0 or not ok[w]:
+                lo[w] = n  # no position k has lo <= k < hi
+                continue
+            ll = m - 1
+            while ll > 0 and abs(e[ll - 1, w]) > tol[w]:
+                ll -= 1
+            lo[w] = ll
+            a, b, c_ = d[m - 1, w], e[m - 1, w], d[m, w]
+            dd = 0.5 * (a - c_)
+            den = dd + np.copysign(np.sqrt(dd * dd + b * b), dd)
+            mu = c_ - b * b / den if den != 0.0 else c_
+            x0[w] = d[ll, w] - mu
+            z0[w] = e[ll, w]
+            kmin = min(kmin, ll)
+            kmax = max(kmax, m)
+        if kmax == 0:
+            break
+        if nsteps + (kmax - kmin) > cap:
+            for w in range(W):
+                if hi[w] > 0:
+                    ok[w] = False
+            break
+        x = _ld(x0)
+        z = _ld(z0)
+        for k in range(kmin, kmax):
+            act = _in_block(lo, hi, k)
+            rr = _sqrt(_fma(x, x, _mul(z, z)))
+            good = _positive(act, rr)
+            c = _sel(good, _div(x, rr), one)
+            s = _sel(good, _div(z, rr), zero)
+            if k > kmin:
+                _st(e[k - 1], _sel(_past_start(act, lo, k), rr, _ld(e[k - 1])))
+            dk = _ld(d[k])
+            dk1 = _ld(d[k + 1])
+            ek = _ld(e[k])
+            cc = _mul(c, c)
+            ss = _mul(s, s)
+            cs = _mul(c, s)
+            cs2 = _mul(two, cs)
+            _st(d[k], _fma(cc, dk, _fma(cs2, ek, _mul(ss, dk1))))
+            _st(d[k + 1], _fma(ss, dk, _fnma(cs2, ek, _mul(cc, dk1))))
+            en = _fma(cs, _sub(dk1, dk), _mul(_sub(cc, ss), ek))
+            _st(e[k], en)
+            bul = zero
+            if k + 1 < n - 1:
+                ek1 = _ld(e[k + 1])
+                bul = _mul(s, ek1)
+                _st(e[k + 1], _mul(c, ek1))
+            x = _sel(act, en, x)
+            z = _sel(act, bul, z)
+            rot_k[nsteps] = k
+            _st(rot_c[nsteps], c)
+            _st(rot_s[nsteps], s)
+            nsteps += 1
+    return nsteps
+
+
+@_jit
+def _lane_vectors(nsteps, rot_k, rot_c, rot_s, sel, K, Ar, Ai, taur, taui, Vr, Vi):
+    """Eigenvectors for the tridiagonal eigenvalues ``sel[q, w]`` (``q < K``): the recorded QR
+    rotations applied backwards to unit vectors, then the Householder reflectors stored in
+    ``Ar, Ai`` (``Vr, Vi``: (K, n, 8))."""
+    n = Ar.shape[0]
+    for q in range(K):
+        for i in range(n):
+            for w in range(W):
+                Vr[q, i, w] = 1.0 if sel[q, w] == i else 0.0
+                Vi[q, i, w] = 0.0
+    for st in range(nsteps - 1, -1, -1):  # Z e_j = G_1^T ... G_N^T e_j: G_N^T first
+        k = rot_k[st]
+        c = _ld(rot_c[st])
+        s = _ld(rot_s[st])
+        for q in range(K):
+            a = _ld(Vr[q, k])
+            b = _ld(Vr[q, k + 1])
+            _st(Vr[q, k], _fnma(s, b, _mul(c, a)))
+            _st(Vr[q, k + 1], _fma(s, a, _mul(c, b)))
+    for k in range(n - 2, -1, -1):  # y = H_0 (H_1 (... H_{n-2} z))
+        o = k + 1
+        tr = _ld(taur[k])
+        ti = _ld(taui[k])
+        for q in range(K):
+            sr = _ld(Vr[q, o])  # s = v^* y
+            si = _ld(Vi[q, o])
+            for i in range(o + 1, n):
+                sr, si = _cjmac(
+                    _ld(Ar[i, k]), _ld(Ai[i, k]), _ld(Vr[q, i]), _ld(Vi[q, i]), sr, si
+                )
+            cr = _fnma(ti, si, _mul(tr, sr))  # y -= tau s v
+            ci = _fma(ti, sr, _mul(tr, si))
+            _st(Vr[q, o], _sub(_ld(Vr[q, o]), cr))
+            _st(Vi[q, o], _sub(_ld(Vi[q, o]), ci))
+            for i in range(o + 1, n):
+                a_r = _ld(Ar[i, k])
+                a_i = _ld(Ai[i, k])
+                _st(Vr[q, i], _sub(_ld(Vr[q, i]), _fnma(ci, a_i, _mul(cr, a_r))))
+                _st(Vi[q, i], _sub(_ld(Vi[q, i]), _fma(ci, a_r, _mul(cr, a_i))))
+
+
+@_jit
+def _lane_gradient(
+    Mr, Mi, x, sel, K, lam, pk, rs, cs, lay_i, lay_c, Tlr, Tli, Tir, Tii, Er, Ei,
+    Vr, Vi, TVr, TVi, XVr, XVi, MVr, MVi, gTr, gTi, g,
+):  # fmt: skip
+    """Gradient ``g`` (p, 8) of the smoothed ``lambda_max`` from the top eigenvectors ``V``
+    (K, n, 8), their weights ``pk`` and eigenvalues ``lam`` (K, 8), as in
+    :func:`mu_kernels.dg_objective`."""
+    (
+        log_par, log_ent, re_par, im_par, lin_ent, lin_row, l_row, l_col, l_ent,
+        r_row, r_col, r_ent, _, _, g_row, g_col, gq_par, gq_pos1, gq_pos2,
+    ) = _unpack_layout(lay_i)  # fmt: skip
+    c, r, _ = Mr.shape
+    n_gq = gq_par.size
+    coef1 = lay_c[:n_gq]
+    coef2 = lay_c[n_gq:]
+    zero = _splat(0.0)
+    for q in range(K):  # TV = T_r^{-1} V, XV = M TV, MV = T_l XV
+        for i in range(r):
+            s = rs[i]
+            ar = zero
+            ai = zero
+            for j in range(s, i + 1):
+                ar, ai = _cmac(
+                    _ld(Tir[i, j - s]), _ld(Tii[i, j - s]), _ld(Vr[q, j]), _ld(Vi[q, j]), ar, ai
+                )
+            _st(TVr[q, i], ar)
+            _st(TVi[q, i], ai)
+        for i in range(c):
+            ar = zero
+            ai = zero
+            for j in range(r):
+                ar, ai = _cmac(
+                    _ld(Mr[i, j]), _ld(Mi[i, j]), _ld(TVr[q, j]), _ld(TVi[q, j]), ar, ai
+                )
+            _st(XVr[q, i], ar)
+            _st(XVi[q, i], ai)
+        for i in range(c):
+            s = cs[i]
+            ar = zero
+            ai = zero
+            for j in range(s, i + 1):
+                ar, ai = _cmac(
+                    _ld(Tlr[i, j - s]), _ld(Tli[i, j - s]), _ld(XVr[q, j]), _ld(XVi[q, j]), ar, ai
+                )
+            _st(MVr[q, i], ar)
+            _st(MVi[q, i], ai)
+    gTr[:] = 0.0
+    gTi[:] = 0.0
+    for k in range(l_row.size):  # T_l entry (i, j): 2 sum_q p_q XV[j, q] conj(MV[i, q])
+        i, j, en = l_row[k], l_col[k], l_ent[k]
+        ar = zero
+        ai = zero
+        for q in range(K):
+            tr, ti = _cjmac(
+                _ld(MVr[q, i]), _ld(MVi[q, i]), _ld(XVr[q, j]), _ld(XVi[q, j]), zero, zero
+            )
+            p2 = _ld(pk[q])
+            ar = _fma(p2, tr, ar)
+            ai = _fma(p2, ti, ai)
+        _st(gTr[en], _fma(_splat(2.0), ar, _ld(gTr[en])))
+        _st(gTi[en], _fma(_splat(2.0), ai, _ld(gTi[en])))
+    for k in range(r_row.size):  # T_r entry (i, j): -2 sum_q p_q l_q TV[j, q] conj(V[i, q])
+        i, j, en = r_row[k], r_col[k], r_ent[k]
+        ar = zero
+        ai = zero
+        for q in range(K):
+            tr, ti = _cjmac(
+                _ld(Vr[q, i]), _ld(Vi[q, i]), _ld(TVr[q, j]), _ld(TVi[q, j]), zero, zero
+            )
+            pl = _mul(_ld(pk[q]), _ld(lam[q]))
+            ar = _fma(pl, tr, ar)
+            ai = _fma(pl, ti, ai)
+        _st(gTr[en], _fnma(_splat(2.0), ar, _ld(gTr[en])))
+        _st(gTi[en], _fnma(_splat(2.0), ai, _ld(gTi[en])))
+    for k in range(log_par.size):
+        en = log_ent[k]
+        for w in range(W):
+            g[log_par[k], w] = gTr[en, w] * Er[en, w] - gTi[en, w] * Ei[en, w]
+    for k in range(lin_ent.size):
+        en = lin_ent[k]
+        for w in range(W):
+            g[lin_row[k], w] += gTr[en, w] * Er[en, w] - gTi[en, w] * Ei[en, w]
+            sc = np.exp(min(max(x[lin_row[k], w], -60.0), 60.0))
+            g[re_par[k], w] = gTr[en, w] * sc
+            g[im_par[k], w] = -gTi[en, w] * sc
+    for q in range(n_gq):  # G entry (i, j): 2j sum_k p_k XV[j, k] conj(TV[i, k]), times coef
+        val = zero
+        for kk in range(2):
+            pos = gq_pos1[q] if kk == 0 else gq_pos2[q]
+            if pos < 0:
+                continue
+            cf = coef1[q] if kk == 0 else coef2[q]
+            i, j = g_row[pos], g_col[pos]
+            ar = zero
+            ai = zero
+            for s_ in range(K):
+                tr, ti = _cjmac(
+                    _ld(TVr[s_, i]), _ld(TVi[s_, i]), _ld(XVr[s_, j]), _ld(XVi[s_, j]), zero, zero
+                )
+                p2 = _ld(pk[s_])
+                ar = _fma(p2, tr, ar)
+                ai = _fma(p2, ti, ai)
+            # Re(2j (ar + j ai) cf) = -2 (ai Re(cf) + ar Im(cf))
+            val = _fnma(_splat(2.0), _fma(ai, _splat(cf.real), _mul(ar, _splat(cf.imag))), val)
+        _st(g[gq_par[q]], val)
+
+
+@_jit
+def _lane_eval(
+    Mr, Mi, Mc, x, tq, lay_i, lay_c, cb, rb, realb, rs, rsz, cs, gco, rgsz,
+    Tlr, Tli, Tir, Tii, Trr, Tri, Gr, Gi, Er, Ei, Xr, Xi, MTr, MTi, GXr, GXi, Hr, Hi,
+    d, e, taur, taui, pr, pi, vr, vi, rot_k, rot_c, rot_s, lo, hi, x0, z0, okq,
+    sel, pk, lam, Vr, Vi, TVr, TVi, XVr, XVi, MVr, MVi, gTr, gTi, f, g, lmax,
+):  # fmt: skip
+    """Objective, gradient and exact ``lambda_max`` at the eight points ``x`` (p, 8).
+
+    ``tq[w] > 0`` is lane ``w``'s temperature; ``tq[w] < 0`` means ``t = -tq[w] / lambda_max``
+    (relative to the lane's own ``lambda_max``). Returns the temperatures used (8,).
+    """
+    n = Hr.shape[0]
+    _lane_scalings(x, lay_i, lay_c, rs, cs, gco, Tlr, Tli, Tir, Tii, Gr, Gi, Er, Ei, Trr, Tri)
+    _lane_form_h(
+        Mr, Mi, rs, rsz, cs, gco, rgsz, Tlr, Tli, Tir, Tii, Gr, Gi, Xr, Xi, MTr, MTi, GXr, GXi,
+        Hr, Hi,
+    )  # fmt: skip
+    _lane_tridiag(Hr, Hi, d, e, taur, taui, pr, pi, vr, vi)
+    nsteps = _lane_qr(d, e, rot_k, rot_c, rot_s, lo, hi, x0, z0, okq)
+    t = np.empty(W)
+    kw = np.zeros(W, dtype=np.int64)
+    K = 1
+    for w in range(W):
+        lm = -np.inf
+        for i in range(n):
+            lm = max(lm, d[i, w])
+        tw = tq[w] if tq[w] > 0 else -tq[w] / max(lm, 1e-12)
+        t[w] = tw
+        ssum = 0.0
+        for i in range(n):
+            ssum += np.exp(tw * (d[i, w] - lm))
+        lmax[w] = lm
+        f[w] = lm + np.log(ssum) / tw
+        for i in range(n):  # eigenvalues that carry the smoothed maximum
+            if np.exp(tw * (d[i, w] - lm)) / ssum > WEIGHT_FLOOR:
+                kw[w] += 1
+        K = max(K, kw[w])
+        # the K largest by repeated arg-max (ties by index); lanes with fewer get zero weights
+        prev = np.inf
+        prev_i = -1
+        for q in range(n):
+            best = -np.inf
+            bi = 0
+            for i in range(n):
+                v = d[i, w]
+                if (v < prev or (v == prev and i > prev_i)) and v > best:
+                    best = v
+                    bi = i
+            sel[q, w] = bi
+            lam[q, w] = best
+            pk[q, w] = np.exp(tw * (best - lm)) / ssum if q < kw[w] else 0.0
+            prev = best
+            prev_i = bi
+            if q + 1 >= kw[w] and q + 1 >= K:
+                break
+    for w in range(W):  # lanes that stopped early: fill the remaining slots with weight 0
+        for q in range(kw[w], K):
+            sel[q, w] = sel[max(kw[w] - 1, 0), w]
+            lam[q, w] = 0.0
+            pk[q, w] = 0.0
+    _lane_vectors(nsteps, rot_k, rot_c, rot_s, sel, K, Hr, Hi, taur, taui, Vr, Vi)
+    _lane_gradient(
+        Mr, Mi, x, sel, K, lam, pk, rs, cs, lay_i, lay_c, Tlr, Tli, Tir, Tii, Er, Ei,
+        Vr, Vi, TVr, TVi, XVr, XVi, MVr, MVi, gTr, gTi, g,
+    )  # fmt: skip
+    for w in range(W):  # a lane whose QR did not converge: the per-matrix kernel
+        if okq[w]:
+            continue
+        p = x.shape[0]
+        xw = np.empty((1, p))
+        for i in range(p):
+            xw[0, i] = x[i, w]
+        f1 = np.empty(1)
+        l1 = np.empty(1)
+        g1 = np.empty((1, p))
+        top1 = np.empty((1, Mc.shape[2]), dtype=np.complex128)
+        t1 = np.ones(1)
+        Mw = Mc[w : w + 1]
+        if tq[w] < 0:
+            mu_kernels.dg_objective(
+                Mw, xw, t1, False, lay_i, lay_c, cb, rb, realb, f1, g1, l1, top1
+            )
+            t1[0] = -tq[w] / max(l1[0], 1e-12)
+        else:
+            t1[0] = tq[w]
+        mu_kernels.dg_objective(Mw, xw, t1, True, lay_i, lay_c, cb, rb, realb, f1, g1, l1, top1)
+        f[w] = f1[0]
+        lmax[w] = l1[0]
+        t[w] = t1[0]
+        for i in range(p):
+            g[i, w] = g1[0, i]
+    return t
+
+
+def lane_layout(packed, structure) -> tuple:
+    """Row maps of the lane kernels from ``mu_kernels.pack_layout``'s arrays: ``(rs, rsz, cs,
+    gco, rgsz, bw)``: block start and size of each r-space row, block start of each c-space
+    row, column offset and size of the real block of each r-space row (size 0: none), and
+    the largest block size."""
+    _, _, cb, rb, realb = packed
+    c, r = structure.n_cols, structure.n_rows
+    rs = _row_starts(r, rb[0], rb[1]).astype(np.int64)
+    rsz = np.ones(r, dtype=np.int64)
+    for s0, m in zip(rb[0], rb[1], strict=True):
+        rsz[s0 : s0 + m] = m
+    cs = _row_starts(c, cb[0], cb[1]).astype(np.int64)
+    gco = np.zeros(r, dtype=np.int64)
+    rgsz = np.zeros(r, dtype=np.int64)
+    for ro, co, m in realb.T:
+        gco[ro : ro + m] = co
+        rgsz[ro : ro + m] = m
+    bw = int(max(1, rb[1].max(initial=1), cb[1].max(initial=1)))
+    return rs, rsz, cs, gco, rgsz, bw
+
+
+@_jit_exact
+def _workspace(c, r, n_entries, bw):
+    """The work arrays of :func:`_lane_eval`, in its argument order (after ``rgsz``)."""
+    n = r
+    cap = QR_STEP_BUDGET * n * n + n
+    z = np.zeros
+    return (
+        z((c, bw, W)), z((c, bw, W)), z((r, bw, W)), z((r, bw, W)), z((r, bw, W)),
+        z((r, bw, W)), z((r, bw, W)), z((r, bw, W)), z((n_entries, W)), z((n_entries, W)),
+        z((c, r, W)), z((c, r, W)), z((r, c, W)), z((r, c, W)), z((r, r, W)), z((r, r, W)),
+        z((n, n, W)), z((n, n, W)), z((n, W)), z((n, W)), z((n, W)), z((n, W)),
+        z((n, W)), z((n, W)), z((n, W)), z((n, W)),
+        z(cap, dtype=np.int64), z((cap, W)), z((cap, W)), z(W, dtype=np.int64),
+        z(W, dtype=np.int64), z(W), z(W), np.ones(W, dtype=np.bool_),
+        z((n, W), dtype=np.int64), z((n, W)), z((n, W)), z((n, n, W)), z((n, n, W)),
+        z((n, r, W)), z((n, r, W)), z((n, c, W)), z((n, c, W)), z((n, c, W)), z((n, c, W)),
+        z((n_entries, W)), z((n_entries, W)),
+    )  # fmt: skip
+
+
+# -- the lock-step optimizer ----------------------------------------------------------------
+
+_INIT, _CHAIN, _START, _SEARCH, _IDLE = 0, 1, 2, 3, 4
+
+
+@_jit_exact
+def _load_lane(w, b, M, x0, Mr, Mi, Mc, xc, xq, tq, temps):
+    """Put matrix ``b`` in lane ``w`` and ask for its first evaluation (at its balancing start,
+    temperature relative to its own ``lambda_max``)."""
+    c, r = M.shape[1], M.shape[2]
+    for i in range(c):
+        for j in range(r):
+            Mr[i, j, w] = M[b, i, j].real
+            Mi[i, j, w] = M[b, i, j].imag
+            Mc[w, i, j] = M[b, i, j]
+    for i in range(x0.shape[1]):
+        xc[w, i] = x0[b, i]
+        xq[i, w] = x0[b, i]
+    tq[w] = -temps[0]
+
+
+@_jit_exact
+def _cap_step(dvec, log_par):
+    """Cap the log-scale steps at 2 (``e^{+-2}`` per iteration), like the per-matrix kernel."""
+    dmax = 0.0
+    for k in range(log_par.size):
+        dmax = max(dmax, abs(dvec[log_par[k]]))
+    if log_par.size:
+        fac = min(1.0, 2.0 / max(dmax, 1e-300))
+        for i in range(dvec.size):
+            dvec[i] *= fac
+
+
+@_jit_exact
+def dg_minimize_lanes(
+    M, x0, temps, max_iter, tol, patience, memory, log_par, lay_i, lay_c, cb, rb, realb,
+    rs, rsz, cs, gco, rgsz, bw, best_x, best_l, iters, evals, chain, chain_temps,
+    chain_patience,
+):  # fmt: skip
+    """The optimizer of :func:`mu_kernels.dg_minimize`, eight matrices at a time.
+
+    Same arguments and outputs as ``mu_kernels.dg_minimize`` except that the starting
+    ``lambda_max`` is computed here (``x0``: starting scalings, (B, p)) and the lane row maps
+    (:func:`lane_layout`) are passed. Lanes take the next matrix as soon as theirs is done;
+    with ``chain`` the batch is cut into 8 contiguous segments, one per lane, so that each
+    matrix can start from the previous one's scalings.
+    """
+    nb, c, r = M.shape
+    p = x0.shape[1]
+    n_ent = lay_i[0]
+    (
+        Tlr, Tli, Tir, Tii, Trr, Tri, Gr, Gi, Er, Ei, Xr, Xi, MTr, MTi, GXr, GXi, Hr, Hi,
+        d, e, taur, taui, pr, pi, vr, vi, rot_k, rot_c, rot_s, lo, hi, q0, z0, okq,
+        sel, pk, lam, Vr, Vi, TVr, TVi, XVr, XVi, MVr, MVi, gTr, gTi,
+    ) = _workspace(c, r, n_ent, bw)  # fmt: skip
+    Mr = np.zeros((c, r, W))
+    Mi = np.zeros((c, r, W))
+    Mc = np.zeros((W, c, r), dtype=np.complex128)
+    xq = np.zeros((p, W))
+    tq = np.zeros(W)
+    f = np.zeros(W)
+    g = np.zeros((p, W))
+    lm = np.zeros(W)
+    # lane state
+    mat = np.full(W, -1, dtype=np.int64)
+    phase = np.full(W, _IDLE, dtype=np.int64)
+    seg_next = np.zeros(W, dtype=np.int64)
+    seg_end = np.zeros(W, dtype=np.int64)
+    xc = np.zeros((W, p))
+    fc = np.zeros(W)
+    gc = np.zeros((W, p))
+    dv = np.zeros((W, p))
+    slope = np.zeros(W)
+    alpha = np.zeros(W)
+    tcur = np.zeros(W)
+    f_init = np.zeros(W)
+    g_init = np.zeros((W, p))
+    ls = np.zeros(W, dtype=np.int64)
+    stage = np.zeros(W, dtype=np.int64)
+    it_total = np.zeros(W, dtype=np.int64)
+    it_stage = np.zeros(W, dtype=np.int64)
+    stall = np.zeros(W, dtype=np.int64)
+    fails = np.zeros(W, dtype=np.int64)
+    n_eval = np.zeros(W, dtype=np.int64)
+    chained = np.zeros(W, dtype=np.bool_)
+    S = np.zeros((W, memory, p))
+    Y = np.zeros((W, memory, p))
+    rho = np.zeros((W, memory))
+    count = np.zeros(W, dtype=np.int64)
+    head = np.full(W, memory - 1, dtype=np.int64)
+    dtmp = np.zeros(p)
+    # which matrices each lane takes
+    seg = (nb + W - 1) // W
+    for w in range(W):
+        if chain:
+            seg_next[w] = min(nb, w * seg)
+            seg_end[w] = min(nb, (w + 1) * seg)
+        _load_lane(w, 0, M, x0, Mr, Mi, Mc, xc, xq, tq, temps)  # valid data in idle lanes
+    next_global = 0
+    active = 0
+    for w in range(W):
+        b = -1
+        if chain:
+            if seg_next[w] < seg_end[w]:
+                b = seg_next[w]
+                seg_next[w] += 1
+        elif next_global < nb:
+            b = next_global
+            next_global += 1
+        if b >= 0:
+            mat[w] = b
+            phase[w] = _INIT
+            _load_lane(w, b, M, x0, Mr, Mi, Mc, xc, xq, tq, temps)
+            active += 1
+    while active > 0:
+        tused = _lane_eval(
+            Mr, Mi, Mc, xq, tq, lay_i, lay_c, cb, rb, realb, rs, rsz, cs, gco, rgsz,
+            Tlr, Tli, Tir, Tii, Trr, Tri, Gr, Gi, Er, Ei, Xr, Xi, MTr, MTi, GXr, GXi, Hr, Hi,
+            d, e, taur, taui, pr, pi, vr, vi, rot_k, rot_c, rot_s, lo, hi, q0, z0, okq,
+            sel, pk, lam, Vr, Vi, TVr, TVi, XVr, XVi, MVr, MVi, gTr, gTi, f, g, lm,
+        )  # fmt: skip
+        for w in range(W):
+            b = mat[w]
+            if b < 0:
+                continue
+            n_eval[w] += 1
+            ph = phase[w]
+            begin = False  # start an L-BFGS iteration from (xc, fc, gc)
+            end_stage = False
+            if ph == _INIT:
+                best_l[b] = lm[w]
+                for i in range(p):
+                    best_x[b, i] = xc[w, i]
+                stage[w] = 0
+                it_total[w] = 0
+                chained[w] = False
+                count[w] = 0
+                head[w] = memory - 1
+                tcur[w] = tused[w]
+                if chain and b > 0 and (b - 1) >= w * seg:  # previous matrix of this segment
+                    f_init[w] = f[w]
+                    for i in range(p):
+                        g_init[w, i] = g[i, w]
+                        xq[i, w] = best_x[b - 1, i]
+                    tq[w] = -chain_temps[0]
+                    phase[w] = _CHAIN
+                    continue
+                fc[w] = f[w]
+                for i in range(p):
+                    gc[w, i] = g[i, w]
+                stall[w] = 0
+                fails[w] = 0
+                it_stage[w] = 0
+                begin = True
+            elif ph == _CHAIN:
+                if lm[w] < best_l[b]:  # the neighbour's scalings start lower
+                    best_l[b] = lm[w]
+                    for i in range(p):
+                        xc[w, i] = best_x[b - 1, i]
+                        best_x[b, i] = xc[w, i]
+                        gc[w, i] = g[i, w]
+                    fc[w] = f[w]
+                    tcur[w] = tused[w]
+                    chained[w] = True
+                else:
+                    fc[w] = f_init[w]
+                    for i in range(p):
+                        gc[w, i] = g_init[w, i]
+                stall[w] = 0
+                fails[w] = 0
+                it_stage[w] = 0
+                begin = True
+            elif ph == _START:
+                fc[w] = f[w]
+                for i in range(p):
+                    gc[w, i] = g[i, w]
+                if lm[w] < best_l[b]:
+                    best_l[b] = lm[w]
+                    for i in range(p):
+                        best_x[b, i] = xc[w, i]
+                stall[w] = 0
+                fails[w] = 0
+                it_stage[w] = 0
+                begin = True
+            elif ph == _SEARCH:
+                pat = chain_patience if chained[w] else patience
+                if np.isfinite(f[w]) and f[w] <= fc[w] + 1e-4 * alpha[w] * slope[w]:
+                    sy = 0.0
+                    ss_ = 0.0
+                    yy = 0.0
+                    for i in range(p):
+                        si = xq[i, w] - xc[w, i]
+                        yi = g[i, w] - gc[w, i]
+                        sy += si * yi
+                        ss_ += si * si
+                        yy += yi * yi
+                    if sy > 1e-14 * max(np.sqrt(ss_ * yy), 1e-300):
+                        h = (head[w] + 1) % memory
+                        head[w] = h
+                        for i in range(p):
+                            S[w, h, i] = xq[i, w] - xc[w, i]
+                            Y[w, h, i] = g[i, w] - gc[w, i]
+                        rho[w, h] = 1.0 / sy
+                        count[w] = min(count[w] + 1, memory)
+                    rel = (fc[w] - f[w]) / max(abs(fc[w]), 1e-300)
+                    for i in range(p):
+                        xc[w, i] = xq[i, w]
+                        gc[w, i] = g[i, w]
+                    fc[w] = f[w]
+                    if lm[w] < best_l[b]:
+                        best_l[b] = lm[w]
+                        for i in range(p):
+                            best_x[b, i] = xc[w, i]
+                    fails[w] = 0
+                    st_tol = tol[min(stage[w], tol.size - 1)]
+                    stall[w] = stall[w] + 1 if rel < st_tol else 0
+                    nst = chain_temps.size if chained[w] else temps.size
+                    per_stage = max(max_iter // nst, min(max_iter, 5))
+                    if stall[w] >= pat or it_stage[w] >= per_stage:
+                        end_stage = True
+                    else:
+                        begin = True
+                else:
+                    alpha[w] *= 0.3
+                    ls[w] += 1
+                    if ls[w] < 12:
+                        for i in range(p):
+                            xq[i, w] = xc[w, i] + alpha[w] * dv[w, i]
+                        continue
+                    count[w] = 0  # forget the curvature pairs, retry along the gradient
+                    fails[w] += 1
+                    nst = chain_temps.size if chained[w] else temps.size
+                    per_stage = max(max_iter // nst, min(max_iter, 5))
+                    if fails[w] >= 3 or it_stage[w] >= per_stage:
+                        end_stage = True
+                    else:
+                        begin = True
+            if end_stage:
+                stages = chain_temps if chained[w] else temps
+                if it_total[w] >= max_iter or stage[w] + 1 >= stages.size:
+                    iters[b] = it_total[w]
+                    evals[b] = n_eval[w]
+                    n_eval[w] = 0
+                    nb_ = -1
+                    if chain:
+                        if seg_next[w] < seg_end[w]:
+                            nb_ = seg_next[w]
+                            seg_next[w] += 1
+                    elif next_global < nb:
+                        nb_ = next_global
+                        next_global += 1
+                    if nb_ < 0:
+                        mat[w] = -1
+                        phase[w] = _IDLE
+                        active -= 1
+                    else:
+                        mat[w] = nb_
+                        phase[w] = _INIT
+                        _load_lane(w, nb_, M, x0, Mr, Mi, Mc, xc, xq, tq, temps)
+                    continue
+                stage[w] += 1
+                tcur[w] = stages[stage[w]] / max(best_l[b], 1e-12)
+                for i in range(p):
+                    xq[i, w] = xc[w, i]
+                tq[w] = tcur[w]
+                phase[w] = _START
+                continue
+            if begin:
+                it_total[w] += 1
+                it_stage[w] += 1
+                for i in range(p):
+                    dtmp[i] = gc[w, i]
+                mu_kernels._lbfgs_dir(dtmp, S[w], Y[w], rho[w], count[w], head[w], dv[w])
+                sl = 0.0
+                for i in range(p):
+                    sl += dv[w, i] * gc[w, i]
+                if sl >= 0:
+                    sl = 0.0
+                    for i in range(p):
+                        dv[w, i] = -gc[w, i]
+                        sl -= gc[w, i] * gc[w, i]
+                    count[w] = 0
+                slope[w] = sl  # before the cap, as the per-matrix kernel does
+                _cap_step(dv[w], log_par)
+                alpha[w] = 1.0
+                ls[w] = 0
+                for i in range(p):
+                    xq[i, w] = xc[w, i] + dv[w, i]
+                tq[w] = tcur[w]
+                phase[w] = _SEARCH
