@@ -19,8 +19,9 @@ Several starts run at once (the worst direction of the upper bound and random ve
 returned ``delta`` is checked: ``sigma_min(I - M delta)`` must be at the round-off level,
 otherwise that candidate is dropped (and the bound lowered, to 0 if no candidate passes).
 
-With numba installed the power iteration runs compiled, matrix by matrix
-(:func:`oos_drake.robust.mu_kernels.power_iteration`, the same arithmetic).
+With numba installed the power iteration, the eigenvalue polish and the residual-vector check
+run compiled, start by start (:mod:`oos_drake.robust.mu_lower_kernels`, the same arithmetic up to
+round-off; the numpy code here is the fallback and the reference of the tests).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from oos_drake.robust import mu_kernels
+from oos_drake.robust import mu_kernels, mu_lower_kernels
 from oos_drake.robust.blocks import FULL, REAL, BlockStructure
 from oos_drake.robust.memory import reuse_freed_memory
 
@@ -41,6 +42,12 @@ USE_COMPILED = True
 
 #: Relative tolerance on ``sigma_min(I - M delta)`` accepted as "singular".
 CERTIFICATE_RTOL = 1e-7
+
+# eigenvalue polish: inverse iteration steps (complex structures), and Newton rounds towards a
+# real eigenvalue with their inverse iteration steps (structures with real blocks)
+_POLISH_STEPS = 3
+_REAL_ROUNDS = 8
+_REAL_STEPS = 2
 
 
 @dataclass(frozen=True)
@@ -154,6 +161,36 @@ def _normalize(v):
     return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
 
 
+def _max_block_norm(structure: BlockStructure, delta: np.ndarray) -> np.ndarray:
+    """``max_k ||Delta_k||_2`` of each ``delta`` (``(N, r, c)`` -> ``(N,)``), i.e.
+    ``np.max(structure.block_norms(delta), axis=1)``, cheaper.
+
+    The scalar blocks take one gather. The full blocks of the power iteration are rank one (an
+    outer product times phases), where ``||B||_2 = ||B||_F``: that holds to round-off when
+    ``||B^* B||_F = ||B||_F^2`` to 1e-13 relative (``||B||_F`` is then at most 5e-14 relative
+    above ``||B||_2``); the other blocks take an SVD.
+    """
+    rep = [b for b in structure.blocks if b.repeated]
+    out = np.zeros(delta.shape[0])
+    if rep:
+        rows = np.concatenate([np.arange(b.rows) + b.row_offset for b in rep])
+        cols = np.concatenate([np.arange(b.cols) + b.col_offset for b in rep])
+        out = np.max(np.abs(delta[:, rows, cols]), axis=1)
+    for b in structure.blocks:
+        if b.kind != FULL:
+            continue
+        B = delta[:, b.r_slice, b.c_slice]
+        fro2 = np.sum(B.real**2 + B.imag**2, axis=(1, 2))
+        G = np.conj(np.swapaxes(B, 1, 2)) @ B
+        g = np.sqrt(np.sum(G.real**2 + G.imag**2, axis=(1, 2)))
+        norm = np.sqrt(fro2)
+        svd = np.flatnonzero(fro2 - g > 1e-13 * fro2)
+        if svd.size:
+            norm[svd] = np.linalg.norm(B[svd], ord=2, axis=(1, 2))
+        out = np.maximum(out, norm)
+    return out
+
+
 class _BlockDiag:
     """Apply a block-diagonal ``Delta`` given per block (no dense ``(B, r, c)`` assembly)."""
 
@@ -185,34 +222,49 @@ class _BlockDiag:
         return out
 
 
+def _kernel_blocks(structure: BlockStructure) -> np.ndarray:
+    """Block description of the compiled kernels: ``(5, n_blocks)`` integers, kind (0 real,
+    1 repeated complex, 2 full), rows, columns, row offset, column offset."""
+    kinds = {REAL: 0, FULL: 2}
+    return np.array(
+        [
+            [kinds.get(b.kind, 1), b.rows, b.cols, b.row_offset, b.col_offset]
+            for b in structure.blocks
+        ],
+        dtype=np.int64,
+    ).T.copy()
+
+
+def _compiled() -> bool:
+    return mu_kernels.HAVE_NUMBA and USE_COMPILED
+
+
 def _power_iteration(M, structure, a, z, iters, kappa, rng):
-    """Run the mixed power iteration from vectors ``a`` (c-space) and ``z`` (c-space)."""
-    nb = M.shape[0]
-    if mu_kernels.HAVE_NUMBA and USE_COMPILED:  # the same iteration, compiled per matrix
+    """Run the mixed power iteration from vectors ``a`` (c-space) and ``z`` (c-space).
+
+    ``M`` is ``(nb, c, r)`` and ``a``, ``z`` are ``(N, c)`` with ``N`` a multiple of ``nb``:
+    start ``s`` runs on ``M[s % nb]`` (several starts per matrix).
+    """
+    nb = a.shape[0]
+    if _compiled():  # the same iteration, compiled per start
         real0 = [rng.uniform(-1.0, 1.0, nb) for b in structure.blocks if b.kind == REAL]
         real0 = np.stack(real0, axis=1) if real0 else np.zeros((nb, 0))
-        kinds = {REAL: 0, FULL: 2}
-        blocks = np.array(
-            [
-                [kinds.get(b.kind, 1), b.rows, b.cols, b.row_offset, b.col_offset]
-                for b in structure.blocks
-            ],
-            dtype=np.int64,
-        ).T.copy()
         delta = np.empty((nb, structure.n_rows, structure.n_cols), dtype=complex)
         a_out = np.empty((nb, structure.n_cols), dtype=complex)
-        mu_kernels.power_iteration(
-            np.require(M, complex, ["C", "W"]),  # one compiled signature (read-only copied)
+        mu_lower_kernels.power_iteration(
+            np.ascontiguousarray(M, dtype=complex),
             np.ascontiguousarray(a, dtype=complex),
             np.ascontiguousarray(z, dtype=complex),
             real0,
-            blocks,
+            _kernel_blocks(structure),
             int(iters),
             float(kappa),
             delta,
             a_out,
         )
         return delta, a_out
+    if M.shape[0] != nb:
+        M = np.broadcast_to(M[None], (nb // M.shape[0],) + M.shape).reshape((nb,) + M.shape[1:])
     MH = np.ascontiguousarray(np.conj(np.swapaxes(M, -1, -2)))
     w = _mv(MH, z)
     bd = _BlockDiag(structure)
@@ -250,7 +302,7 @@ def _power_iteration(M, structure, a, z, iters, kappa, rng):
     return _assemble(structure, params, nb), a
 
 
-def _polish_eigenvalue(MD, a, steps=3):
+def _polish_eigenvalue(MD, a, steps=_POLISH_STEPS):
     """Eigenvalue of ``MD`` nearest the Rayleigh quotient of ``a`` (shifted inverse iteration)."""
     n = MD.shape[-1]
     lam = np.sum(np.conj(a) * _mv(MD, a), axis=1)
@@ -266,7 +318,7 @@ def _polish_eigenvalue(MD, a, steps=3):
     return lam, a
 
 
-def _make_eigenvalue_real(M, structure, delta, a, steps=8):
+def _make_eigenvalue_real(M, structure, delta, a, steps=_REAL_ROUNDS):
     """Newton steps on the real blocks (and a common phase of the complex blocks) to Im(lam) = 0.
 
     Returns ``(delta, lam)`` with ``lam`` the eigenvalue of ``M delta`` tracked from ``a``.
@@ -284,7 +336,7 @@ def _make_eigenvalue_real(M, structure, delta, a, steps=8):
         Ma = M[act]
         da = delta[act]
         MD = Ma @ da
-        lam, aa = _polish_eigenvalue(MD, a[act], steps=2)
+        lam, aa = _polish_eigenvalue(MD, a[act], steps=_REAL_STEPS)
         a[act], lam_all[act] = aa, lam
         done = np.abs(lam.imag) <= 1e-13 * np.abs(lam)
         if rnd == steps or np.all(done):
@@ -443,32 +495,55 @@ def mu_lower_bound(
         starts_a.append(_normalize(np.ones((nb, c), dtype=complex)))
         starts_z.append(starts_a[0])
     ns = len(starts_a)
-    Mrep = np.broadcast_to(M[None], (ns, nb, c, r)).reshape(ns * nb, c, r)
+    mat = np.tile(np.arange(nb), ns)  # the matrix of each start
     a = np.concatenate(starts_a, axis=0)
     z = np.concatenate(starts_z, axis=0)
-    delta_unit, a = _power_iteration(Mrep, structure, a, z, iters, kappa, rng)
+    delta_unit, a = _power_iteration(M, structure, a, z, iters, kappa, rng)
+    compiled = _compiled()
+    if compiled:
+        M = np.ascontiguousarray(M, dtype=complex)
+        blocks = _kernel_blocks(structure)
     if polish_starts is not None and 0 < polish_starts < ns:
         # the eigenvalue polish and the certificate cost more than the power iteration itself:
         # keep only the most promising starts of each matrix (Rayleigh quotient estimate)
-        est = np.abs(np.sum(np.conj(a) * _mv(Mrep, _mv(delta_unit, a)), axis=1))
-        est = est / np.maximum(np.max(structure.block_norms(delta_unit), axis=1), 1e-300)
+        if compiled:
+            est = np.empty(a.shape[0], dtype=complex)
+            mu_lower_kernels.rayleigh_quotients(M, delta_unit, a, blocks, est)
+            est = np.abs(est)
+        else:
+            est = np.abs(np.sum(np.conj(a) * _mv(M[mat], _mv(delta_unit, a)), axis=1))
+        est = est / np.maximum(_max_block_norm(structure, delta_unit), 1e-300)
         order = np.argsort(-est.reshape(ns, nb), axis=0, kind="stable")[:polish_starts]
         keep = (order * nb + np.arange(nb)[None, :]).ravel()
         ns = polish_starts
-        Mrep, delta_unit, a = Mrep[keep], delta_unit[keep], a[keep]
-    if structure.has_real:
-        delta_unit, lam, a = _make_eigenvalue_real(Mrep, structure, delta_unit, a)
+        mat, delta_unit, a = mat[keep], delta_unit[keep], a[keep]
+    if compiled:  # the same polish, compiled per matrix
+        delta_unit = np.ascontiguousarray(delta_unit)
+        a = np.ascontiguousarray(a)
+        lam = np.empty(a.shape[0], dtype=complex)
+        mu_lower_kernels.eigen_polish(
+            M,
+            mat,
+            delta_unit,
+            a,
+            blocks,
+            _REAL_ROUNDS if structure.has_real else 0,
+            _REAL_STEPS if structure.has_real else _POLISH_STEPS,
+            lam,
+        )
+    elif structure.has_real:
+        delta_unit, lam, a = _make_eigenvalue_real(M[mat], structure, delta_unit, a)
     else:
-        lam, a = _polish_eigenvalue(Mrep @ delta_unit, a)
+        lam, a = _polish_eigenvalue(M[mat] @ delta_unit, a)
     lam_raw = lam.copy()
     mag = np.abs(lam)
     if structure.has_real:
         is_real = np.abs(lam.imag) <= 1e-9 * np.maximum(mag, 1e-300)
         lam = np.where(is_real, lam.real, 0.0)
         mag = np.abs(lam)
-    norm_unit = np.max(structure.block_norms(delta_unit), axis=1)
+    norm_unit = _max_block_norm(structure, delta_unit)
     # eigenvalues at round-off level of ||M|| carry no information (and overflow delta)
-    floor = 1e-13 * np.linalg.norm(Mrep, axis=(1, 2)) + 1e-300
+    floor = (1e-13 * np.linalg.norm(M, axis=(1, 2)) + 1e-300)[mat]
     usable = (mag > floor) & (norm_unit > 1e-12) & np.isfinite(mag)
     candidate = np.where(usable, mag / np.maximum(norm_unit, 1e-300), 0.0)
     delta = np.where(
@@ -476,16 +551,22 @@ def mu_lower_bound(
     )
     resid = np.full(candidate.shape, np.inf)
     if np.any(usable):
-        resid[usable] = _vector_residual(Mrep[usable], delta[usable], a[usable])
-        exact = usable & (resid > CERTIFICATE_RTOL)  # inconclusive: the exact (SVD) residual
-        if np.any(exact):
-            resid[exact] = certificate_residual(Mrep[exact], delta[exact])
+        if compiled:
+            vres = np.empty(a.shape[0])
+            mu_lower_kernels.vector_residual(M, mat, delta, a, blocks, vres)
+            resid[usable] = vres[usable]
+        else:
+            resid[usable] = _vector_residual(M[mat[usable]], delta[usable], a[usable])
+        exact = np.flatnonzero(usable & (resid > CERTIFICATE_RTOL))  # inconclusive: SVD
+        if exact.size:
+            resid[exact] = certificate_residual(M[mat[exact]], delta[exact])
     valid = (candidate > 0) & (resid <= CERTIFICATE_RTOL)
     retry = np.flatnonzero(~valid)
     if retry.size:
         # inverse iteration may stall on clustered eigenvalues, and the real-eigenvalue search
         # may shrink the real parameters: take the largest admissible eigenvalue of a full eig,
         # for the iterate and for its real parameters pushed to the vertex of their sign
+        M_retry = M[mat[retry]]
         vertex = delta_unit[retry].copy()
         for block in structure.blocks:
             if block.kind == REAL:
@@ -495,8 +576,8 @@ def mu_lower_bound(
                     d < 0, -1.0, 1.0
                 )[:, None]
         for trial in (delta_unit[retry], vertex):
-            tn = np.max(structure.block_norms(trial), axis=1)
-            ev = np.linalg.eigvals(Mrep[retry] @ trial)
+            tn = _max_block_norm(structure, trial)
+            ev = np.linalg.eigvals(M_retry @ trial)
             if structure.has_real:
                 ev = np.where(np.abs(ev.imag) <= 1e-9 * np.abs(ev), ev.real, 0.0)
             pick_ev = ev[np.arange(retry.size), np.argmax(np.abs(ev), axis=1)]
@@ -504,7 +585,7 @@ def mu_lower_bound(
             d_new = trial / np.where(ok, pick_ev, 1.0)[:, None, None]
             res_new = np.full(retry.size, np.inf)
             if np.any(ok):
-                res_new[ok] = certificate_residual(Mrep[retry][ok], d_new[ok])
+                res_new[ok] = certificate_residual(M_retry[ok], d_new[ok])
             value = np.where(ok, np.abs(pick_ev) / np.maximum(tn, 1e-300), 0.0)
             good = ok & (res_new <= CERTIFICATE_RTOL) & (value > candidate[retry] * valid[retry])
             fix = retry[good]
