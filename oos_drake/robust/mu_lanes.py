@@ -594,6 +594,21 @@ def _lane_vectors(nsteps, rot_k, rot_c, rot_s, sel, K, Ar, Ai, taur, taui, Vr, V
 
 
 @_jit
+def _block_rows_times(Tr_, Ti_, starts, xr, xi, outr, outi):
+    """``out = T x`` for the eight lanes, ``T`` block diagonal with lower-triangular blocks
+    stored by rows (``T[i, j] = T_[i, j - starts[i]]``), ``x`` and ``out`` (n, 8)."""
+    zero = _splat(0.0)
+    for i in range(starts.size):
+        s = starts[i]
+        ar = zero
+        ai = zero
+        for j in range(s, i + 1):
+            ar, ai = _cmac(_ld(Tr_[i, j - s]), _ld(Ti_[i, j - s]), _ld(xr[j]), _ld(xi[j]), ar, ai)
+        _st(outr[i], ar)
+        _st(outi[i], ai)
+
+
+@_jit
 def _lane_gradient(
     Mr, Mi, x, sel, K, lam, pk, rs, cs, lay_i, lay_c, Tlr, Tli, Tir, Tii, Er, Ei,
     Vr, Vi, TVr, TVi, XVr, XVi, MVr, MVi, gTr, gTi, g,
@@ -611,16 +626,7 @@ def _lane_gradient(
     coef2 = lay_c[n_gq:]
     zero = _splat(0.0)
     for q in range(K):  # TV = T_r^{-1} V, XV = M TV, MV = T_l XV
-        for i in range(r):
-            s = rs[i]
-            ar = zero
-            ai = zero
-            for j in range(s, i + 1):
-                ar, ai = _cmac(
-                    _ld(Tir[i, j - s]), _ld(Tii[i, j - s]), _ld(Vr[q, j]), _ld(Vi[q, j]), ar, ai
-                )
-            _st(TVr[q, i], ar)
-            _st(TVi[q, i], ai)
+        _block_rows_times(Tir, Tii, rs, Vr[q], Vi[q], TVr[q], TVi[q])
         for i in range(c):
             ar = zero
             ai = zero
@@ -630,16 +636,7 @@ def _lane_gradient(
                 )
             _st(XVr[q, i], ar)
             _st(XVi[q, i], ai)
-        for i in range(c):
-            s = cs[i]
-            ar = zero
-            ai = zero
-            for j in range(s, i + 1):
-                ar, ai = _cmac(
-                    _ld(Tlr[i, j - s]), _ld(Tli[i, j - s]), _ld(XVr[q, j]), _ld(XVi[q, j]), ar, ai
-                )
-            _st(MVr[q, i], ar)
-            _st(MVi[q, i], ai)
+        _block_rows_times(Tlr, Tli, cs, XVr[q], XVi[q], MVr[q], MVi[q])
     gTr[:] = 0.0
     gTi[:] = 0.0
     for k in range(l_row.size):  # T_l entry (i, j): 2 sum_q p_q XV[j, q] conj(MV[i, q])

@@ -21,8 +21,8 @@ Paper-sized problem (26 x 26, 16 blocks), one core: about 47 us per power-iterat
 steps (the earlier per-matrix kernel: 88 us) and about 60 us per polished start (numpy: about
 160 us).
 
-Blocks are described by an integer array ``(5, n_blocks)`` of kind (0 repeated real, 1 repeated complex, 2 full), rows, columns, row
-offset and column offset.
+Blocks are described by an integer array ``(5, n_blocks)``: kind (0 repeated real, 1 repeated
+complex, 2 full), rows, columns, row offset and column offset.
 """
 
 from __future__ import annotations

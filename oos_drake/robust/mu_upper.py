@@ -623,55 +623,29 @@ def mu_upper_bound(
     best_l = lmax0.copy()
     best_x = x.copy()
     iters_done = 0
-    if lanes:  # the same optimizer, compiled, eight matrices in lock-step (mu_lanes)
+    if p > 0 and max_iter > 0 and obj.compiled:  # the same optimizer, compiled
         its = np.zeros(nb, dtype=np.int64)
         n_evals = np.zeros(nb, dtype=np.int64)
-        rows = obj.lane_rows
+        settings = (
+            np.asarray(temperatures, dtype=float),
+            int(max_iter),
+            tols,
+            int(patience),
+            int(memory),
+            layout.log_par.astype(np.int64),
+            *obj.packed,
+        )
+        outputs = (best_x, best_l, its, n_evals)
+        chaining = (bool(chain), np.asarray(chain_temperatures, dtype=float), int(chain_patience))
+        start = np.ascontiguousarray(x)
+        # one BLAS thread: threads on 26 x 26 LAPACK calls are 100x slower
         with single_threaded_blas(), mu_lanes.compile_with_slp():
-            mu_lanes.dg_minimize_lanes(
-                obj.M,
-                np.ascontiguousarray(x),
-                np.asarray(temperatures, dtype=float),
-                int(max_iter),
-                tols,
-                int(patience),
-                int(memory),
-                layout.log_par.astype(np.int64),
-                *obj.packed,
-                *rows,
-                best_x,
-                best_l,
-                its,
-                n_evals,
-                bool(chain),
-                np.asarray(chain_temperatures, dtype=float),
-                int(chain_patience),
-            )
-        iters_done = int(its.max(initial=0))
-        obj.count += n_evals
-    elif p > 0 and max_iter > 0 and obj.compiled:  # the same optimizer, compiled per matrix
-        its = np.zeros(nb, dtype=np.int64)
-        n_evals = np.zeros(nb, dtype=np.int64)
-        with single_threaded_blas():  # threads on 26 x 26 LAPACK calls: 100x slower
-            mu_kernels.dg_minimize(
-                obj.M,
-                np.ascontiguousarray(x),
-                lmax0,
-                np.asarray(temperatures, dtype=float),
-                int(max_iter),
-                tols,
-                int(patience),
-                int(memory),
-                layout.log_par.astype(np.int64),
-                *obj.packed,
-                best_x,
-                best_l,
-                its,
-                n_evals,
-                bool(chain),
-                np.asarray(chain_temperatures, dtype=float),
-                int(chain_patience),
-            )
+            if lanes:  # eight matrices in lock-step (mu_lanes)
+                mu_lanes.dg_minimize_lanes(
+                    obj.M, start, *settings, *obj.lane_rows, *outputs, *chaining
+                )
+            else:  # matrix by matrix
+                mu_kernels.dg_minimize(obj.M, start, lmax0, *settings, *outputs, *chaining)
         iters_done = int(its.max(initial=0))
         obj.count += n_evals
     elif p > 0 and max_iter > 0:  # max_iter = 0: the balancing (or warm start) alone
