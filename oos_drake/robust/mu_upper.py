@@ -29,11 +29,12 @@ repeated block), or a warm start. Whatever the optimizer reaches, the returned v
 exact ``lambda_max`` at the returned scalings, so the bound is always valid; the scalings are
 returned so that the LMI can be checked independently (:func:`lmi_residual`).
 
-Speed: with numba installed the objective, the L-BFGS loop (per matrix: no batch bookkeeping,
-single-matrix calls cost the same per matrix as batches) and the balancing run compiled
-(:mod:`oos_drake.robust.mu_kernels`: about 40-50 us per 26 x 26 evaluation instead of ~100 us,
-most of it the Householder tridiagonalization). Without numba the numpy implementation below
-runs the same algorithm (batched over matrices).
+Speed: with numba installed the objective, the L-BFGS loop and the balancing run compiled.
+Batches of :data:`LANES_MIN_BATCH` matrices or more are optimized eight at a time, one matrix
+per SIMD lane (:mod:`oos_drake.robust.mu_lanes`: about 16-20 us per 26 x 26 matrix and
+evaluation); smaller ones matrix by matrix (:mod:`oos_drake.robust.mu_kernels`: about 36-45 us;
+numpy: about 100 us). Without numba the numpy implementation below runs the same algorithm
+(batched over matrices).
 """
 
 from __future__ import annotations
@@ -55,7 +56,7 @@ CHUNK = 512
 #: numpy implementation (same algorithm, used for cross-checks).
 USE_COMPILED = True
 
-#: Run the compiled optimizer eight matrices at a time (:mod:`mu_lanes`, 2.3x faster per
+#: Run the compiled optimizer eight matrices at a time (:mod:`mu_lanes`, 2.8x faster per
 #: matrix on the paper-sized benchmark) for batches of at least :data:`LANES_MIN_BATCH`
 #: matrices; smaller batches, where most lanes would idle, run matrix by matrix.
 USE_LANES = True
