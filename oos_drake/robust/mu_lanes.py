@@ -221,6 +221,19 @@ def _row_starts(n, starts, sizes):
 
 
 @_jit
+def _scatter_rows(rows, cols, ents, starts, Er, Ei, Tr_, Ti_):
+    """Block-diagonal ``T`` stored by rows (``T[i, j] = T_[i, j - starts[i]]``) from its entry
+    values ``E`` (n_ent, 8) and the positions ``(rows, cols, ents)`` of the layout."""
+    Tr_[:] = 0.0
+    Ti_[:] = 0.0
+    for k in range(rows.size):
+        i = rows[k]
+        q = cols[k] - starts[i]
+        _st(Tr_[i, q], _ld(Er[ents[k]]))
+        _st(Ti_[i, q], _ld(Ei[ents[k]]))
+
+
+@_jit
 def _lane_scalings(x, lay_i, lay_c, rs, cs, gco, Tlr, Tli, Tir, Tii, Gr, Gi, Er, Ei, Trr, Tri):
     """``T_l``, ``T_r^{-1}`` and ``G`` of the eight lanes from the parameters ``x`` (p, 8).
 
@@ -243,20 +256,8 @@ def _lane_scalings(x, lay_i, lay_c, rs, cs, gco, Tlr, Tli, Tir, Tii, Gr, Gi, Er,
             sc = np.exp(min(max(x[lin_row[k], w], -60.0), 60.0))
             Er[lin_ent[k], w] = sc * x[re_par[k], w]
             Ei[lin_ent[k], w] = sc * x[im_par[k], w]
-    Tlr[:] = 0.0
-    Tli[:] = 0.0
-    for k in range(l_row.size):
-        i = l_row[k]
-        q = l_col[k] - cs[i]
-        _st(Tlr[i, q], _ld(Er[l_ent[k]]))
-        _st(Tli[i, q], _ld(Ei[l_ent[k]]))
-    Trr[:] = 0.0
-    Tri[:] = 0.0
-    for k in range(r_row.size):
-        i = r_row[k]
-        q = r_col[k] - rs[i]
-        _st(Trr[i, q], _ld(Er[r_ent[k]]))
-        _st(Tri[i, q], _ld(Ei[r_ent[k]]))
+    _scatter_rows(l_row, l_col, l_ent, cs, Er, Ei, Tlr, Tli)
+    _scatter_rows(r_row, r_col, r_ent, rs, Er, Ei, Trr, Tri)
     # inverse of each lower-triangular diagonal block of T_r (real positive diagonal)
     Tir[:] = 0.0
     Tii[:] = 0.0
