@@ -603,7 +603,6 @@ def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax,
     ifail = np.zeros(n, dtype=np.int32)
     ints = np.zeros(8, dtype=np.int32)
     ints[4] = ord("L")
-    ints[6] = ord("L")
     ints[7] = ord("N")
     Hr = np.zeros((r, r))
     Hi = np.zeros((r, r))

@@ -611,12 +611,27 @@ def _block_rows_times(Tr_, Ti_, starts, xr, xi, outr, outi):
 
 
 @_jit
+def _weighted_cross(Ar, Ai, i, Br, Bi, j, wts, K):
+    """``sum_q wts[q] conj(A[q, i]) B[q, j]`` over the ``K`` eigenvectors, for the eight lanes
+    (``A``, ``B``: (K, n, 8) real and imaginary parts; returns the two 8-tuples)."""
+    zero = _splat(0.0)
+    ar = zero
+    ai = zero
+    for q in range(K):
+        tr, ti = _cjmac(_ld(Ar[q, i]), _ld(Ai[q, i]), _ld(Br[q, j]), _ld(Bi[q, j]), zero, zero)
+        wq = _ld(wts[q])
+        ar = _fma(wq, tr, ar)
+        ai = _fma(wq, ti, ai)
+    return ar, ai
+
+
+@_jit
 def _lane_gradient(
     Mr, Mi, x, sel, K, lam, pk, rs, cs, lay_i, lay_c, Tlr, Tli, Tir, Tii, Er, Ei,
     Vr, Vi, TVr, TVi, XVr, XVi, MVr, MVi, gTr, gTi, g,
 ):  # fmt: skip
     """Gradient ``g`` (p, 8) of the smoothed ``lambda_max`` from the top eigenvectors ``V``
-    (K, n, 8), their weights ``pk`` and eigenvalues ``lam`` (K, 8), as in
+    (K, n, 8), their weights ``pk`` and eigenvalues ``lam`` (K, 8; overwritten), as in
     :func:`mu_kernels.dg_objective`."""
     (
         log_par, log_ent, re_par, im_par, lin_ent, lin_row, l_row, l_col, l_ent,
@@ -642,29 +657,15 @@ def _lane_gradient(
     gTr[:] = 0.0
     gTi[:] = 0.0
     for k in range(l_row.size):  # T_l entry (i, j): 2 sum_q p_q XV[j, q] conj(MV[i, q])
-        i, j, en = l_row[k], l_col[k], l_ent[k]
-        ar = zero
-        ai = zero
-        for q in range(K):
-            tr, ti = _cjmac(
-                _ld(MVr[q, i]), _ld(MVi[q, i]), _ld(XVr[q, j]), _ld(XVi[q, j]), zero, zero
-            )
-            p2 = _ld(pk[q])
-            ar = _fma(p2, tr, ar)
-            ai = _fma(p2, ti, ai)
+        en = l_ent[k]
+        ar, ai = _weighted_cross(MVr, MVi, l_row[k], XVr, XVi, l_col[k], pk, K)
         _st(gTr[en], _fma(_splat(2.0), ar, _ld(gTr[en])))
         _st(gTi[en], _fma(_splat(2.0), ai, _ld(gTi[en])))
+    for q in range(K):  # scratch: lam becomes p_q l_q (not used after the gradient)
+        _st(lam[q], _mul(_ld(pk[q]), _ld(lam[q])))
     for k in range(r_row.size):  # T_r entry (i, j): -2 sum_q p_q l_q TV[j, q] conj(V[i, q])
-        i, j, en = r_row[k], r_col[k], r_ent[k]
-        ar = zero
-        ai = zero
-        for q in range(K):
-            tr, ti = _cjmac(
-                _ld(Vr[q, i]), _ld(Vi[q, i]), _ld(TVr[q, j]), _ld(TVi[q, j]), zero, zero
-            )
-            pl = _mul(_ld(pk[q]), _ld(lam[q]))
-            ar = _fma(pl, tr, ar)
-            ai = _fma(pl, ti, ai)
+        en = r_ent[k]
+        ar, ai = _weighted_cross(Vr, Vi, r_row[k], TVr, TVi, r_col[k], lam, K)
         _st(gTr[en], _fnma(_splat(2.0), ar, _ld(gTr[en])))
         _st(gTi[en], _fnma(_splat(2.0), ai, _ld(gTi[en])))
     for k in range(log_par.size):
@@ -685,16 +686,7 @@ def _lane_gradient(
             if pos < 0:
                 continue
             cf = coef1[q] if kk == 0 else coef2[q]
-            i, j = g_row[pos], g_col[pos]
-            ar = zero
-            ai = zero
-            for s_ in range(K):
-                tr, ti = _cjmac(
-                    _ld(TVr[s_, i]), _ld(TVi[s_, i]), _ld(XVr[s_, j]), _ld(XVi[s_, j]), zero, zero
-                )
-                p2 = _ld(pk[s_])
-                ar = _fma(p2, tr, ar)
-                ai = _fma(p2, ti, ai)
+            ar, ai = _weighted_cross(TVr, TVi, g_row[pos], XVr, XVi, g_col[pos], pk, K)
             # Re(2j (ar + j ai) cf) = -2 (ai Re(cf) + ar Im(cf))
             val = _fnma(_splat(2.0), _fma(ai, _splat(cf.real), _mul(ar, _splat(cf.imag))), val)
         _st(g[gq_par[q]], val)
@@ -1022,6 +1014,8 @@ def dg_minimize_lanes(
                 begin = True
             elif ph == _SEARCH:
                 pat = chain_patience if chained[w] else patience
+                nst = chain_temps.size if chained[w] else temps.size
+                per_stage = max(max_iter // nst, min(max_iter, 5))
                 if np.isfinite(f[w]) and f[w] <= fc[w] + 1e-4 * alpha[w] * slope[w]:
                     sy = 0.0
                     ss_ = 0.0
@@ -1052,8 +1046,6 @@ def dg_minimize_lanes(
                     fails[w] = 0
                     st_tol = tol[min(stage[w], tol.size - 1)]
                     stall[w] = stall[w] + 1 if rel < st_tol else 0
-                    nst = chain_temps.size if chained[w] else temps.size
-                    per_stage = max(max_iter // nst, min(max_iter, 5))
                     if stall[w] >= pat or it_stage[w] >= per_stage:
                         end_stage = True
                     else:
@@ -1067,8 +1059,6 @@ def dg_minimize_lanes(
                         continue
                     count[w] = 0  # forget the curvature pairs, retry along the gradient
                     fails[w] += 1
-                    nst = chain_temps.size if chained[w] else temps.size
-                    per_stage = max(max_iter // nst, min(max_iter, 5))
                     if fails[w] >= 3 or it_stage[w] >= per_stage:
                         end_stage = True
                     else:

@@ -457,7 +457,7 @@ class _Balanced:
         tl = np.real(np.diagonal(Tl, axis1=1, axis2=2))
         tr = np.real(np.diagonal(Tr, axis1=1, axis2=2))
         self.M = tl[:, :, None] * obj.M / tr[:, None, :]
-        lin_col_par, g_row_par, g_col_par = _balance_maps(L)
+        lin_col_par, g_row_par, g_col_par = _balance_maps(obj.s, L)
         log_t = x_start  # the start's log-scalings (its other parameters are zero)
         self.shift = np.zeros_like(x_start)
         self.shift[:, L.log_par] = x_start[:, L.log_par]
@@ -476,13 +476,16 @@ class _Balanced:
         return x_b / self.factor + self.shift
 
 
-_BALANCE_MAPS: dict = {}  # id(_Layout) -> index arrays of _balance_maps
+_BALANCE_MAPS: dict = {}  # BLK -> index arrays of _balance_maps
 
 
-def _balance_maps(L: _Layout):
+def _balance_maps(structure: BlockStructure, L: _Layout):
     """For each off-diagonal ``T`` entry, the log-parameter of its column's channel; for each
-    ``G`` parameter, the log-parameters of the r-space row and c-space column of its entry."""
-    key = id(L)
+    ``G`` parameter, the log-parameters of the r-space row and c-space column of its entry
+    (``L`` is the layout of ``structure``; cached per BLK like the layout)."""
+    key = (structure.blk.shape, structure.blk.tobytes())
+    if len(_BALANCE_MAPS) > 64:
+        _BALANCE_MAPS.clear()
     if key not in _BALANCE_MAPS:
         diag_par_r, diag_par_l = {}, {}
         ent_par = dict(zip(L.log_ent.tolist(), L.log_par.tolist(), strict=True))
