@@ -112,13 +112,26 @@ class AnalysisOptions:
     time_check_duration: float = 600.0
     progress: bool = True
 
-    def grid(self) -> np.ndarray:
-        """Common frequency grid [rad/s]."""
+    def __post_init__(self):
+        # checked here, before any work: a bad option must not cost a mission sweep
         lo, hi = self.frequency_range_hz
         if not 0 < lo < hi:
             raise ValueError(
                 f"frequency_range_hz must be 0 < low < high, got {self.frequency_range_hz}"
             )
+        unknown = [p for p in self.docking_phases if str(p) not in ("7", "8")]
+        if unknown:
+            raise ValueError(f"--docking: unknown docking phase {unknown[0]!r} (phases: 7, 8)")
+        for name in ("configurations", "points_per_decade", "docking_points"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        k_lo, k_hi = self.stiffness_range
+        if not 0 < k_lo <= k_hi:
+            raise ValueError(f"stiffness_range must be 0 < low <= high, got {self.stiffness_range}")
+
+    def grid(self) -> np.ndarray:
+        """Common frequency grid [rad/s]."""
+        lo, hi = self.frequency_range_hz
         n = max(int(round(self.points_per_decade * np.log10(hi / lo))) + 1, 3)
         return 2 * np.pi * np.geomspace(lo, hi, n)
 
