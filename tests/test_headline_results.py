@@ -232,3 +232,19 @@ def test_target_array_modes_alone_reach_only_the_static_limit(default_run):
     assert target.mu_lower == pytest.approx(0.2, rel=2e-3)
     assert target.frequency < 1e-3  # the static limit, no finite-frequency crossing
     assert chaser.mu_lower > 0.3 and 0.5 < chaser.frequency < 1.2
+
+
+def test_the_worst_cases_drive_a_chaser_array_mode_below_its_range(default_run):
+    """docs/ANALYSIS-RESULTS.md: the worst perturbations of the total set (mission and both
+    docking phases) put every real block they move at one vertex of the scaled box, with w1_SA1 (a chaser
+    array's first mode) below its range, and their peaks lie in 0.75-0.9 Hz."""
+    peaks = _peaks(default_run).set_index(["study", "subset"])
+    worst = pd.read_parquet(default_run / "analysis" / "worst_perturbations.parquet")
+    for study in ("mission", "docking-7", "docking-8"):
+        rows = worst[(worst["study"] == study) & (worst["subset"] == "total")]
+        real = rows[rows["kind"] == "ureal"].set_index("block")["normalized_real [-]"]
+        size = 1.0 / peaks.loc[(study, "total"), "mu_lower"]
+        moved = real[np.abs(real) > 1e-9 * size]  # a vertex of the scaled box (or untouched)
+        np.testing.assert_allclose(np.abs(moved), size, rtol=1e-6)
+        assert real["w1_SA1"] < -1.0, study  # below its range
+        assert 0.75 < peaks.loc[(study, "total"), "frequency [Hz]"] < 0.9, study
