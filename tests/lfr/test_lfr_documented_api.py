@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.linalg import block_diag
 
-from oos_drake.lfr import LFR, append, feedback, ucomplex, ultidyn, ureal, usubs
+from oos_drake.lfr import LFR, append, close_blocks, feedback, ucomplex, ultidyn, ureal, usubs
 from oos_drake.lfr.blocks import UComplex, ULTIDyn, make_ureal_spec
 
 TOL = 1e-12
@@ -181,6 +181,14 @@ def test_from_parts_round_trips_the_partition_and_channel_slices_give_the_layout
     s = 0.5j
     expected = C @ np.linalg.solve(s * np.eye(n) - A, B) + D
     np.testing.assert_allclose(closed.freqresp([0.5])[0], expected, rtol=1e-10, atol=1e-12)
+    # close_blocks takes the same normalized values and is the same loop
+    direct = close_blocks(sys, {"a": delta_a, "b": delta_b})
+    np.testing.assert_allclose(direct.freqresp([0.5])[0], expected, rtol=1e-10, atol=1e-12)
+    # closing one block keeps the other with its channels
+    only_a = close_blocks(sys, {"a": delta_a})
+    assert only_a.occurrences == {"b": 1} and only_a.channel_slices() == {
+        "b": (slice(0, 2), slice(0, 3))
+    }
     # the same with a block-diagonal Delta assembled in BLK order (BLK rows: [-2, 0], [3, 2])
     np.testing.assert_array_equal(sys.blk, [[-2, 0], [3, 2]])
     np.testing.assert_array_equal(block_diag(delta_a * np.eye(2), delta_b), Delta)
