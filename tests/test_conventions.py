@@ -92,12 +92,6 @@ def test_every_runnable_command_sets_func():
         assert callable(func), f"oos {' '.join(path)} sets no func"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="`oos sdf` without an action sets no func and its action is optional: main() prints "
-    "the top-level help (not sdf's) and returns 1 (`oos model` prints its own help; robust and "
-    "campaign require their action)",
-)
 def test_every_command_with_actions_sets_func_or_requires_an_action():
     from oos_drake.cli import build_parser
 

@@ -113,7 +113,7 @@ def register(subparsers) -> None:
     validate.set_defaults(func=_validate)
 
     sdf = subparsers.add_parser("sdf", help="generate or check the scenario's SDF files")
-    sdf_commands = sdf.add_subparsers(dest="sdf_command", metavar="SDF_COMMAND")
+    sdf_commands = sdf.add_subparsers(dest="sdf_command", metavar="SDF_COMMAND", required=True)
     for name, func, text in (
         ("generate", _sdf_generate, "write the SDF files from the scenario data file"),
         ("check", _sdf_check, "exit 1 if the SDF files differ from the scenario data file"),
