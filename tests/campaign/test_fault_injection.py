@@ -9,6 +9,7 @@ uninterrupted one, metric for metric.
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
@@ -83,15 +84,17 @@ def _cli(*args) -> list[str]:
 
 @pytest.fixture
 def campaign_in_progress(write_spec, tmp_path):
-    """A slow campaign run by another process, once its first run is finished: (spec, directory,
-    process). The process is killed at teardown if still running."""
-    spec = write_spec(_with_simulator("make_slow_simulator"))
+    """A campaign run by another process, held after its first run until the test opens the
+    gate (``gate.touch()``): (spec, directory, process, gate). Killed at teardown if running."""
+    spec = write_spec(_with_simulator("make_gated_simulator"))
     directory = tmp_path / "c"
+    gate = tmp_path / "gate"
     process = subprocess.Popen(
         _cli("run", spec, "--out", directory, "--no-progress"),
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
+        env={**os.environ, "OOS_TEST_GATE": str(gate)},
     )
     try:
         deadline = time.monotonic() + 120
@@ -99,7 +102,7 @@ def campaign_in_progress(write_spec, tmp_path):
             assert process.poll() is None, process.stderr.read()
             assert time.monotonic() < deadline, "the campaign did not start"
             time.sleep(0.05)
-        yield spec, directory, process
+        yield spec, directory, process, gate
     finally:
         if process.poll() is None:
             process.kill()
@@ -107,7 +110,8 @@ def campaign_in_progress(write_spec, tmp_path):
 
 
 def test_a_second_process_on_a_campaign_in_use_is_refused(campaign_in_progress):
-    spec, directory, first = campaign_in_progress
+    spec, directory, first, gate = campaign_in_progress
+
     def files():  # (temporary files of the writes in flight come and go)
         return {p.relative_to(directory) for p in directory.rglob("*") if p.suffix != ".tmp"}
 
@@ -126,6 +130,7 @@ def test_a_second_process_on_a_campaign_in_use_is_refused(campaign_in_progress):
     after = files()
     assert listing <= after
     assert all(str(p).startswith((store.RUNS_DIR, store.TIMESERIES_DIR)) for p in after - listing)
+    gate.touch()
     assert first.wait(timeout=180) == 0
     runs = pd.read_parquet(directory / "runs.parquet")
     assert runs["run_id"].tolist() == list(range(12))
@@ -134,14 +139,14 @@ def test_a_second_process_on_a_campaign_in_use_is_refused(campaign_in_progress):
 
 def test_the_lock_is_released_when_its_holder_is_killed(campaign_in_progress):
     """``flock`` dies with its process: a ``kill -9`` never leaves a campaign locked."""
-    import os
     import signal
 
-    _, directory, first = campaign_in_progress
+    _, directory, first, gate = campaign_in_progress
     with pytest.raises(ValueError, match=f"pid {first.pid}"):
         with store.campaign_lock(directory):
             pass
     os.kill(first.pid, signal.SIGKILL)
     first.wait()
+    gate.touch()
     summary = resume_campaign(directory, progress=False)
     assert summary.executed + summary.skipped == 12
