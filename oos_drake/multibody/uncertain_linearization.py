@@ -1,0 +1,850 @@
+r"""Uncertain linearization of a Drake system (MATLAB ``ulinearize`` for MultibodyPlant models).
+
+:func:`ulinearize` turns a Drake system (a ``MultibodyPlant`` or a ``Diagram`` holding one), a
+Context at an operating point and a list of declared physical parameters into an
+:class:`oos_drake.lfr.LFR` whose ``ureal`` blocks are those parameters. Nothing about the
+model's equations is assumed beyond what Drake itself computes:
+
+1. **Descriptor form.** At a point where the plant's generalized accelerations vanish (an
+   equilibrium: no gravity in orbit, zero velocity, zero inputs), Drake's linearization
+   ``x' = A x + B u``, ``y = C x + D u`` (``FirstOrderTaylorApproximation``) satisfies
+
+   .. math::  E(p)\, x' = \tilde A(p)\, x + \tilde B(p)\, u, \qquad
+              E = \mathrm{blkdiag}(I, M(q_0, p), I), \quad \tilde A = E A, \quad \tilde B = E B,
+
+   with ``M`` the mass matrix of the free (unlocked) velocities (``CalcMassMatrix``); the term
+   ``dM^{-1}/dq f`` vanishes because ``f = M v' = 0``. ``M`` is linear in each body's mass (its
+   centre of mass and its inertia about it kept) and in each diagonal moment of inertia;
+   ``\tilde A`` is linear in spring and bushing stiffnesses and in damping constants. Outputs
+   that read accelerations are written ``y = C_x(p) x + D_u(p) u + C_d x'`` with a constant
+   ``C_d`` found by least squares (zero when ``[C D]`` is itself polynomial).
+2. **Coefficients from evaluations.** All of ``[E, -\tilde A, -\tilde B; -C_d, I, -C_x, -D_u]``
+   (the implicit relation ``R(p) [x'; y; x; u] = 0``) is evaluated at the nominal point and at
+   ``nominal +- h`` for each parameter (``h`` its half range), which gives the exact
+   coefficients of a polynomial of degree <= 2 in the deviation ``d = p - nominal``; the fit is
+   checked at a third point per parameter (a parameter whose dependence is not polynomial of
+   degree <= 2 is refused, naming it) and the sum of the per-parameter terms at random joint
+   points (cross terms are refused).
+3. **Minimal repetitions.** Each parameter's coefficients are factored by SVD: affine
+   ``d R_1 = U d V^T`` takes ``rank R_1`` occurrences; quadratic ``d R_1 + d^2 R_2`` takes
+   ``rank [R_1, R_2] + rank R_2`` (or ``rank [R_1; R_2] + rank R_2``, whichever is smaller).
+   A modal frequency ``omega`` (quantity ``"frequency"``) scales its joint's spring as
+   ``k = k_0 (omega / omega_0)^2 = J omega^2`` and its damping as ``d = d_0 omega / omega_0 =
+   2 xi J omega`` (``J = k_0 / omega_0^2``, ``xi`` kept): both terms sit in the joint's row of
+   ``\tilde A``, so ``omega`` occurs twice (``omega I_2``, as in TITOP's modal block).
+4. **Normalization and assembly.** Each deviation ``d = p - nominal`` is written in the
+   normalized ``delta`` of MATLAB's ``ureal`` (affine for a centred range, MATLAB's bilinear
+   map otherwise) and the implicit relation is solved for ``[x'; y]`` around the nominal
+   (the algebraic loop through ``E``'s uncertain part stays inside the LFR). States that
+   structurally cannot reach an output or be reached from an input (through any uncertain
+   channel) are removed. The result is checked against Drake's own linearization at random
+   parameter values inside and outside the ranges.
+
+Parameters are declared with :class:`PhysicalParameter` (or a TOML file, :func:`load_parameters`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from oos_drake.lfr import LFR
+from oos_drake.lfr.blocks import UReal
+from oos_drake.lfr.core import BlockEntry
+from oos_drake.multibody.linearization import structural_keep
+
+__all__ = [
+    "BODY_QUANTITIES",
+    "JOINT_QUANTITIES",
+    "BUSHING_QUANTITIES",
+    "PhysicalParameter",
+    "load_parameters",
+    "parse_port",
+    "ulinearize",
+]
+
+BODY_QUANTITIES = ("mass", "Ixx", "Iyy", "Izz")
+JOINT_QUANTITIES = ("stiffness", "damping", "frequency")
+_BUSHING_KINDS = ("force_stiffness", "torque_stiffness", "force_damping", "torque_damping")
+BUSHING_QUANTITIES = tuple(
+    f"{kind}{axis}" for kind in _BUSHING_KINDS for axis in ("", "_x", "_y", "_z")
+)
+_UNITS = {
+    "mass": "kg",
+    "Ixx": "kg m^2",
+    "Iyy": "kg m^2",
+    "Izz": "kg m^2",
+    "stiffness": "N m/rad",
+    "damping": "N m s/rad",
+    "frequency": "rad/s",
+    "force_stiffness": "N/m",
+    "torque_stiffness": "N m/rad",
+    "force_damping": "N s/m",
+    "torque_damping": "N m s/rad",
+}
+
+
+@dataclass(frozen=True)
+class PhysicalParameter:
+    """One uncertain physical parameter of a Drake model (becomes a ``ureal`` block).
+
+    Attributes
+    ----------
+    name : str
+        Block name in the LFR (e.g. ``"m_hub"``).
+    element : str
+        What it belongs to: a body or joint name (``"hub"``, optionally scoped
+        ``"model::hub"``), or a bushing as ``"frameA/frameC"`` (its two frames' names).
+    quantity : str
+        Body: ``"mass"`` [kg] (centre of mass and inertia about it kept), ``"Ixx"``, ``"Iyy"``,
+        ``"Izz"`` [kg m^2] (inertia about the centre of mass, body axes). Revolute joint:
+        ``"stiffness"`` [N m/rad] (its ``RevoluteSpring``), ``"damping"`` [N m s/rad],
+        ``"frequency"`` [rad/s] (modal frequency: spring ``k0 (w/w0)^2``, damping ``d0 w/w0``
+        with ``k0, d0`` the context's values at the nominal ``w0``). Bushing:
+        ``"force_stiffness"`` [N/m], ``"torque_stiffness"`` [N m/rad], ``"force_damping"``
+        [N s/m], ``"torque_damping"`` [N m s/rad], all three axes, or one axis with a suffix
+        ``_x``, ``_y``, ``_z``.
+    nominal : float
+        Nominal value (unit of the quantity).
+    lower, upper : float
+        Range, ``lower < nominal < upper`` (an off-centre range uses MATLAB's bilinear map).
+    """
+
+    name: str
+    element: str
+    quantity: str
+    nominal: float
+    lower: float
+    upper: float
+
+    def __post_init__(self):
+        known = BODY_QUANTITIES + JOINT_QUANTITIES + BUSHING_QUANTITIES
+        if self.quantity not in known:
+            raise ValueError(
+                f"parameter {self.name!r}: unknown quantity {self.quantity!r}; known: {known}"
+            )
+        self.spec  # validates name and range (one-line ValueError)
+        positive = self.quantity != "damping" and "damping" not in self.quantity
+        if positive and self.lower <= 0:
+            raise ValueError(
+                f"parameter {self.name!r}: range [{self.lower:g}, {self.upper:g}] makes the "
+                f"{self.quantity} of {self.element!r} non-positive"
+            )
+        if not positive and self.lower < 0:
+            raise ValueError(
+                f"parameter {self.name!r}: range [{self.lower:g}, {self.upper:g}] makes the "
+                f"{self.quantity} of {self.element!r} negative"
+            )
+
+    @property
+    def spec(self) -> UReal:
+        """The ``ureal`` block spec (MATLAB normalization)."""
+        return UReal(self.name, self.nominal, self.lower, self.upper)
+
+    @property
+    def unit(self) -> str:
+        """Physical unit of the quantity."""
+        return _UNITS[self.quantity.removesuffix("_x").removesuffix("_y").removesuffix("_z")]
+
+    @property
+    def kind(self) -> str:
+        """``"body"``, ``"joint"`` or ``"bushing"``."""
+        if self.quantity in BODY_QUANTITIES:
+            return "body"
+        return "joint" if self.quantity in JOINT_QUANTITIES else "bushing"
+
+
+def load_parameters(path) -> tuple[PhysicalParameter, ...]:
+    """Read parameter declarations from a TOML file.
+
+    Format: one table per parameter, named by its block name::
+
+        [m_hub]
+        element = "hub"
+        quantity = "mass"
+        nominal = 100.0        # kg
+        range = [90.0, 110.0]  # or percent = 10, or plusminus = 10.0
+
+    Raises
+    ------
+    ValueError
+        Unreadable file, missing field, bad range (the message names the parameter).
+    """
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as error:
+        raise ValueError(f"{path}: cannot read parameter file ({error})") from None
+    parameters = []
+    for name, table in data.items():
+        if not isinstance(table, dict):
+            raise ValueError(f"{path}: {name!r} must be a table [{name}]")
+        missing = [key for key in ("element", "quantity", "nominal") if key not in table]
+        if missing:
+            raise ValueError(f"{path}: parameter {name!r} misses {missing}")
+        extra = set(table) - {"element", "quantity", "nominal", "range", "percent", "plusminus"}
+        if extra:
+            raise ValueError(f"{path}: parameter {name!r} has unknown keys {sorted(extra)}")
+        from oos_drake.lfr.blocks import make_ureal_spec
+
+        ranges = {k: table[k] for k in ("range", "percent", "plusminus") if k in table}
+        if len(ranges) != 1:
+            raise ValueError(
+                f"{path}: parameter {name!r} needs exactly one of range, percent, plusminus"
+            )
+        spec = make_ureal_spec(name, float(table["nominal"]), **ranges)
+        parameters.append(
+            PhysicalParameter(
+                name, str(table["element"]), str(table["quantity"]),
+                spec.nominal, spec.lower, spec.upper,
+            )
+        )  # fmt: skip
+    if not parameters:
+        raise ValueError(f"{path}: no parameters declared")
+    return tuple(parameters)
+
+
+# ----------------------------------------------------------------------------- Drake binding
+def _scoped(plant, name: str, has, get, kind: str):
+    if "::" in name:
+        model, local = name.rsplit("::", 1)
+        if not plant.HasModelInstanceNamed(model):
+            raise ValueError(f"no model instance {model!r} for {kind} {name!r}")
+        instance = plant.GetModelInstanceByName(model)
+        if not has(local, instance):
+            raise ValueError(f"no {kind} named {name!r} in the model")
+        return get(local, instance)
+    if not has(name):
+        raise ValueError(f"no {kind} named {name!r} in the model")
+    try:
+        return get(name)
+    except RuntimeError:
+        raise ValueError(f"{kind} name {name!r} is ambiguous; scope it as 'model::{name}'") from None
+
+
+def _force_elements(plant):
+    from pydrake.multibody.tree import ForceElementIndex
+
+    return [plant.get_force_element(ForceElementIndex(i)) for i in range(plant.num_force_elements())]
+
+
+class _Binding:
+    """A parameter bound to its Drake element, with the base context's values it scales."""
+
+    def __init__(self, parameter: PhysicalParameter, plant, plant_context):
+        from pydrake.multibody.tree import LinearBushingRollPitchYaw, RevoluteSpring
+
+        self.parameter = parameter
+        self.plant = plant
+        kind, element, quantity = parameter.kind, parameter.element, parameter.quantity
+        label = f"parameter {parameter.name!r}"
+        if kind == "body":
+            self.body = _scoped(plant, element, plant.HasBodyNamed, plant.GetBodyByName, "body")
+            if parameter.quantity != "mass":
+                self._check_inertia(plant_context)
+        elif kind == "joint":
+            joint = _scoped(plant, element, plant.HasJointNamed, plant.GetJointByName, "joint")
+            if joint.num_velocities() != 1 or joint.type_name() != "revolute":
+                raise ValueError(f"{label}: joint {element!r} is not a revolute joint")
+            self.joint = joint
+            springs = [
+                f for f in _force_elements(plant)
+                if isinstance(f, RevoluteSpring) and f.joint().index() == joint.index()
+            ]  # fmt: skip
+            self.spring = springs[0] if springs else None
+            if quantity in ("stiffness", "frequency") and self.spring is None:
+                raise ValueError(f"{label}: joint {element!r} has no spring (RevoluteSpring)")
+            self.k0 = self.spring.GetStiffness(plant_context) if self.spring else 0.0
+            self.d0 = float(joint.GetDampingVector(plant_context)[0])
+        else:
+            frames = element.split("/")
+            if len(frames) != 2:
+                raise ValueError(f"{label}: a bushing is named 'frameA/frameC', got {element!r}")
+            matches = [
+                f for f in _force_elements(plant)
+                if isinstance(f, LinearBushingRollPitchYaw)
+                and (f.frameA().name(), f.frameC().name()) == tuple(frames)
+            ]  # fmt: skip
+            if len(matches) != 1:
+                raise ValueError(
+                    f"{label}: {'no' if not matches else 'more than one'} bushing between "
+                    f"frames {frames[0]!r} and {frames[1]!r}"
+                )
+            self.bushing = matches[0]
+            base, _, axis = quantity.rpartition("_") if quantity[-2:] in ("_x", "_y", "_z") else (
+                quantity, "", ""
+            )
+            self.bushing_kind = base
+            self.axes = [{"x": 0, "y": 1, "z": 2}[axis]] if axis else [0, 1, 2]
+
+    def _check_inertia(self, plant_context):
+        from pydrake.multibody.tree import SpatialInertia
+
+        for value in (self.parameter.lower, self.parameter.upper):
+            mass, com, inertia = self._central(plant_context)
+            axis = BODY_QUANTITIES.index(self.parameter.quantity) - 1
+            inertia[axis, axis] = value
+            if not SpatialInertia.MakeFromCentralInertia(
+                mass, com, _rotational(inertia)
+            ).IsPhysicallyValid() or np.linalg.eigvalsh(inertia).min() <= 0:
+                raise ValueError(
+                    f"parameter {self.parameter.name!r}: {self.parameter.quantity} = {value:g} "
+                    f"makes the inertia of body {self.parameter.element!r} non-physical "
+                    "(triangle inequality or non-positive moment)"
+                )
+
+    def _central(self, plant_context):
+        M = self.body.CalcSpatialInertiaInBodyFrame(plant_context)
+        mass, com = M.get_mass(), M.get_com()
+        inertia = M.Shift(com).CalcRotationalInertia().CopyToFullMatrix3()
+        return mass, com, inertia
+
+    def apply(self, plant_context, value: float) -> None:
+        """Write ``value`` (physical) into ``plant_context``."""
+        quantity = self.parameter.quantity
+        if self.parameter.kind == "body":
+            from pydrake.multibody.tree import SpatialInertia
+
+            mass, com, inertia = self._central(plant_context)
+            if quantity == "mass":
+                mass = value
+            else:
+                axis = BODY_QUANTITIES.index(quantity) - 1
+                inertia[axis, axis] = value
+            self.body.SetSpatialInertiaInBodyFrame(
+                plant_context, SpatialInertia.MakeFromCentralInertia(mass, com, _rotational(inertia))
+            )
+        elif self.parameter.kind == "joint":
+            if quantity == "stiffness":
+                self.spring.SetStiffness(plant_context, value)
+            elif quantity == "damping":
+                self.joint.SetDampingVector(plant_context, [value])
+            else:
+                ratio = value / self.parameter.nominal
+                self.spring.SetStiffness(plant_context, self.k0 * ratio**2)
+                self.joint.SetDampingVector(plant_context, [self.d0 * ratio])
+        else:
+            getter = getattr(self.bushing, f"Get{_camel(self.bushing_kind)}Constants")
+            setter = getattr(self.bushing, f"Set{_camel(self.bushing_kind)}Constants")
+            constants = np.array(getter(plant_context), dtype=float)
+            constants[self.axes] = value
+            setter(plant_context, constants)
+
+
+def _camel(kind: str) -> str:
+    return "".join(part.capitalize() for part in kind.split("_"))
+
+
+def _rotational(inertia: np.ndarray):
+    from pydrake.multibody.tree import RotationalInertia
+
+    I = inertia
+    return RotationalInertia(I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])
+
+
+_PORT = re.compile(r"^\s*([^\[\]]+?)\s*(?:\[([0-9,:\s]*)\])?\s*$")
+
+
+def parse_port(text: str) -> tuple[str, slice | list[int] | None]:
+    """Split ``"name"``, ``"name[0:6]"`` or ``"name[2,9]"`` into a port name and a row selection."""
+    match = _PORT.match(str(text))
+    if not match:
+        raise ValueError(f"bad port specification {text!r} (use NAME, NAME[i,j] or NAME[a:b])")
+    name, selection = match.group(1), match.group(2)
+    if selection is None:
+        return name, None
+    selection = selection.replace(" ", "")
+    try:
+        if ":" in selection:
+            start, stop = (int(v) if v else None for v in selection.split(":"))
+            return name, slice(start, stop)
+        return name, [int(v) for v in selection.split(",") if v]
+    except ValueError:
+        raise ValueError(f"bad port specification {text!r}") from None
+
+
+def _port(system, text: str, direction: str):
+    name, selection = parse_port(text)
+    has = system.HasInputPort if direction == "input" else system.HasOutputPort
+    get = system.GetInputPort if direction == "input" else system.GetOutputPort
+    if not has(name):
+        count = system.num_input_ports() if direction == "input" else system.num_output_ports()
+        port = system.get_input_port if direction == "input" else system.get_output_port
+        names = [port(i).get_name() for i in range(count)]
+        raise ValueError(f"no {direction} port {name!r} on {system.get_name()!r}; ports: {names}")
+    port = get(name)
+    rows = np.arange(port.size())
+    if selection is not None:
+        try:
+            rows = rows[selection]
+        except IndexError:
+            raise ValueError(
+                f"{direction} port {text!r}: selection outside its {port.size()} entries"
+            ) from None
+        if rows.size == 0:
+            raise ValueError(f"{direction} port {text!r}: empty selection")
+    return port, rows, name
+
+
+def _find_plant(system):
+    from pydrake.multibody.plant import MultibodyPlant
+
+    if isinstance(system, MultibodyPlant):
+        return system
+    plants = [s for s in system.GetSystems() if isinstance(s, MultibodyPlant)]
+    if len(plants) != 1:
+        raise ValueError(
+            f"ulinearize: {system.get_name()!r} holds {len(plants)} MultibodyPlants (need one)"
+        )
+    return plants[0]
+
+
+@dataclass(frozen=True)
+class _Problem:
+    system: object
+    plant: object
+    context: object
+    bindings: tuple
+    inputs: tuple  # (port, rows, name)
+    outputs: tuple
+    velocity_rows: np.ndarray  # diagram continuous-state indices of the free velocities
+    free_velocities: np.ndarray  # plant velocity indices that are not locked
+
+    @property
+    def nominal(self) -> np.ndarray:
+        return np.array([b.parameter.nominal for b in self.bindings])
+
+    def linearize(self, values) -> dict:
+        """Drake's Taylor linearization and mass matrix at physical ``values`` (one per binding)."""
+        from pydrake.systems.primitives import FirstOrderTaylorApproximation
+
+        context = self.context.Clone()
+        plant_context = self.plant.GetMyMutableContextFromRoot(context)
+        for binding, value in zip(self.bindings, values, strict=True):
+            binding.apply(plant_context, float(value))
+        for port, _, _ in self.inputs:
+            if not port.HasValue(context):
+                port.FixValue(context, np.zeros(port.size()))
+        B, C, D = [], [], []
+        A = f0 = None
+        for k, (out_port, out_rows, _) in enumerate(self.outputs):
+            row_C, row_D = None, []
+            for j, (in_port, in_rows, _) in enumerate(self.inputs):
+                affine = FirstOrderTaylorApproximation(
+                    self.system, context,
+                    input_port_index=in_port.get_index(), output_port_index=out_port.get_index(),
+                )  # fmt: skip
+                if A is None:
+                    A, f0 = affine.A(), affine.f0()
+                if k == 0:
+                    B.append(affine.B()[:, in_rows])
+                row_C = affine.C()[out_rows, :]
+                row_D.append(affine.D()[np.ix_(out_rows, in_rows)])
+            C.append(row_C)
+            D.append(np.hstack(row_D))
+        M = self.plant.CalcMassMatrix(plant_context)[np.ix_(self.free_velocities, self.free_velocities)]
+        return {"A": A, "B": np.hstack(B), "C": np.vstack(C), "D": np.vstack(D), "M": M, "f0": f0}
+
+
+def _problem(system, context, parameters, inputs, outputs) -> _Problem:
+    plant = _find_plant(system)
+    if isinstance(inputs, str):
+        inputs = [inputs]
+    if isinstance(outputs, str):
+        outputs = [outputs]
+    if not inputs or not outputs:
+        raise ValueError("ulinearize: give at least one input and one output port")
+    parameters = tuple(parameters)
+    if not parameters:
+        raise ValueError("ulinearize: no parameters declared")
+    names = [p.name for p in parameters]
+    duplicates = sorted({n for n in names if names.count(n) > 1})
+    if duplicates:
+        raise ValueError(f"ulinearize: parameter names declared twice: {duplicates}")
+    if not plant.is_finalized():
+        raise ValueError("ulinearize: the MultibodyPlant is not finalized")
+    if plant.time_step() != 0:
+        raise ValueError("ulinearize: the MultibodyPlant must be continuous (time_step = 0)")
+    plant_context = plant.GetMyContextFromRoot(context)
+    bindings = tuple(_Binding(p, plant, plant_context) for p in parameters)
+    in_ports = tuple(_port(system, name, "input") for name in inputs)
+    out_ports = tuple(_port(system, name, "output") for name in outputs)
+    # where the plant's velocities sit in the system's continuous state: write markers
+    marked = context.Clone()
+    state = marked.get_mutable_continuous_state_vector()
+    state.SetFromVector(np.arange(state.size(), dtype=float))
+    plant_state = plant.GetMyContextFromRoot(marked).get_continuous_state_vector().CopyToVector()
+    nq = plant.num_positions()
+    locked = np.zeros(plant.num_velocities(), dtype=bool)
+    for index in plant.GetJointIndices():
+        joint = plant.get_joint(index)
+        if joint.is_locked(plant_context):
+            locked[joint.velocity_start() : joint.velocity_start() + joint.num_velocities()] = True
+    free = np.flatnonzero(~locked)
+    velocity_rows = plant_state[nq:][free].astype(int)
+    return _Problem(system, plant, context, bindings, in_ports, out_ports, velocity_rows, free)
+
+
+# ----------------------------------------------------------------------------- algebra
+def _implicit(problem: _Problem, lin: dict, Cd: np.ndarray | None):
+    """Rows ``R`` of ``R [x'; y; x; u] = 0`` and the parts used to fit ``C_d``."""
+    A, B, C, D = lin["A"], lin["B"], lin["C"], lin["D"]
+    n, nu, ny = A.shape[0], B.shape[1], C.shape[0]
+    E = np.eye(n)
+    rows = problem.velocity_rows
+    E[np.ix_(rows, rows)] = lin["M"]
+    At, Bt = E @ A, E @ B
+    top = np.hstack([E, np.zeros((n, ny)), -At, -Bt])
+    Cd = np.zeros((ny, n)) if Cd is None else Cd
+    bottom = np.hstack([-Cd, np.eye(ny), -(C - Cd @ A), -(D - Cd @ B)])
+    return np.vstack([top, bottom])
+
+
+def _fit_axes(problem: _Problem, evaluate, h: np.ndarray):
+    """Per-parameter coefficients ``(R1, R2)`` (in deviation units) and the fit checks."""
+    nominal = problem.nominal
+    R0 = evaluate(nominal)
+    coefficients = []
+    for i, binding in enumerate(problem.bindings):
+        step = np.zeros_like(nominal)
+        step[i] = h[i]
+        plus, minus = evaluate(nominal + step), evaluate(nominal - step)
+        R1 = (plus - minus) / (2 * h[i])
+        R2 = (plus + minus - 2 * R0) / (2 * h[i] ** 2)
+        coefficients.append((R1, R2))
+    return R0, coefficients
+
+
+def _scales(R0, coefficients, h):
+    """Column scale for the tolerance checks (largest entry a column can reach in the range)."""
+    total = np.abs(R0).copy()
+    for (R1, R2), hi in zip(coefficients, h, strict=True):
+        total += np.abs(R1) * hi + np.abs(R2) * hi**2
+    return np.maximum(total.max(axis=0), 1e-300)
+
+
+def _model(R0, coefficients, nominal, values):
+    d = np.asarray(values) - nominal
+    R = R0.copy()
+    for (R1, R2), di in zip(coefficients, d, strict=True):
+        R = R + di * R1 + di**2 * R2
+    return R
+
+
+def _factor(R, tol):
+    """``R = U V^T`` with ``rank(R)`` columns (singular values above ``tol``), balanced."""
+    if not np.any(R):
+        return np.zeros((R.shape[0], 0)), np.zeros((R.shape[1], 0))
+    U, s, Vt = np.linalg.svd(R, full_matrices=False)
+    r = int(np.sum(s > tol))
+    root = np.sqrt(s[:r])
+    return U[:, :r] * root, Vt[:r].T * root
+
+
+def _channels(R1, R2, h, scale, rtol):
+    """Occurrence structure of ``d R1 + d^2 R2`` (see module docstring, step 3).
+
+    Returns ``(U, V, W)``: with ``w = d z``, the term is ``U w`` and ``z = V^T xi + W w``.
+    Factored in ``e = d / h`` on column-scaled matrices (``scale``), so that the rank tolerance
+    ``rtol`` is relative to what each column reaches over the range.
+    """
+    S1, S2 = R1 * h / scale, R2 * h**2 / scale
+    tol = rtol * max(np.abs(S1).max(initial=0), np.abs(S2).max(initial=0), 1e-300)
+    m = S1.shape[1]
+    if not np.any(np.abs(S2) > tol):
+        U, V = _factor(S1, tol)
+        return U / h, V * scale[:, None], np.zeros((U.shape[1], U.shape[1]))
+    # horizontal: U e (V1^T + P e Q^T)   vs   vertical: (U1 + P e Q^T) e V^T
+    Uh, Vh = _factor(np.hstack([S1, S2]), tol)
+    P, Q = _factor(Vh[m:].T, tol)
+    Uv, Vv = _factor(np.vstack([S1, S2]), tol)
+    Pv, Qv = _factor(Uv[S1.shape[0] :], tol)
+    if Uh.shape[1] + P.shape[1] <= Uv.shape[1] + Pv.shape[1]:
+        ra, rb = Uh.shape[1], P.shape[1]
+        U = np.hstack([Uh / h, np.zeros((Uh.shape[0], rb))])
+        V = np.hstack([Vh[:m], Q])  # z1 = V1^T xi + P w2, z2 = Q^T xi
+        W = np.zeros((ra + rb, ra + rb))
+        W[:ra, ra:] = P / h
+    else:
+        ra, rb = Uv.shape[1], Pv.shape[1]
+        U = np.hstack([Uv[: S1.shape[0]] / h, Pv / h**2])  # U1 w1 + P w2
+        V = np.hstack([Vv, np.zeros((m, rb))])  # z1 = V^T xi, z2 = Q^T w1
+        W = np.zeros((ra + rb, ra + rb))
+        W[ra:, :ra] = Qv.T
+    return U, V * scale[:, None], W
+
+
+def _assemble(problem, R0, coefficients, h, scale, n, nu, ny, rtol, input_names, output_names):
+    """Solve ``R(delta) [x'; y; x; u] = 0`` for ``[x'; y]`` as an upper LFT (normalized)."""
+    order = np.argsort([b.parameter.name for b in problem.bindings], kind="stable")
+    Us, Vs, Ws, gains, betas, entries = [], [], [], [], [], []
+    for i in order:
+        spec = problem.bindings[i].parameter.spec
+        U, V, W = _channels(*coefficients[i], h[i], scale, rtol)
+        if U.shape[1] == 0:
+            raise ValueError(
+                f"parameter {spec.name!r} does not change the linearization from "
+                f"{[p[2] for p in problem.inputs]} to {[p[2] for p in problem.outputs]}"
+            )
+        Us.append(U)
+        Vs.append(V)
+        Ws.append(W)
+        g = spec.alpha - spec.nominal * spec.beta  # deviation = g delta / (1 + beta delta)
+        gains.append(np.full(U.shape[1], math.sqrt(g)))
+        betas.append(np.full(U.shape[1], spec.beta))
+        entries.append(BlockEntry(spec, U.shape[1]))
+    U, V = np.hstack(Us), np.hstack(Vs)
+    from scipy.linalg import block_diag
+
+    W = block_diag(*Ws)
+    S, beta = np.concatenate(gains), np.concatenate(betas)
+    m = n + ny  # unknowns eta = [x'; y]
+    Ra, Rb = R0[:, :m], R0[:, m:]
+    T = -np.linalg.inv(Ra)
+    G_zeta = T @ Rb
+    G_w = T @ U * S[None, :]
+    Va, Vb = V[:m].T, V[m:].T
+    Z_zeta = S[:, None] * (Va @ G_zeta + Vb)
+    Z_w = S[:, None] * (Va @ G_w + W * S[None, :]) - np.diag(beta)
+    xs, ys, xc, uc = slice(0, n), slice(n, m), slice(0, n), slice(n, n + nu)
+    return LFR.from_parts(
+        G_zeta[xs, xc], G_w[xs], G_zeta[xs, uc],
+        Z_zeta[:, xc], G_zeta[ys, xc],
+        Z_w, Z_zeta[:, uc], G_w[ys], G_zeta[ys, uc],
+        [(e.spec, e.reps) for e in entries],
+        input_names=input_names, output_names=output_names,
+    )  # fmt: skip
+
+
+def _prune(sys: LFR, rtol: float = 1e-13) -> LFR:
+    """Drop states that cannot reach ``y`` or be reached from ``u`` through any channel."""
+    n, nz, nw = sys.nstates, sys.nz, sys.nw
+    M = np.abs(np.asarray(sys.M))
+    rows, cols = M.shape
+    # graph nodes: states, z, w; edges j -> i where M[i, j] != 0, plus z_k -> w_k (Delta)
+    big = max(M.max(initial=0.0), 1e-300)
+    size = n + nz
+    edges = np.zeros((size + nw, size + nw), dtype=bool)
+    edges[:size, :n] = M[:size, :n] > rtol * big
+    edges[:size, size:] = M[:size, n : n + nw] > rtol * big
+    edges[size:, n:size] = np.eye(nw, nz, dtype=bool)  # w_k driven by z_k (one-to-one, p = q)
+    sources = np.zeros(size + nw, dtype=bool)
+    sources[:size] = (M[:size, n + nw :] > rtol * big).any(axis=1)
+    sinks = np.zeros(size + nw, dtype=bool)
+    sinks[:n] = (M[size:, :n] > rtol * big).any(axis=0)
+    sinks[size:] = (M[size:, n : n + nw] > rtol * big).any(axis=0)
+    keep = structural_keep(edges, sources, sinks)
+    states = np.flatnonzero(keep[:n])
+    if states.size == n:
+        return sys
+    rows_keep = np.concatenate([states, np.arange(n, rows)])
+    cols_keep = np.concatenate([states, np.arange(n, cols)])
+    return LFR(
+        np.asarray(sys.M)[np.ix_(rows_keep, cols_keep)],
+        states.size,
+        sys.block_entries,
+        input_names=sys.input_names,
+        output_names=sys.output_names,
+    )
+
+
+def _relative(a, b) -> float:
+    return float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-300))
+
+
+def ulinearize(
+    system,
+    context,
+    parameters: Sequence[PhysicalParameter],
+    inputs: str | Sequence[str],
+    outputs: str | Sequence[str],
+    *,
+    rtol: float = 1e-9,
+    check_points: int = 4,
+    check_tolerance: float = 1e-7,
+    prune: bool = True,
+    rng: np.random.Generator | None = None,
+) -> LFR:
+    r"""Linearize a Drake system into an uncertain LFR with named physical parameters.
+
+    Parameters
+    ----------
+    system : MultibodyPlant or Diagram
+        Continuous system holding exactly one finalized ``MultibodyPlant``.
+    context : Context
+        Root context at the operating point: an equilibrium (generalized accelerations zero
+        with zero inputs); locked joints are motion-driven (their states are dropped as
+        unreachable). Not modified.
+    parameters : sequence of PhysicalParameter
+        Declared uncertain parameters (see :class:`PhysicalParameter`); the context's own
+        values are replaced by the declared nominal values at the nominal point.
+    inputs, outputs : str or sequence of str
+        Port names of ``system``, optionally with a row selection ``"y_G1[0:6]"`` or
+        ``"state[2,9]"``. Input ports not listed keep their context values (fixed).
+    rtol : float
+        Relative rank tolerance of the coefficient factorizations (per column).
+    check_points : int
+        Random parameter points (half inside the ranges, half up to half a range outside,
+        kept positive) at which the LFR is checked against Drake's linearization.
+    check_tolerance : float
+        Largest relative error of ``[A B; C D]`` allowed at those points (and of the
+        degree-2 and no-cross-term checks).
+    prune : bool
+        Remove states that structurally cannot reach an output or be reached from an input.
+    rng : numpy.random.Generator, optional
+        For the check points (default: ``numpy.random.default_rng(0)``).
+
+    Returns
+    -------
+    LFR
+        Upper LFT in the states of Drake's linearization (``[q; v]`` order, pruned), inputs
+        and outputs named ``port[i]``; one ``ureal`` block per parameter with the minimal
+        number of repetitions.
+
+    Raises
+    ------
+    ValueError
+        Unknown body/joint/bushing/port, a range making a mass or stiffness non-positive,
+        a non-equilibrium context, a parameter that is not polynomial of degree <= 2 or
+        that does not enter the model, cross terms between parameters, or a failed check.
+
+    Examples
+    --------
+    >>> from pydrake.all import MultibodyPlant, Parser                  # doctest: +SKIP
+    >>> plant = MultibodyPlant(0.0); Parser(plant).AddModels("sdf/examples/servicer.sdf")
+    >>> plant.Finalize(); context = plant.CreateDefaultContext()       # doctest: +SKIP
+    >>> G = ulinearize(plant, context, load_parameters("servicer_parameters.toml"),
+    ...                "servicer_actuation", "servicer_state[0,1,2,7,8,9]")  # doctest: +SKIP
+    """
+    rng = np.random.default_rng(0) if rng is None else rng
+    problem = _problem(system, context, parameters, inputs, outputs)
+    nominal = problem.nominal
+    h = np.array([0.5 * (b.parameter.upper - b.parameter.lower) for b in problem.bindings])
+    cache: dict = {}
+
+    def linearize(values):
+        key = np.asarray(values, dtype=float).tobytes()
+        if key not in cache:
+            cache[key] = problem.linearize(values)
+        return cache[key]
+
+    lin0 = linearize(nominal)
+    n, nu, ny = lin0["A"].shape[0], lin0["B"].shape[1], lin0["C"].shape[0]
+    vdot = lin0["f0"][problem.velocity_rows]
+    if np.abs(vdot).max(initial=0.0) > 1e-9 * max(1.0, np.abs(lin0["f0"]).max(initial=0.0)):
+        raise ValueError(
+            f"ulinearize: the context is not an equilibrium (max |v'| = {np.abs(vdot).max():.3g})"
+        )
+    Cd = _output_acceleration_map(problem, linearize, nominal, h, check_tolerance)
+
+    def evaluate(values):
+        return _implicit(problem, linearize(values), Cd)
+
+    R0, coefficients = _fit_axes(problem, evaluate, h)
+    scale = _scales(R0, coefficients, h)
+    for i, binding in enumerate(problem.bindings):  # degree <= 2 along each axis
+        point = nominal.copy()
+        point[i] = nominal[i] + 0.5 * h[i]
+        error = np.abs(evaluate(point) - _model(R0, coefficients, nominal, point)) / scale
+        if error.max() > check_tolerance:
+            raise ValueError(
+                f"parameter {binding.parameter.name!r}: the linearization is not polynomial of "
+                f"degree <= 2 in it (fit error {error.max():.2e})"
+            )
+    names = [f"{name}[{k}]" for _, rows, name in problem.inputs for k in rows]
+    out_names = [f"{name}[{k}]" for _, rows, name in problem.outputs for k in rows]
+    lfr = _assemble(problem, R0, coefficients, h, scale, n, nu, ny, rtol, names, out_names)
+    _check(problem, lfr, linearize, h, check_points, check_tolerance, rng)
+    return _prune(lfr) if prune else lfr
+
+
+def _output_acceleration_map(problem, linearize, nominal, h, tolerance):
+    """Constant ``C_d`` with ``[C D](p) - C_d [A B](p)`` polynomial (zero if none is needed)."""
+    points = [nominal]
+    for i in range(nominal.size):
+        for sign in (1.0, -1.0, 0.5):
+            point = nominal.copy()
+            point[i] += sign * h[i]
+            points.append(point)
+    lins = [linearize(p) for p in points]
+    CD = [np.hstack([lin["C"], lin["D"]]) for lin in lins]
+    AB = [np.hstack([lin["A"], lin["B"]]) for lin in lins]
+    # regressors: per point, [1, d_i, d_i^2 (per parameter)] (x) [C D] entries, and C_d [A B]
+    basis = [np.concatenate([[1.0], (p - nominal) / h, ((p - nominal) / h) ** 2]) for p in points]
+    basis = np.array(basis)  # (J, 1 + 2P)
+
+    def residual(Cd):
+        target = np.stack([cd - Cd @ ab for cd, ab in zip(CD, AB, strict=True)])  # (J, ny, n+nu)
+        flat = target.reshape(len(points), -1)
+        coef, *_ = np.linalg.lstsq(basis, flat, rcond=None)
+        scale = max(np.abs(flat).max(), 1e-300)
+        return np.abs(basis @ coef - flat).max() / scale
+
+    if residual(np.zeros((CD[0].shape[0], AB[0].shape[0]))) <= tolerance:
+        return None
+    # Unknowns per output row: C_d row (n) and polynomial coefficients; solve jointly.
+    J, n = len(points), AB[0].shape[0]
+    ny, width = CD[0].shape
+    Cd = np.zeros((ny, n))
+    for row in range(ny):
+        blocks = []
+        rhs = []
+        for j in range(J):
+            # cd_row(j) = sum_k basis[j,k] c_k + Cd_row @ AB[j]
+            left = np.hstack([np.kron(basis[j][None, :], np.eye(width)), AB[j].T])
+            blocks.append(left)
+            rhs.append(CD[j][row])
+        solution, *_ = np.linalg.lstsq(np.vstack(blocks), np.concatenate(rhs), rcond=None)
+        Cd[row] = solution[-n:]
+    if residual(Cd) > tolerance:
+        raise ValueError(
+            "ulinearize: the outputs depend on the parameters neither polynomially nor through "
+            f"the state derivative (fit error {residual(Cd):.2e})"
+        )
+    return Cd
+
+
+def _check(problem, lfr, linearize, h, count, tolerance, rng):
+    """Compare the LFR with Drake's linearization at random points (inside and outside)."""
+    from oos_drake.lfr import usubs
+
+    specs = [b.parameter for b in problem.bindings]
+    for k in range(count):
+        spread = 1.0 if k % 2 == 0 else 2.0  # half the points up to half a range outside
+        values = np.array(
+            [p.nominal + rng.uniform(-spread, spread) * hi for p, hi in zip(specs, h, strict=True)]
+        )
+        values = np.maximum(values, np.array([0.05 * p.nominal for p in specs]))
+        lin = linearize(values)
+        deltas = {p.name: float(p.spec.to_normalized(v, check=False)) for p, v in zip(specs, values, strict=True)}
+        model = usubs(lfr, deltas, normalized=True).nominal
+        reference = np.block([[lin["A"], lin["B"]], [lin["C"], lin["D"]]])
+        error = _relative(np.asarray(model.M), reference)
+        if not error <= tolerance:
+            worst = ", ".join(f"{p.name}={v:.6g}" for p, v in zip(specs, values, strict=True))
+            raise ValueError(
+                f"ulinearize: LFR differs from Drake's linearization by {error:.2e} (relative) at "
+                f"{worst}; cross terms between parameters?"
+            )
+
+
+def parameter_table(parameters: Mapping[str, PhysicalParameter] | Sequence[PhysicalParameter]):
+    """pandas table of declarations: ``name, element, quantity, nominal, lower, upper, unit``."""
+    import pandas as pd
+
+    items = parameters.values() if isinstance(parameters, Mapping) else parameters
+    return pd.DataFrame(
+        [
+            {
+                "name": p.name, "element": p.element, "quantity": p.quantity,
+                "nominal": p.nominal, "lower": p.lower, "upper": p.upper, "unit": p.unit,
+            }
+            for p in items
+        ]
+    )  # fmt: skip
