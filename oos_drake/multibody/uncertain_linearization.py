@@ -65,7 +65,9 @@ __all__ = [
     "BUSHING_QUANTITIES",
     "PhysicalParameter",
     "load_parameters",
+    "parameter_table",
     "parse_port",
+    "sdf_plant",
     "ulinearize",
 ]
 
@@ -379,6 +381,10 @@ def _port(system, text: str, direction: str):
         names = [port(i).get_name() for i in range(count)]
         raise ValueError(f"no {direction} port {name!r} on {system.get_name()!r}; ports: {names}")
     port = get(name)
+    from pydrake.systems.framework import PortDataType
+
+    if port.get_data_type() != PortDataType.kVectorValued:
+        raise ValueError(f"{direction} port {name!r} is not vector-valued")
     rows = np.arange(port.size())
     if selection is not None:
         try:
@@ -722,8 +728,13 @@ def ulinearize(
     >>> G = ulinearize(plant, context, load_parameters("servicer_parameters.toml"),
     ...                "servicer_actuation", "servicer_state[0,1,2,7,8,9]")  # doctest: +SKIP
     """
-    rng = np.random.default_rng(0) if rng is None else rng
     problem = _problem(system, context, parameters, inputs, outputs)
+    return _extract(problem, rtol, check_points, check_tolerance, prune, rng)
+
+
+def _extract(problem, rtol, check_points, check_tolerance, prune, rng) -> LFR:
+    """Steps 1-4 of the module docstring on a bound problem (anything with ``linearize``)."""
+    rng = np.random.default_rng(0) if rng is None else rng
     nominal = problem.nominal
     h = np.array([0.5 * (b.parameter.upper - b.parameter.lower) for b in problem.bindings])
     cache: dict = {}
@@ -765,49 +776,65 @@ def ulinearize(
 
 
 def _output_acceleration_map(problem, linearize, nominal, h, tolerance):
-    """Constant ``C_d`` with ``[C D](p) - C_d [A B](p)`` polynomial (zero if none is needed)."""
-    points = [nominal]
+    """Constant ``C_d`` with ``[C D](p) - C_d [A B](p)`` polynomial (``None`` if ``C_d = 0`` does).
+
+    Least squares over the nominal point and ``nominal +- h, +- h/2`` along each parameter's
+    axis (more equations than unknowns); a parameter for which no constant ``C_d`` makes the
+    output polynomial of degree <= 2 is named in the error.
+    """
+    steps = (1.0, -1.0, 0.5, -0.5)
+    axes = [[nominal]]
     for i in range(nominal.size):
-        for sign in (1.0, -1.0, 0.5):
+        axis = []
+        for step in steps:
             point = nominal.copy()
-            point[i] += sign * h[i]
-            points.append(point)
-    lins = [linearize(p) for p in points]
-    CD = [np.hstack([lin["C"], lin["D"]]) for lin in lins]
-    AB = [np.hstack([lin["A"], lin["B"]]) for lin in lins]
-    # regressors: per point, [1, d_i, d_i^2 (per parameter)] (x) [C D] entries, and C_d [A B]
-    basis = [np.concatenate([[1.0], (p - nominal) / h, ((p - nominal) / h) ** 2]) for p in points]
-    basis = np.array(basis)  # (J, 1 + 2P)
+            point[i] += step * h[i]
+            axis.append(point)
+        axes.append(axis)
+    lins = [[linearize(p) for p in axis] for axis in axes]
+    ny, n = lins[0][0]["C"].shape
+    nu = lins[0][0]["B"].shape[1]
+    width = n + nu
 
-    def residual(Cd):
-        target = np.stack([cd - Cd @ ab for cd, ab in zip(CD, AB, strict=True)])  # (J, ny, n+nu)
-        flat = target.reshape(len(points), -1)
-        coef, *_ = np.linalg.lstsq(basis, flat, rcond=None)
-        scale = max(np.abs(flat).max(), 1e-300)
-        return np.abs(basis @ coef - flat).max() / scale
+    def basis(point):  # 1, e_i, e_i^2 per parameter (no cross terms)
+        e = (point - nominal) / h
+        return np.concatenate([[1.0], e, e**2])
 
-    if residual(np.zeros((CD[0].shape[0], AB[0].shape[0]))) <= tolerance:
+    def fit(groups, with_Cd):
+        points = [p for g in groups for p in axes[g]]
+        L = [lin for g in groups for lin in lins[g]]
+        X = np.array([basis(p) for p in points])
+        CD = np.stack([np.hstack([lin["C"], lin["D"]]) for lin in L])  # (J, ny, width)
+        AB = np.stack([np.hstack([lin["A"], lin["B"]]) for lin in L])  # (J, n, width)
+        Cd = np.zeros((ny, n))
+        if with_Cd:  # per output row: CD[j, row] = kron(X[j], I) c + AB[j]^T Cd[row]
+            left = np.concatenate(
+                [np.hstack([np.kron(X[j][None, :], np.eye(width)), AB[j].T]) for j in range(len(L))]
+            )
+            for row in range(ny):
+                solution, *_ = np.linalg.lstsq(left, CD[:, row, :].ravel(), rcond=None)
+                Cd[row] = solution[-n:]
+        target = (CD - np.einsum("ik,jkl->jil", Cd, AB)).reshape(len(L), -1)
+        coef, *_ = np.linalg.lstsq(X, target, rcond=None)
+        error = np.abs(X @ coef - target).max() / max(np.abs(target).max(), 1e-300)
+        return Cd, error
+
+    everything = list(range(len(axes)))
+    _, error = fit(everything, False)
+    if error <= tolerance:
         return None
-    # Unknowns per output row: C_d row (n) and polynomial coefficients; solve jointly.
-    J, n = len(points), AB[0].shape[0]
-    ny, width = CD[0].shape
-    Cd = np.zeros((ny, n))
-    for row in range(ny):
-        blocks = []
-        rhs = []
-        for j in range(J):
-            # cd_row(j) = sum_k basis[j,k] c_k + Cd_row @ AB[j]
-            left = np.hstack([np.kron(basis[j][None, :], np.eye(width)), AB[j].T])
-            blocks.append(left)
-            rhs.append(CD[j][row])
-        solution, *_ = np.linalg.lstsq(np.vstack(blocks), np.concatenate(rhs), rcond=None)
-        Cd[row] = solution[-n:]
-    if residual(Cd) > tolerance:
-        raise ValueError(
-            "ulinearize: the outputs depend on the parameters neither polynomially nor through "
-            f"the state derivative (fit error {residual(Cd):.2e})"
-        )
-    return Cd
+    Cd, error = fit(everything, True)
+    if error <= tolerance:
+        return Cd
+    culprits = [
+        b.parameter.name
+        for i, b in enumerate(problem.bindings)
+        if fit([0, i + 1], True)[1] > tolerance
+    ]
+    raise ValueError(
+        f"ulinearize: the outputs {[p[2] for p in problem.outputs]} are not polynomial of degree "
+        f"<= 2 in {culprits or 'the parameters jointly'} (fit error {error:.2e})"
+    )
 
 
 def _check(problem, lfr, linearize, h, count, tolerance, rng):
@@ -848,3 +875,33 @@ def parameter_table(parameters: Mapping[str, PhysicalParameter] | Sequence[Physi
             for p in items
         ]
     )  # fmt: skip
+
+
+def sdf_plant(path):
+    """Parse an SDF/URDF file into a finalized continuous ``MultibodyPlant`` without gravity.
+
+    Returns
+    -------
+    (MultibodyPlant, Context)
+        The plant and a default context (all positions and velocities zero).
+
+    Raises
+    ------
+    ValueError
+        Missing file or a file Drake's parser refuses (first line of its message).
+    """
+    from pydrake.multibody.parsing import Parser
+    from pydrake.multibody.plant import MultibodyPlant
+
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such model file")
+    plant = MultibodyPlant(time_step=0.0)
+    plant.mutable_gravity_field().set_gravity_vector(np.zeros(3))
+    try:
+        Parser(plant).AddModels(str(path))
+    except RuntimeError as error:
+        first = str(error).strip().splitlines()[0] if str(error).strip() else "parse error"
+        raise ValueError(f"{path}: {first}") from None
+    plant.Finalize()
+    return plant, plant.CreateDefaultContext()
