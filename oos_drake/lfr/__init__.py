@@ -27,6 +27,7 @@ Modules: :mod:`~oos_drake.lfr.blocks` (block specs and normalization),
 from oos_drake.lfr.blocks import UComplex, ULTIDyn, UReal
 from oos_drake.lfr.core import LFR, BlockEntry, as_lfr
 from oos_drake.lfr.frequency import freqresp
+from oos_drake.lfr.matfile import load_lfr
 from oos_drake.lfr.interconnect import (
     append,
     connect,
@@ -56,6 +57,7 @@ __all__ = [
     "inv",
     "lft",
     "lftdata",
+    "load_lfr",
     "nominal",
     "sumblk",
     "ucomplex",

@@ -244,3 +244,65 @@ class _RationalProblem:
 def test_non_polynomial_dependence_is_refused_naming_the_parameter():
     with pytest.raises(ValueError, match=r"not polynomial of degree <= 2 in \['k'\]"):
         _extract(_RationalProblem(), 1e-9, 2, 1e-7, True, None)
+
+
+# ----------------------------------------------------------------------------- command line
+def _cli(args):
+    from oos_drake.cli import main
+
+    return main(["ulinearize", str(SDF), *args])
+
+
+def test_cli_writes_mat_and_npz_that_load_back(tmp_path, capsys):
+    import scipy.io
+
+    from oos_drake.lfr import load_lfr
+
+    out = tmp_path / "servicer"
+    status = _cli(["--parameters", str(PARAMETERS), "--input", INPUTS, "--output", OUTPUTS,
+                   "--out", str(out)])  # fmt: skip
+    assert status == 0, capsys.readouterr().err
+    plant, context = sdf_plant(SDF)
+    direct = ulinearize(plant, context, load_parameters(PARAMETERS), INPUTS, OUTPUTS)
+    for suffix in ("mat", "npz"):
+        loaded = load_lfr(out / f"lfr.{suffix}")
+        assert loaded.occurrences == direct.occurrences
+        np.testing.assert_array_equal(loaded.M, direct.M)
+        assert loaded.input_names == direct.input_names
+    data = scipy.io.loadmat(out / "lfr.mat")
+    # MATLAB mussv BLK rows [-r 0], blocks sorted by name: Izz_hub, k_dock, kt_dock, m_client,
+    # m_hub, w_panel
+    np.testing.assert_array_equal(data["blk"], [[-1, 0], [-2, 0], [-1, 0], [-2, 0], [-2, 0], [-2, 0]])
+
+
+@pytest.mark.parametrize(
+    ("edit", "port", "message"),
+    [
+        (('element = "hub"', 'element = "hubb"'), None, "no body named 'hubb'"),
+        (('element = "panel_hinge"', 'element = "hinge"'), None, "no joint named 'hinge'"),
+        (("nominal = 100.0\npercent = 10", "nominal = 100.0\npercent = 120"), None,
+         "makes the mass of 'hub' non-positive"),
+        (("nominal = 500.0\npercent = 30", "nominal = 500.0\nrange = [-10.0, 600.0]"), None,
+         "makes the torque_stiffness_z of 'dock/client_dock' non-positive"),
+        (None, ("--input", "thrusters"), "no input port 'thrusters'"),
+        (None, ("--output", "servicer_state[40]"), "selection outside its 14 entries"),
+    ],
+)  # fmt: skip
+def test_cli_bad_input_exit_2_and_nothing_written(tmp_path, capsys, edit, port, message):
+    text = PARAMETERS.read_text()
+    if edit is not None:
+        assert edit[0] in text
+        text = text.replace(edit[0], edit[1], 1)
+    parameters = tmp_path / "parameters.toml"
+    parameters.write_text(text)
+    ports = {"--input": INPUTS, "--output": OUTPUTS}
+    if port is not None:
+        ports[port[0]] = port[1]
+    out = tmp_path / "out"
+    args = ["--parameters", str(parameters), "--out", str(out)]
+    for flag, value in ports.items():
+        args += [flag, value]
+    assert _cli(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+    assert not out.exists()
