@@ -53,6 +53,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from pydrake.multibody.tree import BodyIndex
 
 from oos_drake.lfr import LFR
 from oos_drake.lfr.blocks import UReal
@@ -447,7 +448,7 @@ class _Problem:
                     input_port_index=in_port.get_index(), output_port_index=out_port.get_index(),
                 )  # fmt: skip
                 if A is None:
-                    A, f0 = affine.A(), affine.f0()
+                    A = affine.A()
                 if k == 0:
                     B.append(affine.B()[:, in_rows])
                 row_C = affine.C()[out_rows, :]
@@ -455,7 +456,66 @@ class _Problem:
             C.append(row_C)
             D.append(np.hstack(row_D))
         M = self.plant.CalcMassMatrix(plant_context)[np.ix_(self.free_velocities, self.free_velocities)]
-        return {"A": A, "B": np.hstack(B), "C": np.vstack(C), "D": np.vstack(D), "M": M, "f0": f0}
+        xdot = self.system.EvalTimeDerivatives(context).CopyToVector()
+        return {"A": A, "B": np.hstack(B), "C": np.vstack(C), "D": np.vstack(D), "M": M, "xdot": xdot}
+
+
+    def acceleration_map(self) -> np.ndarray | None:
+        """``C_d`` such that the outputs are ``y = X [x; u] + C_d x'`` (``None``: no ``x'``).
+
+        Probes: a unit force and a unit torque along each world axis on each body (the plant's
+        ``applied_spatial_force`` input) change the generalized accelerations ``v'`` and,
+        through them only, the outputs: ``dy = C_d dv'`` for every probe, exact (linear).
+        """
+        from pydrake.multibody.math import SpatialForce
+        from pydrake.multibody.plant import ExternallyAppliedSpatialForce
+
+        context = self.context.Clone()
+        for port, _, _ in self.inputs:
+            if not port.HasValue(context):
+                port.FixValue(context, np.zeros(port.size()))
+        plant, plant_context = self.plant, None
+        plant_context = plant.GetMyMutableContextFromRoot(context)
+        nominal_values = self.nominal
+        for binding, value in zip(self.bindings, nominal_values, strict=True):
+            binding.apply(plant_context, float(value))
+        force_port = plant.get_applied_spatial_force_input_port()
+        acceleration = plant.get_generalized_acceleration_output_port()
+
+        def outputs():
+            return np.concatenate([p.Eval(context)[rows] for p, rows, _ in self.outputs])
+
+        def probe(forces):
+            force_port.FixValue(plant_context, forces)
+            return outputs(), acceleration.Eval(plant_context)[self.free_velocities]
+
+        try:
+            y0, a0 = probe([])
+        except RuntimeError as error:
+            raise ValueError(
+                f"ulinearize: cannot probe the plant's accelerations ({str(error).splitlines()[0]})"
+            ) from None
+        dY, dV = [], []
+        for index in range(1, plant.num_bodies()):  # body 0 is the world
+            body = plant.get_body(BodyIndex(index))
+            for k in range(6):
+                wrench = np.zeros(6)
+                wrench[k] = 1.0  # [torque; force] at the body origin, world axes
+                applied = ExternallyAppliedSpatialForce()
+                applied.body_index = body.index()
+                applied.p_BoBq_B = np.zeros(3)
+                applied.F_Bq_W = SpatialForce(wrench[:3], wrench[3:])
+                y, a = probe([applied])
+                dY.append(y - y0)
+                dV.append(a - a0)
+        dY, dV = np.array(dY).T, np.array(dV).T
+        if np.abs(dY).max(initial=0.0) <= 1e-12 * max(np.abs(y0).max(initial=0.0), 1.0):
+            return None
+        Cd = np.zeros((dY.shape[0], self.velocity_rows.size))
+        Cd_v, *_ = np.linalg.lstsq(dV.T, dY.T, rcond=None)
+        Cd = np.zeros((dY.shape[0], context.get_continuous_state_vector().size()))
+        Cd[:, self.velocity_rows] = Cd_v.T
+        return Cd
 
 
 def _problem(system, context, parameters, inputs, outputs) -> _Problem:
@@ -528,11 +588,16 @@ def _fit_axes(problem: _Problem, evaluate, h: np.ndarray):
 
 
 def _scales(R0, coefficients, h):
-    """Column scale for the tolerance checks (largest entry a column can reach in the range)."""
+    """Column scale for the tolerance checks (largest entry a column can reach in the range).
+
+    Floored at ``1e-10`` times the largest column: a column whose entries are round-off of an
+    exact zero (``E A`` with an ill-conditioned ``E``) must not be scaled up to size 1.
+    """
     total = np.abs(R0).copy()
     for (R1, R2), hi in zip(coefficients, h, strict=True):
         total += np.abs(R1) * hi + np.abs(R2) * hi**2
-    return np.maximum(total.max(axis=0), 1e-300)
+    column = total.max(axis=0)
+    return np.maximum(column, 1e-10 * max(column.max(initial=0.0), 1e-300))
 
 
 def _model(R0, coefficients, nominal, values):
@@ -545,23 +610,29 @@ def _model(R0, coefficients, nominal, values):
 
 def _factor(R, tol):
     """``R = U V^T`` with ``rank(R)`` columns (singular values above ``tol``), balanced."""
-    if not np.any(R):
-        return np.zeros((R.shape[0], 0)), np.zeros((R.shape[1], 0))
-    U, s, Vt = np.linalg.svd(R, full_matrices=False)
+    rows, cols = np.flatnonzero(np.any(R, axis=1)), np.flatnonzero(np.any(R, axis=0))
+    U_full, V_full = np.zeros((R.shape[0], 0)), np.zeros((R.shape[1], 0))
+    if rows.size == 0:
+        return U_full, V_full
+    U, s, Vt = np.linalg.svd(R[np.ix_(rows, cols)], full_matrices=False)  # nonzero part only
     r = int(np.sum(s > tol))
     root = np.sqrt(s[:r])
-    return U[:, :r] * root, Vt[:r].T * root
+    U_full, V_full = np.zeros((R.shape[0], r)), np.zeros((R.shape[1], r))
+    U_full[rows] = U[:, :r] * root
+    V_full[cols] = Vt[:r].T * root
+    return U_full, V_full
 
 
 def _channels(R1, R2, h, scale, rtol):
     """Occurrence structure of ``d R1 + d^2 R2`` (see module docstring, step 3).
 
     Returns ``(U, V, W)``: with ``w = d z``, the term is ``U w`` and ``z = V^T xi + W w``.
-    Factored in ``e = d / h`` on column-scaled matrices (``scale``), so that the rank tolerance
-    ``rtol`` is relative to what each column reaches over the range.
+    Factored in ``e = d / h`` on column-scaled matrices (``scale``: each column's largest entry
+    over the ranges), so that a singular value below ``rtol`` changes no entry by more than
+    ``rtol`` relative to what its column reaches.
     """
     S1, S2 = R1 * h / scale, R2 * h**2 / scale
-    tol = rtol * max(np.abs(S1).max(initial=0), np.abs(S2).max(initial=0), 1e-300)
+    tol = rtol  # columns scaled to what they reach over the ranges: entries <= 1
     m = S1.shape[1]
     if not np.any(np.abs(S2) > tol):
         U, V = _factor(S1, tol)
@@ -586,13 +657,15 @@ def _channels(R1, R2, h, scale, rtol):
     return U, V * scale[:, None], W
 
 
-def _assemble(problem, R0, coefficients, h, scale, n, nu, ny, rtol, input_names, output_names):
+def _assemble(problem, R0, coefficients, h, scale, n, nu, ny, rtol, unused, names):
     """Solve ``R(delta) [x'; y; x; u] = 0`` for ``[x'; y]`` as an upper LFT (normalized)."""
     order = np.argsort([b.parameter.name for b in problem.bindings], kind="stable")
     Us, Vs, Ws, gains, betas, entries = [], [], [], [], [], []
     for i in order:
         spec = problem.bindings[i].parameter.spec
         U, V, W = _channels(*coefficients[i], h[i], scale, rtol)
+        if U.shape[1] == 0 and unused == "drop":
+            continue
         if U.shape[1] == 0:
             raise ValueError(
                 f"parameter {spec.name!r} does not change the linearization from "
@@ -605,11 +678,13 @@ def _assemble(problem, R0, coefficients, h, scale, n, nu, ny, rtol, input_names,
         gains.append(np.full(U.shape[1], math.sqrt(g)))
         betas.append(np.full(U.shape[1], spec.beta))
         entries.append(BlockEntry(spec, U.shape[1]))
-    U, V = np.hstack(Us), np.hstack(Vs)
     from scipy.linalg import block_diag
 
-    W = block_diag(*Ws)
-    S, beta = np.concatenate(gains), np.concatenate(betas)
+    width = R0.shape[1]
+    U = np.hstack([np.zeros((R0.shape[0], 0)), *Us])
+    V = np.hstack([np.zeros((width, 0)), *Vs])
+    W = block_diag(*Ws) if Ws else np.zeros((0, 0))
+    S, beta = np.concatenate([np.zeros(0), *gains]), np.concatenate([np.zeros(0), *betas])
     m = n + ny  # unknowns eta = [x'; y]
     Ra, Rb = R0[:, :m], R0[:, m:]
     T = -np.linalg.inv(Ra)
@@ -624,7 +699,7 @@ def _assemble(problem, R0, coefficients, h, scale, n, nu, ny, rtol, input_names,
         Z_zeta[:, xc], G_zeta[ys, xc],
         Z_w, Z_zeta[:, uc], G_w[ys], G_zeta[ys, uc],
         [(e.spec, e.reps) for e in entries],
-        input_names=input_names, output_names=output_names,
+        input_names=names[0], output_names=names[1],
     )  # fmt: skip
 
 
@@ -671,10 +746,11 @@ def ulinearize(
     inputs: str | Sequence[str],
     outputs: str | Sequence[str],
     *,
-    rtol: float = 1e-9,
+    rtol: float = 1e-6,
     check_points: int = 4,
-    check_tolerance: float = 1e-7,
+    check_tolerance: float = 1e-6,
     prune: bool = True,
+    unused: str = "error",
     rng: np.random.Generator | None = None,
 ) -> LFR:
     r"""Linearize a Drake system into an uncertain LFR with named physical parameters.
@@ -694,7 +770,11 @@ def ulinearize(
         Port names of ``system``, optionally with a row selection ``"y_G1[0:6]"`` or
         ``"state[2,9]"``. Input ports not listed keep their context values (fixed).
     rtol : float
-        Relative rank tolerance of the coefficient factorizations (per column).
+        Rank tolerance of the coefficient factorizations, relative to what each column of the
+        implicit relation reaches over the ranges. Round-off of ``E A`` grows with the
+        conditioning of the mass matrix and the stiffness: up to 4e-7 for the mission twin with
+        1e5 N/m docking springs (mass matrix condition number ~1e7), where the smallest true
+        singular value is 1e-2 (:func:`oos_drake.multibody.mission_lfr.twin_lfr` uses 1e-5).
     check_points : int
         Random parameter points (half inside the ranges, half up to half a range outside,
         kept positive) at which the LFR is checked against Drake's linearization.
@@ -703,6 +783,10 @@ def ulinearize(
         degree-2 and no-cross-term checks).
     prune : bool
         Remove states that structurally cannot reach an output or be reached from an input.
+    unused : str
+        ``"error"`` (default): a parameter that does not change the linearization is refused;
+        ``"drop"``: it is left out of the LFR (zero repetitions, e.g. the target's inertia
+        while the target floats free).
     rng : numpy.random.Generator, optional
         For the check points (default: ``numpy.random.default_rng(0)``).
 
@@ -729,10 +813,12 @@ def ulinearize(
     ...                "servicer_actuation", "servicer_state[0,1,2,7,8,9]")  # doctest: +SKIP
     """
     problem = _problem(system, context, parameters, inputs, outputs)
-    return _extract(problem, rtol, check_points, check_tolerance, prune, rng)
+    if unused not in ("error", "drop"):
+        raise ValueError(f"ulinearize: unused must be 'error' or 'drop', got {unused!r}")
+    return _extract(problem, rtol, check_points, check_tolerance, prune, rng, unused)
 
 
-def _extract(problem, rtol, check_points, check_tolerance, prune, rng) -> LFR:
+def _extract(problem, rtol, check_points, check_tolerance, prune, rng, unused="error") -> LFR:
     """Steps 1-4 of the module docstring on a bound problem (anything with ``linearize``)."""
     rng = np.random.default_rng(0) if rng is None else rng
     nominal = problem.nominal
@@ -747,12 +833,12 @@ def _extract(problem, rtol, check_points, check_tolerance, prune, rng) -> LFR:
 
     lin0 = linearize(nominal)
     n, nu, ny = lin0["A"].shape[0], lin0["B"].shape[1], lin0["C"].shape[0]
-    vdot = lin0["f0"][problem.velocity_rows]
-    if np.abs(vdot).max(initial=0.0) > 1e-9 * max(1.0, np.abs(lin0["f0"]).max(initial=0.0)):
+    vdot = lin0["xdot"][problem.velocity_rows]
+    if np.abs(vdot).max(initial=0.0) > 1e-9 * max(1.0, np.abs(lin0["xdot"]).max(initial=0.0)):
         raise ValueError(
             f"ulinearize: the context is not an equilibrium (max |v'| = {np.abs(vdot).max():.3g})"
         )
-    Cd = _output_acceleration_map(problem, linearize, nominal, h, check_tolerance)
+    Cd = problem.acceleration_map()
 
     def evaluate(values):
         return _implicit(problem, linearize(values), Cd)
@@ -770,71 +856,11 @@ def _extract(problem, rtol, check_points, check_tolerance, prune, rng) -> LFR:
             )
     names = [f"{name}[{k}]" for _, rows, name in problem.inputs for k in rows]
     out_names = [f"{name}[{k}]" for _, rows, name in problem.outputs for k in rows]
-    lfr = _assemble(problem, R0, coefficients, h, scale, n, nu, ny, rtol, names, out_names)
+    lfr = _assemble(
+        problem, R0, coefficients, h, scale, n, nu, ny, rtol, unused, (names, out_names)
+    )
     _check(problem, lfr, linearize, h, check_points, check_tolerance, rng)
     return _prune(lfr) if prune else lfr
-
-
-def _output_acceleration_map(problem, linearize, nominal, h, tolerance):
-    """Constant ``C_d`` with ``[C D](p) - C_d [A B](p)`` polynomial (``None`` if ``C_d = 0`` does).
-
-    Least squares over the nominal point and ``nominal +- h, +- h/2`` along each parameter's
-    axis (more equations than unknowns); a parameter for which no constant ``C_d`` makes the
-    output polynomial of degree <= 2 is named in the error.
-    """
-    steps = (1.0, -1.0, 0.5, -0.5)
-    axes = [[nominal]]
-    for i in range(nominal.size):
-        axis = []
-        for step in steps:
-            point = nominal.copy()
-            point[i] += step * h[i]
-            axis.append(point)
-        axes.append(axis)
-    lins = [[linearize(p) for p in axis] for axis in axes]
-    ny, n = lins[0][0]["C"].shape
-    nu = lins[0][0]["B"].shape[1]
-    width = n + nu
-
-    def basis(point):  # 1, e_i, e_i^2 per parameter (no cross terms)
-        e = (point - nominal) / h
-        return np.concatenate([[1.0], e, e**2])
-
-    def fit(groups, with_Cd):
-        points = [p for g in groups for p in axes[g]]
-        L = [lin for g in groups for lin in lins[g]]
-        X = np.array([basis(p) for p in points])
-        CD = np.stack([np.hstack([lin["C"], lin["D"]]) for lin in L])  # (J, ny, width)
-        AB = np.stack([np.hstack([lin["A"], lin["B"]]) for lin in L])  # (J, n, width)
-        Cd = np.zeros((ny, n))
-        if with_Cd:  # per output row: CD[j, row] = kron(X[j], I) c + AB[j]^T Cd[row]
-            left = np.concatenate(
-                [np.hstack([np.kron(X[j][None, :], np.eye(width)), AB[j].T]) for j in range(len(L))]
-            )
-            for row in range(ny):
-                solution, *_ = np.linalg.lstsq(left, CD[:, row, :].ravel(), rcond=None)
-                Cd[row] = solution[-n:]
-        target = (CD - np.einsum("ik,jkl->jil", Cd, AB)).reshape(len(L), -1)
-        coef, *_ = np.linalg.lstsq(X, target, rcond=None)
-        error = np.abs(X @ coef - target).max() / max(np.abs(target).max(), 1e-300)
-        return Cd, error
-
-    everything = list(range(len(axes)))
-    _, error = fit(everything, False)
-    if error <= tolerance:
-        return None
-    Cd, error = fit(everything, True)
-    if error <= tolerance:
-        return Cd
-    culprits = [
-        b.parameter.name
-        for i, b in enumerate(problem.bindings)
-        if fit([0, i + 1], True)[1] > tolerance
-    ]
-    raise ValueError(
-        f"ulinearize: the outputs {[p[2] for p in problem.outputs]} are not polynomial of degree "
-        f"<= 2 in {culprits or 'the parameters jointly'} (fit error {error:.2e})"
-    )
 
 
 def _check(problem, lfr, linearize, h, count, tolerance, rng):
@@ -849,7 +875,11 @@ def _check(problem, lfr, linearize, h, count, tolerance, rng):
         )
         values = np.maximum(values, np.array([0.05 * p.nominal for p in specs]))
         lin = linearize(values)
-        deltas = {p.name: float(p.spec.to_normalized(v, check=False)) for p, v in zip(specs, values, strict=True)}
+        deltas = {
+            p.name: float(p.spec.to_normalized(v, check=False))
+            for p, v in zip(specs, values, strict=True)
+            if p.name in lfr.uncertainty
+        }
         model = usubs(lfr, deltas, normalized=True).nominal
         reference = np.block([[lin["A"], lin["B"]], [lin["C"], lin["D"]]])
         error = _relative(np.asarray(model.M), reference)

@@ -232,17 +232,20 @@ class _RationalProblem:
     def nominal(self):
         return np.array([2.0])
 
+    def acceleration_map(self):
+        return None
+
     def linearize(self, values):
         k = float(values[0])
         return {
             "A": np.array([[0.0, 1.0], [-k, -0.1]]), "B": np.array([[0.0], [1.0]]),
             "C": np.array([[1.0 / (1.0 + k), 0.0]]), "D": np.zeros((1, 1)),
-            "M": np.eye(1), "f0": np.zeros(2),
+            "M": np.eye(1), "xdot": np.zeros(2),
         }  # fmt: skip
 
 
 def test_non_polynomial_dependence_is_refused_naming_the_parameter():
-    with pytest.raises(ValueError, match=r"not polynomial of degree <= 2 in \['k'\]"):
+    with pytest.raises(ValueError, match=r"parameter 'k': .* not polynomial of degree <= 2 in it"):
         _extract(_RationalProblem(), 1e-9, 2, 1e-7, True, None)
 
 
