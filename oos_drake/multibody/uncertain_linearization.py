@@ -657,20 +657,15 @@ def _channels(R1, R2, h, scale, rtol):
     return U, V * scale[:, None], W
 
 
-def _assemble(problem, R0, coefficients, h, scale, n, nu, ny, rtol, unused, names):
+def _assemble(problem, R0, coefficients, h, scale, n, nu, ny, rtol, names):
     """Solve ``R(delta) [x'; y; x; u] = 0`` for ``[x'; y]`` as an upper LFT (normalized)."""
     order = np.argsort([b.parameter.name for b in problem.bindings], kind="stable")
     Us, Vs, Ws, gains, betas, entries = [], [], [], [], [], []
     for i in order:
         spec = problem.bindings[i].parameter.spec
         U, V, W = _channels(*coefficients[i], h[i], scale, rtol)
-        if U.shape[1] == 0 and unused == "drop":
-            continue
         if U.shape[1] == 0:
-            raise ValueError(
-                f"parameter {spec.name!r} does not change the linearization from "
-                f"{[p[2] for p in problem.inputs]} to {[p[2] for p in problem.outputs]}"
-            )
+            continue  # not in the model at all (refused or dropped by the caller)
         Us.append(U)
         Vs.append(V)
         Ws.append(W)
@@ -704,32 +699,43 @@ def _assemble(problem, R0, coefficients, h, scale, n, nu, ny, rtol, unused, name
 
 
 def _prune(sys: LFR, rtol: float = 1e-13) -> LFR:
-    """Drop states that cannot reach ``y`` or be reached from ``u`` through any channel."""
+    """Drop states and uncertain channels that cannot reach ``y`` or be reached from ``u``.
+
+    Structural (exact): a graph over states, ``z`` and ``w`` channels (edges from the nonzero
+    entries of ``M`` and ``z_k -> w_k`` through ``Delta``, every block here being a scalar
+    occurrence); a block that loses all its channels disappears.
+    """
     n, nz, nw = sys.nstates, sys.nz, sys.nw
     M = np.abs(np.asarray(sys.M))
     rows, cols = M.shape
-    # graph nodes: states, z, w; edges j -> i where M[i, j] != 0, plus z_k -> w_k (Delta)
     big = max(M.max(initial=0.0), 1e-300)
-    size = n + nz
+    nonzero = M > rtol * big
+    size = n + nz  # nodes: states, z channels, then w channels
     edges = np.zeros((size + nw, size + nw), dtype=bool)
-    edges[:size, :n] = M[:size, :n] > rtol * big
-    edges[:size, size:] = M[:size, n : n + nw] > rtol * big
-    edges[size:, n:size] = np.eye(nw, nz, dtype=bool)  # w_k driven by z_k (one-to-one, p = q)
+    edges[:size, :n] = nonzero[:size, :n]
+    edges[:size, size:] = nonzero[:size, n : n + nw]
+    edges[size:, n:size] = np.eye(nw, nz, dtype=bool)
     sources = np.zeros(size + nw, dtype=bool)
-    sources[:size] = (M[:size, n + nw :] > rtol * big).any(axis=1)
+    sources[:size] = nonzero[:size, n + nw :].any(axis=1)
     sinks = np.zeros(size + nw, dtype=bool)
-    sinks[:n] = (M[size:, :n] > rtol * big).any(axis=0)
-    sinks[size:] = (M[size:, n : n + nw] > rtol * big).any(axis=0)
+    sinks[:n] = nonzero[size:, :n].any(axis=0)
+    sinks[size:] = nonzero[size:, n : n + nw].any(axis=0)
     keep = structural_keep(edges, sources, sinks)
-    states = np.flatnonzero(keep[:n])
-    if states.size == n:
+    states, channels = np.flatnonzero(keep[:n]), np.flatnonzero(keep[n:size])
+    if states.size == n and channels.size == nz:
         return sys
-    rows_keep = np.concatenate([states, np.arange(n, rows)])
-    cols_keep = np.concatenate([states, np.arange(n, cols)])
+    entries, start = [], 0
+    for entry in sys.block_entries:
+        reps = int(np.count_nonzero((channels >= start) & (channels < start + entry.reps)))
+        if reps:
+            entries.append(BlockEntry(entry.spec, reps))
+        start += entry.reps
+    rows_keep = np.concatenate([states, n + channels, np.arange(size, rows)])
+    cols_keep = np.concatenate([states, n + channels, np.arange(n + nw, cols)])
     return LFR(
         np.asarray(sys.M)[np.ix_(rows_keep, cols_keep)],
         states.size,
-        sys.block_entries,
+        entries,
         input_names=sys.input_names,
         output_names=sys.output_names,
     )
@@ -857,10 +863,17 @@ def _extract(problem, rtol, check_points, check_tolerance, prune, rng, unused="e
     names = [f"{name}[{k}]" for _, rows, name in problem.inputs for k in rows]
     out_names = [f"{name}[{k}]" for _, rows, name in problem.outputs for k in rows]
     lfr = _assemble(
-        problem, R0, coefficients, h, scale, n, nu, ny, rtol, unused, (names, out_names)
+        problem, R0, coefficients, h, scale, n, nu, ny, rtol, (names, out_names)
     )
     _check(problem, lfr, linearize, h, check_points, check_tolerance, rng)
-    return _prune(lfr) if prune else lfr
+    lfr = _prune(lfr) if prune else lfr
+    missing = [b.parameter.name for b in problem.bindings if b.parameter.name not in lfr.uncertainty]
+    if missing and unused == "error":
+        raise ValueError(
+            f"parameter {missing[0]!r} does not change the linearization from "
+            f"{[p[2] for p in problem.inputs]} to {[p[2] for p in problem.outputs]}"
+        )
+    return lfr
 
 
 def _check(problem, lfr, linearize, h, count, tolerance, rng):
