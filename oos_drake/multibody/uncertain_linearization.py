@@ -813,7 +813,7 @@ def ulinearize(
     Examples
     --------
     >>> from pydrake.all import MultibodyPlant, Parser                  # doctest: +SKIP
-    >>> plant = MultibodyPlant(0.0); Parser(plant).AddModels("sdf/examples/servicer.sdf")
+    >>> plant = MultibodyPlant(0.0); Parser(plant).AddModels("examples/servicer/servicer.sdf")
     >>> plant.Finalize(); context = plant.CreateDefaultContext()       # doctest: +SKIP
     >>> G = ulinearize(plant, context, load_parameters("servicer_parameters.toml"),
     ...                "servicer_actuation", "servicer_state[0,1,2,7,8,9]")  # doctest: +SKIP

@@ -19,8 +19,8 @@ from oos_drake.multibody.uncertain_linearization import (  # noqa: E402
 )
 
 ROOT = Path(__file__).resolve().parents[2]
-SDF = ROOT / "sdf" / "examples" / "servicer.sdf"
-PARAMETERS = ROOT / "sdf" / "examples" / "servicer_parameters.toml"
+SDF = ROOT / "examples" / "servicer" / "servicer.sdf"
+PARAMETERS = ROOT / "examples" / "servicer" / "servicer_parameters.toml"
 INPUTS = "servicer_actuation"  # Fx, Fy (hub_x, hub_y) [N], Tz (hub_yaw) [N m]
 OUTPUTS = "servicer_state[0,1,2,7,8,9]"  # x, y [m], yaw [rad], their rates
 OMEGA = np.logspace(-2, 3, 300)  # rad/s
