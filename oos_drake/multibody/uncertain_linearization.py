@@ -812,11 +812,12 @@ def ulinearize(
 
     Examples
     --------
-    >>> from pydrake.all import MultibodyPlant, Parser                  # doctest: +SKIP
-    >>> plant = MultibodyPlant(0.0); Parser(plant).AddModels("examples/servicer/servicer.sdf")
-    >>> plant.Finalize(); context = plant.CreateDefaultContext()       # doctest: +SKIP
-    >>> G = ulinearize(plant, context, load_parameters("servicer_parameters.toml"),
-    ...                "servicer_actuation", "servicer_state[0,1,2,7,8,9]")  # doctest: +SKIP
+    >>> plant, context = sdf_plant("examples/servicer/servicer.sdf")  # no gravity, at rest
+    >>> G = ulinearize(plant, context,
+    ...                load_parameters("examples/servicer/servicer_parameters.toml"),
+    ...                "servicer_actuation", "servicer_state[0,1,2,7,8,9]")
+    >>> G.occurrences["w_panel"]                                   # k ~ w^2, d ~ w: w I2
+    2
     """
     problem = _problem(system, context, parameters, inputs, outputs)
     if unused not in ("error", "drop"):

@@ -314,3 +314,17 @@ def test_cli_bad_input_exit_2_and_nothing_written(tmp_path, capsys, edit, port, 
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err, err
     assert not out.exists()
+
+
+def test_oos_robust_robstab_reads_a_stored_closed_loop(extracted, tmp_path, capsys):
+    from oos_drake.cli import main
+    from oos_drake.robust import robstab
+
+    K = LFR.from_ss(-np.eye(3) / 0.3, np.hstack([np.eye(3) * 200, np.eye(3) * 300]) / 0.3,
+                    -np.eye(3), np.zeros((3, 6)))  # fmt: skip
+    loop = feedback(extracted, K, sign=1)
+    loop.to_npz(tmp_path / "loop.npz")
+    assert main(["robust", "robstab", str(tmp_path / "loop.npz")]) == 0
+    text = capsys.readouterr().out
+    result = robstab(loop)
+    assert f"stability margin in [{result.lower:.6g}, {result.upper:.6g}]" in text
