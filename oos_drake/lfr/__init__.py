@@ -27,7 +27,6 @@ Modules: :mod:`~oos_drake.lfr.blocks` (block specs and normalization),
 from oos_drake.lfr.blocks import UComplex, ULTIDyn, UReal
 from oos_drake.lfr.core import LFR, BlockEntry, as_lfr
 from oos_drake.lfr.frequency import freqresp
-from oos_drake.lfr.matfile import load_lfr
 from oos_drake.lfr.interconnect import (
     append,
     connect,
@@ -38,6 +37,7 @@ from oos_drake.lfr.interconnect import (
     sumblk,
     vstack,
 )
+from oos_drake.lfr.matfile import load_lfr
 from oos_drake.lfr.substitution import close_blocks, lftdata, nominal, usample, usubs
 from oos_drake.lfr.uncertain import ucomplex, ultidyn, ureal
 

@@ -50,7 +50,9 @@ def to_mat(sys: LFR, path) -> None:
         )
 
     data = _variables(sys, last)
-    _atomic(path, lambda stream: scipy.io.savemat(stream, data, do_compression=True, oned_as="column"))
+    _atomic(
+        path, lambda stream: scipy.io.savemat(stream, data, do_compression=True, oned_as="column")
+    )
 
 
 def to_npz(sys: LFR, path) -> None:
@@ -131,7 +133,11 @@ def load_lfr(path) -> LFR:
 
         def first(x):  # MATLAB layout: batch dimensions last
             x = np.asarray(x)
-            return np.moveaxis(x, tuple(range(2, x.ndim)), tuple(range(x.ndim - 2))) if x.ndim > 2 else x
+            return (
+                np.moveaxis(x, tuple(range(2, x.ndim)), tuple(range(x.ndim - 2)))
+                if x.ndim > 2
+                else x
+            )
 
         def strings(key):
             return [str(np.ravel(x)[0]) for x in np.ravel(raw.get(key, np.zeros(0))) if np.size(x)]
@@ -145,7 +151,9 @@ def load_lfr(path) -> LFR:
             return [str(x) for x in raw.get(key, [])]
 
     else:
-        raise ValueError(f"{path}: expected a .mat or .npz file, got {path.suffix or 'no suffix'!r}")
+        raise ValueError(
+            f"{path}: expected a .mat or .npz file, got {path.suffix or 'no suffix'!r}"
+        )
     names, kinds = strings("block_names"), strings("block_kinds")
     required = ("A", "B", "C", "D", "nstates", "repetitions", "nominal", "lower", "upper")
     missing = [k for k in required if k not in raw]
@@ -159,7 +167,9 @@ def load_lfr(path) -> LFR:
     entries = []
     for k, (name, kind) in enumerate(zip(names, kinds, strict=True)):
         if kind == "ureal":
-            spec = UReal(name, float(np.real(vector["nominal"][k])), vector["lower"][k], vector["upper"][k])
+            spec = UReal(
+                name, float(np.real(vector["nominal"][k])), vector["lower"][k], vector["upper"][k]
+            )
         elif kind == "ucomplex":
             spec = UComplex(name, complex(vector["nominal"][k]), float(radius[k]))
         elif kind == "ultidyn":

@@ -6,7 +6,8 @@ Examples::
     oos validate --cases moments      # only the six moments
     oos sdf generate                  # rewrite sdf/ from oos_drake/scenario/data/paper.toml
     oos sdf check                     # exit 1 if the committed SDF files are stale
-    oos ulinearize examples/servicer/servicer.sdf --parameters examples/servicer/servicer_parameters.toml \
+    oos ulinearize examples/servicer/servicer.sdf \
+        --parameters examples/servicer/servicer_parameters.toml \
         --input servicer_actuation --output "servicer_state[0,1,2,7,8,9]" --out out/servicer
 """
 

@@ -48,7 +48,7 @@ from __future__ import annotations
 import math
 import re
 import tomllib
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -56,7 +56,7 @@ import numpy as np
 from pydrake.multibody.tree import BodyIndex
 
 from oos_drake.lfr import LFR
-from oos_drake.lfr.blocks import UReal
+from oos_drake.lfr.blocks import UReal, make_ureal_spec
 from oos_drake.lfr.core import BlockEntry
 from oos_drake.multibody.linearization import structural_keep
 
@@ -66,7 +66,6 @@ __all__ = [
     "BUSHING_QUANTITIES",
     "PhysicalParameter",
     "load_parameters",
-    "parameter_table",
     "parse_port",
     "sdf_plant",
     "ulinearize",
@@ -132,7 +131,7 @@ class PhysicalParameter:
             raise ValueError(
                 f"parameter {self.name!r}: unknown quantity {self.quantity!r}; known: {known}"
             )
-        self.spec  # validates name and range (one-line ValueError)
+        _ = self.spec  # validates name and range (one-line ValueError)
         positive = self.quantity != "damping" and "damping" not in self.quantity
         if positive and self.lower <= 0:
             raise ValueError(
@@ -194,8 +193,6 @@ def load_parameters(path) -> tuple[PhysicalParameter, ...]:
         extra = set(table) - {"element", "quantity", "nominal", "range", "percent", "plusminus"}
         if extra:
             raise ValueError(f"{path}: parameter {name!r} has unknown keys {sorted(extra)}")
-        from oos_drake.lfr.blocks import make_ureal_spec
-
         ranges = {k: table[k] for k in ("range", "percent", "plusminus") if k in table}
         if len(ranges) != 1:
             raise ValueError(
@@ -228,13 +225,17 @@ def _scoped(plant, name: str, has, get, kind: str):
     try:
         return get(name)
     except RuntimeError:
-        raise ValueError(f"{kind} name {name!r} is ambiguous; scope it as 'model::{name}'") from None
+        raise ValueError(
+            f"{kind} name {name!r} is ambiguous; scope it as 'model::{name}'"
+        ) from None
 
 
 def _force_elements(plant):
     from pydrake.multibody.tree import ForceElementIndex
 
-    return [plant.get_force_element(ForceElementIndex(i)) for i in range(plant.num_force_elements())]
+    return [
+        plant.get_force_element(ForceElementIndex(i)) for i in range(plant.num_force_elements())
+    ]
 
 
 class _Binding:
@@ -280,10 +281,8 @@ class _Binding:
                     f"frames {frames[0]!r} and {frames[1]!r}"
                 )
             self.bushing = matches[0]
-            base, _, axis = quantity.rpartition("_") if quantity[-2:] in ("_x", "_y", "_z") else (
-                quantity, "", ""
-            )
-            self.bushing_kind = base
+            axis = quantity[-1] if quantity[-2:] in ("_x", "_y", "_z") else ""
+            self.bushing_kind = quantity[:-2] if axis else quantity
             self.axes = [{"x": 0, "y": 1, "z": 2}[axis]] if axis else [0, 1, 2]
 
     def _check_inertia(self, plant_context):
@@ -293,9 +292,12 @@ class _Binding:
             mass, com, inertia = self._central(plant_context)
             axis = BODY_QUANTITIES.index(self.parameter.quantity) - 1
             inertia[axis, axis] = value
-            if not SpatialInertia.MakeFromCentralInertia(
-                mass, com, _rotational(inertia)
-            ).IsPhysicallyValid() or np.linalg.eigvalsh(inertia).min() <= 0:
+            if (
+                not SpatialInertia.MakeFromCentralInertia(
+                    mass, com, _rotational(inertia)
+                ).IsPhysicallyValid()
+                or np.linalg.eigvalsh(inertia).min() <= 0
+            ):
                 raise ValueError(
                     f"parameter {self.parameter.name!r}: {self.parameter.quantity} = {value:g} "
                     f"makes the inertia of body {self.parameter.element!r} non-physical "
@@ -321,7 +323,8 @@ class _Binding:
                 axis = BODY_QUANTITIES.index(quantity) - 1
                 inertia[axis, axis] = value
             self.body.SetSpatialInertiaInBodyFrame(
-                plant_context, SpatialInertia.MakeFromCentralInertia(mass, com, _rotational(inertia))
+                plant_context,
+                SpatialInertia.MakeFromCentralInertia(mass, com, _rotational(inertia)),
             )
         elif self.parameter.kind == "joint":
             if quantity == "stiffness":
@@ -439,10 +442,10 @@ class _Problem:
             if not port.HasValue(context):
                 port.FixValue(context, np.zeros(port.size()))
         B, C, D = [], [], []
-        A = f0 = None
+        A = None
         for k, (out_port, out_rows, _) in enumerate(self.outputs):
             row_C, row_D = None, []
-            for j, (in_port, in_rows, _) in enumerate(self.inputs):
+            for in_port, in_rows, _ in self.inputs:
                 affine = FirstOrderTaylorApproximation(
                     self.system, context,
                     input_port_index=in_port.get_index(), output_port_index=out_port.get_index(),
@@ -455,10 +458,18 @@ class _Problem:
                 row_D.append(affine.D()[np.ix_(out_rows, in_rows)])
             C.append(row_C)
             D.append(np.hstack(row_D))
-        M = self.plant.CalcMassMatrix(plant_context)[np.ix_(self.free_velocities, self.free_velocities)]
+        M = self.plant.CalcMassMatrix(plant_context)[
+            np.ix_(self.free_velocities, self.free_velocities)
+        ]
         xdot = self.system.EvalTimeDerivatives(context).CopyToVector()
-        return {"A": A, "B": np.hstack(B), "C": np.vstack(C), "D": np.vstack(D), "M": M, "xdot": xdot}
-
+        return {
+            "A": A,
+            "B": np.hstack(B),
+            "C": np.vstack(C),
+            "D": np.vstack(D),
+            "M": M,
+            "xdot": xdot,
+        }
 
     def acceleration_map(self) -> np.ndarray | None:
         """``C_d`` such that the outputs are ``y = X [x; u] + C_d x'`` (``None``: no ``x'``).
@@ -474,10 +485,9 @@ class _Problem:
         for port, _, _ in self.inputs:
             if not port.HasValue(context):
                 port.FixValue(context, np.zeros(port.size()))
-        plant, plant_context = self.plant, None
+        plant = self.plant
         plant_context = plant.GetMyMutableContextFromRoot(context)
-        nominal_values = self.nominal
-        for binding, value in zip(self.bindings, nominal_values, strict=True):
+        for binding, value in zip(self.bindings, self.nominal, strict=True):
             binding.apply(plant_context, float(value))
         force_port = plant.get_applied_spatial_force_input_port()
         acceleration = plant.get_generalized_acceleration_output_port()
@@ -511,7 +521,6 @@ class _Problem:
         dY, dV = np.array(dY).T, np.array(dV).T
         if np.abs(dY).max(initial=0.0) <= 1e-12 * max(np.abs(y0).max(initial=0.0), 1.0):
             return None
-        Cd = np.zeros((dY.shape[0], self.velocity_rows.size))
         Cd_v, *_ = np.linalg.lstsq(dV.T, dY.T, rcond=None)
         Cd = np.zeros((dY.shape[0], context.get_continuous_state_vector().size()))
         Cd[:, self.velocity_rows] = Cd_v.T
@@ -559,9 +568,9 @@ def _problem(system, context, parameters, inputs, outputs) -> _Problem:
 
 # ----------------------------------------------------------------------------- algebra
 def _implicit(problem: _Problem, lin: dict, Cd: np.ndarray | None):
-    """Rows ``R`` of ``R [x'; y; x; u] = 0`` and the parts used to fit ``C_d``."""
+    """Rows ``R`` of the implicit relation ``R [x'; y; x; u] = 0`` (module docstring, step 2)."""
     A, B, C, D = lin["A"], lin["B"], lin["C"], lin["D"]
-    n, nu, ny = A.shape[0], B.shape[1], C.shape[0]
+    n, ny = A.shape[0], C.shape[0]
     E = np.eye(n)
     rows = problem.velocity_rows
     E[np.ix_(rows, rows)] = lin["M"]
@@ -573,11 +582,11 @@ def _implicit(problem: _Problem, lin: dict, Cd: np.ndarray | None):
 
 
 def _fit_axes(problem: _Problem, evaluate, h: np.ndarray):
-    """Per-parameter coefficients ``(R1, R2)`` (in deviation units) and the fit checks."""
+    """``R0`` and per-parameter coefficients ``(R1, R2)`` of ``R0 + d R1 + d^2 R2`` (exact)."""
     nominal = problem.nominal
     R0 = evaluate(nominal)
     coefficients = []
-    for i, binding in enumerate(problem.bindings):
+    for i in range(nominal.size):
         step = np.zeros_like(nominal)
         step[i] = h[i]
         plus, minus = evaluate(nominal + step), evaluate(nominal - step)
@@ -863,12 +872,12 @@ def _extract(problem, rtol, check_points, check_tolerance, prune, rng, unused="e
             )
     names = [f"{name}[{k}]" for _, rows, name in problem.inputs for k in rows]
     out_names = [f"{name}[{k}]" for _, rows, name in problem.outputs for k in rows]
-    lfr = _assemble(
-        problem, R0, coefficients, h, scale, n, nu, ny, rtol, (names, out_names)
-    )
+    lfr = _assemble(problem, R0, coefficients, h, scale, n, nu, ny, rtol, (names, out_names))
     _check(problem, lfr, linearize, h, check_points, check_tolerance, rng)
     lfr = _prune(lfr) if prune else lfr
-    missing = [b.parameter.name for b in problem.bindings if b.parameter.name not in lfr.uncertainty]
+    missing = [
+        b.parameter.name for b in problem.bindings if b.parameter.name not in lfr.uncertainty
+    ]
     if missing and unused == "error":
         raise ValueError(
             f"parameter {missing[0]!r} does not change the linearization from "
@@ -903,22 +912,6 @@ def _check(problem, lfr, linearize, h, count, tolerance, rng):
                 f"ulinearize: LFR differs from Drake's linearization by {error:.2e} (relative) at "
                 f"{worst}; cross terms between parameters?"
             )
-
-
-def parameter_table(parameters: Mapping[str, PhysicalParameter] | Sequence[PhysicalParameter]):
-    """pandas table of declarations: ``name, element, quantity, nominal, lower, upper, unit``."""
-    import pandas as pd
-
-    items = parameters.values() if isinstance(parameters, Mapping) else parameters
-    return pd.DataFrame(
-        [
-            {
-                "name": p.name, "element": p.element, "quantity": p.quantity,
-                "nominal": p.nominal, "lower": p.lower, "upper": p.upper, "unit": p.unit,
-            }
-            for p in items
-        ]
-    )  # fmt: skip
 
 
 def sdf_plant(path):

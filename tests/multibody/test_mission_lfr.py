@@ -72,8 +72,7 @@ def test_drake_lfr_equals_titop_lfr(titop, index):
         values[p.name] = np.concatenate([inside, outside])
     ours = {n: spec.to_normalized(values[n], check=False) for n, spec in drake.uncertainty.items()}
     theirs = {
-        n: spec.to_normalized(values[n], check=False)
-        for n, spec in reference.uncertainty.items()
+        n: spec.to_normalized(values[n], check=False) for n, spec in reference.uncertainty.items()
     }
     G = usubs(drake, ours, normalized=True).nominal
     H = usubs(reference, theirs, normalized=True).nominal

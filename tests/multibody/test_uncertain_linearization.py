@@ -1,4 +1,4 @@
-"""ulinearize on the shipped servicer SDF against an LFR derived by hand, robstab vs a pole sweep."""
+"""ulinearize on the shipped servicer SDF vs an LFR derived by hand; robstab vs a pole sweep."""
 
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -207,7 +207,9 @@ def test_unknown_names_and_bad_ranges_are_refused():
         ulinearize(plant, context, good, "thrust", OUTPUTS)
     with pytest.raises(ValueError, match="no output port 'hub_state'"):
         ulinearize(plant, context, good, INPUTS, "hub_state")
-    with pytest.raises(ValueError, match="'Ixx_hub' does not change the linearization"):  # planar: Ixx does not enter
+    with pytest.raises(
+        ValueError, match="'Ixx_hub' does not change the linearization"
+    ):  # planar: Ixx does not enter
         ulinearize(plant, context, [PhysicalParameter("Ixx_hub", "hub", "Ixx", 20, 18, 22)],
                    INPUTS, OUTPUTS)  # fmt: skip
 
@@ -280,7 +282,9 @@ def test_cli_writes_mat_and_npz_that_load_back(tmp_path, capsys):
     data = scipy.io.loadmat(out / "lfr.mat")
     # MATLAB mussv BLK rows [-r 0], blocks sorted by name: Izz_hub, k_dock, kt_dock, m_client,
     # m_hub, w_panel
-    np.testing.assert_array_equal(data["blk"], [[-1, 0], [-2, 0], [-1, 0], [-2, 0], [-2, 0], [-2, 0]])
+    np.testing.assert_array_equal(
+        data["blk"], [[-1, 0], [-2, 0], [-1, 0], [-2, 0], [-2, 0], [-2, 0]]
+    )
 
 
 @pytest.mark.parametrize(
