@@ -168,7 +168,7 @@ def test_robstab_agrees_with_a_dense_pole_sweep(extracted):
     K = LFR.from_ss(-np.eye(3) / tau, np.hstack([kp, kd]) / tau, -np.eye(3), np.zeros((3, 6)))
     loop = feedback(extracted, K, sign=1)
     result = robstab(loop)
-    assert result.nominal_stable and 0.0 < result.lower <= result.upper < 10.0
+    assert result.nominal_stable and 1.0 < result.lower <= result.upper < 10.0
     names = sorted(extracted.uncertainty)
     rng = np.random.default_rng(7)
     # directions: the box's corners and random points, at radii up to 1.2 x the upper bound
