@@ -132,6 +132,10 @@ class AnalysisOptions:
         k_lo, k_hi = self.stiffness_range
         if not 0 < k_lo <= k_hi:
             raise ValueError(f"stiffness_range must be 0 < low <= high, got {self.stiffness_range}")
+        from oos_drake.analysis.models import PLANT_SOURCES
+
+        if self.plant not in PLANT_SOURCES:
+            raise ValueError(f"plant must be one of {PLANT_SOURCES}, got {self.plant!r}")
 
     def grid(self) -> np.ndarray:
         """Common frequency grid [rad/s]."""
