@@ -17,7 +17,8 @@ model's equations is assumed beyond what Drake itself computes:
    centre of mass and its inertia about it kept) and in each diagonal moment of inertia;
    ``\tilde A`` is linear in spring and bushing stiffnesses and in damping constants. Outputs
    that read accelerations are written ``y = C_x(p) x + D_u(p) u + C_d x'`` with a constant
-   ``C_d`` found by least squares (zero when ``[C D]`` is itself polynomial).
+   ``C_d`` measured exactly by probing: unit forces and torques on each body (the plant's
+   ``applied_spatial_force`` input) change ``v'`` and, through it only, ``y``.
 2. **Coefficients from evaluations.** All of ``[E, -\tilde A, -\tilde B; -C_d, I, -C_x, -D_u]``
    (the implicit relation ``R(p) [x'; y; x; u] = 0``) is evaluated at the nominal point and at
    ``nominal +- h`` for each parameter (``h`` its half range), which gives the exact
@@ -37,8 +38,10 @@ model's equations is assumed beyond what Drake itself computes:
    map otherwise) and the implicit relation is solved for ``[x'; y]`` around the nominal
    (the algebraic loop through ``E``'s uncertain part stays inside the LFR). States that
    structurally cannot reach an output or be reached from an input (through any uncertain
-   channel) are removed. The result is checked against Drake's own linearization at random
-   parameter values inside and outside the ranges.
+   channel) are removed, and so are such channels. The result is checked against Drake's own
+   linearization at random parameter values inside and outside the ranges. Finally each
+   repeated block's channels are balanced (an exact change of coordinates that helps the mu
+   optimizers).
 
 Parameters are declared with :class:`PhysicalParameter` (or a TOML file, :func:`load_parameters`).
 """
