@@ -332,3 +332,17 @@ def test_oos_robust_robstab_reads_a_stored_closed_loop(extracted, tmp_path, caps
     text = capsys.readouterr().out
     result = robstab(loop)
     assert f"stability margin in [{result.lower:.6g}, {result.upper:.6g}]" in text
+
+
+def test_readme_servicer_snippet_runs(monkeypatch, capsys):
+    import re
+
+    text = (ROOT / "README.md").read_text()
+    blocks = [b for b in re.findall(r"```python\n(.*?)```", text, re.DOTALL) if "ulinearize" in b]
+    assert len(blocks) == 1
+    monkeypatch.chdir(ROOT)
+    namespace = {}
+    exec(compile(blocks[0], "README.md", "exec"), namespace)
+    result = namespace["result"]
+    assert 1.0 < result.lower <= result.upper
+    assert "stability margin in [" in capsys.readouterr().out
