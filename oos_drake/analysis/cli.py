@@ -74,10 +74,11 @@ def run_analyze(args) -> int:
         sensitivity=not args.no_sensitivity,
         time_check=not args.no_time_check,
         progress=not args.quiet,
+        plant=args.plant,
     )
     summary = _write_atomically(args.out, lambda tmp: run_analysis(controller, tmp, options))
     m = summary["mission"]
-    print(f"controller: {controller.label} ({controller.source})")
+    print(f"controller: {controller.label} ({controller.source}); plants: {args.plant}")
     print(
         f"mission: mu peak <= {m['mu_peak_upper']:.4g} "
         f"certified >= {m['mu_peak_lower']:.4g} (gap {m['gap_percent']:.2g} %) at "
@@ -176,5 +177,10 @@ def register(subparsers) -> None:
     parser.add_argument("--no-sensitivity", action="store_true", help="skip the sensitivity table")
     parser.add_argument("--no-time-check", action="store_true", help="skip the time-domain check")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes")
+    parser.add_argument(
+        "--plant", choices=("lfr", "drake"), default="lfr",
+        help="uncertain plants: the TITOP LFR (default) or LFRs extracted from the Drake twin "
+        "by ulinearize (same blocks; needs pydrake)",
+    )  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run_analyze)

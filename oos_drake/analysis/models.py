@@ -60,13 +60,34 @@ def mission_times(n_configurations: int, scenario=None) -> np.ndarray:
     return np.linspace(timeline.t_start, timeline.t_end, n_configurations)
 
 
-def mission_closed_loop(controller: Controller, times, scenario=None) -> ModelArray:
-    """``M_hat_N``: the uncertain closed loop at mission ``times`` [s]."""
+def _check_source(source: str) -> None:
+    if source not in PLANT_SOURCES:
+        raise ValueError(f"plant source must be one of {PLANT_SOURCES}, got {source!r}")
+
+
+#: Sources of the uncertain plants: the TITOP LFR or LFRs extracted from the Drake twin.
+PLANT_SOURCES = ("lfr", "drake")
+
+
+def mission_closed_loop(
+    controller: Controller, times, scenario=None, *, source: str = "lfr"
+) -> ModelArray:
+    """``M_hat_N``: the uncertain closed loop at mission ``times`` [s].
+
+    ``source="drake"``: the plants are the Drake twin's, extracted by ``ulinearize``
+    (:func:`oos_drake.multibody.mission_lfr.twin_mission_plants`).
+    """
     from oos_drake.scenario.model import build_mission_model, mission_values
 
+    _check_source(source)
     scenario = _scenario(scenario)
     times = np.atleast_1d(np.asarray(times, dtype=float))
-    plant = usubs(build_mission_model(scenario), mission_values(times, scenario))
+    if source == "drake":
+        from oos_drake.multibody.mission_lfr import twin_mission_plants
+
+        plant = twin_mission_plants(times, scenario)
+    else:
+        plant = usubs(build_mission_model(scenario), mission_values(times, scenario))
     if not plant.batch_shape:
         plant = plant.model(np.zeros(times.size, dtype=int)) if plant.batch_shape else plant
     system = close_loop(plant, controller.K, controller.spec)
@@ -84,7 +105,7 @@ def phase_configuration(phase: str, scenario=None):
 
 
 def docking_closed_loop(
-    controller: Controller, phase: str, stiffness, *, damping=None, scenario=None
+    controller: Controller, phase: str, stiffness, *, damping=None, scenario=None, source="lfr"
 ) -> ModelArray:
     """Uncertain closed loop of docking phase 7 or 8 for each swept stiffness.
 
@@ -101,9 +122,13 @@ def docking_closed_loop(
     damping : float, optional
         Damping of the swept spring-damper [N s/m, N m s/rad] (default: scenario, paper 100).
     scenario : Scenario, optional
+    source : {"lfr", "drake"}
+        TITOP LFR, or the Drake twin's LFR (one ``ulinearize`` per phase, the stiffness
+        substituted: :func:`oos_drake.multibody.mission_lfr.twin_docking_plants`).
     """
     from oos_drake.scenario.model import build_docking_model, configuration_values
 
+    _check_source(source)
     scenario = _scenario(scenario)
     phase = str(phase)
     stiffness = np.atleast_1d(np.asarray(stiffness, dtype=float))
@@ -111,6 +136,12 @@ def docking_closed_loop(
         raise ValueError("docking: stiffness values must be finite and >= 0")
     settings = scenario.docking
     damping = float(settings.damping if damping is None else damping)
+    if source == "drake":
+        from oos_drake.multibody.mission_lfr import twin_docking_plants
+
+        plant = twin_docking_plants(phase, stiffness, damping, scenario)
+        system = close_loop(plant, controller.K, controller.spec)
+        return ModelArray(system, stiffness, "stiffness [N/m or N m/rad]", f"docking-{phase}")
     model = build_docking_model(phase, scenario)
     named = phase_configuration(phase, scenario)
     cfg = named.configuration

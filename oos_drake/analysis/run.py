@@ -91,6 +91,9 @@ class AnalysisOptions:
         Simulated time [s].
     progress : bool
         tqdm progress bars.
+    plant : str
+        Source of the uncertain plants: ``"lfr"`` (the TITOP LFR, substituted) or ``"drake"``
+        (LFRs extracted from the Drake twin by ``ulinearize``, same blocks).
     """
 
     configurations: int = 330
@@ -111,6 +114,7 @@ class AnalysisOptions:
     time_check: bool = True
     time_check_duration: float = 600.0
     progress: bool = True
+    plant: str = "lfr"
 
     def __post_init__(self):
         # checked here, before any work: a bad option must not cost a mission sweep
@@ -128,6 +132,10 @@ class AnalysisOptions:
         k_lo, k_hi = self.stiffness_range
         if not 0 < k_lo <= k_hi:
             raise ValueError(f"stiffness_range must be 0 < low <= high, got {self.stiffness_range}")
+        from oos_drake.analysis.models import PLANT_SOURCES
+
+        if self.plant not in PLANT_SOURCES:
+            raise ValueError(f"plant must be one of {PLANT_SOURCES}, got {self.plant!r}")
 
     def grid(self) -> np.ndarray:
         """Common frequency grid [rad/s]."""
@@ -307,7 +315,7 @@ def run_analysis(
     omega = options.grid()
     # ------------------------------------------------------------------ mission stability
     times = mission_times(options.configurations, scenario)
-    mission = mission_closed_loop(controller, times, scenario)
+    mission = mission_closed_loop(controller, times, scenario, source=options.plant)
     subsets = uncertainty_subsets(mission.system.uncertainty)
     abscissa = np.linalg.eigvals(np.asarray(mission.system.A)).real.max(axis=-1)
     lap("build mission models")
@@ -348,7 +356,9 @@ def run_analysis(
     docking_perturbations, docking_certs = [], {}
     stiffness = np.geomspace(*options.stiffness_range, options.docking_points)
     for phase in options.docking_phases:
-        arr = docking_closed_loop(controller, phase, stiffness, scenario=scenario)
+        arr = docking_closed_loop(
+            controller, phase, stiffness, scenario=scenario, source=options.plant
+        )
         tot = {"total": uncertainty_subsets(arr.system.uncertainty)["total"]}
         dres = study(arr.system, tot, stiffness, f"mu docking {phase}")
         dsweep = dres.table.rename(columns={"time [s]": "stiffness [N/m or N m/rad]"})

@@ -37,6 +37,7 @@ from oos_drake.lfr.interconnect import (
     sumblk,
     vstack,
 )
+from oos_drake.lfr.matfile import load_lfr
 from oos_drake.lfr.substitution import close_blocks, lftdata, nominal, usample, usubs
 from oos_drake.lfr.uncertain import ucomplex, ultidyn, ureal
 
@@ -56,6 +57,7 @@ __all__ = [
     "inv",
     "lft",
     "lftdata",
+    "load_lfr",
     "nominal",
     "sumblk",
     "ucomplex",

@@ -550,6 +550,12 @@ class LFR:
 
         to_mat(self, path)
 
+    def to_npz(self, path) -> None:
+        """See :func:`oos_drake.lfr.matfile.to_npz` (read back with ``load_lfr``)."""
+        from oos_drake.lfr.matfile import to_npz
+
+        to_npz(self, path)
+
 
 def _rebuild(M, n, blocks, input_names, output_names):
     return LFR(M, n, blocks, input_names=input_names, output_names=output_names)

@@ -1,13 +1,23 @@
-"""Export an LFR to a MATLAB ``.mat`` file for cross-checking with the Robust Control Toolbox."""
+"""Store an LFR: MATLAB ``.mat`` (for the Robust Control Toolbox) or numpy ``.npz``, and load it.
+
+Both files hold the same variables (see :func:`to_mat`); the ``.mat`` puts model-array batch
+dimensions last (MATLAB), the ``.npz`` first (numpy). :func:`load_lfr` rebuilds the LFR from
+either. Files are written atomically (temporary file, then rename).
+"""
 
 from __future__ import annotations
 
+import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import scipy.io
 
-from oos_drake.lfr.core import LFR
+from oos_drake.lfr.blocks import UComplex, ULTIDyn, UReal
+from oos_drake.lfr.core import LFR, BlockEntry
+
+__all__ = ["to_mat", "to_npz", "load_lfr"]
 
 
 def to_mat(sys: LFR, path) -> None:
@@ -32,13 +42,45 @@ def to_mat(sys: LFR, path) -> None:
     path = Path(path)
     if path.suffix != ".mat":
         path = path.with_suffix(path.suffix + ".mat")
-    n = sys.nstates
 
     def last(x):
         x = np.asarray(x)
         return (
             np.moveaxis(x, tuple(range(x.ndim - 2)), tuple(range(2, x.ndim))) if x.ndim > 2 else x
         )
+
+    data = _variables(sys, last)
+    _atomic(
+        path, lambda stream: scipy.io.savemat(stream, data, do_compression=True, oned_as="column")
+    )
+
+
+def to_npz(sys: LFR, path) -> None:
+    """Write the variables of :func:`to_mat` to a numpy ``.npz`` (batch dimensions first)."""
+    path = Path(path)
+    if path.suffix != ".npz":
+        path = path.with_suffix(path.suffix + ".npz")
+    data = _variables(sys, np.asarray)
+    for key in ("block_names", "block_kinds", "input_names", "output_names"):
+        data[key] = np.array([str(x) for x in data[key]], dtype=str)
+    _atomic(path, lambda stream: np.savez_compressed(stream, **data))
+
+
+def _atomic(path: Path, write) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            write(stream)
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+
+
+def _variables(sys: LFR, layout) -> dict:
+    n = sys.nstates
+    last = layout
 
     specs = [entry.spec for entry in sys.block_entries]
     lower = [s.range[0] if s.kind == "ureal" else np.nan for s in specs]
@@ -69,5 +111,72 @@ def to_mat(sys: LFR, path) -> None:
         "upper": np.array(upper, dtype=float),
         "radius": np.array(radius, dtype=float),
         "block_shape": np.array([s.shape for s in specs], dtype=float).reshape(-1, 2),
+        "input_names": np.array(list(sys.input_names or ()), dtype=object),
+        "output_names": np.array(list(sys.output_names or ()), dtype=object),
     }
-    scipy.io.savemat(path, data, do_compression=True, oned_as="column")
+    return data
+
+
+def load_lfr(path) -> LFR:
+    """Read an LFR written by :func:`to_mat` (``.mat``) or :func:`to_npz` (``.npz``).
+
+    Raises
+    ------
+    ValueError
+        Unknown suffix, missing variables or an inconsistent block table (names the file).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such file")
+    if path.suffix == ".mat":
+        raw = {k: v for k, v in scipy.io.loadmat(path).items() if not k.startswith("__")}
+
+        def first(x):  # MATLAB layout: batch dimensions last
+            x = np.asarray(x)
+            return (
+                np.moveaxis(x, tuple(range(2, x.ndim)), tuple(range(x.ndim - 2)))
+                if x.ndim > 2
+                else x
+            )
+
+        def strings(key):
+            return [str(np.ravel(x)[0]) for x in np.ravel(raw.get(key, np.zeros(0))) if np.size(x)]
+
+    elif path.suffix == ".npz":
+        with np.load(path) as stored:
+            raw = {k: stored[k] for k in stored.files}
+        first = np.asarray
+
+        def strings(key):
+            return [str(x) for x in raw.get(key, [])]
+
+    else:
+        raise ValueError(
+            f"{path}: expected a .mat or .npz file, got {path.suffix or 'no suffix'!r}"
+        )
+    names, kinds = strings("block_names"), strings("block_kinds")
+    required = ("A", "B", "C", "D", "nstates", "repetitions", "nominal", "lower", "upper")
+    missing = [k for k in required if k not in raw]
+    if missing:
+        raise ValueError(f"{path}: not an LFR file, missing variable(s) {missing}")
+    A, B, C, D = (first(raw[k]) for k in "ABCD")
+    n = int(np.ravel(raw["nstates"])[0])
+    vector = {k: np.ravel(raw[k]) for k in ("repetitions", "nominal", "lower", "upper")}
+    radius = np.ravel(raw.get("radius", np.full(len(names), np.nan)))
+    shapes = np.asarray(raw.get("block_shape", np.ones((len(names), 2)))).reshape(-1, 2)
+    entries = []
+    for k, (name, kind) in enumerate(zip(names, kinds, strict=True)):
+        if kind == "ureal":
+            spec = UReal(
+                name, float(np.real(vector["nominal"][k])), vector["lower"][k], vector["upper"][k]
+            )
+        elif kind == "ucomplex":
+            spec = UComplex(name, complex(vector["nominal"][k]), float(radius[k]))
+        elif kind == "ultidyn":
+            spec = ULTIDyn(name, tuple(int(v) for v in shapes[k]), float(radius[k]))
+        else:
+            raise ValueError(f"{path}: block {name!r} has unknown kind {kind!r}")
+        entries.append(BlockEntry(spec, int(vector["repetitions"][k])))
+    M = np.concatenate([np.concatenate([A, B], axis=-1), np.concatenate([C, D], axis=-1)], axis=-2)
+    inputs, outputs = strings("input_names"), strings("output_names")
+    return LFR(M, n, entries, input_names=inputs or None, output_names=outputs or None)

@@ -10,6 +10,25 @@
   linearize it (``linearize_at``, ``linearize_time``, ``linearize_named``) into a
   ``control.StateSpace`` from the wrench at G1 to ``[a; wdot; w; rpy]``.
 - :mod:`~oos_drake.multibody.cross_check`: Drake vs TITOP (``oos validate``).
+- :mod:`~oos_drake.multibody.uncertain_linearization`: ``ulinearize(system, context, parameters,
+  inputs, outputs)``: uncertain LFR of any Drake model with declared physical parameters
+  (``oos ulinearize``); :mod:`~oos_drake.multibody.mission_lfr`: the twin's LFRs at the mission's
+  configurations.
 
 Submodules are imported on demand (pydrake import takes ~1 s).
 """
+
+_LAZY = {
+    "ulinearize": "oos_drake.multibody.uncertain_linearization",
+    "PhysicalParameter": "oos_drake.multibody.uncertain_linearization",
+    "load_parameters": "oos_drake.multibody.uncertain_linearization",
+}
+
+
+def __getattr__(name):
+    """``oos_drake.multibody.ulinearize`` & co. without importing pydrake at package import."""
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'oos_drake.multibody' has no attribute {name!r}")

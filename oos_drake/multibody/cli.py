@@ -6,6 +6,9 @@ Examples::
     oos validate --cases moments      # only the six moments
     oos sdf generate                  # rewrite sdf/ from oos_drake/scenario/data/paper.toml
     oos sdf check                     # exit 1 if the committed SDF files are stale
+    oos ulinearize examples/servicer/servicer.sdf \
+        --parameters examples/servicer/servicer_parameters.toml \
+        --input servicer_actuation --output "servicer_state[0,1,2,7,8,9]" --out out/servicer
 """
 
 from __future__ import annotations
@@ -87,6 +90,30 @@ def _sdf_check(args: argparse.Namespace) -> int:
     return 0
 
 
+def _ulinearize(args: argparse.Namespace) -> int:
+    from oos_drake.multibody.uncertain_linearization import (
+        load_parameters,
+        sdf_plant,
+        ulinearize,
+    )
+
+    parameters = load_parameters(args.parameters)
+    plant, context = sdf_plant(args.model)
+    start = time.perf_counter()
+    lfr = ulinearize(plant, context, parameters, args.input, args.output)
+    elapsed = time.perf_counter() - start
+    out = Path(args.out)
+    lfr.to_mat(out / f"{args.name}.mat")
+    lfr.to_npz(out / f"{args.name}.npz")
+    print(
+        f"{args.model}: {lfr.nstates} states, {lfr.shape[1]} inputs, {lfr.shape[0]} outputs "
+        f"({elapsed:.2f} s)"
+    )
+    print(lfr.blocks[["name", "repetitions", "nominal", "range"]].to_string(index=False))
+    print(f"written: {out / args.name}.mat, {out / args.name}.npz")
+    return 0
+
+
 def register(subparsers) -> None:
     """Add ``validate`` and ``sdf`` to the ``oos`` command line."""
     from oos_drake.multibody.scenario_sdf import SDF_DIRECTORY
@@ -111,6 +138,30 @@ def register(subparsers) -> None:
     validate.add_argument("--scenario", type=Path, default=None, help="scenario TOML file")
     validate.add_argument("--sdf-dir", type=Path, default=SDF_DIRECTORY, help="SDF directory")
     validate.set_defaults(func=_validate)
+
+    ulin = subparsers.add_parser(
+        "ulinearize",
+        help="uncertain LFR of an SDF/URDF model with declared physical parameters (.mat, .npz)",
+        description="Linearize a Drake model (parsed from MODEL, no gravity, all positions and "
+        "velocities zero) into an uncertain LFR whose ureal blocks are the parameters declared in "
+        "the TOML file (body mass and inertia, revolute spring stiffness, damping or modal "
+        "frequency, bushing stiffness and damping per axis). Writes OUT/NAME.mat (MATLAB "
+        "layout, BLK rows and block table) and OUT/NAME.npz; load them with "
+        "oos_drake.lfr.load_lfr or `oos robust robstab`.",
+    )
+    ulin.add_argument("model", type=Path, help="SDF or URDF file")
+    ulin.add_argument("--parameters", type=Path, required=True, help="parameter TOML file")
+    ulin.add_argument(
+        "--input", action="append", required=True,
+        help="input port of the plant, optionally with rows: NAME, NAME[i,j], NAME[a:b] "
+        "(repeat for several ports)",
+    )  # fmt: skip
+    ulin.add_argument(
+        "--output", action="append", required=True, help="output port (same syntax as --input)"
+    )
+    ulin.add_argument("--out", type=Path, required=True, help="output directory")
+    ulin.add_argument("--name", default="lfr", help="file stem (default: lfr)")
+    ulin.set_defaults(func=_ulinearize)
 
     sdf = subparsers.add_parser("sdf", help="generate or check the scenario's SDF files")
     sdf_commands = sdf.add_subparsers(dest="sdf_command", metavar="SDF_COMMAND", required=True)

@@ -33,6 +33,7 @@ __all__ = [
     "add_hub_io",
     "linearize_hub",
     "HubPorts",
+    "structural_keep",
     "structural_prune",
     "HubWrenchToGeneralizedForce",
     "HubWrenchToGeneralizedForce_",
@@ -160,6 +161,31 @@ def linearize_hub(diagram: Diagram, context, ports: HubPorts = HubPorts()) -> co
     )
 
 
+def structural_keep(edges: np.ndarray, sources: np.ndarray, sinks: np.ndarray) -> np.ndarray:
+    """Nodes of a directed graph reachable from ``sources`` and reaching ``sinks``.
+
+    Parameters
+    ----------
+    edges : numpy.ndarray of bool, shape (N, N)
+        ``edges[i, j]``: node ``j`` drives node ``i``.
+    sources, sinks : numpy.ndarray of bool, shape (N,)
+        Nodes driven by an input, nodes read by an output.
+    """
+    observable = np.array(sinks, dtype=bool)
+    frontier = observable.copy()
+    while frontier.any():
+        new = edges[frontier].any(axis=0) & ~observable
+        observable |= new
+        frontier = new
+    controllable = np.array(sources, dtype=bool)
+    frontier = controllable.copy()
+    while frontier.any():
+        new = edges[:, frontier].any(axis=1) & ~controllable
+        controllable |= new
+        frontier = new
+    return observable & controllable
+
+
 def structural_prune(system: control.StateSpace, rtol: float = 1e-13) -> control.StateSpace:
     """Remove states that structurally cannot reach an output or be reached from an input.
 
@@ -175,18 +201,8 @@ def structural_prune(system: control.StateSpace, rtol: float = 1e-13) -> control
     scale = max(np.abs(A).max(initial=0.0), 1.0)
     edges = np.abs(A) > rtol * scale  # edges[i, j]: x_j drives xdot_i
     observable = np.abs(C).max(axis=0) > rtol * max(np.abs(C).max(initial=0.0), 1e-300)
-    frontier = observable.copy()
-    while frontier.any():
-        new = edges[frontier].any(axis=0) & ~observable
-        observable |= new
-        frontier = new
     controllable = np.abs(B).max(axis=1) > rtol * max(np.abs(B).max(initial=0.0), 1e-300)
-    frontier = controllable.copy()
-    while frontier.any():
-        new = edges[:, frontier].any(axis=1) & ~controllable
-        controllable |= new
-        frontier = new
-    keep = np.flatnonzero(observable & controllable)
+    keep = np.flatnonzero(structural_keep(edges, controllable, observable))
     return control.ss(
         A[np.ix_(keep, keep)], B[keep, :], C[:, keep], system.D,
         inputs=system.input_labels, outputs=system.output_labels,

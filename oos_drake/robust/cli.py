@@ -9,6 +9,7 @@ Examples::
     oos robust mussv case.mat                    # M and blk from MATLAB
     oos robust mussv sweep.npz --out bounds.npz  # batch: writes upper, lower, delta, D, G
     oos robust hinfnorm plant.npz
+    oos robust robstab closed_loop.npz           # LFR file (lfr.to_npz / to_mat, oos ulinearize)
 """
 
 from __future__ import annotations
@@ -75,6 +76,25 @@ def _hinfnorm(args: argparse.Namespace) -> int:
     return 0
 
 
+def _robstab(args: argparse.Namespace) -> int:
+    from oos_drake.lfr import load_lfr
+    from oos_drake.robust import robstab
+
+    sys = load_lfr(args.file)
+    res = robstab(sys, blocks=args.blocks)
+    if not res.nominal_stable:
+        print(f"{args.file}: the nominal model is unstable (margin 0)")
+        return 0
+    print(f"{args.file}: {sys.nstates} states, blocks {list(sys.occurrences.items())}")
+    print(
+        f"stability margin in [{res.lower:.6g}, {res.upper:.6g}] (normalized units; > 1: robustly "
+        f"stable), critical frequency {res.critical_frequency:.6g} rad/s"
+    )
+    for name, value in res.worst_case.items():
+        print(f"  destabilizing {name} = {value}")
+    return 0
+
+
 def register(subparsers) -> None:
     """Add ``oos robust ...`` to the ``oos`` parser."""
     robust = subparsers.add_parser(
@@ -91,3 +111,7 @@ def register(subparsers) -> None:
     hinf = commands.add_parser("hinfnorm", help="H-infinity norm of (A, B, C, D)")
     hinf.add_argument("file", help=".npz or .mat file with variables A, B, C, D")
     hinf.set_defaults(func=_hinfnorm)
+    stab = commands.add_parser("robstab", help="robust stability margin of a stored LFR")
+    stab.add_argument("file", help=".npz or .mat LFR file (oos_drake.lfr.load_lfr)")
+    stab.add_argument("--blocks", nargs="+", default=None, help="analyze only these blocks")
+    stab.set_defaults(func=_robstab)

@@ -178,3 +178,26 @@ def test_star_product_general_sizes():
     ic = control.interconnect([Pn, Qn], inplist=["p0", "p1", "r1"], outlist=["q0", "q1", "s1"])
     assert_response_close(star.freqresp(OMEGA), control_response(ic, OMEGA), rtol=1e-9)
     assert append(P, Q).shape == (5, 5)
+
+
+def test_load_lfr_round_trips_mat_and_npz_model_arrays(tmp_path):
+    from oos_drake.lfr import load_lfr
+
+    m = ureal("m", 2.0, percent=10)
+    c = ureal("c", 0.3, range=(0.1, 0.4))
+    D = ultidyn("Dyn", (1, 1), bound=0.1)
+    s = control.tf("s")
+    sys = (feedback(inv(m) * (1 / s) * (1 + D), c) * (1 / s)).with_names(
+        inputs=["F"], outputs=["x"]
+    )
+    for model in (sys, usubs(sys, {"m": np.array([1.9, 2.0, 2.1])})):
+        for writer, suffix in ((model.to_mat, "mat"), (model.to_npz, "npz")):
+            path = tmp_path / f"model.{suffix}"
+            writer(path)
+            back = load_lfr(path)
+            np.testing.assert_array_equal(back.M, model.M)
+            assert back.block_entries == model.block_entries
+            assert back.input_names == ("F",) and back.output_names == ("x",)
+    with pytest.raises(ValueError, match="not an LFR file"):
+        np.savez(tmp_path / "other.npz", A=np.eye(2))
+        load_lfr(tmp_path / "other.npz")

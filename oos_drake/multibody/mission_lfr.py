@@ -1,0 +1,248 @@
+"""Uncertain LFRs of the Drake twin at the mission's configurations (``ulinearize`` on the twin).
+
+The twin (:mod:`oos_drake.multibody.scenario_plant`) is placed at a configuration (moments 1-6,
+docking phases 7 and 8: :func:`oos_drake.multibody.operating_point.set_operating_point`) and
+:func:`oos_drake.multibody.uncertain_linearization.ulinearize` extracts the LFR from the wrench
+at G1 to ``[a_G1; wdot]`` with the scenario's real parameters as ``ureal`` blocks:
+
+==========================  =================================================================
+``m_<hub>``                 hub mass (body ``oos_scenario::<hub>::<hub>``, quantity ``mass``)
+``J{xx,yy,zz}_<hub>``       hub central moments of inertia (``Ixx``, ``Iyy``, ``Izz``)
+``w1_<array>``              first cantilever mode of the array (its mode-1 joint, quantity
+                            ``frequency``: spring ``k^2 w^2`` and damping ``2 xi w k^2``)
+``k_shear_SM<i>``, ...      docking bushing SM1 (frames J7/D2), SM2 (D1/D3): ``force_stiffness``,
+                            ``torque_stiffness``, ``force_damping``, ``torque_damping``
+==========================  =================================================================
+
+same names, nominal values and ranges as the TITOP LFR (:mod:`oos_drake.scenario.model`) for
+the hub and array parameters; the TITOP spring-damper blocks span ``[0, 2 nominal]`` (stiffness
+0 is allowed there, where the Drake declaration needs a positive range), so the docking
+parameters are declared per case around the case's value.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from oos_drake.lfr import LFR
+from oos_drake.multibody.appendage_sdf import MODE_JOINT
+from oos_drake.multibody.operating_point import OperatingPoint, set_operating_point
+from oos_drake.multibody.scenario_plant import cached_scenario_diagram
+from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL
+from oos_drake.multibody.uncertain_linearization import PhysicalParameter, ulinearize
+
+__all__ = ["SPRING_QUANTITIES", "mission_parameters", "spring_damper_parameters", "twin_lfr"]
+
+#: TITOP spring-damper block prefix -> bushing quantity.
+SPRING_QUANTITIES = {
+    "k_shear": "force_stiffness",
+    "k_tors": "torque_stiffness",
+    "d_shear": "force_damping",
+    "d_tors": "torque_damping",
+}
+_BUSHING_FRAMES = {"SM1": "J7/D2", "SM2": "D1/D3"}
+
+
+def mission_parameters(scenario=None) -> tuple[PhysicalParameter, ...]:
+    """The scenario's real uncertain parameters as Drake declarations (TITOP names and ranges)."""
+    from oos_drake.multibody.synthesis_plants import _scenario, uncertain_parameters
+
+    scenario = _scenario(scenario)
+    hubs = {hub.name for hub in scenario.hubs.values()}
+    arrays = {mount.name for mount in scenario.arrays.values()}
+    declared = []
+    for p in uncertain_parameters(scenario):
+        prefix, owner = p.name.split("_", 1)
+        if owner in hubs:
+            element = f"{ASSEMBLY_MODEL}::{owner}::{owner}"
+            quantity = "mass" if prefix == "m" else "I" + prefix[1:]
+        elif owner in arrays and prefix == "w1":
+            element = f"{ASSEMBLY_MODEL}::{owner}::{MODE_JOINT.format(1)}"
+            quantity = "frequency"
+        else:
+            raise ValueError(f"no Drake element for the scenario parameter {p.name!r}")
+        declared.append(
+            PhysicalParameter(p.name, element, quantity, p.nominal, float(p.lower), float(p.upper))
+        )
+    return tuple(declared)
+
+
+def spring_damper_parameters(
+    values: Mapping[str, float], percent: float = 50.0
+) -> tuple[PhysicalParameter, ...]:
+    """Bushing parameters named as the TITOP blocks, nominal = ``values``, range +- ``percent``.
+
+    Parameters
+    ----------
+    values : Mapping[str, float]
+        ``{"k_shear_SM1": k, "d_tors_SM2": d, ...}`` [N/m, N m/rad, N s/m, N m s/rad], > 0.
+    percent : float
+        Half range in percent of the nominal (< 100 keeps the range positive).
+    """
+    declared = []
+    for name, value in sorted(values.items()):
+        prefix, _, spring = name.rpartition("_")
+        if prefix not in SPRING_QUANTITIES or spring not in _BUSHING_FRAMES:
+            raise ValueError(f"unknown spring-damper parameter {name!r}")
+        value = float(value)
+        half = abs(value) * percent / 100.0
+        declared.append(
+            PhysicalParameter(
+                name, _BUSHING_FRAMES[spring], SPRING_QUANTITIES[prefix], value,
+                value - half, value + half,
+            )
+        )  # fmt: skip
+    return tuple(declared)
+
+
+def twin_lfr(point: OperatingPoint, parameters, *, sdf_directory=None, **options) -> LFR:
+    """``ulinearize`` the twin at ``point``: ``[F; T]`` at G1 -> ``[a_G1; wdot]`` (6x6).
+
+    Parameters that do not act at this configuration (the target's while it floats free) are
+    dropped (zero repetitions). ``options`` go to :func:`ulinearize`.
+    """
+    from oos_drake.multibody.scenario_sdf import SDF_DIRECTORY
+
+    directory = str(SDF_DIRECTORY if sdf_directory is None else sdf_directory)
+    handles = cached_scenario_diagram(point.connection, directory)
+    context = handles.diagram.CreateDefaultContext()
+    set_operating_point(handles, context, point)
+    options.setdefault("unused", "drop")
+    # measured: round-off singular values <= 4.2e-7, true ones >= 9.6e-3 (docking phase 8)
+    options.setdefault("rtol", 1e-5)
+    return ulinearize(
+        handles.diagram, context, parameters, handles.ports.wrench_input,
+        f"{handles.ports.hub_output}[0:6]", **options,
+    )  # fmt: skip
+
+
+#: Pole [rad/s] of the decoupled states that pad lower-order models to the array's order.
+PADDING_POLE = -1.0
+
+
+def stack_models(models) -> LFR:
+    """One model array ``(N,)`` from LFRs with different orders and block repetitions.
+
+    Every model gets the union of the blocks (specs must agree), each with its largest
+    repetition count, and the largest order: missing uncertain channels are added unconnected
+    (zero rows and columns) and missing states as decoupled states at :data:`PADDING_POLE`
+    (no input, no output): each model's input-output map is unchanged for every ``Delta``.
+    """
+    import numpy as np
+
+    from oos_drake.lfr.core import BlockEntry
+
+    models = list(models)
+    if not models:
+        raise ValueError("stack_models: no models")
+    specs, reps = {}, {}
+    for model in models:
+        if model.batch_shape:
+            raise ValueError("stack_models: models must not be arrays")
+        if model.shape != models[0].shape:
+            raise ValueError(f"stack_models: shapes differ ({model.shape} vs {models[0].shape})")
+        for entry in model.block_entries:
+            name = entry.spec.name
+            if name in specs and specs[name] != entry.spec:
+                raise ValueError(f"stack_models: block {name!r} differs between models")
+            specs[name] = entry.spec
+            reps[name] = max(reps.get(name, 0), entry.reps)
+    names = sorted(specs)
+    offsets = dict(zip(names, np.cumsum([0] + [reps[n] for n in names])[:-1], strict=True))
+    order = max(model.nstates for model in models)
+    nz = sum(reps.values())
+    ny, nu = models[0].shape
+    stacked = np.zeros((len(models), order + nz + ny, order + nz + nu))
+    for k, model in enumerate(models):
+        n = model.nstates
+        channels = np.concatenate(
+            [offsets[e.spec.name] + np.arange(e.reps) for e in model.block_entries] or [[]]
+        ).astype(int)
+        rows = np.concatenate([np.arange(n), order + channels, order + nz + np.arange(ny)])
+        cols = np.concatenate([np.arange(n), order + channels, order + nz + np.arange(nu)])
+        stacked[k][np.ix_(rows, cols)] = np.asarray(model.M)
+        stacked[k, n:order, n:order] = PADDING_POLE * np.eye(order - n)
+    entries = [BlockEntry(specs[n], reps[n]) for n in names]
+    return LFR(
+        stacked, order, entries,
+        input_names=models[0].input_names, output_names=models[0].output_names,
+    )  # fmt: skip
+
+
+def twin_mission_plants(times, scenario=None, *, progress=None) -> LFR:
+    """The twin's uncertain 6x6 plants at mission ``times`` [s] (model array, TITOP blocks).
+
+    Parameters
+    ----------
+    times : array_like
+        Mission times [s] (rigid connections from the timeline's switches).
+    progress : callable, optional
+        ``progress(done, total)``.
+    """
+    import numpy as np
+
+    from oos_drake.multibody.operating_point import operating_point
+    from oos_drake.multibody.synthesis_plants import _scenario
+    from oos_drake.scenario.timeline import mission_timeline
+
+    scenario = _scenario(scenario)
+    times = np.atleast_1d(np.asarray(times, dtype=float))
+    timeline = mission_timeline(scenario)
+    declared = mission_parameters(scenario)
+    models = []
+    for k, t in enumerate(times):
+        models.append(twin_lfr(operating_point(timeline.configuration(float(t))), declared))
+        if progress is not None:
+            progress(k + 1, times.size)
+    return stack_models(models)
+
+
+def twin_docking_plants(phase: str, stiffness, damping: float, scenario=None) -> LFR:
+    """The twin's uncertain plants of docking phase 7 or 8 over swept ``stiffness`` values.
+
+    One extraction per phase: the swept spring-damper's shear and torsion stiffness are
+    declared as parameters over ``[min, max]`` of the sweep (the dependence is affine, the LFR
+    exact over the whole range, as checked at random points) and substituted, so the model
+    array keeps only the hub and array parameters, like the TITOP docking study. Phase 7: SM1
+    swept, SM2 open; phase 8: SM2 swept, SM1 at the scenario's rigid stiffness and damping.
+
+    Parameters
+    ----------
+    phase : {"7", "8"}
+    stiffness : array_like
+        Swept stiffness [N/m = N m/rad], > 0.
+    damping : float
+        Damping of the swept spring-damper [N s/m = N m s/rad].
+    """
+    import numpy as np
+
+    from oos_drake.lfr import usubs
+    from oos_drake.multibody.operating_point import operating_point
+    from oos_drake.multibody.synthesis_plants import _scenario
+    from oos_drake.scenario.timeline import mission_timeline
+
+    scenario = _scenario(scenario)
+    stiffness = np.atleast_1d(np.asarray(stiffness, dtype=float))
+    if not np.all(np.isfinite(stiffness)) or np.any(stiffness <= 0):
+        raise ValueError("twin_docking_plants: stiffness values must be finite and > 0")
+    phases = mission_timeline(scenario).docking_phases
+    if str(phase) not in phases:
+        raise ValueError(f"docking phase must be one of {sorted(phases)}, got {phase!r}")
+    named = phases[str(phase)]
+    swept = "SM1" if str(phase) == "7" else "SM2"
+    low, high = float(stiffness.min()), float(stiffness.max())
+    if high <= low:
+        high = 2.0 * low
+    nominal = float(np.sqrt(low * high))
+    springs = {swept: (nominal, float(damping))}
+    if str(phase) == "8":
+        docking = scenario.docking
+        springs["SM1"] = (docking.rigid_stiffness, docking.rigid_damping)
+    point = operating_point(named.configuration, springs, label=f"phase {phase}")
+    declared = mission_parameters(scenario) + tuple(
+        PhysicalParameter(f"{prefix}_{swept}", _BUSHING_FRAMES[swept], SPRING_QUANTITIES[prefix],
+                          nominal, 0.5 * low, 2.0 * high)
+        for prefix in ("k_shear", "k_tors")
+    )  # fmt: skip
+    lfr = twin_lfr(point, declared)
+    return usubs(lfr, {f"k_shear_{swept}": stiffness, f"k_tors_{swept}": stiffness})

@@ -1,0 +1,58 @@
+"""``oos analyze --plant drake``: closed loops from the Drake twin's LFRs equal the TITOP ones."""
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.drake
+pytest.importorskip("pydrake")
+
+from oos_drake.analysis.models import (  # noqa: E402
+    docking_closed_loop,
+    mission_closed_loop,
+    mission_times,
+)
+from oos_drake.lfr import usubs  # noqa: E402
+
+OMEGA = 2 * np.pi * np.geomspace(0.005, 5.0, 60)
+
+
+@pytest.fixture(scope="module")
+def controller():
+    from oos_drake.analysis.cli import _controller
+
+    return _controller(None)  # the baseline PD
+
+
+def _compare(drake, titop, rng):
+    assert drake.system.occurrences == titop.system.occurrences
+    assert drake.system.batch_shape == titop.system.batch_shape
+    deltas = {n: rng.uniform(-1, 1) for n, spec in titop.system.uncertainty.items()
+              if spec.kind == "ureal"}  # fmt: skip
+    a = usubs(drake.system, deltas, normalized=True)
+    b = usubs(titop.system, deltas, normalized=True)
+    # remaining blocks (Delta_add, Delta_mul: ultidyn) at zero: nominal of the rest
+    Ha, Hb = a.nominal.freqresp(OMEGA), b.nominal.freqresp(OMEGA)
+    error = np.abs(Ha - Hb).max() / np.abs(Hb).max()
+    assert error < 1e-8, error
+
+
+def test_mission_loops_from_drake_equal_the_titop_loops(controller):
+    rng = np.random.default_rng(1)
+    times = mission_times(4)  # free target, arm-held, docked, tilted arrays
+    drake = mission_closed_loop(controller, times, source="drake")
+    titop = mission_closed_loop(controller, times)
+    _compare(drake, titop, rng)
+
+
+@pytest.mark.parametrize("phase", ["7", "8"])
+def test_docking_loops_from_drake_equal_the_titop_loops(controller, phase):
+    rng = np.random.default_rng(2)
+    stiffness = np.geomspace(0.1, 1e5, 4)
+    drake = docking_closed_loop(controller, phase, stiffness, source="drake")
+    titop = docking_closed_loop(controller, phase, stiffness)
+    _compare(drake, titop, rng)
+
+
+def test_unknown_plant_source_is_refused(controller):
+    with pytest.raises(ValueError, match="plant source must be one of"):
+        mission_closed_loop(controller, [0.0], source="simulink")
