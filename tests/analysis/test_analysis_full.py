@@ -13,6 +13,7 @@ import pytest
 
 from oos_drake.analysis.cli import _controller
 from oos_drake.analysis.run import AnalysisOptions, run_analysis
+from oos_drake.analysis.tightening import TightenOptions
 
 
 @pytest.mark.slow
@@ -21,9 +22,14 @@ def test_full_analysis_of_the_baseline_controller(tmp_path):
     from oos_drake.lfr import usubs
 
     controller = _controller(None)
-    summary = run_analysis(
-        controller, tmp_path, AnalysisOptions(progress=False), log=lambda *_: None
+    # no wall-clock budget: what stops the resolution must not depend on the machine's load
+    # (the work budgets, deterministic, stay the defaults)
+    options = AnalysisOptions(
+        progress=False,
+        spike_budget=float("inf"),
+        tighten=TightenOptions(time_budget=float("inf")),
     )
+    summary = run_analysis(controller, tmp_path, options, log=lambda *_: None)
     m = summary["mission"]
     assert m["configurations"] == 330 and m["nominal_stable_models"] == 330
     assert 0 < m["mu_peak_lower"] <= m["mu_peak_upper"]
