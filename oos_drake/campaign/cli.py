@@ -132,7 +132,7 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from oos_drake.multibody.replay import replay_case
+    from oos_drake.campaign.replay import replay_case
 
     result = replay_case(args.directory, args.case, speed=args.speed)
     span = f"t = {result.start:g} .. {result.end:g} s"

@@ -19,7 +19,7 @@ validity raises :class:`SimulationDiverged`; the runner records it as status ``"
 Registering a simulator (the Drake mission simulator does this from its own package)::
 
     from oos_drake.campaign.simulator import register_simulator
-    register_simulator("drake-mission", "oos_drake.multibody.mission_sim:make_simulator")
+    register_simulator("drake-mission", "oos_drake.campaign.drake_simulator:make_simulator")
 
 The factory is named by an import path (``"module:function"``) so that a worker process that did
 not import the registering module still finds it; a spec may also give the import path directly as
