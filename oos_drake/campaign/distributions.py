@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.special
+import scipy.stats
 
 from oos_drake.campaign.simulator import Parameter
 
@@ -84,36 +84,18 @@ class TruncatedNormal:
     high: float
     kind = "normal"
 
-    def _bounds(self) -> tuple[float, float, float]:
-        """Standardized bounds (reflected into the lower half when above the mean) and sign."""
+    @property
+    def law(self):
+        """The frozen ``scipy.stats.truncnorm`` law (log-space tails: no underflow far out)."""
         a = (self.low - self.mean) / self.std
         b = (self.high - self.mean) / self.std
-        if a > 0:  # work in the lower tail, where Phi keeps its relative precision
-            return -b, -a, -1.0
-        return a, b, 1.0
-
-    def _log_mass(self) -> tuple[float, float, float, float]:
-        """(a, b, sign, log(Phi(b) - Phi(a))), in log space so that far tails do not underflow."""
-        a, b, sign = self._bounds()
-        log_a, log_b = scipy.special.log_ndtr(a), scipy.special.log_ndtr(b)
-        return a, b, sign, float(log_b + np.log1p(-np.exp(log_a - log_b)))
+        return scipy.stats.truncnorm(a, b, loc=self.mean, scale=self.std)
 
     def ppf(self, u: np.ndarray) -> np.ndarray:
-        a, _, sign, log_mass = self._log_mass()
-        u = np.asarray(u, dtype=float)
-        if sign < 0:
-            u = 1.0 - u
-        with np.errstate(divide="ignore"):
-            log_cdf = np.logaddexp(scipy.special.log_ndtr(a), np.log(u) + log_mass)
-        z = scipy.special.ndtri_exp(np.minimum(log_cdf, 0.0))
-        return np.clip(self.mean + sign * self.std * z, self.low, self.high)
+        return np.clip(self.law.ppf(np.asarray(u, dtype=float)), self.low, self.high)
 
     def pdf(self, x: np.ndarray) -> np.ndarray:
-        _, _, _, log_mass = self._log_mass()
-        x = np.asarray(x, dtype=float)
-        z = (x - self.mean) / self.std
-        log_density = -0.5 * z**2 - math.log(math.sqrt(2 * math.pi) * self.std) - log_mass
-        return np.where((x >= self.low) & (x <= self.high), np.exp(log_density), 0.0)
+        return self.law.pdf(np.asarray(x, dtype=float))
 
     @property
     def support(self) -> tuple[float, float]:

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+import scipy.stats
 
 from oos_drake.campaign.distributions import (
     Distribution,
@@ -60,8 +61,7 @@ def uniform_variates(kind: str, n: int, d: int, rng: np.random.Generator) -> np.
         return np.empty((n, 0))
     if kind == "latin-hypercube":
         # one point per stratum [k/n, (k+1)/n) of each marginal, strata shuffled per column
-        strata = np.argsort(rng.random((n, d)), axis=0)
-        return (strata + rng.random((n, d))) / n
+        return scipy.stats.qmc.LatinHypercube(d, rng=rng).random(n)
     return rng.random((n, d))
 
 
