@@ -20,10 +20,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 from oos_drake import __version__
+from oos_drake.resources import package_path
 
-PACKAGE_ROOT = Path(__file__).resolve().parent
-REPO_ROOT = PACKAGE_ROOT.parent
-DEFAULT_CAMPAIGN = REPO_ROOT / "campaigns" / "paper.toml"
+PACKAGE_ROOT = package_path("oos_drake")
+DEFAULT_CAMPAIGN = package_path("oos_drake.campaign", "specs", "paper.toml")
 STAMP = "stage.json"
 
 

@@ -8,7 +8,7 @@
 
 Layer order (low to high) and why:
 
-``base`` (``oos_drake`` itself, ``oos_drake.blas``) < ``lfr`` < ``titop`` < ``scenario`` <
+``base`` (``oos_drake`` itself, ``blas``, ``resources``) < ``lfr`` < ``titop`` < ``scenario`` <
 ``robust`` < ``control`` < ``multibody`` < ``campaign`` < ``analysis`` < ``cli``.
 
 - ``robust`` below ``control``: the synthesis may reuse the mu and H-infinity machinery; the
@@ -36,7 +36,7 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1] / "oos_drake"
 
 #: Layers from the bottom; a module may import its own package and lower layers only.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("oos_drake", "oos_drake.blas"),
+    ("oos_drake", "oos_drake.blas", "oos_drake.resources"),
     ("oos_drake.lfr",),
     ("oos_drake.titop",),
     ("oos_drake.scenario",),

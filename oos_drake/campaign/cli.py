@@ -2,8 +2,8 @@
 
 Examples::
 
-    oos campaign run campaigns/demo.toml --out out/demo --workers 2
-    oos campaign run campaigns/demo.toml --out out/demo --scheduler local     # local Dask cluster
+    oos campaign run demo --out out/demo --workers 2
+    oos campaign run demo --out out/demo --scheduler local     # local Dask cluster
     oos campaign resume out/demo                  # after a crash or kill -9
     oos campaign rerun out/demo --case 17         # recompute run 17, compare with the record
     oos campaign report out/demo                  # figures + tables in out/demo/report
@@ -157,7 +157,11 @@ def register(subparsers) -> None:
     commands = campaign.add_subparsers(dest="campaign_command", metavar="ACTION", required=True)
 
     run = commands.add_parser("run", help="validate a spec and run the campaign")
-    run.add_argument("spec", help="campaign spec (TOML), e.g. campaigns/demo.toml")
+    run.add_argument(
+        "spec",
+        help="campaign spec (TOML file), or the name of a shipped spec: demo, demo_mu, paper, "
+        "paper_mc",
+    )
     run.add_argument(
         "--out",
         default=None,

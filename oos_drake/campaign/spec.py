@@ -1,4 +1,7 @@
-"""Campaign specs: TOML files in ``campaigns/``, validated before any run starts.
+"""Campaign specs: TOML files, validated before any run starts.
+
+The specs shipped with the package (``oos_drake/campaign/specs/``: ``demo``, ``demo_mu``,
+``paper``, ``paper_mc``) can be named without a path: ``oos campaign run demo``.
 
 A spec names a simulator, disperses some of its parameters, chooses a sampler, a number of runs, a
 seed and a mission window, and states the requirements each run is checked against::
@@ -54,6 +57,7 @@ from oos_drake.campaign.simulator import (
     describe_simulator,
 )
 from oos_drake.campaign.worst_cases import WorstCaseRegion, read_worst_cases
+from oos_drake.resources import package_path
 
 SAMPLERS = ("monte-carlo", "latin-hypercube", "mu-guided")
 WINDOW_KINDS = ("mission", "event", "critical")
@@ -220,8 +224,30 @@ def _positive_float(where: str, key: str, value: Any, allow_zero: bool = False) 
     return float(value)
 
 
+#: Folder of the campaign specs shipped with the package.
+SPEC_DIRECTORY = package_path("oos_drake.campaign", "specs")
+
+
+def packaged_spec_names() -> list[str]:
+    """Names of the specs shipped in :data:`SPEC_DIRECTORY` (``["demo", ...]``)."""
+    return sorted(p.stem for p in SPEC_DIRECTORY.glob("*.toml"))
+
+
+def packaged_spec(name: str) -> Path:
+    """Path of the shipped spec ``name`` (``"paper"`` or ``"paper.toml"``)."""
+    path = SPEC_DIRECTORY / Path(name).with_suffix(".toml").name
+    if not path.is_file():
+        raise ValueError(
+            f"no shipped campaign spec {name!r}; shipped: {', '.join(packaged_spec_names())}"
+        )
+    return path
+
+
 def load_spec(path: str | Path) -> CampaignSpec:
     """Read and validate a campaign spec file.
+
+    ``path`` may also be the bare name of a shipped spec (``"demo"``, see
+    :func:`packaged_spec_names`) when no such file exists in the working directory.
 
     Raises
     ------
@@ -229,8 +255,13 @@ def load_spec(path: str | Path) -> CampaignSpec:
         On any problem, with a one-line message naming the file and the key.
     """
     path = Path(path)
+    if not path.is_file() and path.parent == Path():
+        shipped = SPEC_DIRECTORY / path.with_suffix(".toml").name
+        path = shipped if shipped.is_file() else path
     if not path.is_file():
-        raise ValueError(f"spec {path}: file not found")
+        raise ValueError(
+            f"spec {path}: file not found (shipped specs: {', '.join(packaged_spec_names())})"
+        )
     return parse_spec(path.read_text(encoding="utf-8"), source=path)
 
 

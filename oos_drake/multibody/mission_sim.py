@@ -32,7 +32,7 @@ a window starting at 235 s and 1.37 mrad (-6 %) from 195 s; over [600, 660] s 0.
 t = 0, 0.21 mrad from 580 s and 0.26 mrad from 540 s. The largest attitude difference is
 0.5 mrad with a 20 s lead (6 % of the 7.9 mrad requirement) and 0.1 mrad with a 60 s lead. The
 campaign's initial-error dispersions (``phi0`` std 1 mrad, ``w0`` std 1e-4 rad/s in
-``campaigns/paper.toml``) are of the size of this residual; a longer ``before`` in the window
+the shipped spec ``paper.toml``) are of the size of this residual; a longer ``before`` in the window
 brings a window closer to the continuation, at the price of simulated time.
 """
 

@@ -52,6 +52,8 @@ from typing import Any
 
 import numpy as np
 
+from oos_drake.resources import package_path
+
 __all__ = [
     "DEFAULT_SCENARIO_PATH",
     "Arm",
@@ -73,7 +75,7 @@ __all__ = [
     "spatial_inertia",
 ]
 
-DEFAULT_SCENARIO_PATH = Path(__file__).resolve().parent / "data" / "paper.toml"
+DEFAULT_SCENARIO_PATH = package_path("oos_drake.scenario", "data", "paper.toml")
 
 _ARRAY_NAMES = ("SA1", "SA2", "SA3", "SA4")
 _HUB_NAMES = ("RH1", "RH2")

@@ -5,17 +5,18 @@ from __future__ import annotations
 import base64
 import re
 import textwrap
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
+from oos_drake.campaign.spec import SPEC_DIRECTORY
+
 pytestmark = pytest.mark.drake
 
 msgpack = pytest.importorskip("msgpack")
 
-CAMPAIGNS = Path(__file__).resolve().parents[2] / "campaigns"
+CAMPAIGNS = SPEC_DIRECTORY
 LOG_RATE = 2.0  # [Hz]
 BEFORE, AFTER = 2.0, 4.0  # [s] around the capture (255 s)
 
@@ -190,8 +191,8 @@ def test_bad_case_or_directory_is_rejected_and_writes_nothing(campaign, tmp_path
 
 def test_campaign_without_a_3d_model_is_rejected(tmp_path):
     """The demo campaign's single-axis simulator has no bodies to draw."""
-    from oos_drake.campaign.runner import run_campaign
     from oos_drake.campaign.replay import replay_case, replay_path
+    from oos_drake.campaign.runner import run_campaign
 
     demo = (CAMPAIGNS / "demo.toml").read_text()
     assert "n_runs = 200" in demo and "after = 130.0" in demo
@@ -237,8 +238,8 @@ def Rotation_about_z(angle: float) -> np.ndarray:  # noqa: N802 - reads like the
 
 
 def test_diverging_run_is_replayed_up_to_the_divergence(tmp_path):
-    from oos_drake.campaign.runner import run_campaign
     from oos_drake.campaign.replay import replay_case
+    from oos_drake.campaign.runner import run_campaign
 
     spec = SPEC.replace(
         "log_rate = 2.0 }", "log_rate = 2.0, divergence_limit = 1.0e-4, check_interval = 1.0 }"
