@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from oos_drake.lfr.blocks import Block, same_block
+from oos_drake.lfr.blocks import Block, merge_facts, same_block
 
 
 @dataclass(frozen=True)
@@ -298,7 +298,11 @@ class LFR:
 
     @property
     def blocks(self):
-        """``pandas.DataFrame``, one row per block: name, kind, repetitions, nominal, range, ..."""
+        """``pandas.DataFrame``, one row per block: name, kind, quantity, unit, repetitions, ...
+
+        Columns ``name, kind, quantity, unit, repetitions, nominal, range, radius, shape``
+        (``kind``: ureal/ucomplex/ultidyn; ``quantity``/``unit``: what the block stands for).
+        """
         import pandas as pd
 
         rows = []
@@ -308,6 +312,8 @@ class LFR:
                 {
                     "name": spec.name,
                     "kind": spec.kind,
+                    "quantity": spec.quantity,
+                    "unit": spec.unit,
                     "repetitions": entry.reps,
                     "nominal": spec.nominal,
                     "range": spec.range,
@@ -315,7 +321,17 @@ class LFR:
                     "shape": spec.shape,
                 }
             )
-        columns = ["name", "kind", "repetitions", "nominal", "range", "radius", "shape"]
+        columns = [
+            "name",
+            "kind",
+            "quantity",
+            "unit",
+            "repetitions",
+            "nominal",
+            "range",
+            "radius",
+            "shape",
+        ]
         return pd.DataFrame(rows, columns=columns)
 
     @property
@@ -637,6 +653,7 @@ def _merge_blocks(systems: Sequence[LFR]):
                         f"uncertain block {name!r} is defined twice differently: "
                         f"{specs[name].describe()} vs {entry.spec.describe()}"
                     )
+                specs[name] = merge_facts(specs[name], entry.spec)
             else:
                 specs[name] = entry.spec
             counts[name] = counts.get(name, 0) + entry.reps

@@ -1,4 +1,10 @@
-"""Export an LFR to a MATLAB ``.mat`` file for cross-checking with the Robust Control Toolbox."""
+"""MATLAB ``.mat`` files: MATLAB's array layout, the LFR export for the Robust Control Toolbox.
+
+MATLAB stores a model array as ``M(:, :, k)``: the batch dimensions come LAST; numpy puts them
+first (``M[k, :, :]``). :func:`matlab_layout` and :func:`numpy_layout` convert, and every ``.mat``
+file the package reads or writes goes through them, so a file from MATLAB's ``save`` reads right
+and a file we write loads in MATLAB with ``M(:, :, k)`` being model ``k``.
+"""
 
 from __future__ import annotations
 
@@ -10,17 +16,95 @@ import scipy.io
 from oos_drake.lfr.core import LFR
 
 
+def matlab_layout(array, core_ndim: int = 2) -> np.ndarray:
+    """``array`` with its leading batch dimensions moved last (numpy ``(..., r, c)`` -> MATLAB).
+
+    Parameters
+    ----------
+    array : array_like
+        ``(*batch, *core)`` array; the last ``core_ndim`` dimensions are the matrix.
+    core_ndim : int
+        Dimensions of one item (2 for a matrix).
+
+    Examples
+    --------
+    >>> matlab_layout(np.zeros((5, 3, 4))).shape
+    (3, 4, 5)
+    """
+    array = np.asarray(array)
+    batch = array.ndim - core_ndim
+    if batch <= 0:
+        return array
+    return np.moveaxis(array, tuple(range(batch)), tuple(range(core_ndim, array.ndim)))
+
+
+def numpy_layout(array, core_ndim: int = 2) -> np.ndarray:
+    """Inverse of :func:`matlab_layout`: MATLAB ``M(:, :, k)`` -> numpy ``M[k]``.
+
+    Examples
+    --------
+    >>> numpy_layout(np.zeros((3, 4, 5))).shape
+    (5, 3, 4)
+    """
+    array = np.asarray(array)
+    batch = array.ndim - core_ndim
+    if batch <= 0:
+        return array
+    return np.moveaxis(array, tuple(range(core_ndim, array.ndim)), tuple(range(batch)))
+
+
+def read_mat(path, matrices=()) -> dict[str, np.ndarray]:
+    """Variables of a ``.mat`` file; the named ``matrices`` in numpy layout (batch first).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        ``.mat`` file (MATLAB ``save``, v5 to v7.2 format, or :func:`scipy.io.savemat`).
+    matrices : iterable of str
+        Variables that are matrices or model arrays ``X(:, :, k, ...)``: returned as
+        ``X[k, ..., :, :]``. Other variables are returned as stored.
+    """
+    data = scipy.io.loadmat(Path(path))
+    names = set(matrices)
+    return {
+        k: numpy_layout(v) if k in names else np.asarray(v)
+        for k, v in data.items()
+        if not k.startswith("__")
+    }
+
+
+def write_mat(path, variables, matrices=()) -> Path:
+    """Write ``variables`` to a ``.mat`` file, the named ``matrices`` in MATLAB layout.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        Output file.
+    variables : dict
+        Name -> array (or scalar, cell-like object array).
+    matrices : iterable of str
+        Variables that are matrices or numpy model arrays ``(..., r, c)``; written as
+        ``(r, c, ...)`` so that MATLAB's ``X(:, :, k)`` is model ``k``.
+    """
+    names = set(matrices)
+    data = {k: matlab_layout(v) if k in names else v for k, v in variables.items()}
+    path = Path(path)
+    scipy.io.savemat(path, data, do_compression=True, oned_as="column")
+    return path
+
+
 def to_mat(sys: LFR, path) -> None:
     """Write ``M = [A B; C D]``, the block table and the ``mussv`` BLK rows to ``path``.
 
     Variables: ``A, B, C, D`` (partitioned as ``docs/DESIGN.md``: ``B = [Bw Bu]``,
     ``C = [Cz; Cy]``), ``nstates, nz, nw, ny, nu``, ``blk`` (BLK rows), ``block_names`` (cell),
-    ``block_kinds`` (cell), ``repetitions``, ``nominal``, ``lower``, ``upper`` (ureal ranges,
-    NaN for
-    other kinds), ``radius`` (ucomplex radius / ultidyn bound, NaN for ureal) and ``block_shape``
-    (``p x q`` per block). Model arrays put the batch dimensions LAST, as MATLAB does
-    (``A(:, :, k)``). In MATLAB, ``lft(blkdiag(eye(nstates)/s, Delta), ss(A, B, C, D))`` with
-    ``Delta`` built from the table rebuilds the uncertain model.
+    ``block_kinds`` (cell: ureal/ucomplex/ultidyn), ``block_quantities`` and ``block_units``
+    (cells: what each block stands for and its unit, ``''`` when not given), ``repetitions``,
+    ``nominal``, ``lower``, ``upper`` (ureal ranges, NaN for other kinds), ``radius`` (ucomplex
+    radius / ultidyn bound, NaN for ureal) and ``block_shape`` (``p x q`` per block). Model
+    arrays put the batch dimensions LAST, as MATLAB does (``A(:, :, k)``). In MATLAB,
+    ``lft(blkdiag(eye(nstates)/s, Delta), ss(A, B, C, D))`` with ``Delta`` built from the table
+    rebuilds the uncertain model.
 
     Parameters
     ----------
@@ -34,12 +118,6 @@ def to_mat(sys: LFR, path) -> None:
         path = path.with_suffix(path.suffix + ".mat")
     n = sys.nstates
 
-    def last(x):
-        x = np.asarray(x)
-        return (
-            np.moveaxis(x, tuple(range(x.ndim - 2)), tuple(range(2, x.ndim))) if x.ndim > 2 else x
-        )
-
     specs = [entry.spec for entry in sys.block_entries]
     lower = [s.range[0] if s.kind == "ureal" else np.nan for s in specs]
     upper = [s.range[1] if s.kind == "ureal" else np.nan for s in specs]
@@ -51,10 +129,10 @@ def to_mat(sys: LFR, path) -> None:
     if np.all(nominal.imag == 0):
         nominal = nominal.real
     data = {
-        "A": last(sys.M[..., :n, :n]),
-        "B": last(sys.M[..., :n, n:]),
-        "C": last(sys.M[..., n:, :n]),
-        "D": last(sys.M[..., n:, n:]),
+        "A": sys.M[..., :n, :n],
+        "B": sys.M[..., :n, n:],
+        "C": sys.M[..., n:, :n],
+        "D": sys.M[..., n:, n:],
         "nstates": n,
         "nz": sys.nz,
         "nw": sys.nw,
@@ -63,6 +141,8 @@ def to_mat(sys: LFR, path) -> None:
         "blk": sys.blk.astype(float),
         "block_names": np.array([s.name for s in specs], dtype=object),
         "block_kinds": np.array([s.kind for s in specs], dtype=object),
+        "block_quantities": np.array([s.quantity for s in specs], dtype=object),
+        "block_units": np.array([s.unit for s in specs], dtype=object),
         "repetitions": np.array([e.reps for e in sys.block_entries], dtype=float),
         "nominal": nominal,
         "lower": np.array(lower, dtype=float),
@@ -70,4 +150,4 @@ def to_mat(sys: LFR, path) -> None:
         "radius": np.array(radius, dtype=float),
         "block_shape": np.array([s.shape for s in specs], dtype=float).reshape(-1, 2),
     }
-    scipy.io.savemat(path, data, do_compression=True, oned_as="column")
+    write_mat(path, data, matrices="ABCD")
