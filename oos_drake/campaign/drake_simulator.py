@@ -62,7 +62,13 @@ class DrakeMissionSimulator:
         self.simulation = MissionSimulation(MissionOptions(**options))
         self._parameters = tuple(
             Parameter(
-                p.name, p.unit, p.nominal, p.lower, p.upper, ParameterKind(p.kind), p.description
+                p.name,
+                p.unit,
+                p.nominal,
+                p.lower,
+                p.upper,
+                ParameterKind.of_quantity(p.quantity),
+                p.description,
             )
             for p in self.simulation.parameters
         )
@@ -168,7 +174,9 @@ def write_paper_worst_cases(path) -> None:
 
     scenario = load_scenario()
     parameters = [
-        Parameter(p.name, p.unit, p.nominal, p.lower, p.upper, ParameterKind(p.kind))
+        Parameter(
+            p.name, p.unit, p.nominal, p.lower, p.upper, ParameterKind.of_quantity(p.quantity)
+        )
         for p in mission_parameters(scenario)
     ]
     write_worst_cases(paper_worst_cases(scenario), parameters, path)

@@ -54,6 +54,23 @@ class ParameterKind(enum.StrEnum):
     #: a scalar that scales a stable LTI perturbation block (Delta_add, Delta_mul)
     LTI = "lti"
 
+    @classmethod
+    def of_quantity(cls, quantity: str) -> ParameterKind:
+        """The kind of a parameter that stands for ``quantity``.
+
+        ``quantity`` is an uncertain block's (:data:`oos_drake.lfr.blocks.QUANTITIES`) or
+        ``"initial condition"`` / ``"seed"``.
+        """
+        if quantity in ("stiffness", "damping"):
+            return cls.STIFFNESS
+        if quantity.endswith("dynamics"):
+            return cls.LTI
+        if quantity == "initial condition":
+            return cls.INITIAL_CONDITION
+        if quantity == "seed":
+            return cls.SEED
+        return cls.REAL_BLOCK
+
 
 @dataclass(frozen=True)
 class Parameter:
