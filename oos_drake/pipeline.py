@@ -127,7 +127,9 @@ def run_pipeline(args: argparse.Namespace) -> int:
         "analysis",
         out / "analysis",
         analysis_key,
-        lambda d: _oos("analyze", "--controller", controller, "--out", d, *quick),
+        lambda d: _oos(
+            "analyze", "--controller", controller, "--out", d, "--workers", args.workers, *quick
+        ),
         timings,
     )
 
@@ -208,7 +210,9 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--campaign", default=str(DEFAULT_CAMPAIGN), help="campaign spec (default: paper.toml)"
     )
-    parser.add_argument("--workers", type=int, default=2, help="campaign worker processes")
+    parser.add_argument(
+        "--workers", type=int, default=2, help="worker processes of the analysis and the campaign"
+    )
     parser.add_argument(
         "--quick", action="store_true", help="40 configurations instead of the paper's grids"
     )

@@ -20,6 +20,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from oos_drake.cli import add_deprecated_alias
+
 
 def _add_executor_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
@@ -35,7 +37,8 @@ def _add_executor_options(parser: argparse.ArgumentParser) -> None:
         help="run on Dask: a scheduler address (tcp://host:8786) or 'local' "
         "for a local cluster of --workers processes",
     )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_deprecated_alias(parser, "--no-progress", "--quiet", flag=True)
 
 
 def _print_summary(summary) -> None:
@@ -75,7 +78,7 @@ def _run(args: argparse.Namespace) -> int:
         out,
         workers=args.workers,
         scheduler=args.scheduler,
-        progress=not args.no_progress,
+        progress=not args.quiet,
         worst_cases=args.worst_cases,
         simulator_options=_parse_options(args.simulator_option),
     )
@@ -90,7 +93,7 @@ def _resume(args: argparse.Namespace) -> int:
         args.directory,
         workers=args.workers,
         scheduler=args.scheduler,
-        progress=not args.no_progress,
+        progress=not args.quiet,
     )
     _print_summary(summary)
     return 0
