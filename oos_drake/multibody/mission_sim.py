@@ -50,6 +50,7 @@ from pydrake.math import RollPitchYaw
 from pydrake.multibody.tree import RotationalInertia, SpatialInertia
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 
+from oos_drake.lfr.blocks import RANGE_RTOL
 from oos_drake.multibody.flight_software import NOISE_CHANNELS
 from oos_drake.multibody.mission import ARRAYS, MissionDiagram, MissionOptions, make_mission_diagram
 from oos_drake.scenario.model import physical_blocks
@@ -380,11 +381,13 @@ class MissionSimulation:
                 raise ValueError(f"mission: unknown parameter {name!r}; known: {', '.join(out)}")
             p = self._by_name[name]
             value = float(value)
-            if not (math.isfinite(value) and p.lower <= value <= p.upper):
+            # a bound written in decimal may miss the block's computed range by round-off
+            slack = RANGE_RTOL * max(1.0, abs(p.lower), abs(p.upper))
+            if not (math.isfinite(value) and p.lower - slack <= value <= p.upper + slack):
                 raise ValueError(
                     f"mission: {name} = {value:g} {p.unit} outside [{p.lower:g}, {p.upper:g}]"
                 )
-            out[name] = value
+            out[name] = min(max(value, p.lower), p.upper)
         return out
 
     def schedule(self, values: Mapping[str, float]) -> _Schedule:
