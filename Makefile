@@ -4,7 +4,7 @@ VENV := .venv
 STAMP := $(VENV)/.installed
 OUT ?= out
 
-.PHONY: run test venv lint bench clean
+.PHONY: run test test-slow test-all venv lint bench clean
 
 # (Re)install only when pyproject.toml changed: idempotent and fast on a warm tree.
 $(STAMP): pyproject.toml
@@ -23,11 +23,17 @@ run: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest -q
 
+# the end-to-end checks behind the headline results (about 25 min on 2 cores); CI runs them
+test-slow: $(STAMP)
+	$(VENV)/bin/python -m pytest -q --runslow -m slow --durations=15
+
+test-all: $(STAMP)
+	$(VENV)/bin/python -m pytest -q --runslow
+
 lint: $(STAMP)
 	$(VENV)/bin/ruff check oos_drake tests benchmarks
 
 bench: $(STAMP)
-	$(VENV)/bin/python -m pip install --quiet -e ".[bench]"
 	for f in benchmarks/bench_*.py; do $(VENV)/bin/python $$f || exit 1; done
 
 clean:

@@ -36,8 +36,11 @@ def _digest(*parts: str | bytes) -> str:
 
 
 def source_key(*packages: str) -> str:
-    """Hash of the scenario data file and the sources of ``packages`` (``oos_drake.<name>``)."""
+    """Hash of the scenario data file, the package's top-level modules (``blas.py``,
+    ``processes.py``, ... which every package may use) and the sources of ``packages``
+    (``oos_drake.<name>``)."""
     files = [PACKAGE_ROOT / "scenario" / "data" / "paper.toml"]
+    files += sorted(PACKAGE_ROOT.glob("*.py"))
     for package in packages:
         files += sorted((PACKAGE_ROOT / package).rglob("*.py"))
     return _digest(__version__, *(f.read_bytes() for f in files))

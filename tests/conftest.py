@@ -9,6 +9,19 @@ def pytest_addoption(parser):
     parser.addoption("--runslow", action="store_true", default=False, help="run tests marked slow")
 
 
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """In CI (``CI`` set) a test skipped for a missing dependency fails: CI installs every test
+    dependency, so such a skip would hide a broken install behind a green run."""
+    outcome = yield
+    report = outcome.get_result()
+    if report.skipped and os.environ.get("CI") and isinstance(report.longrepr, tuple):
+        reason = str(report.longrepr[2])
+        if "could not import" in reason or "not installed" in reason:
+            report.outcome = "failed"
+            report.longrepr = f"missing test dependency in CI: {reason}"
+
+
 def pytest_collection_modifyitems(config, items):
     if config.getoption("--runslow") or os.environ.get("OOS_RUN_SLOW") == "1":
         return

@@ -8,8 +8,8 @@
 
 Layer order (low to high) and why:
 
-``base`` (``oos_drake`` itself, ``blas``, ``resources``) < ``lfr`` < ``titop`` < ``scenario`` <
-``robust`` < ``control`` < ``multibody`` < ``campaign`` < ``analysis`` < ``cli``.
+``base`` (``oos_drake`` itself, ``blas``, ``resources``) < ``processes`` < ``lfr`` < ``titop`` <
+``scenario`` < ``robust`` < ``control`` < ``multibody`` < ``campaign`` < ``analysis`` < ``cli``.
 
 - ``robust`` below ``control``: the synthesis may reuse the mu and H-infinity machinery; the
   robustness analysis never needs a controller design.
@@ -37,6 +37,7 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1] / "oos_drake"
 #: Layers from the bottom; a module may import its own package and lower layers only.
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("oos_drake", "oos_drake.blas", "oos_drake.resources"),
+    ("oos_drake.processes",),
     ("oos_drake.lfr",),
     ("oos_drake.titop",),
     ("oos_drake.scenario",),

@@ -22,6 +22,29 @@ def _controller(path):
     return baseline_controller(rotational_channels(plant).nominal)
 
 
+def _write_atomically(out, work):
+    """Run ``work(tmp)`` in a sibling temporary folder that replaces ``out`` only when it
+    succeeds: a failed or interrupted analysis leaves no half-written result folder. An
+    existing ``out`` is replaced only if it holds a previous analysis (``summary.json``)."""
+    import shutil
+    from pathlib import Path
+
+    out = Path(out).resolve()
+    if out.exists() and any(out.iterdir()) and not (out / "summary.json").is_file():
+        raise ValueError(f"--out {out} exists and holds something other than an analysis")
+    tmp = out.with_name(f".{out.name}.tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        result = work(tmp)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if out.exists():
+        shutil.rmtree(out)
+    tmp.rename(out)
+    return result
+
+
 def run_analyze(args) -> int:
     """Run the analysis; exit status 0."""
     from oos_drake.analysis.run import AnalysisOptions, run_analysis
@@ -55,7 +78,7 @@ def run_analyze(args) -> int:
         time_check=not args.no_time_check,
         progress=not args.quiet,
     )
-    summary = run_analysis(controller, args.out, options)
+    summary = _write_atomically(args.out, lambda tmp: run_analysis(controller, tmp, options))
     m = summary["mission"]
     print(f"controller: {controller.label} ({controller.source})")
     print(

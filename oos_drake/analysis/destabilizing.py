@@ -209,13 +209,25 @@ def _residual(M, delta):
 
 
 def _real_crossing_delta(A, Bw, Cz, Dzw, structure, alpha, signs):
-    """Perturbation and frequency of a real crossing, with its singularity residual."""
+    """Perturbation and frequency of a real crossing, with its singularity residual.
+
+    A pole can also leave through infinity: when ``I - Dzw delta`` becomes singular (the loop
+    is ill-posed there; e.g. a mass matrix made singular by negative masses) the abscissa jumps
+    from negative to large positive values. The crossing frequency is then ``inf``, where
+    ``M = Dzw`` is singular against ``delta``.
+    """
     delta = _expand(structure, alpha * signs)
-    ev = np.linalg.eigvals(_closed_A(A, Bw, Cz, Dzw, delta))
-    k = int(np.argmax(ev.real))
-    w = abs(ev[k].imag)
-    M = delta_channel_response(A, Bw, Cz, Dzw, [w])[0]
-    return delta, w, _residual(M, delta)
+    try:
+        ev = np.linalg.eigvals(_closed_A(A, Bw, Cz, Dzw, delta))
+        k = int(np.argmax(ev.real))
+        w = abs(ev[k].imag)
+        residual = _residual(delta_channel_response(A, Bw, Cz, Dzw, [w])[0], delta)
+    except np.linalg.LinAlgError:
+        w, residual = np.nan, np.inf
+    at_infinity = _residual(Dzw, delta)
+    if at_infinity < residual:
+        return delta, np.inf, at_infinity
+    return delta, w, residual
 
 
 def _complex_part(A, Bw, Cz, Dzw, structure, real_part, omega):

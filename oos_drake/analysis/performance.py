@@ -10,12 +10,12 @@ bound is gain 1), from the normalized disturbances ``d``.
 
 from __future__ import annotations
 
-from concurrent.futures import ProcessPoolExecutor
-
 import numpy as np
 import pandas as pd
 
-from oos_drake.analysis.stability import _init_worker, subset_parts
+from oos_drake.analysis.stability import subset_parts
+from oos_drake.blas import limit_blas_threads
+from oos_drake.processes import process_pool
 from oos_drake.robust.lfr_analysis import delta_channel_response
 
 #: Performance channels: name -> rows of ``e``.
@@ -127,17 +127,12 @@ def worst_case_gains(
     bar = tqdm(total=len(tasks), desc="worst-case gains", unit="task", disable=not progress)
     results = []
     if n_jobs <= 1:
-        _init_worker()
+        limit_blas_threads(1)
         for t in tasks:
             results.append(_channel_task(t))
             bar.update(1)
     else:
-        import multiprocessing as mp
-
-        method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-        with ProcessPoolExecutor(
-            n_jobs, mp_context=mp.get_context(method), initializer=_init_worker
-        ) as pool:
+        with process_pool(n_jobs) as pool:
             for r in pool.map(_channel_task, tasks):
                 results.append(r)
                 bar.update(1)

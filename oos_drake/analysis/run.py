@@ -5,6 +5,7 @@ Files written in ``out_dir`` (Parquet tables are tidy, units in column names):
 ``mu_mission.parquet``          mu bounds: subset x configuration x frequency (Fig. muanalysis)
 ``stability_peaks.parquet``     certified peak per subset: time, frequency, bounds, gap, margin
 ``worst_perturbations.parquet`` destabilizing perturbation of every peak, per block (physical)
+``peak_perturbations.npz``      the same perturbations whole and normalized (complex blocks too)
 ``performance.parquet``         worst-case gains of d -> e_p, d -> e_u per subset (Fig. performance)
 ``docking_<7|8>.parquet``       mu (Delta_tot), stiffness x frequency (Fig. mu_analysis_SM)
 ``sensitivity.parquet``         which block moves the worst-case mu most (Fig. unc_sensitivity)
@@ -111,13 +112,26 @@ class AnalysisOptions:
     time_check_duration: float = 600.0
     progress: bool = True
 
-    def grid(self) -> np.ndarray:
-        """Common frequency grid [rad/s]."""
+    def __post_init__(self):
+        # checked here, before any work: a bad option must not cost a mission sweep
         lo, hi = self.frequency_range_hz
         if not 0 < lo < hi:
             raise ValueError(
                 f"frequency_range_hz must be 0 < low < high, got {self.frequency_range_hz}"
             )
+        unknown = [p for p in self.docking_phases if str(p) not in ("7", "8")]
+        if unknown:
+            raise ValueError(f"--docking: unknown docking phase {unknown[0]!r} (phases: 7, 8)")
+        for name in ("configurations", "points_per_decade", "docking_points"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        k_lo, k_hi = self.stiffness_range
+        if not 0 < k_lo <= k_hi:
+            raise ValueError(f"stiffness_range must be 0 < low <= high, got {self.stiffness_range}")
+
+    def grid(self) -> np.ndarray:
+        """Common frequency grid [rad/s]."""
+        lo, hi = self.frequency_range_hz
         n = max(int(round(self.points_per_decade * np.log10(hi / lo))) + 1, 3)
         return 2 * np.pi * np.geomspace(lo, hi, n)
 
@@ -190,6 +204,24 @@ def _certify(array, study, subsets, *, configuration_label):
                 }
             )
     return pd.DataFrame(rows), pd.DataFrame(perturbation_rows), certificates
+
+
+def _write_perturbations(path: Path, study_certs: dict) -> Path:
+    """The whole normalized destabilizing perturbation of every certified peak, for re-checks.
+
+    Keys ``"<study>|<subset>|<block>"`` hold the block's normalized value (a float for a
+    ``ureal``, the complex matrix of an ``ultidyn``); ``"<study>|<subset>|model"`` and
+    ``"<study>|<subset>|omega [rad/s]"`` the critical model and frequency.
+    """
+    arrays = {}
+    for study, certs in study_certs.items():
+        for subset, (model, frequency, _, _, normalized) in certs.items():
+            arrays[f"{study}|{subset}|model"] = np.int64(model)
+            arrays[f"{study}|{subset}|omega [rad/s]"] = np.float64(2 * np.pi * frequency)
+            for block, value in normalized.items():
+                arrays[f"{study}|{subset}|{block}"] = np.asarray(value)
+    np.savez(path, **arrays)
+    return path
 
 
 def _moment_time(name, scenario=None) -> float:
@@ -348,6 +380,9 @@ def run_analysis(
     all_pert = pd.concat([perturbations] + docking_perturbations, ignore_index=True)
     all_pert.to_parquet(out / "worst_perturbations.parquet", index=False)
     paths["worst_perturbations"] = out / "worst_perturbations.parquet"
+    study_certs = {"mission": certs}
+    study_certs.update({f"docking-{ph}": {"total": c} for ph, (_, c) in docking_certs.items()})
+    paths["peak_perturbations"] = _write_perturbations(out / "peak_perturbations.npz", study_certs)
     # ------------------------------------------------------------------ worst cases file
     regions = []
     for _, row in peaks.iterrows():

@@ -177,12 +177,6 @@ def model_grid(A, omega, *, band=None, max_damping: float = 0.05, points: int = 
     return np.unique(np.concatenate([omega] + extra)) if extra else omega
 
 
-def _init_worker():
-    from oos_drake.blas import limit_blas_threads
-
-    limit_blas_threads(1)
-
-
 def _peak_frequencies(omega, values, points):
     from oos_drake.robust.robstab import _refine
 

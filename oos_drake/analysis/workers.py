@@ -9,11 +9,11 @@ core over batches of small matrices.
 
 from __future__ import annotations
 
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
+from oos_drake.processes import process_pool, start_method
 from oos_drake.robust.blocks import parse_blk
 from oos_drake.robust.lfr_analysis import delta_channel_response
 
@@ -173,14 +173,9 @@ class ModelPool:
         if self.n_jobs > 1:
             import multiprocessing as mp
 
-            method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-            context = mp.get_context(method)
-            self.queue = context.Queue()
-            self._pool = ProcessPoolExecutor(
-                self.n_jobs,
-                mp_context=context,
-                initializer=_install,
-                initargs=(self.arrays, self.queue),
+            self.queue = mp.get_context(start_method()).Queue()
+            self._pool = process_pool(
+                self.n_jobs, initializer=_install, initargs=(self.arrays, self.queue)
             )
         else:
             self._previous = (_ARRAYS.get("models"), _ARRAYS.get("queue"))

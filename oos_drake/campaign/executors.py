@@ -21,7 +21,6 @@ from __future__ import annotations
 import collections
 import concurrent.futures
 import math
-import multiprocessing
 import os
 import socket
 import time
@@ -34,7 +33,7 @@ from typing import Protocol
 
 import pandas as pd
 
-from oos_drake.blas import limit_blas_threads, single_threaded_blas
+from oos_drake.blas import single_threaded_blas
 from oos_drake.campaign.simulator import (
     RunCase,
     SimulationDiverged,
@@ -42,6 +41,7 @@ from oos_drake.campaign.simulator import (
     build_simulator,
     simulator_builds,
 )
+from oos_drake.processes import process_pool
 
 
 @dataclass(frozen=True)
@@ -54,7 +54,7 @@ class RunResult:
         The case's run id.
     status : str
         ``"ok"``, ``"diverged"`` (the simulator raised SimulationDiverged) or ``"failed"`` (any
-        other exception).
+        other exception, a metric that is NaN or infinite, a timeout, a dead worker).
     error : str
         ``"ExceptionType: message"`` for a run that did not finish, else ``""``.
     metrics : dict
@@ -98,6 +98,9 @@ def execute_case(recipe: SimulatorRecipe, case: RunCase) -> RunResult:
         status, error = "ok", ""
         metrics = {k: float(v) for k, v in output.metrics.items()}
         timeseries = output.timeseries
+        bad = [f"{k} = {v}" for k, v in metrics.items() if not math.isfinite(v)]
+        if bad:  # a NaN metric would pass or fail requirements silently: the run failed
+            status, error = "failed", "NonFiniteMetric: " + ", ".join(bad)
     except SimulationDiverged as exc:
         status, error, metrics, timeseries = "diverged", f"SimulationDiverged: {exc}", {}, None
     except Exception as exc:  # noqa: BLE001 - a failing run is data, not a crash
@@ -123,22 +126,7 @@ def _warm_up(recipe: SimulatorRecipe) -> None:
     build_simulator(recipe)
 
 
-def _exit_with_parent(parent_pid: int, period: float = 1.0) -> None:
-    """Pool worker: exit when the driver dies (a ``kill -9`` of it leaves no orphan workers)."""
-    import threading
-
-    def watch() -> None:
-        while True:
-            time.sleep(period)
-            if os.getppid() != parent_pid:
-                os._exit(0)
-
-    threading.Thread(target=watch, name="oos-parent-watch", daemon=True).start()
-
-
-def _init_pool_worker(recipe: SimulatorRecipe, parent_pid: int) -> None:
-    _exit_with_parent(parent_pid)
-    limit_blas_threads(1)  # one process per core: no BLAS threads competing with the workers
+def _init_pool_worker(recipe: SimulatorRecipe) -> None:
     _warm_up(recipe)
 
 
@@ -208,11 +196,9 @@ class ProcessPoolExecutor:
     def start(self, recipe: SimulatorRecipe) -> None:
         """Start the processes and build the simulator in each (before any timing)."""
         if self._pool is None:
-            self._pool = concurrent.futures.ProcessPoolExecutor(
-                max_workers=self.workers,
-                mp_context=multiprocessing.get_context("spawn"),
-                initializer=_init_pool_worker,
-                initargs=(recipe, os.getpid()),
+            # spawn rather than fork: Drake's threads do not survive a fork
+            self._pool = process_pool(
+                self.workers, initializer=_init_pool_worker, initargs=(recipe,), method="spawn"
             )
             # bring workers up now (one warm-up task each; the pool may reuse an idle one)
             list(self._pool.map(_warm_up, [recipe] * self.workers))

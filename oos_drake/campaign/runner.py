@@ -153,6 +153,8 @@ def _execute(
     progress: bool,
 ) -> CampaignSummary:
     store.remove_temporaries(directory)
+    for path in store.quarantine_unreadable(directory):
+        print(f"unreadable file moved to {path}; its run is redone", file=sys.stderr)
     finished = store.finished_run_ids(directory)
     pending = plan[~plan["run_id"].isin(finished)]
     by_id = {int(row.run_id): row for _, row in plan.iterrows()}
@@ -193,13 +195,23 @@ def _execute(
     )
 
 
-def prepare_campaign(
+def _check_new_directory(directory: Path) -> None:
+    """Refuse an ``--out`` that holds a campaign or anything else (the lock file aside)."""
+    if (directory / store.SPEC_FILE).exists():
+        raise ValueError(
+            f"{directory} already holds a campaign; continue it with "
+            f"'oos campaign resume {directory}' or choose another --out"
+        )
+    if directory.exists() and any(p.name != store.LOCK_FILE for p in directory.iterdir()):
+        raise ValueError(f"--out {directory} exists and is not empty")
+
+
+def plan_campaign(
     spec_path: str | Path,
-    out: str | Path,
     worst_cases: str | Path | None = None,
     simulator_options: Mapping[str, Any] | None = None,
-) -> tuple[Path, CampaignSpec, pd.DataFrame]:
-    """Validate the spec, build the plan, then (only then) create the campaign directory.
+) -> tuple[CampaignSpec, pd.DataFrame]:
+    """Validate the spec and build the plan; writes nothing.
 
     ``worst_cases`` replaces the mu-guided sampler's ``worst_cases`` file of the spec (e.g. the
     output of ``oos analyze``); ``simulator_options`` update the spec's simulator options (e.g. a
@@ -218,15 +230,12 @@ def prepare_campaign(
     if worst_cases is not None or simulator_options:
         toml = spec_to_toml(spec, str(worst_cases) if worst_cases is not None else None)
         spec = parse_spec(toml, source=Path(spec_path))
-    plan = make_plan(spec)
-    directory = Path(out)
-    if directory.exists() and any(directory.iterdir()):
-        if (directory / store.SPEC_FILE).exists():
-            raise ValueError(
-                f"{directory} already holds a campaign; continue it with "
-                f"'oos campaign resume {directory}' or choose another --out"
-            )
-        raise ValueError(f"--out {directory} exists and is not empty")
+    return spec, make_plan(spec)
+
+
+def _write_campaign(directory: Path, spec: CampaignSpec, plan: pd.DataFrame) -> None:
+    """Create the campaign directory: worst cases, environment, plan, and the spec last."""
+    _check_new_directory(directory)
     directory.mkdir(parents=True, exist_ok=True)
     worst_cases_name = None
     if spec.sampler.kind == "mu-guided":
@@ -238,7 +247,19 @@ def prepare_campaign(
     )
     store.atomic_write_parquet(plan, directory / store.PLAN_FILE)
     store.atomic_write_text(spec_to_toml(spec, worst_cases_name), directory / store.SPEC_FILE)
-    return directory, spec, plan
+
+
+def prepare_campaign(
+    spec_path: str | Path,
+    out: str | Path,
+    worst_cases: str | Path | None = None,
+    simulator_options: Mapping[str, Any] | None = None,
+) -> tuple[Path, CampaignSpec, pd.DataFrame]:
+    """Validate the spec, build the plan, then (only then) create the campaign directory
+    (arguments of :func:`plan_campaign`)."""
+    spec, plan = plan_campaign(spec_path, worst_cases, simulator_options)
+    _write_campaign(Path(out), spec, plan)
+    return Path(out), spec, plan
 
 
 def run_campaign(
@@ -250,14 +271,22 @@ def run_campaign(
     worst_cases: str | Path | None = None,
     simulator_options: Mapping[str, Any] | None = None,
 ) -> CampaignSummary:
-    """Validate, plan and run a campaign into ``out`` (see the module docstring)."""
-    directory, _, _ = prepare_campaign(spec_path, out, worst_cases, simulator_options)
-    # run from the directory's own resolved spec: what resume and rerun will see
-    spec, plan = load_campaign(directory)
-    if spec.sampler.kind == "mu-guided":
-        counts = region_counts(plan, spec.regions)
-        print("runs per region:\n" + counts.to_string(index=False), file=sys.stderr)
-    return _execute(directory, spec, plan, workers, scheduler, progress)
+    """Validate, plan and run a campaign into ``out`` (see the module docstring).
+
+    The spec and the plan are checked before anything is written; the directory is locked
+    while the campaign runs (a second ``run`` or ``resume`` of it is refused).
+    """
+    directory = Path(out)
+    spec, plan = plan_campaign(spec_path, worst_cases, simulator_options)
+    _check_new_directory(directory)  # before the lock file is made
+    with store.campaign_lock(directory):
+        _write_campaign(directory, spec, plan)  # checks again: another run may have come first
+        # run from the directory's own resolved spec: what resume and rerun will see
+        spec, plan = load_campaign(directory)
+        if spec.sampler.kind == "mu-guided":
+            counts = region_counts(plan, spec.regions)
+            print("runs per region:\n" + counts.to_string(index=False), file=sys.stderr)
+        return _execute(directory, spec, plan, workers, scheduler, progress)
 
 
 def resume_campaign(
@@ -265,7 +294,8 @@ def resume_campaign(
 ) -> CampaignSummary:
     """Finish a campaign: run exactly the planned cases that have no result row yet."""
     spec, plan = load_campaign(directory)
-    return _execute(Path(directory), spec, plan, workers, scheduler, progress)
+    with store.campaign_lock(Path(directory)):
+        return _execute(Path(directory), spec, plan, workers, scheduler, progress)
 
 
 @dataclass(frozen=True)

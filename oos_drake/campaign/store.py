@@ -10,18 +10,29 @@ Layout of a campaign directory::
     timeseries/run_000042.parquet   its retained time series (written before the run row)
     runs.parquet           consolidation of runs/ in run-id order (written at the end of run/resume)
     report/                figures and tables of ``oos campaign report``
+    .lock                  held (``flock``) by the process that runs or resumes the campaign
+    quarantine/            unreadable run files moved aside by ``resume`` (the runs are redone)
 
 Every file is written to a temporary name in the same directory, flushed and ``fsync``-ed, then
 renamed over its final name with :func:`os.replace` (atomic on POSIX): a reader (or a ``resume``
 after ``kill -9``) sees either the whole file or none of it. A run is finished exactly when its
 ``runs/run_NNNNNN.parquet`` exists, and the time series is written before it, so a killed
 campaign loses at most the runs that were in flight, and ``resume`` redoes exactly those.
+
+Two processes never run one campaign: ``run`` and ``resume`` hold an exclusive ``flock`` on
+``.lock`` (released by the kernel when the holder dies, even by ``kill -9``), and a second one is
+refused with a one-line error. A run file that cannot be read (truncated by a crash of the disk
+or a copy, never by our writes) is moved to ``quarantine/`` by ``resume``, which then redoes
+that run.
 """
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import os
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pandas as pd
@@ -34,6 +45,8 @@ WORST_CASES_FILE = "worst_cases.parquet"
 RUNS_DIR = "runs"
 TIMESERIES_DIR = "timeseries"
 REPORT_DIR = "report"
+LOCK_FILE = ".lock"
+QUARANTINE_DIR = "quarantine"
 
 
 def _file_mode() -> int:
@@ -121,6 +134,71 @@ def remove_temporaries(directory: Path) -> int:
             path.unlink(missing_ok=True)
             count += 1
     return count
+
+
+@contextlib.contextmanager
+def campaign_lock(directory: Path) -> Iterator[None]:
+    """Hold the campaign's exclusive lock for the ``with`` body; refuse if another process has it.
+
+    Raises
+    ------
+    ValueError
+        The campaign is being run or resumed by another process (its pid is named).
+    """
+    path = Path(directory) / LOCK_FILE
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle = os.open(path, os.O_RDWR | os.O_CREAT, _FILE_MODE)
+    try:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(handle, 32, 0).decode(errors="replace").strip() or "?"
+            raise ValueError(
+                f"{directory} is in use by another campaign process (pid {holder}); "
+                "wait for it to finish or stop it, then 'oos campaign resume'"
+            ) from None
+        os.ftruncate(handle, 0)
+        os.pwrite(handle, f"{os.getpid()}\n".encode(), 0)
+        yield
+    finally:
+        os.close(handle)  # releases the lock
+
+
+def _readable_parquet(path: Path) -> bool:
+    import pyarrow.parquet as pq
+
+    try:
+        pq.read_metadata(path)
+    except Exception:  # noqa: BLE001 - any reader error means the file is not usable
+        return False
+    return True
+
+
+def quarantine_unreadable(directory: Path) -> list[Path]:
+    """Move unreadable run rows and time series to ``quarantine/``; return their new paths.
+
+    A run whose row or retained time series cannot be read is no longer finished: ``resume``
+    redoes it. Nothing is deleted (the files are kept for inspection).
+    """
+    directory = Path(directory)
+    moved = []
+    for folder in (RUNS_DIR, TIMESERIES_DIR):
+        source = directory / folder
+        files = sorted(source.glob("run_*.parquet")) if source.is_dir() else []
+        for path in files:
+            if _readable_parquet(path):
+                continue
+            target = directory / QUARANTINE_DIR / folder / path.name
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(path, target)
+            moved.append(target)
+            row = run_file(directory, int(path.stem.removeprefix("run_")))
+            if folder == TIMESERIES_DIR and row.is_file():  # redo the run to get its series
+                aside = directory / QUARANTINE_DIR / RUNS_DIR / row.name
+                aside.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(row, aside)
+                moved.append(aside)
+    return moved
 
 
 def read_run_rows(directory: Path) -> pd.DataFrame:

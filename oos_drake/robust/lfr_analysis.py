@@ -115,7 +115,7 @@ def delta_channel_response(A, Bw, Cz, Dzw, omega) -> np.ndarray:
     """``Dzw + Cz (j omega I - A)^{-1} Bw`` for batched matrices: ``batch + (F, nz, nw)``.
 
     Uses the eigen-decomposition of ``A`` when it is well conditioned (``O(F n nz nw)``), else
-    batched solves.
+    batched solves. ``omega = inf`` gives ``Dzw`` (the well-posedness point of the loop).
     """
     A, Bw, Cz, Dzw = (np.asarray(x) for x in (A, Bw, Cz, Dzw))
     omega = np.atleast_1d(np.asarray(omega, dtype=float))
@@ -131,7 +131,8 @@ def delta_channel_response(A, Bw, Cz, Dzw, omega) -> np.ndarray:
     if n == 0:
         out[:] = Dzw[:, None]
         return out.reshape(batch + out.shape[1:])
-    s = 1j * omega
+    infinite = np.isinf(omega)
+    s = 1j * np.where(infinite, 0.0, omega)
     for k in range(nb):
         lam, V = np.linalg.eig(A[k])
         cond = np.linalg.cond(V)
@@ -146,6 +147,7 @@ def delta_channel_response(A, Bw, Cz, Dzw, omega) -> np.ndarray:
                 s[:, None, None] * eye - A[k], np.broadcast_to(Bw[k], (s.size, n, nw))
             )
             out[k] = Dzw[k] + Cz[k] @ X
+    out[:, infinite] = Dzw[:, None]
     return out.reshape(batch + out.shape[1:])
 
 
@@ -229,12 +231,16 @@ def worst_case_values(bmap: BlockMap, structure, delta: np.ndarray, omega: float
 
 
 def _allpass_factor(c: complex, omega: float):
-    """Stable real ``g(s) = k (s - a)/(s + a)`` (or a constant) with ``g(j omega) = c``."""
+    """Stable real ``g(s) = k (s - a)/(s + a)`` (or a constant) with ``g(j omega) = c``.
+
+    At ``omega = 0`` or ``inf`` the response of a real system is real: the constant ``Re c``
+    (the worst perturbation there is real, as ``M`` is).
+    """
     import control
 
     mag = abs(c)
-    if mag == 0 or omega <= 0:
-        return control.ss([], [], [], [[float(np.real(c)) if omega <= 0 else 0.0]])
+    if mag == 0 or omega <= 0 or np.isinf(omega):
+        return control.ss([], [], [], [[float(np.real(c)) if mag else 0.0]])
     phase = np.angle(c)
     sign = 1.0
     # (j w - a)/(j w + a) has phase pi - 2 atan(w / a) in (0, pi); a negative gain adds pi

@@ -15,10 +15,9 @@ of a 500-point grid on the paper-sized benchmark), so the peak is bracketed as i
 
 from __future__ import annotations
 
-from concurrent.futures import ProcessPoolExecutor
-
 import numpy as np
 
+from oos_drake.processes import process_pool
 from oos_drake.robust.lfr_analysis import block_map, delta_channel_response, frequency_grid
 
 #: Columns of the table returned by :func:`robust_sweep`.
@@ -365,16 +364,7 @@ def robust_sweep(
     if n_jobs == 1:
         results = [_sweep_models(t) for t in tasks]
     else:
-        import multiprocessing as mp
-
-        from oos_drake.blas import limit_blas_threads
-
-        # fork where available (no __main__ guard needed in user scripts); one BLAS thread per
-        # worker: batched small-matrix kernels only lose from more
-        method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-        with ProcessPoolExecutor(
-            n_jobs, mp_context=mp.get_context(method), initializer=limit_blas_threads, initargs=(1,)
-        ) as pool:
+        with process_pool(n_jobs) as pool:
             results = list(pool.map(_sweep_models, tasks))
     frames = []
     for rows in results:

@@ -3,13 +3,9 @@
 Issue 7's claims for a controller other than the synthesized one: every certified peak has its
 bounds within 5 % (a worst case, not only a bound), the spike resolution is not cut short by a
 time or work budget, the certified perturbation really destabilizes (checked independently with
-``usubs``), and the whole analysis fits in 10 minutes on 2 cores (CPU time <= 2 x 600 s; the
-wall time is asserted when the machine is not shared).
+``usubs``). Its run time is not asserted here (tests assert no wall or CPU time): ``oos analyze``
+writes it to ``summary.json``; ``benchmarks/bench_analysis.py`` compares the sweep methods.
 """
-
-import os
-import resource
-import time
 
 import numpy as np
 import pandas as pd
@@ -19,25 +15,15 @@ from oos_drake.analysis.cli import _controller
 from oos_drake.analysis.run import AnalysisOptions, run_analysis
 
 
-def _cpu() -> float:
-    own = resource.getrusage(resource.RUSAGE_SELF)
-    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
-
-
 @pytest.mark.slow
 def test_full_analysis_of_the_baseline_controller(tmp_path):
     from oos_drake.analysis.models import mission_closed_loop, mission_times
     from oos_drake.lfr import usubs
 
     controller = _controller(None)
-    load = os.getloadavg()[0]
-    wall, cpu = time.perf_counter(), _cpu()
     summary = run_analysis(
         controller, tmp_path, AnalysisOptions(progress=False), log=lambda *_: None
     )
-    wall, cpu = time.perf_counter() - wall, _cpu() - cpu
-    load = max(load, os.getloadavg()[0])
     m = summary["mission"]
     assert m["configurations"] == 330 and m["nominal_stable_models"] == 330
     assert 0 < m["mu_peak_lower"] <= m["mu_peak_upper"]
@@ -77,7 +63,3 @@ def test_full_analysis_of_the_baseline_controller(tmp_path):
     docking = pd.read_parquet(tmp_path / "docking_7.parquet")
     assert docking["model"].nunique() == 300
     assert summary["timings_s"]["total"] > 0
-    # 10 minutes on 2 cores: the CPU work always, the wall time on an unshared machine
-    assert cpu < 2 * 600.0, cpu
-    if load < 2.5:
-        assert wall < 600.0, (wall, load)

@@ -200,3 +200,32 @@ def test_worst_perturbation_destabilizes_at_the_reported_frequency(analysis):
     smaller = {k: 0.9 * v for k, v in cert.worst_case_normalized.items()}
     inside = usubs(one, smaller, normalized=True)
     assert np.max(np.linalg.eigvals(np.asarray(inside.A)).real) < 0
+
+
+@pytest.mark.parametrize(
+    "option, culprit",
+    [
+        (["--docking", "9"], "'9'"),
+        (["--configurations", "0"], "configurations"),
+        (["--fmin", "1", "--fmax", "0.5"], "frequency_range_hz"),
+    ],
+)
+def test_bad_analyze_options_exit_2_and_write_nothing(tmp_path, capsys, option, culprit):
+    """Checked before any work (a bad docking phase used to fail after the mission sweep,
+    leaving mu_mission.parquet behind)."""
+    from oos_drake.cli import main
+
+    out = tmp_path / "analysis"
+    assert main(["analyze", "--out", str(out), *option]) == 2
+    message = capsys.readouterr().err.strip().splitlines()
+    assert len(message) == 1 and culprit in message[0], message
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_analyze_refuses_an_out_folder_that_is_not_an_analysis(tmp_path, capsys):
+    from oos_drake.cli import main
+
+    (tmp_path / "precious.txt").write_text("keep me")
+    assert main(["analyze", "--out", str(tmp_path), "--configurations", "2"]) == 2
+    assert "holds something other than an analysis" in capsys.readouterr().err
+    assert [p.name for p in tmp_path.iterdir()] == ["precious.txt"]

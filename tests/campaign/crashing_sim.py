@@ -52,3 +52,31 @@ class ProbeSimulator(FlexibleAttitudeSimulator):
 
 def make_probe_simulator(**options) -> ProbeSimulator:
     return ProbeSimulator(**options)
+
+
+class NaNSimulator(FlexibleAttitudeSimulator):
+    """Returns a NaN APE on run 2 (like an integrator that produced NaN without raising)."""
+
+    def run(self, case):
+        output = super().run(case)
+        if case.run_id == 2:
+            from dataclasses import replace
+
+            output = replace(output, metrics={**output.metrics, "ape": float("nan")})
+        return output
+
+
+def make_nan_simulator(**options) -> NaNSimulator:
+    return NaNSimulator(**options)
+
+
+class SlowSimulator(FlexibleAttitudeSimulator):
+    """Sleeps 0.5 s per run: a campaign that stays in progress long enough to be disturbed."""
+
+    def run(self, case):
+        time.sleep(0.5)
+        return super().run(case)
+
+
+def make_slow_simulator(**options) -> SlowSimulator:
+    return SlowSimulator(**options)

@@ -166,8 +166,11 @@ def test_kill_9_then_resume_loses_and_repeats_nothing(write_spec, tmp_path, work
     resumed = pd.read_parquet(killed / "runs.parquet")
     uninterrupted = pd.read_parquet(reference / "runs.parquet")
     assert resumed["run_id"].tolist() == list(range(n_runs))  # each run exactly once
-    for column in ["seed", "J_hub [kg m^2]", "k_dock [N m/rad]", *METRICS, "status", "pass"]:
-        assert resumed[column].tolist() == uninterrupted[column].tolist(), column
+    # bit for bit: every column but the timing and worker ones
+    machine = ["wall_time [s]", "cpu_time [s]", "worker"]
+    pd.testing.assert_frame_equal(
+        resumed.drop(columns=machine), uninterrupted.drop(columns=machine), check_exact=True
+    )
     assert len(list((killed / "timeseries").glob("run_*.parquet"))) == n_runs
 
 
@@ -251,9 +254,7 @@ def test_a_run_over_the_timeout_is_stopped_and_recorded(write_spec, tmp_path):
     text = BASE_SPEC.replace(
         'name = "flexible-attitude"', f'name = "{crashing_sim.__name__}:make_hanging_simulator"'
     ).replace("random_seed = 7", "random_seed = 7\nrun_timeout = 2.0")
-    start = time.monotonic()
     run_campaign(write_spec(text), tmp_path / "c", workers=1, progress=False)
-    assert time.monotonic() - start < 60
     runs = pd.read_parquet(tmp_path / "c" / "runs.parquet").set_index("run_id")
     assert runs.loc[4, "status"] == "failed"
     assert runs.loc[4, "error"].startswith("Timeout: the run exceeded 2 s")
@@ -276,7 +277,8 @@ def test_runs_report_processor_time_and_use_one_blas_thread(workers):
     finally:
         executor.close()
     assert result.status == "ok", result.error
-    assert 0.2 <= result.cpu_time < 0.45, result.cpu_time  # the 0.3 s sleep is not counted
-    assert result.wall_time >= 0.5
+    # the 0.2 s busy loop is counted, the 0.3 s sleep is not (whatever the machine's load)
+    assert result.cpu_time >= 0.2, result.cpu_time
+    assert result.wall_time - result.cpu_time >= 0.29, (result.wall_time, result.cpu_time)
     if result.metrics["blas_threads"] >= 0:  # an OpenBLAS with a thread getter is loaded
         assert result.metrics["blas_threads"] == 1

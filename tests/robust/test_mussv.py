@@ -249,16 +249,45 @@ def _lmi_dg_bound(M, blk, rtol=1e-4):
     return hi
 
 
-@pytest.mark.parametrize("blk", [[[-2, 0], [1, 1], [2, 1]], [[-1, 0], [-2, 0], [1, 0]]])
-def test_upper_bound_matches_lmi_solver(blk):
+#: The paper's structure: 26 x 26, 16 blocks (two delta_m I3, four repeated reals, the 3 x 3
+#: complex Delta_add/Delta_mul block, nine real scalars).
+PAPER_BLK = [[-3, 0], [-3, 0]] + [[-2, 0]] * 4 + [[3, 3]] + [[1, 0]] * 9
+
+
+def _check_against_lmi(blk, M, rtol):
     import warnings
 
-    rng = np.random.default_rng(8)
-    c = sum(abs(x) if cc == 0 else cc for x, cc in blk)
-    r = sum(abs(x) if cc == 0 else x for x, cc in blk)
-    M = _crandn(rng, 2, c, r)
     res = mussv(M, blk)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ref = [_lmi_dg_bound(M[k], blk) for k in range(2)]
-    assert_allclose(res.upper, ref, rtol=5e-3)
+        ref = np.array([_lmi_dg_bound(M[k], blk) for k in range(M.shape[0])])
+    # the same D-G bound: ours is optimized by smoothed L-BFGS, the reference by an SDP solver
+    assert_allclose(res.upper, ref, rtol=rtol)
+    assert np.all(res.check(M)["lmi_max_eig"] <= 0)
+
+
+@pytest.mark.parametrize(
+    "blk",
+    [
+        [[-2, 0], [1, 1], [2, 1]],
+        [[-1, 0], [-2, 0], [1, 0]],
+        [[-2, 0], [2, 3], [1, 1], [3, 0]],  # a full 2 x 3 complex block: M is 9 x 8
+    ],
+)
+def test_upper_bound_matches_lmi_solver(blk):
+    rng = np.random.default_rng(8)
+    c = sum(abs(x) if cc == 0 else cc for x, cc in blk)
+    r = sum(abs(x) if cc == 0 else x for x, cc in blk)
+    _check_against_lmi(blk, _crandn(rng, 2, c, r), rtol=5e-3)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scaling", ["plain", "badly scaled"])
+def test_paper_sized_upper_bound_matches_lmi_solver(scaling):
+    """26 x 26, 16 blocks, like the mission's Delta_tot: within 1 % of the SDP solver's bound."""
+    rng = np.random.default_rng(11 if scaling == "plain" else 12)
+    M = _crandn(rng, 2, 26, 26) / np.sqrt(26)
+    if scaling == "badly scaled":  # channel scalings that change neither mu nor the bound
+        d = np.exp(rng.uniform(-2.5, 2.5, 26))
+        M = d[:, None] * M / d[None, :]
+    _check_against_lmi(PAPER_BLK, M, rtol=1e-2)
