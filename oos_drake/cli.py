@@ -8,7 +8,7 @@ printed as one line and give exit status 2.
 One name per option across commands: ``--out`` (where results go), ``--workers`` (parallel
 worker processes or threads), ``--quiet`` (no progress bars), ``--f-min``/``--f-max`` (frequency
 range [Hz]). Older spellings (``--jobs``, ``--no-progress``, ``--fmin``, ``--fmax``) are hidden
-aliases that print a deprecation note (:func:`add_deprecated_alias`).
+aliases that raise a ``DeprecationWarning`` (:func:`add_deprecated_alias`).
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import warnings
 
 from oos_drake import __version__
 
@@ -32,14 +33,18 @@ COMMAND_MODULES = (
 
 
 class _DeprecatedAlias(argparse.Action):
-    """Hidden old spelling of an option: stores into the new option's ``dest`` and says so."""
+    """Hidden old spelling of an option: stores into the new option's ``dest``.
+
+    It warns with a :class:`DeprecationWarning` (silent by default, so scripts that check the
+    command's stderr keep working).
+    """
 
     def __init__(self, option_strings, dest, new: str, **kwargs):
         self.new = new
         super().__init__(option_strings, dest, help=argparse.SUPPRESS, **kwargs)
 
     def __call__(self, parser, namespace, values, option_string=None):
-        print(f"oos: {option_string} is deprecated, use {self.new}", file=sys.stderr)
+        warnings.warn(f"{option_string} is deprecated, use {self.new}", DeprecationWarning, 2)
         setattr(namespace, self.dest, self.const if self.nargs == 0 else values)
 
 

@@ -20,7 +20,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.stats
 
 from oos_drake.campaign.simulator import Parameter
 
@@ -87,6 +86,8 @@ class TruncatedNormal:
     @property
     def law(self):
         """The frozen ``scipy.stats.truncnorm`` law (log-space tails: no underflow far out)."""
+        import scipy.stats  # seconds to import: only where a normal law is used
+
         a = (self.low - self.mean) / self.std
         b = (self.high - self.mean) / self.std
         return scipy.stats.truncnorm(a, b, loc=self.mean, scale=self.std)

@@ -31,7 +31,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-import scipy.stats
 
 from oos_drake.campaign.distributions import (
     Distribution,
@@ -60,6 +59,8 @@ def uniform_variates(kind: str, n: int, d: int, rng: np.random.Generator) -> np.
     if d == 0:
         return np.empty((n, 0))
     if kind == "latin-hypercube":
+        import scipy.stats  # seconds to import: only for Latin hypercube plans
+
         # one point per stratum [k/n, (k+1)/n) of each marginal, strata shuffled per column
         return scipy.stats.qmc.LatinHypercube(d, rng=rng).random(n)
     return rng.random((n, d))
