@@ -187,10 +187,64 @@ def test_every_certified_upper_bound_is_proved_by_scalings_at_its_peak(default_r
         sub = usubs(one, others, normalized=True) if others else one
         A, Bw, Cz, Dzw = (np.asarray(x) for x in (sub.A, sub.Bw, sub.Cz, sub.Dzw))
         omega = 2 * np.pi * row["peak_frequency [Hz]"]
-        M = Dzw + Cz @ np.linalg.solve(1j * omega * np.eye(A.shape[0]) - A, Bw)
+        if np.isinf(omega):  # the well-posedness point: M(inf) = Dzw
+            M = Dzw.astype(complex)
+        else:
+            M = Dzw + Cz @ np.linalg.solve(1j * omega * np.eye(A.shape[0]) - A, Bw)
         res = mussv(M, sub.blk, upper_iterations=1000, upper_tol=1e-9)
         assert _lmi_max_eig(M, res.upper * (1 + 1e-6), res.D_left, res.D_right, res.G) <= 1e-12
         assert res.upper <= row["mu_upper"] * 1.005, (key, res.upper, row["mu_upper"])
         assert res.lower <= row["mu_upper"] * (1 + 1e-9), key
         assert row["mu_lower"] <= row["mu_upper"]
         assert row["gap [%]"] <= 100 * TARGET_GAP + 1e-9, (key, row["gap [%]"])
+
+
+def test_target_array_modes_alone_reach_only_the_static_limit(default_run):
+    """docs/ANALYSIS-RESULTS.md, "why the numbers differ": the target arrays' first modes
+    ({w1_SA3, w1_SA4} alone) cannot destabilize the loop at any finite frequency; their mu is
+    the static limit where a normalized change of -5 (the +-20 % range) drives the mode
+    frequency to zero: exactly 1/5. The chaser arrays' modes alone do destabilize, at a finite
+    frequency, with a larger mu. After the first docking (256-860 s)."""
+    from oos_drake.analysis.stability import SweepOptions, certified_sweep
+
+    controller = load_controller(default_run / "controller" / "controller.json")
+    times = np.linspace(256.0, 860.0, 8)
+    system = mission_closed_loop(controller, times).system
+    ranges = {
+        name: spec.range for name, spec in system.uncertainty.items() if name.startswith("w1_SA")
+    }
+    omega = 2 * np.pi * np.geomspace(0.05, 5.0, 25)
+    result = certified_sweep(
+        system,
+        omega,
+        {"SA3,4": ["w1_SA3", "w1_SA4"], "SA1,2": ["w1_SA1", "w1_SA2"]},
+        times=times,
+        options=SweepOptions(n_jobs=1),
+        progress=False,
+    )
+    target, chaser = result.certificates["SA3,4"], result.certificates["SA1,2"]
+    for name in ("w1_SA3", "w1_SA4"):
+        low, high = ranges[name]
+        nominal = system.uncertainty[name].nominal
+        # normalized distance from nominal to a zero frequency, closed form (symmetric range)
+        assert nominal / (nominal - low) == pytest.approx(5.0, rel=1e-9)
+    assert target.mu_upper == pytest.approx(0.2, rel=2e-3)
+    assert target.mu_lower == pytest.approx(0.2, rel=2e-3)
+    assert target.frequency < 1e-3  # the static limit, no finite-frequency crossing
+    assert chaser.mu_lower > 0.3 and 0.5 < chaser.frequency < 1.2
+
+
+def test_the_worst_cases_drive_a_chaser_array_mode_below_its_range(default_run):
+    """docs/ANALYSIS-RESULTS.md: the worst perturbations of the total set (mission and both
+    docking phases) put every real block they move at one vertex of the scaled box, with w1_SA1 (a chaser
+    array's first mode) below its range, and their peaks lie in 0.75-0.9 Hz."""
+    peaks = _peaks(default_run).set_index(["study", "subset"])
+    worst = pd.read_parquet(default_run / "analysis" / "worst_perturbations.parquet")
+    for study in ("mission", "docking-7", "docking-8"):
+        rows = worst[(worst["study"] == study) & (worst["subset"] == "total")]
+        real = rows[rows["kind"] == "ureal"].set_index("block")["normalized_real [-]"]
+        size = 1.0 / peaks.loc[(study, "total"), "mu_lower"]
+        moved = real[np.abs(real) > 1e-9 * size]  # a vertex of the scaled box (or untouched)
+        np.testing.assert_allclose(np.abs(moved), size, rtol=1e-6)
+        assert real["w1_SA1"] < -1.0, study  # below its range
+        assert 0.75 < peaks.loc[(study, "total"), "frequency [Hz]"] < 0.9, study

@@ -678,7 +678,7 @@ def certified_sweep(
                 found = pool.map(_search_task, tasks)
                 return [
                     LowerCertificate(float(d.mu_lower), int(m), float(d.omega), d.delta, "search")
-                    if d.mu_lower > 0 and np.isfinite(d.omega)
+                    if d.mu_lower > 0 and not np.isnan(d.omega)  # inf: ill-posed loop
                     else LowerCertificate()
                     for (m, _), d in zip(requests, found, strict=True)
                 ]
@@ -712,6 +712,14 @@ def certified_sweep(
                 critical_iterations,
                 tighten.target_gap,
             )
+            certificates[name] = _with_infinite_frequency(
+                certificates[name],
+                arrays[3],
+                parts[name],
+                bmap_all.subset(list(subsets[name]))[0],
+                times,
+                critical_iterations,
+            )
             bar.update(1)
         bar.close()
     timings["tighten+certify"] = _time.perf_counter() - clock
@@ -735,7 +743,9 @@ def _certificate(
     models, omegas, sources, owners = [], [], [], []
     for t, (m, w) in enumerate(targets):
         same = np.flatnonzero(pts.model == m)
-        gap = np.abs(np.log(pts.omega[same] / max(w, 1e-9 * float(pts.omega.min()))))
+        # (an ill-posed crossing, w = inf, takes the highest analyzed frequency as its neighbour)
+        w_near = min(max(w, 1e-9 * float(pts.omega.min())), float(pts.omega.max()))
+        gap = np.abs(np.log(pts.omega[same] / w_near))
         j = same[np.argmin(gap)] if same.size else ipk
         for src in (j, nb[j, 0], nb[j, 1]):
             if src >= 0:
@@ -798,12 +808,7 @@ def _certificate(
     normalized, worst = {}, {}
     if lower.value > 0 and lower.delta is not None:
         sub = model_parts(model, name)[5] if lower.source == "search" else grid_map
-        structure = parse_blk(sub.blk)
-        worst = worst_case_values(sub, structure, lower.delta, w_crit)
-        for bname, kind, rows in zip(sub.names, sub.kinds, sub.blk_rows, strict=True):
-            b = structure.blocks[rows[0]]
-            block = lower.delta[b.r_slice, b.c_slice]
-            normalized[bname] = float(block[0, 0].real) if kind == "ureal" else block.copy()
+        worst, normalized = _named_perturbation(sub, lower.delta, w_crit)
     return PeakCertificate(
         name,
         int(model),
@@ -821,6 +826,68 @@ def _certificate(
         source=lower.source,
         spikes_left=int(np.sum(pts.upper > threshold)) + int(up_crit > threshold),
     )
+
+
+def _named_perturbation(sub, delta: np.ndarray, omega: float) -> tuple[dict, dict]:
+    """Block name -> physical worst value, and -> normalized value (float for a ``ureal``, the
+    complex matrix of a dynamic block), of a perturbation in the mussv layout of ``sub``."""
+    structure = parse_blk(sub.blk)
+    worst = worst_case_values(sub, structure, delta, omega)
+    normalized = {}
+    for name, kind, rows in zip(sub.names, sub.kinds, sub.blk_rows, strict=True):
+        b = structure.blocks[rows[0]]
+        block = delta[b.r_slice, b.c_slice]
+        normalized[name] = float(block[0, 0].real) if kind == "ureal" else block.copy()
+    return worst, normalized
+
+
+def _with_infinite_frequency(cert, Dzw, part, sub, times, iterations: int):
+    """Add the point ``omega = inf`` (the loop's well-posedness) to a certified peak.
+
+    A grid of finite frequencies misses a perturbation that makes ``I - Dzw delta`` singular:
+    a pole then leaves through infinity (masses driven negative until a mass matrix is
+    singular). Upper bounds of ``mu(Dzw)`` over all models, and the exact ill-posing vertex
+    perturbation (:func:`~oos_drake.analysis.destabilizing.ill_posed_perturbation`) of the
+    models with the largest ones, enter the peak like any other analyzed point.
+    """
+    import dataclasses
+
+    from oos_drake.analysis.destabilizing import ill_posed_perturbation
+    from oos_drake.robust import mussv
+
+    zrows, wcols, blk = part
+    M = np.ascontiguousarray(Dzw[:, zrows][:, :, wcols])
+    upper = np.atleast_1d(mussv(M, blk).upper)
+    k_up = int(np.argmax(upper))
+    if upper[k_up] > cert.mu_upper:  # polish the one that would raise the peak
+        upper[k_up] = min(upper[k_up], mussv(M[k_up], blk, upper_iterations=iterations).upper)
+    changes = {}
+    if upper[k_up] > cert.mu_upper:
+        changes.update(
+            mu_upper=float(upper[k_up]),
+            peak_model=k_up,
+            peak_time=float(times[k_up]),
+            peak_frequency=np.inf,
+        )
+    candidates = [int(k) for k in np.argsort(upper)[::-1][:3] if upper[k] > cert.mu_lower]
+    found = [(ill_posed_perturbation(M[k], blk), k) for k in candidates]
+    found = [(d, k) for d, k in found if d.mu_lower > cert.mu_lower and d.residual <= 1e-6]
+    if found:
+        best, k = max(found, key=lambda pair: pair[0].mu_lower)
+        worst, normalized = _named_perturbation(sub, best.delta, np.inf)
+        changes.update(
+            model=k,
+            time=float(times[k]),
+            frequency=np.inf,
+            mu_lower=float(best.mu_lower),
+            mu_upper_critical=float(max(upper[k], best.mu_lower)),
+            delta=best.delta,
+            worst_case=worst,
+            worst_case_normalized=normalized,
+            source="well-posedness",
+        )
+        changes["mu_upper"] = max(changes.get("mu_upper", cert.mu_upper), best.mu_lower)
+    return dataclasses.replace(cert, **changes) if changes else cert
 
 
 @dataclass(frozen=True)
@@ -854,7 +921,9 @@ class PeakCertificate:
     peak_time, peak_frequency : float
         Its scheduling value and frequency [Hz].
     source : str
-        Where the lower bound comes from: ``"grid"`` (power iteration) or ``"search"``.
+        Where the lower bound comes from: ``"grid"`` (power iteration), ``"search"`` (direct
+        search of a pole crossing) or ``"well-posedness"`` (a perturbation making the loop
+        ill-posed: ``frequency`` is then ``inf``).
     spikes_left : int
         Analyzed points whose upper bound still exceeds ``(1 + target gap) mu_lower``.
     """
@@ -989,11 +1058,7 @@ def certify_peak(
     peak_up = float(max(up.max(), lower))
     normalized, worst = {}, {}
     if lower > 0:
-        worst = worst_case_values(sub, structure, delta, w_crit)
-        for name, kind, rows in zip(sub.names, sub.kinds, sub.blk_rows, strict=True):
-            b = structure.blocks[rows[0]]
-            block = delta[b.r_slice, b.c_slice]
-            normalized[name] = float(block[0, 0].real) if kind == "ureal" else block.copy()
+        worst, normalized = _named_perturbation(sub, delta, w_crit)
     return PeakCertificate(
         subset,
         int(model),

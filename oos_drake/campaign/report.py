@@ -13,7 +13,8 @@ A run fails when it did not finish (``failed``/``diverged``) or violates a requi
 Files written in ``DIR/report/``:
 
 - ``summary.parquet``: per metric: runs, weighted mean, min, quantiles, max, requirement,
-  violations, estimated violation probability and its standard error;
+  violations, estimated violation probability, its standard error and a 95 % confidence
+  interval that holds with zero violations too (:func:`probability_interval`);
 - ``status.parquet``: runs per status; ``worst_runs.parquet``: the worst runs by requirement
   margin; ``regions.parquet`` (mu-guided): runs, failures and estimate per proposal region;
 - ``metric_distributions.png``, ``worst_runs.png``, ``pass_fail_vs_parameters.png``, and for
@@ -84,6 +85,93 @@ def weighted_probability(weights: np.ndarray, indicator: np.ndarray) -> tuple[fl
     return float(values.mean()), se
 
 
+@dataclass(frozen=True)
+class ProbabilityEstimate:
+    """An estimated probability with its confidence interval.
+
+    Attributes
+    ----------
+    p : float
+        Estimate [-].
+    se : float
+        Standard error [-].
+    low, high : float
+        Confidence interval [-].
+    method : str
+        ``"Clopper-Pearson"`` (exact binomial, unweighted runs) or ``"empirical Bernstein"``
+        (importance-weighted runs).
+    """
+
+    p: float
+    se: float
+    low: float
+    high: float
+    method: str
+
+
+def probability_interval(
+    weights: np.ndarray, indicator: np.ndarray, *, weight_bound: float, confidence: float = 0.95
+) -> ProbabilityEstimate:
+    r"""``P(indicator)`` with a confidence interval that holds with zero events too.
+
+    Unweighted runs (all weights 1): the exact binomial (Clopper-Pearson) interval, as
+    ``scipy.stats.binomtest(k, n).proportion_ci(method="exact")``: zero failures in ``n`` runs give
+    ``[0, 1 - (alpha/2)^(1/n)]``, not ``p = 0 +- 0``.
+
+    Importance-weighted runs (mu-guided): ``X_i = w_i 1[event]`` lies in ``[0, b]`` with ``b =
+    weight_bound`` (the defensive mixture bounds every weight by ``1 / defensive_fraction``), so the
+    empirical Bernstein bound of Maurer and Pontil (2009, theorem 4) applies on each side with
+    ``delta = (1 - confidence) / 2``:
+
+    .. math::
+
+        |\hat p - p| \le \sqrt{2 V_n \ln(2/\delta) / n} + rac{7 b \ln(2/\delta)}{3 (n - 1)}
+
+    with ``V_n`` the sample variance of the ``X_i``. It assumes independent draws from the
+    mixture; the plan draws a fixed number of runs per component (stratified), which does not
+    increase the variance. Distribution-free, hence wide for small ``n``: it is a guarantee,
+    not an approximation.
+
+    Parameters
+    ----------
+    weights : array_like
+        Run weights (likelihood ratios) [-].
+    indicator : array_like of bool
+        The event per run (a failure, a violated requirement).
+    weight_bound : float
+        Upper bound of every possible weight [-] (1 for plain Monte Carlo).
+    confidence : float
+        Confidence level of the interval [-].
+    """
+    from scipy.stats import binomtest
+
+    weights = np.asarray(weights, float)
+    events = np.asarray(indicator, bool)
+    n = weights.size
+    p, se = weighted_probability(weights, events)
+    if n == 0:
+        return ProbabilityEstimate(math.nan, math.nan, math.nan, math.nan, "")
+    if np.all(weights == 1.0):
+        ci = binomtest(int(events.sum()), n).proportion_ci(confidence, method="exact")
+        return ProbabilityEstimate(p, se, float(ci.low), float(ci.high), "Clopper-Pearson")
+    if n < 2:
+        return ProbabilityEstimate(p, se, 0.0, 1.0, "empirical Bernstein")
+    values = weights * events
+    log_term = math.log(4.0 / (1.0 - confidence))  # ln(2 / delta), delta = (1 - confidence) / 2
+    radius = math.sqrt(2.0 * np.var(values, ddof=1) * log_term / n)
+    radius += 7.0 * weight_bound * log_term / (3.0 * (n - 1))
+    return ProbabilityEstimate(
+        p, se, max(0.0, p - radius), min(1.0, p + radius), "empirical Bernstein"
+    )
+
+
+def weight_bound(spec) -> float:
+    """Largest possible run weight of the spec's sampler [-]: 1, or ``1 / defensive_fraction``."""
+    if spec.sampler.kind == "mu-guided":
+        return 1.0 / spec.sampler.defensive_fraction
+    return 1.0
+
+
 def effective_sample_size(weights: np.ndarray) -> float:
     """Kish's effective sample size ``(sum w)^2 / sum w^2`` of importance weights [runs]."""
     weights = np.asarray(weights, float)
@@ -139,22 +227,31 @@ def _summary_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
         }
         if requirement is not None:
             violated = ~runs[requirement.column].to_numpy(bool)
-            p, se = weighted_probability(weights, violated)
-            row.update({"violations": int(violated.sum()), "P(violation)": p, "se": se})
+            row.update({"violations": int(violated.sum()), **_estimate(spec, weights, violated)})
         rows.append(row)
     failed = ~runs["pass"].to_numpy(bool)
-    p, se = weighted_probability(weights, failed)
     rows.append(
         {
             "metric": "any (requirement or run failure)",
             "runs": len(runs),
             "requirement": "all",
             "violations": int(failed.sum()),
-            "P(violation)": p,
-            "se": se,
+            **_estimate(spec, weights, failed),
         }
     )
     return pd.DataFrame(rows)
+
+
+def _estimate(spec, weights, events) -> dict:
+    """The summary columns of one estimated probability."""
+    est = probability_interval(weights, events, weight_bound=weight_bound(spec))
+    return {
+        "P(violation)": est.p,
+        "se": est.se,
+        "P 95 % low": est.low,
+        "P 95 % high": est.high,
+        "interval": est.method,
+    }
 
 
 def _regions_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
@@ -270,8 +367,10 @@ def _plot_distributions(spec, runs: pd.DataFrame, path: Path) -> Path:
                         linestyle="--",
                         label=f"requirement {requirement.label}",
                     )
-            p, se = weighted_probability(weights, ~runs[requirement.column].to_numpy(bool))
-            title += f"\nP(violation) = {p:.3g} +- {se:.2g}"
+            est = probability_interval(
+                weights, ~runs[requirement.column].to_numpy(bool), weight_bound=weight_bound(spec)
+            )
+            title += f"\nP(violation) = {est.p:.3g}, 95 % in [{est.low:.2g}, {est.high:.2g}]"
         ax.set_xlabel(column)
         ax.set_ylabel("number of runs")
         ax.set_title(title, fontsize=10)

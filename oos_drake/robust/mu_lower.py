@@ -158,7 +158,10 @@ def _mv(A, v):
 
 
 def _normalize(v):
-    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
+    """Unit rows; a zero or non-finite row (e.g. the worst input of ``M = 0``) becomes zero."""
+    norm = np.linalg.norm(v, axis=1, keepdims=True)
+    ok = np.isfinite(norm) & (norm > 1e-300)
+    return np.where(ok, v / np.where(ok, norm, 1.0), 0.0)
 
 
 def _max_block_norm(structure: BlockStructure, delta: np.ndarray) -> np.ndarray:

@@ -2,6 +2,7 @@
 
 import control
 import numpy as np
+import pytest
 
 from oos_drake.analysis.destabilizing import destabilizing_perturbation
 from oos_drake.analysis.stability import certify_peak
@@ -48,3 +49,40 @@ def test_certified_peak_brackets_and_destabilizes():
     poles = np.linalg.eigvals(np.asarray(closed.A))
     w = 2 * np.pi * cert.frequency
     assert np.min(np.abs(poles - 1j * w)) < 1e-4 * w
+
+
+def test_a_mass_driven_to_zero_is_an_ill_posed_crossing_at_infinite_frequency():
+    """m x'' = -k x - c x' with m = m0 (1 + 0.5 delta): the loop is stable for every m > 0 and
+    ill-posed at delta = -2 (m = 0), where a pole leaves through infinity: mu = 1/2 exactly, at
+    omega = inf (not a crossing of the imaginary axis at 0 Hz)."""
+    from oos_drake.analysis.destabilizing import destabilizing_perturbation, ill_posed_perturbation
+
+    m0, k, c = 2.0, 3.0, 0.4
+    A = np.array([[0.0, 1.0], [-k / m0, -c / m0]])
+    Bw = np.array([[0.0], [-0.5]])
+    Cz = np.array([[-k / m0, -c / m0]])
+    Dzw = np.array([[-0.5]])
+    found = destabilizing_perturbation(A, Bw, Cz, Dzw, [[-1, 0]], [0.1, 10.0])
+    assert found.mu_lower == pytest.approx(0.5, rel=1e-6)
+    assert np.isinf(found.omega)
+    assert found.residual < 1e-6
+    exact = ill_posed_perturbation(Dzw, [[-1, 0]])
+    assert exact.mu_lower == pytest.approx(0.5, rel=1e-12) and np.isinf(exact.omega)
+    assert exact.delta[0, 0].real == pytest.approx(-2.0, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    "Dzw, blk, mu",
+    [
+        (np.diag([0.5, -0.25]), [[-1, 0], [-1, 0]], 0.5),  # diagonal: max |entry|
+        (np.array([[0.0, 0.8], [0.2, 0.0]]), [[-1, 0], [-1, 0]], 0.4),  # sqrt(|a b|)
+        (np.array([[0.0, 0.8], [-0.2, 0.0]]), [[-1, 0], [-1, 0]], 0.4),  # sign of a b: vertex
+    ],
+)
+def test_ill_posing_vertex_matches_the_closed_form_real_mu(Dzw, blk, mu):
+    from oos_drake.analysis.destabilizing import ill_posed_perturbation
+
+    found = ill_posed_perturbation(Dzw, blk)
+    assert found.mu_lower == pytest.approx(mu, rel=1e-12)
+    delta = found.delta
+    assert np.linalg.svd(np.eye(2) - Dzw @ delta, compute_uv=False)[-1] < 1e-12

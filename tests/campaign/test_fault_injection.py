@@ -81,10 +81,13 @@ def _cli(*args) -> list[str]:
     return [sys.executable, "-m", "oos_drake.campaign.cli", "campaign", *map(str, args)]
 
 
-def test_a_second_process_on_a_campaign_in_use_is_refused(write_spec, tmp_path):
+@pytest.fixture
+def campaign_in_progress(write_spec, tmp_path):
+    """A slow campaign run by another process, once its first run is finished: (spec, directory,
+    process). The process is killed at teardown if still running."""
     spec = write_spec(_with_simulator("make_slow_simulator"))
     directory = tmp_path / "c"
-    first = subprocess.Popen(
+    process = subprocess.Popen(
         _cli("run", spec, "--out", directory, "--no-progress"),
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
@@ -93,52 +96,48 @@ def test_a_second_process_on_a_campaign_in_use_is_refused(write_spec, tmp_path):
     try:
         deadline = time.monotonic() + 120
         while not store.finished_run_ids(directory):
-            assert first.poll() is None, first.stderr.read()
-            assert time.monotonic() < deadline, "the first campaign did not start"
+            assert process.poll() is None, process.stderr.read()
+            assert time.monotonic() < deadline, "the campaign did not start"
             time.sleep(0.05)
-        listing = sorted(p.relative_to(directory) for p in directory.rglob("*"))
-        for command in (
-            _cli("resume", directory, "--no-progress"),
-            _cli("run", spec, "--out", directory, "--no-progress"),
-        ):
-            second = subprocess.run(command, capture_output=True, text=True, timeout=120)
-            assert second.returncode == 2, second.stderr
-            message = second.stderr.strip().splitlines()
-            assert len(message) == 1, second.stderr
-            assert str(directory) in message[0]
-            assert "in use" in message[0] or "already holds a campaign" in message[0]
-        # the refused commands wrote nothing (the first campaign only added run files)
-        after = sorted(p.relative_to(directory) for p in directory.rglob("*"))
-        assert set(listing) <= set(after)
-        assert all(
-            str(p).startswith((store.RUNS_DIR, store.TIMESERIES_DIR))
-            for p in set(after) - set(listing)
-        )
-        assert first.wait(timeout=180) == 0
+        yield spec, directory, process
     finally:
-        if first.poll() is None:
-            first.kill()
+        if process.poll() is None:
+            process.kill()
+        process.wait()
+
+
+def test_a_second_process_on_a_campaign_in_use_is_refused(campaign_in_progress):
+    spec, directory, first = campaign_in_progress
+    def files():  # (temporary files of the writes in flight come and go)
+        return {p.relative_to(directory) for p in directory.rglob("*") if p.suffix != ".tmp"}
+
+    listing = files()
+    for command in (
+        _cli("resume", directory, "--no-progress"),
+        _cli("run", spec, "--out", directory, "--no-progress"),
+    ):
+        second = subprocess.run(command, capture_output=True, text=True, timeout=120)
+        assert second.returncode == 2, second.stderr
+        message = second.stderr.strip().splitlines()
+        assert len(message) == 1, second.stderr
+        assert str(directory) in message[0]
+        assert "in use" in message[0] or "already holds a campaign" in message[0]
+    # the refused commands wrote nothing (the first campaign only added run files)
+    after = files()
+    assert listing <= after
+    assert all(str(p).startswith((store.RUNS_DIR, store.TIMESERIES_DIR)) for p in after - listing)
+    assert first.wait(timeout=180) == 0
     runs = pd.read_parquet(directory / "runs.parquet")
     assert runs["run_id"].tolist() == list(range(12))
     assert (runs["status"] == "ok").all()
 
 
-def test_the_lock_is_released_when_its_holder_is_killed(write_spec, tmp_path):
+def test_the_lock_is_released_when_its_holder_is_killed(campaign_in_progress):
     """``flock`` dies with its process: a ``kill -9`` never leaves a campaign locked."""
     import os
     import signal
 
-    spec = write_spec(_with_simulator("make_slow_simulator"))
-    directory = tmp_path / "c"
-    first = subprocess.Popen(
-        _cli("run", spec, "--out", directory, "--no-progress"),
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    deadline = time.monotonic() + 120
-    while not store.finished_run_ids(directory):
-        assert first.poll() is None and time.monotonic() < deadline
-        time.sleep(0.05)
+    _, directory, first = campaign_in_progress
     with pytest.raises(ValueError, match=f"pid {first.pid}"):
         with store.campaign_lock(directory):
             pass

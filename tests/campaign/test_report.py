@@ -5,6 +5,7 @@ from __future__ import annotations
 import matplotlib.image
 import numpy as np
 import pandas as pd
+import pytest
 
 from oos_drake.campaign.cli import main as cli_main
 from oos_drake.campaign.report import weighted_quantile, write_report
@@ -96,3 +97,40 @@ def test_mu_guided_report_states_the_weight_shares(tmp_path):
         "of the total weight" in report.text
     )
     assert f"effective sample size {w.sum() ** 2 / (w**2).sum():.1f} of 24" in report.text
+
+
+@pytest.mark.parametrize("k, n", [(0, 48), (1, 48), (7, 200), (200, 200)])
+def test_unweighted_interval_is_the_exact_binomial_one(k, n):
+    from scipy.stats import binomtest
+
+    from oos_drake.campaign.report import probability_interval
+
+    events = np.zeros(n, bool)
+    events[:k] = True
+    est = probability_interval(np.ones(n), events, weight_bound=1.0)
+    ref = binomtest(k, n).proportion_ci(0.95, method="exact")
+    assert est.method == "Clopper-Pearson"
+    assert est.p == k / n
+    assert (est.low, est.high) == pytest.approx((ref.low, ref.high), rel=1e-12, abs=1e-15)
+    if k == 0:  # zero failures: no "p = 0 +- 0", but the rule-of-three-like upper bound
+        assert est.low == 0 and est.high == pytest.approx(1 - 0.025 ** (1 / n), rel=1e-9)
+
+
+def test_weighted_interval_covers_the_true_probability():
+    """Brute force: 2000 importance-sampled campaigns of 48 runs from a defensive mixture with
+    a known failure probability; the 95 % interval must contain it in at least 95 % of them."""
+    from oos_drake.campaign.report import probability_interval
+
+    rng = np.random.default_rng(3)
+    alpha, region_mass, p_region = 0.2, 0.05, 0.3  # nominal density: a region of mass 5 %
+    p_true = region_mass * p_region  # failures only inside the region
+    covered, n = 0, 48
+    for _ in range(2000):
+        in_nominal = rng.random(n) < alpha  # defensive share draws from the nominal density
+        inside = np.where(in_nominal, rng.random(n) < region_mass, True)
+        weights = np.where(inside, region_mass / (alpha * region_mass + (1 - alpha)), 1 / alpha)
+        fails = inside & (rng.random(n) < p_region)
+        est = probability_interval(weights, fails, weight_bound=1 / alpha)
+        covered += est.low <= p_true <= est.high
+        assert est.method == "empirical Bernstein"
+    assert covered / 2000 >= 0.95

@@ -291,3 +291,14 @@ def test_paper_sized_upper_bound_matches_lmi_solver(scaling):
         d = np.exp(rng.uniform(-2.5, 2.5, 26))
         M = d[:, None] * M / d[None, :]
     _check_against_lmi(PAPER_BLK, M, rtol=1e-2)
+
+
+@pytest.mark.parametrize("blk", [[[1, 1], [1, 1], [1, 1]], [[-1, 0], [-2, 0]], [[3, 3]]])
+def test_zero_matrix_gives_zero_bounds_without_warnings(blk):
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = mussv(np.zeros((4, 3, 3)), blk)
+    assert np.all(res.upper == 0) and np.all(res.lower == 0)
+    assert np.all(np.isfinite(res.delta)) and not np.any(res.delta)

@@ -123,3 +123,15 @@ def test_model_figures_command_writes_files(tmp_path):
     ):
         assert (tmp_path / f"{stem}.png").stat().st_size > 10_000
         assert (tmp_path / f"{stem}.{ext}").exists()
+
+
+def test_model_info_of_a_docking_phase_lists_its_spring_damper(capsys):
+    """``oos model info --phase 7``: the phase-7 LFR has the SM1 spring-damper blocks (shear and
+    torsion, 3 axes each) and no SM2 block (open in phase 7)."""
+    assert main(["model", "info", "--phase", "7"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("docking phase 7 LFR")
+    rows = {line.split()[0]: line.split() for line in out.splitlines()[2:] if line.strip()}
+    for name in ("k_shear_SM1", "k_tors_SM1", "d_shear_SM1", "d_tors_SM1"):
+        assert rows[name][-2] == "3", rows[name]  # one occurrence per axis
+    assert not any(name.endswith("_SM2") for name in rows)
