@@ -3,7 +3,7 @@
 :func:`replay_case` re-simulates run ``N`` of a campaign exactly as the campaign ran it (same
 simulator options, dispersed values, seed and mission window, read back from the campaign
 directory), then plays the logged plant states into a Meshcat recording
-(:func:`oos_drake.multibody.replay.record`, which also describes what is drawn) and writes
+(:func:`oos_drake.multibody.replay.recording_html`, which also describes what is drawn) and writes
 ``meshcat.StaticHtml()`` atomically to ``DIR/replay/case_N.html``: one file, no server, that any
 browser opens (scene, animation, play/pause and time-scale controls under *Animations*).
 """
@@ -18,7 +18,7 @@ import numpy as np
 
 from oos_drake.campaign.runner import case_from_plan_row, load_campaign
 from oos_drake.campaign.store import atomic_write_text
-from oos_drake.multibody.replay import default_speed, record
+from oos_drake.multibody.replay import default_speed, recording_html
 
 __all__ = ["ReplayResult", "replay_case", "replay_path"]
 
@@ -158,18 +158,9 @@ def replay_case(
         raise ValueError(f"run {run_id}: no logged state to replay ({error or 'empty window'})")
     if speed is None:
         speed = default_speed(case.window.end - case.window.start)
-    owned = meshcat is None
-    if owned:
-        from pydrake.geometry import Meshcat, MeshcatParams
-
-        params = MeshcatParams()
-        params.host = "localhost"
-        meshcat = Meshcat(params)
-    frames = record(meshcat, capture.simulation.handles, times, states, float(speed))
-    meshcat.PublishRecording()
-    html = meshcat.StaticHtml()
-    if owned:
-        meshcat = None  # closes the server and its port
+    html, frames = recording_html(
+        capture.simulation.handles, times, states, float(speed), meshcat=meshcat
+    )
     path = atomic_write_text(html, replay_path(directory, case.run_id))
     size = len(html.encode("utf-8"))
     return ReplayResult(

@@ -298,10 +298,12 @@ class LFR:
 
     @property
     def blocks(self):
-        """``pandas.DataFrame``, one row per block: name, kind, quantity, unit, repetitions, ...
+        """``pandas.DataFrame``, one row per block: name, kind, repetitions, nominal, range, ...
 
-        Columns ``name, kind, quantity, unit, repetitions, nominal, range, radius, shape``
-        (``kind``: ureal/ucomplex/ultidyn; ``quantity``/``unit``: what the block stands for).
+        Columns ``name, kind, repetitions, nominal, range, radius, shape, quantity, unit``
+        (``kind``: ureal/ucomplex/ultidyn; ``radius``: ucomplex radius or ultidyn bound;
+        ``shape``: ``(p, q)`` of one occurrence; ``quantity``/``unit``: what the block stands
+        for).
         """
         import pandas as pd
 
@@ -312,25 +314,25 @@ class LFR:
                 {
                     "name": spec.name,
                     "kind": spec.kind,
-                    "quantity": spec.quantity,
-                    "unit": spec.unit,
                     "repetitions": entry.reps,
                     "nominal": spec.nominal,
                     "range": spec.range,
                     "radius": getattr(spec, "radius", getattr(spec, "bound", None)),
                     "shape": spec.shape,
+                    "quantity": spec.quantity,
+                    "unit": spec.unit,
                 }
             )
         columns = [
             "name",
             "kind",
-            "quantity",
-            "unit",
             "repetitions",
             "nominal",
             "range",
             "radius",
             "shape",
+            "quantity",
+            "unit",
         ]
         return pd.DataFrame(rows, columns=columns)
 

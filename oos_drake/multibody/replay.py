@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["default_speed", "equivalent_box", "record"]
+__all__ = ["default_speed", "equivalent_box", "record", "recording_html"]
 
 #: Meshcat root path of the replay's objects.
 ROOT = "/oos"
@@ -209,6 +209,40 @@ def record(meshcat, handles, times: np.ndarray, states: np.ndarray, speed: float
             meshcat.SetTransform(path, plant.EvalBodyPoseInWorld(context, body), time_in_recording)
     meshcat.StopRecording()
     return n
+
+
+def recording_html(
+    handles, times: np.ndarray, states: np.ndarray, speed: float = 1.0, *, meshcat=None
+) -> tuple[str, int]:
+    """:func:`record` the states and return the recording as a self-contained HTML page.
+
+    Parameters
+    ----------
+    handles, times, states, speed
+        As for :func:`record`.
+    meshcat : pydrake.geometry.Meshcat, optional
+        Visualizer to record into (default: a new one on a free local port, closed after).
+
+    Returns
+    -------
+    html : str
+        ``meshcat.StaticHtml()`` with the published recording.
+    frames : int
+        Frames recorded.
+    """
+    owned = meshcat is None
+    if owned:
+        from pydrake.geometry import Meshcat, MeshcatParams
+
+        params = MeshcatParams()
+        params.host = "localhost"
+        meshcat = Meshcat(params)
+    frames = record(meshcat, handles, times, states, speed)
+    meshcat.PublishRecording()
+    html = meshcat.StaticHtml()
+    if owned:
+        meshcat = None  # closes the server and its port
+    return html, frames
 
 
 def default_speed(duration: float) -> float:
