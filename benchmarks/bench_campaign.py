@@ -6,7 +6,7 @@ Run as a script (short by default; the machine is shared)::
     .venv/bin/python benchmarks/bench_campaign.py --only-parallel --runs 8 --window 40
     .venv/bin/python benchmarks/bench_campaign.py --only-parallel --simulator flexible-attitude
     .venv/bin/python benchmarks/bench_campaign.py --write-demo-worst-cases \
-        campaigns/demo_worst_cases.parquet
+        oos_drake/campaign/specs/demo_worst_cases.parquet
 
 1. Speed of one whole-mission run of the cheap ``flexible-attitude`` simulator (x real time).
 2. Parallel efficiency of the local process pool with the Drake mission simulator (default) or
@@ -15,7 +15,7 @@ Run as a script (short by default; the machine is shared)::
    in the same run; and the same ratio on processor time (per-run processor time of each mode,
    busiest worker), which the other jobs of a shared machine do not inflate. Workers run in
    their own sessions by default (see :func:`isolated_simulator`).
-3. ``mu-guided`` against ``monte-carlo`` with the same number of runs on ``campaigns/demo.toml``:
+3. ``mu-guided`` against ``monte-carlo`` with the same number of runs on the shipped ``demo.toml``:
    worst APE found, requirement violations, and the two estimates of P(APE violation).
 
 The worst cases used in part 3 stand in for the robust analysis' file: a vertex search of the
@@ -47,14 +47,14 @@ from oos_drake.campaign.simulator import (
     SimulatorRecipe,
     build_simulator,
 )
-from oos_drake.campaign.spec import load_spec
+from oos_drake.campaign.spec import SPEC_DIRECTORY, load_spec
 from oos_drake.campaign.worst_cases import WorstCaseRegion, write_worst_cases
 
 # spawned pool workers import this module by name for isolated_simulator
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 ROOT = Path(__file__).resolve().parents[1]
-DEMO = ROOT / "campaigns" / "demo.toml"
+DEMO = SPEC_DIRECTORY / "demo.toml"
 
 
 def simulator_speed(rate: float) -> float:
@@ -349,7 +349,7 @@ def main() -> None:
     parallel_efficiency(
         args.runs, args.window, args.repeats, args.simulator, isolate=not args.same_session
     )
-    print("\n== 3. mu-guided vs Monte Carlo, same number of runs (campaigns/demo.toml)")
+    print("\n== 3. mu-guided vs Monte Carlo, same number of runs (shipped spec demo.toml)")
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "worst_cases.parquet"
         write_worst_cases(vertex_worst_cases(), load_spec(DEMO).info.parameters, path)

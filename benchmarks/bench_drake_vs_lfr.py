@@ -2,8 +2,8 @@
 
 For the same ``n`` equally spaced mission configurations (paper: 330):
 
-- **Drake, rebuild**: per configuration, build the diagram from ``sdf/`` (parse, modal residuals,
-  connection) and linearize it (``FirstOrderTaylorApproximation``);
+- **Drake, rebuild**: per configuration, build the diagram from the SDF files (parse, modal
+  residuals, connection) and linearize it (``FirstOrderTaylorApproximation``);
 - **Drake, cached**: one diagram per connection kind (3 builds), then per configuration set the
   context (angles, locks, target pose) and linearize;
 - **LFR**: build the mission LFR once (TITOP blocks) and substitute the scheduled parameters for all

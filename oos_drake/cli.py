@@ -4,6 +4,11 @@ Each subpackage that offers commands has a ``cli`` module with ``register(subpar
 module only collects them, so that a capability adds its commands without touching this file.
 Errors that a user can fix (bad data, bad spec, unknown names) are ``ValueError``s: they are
 printed as one line and give exit status 2.
+
+One name per option across commands: ``--out`` (where results go), ``--workers`` (parallel
+worker processes or threads), ``--quiet`` (no progress bars), ``--f-min``/``--f-max`` (frequency
+range [Hz]). Older spellings (``--jobs``, ``--no-progress``, ``--fmin``, ``--fmax``) are hidden
+aliases that raise a ``DeprecationWarning`` (:func:`add_deprecated_alias`).
 """
 
 from __future__ import annotations
@@ -11,6 +16,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import warnings
+
+from oos_drake import __version__
 
 #: Subpackage modules whose ``register(subparsers)`` adds commands, in ``--help`` order.
 COMMAND_MODULES = (
@@ -24,6 +32,43 @@ COMMAND_MODULES = (
 )
 
 
+class _DeprecatedAlias(argparse.Action):
+    """Hidden old spelling of an option: stores into the new option's ``dest``.
+
+    It warns with a :class:`DeprecationWarning` (silent by default, so scripts that check the
+    command's stderr keep working).
+    """
+
+    def __init__(self, option_strings, dest, new: str, **kwargs):
+        self.new = new
+        super().__init__(option_strings, dest, help=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        warnings.warn(f"{option_string} is deprecated, use {self.new}", DeprecationWarning, 2)
+        setattr(namespace, self.dest, self.const if self.nargs == 0 else values)
+
+
+def add_deprecated_alias(
+    parser: argparse.ArgumentParser, old: str, new: str, *, flag: bool = False, type=None
+) -> None:
+    """Accept ``old`` as a hidden, deprecated spelling of option ``new`` of ``parser``.
+
+    Parameters
+    ----------
+    old, new : str
+        Option strings (``"--jobs"``, ``"--workers"``); ``new`` must already be defined.
+    flag : bool
+        ``new`` is a ``store_true`` flag (``--no-progress`` -> ``--quiet``).
+    type : callable, optional
+        Conversion of the value (as for ``new``).
+    """
+    dest = new.lstrip("-").replace("-", "_")
+    options = {"nargs": 0, "const": True} if flag else {"type": type}
+    parser.add_argument(
+        old, dest=dest, new=new, action=_DeprecatedAlias, default=argparse.SUPPRESS, **options
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the ``oos`` argument parser with every available subcommand."""
     parser = argparse.ArgumentParser(
@@ -31,6 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="oos_drake: uncertain LFR models, Drake twin, robust control and campaigns "
         "for a flexible on-orbit-servicing spacecraft.",
     )
+    parser.add_argument("--version", action="version", version=f"oos_drake {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for module_name in COMMAND_MODULES:
         try:

@@ -20,10 +20,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 from oos_drake import __version__
+from oos_drake.resources import package_path
 
-PACKAGE_ROOT = Path(__file__).resolve().parent
-REPO_ROOT = PACKAGE_ROOT.parent
-DEFAULT_CAMPAIGN = REPO_ROOT / "campaigns" / "paper.toml"
+PACKAGE_ROOT = package_path("oos_drake")
+DEFAULT_CAMPAIGN = package_path("oos_drake.campaign", "specs", "paper.toml")
 STAMP = "stage.json"
 
 
@@ -130,7 +130,9 @@ def run_pipeline(args: argparse.Namespace) -> int:
         "analysis",
         out / "analysis",
         analysis_key,
-        lambda d: _oos("analyze", "--controller", controller, "--out", d, *quick),
+        lambda d: _oos(
+            "analyze", "--controller", controller, "--out", d, "--workers", args.workers, *quick
+        ),
         timings,
     )
 
@@ -211,7 +213,9 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--campaign", default=str(DEFAULT_CAMPAIGN), help="campaign spec (default: paper.toml)"
     )
-    parser.add_argument("--workers", type=int, default=2, help="campaign worker processes")
+    parser.add_argument(
+        "--workers", type=int, default=2, help="worker processes of the analysis and the campaign"
+    )
     parser.add_argument(
         "--quick", action="store_true", help="40 configurations instead of the paper's grids"
     )

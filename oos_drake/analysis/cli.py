@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from oos_drake.analysis.stability import SweepOptions
+from oos_drake.cli import add_deprecated_alias
 
 
 def _controller(path):
@@ -57,12 +58,14 @@ def run_analyze(args) -> int:
     from oos_drake.analysis.tightening import TightenOptions
 
     sweep = SweepOptions(
-        upper_iterations=args.iterations, n_jobs=args.jobs, refine_iterations=args.refine_iterations
+        upper_iterations=args.iterations,
+        n_jobs=args.workers,
+        refine_iterations=args.refine_iterations,
     )
     tighten = TightenOptions(target_gap=args.target_gap, rounds=args.spike_rounds)
     options = AnalysisOptions(
         configurations=args.configurations,
-        frequency_range_hz=(args.fmin, args.fmax),
+        frequency_range_hz=(args.f_min, args.f_max),
         points_per_decade=args.points_per_decade,
         sweep=sweep,
         tighten=tighten,
@@ -124,8 +127,8 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--configurations", type=int, default=330, help="equally spaced mission configurations"
     )
-    parser.add_argument("--fmin", type=float, default=0.005, help="lowest grid frequency [Hz]")
-    parser.add_argument("--fmax", type=float, default=5.0, help="highest grid frequency [Hz]")
+    parser.add_argument("--f-min", type=float, default=0.005, help="lowest grid frequency [Hz]")
+    parser.add_argument("--f-max", type=float, default=5.0, help="highest grid frequency [Hz]")
     parser.add_argument(
         "--points-per-decade",
         type=int,
@@ -176,11 +179,16 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--no-sensitivity", action="store_true", help="skip the sensitivity table")
     parser.add_argument("--no-time-check", action="store_true", help="skip the time-domain check")
-    parser.add_argument("--jobs", type=int, default=2, help="worker processes")
+    parser.add_argument("--workers", type=int, default=2, help="worker processes")
     parser.add_argument(
-        "--plant", choices=("lfr", "drake"), default="lfr",
+        "--plant",
+        choices=("lfr", "drake"),
+        default="lfr",
         help="uncertain plants: the TITOP LFR (default) or LFRs extracted from the Drake twin "
         "by ulinearize (same blocks; needs pydrake)",
-    )  # fmt: skip
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_deprecated_alias(parser, "--fmin", "--f-min", type=float)
+    add_deprecated_alias(parser, "--fmax", "--f-max", type=float)
+    add_deprecated_alias(parser, "--jobs", "--workers", type=int)
     parser.set_defaults(func=run_analyze)

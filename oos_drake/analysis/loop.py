@@ -82,14 +82,17 @@ def uncertain_plant(
     spec = spec or comp.DesignSpecification()
     P = rotational_channels(plant)
     if additive:
-        P = P + spec.additive_weight * ultidyn(ADDITIVE_BLOCK, (3, 3))
+        P = P + spec.additive_weight * ultidyn(
+            ADDITIVE_BLOCK, (3, 3), unit="-", quantity="additive dynamics"
+        )
     if multiplicative:
         factor = as_lfr(np.eye(3))
         eye = np.eye(3)
         for name in MULTIPLICATIVE_BLOCKS:
             i, j = _AXES.index(name[-2]), _AXES.index(name[-1])
             weight = spec.multiplicative_diagonal if i == j else spec.multiplicative_off_diagonal
-            factor = factor + (weight * eye[:, [i]]) @ ultidyn(name, (1, 1)) @ eye[[j], :]
+            delta = ultidyn(name, (1, 1), unit="-", quantity="multiplicative dynamics")
+            factor = factor + (weight * eye[:, [i]]) @ delta @ eye[[j], :]
         P = P @ factor
     return P
 

@@ -203,7 +203,7 @@ def _certify(array, study, subsets, *, configuration_label):
                     "subset": name,
                     "block": bname,
                     "kind": kind,
-                    "unit": _unit(bname),
+                    "unit": specs[bname].unit,
                     "normalized_norm [-]": float(np.linalg.norm(arr, ord=2)),
                     "normalized_real [-]": float(arr[0, 0].real),
                     "normalized_imag [-]": float(arr[0, 0].imag),
@@ -236,12 +236,6 @@ def _moment_time(name, scenario=None) -> float:
     from oos_drake.scenario.timeline import mission_timeline
 
     return float(mission_timeline(scenario).moments[name].time)
-
-
-def _unit(name):
-    from oos_drake.analysis.subsets import block_unit
-
-    return block_unit(name)
 
 
 def _moment_label(times, scenario=None):

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from oos_drake.analysis.stability import SweepOptions, grid_bounds
-from oos_drake.analysis.subsets import block_unit, is_lti, is_modal
+from oos_drake.analysis.subsets import block_group
 from oos_drake.robust.lfr_analysis import block_map, delta_channel_response
 
 #: Columns of the sensitivity table.
@@ -32,14 +32,6 @@ SENSITIVITY_COLUMNS = [
     "sensitivity [-]",
     "frequency [Hz]",
 ]
-
-
-def _group(name: str) -> str:
-    if name == "Delta_add":
-        return "additive"
-    if is_lti(name):
-        return "multiplicative"
-    return "modal" if is_modal(name) else "mechanical"
 
 
 def mu_sensitivity(
@@ -98,8 +90,8 @@ def mu_sensitivity(
         rows.append(
             {
                 "block": name,
-                "group": _group(name),
-                "unit": block_unit(name),
+                "group": block_group(one.uncertainty[name]),
+                "unit": one.uncertainty[name].unit,
                 "mu_upper_total [-]": peak,
                 "mu_upper_alone [-]": float(alone.max()),
                 "mu_upper_without [-]": float(without.max()),

@@ -1,70 +1,65 @@
-"""Named uncertainty subsets of ``Delta_tot`` and the physical units of the blocks.
+"""Named uncertainty subsets of ``Delta_tot``, read from what each block is.
 
 ``Delta_tot = diag(Delta_real, Delta_add, Delta_mul)`` with ``Delta_real = diag(Delta_mec,
 Delta_mod)`` (paper section 4): ``Delta_mec`` are the target hub's mass and inertias (and, in the
 docking models, the spring-damper coefficients), ``Delta_mod`` the first modal frequencies of the
-four arrays.
+four arrays. A block's subset follows from its ``quantity`` (set where the block is created,
+:data:`oos_drake.lfr.blocks.QUANTITIES`), never from its name.
 """
 
 from __future__ import annotations
 
-from oos_drake.analysis.loop import ADDITIVE_BLOCK, MULTIPLICATIVE_BLOCKS
+from collections.abc import Mapping
 
 #: Subset names in the order of the figures.
 SUBSET_ORDER = ("total", "real", "modal", "mechanical", "additive", "multiplicative")
 
-
-def block_unit(name: str) -> str:
-    """Physical unit of a block's value (used in ``wc:<block> [<unit>]`` columns)."""
-    if name.startswith("w1_"):
-        return "rad/s"
-    if name.startswith("m_"):
-        return "kg"
-    if name.startswith("J"):
-        return "kg m^2"
-    if name.startswith("k_shear"):
-        return "N/m"
-    if name.startswith("k_tors"):
-        return "N m/rad"
-    if name.startswith("d_shear"):
-        return "N s/m"
-    if name.startswith("d_tors"):
-        return "N m s/rad"
-    return "-"
+#: Quantities of the ``Delta_mec`` blocks.
+MECHANICAL_QUANTITIES = ("mass", "inertia", "length", "stiffness", "damping")
 
 
-def is_modal(name: str) -> bool:
-    """Modal block (first frequency of an array)."""
-    return name.startswith("w1_")
+def block_group(spec) -> str:
+    """``"modal"``, ``"mechanical"``, ``"additive"``, ``"multiplicative"`` or ``"other"``.
+
+    Parameters
+    ----------
+    spec : oos_drake.lfr.blocks.Block
+        Block spec (``sys.uncertainty[name]``).
+    """
+    if spec.quantity == "modal frequency":
+        return "modal"
+    if spec.quantity in MECHANICAL_QUANTITIES:
+        return "mechanical"
+    if spec.quantity == "additive dynamics":
+        return "additive"
+    if spec.quantity == "multiplicative dynamics":
+        return "multiplicative"
+    return "other"
 
 
-def is_lti(name: str) -> bool:
-    """``Delta_add`` or one of the ``Delta_mul`` scalars."""
-    return name == ADDITIVE_BLOCK or name in MULTIPLICATIVE_BLOCKS
-
-
-def uncertainty_subsets(block_names) -> dict[str, list[str]]:
+def uncertainty_subsets(blocks: Mapping) -> dict[str, list[str]]:
     """The paper's subsets of the blocks present in a model.
 
     Parameters
     ----------
-    block_names : iterable of str
-        Uncertain blocks left in the closed loop (after the configuration was substituted).
+    blocks : Mapping
+        Block name -> spec of the uncertain blocks left in the closed loop (``sys.uncertainty``,
+        after the configuration was substituted).
 
     Returns
     -------
     dict
         ``total``, ``real``, ``modal``, ``mechanical``, ``additive``, ``multiplicative`` ->
-        block names (empty subsets are left out).
+        block names (empty subsets are left out). ``real`` holds every ``ureal`` block.
     """
-    names = sorted(block_names)
-    real = [n for n in names if not is_lti(n)]
+    names = sorted(blocks)
+    group = {name: block_group(blocks[name]) for name in names}
     subsets = {
         "total": names,
-        "real": real,
-        "modal": [n for n in real if is_modal(n)],
-        "mechanical": [n for n in real if not is_modal(n)],
-        "additive": [n for n in names if n == ADDITIVE_BLOCK],
-        "multiplicative": [n for n in names if n in MULTIPLICATIVE_BLOCKS],
+        "real": [n for n in names if blocks[n].kind == "ureal"],
+        "modal": [n for n in names if group[n] == "modal"],
+        "mechanical": [n for n in names if group[n] == "mechanical"],
+        "additive": [n for n in names if group[n] == "additive"],
+        "multiplicative": [n for n in names if group[n] == "multiplicative"],
     }
     return {k: v for k, v in subsets.items() if v}

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from oos_drake.analysis.subsets import block_unit
+from oos_drake.campaign.simulator import Parameter, ParameterKind
+from oos_drake.campaign.worst_cases import WorstCaseRegion, write_worst_cases
 
 
 @dataclass(frozen=True)
@@ -31,22 +32,19 @@ class Region:
 
 
 def block_parameters(sys):
-    """Campaign :class:`~oos_drake.campaign.simulator.Parameter` of every block of ``sys``."""
-    from oos_drake.campaign.simulator import Parameter, ParameterKind
+    """Campaign :class:`~oos_drake.campaign.simulator.Parameter` of every block of ``sys``.
 
+    Unit and kind come from the blocks (their ``unit`` and ``quantity``).
+    """
     params = []
     for name, spec in sys.uncertainty.items():
+        kind = ParameterKind.of_quantity(spec.quantity)
         if spec.kind == "ureal":
             lo, hi = spec.range
-            kind = (
-                ParameterKind.STIFFNESS
-                if name.startswith(("k_", "d_"))
-                else ParameterKind.REAL_BLOCK
-            )
             params.append(
                 Parameter(
                     name,
-                    block_unit(name),
+                    spec.unit,
                     float(spec.nominal),
                     float(lo),
                     float(hi),
@@ -58,7 +56,7 @@ def block_parameters(sys):
             params.append(
                 Parameter(
                     name,
-                    "-",
+                    spec.unit,
                     0.0,
                     0.0,
                     float(spec.bound),
@@ -87,7 +85,6 @@ def physical_values(sys, normalized: dict, scale: float) -> dict:
 
 def write_regions(regions, sys, path) -> Path:
     """Write ``regions`` (list of :class:`Region`) for the blocks of ``sys`` to ``path``."""
-    from oos_drake.campaign.worst_cases import WorstCaseRegion, write_worst_cases
 
     params = block_parameters(sys)
     out = []

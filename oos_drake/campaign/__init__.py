@@ -7,7 +7,7 @@ Flow: ``spec`` (validated TOML) -> ``samplers`` (plan: values, seeds, weights, w
 Plugging in a simulator (e.g. the Drake mission): implement the :class:`Simulator` protocol,
 expose a factory ``make_simulator(**options)``, and register it::
 
-    register_simulator("drake-mission", "oos_drake.multibody.mission_sim:make_simulator")
+    register_simulator("drake-mission", "oos_drake.campaign.drake_simulator:make_simulator")
 
 (or name the factory path directly in the spec: ``[simulator] name = "pkg.module:factory"``),
 and call :func:`check_simulator` on it in its tests (declarations, metrics, time-series columns,

@@ -2,8 +2,8 @@
 
 Examples::
 
-    oos campaign run campaigns/demo.toml --out out/demo --workers 2
-    oos campaign run campaigns/demo.toml --out out/demo --scheduler local     # local Dask cluster
+    oos campaign run demo --out out/demo --workers 2
+    oos campaign run demo --out out/demo --scheduler local     # local Dask cluster
     oos campaign resume out/demo                  # after a crash or kill -9
     oos campaign rerun out/demo --case 17         # recompute run 17, compare with the record
     oos campaign report out/demo                  # figures + tables in out/demo/report
@@ -20,6 +20,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from oos_drake.cli import add_deprecated_alias
+
 
 def _add_executor_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
@@ -35,7 +37,8 @@ def _add_executor_options(parser: argparse.ArgumentParser) -> None:
         help="run on Dask: a scheduler address (tcp://host:8786) or 'local' "
         "for a local cluster of --workers processes",
     )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_deprecated_alias(parser, "--no-progress", "--quiet", flag=True)
 
 
 def _print_summary(summary) -> None:
@@ -75,7 +78,7 @@ def _run(args: argparse.Namespace) -> int:
         out,
         workers=args.workers,
         scheduler=args.scheduler,
-        progress=not args.no_progress,
+        progress=not args.quiet,
         worst_cases=args.worst_cases,
         simulator_options=_parse_options(args.simulator_option),
     )
@@ -90,7 +93,7 @@ def _resume(args: argparse.Namespace) -> int:
         args.directory,
         workers=args.workers,
         scheduler=args.scheduler,
-        progress=not args.no_progress,
+        progress=not args.quiet,
     )
     _print_summary(summary)
     return 0
@@ -132,7 +135,7 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from oos_drake.multibody.replay import replay_case
+    from oos_drake.campaign.replay import replay_case
 
     result = replay_case(args.directory, args.case, speed=args.speed)
     span = f"t = {result.start:g} .. {result.end:g} s"
@@ -157,7 +160,11 @@ def register(subparsers) -> None:
     commands = campaign.add_subparsers(dest="campaign_command", metavar="ACTION", required=True)
 
     run = commands.add_parser("run", help="validate a spec and run the campaign")
-    run.add_argument("spec", help="campaign spec (TOML), e.g. campaigns/demo.toml")
+    run.add_argument(
+        "spec",
+        help="campaign spec (TOML file), or the name of a shipped spec: demo, demo_mu, paper, "
+        "paper_mc",
+    )
     run.add_argument(
         "--out",
         default=None,

@@ -20,7 +20,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.special
 
 from oos_drake.campaign.simulator import Parameter
 
@@ -84,36 +83,20 @@ class TruncatedNormal:
     high: float
     kind = "normal"
 
-    def _bounds(self) -> tuple[float, float, float]:
-        """Standardized bounds (reflected into the lower half when above the mean) and sign."""
+    @property
+    def law(self):
+        """The frozen ``scipy.stats.truncnorm`` law (log-space tails: no underflow far out)."""
+        import scipy.stats  # seconds to import: only where a normal law is used
+
         a = (self.low - self.mean) / self.std
         b = (self.high - self.mean) / self.std
-        if a > 0:  # work in the lower tail, where Phi keeps its relative precision
-            return -b, -a, -1.0
-        return a, b, 1.0
-
-    def _log_mass(self) -> tuple[float, float, float, float]:
-        """(a, b, sign, log(Phi(b) - Phi(a))), in log space so that far tails do not underflow."""
-        a, b, sign = self._bounds()
-        log_a, log_b = scipy.special.log_ndtr(a), scipy.special.log_ndtr(b)
-        return a, b, sign, float(log_b + np.log1p(-np.exp(log_a - log_b)))
+        return scipy.stats.truncnorm(a, b, loc=self.mean, scale=self.std)
 
     def ppf(self, u: np.ndarray) -> np.ndarray:
-        a, _, sign, log_mass = self._log_mass()
-        u = np.asarray(u, dtype=float)
-        if sign < 0:
-            u = 1.0 - u
-        with np.errstate(divide="ignore"):
-            log_cdf = np.logaddexp(scipy.special.log_ndtr(a), np.log(u) + log_mass)
-        z = scipy.special.ndtri_exp(np.minimum(log_cdf, 0.0))
-        return np.clip(self.mean + sign * self.std * z, self.low, self.high)
+        return np.clip(self.law.ppf(np.asarray(u, dtype=float)), self.low, self.high)
 
     def pdf(self, x: np.ndarray) -> np.ndarray:
-        _, _, _, log_mass = self._log_mass()
-        x = np.asarray(x, dtype=float)
-        z = (x - self.mean) / self.std
-        log_density = -0.5 * z**2 - math.log(math.sqrt(2 * math.pi) * self.std) - log_mass
-        return np.where((x >= self.low) & (x <= self.high), np.exp(log_density), 0.0)
+        return self.law.pdf(np.asarray(x, dtype=float))
 
     @property
     def support(self) -> tuple[float, float]:
@@ -237,13 +220,17 @@ def parse_distribution(where: str, table: Any, parameter: Parameter) -> Distribu
     lo, hi = parameter.lower, parameter.upper
     unit = parameter.unit
 
+    # a bound written in decimal (2.552) may miss the computed range (2.32 * 1.1) by round-off:
+    # accept, and clip, within 1e-9 of the range's scale
+    slack = 1e-9 * max(abs(lo), abs(hi), hi - lo)
+
     def in_range(key: str, value: float) -> float:
-        if not (lo <= value <= hi):
+        if not (lo - slack <= value <= hi + slack):
             raise ValueError(
                 f"{where}: {key} = {value:g} {unit} outside the range of {parameter.name} "
                 f"[{lo:g}, {hi:g}] {unit}"
             )
-        return value
+        return min(max(value, lo), hi)
 
     if name == "fixed":
         return Fixed(in_range("value", _number(where, "value", table["value"])))

@@ -62,7 +62,13 @@ class DrakeMissionSimulator:
         self.simulation = MissionSimulation(MissionOptions(**options))
         self._parameters = tuple(
             Parameter(
-                p.name, p.unit, p.nominal, p.lower, p.upper, ParameterKind(p.kind), p.description
+                p.name,
+                p.unit,
+                p.nominal,
+                p.lower,
+                p.upper,
+                ParameterKind.of_quantity(p.quantity),
+                p.description,
             )
             for p in self.simulation.parameters
         )
@@ -116,7 +122,7 @@ def make_simulator(**options) -> DrakeMissionSimulator:
 def paper_worst_cases(scenario=None):
     """Stand-in worst-case regions from the paper's published mu analysis (section 4).
 
-    Used by ``campaigns/paper.toml`` until ``oos analyze`` writes the analysis' own
+    Used by ``oos_drake/campaign/specs/paper.toml`` until ``oos analyze`` writes the analysis' own
     ``worst_cases.parquet`` (the pipeline points the spec at that file). Regions:
 
     - the mission peak of mu (paper: ``mu < 0.79`` around t = 275 s at 0.55 Hz), arm holding the
@@ -168,7 +174,9 @@ def write_paper_worst_cases(path) -> None:
 
     scenario = load_scenario()
     parameters = [
-        Parameter(p.name, p.unit, p.nominal, p.lower, p.upper, ParameterKind(p.kind))
+        Parameter(
+            p.name, p.unit, p.nominal, p.lower, p.upper, ParameterKind.of_quantity(p.quantity)
+        )
         for p in mission_parameters(scenario)
     ]
     write_worst_cases(paper_worst_cases(scenario), parameters, path)

@@ -59,9 +59,10 @@ def uniform_variates(kind: str, n: int, d: int, rng: np.random.Generator) -> np.
     if d == 0:
         return np.empty((n, 0))
     if kind == "latin-hypercube":
+        import scipy.stats  # seconds to import: only for Latin hypercube plans
+
         # one point per stratum [k/n, (k+1)/n) of each marginal, strata shuffled per column
-        strata = np.argsort(rng.random((n, d)), axis=0)
-        return (strata + rng.random((n, d))) / n
+        return scipy.stats.qmc.LatinHypercube(d, rng=rng).random(n)
     return rng.random((n, d))
 
 

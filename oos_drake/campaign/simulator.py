@@ -19,7 +19,7 @@ validity raises :class:`SimulationDiverged`; the runner records it as status ``"
 Registering a simulator (the Drake mission simulator does this from its own package)::
 
     from oos_drake.campaign.simulator import register_simulator
-    register_simulator("drake-mission", "oos_drake.multibody.mission_sim:make_simulator")
+    register_simulator("drake-mission", "oos_drake.campaign.drake_simulator:make_simulator")
 
 The factory is named by an import path (``"module:function"``) so that a worker process that did
 not import the registering module still finds it; a spec may also give the import path directly as
@@ -53,6 +53,23 @@ class ParameterKind(enum.StrEnum):
     SEED = "seed"
     #: a scalar that scales a stable LTI perturbation block (Delta_add, Delta_mul)
     LTI = "lti"
+
+    @classmethod
+    def of_quantity(cls, quantity: str) -> ParameterKind:
+        """The kind of a parameter that stands for ``quantity``.
+
+        ``quantity`` is an uncertain block's (:data:`oos_drake.lfr.blocks.QUANTITIES`) or
+        ``"initial condition"`` / ``"seed"``.
+        """
+        if quantity in ("stiffness", "damping"):
+            return cls.STIFFNESS
+        if quantity.endswith("dynamics"):
+            return cls.LTI
+        if quantity == "initial condition":
+            return cls.INITIAL_CONDITION
+        if quantity == "seed":
+            return cls.SEED
+        return cls.REAL_BLOCK
 
 
 @dataclass(frozen=True)

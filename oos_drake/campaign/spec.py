@@ -1,4 +1,7 @@
-"""Campaign specs: TOML files in ``campaigns/``, validated before any run starts.
+"""Campaign specs: TOML files, validated before any run starts.
+
+The specs shipped with the package (``oos_drake/campaign/specs/``: ``demo``, ``demo_mu``,
+``paper``, ``paper_mc``) can be named without a path: ``oos campaign run demo``.
 
 A spec names a simulator, disperses some of its parameters, chooses a sampler, a number of runs, a
 seed and a mission window, and states the requirements each run is checked against::
@@ -37,13 +40,14 @@ simulator once (in the calling process) to check parameter names, ranges, metric
 
 from __future__ import annotations
 
-import json
 import math
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import tomli_w
 
 from oos_drake.campaign.distributions import Distribution, parse_distribution
 from oos_drake.campaign.simulator import (
@@ -53,6 +57,7 @@ from oos_drake.campaign.simulator import (
     describe_simulator,
 )
 from oos_drake.campaign.worst_cases import WorstCaseRegion, read_worst_cases
+from oos_drake.resources import package_path
 
 SAMPLERS = ("monte-carlo", "latin-hypercube", "mu-guided")
 WINDOW_KINDS = ("mission", "event", "critical")
@@ -219,8 +224,30 @@ def _positive_float(where: str, key: str, value: Any, allow_zero: bool = False) 
     return float(value)
 
 
+#: Folder of the campaign specs shipped with the package.
+SPEC_DIRECTORY = package_path("oos_drake.campaign", "specs")
+
+
+def packaged_spec_names() -> list[str]:
+    """Names of the specs shipped in :data:`SPEC_DIRECTORY` (``["demo", ...]``)."""
+    return sorted(p.stem for p in SPEC_DIRECTORY.glob("*.toml"))
+
+
+def packaged_spec(name: str) -> Path:
+    """Path of the shipped spec ``name`` (``"paper"`` or ``"paper.toml"``)."""
+    path = SPEC_DIRECTORY / Path(name).with_suffix(".toml").name
+    if not path.is_file():
+        raise ValueError(
+            f"no shipped campaign spec {name!r}; shipped: {', '.join(packaged_spec_names())}"
+        )
+    return path
+
+
 def load_spec(path: str | Path) -> CampaignSpec:
     """Read and validate a campaign spec file.
+
+    ``path`` may also be the bare name of a shipped spec (``"demo"``, see
+    :func:`packaged_spec_names`) when no such file exists in the working directory.
 
     Raises
     ------
@@ -228,8 +255,13 @@ def load_spec(path: str | Path) -> CampaignSpec:
         On any problem, with a one-line message naming the file and the key.
     """
     path = Path(path)
+    if not path.is_file() and path.parent == Path():
+        shipped = SPEC_DIRECTORY / path.with_suffix(".toml").name
+        path = shipped if shipped.is_file() else path
     if not path.is_file():
-        raise ValueError(f"spec {path}: file not found")
+        raise ValueError(
+            f"spec {path}: file not found (shipped specs: {', '.join(packaged_spec_names())})"
+        )
     return parse_spec(path.read_text(encoding="utf-8"), source=path)
 
 
@@ -432,32 +464,6 @@ def parse_spec(text: str, source: Path) -> CampaignSpec:
 
 
 # --- writing the resolved spec -----------------------------------------------------------------
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        return repr(value)
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, list | tuple):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    if isinstance(value, Mapping):
-        return (
-            "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items()) + " }"
-        )
-    raise TypeError(f"cannot write {value!r} to TOML")
-
-
-def _toml_key(key: str) -> str:
-    return key if key.replace("_", "").replace("-", "").isalnum() else json.dumps(key)
-
-
 def spec_to_toml(spec: CampaignSpec, worst_cases_name: str | None = None) -> str:
     """The resolved spec as TOML (every default written out); reading it back gives ``spec``.
 
@@ -466,57 +472,38 @@ def spec_to_toml(spec: CampaignSpec, worst_cases_name: str | None = None) -> str
     worst_cases_name : str, optional
         Path written for the mu-guided ``worst_cases`` (the campaign directory's copy).
     """
-    lines = [
-        "# Resolved campaign spec written by oos campaign run (every default filled in).",
-        f"name = {_toml_value(spec.name)}",
-        f"description = {_toml_value(spec.description)}",
-        f"n_runs = {spec.n_runs}",
-        f"random_seed = {spec.random_seed}",
-        f"metrics = {_toml_value(list(spec.metrics))}",
-        *([f"run_timeout = {_toml_value(spec.run_timeout)}"] if spec.run_timeout else []),
-        "",
-        "[sampler]",
-        f"kind = {_toml_value(spec.sampler.kind)}",
-    ]
+    document: dict[str, Any] = {
+        "name": spec.name,
+        "description": spec.description,
+        "n_runs": spec.n_runs,
+        "random_seed": spec.random_seed,
+        "metrics": list(spec.metrics),
+    }
+    if spec.run_timeout:
+        document["run_timeout"] = spec.run_timeout
+    sampler: dict[str, Any] = {"kind": spec.sampler.kind}
     if spec.sampler.kind == "mu-guided":
-        path = worst_cases_name or str(spec.sampler.worst_cases)
-        lines += [
-            f"worst_cases = {_toml_value(path)}",
-            f"defensive_fraction = {_toml_value(spec.sampler.defensive_fraction)}",
-            f"spread = {_toml_value(spec.sampler.spread)}",
-            f"region_weighting = {_toml_value(spec.sampler.region_weighting)}",
-        ]
-    lines += [
-        "",
-        "[simulator]",
-        f"name = {_toml_value(spec.simulator.name)}",
-        f"options = {_toml_value(spec.simulator.option_dict)}",
-        "",
-        "[window]",
-        f"kind = {_toml_value(spec.window.kind)}",
-    ]
+        sampler |= {
+            "worst_cases": worst_cases_name or str(spec.sampler.worst_cases),
+            "defensive_fraction": spec.sampler.defensive_fraction,
+            "spread": spec.sampler.spread,
+            "region_weighting": spec.sampler.region_weighting,
+        }
+    window: dict[str, Any] = {"kind": spec.window.kind}
     if spec.window.kind != "mission":
         if spec.window.event is not None:
-            lines.append(f"event = {_toml_value(spec.window.event)}")
-        lines += [
-            f"before = {_toml_value(spec.window.before)}",
-            f"after = {_toml_value(spec.window.after)}",
-        ]
-    lines += ["", "[dispersions]"]
-    lines += [f"{_toml_key(n)} = {_toml_value(d.to_dict())}" for n, d in spec.dispersions.items()]
-    lines += ["", "[requirements]"]
-    for requirement in spec.requirements:
-        bounds = {
-            k: getattr(requirement, k)
-            for k in ("max", "min")
-            if getattr(requirement, k) is not None
-        }
-        lines.append(f"{_toml_key(requirement.metric)} = {_toml_value(bounds)}")
-    lines += [
-        "",
-        "[timeseries]",
-        f"keep = {_toml_value(spec.timeseries.keep)}",
-        f"signals = {_toml_value(list(spec.timeseries.signals))}",
-        "",
-    ]
-    return "\n".join(lines)
+            window["event"] = spec.window.event
+        window |= {"before": spec.window.before, "after": spec.window.after}
+    document |= {
+        "sampler": sampler,
+        "simulator": {"name": spec.simulator.name, "options": spec.simulator.option_dict},
+        "window": window,
+        "dispersions": {name: d.to_dict() for name, d in spec.dispersions.items()},
+        "requirements": {
+            r.metric: {k: getattr(r, k) for k in ("max", "min") if getattr(r, k) is not None}
+            for r in spec.requirements
+        },
+        "timeseries": {"keep": spec.timeseries.keep, "signals": list(spec.timeseries.signals)},
+    }
+    header = "# Resolved campaign spec written by oos campaign run (every default filled in).\n"
+    return header + tomli_w.dumps(document)

@@ -45,7 +45,13 @@ def multiplicative_uncertainty(spec: DesignSpecification | None = None):
             E[i, 0] = 1.0
             F = np.zeros((1, 3))
             F[0, j] = 1.0
-            delta = ultidyn(f"mul_{AXES[i]}{AXES[j]}", (1, 1), bound=1.0)
+            delta = ultidyn(
+                f"mul_{AXES[i]}{AXES[j]}",
+                (1, 1),
+                bound=1.0,
+                unit="-",
+                quantity="multiplicative dynamics",
+            )
             total = total + LFR.from_matrix(weight * E) * delta * LFR.from_matrix(F)
     return total
 
@@ -66,7 +72,9 @@ def uncertain_plant(plant, spec: DesignSpecification | None = None):
     plant = as_lfr(plant)
     if plant.shape != (3, 3):
         raise ValueError(f"uncertain_plant: plant must be 3x3 (T -> wdot), got {plant.shape}")
-    additive = spec.additive_weight * ultidyn("Delta_add", (3, 3), bound=1.0)
+    additive = spec.additive_weight * ultidyn(
+        "Delta_add", (3, 3), bound=1.0, unit="-", quantity="additive dynamics"
+    )
     return plant * multiplicative_uncertainty(spec) + additive
 
 

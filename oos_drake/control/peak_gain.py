@@ -275,12 +275,15 @@ class ModalResponse:
         return pruned_sigma(H) if prune else _sigma_max(H)
 
     def default_grid(self, points_per_decade: int = 12) -> np.ndarray:
-        """Per-model frequency grid [rad/s] from the poles (see :func:`frequency_grid`)."""
-        return frequency_grid(self.lam, points_per_decade)
+        """Per-model starting grid [rad/s] of the peak search (see :func:`peak_search_grid`)."""
+        return peak_search_grid(self.lam, points_per_decade)
 
 
-def frequency_grid(lam, points_per_decade: int = 12) -> np.ndarray:
-    """Per-model frequency grid [rad/s], shape (N, F), increasing along each row.
+def peak_search_grid(lam, points_per_decade: int = 12) -> np.ndarray:
+    """Per-model starting points [rad/s] of the H-infinity peak search, shape (N, F), increasing.
+
+    Not a general frequency grid (that is :func:`oos_drake.robust.lfr_analysis.frequency_grid`):
+    the brackets of this peak search, one row per model.
 
     ``0``; a log grid from ``0.05 min|lambda|`` to ``2 max|lambda|`` (beyond, a stable
     model's gain tends to ``sigma(D)``: one far point covers it); the damped frequency
@@ -491,7 +494,7 @@ def peak_gain(
         return PeakGain(np.where(unstable, np.inf, np.nan), np.full(N, np.nan), abscissa)
     if points_per_decade is None:
         points_per_decade = 12
-    grid = frequency_grid(lam, points_per_decade)
+    grid = peak_search_grid(lam, points_per_decade)
     values = sampler.sigma(grid, prune=True)
     if focus is None:
         near = np.arange(N)

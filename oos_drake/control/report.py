@@ -6,8 +6,9 @@ Files written by :func:`write_synthesis` in ``out_dir``:
     Gains with units, gamma (and the baseline's), the active models, the configuration list,
     the worst cases found, a SHA-256 of the model data, the design weights and options.
 ``closed_loop.npz`` / ``closed_loop.mat``
-    ``A, B, C, D`` of every closed loop ``d -> e`` of the final model set (leading dimension =
-    model), channel names, configuration index and parameter values.
+    ``A, B, C, D`` of every closed loop ``d -> e`` of the final model set, channel names,
+    configuration index and parameter values. The model index is the leading dimension in the
+    ``.npz`` (``A[k]``) and the last one in the ``.mat`` (MATLAB's ``A(:, :, k)``).
 ``models.parquet`` / ``models.csv``
     One row per model: configuration, parameters, gamma_i, peak frequency, flags.
 ``runs.csv``, ``worst_cases.csv``
@@ -21,11 +22,11 @@ from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
-import scipy.io
 
 from oos_drake.control.interconnection import DISTURBANCES, ERRORS, weighted_interconnection
 from oos_drake.control.plants import PlantArray
 from oos_drake.control.synthesis import SynthesisOptions, SynthesisResult
+from oos_drake.lfr.matfile import write_mat
 
 
 def _json_ready(value):
@@ -116,16 +117,15 @@ def write_synthesis(
     }
     paths["npz"] = out / "closed_loop.npz"
     np.savez_compressed(paths["npz"], **arrays, **names)
-    paths["mat"] = out / "closed_loop.mat"
-    scipy.io.savemat(
-        paths["mat"],
+    paths["mat"] = write_mat(
+        out / "closed_loop.mat",
         {
             **arrays,
             "inputs": np.array(DISTURBANCES, dtype=object),
             "outputs": np.array(ERRORS, dtype=object),
             "parameter_names": np.array(result.parameter_names, dtype=object),
         },
-        do_compression=True,
+        matrices="ABCD",
     )
     paths["parquet"] = out / "models.parquet"
     table.to_parquet(paths["parquet"], index=False)

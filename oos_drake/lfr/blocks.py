@@ -15,11 +15,18 @@ occurs in a model. Every block is normalized so that ``delta = 0`` is the nomina
 * ``ucomplex``: ``p = N + radius * delta`` with ``|delta| <= 1`` complex.
 * ``ultidyn``: ``Delta = bound * delta`` with ``||delta||_inf <= 1``.
 
+Every spec also carries what it stands for, from where it is created: ``unit`` (the physical unit
+of its value, ``"kg"``, ``"kg m^2"``, ``"rad/s"``, ``"-"``) and ``quantity`` (one of
+:data:`QUANTITIES`: ``"mass"``, ``"inertia"``, ``"modal frequency"``, ...). Both are ``""`` when
+not given; the algebra keeps them (merges, substitutions, ``lftdata``, ``.blocks``, ``to_mat``)
+so that nothing downstream guesses them from a block's name.
+
 The specs are frozen dataclasses; the algebra only keeps them in LFR block tables.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -27,6 +34,41 @@ import numpy as np
 
 #: Relative slack allowed when checking that a physical value lies in its block's range.
 RANGE_RTOL = 1e-9
+
+#: What an uncertain block may stand for (the ``quantity=`` of ``ureal``/``ucomplex``/``ultidyn``).
+#: ``angle``: a scheduled angle (its value is ``tan(angle / 4)``); ``switch``: a connection switch
+#: in [0, 1]; ``additive dynamics``/``multiplicative dynamics``: ``ultidyn`` blocks of the additive
+#: plant and multiplicative input uncertainty; ``dynamics``: any other ``ultidyn``.
+QUANTITIES = (
+    "mass",
+    "inertia",
+    "length",
+    "modal frequency",
+    "stiffness",
+    "damping",
+    "angle",
+    "switch",
+    "gain",
+    "dynamics",
+    "additive dynamics",
+    "multiplicative dynamics",
+)
+
+
+def _check_facts(spec) -> None:
+    """Validate ``unit`` and ``quantity`` of a spec (``""``: not given)."""
+    if not isinstance(spec.unit, str):
+        raise ValueError(f"{spec.kind} {spec.name!r}: unit must be a string, got {spec.unit!r}")
+    if spec.quantity not in QUANTITIES + ("",):
+        raise ValueError(
+            f"{spec.kind} {spec.name!r}: unknown quantity {spec.quantity!r}; use one of "
+            f"{', '.join(QUANTITIES)}"
+        )
+
+
+def _facts(spec) -> str:
+    facts = [f for f in (spec.quantity, f"[{spec.unit}]" if spec.unit else "") if f]
+    return f" ({' '.join(facts)})" if facts else ""
 
 
 def _check_name(name: object) -> str:
@@ -59,6 +101,10 @@ class UReal:
     mode : str
         How the user specified the range (``"plusminus"``, ``"percent"`` or ``"range"``);
         display only.
+    unit : str
+        Physical unit of the value (``"kg"``); ``""`` when not given.
+    quantity : str
+        What the parameter is, one of :data:`QUANTITIES`; ``""`` when not given.
     """
 
     name: str
@@ -66,11 +112,14 @@ class UReal:
     lower: float
     upper: float
     mode: str = field(default="range", compare=False)
+    unit: str = ""
+    quantity: str = ""
 
     kind = "ureal"
 
     def __post_init__(self):
         _check_name(self.name)
+        _check_facts(self)
         for label in ("nominal", "lower", "upper"):
             object.__setattr__(self, label, float(getattr(self, label)))
         for label, value in (
@@ -178,7 +227,7 @@ class UReal:
 
     def describe(self) -> str:
         return (
-            f"ureal {self.name}: nominal {self.nominal:.6g}, "
+            f"ureal {self.name}{_facts(self)}: nominal {self.nominal:.6g}, "
             f"range [{self.lower:.6g}, {self.upper:.6g}]"
         )
 
@@ -195,16 +244,21 @@ class UComplex:
         Nominal value (physical unit).
     radius : float
         Radius of the uncertainty disc around the nominal, > 0 (same unit).
+    unit, quantity : str
+        Physical unit and what the parameter is (:data:`QUANTITIES`); ``""`` when not given.
     """
 
     name: str
     nominal: complex
     radius: float
+    unit: str = ""
+    quantity: str = ""
 
     kind = "ucomplex"
 
     def __post_init__(self):
         _check_name(self.name)
+        _check_facts(self)
         if not (np.isfinite(self.nominal) and math.isfinite(self.radius)):
             raise ValueError(
                 f"ucomplex {self.name!r}: nominal {self.nominal!r} and radius {self.radius!r} "
@@ -258,7 +312,10 @@ class UComplex:
         return [1, 0]
 
     def describe(self) -> str:
-        return f"ucomplex {self.name}: nominal {self.nominal:.6g}, radius {self.radius:.6g}"
+        return (
+            f"ucomplex {self.name}{_facts(self)}: nominal {self.nominal:.6g}, "
+            f"radius {self.radius:.6g}"
+        )
 
 
 @dataclass(frozen=True)
@@ -273,16 +330,22 @@ class ULTIDyn:
         ``(p, q)``: ``Delta`` has ``p`` outputs (rows of ``w``) and ``q`` inputs (rows of ``z``).
     bound : float
         Gain bound (H-infinity norm bound), > 0.
+    unit, quantity : str
+        Unit of the gain (``"-"`` for a normalized perturbation) and what the block is
+        (:data:`QUANTITIES`, e.g. ``"additive dynamics"``); ``""`` when not given.
     """
 
     name: str
     io_shape: tuple[int, int]
     bound: float = 1.0
+    unit: str = ""
+    quantity: str = ""
 
     kind = "ultidyn"
 
     def __post_init__(self):
         _check_name(self.name)
+        _check_facts(self)
         shape = tuple(int(s) for s in np.atleast_1d(self.io_shape))
         if len(shape) == 1:
             shape = (shape[0], shape[0])
@@ -356,16 +419,26 @@ class ULTIDyn:
         return list(self.io_shape)
 
     def describe(self) -> str:
-        return f"ultidyn {self.name}: {self.io_shape[0]}x{self.io_shape[1]}, bound {self.bound:.6g}"
+        return (
+            f"ultidyn {self.name}{_facts(self)}: {self.io_shape[0]}x{self.io_shape[1]}, "
+            f"bound {self.bound:.6g}"
+        )
 
 
 Block = UReal | UComplex | ULTIDyn
 
 
 def same_block(first: Block, second: Block) -> bool:
-    """True when two specs describe the same block (same kind, name and normalization)."""
+    """True when two specs describe the same block (same kind, name and normalization).
+
+    ``unit`` and ``quantity`` must agree where both are given (``""`` matches anything).
+    """
     if type(first) is not type(second) or first.name != second.name:
         return False
+    for fact in ("unit", "quantity"):
+        given = {getattr(first, fact), getattr(second, fact)} - {""}
+        if len(given) > 1:
+            return False
     if isinstance(first, UReal):
         return all(
             math.isclose(a, b, rel_tol=1e-12, abs_tol=1e-300)
@@ -384,8 +457,28 @@ def same_block(first: Block, second: Block) -> bool:
     )
 
 
-def make_ureal_spec(name, nominal, *, percent=None, plusminus=None, range=None) -> UReal:  # noqa: A002
+def merge_facts(first: Block, second: Block) -> Block:
+    """``first`` with the ``unit`` and ``quantity`` that only ``second`` gives (same block)."""
+    missing = {
+        fact: getattr(second, fact)
+        for fact in ("unit", "quantity")
+        if not getattr(first, fact) and getattr(second, fact)
+    }
+    return dataclasses.replace(first, **missing) if missing else first
+
+
+def make_ureal_spec(
+    name,
+    nominal,
+    *,
+    percent=None,
+    plusminus=None,
+    range=None,  # noqa: A002
+    unit: str = "",
+    quantity: str = "",
+) -> UReal:
     """Build a :class:`UReal` spec from MATLAB-style arguments (see :func:`oos_drake.lfr.ureal`)."""
+    facts = {"unit": unit, "quantity": quantity}
     _check_name(name)
     try:
         nominal = float(nominal)
@@ -425,7 +518,9 @@ def make_ureal_spec(name, nominal, *, percent=None, plusminus=None, range=None) 
         if nominal == 0.0:
             raise ValueError(f"ureal {name!r}: percent uncertainty needs a nonzero nominal, got 0")
         scale = abs(nominal) / 100.0
-        return UReal(name, nominal, nominal + lo_pct * scale, nominal + hi_pct * scale, "percent")
+        return UReal(
+            name, nominal, nominal + lo_pct * scale, nominal + hi_pct * scale, "percent", **facts
+        )
     if plusminus is not None:
         lo_pm, hi_pm, scalar = pair(plusminus, "plusminus")
         if scalar is not None and scalar < 0:
@@ -435,8 +530,8 @@ def make_ureal_spec(name, nominal, *, percent=None, plusminus=None, range=None) 
                 f"ureal {name!r}: plusminus pair must be [-a, b] with a, b >= 0, "
                 f"got {list(plusminus)!r}"
             )
-        return UReal(name, nominal, nominal + lo_pm, nominal + hi_pm, "plusminus")
+        return UReal(name, nominal, nominal + lo_pm, nominal + hi_pm, "plusminus", **facts)
     arr = np.asarray(range, dtype=float).ravel()
     if arr.size != 2:
         raise ValueError(f"ureal {name!r}: range must be a pair (lower, upper), got {range!r}")
-    return UReal(name, nominal, float(arr[0]), float(arr[1]), "range")
+    return UReal(name, nominal, float(arr[0]), float(arr[1]), "range", **facts)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from oos_drake.lfr.blocks import Block, same_block
+from oos_drake.lfr.blocks import Block, merge_facts, same_block
 
 
 @dataclass(frozen=True)
@@ -298,7 +298,13 @@ class LFR:
 
     @property
     def blocks(self):
-        """``pandas.DataFrame``, one row per block: name, kind, repetitions, nominal, range, ..."""
+        """``pandas.DataFrame``, one row per block: name, kind, repetitions, nominal, range, ...
+
+        Columns ``name, kind, repetitions, nominal, range, radius, shape, quantity, unit``
+        (``kind``: ureal/ucomplex/ultidyn; ``radius``: ucomplex radius or ultidyn bound;
+        ``shape``: ``(p, q)`` of one occurrence; ``quantity``/``unit``: what the block stands
+        for).
+        """
         import pandas as pd
 
         rows = []
@@ -313,9 +319,21 @@ class LFR:
                     "range": spec.range,
                     "radius": getattr(spec, "radius", getattr(spec, "bound", None)),
                     "shape": spec.shape,
+                    "quantity": spec.quantity,
+                    "unit": spec.unit,
                 }
             )
-        columns = ["name", "kind", "repetitions", "nominal", "range", "radius", "shape"]
+        columns = [
+            "name",
+            "kind",
+            "repetitions",
+            "nominal",
+            "range",
+            "radius",
+            "shape",
+            "quantity",
+            "unit",
+        ]
         return pd.DataFrame(rows, columns=columns)
 
     @property
@@ -643,6 +661,7 @@ def _merge_blocks(systems: Sequence[LFR]):
                         f"uncertain block {name!r} is defined twice differently: "
                         f"{specs[name].describe()} vs {entry.spec.describe()}"
                     )
+                specs[name] = merge_facts(specs[name], entry.spec)
             else:
                 specs[name] = entry.spec
             counts[name] = counts.get(name, 0) + entry.reps

@@ -1,8 +1,11 @@
 """Store an LFR: MATLAB ``.mat`` (for the Robust Control Toolbox) or numpy ``.npz``, and load it.
 
-Both files hold the same variables (see :func:`to_mat`); the ``.mat`` puts model-array batch
-dimensions last (MATLAB), the ``.npz`` first (numpy). :func:`load_lfr` rebuilds the LFR from
-either. Files are written atomically (temporary file, then rename).
+MATLAB stores a model array as ``M(:, :, k)``: the batch dimensions come LAST; numpy puts them
+first (``M[k, :, :]``). :func:`matlab_layout` and :func:`numpy_layout` convert, and every ``.mat``
+file the package reads or writes goes through them, so a file from MATLAB's ``save`` reads right
+and a file we write loads in MATLAB with ``M(:, :, k)`` being model ``k``. Both files hold the same
+variables (see :func:`to_mat`); :func:`load_lfr` rebuilds the LFR from either. Files are written
+atomically (temporary file, then rename).
 """
 
 from __future__ import annotations
@@ -20,17 +23,97 @@ from oos_drake.lfr.core import LFR, BlockEntry
 __all__ = ["to_mat", "to_npz", "load_lfr"]
 
 
+def matlab_layout(array, core_ndim: int = 2) -> np.ndarray:
+    """``array`` with its leading batch dimensions moved last (numpy ``(..., r, c)`` -> MATLAB).
+
+    Parameters
+    ----------
+    array : array_like
+        ``(*batch, *core)`` array; the last ``core_ndim`` dimensions are the matrix.
+    core_ndim : int
+        Dimensions of one item (2 for a matrix).
+
+    Examples
+    --------
+    >>> matlab_layout(np.zeros((5, 3, 4))).shape
+    (3, 4, 5)
+    """
+    array = np.asarray(array)
+    batch = array.ndim - core_ndim
+    if batch <= 0:
+        return array
+    return np.moveaxis(array, tuple(range(batch)), tuple(range(core_ndim, array.ndim)))
+
+
+def numpy_layout(array, core_ndim: int = 2) -> np.ndarray:
+    """Inverse of :func:`matlab_layout`: MATLAB ``M(:, :, k)`` -> numpy ``M[k]``.
+
+    Examples
+    --------
+    >>> numpy_layout(np.zeros((3, 4, 5))).shape
+    (5, 3, 4)
+    """
+    array = np.asarray(array)
+    batch = array.ndim - core_ndim
+    if batch <= 0:
+        return array
+    return np.moveaxis(array, tuple(range(core_ndim, array.ndim)), tuple(range(batch)))
+
+
+def read_mat(path, matrices=()) -> dict[str, np.ndarray]:
+    """Variables of a ``.mat`` file; the named ``matrices`` in numpy layout (batch first).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        ``.mat`` file (MATLAB ``save``, v5 to v7.2 format, or :func:`scipy.io.savemat`).
+    matrices : iterable of str
+        Variables that are matrices or model arrays ``X(:, :, k, ...)``: returned as
+        ``X[k, ..., :, :]``. Other variables are returned as stored.
+    """
+    data = scipy.io.loadmat(Path(path))
+    names = set(matrices)
+    return {
+        k: numpy_layout(v) if k in names else np.asarray(v)
+        for k, v in data.items()
+        if not k.startswith("__")
+    }
+
+
+def write_mat(path, variables, matrices=()) -> Path:
+    """Write ``variables`` to a ``.mat`` file, the named ``matrices`` in MATLAB layout.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        Output file.
+    variables : dict
+        Name -> array (or scalar, cell-like object array).
+    matrices : iterable of str
+        Variables that are matrices or numpy model arrays ``(..., r, c)``; written as
+        ``(r, c, ...)`` so that MATLAB's ``X(:, :, k)`` is model ``k``.
+    """
+    names = set(matrices)
+    data = {k: matlab_layout(v) if k in names else v for k, v in variables.items()}
+    path = Path(path)
+    _atomic(
+        path, lambda stream: scipy.io.savemat(stream, data, do_compression=True, oned_as="column")
+    )
+    return path
+
+
 def to_mat(sys: LFR, path) -> None:
     """Write ``M = [A B; C D]``, the block table and the ``mussv`` BLK rows to ``path``.
 
     Variables: ``A, B, C, D`` (partitioned as ``docs/DESIGN.md``: ``B = [Bw Bu]``,
     ``C = [Cz; Cy]``), ``nstates, nz, nw, ny, nu``, ``blk`` (BLK rows), ``block_names`` (cell),
-    ``block_kinds`` (cell), ``repetitions``, ``nominal``, ``lower``, ``upper`` (ureal ranges,
-    NaN for
-    other kinds), ``radius`` (ucomplex radius / ultidyn bound, NaN for ureal) and ``block_shape``
-    (``p x q`` per block). Model arrays put the batch dimensions LAST, as MATLAB does
-    (``A(:, :, k)``). In MATLAB, ``lft(blkdiag(eye(nstates)/s, Delta), ss(A, B, C, D))`` with
-    ``Delta`` built from the table rebuilds the uncertain model.
+    ``block_kinds`` (cell: ureal/ucomplex/ultidyn), ``block_quantities`` and ``block_units``
+    (cells: what each block stands for and its unit, ``''`` when not given), ``repetitions``,
+    ``nominal``, ``lower``, ``upper`` (ureal ranges, NaN for other kinds), ``radius`` (ucomplex
+    radius / ultidyn bound, NaN for ureal) and ``block_shape`` (``p x q`` per block). Model
+    arrays put the batch dimensions LAST, as MATLAB does (``A(:, :, k)``). In MATLAB,
+    ``lft(blkdiag(eye(nstates)/s, Delta), ss(A, B, C, D))`` with ``Delta`` built from the table
+    rebuilds the uncertain model.
 
     Parameters
     ----------
@@ -43,16 +126,7 @@ def to_mat(sys: LFR, path) -> None:
     if path.suffix != ".mat":
         path = path.with_suffix(path.suffix + ".mat")
 
-    def last(x):
-        x = np.asarray(x)
-        return (
-            np.moveaxis(x, tuple(range(x.ndim - 2)), tuple(range(2, x.ndim))) if x.ndim > 2 else x
-        )
-
-    data = _variables(sys, last)
-    _atomic(
-        path, lambda stream: scipy.io.savemat(stream, data, do_compression=True, oned_as="column")
-    )
+    write_mat(path, _variables(sys), matrices="ABCD")
 
 
 def to_npz(sys: LFR, path) -> None:
@@ -60,8 +134,15 @@ def to_npz(sys: LFR, path) -> None:
     path = Path(path)
     if path.suffix != ".npz":
         path = path.with_suffix(path.suffix + ".npz")
-    data = _variables(sys, np.asarray)
-    for key in ("block_names", "block_kinds", "input_names", "output_names"):
+    data = _variables(sys)
+    for key in (
+        "block_names",
+        "block_kinds",
+        "block_quantities",
+        "block_units",
+        "input_names",
+        "output_names",
+    ):
         data[key] = np.array([str(x) for x in data[key]], dtype=str)
     _atomic(path, lambda stream: np.savez_compressed(stream, **data))
 
@@ -78,9 +159,9 @@ def _atomic(path: Path, write) -> None:
         raise
 
 
-def _variables(sys: LFR, layout) -> dict:
+def _variables(sys: LFR) -> dict:
+    """The variables of :func:`to_mat` in numpy layout (batch dimensions first)."""
     n = sys.nstates
-    last = layout
 
     specs = [entry.spec for entry in sys.block_entries]
     lower = [s.range[0] if s.kind == "ureal" else np.nan for s in specs]
@@ -93,10 +174,10 @@ def _variables(sys: LFR, layout) -> dict:
     if np.all(nominal.imag == 0):
         nominal = nominal.real
     data = {
-        "A": last(sys.M[..., :n, :n]),
-        "B": last(sys.M[..., :n, n:]),
-        "C": last(sys.M[..., n:, :n]),
-        "D": last(sys.M[..., n:, n:]),
+        "A": sys.M[..., :n, :n],
+        "B": sys.M[..., :n, n:],
+        "C": sys.M[..., n:, :n],
+        "D": sys.M[..., n:, n:],
         "nstates": n,
         "nz": sys.nz,
         "nw": sys.nw,
@@ -105,6 +186,8 @@ def _variables(sys: LFR, layout) -> dict:
         "blk": sys.blk.astype(float),
         "block_names": np.array([s.name for s in specs], dtype=object),
         "block_kinds": np.array([s.kind for s in specs], dtype=object),
+        "block_quantities": np.array([s.quantity for s in specs], dtype=object),
+        "block_units": np.array([s.unit for s in specs], dtype=object),
         "repetitions": np.array([e.reps for e in sys.block_entries], dtype=float),
         "nominal": nominal,
         "lower": np.array(lower, dtype=float),
@@ -129,23 +212,16 @@ def load_lfr(path) -> LFR:
     if not path.is_file():
         raise ValueError(f"{path}: no such file")
     if path.suffix == ".mat":
-        raw = {k: v for k, v in scipy.io.loadmat(path).items() if not k.startswith("__")}
-
-        def first(x):  # MATLAB layout: batch dimensions last
-            x = np.asarray(x)
-            return (
-                np.moveaxis(x, tuple(range(2, x.ndim)), tuple(range(x.ndim - 2)))
-                if x.ndim > 2
-                else x
-            )
+        raw = read_mat(path, matrices="ABCD")
 
         def strings(key):
-            return [str(np.ravel(x)[0]) for x in np.ravel(raw.get(key, np.zeros(0))) if np.size(x)]
+            # cells of strings; an empty string is stored as an empty array: keep its place
+            cells = np.ravel(raw.get(key, np.zeros(0, dtype=object)))
+            return [str(np.ravel(x)[0]) if np.size(x) else "" for x in cells]
 
     elif path.suffix == ".npz":
         with np.load(path) as stored:
             raw = {k: stored[k] for k in stored.files}
-        first = np.asarray
 
         def strings(key):
             return [str(x) for x in raw.get(key, [])]
@@ -159,21 +235,28 @@ def load_lfr(path) -> LFR:
     missing = [k for k in required if k not in raw]
     if missing:
         raise ValueError(f"{path}: not an LFR file, missing variable(s) {missing}")
-    A, B, C, D = (first(raw[k]) for k in "ABCD")
+    A, B, C, D = (np.asarray(raw[k]) for k in "ABCD")
     n = int(np.ravel(raw["nstates"])[0])
     vector = {k: np.ravel(raw[k]) for k in ("repetitions", "nominal", "lower", "upper")}
     radius = np.ravel(raw.get("radius", np.full(len(names), np.nan)))
     shapes = np.asarray(raw.get("block_shape", np.ones((len(names), 2)))).reshape(-1, 2)
+    quantities = strings("block_quantities") or [""] * len(names)
+    units = strings("block_units") or [""] * len(names)
     entries = []
     for k, (name, kind) in enumerate(zip(names, kinds, strict=True)):
+        facts = {"unit": units[k], "quantity": quantities[k]}
         if kind == "ureal":
             spec = UReal(
-                name, float(np.real(vector["nominal"][k])), vector["lower"][k], vector["upper"][k]
+                name,
+                float(np.real(vector["nominal"][k])),
+                vector["lower"][k],
+                vector["upper"][k],
+                **facts,
             )
         elif kind == "ucomplex":
-            spec = UComplex(name, complex(vector["nominal"][k]), float(radius[k]))
+            spec = UComplex(name, complex(vector["nominal"][k]), float(radius[k]), **facts)
         elif kind == "ultidyn":
-            spec = ULTIDyn(name, tuple(int(v) for v in shapes[k]), float(radius[k]))
+            spec = ULTIDyn(name, tuple(int(v) for v in shapes[k]), float(radius[k]), **facts)
         else:
             raise ValueError(f"{path}: block {name!r} has unknown kind {kind!r}")
         entries.append(BlockEntry(spec, int(vector["repetitions"][k])))

@@ -16,6 +16,8 @@ LFRs built by the algebra, e.g. ``m + m`` -> one occurrence, ``m * (u v^T)`` -> 
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from oos_drake.lfr.core import LFR, BlockEntry
@@ -143,7 +145,7 @@ def _transpose(sys: LFR) -> LFR:
     for entry in sys.block_entries:
         spec = entry.spec
         if isinstance(spec, ULTIDyn):
-            spec = ULTIDyn(spec.name, spec.io_shape[::-1], spec.bound)
+            spec = dataclasses.replace(spec, io_shape=spec.io_shape[::-1])
         entries.append(BlockEntry(spec, entry.reps))
     MH = np.conj(np.swapaxes(sys.M, -1, -2))
     return LFR(MH, sys.nstates, entries, input_names=sys.output_names, output_names=sys.input_names)

@@ -670,7 +670,9 @@ def lftdata(sys: LFR, names=None):
     Delta : LFR
         Block-diagonal normalized blocks (``ureal(name, 0, range=(-1, 1))``,
         ``ucomplex(name, 0, 1)``, ``ultidyn(name, shape, 1)``), each repeated as often as it occurs,
-        so that ``lft(Delta, M)`` is ``sys`` in normalized coordinates.
+        so that ``lft(Delta, M)`` is ``sys`` in normalized coordinates. Each normalized block
+        keeps the ``unit`` and ``quantity`` of the block it stands for (its value is ``delta``,
+        dimensionless; the unit says what ``delta`` scales).
     """
     from oos_drake.lfr.blocks import UComplex, ULTIDyn, UReal
     from oos_drake.lfr.core import BlockEntry, append_systems
@@ -713,12 +715,13 @@ def lftdata(sys: LFR, names=None):
         if entry.spec.name not in names:
             continue
         spec = entry.spec
+        facts = {"unit": spec.unit, "quantity": spec.quantity}
         if isinstance(spec, UReal):
-            unit = UReal(spec.name, 0.0, -1.0, 1.0)
+            unit = UReal(spec.name, 0.0, -1.0, 1.0, **facts)
         elif isinstance(spec, UComplex):
-            unit = UComplex(spec.name, 0.0, 1.0)
+            unit = UComplex(spec.name, 0.0, 1.0, **facts)
         else:
-            unit = ULTIDyn(spec.name, spec.io_shape, 1.0)
+            unit = ULTIDyn(spec.name, spec.io_shape, 1.0, **facts)
         atom = LFR(unit.atom(), 0, (BlockEntry(unit, 1),))
         atoms.extend([atom] * entry.reps)
     Delta = append_systems(atoms) if atoms else LFR.from_matrix(np.zeros((0, 0)))

@@ -2,10 +2,12 @@
 
 - :mod:`~oos_drake.multibody.modal_realization` (numpy only): exact rigid-body realization of a
   flexible appendage's ``M_P(s)`` by mode bodies on spring-damped revolute joints.
-- :mod:`~oos_drake.multibody.scenario_sdf`: SDF files of ``sdf/`` generated from the scenario data
-  (``oos sdf generate``); :mod:`~oos_drake.multibody.sdf_validation`: checks before parsing.
+- :mod:`~oos_drake.multibody.scenario_sdf`: SDF files (package data ``multibody/sdf/``)
+  generated from the scenario data (``oos sdf generate``);
+  :mod:`~oos_drake.multibody.sdf_validation`: checks before parsing.
 - :mod:`~oos_drake.multibody.scenario_plant`: ``build_scenario_diagram(connection)``: plant from
-  ``sdf/`` + modal residuals, floating joints, welds or docking bushings (Context parameters).
+  the SDF files + modal residuals, floating joints, welds or docking bushings (Context
+  parameters).
 - :mod:`~oos_drake.multibody.operating_point`: place the twin at a configuration and
   linearize it (``linearize_at``, ``linearize_time``, ``linearize_named``) into a
   ``control.StateSpace`` from the wrench at G1 to ``[a; wdot; w; rpy]``.

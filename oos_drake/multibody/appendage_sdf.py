@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from oos_drake.multibody.modal_realization import realize_appendage, rigid_spatial_inertia
+from oos_drake.multibody.modal_realization import realize_appendage
 from oos_drake.multibody.sdf_writer import Frame, Inertial, Joint, Link, Model, Pose
+from oos_drake.titop.spatial import rigid_spatial_inertia
 
 __all__ = ["appendage_model", "MODE_LINK", "MODE_JOINT", "ROOT_LINK"]
 
@@ -61,7 +62,7 @@ def appendage_model(
     """
     p_PS = np.asarray(p_PS, dtype=float)
     I_S = np.asarray(I_S, dtype=float)
-    D_P = rigid_spatial_inertia(mass, p_PS, I_S)
+    D_P = rigid_spatial_inertia(mass, I_S, p_PS)
     realization = realize_appendage(D_P, frequencies, damping_ratios, participations, name=name)
     links = [Link(ROOT_LINK, Inertial(mass, I_S, Pose(tuple(p_PS))))]
     joints = []

@@ -4,7 +4,7 @@ Examples::
 
     oos validate                      # moments 1-6, phase 7 and 8 sweeps; exit 1 on failure
     oos validate --cases moments      # only the six moments
-    oos sdf generate                  # rewrite sdf/ from oos_drake/scenario/data/paper.toml
+    oos sdf generate                  # rewrite multibody/sdf/ from scenario/data/paper.toml
     oos sdf check                     # exit 1 if the committed SDF files are stale
     oos ulinearize examples/servicer/servicer.sdf \
         --parameters examples/servicer/servicer_parameters.toml \
@@ -27,17 +27,17 @@ def _select(cases, group: str):
 
 
 def _validate(args: argparse.Namespace) -> int:
-    from oos_drake.multibody.cross_check import (
-        format_table,
-        frequency_grid,
-        run_validation,
-        validation_cases,
-    )
+    import numpy as np
+
+    from oos_drake.multibody.cross_check import format_table, run_validation, validation_cases
+    from oos_drake.robust.lfr_analysis import frequency_grid
     from oos_drake.scenario.data import load_scenario
 
     scenario = load_scenario(args.scenario)
     cases = _select(validation_cases(scenario), args.cases)
-    omega = frequency_grid(args.frequencies, args.f_min, args.f_max)
+    omega = frequency_grid(
+        omega_range=(2 * np.pi * args.f_min, 2 * np.pi * args.f_max), points=args.frequencies
+    )
     print(
         f"Drake twin vs TITOP LFR: 6x6 [F; T]@G1 -> [a; wdot]@G1, {args.frequencies} frequencies "
         f"{args.f_min:g}-{args.f_max:g} Hz; pass: response error <= {args.tolerance:g}, "

@@ -29,11 +29,12 @@ from oos_drake.multibody.operating_point import (
     linearize_at,
     operating_point,
 )
+from oos_drake.robust.lfr_analysis import frequency_grid
 
 __all__ = [
     "CaseResult",
     "ValidationCase",
-    "frequency_grid",
+    "VALIDATION_OMEGA",
     "relative_response_error",
     "match_roots",
     "transmission_zeros",
@@ -47,9 +48,8 @@ __all__ = [
 ]
 
 
-def frequency_grid(n: int = 400, f_min: float = 0.01, f_max: float = 100.0) -> np.ndarray:
-    """``n`` log-spaced angular frequencies [rad/s] from ``f_min`` to ``f_max`` [Hz]."""
-    return 2.0 * np.pi * np.logspace(np.log10(f_min), np.log10(f_max), n)
+#: Default validation frequencies: 400 log-spaced, 0.01 to 100 Hz [rad/s].
+VALIDATION_OMEGA = frequency_grid(omega_range=(2.0 * np.pi * 0.01, 2.0 * np.pi * 100.0), points=400)
 
 
 def _response(system, omega: np.ndarray) -> np.ndarray:
@@ -292,7 +292,7 @@ def run_validation(
     response_tolerance, root_tolerance : float
         Pass thresholds (relative).
     sdf_directory : str or Path, optional
-        SDF files of the twin (default: ``sdf/``).
+        SDF files of the twin (default: ``oos_drake/multibody/sdf/``).
     progress : callable, optional
         Called with each :class:`CaseResult` as soon as it is computed.
     """
@@ -304,7 +304,7 @@ def run_validation(
 
     scenario = load_scenario() if scenario is None else scenario
     cases = validation_cases(scenario) if cases is None else cases
-    omega = frequency_grid() if omega is None else omega
+    omega = VALIDATION_OMEGA if omega is None else omega
     builders = _titop_builders(scenario)
     models: dict[str, object] = {}
     results = []

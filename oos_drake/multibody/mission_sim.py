@@ -32,7 +32,7 @@ a window starting at 235 s and 1.37 mrad (-6 %) from 195 s; over [600, 660] s 0.
 t = 0, 0.21 mrad from 580 s and 0.26 mrad from 540 s. The largest attitude difference is
 0.5 mrad with a 20 s lead (6 % of the 7.9 mrad requirement) and 0.1 mrad with a 60 s lead. The
 campaign's initial-error dispersions (``phi0`` std 1 mrad, ``w0`` std 1e-4 rad/s in
-``campaigns/paper.toml``) are of the size of this residual; a longer ``before`` in the window
+the shipped spec ``paper.toml``) are of the size of this residual; a longer ``before`` in the window
 brings a window closer to the continuation, at the price of simulated time.
 """
 
@@ -50,8 +50,10 @@ from pydrake.math import RollPitchYaw
 from pydrake.multibody.tree import RotationalInertia, SpatialInertia
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 
+from oos_drake.lfr.blocks import RANGE_RTOL
 from oos_drake.multibody.flight_software import NOISE_CHANNELS
 from oos_drake.multibody.mission import ARRAYS, MissionDiagram, MissionOptions, make_mission_diagram
+from oos_drake.scenario.model import physical_blocks
 
 __all__ = [
     "MissionDiverged",
@@ -79,11 +81,14 @@ class MissionParameter:
     name : str
         Uncertain-block name (as in the LFR model) or initial-condition / seed name.
     unit : str
-        Unit of the physical value.
+        Unit of the physical value (an uncertain block's own unit).
     nominal, lower, upper : float
         Nominal value and valid range [unit].
-    kind : str
-        ``real_block``, ``stiffness``, ``initial_condition``, ``seed`` or ``lti``.
+    quantity : str
+        What the parameter is: the uncertain block's quantity (``"mass"``, ``"inertia"``,
+        ``"modal frequency"``, ``"stiffness"``, ``"damping"``, ``"additive dynamics"``,
+        ``"multiplicative dynamics"``, see :data:`oos_drake.lfr.blocks.QUANTITIES`), or
+        ``"initial condition"`` / ``"seed"``.
     description : str
         One line.
     """
@@ -93,77 +98,46 @@ class MissionParameter:
     nominal: float
     lower: float
     upper: float
-    kind: str
+    quantity: str
     description: str
 
 
+#: Valid range of the bushing stiffness [N/m or N m/rad] and damping [N s/m or N m s/rad] in the
+#: Drake mission (wider than the LFR docking blocks' ``[0, 2 x nominal]``: the bushing model
+#: holds from a loose capture to a stiff weld).
+BUSHING_RANGES = {"stiffness": (0.1, 1e6), "damping": (0.0, 1e4)}
+
+
 def mission_parameters(scenario) -> tuple[MissionParameter, ...]:
-    """Every dispersible parameter, with nominal values and ranges from the scenario data."""
-    target = scenario.hubs["RH2"]
-    params = []
-    r = target.mass_uncertainty_percent / 100.0
-    params.append(
-        MissionParameter(
-            "m_RH2",
-            "kg",
-            target.mass,
-            target.mass * (1 - r),
-            target.mass * (1 + r),
-            "real_block",
-            "target hub mass",
-        )
-    )
-    for i, axis in enumerate(("xx", "yy", "zz")):
-        J = float(target.inertia[i, i])
-        r = float(target.inertia_uncertainty_percent[i]) / 100.0
-        params.append(
-            MissionParameter(
-                f"J{axis}_RH2",
-                "kg m^2",
-                J,
-                J * (1 - r),
-                J * (1 + r),
-                "real_block",
-                f"target hub inertia J{axis} at G2",
-            )
-        )
+    """Every dispersible parameter, with nominal values and ranges from the scenario data.
+
+    The uncertain physical parameters are the scenario model's own blocks
+    (:func:`oos_drake.scenario.model.physical_blocks`): the target hub's mass and inertias, the
+    arrays' first mode frequencies and the docking spring-dampers, with the blocks' units,
+    quantities, nominal values and ranges (the bushings' ranges are :data:`BUSHING_RANGES`).
+    """
+    blocks = physical_blocks(scenario)
+    descriptions = {"m_RH2": "target hub mass"}
+    for axis in ("xx", "yy", "zz"):
+        descriptions[f"J{axis}_RH2"] = f"target hub inertia J{axis} at G2"
     for array in ARRAYS:
-        model = scenario.arrays[array].model
-        w = float(model.omega[0])
-        r = model.first_mode_uncertainty_percent / 100.0
+        descriptions[f"w1_{array}"] = f"first cantilever mode frequency of {array}"
+    for sm in ("SM1", "SM2"):
+        descriptions |= {
+            f"k_shear_{sm}": f"{sm} final shear stiffness",
+            f"k_tors_{sm}": f"{sm} final torsional stiffness",
+            f"d_shear_{sm}": f"{sm} shear damping",
+            f"d_tors_{sm}": f"{sm} torsional damping",
+        }
+    params = []
+    for name, description in descriptions.items():
+        block = blocks[name]
+        lower, upper = BUSHING_RANGES.get(block.quantity, block.range)
         params.append(
             MissionParameter(
-                f"w1_{array}",
-                "rad/s",
-                w,
-                w * (1 - r),
-                w * (1 + r),
-                "real_block",
-                f"first cantilever mode frequency of {array}",
+                name, block.unit, block.nominal, lower, upper, block.quantity, description
             )
         )
-    k, d = scenario.docking.rigid_stiffness, scenario.docking.damping
-    for sm in ("SM1", "SM2"):
-        params += [
-            MissionParameter(
-                f"k_shear_{sm}", "N/m", k, 0.1, 1e6, "stiffness", f"{sm} final shear stiffness"
-            ),
-            MissionParameter(
-                f"k_tors_{sm}",
-                "N m/rad",
-                k,
-                0.1,
-                1e6,
-                "stiffness",
-                f"{sm} final torsional stiffness",
-            ),
-            MissionParameter(
-                f"d_shear_{sm}", "N s/m", d, 0.0, 1e4, "stiffness", f"{sm} shear damping"
-            ),
-            MissionParameter(
-                f"d_tors_{sm}", "N m s/rad", d, 0.0, 1e4, "stiffness", f"{sm} torsional damping"
-            ),
-        ]
     for axis in AXES:
         params.append(
             MissionParameter(
@@ -172,7 +146,7 @@ def mission_parameters(scenario) -> tuple[MissionParameter, ...]:
                 0.0,
                 -0.05,
                 0.05,
-                "initial_condition",
+                "initial condition",
                 f"initial hub attitude error ({axis})",
             )
         )
@@ -184,7 +158,7 @@ def mission_parameters(scenario) -> tuple[MissionParameter, ...]:
                 0.0,
                 -0.01,
                 0.01,
-                "initial_condition",
+                "initial condition",
                 f"initial hub body rate error ({axis})",
             )
         )
@@ -208,7 +182,7 @@ def mission_parameters(scenario) -> tuple[MissionParameter, ...]:
                     0.0,
                     -1.0,
                     1.0,
-                    "lti",
+                    "multiplicative dynamics",
                     f"entry {row}{col} of the multiplicative actuator all-pass perturbation",
                 )
             )
@@ -219,7 +193,7 @@ def mission_parameters(scenario) -> tuple[MissionParameter, ...]:
             0.0,
             -1.0,
             1.0,
-            "lti",
+            "additive dynamics",
             "scale of the additive plant all-pass perturbation",
         )
     )
@@ -407,11 +381,13 @@ class MissionSimulation:
                 raise ValueError(f"mission: unknown parameter {name!r}; known: {', '.join(out)}")
             p = self._by_name[name]
             value = float(value)
-            if not (math.isfinite(value) and p.lower <= value <= p.upper):
+            # a bound written in decimal may miss the block's computed range by round-off
+            slack = RANGE_RTOL * max(1.0, abs(p.lower), abs(p.upper))
+            if not (math.isfinite(value) and p.lower - slack <= value <= p.upper + slack):
                 raise ValueError(
                     f"mission: {name} = {value:g} {p.unit} outside [{p.lower:g}, {p.upper:g}]"
                 )
-            out[name] = value
+            out[name] = min(max(value, p.lower), p.upper)
         return out
 
     def schedule(self, values: Mapping[str, float]) -> _Schedule:

@@ -47,54 +47,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from oos_drake.titop.spatial import rigid_spatial_inertia, skew
+
 __all__ = [
     "ModeBody",
     "ModalRealization",
-    "skew",
-    "spatial_inertia_at_point",
-    "rigid_spatial_inertia",
     "realize_appendage",
     "realize_mode",
     "is_physical_spatial_inertia",
 ]
-
-
-def skew(vector: np.ndarray) -> np.ndarray:
-    """Return the cross-product matrix ``[v]x`` of a 3-vector (``skew(a) @ b == cross(a, b)``)."""
-    x, y, z = np.asarray(vector, dtype=float)
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
-def spatial_inertia_at_point(mass: float, p_PScm: np.ndarray, I_Scm: np.ndarray) -> np.ndarray:
-    """Return the 6x6 spatial inertia about point ``P`` in ``[translation; rotation]`` order.
-
-    Parameters
-    ----------
-    mass : float
-        Body mass [kg].
-    p_PScm : array_like, shape (3,)
-        Position of the centre of mass from ``P`` [m].
-    I_Scm : array_like, shape (3, 3)
-        Central inertia [kg m^2], same frame.
-
-    Returns
-    -------
-    numpy.ndarray, shape (6, 6)
-        ``[[m I, -m [r]x], [m [r]x, I_Scm - m [r]x^2]]`` (the paper's
-        ``D_P = tau_SP^T diag(m I, J_S) tau_SP``).
-    """
-    r = skew(p_PScm)
-    out = np.zeros((6, 6))
-    out[:3, :3] = mass * np.eye(3)
-    out[:3, 3:] = -mass * r
-    out[3:, :3] = mass * r
-    out[3:, 3:] = np.asarray(I_Scm, dtype=float) - mass * r @ r
-    return out
-
-
-def rigid_spatial_inertia(mass: float, p_PScm: np.ndarray, I_Scm: np.ndarray) -> np.ndarray:
-    """Alias of :func:`spatial_inertia_at_point` named after the paper's ``D_P``."""
-    return spatial_inertia_at_point(mass, p_PScm, I_Scm)
 
 
 @dataclass(frozen=True)
@@ -142,7 +103,7 @@ class ModeBody:
     @property
     def spatial_inertia(self) -> np.ndarray:
         """``M_i``: 6x6 spatial inertia about ``P`` [kg, kg m, kg m^2]."""
-        return spatial_inertia_at_point(self.mass, self.p_PScm, self.I_Scm)
+        return rigid_spatial_inertia(self.mass, self.I_Scm, self.p_PScm)
 
     @property
     def twist(self) -> np.ndarray:
@@ -286,7 +247,7 @@ def realize_mode(
     alpha = float(g @ g) / float(n @ g)
     for _ in range(60):
         I_Scm = rank_one + alpha * (np.eye(3) - np.outer(n, n))
-        if is_physical_spatial_inertia(spatial_inertia_at_point(mass, np.zeros(3), I_Scm)):
+        if is_physical_spatial_inertia(rigid_spatial_inertia(mass, I_Scm)):
             break
         alpha *= 2.0
     else:  # pragma: no cover - the loop always succeeds for alpha large enough

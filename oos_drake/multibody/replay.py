@@ -1,10 +1,8 @@
-"""Self-contained HTML 3D replay of one campaign run (``oos campaign replay DIR --case N``).
+"""Meshcat recording of logged mission states: the drawing behind ``oos campaign replay``.
 
-:func:`replay_case` re-simulates run ``N`` of a campaign exactly as the campaign ran it (same
-simulator options, dispersed values, seed and mission window, read back from the campaign
-directory), then plays the logged plant states into a Meshcat recording and writes
-``meshcat.StaticHtml()`` atomically to ``DIR/replay/case_N.html``: one file, no server, that any
-browser opens (scene, animation, play/pause and time-scale controls under *Animations*).
+:func:`record` draws the mission's bodies and records one animation frame per logged plant state;
+:func:`oos_drake.campaign.replay.replay_case` re-simulates a campaign run and writes the recording
+as a self-contained HTML page.
 
 The SDF models carry no visual geometry, so the replay draws simple shapes on the plant's bodies
 (nothing is added to the plant, the simulated dynamics are the campaign's):
@@ -30,20 +28,9 @@ coordinates are in the campaign's time series).
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-from pathlib import Path
-
 import numpy as np
 
-__all__ = [
-    "ReplayResult",
-    "default_speed",
-    "equivalent_box",
-    "record",
-    "replay_case",
-    "replay_path",
-]
+__all__ = ["default_speed", "equivalent_box", "record", "recording_html"]
 
 #: Meshcat root path of the replay's objects.
 ROOT = "/oos"
@@ -74,49 +61,6 @@ _COLORS = {
 }
 
 
-@dataclass(frozen=True)
-class ReplayResult:
-    """What :func:`replay_case` wrote.
-
-    Attributes
-    ----------
-    path : Path
-        The HTML file (``DIR/replay/case_N.html``).
-    run_id : int
-        Replayed run.
-    start, end : float
-        Simulated window [s] (``end`` is the last logged sample when the run diverged).
-    frame_rate : float
-        Logged samples per simulated second [Hz] (the simulator's ``log_rate``).
-    frames : int
-        Frames in the recording (``round((end - start) * frame_rate) + 1``).
-    speed : float
-        Playback speed (simulated seconds per second of animation) [-].
-    status : str
-        ``"ok"`` or ``"diverged"`` (the replay shows the run up to the divergence).
-    error : str
-        Divergence message (empty if ``ok``).
-    bytes : int
-        Size of the HTML file [B].
-    """
-
-    path: Path
-    run_id: int
-    start: float
-    end: float
-    frame_rate: float
-    frames: int
-    speed: float
-    status: str
-    error: str
-    bytes: int
-
-
-def replay_path(directory: str | Path, run_id: int) -> Path:
-    """``DIR/replay/case_N.html``: where the replay of run ``run_id`` goes."""
-    return Path(directory) / "replay" / f"case_{int(run_id)}.html"
-
-
 def equivalent_box(mass: float, inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Sides and axes of the uniform box with a body's mass and central inertia.
 
@@ -143,45 +87,6 @@ def equivalent_box(mass: float, inertia: np.ndarray) -> tuple[np.ndarray, np.nda
     total = moments.sum()
     squares = 6.0 * (total - 2.0 * moments) / mass
     return np.sqrt(np.maximum(squares, MIN_SIDE**2)), axes
-
-
-class _Capture:
-    """Keeps the root context of the last run of a :class:`MissionSimulation` (its logs)."""
-
-    def __init__(self, simulation):
-        self.context = None
-        self.simulation = simulation
-
-    def __call__(self, context) -> None:
-        self.context = context
-
-    def states(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.simulation.state_log(self.context)
-
-
-def _load_case(directory: Path, run_id: int):
-    from oos_drake.campaign.runner import case_from_plan_row, load_campaign
-
-    spec, plan = load_campaign(directory)
-    matches = plan[plan["run_id"] == int(run_id)]
-    if matches.empty:
-        raise ValueError(
-            f"--case {run_id}: no such run in {directory} (the plan has runs 0..{len(plan) - 1})"
-        )
-    return spec, case_from_plan_row(spec, matches.iloc[0])
-
-
-def _mission_simulation(spec):
-    from oos_drake.campaign.drake_simulator import DrakeMissionSimulator
-    from oos_drake.campaign.simulator import build_simulator
-
-    simulator = build_simulator(spec.simulator)
-    if not isinstance(simulator, DrakeMissionSimulator):
-        raise ValueError(
-            f"simulator {spec.simulator.name!r} has no 3D model to replay (replay needs the Drake "
-            "mission simulator oos_drake.campaign.drake_simulator:make_simulator)"
-        )
-    return simulator.simulation
 
 
 def _visuals(handles):
@@ -306,6 +211,40 @@ def record(meshcat, handles, times: np.ndarray, states: np.ndarray, speed: float
     return n
 
 
+def recording_html(
+    handles, times: np.ndarray, states: np.ndarray, speed: float = 1.0, *, meshcat=None
+) -> tuple[str, int]:
+    """:func:`record` the states and return the recording as a self-contained HTML page.
+
+    Parameters
+    ----------
+    handles, times, states, speed
+        As for :func:`record`.
+    meshcat : pydrake.geometry.Meshcat, optional
+        Visualizer to record into (default: a new one on a free local port, closed after).
+
+    Returns
+    -------
+    html : str
+        ``meshcat.StaticHtml()`` with the published recording.
+    frames : int
+        Frames recorded.
+    """
+    owned = meshcat is None
+    if owned:
+        from pydrake.geometry import Meshcat, MeshcatParams
+
+        params = MeshcatParams()
+        params.host = "localhost"
+        meshcat = Meshcat(params)
+    frames = record(meshcat, handles, times, states, speed)
+    meshcat.PublishRecording()
+    html = meshcat.StaticHtml()
+    if owned:
+        meshcat = None  # closes the server and its port
+    return html, frames
+
+
 def default_speed(duration: float) -> float:
     """Playback speed that shows ``duration`` [s] in at most :data:`PLAYBACK_TARGET` seconds.
 
@@ -316,88 +255,3 @@ def default_speed(duration: float) -> float:
         if duration / speed <= PLAYBACK_TARGET + 1e-9:
             return float(speed)
     return float(SPEEDS[-1])
-
-
-def replay_case(
-    directory: str | Path, run_id: int, *, speed: float | None = None, meshcat=None
-) -> ReplayResult:
-    """Re-simulate run ``run_id`` of a campaign and write its HTML 3D replay.
-
-    Parameters
-    ----------
-    directory : str or Path
-        Campaign directory (``oos campaign run --out``).
-    run_id : int
-        Run to replay (``--case``).
-    speed : float, optional
-        Playback speed [-] (simulated seconds per second of animation; the viewer's *Animations*
-        panel can change it further). Default: :func:`default_speed` of the window.
-    meshcat : pydrake.geometry.Meshcat, optional
-        Visualizer to record into (default: a new one on a free local port, closed after).
-
-    Returns
-    -------
-    ReplayResult
-
-    Raises
-    ------
-    ValueError
-        Not a campaign directory, unknown run id, a simulator without a 3D model, or a bad
-        ``speed``; nothing is written then.
-    """
-    from oos_drake.multibody.mission_sim import MissionDiverged
-
-    directory = Path(directory)
-    if speed is not None and not (
-        isinstance(speed, int | float) and math.isfinite(speed) and speed > 0
-    ):
-        raise ValueError(f"replay speed must be a positive number, got {speed!r}")
-    spec, case = _load_case(directory, run_id)
-    capture = _Capture(_mission_simulation(spec))
-    status, error = "ok", ""
-    try:
-        capture.simulation.run(
-            dict(case.values),
-            seed=case.seed,
-            start=case.window.start,
-            end=case.window.end,
-            log=False,
-            on_start=capture,
-        )
-    except MissionDiverged as exc:
-        status, error = "diverged", str(exc)
-    if capture.context is None:
-        raise ValueError(f"run {run_id}: the simulation did not start ({error})")
-    times, states = capture.states()
-    if times.size == 0:
-        raise ValueError(f"run {run_id}: no logged state to replay ({error or 'empty window'})")
-    if speed is None:
-        speed = default_speed(case.window.end - case.window.start)
-    owned = meshcat is None
-    if owned:
-        from pydrake.geometry import Meshcat, MeshcatParams
-
-        params = MeshcatParams()
-        params.host = "localhost"
-        meshcat = Meshcat(params)
-    frames = record(meshcat, capture.simulation.handles, times, states, float(speed))
-    meshcat.PublishRecording()
-    html = meshcat.StaticHtml()
-    if owned:
-        meshcat = None  # closes the server and its port
-    from oos_drake.campaign.store import atomic_write_text
-
-    path = atomic_write_text(html, replay_path(directory, case.run_id))
-    size = len(html.encode("utf-8"))
-    return ReplayResult(
-        path=path,
-        run_id=case.run_id,
-        start=float(times[0]),
-        end=float(times[-1]),
-        frame_rate=float(capture.simulation.options.log_rate),
-        frames=frames,
-        speed=float(speed),
-        status=status,
-        error=error,
-        bytes=size,
-    )

@@ -1,7 +1,8 @@
-"""Factory of the scenario's Drake twin: MultibodyPlant from ``sdf/`` plus the Drake-only parts.
+"""Factory of the scenario's Drake twin: MultibodyPlant from the SDF files plus Drake-only parts.
 
-``build_scenario_diagram(connection)`` parses ``sdf/oos_scenario.sdf`` (after validating every
-SDF file it includes), then
+``build_scenario_diagram(connection)`` parses ``oos_scenario.sdf`` of
+:data:`~oos_drake.multibody.scenario_sdf.SDF_DIRECTORY` (after validating every SDF file it
+includes), then
 
 - adds the modal residual bodies of the four arrays (exact ``M_P(s)``, see
   :mod:`oos_drake.multibody.modal_realization`);

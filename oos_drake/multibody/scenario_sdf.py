@@ -1,6 +1,6 @@
 """Generate the scenario's SDF files from the scenario data file (the single source of truth).
 
-Files (in ``sdf/`` at the repository root)::
+Files (package data in ``oos_drake/multibody/sdf/``, :data:`SDF_DIRECTORY`)::
 
     hub_RH1.sdf           chaser hub: link RH1 (frame R_RH1 at G1), frames P1, P2, J0, D1
     hub_RH2.sdf           target hub: link RH2 (R_RH2 at G2), frames P3, P4, D2, D3
@@ -37,6 +37,7 @@ from oos_drake.multibody.sdf_writer import (
     pose_from_matrix,
     to_sdf_text,
 )
+from oos_drake.resources import package_path
 
 __all__ = [
     "SDF_DIRECTORY",
@@ -50,7 +51,8 @@ __all__ = [
     "arm_joint_name",
 ]
 
-SDF_DIRECTORY = Path(__file__).resolve().parents[2] / "sdf"
+#: The generated SDF files, shipped as package data (``oos_drake/multibody/sdf/``).
+SDF_DIRECTORY = package_path("oos_drake.multibody", "sdf")
 ASSEMBLY_FILE = "oos_scenario.sdf"
 ASSEMBLY_MODEL = "oos_scenario"
 ARM_MODEL = "arm"

@@ -1,8 +1,10 @@
 """``oos robust mussv|hinfnorm``: mu bounds and H-infinity norms of matrices stored in files.
 
 Files are ``.npz`` (numpy) or ``.mat`` (MATLAB, e.g. written by ``save``): ``mussv`` reads the
-variables ``M`` (``(..., sum(c), sum(r))``) and ``blk`` (MATLAB BLK rows); ``hinfnorm`` reads
-``A``, ``B``, ``C``, ``D`` (optionally with leading batch dims).
+variables ``M`` and ``blk`` (MATLAB BLK rows); ``hinfnorm`` reads ``A``, ``B``, ``C``, ``D``.
+Model arrays are shaped as each format's home does: in a ``.mat`` file the batch dimensions come
+last (MATLAB's ``M(:, :, k)``, ``sum(c) x sum(r) x K``), in a ``.npz`` file first
+(``M[k]``, ``(K, sum(c), sum(r))``).
 
 Examples::
 
@@ -28,9 +30,9 @@ def _load(path: str, names) -> dict:
         with np.load(p) as data:
             found = {k: np.asarray(data[k]) for k in data.files}
     elif p.suffix == ".mat":
-        from scipy.io import loadmat
+        from oos_drake.lfr.matfile import read_mat
 
-        found = {k: np.asarray(v) for k, v in loadmat(p).items() if not k.startswith("__")}
+        found = read_mat(p, matrices=("M", "A", "B", "C", "D"))
     else:
         raise ValueError(f"{path}: expected a .npz or .mat file, got {p.suffix or 'no suffix'!r}")
     missing = [n for n in names if n not in found]

@@ -151,15 +151,35 @@ def delta_channel_response(A, Bw, Cz, Dzw, omega) -> np.ndarray:
     return out.reshape(batch + out.shape[1:])
 
 
-def frequency_grid(A, *, points_per_decade: int = 40, omega_range=None) -> np.ndarray:
+def frequency_grid(
+    A=None, *, points_per_decade: int = 40, omega_range=None, points: int | None = None
+) -> np.ndarray:
     """Frequencies [rad/s] that resolve the dynamics of ``A`` (or several ``A``).
 
-    A logarithmic grid from a decade below the slowest to a decade above the fastest non-zero
-    pole, plus, around each lightly damped pole (damping ratio ``zeta < 0.3``), a local grid of
-    spacing ``zeta * omega_n / 2`` over ``+-6 zeta omega_n`` so that resonances of damping 0.01 are
-    sampled at their peak.
+    The package's one frequency grid. A logarithmic grid from a decade below the slowest to a
+    decade above the fastest non-zero pole (or over ``omega_range``), plus, around each lightly
+    damped pole (damping ratio ``zeta < 0.3``), a local grid of spacing ``zeta * omega_n / 2``
+    over ``+-6 zeta omega_n`` so that resonances of damping 0.01 are sampled at their peak.
+
+    Parameters
+    ----------
+    A : array_like, shape (..., n, n), optional
+        State matrices whose poles the grid resolves; None: a plain logarithmic grid over
+        ``omega_range``.
+    points_per_decade : int
+        Density of the logarithmic grid.
+    omega_range : (float, float), optional
+        ``(lowest, highest)`` frequency [rad/s]; default: from the poles.
+    points : int, optional
+        Number of points of the logarithmic grid (instead of ``points_per_decade``).
+
+    Examples
+    --------
+    >>> grid = frequency_grid(omega_range=(2 * np.pi * 0.01, 2 * np.pi * 100.0), points=400)
+    >>> grid.size, round(grid[0] / (2 * np.pi), 6), round(grid[-1] / (2 * np.pi), 6)
+    (400, 0.01, 100.0)
     """
-    A = np.asarray(A)
+    A = np.zeros((0, 0)) if A is None else np.asarray(A)
     poles = (
         np.linalg.eigvals(A.reshape((-1,) + A.shape[-2:])).ravel() if A.shape[-1] else np.array([])
     )
@@ -173,7 +193,8 @@ def frequency_grid(A, *, points_per_decade: int = 40, omega_range=None) -> np.nd
     else:
         lo, hi = omega_range
     decades = max(np.log10(hi / lo), 1.0)
-    grid = [np.logspace(np.log10(lo), np.log10(hi), int(points_per_decade * decades) + 1)]
+    count = int(points_per_decade * decades) + 1 if points is None else int(points)
+    grid = [np.logspace(np.log10(lo), np.log10(hi), count)]
     if nz.size:
         p = poles[mag > 1e-9 * max(1.0, mag.max())]
         wn = np.abs(p)

@@ -52,6 +52,9 @@ from typing import Any
 
 import numpy as np
 
+from oos_drake.resources import package_path
+from oos_drake.titop.spatial import rigid_spatial_inertia
+
 __all__ = [
     "DEFAULT_SCENARIO_PATH",
     "Arm",
@@ -69,11 +72,9 @@ __all__ = [
     "ScenarioError",
     "Waypoints",
     "load_scenario",
-    "skew",
-    "spatial_inertia",
 ]
 
-DEFAULT_SCENARIO_PATH = Path(__file__).resolve().parent / "data" / "paper.toml"
+DEFAULT_SCENARIO_PATH = package_path("oos_drake.scenario", "data", "paper.toml")
 
 _ARRAY_NAMES = ("SA1", "SA2", "SA3", "SA4")
 _HUB_NAMES = ("RH1", "RH2")
@@ -100,50 +101,6 @@ class ScenarioError(ValueError):
         self.body = body
         self.detail = detail
         super().__init__(f"{body}: {detail}")
-
-
-# ----------------------------------------------------------------------------------------------
-# small math helpers (also used by kinematics)
-# ----------------------------------------------------------------------------------------------
-def skew(v: np.ndarray) -> np.ndarray:
-    """Skew-symmetric cross-product matrix, ``skew(v) @ w = v x w``; batched over ``v[..., 3]``."""
-    v = np.asarray(v, dtype=float)
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1] = -v[..., 2]
-    out[..., 0, 2] = v[..., 1]
-    out[..., 1, 0] = v[..., 2]
-    out[..., 1, 2] = -v[..., 0]
-    out[..., 2, 0] = -v[..., 1]
-    out[..., 2, 1] = v[..., 0]
-    return out
-
-
-def spatial_inertia(mass: float, inertia_at_com: np.ndarray, p_P_com: np.ndarray) -> np.ndarray:
-    """Rigid spatial inertia at a point P, 6x6, ``[translation; rotation]`` ordering.
-
-    .. math:: D_P = \\tau_{GP}^T \\operatorname{diag}(m I_3, J_G) \\tau_{GP},\\quad
-              \\tau_{GP} = \\begin{bmatrix} I_3 & [\\vec{GP}]_\\times \\\\ 0 & I_3 \\end{bmatrix}
-
-    Parameters
-    ----------
-    mass : float
-        Body mass [kg].
-    inertia_at_com : (3, 3) array
-        Inertia tensor at the centre of mass G [kg m^2], same frame as ``p_P_com``.
-    p_P_com : (3,) array
-        Vector P -> G [m].
-
-    Returns
-    -------
-    (6, 6) ndarray
-        ``D_P`` such that ``[F; T_P] = D_P [a_P; wdot]`` for the rigid body.
-    """
-    tau_GP = np.eye(6)
-    tau_GP[:3, 3:] = skew(-np.asarray(p_P_com, dtype=float))  # skew(GP) with GP = -PG
-    D_G = np.zeros((6, 6))
-    D_G[:3, :3] = mass * np.eye(3)
-    D_G[3:, 3:] = inertia_at_com
-    return tau_GP.T @ D_G @ tau_GP
 
 
 def _ro(values: Any, shape: tuple[int, ...] | None = None) -> np.ndarray:
@@ -187,7 +144,7 @@ class RigidHub:
     @property
     def spatial_inertia(self) -> np.ndarray:
         """``D_G = diag(m I3, J_G)`` (6x6) [kg, kg m^2]."""
-        return spatial_inertia(self.mass, self.inertia, np.zeros(3))
+        return rigid_spatial_inertia(self.mass, self.inertia, np.zeros(3))
 
     @property
     def mass_range(self) -> tuple[float, float]:
@@ -253,7 +210,7 @@ class FlexibleArrayModel:
     @property
     def rigid_spatial_inertia(self) -> np.ndarray:
         """``D_P``: rigid spatial inertia of the array at P in R_SA (6x6) [kg, kg m, kg m^2]."""
-        return spatial_inertia(self.mass, self.inertia, self.p_P_S)
+        return rigid_spatial_inertia(self.mass, self.inertia, self.p_P_S)
 
     @property
     def residual_mass(self) -> np.ndarray:
@@ -322,7 +279,7 @@ class ArmLink:
     @property
     def spatial_inertia_at_joint(self) -> np.ndarray:
         """Rigid spatial inertia at J_i in R_Li (6x6)."""
-        return spatial_inertia(self.mass, self.inertia, self.p_J_G)
+        return rigid_spatial_inertia(self.mass, self.inertia, self.p_J_G)
 
 
 @dataclass(frozen=True, eq=False)

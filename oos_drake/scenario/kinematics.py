@@ -38,8 +38,9 @@ from types import MappingProxyType
 
 import numpy as np
 
-from oos_drake.scenario.data import Scenario, load_scenario, skew
+from oos_drake.scenario.data import Scenario, load_scenario
 from oos_drake.scenario.timeline import Configuration, mission_timeline
+from oos_drake.titop.spatial import rigid_spatial_inertia, skew
 
 __all__ = [
     "BODY_NAMES",
@@ -558,12 +559,7 @@ def rigid_spatial_inertia_at_G1(
         pose = poses.bodies[name]
         r = poses.centers_of_mass[name]  # G1 -> CoM in R_RH1
         J = pose.R @ inertia @ np.swapaxes(pose.R, -1, -2)
-        S = skew(r)
-        block = np.zeros(batch + (6, 6))
-        block[..., :3, :3] = mass * np.eye(3)
-        block[..., :3, 3:] = -mass * S
-        block[..., 3:, :3] = mass * S
-        block[..., 3:, 3:] = J - mass * (S @ S)
+        block = rigid_spatial_inertia(mass, J, r)
         weight = connected[..., None, None] if name in _TARGET_BODIES else 1.0
         total += weight * block
     return total

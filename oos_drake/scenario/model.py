@@ -65,6 +65,7 @@ __all__ = [
     "MissionValues",
     "build_mission_model",
     "build_docking_model",
+    "physical_blocks",
     "attitude_model",
     "configuration_values",
     "mission_values",
@@ -148,15 +149,61 @@ def _hub_parameters(hub):
     return mass, inertia
 
 
+def _first_mode_parameter(mount):
+    """First cantilever mode frequency ``w1_<array>`` [rad/s]: a ureal if the data say uncertain."""
+    model = mount.model
+    percent = float(model.first_mode_uncertainty_percent)
+    return relative_parameter(
+        mode_frequency_name(mount.name, 1),
+        float(model.omega[0]),
+        percent if percent > 0 else None,
+        unit="rad/s",
+        quantity="modal frequency",
+    )
+
+
+def _spring_damper_blocks(name: str, docking) -> dict:
+    """Default blocks of spring-damper ``name`` (``SM1``, ``SM2``): ranges ``[0, 2 x nominal]``."""
+    return spring_damper_parameters(
+        name,
+        stiffness=(docking.rigid_stiffness, docking.rigid_stiffness),
+        damping=(docking.damping, docking.damping),
+        stiffness_range=(0.0, 2.0 * docking.rigid_stiffness),
+        damping_range=(0.0, 2.0 * docking.damping),
+    )
+
+
+def physical_blocks(scenario=None) -> dict:
+    """The scenario's uncertain physical parameters as the models create them.
+
+    Hub masses and inertias, first array mode frequencies and the docking spring-dampers' default
+    blocks (those the scenario data declare uncertain), each with its unit, quantity, nominal and
+    range; the scheduled blocks (angles, switches) are not included.
+
+    Returns
+    -------
+    dict
+        Block name -> block spec (:class:`~oos_drake.lfr.blocks.UReal`), sorted by name.
+    """
+    scenario = _scenario(scenario)
+    parts = [p for hub in scenario.hubs.values() for p in _hub_parameters(hub)]
+    parts += [_first_mode_parameter(mount) for mount in scenario.arrays.values()]
+    for name in ("SM1", "SM2"):
+        parts += list(_spring_damper_blocks(name, scenario.docking).values())
+    blocks = {}
+    for part in parts:
+        if isinstance(part, LFR):
+            blocks.update(part.uncertainty)
+    return dict(sorted(blocks.items()))
+
+
 def _array_component(mount, parent_frame: str) -> Component:
     """Array k on its hub: ``T0^T T_theta^T (-M_P(s)) T_theta T0`` (16 tau + 2 w occurrences)."""
     model = mount.model
     k = mount.name[-1]
     omega = np.asarray(model.omega, dtype=float)
-    percent = float(model.first_mode_uncertainty_percent)
-    uncertain = {}
-    if percent > 0:
-        uncertain[0] = relative_parameter(mode_frequency_name(mount.name, 1), omega[0], percent)
+    first = _first_mode_parameter(mount)
+    uncertain = {} if isinstance(first, float) else {0: first}
     appendage = flexible_appendage(
         model.rigid_spatial_inertia,
         np.asarray(model.participation, dtype=float).T,  # data: one row per mode
@@ -366,13 +413,7 @@ def _docking_model(phase: str, scenario, spring_dampers) -> LFR:
     for sm in active:
         given = (spring_dampers or {}).get(sm)
         if given is None:
-            blocks = spring_damper_parameters(
-                sm,
-                stiffness=(docking.rigid_stiffness, docking.rigid_stiffness),
-                damping=(docking.damping, docking.damping),
-                stiffness_range=(0.0, 2.0 * docking.rigid_stiffness),
-                damping_range=(0.0, 2.0 * docking.damping),
-            )
+            blocks = _spring_damper_blocks(sm, docking)
         else:
             blocks = dict(given)
         params[sm] = blocks

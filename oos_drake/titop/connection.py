@@ -110,13 +110,19 @@ def spring_damper_parameters(
 
     check_name(name, "spring-damper name")
     blocks = {}
-    for label, nominal, value_range in (
-        ("k_shear", stiffness[0], stiffness_range),
-        ("k_tors", stiffness[1], stiffness_range),
-        ("d_shear", damping[0], damping_range),
-        ("d_tors", damping[1], damping_range),
+    for label, nominal, value_range, unit, quantity in (
+        ("k_shear", stiffness[0], stiffness_range, "N/m", "stiffness"),
+        ("k_tors", stiffness[1], stiffness_range, "N m/rad", "stiffness"),
+        ("d_shear", damping[0], damping_range, "N s/m", "damping"),
+        ("d_tors", damping[1], damping_range, "N m s/rad", "damping"),
     ):
-        blocks[label] = ureal(f"{label}_{name}", float(nominal), range=tuple(value_range))
+        blocks[label] = ureal(
+            f"{label}_{name}",
+            float(nominal),
+            range=tuple(value_range),
+            unit=unit,
+            quantity=quantity,
+        )
     return blocks
 
 

@@ -57,16 +57,23 @@ def angle_parameter(name: str):
     ----------
     name : str
         Block name, e.g. ``"tau_theta1"`` or ``"tau_alpha3"``.
+
+    Returns
+    -------
+    LFR
+        ``ureal`` of quantity ``"angle"``, unit ``"-"`` (its value is ``tan(angle / 4)``).
     """
-    return ureal(check_name(name), 0.0, range=(-1.0, 1.0))
+    return ureal(check_name(name), 0.0, range=(-1.0, 1.0), unit="-", quantity="angle")
 
 
 def connection_parameter(name: str):
     """Connection switch ``delta_C`` in ``[0, 1]`` (nominal 0.5, affine), e.g. ``"delta_C1"``."""
-    return ureal(check_name(name), 0.5, range=(0.0, 1.0))
+    return ureal(check_name(name), 0.5, range=(0.0, 1.0), unit="-", quantity="switch")
 
 
-def relative_parameter(name: str, nominal: float, percent: float | None):
+def relative_parameter(
+    name: str, nominal: float, percent: float | None, *, unit: str = "", quantity: str = ""
+):
     """Return ``ureal(name, nominal, percent=percent)`` (a plain float if ``percent`` is None).
 
     Parameters
@@ -74,15 +81,19 @@ def relative_parameter(name: str, nominal: float, percent: float | None):
     name : str
         Block name.
     nominal : float
-        Nominal value [unit of the quantity].
+        Nominal value [unit].
     percent : float or None
         Relative uncertainty [%] (``value = nominal (1 + percent/100 delta)``, ``|delta| <= 1``).
+    unit, quantity : str
+        Physical unit and what the parameter is (see :func:`oos_drake.lfr.ureal`).
     """
     if percent is None:
         return float(nominal)
     if percent < 0:
         raise ValueError(f"{name}: uncertainty percent must be >= 0, got {percent}")
-    return ureal(check_name(name), float(nominal), percent=float(percent))
+    return ureal(
+        check_name(name), float(nominal), percent=float(percent), unit=unit, quantity=quantity
+    )
 
 
 def mass_name(body: str) -> str:

@@ -75,7 +75,7 @@ def uncertain_mass(body: str, nominal: float, percent: float | None):
     """Mass parameter ``m_<body>`` [kg] (ureal with relative ``percent``, or a float if None)."""
     if not nominal > 0:
         raise ValueError(f"{body}: mass must be > 0 kg, got {nominal}")
-    return relative_parameter(mass_name(body), nominal, percent)
+    return relative_parameter(mass_name(body), nominal, percent, unit="kg", quantity="mass")
 
 
 def uncertain_inertia(body: str, inertia_G, percent: float | Sequence[float] | None) -> LFR:
@@ -101,7 +101,7 @@ def uncertain_inertia(body: str, inertia_G, percent: float | Sequence[float] | N
     percents = np.broadcast_to(np.asarray(percent, dtype=float), (3,))
     off_diagonal = inertia_G - np.diag(np.diag(inertia_G))
     diagonal = [
-        relative_parameter(name, inertia_G[k, k], percents[k])
+        relative_parameter(name, inertia_G[k, k], percents[k], unit="kg m^2", quantity="inertia")
         for k, name in enumerate(inertia_names(body))
     ]
     return as_lfr(off_diagonal) + append(*[as_lfr(d) for d in diagonal])

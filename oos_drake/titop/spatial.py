@@ -45,13 +45,26 @@ def _vector3(value, what: str) -> np.ndarray:
 def skew(vector) -> np.ndarray:
     """Return the cross-product matrix ``(*v)`` with ``skew(v) @ u == cross(v, u)``.
 
+    The package's one cross-product matrix (TITOP blocks, scenario kinematics, Drake modal
+    bodies use it).
+
     Parameters
     ----------
-    vector : array_like, shape (3,)
-        Vector ``v`` [any unit].
+    vector : array_like, shape (..., 3)
+        Vector(s) ``v`` [any unit]; leading dimensions are a batch.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 3, 3)
     """
-    x, y, z = _vector3(vector, "skew")
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    v = np.asarray(vector, dtype=float)
+    if v.shape[-1:] != (3,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"skew: expected finite 3-vector(s), got shape {v.shape}")
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
 
 
 def kinematic_matrix(p_PB) -> np.ndarray:
@@ -168,28 +181,39 @@ def rank2_factors(vector) -> tuple[np.ndarray, np.ndarray]:
 def rigid_spatial_inertia(mass, inertia_G, p_PG=(0.0, 0.0, 0.0)) -> np.ndarray:
     """Rigid spatial inertia ``D_P = tau_GP^T diag(m I3, J_G) tau_GP`` at point ``P`` (6x6).
 
+    The package's one spatial-inertia helper; arguments always in this order: mass, inertia at
+    the centre of mass, vector from the reference point to the centre of mass.
+
+    .. math:: D_P = \\begin{bmatrix} m I_3 & -m [p]_\\times \\\\ m [p]_\\times &
+              J_G - m [p]_\\times^2 \\end{bmatrix}, \\qquad p = \\vec{PG}
+
     Parameters
     ----------
     mass : float
         Body mass ``m`` [kg].
-    inertia_G : array_like, shape (3, 3)
+    inertia_G : array_like, shape (..., 3, 3)
         Inertia tensor at the center of mass ``G`` [kg m^2].
-    p_PG : array_like, shape (3,)
-        Vector from ``P`` to ``G`` [m] (same frame as ``inertia_G``).
+    p_PG : array_like, shape (..., 3)
+        Vector from ``P`` to ``G`` [m] (same frame as ``inertia_G``); batch dimensions of
+        ``inertia_G`` and ``p_PG`` broadcast.
 
     Returns
     -------
-    numpy.ndarray, shape (6, 6)
-        ``D_P`` with ``W_P = D_P xdd_P`` for the wrench applied to the body at ``P``.
+    numpy.ndarray, shape (..., 6, 6)
+        ``D_P`` with ``W_P = D_P xdd_P`` for the wrench applied to the body at ``P``
+        ``[translation; rotation]``.
     """
     inertia_G = np.asarray(inertia_G, dtype=float)
-    if inertia_G.shape != (3, 3):
+    if inertia_G.shape[-2:] != (3, 3):
         raise ValueError(f"rigid_spatial_inertia: inertia must be 3x3, got {inertia_G.shape}")
-    d_G = np.zeros((6, 6))
-    d_G[:3, :3] = float(mass) * np.eye(3)
-    d_G[3:, 3:] = inertia_G
-    tau_GP = kinematic_matrix(-_vector3(p_PG, "rigid_spatial_inertia p_PG"))
-    return tau_GP.T @ d_G @ tau_GP
+    S = skew(p_PG)
+    batch = np.broadcast_shapes(inertia_G.shape[:-2], S.shape[:-2])
+    out = np.zeros(batch + (6, 6))
+    out[..., :3, :3] = float(mass) * np.eye(3)
+    out[..., :3, 3:] = -mass * S
+    out[..., 3:, :3] = mass * S
+    out[..., 3:, 3:] = inertia_G - mass * (S @ S)
+    return out
 
 
 def effective_mass(participation) -> np.ndarray:

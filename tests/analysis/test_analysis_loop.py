@@ -60,3 +60,39 @@ def test_real_blocks_of_the_plant_are_kept():
     k = ureal("k_gain", 1.0, percent=10)
     closed = close_loop(k * LFR.from_ss(A, B, C, D), K)
     assert "k_gain" in closed.uncertainty
+
+
+def test_subsets_follow_the_blocks_quantities_not_their_names():
+    """A renamed block keeps its subset; a name that looks modal does not make a block modal."""
+    import control
+
+    from oos_drake.analysis.subsets import uncertainty_subsets
+    from oos_drake.lfr import ultidyn, ureal
+
+    s = control.tf("s")
+    sys = (
+        ureal("flex_mode_a", 8.0, percent=20, unit="rad/s", quantity="modal frequency")
+        * (1 / (s + 1))
+        + ureal("w1_not_modal", 25.0, percent=10, unit="kg", quantity="mass") * (1 / (s + 2))
+        + ultidyn("u_add", (1, 1), unit="-", quantity="additive dynamics")
+        + ultidyn("Delta_add", (1, 1), unit="-", quantity="multiplicative dynamics")
+    )
+    subsets = uncertainty_subsets(sys.uncertainty)
+    assert subsets["modal"] == ["flex_mode_a"]
+    assert subsets["mechanical"] == ["w1_not_modal"]
+    assert subsets["real"] == ["flex_mode_a", "w1_not_modal"]
+    assert subsets["additive"] == ["u_add"]
+    assert subsets["multiplicative"] == ["Delta_add"]
+    # the mission blocks keep their subsets when renamed
+    from dataclasses import replace
+
+    from oos_drake.scenario.model import physical_blocks
+
+    blocks = physical_blocks()
+    renamed = {f"p{i}": replace(b, name=f"p{i}") for i, b in enumerate(blocks.values())}
+    original = uncertainty_subsets(blocks)
+    again = uncertainty_subsets(renamed)
+    lookup = {f"p{i}": name for i, name in enumerate(blocks)}
+    for subset, members in original.items():
+        assert sorted(lookup[m] for m in again[subset]) == members
+    assert set(original) == {"total", "real", "modal", "mechanical"}

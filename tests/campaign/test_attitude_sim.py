@@ -109,18 +109,22 @@ def test_same_seed_same_run_other_seed_other_noise():
     assert sim.run(RunCase(0, 12, values, window)).metrics != a
 
 
-def test_expm_small_matches_scipy():
-    import scipy.linalg
-
-    from oos_drake.campaign.attitude_sim import expm_small
-
-    rng = np.random.default_rng(4)
-    for scale in (1e-3, 0.3, 5.0, 60.0):
-        matrix = rng.standard_normal((7, 7)) * scale
-        expected = scipy.linalg.expm(matrix)
-        np.testing.assert_allclose(
-            expm_small(matrix), expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max()
-        )
+def test_zero_order_hold_model_matches_ode_integration():
+    """(Ad, Bd) over one period equal a tight ODE integration of x' = A x + B u, u held."""
+    sim = FlexibleAttitudeSimulator(control_rate=2.0)
+    values = _nominal(sim)
+    for docked in (False, True):
+        A, B = sim.continuous_model(values, docked)
+        Ad, Bd = sim.discrete_model(values, docked)
+        period = 1.0 / sim.control_rate
+        for column, x0, u in [(None, np.zeros(6), 1.0)] + [
+            (j, np.eye(6)[j], 0.0) for j in range(6)
+        ]:
+            solution = scipy.integrate.solve_ivp(
+                lambda t, x, A=A, B=B, u=u: A @ x + B * u, (0.0, period), x0, rtol=1e-12, atol=1e-14
+            )
+            expected = Ad[:, column] if column is not None else Bd
+            np.testing.assert_allclose(solution.y[:, -1], expected, rtol=1e-8, atol=1e-11)
 
 
 def test_cheap_simulator_passes_the_protocol_check():

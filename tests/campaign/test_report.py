@@ -10,6 +10,7 @@ import pytest
 from oos_drake.campaign.cli import main as cli_main
 from oos_drake.campaign.report import weighted_quantile, write_report
 from oos_drake.campaign.runner import run_campaign
+from oos_drake.campaign.spec import SPEC_DIRECTORY
 
 from .spec_texts import BASE_SPEC
 
@@ -73,9 +74,8 @@ def test_effective_sample_size():
 
 
 def test_mu_guided_report_states_the_weight_shares(tmp_path):
-    from pathlib import Path
 
-    root = Path(__file__).resolve().parents[2] / "campaigns"
+    root = SPEC_DIRECTORY
     text = (
         (root / "demo_mu.toml")
         .read_text()

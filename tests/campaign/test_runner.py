@@ -121,7 +121,7 @@ def test_kill_9_then_resume_loses_and_repeats_nothing(write_spec, tmp_path, work
     spec = write_spec(text)
     killed = tmp_path / "killed"
     process = subprocess.Popen(
-        _oos("run", spec, "--out", killed, "--workers", workers, "--no-progress"),
+        _oos("run", spec, "--out", killed, "--workers", workers, "--quiet"),
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         start_new_session=True,
@@ -150,7 +150,7 @@ def test_kill_9_then_resume_loses_and_repeats_nothing(write_spec, tmp_path, work
     (killed / "runs" / ".run_000029.parquet.abc.tmp").write_bytes(b"PAR1 truncated")
 
     result = subprocess.run(
-        _oos("resume", killed, "--workers", workers, "--no-progress"),
+        _oos("resume", killed, "--workers", workers, "--quiet"),
         capture_output=True,
         text=True,
         timeout=180,

@@ -189,3 +189,51 @@ def test_truncated_normal_is_a_density_on_its_support(mean, std, low, width):
     u = np.linspace(0.0, 1.0, 21)
     x = dist.ppf(u)
     assert np.all(np.diff(x) >= 0) and x[0] >= low and x[-1] <= high
+
+
+def _truncated_normal_moments(mean, std, low, high):
+    """Mean and variance of a truncated normal, closed form (math.erf; no scipy)."""
+    a, b = (low - mean) / std, (high - mean) / std
+    phi = [math.exp(-0.5 * z * z) / math.sqrt(2 * math.pi) for z in (a, b)]
+    mass = 0.5 * (math.erf(b / math.sqrt(2)) - math.erf(a / math.sqrt(2)))
+    shift = (phi[0] - phi[1]) / mass
+    variance = std**2 * (1 + (a * phi[0] - b * phi[1]) / mass - shift**2)
+    return mean + std * shift, variance
+
+
+@pytest.mark.parametrize("sampler", ["monte-carlo", "latin-hypercube"])
+def test_planned_normal_dispersion_is_the_truncated_normal(write_spec, sampler):
+    """Plan values of a normal dispersion: KS test against the law, moments in closed form."""
+    text = BASE_SPEC.replace('"monte-carlo"', f'"{sampler}"').replace(
+        "n_runs = 12", "n_runs = 4000"
+    )
+    spec = load_spec(write_spec(text))
+    plan = make_plan(spec)
+    dist = spec.dispersions["omega_capture"]  # N(0, 0.004) truncated to [-0.01, 0.01]
+    x = plan["omega_capture [rad/s]"].to_numpy()
+    assert x.min() >= dist.low and x.max() <= dist.high
+    law = scipy.stats.truncnorm(dist.low / dist.std, dist.high / dist.std, scale=dist.std)
+    assert scipy.stats.kstest(x, law.cdf).pvalue > 1e-3
+    mean, variance = _truncated_normal_moments(dist.mean, dist.std, dist.low, dist.high)
+    # Monte Carlo: 5 standard errors; Latin hypercube stratifies, so it is much closer
+    tolerance = 5 * math.sqrt(variance / len(x)) if sampler == "monte-carlo" else 1e-3 * dist.std
+    assert abs(x.mean() - mean) < tolerance
+    assert x.var() == pytest.approx(variance, rel=0.1 if sampler == "monte-carlo" else 0.01)
+    # the uniform and log-uniform dispersions: KS against their laws
+    assert (
+        scipy.stats.kstest(plan["J_hub [kg m^2]"], scipy.stats.uniform(400, 200).cdf).pvalue > 1e-3
+    )
+    k = plan.filter(like="k_dock").iloc[:, 0]
+    assert scipy.stats.kstest(k, scipy.stats.loguniform(1e2, 1e5).cdf).pvalue > 1e-3
+    # a seed gives one plan
+    assert make_plan(spec).equals(plan)
+
+
+def test_latin_hypercube_marginals_are_uniform_and_seeded():
+    u = uniform_variates("latin-hypercube", 500, 4, np.random.default_rng(11))
+    for j in range(4):
+        assert scipy.stats.kstest(u[:, j], "uniform").pvalue > 1e-3
+    again = uniform_variates("latin-hypercube", 500, 4, np.random.default_rng(11))
+    np.testing.assert_array_equal(u, again)
+    other = uniform_variates("latin-hypercube", 500, 4, np.random.default_rng(12))
+    assert not np.array_equal(u, other)

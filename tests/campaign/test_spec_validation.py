@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from oos_drake.campaign.spec import load_spec, parse_spec, spec_to_toml
+from oos_drake.campaign.spec import SPEC_DIRECTORY, load_spec, parse_spec, spec_to_toml
 
 from .spec_texts import BASE_SPEC
 
@@ -186,8 +186,7 @@ def test_existing_campaign_directory_is_not_overwritten(write_spec, tmp_path):
 
 @pytest.mark.parametrize("name", ["demo.toml", "demo_mu.toml"])
 def test_shipped_demo_specs_are_valid(name):
-    from pathlib import Path
 
-    spec = load_spec(Path(__file__).resolve().parents[2] / "campaigns" / name)
+    spec = load_spec(SPEC_DIRECTORY / name)
     assert spec.simulator.name == "flexible-attitude" and spec.n_runs > 0
     assert [r.label for r in spec.requirements] == ["ape <= 0.0079 rad", "peak_torque <= 2 N m"]

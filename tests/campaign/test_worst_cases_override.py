@@ -1,13 +1,12 @@
 """`oos campaign run --worst-cases` points a mu-guided spec at another analysis output."""
 
-from pathlib import Path
-
 import pandas as pd
 import pytest
 
 from oos_drake.campaign.runner import prepare_campaign
+from oos_drake.campaign.spec import SPEC_DIRECTORY
 
-CAMPAIGNS = Path(__file__).resolve().parents[2] / "campaigns"
+CAMPAIGNS = SPEC_DIRECTORY
 
 
 def test_override_replaces_the_regions(tmp_path):

@@ -40,5 +40,9 @@ def test_synth_writes_every_output(tmp_path):
     npz = np.load(out / "closed_loop.npz")
     assert npz["A"].shape[0] == 3 and npz["B"].shape[-1] == 9 and npz["C"].shape[-2] == 6
     mat = scipy.io.loadmat(out / "closed_loop.mat")
-    np.testing.assert_allclose(mat["A"], npz["A"])
+    # MATLAB layout: model k is A(:, :, k)
+    assert mat["A"].shape == npz["A"].shape[1:] + (3,)
+    for k in range(3):
+        np.testing.assert_allclose(mat["A"][:, :, k], npz["A"][k])
+        np.testing.assert_allclose(mat["D"][:, :, k], npz["D"][k])
     assert pd.read_csv(out / "models.csv").shape[0] == 3

@@ -112,3 +112,46 @@ def test_other_block_errors():
         ultidyn("D", (1, 1), bound=0.0)
     with pytest.raises(ValueError, match="shape"):
         ultidyn("D", (0, 2))
+
+
+def test_unit_and_quantity_travel_through_the_algebra():
+    """Unit and quantity set at creation survive products, merges, usubs, lftdata and reduce."""
+    import control
+
+    from oos_drake.lfr import feedback, inv, lftdata
+
+    m = ureal("m", 2.0, percent=10, unit="kg", quantity="mass")
+    k = ureal("k", 100.0, plusminus=20.0, unit="N/m", quantity="stiffness")
+    dyn = ultidyn("D", (1, 1), unit="-", quantity="additive dynamics")
+    s = control.tf("s")
+    plant = feedback(inv(m) * (1 / s) * (1 / s), k)  # 1 / (m s^2 + k)
+    sys = plant * (1 + 0.1 * dyn) + 0.01 * m  # m occurs twice: merged by name
+    assert sys.occurrences["m"] == 2
+    expected = {
+        "D": ("-", "additive dynamics"),
+        "k": ("N/m", "stiffness"),
+        "m": ("kg", "mass"),
+    }
+    facts = {n: (b.unit, b.quantity) for n, b in sys.uncertainty.items()}
+    assert facts == expected
+    table = sys.blocks.set_index("name")
+    assert table.loc["m", "unit"] == "kg" and table.loc["k", "quantity"] == "stiffness"
+    left = usubs(sys, {"k": 110.0})
+    assert {n: (b.unit, b.quantity) for n, b in left.uncertainty.items()} == {
+        n: expected[n] for n in ("D", "m")
+    }
+    _, Delta = lftdata(sys)
+    assert {n: (b.unit, b.quantity) for n, b in Delta.uncertainty.items()} == expected
+    assert {n: (b.unit, b.quantity) for n, b in sys.reduce().uncertainty.items()} == expected
+
+
+def test_block_without_facts_merges_with_one_that_has_them_and_conflicts_are_errors():
+    plain = ureal("m", 2.0, percent=10)
+    described = ureal("m", 2.0, percent=10, unit="kg", quantity="mass")
+    merged = plain + described
+    assert merged.occurrences["m"] == 2
+    assert (merged.uncertainty["m"].unit, merged.uncertainty["m"].quantity) == ("kg", "mass")
+    with pytest.raises(ValueError, match="'m' is defined twice differently"):
+        described + ureal("m", 2.0, percent=10, unit="g", quantity="mass")
+    with pytest.raises(ValueError, match="unknown quantity 'weight'"):
+        ureal("m", 2.0, quantity="weight")

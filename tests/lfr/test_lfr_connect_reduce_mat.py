@@ -141,7 +141,7 @@ def test_reduce_keeps_ultidyn_blocks():
 
 
 def test_to_mat_round_trip(tmp_path):
-    m = ureal("m", 2.0, percent=10)
+    m = ureal("m", 2.0, percent=10, unit="kg", quantity="mass")
     c = ureal("c", 0.3, range=(0.1, 0.4))
     D = ultidyn("Dyn", (1, 1), bound=0.1)
     s = control.tf("s")
@@ -183,7 +183,7 @@ def test_star_product_general_sizes():
 def test_load_lfr_round_trips_mat_and_npz_model_arrays(tmp_path):
     from oos_drake.lfr import load_lfr
 
-    m = ureal("m", 2.0, percent=10)
+    m = ureal("m", 2.0, percent=10, unit="kg", quantity="mass")
     c = ureal("c", 0.3, range=(0.1, 0.4))
     D = ultidyn("Dyn", (1, 1), bound=0.1)
     s = control.tf("s")
@@ -201,3 +201,25 @@ def test_load_lfr_round_trips_mat_and_npz_model_arrays(tmp_path):
     with pytest.raises(ValueError, match="not an LFR file"):
         np.savez(tmp_path / "other.npz", A=np.eye(2))
         load_lfr(tmp_path / "other.npz")
+
+
+def test_to_mat_model_array_is_matlab_shaped_and_reads_back(tmp_path):
+    """A model array is written as MATLAB stores it (A(:, :, k) is model k) and read back."""
+    from oos_drake.lfr.matfile import read_mat
+
+    k = ureal("k", 2.0, percent=20, unit="N/m", quantity="stiffness")
+    s = control.tf("s")
+    sys = usubs(k * (1 / (s + 1)) + ureal("g", 1.0, percent=10), {"g": [0.95, 1.0, 1.05, 1.1]})
+    assert sys.batch_shape == (4,)
+    path = tmp_path / "array.mat"
+    sys.to_mat(path)
+    raw = scipy.io.loadmat(path)
+    n = sys.nstates
+    assert raw["D"].shape == sys.M[0, n:, n:].shape + (4,)
+    for j in range(4):
+        np.testing.assert_allclose(raw["D"][:, :, j], sys.M[j, n:, n:])
+    back = read_mat(path, matrices="ABCD")
+    np.testing.assert_allclose(back["D"], sys.M[..., n:, n:])
+    units = [str(np.ravel(x)[0]) for x in np.ravel(raw["block_units"])]
+    quantities = [str(np.ravel(x)[0]) for x in np.ravel(raw["block_quantities"])]
+    assert units == ["N/m"] and quantities == ["stiffness"]

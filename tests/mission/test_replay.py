@@ -5,17 +5,18 @@ from __future__ import annotations
 import base64
 import re
 import textwrap
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
+from oos_drake.campaign.spec import SPEC_DIRECTORY
+
 pytestmark = pytest.mark.drake
 
 msgpack = pytest.importorskip("msgpack")
 
-CAMPAIGNS = Path(__file__).resolve().parents[2] / "campaigns"
+CAMPAIGNS = SPEC_DIRECTORY
 LOG_RATE = 2.0  # [Hz]
 BEFORE, AFTER = 2.0, 4.0  # [s] around the capture (255 s)
 
@@ -81,7 +82,7 @@ def _track(clip: dict, name: str) -> list[dict]:
 
 def test_replay_writes_scene_and_animation_matching_the_run(campaign):
     from oos_drake.campaign import store
-    from oos_drake.multibody.replay import replay_case, replay_path
+    from oos_drake.campaign.replay import replay_case, replay_path
 
     run_id = 1
     result = replay_case(campaign, run_id)
@@ -139,7 +140,7 @@ def test_replay_shows_the_arm_tip_holding_the_target(campaign):
     """Composing the drawn shapes' offsets with the animated body poses gives a physical scene:
     at the capture the arm tip J7 is on the target's port D2 (the SM1 bushing closes the gap),
     while the hub port D1 is still far from the target's D3 (docking comes at 880 s)."""
-    from oos_drake.multibody.replay import replay_case
+    from oos_drake.campaign.replay import replay_case
 
     result = replay_case(campaign, 0)
     html = result.path.read_text()
@@ -163,7 +164,7 @@ def test_replay_shows_the_arm_tip_holding_the_target(campaign):
 
 
 def test_playback_speed_scales_the_frame_rate_not_the_frames(campaign):
-    from oos_drake.multibody.replay import replay_case
+    from oos_drake.campaign.replay import replay_case
 
     result = replay_case(campaign, 0, speed=5.0)
     clips = _animation(result.path.read_text())
@@ -174,7 +175,7 @@ def test_playback_speed_scales_the_frame_rate_not_the_frames(campaign):
 
 def test_bad_case_or_directory_is_rejected_and_writes_nothing(campaign, tmp_path):
     from oos_drake.campaign.cli import main
-    from oos_drake.multibody.replay import replay_case, replay_path
+    from oos_drake.campaign.replay import replay_case, replay_path
 
     with pytest.raises(ValueError, match=r"--case 7: no such run"):
         replay_case(campaign, 7)
@@ -190,8 +191,8 @@ def test_bad_case_or_directory_is_rejected_and_writes_nothing(campaign, tmp_path
 
 def test_campaign_without_a_3d_model_is_rejected(tmp_path):
     """The demo campaign's single-axis simulator has no bodies to draw."""
+    from oos_drake.campaign.replay import replay_case, replay_path
     from oos_drake.campaign.runner import run_campaign
-    from oos_drake.multibody.replay import replay_case, replay_path
 
     demo = (CAMPAIGNS / "demo.toml").read_text()
     assert "n_runs = 200" in demo and "after = 130.0" in demo
@@ -237,8 +238,8 @@ def Rotation_about_z(angle: float) -> np.ndarray:  # noqa: N802 - reads like the
 
 
 def test_diverging_run_is_replayed_up_to_the_divergence(tmp_path):
+    from oos_drake.campaign.replay import replay_case
     from oos_drake.campaign.runner import run_campaign
-    from oos_drake.multibody.replay import replay_case
 
     spec = SPEC.replace(
         "log_rate = 2.0 }", "log_rate = 2.0, divergence_limit = 1.0e-4, check_interval = 1.0 }"

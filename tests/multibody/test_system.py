@@ -7,8 +7,8 @@ pytestmark = pytest.mark.drake
 pytest.importorskip("pydrake")
 
 from oos_drake.multibody.cross_check import (  # noqa: E402
+    VALIDATION_OMEGA,
     compare_systems,
-    frequency_grid,
     run_validation,
     titop_state_space,
     validation_cases,
@@ -36,7 +36,7 @@ from oos_drake.scenario.timeline import mission_timeline  # noqa: E402
 
 SCENARIO = load_scenario()
 TIMELINE = mission_timeline(SCENARIO)
-OMEGA = frequency_grid()  # 400 frequencies, 0.01 .. 100 Hz
+OMEGA = VALIDATION_OMEGA  # 400 frequencies, 0.01 .. 100 Hz
 
 
 @pytest.fixture(scope="module")

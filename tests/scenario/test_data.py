@@ -11,9 +11,9 @@ from oos_drake.scenario.data import (
     DEFAULT_SCENARIO_PATH,
     ScenarioError,
     load_scenario,
-    skew,
-    spatial_inertia,
 )
+from oos_drake.titop.spatial import rigid_spatial_inertia as spatial_inertia
+from oos_drake.titop.spatial import skew
 
 PAPER_TEXT = DEFAULT_SCENARIO_PATH.read_text()
 

@@ -185,3 +185,33 @@ def test_well_posed_and_stable_over_the_mission_and_the_parameter_box(model):
     box, _ = usample(model, 20, np.random.default_rng(7))
     assert np.linalg.eigvals(box.M[..., :n, :n]).real.max() < 0
     assert np.all(np.isfinite(box.freqresp(np.array([0.0, 4.0]))))
+
+
+def test_every_block_of_the_mission_and_docking_models_has_a_unit_and_quantity():
+    """Units and quantities are set where the blocks are created (TITOP / scenario helpers)."""
+    from oos_drake.lfr.blocks import QUANTITIES
+    from oos_drake.scenario.model import build_docking_model, build_mission_model, physical_blocks
+
+    expected = {
+        "m_RH2": ("kg", "mass"),
+        "Jxx_RH2": ("kg m^2", "inertia"),
+        "w1_SA3": ("rad/s", "modal frequency"),
+        "tau_alpha2": ("-", "angle"),
+        "tau_theta1": ("-", "angle"),
+        "delta_C1": ("-", "switch"),
+        "k_shear_SM1": ("N/m", "stiffness"),
+        "k_tors_SM2": ("N m/rad", "stiffness"),
+        "d_shear_SM2": ("N s/m", "damping"),
+        "d_tors_SM1": ("N m s/rad", "damping"),
+    }
+    blocks = {**build_mission_model().uncertainty, **build_docking_model("8").uncertainty}
+    for block in blocks.values():
+        assert block.unit and block.quantity in QUANTITIES, block.describe()
+    for name, facts in expected.items():
+        assert (blocks[name].unit, blocks[name].quantity) == facts, name
+    # physical_blocks: the same specs as the models, scheduled blocks left out
+    physical = physical_blocks()
+    assert set(physical) == {n for n, b in blocks.items() if b.quantity not in ("angle", "switch")}
+    for name, block in physical.items():
+        if name in build_mission_model().uncertainty:
+            assert block == build_mission_model().uncertainty[name]

@@ -142,3 +142,22 @@ def test_bad_inputs_raise_value_errors():
         rotation_matrix_lfr(0.3, [0, 0, 1])
     with pytest.raises(ValueError, match="not a valid name"):
         angle_parameter("tau theta")
+
+
+def test_skew_and_spatial_inertia_are_batched_like_their_single_forms():
+    """Batched ``skew``/``rigid_spatial_inertia`` equal the per-item results (parallel axes)."""
+    rng = np.random.default_rng(21)
+    p = rng.normal(size=(4, 3))
+    A = rng.normal(size=(4, 3, 3))
+    J = A @ np.swapaxes(A, -1, -2) + np.eye(3)
+    S = skew(p)
+    D = rigid_spatial_inertia(1.7, J, p)
+    assert S.shape == (4, 3, 3) and D.shape == (4, 6, 6)
+    u = rng.normal(size=3)
+    for k in range(4):
+        np.testing.assert_allclose(S[k] @ u, np.cross(p[k], u), atol=1e-14)
+        np.testing.assert_allclose(D[k], rigid_spatial_inertia(1.7, J[k], p[k]), atol=1e-13)
+        parallel = J[k] + 1.7 * (p[k] @ p[k] * np.eye(3) - np.outer(p[k], p[k]))
+        np.testing.assert_allclose(D[k, 3:, 3:], parallel, rtol=1e-13)
+    with pytest.raises(ValueError, match="skew"):
+        skew([1.0, np.nan, 0.0])

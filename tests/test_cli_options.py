@@ -1,0 +1,84 @@
+"""One name per option across the ``oos`` commands; ``oos --version``; deprecated aliases."""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+
+import pytest
+
+from oos_drake import __version__
+from oos_drake.cli import build_parser
+
+#: Spellings replaced by one name across commands (old -> new); the old ones stay hidden aliases.
+RENAMED = {
+    "--jobs": "--workers",
+    "--no-progress": "--quiet",
+    "--fmin": "--f-min",
+    "--fmax": "--f-max",
+}
+
+
+def _commands(parser, prefix=()):
+    """``(path, parser)`` of every (sub)command of ``parser``."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield (*prefix, name), sub
+                yield from _commands(sub, (*prefix, name))
+
+
+def _visible_options(parser) -> set[str]:
+    return {
+        option
+        for action in parser._actions
+        if action.help != argparse.SUPPRESS
+        for option in action.option_strings
+    }
+
+
+def test_no_command_shows_an_old_spelling():
+    for path, parser in _commands(build_parser()):
+        shown = _visible_options(parser)
+        old = shown & set(RENAMED)
+        assert not old, f"oos {' '.join(path)} shows {old}; use {[RENAMED[o] for o in old]}"
+
+
+def test_long_running_commands_share_workers_and_quiet():
+    commands = dict(_commands(build_parser()))
+    for path in [("analyze",), ("campaign", "run"), ("campaign", "resume"), ("run",)]:
+        assert "--workers" in _visible_options(commands[path]), path
+    for path in [("analyze",), ("campaign", "run"), ("campaign", "resume")]:
+        assert "--quiet" in _visible_options(commands[path]), path
+    for path in [("analyze",), ("validate",)]:
+        assert {"--f-min", "--f-max"} <= _visible_options(commands[path]), path
+
+
+@pytest.mark.parametrize(
+    "argv, dest, value",
+    [
+        (["analyze", "--out", "x", "--jobs", "3"], "workers", 3),
+        (["analyze", "--out", "x", "--fmin", "0.01"], "f_min", 0.01),
+        (["campaign", "resume", "dir", "--no-progress"], "quiet", True),
+    ],
+)
+def test_old_spelling_still_works_and_says_it_is_deprecated(argv, dest, value):
+    with pytest.warns(DeprecationWarning, match="is deprecated, use --"):
+        args = build_parser().parse_args(argv)
+    assert getattr(args, dest) == value
+
+
+def test_new_spelling_defaults_are_kept_when_the_alias_is_absent():
+    args = build_parser().parse_args(["analyze", "--out", "x"])
+    assert args.workers == 2 and args.f_min == 0.005 and args.f_max == 5.0 and not args.quiet
+
+
+def test_version():
+    result = subprocess.run(
+        [sys.executable, "-m", "oos_drake.cli", "--version"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert result.stdout.strip() == f"oos_drake {__version__}"
