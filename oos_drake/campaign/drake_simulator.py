@@ -122,7 +122,7 @@ def make_simulator(**options) -> DrakeMissionSimulator:
 def paper_worst_cases(scenario=None):
     """Stand-in worst-case regions from the paper's published mu analysis (section 4).
 
-    Used by ``oos_drake/campaign/specs/paper.toml`` until ``oos analyze`` writes the analysis' own
+    Used by ``campaigns/paper.toml`` until ``oos analyze`` writes the analysis' own
     ``worst_cases.parquet`` (the pipeline points the spec at that file). Regions:
 
     - the mission peak of mu (paper: ``mu < 0.79`` around t = 275 s at 0.55 Hz), arm holding the

@@ -2,7 +2,7 @@
 
 - :mod:`~oos_drake.multibody.modal_realization` (numpy only): exact rigid-body realization of a
   flexible appendage's ``M_P(s)`` by mode bodies on spring-damped revolute joints.
-- :mod:`~oos_drake.multibody.scenario_sdf`: SDF files (package data ``multibody/sdf/``)
+- :mod:`~oos_drake.multibody.scenario_sdf`: SDF files (``sdf/``, package data ``multibody/sdf/``)
   generated from the scenario data (``oos sdf generate``);
   :mod:`~oos_drake.multibody.sdf_validation`: checks before parsing.
 - :mod:`~oos_drake.multibody.scenario_plant`: ``build_scenario_diagram(connection)``: plant from

@@ -4,7 +4,7 @@ Examples::
 
     oos validate                      # moments 1-6, phase 7 and 8 sweeps; exit 1 on failure
     oos validate --cases moments      # only the six moments
-    oos sdf generate                  # rewrite multibody/sdf/ from scenario/data/paper.toml
+    oos sdf generate                  # rewrite sdf/ from scenario/data/paper.toml
     oos sdf check                     # exit 1 if the committed SDF files are stale
     oos ulinearize examples/servicer/servicer.sdf \
         --parameters examples/servicer/servicer_parameters.toml \

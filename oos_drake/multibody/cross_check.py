@@ -292,7 +292,7 @@ def run_validation(
     response_tolerance, root_tolerance : float
         Pass thresholds (relative).
     sdf_directory : str or Path, optional
-        SDF files of the twin (default: ``oos_drake/multibody/sdf/``).
+        SDF files of the twin (default: ``sdf/``).
     progress : callable, optional
         Called with each :class:`CaseResult` as soon as it is computed.
     """

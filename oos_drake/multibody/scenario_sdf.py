@@ -1,6 +1,6 @@
 """Generate the scenario's SDF files from the scenario data file (the single source of truth).
 
-Files (package data in ``oos_drake/multibody/sdf/``, :data:`SDF_DIRECTORY`)::
+Files (``sdf/``, shipped as package data ``oos_drake/multibody/sdf/``, :data:`SDF_DIRECTORY`)::
 
     hub_RH1.sdf           chaser hub: link RH1 (frame R_RH1 at G1), frames P1, P2, J0, D1
     hub_RH2.sdf           target hub: link RH2 (R_RH2 at G2), frames P3, P4, D2, D3
@@ -51,7 +51,7 @@ __all__ = [
     "arm_joint_name",
 ]
 
-#: The generated SDF files, shipped as package data (``oos_drake/multibody/sdf/``).
+#: The generated SDF files, shipped as package data (``sdf/``, linked as ``oos_drake/multibody/sdf/``).
 SDF_DIRECTORY = package_path("oos_drake.multibody", "sdf")
 ASSEMBLY_FILE = "oos_scenario.sdf"
 ASSEMBLY_MODEL = "oos_scenario"

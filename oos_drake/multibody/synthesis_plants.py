@@ -246,7 +246,7 @@ class DrakePlantSource:
     times : array_like, shape (N,)
         Mission times [s] of the configurations.
     scenario : Scenario, optional
-        Default: the paper's (must match the SDF files under ``oos_drake/multibody/sdf/``).
+        Default: the paper's (must match the SDF files under ``sdf/``).
     cache_size : int
         Largest number of perturbed linearizations kept in memory.
     progress : callable, optional
