@@ -136,3 +136,29 @@ def test_slp_switch_is_restored():
     with mu_lanes.compile_with_slp():
         assert numba.config.SLP_VECTORIZE == 1
     assert numba.config.SLP_VECTORIZE == before
+
+
+@pytest.mark.parametrize("batch", [mu.LANES_MIN_BATCH - 1, mu.LANES_MIN_BATCH])
+def test_batches_below_the_lane_threshold_go_matrix_by_matrix(monkeypatch, batch):
+    """DESIGN.md: batches of fewer than LANES_MIN_BATCH matrices are optimized by the per-matrix
+    kernel, larger ones eight at a time in the lanes."""
+    calls = {"lanes": 0, "per matrix": 0}
+    lanes, per_matrix = mu_lanes.dg_minimize_lanes, mu_kernels.dg_minimize
+
+    def spy_lanes(*args, **kwargs):
+        calls["lanes"] += 1
+        return lanes(*args, **kwargs)
+
+    def spy_per_matrix(*args, **kwargs):
+        calls["per matrix"] += 1
+        return per_matrix(*args, **kwargs)
+
+    monkeypatch.setattr(mu_lanes, "dg_minimize_lanes", spy_lanes)
+    monkeypatch.setattr(mu_kernels, "dg_minimize", spy_per_matrix)
+    rng = np.random.default_rng(5)
+    M = rng.standard_normal((batch, 9, 9)) + 1j * rng.standard_normal((batch, 9, 9))
+    mussv(M, [[-2, 0], [-1, 0], [2, 2], [2, 0], [1, 0], [1, 0]])
+    if batch < mu.LANES_MIN_BATCH:
+        assert calls["lanes"] == 0 and calls["per matrix"] >= 1
+    else:
+        assert calls["lanes"] >= 1
