@@ -26,7 +26,7 @@ from oos_drake.multibody.mission_lfr import (  # noqa: E402
 from oos_drake.scenario.data import load_scenario  # noqa: E402
 
 SAMPLES = 6  # per case: half inside the ranges, half outside
-OMEGA = frequency_grid(200)
+OMEGA = frequency_grid(omega_range=(2 * np.pi * 0.01, 2 * np.pi * 100.0), points=200)
 
 
 @pytest.fixture(scope="module")
