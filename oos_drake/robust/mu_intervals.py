@@ -68,6 +68,8 @@ AXIS_TOLERANCE = 1e-6
 STRICT = LMI_ROUNDOFF
 #: Default relative slack above the optimal bound at each point (intervals of non-zero width).
 SLACK = 0.005
+#: Smallest eigenvalue of the D scalings relative to the largest (see :meth:`Scalings.conditioned`).
+CONDITION_FLOOR = 1e-10
 
 
 @dataclass(frozen=True)
@@ -206,6 +208,21 @@ class Scalings:
     D_right: np.ndarray
     G: np.ndarray
 
+    def conditioned(self, floor: float = CONDITION_FLOOR) -> Scalings:
+        """``D_l + e I`` and ``D_r + e I`` with ``e = floor * lambda_max(D_r)``.
+
+        Adding the same multiple of the identity to both keeps the block structure (equal
+        scalars of full blocks, equal blocks of repeated scalars). The optimal scalings of a
+        real ``M`` (``omega = 0``) or a bound reached by unbounded scalings can have condition
+        numbers of 1e16, where the sign of ``Phi`` is round-off; after this the LMI is
+        evaluated reliably and, with the slack of the level, still holds (the change of
+        ``Phi`` is ``e (||M||^2 - beta^2)``, far below ``slack * beta^2``; :func:`dg_interval`
+        checks it anyway).
+        """
+        Dl, Dr = np.asarray(self.D_left), np.asarray(self.D_right)
+        e = floor * float(np.max(np.linalg.eigvalsh(0.5 * (Dr + np.conj(Dr.T)))))
+        return Scalings(Dl + e * np.eye(Dl.shape[0]), Dr + e * np.eye(Dr.shape[0]), self.G)
+
 
 class _Multiplier:
     """``Phi`` of fixed scalings and level on a realization, in the Cholesky-scaled form."""
@@ -309,6 +326,13 @@ def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: floa
     ValueError
         If the LMI does not hold strictly at ``omega0``, or ``Phi(inf)`` is singular.
     """
+    for name, Dx in (("D_left", scalings.D_left), ("D_right", scalings.D_right)):
+        ev = np.linalg.eigvalsh(0.5 * (Dx + np.conj(np.asarray(Dx).T)))
+        if not ev[0] > 0.1 * CONDITION_FLOOR * ev[-1]:
+            raise ValueError(
+                f"dg_interval: {name} is not positive definite to round-off (eigenvalues "
+                f"{ev[0]:.3g} .. {ev[-1]:.3g}); use Scalings.conditioned()"
+            )
     mult = _Multiplier(real, scalings, beta)
     nu0 = float(real.to_nu(omega0))
     if mult.max_eig([nu0])[0] >= -STRICT:
@@ -338,9 +362,8 @@ def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: floa
     left = k
     while left - 1 >= 0 and ok[left - 1]:
         left -= 1
-    # the ends are eigenvalues of H, accurate to its round-off: where lambda_max is already
-    # positive at an end, move the end inside to the sign change (bisection from the piece's
-    # test point, which is negative)
+    # the ends are eigenvalues of H, accurate to its round-off: move each end inside to the
+    # last point where lambda_max is strictly negative (bisection from the piece's test point)
     nu_lo = _inner_end(mult, bounds[left], mids[left]) if left > 0 else 0.0
     nu_hi = _inner_end(mult, bounds[right + 1], mids[right]) if right + 1 < ok.size else np.inf
     lo, hi = float(real.from_nu(nu_lo)), float(real.from_nu(nu_hi))
@@ -348,9 +371,10 @@ def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: floa
 
 
 def _inner_end(mult, end, inside):
-    """``end`` if ``Phi(end) <= 0`` (to round-off), else the sign change between ``inside`` and
-    ``end`` found by bisection (its ``inside`` side)."""
-    if mult.max_eig([end])[0] <= STRICT:
+    """``end`` if ``Phi(end) < 0`` strictly, else the last strictly negative point before the
+    sign change between ``inside`` (negative) and ``end``, by bisection: the crossing itself
+    (``lambda_max = 0``) is only known to the round-off of the Hamiltonian's eigenvalues."""
+    if not np.isfinite(end) or mult.max_eig([end])[0] < -STRICT:
         return end
     a, b = inside, end
     for _ in range(200):
@@ -617,7 +641,7 @@ def mu_solver(real: Realization, blk, *, slack: float = SLACK, polish_above: flo
             upper[rows] = more.upper[better]
             Dl, Dr, G = Dl.copy(), Dr.copy(), G.copy()
             Dl[rows], Dr[rows], G[rows] = more.D_left[better], more.D_right[better], more.G[better]
-        scalings = [Scalings(Dl[i], Dr[i], G[i]) for i in range(upper.size)]
+        scalings = [Scalings(Dl[i], Dr[i], G[i]).conditioned() for i in range(upper.size)]
         return upper, upper * (1.0 + slack), scalings
 
     return solve

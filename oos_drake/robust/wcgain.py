@@ -362,7 +362,7 @@ def _gain_solver(real, nz, nw, blk, slack, tol, iterations, polish_above):
             res = mu_upper_bound(Mg, s_aug, **POLISH_OPTIONS)
             ok = res.upper < 1.0 - 1e-9
             for j in np.flatnonzero(ok):
-                scalings[todo[j]] = Scalings(res.D_left[j], res.D_right[j], res.G[j])
+                scalings[todo[j]] = Scalings(res.D_left[j], res.D_right[j], res.G[j]).conditioned()
             level[todo[~ok]] *= 1.0 + slack
             todo = todo[~ok]
         level[todo] = np.inf
