@@ -248,6 +248,7 @@ class _Multiplier:
             self.P22 = -(beta**2) * Dr
         self.A, self.B, self.C, self.D = A, B, C, D
         self.ref = np.linalg.norm(self.P22, 2)
+
     def max_eig(self, nu) -> np.ndarray:
         """``lambda_max(Phi(j nu))`` relative to the size of its terms (``nu`` may hold inf)."""
         nu = np.atleast_1d(np.asarray(nu, dtype=float))
