@@ -50,6 +50,7 @@ def run_analyze(args) -> int:
         performance_points=args.performance_points,
         sensitivity=not args.no_sensitivity,
         time_check=not args.no_time_check,
+        guarantee=not args.no_guarantee,
         progress=not args.quiet,
     )
     summary = run_analysis(controller, args.out, options)
@@ -152,6 +153,11 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--no-sensitivity", action="store_true", help="skip the sensitivity table")
     parser.add_argument("--no-time-check", action="store_true", help="skip the time-domain check")
+    parser.add_argument(
+        "--no-guarantee",
+        action="store_true",
+        help="skip the proof of the mu peaks on the whole frequency axis (grid only)",
+    )
     parser.add_argument("--jobs", type=int, default=2, help="worker processes")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run_analyze)
