@@ -38,9 +38,10 @@ the unit circle ``0 <= omega <= pi / T``.
 
 :func:`cover_axis` covers ``[0, inf)`` (or ``[0, pi / T]``) with such intervals (Roos and
 Biannic, ACC 2010; SMAC): it solves the bound at seed frequencies, proves every point at the
-common level ``L = max(floor, (1 + slack) beta_i)`` (a higher level only widens an interval:
-``-L^2 D_r`` decreases), and adds points at the edges and in the middle of every gap until the
-intervals cover the axis. The guaranteed bound is ``L``; the :class:`AxisCertificate` keeps the
+running level ``L = max(floor, (1 + slack) beta_i so far)`` (a higher level only widens an
+interval: ``-L^2 D_r`` decreases; an interval proved at a lower level stays valid when ``L``
+grows), and adds points at the edges and in the middle of every gap until the intervals cover
+the axis. The guaranteed bound is the largest level; the :class:`AxisCertificate` keeps the
 points, their scalings, levels and intervals, and :meth:`AxisCertificate.check` proves them again.
 
 The same works for the skewed-mu bound of :func:`~oos_drake.robust.wcgain`: the rows of the
@@ -247,6 +248,14 @@ class _Multiplier:
             self.P12 = -1j * np.conj(G.T)
             self.P22 = -(beta**2) * Dr
         self.A, self.B, self.C, self.D = A, B, C, D
+        # modal form, once: every later evaluation of M is O(n) per entry (ends are bisected)
+        self._modal = None
+        self.poles = np.zeros(0)
+        if A.shape[0]:
+            lam, V = np.linalg.eig(A)
+            self.poles = lam
+            if np.isfinite(np.linalg.cond(V)) and np.linalg.cond(V) < 1e8:
+                self._modal = (lam, C @ V, np.linalg.solve(V, B))
         self.ref = np.linalg.norm(self.P22, 2)
 
     def max_eig(self, nu) -> np.ndarray:
@@ -255,7 +264,12 @@ class _Multiplier:
         M = np.empty((nu.size,) + self.D.shape, dtype=complex)
         fin = np.isfinite(nu)
         M[~fin] = self.D
-        if np.any(fin):
+        if np.any(fin) and self._modal is not None:
+            lam, CV, VB = self._modal
+            M[fin] = self.D + np.einsum(
+                "in,fn,nj->fij", CV, 1.0 / (1j * nu[fin, None] - lam[None, :]), VB
+            )
+        elif np.any(fin):
             M[fin] = delta_channel_response(self.A, self.B, self.C, self.D, nu[fin])
         MH = np.conj(np.swapaxes(M, -1, -2))
         cross = MH @ self.P12
@@ -347,7 +361,7 @@ def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: floa
     # one test point inside each piece (the sign of lambda_max is constant there)
     lo_b, hi_b = bounds[:-1], bounds[1:]
     last = np.isinf(hi_b)
-    rho = float(np.max(np.abs(np.linalg.eigvals(mult.A)))) if mult.A.size else 0.0
+    rho = float(np.max(np.abs(mult.poles))) if mult.poles.size else 0.0
     tail = 2.0 * lo_b + max(1.0, rho)
     mids = np.where(last, tail, 0.5 * (lo_b + np.where(last, 0.0, hi_b)))
     ok = mult.max_eig(mids) < -STRICT
@@ -380,7 +394,7 @@ def _inner_end(mult, end, inside):
     a, b = inside, end
     for _ in range(200):
         m = 0.5 * (a + b)
-        if m in (a, b):
+        if m in (a, b) or abs(b - a) <= 1e-10 * abs(b):
             break
         if mult.max_eig([m])[0] < -STRICT:
             a = m
@@ -549,15 +563,15 @@ def cover_axis(
     opt, lmin, scs = list(opt), list(lmin), list(scs)
     omega, added = list(omega), [False] * len(omega)
     level = max(float(floor), max(lmin, default=0.0))
-    cache = {}
+    # an interval proved at a lower level also proves any higher one (Phi only decreases), so
+    # each point keeps the interval of the level current when it was solved: no recomputation
+    proved = {}
     covered = False
     for _ in range(max_rounds):
-        spans = []
         for i, w in enumerate(omega):
-            if i not in cache or cache[i][0] != level:
-                cache[i] = (level, _interval_at(real, performance_rows, scs[i], level, w))
-            spans.append(cache[i][1])
-        gaps = _gaps(np.array(spans).reshape(-1, 2), end)
+            if i not in proved:
+                proved[i] = (level, _interval_at(real, performance_rows, scs[i], level, w))
+        gaps = _gaps(np.array([proved[i][1] for i in range(len(omega))]).reshape(-1, 2), end)
         if not gaps:
             covered = True
             break
@@ -575,15 +589,14 @@ def cover_axis(
             break
         if progress is not None:
             progress(len(omega))
-    order = np.argsort(omega, kind="stable")
-    spans = np.array(
-        [cache[i][1] if i in cache and cache[i][0] == level else (np.nan, np.nan) for i in order]
-    ).reshape(-1, 2)
+    order = [i for i in np.argsort(omega, kind="stable") if i in proved]
+    spans = np.array([proved[i][1] for i in order]).reshape(-1, 2)
+    levels = np.array([proved[i][0] for i in order], dtype=float)
     return AxisCertificate(
-        upper=level if covered else np.inf,
+        upper=float(np.max(levels)) if covered else np.inf,
         omega=np.asarray(omega)[order],
         optimal=np.asarray(opt, dtype=float)[order],
-        level=np.full(len(omega), level),
+        level=levels,
         interval=spans,
         added=np.asarray(added)[order],
         scalings=tuple(scs[i] for i in order),
