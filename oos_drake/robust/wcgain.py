@@ -283,7 +283,7 @@ def wcgain(
     guarantee, searched = None, None
     upper = float(up.max())
     if guaranteed:
-        found = _parameter_search(sys, bmap, blocks)
+        found = _parameter_search(sys, bmap)
         if found is not None and found[0] > best_lower:
             best_lower, critical, searched = found
             worst = {
@@ -371,7 +371,7 @@ def _gain_solver(real, nz, nw, blk, slack, tol, iterations, polish_above):
     return solve
 
 
-def _parameter_search(sys, bmap, blocks):
+def _parameter_search(sys, bmap):
     """Worst-case gain over the box of the ``ureal`` parameters, evaluated exactly.
 
     Corners (and a 5-level grid for up to three parameters), then a bounded Nelder-Mead ascent

@@ -53,6 +53,16 @@ def sampled_component(real, sc, beta, omega0, grid):
     return grid[a], grid[b], a == 0, b == grid.size - 1
 
 
+def interval_and_sampled(real, blk, w0, grid):
+    """``dg_interval`` of mussv's scalings at ``w0`` (level 1.005 x its bound) and the sampled
+    component on ``grid``: ``(lo, hi, a, b, a_end, b_end, scalings, beta)``."""
+    res = mussv(real.response([w0]), blk)
+    sc = Scalings(res.D_left[0], res.D_right[0], res.G[0]).conditioned()
+    beta = 1.005 * float(res.upper[0])
+    lo, hi = dg_interval(real, sc, beta, w0)
+    return (lo, hi, *sampled_component(real, sc, beta, w0, grid), sc, beta)
+
+
 def two_modes():
     k1, c1 = ureal("k1", 1.0, plusminus=0.3), ureal("c1", 0.01, plusminus=0.005)
     k2, c2 = ureal("k2", 9.0, plusminus=3.0), ureal("c2", 0.03, plusminus=0.01)
@@ -71,11 +81,7 @@ def test_interval_matches_dense_sampling(make, omegas):
     real, blk = delta_realization(make())
     grid = np.linspace(0.0, 12.0, 120001)  # spacing 1e-4 rad/s
     for w0 in omegas:
-        res = mussv(real.response([w0]), blk)
-        sc = Scalings(res.D_left[0], res.D_right[0], res.G[0]).conditioned()
-        beta = 1.005 * float(res.upper[0])
-        lo, hi = dg_interval(real, sc, beta, w0)
-        a, b, a_end, b_end = sampled_component(real, sc, beta, w0, grid)
+        lo, hi, a, b, a_end, b_end, sc, beta = interval_and_sampled(real, blk, w0, grid)
         step = grid[1] - grid[0]
         # never outside the sampled sign change; inside it by at most a sample plus the
         # round-off band where lambda_max is within STRICT of zero (up to 1e-3 relative here)
@@ -112,11 +118,7 @@ def test_discrete_interval_on_the_unit_circle():
     blk = block_map(sys).blk
     grid = np.linspace(0.0, np.pi / Ts, 60001)
     for w0 in (0.5, 1.0, 1.1, 20.0):
-        res = mussv(real.response([w0]), blk)
-        sc = Scalings(res.D_left[0], res.D_right[0], res.G[0]).conditioned()
-        beta = 1.005 * float(res.upper[0])
-        lo, hi = dg_interval(real, sc, beta, w0)
-        a, b, a_end, b_end = sampled_component(real, sc, beta, w0, grid)
+        lo, hi, a, b, a_end, b_end, sc, beta = interval_and_sampled(real, blk, w0, grid)
         step = grid[1] - grid[0]
         assert (lo == 0.0) if a_end else (a - step <= lo <= a + 1e-3 * a)
         assert (hi == pytest.approx(np.pi / Ts)) if b_end else (b - 1e-3 * b <= hi <= b + step)
