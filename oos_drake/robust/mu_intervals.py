@@ -386,11 +386,16 @@ def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: floa
 
 
 def _inner_end(mult, end, inside):
-    """``end`` if ``Phi(end) < 0`` strictly, else the last strictly negative point before the
-    sign change between ``inside`` (negative) and ``end``, by bisection: the crossing itself
-    (``lambda_max = 0``) is only known to the round-off of the Hamiltonian's eigenvalues."""
-    if not np.isfinite(end) or mult.max_eig([end])[0] < -STRICT:
+    """``end`` if ``Phi(end) < 0`` strictly, else the point nearest to ``end`` (towards
+    ``inside``, where ``Phi < 0``) at which it is: the crossing itself (``lambda_max = 0``) is
+    only known to the round-off of the Hamiltonian's eigenvalues. Tries steps of 1e-10 .. 1e-4
+    of the distance first (one evaluation each), then bisects."""
+    if not np.isfinite(end):
         return end
+    steps = np.array([0.0, 1e-10, 1e-8, 1e-6, 1e-4])
+    for t, value in zip(steps, mult.max_eig(end + steps * (inside - end)), strict=True):
+        if value < -STRICT:
+            return end + t * (inside - end)
     a, b = inside, end
     for _ in range(200):
         m = 0.5 * (a + b)
