@@ -236,8 +236,8 @@ def test_target_array_modes_alone_reach_only_the_static_limit(default_run):
 
 def test_the_worst_cases_drive_a_chaser_array_mode_below_its_range(default_run):
     """docs/ANALYSIS-RESULTS.md: the worst perturbations of the total set (mission and both
-    docking phases) put every real block they move at one vertex of the scaled box, with w1_SA1 (a chaser
-    array's first mode) below its range, and their peaks lie in 0.75-0.9 Hz."""
+    docking phases) put every real block they move at one vertex of the scaled box, with w1_SA1
+    (a chaser array's first mode) below its range, and their peaks lie in 0.75-0.9 Hz."""
     peaks = _peaks(default_run).set_index(["study", "subset"])
     worst = pd.read_parquet(default_run / "analysis" / "worst_perturbations.parquet")
     for study in ("mission", "docking-7", "docking-8"):

@@ -76,6 +76,7 @@ def run_analyze(args) -> int:
         performance_points=args.performance_points,
         sensitivity=not args.no_sensitivity,
         time_check=not args.no_time_check,
+        guarantee=args.guarantee,
         progress=not args.quiet,
         plant=args.plant,
     )
@@ -186,6 +187,12 @@ def register(subparsers) -> None:
         default="lfr",
         help="uncertain plants: the TITOP LFR (default) or LFRs extracted from the Drake twin "
         "by ulinearize (same blocks; needs pydrake)",
+    )
+    parser.add_argument(
+        "--guarantee",
+        action="store_true",
+        help="also prove each configuration's mu peak on the whole frequency axis (D-G scalings "
+        "validated on intervals; slower, and loose where the optimizer stalls: see DESIGN.md)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     add_deprecated_alias(parser, "--fmin", "--f-min", type=float)

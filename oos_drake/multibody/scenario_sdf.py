@@ -51,7 +51,7 @@ __all__ = [
     "arm_joint_name",
 ]
 
-#: The generated SDF files, shipped as package data (``sdf/``, linked as ``oos_drake/multibody/sdf/``).
+#: The generated SDF files (``sdf/``), shipped as package data (``oos_drake/multibody/sdf/``).
 SDF_DIRECTORY = package_path("oos_drake.multibody", "sdf")
 ASSEMBLY_FILE = "oos_scenario.sdf"
 ASSEMBLY_MODEL = "oos_scenario"

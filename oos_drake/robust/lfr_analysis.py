@@ -122,10 +122,11 @@ def delta_channel_response(A, Bw, Cz, Dzw, omega) -> np.ndarray:
     batch = np.broadcast_shapes(A.shape[:-2], Bw.shape[:-2], Cz.shape[:-2], Dzw.shape[:-2])
     n = A.shape[-1]
     nz, nw = Dzw.shape[-2:]
-    A = np.broadcast_to(A, batch + (n, n)).reshape(-1, n, n)
-    Bw = np.broadcast_to(Bw, batch + (n, nw)).reshape(-1, n, nw)
-    Cz = np.broadcast_to(Cz, batch + (nz, n)).reshape(-1, nz, n)
-    Dzw = np.broadcast_to(Dzw, batch + (nz, nw)).reshape(-1, nz, nw)
+    nb = int(np.prod(batch, dtype=int))  # explicit: -1 is ambiguous for a static model (n = 0)
+    A = np.broadcast_to(A, batch + (n, n)).reshape(nb, n, n)
+    Bw = np.broadcast_to(Bw, batch + (n, nw)).reshape(nb, n, nw)
+    Cz = np.broadcast_to(Cz, batch + (nz, n)).reshape(nb, nz, n)
+    Dzw = np.broadcast_to(Dzw, batch + (nz, nw)).reshape(nb, nz, nw)
     nb = A.shape[0]
     out = np.empty((nb, omega.size, nz, nw), dtype=complex)
     if n == 0:

@@ -4,7 +4,11 @@ The stability margin is the factor by which the normalized uncertainty can grow 
 goes unstable: ``margin = 1 / max_omega mu(M11(j omega))``. A margin above 1 means the loop is
 stable for the whole modeled uncertainty. The bounds:
 
-* ``lower = 1 / max mu_upper`` over the (refined) frequency grid,
+* ``lower = 1 / max mu_upper``: with ``guaranteed=True`` (default) over the whole frequency
+  axis (:mod:`oos_drake.robust.mu_intervals`: the D-G scalings of a few frequencies prove the
+  bound on intervals computed exactly from a Hamiltonian, points are added until the intervals
+  cover ``[0, inf)``; ``guarantee`` holds them); with ``guaranteed=False`` over the (refined)
+  frequency grid only,
 * ``upper = 1 / max mu_lower``: a perturbation of that size, returned in ``worst_case`` (named,
   physical values), puts a closed-loop pole on the imaginary axis at ``critical_frequency``.
 
@@ -25,6 +29,7 @@ from oos_drake.robust.lfr_analysis import (
     worst_case_values,
 )
 from oos_drake.robust.mu import mussv
+from oos_drake.robust.mu_intervals import SLACK, AxisCertificate, Realization, cover_axis, mu_solver
 
 
 @dataclass(frozen=True)
@@ -34,7 +39,8 @@ class RobStabResult:
     Attributes
     ----------
     lower : float
-        Guaranteed margin on the analyzed frequencies (``1 / peak mu_upper``; ``inf`` if mu = 0).
+        Guaranteed margin (``1 / peak mu_upper``; ``inf`` if mu = 0): on the whole frequency
+        axis when ``guarantee`` is set, else on the analyzed frequencies only.
     upper : float
         Margin of the destabilizing perturbation ``worst_case`` (``1 / peak mu_lower``).
     critical_frequency : float
@@ -50,6 +56,10 @@ class RobStabResult:
         Analyzed frequencies [rad/s] (sorted).
     mu_upper, mu_lower : numpy.ndarray
         Bounds of mu at ``omega``.
+    guarantee : AxisCertificate or None
+        The intervals that prove ``mu <= 1 / lower`` on ``[0, inf)`` (``guaranteed=True``):
+        which points were solved (``added`` where the cover added them), at which level, on
+        which interval; ``guarantee.check()`` proves it again.
     """
 
     lower: float
@@ -61,6 +71,7 @@ class RobStabResult:
     omega: np.ndarray = field(default_factory=lambda: np.zeros(0))
     mu_upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
     mu_lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    guarantee: AxisCertificate | None = None
 
     @property
     def robustly_stable(self) -> bool:
@@ -263,6 +274,8 @@ def robstab(
     points_per_decade: int = 40,
     refine_rounds: int = 2,
     mu_options: dict | None = None,
+    guaranteed: bool = True,
+    slack: float = SLACK,
 ) -> RobStabResult:
     """Robust stability margin of an uncertain LFR.
 
@@ -281,6 +294,12 @@ def robstab(
         Rounds of local refinement around the peaks of the bounds.
     mu_options : dict, optional
         Options passed to :func:`~oos_drake.robust.mussv`.
+    guaranteed : bool
+        Prove the upper bound of mu (so the margin ``lower``) on the whole frequency axis, not
+        only on the grid (see :func:`~oos_drake.robust.mu_intervals.cover_axis`).
+    slack : float
+        Relative slack of the guaranteed bound above the bound found at each point
+        (``lower`` is about ``1 / (1 + slack)`` times the exact D-G margin at best).
 
     Returns
     -------
@@ -289,7 +308,9 @@ def robstab(
     Raises
     ------
     ValueError
-        If ``sys`` is a model array, has no uncertain blocks, or names unknown blocks.
+        If ``sys`` is a model array, has no uncertain blocks, or names unknown blocks; with
+        ``guaranteed=True``, if the nominal model has a pole within round-off of the
+        imaginary axis (no frequency-axis certificate exists).
 
     Examples
     --------
@@ -322,7 +343,12 @@ def robstab(
     omega, up, lo, dl, structure = mu_sweep(
         A, Bw, Cz, Dzw, bmap.blk, omega, refine_rounds=refine_rounds, mu_options=mu_options
     )
-    peak_up = float(up.max())
+    guarantee = None
+    if guaranteed:
+        guarantee = _guarantee(Realization(A, Bw, Cz, Dzw), structure, omega, up, lo, slack)
+        peak_up = guarantee.upper
+    else:
+        peak_up = float(up.max())
     k = int(np.argmax(lo))
     peak_lo = float(lo[k])
     lower = 1.0 / peak_up if peak_up > 0 else float("inf")
@@ -341,4 +367,28 @@ def robstab(
                 if kind == "ucomplex"
                 else sub
             )
-    return RobStabResult(lower, upper, wc, worst, worst_norm, True, omega, up, lo)
+    return RobStabResult(lower, upper, wc, worst, worst_norm, True, omega, up, lo, guarantee)
+
+
+def peak_seeds(omega, values, count: int = 6) -> np.ndarray:
+    """Frequencies of the ``count`` highest local maxima of ``values`` (plus 0): where a cover
+    of the frequency axis starts."""
+    interior = np.r_[True, values[1:] >= values[:-1]] & np.r_[values[:-1] >= values[1:], True]
+    peaks = np.flatnonzero(interior)
+    peaks = peaks[np.argsort(values[peaks])[::-1][:count]]
+    return np.unique(np.concatenate([[0.0], omega[peaks]]))
+
+
+def _guarantee(real, structure, omega, up, lo, slack) -> AxisCertificate:
+    """Cover ``[0, inf)`` starting from the peaks of the grid's bounds, at a level no lower than
+    ``(1 + slack)`` times the best certified lower bound (a common level widens the intervals;
+    the points whose bound exceeds it get long optimizer runs, so that an optimizer stall does
+    not raise the level)."""
+    best = float(lo.max())
+    return cover_axis(
+        real,
+        mu_solver(real, structure, slack=slack, polish_above=best),
+        np.union1d(peak_seeds(omega, up), peak_seeds(omega, lo)),
+        floor=(1.0 + slack) * best,
+        slack=slack,
+    )

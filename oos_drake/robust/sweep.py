@@ -20,8 +20,9 @@ import numpy as np
 from oos_drake.processes import process_pool
 from oos_drake.robust.lfr_analysis import block_map, delta_channel_response, frequency_grid
 
-#: Columns of the table returned by :func:`robust_sweep`.
+#: Columns of the table returned by :func:`robust_sweep` (the last two with ``guaranteed=True``).
 COLUMNS = ["model", "time", "frequency", "mu_lower", "mu_upper", "subset", "refined", "tightened"]
+GUARANTEE_COLUMNS = ["mu_upper_guaranteed", "guarantee_points"]
 
 
 def _polish_model_peaks(M, blk, up, lo, count):
@@ -183,9 +184,21 @@ def _sweep_models(task):
     from oos_drake.robust.mu import mussv
     from oos_drake.robust.robstab import _refine
 
-    (A, Bw, Cz, Dzw, first, omega, subsets, refine_points, polish, warm_start, mode, mu_options) = (
-        task
-    )
+    (
+        A,
+        Bw,
+        Cz,
+        Dzw,
+        first,
+        omega,
+        subsets,
+        refine_points,
+        polish,
+        warm_start,
+        mode,
+        mu_options,
+        slack,
+    ) = task
     nm, F = A.shape[0], omega.size
     M = delta_channel_response(A, Bw, Cz, Dzw, omega)  # (nm, F, nz, nw)
     rows = []
@@ -202,8 +215,27 @@ def _sweep_models(task):
             lo = np.asarray(res.lower).reshape(nm, F)
         if polish > 0:
             up = _polish_model_peaks(Msub, blk, up, lo, polish)
+        axis = [(np.nan, 0)] * nm
+        if slack is not None:
+            axis = [
+                _axis_peak(
+                    A[j],
+                    Bw[j][:, wcols],
+                    Cz[j][zrows],
+                    Dzw[j][np.ix_(zrows, wcols)],
+                    blk,
+                    omega,
+                    up[j],
+                    lo[j],
+                    slack,
+                    first + j,
+                )
+                for j in range(nm)
+            ]
         for j in range(nm):
-            rows.append((first + j, omega, lo[j], up[j], name, np.zeros(F, dtype=bool), tight[j]))
+            rows.append(
+                (first + j, omega, lo[j], up[j], name, np.zeros(F, dtype=bool), tight[j], axis[j])
+            )
         if refine_points <= 0 or F < 3:
             continue
         extra = [
@@ -231,10 +263,23 @@ def _sweep_models(task):
                         name,
                         np.ones(e.size, dtype=bool),
                         np.ones(e.size, dtype=bool),
+                        axis[j],
                     )
                 )
                 k += e.size
     return rows
+
+
+def _axis_peak(A, Bw, Cz, Dzw, blk, omega, up, lo, slack, model):
+    """``(guaranteed peak of mu over [0, inf), points solved)`` of one model and subset."""
+    from oos_drake.robust.mu_intervals import Realization
+    from oos_drake.robust.robstab import _guarantee
+
+    try:
+        cert = _guarantee(Realization(A, Bw, Cz, Dzw), blk, omega, up, lo, slack)
+    except ValueError as err:
+        raise ValueError(f"robust_sweep: model {model}: {err}") from None
+    return float(cert.upper), int(cert.omega.size)
 
 
 def robust_sweep(
@@ -250,6 +295,8 @@ def robust_sweep(
     mode: str = "peak",
     chunk_size: int | None = None,
     mu_options=None,
+    guaranteed: bool = True,
+    slack: float | None = None,
 ):
     """mu bounds for every model, frequency and uncertainty subset.
 
@@ -292,6 +339,15 @@ def robust_sweep(
         within ~0.25 % of a fully converged one). With ``mode="full", warm_start=True`` the grid
         upper bound is 1-4 % above a converged one away from the polished peaks; every upper
         bound is valid.
+    guaranteed : bool
+        Also prove, for each model and subset, a bound of the peak of mu over the whole
+        frequency axis (:func:`~oos_drake.robust.mu_intervals.cover_axis`, started from the
+        peaks of the grid): columns ``mu_upper_guaranteed`` (the same value on every row of the
+        model and subset; ``inf`` if the cover did not close) and ``guarantee_points``
+        (frequencies solved for the proof). The per-frequency columns stay pointwise bounds.
+    slack : float, optional
+        Relative slack of the guaranteed bound (default
+        :data:`~oos_drake.robust.mu_intervals.SLACK`).
 
     Returns
     -------
@@ -303,7 +359,8 @@ def robust_sweep(
     Raises
     ------
     ValueError
-        For unknown block names, a ``times`` of the wrong length, or bad frequencies.
+        For unknown block names, a ``times`` of the wrong length, or bad frequencies; with
+        ``guaranteed=True``, for a model with a pole within round-off of the imaginary axis.
     """
     import pandas as pd
 
@@ -338,6 +395,12 @@ def robust_sweep(
     if mode not in ("peak", "full"):
         raise ValueError(f"robust_sweep: mode must be 'peak' or 'full', got {mode!r}")
     n_jobs = max(1, int(n_jobs))
+    if guaranteed:
+        from oos_drake.robust.mu_intervals import SLACK
+
+        slack = SLACK if slack is None else float(slack)
+    else:
+        slack = None
     if chunk_size is None:
         # big batches share the Python overhead of the iterations; 40 models x 500 frequencies
         # of 26 x 26 matrices are ~200 MB per copy, which bounds the memory of a worker. The
@@ -358,6 +421,7 @@ def robust_sweep(
             bool(warm_start),
             mode,
             mu_options,
+            slack,
         )
         for i in range(0, n_models, chunk_size)
     ]
@@ -368,7 +432,7 @@ def robust_sweep(
             results = list(pool.map(_sweep_models, tasks))
     frames = []
     for rows in results:
-        for model, w, lo, up, name, refined, tightened in rows:
+        for model, w, lo, up, name, refined, tightened, (axis_up, axis_pts) in rows:
             frames.append(
                 pd.DataFrame(
                     {
@@ -380,9 +444,12 @@ def robust_sweep(
                         "subset": name,
                         "refined": refined,
                         "tightened": tightened,
+                        "mu_upper_guaranteed": np.full(w.size, axis_up),
+                        "guarantee_points": np.full(w.size, axis_pts, dtype=int),
                     }
                 )
             )
-    table = pd.concat(frames, ignore_index=True)[COLUMNS]
+    columns = COLUMNS + (GUARANTEE_COLUMNS if slack is not None else [])
+    table = pd.concat(frames, ignore_index=True)[columns]
     table["subset"] = table["subset"].astype("category")
     return table.sort_values(["subset", "model", "frequency"], ignore_index=True)

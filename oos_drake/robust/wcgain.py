@@ -12,6 +12,16 @@ At each frequency, with ``M = [[M11, M12], [M21, M22]]`` the response from ``[w;
 
 The peak over frequency is refined around the largest values; ``worst_case`` holds the named,
 physical perturbation that achieves the lower bound at ``critical_frequency``.
+
+With ``guaranteed=True`` (default) the upper bound holds on the whole frequency axis: the
+skewed-mu scalings of a few frequencies prove the gain level on intervals computed exactly
+(:mod:`oos_drake.robust.mu_intervals`, the performance outputs divided by the level, LMI at
+``beta = 1``) and points are added until the intervals cover ``[0, inf)``. For models whose
+analyzed blocks are all ``ureal`` (at most :data:`SEARCH_MAX_PARAMETERS`), the lower bound also
+searches the parameter box (corners, a coarse grid for up to three parameters, then a local
+ascent from the best ones), each candidate evaluated exactly by the H-infinity norm of the
+closed loop at those values: a worst case far from the nominal poles (a corner of the box) is
+found, not a local maximum near nominal.
 """
 
 from __future__ import annotations
@@ -27,8 +37,20 @@ from oos_drake.robust.lfr_analysis import (
     frequency_grid,
     worst_case_values,
 )
+from oos_drake.robust.mu_intervals import (
+    POLISH_OPTIONS,
+    SLACK,
+    AxisCertificate,
+    Realization,
+    Scalings,
+    cover_axis,
+)
 from oos_drake.robust.mu_lower import mu_lower_bound
 from oos_drake.robust.mu_upper import mu_upper_bound
+
+#: Largest number of ``ureal`` parameters for the parameter-box search of the lower bound
+#: (corners: ``2^k`` closed loops; a 5-level grid up to three parameters).
+SEARCH_MAX_PARAMETERS = 8
 
 
 @dataclass(frozen=True)
@@ -40,7 +62,8 @@ class WcGainResult:
     lower : float
         Gain reached by ``worst_case`` (exact evaluation) at ``critical_frequency``.
     upper : float
-        Guaranteed bound of the worst-case gain on the analyzed frequencies.
+        Guaranteed bound of the worst-case gain: on the whole frequency axis when
+        ``guarantee`` is set, else on the analyzed frequencies only.
     critical_frequency : float
         Frequency [rad/s] of the lower bound.
     worst_case : dict
@@ -54,6 +77,9 @@ class WcGainResult:
         Frequencies [rad/s].
     gain_lower, gain_upper : numpy.ndarray
         Bounds at each frequency.
+    guarantee : AxisCertificate or None
+        With ``guaranteed=True``: the intervals that prove ``upper`` on ``[0, inf)`` (levels of
+        the gain; ``check()`` proves them again).
     """
 
     lower: float
@@ -65,6 +91,7 @@ class WcGainResult:
     omega: np.ndarray = field(default_factory=lambda: np.zeros(0))
     gain_lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
     gain_upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    guarantee: AxisCertificate | None = None
 
 
 def _closed_gain(M11, M12, M21, M22, delta):
@@ -160,6 +187,8 @@ def wcgain(
     points_per_decade: int = 30,
     refine_rounds: int = 1,
     upper_iterations: int = 60,
+    guaranteed: bool = True,
+    slack: float = SLACK,
 ) -> WcGainResult:
     """Worst-case peak gain of an uncertain LFR over its uncertainty (unit normalized size).
 
@@ -179,10 +208,21 @@ def wcgain(
         Rounds of refinement around the peaks of the lower and upper bounds.
     upper_iterations : int
         Iterations of each mu upper bound.
+    guaranteed : bool
+        Prove the upper bound on the whole frequency axis (and search the parameter box for
+        the lower bound when all analyzed blocks are ``ureal``).
+    slack : float
+        Relative slack of the guaranteed bound above the level found at each point.
 
     Returns
     -------
     WcGainResult
+
+    Raises
+    ------
+    ValueError
+        For a model array, unknown blocks, or (``guaranteed=True``) a nominal pole within
+        round-off of the imaginary axis.
 
     Examples
     --------
@@ -221,7 +261,7 @@ def wcgain(
         return skewed_gain_bounds(M, nz, nw, bmap.blk, tol=tol, upper_iterations=upper_iterations)
 
     lo, up, dl, nom = evaluate(omega)
-    from oos_drake.robust.robstab import _refine
+    from oos_drake.robust.robstab import _refine, peak_seeds
 
     for _ in range(refine_rounds):
         fin_up = np.where(np.isfinite(up), up, np.nanmax(np.where(np.isfinite(up), up, 0)) * 10 + 1)
@@ -239,6 +279,33 @@ def wcgain(
     k = int(np.argmax(lo))
     structure = parse_blk(bmap.blk)
     worst = worst_case_values(bmap, structure, dl[k], float(omega[k]))
+    best_lower, critical = float(lo[k]), float(omega[k])
+    guarantee, searched = None, None
+    upper = float(up.max())
+    if guaranteed:
+        found = _parameter_search(sys, bmap)
+        if found is not None and found[0] > best_lower:
+            best_lower, critical, searched = found
+            worst = {
+                name: float(spec.to_physical(searched[name]))
+                for name, spec in zip(bmap.names, bmap.specs, strict=True)
+            }
+        real = Realization(A, B, C, D)
+        ny = D.shape[0] - nz
+        floor = (1.0 + slack) * best_lower if np.isfinite(best_lower) else np.inf
+        if np.isfinite(floor):
+            seeds = np.union1d(peak_seeds(omega, np.where(np.isfinite(up), up, 0.0)), [critical])
+            guarantee = cover_axis(
+                real,
+                _gain_solver(real, nz, nw, bmap.blk, slack, tol, upper_iterations, best_lower),
+                seeds,
+                floor=floor,
+                slack=slack,
+                performance_rows=ny,
+            )
+            upper = guarantee.upper
+        else:
+            upper = np.inf
     worst_norm = {}
     for name, kind, rows in zip(bmap.names, bmap.kinds, bmap.blk_rows, strict=True):
         b = structure.blocks[rows[0]]
@@ -248,14 +315,112 @@ def wcgain(
             if kind == "ureal"
             else (complex(sub[0, 0]) if kind == "ucomplex" else sub)
         )
+    if searched is not None:
+        worst_norm = searched
     return WcGainResult(
-        float(lo[k]),
-        float(up.max()),
-        float(omega[k]),
+        best_lower,
+        max(float(upper), best_lower),
+        critical,
         worst,
         worst_norm,
         float(nom.max()),
         omega,
         lo,
         up,
+        guarantee,
     )
+
+
+def _gain_solver(real, nz, nw, blk, slack, tol, iterations, polish_above):
+    """The ``solve`` of :func:`~oos_drake.robust.mu_intervals.cover_axis` for the worst-case gain.
+
+    At each frequency: the skewed-mu bisection gives ``gamma`` (long optimizer runs where it
+    exceeds ``polish_above``); the scalings are then computed for the problem whose performance
+    rows are divided by ``L = (1 + slack) gamma`` and must prove ``mu < 1`` strictly there
+    (else ``L`` grows by ``1 + slack``, at most five times; ``inf`` without a proof).
+    """
+    ny = real.D.shape[0] - nz
+    s_aug = parse_blk(np.vstack([np.asarray(blk).reshape(-1, 2), [[real.D.shape[1] - nw, ny]]]))
+
+    def solve(omega):
+        M = real.response(omega)
+        _, gamma, _, _ = skewed_gain_bounds(M, nz, nw, blk, tol=tol, upper_iterations=iterations)
+        redo = np.flatnonzero(np.isfinite(gamma) & (gamma > polish_above))
+        if redo.size:
+            _, g2, _, _ = skewed_gain_bounds(
+                M[redo], nz, nw, blk, tol=tol, upper_iterations=POLISH_OPTIONS["max_iter"]
+            )
+            gamma[redo] = np.minimum(gamma[redo], g2)
+        level = (1.0 + slack) * gamma
+        scalings = [None] * omega.size
+        todo = np.flatnonzero(np.isfinite(level))
+        for _ in range(5):
+            if todo.size == 0:
+                break
+            Mg = M[todo].copy()
+            Mg[:, nz:, :] /= level[todo, None, None]
+            res = mu_upper_bound(Mg, s_aug, **POLISH_OPTIONS)
+            ok = res.upper < 1.0 - 1e-9
+            for j in np.flatnonzero(ok):
+                scalings[todo[j]] = Scalings(res.D_left[j], res.D_right[j], res.G[j]).conditioned()
+            level[todo[~ok]] *= 1.0 + slack
+            todo = todo[~ok]
+        level[todo] = np.inf
+        return gamma, level, scalings
+
+    return solve
+
+
+def _parameter_search(sys, bmap):
+    """Worst-case gain over the box of the ``ureal`` parameters, evaluated exactly.
+
+    Corners (and a 5-level grid for up to three parameters), then a bounded Nelder-Mead ascent
+    from the three best. Each value is the H-infinity norm of the closed loop at normalized
+    parameters in ``[-1, 1]``: an achieved gain (a certified lower bound).
+
+    Returns
+    -------
+    tuple or None
+        ``(gain, frequency [rad/s], {name: normalized value})``, or None when a block is not
+        ``ureal`` or there are too many.
+    """
+    import itertools
+
+    from scipy.optimize import minimize
+
+    from oos_drake.lfr import usubs
+    from oos_drake.robust.hinf import hinfnorm
+
+    if any(k != "ureal" for k in bmap.kinds) or len(bmap.names) > SEARCH_MAX_PARAMETERS:
+        return None
+    names = list(bmap.names)
+    fixed = {n: 0.0 for n in sys.uncertainty if n not in names}
+    levels = [-1.0, -0.5, 0.0, 0.5, 1.0] if len(names) <= 3 else [-1.0, 1.0]
+    points = np.array(list(itertools.product(levels, repeat=len(names))), dtype=float)
+
+    def gains(P):
+        vals = {n: P[:, i] for i, n in enumerate(names)}
+        vals.update({n: np.full(P.shape[0], v) for n, v in fixed.items()})
+        loop = usubs(sys, vals, normalized=True)
+        res = hinfnorm((loop.A, loop.Bu, loop.Cy, loop.Dyu))
+        return np.atleast_1d(res.norm), np.atleast_1d(res.peak_frequency)
+
+    g, w = gains(points)
+    best = int(np.argmax(g))
+    top = np.argsort(g)[::-1][:3]
+    if np.isfinite(g[best]):
+        for i in top:
+            out = minimize(
+                lambda x: -gains(np.clip(x, -1.0, 1.0)[None])[0][0],
+                points[i],
+                method="Nelder-Mead",
+                bounds=[(-1.0, 1.0)] * len(names),
+                options=dict(xatol=1e-6, fatol=1e-9 * max(g[best], 1e-300), maxiter=400),
+            )
+            x = np.clip(out.x, -1.0, 1.0)
+            gx, wx = gains(x[None])
+            if gx[0] > g[best]:
+                points = np.vstack([points, x])
+                g, w = np.append(g, gx[0]), np.append(w, wx[0])
+                best = g.size - 1
+    return float(g[best]), float(w[best]), dict(zip(names, points[best].tolist(), strict=True))

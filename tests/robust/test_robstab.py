@@ -7,6 +7,7 @@ from numpy.testing import assert_allclose
 
 from oos_drake.lfr import feedback, ultidyn, ureal, usubs
 from oos_drake.robust import hinfnorm, robstab, robust_sweep, wcgain
+from oos_drake.robust.mu_intervals import SLACK
 
 
 def _max_real_pole(sys, values):
@@ -88,7 +89,9 @@ def test_unstructured_margin_is_inverse_hinf_norm_and_worst_case_realization():
     res = robstab(loop)
     assert_allclose(res.upper, ref, rtol=2e-3)
     assert res.lower <= res.upper
-    assert_allclose(res.lower, ref, rtol=2e-3)
+    # guaranteed on the whole axis, below the exact margin by at most the slack of the cover
+    assert ref / (1 + SLACK) / (1 + 2e-3) <= res.lower <= ref * (1 + 1e-9)
+    assert_allclose(robstab(loop, guaranteed=False).lower, ref, rtol=2e-3)
     wc = res.worst_case["d"]  # stable LTI system with ||wc||_inf = upper
     assert_allclose(hinfnorm(wc).norm, res.upper, rtol=1e-6)
     closed = control.feedback(P * (1 + 0.5 * wc) * K, 1)
@@ -131,8 +134,14 @@ def test_robust_sweep_table_and_consistency_with_robstab():
         "subset",
         "refined",
         "tightened",
+        "mu_upper_guaranteed",
+        "guarantee_points",
     ]
     assert set(df.model) == {0, 1, 2}
+    # the guaranteed peak over the whole axis: stable for k g < 60, so mu = 10 / (60 / g - 40)
+    exact = 10.0 / (60.0 / np.array([0.9, 1.0, 1.1]) - 40.0)
+    axis = df.groupby("model").mu_upper_guaranteed.first().values
+    assert np.all(axis >= exact) and np.all(axis <= 1.02 * exact)
     assert np.all(df.mu_lower <= df.mu_upper * (1 + 1e-9))
     grid = df[~df.refined].frequency.unique() * 2 * np.pi
     assert_allclose(np.sort(grid), omega)
@@ -143,7 +152,10 @@ def test_robust_sweep_table_and_consistency_with_robstab():
     best = df.groupby("model").mu_lower.transform("max")
     assert np.all(df.mu_upper[~df.tightened] <= best[~df.tightened] * (1 + 1e-12))
     # independent mussv calls per frequency (full mode, no warm start) agree on the peaks
-    cold = robust_sweep(arr, omega, subsets={"k": ["k"]}, mode="full", warm_start=False, n_jobs=2)
+    cold = robust_sweep(
+        arr, omega, subsets={"k": ["k"]}, mode="full", warm_start=False, n_jobs=2, guaranteed=False
+    )
+    assert "mu_upper_guaranteed" not in cold.columns
     assert cold.tightened.all()
     assert_allclose(
         cold.groupby("model").mu_upper.max().values,
@@ -165,7 +177,7 @@ def test_complex_scalar_margin_matches_dense_frequency_sweep():
     exact = np.min(np.abs(2.0 * (1.0 + 1.0 / Pjw)))
     res = robstab(loop)
     assert_allclose(res.upper, exact, rtol=1e-4)
-    assert_allclose(res.lower, exact, rtol=1e-3)
+    assert exact / (1 + SLACK) / (1 + 1e-3) <= res.lower <= exact * (1 + 1e-9)
     c_wc = res.worst_case["c"]  # physical complex value
     P_crit = 4.0 / (1j * res.critical_frequency + 1.0) ** 2
     assert abs(1.0 + c_wc * P_crit) < 1e-8

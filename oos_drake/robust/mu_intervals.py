@@ -1,0 +1,666 @@
+r"""Frequency intervals on which fixed D-G scalings prove a mu bound, and covers of the axis.
+
+The D-G upper bound of :func:`~oos_drake.robust.mussv` at one frequency is the LMI
+(:attr:`MuResult.G <oos_drake.robust.MuResult>` convention)
+
+.. math::
+
+    \Phi(\omega) = M^* D_l M + j (G M - M^* G^*) - \beta^2 D_r
+        = \begin{bmatrix} M \\ I \end{bmatrix}^*
+          \begin{bmatrix} D_l & -j G^* \\ j G & -\beta^2 D_r \end{bmatrix}
+          \begin{bmatrix} M \\ I \end{bmatrix} \preceq 0,
+    \qquad M = M(j\omega) = C (j\omega I - A)^{-1} B + D,
+
+which proves ``mu(M(j omega)) <= beta``. With ``D_l, D_r, G, beta`` fixed it is a
+frequency-domain inequality in ``M(j omega)``: ``lambda_max(Phi)`` is continuous in ``omega``
+and changes sign only where ``Phi(j omega)`` is singular, i.e. (``A`` without imaginary
+eigenvalues, ``Phi(inf) = R`` nonsingular) where the Hamiltonian
+
+.. math::
+
+    H = \begin{bmatrix} A - B R^{-1} S^* & -B R^{-1} B^* \\
+        -Q + S R^{-1} S^* & -A^* + S R^{-1} B^* \end{bmatrix},\quad
+    Q = C^* \Pi_{11} C,\ S = C^* (\Pi_{11} D + \Pi_{12}),\
+    R = \begin{bmatrix} D \\ I \end{bmatrix}^* \Pi \begin{bmatrix} D \\ I \end{bmatrix}
+
+has the eigenvalue ``j omega`` (the construction of the Hamiltonian test of an H-infinity norm,
+:mod:`oos_drake.robust.hinf`). :func:`dg_interval` takes those eigenvalues (generously: every
+eigenvalue within ``1e-6`` relative of the axis; spurious ones only cost a check), evaluates
+``lambda_max(Phi)`` once inside each piece they cut the axis into, and returns the largest
+interval around ``omega_0`` whose pieces are all negative: exact up to the eigenvalue
+round-off, no sampling. It works after the congruence with the Cholesky factors of ``D_l`` and
+``D_r`` (as :func:`~oos_drake.robust.mu_upper.lmi_residual`), which keeps the inertia and the
+accuracy when the scalings are ill-conditioned.
+
+Discrete time: ``M(e^{j omega T})`` is the continuous-time response, at ``nu = tan(omega T / 2)``,
+of the Cayley transform of the realization (``z = (1 + s) / (1 - s)``), so the same test covers
+the unit circle ``0 <= omega <= pi / T``.
+
+:func:`cover_axis` covers ``[0, inf)`` (or ``[0, pi / T]``) with such intervals (Roos and
+Biannic, ACC 2010; SMAC): it solves the bound at seed frequencies, proves every point at the
+running level ``L = max(floor, (1 + slack) beta_i so far)`` (a higher level only widens an
+interval: ``-L^2 D_r`` decreases; an interval proved at a lower level stays valid when ``L``
+grows), and adds points at the edges and in the middle of every gap until the intervals cover
+the axis. The guaranteed bound is the largest level; the :class:`AxisCertificate` keeps the
+points, their scalings, levels and intervals, and :meth:`AxisCertificate.check` proves them again.
+
+The same works for the skewed-mu bound of :func:`~oos_drake.robust.wcgain`: the rows of the
+performance outputs are divided by the gain level ``gamma`` and the LMI is taken at
+``beta = 1``; dividing them by a larger ``gamma`` only lowers ``Phi`` (``G`` has no performance
+columns), so a larger level again only widens an interval.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from oos_drake.robust.lfr_analysis import delta_channel_response
+from oos_drake.robust.mu_upper import LMI_ROUNDOFF
+
+#: Eigenvalues of the Hamiltonian within this distance of the imaginary axis (relative to the
+#: largest eigenvalue modulus) are candidate crossings. Generous on purpose: a spurious candidate
+#: only adds one evaluation of ``Phi``; a missed one would be a hole in the proof.
+AXIS_TOLERANCE = 1e-6
+#: ``lambda_max(Phi)`` relative to the size of its terms must be below ``-STRICT`` in a piece of
+#: the axis for the piece to count as proved (the round-off of forming ``Phi``, as for the
+#: certificate check of :func:`~oos_drake.robust.mu_upper.lmi_residual`).
+STRICT = LMI_ROUNDOFF
+#: Default relative slack above the optimal bound at each point (intervals of non-zero width).
+SLACK = 0.005
+#: Smallest eigenvalue of the D scalings relative to the largest (see :meth:`Scalings.conditioned`).
+CONDITION_FLOOR = 1e-10
+
+
+@dataclass(frozen=True)
+class Realization:
+    """State-space realization ``(A, B, C, D)`` of the matrix ``M`` seen by the uncertainty.
+
+    Attributes
+    ----------
+    A, B, C, D : numpy.ndarray
+        ``(n, n), (n, r), (c, n), (c, r)`` real or complex.
+    sample_time : float or None
+        None for continuous time, else the sample time [s] of a discrete-time model.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    sample_time: float | None = None
+
+    def __post_init__(self):
+        A, B, C, D = (np.atleast_2d(np.asarray(x)) for x in (self.A, self.B, self.C, self.D))
+        n = A.shape[0] if A.size else 0
+        A = A.reshape(n, n)
+        B = B.reshape(n, D.shape[1])
+        C = C.reshape(D.shape[0], n)
+        for name, x in zip("ABCD", (A, B, C, D), strict=True):
+            if x.dtype.kind not in "biufc" or not np.all(np.isfinite(x)):
+                raise ValueError(f"Realization: {name} must be finite numbers")
+        ts = self.sample_time
+        if ts is not None and not (np.isfinite(ts) and ts > 0):
+            raise ValueError(f"Realization: sample_time must be None or > 0 [s], got {ts!r}")
+        object.__setattr__(self, "A", A)
+        object.__setattr__(self, "B", B)
+        object.__setattr__(self, "C", C)
+        object.__setattr__(self, "D", D)
+
+    @classmethod
+    def from_lti(cls, sys) -> Realization:
+        """From a ``control.StateSpace`` / ``TransferFunction`` (``dt = 0``: continuous,
+        ``dt > 0``: discrete with that sample time; ``dt = True`` is refused: no sample time)."""
+        import control
+
+        dt = getattr(sys, "dt", 0)
+        if dt is True:
+            raise ValueError(
+                "Realization: discrete-time model without a sample time (dt=True); "
+                "give dt > 0 [s] so that the unit circle maps to frequencies"
+            )
+        ss = control.ss(sys)
+        return cls(ss.A, ss.B, ss.C, ss.D, None if not dt else float(dt))
+
+    @property
+    def nyquist(self) -> float:
+        """End of the frequency axis [rad/s]: ``inf`` or ``pi / sample_time``."""
+        return np.inf if self.sample_time is None else np.pi / self.sample_time
+
+    def check_axis(self) -> None:
+        """Raise ``ValueError`` if ``M`` has a pole on the imaginary axis (unit circle)."""
+        if not self.A.size:
+            return
+        lam = np.linalg.eigvals(self.A)
+        if self.sample_time is None:
+            dist = np.abs(lam.real)
+        else:
+            dist = np.abs(np.abs(lam) - 1.0)
+        scale = max(1.0, float(np.max(np.abs(lam)))) if self.sample_time is None else 1.0
+        bad = dist <= 1e-10 * scale
+        if np.any(bad):
+            where = "imaginary axis" if self.sample_time is None else "unit circle"
+            raise ValueError(
+                f"the model has a pole on the {where} ({lam[bad][0]:.6g}): M is unbounded "
+                "there, no frequency-axis certificate exists"
+            )
+
+    def continuous(self) -> tuple:
+        """``(A, B, C, D)`` whose response at ``j nu`` is ``M`` at :meth:`to_nu` ``(omega)``."""
+        if self.sample_time is None:
+            return self.A, self.B, self.C, self.D
+        n = self.A.shape[0]
+        if n == 0:
+            return self.A, self.B, self.C, self.D
+        P = np.eye(n) + self.A  # Cayley: z = (1 + s) / (1 - s)
+        Pi_B = np.linalg.solve(P, self.B)
+        C_Pi = np.linalg.solve(P.T, self.C.T).T
+        Ac = np.linalg.solve(P, self.A - np.eye(n))
+        return Ac, np.sqrt(2.0) * Pi_B, np.sqrt(2.0) * C_Pi, self.D - self.C @ Pi_B
+
+    def to_nu(self, omega):
+        """Continuous-time frequency of the Cayley image (identity in continuous time)."""
+        omega = np.asarray(omega, dtype=float)
+        if self.sample_time is None:
+            return omega
+        theta = np.clip(omega * self.sample_time, 0.0, np.pi)
+        with np.errstate(over="ignore"):
+            return np.where(theta >= np.pi, np.inf, np.tan(theta / 2.0))
+
+    def from_nu(self, nu):
+        """Inverse of :meth:`to_nu` [rad/s]."""
+        nu = np.asarray(nu, dtype=float)
+        if self.sample_time is None:
+            return nu
+        return 2.0 * np.arctan(nu) / self.sample_time
+
+    def response(self, omega) -> np.ndarray:
+        """``M`` at the frequencies ``omega`` [rad/s]: ``(F, c, r)`` (``inf``: the feedthrough)."""
+        nu = np.atleast_1d(self.to_nu(omega))
+        A, B, C, D = self.continuous()
+        out = np.empty((nu.size,) + D.shape, dtype=complex)
+        fin = np.isfinite(nu)
+        out[~fin] = D
+        if np.any(fin):
+            out[fin] = delta_channel_response(A, B, C, D, nu[fin])
+        return out
+
+    def scale_rows(self, rows: slice, factor: float) -> Realization:
+        """The realization with the outputs ``rows`` multiplied by ``factor``."""
+        C, D = self.C.astype(complex if np.iscomplexobj(self.C) else float), self.D.copy()
+        C[rows] *= factor
+        D = D.astype(np.result_type(D, float))
+        D[rows] *= factor
+        return Realization(self.A, self.B, C, D, self.sample_time)
+
+
+@dataclass(frozen=True)
+class Scalings:
+    """D-G scalings of one frequency (the :class:`~oos_drake.robust.MuResult` convention).
+
+    Attributes
+    ----------
+    D_left, D_right, G : numpy.ndarray
+        ``(c, c)``, ``(r, r)`` Hermitian positive definite and ``(r, c)``.
+    """
+
+    D_left: np.ndarray
+    D_right: np.ndarray
+    G: np.ndarray
+
+    def conditioned(self, floor: float = CONDITION_FLOOR) -> Scalings:
+        """``D_l + e I`` and ``D_r + e I`` with ``e = floor * lambda_max(D_r)``.
+
+        Adding the same multiple of the identity to both keeps the block structure (equal
+        scalars of full blocks, equal blocks of repeated scalars). The optimal scalings of a
+        real ``M`` (``omega = 0``) or a bound reached by unbounded scalings can have condition
+        numbers of 1e16, where the sign of ``Phi`` is round-off; after this the LMI is
+        evaluated reliably and, with the slack of the level, still holds (the change of
+        ``Phi`` is ``e (||M||^2 - beta^2)``, far below ``slack * beta^2``; :func:`dg_interval`
+        checks it anyway).
+        """
+        Dl, Dr = np.asarray(self.D_left), np.asarray(self.D_right)
+        e = floor * float(np.max(np.linalg.eigvalsh(0.5 * (Dr + np.conj(Dr.T)))))
+        return Scalings(Dl + e * np.eye(Dl.shape[0]), Dr + e * np.eye(Dr.shape[0]), self.G)
+
+
+class _Multiplier:
+    """``Phi`` of fixed scalings and level on a realization, in the Cholesky-scaled form."""
+
+    def __init__(self, real: Realization, sc: Scalings, beta: float):
+        A, B, C, D = real.continuous()
+        herm = lambda X: 0.5 * (X + np.conj(X.T))  # noqa: E731
+        Dl, Dr, G = herm(np.asarray(sc.D_left)), herm(np.asarray(sc.D_right)), np.asarray(sc.G)
+        c, r = D.shape
+        try:
+            Ll = np.linalg.cholesky(Dl)
+            Lr = np.linalg.cholesky(Dr)
+            B = np.linalg.solve(Lr, np.conj(B.T)).conj().T  # B L_r^{-*}
+            C = np.conj(Ll.T) @ C
+            D = np.conj(Ll.T) @ np.linalg.solve(Lr, np.conj(D.T)).conj().T
+            Gh = np.linalg.solve(Lr, np.linalg.solve(Ll, np.conj(G.T)).conj().T)
+            self.P11 = np.eye(c)
+            self.P12 = -1j * np.conj(Gh.T)
+            self.P22 = -(beta**2) * np.eye(r)
+        except np.linalg.LinAlgError:  # not numerically definite: the unscaled form
+            self.P11 = Dl.astype(complex)
+            self.P12 = -1j * np.conj(G.T)
+            self.P22 = -(beta**2) * Dr
+        self.A, self.B, self.C, self.D = A, B, C, D
+        # modal form, once: every later evaluation of M is O(n) per entry (ends are bisected)
+        self._modal = None
+        self.poles = np.zeros(0)
+        if A.shape[0]:
+            lam, V = np.linalg.eig(A)
+            self.poles = lam
+            if np.isfinite(np.linalg.cond(V)) and np.linalg.cond(V) < 1e8:
+                self._modal = (lam, C @ V, np.linalg.solve(V, B))
+        self.ref = np.linalg.norm(self.P22, 2)
+
+    def max_eig(self, nu) -> np.ndarray:
+        """``lambda_max(Phi(j nu))`` relative to the size of its terms (``nu`` may hold inf)."""
+        nu = np.atleast_1d(np.asarray(nu, dtype=float))
+        M = np.empty((nu.size,) + self.D.shape, dtype=complex)
+        fin = np.isfinite(nu)
+        M[~fin] = self.D
+        if np.any(fin) and self._modal is not None:
+            lam, CV, VB = self._modal
+            M[fin] = self.D + np.einsum(
+                "in,fn,nj->fij", CV, 1.0 / (1j * nu[fin, None] - lam[None, :]), VB
+            )
+        elif np.any(fin):
+            M[fin] = delta_channel_response(self.A, self.B, self.C, self.D, nu[fin])
+        MH = np.conj(np.swapaxes(M, -1, -2))
+        cross = MH @ self.P12
+        Phi = MH @ self.P11 @ M + cross + np.conj(np.swapaxes(cross, -1, -2)) + self.P22
+        Phi = 0.5 * (Phi + np.conj(np.swapaxes(Phi, -1, -2)))
+        # size of the terms entry by entry (what the round-off of forming Phi scales with)
+        aM, aMH = np.abs(M), np.abs(MH)
+        size = aMH @ np.abs(self.P11) @ aM + 2.0 * aMH @ np.abs(self.P12) + np.abs(self.P22)
+        size = np.linalg.norm(size, axis=(-2, -1))
+        return np.linalg.eigvalsh(Phi)[:, -1] / size
+
+    def crossings(self) -> np.ndarray:
+        """Candidate ``nu >= 0`` where ``Phi(j nu)`` may be singular (Hamiltonian eigenvalues).
+
+        Raises ``ValueError`` when ``Phi(inf)`` is singular (the Hamiltonian does not exist).
+        """
+        A, B, C, D = self.A, self.B, self.C, self.D
+        n = A.shape[0]
+        if n == 0:
+            return np.zeros(0)
+        P11, P12, P22 = self.P11, self.P12, self.P22
+        DH, CH = np.conj(D.T), np.conj(C.T)
+        R = DH @ P11 @ D + DH @ P12 + np.conj(P12.T) @ D + P22
+        R = 0.5 * (R + np.conj(R.T))
+        ev = np.linalg.eigvalsh(R)
+        if np.min(np.abs(ev)) <= 1e-12 * max(np.max(np.abs(ev)), self.ref):
+            raise ValueError("Phi(inf) is singular at this level: no Hamiltonian test")
+        Q = CH @ P11 @ C
+        S = CH @ (P11 @ D + P12)
+        RiSH = np.linalg.solve(R, np.conj(S.T))
+        RiBH = np.linalg.solve(R, np.conj(B.T))
+        H = np.block(
+            [
+                [A - B @ RiSH, -B @ RiBH],
+                [-Q + S @ RiSH, -np.conj(A.T) + S @ RiBH],
+            ]
+        )
+        lam = np.linalg.eigvals(H)
+        scale = max(float(np.max(np.abs(lam))), 1e-300)
+        near = np.abs(lam.real) <= AXIS_TOLERANCE * scale
+        w = lam.imag[near]
+        w = w[w >= -AXIS_TOLERANCE * scale]
+        return np.unique(np.maximum(w, 0.0))
+
+
+def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: float):
+    """Largest frequency interval around ``omega0`` on which the scalings prove ``mu <= beta``.
+
+    Parameters
+    ----------
+    real : Realization
+        Realization of ``M`` (no pole on the imaginary axis / unit circle).
+    scalings : Scalings
+        D-G scalings found at ``omega0``.
+    beta : float
+        Level to prove (``> 0``); the LMI must hold strictly at ``omega0``.
+    omega0 : float
+        Frequency [rad/s], ``0 <= omega0 <= real.nyquist``.
+
+    Returns
+    -------
+    tuple of float
+        ``(lo, hi)`` [rad/s] with ``0 <= lo <= omega0 <= hi <= real.nyquist`` (``hi`` may be
+        ``inf``): ``Phi(omega) <= 0`` for every ``omega`` in ``[lo, hi]``, and ``Phi`` has a
+        positive eigenvalue just outside each finite end below the axis end.
+
+    Raises
+    ------
+    ValueError
+        If the LMI does not hold strictly at ``omega0``, or ``Phi(inf)`` is singular.
+    """
+    for name, Dx in (("D_left", scalings.D_left), ("D_right", scalings.D_right)):
+        ev = np.linalg.eigvalsh(0.5 * (Dx + np.conj(np.asarray(Dx).T)))
+        if not ev[0] > 0.1 * CONDITION_FLOOR * ev[-1]:
+            raise ValueError(
+                f"dg_interval: {name} is not positive definite to round-off (eigenvalues "
+                f"{ev[0]:.3g} .. {ev[-1]:.3g}); use Scalings.conditioned()"
+            )
+    mult = _Multiplier(real, scalings, beta)
+    nu0 = float(real.to_nu(omega0))
+    if mult.max_eig([nu0])[0] >= -STRICT:
+        raise ValueError(
+            f"dg_interval: the scalings do not prove mu <= {beta:.6g} strictly at "
+            f"omega = {omega0:.6g} rad/s"
+        )
+    cand = mult.crossings()
+    bounds = np.concatenate([[0.0], cand[cand > 0], [np.inf]])
+    bounds = np.unique(bounds)
+    # one test point inside each piece (the sign of lambda_max is constant there)
+    lo_b, hi_b = bounds[:-1], bounds[1:]
+    last = np.isinf(hi_b)
+    rho = float(np.max(np.abs(mult.poles))) if mult.poles.size else 0.0
+    tail = 2.0 * lo_b + max(1.0, rho)
+    mids = np.where(last, tail, 0.5 * (lo_b + np.where(last, 0.0, hi_b)))
+    ok = mult.max_eig(mids) < -STRICT
+    if last[-1]:
+        ok[-1] &= mult.max_eig([np.inf])[0] < -STRICT
+    k = int(np.searchsorted(bounds, nu0, side="right") - 1)
+    k = min(max(k, 0), ok.size - 1)
+    if not ok[k]:  # nu0 sits on a spurious candidate: the piece to its right holds it too
+        raise ValueError(f"dg_interval: inconsistent sign at omega = {omega0:.6g} rad/s")
+    right = k
+    while right + 1 < ok.size and ok[right + 1]:
+        right += 1
+    left = k
+    while left - 1 >= 0 and ok[left - 1]:
+        left -= 1
+    # the ends are eigenvalues of H, accurate to its round-off: move each end inside to the
+    # last point where lambda_max is strictly negative (bisection from the piece's test point)
+    nu_lo = _inner_end(mult, bounds[left], mids[left]) if left > 0 else 0.0
+    nu_hi = _inner_end(mult, bounds[right + 1], mids[right]) if right + 1 < ok.size else np.inf
+    lo, hi = float(real.from_nu(nu_lo)), float(real.from_nu(nu_hi))
+    return lo, min(hi, real.nyquist)
+
+
+def _inner_end(mult, end, inside):
+    """``end`` if ``Phi(end) < 0`` strictly, else the point nearest to ``end`` (towards
+    ``inside``, where ``Phi < 0``) at which it is: the crossing itself (``lambda_max = 0``) is
+    only known to the round-off of the Hamiltonian's eigenvalues. Tries steps of 1e-10 .. 1e-4
+    of the distance first (one evaluation each), then bisects."""
+    if not np.isfinite(end):
+        return end
+    steps = np.array([0.0, 1e-10, 1e-8, 1e-6, 1e-4])
+    for t, value in zip(steps, mult.max_eig(end + steps * (inside - end)), strict=True):
+        if value < -STRICT:
+            return end + t * (inside - end)
+    a, b = inside, end
+    for _ in range(200):
+        m = 0.5 * (a + b)
+        if m in (a, b) or abs(b - a) <= 1e-10 * abs(b):
+            break
+        if mult.max_eig([m])[0] < -STRICT:
+            a = m
+        else:
+            b = m
+    return a
+
+
+@dataclass(frozen=True)
+class AxisCertificate:
+    """Intervals that together prove a bound on the whole frequency axis.
+
+    Attributes
+    ----------
+    upper : float
+        Guaranteed bound on ``[0, nyquist]`` (``inf`` if the cover did not close).
+    omega : numpy.ndarray
+        ``(K,)`` frequencies [rad/s] where scalings were computed, sorted.
+    optimal : numpy.ndarray
+        ``(K,)`` bound found at each point (mu upper bound, or worst-case gain level).
+    level : numpy.ndarray
+        ``(K,)`` level proved on each point's interval (``>= (1 + slack) optimal``).
+    interval : numpy.ndarray
+        ``(K, 2)`` ``[lo, hi]`` [rad/s] proved at ``level``.
+    added : numpy.ndarray
+        ``(K,)`` True for points the cover added (not seeds).
+    scalings : tuple of Scalings
+        The scalings of each point.
+    slack : float
+        Relative slack above each point's optimal bound.
+    covered : bool
+        True when the intervals cover ``[0, nyquist]``.
+    realization : Realization
+        The realization of ``M`` the intervals refer to.
+    performance_rows : int
+        0 for a mu bound; else the number of trailing outputs of ``M`` divided by the level
+        (skewed mu of a worst-case gain, LMI at ``beta = 1``).
+    """
+
+    upper: float
+    omega: np.ndarray
+    optimal: np.ndarray
+    level: np.ndarray
+    interval: np.ndarray
+    added: np.ndarray
+    scalings: tuple
+    slack: float
+    covered: bool
+    realization: Realization = field(repr=False, default=None)
+    performance_rows: int = 0
+
+    @property
+    def nyquist(self) -> float:
+        """End of the frequency axis [rad/s]."""
+        return self.realization.nyquist
+
+    def check(self) -> dict:
+        """Prove the cover again: recompute every interval from its scalings and level.
+
+        Returns
+        -------
+        dict
+            ``intervals_hold`` (every recomputed interval contains the stored one),
+            ``covered`` (their union covers ``[0, nyquist]``), ``upper`` (max level).
+        """
+        held, spans = True, []
+        for w, lev, sc, (lo, hi) in zip(
+            self.omega, self.level, self.scalings, self.interval, strict=True
+        ):
+            if not np.isfinite(lo):  # a point whose interval is not part of the proof
+                continue
+            real, beta = _level_problem(self.realization, self.performance_rows, lev)
+            a, b = dg_interval(real, sc, beta, w)
+            held &= a <= lo * (1 + 1e-12) and b >= hi * (1 - 1e-12)
+            spans.append((a, b))
+        return {
+            "intervals_hold": bool(held),
+            "covered": not _gaps(np.array(spans).reshape(-1, 2), self.nyquist),
+            "upper": float(np.max(self.level)) if self.level.size else 0.0,
+        }
+
+
+def _level_problem(real: Realization, performance_rows: int, level: float):
+    """Realization and ``beta`` of the LMI that proves ``level``."""
+    if performance_rows == 0:
+        return real, level
+    c = real.D.shape[0]
+    return real.scale_rows(slice(c - performance_rows, c), 1.0 / level), 1.0
+
+
+def _gaps(intervals: np.ndarray, end: float) -> list:
+    """Uncovered pieces ``(a, b)`` of ``[0, end]`` by closed intervals (NaN rows: none)."""
+    spans = intervals[np.all(np.isfinite(intervals) | np.isposinf(intervals), axis=1)]
+    spans = spans[np.argsort(spans[:, 0], kind="stable")]
+    gaps, reach = [], 0.0
+    for lo, hi in spans:
+        if lo > reach:
+            gaps.append((reach, lo))
+        reach = max(reach, hi)
+    if reach < end or spans.size == 0:
+        gaps.append((reach, end))
+    return gaps
+
+
+def _new_points(gaps, end, known):
+    """Frequencies to solve in the gaps: both edges and an interior point."""
+    pts = []
+    for a, b in gaps:
+        pts.append(a)
+        if np.isfinite(b):
+            pts.append(b)
+            pts.append(np.sqrt(a * b) if a > 0 and b / a > 4 else 0.5 * (a + b))
+        else:
+            pts.extend([max(2.0 * a, 1e-3), max(10.0 * a, 1e-2)])
+    pts = np.unique(np.clip(np.array(pts, dtype=float), 0.0, end if np.isfinite(end) else None))
+    known = np.asarray(known, dtype=float)
+    if known.size:
+        dist = np.min(np.abs(pts[:, None] - known[None, :]), axis=1)
+        pts = pts[dist > 1e-12 * np.maximum(pts, 1e-300)]
+    return pts
+
+
+def cover_axis(
+    real: Realization,
+    solve,
+    seeds,
+    *,
+    floor: float = 0.0,
+    slack: float = SLACK,
+    performance_rows: int = 0,
+    max_rounds: int = 40,
+    progress=None,
+) -> AxisCertificate:
+    """Cover the frequency axis with intervals proved by D-G scalings.
+
+    Parameters
+    ----------
+    real : Realization
+        Realization of ``M`` (checked: no pole on the axis).
+    solve : callable
+        ``solve(omega) -> (optimal, level_min, scalings)`` for frequencies ``omega`` [rad/s]:
+        the bound at each, the smallest level its scalings prove strictly (e.g.
+        ``(1 + slack) optimal``) and a list of :class:`Scalings`.
+    seeds : array_like
+        First frequencies [rad/s] (e.g. the peaks of a grid sweep and 0).
+    floor : float
+        Lowest level to prove (e.g. ``(1 + slack)`` times a grid peak): a common level makes
+        the intervals wide, and the guaranteed bound cannot be below the grid's anyway.
+    slack : float
+        Recorded in the result (``solve`` applies it).
+    performance_rows : int
+        See :class:`AxisCertificate`.
+    max_rounds : int
+        Rounds of gap filling before giving up (then ``covered`` is False and ``upper`` inf).
+    progress : callable, optional
+        Called with the number of points after each round.
+
+    Returns
+    -------
+    AxisCertificate
+    """
+    real.check_axis()
+    end = real.nyquist
+    omega = np.unique(np.clip(np.asarray(seeds, dtype=float), 0.0, end))
+    opt, lmin, scs = solve(omega)
+    opt, lmin, scs = list(opt), list(lmin), list(scs)
+    omega, added = list(omega), [False] * len(omega)
+    level = max(float(floor), max(lmin, default=0.0))
+    # an interval proved at a lower level also proves any higher one (Phi only decreases), so
+    # each point keeps the interval of the level current when it was solved: no recomputation
+    proved = {}
+    covered = False
+    for _ in range(max_rounds):
+        for i, w in enumerate(omega):
+            if i not in proved:
+                proved[i] = (level, _interval_at(real, performance_rows, scs[i], level, w))
+        gaps = _gaps(np.array([proved[i][1] for i in range(len(omega))]).reshape(-1, 2), end)
+        if not gaps:
+            covered = True
+            break
+        new = _new_points(gaps, end, omega)
+        if new.size == 0:
+            break
+        o2, l2, s2 = solve(new)
+        omega.extend(new.tolist())
+        opt.extend(list(o2))
+        lmin.extend(list(l2))
+        scs.extend(list(s2))
+        added.extend([True] * new.size)
+        level = max(level, max(l2))
+        if not np.isfinite(level):
+            break
+        if progress is not None:
+            progress(len(omega))
+    order = [i for i in np.argsort(omega, kind="stable") if i in proved]
+    spans = np.array([proved[i][1] for i in order]).reshape(-1, 2)
+    levels = np.array([proved[i][0] for i in order], dtype=float)
+    return AxisCertificate(
+        upper=float(np.max(levels)) if covered else np.inf,
+        omega=np.asarray(omega)[order],
+        optimal=np.asarray(opt, dtype=float)[order],
+        level=levels,
+        interval=spans,
+        added=np.asarray(added)[order],
+        scalings=tuple(scs[i] for i in order),
+        slack=slack,
+        covered=covered,
+        realization=real,
+        performance_rows=performance_rows,
+    )
+
+
+def _interval_at(real, performance_rows, sc, level, omega0):
+    """:func:`dg_interval` at ``level``; an empty (NaN) interval where it cannot be proved
+    (e.g. ``Phi(inf)`` singular at exactly this level): the cover then adds points there."""
+    if not np.isfinite(level) or sc is None:
+        return (np.nan, np.nan)
+    r, beta = _level_problem(real, performance_rows, level)
+    try:
+        return dg_interval(r, sc, beta, omega0)
+    except ValueError:
+        return (np.nan, np.nan)
+
+
+#: Long runs of the upper bound for the points that would raise the level (their bound decides
+#: the result; a stalled optimizer would show up as a spike in the guaranteed bound).
+POLISH_OPTIONS = dict(max_iter=600, temperatures=(30.0, 300.0, 3000.0))
+
+
+def mu_solver(real: Realization, blk, *, slack: float = SLACK, polish_above: float = 0.0):
+    """The ``solve`` of :func:`cover_axis` for ``mu(M(j omega))`` (D-G bound of ``mussv``).
+
+    Points whose bound exceeds ``polish_above`` get a second, long optimizer run
+    (:data:`POLISH_OPTIONS`, warm-started) and keep the lower of the two.
+    """
+    from oos_drake.robust.blocks import parse_blk
+    from oos_drake.robust.mu import UPPER_ITERATIONS, UPPER_PATIENCE, UPPER_TEMPERATURES, UPPER_TOL
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    structure = parse_blk(blk)
+
+    def solve(omega):
+        M = real.response(omega)
+        res = mu_upper_bound(
+            M,
+            structure,
+            max_iter=UPPER_ITERATIONS,
+            tol=UPPER_TOL,
+            temperatures=UPPER_TEMPERATURES,
+            patience=UPPER_PATIENCE,
+        )
+        upper, Dl, Dr, G = res.upper.copy(), res.D_left, res.D_right, res.G
+        redo = np.flatnonzero(upper > polish_above)
+        if redo.size:
+            more = mu_upper_bound(M[redo], structure, x0=res.params[redo], **POLISH_OPTIONS)
+            better = more.upper < upper[redo]
+            rows = redo[better]
+            upper[rows] = more.upper[better]
+            Dl, Dr, G = Dl.copy(), Dr.copy(), G.copy()
+            Dl[rows], Dr[rows], G[rows] = more.D_left[better], more.D_right[better], more.G[better]
+        scalings = [Scalings(Dl[i], Dr[i], G[i]).conditioned() for i in range(upper.size)]
+        return upper, upper * (1.0 + slack), scalings
+
+    return solve
