@@ -98,8 +98,9 @@ def compile_times() -> tuple[float, float]:
     """(first call with an empty numba cache, first call with the cache filled) [s, wall].
 
     Each is a fresh process running ``mussv`` on 2 and on 8 matrices with the paper's
-    structure (the per-matrix and the lane optimizer) from a fresh cache directory: the first pays the compilation of the kernels (as CI does
-    on a fresh clone), the second only loads them (as every later process does).
+    structure (the per-matrix and the lane optimizer) from a fresh cache directory: the first
+    pays the compilation of the kernels (as CI does on a fresh clone), the second only loads
+    them (as every later process does).
     """
     import subprocess
     import sys

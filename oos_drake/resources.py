@@ -4,8 +4,9 @@ The scenario data (``scenario/data/paper.toml``), the SDF models (``multibody/sd
 campaign specs (``campaign/specs/``) are package data (the two folders are links to the
 repository's top-level ``sdf/`` and ``campaigns/``; a wheel holds their files): they are found
 the same way in a checkout, an editable install and a ``pip install .`` into another
-environment, whatever the working directory. Drake and pandas read real files, so a resource is returned as a filesystem path (a
-package installed as a zip archive is extracted once per process).
+environment, whatever the working directory. Drake and pandas read real files, so a resource is
+returned as a filesystem path (a package installed as a zip archive is extracted once per
+process).
 """
 
 from __future__ import annotations
