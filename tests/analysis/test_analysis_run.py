@@ -207,7 +207,7 @@ def test_worst_perturbation_destabilizes_at_the_reported_frequency(analysis):
     [
         (["--docking", "9"], "'9'"),
         (["--configurations", "0"], "configurations"),
-        (["--fmin", "1", "--fmax", "0.5"], "frequency_range_hz"),
+        (["--f-min", "1", "--f-max", "0.5"], "frequency_range_hz"),
     ],
 )
 def test_bad_analyze_options_exit_2_and_write_nothing(tmp_path, capsys, option, culprit):

@@ -75,7 +75,9 @@ def test_certified_sweep_brackets_the_closed_form_peak():
     a = ureal("a", 1.0, range=(0.1, 2.0))
     arr = usubs(feedback(k * a * control.tf(1, [1, 6, 11, 6]), 1), {"a": gains})
     omega = 2 * np.pi * np.geomspace(0.05, 5.0, 25)
-    res = certified_sweep(arr, omega, {"k": ["k"]}, times=gains, options=FAST, progress=False)
+    res = certified_sweep(
+        arr, omega, {"k": ["k"]}, times=gains, options=FAST, progress=False, guarantee=True
+    )
     cert = res.certificates["k"]
     dense = 2 * np.pi * np.geomspace(0.05, 5.0, 20001)
     s = 1j * dense
