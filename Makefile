@@ -23,7 +23,7 @@ run: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest -q
 
-# the end-to-end checks behind the headline results (about 25 min on 2 cores); CI runs them
+# the end-to-end checks behind the headline results (about 20 min on 2 cores); CI runs them
 test-slow: $(STAMP)
 	$(VENV)/bin/python -m pytest -q --runslow -m slow --durations=15
 

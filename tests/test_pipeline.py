@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 
+import pandas as pd
 import pytest
 
 from oos_drake.pipeline import STAMP, run_stage, source_key
@@ -62,3 +63,42 @@ def test_missing_campaign_spec_is_one_line_and_writes_nothing(tmp_path):
     assert result.returncode == 2
     assert "no.toml" in result.stderr and len(result.stderr.strip().splitlines()) == 1
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_oos_run_quick_end_to_end_then_everything_up_to_date(tmp_path):
+    """``make run ARGS=--quick`` from the command line: every stage, the printed map of results
+    and ``timings.json``; a second call recomputes nothing and the campaign resumes with no run
+    left to do."""
+    out = tmp_path / "out"
+    command = [sys.executable, "-m", "oos_drake.cli", "run", "--out", str(out), "--quick"]
+    first = subprocess.run(command, capture_output=True, text=True, timeout=3000)
+    assert first.returncode == 0, first.stderr[-3000:]
+    timings = json.loads((out / "timings.json").read_text())
+    assert set(timings["stages_s"]) == {
+        "model",
+        "validate",
+        "controller",
+        "analysis",
+        "campaign + report",
+    }
+    assert all(v is not None and v > 0 for v in timings["stages_s"].values())
+    for stage in ("model", "validate", "controller", "analysis"):
+        assert (out / stage / STAMP).is_file(), stage
+    controller = json.loads((out / "controller" / "controller.json").read_text())
+    assert len(controller["configurations"]["time_s"]) == 40
+    summary = json.loads((out / "analysis" / "summary.json").read_text())
+    assert summary["mission"]["configurations"] == 40
+    (campaign,) = out.glob("campaign-*")
+    runs = pd.read_parquet(campaign / "runs.parquet")
+    plan = pd.read_parquet(campaign / "plan.parquet")
+    assert sorted(runs["run_id"]) == sorted(plan["run_id"])
+    assert (campaign / "report").is_dir()
+    for label in ("controller", "robust analysis", "campaign results"):
+        assert label in first.stdout
+
+    second = subprocess.run(command, capture_output=True, text=True, timeout=3000)
+    assert second.returncode == 0, second.stderr[-3000:]
+    again = json.loads((out / "timings.json").read_text())["stages_s"]
+    assert [k for k, v in again.items() if v is not None] == ["campaign + report"]
+    assert "0 run now" in second.stdout
