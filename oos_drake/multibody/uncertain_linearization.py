@@ -93,6 +93,20 @@ _UNITS = {
     "force_damping": "N s/m",
     "torque_damping": "N m s/rad",
 }
+#: Drake quantity -> the block's ``quantity`` (:data:`oos_drake.lfr.blocks.QUANTITIES`).
+_BLOCK_QUANTITIES = {
+    "mass": "mass",
+    "Ixx": "inertia",
+    "Iyy": "inertia",
+    "Izz": "inertia",
+    "stiffness": "stiffness",
+    "damping": "damping",
+    "frequency": "modal frequency",
+    "force_stiffness": "stiffness",
+    "torque_stiffness": "stiffness",
+    "force_damping": "damping",
+    "torque_damping": "damping",
+}
 
 
 @dataclass(frozen=True)
@@ -149,13 +163,20 @@ class PhysicalParameter:
 
     @property
     def spec(self) -> UReal:
-        """The ``ureal`` block spec (MATLAB normalization)."""
-        return UReal(self.name, self.nominal, self.lower, self.upper)
+        """The ``ureal`` block spec (MATLAB normalization) with its unit and block quantity."""
+        return UReal(
+            self.name, self.nominal, self.lower, self.upper,
+            unit=self.unit, quantity=_BLOCK_QUANTITIES[self._base_quantity],
+        )  # fmt: skip
+
+    @property
+    def _base_quantity(self) -> str:
+        return self.quantity.removesuffix("_x").removesuffix("_y").removesuffix("_z")
 
     @property
     def unit(self) -> str:
         """Physical unit of the quantity."""
-        return _UNITS[self.quantity.removesuffix("_x").removesuffix("_y").removesuffix("_z")]
+        return _UNITS[self._base_quantity]
 
     @property
     def kind(self) -> str:

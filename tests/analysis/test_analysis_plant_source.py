@@ -11,6 +11,7 @@ from oos_drake.analysis.models import (  # noqa: E402
     mission_closed_loop,
     mission_times,
 )
+from oos_drake.analysis.subsets import uncertainty_subsets  # noqa: E402
 from oos_drake.lfr import usubs  # noqa: E402
 
 OMEGA = 2 * np.pi * np.geomspace(0.005, 5.0, 60)
@@ -25,6 +26,14 @@ def controller():
 
 def _compare(drake, titop, rng):
     assert drake.system.occurrences == titop.system.occurrences
+    # what each block is (unit, quantity) travels with it: the same subsets, hence the same
+    # studies and tables (without quantities the twin's blocks fell out of modal/mechanical)
+    for name, spec in titop.system.uncertainty.items():
+        ours = drake.system.uncertainty[name]
+        assert (ours.unit, ours.quantity) == (spec.unit, spec.quantity), name
+    assert uncertainty_subsets(drake.system.uncertainty) == uncertainty_subsets(
+        titop.system.uncertainty
+    )
     assert drake.system.batch_shape == titop.system.batch_shape
     deltas = {n: rng.uniform(-1, 1) for n, spec in titop.system.uncertainty.items()
               if spec.kind == "ureal"}  # fmt: skip
