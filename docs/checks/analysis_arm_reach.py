@@ -17,9 +17,9 @@ from oos_drake.blas import limit_blas_threads
 limit_blas_threads(1)
 from oos_drake.analysis.cli import _controller
 from oos_drake.analysis.controller import load_controller
-from oos_drake.analysis.loop import close_loop
 from oos_drake.analysis.stability import SweepOptions, certified_sweep
 from oos_drake.analysis.subsets import uncertainty_subsets
+from oos_drake.control.analysis_model import close_loop
 from oos_drake.lfr import usubs
 from oos_drake.scenario.data import load_scenario
 from oos_drake.scenario.kinematics import forward_kinematics, rigid_spatial_inertia_at_G1

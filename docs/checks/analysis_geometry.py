@@ -12,9 +12,9 @@ from oos_drake.blas import limit_blas_threads
 limit_blas_threads(1)
 from oos_drake.analysis.cli import _controller
 from oos_drake.analysis.controller import load_controller
-from oos_drake.analysis.loop import close_loop
 from oos_drake.analysis.stability import SweepOptions, certified_sweep
 from oos_drake.analysis.subsets import uncertainty_subsets
+from oos_drake.control.analysis_model import close_loop
 from oos_drake.lfr import usubs
 from oos_drake.scenario.model import build_mission_model, mission_values
 from oos_drake.titop.spatial import angle_to_tau

@@ -13,7 +13,7 @@ def _controller(path):
 
     if path:
         return load_controller(path)
-    from oos_drake.analysis.loop import rotational_channels
+    from oos_drake.control.analysis_model import rotational_channels
     from oos_drake.control.baseline import TUNING_TIME_S
     from oos_drake.lfr import usubs
     from oos_drake.scenario.model import build_mission_model, mission_values

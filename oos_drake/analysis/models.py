@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from oos_drake.analysis.controller import Controller
-from oos_drake.analysis.loop import close_loop
+from oos_drake.control.analysis_model import close_loop
 from oos_drake.lfr import LFR, usubs
 
 
@@ -69,13 +69,12 @@ def _check_source(source: str) -> None:
 PLANT_SOURCES = ("lfr", "drake")
 
 
-def mission_closed_loop(
-    controller: Controller, times, scenario=None, *, source: str = "lfr"
-) -> ModelArray:
-    """``M_hat_N``: the uncertain closed loop at mission ``times`` [s].
+def mission_plants(times, scenario=None, *, source: str = "lfr") -> LFR:
+    """The uncertain 6x6 plants ``[F; T] at G1 -> [a; wdot]`` at mission ``times`` [s].
 
-    ``source="drake"``: the plants are the Drake twin's, extracted by ``ulinearize``
-    (:func:`oos_drake.multibody.mission_lfr.twin_mission_plants`).
+    A model array ``(N,)`` whose blocks are ``Delta_real``: the TITOP LFR with the configuration
+    substituted (``source="lfr"``) or the Drake twin's LFRs extracted by ``ulinearize``
+    (``source="drake"``, :func:`oos_drake.multibody.mission_lfr.twin_mission_plants`).
     """
     from oos_drake.scenario.model import build_mission_model, mission_values
 
@@ -85,11 +84,17 @@ def mission_closed_loop(
     if source == "drake":
         from oos_drake.multibody.mission_lfr import twin_mission_plants
 
-        plant = twin_mission_plants(times, scenario)
-    else:
-        plant = usubs(build_mission_model(scenario), mission_values(times, scenario))
-    if not plant.batch_shape:
-        plant = plant.model(np.zeros(times.size, dtype=int)) if plant.batch_shape else plant
+        return twin_mission_plants(times, scenario)
+    return usubs(build_mission_model(scenario), mission_values(times, scenario))
+
+
+def mission_closed_loop(
+    controller: Controller, times, scenario=None, *, source: str = "lfr"
+) -> ModelArray:
+    """``M_hat_N``: the uncertain closed loop at mission ``times`` [s] (plants of
+    :func:`mission_plants` from ``source``)."""
+    times = np.atleast_1d(np.asarray(times, dtype=float))
+    plant = mission_plants(times, scenario, source=source)
     system = close_loop(plant, controller.K, controller.spec)
     return ModelArray(system, times, "time [s]", "mission")
 

@@ -535,13 +535,12 @@ def run_analysis(
         lap("time-domain check")
     # ------------------------------------------------------------------ open-loop effects
     if options.open_loop_samples > 0:
-        from oos_drake.analysis.loop import uncertain_plant
+        from oos_drake.analysis.models import mission_plants
         from oos_drake.analysis.open_loop import uncertainty_effects
-        from oos_drake.lfr import usubs
-        from oos_drake.scenario.model import build_mission_model, mission_values
+        from oos_drake.control.analysis_model import uncertain_plant
 
         t_moment = _moment_time("2", scenario)
-        plant = usubs(build_mission_model(scenario), mission_values([t_moment], scenario)).model(0)
+        plant = mission_plants([t_moment], scenario, source=options.plant).model(0)
         p_hat = uncertain_plant(plant, controller.spec)
         effects = uncertainty_effects(
             p_hat,

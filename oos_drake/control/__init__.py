@@ -11,14 +11,14 @@ main entry points:
 - :func:`peak_gain` -- batched H-infinity norms of model arrays;
 - :class:`LoopResponse` -- closed-loop responses from the plant's modal form (the fast path of
   every gamma evaluation: closed-loop eigenvalues only, no eigenvectors);
-- :func:`closed_loop_lfr` -- the uncertain closed loop with Delta_add and Delta_mul for analysis;
+- :func:`close_loop` -- the uncertain closed loop with Delta_add and Delta_mul (the analysis');
 - :func:`write_synthesis` -- controller JSON, closed-loop arrays (.npz/.mat), per-model tables.
 
 This package never imports pydrake (``oos synth --plant drake`` imports
 :mod:`oos_drake.multibody.synthesis_plants` lazily from :mod:`oos_drake.control.cli`).
 """
 
-from oos_drake.control.analysis_model import closed_loop_lfr, uncertain_plant
+from oos_drake.control.analysis_model import close_loop, uncertain_plant
 from oos_drake.control.baseline import baseline_gains, inertia_from_plant
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.interconnection import WeightedInterconnection, weighted_interconnection
@@ -41,7 +41,7 @@ __all__ = [
     "UncertainParameter",
     "WeightedInterconnection",
     "baseline_gains",
-    "closed_loop_lfr",
+    "close_loop",
     "connect",
     "from_lfr",
     "from_statespace",

@@ -1,25 +1,33 @@
-"""The uncertain closed loop of the paper's analysis (section 4) as an LFR.
+r"""The uncertain closed loop of the analysis (paper Fig. controldesign with Delta_add, Delta_mul).
 
-``M_unc = F_u(M, diag(Delta_real, Delta_add, Delta_mul))`` with ``M = F_l(P_tot, K)``: the
-weighted interconnection of Fig. controldesign closed by the static gain, around the plant
+One implementation for the analysis (:mod:`oos_drake.analysis`) and the control package's users.
+
+Around the rotational plant ``P(Delta_real)`` (``T_ext,G1 -> wdot``, 3x3, a channel of the
+scenario LFR) the analysis adds
 
 .. math::
 
-    \\hat P = P\\,(I_3 + W_{mul,L} \\Delta_{mul,L} + W_{mul,R} \\Delta_{mul,R})
-    + W_{add} \\Delta_{add}
+    \hat P = (P + W_{add} \Delta_{add})
+             \,(I_3 + W_{mul_L} \Delta_{mul_L} + W_{mul_R} \Delta_{mul_R}),
 
-(paper Eqs. for Delta_add and Delta_mul): ``Delta_add`` a full 3x3 ``ultidyn`` scaled by
-``W_add = -75 dB``; ``Delta_mul`` nine scalar ``ultidyn`` blocks, ``mul_xx, mul_yy, mul_zz``
-(weight 4e-2) on the diagonal and ``mul_xy, ...`` (weight 4e-3) off it. The real uncertainty
-``Delta_real`` of the plant LFR stays in. Inputs ``d`` (9) and outputs ``e`` (6) keep the names
-of :mod:`oos_drake.control.interconnection`.
+with ``Delta_add`` a full 3x3 ``ultidyn`` (``W_add = -75 dB``: it covers unknown inverse inertia
+[(rad/s^2)/(N m)]) and ``Delta_mul`` nine scalar ``ultidyn`` blocks (diagonal ``W_mul_L = 4e-2``,
+off-diagonal ``W_mul_R = 4e-3``: actuator gain, phase and misalignment). The weighted
+interconnection (sensors, reaction wheels, roll-off, weights) of :mod:`oos_drake.control` is
+closed with the static gain ``K`` and with ``\hat P`` by two star products, giving the LFR
+
+.. math:: \hat{\mathscr M}_{unc} = F_u(\mathscr M, \Delta_{tot}) : d = [d_{ext}; n_{sst}; n_{gyro}]
+          \to e = [e_p; e_u],
+
+with ``e_p = phi / W_p`` (pointing error over the APE requirement) and ``e_u = W_u u`` (torque
+over its 2 N m bound), batched over the plant's configurations.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from oos_drake.control.components import DesignSpecification
+from oos_drake.control import components as comp
 from oos_drake.control.interconnection import (
     CONTROLS,
     DISTURBANCES,
@@ -27,123 +35,120 @@ from oos_drake.control.interconnection import (
     MEASUREMENTS,
     diagram_parts,
 )
-from oos_drake.control.statespace import BatchedStateSpace, channel_names, connect
+from oos_drake.control.statespace import channel_names, connect
+from oos_drake.lfr import LFR, as_lfr, lft, ultidyn
 
-AXES = "xyz"
+#: Name of the full 3x3 additive LTI block.
+ADDITIVE_BLOCK = "Delta_add"
+#: Axis labels of the multiplicative scalars ``Delta_mul_<ij>``.
+_AXES = "xyz"
+#: The nine multiplicative LTI scalars, diagonal (``W_mul_L``) first.
+MULTIPLICATIVE_BLOCKS = tuple(f"Delta_mul_{a}{a}" for a in _AXES) + tuple(
+    f"Delta_mul_{a}{b}" for a in _AXES for b in _AXES if a != b
+)
 
-
-def multiplicative_uncertainty(spec: DesignSpecification | None = None):
-    """``I3 + W_mul,L Delta_mul,L + W_mul,R Delta_mul,R`` as a 3x3 static LFR (9 ultidyn blocks)."""
-    from oos_drake.lfr import LFR, ultidyn
-
-    spec = spec or DesignSpecification()
-    total = LFR.from_matrix(np.eye(3))
-    for i in range(3):
-        for j in range(3):
-            weight = spec.multiplicative_diagonal if i == j else spec.multiplicative_off_diagonal
-            E = np.zeros((3, 1))
-            E[i, 0] = 1.0
-            F = np.zeros((1, 3))
-            F[0, j] = 1.0
-            delta = ultidyn(
-                f"mul_{AXES[i]}{AXES[j]}",
-                (1, 1),
-                bound=1.0,
-                unit="-",
-                quantity="multiplicative dynamics",
-            )
-            total = total + LFR.from_matrix(weight * E) * delta * LFR.from_matrix(F)
-    return total
+PLANT_IN = channel_names("T", 3)
+PLANT_OUT = channel_names("wdot", 3)
 
 
-def uncertain_plant(plant, spec: DesignSpecification | None = None):
-    """``P_hat = P (I + W_mul Delta_mul) + W_add Delta_add`` (an LFR, 3x3 ``T -> wdot``).
-
-    Parameters
-    ----------
-    plant : oos_drake.lfr.LFR or BatchedStateSpace
-        The 3x3 plant (possibly with ``Delta_real`` blocks and batch dimensions).
-    """
-    from oos_drake.lfr import LFR, as_lfr, ultidyn
-
-    spec = spec or DesignSpecification()
-    if isinstance(plant, BatchedStateSpace):
-        plant = LFR.from_ss(plant.A, plant.B, plant.C, plant.D)
-    plant = as_lfr(plant)
-    if plant.shape != (3, 3):
-        raise ValueError(f"uncertain_plant: plant must be 3x3 (T -> wdot), got {plant.shape}")
-    additive = spec.additive_weight * ultidyn(
-        "Delta_add", (3, 3), bound=1.0, unit="-", quantity="additive dynamics"
-    )
-    return plant * multiplicative_uncertainty(spec) + additive
+def rotational_channels(model: LFR) -> LFR:
+    """``T_ext,G1 -> wdot`` (3x3) of a scenario LFR ``W_ext,G1 (6) -> [a; wdot] (6)``."""
+    model = as_lfr(model)
+    if model.shape == (3, 3):
+        return model
+    if model.shape != (6, 6):
+        raise ValueError(
+            f"plant must be 3x3 (T -> wdot) or 6x6 (wrench -> twist), got {model.shape}"
+        )
+    return model[3:6, 3:6]
 
 
-def closed_loop_lfr(plant, K, spec: DesignSpecification | None = None, *, analysis=True):
-    """The closed loop ``d -> e`` with its uncertain blocks, as an LFR (for mu analysis).
+def uncertain_plant(
+    plant: LFR,
+    spec: comp.DesignSpecification | None = None,
+    *,
+    additive: bool = True,
+    multiplicative: bool = True,
+) -> LFR:
+    """``P_hat = (P + W_add Delta_add)(I + W_mul Delta_mul)`` (3x3, blocks added by name).
 
     Parameters
     ----------
-    plant : oos_drake.lfr.LFR or BatchedStateSpace
-        3x3 plant ``T -> wdot`` (``Delta_real`` blocks and batch dimensions allowed).
-    K : array_like, shape (3, 6)
-        Static gain ``[K_p, K_d]`` [N m/rad, N m s/rad].
+    plant : LFR
+        ``T -> wdot`` (3x3) or the 6x6 scenario model, possibly a model array.
     spec : DesignSpecification, optional
-    analysis : bool
-        Add ``Delta_add`` and ``Delta_mul`` (default) or keep only the plant's blocks.
+        ``additive_weight_db``, ``multiplicative_diagonal``, ``multiplicative_off_diagonal``.
+    additive, multiplicative : bool
+        Include ``Delta_add`` / ``Delta_mul``.
+    """
+    spec = spec or comp.DesignSpecification()
+    P = rotational_channels(plant)
+    if additive:
+        P = P + spec.additive_weight * ultidyn(
+            ADDITIVE_BLOCK, (3, 3), unit="-", quantity="additive dynamics"
+        )
+    if multiplicative:
+        factor = as_lfr(np.eye(3))
+        eye = np.eye(3)
+        for name in MULTIPLICATIVE_BLOCKS:
+            i, j = _AXES.index(name[-2]), _AXES.index(name[-1])
+            weight = spec.multiplicative_diagonal if i == j else spec.multiplicative_off_diagonal
+            delta = ultidyn(name, (1, 1), unit="-", quantity="multiplicative dynamics")
+            factor = factor + (weight * eye[:, [i]]) @ delta @ eye[[j], :]
+        P = P @ factor
+    return P
+
+
+def weighted_interconnection_open(spec: comp.DesignSpecification | None = None) -> LFR:
+    """The certain part of Fig. controldesign with the plant cut out.
 
     Returns
     -------
-    oos_drake.lfr.LFR
-        ``M_unc``: inputs ``DISTURBANCES``, outputs ``ERRORS``.
+    LFR
+        Inputs ``[d (9); wdot (3); u_K (3)]``, outputs ``[e (6); T (3); y (6)]`` (the same
+        components and signs as :func:`oos_drake.control.interconnection.weighted_interconnection`).
     """
-    from oos_drake.lfr import LFR, as_lfr
+    spec = spec or comp.DesignSpecification()
+    parts = diagram_parts(spec)
+    inputs = DISTURBANCES + PLANT_OUT + CONTROLS
+    outputs = ERRORS + PLANT_IN + MEASUREMENTS
+    H = connect(parts, inputs, outputs)
+    return LFR.from_ss(H.A, H.B, H.C, H.D, input_names=list(inputs), output_names=list(outputs))
 
-    spec = spec or DesignSpecification()
+
+def close_loop(
+    plant: LFR,
+    K,
+    spec: comp.DesignSpecification | None = None,
+    *,
+    additive: bool = True,
+    multiplicative: bool = True,
+) -> LFR:
+    """Uncertain closed loop ``d (9) -> e (6)`` with ``Delta_tot`` (batched like ``plant``).
+
+    Parameters
+    ----------
+    plant : LFR
+        Scenario model (6x6) or its rotational channels (3x3) with the configuration already
+        substituted (the remaining blocks are ``Delta_real``); a model array is allowed.
+    K : array_like, shape (3, 6)
+        ``[K_p, K_d]`` [N m/rad, N m s/rad].
+    spec : DesignSpecification, optional
+        Weights and components (paper values by default).
+    additive, multiplicative : bool
+        Include ``Delta_add`` / ``Delta_mul``.
+
+    Returns
+    -------
+    LFR
+        Inputs ``d_ext[0..2], n_sst[0..2], n_gyro[0..2]``, outputs ``e_p[0..2], e_u[0..2]``.
+    """
     K = np.asarray(K, dtype=float)
     if K.shape != (3, 6):
-        raise ValueError(f"controller gain K must be 3x6, got shape {K.shape}")
-    if isinstance(plant, BatchedStateSpace):
-        plant = LFR.from_ss(plant.A, plant.B, plant.C, plant.D)
-    P = uncertain_plant(plant, spec) if analysis else as_lfr(plant)
-    nz, nw = P.nz, P.nw
-    z_names, w_names = channel_names("z_delta", nz), channel_names("w_delta", nw)
-    augmented = BatchedStateSpace(
-        P.A,
-        np.concatenate([P.Bw, P.Bu], axis=-1),
-        np.concatenate([P.Cz, P.Cy], axis=-2),
-        np.concatenate(
-            [np.concatenate([P.Dzw, P.Dzu], axis=-1), np.concatenate([P.Dyw, P.Dyu], axis=-1)],
-            axis=-2,
-        ),
-        w_names + channel_names("T", 3),
-        z_names + channel_names("wdot", 3),
-    )
-    G = connect(
-        [augmented, *diagram_parts(spec)],
-        w_names + DISTURBANCES + CONTROLS,
-        z_names + ERRORS + MEASUREMENTS,
-    )
-    # close u_K = K y (the loop u_K -> y is strictly proper)
-    nin, nout = nw + 9, nz + 6
-    Bu, Cy = G.B[..., :, nin:], G.C[..., nout:, :]
-    Dyw, Dzu = G.D[..., nout:, :nin], G.D[..., :nout, nin:]
-    if np.any(G.D[..., nout:, nin:] != 0):
-        raise ValueError("closed_loop_lfr: the loop u_K -> y must be strictly proper")
-    A = G.A + Bu @ K @ Cy
-    B = G.B[..., :, :nin] + Bu @ K @ Dyw
-    C = G.C[..., :nout, :] + Dzu @ K @ Cy
-    D = G.D[..., :nout, :nin] + Dzu @ K @ Dyw
-    return LFR.from_parts(
-        A,
-        B[..., :, :nw],
-        B[..., :, nw:],
-        C[..., :nz, :],
-        C[..., nz:, :],
-        D[..., :nz, :nw],
-        D[..., :nz, nw:],
-        D[..., nz:, :nw],
-        D[..., nz:, nw:],
-        [(entry.spec, entry.reps) for entry in P.block_entries],
-        input_names=list(DISTURBANCES),
-        output_names=list(ERRORS),
-    )
+        raise ValueError(f"close_loop: K must be 3x6, got shape {K.shape}")
+    spec = spec or comp.DesignSpecification()
+    H = weighted_interconnection_open(spec)
+    HK = lft(H, as_lfr(K), 6, 3)  # y -> K -> u_K: [d; wdot] -> [e; T]
+    P_hat = uncertain_plant(plant, spec, additive=additive, multiplicative=multiplicative)
+    closed = lft(HK, P_hat, 3, 3)  # T -> P_hat -> wdot
+    return closed.with_names(inputs=list(DISTURBANCES), outputs=list(ERRORS))

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from oos_drake.analysis.loop import MULTIPLICATIVE_BLOCKS, close_loop
+from oos_drake.control.analysis_model import MULTIPLICATIVE_BLOCKS, close_loop
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.interconnection import plant_statespace, weighted_interconnection
 from oos_drake.control.plants import flexible_rotational_plant

@@ -7,10 +7,10 @@ import pandas as pd
 import pytest
 
 from oos_drake.analysis.controller import baseline_controller
-from oos_drake.analysis.loop import rotational_channels
 from oos_drake.analysis.run import AnalysisOptions, run_analysis
 from oos_drake.analysis.stability import SweepOptions
 from oos_drake.analysis.tightening import TightenOptions
+from oos_drake.control.analysis_model import rotational_channels
 
 FAST = AnalysisOptions(
     configurations=3,
