@@ -39,7 +39,8 @@ def mission_times(configurations: int) -> np.ndarray:
 
 
 def drake_plants(configurations: int) -> PlantArray:
-    """The same model array from Drake linearizations of the twin (imports pydrake lazily)."""
+    """The same model array from the Drake twin (imports pydrake lazily): nominal
+    linearizations, and LFRs extracted per configuration for the worst-case search."""
     try:
         from oos_drake.multibody.synthesis_plants import drake_plant_array
     except ModuleNotFoundError as exc:
@@ -93,6 +94,8 @@ def run_synth(args) -> int:
         f"gamma = {result.gamma:.6g} (baseline {result.gamma_start:.6g}), "
         f"{len(active)} active model(s), {result.wall_time_s:.1f} s"
     )
+    if plants.statistics is not None:
+        print(f"models: {plants.statistics()}")
     print(f"K_p [N m/rad] =\n{np.array2string(result.K[:, :3], precision=5)}")
     print(f"K_d [N m s/rad] =\n{np.array2string(result.K[:, 3:], precision=5)}")
     for name, path in paths.items():
@@ -115,8 +118,9 @@ def register(subparsers) -> None:
         "--plant",
         default="lfr",
         choices=["lfr", "drake", "synthetic"],
-        help="source of the model array: lfr (TITOP LFR substitution), drake (linearizations "
-        "of the Drake twin, same configurations and real parameters), synthetic (test plants)",
+        help="source of the model array: lfr (TITOP LFR substitution), drake (the Drake twin: "
+        "nominal linearizations, worst cases substituted into LFRs extracted by ulinearize; "
+        "same configurations and real parameters), synthetic (test plants)",
     )
     parser.add_argument(
         "--configurations", type=int, default=200, help="equally spaced mission configurations"

@@ -60,12 +60,16 @@ class PlantArray:
         (physical parameter values, columns in ``parameters`` order).
     source : str
         Where the models come from (``"synthetic"``, ``"lfr"``, ``"drake"``).
+    statistics : callable, optional
+        ``statistics() -> dict``: what building the models has cost so far (e.g. the Drake
+        source's linearizations and LFR extractions, with their times [s]).
     """
 
     configurations: pd.DataFrame
     parameters: tuple[UncertainParameter, ...]
     build: Callable
     source: str = "unknown"
+    statistics: Callable | None = None
 
     @property
     def size(self) -> int:
@@ -265,9 +269,58 @@ def synthetic_flexible_plants(
     return PlantArray(pd.DataFrame({"time_s": t}), parameters, build, "synthetic")
 
 
+def lfr_statespace(model, values: dict):
+    """``(A, B, C, D)`` of an LFR with every block substituted by PHYSICAL ``values``.
+
+    Parameters
+    ----------
+    model : oos_drake.lfr.LFR
+        Uncertain plant whose blocks are all ``ureal`` (one model or a model array ``(K,)``).
+    values : dict
+        Block name -> physical values, shape (K,) (every block of ``model``; extra names are
+        an error of :func:`oos_drake.lfr.usubs`).
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(A, B, C, D)`` with leading dimension K.
+    """
+    from oos_drake.lfr import usubs
+
+    sizes = {np.asarray(v).shape for v in values.values()}
+    if values:
+        model = usubs(model, values)
+    n = model.nstates
+    M = np.asarray(model.M, dtype=float)
+    if M.ndim == 2:
+        K = next(iter(sizes))[0] if sizes else 1
+        M = np.broadcast_to(M, (K,) + M.shape)
+    return M[..., :n, :n], M[..., :n, n:], M[..., n:, :n], M[..., n:, n:]
+
+
+def lfr_parameters(model) -> tuple[UncertainParameter, ...]:
+    """The blocks of ``model`` as :class:`UncertainParameter` (physical nominal and range).
+
+    Raises
+    ------
+    ValueError
+        A block that is not a ``ureal`` (the synthesis searches real parameters only).
+    """
+    blocks = model.blocks
+    kinds = set(blocks["kind"]) - {"ureal"}
+    if kinds:
+        raise ValueError(
+            f"from_lfr: only ureal blocks may remain for synthesis, found {sorted(kinds)}"
+        )
+    return tuple(
+        UncertainParameter(row.name, float(row.nominal), float(row.range[0]), float(row.range[1]))
+        for row in blocks.itertuples()
+    )
+
+
 def from_lfr(
     model,
-    configuration_values: dict,
+    configuration_values: dict | None = None,
     configurations: pd.DataFrame | None = None,
     *,
     source: str = "lfr",
@@ -279,9 +332,11 @@ def from_lfr(
     model : oos_drake.lfr.LFR
         The plant: either the 3x3 channels ``T_ext,G1 -> wdot`` or the full 6x6 model
         ``W_ext,G1 -> [a; wdot]`` (its rotational block ``[3:6, 3:6]`` is taken).
-    configuration_values : dict
+    configuration_values : dict, optional
         Scheduled block name -> PHYSICAL values, shape (N,) (e.g.
-        ``oos_drake.scenario.model.mission_values(times)``); substituted once.
+        ``oos_drake.scenario.model.mission_values(times)``); substituted once. Omitted: ``model``
+        is already a model array ``(N,)``, one model per configuration (e.g. LFRs extracted
+        from the Drake twin).
     configurations : pandas.DataFrame, optional
         One row per configuration (e.g. ``time_s``).
     source : str
@@ -291,7 +346,8 @@ def from_lfr(
     -------
     PlantArray
         Parameters: the blocks left after substitution (must be ``ureal``: ``Delta_real``),
-        with their physical nominal values and ranges.
+        with their physical nominal values and ranges. The plants at given parameter values
+        are the LFR with those values substituted (:func:`lfr_statespace`).
     """
     from oos_drake.lfr import LFR, usubs
 
@@ -301,34 +357,32 @@ def from_lfr(
         model = model[3:6, 3:6]
     if model.shape != (3, 3):
         raise ValueError(f"from_lfr: the plant must be 3x3 or 6x6, got {model.shape}")
-    sizes = {np.asarray(v).shape for v in configuration_values.values()}
-    if len(sizes) != 1 or len(next(iter(sizes))) != 1:
-        raise ValueError("from_lfr: every configuration value must be a 1-D array of equal length")
-    N = next(iter(sizes))[0]
-    scheduled = usubs(model, configuration_values)
-    if scheduled.batch_shape != (N,):
-        scheduled = (
-            scheduled.model(np.zeros(N, dtype=int)) if not scheduled.batch_shape else scheduled
-        )
-    blocks = scheduled.blocks
-    kinds = set(blocks["kind"]) - {"ureal"}
-    if kinds:
-        raise ValueError(
-            f"from_lfr: only ureal blocks may remain for synthesis, found {sorted(kinds)}"
-        )
-    parameters = tuple(
-        UncertainParameter(row.name, float(row.nominal), float(row.range[0]), float(row.range[1]))
-        for row in blocks.itertuples()
-    )
+    if configuration_values is None:
+        if len(model.batch_shape) != 1:
+            raise ValueError(
+                "from_lfr: without configuration values the model must be a model array (N,), "
+                f"got batch shape {model.batch_shape}"
+            )
+        N = model.batch_shape[0]
+        scheduled = model
+    else:
+        sizes = {np.asarray(v).shape for v in configuration_values.values()}
+        if len(sizes) != 1 or len(next(iter(sizes))) != 1:
+            raise ValueError(
+                "from_lfr: every configuration value must be a 1-D array of equal length"
+            )
+        N = next(iter(sizes))[0]
+        scheduled = usubs(model, configuration_values)
+        if scheduled.batch_shape != (N,):
+            scheduled = (
+                scheduled.model(np.zeros(N, dtype=int)) if not scheduled.batch_shape else scheduled
+            )
+    parameters = lfr_parameters(scheduled)
     names = [p.name for p in parameters]
 
     def build(index, values):
         sub = scheduled.model(np.asarray(index, dtype=int))
-        if names:
-            sub = usubs(sub, {name: values[:, j] for j, name in enumerate(names)})
-        n = sub.nstates
-        M = np.asarray(sub.M, dtype=float)
-        return M[..., :n, :n], M[..., :n, n:], M[..., n:, :n], M[..., n:, n:]
+        return lfr_statespace(sub, {name: values[:, j] for j, name in enumerate(names)})
 
     configurations = (
         configurations if configurations is not None else pd.DataFrame({"index": np.arange(N)})

@@ -71,6 +71,7 @@ def controller_record(result: SynthesisResult, plants: PlantArray, options=None)
             "uncertain_parameters": [asdict(p) for p in plants.parameters],
             "worst_cases": result.worst_cases.to_dict(orient="records"),
             "model_source": plants.source,
+            "model_statistics": plants.statistics() if plants.statistics else None,
             "model_sha256": plants.fingerprint(),
             "design_specification": result.spec.to_dict(),
             "options": asdict(options) if options is not None else None,

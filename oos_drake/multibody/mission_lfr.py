@@ -31,7 +31,13 @@ from oos_drake.multibody.scenario_plant import cached_scenario_diagram
 from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL
 from oos_drake.multibody.uncertain_linearization import PhysicalParameter, ulinearize
 
-__all__ = ["SPRING_QUANTITIES", "mission_parameters", "spring_damper_parameters", "twin_lfr"]
+__all__ = [
+    "SPRING_QUANTITIES",
+    "mission_parameters",
+    "spring_damper_parameters",
+    "twin_lfr",
+    "uncertain_parameters",
+]
 
 #: TITOP spring-damper block prefix -> bushing quantity.
 SPRING_QUANTITIES = {
@@ -43,10 +49,63 @@ SPRING_QUANTITIES = {
 _BUSHING_FRAMES = {"SM1": "J7/D2", "SM2": "D1/D3"}
 
 
+def _scenario(scenario):
+    if scenario is None:
+        from oos_drake.scenario.data import load_scenario
+
+        return load_scenario()
+    return scenario
+
+
+def uncertain_parameters(scenario=None):
+    """The real uncertain parameters ``Delta_real`` of the scenario, sorted by name.
+
+    Same names, nominal values and ranges as the blocks the mission LFR keeps after the
+    configuration substitution (``m_<hub>``, ``J{xx,yy,zz}_<hub>``, ``w1_<array>``), computed
+    from the scenario data: ``value = nominal (1 +- percent / 100)``.
+
+    Parameters
+    ----------
+    scenario : Scenario, optional
+        Default: the paper's (``oos_drake.scenario.load_scenario()``).
+
+    Returns
+    -------
+    tuple of oos_drake.control.plants.UncertainParameter
+    """
+    import numpy as np
+
+    from oos_drake.control.plants import UncertainParameter
+    from oos_drake.titop.parameters import inertia_names, mass_name, mode_frequency_name
+
+    scenario = _scenario(scenario)
+    parameters = []
+
+    def add(name, nominal, percent):
+        r = float(percent) / 100.0
+        if r > 0:
+            parameters.append(
+                UncertainParameter(name, float(nominal), nominal * (1 - r), nominal * (1 + r))
+            )
+
+    for hub in scenario.hubs.values():
+        add(mass_name(hub.name), hub.mass, hub.mass_uncertainty_percent)
+        diagonal = np.diag(np.asarray(hub.inertia, dtype=float))
+        percents = np.broadcast_to(np.asarray(hub.inertia_uncertainty_percent, float), (3,))
+        for name, value, percent in zip(inertia_names(hub.name), diagonal, percents, strict=True):
+            add(name, value, percent)
+    for mount in scenario.arrays.values():
+        model = mount.model
+        add(
+            mode_frequency_name(mount.name, 1),
+            float(model.omega[0]),
+            model.first_mode_uncertainty_percent,
+        )
+    return tuple(sorted(parameters, key=lambda p: p.name))
+
+
 def mission_parameters(scenario=None) -> tuple[PhysicalParameter, ...]:
     """The scenario's real uncertain parameters as Drake declarations (TITOP names and ranges)."""
-    from oos_drake.multibody.synthesis_plants import _scenario, uncertain_parameters
-
     scenario = _scenario(scenario)
     hubs = {hub.name for hub in scenario.hubs.values()}
     arrays = {mount.name for mount in scenario.arrays.values()}
@@ -182,7 +241,6 @@ def twin_mission_plants(times, scenario=None, *, progress=None) -> LFR:
     import numpy as np
 
     from oos_drake.multibody.operating_point import operating_point
-    from oos_drake.multibody.synthesis_plants import _scenario
     from oos_drake.scenario.timeline import mission_timeline
 
     scenario = _scenario(scenario)
@@ -218,7 +276,6 @@ def twin_docking_plants(phase: str, stiffness, damping: float, scenario=None) ->
 
     from oos_drake.lfr import usubs
     from oos_drake.multibody.operating_point import operating_point
-    from oos_drake.multibody.synthesis_plants import _scenario
     from oos_drake.scenario.timeline import mission_timeline
 
     scenario = _scenario(scenario)

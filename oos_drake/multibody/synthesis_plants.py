@@ -1,116 +1,75 @@
-"""Drake-linearized plant arrays for the H-infinity synthesis (``oos synth --plant drake``).
+"""Drake plant arrays for the H-infinity synthesis (``oos synth --plant drake``).
 
 The synthesis (:mod:`oos_drake.control.synthesis`) needs, for every mission configuration ``i``
 and every value of the real uncertain parameters ``Delta_real``, the rotational plant
 ``T_ext,G1 -> wdot`` as state-space matrices (a :class:`oos_drake.control.plants.PlantArray`).
-This module builds it from the Drake twin instead of the TITOP LFR:
+This module builds it from the Drake twin instead of the TITOP LFR, the same way:
 
-- configuration ``i`` (mission time ``t_i``): the twin is placed at the timeline's configuration
-  (arm and array drive angles locked, connection from the docking switches) and linearized by
+- nominal plants: the twin is placed at configuration ``i`` (mission time ``t_i``; arm and array
+  drive angles locked, connection from the docking switches) and linearized once by
   :func:`oos_drake.multibody.operating_point.linearize_at`; the unreachable and unobservable
   states (chaser rigid-body motion, a free target) are pruned structurally and the 3x3 block
-  ``[T] -> [wdot]`` is kept;
-- real parameters (physical values, the same names, nominal values and ranges as the LFR's
-  ``ureal`` blocks, taken from the scenario data): they are written into the **Context
-  parameters** of the cached diagram, no rebuild:
-
-  ===============================  ==============================================================
-  ``m_RH2``, ``J{xx,yy,zz}_RH2``   target hub spatial inertia (link frame at its centre of mass
-                                   G2, products of inertia nominal),
-                                   ``RigidBody.SetSpatialInertiaInBodyFrame``
-  ``w1_SA<k>``                     first cantilever mode of array k: the mode body's hinge spring
-                                   ``k^2 w^2`` and damping ``2 xi w k^2`` scaled by
-                                   ``(w / w_0)^2`` and ``w / w_0`` (same ``xi``, same participation:
-                                   the LFR's ``w1`` block occurs in both terms)
-  ===============================  ==============================================================
-
+  ``[T] -> [wdot]`` is kept (~10 ms per configuration);
+- plants at other parameter values (the worst-case search): configuration ``i``'s uncertain LFR
+  is extracted from the twin by ``ulinearize``
+  (:func:`oos_drake.multibody.mission_lfr.twin_lfr`, the TITOP block names, nominal values and
+  ranges) the first time the search visits ``i``, kept, and the values are substituted into it
+  (:func:`oos_drake.control.plants.lfr_statespace`), exactly as the TITOP path substitutes them
+  into its LFR. An extraction costs ~29 linearizations (~0.4 s); the search visits a few
+  configurations per round, so only those are extracted. Nothing is relinearized per parameter
+  point.
 - every model of the array has the same number of states (the largest pruned order, 48 for the
   paper): models with fewer states (free target: the target's modes are not reachable) are padded
   with decoupled states at ``-1 rad/s`` (``B = 0``, ``C = 0``): the transfer function, hence every
   closed-loop H-infinity norm, is unchanged. The LFR array carries those target modes as
   decoupled states too.
 
-The nominal linearizations are computed once when the array is built (one Taylor approximation per
-configuration, ~10 ms each); perturbed ones are computed on demand and kept in a bounded cache
-(the worst-case search evaluates the same parameter points repeatedly).
+:func:`rotational_plant` with parameter ``values`` (written into the **Context parameters** of
+the cached diagram by :func:`apply_physical_values`, no rebuild) is the independent reference the
+tests hold the extracted LFRs to:
+
+===============================  ==============================================================
+``m_RH2``, ``J{xx,yy,zz}_RH2``   target hub spatial inertia (link frame at its centre of mass
+                                 G2, products of inertia nominal),
+                                 ``RigidBody.SetSpatialInertiaInBodyFrame``
+``w1_SA<k>``                     first cantilever mode of array k: the mode body's hinge spring
+                                 ``k^2 w^2`` and damping ``2 xi w k^2`` scaled by
+                                 ``(w / w_0)^2`` and ``w / w_0`` (same ``xi``, same participation:
+                                 the LFR's ``w1`` block occurs in both terms)
+===============================  ==============================================================
 """
 
 from __future__ import annotations
 
 import time
-from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 from pydrake.multibody.tree import RevoluteSpring, RotationalInertia, SpatialInertia
 
-from oos_drake.control.plants import PlantArray, UncertainParameter
+from oos_drake.control.plants import PlantArray, lfr_statespace
+from oos_drake.lfr import LFR
 from oos_drake.multibody.appendage_sdf import MODE_JOINT
 from oos_drake.multibody.linearization import structural_prune
+from oos_drake.multibody.mission_lfr import (
+    PADDING_POLE,
+    _scenario,
+    mission_parameters,
+    twin_lfr,
+    uncertain_parameters,
+)
 from oos_drake.multibody.operating_point import linearize_at, operating_point
 from oos_drake.multibody.scenario_plant import ScenarioDiagram, cached_scenario_diagram
 from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL
 
 __all__ = [
     "PADDING_POLE",
-    "uncertain_parameters",
     "apply_physical_values",
     "rotational_plant",
     "DrakePlantSource",
     "drake_plant_array",
 ]
-
-#: Pole [rad/s] of the decoupled states that pad lower-order models to the array's order.
-PADDING_POLE = -1.0
-
-
-def _scenario(scenario):
-    if scenario is None:
-        from oos_drake.scenario.data import load_scenario
-
-        return load_scenario()
-    return scenario
-
-
-def uncertain_parameters(scenario=None) -> tuple[UncertainParameter, ...]:
-    """The real uncertain parameters ``Delta_real`` of the scenario, sorted by name.
-
-    Same names, nominal values and ranges as the blocks the mission LFR keeps after the
-    configuration substitution (``m_<hub>``, ``J{xx,yy,zz}_<hub>``, ``w1_<array>``), computed
-    from the scenario data: ``value = nominal (1 +- percent / 100)``.
-
-    Parameters
-    ----------
-    scenario : Scenario, optional
-        Default: the paper's (``oos_drake.scenario.load_scenario()``).
-    """
-    from oos_drake.titop.parameters import inertia_names, mass_name, mode_frequency_name
-
-    scenario = _scenario(scenario)
-    parameters = []
-
-    def add(name, nominal, percent):
-        r = float(percent) / 100.0
-        if r > 0:
-            parameters.append(
-                UncertainParameter(name, float(nominal), nominal * (1 - r), nominal * (1 + r))
-            )
-
-    for hub in scenario.hubs.values():
-        add(mass_name(hub.name), hub.mass, hub.mass_uncertainty_percent)
-        diagonal = np.diag(np.asarray(hub.inertia, dtype=float))
-        percents = np.broadcast_to(np.asarray(hub.inertia_uncertainty_percent, float), (3,))
-        for name, value, percent in zip(inertia_names(hub.name), diagonal, percents, strict=True):
-            add(name, value, percent)
-    for mount in scenario.arrays.values():
-        model = mount.model
-        add(
-            mode_frequency_name(mount.name, 1),
-            float(model.omega[0]),
-            model.first_mode_uncertainty_percent,
-        )
-    return tuple(sorted(parameters, key=lambda p: p.name))
 
 
 def _mode_spring(handles: ScenarioDiagram, joint) -> RevoluteSpring:
@@ -224,22 +183,25 @@ def rotational_plant(
 
 
 def _pad(A, B, C, D, order: int):
-    n = A.shape[0]
+    """Pad ``(A, B, C, D)`` (leading batch dimensions allowed) with decoupled states."""
+    n = A.shape[-1]
     if n > order:
         raise ValueError(f"Drake plant has {n} states, more than the array order {order}")
     if n == order:
         return A, B, C, D
-    k = order - n
-    A2 = np.zeros((order, order))
-    A2[:n, :n] = A
-    A2[n:, n:] = PADDING_POLE * np.eye(k)
-    B2 = np.vstack([B, np.zeros((k, B.shape[1]))])
-    C2 = np.hstack([C, np.zeros((C.shape[0], k))])
+    batch = A.shape[:-2]
+    A2 = np.zeros(batch + (order, order))
+    A2[..., :n, :n] = A
+    A2[..., n:, n:] = PADDING_POLE * np.eye(order - n)
+    B2 = np.zeros(batch + (order, B.shape[-1]))
+    B2[..., :n, :] = B
+    C2 = np.zeros(batch + (C.shape[-2], order))
+    C2[..., :n] = C
     return A2, B2, C2, D
 
 
 class DrakePlantSource:
-    """Per-configuration Drake linearizations with real-parameter values, cached.
+    """Drake twin plants per configuration: nominal linearizations, extracted LFRs elsewhere.
 
     Parameters
     ----------
@@ -247,8 +209,6 @@ class DrakePlantSource:
         Mission times [s] of the configurations.
     scenario : Scenario, optional
         Default: the paper's (must match the SDF files under ``sdf/``).
-    cache_size : int
-        Largest number of perturbed linearizations kept in memory.
     progress : callable, optional
         ``progress(done, total)`` during the nominal linearizations.
 
@@ -258,6 +218,10 @@ class DrakePlantSource:
         ``(A, B, C, D)`` batched over the configurations (padded to :attr:`order`).
     build_time_s, build_cpu_s : float
         Wall and CPU time of the nominal linearizations [s].
+    extractions : int
+        LFRs extracted so far (at most one per configuration).
+    extraction_time_s : float
+        Wall time of those extractions [s].
     """
 
     def __init__(
@@ -265,7 +229,6 @@ class DrakePlantSource:
         times: Sequence[float],
         scenario=None,
         *,
-        cache_size: int = 4096,
         progress: Callable | None = None,
     ):
         from oos_drake.scenario.timeline import mission_timeline
@@ -287,62 +250,83 @@ class DrakePlantSource:
             for i in range(self.times.size)
         ]
         self.parameters = uncertain_parameters(self.scenario)
-        self.cache_size = int(cache_size)
-        self._cache: OrderedDict = OrderedDict()
-        self.linearizations = 0
+        self.declared = mission_parameters(self.scenario)
+        self._lfrs: dict[int, LFR] = {}
+        self.extractions = 0
+        self.extraction_time_s = 0.0
         wall, cpu = time.perf_counter(), time.process_time()
         raw = []
         for i, configuration in enumerate(self.configurations):
             raw.append(rotational_plant(configuration, scenario=self.scenario))
             if progress is not None:
                 progress(i + 1, self.times.size)
-        self.linearizations += len(raw)
+        self.linearizations = len(raw)
         self.order = max(m[0].shape[0] for m in raw)
         padded = [_pad(*m, self.order) for m in raw]
         self.nominal_matrices = tuple(np.stack([m[k] for m in padded]) for k in range(4))
         self.build_time_s = time.perf_counter() - wall
         self.build_cpu_s = time.process_time() - cpu
 
-    def matrices(self, index: int, values: np.ndarray):
-        """``(A, B, C, D)`` of configuration ``index`` at physical parameter ``values`` (P,)."""
-        values = np.asarray(values, dtype=float)
-        nominal = np.array([p.nominal for p in self.parameters])
-        if values.size == 0 or np.array_equal(values, nominal):
-            return tuple(M[index] for M in self.nominal_matrices)
-        key = (int(index), values.tobytes())
-        if key in self._cache:
-            self._cache.move_to_end(key)
-            return self._cache[key]
-        changed = {
-            p.name: float(v) for p, v in zip(self.parameters, values, strict=True) if v != p.nominal
-        }
-        result = _pad(
-            *rotational_plant(self.configurations[index], changed, self.scenario), self.order
-        )
-        self.linearizations += 1
-        self._cache[key] = result
-        if len(self._cache) > self.cache_size:
-            self._cache.popitem(last=False)
-        return result
+    def lfr(self, index: int) -> LFR:
+        """The uncertain plant ``T -> wdot`` of configuration ``index`` (extracted once).
+
+        ``ulinearize`` of the twin (:func:`~oos_drake.multibody.mission_lfr.twin_lfr`) with the
+        scenario's real parameters; the ones that do not act at this configuration (a free
+        target's) are absent.
+        """
+        index = int(index)
+        if index not in self._lfrs:
+            wall = time.perf_counter()
+            point = operating_point(self.configurations[index])
+            self._lfrs[index] = twin_lfr(point, self.declared)[3:6, 3:6]
+            self.extractions += 1
+            self.extraction_time_s += time.perf_counter() - wall
+        return self._lfrs[index]
 
     def build(self, index, values):
-        """The :class:`~oos_drake.control.plants.PlantArray` ``build`` callable (batched)."""
-        index = np.asarray(index, dtype=int)
+        """The :class:`~oos_drake.control.plants.PlantArray` ``build`` callable (batched).
+
+        Rows at the nominal values are the nominal linearizations; the others are their
+        configuration's extracted LFR with ``values`` substituted.
+        """
+        index = np.asarray(index, dtype=int).ravel()
         values = np.asarray(values, dtype=float).reshape(index.size, len(self.parameters))
-        if len(self.parameters) == 0 or np.all(values == self.nominal_values):
-            return tuple(M[index] for M in self.nominal_matrices)
-        parts = [self.matrices(i, v) for i, v in zip(index, values, strict=True)]
-        return tuple(np.stack([p[k] for p in parts]) for k in range(4))
+        A, B, C, D = (M[index] for M in self.nominal_matrices)  # copies (fancy indexing)
+        perturbed = np.any(values != self.nominal_values, axis=1)
+        names = [p.name for p in self.parameters]
+        for i in np.unique(index[perturbed]):
+            rows = np.flatnonzero(perturbed & (index == i))
+            model = self.lfr(i)
+            present = model.uncertainty
+            substituted = lfr_statespace(
+                model, {n: values[rows, j] for j, n in enumerate(names) if n in present}
+            )
+            for M, S in zip((A, B, C, D), _pad(*substituted, self.order), strict=True):
+                M[rows] = S
+        return A, B, C, D
 
     @property
     def nominal_values(self) -> np.ndarray:
         """Nominal parameter values (P,)."""
         return np.array([p.nominal for p in self.parameters], dtype=float)
 
+    def statistics(self) -> dict:
+        """Cost of the models so far: linearizations, extractions and their times [s]."""
+        return {
+            "nominal_linearizations": self.linearizations,
+            "nominal_linearization_time_s": round(self.build_time_s, 3),
+            "lfr_extractions": self.extractions,
+            "lfr_extraction_time_s": round(self.extraction_time_s, 3),
+        }
+
     def plant_array(self) -> PlantArray:
         """The synthesis' plant array (configurations table with ``time_s``)."""
         return PlantArray(
-            pd.DataFrame({"time_s": self.times}), self.parameters, self.build, source="drake"
+            pd.DataFrame({"time_s": self.times}),
+            self.parameters,
+            self.build,
+            source="drake",
+            statistics=self.statistics,
         )
 
 

@@ -1,4 +1,11 @@
-"""Drake plant arrays for the synthesis vs the TITOP LFR substitution (an independent model)."""
+"""Drake plant arrays for the synthesis vs the TITOP LFR substitution (an independent model).
+
+The Drake source's plants at non-nominal parameter values come from LFRs extracted from the twin
+(``ulinearize``); they are held to the TITOP LFR substituted at the same values, and to an
+independent computation: the twin relinearized with the values written into its Context
+(``rotational_plant(configuration, values)``), compared by closed-loop poles and H-infinity
+norms (Hamiltonian bisection, not the synthesis' modal evaluation).
+"""
 
 import numpy as np
 import pytest
@@ -6,14 +13,23 @@ import pytest
 pytestmark = pytest.mark.drake
 pytest.importorskip("pydrake")
 
+from oos_drake.control.baseline import baseline_gains, inertia_from_plant  # noqa: E402
 from oos_drake.control.cli import mission_times, scenario_plants  # noqa: E402
+from oos_drake.control.interconnection import (  # noqa: E402
+    plant_statespace,
+    weighted_interconnection,
+)
+from oos_drake.control.synthesis import SynthesisOptions, _worst_case_search, tune  # noqa: E402
+from oos_drake.multibody.mission_lfr import uncertain_parameters  # noqa: E402
 from oos_drake.multibody.scenario_plant import cached_scenario_diagram  # noqa: E402
 from oos_drake.multibody.synthesis_plants import (  # noqa: E402
     PADDING_POLE,
     DrakePlantSource,
+    _pad,
     apply_physical_values,
-    uncertain_parameters,
+    rotational_plant,
 )
+from oos_drake.robust.hinf import hinfnorm  # noqa: E402
 
 CONFIGURATIONS = 9  # 0 .. 1500 s every 187.5 s: free target, arm-held, docked, tilted
 OMEGA = np.logspace(-3, 3, 400)  # rad/s
@@ -79,14 +95,82 @@ def test_free_target_models_are_padded_with_decoupled_states(sources):
     assert not np.any(A[np.ix_(rest, padded)]) and not np.any(A[np.ix_(padded, rest)])
 
 
-def test_perturbed_linearizations_are_cached(sources):
-    drake, _ = sources
+def test_each_configuration_is_extracted_once_and_nothing_is_relinearized():
+    drake = DrakePlantSource(mission_times(3))
     plants = drake.plant_array()
-    values = plants.bounds[1][None]
-    plants.evaluate([3], values)
-    count = drake.linearizations
-    plants.evaluate([3, 3], np.vstack([values, values]))
-    assert drake.linearizations == count
+    lower, upper = plants.bounds
+    plants.evaluate([1, 1], np.vstack([lower, upper]))
+    plants.evaluate([1, 1, 2], np.vstack([upper, lower, plants.nominal_values]))
+    statistics = drake.statistics()
+    assert statistics["lfr_extractions"] == 1  # configuration 1 only; nominal rows need none
+    assert statistics["nominal_linearizations"] == 3
+    assert set(drake._lfrs) == {1}
+
+
+def _closed_loops(A, B, C, D, K):
+    return weighted_interconnection(plant_statespace(A, B, C, D)).close(K)
+
+
+def _poles_match(a, b, rtol):
+    """Every eigenvalue of ``a`` has one of ``b`` within ``rtol`` (relative to its size)."""
+    distance = np.abs(a[:, None] - b[None, :]).min(axis=1)
+    return np.all(distance <= rtol * np.maximum(np.abs(a), 1e-3))
+
+
+def test_worst_case_search_equals_the_titop_path_and_drake_relinearized(sources):
+    # the synthesis' worst-case search on both sources from the same gain and seed; the points
+    # it finds, closed with the gain, against the twin relinearized with the values in its
+    # Context (independent of the LFR extraction) and the TITOP LFR substituted
+    drake, lfr = sources
+    plants = {"drake": drake.plant_array(), "lfr": lfr}
+    # a gain tuned a little (the baseline's peak, gamma ~11, does not depend on Delta_real)
+    K0 = baseline_gains(inertia_from_plant(lfr.evaluate([2]))[0])
+    K = tune(weighted_interconnection(lfr.nominal()), K0, max_iterations=15)[0]
+    configs = np.array([0, 2, 5, 7])  # free target, arm-held, docked, tilted arrays
+    options = SynthesisOptions(worst_case_samples=4, worst_case_ascent_steps=1)
+    found = {
+        kind: _worst_case_search(p, configs, K, None, options, np.random.default_rng(5))
+        for kind, p in plants.items()
+    }
+    np.testing.assert_allclose(found["drake"][1], found["lfr"][1], rtol=1e-7)
+    assert drake.statistics()["nominal_linearizations"] == CONFIGURATIONS  # no relinearization
+    # off-nominal points everywhere: the search's, else (nominal worst case) the upper corner
+    off = np.any(found["drake"][0] != drake.nominal_values, axis=1)
+    assert off.sum() >= 2, found["drake"][0]
+    values = np.where(off[:, None], found["drake"][0], plants["drake"].bounds[1])
+    names = [p.name for p in plants["drake"].parameters]
+    ours = plants["drake"].evaluate(configs, values)
+    theirs = lfr.evaluate(configs, values)
+    for k, c in enumerate(configs):
+        reference = _pad(
+            *rotational_plant(drake.configurations[c], dict(zip(names, values[k], strict=True))),
+            drake.order,
+        )
+        loops = {
+            "drake": _closed_loops(ours.A[k], ours.B[k], ours.C[k], ours.D[k], K),
+            "lfr": _closed_loops(theirs.A[k], theirs.B[k], theirs.C[k], theirs.D[k], K),
+            "relinearized": _closed_loops(*reference, K),
+        }
+        norms = {n: hinfnorm((m.A, m.B, m.C, m.D), tol=1e-10).norm for n, m in loops.items()}
+        poles = {n: np.linalg.eigvals(loops[n].A) for n in ("drake", "relinearized")}
+        assert np.all(poles["relinearized"].real < 0), c
+        for kind in ("drake", "lfr"):
+            np.testing.assert_allclose(norms[kind], norms["relinearized"], rtol=1e-7, err_msg=kind)
+        # same realization family (both padded alike; TITOP keeps a free target's own modes as
+        # decoupled states instead): the closed-loop poles too
+        assert _poles_match(poles["drake"], poles["relinearized"], 1e-6), c
+        if off[k]:  # the search's own value (the synthesis' modal evaluation) is that norm
+            np.testing.assert_allclose(found["drake"][1][k], norms["relinearized"], rtol=1e-5)
+    # the values reach the model: the worst cases raise the nominal loops' norms
+    nominal = plants["drake"].evaluate(configs)
+    nominal_norms = np.array([
+        hinfnorm((m.A, m.B, m.C, m.D)).norm
+        for m in [_closed_loops(nominal.A[k], nominal.B[k], nominal.C[k], nominal.D[k], K)
+                  for k in range(configs.size)]
+    ])  # fmt: skip
+    print("worst / nominal closed-loop norms:", found["drake"][1] / nominal_norms)
+    assert np.all(found["drake"][1] >= nominal_norms * (1 - 1e-7))
+    assert np.max(found["drake"][1] / nominal_norms) > 1.001  # measured 1.002
 
 
 def test_unknown_parameter_is_a_clear_error():
