@@ -117,6 +117,26 @@ def _poles_match(a, b, rtol):
     return np.all(distance <= rtol * np.maximum(np.abs(a), 1e-3))
 
 
+def test_extracted_plants_equal_the_twin_relinearized_with_the_values(sources):
+    # the independent reference: the values written into the twin's Context, relinearized
+    drake, _ = sources
+    plants = drake.plant_array()
+    lower, upper = plants.bounds
+    rng = np.random.default_rng(7)
+    index = np.array([0, 5, 5])  # free target (its blocks absent from its LFR), docked
+    values = np.vstack([upper, lower, lower + (upper - lower) * rng.random(lower.size)])
+    names = [p.name for p in plants.parameters]
+    reference = [
+        _pad(*rotational_plant(drake.configurations[i], dict(zip(names, v, strict=True))), 48)
+        for i, v in zip(index, values, strict=True)
+    ]
+    A, B, C, D = (np.stack([m[k] for m in reference]) for k in range(4))
+    error = relative_error(plants.evaluate(index, values), plant_statespace(A, B, C, D))
+    assert error.max() < 1e-8, error
+    assert relative_error(plants.evaluate(index), plant_statespace(A, B, C, D))[1:].min() > 1e-3
+
+
+@pytest.mark.slow
 def test_worst_case_search_equals_the_titop_path_and_drake_relinearized(sources):
     # the synthesis' worst-case search on both sources from the same gain and seed; the points
     # it finds, closed with the gain, against the twin relinearized with the values in its
