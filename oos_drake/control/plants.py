@@ -298,29 +298,9 @@ def lfr_statespace(model, values: dict):
     return M[..., :n, :n], M[..., :n, n:], M[..., n:, :n], M[..., n:, n:]
 
 
-def lfr_parameters(model) -> tuple[UncertainParameter, ...]:
-    """The blocks of ``model`` as :class:`UncertainParameter` (physical nominal and range).
-
-    Raises
-    ------
-    ValueError
-        A block that is not a ``ureal`` (the synthesis searches real parameters only).
-    """
-    blocks = model.blocks
-    kinds = set(blocks["kind"]) - {"ureal"}
-    if kinds:
-        raise ValueError(
-            f"from_lfr: only ureal blocks may remain for synthesis, found {sorted(kinds)}"
-        )
-    return tuple(
-        UncertainParameter(row.name, float(row.nominal), float(row.range[0]), float(row.range[1]))
-        for row in blocks.itertuples()
-    )
-
-
 def from_lfr(
     model,
-    configuration_values: dict | None = None,
+    configuration_values: dict,
     configurations: pd.DataFrame | None = None,
     *,
     source: str = "lfr",
@@ -332,11 +312,9 @@ def from_lfr(
     model : oos_drake.lfr.LFR
         The plant: either the 3x3 channels ``T_ext,G1 -> wdot`` or the full 6x6 model
         ``W_ext,G1 -> [a; wdot]`` (its rotational block ``[3:6, 3:6]`` is taken).
-    configuration_values : dict, optional
+    configuration_values : dict
         Scheduled block name -> PHYSICAL values, shape (N,) (e.g.
-        ``oos_drake.scenario.model.mission_values(times)``); substituted once. Omitted: ``model``
-        is already a model array ``(N,)``, one model per configuration (e.g. LFRs extracted
-        from the Drake twin).
+        ``oos_drake.scenario.model.mission_values(times)``); substituted once.
     configurations : pandas.DataFrame, optional
         One row per configuration (e.g. ``time_s``).
     source : str
@@ -357,27 +335,25 @@ def from_lfr(
         model = model[3:6, 3:6]
     if model.shape != (3, 3):
         raise ValueError(f"from_lfr: the plant must be 3x3 or 6x6, got {model.shape}")
-    if configuration_values is None:
-        if len(model.batch_shape) != 1:
-            raise ValueError(
-                "from_lfr: without configuration values the model must be a model array (N,), "
-                f"got batch shape {model.batch_shape}"
-            )
-        N = model.batch_shape[0]
-        scheduled = model
-    else:
-        sizes = {np.asarray(v).shape for v in configuration_values.values()}
-        if len(sizes) != 1 or len(next(iter(sizes))) != 1:
-            raise ValueError(
-                "from_lfr: every configuration value must be a 1-D array of equal length"
-            )
-        N = next(iter(sizes))[0]
-        scheduled = usubs(model, configuration_values)
-        if scheduled.batch_shape != (N,):
-            scheduled = (
-                scheduled.model(np.zeros(N, dtype=int)) if not scheduled.batch_shape else scheduled
-            )
-    parameters = lfr_parameters(scheduled)
+    sizes = {np.asarray(v).shape for v in configuration_values.values()}
+    if len(sizes) != 1 or len(next(iter(sizes))) != 1:
+        raise ValueError("from_lfr: every configuration value must be a 1-D array of equal length")
+    N = next(iter(sizes))[0]
+    scheduled = usubs(model, configuration_values)
+    if scheduled.batch_shape != (N,):
+        scheduled = (
+            scheduled.model(np.zeros(N, dtype=int)) if not scheduled.batch_shape else scheduled
+        )
+    blocks = scheduled.blocks
+    kinds = set(blocks["kind"]) - {"ureal"}
+    if kinds:
+        raise ValueError(
+            f"from_lfr: only ureal blocks may remain for synthesis, found {sorted(kinds)}"
+        )
+    parameters = tuple(
+        UncertainParameter(row.name, float(row.nominal), float(row.range[0]), float(row.range[1]))
+        for row in blocks.itertuples()
+    )
     names = [p.name for p in parameters]
 
     def build(index, values):

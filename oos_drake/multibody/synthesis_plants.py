@@ -15,9 +15,10 @@ This module builds it from the Drake twin instead of the TITOP LFR, the same way
   (:func:`oos_drake.multibody.mission_lfr.twin_lfr`, the TITOP block names, nominal values and
   ranges) the first time the search visits ``i``, kept, and the values are substituted into it
   (:func:`oos_drake.control.plants.lfr_statespace`), exactly as the TITOP path substitutes them
-  into its LFR. An extraction costs ~29 linearizations (~0.4 s); the search visits a few
-  configurations per round, so only those are extracted. Nothing is relinearized per parameter
-  point.
+  into its LFR. An extraction (29 Taylor linearizations and the acceleration probes) costs as
+  much as ~38 relinearizations at single parameter points (``benchmarks/
+  bench_synthesis_plants.py``); a search round evaluates ~90 points per configuration it visits
+  (a few per round) and later rounds reuse the extraction. Nothing is relinearized per point.
 - every model of the array has the same number of states (the largest pruned order, 48 for the
   paper): models with fewer states (free target: the target's modes are not reachable) are padded
   with decoupled states at ``-1 rad/s`` (``B = 0``, ``C = 0``): the transfer function, hence every
