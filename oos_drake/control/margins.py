@@ -33,9 +33,10 @@ time uses ``l_i``; the **multiloop** disk margin (independent ``f_i`` in every c
           \quad \Delta = \mathrm{diag}(\delta_1, \delta_2, \delta_3) \text{ complex},
 
 computed from an Osborne-balanced upper bound of ``mu`` on the whole grid and
-:func:`oos_drake.robust.mussv` at the grid points where that bound is largest: the margin it
-reports (``1 / mu_upper``) holds on the grid; ``multiloop_disk_max`` (``1 / mu_lower``) is a
-perturbation size that does destabilize.
+:func:`oos_drake.robust.mussv` at the grid points where that bound is largest and at the two
+largest peaks refined between grid points: the margin it reports (``1 / mu_upper``) holds on
+the grid and at the refined peaks (not proven between grid points);
+``multiloop_disk_max`` (``1 / mu_lower``) is a perturbation size that does destabilize.
 """
 
 from __future__ import annotations
@@ -257,11 +258,26 @@ def margins(loop: Callable[[np.ndarray], np.ndarray], omega) -> Margins:
     Mgrid = np.linalg.inv(eye + L) - eye / 2
     upper = _osborne_upper(Mgrid)
     top = np.argsort(upper)[::-1][:_MU_POINTS]
-    res = mussv(Mgrid[top], [[1, 1]] * n)
-    mu_up = np.minimum(upper[top], np.asarray(res.upper))
+    # refine the two largest peaks between their grid neighbours (on the Osborne bound)
+    refined = []
+    for k in top[:2]:
+        lo, hi = omega[max(k - 1, 0)], omega[min(k + 1, omega.size - 1)]
+        w_peak, _ = _golden_max(
+            lambda w: float(
+                _osborne_upper(np.linalg.inv(eye + loop(np.atleast_1d(w))) - eye / 2)[0]
+            ),
+            lo,
+            hi,
+        )
+        refined.append(w_peak)
+    refined = np.array(refined)
+    points = np.concatenate([Mgrid[top], np.linalg.inv(eye + loop(refined)) - eye / 2])
+    frequencies = np.concatenate([omega[top], refined])
+    res = mussv(points, [[1, 1]] * n)
+    mu_up = np.minimum(_osborne_upper(points), np.asarray(res.upper))
     upper_all = upper.copy()
-    upper_all[top] = mu_up
-    mu_upper = float(np.max(upper_all))
+    upper_all[top] = mu_up[: top.size]
+    mu_upper = float(max(np.max(upper_all), np.max(mu_up)))
     j = int(np.argmax(np.asarray(res.lower)))
     mu_lower = float(np.asarray(res.lower)[j])
     return Margins(
@@ -275,5 +291,5 @@ def margins(loop: Callable[[np.ndarray], np.ndarray], omega) -> Margins:
         disk_hz=disk_hz,
         multiloop_disk=1.0 / mu_upper if mu_upper > 0 else np.inf,
         multiloop_disk_max=1.0 / mu_lower if mu_lower > 0 else np.inf,
-        multiloop_hz=float(omega[top[j]] / (2 * np.pi)),
+        multiloop_hz=float(frequencies[j] / (2 * np.pi)),
     )
