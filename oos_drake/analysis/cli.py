@@ -144,7 +144,12 @@ def run_margins(args) -> int:
         )
     rays = {}
     if args.analysis:
-        summary = json.loads((Path(args.analysis) / "summary.json").read_text())
+        record = Path(args.analysis) / "summary.json"
+        if not record.is_file():
+            raise ValueError(
+                f"--analysis {args.analysis}: no summary.json (not an oos analyze folder)"
+            )
+        summary = json.loads(record.read_text())
         rays = analysis_rays(args.analysis, int(summary["mission"]["configurations"]))
     times = mission_times(args.configurations)
     start = time.perf_counter()
