@@ -209,6 +209,22 @@ def run_margins(args) -> int:
     return 0
 
 
+def _common_arguments(parser, *, configurations: int) -> None:
+    """``--controller``, ``--out`` and ``--configurations`` of ``oos analyze`` / ``oos margins``."""
+    parser.add_argument(
+        "--controller",
+        default=None,
+        help="controller JSON from `oos synth` (default: the BASELINE PD)",
+    )
+    parser.add_argument("--out", required=True, help="output directory")
+    parser.add_argument(
+        "--configurations",
+        type=int,
+        default=configurations,
+        help="equally spaced mission configurations",
+    )
+
+
 def register(subparsers) -> None:
     """Add ``oos analyze`` and ``oos margins``."""
     parser = subparsers.add_parser(
@@ -219,15 +235,7 @@ def register(subparsers) -> None:
         "writes Parquet tables, PNG figures and worst_cases.parquet.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument(
-        "--controller",
-        default=None,
-        help="controller JSON from `oos synth` (default: the BASELINE PD)",
-    )
-    parser.add_argument("--out", required=True, help="output directory")
-    parser.add_argument(
-        "--configurations", type=int, default=330, help="equally spaced mission configurations"
-    )
+    _common_arguments(parser, configurations=330)
     parser.add_argument("--f-min", type=float, default=0.005, help="lowest grid frequency [Hz]")
     parser.add_argument("--f-max", type=float, default=5.0, help="highest grid frequency [Hz]")
     parser.add_argument(
@@ -312,15 +320,7 @@ def register(subparsers) -> None:
         "along the analysis' worst real-parameter perturbations (ray_boundaries.parquet).",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument(
-        "--controller",
-        default=None,
-        help="controller JSON from `oos synth` (default: the BASELINE PD)",
-    )
-    parser.add_argument("--out", required=True, help="output directory")
-    parser.add_argument(
-        "--configurations", type=int, default=60, help="equally spaced mission configurations"
-    )
+    _common_arguments(parser, configurations=60)
     parser.add_argument(
         "--delay",
         type=float,
