@@ -69,6 +69,40 @@ def add_deprecated_alias(
     )
 
 
+def add_loop_arguments(parser) -> None:
+    """``--sampled`` / ``--delay``: the loop model, shared by ``oos synth`` and ``oos analyze``."""
+    parser.add_argument(
+        "--sampled",
+        action="store_true",
+        help="model the flight software's sample-and-hold (rate: DesignSpecification."
+        "flight_software_rate_hz, 10 Hz) as a rational approximation inside the loop "
+        "(default: the continuous loop)",
+    )
+    parser.add_argument(
+        "--delay",
+        type=float,
+        default=None,
+        help="computation delay of the sampled loop [s] (default: DesignSpecification."
+        "computation_delay_s, 0: the flight software writes the torque at the sample instant)",
+    )
+
+
+def loop_specification(spec, args):
+    """``spec`` (a ``DesignSpecification``) with the loop model of ``--sampled`` / ``--delay``.
+
+    Raises
+    ------
+    ValueError
+        ``--delay`` without ``--sampled``, or a negative delay.
+    """
+    import dataclasses
+
+    if args.delay is not None and not args.sampled:
+        raise ValueError("--delay needs --sampled (the continuous loop has no computation delay)")
+    delay = spec.computation_delay_s if args.delay is None else float(args.delay)
+    return dataclasses.replace(spec, sampled=bool(args.sampled), computation_delay_s=delay)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Return the ``oos`` argument parser with every available subcommand."""
     parser = argparse.ArgumentParser(

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
+from pathlib import Path
 
 from oos_drake.analysis.stability import SweepOptions
-from oos_drake.cli import add_deprecated_alias
+from oos_drake.cli import add_deprecated_alias, add_loop_arguments, loop_specification
 
 
 def _controller(path):
@@ -50,6 +52,7 @@ def run_analyze(args) -> int:
     from oos_drake.analysis.run import AnalysisOptions, run_analysis
 
     controller = _controller(args.controller)
+    controller = dataclasses.replace(controller, spec=loop_specification(controller.spec, args))
     if controller.label == "baseline":
         print(
             "WARNING: no --controller given: analyzing the BASELINE PD controller "
@@ -82,7 +85,16 @@ def run_analyze(args) -> int:
     )
     summary = _write_atomically(args.out, lambda tmp: run_analysis(controller, tmp, options))
     m = summary["mission"]
-    print(f"controller: {controller.label} ({controller.source}); plants: {args.plant}")
+    loop = summary["loop"]
+    print(
+        f"controller: {controller.label} ({controller.source}); plants: {args.plant}; loop: "
+        + (
+            f"sampled at {loop['sample_rate_hz']:g} Hz (hold order {loop['hold_order']}, delay "
+            f"{loop['delay_s']:g} s)"
+            if loop["sampled"]
+            else "continuous"
+        )
+    )
     print(
         f"mission: mu peak <= {m['mu_peak_upper']:.4g} "
         f"certified >= {m['mu_peak_lower']:.4g} (gap {m['gap_percent']:.2g} %) at "
@@ -109,8 +121,112 @@ def run_analyze(args) -> int:
     return 0
 
 
+def run_margins(args) -> int:
+    """Margins over the mission, continuous and sampled loops; exit status 0."""
+    import json
+    import time
+
+    from oos_drake.analysis.margins import (
+        LOOPS,
+        analysis_rays,
+        margins_figure,
+        mission_margins,
+        ray_boundaries,
+    )
+    from oos_drake.analysis.models import mission_times
+
+    controller = _controller(args.controller)
+    if args.delay is not None:
+        if args.delay < 0:
+            raise ValueError(f"--delay must be >= 0 s, got {args.delay}")
+        controller = dataclasses.replace(
+            controller, spec=dataclasses.replace(controller.spec, computation_delay_s=args.delay)
+        )
+    rays = {}
+    if args.analysis:
+        record = Path(args.analysis) / "summary.json"
+        if not record.is_file():
+            raise ValueError(
+                f"--analysis {args.analysis}: no summary.json (not an oos analyze folder)"
+            )
+        summary = json.loads(record.read_text())
+        rays = analysis_rays(args.analysis, int(summary["mission"]["configurations"]))
+    times = mission_times(args.configurations)
+    start = time.perf_counter()
+
+    def work(tmp):
+        tmp.mkdir(parents=True)
+        table = mission_margins(controller, times, progress=not args.quiet)
+        table.to_parquet(tmp / "margins.parquet", index=False)
+        margins_figure(table, tmp / "margins.png", controller.spec.flight_software_rate_hz)
+        worst = {}
+        for loop in LOOPS:
+            part = table[table["loop"] == loop]
+            worst[loop] = {
+                column: float(part[column].min())
+                for column in (
+                    "gain margin upper [dB]",
+                    "phase margin [deg]",
+                    "delay margin [s]",
+                    "disk margin [-]",
+                    "multiloop disk margin [-]",
+                )
+            }
+        record = {
+            "controller": {"label": controller.label, "source": controller.source},
+            "loop": {
+                "sample_rate_hz": controller.spec.flight_software_rate_hz,
+                "delay_s": controller.spec.computation_delay_s,
+                "hold_order": controller.spec.hold_order,
+            },
+            "configurations": int(times.size),
+            "worst": worst,
+        }
+        if rays:
+            boundaries = ray_boundaries(controller, rays)
+            boundaries.to_parquet(tmp / "ray_boundaries.parquet", index=False)
+            record["rays"] = boundaries.to_dict(orient="records")
+        record["time_s"] = round(time.perf_counter() - start, 2)
+        (tmp / "summary.json").write_text(json.dumps(record, indent=2))
+        return table, record
+
+    table, record = _write_atomically(args.out, work)
+    for loop, values in record["worst"].items():
+        print(
+            f"{loop:>14s}: worst over the mission: GM {values['gain margin upper [dB]']:.3g} dB, "
+            f"PM {values['phase margin [deg]']:.3g} deg, DM {values['delay margin [s]']:.3g} s, "
+            f"disk {values['disk margin [-]']:.3g} (multiloop "
+            f"{values['multiloop disk margin [-]']:.3g})"
+        )
+    for ray in record.get("rays", []):
+        print(
+            f"ray {ray['ray']} at t = {ray['time [s]']:.0f} s: boundary continuous "
+            f"{ray['boundary continuous [-]']:.4g}, sampled model "
+            f"{ray['boundary sampled model [-]']:.4g}, exact sampled "
+            f"{ray['boundary sampled [-]']:.4g}"
+        )
+    print(f"{record['time_s']:.1f} s; outputs in {args.out}")
+    return 0
+
+
+def _common_arguments(parser, *, configurations: int) -> None:
+    """``--controller``, ``--out`` and ``--configurations`` of ``oos analyze`` / ``oos margins``."""
+    parser.add_argument(
+        "--controller",
+        default=None,
+        help="controller JSON from `oos synth` (default: the BASELINE PD)",
+    )
+    parser.add_argument("--out", required=True, help="output directory")
+    parser.add_argument(
+        "--configurations",
+        type=int,
+        default=configurations,
+        help="equally spaced mission configurations",
+    )
+
+
 def register(subparsers) -> None:
-    """Add ``oos analyze``."""
+    """Add ``oos analyze`` and ``oos margins``."""
     parser = subparsers.add_parser(
         "analyze",
         help="worst-case mu analysis over the mission and the docking phases (paper section 4)",
@@ -119,15 +235,7 @@ def register(subparsers) -> None:
         "writes Parquet tables, PNG figures and worst_cases.parquet.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument(
-        "--controller",
-        default=None,
-        help="controller JSON from `oos synth` (default: the BASELINE PD)",
-    )
-    parser.add_argument("--out", required=True, help="output directory")
-    parser.add_argument(
-        "--configurations", type=int, default=330, help="equally spaced mission configurations"
-    )
+    _common_arguments(parser, configurations=330)
     parser.add_argument("--f-min", type=float, default=0.005, help="lowest grid frequency [Hz]")
     parser.add_argument("--f-max", type=float, default=5.0, help="highest grid frequency [Hz]")
     parser.add_argument(
@@ -194,8 +302,37 @@ def register(subparsers) -> None:
         help="also prove each configuration's mu peak on the whole frequency axis (D-G scalings "
         "validated on intervals; slower, and loose where the optimizer stalls: see DESIGN.md)",
     )
+    add_loop_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     add_deprecated_alias(parser, "--fmin", "--f-min", type=float)
     add_deprecated_alias(parser, "--fmax", "--f-max", type=float)
     add_deprecated_alias(parser, "--jobs", "--workers", type=int)
     parser.set_defaults(func=run_analyze)
+
+    parser = subparsers.add_parser(
+        "margins",
+        help="loop-at-a-time gain/phase/delay and disk margins over the mission, continuous and "
+        "sampled-data loops",
+        description="Breaks the attitude loop at the wheel input at each mission configuration "
+        "(nominal plant) and writes margins.parquet and margins.png for the continuous loop, the "
+        "exact sampled-data loop of the flight software and the rational hold model of "
+        "`oos analyze --sampled`; with --analysis, the stability boundary of the three loops "
+        "along the analysis' worst real-parameter perturbations (ray_boundaries.parquet).",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    _common_arguments(parser, configurations=60)
+    parser.add_argument(
+        "--delay",
+        type=float,
+        default=None,
+        help="computation delay of the sampled loops [s] (default: DesignSpecification."
+        "computation_delay_s, 0)",
+    )
+    parser.add_argument(
+        "--analysis",
+        default=None,
+        help="an `oos analyze` output folder: also compare the stability boundaries along its "
+        "worst real-parameter perturbations",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.set_defaults(func=run_margins)

@@ -583,6 +583,12 @@ def run_analysis(
             "gamma": controller.gamma,
             "K": controller.K.tolist(),
         },
+        "loop": {
+            "sampled": controller.spec.sampled,
+            "sample_rate_hz": controller.spec.flight_software_rate_hz,
+            "delay_s": controller.spec.computation_delay_s,
+            "hold_order": controller.spec.hold_order,
+        },
         "mission": {
             "configurations": int(times.size),
             "grid_frequencies": int(omega.size),

@@ -9,7 +9,9 @@ import time
 import numpy as np
 import pandas as pd
 
+from oos_drake.cli import add_loop_arguments, loop_specification
 from oos_drake.control.baseline import TUNING_TIME_S, baseline_gains, inertia_from_plant
+from oos_drake.control.components import DesignSpecification
 from oos_drake.control.plants import PlantArray, from_lfr, synthetic_flexible_plants
 from oos_drake.control.report import write_synthesis
 from oos_drake.control.synthesis import SynthesisOptions, synthesize
@@ -87,7 +89,8 @@ def run_synth(args) -> int:
         workers=args.workers,
     )
     K0 = baseline_for(plants)
-    result = synthesize(plants, K0, options=options, progress=print)
+    spec = loop_specification(DesignSpecification(), args)
+    result = synthesize(plants, K0, spec=spec, options=options, progress=print)
     paths = write_synthesis(args.out, result, plants, options)
     active = result.models[result.models["active"]]
     print(
@@ -145,4 +148,5 @@ def register(subparsers) -> None:
         default=min(2, os.cpu_count() or 1),
         help="threads for the per-model eigendecompositions",
     )
+    add_loop_arguments(parser)
     parser.set_defaults(func=run_synth)

@@ -53,6 +53,19 @@ class DesignSpecification:
         W_mul,L on the diagonal LTI scalars of Delta_mul (analysis only) [-] (paper: 4e-2).
     multiplicative_off_diagonal : float
         W_mul,R on the off-diagonal LTI scalars of Delta_mul (analysis only) [-] (paper: 4e-3).
+    flight_software_rate_hz : float
+        Sample rate of the flight software [Hz] (10: the Drake mission's default
+        ``MissionOptions.control_rate`` reads it here). The one place that holds the rate.
+    computation_delay_s : float
+        Delay between a sample and the torque computed from it [s]. 0: the flight software
+        (``multibody/flight_software.py``) writes the torque at the sample instant itself.
+    sampled : bool
+        Model the flight software's sample-and-hold in the loop (:func:`sample_hold`, between
+        the reaction wheels and the plant); ``False`` (default): the continuous loop of the
+        paper.
+    hold_order : int
+        Order of the rational (Pade-type) approximation of the hold and of the delay
+        (:func:`sample_hold`).
     """
 
     star_tracker_cutoff_hz: float = 8.0
@@ -70,6 +83,10 @@ class DesignSpecification:
     additive_weight_db: float = -75.0
     multiplicative_diagonal: float = 4e-2
     multiplicative_off_diagonal: float = 4e-3
+    flight_software_rate_hz: float = 10.0
+    computation_delay_s: float = 0.0
+    sampled: bool = False
+    hold_order: int = 2
 
     def __post_init__(self):
         for name in (
@@ -82,6 +99,7 @@ class DesignSpecification:
             "noise_star_tracker",
             "pointing_requirement",
             "control_weight",
+            "flight_software_rate_hz",
         ):
             value = getattr(self, name)
             if not np.isfinite(value) or value <= 0:
@@ -89,6 +107,15 @@ class DesignSpecification:
         if self.rolloff_order < 1:
             raise ValueError(
                 f"DesignSpecification.rolloff_order must be >= 1, got {self.rolloff_order}"
+            )
+        if not (np.isfinite(self.computation_delay_s) and self.computation_delay_s >= 0):
+            raise ValueError(
+                "DesignSpecification.computation_delay_s must be >= 0 s, got "
+                f"{self.computation_delay_s!r}"
+            )
+        if self.hold_order not in (1, 2, 3, 4):
+            raise ValueError(
+                f"DesignSpecification.hold_order must be 1..4, got {self.hold_order!r}"
             )
         if len(self.disturbance_gains) != 3 or len(self.disturbance_denominator) != 2:
             raise ValueError("DesignSpecification.disturbance_gains needs 3 values, denominator 2")
@@ -129,6 +156,47 @@ def butterworth(order: int, cutoff_hz: float) -> tuple[np.ndarray, ...]:
     return Ti @ A @ T, Ti @ B, C @ T, D
 
 
+def sample_hold(spec: DesignSpecification) -> tuple[np.ndarray, ...]:
+    r"""``(A, B, C, D)`` of the rational model of the flight software's sample-and-hold.
+
+    A signal sampled every ``T = 1 / flight_software_rate_hz`` and held (zero-order hold) after
+    a computation delay ``tau = computation_delay_s`` reaches the plant, at frequencies well
+    below the Nyquist frequency, through
+
+    .. math::
+
+        H(s) = \frac{1 - e^{-sT}}{sT}\, e^{-s\tau}
+        \approx \frac{1 - R_n(sT)}{sT}\, R_n(s\tau),
+
+    with ``R_n`` the ``(n, n)`` Pade approximant of ``e^{-x}`` (``n = hold_order``,
+    python-control's :func:`control.pade`). ``1 - R_n(x)`` has no constant term, so the hold
+    factor is a strictly proper rational function of order ``n`` (``n = 2``:
+    ``1 / (1 + sT/2 + (sT)^2/12)``), exact in gain AND phase to ``O((wT)^{2n})``: it keeps the
+    hold's ``sinc`` droop (-0.1 dB at 0.83 Hz, 10 Hz) with its half-sample lag
+    (``-w T / 2``: 15 deg at 0.83 Hz). What it omits are the aliases of the sampled signal, which
+    the flight software's 0.7 Hz roll-off and the plant's double integrator attenuate by
+    ``(f / f_s)^2`` and more. ``tests/control/test_sampled.py`` measures the error against the
+    exact sampled-data loop.
+
+    Returns
+    -------
+    tuple of ndarray
+        SISO ``(A, B, C, D)`` [-], unit DC gain; ``(0 x 0, ..., D = 1)`` when ``spec.sampled``
+        is false.
+    """
+    import control
+
+    if not spec.sampled:
+        return np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), np.ones((1, 1))
+    n, T, tau = spec.hold_order, 1.0 / spec.flight_software_rate_hz, spec.computation_delay_s
+    num, den = control.pade(T, n)  # e^{-sT} ~ num / den, highest power first
+    hold = control.tf(np.polysub(den, num)[:-1] / T, den)  # (1 - e^{-sT}) / (sT)
+    if tau > 0:
+        hold = hold * control.tf(*control.pade(tau, n))
+    ss = control.ss(hold)
+    return tuple(np.atleast_2d(np.asarray(m, dtype=float)) for m in (ss.A, ss.B, ss.C, ss.D))
+
+
 def _axes(siso, name_in: str, name_out: str) -> BatchedStateSpace:
     single = BatchedStateSpace(*siso, ("in",), ("out",))
     return single.replicate(3, channel_names(name_in, 3), channel_names(name_out, 3))
@@ -152,6 +220,11 @@ def reaction_wheels(spec: DesignSpecification, name_in="u", name_out="T_rw"):
 def rolloff_filter(spec: DesignSpecification, name_in="u_K", name_out="u"):
     """Roll-off ``F_ro``: Butterworth low-pass on each controller output [N m -> N m]."""
     return _axes(butterworth(spec.rolloff_order, spec.rolloff_cutoff_hz), name_in, name_out)
+
+
+def hold(spec: DesignSpecification, name_in="T_rw_c", name_out="T_rw"):
+    """Sample-and-hold of the flight software (:func:`sample_hold`) on each torque [N m -> N m]."""
+    return _axes(sample_hold(spec), name_in, name_out)
 
 
 def disturbance_weight(spec: DesignSpecification, name_in="d_ext", name_out="T_dist"):

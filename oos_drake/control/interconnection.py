@@ -9,7 +9,9 @@ Signals (three channels each, named ``name[0..2]``)::
                                  -(GYRO w + W_n,gyro n_gyro) [rad/s] (6 outputs)
 
     u    = F_ro u_K                     (Butterworth roll-off on the command)
-    T    = RW u + W_n,ext d_ext         (reaction wheels, external disturbance) -> plant input
+    T    = H RW u + W_n,ext d_ext       (reaction wheels, external disturbance) -> plant input;
+                                        H = 1, or the flight software's sample-and-hold
+                                        (``components.sample_hold``) when ``spec.sampled``
     wdot = P T                          (plant channels T_ext,G1 -> wdot, 3x3)
     w    = wdot / s,  phi = w / s
 
@@ -163,7 +165,11 @@ def diagram_parts(spec: comp.DesignSpecification) -> list[BatchedStateSpace]:
         comp.star_tracker(spec, "phi", "phi_sst"),
         comp.gyro(spec, "w", "w_gyro"),
         comp.rolloff_filter(spec, "u_K", "u"),
-        comp.reaction_wheels(spec, "u", "T_rw"),
+        *(
+            [comp.reaction_wheels(spec, "u", "T_rw_c"), comp.hold(spec, "T_rw_c", "T_rw")]
+            if spec.sampled
+            else [comp.reaction_wheels(spec, "u", "T_rw")]
+        ),
         comp.disturbance_weight(spec, "d_ext", "T_dist"),
         sum_block(v("T", 3), [v("T_rw", 3), v("T_dist", 3)], [1.0, 1.0]),
         comp.static_gain(spec.noise_star_tracker, "n_sst", "n_sst_w"),

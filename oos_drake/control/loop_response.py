@@ -3,8 +3,8 @@
 The closed loop ``M = F_l(P_tot, K)`` of Fig. controldesign has 81 states (48 plant, 33 sensors,
 actuators, filters, integrators), but every block except the plant is a per-axis SISO filter that
 does not depend on the model, and the controller is static. At ``s = j omega``, with the scalar
-responses ``sst, gyro`` (sensors), ``ro`` (roll-off), ``rw`` (wheels), ``w_i`` (disturbance
-weights) and the plant ``P(s)`` (3x3):
+responses ``sst, gyro`` (sensors), ``ro`` (roll-off), ``rw`` (wheels, times the sample-and-hold
+model when ``spec.sampled``), ``w_i`` (disturbance weights) and the plant ``P(s)`` (3x3):
 
 .. math::
 
@@ -110,6 +110,7 @@ class LoopResponse:
         self.gyro = _siso_modal(comp.first_order_lowpass(spec.gyro_cutoff_hz))
         self.wheels = _siso_modal(comp.second_order(spec.wheel_frequency_hz, spec.wheel_damping))
         self.rolloff = _siso_modal(comp.butterworth(spec.rolloff_order, spec.rolloff_cutoff_hz))
+        self.hold = _siso_modal(comp.sample_hold(spec))
 
     @property
     def size(self) -> int:
@@ -144,7 +145,7 @@ class LoopResponse:
         t["sst"] = _siso_response(self.star_tracker, s)
         t["gyro"] = _siso_response(self.gyro, s)
         t["ro"] = _siso_response(self.rolloff, s)
-        t["c"] = c = _siso_response(self.wheels, s) * t["ro"]
+        t["c"] = c = _siso_response(self.wheels, s) * _siso_response(self.hold, s) * t["ro"]
         Kp, Kd = K[:, :3], K[:, 3:]
         t["Kg"] = Kg = (
             Kp * (t["sst"] / s**2)[..., None, None] + Kd * (t["gyro"] / s)[..., None, None]
@@ -180,6 +181,21 @@ class LoopResponse:
         out[..., 3:, :3] = -(t["Kg"] @ Q) * (u_gain[..., None] * w_ext)[..., None, :]
         out[..., 3:, 3:] = (S @ t["N"]) * u_gain[..., None, None]
         return out
+
+    def loop_gain(self, K, omega, index=None) -> np.ndarray:
+        """Loop ``L_i(j omega) = rw ro K_g P`` (N, F, 3, 3) broken at the wheel input ``u``
+        (negative feedback: ``u = -L u``; with the hold model when ``spec.sampled``).
+
+        Parameters
+        ----------
+        K : array_like, shape (3, 6)
+        omega : array_like, shape (N, F)
+            Frequencies [rad/s].
+        index : array_like of int, optional
+            Models (default all).
+        """
+        t = self._terms(K, omega, index)
+        return t["c"][..., None, None] * (t["Kg"] @ t["P"])
 
     def gain_sensitivity(self, K, omega, index):
         r"""``(M, G12, G21)`` at one frequency per model: ``dM = G12 dK G21``.

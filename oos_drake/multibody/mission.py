@@ -64,6 +64,7 @@ from pydrake.systems.primitives import (
 from pydrake.trajectories import PiecewisePolynomial
 
 from oos_drake.control.baseline import baseline_gains
+from oos_drake.control.components import DesignSpecification
 from oos_drake.multibody.flight_software import FlightSoftware, FlightSoftwareDesign
 from oos_drake.multibody.plant_parts import add_floating_joint, add_modal_residual
 from oos_drake.multibody.scenario_sdf import (
@@ -104,7 +105,8 @@ class MissionOptions:
     Attributes
     ----------
     control_rate : float
-        Flight-software sample rate [Hz].
+        Flight-software sample rate [Hz] (default: ``DesignSpecification.flight_software_rate_hz``,
+        the one place the rate is set; the analysis' ``--sampled`` loop reads it there too).
     log_rate : float
         Logging rate of the time series [Hz] (must divide ``control_rate``).
     controller : str or None
@@ -159,7 +161,7 @@ class MissionOptions:
         Simulated time between divergence checks [s].
     """
 
-    control_rate: float = 10.0
+    control_rate: float = DesignSpecification.flight_software_rate_hz
     log_rate: float = 1.0
     controller: str | None = None
     torque_limit: float = 2.0

@@ -1,0 +1,335 @@
+"""Classical and disk margins over the mission, for the continuous and the sampled-data loop.
+
+For each mission configuration (nominal plant, the configuration substituted) three loops are
+broken at the reaction wheels' input (:mod:`oos_drake.control.margins`):
+
+- ``continuous``: the paper's continuous loop;
+- ``sampled``: the EXACT sampled-data loop of the flight software
+  (:func:`oos_drake.control.sampled.sampled_loop`: zero-order-hold plant, Tustin controller,
+  responses at ``z = e^{j omega T}`` up to the Nyquist frequency);
+- ``sampled model``: the continuous loop with the rational hold model that ``--sampled`` puts
+  in the mu analysis (:func:`oos_drake.control.components.sample_hold`): its distance to
+  ``sampled`` is the model's error.
+
+The study also measures, along rays of the analysis' worst real-parameter perturbations, where
+the exact sampled loop and the two continuous models lose stability (:func:`ray_boundaries`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from oos_drake.analysis.controller import Controller
+from oos_drake.control.interconnection import plant_statespace
+from oos_drake.control.loop_response import LoopResponse
+from oos_drake.control.margins import disk_gain_phase, margins
+from oos_drake.control.sampled import continuous_poles, sampled_loop, spectral_abscissa
+
+#: The loops of the study, in table order.
+LOOPS = ("continuous", "sampled model", "sampled")
+#: Grid points per study (log spaced, plus the plant's lightly damped mode frequencies).
+GRID_POINTS = 1200
+#: Lowest grid frequency [Hz].
+F_MIN_HZ = 1e-3
+#: Highest grid frequency of the continuous loops [Hz] (the sampled loop stops at Nyquist).
+F_MAX_HZ = 20.0
+
+
+def _grid(f_max_hz: float, plant_poles) -> np.ndarray:
+    """Log grid [rad/s] with the frequencies of the plant's modes (and +-0.2 % around them)."""
+    omega = 2 * np.pi * np.geomspace(F_MIN_HZ, f_max_hz, GRID_POINTS)
+    modes = np.abs(np.imag(plant_poles))
+    modes = modes[(modes > omega[0]) & (modes < omega[-1])]
+    extra = np.concatenate([modes, modes * 0.998, modes * 1.002])
+    return np.unique(np.concatenate([omega, extra[extra < omega[-1]]]))
+
+
+def _rows(result, time_s: float, loop: str) -> list[dict]:
+    gain, phase = disk_gain_phase(result.disk)
+    rows = []
+    for i, axis in enumerate("xyz"):
+        rows.append(
+            {
+                "time [s]": time_s,
+                "loop": loop,
+                "channel": f"u_{axis}",
+                "gain margin upper [dB]": result.gain_upper_db[i],
+                "phase crossover [Hz]": result.gain_upper_hz[i],
+                "gain margin lower [dB]": result.gain_lower_db[i],
+                "phase margin [deg]": result.phase_deg[i],
+                "gain crossover [Hz]": result.crossover_hz[i],
+                "delay margin [s]": result.delay_s[i],
+                "disk margin [-]": result.disk[i],
+                "disk gain margin [dB]": gain[i],
+                "disk phase margin [deg]": phase[i],
+                "disk frequency [Hz]": result.disk_hz[i],
+                "multiloop disk margin [-]": result.multiloop_disk,
+                "multiloop disk margin, destabilizing [-]": result.multiloop_disk_max,
+                "multiloop frequency [Hz]": result.multiloop_hz,
+            }
+        )
+    return rows
+
+
+def mission_plants(times, scenario=None):
+    """Nominal rotational plants ``T -> wdot`` at mission ``times`` [s] (a BatchedStateSpace)."""
+    from oos_drake.analysis.loop import rotational_channels
+    from oos_drake.lfr import usubs
+    from oos_drake.scenario.model import build_mission_model, mission_values
+
+    if scenario is None:
+        from oos_drake.scenario.data import load_scenario
+
+        scenario = load_scenario()
+    times = np.atleast_1d(np.asarray(times, dtype=float))
+    model = usubs(build_mission_model(scenario), mission_values(times, scenario))
+    P = rotational_channels(model.nominal)
+    A, B, C, D = (np.asarray(m, dtype=float) for m in (P.A, P.B, P.C, P.D))
+    if A.ndim == 2:
+        A, B, C, D = (m[None] for m in (A, B, C, D))
+    return plant_statespace(A, B, C, D)
+
+
+def mission_margins(
+    controller: Controller, times, scenario=None, *, progress: bool = False
+) -> pd.DataFrame:
+    """Margins of the three loops (:data:`LOOPS`) at each mission time.
+
+    Parameters
+    ----------
+    controller : Controller
+        Gain and design specification (its ``flight_software_rate_hz`` and
+        ``computation_delay_s`` define the sampled loops; its ``sampled`` flag is ignored).
+    times : array_like
+        Mission times [s].
+    scenario : Scenario, optional
+    progress : bool
+        tqdm progress bar.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per time, loop and channel (columns ``name [unit]``, see :func:`_rows`).
+    """
+    from tqdm import tqdm
+
+    times = np.atleast_1d(np.asarray(times, dtype=float))
+    plants = mission_plants(times, scenario)
+    specs = {
+        "continuous": dataclasses.replace(controller.spec, sampled=False),
+        "sampled model": dataclasses.replace(controller.spec, sampled=True),
+    }
+    responses = {name: LoopResponse(plants, spec) for name, spec in specs.items()}
+    nyquist_hz = controller.spec.flight_software_rate_hz / 2
+    rows = []
+    for k in tqdm(range(times.size), disable=not progress, desc="margins", unit="config"):
+        poles = np.linalg.eigvals(plants.A[k])
+        for name, response in responses.items():
+
+            def loop(w, response=response, k=k):
+                return response.loop_gain(controller.K, np.atleast_1d(w)[None, :], [k])[0]
+
+            rows += _rows(margins(loop, _grid(F_MAX_HZ, poles)), times[k], name)
+        exact = sampled_loop(
+            (plants.A[k], plants.B[k], plants.C[k], plants.D[k]), controller.K, controller.spec
+        )
+        grid = _grid(nyquist_hz, poles)
+        grid[-1] = 2 * np.pi * nyquist_hz
+        rows += _rows(margins(exact.loop_gain, grid), times[k], "sampled")
+    return pd.DataFrame(rows)
+
+
+def ray_boundaries(
+    controller: Controller, perturbations: dict, scenario=None, *, scale_max: float = 6.0
+) -> pd.DataFrame:
+    """Stability boundary along rays of real-parameter perturbations, three loops compared.
+
+    For each ray (a mission time and normalized values of ``ureal`` blocks of the scenario
+    model; the other blocks nominal) the plant ``P(s * delta)`` is built for a scale ``s`` and
+    the smallest ``s`` in ``(0, scale_max]`` where the loop is unstable is found by bisection:
+    closed-loop eigenvalues ``|z| >= 1`` for the exact sampled loop, ``Re >= 0`` for the
+    continuous models.
+
+    Parameters
+    ----------
+    controller : Controller
+    perturbations : dict
+        ``name -> (time [s], {block: normalized value})``.
+    scale_max : float
+        Largest scale searched [-].
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``ray``, ``time [s]``, ``boundary <loop> [-]`` for each loop, the relative errors of the
+        two models against the exact loop, and the frequency [Hz] of the pole that crosses.
+    """
+    from oos_drake.analysis.loop import rotational_channels
+    from oos_drake.lfr import usubs
+    from oos_drake.scenario.model import build_mission_model, mission_values
+
+    if scenario is None:
+        from oos_drake.scenario.data import load_scenario
+
+        scenario = load_scenario()
+    model = build_mission_model(scenario)
+    spec_c = dataclasses.replace(controller.spec, sampled=False)
+    spec_s = dataclasses.replace(controller.spec, sampled=True)
+    pole_sets = {
+        "continuous": lambda p: continuous_poles(p, controller.K, spec_c),
+        "sampled model": lambda p: continuous_poles(p, controller.K, spec_s),
+        "sampled": lambda p: sampled_loop(p, controller.K, controller.spec).poles(),
+    }
+    rows = []
+    for name, (time_s, values) in perturbations.items():
+        configured = usubs(model, mission_values([time_s], scenario)).model(0)
+        unknown = set(values) - set(configured.uncertainty)
+        if unknown:
+            raise ValueError(f"ray {name}: blocks {sorted(unknown)} are not in the mission model")
+
+        def plant(scale, configured=configured, values=values):
+            sub = {k: scale * v for k, v in values.items()}
+            P = rotational_channels(usubs(configured, sub, normalized=True)).nominal
+            return (P.A, P.B, P.C, P.D)
+
+        row = {"ray": name, "time [s]": time_s}
+        for loop_name, poles_of in pole_sets.items():
+            scale = _boundary(lambda s, f=poles_of: spectral_abscissa(f(plant(s))), scale_max)
+            row[f"boundary {loop_name} [-]"] = scale
+            frequency = np.nan
+            if np.isfinite(scale):
+                poles = poles_of(plant(scale))
+                frequency = abs(poles[np.argmax(poles.real)].imag) / (2 * np.pi)
+            row[f"crossing frequency {loop_name} [Hz]"] = frequency
+        exact = row["boundary sampled [-]"]
+        for loop_name in ("continuous", "sampled model"):
+            row[f"error {loop_name} [%]"] = 100 * (row[f"boundary {loop_name} [-]"] / exact - 1)
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def analysis_rays(analysis_dir, configurations: int, scenario=None) -> dict:
+    """Rays of the mission's worst real-parameter perturbations of an ``oos analyze`` folder.
+
+    Reads ``peak_perturbations.npz`` (normalized values) and keeps the mission subsets whose
+    perturbation has only blocks of the scenario model (``ureal``) and a finite critical
+    frequency; each ray is the
+    perturbation divided by its largest entry, so the scale is the normalized size (mu's
+    boundary is ``1 / mu`` on it).
+
+    Parameters
+    ----------
+    analysis_dir : path
+        Output folder of ``oos analyze``.
+    configurations : int
+        The analysis' number of mission configurations (its ``summary.json``).
+    """
+    from oos_drake.analysis.models import mission_times
+
+    path = Path(analysis_dir) / "peak_perturbations.npz"
+    if not path.is_file():
+        raise ValueError(f"--analysis: {path} not found")
+    from oos_drake.scenario.model import build_mission_model
+
+    data = np.load(path, allow_pickle=False)
+    real_blocks = build_mission_model(scenario).uncertainty  # the plant's ureal blocks
+    times = mission_times(configurations, scenario)
+    subsets = sorted({k.split("|")[1] for k in data.files if k.startswith("mission|")})
+    rays = {}
+    for subset in subsets:
+        prefix = f"mission|{subset}|"
+        blocks = {
+            k[len(prefix) :]: data[k]
+            for k in data.files
+            if k.startswith(prefix) and k[len(prefix) :] not in ("model", "omega [rad/s]")
+        }
+        omega = float(data[prefix + "omega [rad/s]"])
+        if not blocks or not np.isfinite(omega) or not set(blocks) <= set(real_blocks):
+            continue
+        values = {k: float(np.real(np.ravel(v)[0])) for k, v in blocks.items()}
+        size = max(abs(v) for v in values.values())
+        if size == 0:
+            continue
+        model = int(data[prefix + "model"])
+        rays[subset] = (float(times[model]), {k: v / size for k, v in values.items()})
+    return rays
+
+
+def _boundary(abscissa, scale_max: float, iterations: int = 40) -> float:
+    """Smallest scale in ``[0, scale_max]`` with ``abscissa(scale) >= 0`` (a scan of 60 steps,
+    then bisection to ``scale_max 2^-46``); ``inf`` when there is none."""
+    if abscissa(0.0) >= 0:
+        return 0.0
+    lo = 0.0
+    for s in np.linspace(0, scale_max, 61)[1:]:
+        if abscissa(s) >= 0:
+            hi = s
+            break
+        lo = s
+    else:
+        return np.inf
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if abscissa(mid) >= 0 else (mid, hi)
+    return 0.5 * (lo + hi)
+
+
+def margins_figure(table: pd.DataFrame, path, rate_hz: float) -> Path:
+    """Margins over the mission: gain, phase, delay and disk margins, continuous (solid),
+    exact sampled (dashed), per channel; the multiloop disk margin in black."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(13, 8), sharex=True)
+    panels = [
+        ("gain margin upper [dB]", "gain margin, gain increase [dB]"),
+        ("phase margin [deg]", "phase margin [deg]"),
+        ("delay margin [s]", "delay margin [s]"),
+        ("disk margin [-]", "balanced disk margin alpha [-]"),
+    ]
+    styles = {"continuous": "-", "sampled": "--"}
+    colors = {"u_x": "C0", "u_y": "C1", "u_z": "C2"}
+    for ax, (column, label) in zip(axes.ravel(), panels, strict=True):
+        for loop, ls in styles.items():
+            part = table[table["loop"] == loop]
+            for channel, color in colors.items():
+                one = part[part["channel"] == channel]
+                ax.plot(
+                    one["time [s]"],
+                    one[column],
+                    ls=ls,
+                    color=color,
+                    lw=1.1,
+                    label=f"{channel}, {loop}",
+                )
+            if column == "disk margin [-]":
+                one = part[part["channel"] == "u_x"]
+                ax.plot(
+                    one["time [s]"],
+                    one["multiloop disk margin [-]"],
+                    ls=ls,
+                    color="k",
+                    lw=1.3,
+                    label=f"multiloop, {loop}",
+                )
+        ax.set_ylabel(label)
+        ax.grid(True, alpha=0.3)
+    for ax in axes[1]:
+        ax.set_xlabel("mission time [s]")
+    axes[0, 0].legend(fontsize=7, ncol=2)
+    axes[1, 1].legend(fontsize=7, ncol=2)
+    fig.suptitle(
+        "Loop-at-a-time margins at the wheel input (others closed) and disk margins: "
+        f"continuous loop (solid) vs exact {rate_hz:g} Hz sampled-data loop (dashed)"
+    )
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

@@ -1,0 +1,265 @@
+r"""The flight software's sampled-data loop, exactly, at fixed parameter values.
+
+The Drake mission runs the flight software (``multibody/flight_software.py``) as one periodic
+discrete update every ``T = 1 / DesignSpecification.flight_software_rate_hz``: it samples the
+hub attitude ``phi`` and rate ``w``, runs the sensors, the gain ``K``, the roll-off and the
+wheels as their bilinear (Tustin) discretizations, and holds the torque ``T_rw`` (zero-order
+hold) from the sample instant on (no computation delay: ``computation_delay_s = 0``). At fixed
+parameter values that loop is exactly a discrete-time linear system:
+
+- the plant ``T -> [phi; w]`` (``P(s)`` with the two integrators) discretized **exactly** with
+  a zero-order hold and a computation delay ``tau = m T + tau_f`` (``0 <= tau_f < T``):
+
+  .. math::
+
+      x_{k+1} = \Phi x_k + \Gamma_0 v_k + \Gamma_1 v_{k-1}, \quad v_k = T_{k-m},\quad
+      \Phi = e^{AT},\ \Gamma_0 = \int_0^{T-\tau_f} e^{As} ds\, B,\
+      \Gamma_1 = e^{A(T-\tau_f)} \int_0^{\tau_f} e^{As} ds\, B;
+
+- the controller chain ``[phi; w] -> T_rw`` discretized with the bilinear transform (a cascade
+  of Tustin blocks is the Tustin transform of the cascade, so this is the flight software's
+  block-by-block discretization).
+
+Its closed-loop eigenvalues ``z`` decide stability (``|z| < 1``); ``log(z) / T`` are the
+equivalent continuous poles that :func:`continuous_poles` (the continuous loop, or the rational
+hold model of :func:`~oos_drake.control.components.sample_hold` when ``spec.sampled``) is compared
+with. Exact discrete-time mu is not available (the zero-order-hold equivalent is not rational in
+the uncertain parameters): this module is the exact reference at fixed parameters, used to
+measure the error of the rational hold model that keeps the LFR structure.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import numpy as np
+import scipy.linalg
+import scipy.signal
+
+from oos_drake.control import components as comp
+
+__all__ = [
+    "SampledLoop",
+    "continuous_poles",
+    "sampled_loop",
+    "spectral_abscissa",
+]
+
+
+def _axes(siso) -> tuple[np.ndarray, ...]:
+    """Block-diagonal replication of a SISO ``(A, B, C, D)`` on three axes."""
+    eye = np.eye(3)
+    return tuple(np.kron(eye, np.atleast_2d(np.asarray(m, dtype=float))) for m in siso)
+
+
+def _series(first, second) -> tuple[np.ndarray, ...]:
+    """``second after first`` for state-space tuples ``(A, B, C, D)``."""
+    A1, B1, C1, D1 = first
+    A2, B2, C2, D2 = second
+    n1, n2 = A1.shape[0], A2.shape[0]
+    A = np.block([[A1, np.zeros((n1, n2))], [B2 @ C1, A2]])
+    return A, np.vstack([B1, B2 @ D1]), np.hstack([D2 @ C1, C2]), D2 @ D1
+
+
+def controller_chain(K, spec: comp.DesignSpecification) -> tuple[np.ndarray, ...]:
+    """Continuous ``(A, B, C, D)`` of ``[phi; w] (6) -> T_rw (3)``: sensors, K, roll-off, wheels.
+
+    ``u = F_ro K [-(SST phi); -(GYRO w)]``, ``T_rw = RW u`` (noise-free, reference zero).
+    """
+    sst, gyro, rolloff, wheels = (_axes(f) for f in _filters(spec))
+    sensors = tuple(scipy.linalg.block_diag(a, b) for a, b in zip(sst, gyro, strict=True))
+    gain = (np.zeros((0, 0)), np.zeros((0, 6)), np.zeros((3, 0)), -np.asarray(K, dtype=float))
+    return _series(_series(_series(sensors, gain), rolloff), wheels)
+
+
+def plant_with_integrators(A, B, C, D) -> tuple[np.ndarray, ...]:
+    """``(A, B, C)`` of ``T -> [phi; w]`` from a plant ``T -> wdot`` (states ``[x; w; phi]``)."""
+    A, B, C, D = (np.asarray(m, dtype=float) for m in (A, B, C, D))
+    n = A.shape[0]
+    Aa = np.zeros((n + 6, n + 6))
+    Aa[:n, :n] = A
+    Aa[n : n + 3, :n] = C
+    Aa[n + 3 :, n : n + 3] = np.eye(3)
+    Ba = np.vstack([B, D, np.zeros((3, 3))])
+    Ca = np.zeros((6, n + 6))
+    Ca[:3, n + 3 :] = np.eye(3)
+    Ca[3:, n : n + 3] = np.eye(3)
+    return Aa, Ba, Ca
+
+
+def _hold_integral(A, B, t) -> tuple[np.ndarray, np.ndarray]:
+    """``(e^{At}, int_0^t e^{As} ds B)`` from one matrix exponential."""
+    n, m = B.shape
+    E = scipy.linalg.expm(np.block([[A, B], [np.zeros((m, n + m))]]) * t)
+    return E[:n, :n], E[:n, n:]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class SampledLoop:
+    """The exact sampled-data loop at one parameter value (see the module docstring).
+
+    Attributes
+    ----------
+    period : float
+        Sample period ``T`` [s].
+    Phi, Gamma0, Gamma1, C : ndarray
+        Zero-order-hold plant ``T -> [phi; w]`` (states ``[x; w; phi]``) [-, -, -, -].
+    shift : int
+        Whole samples ``m`` of the computation delay.
+    controller : tuple of ndarray
+        Tustin ``(A, B, C, D)`` of the controller chain ``[phi; w] -> T_rw``.
+    K : ndarray, shape (3, 6)
+        The gain [N m/rad, N m s/rad].
+    spec : DesignSpecification
+    """
+
+    period: float
+    Phi: np.ndarray
+    Gamma0: np.ndarray
+    Gamma1: np.ndarray
+    C: np.ndarray
+    shift: int
+    controller: tuple
+    K: np.ndarray
+    spec: comp.DesignSpecification
+
+    def closed_loop(self) -> np.ndarray:
+        """Discrete closed-loop state matrix (states ``[x_p; x_c; T_{k-1} .. T_{k-m-1}]``)."""
+        Ac, Bc, Cc, Dc = self.controller
+        n, nc, m = self.Phi.shape[0], Ac.shape[0], self.shift
+        nb = 3 * (m + 1)  # past commands T_{k-1} .. T_{k-m-1}
+        N = n + nc + nb
+        # T_k = Cc x_c + Dc C x_p  as a row block over the whole state
+        Tk = np.zeros((3, N))
+        Tk[:, :n] = Dc @ self.C
+        Tk[:, n : n + nc] = Cc
+        buffer = [np.zeros((3, N)) for _ in range(m + 1)]
+        for i in range(m + 1):
+            buffer[i][:, n + nc + 3 * i : n + nc + 3 * i + 3] = np.eye(3)
+        v_now = Tk if m == 0 else buffer[m - 1]  # v_k = T_{k-m}
+        v_last = buffer[m]  # v_{k-1} = T_{k-m-1}
+        A = np.zeros((N, N))
+        A[:n] = self.Gamma0 @ v_now + self.Gamma1 @ v_last
+        A[:n, :n] += self.Phi
+        A[n : n + nc] = Bc @ self.C @ np.eye(n, N) + Ac @ np.eye(N)[n : n + nc]
+        A[n + nc : n + nc + 3] = Tk
+        for i in range(1, m + 1):
+            A[n + nc + 3 * i : n + nc + 3 * i + 3] = buffer[i - 1]
+        return A
+
+    def poles(self) -> np.ndarray:
+        """Equivalent continuous closed-loop poles ``log(z) / T`` [rad/s] (``z = 0`` dropped)."""
+        z = np.linalg.eigvals(self.closed_loop())
+        z = z[np.abs(z) > 1e-12]
+        return np.log(z.astype(complex)) / self.period
+
+    def loop_gain(self, omega) -> np.ndarray:
+        """Loop ``L(e^{j omega T})`` (F, 3, 3) broken at the wheel input ``u`` (``u = -L u``).
+
+        The Tustin blocks are evaluated at ``s_w = j (2/T) tan(omega T / 2)`` (exact for the
+        bilinear transform); the plant by one solve per frequency. ``omega`` [rad/s] in
+        ``(0, pi / T]``.
+        """
+        spec, T = self.spec, self.period
+        omega = np.atleast_1d(np.asarray(omega, dtype=float))
+        z = np.exp(1j * omega * T)
+        s_w = 1j * (2.0 / T) * np.tan(np.minimum(omega * T / 2.0, np.pi / 2 - 1e-9))
+        n = self.Phi.shape[0]
+        M = z[:, None, None] * np.eye(n) - self.Phi
+        rhs = (self.Gamma0 + self.Gamma1 / z[:, None, None]) * z[:, None, None] ** (-self.shift)
+        G = self.C @ np.linalg.solve(M, rhs)  # (F, 6, 3): T -> [phi; w]
+        sst, gyro, rolloff, wheels = _filters(spec)
+        sensors = np.concatenate(
+            [np.repeat(_siso(sst, s_w)[:, None], 3, 1), np.repeat(_siso(gyro, s_w)[:, None], 3, 1)],
+            axis=1,
+        )
+        c = _siso(rolloff, s_w) * _siso(wheels, s_w)
+        return c[:, None, None] * ((self.K * sensors[:, None, :]) @ G)
+
+
+@functools.lru_cache(maxsize=8)
+def _filters(spec: comp.DesignSpecification) -> tuple:
+    """SISO realizations of star tracker, gyro, roll-off and wheels (one per specification)."""
+    return (
+        comp.first_order_lowpass(spec.star_tracker_cutoff_hz),
+        comp.first_order_lowpass(spec.gyro_cutoff_hz),
+        comp.butterworth(spec.rolloff_order, spec.rolloff_cutoff_hz),
+        comp.second_order(spec.wheel_frequency_hz, spec.wheel_damping),
+    )
+
+
+def _siso(siso, s) -> np.ndarray:
+    """Response of a SISO ``(A, B, C, D)`` at the points ``s``."""
+    A, B, C, D = (np.atleast_2d(np.asarray(m, dtype=float)) for m in siso)
+    n = A.shape[0]
+    X = np.linalg.solve(s[:, None, None] * np.eye(n) - A, np.broadcast_to(B, (s.size, n, 1)))
+    return (C @ X)[:, 0, 0] + D[0, 0]
+
+
+def sampled_loop(plant, K, spec: comp.DesignSpecification | None = None) -> SampledLoop:
+    """The exact sampled-data loop of a certain plant ``T -> wdot`` (3x3).
+
+    Parameters
+    ----------
+    plant : tuple ``(A, B, C, D)`` or an object with ``A, B, C, D`` attributes
+        Certain plant ``T [N m] -> wdot [rad/s^2]`` (an LFR without blocks works).
+    K : array_like, shape (3, 6)
+        ``[K_p, K_d]`` [N m/rad, N m s/rad].
+    spec : DesignSpecification, optional
+        Components, ``flight_software_rate_hz`` and ``computation_delay_s`` (``sampled`` is
+        not read: this is the exact loop whatever the continuous model).
+    """
+    spec = spec or comp.DesignSpecification()
+    A, B, C, D = _matrices(plant)
+    K = np.asarray(K, dtype=float)
+    if K.shape != (3, 6):
+        raise ValueError(f"sampled_loop: K must be 3x6, got shape {K.shape}")
+    T = 1.0 / spec.flight_software_rate_hz
+    Aa, Ba, Ca = plant_with_integrators(A, B, C, D)
+    shift = int(np.floor(spec.computation_delay_s / T + 1e-12))
+    frac = max(spec.computation_delay_s - shift * T, 0.0)
+    E_late, Gamma0 = _hold_integral(Aa, Ba, T - frac)
+    _, early = _hold_integral(Aa, Ba, frac)
+    Phi = E_late @ scipy.linalg.expm(Aa * frac)
+    Gamma1 = E_late @ early
+    Ac, Bc, Cc, Dc, _ = scipy.signal.cont2discrete(controller_chain(K, spec), T, method="bilinear")
+    return SampledLoop(T, Phi, Gamma0, Gamma1, Ca, shift, (Ac, Bc, Cc, Dc), K, spec)
+
+
+def _matrices(plant) -> tuple[np.ndarray, ...]:
+    """``(A, B, C, D)`` of a certain 3x3 plant (a tuple, a state space or an LFR w/o blocks)."""
+    if isinstance(plant, tuple):
+        A, B, C, D = plant
+    else:
+        if getattr(plant, "nw", 0):
+            raise ValueError("sampled_loop: the plant still has uncertain blocks; substitute them")
+        A, B, C, D = plant.A, plant.B, plant.C, plant.D
+    A, B, C, D = (np.asarray(m, dtype=float) for m in (A, B, C, D))
+    if D.shape != (3, 3):
+        raise ValueError(f"sampled_loop: the plant must be 3x3 (T -> wdot), got {D.shape}")
+    return A, B, C, D
+
+
+def continuous_poles(plant, K, spec: comp.DesignSpecification | None = None) -> np.ndarray:
+    """Closed-loop poles [rad/s] of the continuous loop model (with the rational hold model
+    when ``spec.sampled``), disturbance-weight poles excluded.
+
+    The weighted interconnection's closed loop (:mod:`oos_drake.control.interconnection`) also
+    holds the poles of ``W_n,ext`` (``-b/a``), which are not poles of the feedback loop; they
+    are removed so the comparison with :meth:`SampledLoop.poles` is one to one.
+    """
+    from oos_drake.control.interconnection import plant_statespace, weighted_interconnection
+
+    spec = spec or comp.DesignSpecification()
+    A, B, C, D = _matrices(plant)
+    closed = weighted_interconnection(plant_statespace(A, B, C, D), spec).close(K)
+    poles = np.linalg.eigvals(closed.A)
+    a, b = spec.disturbance_denominator
+    drop = np.argsort(np.abs(poles + b / a))[:3]
+    return np.delete(poles, drop)
+
+
+def spectral_abscissa(poles) -> float:
+    """Largest real part of ``poles`` [rad/s]."""
+    return float(np.max(np.real(poles)))
