@@ -36,7 +36,8 @@ def _sources():
 
 # ---------------------------------------------------------------- D3: the oos parser
 COMMANDS = {
-    "run", "model", "sdf", "validate", "synth", "analyze", "robust", "campaign", "ulinearize",
+    "run", "model", "sdf", "validate", "synth", "analyze", "confirm", "robust", "campaign",
+    "ulinearize",
 }  # fmt: skip
 #: Every command line that runs something (README's `oos` table).
 RUNNABLE = {
@@ -44,6 +45,7 @@ RUNNABLE = {
     "validate",
     "synth",
     "analyze",
+    "confirm",
     "model info",
     "model figures",
     "sdf generate",

@@ -164,9 +164,14 @@ def run_confirm(args) -> int:
         table.to_parquet(tmp / CONFIRMATION_FILE)
         histories.to_parquet(tmp / HISTORIES_FILE)
         for _, row in table.iterrows():
-            part = histories[
-                (histories.get("study") == row["study"]) & (histories.get("subset") == row["subset"])
-            ] if not histories.empty else histories
+            part = (
+                histories[
+                    (histories.get("study") == row["study"])
+                    & (histories.get("subset") == row["subset"])
+                ]
+                if not histories.empty
+                else histories
+            )
             if not part.empty:
                 name = f"confirmation_{row['study']}_{row['subset']}.png"
                 confirmation_figure(part, row, tmp / name)
@@ -206,7 +211,9 @@ def register(subparsers) -> None:
         default=None,
         help="controller JSON (default: the one the analysis recorded in summary.json)",
     )
-    confirm.add_argument("--out", default=None, help="output directory (default: ANALYSIS/../confirm)")
+    confirm.add_argument(
+        "--out", default=None, help="output directory (default: ANALYSIS/../confirm)"
+    )
     confirm.add_argument("--workers", type=int, default=2, help="worker processes")
     confirm.add_argument("--quiet", action="store_true", help="no progress bars")
     confirm.set_defaults(func=run_confirm)

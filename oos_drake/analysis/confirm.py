@@ -599,8 +599,13 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
         guess = alpha_s if np.isfinite(alpha_s) else 1.0
         if guess >= top:
             oscillation, history, diverged = twin.run(ray_values(specs, direction, top))
-            runs = {top: (diverged or oscillation is None or oscillation.decay_rate > 0,
-                          oscillation, history)}
+            runs = {
+                top: (
+                    diverged or oscillation is None or oscillation.decay_rate > 0,
+                    oscillation,
+                    history,
+                )
+            }
             alpha_n = math.inf if not runs[top][0] else math.nan
         else:
             alpha_n, runs = _nonlinear_boundary(twin, specs, direction, guess, top)
@@ -643,11 +648,16 @@ def _status(row: Mapping, alpha_n: float, finite: bool) -> str:
         return abs(a / b - 1.0) <= AGREEMENT
 
     f = row["oscillation frequency [Hz]"]
-    if not (close(alpha_n, row["alpha linear sampled [-]"]) and close(f, row["frequency linear sampled [Hz]"])):
+    if not (
+        close(alpha_n, row["alpha linear sampled [-]"])
+        and close(f, row["frequency linear sampled [Hz]"])
+    ):
         return "mismatch with the sampled-data loop"
     if close(f, row["critical frequency [Hz]"]):
         return "confirmed"
-    return "confirmed on the sampled-data loop; its crossing frequency differs from the continuous one"
+    return (
+        "confirmed on the sampled-data loop; its crossing frequency differs from the continuous one"
+    )
 
 
 def _confirm_task(args):

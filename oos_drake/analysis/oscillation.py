@@ -81,7 +81,9 @@ def pencil_poles(signal: np.ndarray, dt: float, *, rtol: float = 1e-6, max_order
     if not dt > 0:
         raise ValueError(f"matrix pencil: sample period must be > 0 s, got {dt}")
     L = n // 2
-    Y = np.vstack([np.lib.stride_tricks.sliding_window_view(y[:, c], L + 1) for c in range(y.shape[1])])
+    Y = np.vstack(
+        [np.lib.stride_tricks.sliding_window_view(y[:, c], L + 1) for c in range(y.shape[1])]
+    )
     _, S, Vh = np.linalg.svd(Y, full_matrices=False)
     if S[0] == 0.0:
         raise ValueError("matrix pencil: the signal is identically zero")

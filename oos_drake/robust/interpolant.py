@@ -37,7 +37,12 @@ def _section(c: complex, omega: float) -> tuple[np.ndarray, ...]:
     """``(A, B, C, D)`` (at most one state) of ``+-|c| a_p(s)`` with value ``c`` at ``j omega``."""
     g, phi = abs(c), float(np.angle(c))
     if g == 0.0 or abs(np.sin(phi)) < STATIC_PHASE:
-        return np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((1, 0)), np.array([[np.sign(c.real) * g]])
+        return (
+            np.zeros((0, 0)),
+            np.zeros((0, 1)),
+            np.zeros((1, 0)),
+            np.array([[np.sign(c.real) * g]]),
+        )
     sign, phase = (1.0, phi) if phi < 0 else (-1.0, phi - np.pi)
     p = omega / np.tan(-phase / 2.0)
     # a_p(s) = -1 + 2 p / (s + p)
