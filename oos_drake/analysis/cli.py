@@ -22,16 +22,17 @@ def _controller(path):
     return baseline_controller(rotational_channels(plant).nominal)
 
 
-def _write_atomically(out, work, marker: str = "summary.json"):
+def _write_atomically(out, work, marker: str = "summary.json", what: str = "an analysis"):
     """Run ``work(tmp)`` in a sibling temporary folder that replaces ``out`` only when it
     succeeds: a failed or interrupted analysis leaves no half-written result folder. An
-    existing ``out`` is replaced only if it holds a previous result (its ``marker`` file)."""
+    existing ``out`` is replaced only if it holds a previous result (its ``marker`` file, ``what``
+    names it in the error)."""
     import shutil
     from pathlib import Path
 
     out = Path(out).resolve()
     if out.exists() and any(out.iterdir()) and not (out / marker).is_file():
-        raise ValueError(f"--out {out} exists and holds something other than a result ({marker})")
+        raise ValueError(f"--out {out} exists and holds something other than {what}")
     tmp = out.with_name(f".{out.name}.tmp")
     shutil.rmtree(tmp, ignore_errors=True)
     try:
@@ -164,20 +165,17 @@ def run_confirm(args) -> int:
         table.to_parquet(tmp / CONFIRMATION_FILE)
         histories.to_parquet(tmp / HISTORIES_FILE)
         for _, row in table.iterrows():
-            part = (
-                histories[
-                    (histories.get("study") == row["study"])
-                    & (histories.get("subset") == row["subset"])
-                ]
-                if not histories.empty
-                else histories
-            )
+            if histories.empty:
+                continue
+            part = histories[
+                (histories["study"] == row["study"]) & (histories["subset"] == row["subset"])
+            ]
             if not part.empty:
                 name = f"confirmation_{row['study']}_{row['subset']}.png"
                 confirmation_figure(part, row, tmp / name)
         return table
 
-    table = _write_atomically(out, work, marker=CONFIRMATION_FILE)
+    table = _write_atomically(out, work, marker=CONFIRMATION_FILE, what="a confirmation")
     print(f"controller: {controller.label} ({controller.source})")
     print(
         f"{'study':>10s} {'subset':>14s} {'f crit':>8s} {'a cont':>7s} {'a samp':>7s} "
@@ -196,28 +194,6 @@ def run_confirm(args) -> int:
 
 def register(subparsers) -> None:
     """Add ``oos analyze`` and ``oos confirm``."""
-    confirm = subparsers.add_parser(
-        "confirm",
-        help="confirm each certified worst case of an analysis on the nonlinear Drake twin",
-        description="For each certified mu peak: the stability boundary along the worst "
-        "perturbation's ray (scaled by alpha) for the continuous and the sampled-data linear "
-        "loops, the physical limit of the parameters, and the nonlinear boundary on the frozen "
-        "Drake mission by bisection; writes confirmation.parquet, time histories and figures.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-    )
-    confirm.add_argument("--analysis", required=True, help="folder written by `oos analyze`")
-    confirm.add_argument(
-        "--controller",
-        default=None,
-        help="controller JSON (default: the one the analysis recorded in summary.json)",
-    )
-    confirm.add_argument(
-        "--out", default=None, help="output directory (default: ANALYSIS/../confirm)"
-    )
-    confirm.add_argument("--workers", type=int, default=2, help="worker processes")
-    confirm.add_argument("--quiet", action="store_true", help="no progress bars")
-    confirm.set_defaults(func=run_confirm)
-
     parser = subparsers.add_parser(
         "analyze",
         help="worst-case mu analysis over the mission and the docking phases (paper section 4)",
@@ -306,3 +282,25 @@ def register(subparsers) -> None:
     add_deprecated_alias(parser, "--fmax", "--f-max", type=float)
     add_deprecated_alias(parser, "--jobs", "--workers", type=int)
     parser.set_defaults(func=run_analyze)
+
+    confirm = subparsers.add_parser(
+        "confirm",
+        help="confirm each certified worst case of an analysis on the nonlinear Drake twin",
+        description="For each certified mu peak: the stability boundary along the worst "
+        "perturbation's ray (scaled by alpha) for the continuous and the sampled-data linear "
+        "loops, the physical limit of the parameters, and the nonlinear boundary on the frozen "
+        "Drake mission by bisection; writes confirmation.parquet, time histories and figures.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    confirm.add_argument("--analysis", required=True, help="folder written by `oos analyze`")
+    confirm.add_argument(
+        "--controller",
+        default=None,
+        help="controller JSON (default: the one the analysis recorded in summary.json)",
+    )
+    confirm.add_argument(
+        "--out", default=None, help="output directory (default: ANALYSIS/../confirm)"
+    )
+    confirm.add_argument("--workers", type=int, default=2, help="worker processes")
+    confirm.add_argument("--quiet", action="store_true", help="no progress bars")
+    confirm.set_defaults(func=run_confirm)

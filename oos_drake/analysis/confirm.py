@@ -416,7 +416,9 @@ class _Twin:
         self.period = 1.0 / mission_options.control_rate
 
     def run(self, values: Mapping[str, float]):
-        """``(Oscillation or None, history DataFrame, diverged)`` of one run."""
+        """``(growing, Oscillation or None, history DataFrame)`` of one run: ``growing`` when
+        the run diverged, the dominant oscillation grows or, without any oscillation, the
+        attitude's peak over the last quarter of the window exceeds that of the second."""
         from oos_drake.analysis.oscillation import dominant_oscillation
         from oos_drake.multibody.mission_sim import MissionDiverged
 
@@ -451,7 +453,10 @@ class _Twin:
                 oscillation = dominant_oscillation(times[window], phi[window])
             except ValueError:
                 oscillation = None
-        return oscillation, history, diverged
+        if diverged or oscillation is not None:
+            return diverged or oscillation.decay_rate > 0, oscillation, history
+        quarters = np.array_split(np.abs(phi[window]).max(axis=1), 4)
+        return bool(quarters[3].max() > quarters[1].max()), None, history
 
 
 def _nonlinear_boundary(twin: _Twin, specs, direction, guess: float, alpha_top: float):
@@ -460,10 +465,8 @@ def _nonlinear_boundary(twin: _Twin, specs, direction, guess: float, alpha_top: 
     runs = {}
 
     def unstable(alpha):
-        oscillation, history, diverged = twin.run(ray_values(specs, direction, alpha))
-        growing = diverged or oscillation is None or oscillation.decay_rate > 0
-        runs[alpha] = (growing, oscillation, history)
-        return growing
+        runs[alpha] = twin.run(ray_values(specs, direction, alpha))
+        return runs[alpha][0]
 
     lo = max(guess * (1.0 - o.bracket), 1e-3)
     hi = min(guess * (1.0 + o.bracket), alpha_top)
@@ -598,15 +601,11 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
         top = min(alpha_phys * (1 - 1e-3), options.alpha_limit)
         guess = alpha_s if np.isfinite(alpha_s) else 1.0
         if guess >= top:
-            oscillation, history, diverged = twin.run(ray_values(specs, direction, top))
-            runs = {
-                top: (
-                    diverged or oscillation is None or oscillation.decay_rate > 0,
-                    oscillation,
-                    history,
-                )
-            }
-            alpha_n = math.inf if not runs[top][0] else math.nan
+            runs = {top: twin.run(ray_values(specs, direction, top))}
+            alpha_n = math.inf
+            if runs[top][0]:  # unstable below the prediction: search under the top
+                alpha_n, below = _nonlinear_boundary(twin, specs, direction, top, top)
+                runs |= below
         else:
             alpha_n, runs = _nonlinear_boundary(twin, specs, direction, guess, top)
         row["nonlinear runs"] = len(runs)
@@ -700,8 +699,12 @@ def confirm_peaks(peaks, controller, options: ConfirmOptions, *, workers=1, quie
     return table, history
 
 
-def confirmation_figure(histories: pd.DataFrame, row: Mapping, path: Path) -> None:
-    """Hub attitude on both sides of the nonlinear boundary of one peak (PNG)."""
+def confirmation_figure(
+    histories: pd.DataFrame, row: Mapping, path: Path, *, settle: float = ConfirmOptions.settle
+) -> None:
+    """Hub attitude on both sides of the nonlinear boundary of one peak (PNG): the window the
+    oscillation is identified on (after ``settle`` [s]), scaled to the critical oscillation of
+    its second half (the transient leaves the plot)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -709,18 +712,23 @@ def confirmation_figure(histories: pd.DataFrame, row: Mapping, path: Path) -> No
 
     fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True, constrained_layout=True)
     for ax, side in zip(axes, ("stable", "unstable"), strict=True):
-        part = histories[histories["side"] == side]
+        part = histories[(histories["side"] == side) & (histories["time [s]"] >= settle)]
         if part.empty:
             ax.text(0.5, 0.5, f"no {side} run", ha="center", transform=ax.transAxes)
             continue
         alpha = float(part["alpha [-]"].iloc[0])
         for a in AXES:
-            ax.plot(part["time [s]"], 1e3 * part[f"phi_{a} [rad]"], label=f"{a} axis")
-        ax.set_ylabel("hub attitude error [mrad]")
-        ax.set_title(f"{side} side: alpha = {alpha:.4f}")
+            ax.plot(part["time [s]"], 1e6 * part[f"phi_{a} [rad]"], label=f"{a} axis")
+        # zoom on the second half of the window: the critical oscillation, not the transient
+        tail = part[part["time [s]"] >= 0.5 * (settle + part["time [s]"].max())]
+        top = 1.5e6 * float(np.abs(tail[[f"phi_{a} [rad]" for a in AXES]].to_numpy()).max())
+        if top > 0:
+            ax.set_ylim(-top, top)
+        ax.set_ylabel("hub attitude error [urad]")
+        ax.set_title(f"{side} side: alpha = {alpha:.4f}", fontsize=10)
         ax.grid(True, alpha=0.3)
         ax.legend(loc="upper right", fontsize=8)
-    axes[-1].set_xlabel("time since the window start [s]")
+    axes[-1].set_xlabel(f"time since the window start [s] (first {settle:g} s of transient cut)")
     fig.suptitle(
         f"{row['study']} / {row['subset']}: nonlinear boundary alpha = "
         f"{row['alpha nonlinear [-]']:.4f} (linear sampled {row['alpha linear sampled [-]']:.4f}, "
