@@ -389,12 +389,23 @@ def sampled_loop_poles(plant_hat, peak: Peak, alpha: float, fsw, period: float) 
 
 # -- nonlinear twin -------------------------------------------------------------------------------
 def _mission_window(sim, t_peak: float, duration: float) -> float:
-    """Start of a frozen-configuration window near ``t_peak`` outside the docking ramps."""
-    start = float(t_peak)
+    """Start [s] of a window of ``duration`` near ``t_peak`` that no docking event (capture,
+    stiffness ramps) falls into: the connection state of the peak's time, held throughout.
+
+    A peak inside a ramp moves after it (the connection is then made); a window that would run
+    into the next event ends before it.
+    """
+    start = min(float(t_peak), sim.duration - duration)
     for a, b in sim.schedule(sim.resolve(None)).ramp_intervals():
-        if a - 1e-9 <= start < b:
+        if a - 1e-9 <= t_peak < b:
             start = b + 0.5
-    return min(start, sim.duration - duration)
+        elif start < a < start + duration:
+            start = a - duration - 0.5
+    if start < 0.0 or start + duration > sim.duration:
+        raise ValueError(
+            f"confirm: no {duration} s window without a docking event near t = {t_peak} s"
+        )
+    return start
 
 
 class _Twin:
@@ -411,9 +422,7 @@ class _Twin:
         self.sim = MissionSimulation(handles=handles)
         self.options = options
         self.start = _mission_window(self.sim, peak.time, options.duration)
-        h = self.sim.handles
-        self.hub_q = h.hub_joint.position_start()
-        self.period = 1.0 / mission_options.control_rate
+        self.hub_q = self.sim.handles.hub_joint.position_start()
 
     def run(self, values: Mapping[str, float]):
         """``(growing, Oscillation or None, history DataFrame)`` of one run: ``growing`` when

@@ -130,3 +130,18 @@ def test_a_worst_case_is_confirmed_on_the_nonlinear_twin(setup):
     )
     assert row["decay rate below [1/s]"] < 0 < row["decay rate above [1/s]"]
     assert set(histories["side"]) == {"stable", "unstable"}
+
+
+def test_confirmation_windows_hold_one_connection_state():
+    from oos_drake.analysis.confirm import _mission_window
+    from oos_drake.multibody.mission_sim import MissionSimulation
+
+    sim = MissionSimulation()
+    ramps = sim.schedule(sim.resolve(None)).ramp_intervals()
+    for t in np.linspace(0.0, sim.duration, 61):
+        start = _mission_window(sim, t, 45.0)
+        assert 0.0 <= start and start + 45.0 <= sim.duration
+        assert not any(start < b and a < start + 45.0 for a, b in ramps), (t, start)
+        inside = [b for a, b in ramps if a <= t < b]
+        if inside:  # a peak inside a ramp: simulated with the connection made
+            assert start == inside[0] + 0.5
