@@ -552,26 +552,25 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
     fsw = FlightSoftware(design, 6, 6, 0, 0).linear_update()
     period = design.period
     alpha_s, f_s = math.nan, math.nan
-    if np.isfinite(peak.omega):
 
-        def sampled_unstable(alpha):
-            try:
+    def sampled_unstable(alpha):
+        try:  # near an ill-posed point the plant's fastest pole overflows the hold's expm
+            with np.errstate(over="ignore", invalid="ignore"):
                 poles = sampled_loop_poles(plant_hat, peak, alpha, fsw, period)
-            except (ValueError, np.linalg.LinAlgError):
-                return True
-            return bool(np.log(np.abs(poles).max()) / period > GROWTH_TOLERANCE)
+        except (ValueError, np.linalg.LinAlgError):
+            return True
+        return bool(np.log(np.abs(poles).max()) / period > GROWTH_TOLERANCE)
 
-        alpha_s = boundary_along_ray(sampled_unstable, options.alpha_limit)
-        if np.isfinite(alpha_s):
-            poles = sampled_loop_poles(plant_hat, peak, alpha_s * (1 + 1e-3), fsw, period)
-            z = poles[np.argmax(np.abs(poles))]
-            f_s = abs(np.angle(z)) / (2 * np.pi * period)
-    else:
+    alpha_s = boundary_along_ray(sampled_unstable, options.alpha_limit)
+    if np.isfinite(alpha_s) and np.isfinite(peak.omega):
+        poles = sampled_loop_poles(plant_hat, peak, alpha_s * (1 + 1e-3), fsw, period)
+        z = poles[np.argmax(np.abs(poles))]
+        f_s = abs(np.angle(z)) / (2 * np.pi * period)
+    if not np.isfinite(peak.omega):
         notes.append(
             "infinite frequency: the loop becomes ill-posed (a mass matrix singular) at alpha "
-            "= 1, no oscillation; the hold cannot change a static loop's well-posedness"
+            "= 1, a pole leaves through infinity: no oscillation to identify"
         )
-        alpha_s = alpha_c
     # 3. physical limit of the real parameters
     alpha_phys, reason = physical_alpha_max(
         specs, direction, (_target_body(scenario),), alpha_limit=options.alpha_limit
