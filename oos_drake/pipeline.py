@@ -137,7 +137,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
         timings,
     )
 
-    confirm_key = _digest(analysis_key, multibody_key, source_key("analysis"))
+    confirm_key = _digest(analysis_key, multibody_key)  # analysis_key covers analysis/ and robust/
     run_stage(
         "confirm",
         out / "confirm",
