@@ -89,10 +89,11 @@ class ConfirmOptions:
     rtol : float
         Relative width of the final bisection bracket on ``alpha`` [-].
     max_step : float
-        Longest integrator step [s] (fixed Radau3 steps; a step of one 10 Hz period damps a
-        0.8 Hz oscillation numerically by about 0.008 1/s, which would move the boundary by
-        about 1 %; 0.05 s: by about 0.001 1/s, 0.2 % of alpha, measured against 0.025 s on the
-        modal peak of the default analysis).
+        Longest integrator step [s] (fixed Radau3 steps). Steps of one 10 Hz period damp a
+        0.8 Hz oscillation numerically: at the modal peak's sampled-data boundary of the
+        default analysis the decay rate is -0.0074 1/s with 0.1 s steps, -0.0009 1/s with
+        0.05 s and +0.0001 1/s with 0.025 s (``benchmarks/bench_confirm.py``); with a slope
+        of about 0.7 (1/s) per unit alpha, 0.05 s moves the boundary by about 0.2 %.
     bracket : float
         Half-width of the first bracket around the sampled-data prediction [-] (relative).
     alpha_limit : float
