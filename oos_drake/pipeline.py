@@ -1,4 +1,5 @@
-"""The main job, ``oos run``: model -> controller -> analysis -> mu-guided campaign -> report.
+"""The main job, ``oos run``: model -> controller -> analysis -> confirmation of the worst cases
+on the Drake twin -> mu-guided campaign -> report.
 
 Each stage writes one folder under ``--out``. A stage is skipped when its folder holds a stamp
 (``stage.json``) whose key matches the current inputs: the key hashes the scenario data file, the
@@ -136,6 +137,25 @@ def run_pipeline(args: argparse.Namespace) -> int:
         timings,
     )
 
+    confirm_key = _digest(analysis_key, multibody_key)  # analysis_key covers analysis/ and robust/
+    run_stage(
+        "confirm",
+        out / "confirm",
+        confirm_key,
+        lambda d: _oos(
+            "confirm",
+            "--analysis",
+            out / "analysis",
+            "--controller",
+            controller,
+            "--out",
+            d,
+            "--workers",
+            args.workers,
+        ),
+        timings,
+    )
+
     campaign_key = _digest(
         analysis_key, multibody_key, source_key("campaign"), campaign_spec.read_bytes()
     )
@@ -178,6 +198,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
         ("Drake vs TITOP validation", out / "validate" / "validate.txt"),
         ("controller", controller),
         ("robust analysis", out / "analysis"),
+        ("worst cases on the Drake twin", out / "confirm" / "confirmation.parquet"),
         ("campaign results", campaign / "runs.parquet"),
         ("campaign report", campaign / "report"),
     ):

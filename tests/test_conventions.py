@@ -36,8 +36,8 @@ def _sources():
 
 # ---------------------------------------------------------------- D3: the oos parser
 COMMANDS = {
-    "run", "model", "sdf", "validate", "synth", "analyze", "robust", "campaign", "ulinearize",
-    "margins",
+    "run", "model", "sdf", "validate", "synth", "analyze", "confirm", "robust", "campaign",
+    "ulinearize", "margins",
 }  # fmt: skip
 #: Every command line that runs something (README's `oos` table).
 RUNNABLE = {
@@ -46,6 +46,7 @@ RUNNABLE = {
     "synth",
     "analyze",
     "margins",
+    "confirm",
     "model info",
     "model figures",
     "sdf generate",

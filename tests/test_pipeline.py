@@ -80,11 +80,16 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(tmp_path):
         "validate",
         "controller",
         "analysis",
+        "confirm",
         "campaign + report",
     }
     assert all(v is not None and v > 0 for v in timings["stages_s"].values())
-    for stage in ("model", "validate", "controller", "analysis"):
+    for stage in ("model", "validate", "controller", "analysis", "confirm"):
         assert (out / stage / STAMP).is_file(), stage
+    confirmation = pd.read_parquet(out / "confirm" / "confirmation.parquet")
+    assert set(confirmation["study"]) == set(
+        pd.read_parquet(out / "analysis" / "stability_peaks.parquet")["study"]
+    )
     controller = json.loads((out / "controller" / "controller.json").read_text())
     assert len(controller["configurations"]["time_s"]) == 40
     summary = json.loads((out / "analysis" / "summary.json").read_text())
@@ -94,7 +99,12 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(tmp_path):
     plan = pd.read_parquet(campaign / "plan.parquet")
     assert sorted(runs["run_id"]) == sorted(plan["run_id"])
     assert (campaign / "report").is_dir()
-    for label in ("controller", "robust analysis", "campaign results"):
+    for label in (
+        "controller",
+        "robust analysis",
+        "worst cases on the Drake twin",
+        "campaign results",
+    ):
         assert label in first.stdout
 
     second = subprocess.run(command, capture_output=True, text=True, timeout=3000)

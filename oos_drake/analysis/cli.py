@@ -24,16 +24,17 @@ def _controller(path):
     return baseline_controller(rotational_channels(plant).nominal)
 
 
-def _write_atomically(out, work):
+def _write_atomically(out, work, marker: str = "summary.json", what: str = "an analysis"):
     """Run ``work(tmp)`` in a sibling temporary folder that replaces ``out`` only when it
     succeeds: a failed or interrupted analysis leaves no half-written result folder. An
-    existing ``out`` is replaced only if it holds a previous analysis (``summary.json``)."""
+    existing ``out`` is replaced only if it holds a previous result (its ``marker`` file, ``what``
+    names it in the error)."""
     import shutil
     from pathlib import Path
 
     out = Path(out).resolve()
-    if out.exists() and any(out.iterdir()) and not (out / "summary.json").is_file():
-        raise ValueError(f"--out {out} exists and holds something other than an analysis")
+    if out.exists() and any(out.iterdir()) and not (out / marker).is_file():
+        raise ValueError(f"--out {out} exists and holds something other than {what}")
     tmp = out.with_name(f".{out.name}.tmp")
     shutil.rmtree(tmp, ignore_errors=True)
     try:
@@ -209,6 +210,90 @@ def run_margins(args) -> int:
     return 0
 
 
+def _confirm_controller(args):
+    """The controller of ``--controller``, else the one the analysis recorded; its gains must
+    be the analysis' (``summary.json``)."""
+    import json
+    from pathlib import Path
+
+    import numpy as np
+
+    summary_file = Path(args.analysis) / "summary.json"
+    if not summary_file.is_file():
+        raise ValueError(f"--analysis {args.analysis}: summary.json not found (run `oos analyze`)")
+    recorded = json.loads(summary_file.read_text()).get("controller", {})
+    path = args.controller
+    if path is None and recorded.get("label") == "synthesized":
+        path = recorded.get("source")
+        if not path or not Path(path).exists():
+            raise ValueError(
+                f"--analysis {args.analysis}: its controller {path} is gone; pass --controller"
+            )
+    controller = _controller(path)
+    K = np.asarray(recorded.get("K", controller.K), dtype=float)
+    if K.shape != controller.K.shape or not np.allclose(K, controller.K, rtol=1e-9, atol=0):
+        raise ValueError(
+            f"--controller {path}: its gains differ from those the analysis {args.analysis} used"
+        )
+    return controller
+
+
+
+def run_confirm(args) -> int:
+    """Confirm the analysis' certified peaks on the Drake twin; exit status 0."""
+    import time
+    from pathlib import Path
+
+    from oos_drake.analysis.confirm import (
+        CONFIRMATION_FILE,
+        HISTORIES_FILE,
+        ConfirmOptions,
+        confirm_peaks,
+        confirmation_figure,
+        read_peaks,
+    )
+
+    peaks = read_peaks(args.analysis)
+    controller = _confirm_controller(args)
+    out = Path(args.out) if args.out else Path(args.analysis).parent / "confirm"
+    start = time.perf_counter()
+
+    def work(tmp):
+        tmp.mkdir(parents=True)
+        table, histories = confirm_peaks(
+            peaks, controller, ConfirmOptions(), workers=args.workers, quiet=args.quiet
+        )
+        table.to_parquet(tmp / CONFIRMATION_FILE)
+        histories.to_parquet(tmp / HISTORIES_FILE)
+        for _, row in table.iterrows():
+            if histories.empty:
+                continue
+            part = histories[
+                (histories["study"] == row["study"]) & (histories["subset"] == row["subset"])
+            ]
+            if not part.empty:
+                name = f"confirmation_{row['study']}_{row['subset']}.png"
+                confirmation_figure(part, row, tmp / name)
+        return table
+
+    table = _write_atomically(out, work, marker=CONFIRMATION_FILE, what="a confirmation")
+    print(f"controller: {controller.label} ({controller.source})")
+    print(
+        f"{'study':>10s} {'subset':>14s} {'f crit':>8s} {'a cont':>7s} {'a samp':>7s} "
+        f"{'a phys':>7s} {'a nonl':>7s} {'f osc':>7s}  status"
+    )
+    for _, r in table.iterrows():
+        print(
+            f"{r['study']:>10s} {r['subset']:>14s} {r['critical frequency [Hz]']:8.4g} "
+            f"{r['alpha linear continuous [-]']:7.4g} {r['alpha linear sampled [-]']:7.4g} "
+            f"{r['alpha physical max [-]']:7.4g} {r['alpha nonlinear [-]']:7.4g} "
+            f"{r['oscillation frequency [Hz]']:7.4g}  {r['status']}"
+        )
+    print(f"confirmation in {time.perf_counter() - start:.1f} s; outputs in {out}")
+    return 0
+
+
+
 def _common_arguments(parser, *, configurations: int) -> None:
     """``--controller``, ``--out`` and ``--configurations`` of ``oos analyze`` / ``oos margins``."""
     parser.add_argument(
@@ -226,7 +311,7 @@ def _common_arguments(parser, *, configurations: int) -> None:
 
 
 def register(subparsers) -> None:
-    """Add ``oos analyze`` and ``oos margins``."""
+    """Add ``oos analyze``, ``oos margins`` and ``oos confirm``."""
     parser = subparsers.add_parser(
         "analyze",
         help="worst-case mu analysis over the mission and the docking phases (paper section 4)",
@@ -336,3 +421,25 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run_margins)
+
+    confirm = subparsers.add_parser(
+        "confirm",
+        help="confirm each certified worst case of an analysis on the nonlinear Drake twin",
+        description="For each certified mu peak: the stability boundary along the worst "
+        "perturbation's ray (scaled by alpha) for the continuous and the sampled-data linear "
+        "loops, the physical limit of the parameters, and the nonlinear boundary on the frozen "
+        "Drake mission by bisection; writes confirmation.parquet, time histories and figures.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    confirm.add_argument("--analysis", required=True, help="folder written by `oos analyze`")
+    confirm.add_argument(
+        "--controller",
+        default=None,
+        help="controller JSON (default: the one the analysis recorded in summary.json)",
+    )
+    confirm.add_argument(
+        "--out", default=None, help="output directory (default: ANALYSIS/../confirm)"
+    )
+    confirm.add_argument("--workers", type=int, default=2, help="worker processes")
+    confirm.add_argument("--quiet", action="store_true", help="no progress bars")
+    confirm.set_defaults(func=run_confirm)

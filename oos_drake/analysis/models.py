@@ -112,7 +112,16 @@ def phase_configuration(phase: str, scenario=None):
 def docking_closed_loop(
     controller: Controller, phase: str, stiffness, *, damping=None, scenario=None, source="lfr"
 ) -> ModelArray:
-    """Uncertain closed loop of docking phase 7 or 8 for each swept stiffness.
+    """Uncertain closed loop of docking phase 7 or 8 for each swept stiffness (plants of
+    :func:`docking_plant`, same parameters)."""
+    stiffness = np.atleast_1d(np.asarray(stiffness, dtype=float))
+    plant = docking_plant(phase, stiffness, damping=damping, scenario=scenario, source=source)
+    system = close_loop(plant, controller.K, controller.spec)
+    return ModelArray(system, stiffness, "stiffness [N/m or N m/rad]", f"docking-{phase}")
+
+
+def docking_plant(phase: str, stiffness, *, damping=None, scenario=None, source="lfr") -> LFR:
+    """Uncertain plant (``Delta_real`` blocks) of docking phase 7 or 8 for each swept stiffness.
 
     Phase 7: SM1 (arm tip J7 / target port D2) has stiffness ``k`` (shear [N/m] and torsion
     [N m/rad] alike) and damping ``damping``; SM2 is open. Phase 8: SM2 (D1 / D3) is swept, SM1
@@ -120,7 +129,6 @@ def docking_closed_loop(
 
     Parameters
     ----------
-    controller : Controller
     phase : {"7", "8"}
     stiffness : array_like
         Swept stiffness values (paper: 300 values, 0.1 .. 1e5, log spaced).
@@ -144,9 +152,7 @@ def docking_closed_loop(
     if source == "drake":
         from oos_drake.multibody.mission_lfr import twin_docking_plants
 
-        plant = twin_docking_plants(phase, stiffness, damping, scenario)
-        system = close_loop(plant, controller.K, controller.spec)
-        return ModelArray(system, stiffness, "stiffness [N/m or N m/rad]", f"docking-{phase}")
+        return twin_docking_plants(phase, stiffness, damping, scenario)
     model = build_docking_model(phase, scenario)
     named = phase_configuration(phase, scenario)
     cfg = named.configuration
@@ -171,6 +177,4 @@ def docking_closed_loop(
         )
     present = model.uncertainty
     values = {k: v for k, v in values.items() if k in present}
-    plant = usubs(model, values)
-    system = close_loop(plant, controller.K, controller.spec)
-    return ModelArray(system, stiffness, "stiffness [N/m or N m/rad]", f"docking-{phase}")
+    return usubs(model, values)

@@ -423,6 +423,7 @@ def make_mission_diagram(
     scenario: Scenario | None = None,
     K=None,
     sdf_directory: str | Path = SDF_DIRECTORY,
+    timeline: MissionTimeline | None = None,
 ) -> MissionDiagram:
     """Build the closed-loop mission diagram (see the module docstring).
 
@@ -436,6 +437,10 @@ def make_mission_diagram(
         Controller gain overriding ``options.controller``.
     sdf_directory : str or Path
         Directory of ``oos_scenario.sdf``.
+    timeline : MissionTimeline, optional
+        Trajectories the arm and array drives follow (default: the scenario's mission;
+        ``mission_timeline(scenario).frozen(t)`` holds them at time ``t``). The joint PDs and
+        the additive perturbation's inertia are sized on the scenario's own timeline either way.
 
     Returns
     -------
@@ -443,7 +448,8 @@ def make_mission_diagram(
     """
     options = options or MissionOptions()
     scenario = scenario or load_scenario()
-    timeline = mission_timeline(scenario)
+    mission = mission_timeline(scenario)
+    timeline = mission if timeline is None else timeline
     K = controller_gain(options.controller, scenario) if K is None else np.asarray(K, float)
     builder = DiagramBuilder()
     parts = _add_plant(builder, Path(sdf_directory))
@@ -464,7 +470,7 @@ def make_mission_diagram(
     builder.Connect(array_source.get_output_port(), reference.get_input_port(1))
 
     sizing_context = plant.CreateDefaultContext()
-    grasp = timeline.configuration(float(scenario.mission.first_docking_time))
+    grasp = mission.configuration(float(scenario.mission.first_docking_time))
     for joint, angle in zip(parts["arm_joints"], grasp.alpha, strict=True):
         joint.set_angle(sizing_context, angle)
     M = plant.CalcMassMatrix(sizing_context)
@@ -487,7 +493,7 @@ def make_mission_diagram(
     builder.Connect(plant.get_state_output_port(), joint_state_gain.get_input_port())
     builder.Connect(reference.get_output_port(), joint_ref_gain.get_input_port())
 
-    configuration = timeline.configuration(float(scenario.mission.first_docking_time))
+    configuration = mission.configuration(float(scenario.mission.first_docking_time))
     J_ref = effective_inertia(rigid_spatial_inertia_at_G1(scenario, configuration))
     design = FlightSoftwareDesign.create(
         K,

@@ -373,8 +373,14 @@ class MissionSimulation:
         self._target_inertia = target.default_spatial_inertia()
 
     # -- values ---------------------------------------------------------------------------------
-    def resolve(self, values: Mapping[str, float] | None) -> dict[str, float]:
-        """Nominal values overridden by ``values``; unknown names or values out of range raise."""
+    def resolve(
+        self, values: Mapping[str, float] | None, *, within_ranges: bool = True
+    ) -> dict[str, float]:
+        """Nominal values overridden by ``values``; unknown names or values out of range raise.
+
+        ``within_ranges=False`` accepts any finite value (a worst case beyond the uncertainty
+        ranges; whether it is a physical body is the caller's check, and Drake refuses some).
+        """
         out = {p.name: float(p.nominal) for p in self.parameters}
         for name, value in dict(values or {}).items():
             if name not in self._by_name:
@@ -383,7 +389,12 @@ class MissionSimulation:
             value = float(value)
             # a bound written in decimal may miss the block's computed range by round-off
             slack = RANGE_RTOL * max(1.0, abs(p.lower), abs(p.upper))
-            if not (math.isfinite(value) and p.lower - slack <= value <= p.upper + slack):
+            if not math.isfinite(value):
+                raise ValueError(f"mission: {name} = {value!r} is not a finite number")
+            if not within_ranges:
+                out[name] = value
+                continue
+            if not p.lower - slack <= value <= p.upper + slack:
                 raise ValueError(
                     f"mission: {name} = {value:g} {p.unit} outside [{p.lower:g}, {p.upper:g}]"
                 )
@@ -457,14 +468,17 @@ class MissionSimulation:
         start: float,
         end: float,
         noise_table: np.ndarray | None = None,
+        *,
+        within_ranges: bool = True,
     ):
         """A root context at the window start with every value applied (see the module doc).
 
         ``noise_table`` (``(n, 9)``: unit ``[n_sst; n_gyro; d_ext]`` per sample) replaces the
-        seeded Gaussian noise (deterministic inputs for tests).
+        seeded Gaussian noise (deterministic inputs for tests); ``within_ranges`` as in
+        :meth:`resolve`.
         """
         h = self.handles
-        values = self.resolve(values)
+        values = self.resolve(values, within_ranges=within_ranges)
         context = h.diagram.CreateDefaultContext()
         context.SetTime(float(start))
         pc = h.plant.GetMyMutableContextFromRoot(context)
@@ -526,6 +540,7 @@ class MissionSimulation:
         log: bool = True,
         noise_table: np.ndarray | None = None,
         on_start: Callable[[object], None] | None = None,
+        within_ranges: bool = True,
     ) -> MissionResult:
         """Simulate ``[start, end]`` of the mission (default: all of it).
 
@@ -534,7 +549,8 @@ class MissionSimulation:
         replaces them by a given ``(n, 9)`` unit table (see :meth:`initial_context`).
         ``on_start(context)`` is called with the run's root context before the first step; a
         caller that keeps it can read the logs afterwards with :meth:`state_log`, also when the
-        run diverged (the replay does this).
+        run diverged (the replay does this). ``within_ranges=False`` accepts values beyond the
+        parameters' ranges (see :meth:`resolve`).
 
         Raises
         ------
@@ -548,7 +564,9 @@ class MissionSimulation:
         if not (0.0 <= start < end <= self.duration + 1e-9):
             raise ValueError(f"mission window [{start}, {end}] s outside [0, {self.duration}] s")
         h, o = self.handles, self.options
-        context, values, schedule = self.initial_context(values, seed, start, end, noise_table)
+        context, values, schedule = self.initial_context(
+            values, seed, start, end, noise_table, within_ranges=within_ranges
+        )
         if on_start is not None:
             on_start(context)
         simulator = Simulator(h.diagram, context)

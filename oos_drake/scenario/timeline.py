@@ -387,6 +387,18 @@ class MissionTimeline:
             theta_ddot=np.concatenate([self.arrays(t, 2), zeros], axis=-1),
         )
 
+    def frozen(self, t: float) -> MissionTimeline:
+        """The same mission with the arm and the arrays held at their configuration of time
+        ``t`` [s] over the whole mission (zero rates; connection switches unchanged)."""
+        t = float(self._times(t))
+        times = np.array([self.t_start, self.t_end], dtype=float)
+
+        def hold(trajectory: QuinticTrajectory) -> QuinticTrajectory:
+            value = np.asarray(trajectory(t), dtype=float)
+            return QuinticTrajectory(times=times, values=np.vstack([value, value]))
+
+        return MissionTimeline(scenario=self.scenario, arm=hold(self.arm), arrays=hold(self.arrays))
+
     def sample(self, n: int = 330) -> Configuration:
         """``n`` equally spaced configurations over the whole mission (paper: 330)."""
         if n < 2:

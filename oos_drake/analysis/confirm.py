@@ -1,0 +1,748 @@
+r"""Confirm each certified worst case of the analysis on the nonlinear Drake twin (``oos confirm``).
+
+For every certified peak of ``stability_peaks.parquet`` the analysis saved the normalized worst
+perturbation ``Delta_*`` (``peak_perturbations.npz``): substituted into the LFR it puts a
+closed-loop pole on the imaginary axis at the critical frequency ``omega``. Along the ray
+``alpha Delta_*`` this module locates the stability boundary three ways, each at fixed parameter
+values (for a fixed perturbation the loop is LTI):
+
+1. **linear, continuous** (the analysis' own loop): eigenvalues of the closed-loop LFR with the
+   real parameters at ``alpha delta_i`` and each complex block replaced by ``alpha`` times a
+   stable interpolant of its worst value at ``omega``
+   (:func:`oos_drake.robust.interpolant.lti_interpolant`, MATLAB ``wcu``'s all-pass sections).
+   Expected boundary: ``alpha = 1``.
+2. **linear, sampled-data** (the loop the Drake twin runs): the same perturbed continuous plant
+   ``T -> [phi; omega]`` discretized exactly with a zero-order hold at the flight software's
+   period and closed with the discrete flight software as it runs
+   (:meth:`~oos_drake.multibody.flight_software.FlightSoftware.linear_update`: Tustin filters,
+   torque computed and applied at the sample, no computation delay). Eigenvalues on the unit
+   circle give its boundary ``alpha`` and crossing frequency.
+3. **nonlinear**: the Drake mission twin (``MissionSimulation``) with the arm and arrays frozen
+   at the peak's configuration (``MissionTimeline.frozen``), the real parameters written as
+   physical values, started from a small attitude error without noise. The decay rate and the
+   frequency of the dominant oscillation of the hub attitude after the transient are identified
+   by the matrix pencil (:mod:`oos_drake.analysis.oscillation`); a bisection on ``alpha`` to
+   ``ConfirmOptions.rtol`` locates the sign change of the decay rate.
+
+Physical validity: a worst perturbation may lie outside the physical domain (non-positive
+mass, an inertia breaking the triangle inequality, a non-positive modal frequency, negative
+stiffness or damping). :func:`physical_alpha_max` gives the largest ``alpha`` along the ray
+that is still a physical body; beyond it no simulation is run (Drake refuses some of these
+bodies, and a non-physical instability is no statement about the spacecraft).
+
+Limits: the Drake twin realizes the analysis' complex blocks only as the flight software's
+scalar all-passes at a fixed frequency, not the interpolants at each peak's frequency (issue
+17 item 3), so peaks whose worst perturbation has complex blocks get the two linear
+predictions only; docking peaks (swept stiffness at a docking phase's configuration) likewise
+stay linear. A peak at infinite frequency is an ill-posed loop (the perturbation makes a mass
+matrix singular): it has no oscillation to confirm; its physical limit is reported instead.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import scipy.signal
+
+__all__ = [
+    "BodyInertia",
+    "ConfirmOptions",
+    "Peak",
+    "boundary_along_ray",
+    "confirm_peaks",
+    "physical_alpha_max",
+    "physical_violation",
+    "read_peaks",
+]
+
+PEAKS_FILE = "stability_peaks.parquet"
+PERTURBATIONS_FILE = "peak_perturbations.npz"
+CONFIRMATION_FILE = "confirmation.parquet"
+HISTORIES_FILE = "confirmation_histories.parquet"
+#: Agreement asked of a confirmation: boundary and frequency within 3 % (issue 17).
+AGREEMENT = 0.03
+AXES = ("x", "y", "z")
+#: Growth rate below which a linear loop counts as stable [1/s]: the plants' structurally
+#: marginal rigid-body modes (translations of the free system, not seen by the attitude loop)
+#: come out of the eigenvalue solver at +-1e-6; a time constant of 1e5 s is no instability
+#: over a 1500 s mission.
+GROWTH_TOLERANCE = 1e-5
+
+
+@dataclass(frozen=True)
+class ConfirmOptions:
+    """Options of the nonlinear confirmation.
+
+    Attributes
+    ----------
+    duration : float
+        Simulated time of one run [s].
+    settle : float
+        Start of the identification window after the run's start [s] (the transient is cut).
+    initial_attitude : float
+        Initial hub attitude error on each axis [rad] (small: the loop stays linear).
+    rtol : float
+        Relative width of the final bisection bracket on ``alpha`` [-].
+    max_step : float
+        Longest integrator step [s] (fixed Radau3 steps). Steps of one 10 Hz period damp a
+        0.8 Hz oscillation numerically: at the modal peak's sampled-data boundary of the
+        default analysis the decay rate is -0.0074 1/s with 0.1 s steps, -0.0009 1/s with
+        0.05 s and +0.0001 1/s with 0.025 s (``benchmarks/bench_confirm.py``); with a slope
+        of about 0.7 (1/s) per unit alpha, 0.05 s moves the boundary by about 0.2 %.
+    bracket : float
+        Half-width of the first bracket around the sampled-data prediction [-] (relative).
+    alpha_limit : float
+        Largest ``alpha`` searched [-].
+    """
+
+    duration: float = 45.0
+    settle: float = 8.0
+    initial_attitude: float = 1e-3
+    rtol: float = 0.005
+    max_step: float = 0.05
+    bracket: float = 0.03
+    alpha_limit: float = 4.0
+
+    def __post_init__(self):
+        for name in ("duration", "settle", "initial_attitude", "rtol", "max_step", "bracket"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"confirm option {name} must be > 0, got {value!r}")
+        if self.settle >= self.duration:
+            raise ValueError(
+                f"confirm option settle ({self.settle} s) must be below duration "
+                f"({self.duration} s)"
+            )
+
+
+@dataclass(frozen=True)
+class Peak:
+    """A certified peak of the analysis and its worst perturbation.
+
+    Attributes
+    ----------
+    study, subset : str
+        ``"mission"`` / ``"docking-7"`` / ``"docking-8"`` and the uncertainty subset.
+    time : float
+        Mission time of the configuration [s] (NaN for docking studies).
+    stiffness : float
+        Swept docking stiffness [N/m or N m/rad] (NaN for the mission).
+    omega : float
+        Critical frequency [rad/s] (``inf``: an ill-posed loop).
+    mu_lower, mu_upper : float
+        Certified bounds [-].
+    perturbation : Mapping[str, float or ndarray]
+        Normalized worst value per block (real scalars; complex matrices).
+    """
+
+    study: str
+    subset: str
+    time: float
+    stiffness: float
+    omega: float
+    mu_lower: float
+    mu_upper: float
+    perturbation: Mapping[str, object] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        """``study|subset``."""
+        return f"{self.study}|{self.subset}"
+
+    @property
+    def has_complex(self) -> bool:
+        """Whether the worst perturbation has complex (dynamic) blocks."""
+        return any(np.ndim(v) > 0 for v in self.perturbation.values())
+
+
+def read_peaks(analysis: str | Path) -> list[Peak]:
+    """The certified peaks of an ``oos analyze`` folder (``mu_lower > 0``).
+
+    Raises
+    ------
+    ValueError
+        Missing folder or files, or a peak without its saved perturbation.
+    """
+    folder = Path(analysis)
+    if not folder.is_dir():
+        raise ValueError(f"--analysis {folder}: folder not found")
+    for name in (PEAKS_FILE, PERTURBATIONS_FILE):
+        if not (folder / name).is_file():
+            raise ValueError(f"--analysis {folder}: {name} not found (run `oos analyze` first)")
+    table = pd.read_parquet(folder / PEAKS_FILE)
+    saved = np.load(folder / PERTURBATIONS_FILE)
+    peaks = []
+    for _, row in table.iterrows():
+        if not row["mu_lower"] > 0:
+            continue
+        key = f"{row['study']}|{row['subset']}|"
+        if key + "omega [rad/s]" not in saved.files:
+            raise ValueError(f"{folder / PERTURBATIONS_FILE}: no perturbation for {key[:-1]}")
+        perturbation = {}
+        for item in saved.files:
+            if item.startswith(key) and item not in (key + "model", key + "omega [rad/s]"):
+                value = saved[item]
+                perturbation[item[len(key) :]] = float(value) if value.ndim == 0 else value
+        peaks.append(
+            Peak(
+                study=str(row["study"]),
+                subset=str(row["subset"]),
+                time=float(row["time [s]"]),
+                stiffness=float(row.get("stiffness [N/m or N m/rad]", math.nan)),
+                omega=float(saved[key + "omega [rad/s]"]),
+                mu_lower=float(row["mu_lower"]),
+                mu_upper=float(row["mu_upper"]),
+                perturbation=perturbation,
+            )
+        )
+    return peaks
+
+
+# -- physical validity along the ray --------------------------------------------------------------
+@dataclass(frozen=True)
+class BodyInertia:
+    """Inertia blocks of one body, for the checks of a rigid body's inertia tensor.
+
+    Attributes
+    ----------
+    diagonal : tuple of str
+        Block names of ``Ixx, Iyy, Izz`` at the centre of mass [kg m^2].
+    tensor : ndarray, shape (3, 3)
+        Nominal tensor [kg m^2] (its products of inertia are kept; blocks replace the diagonal).
+    """
+
+    diagonal: tuple[str, str, str]
+    tensor: np.ndarray
+
+
+def physical_violation(
+    values: Mapping[str, float], quantities: Mapping[str, str], bodies=()
+) -> str:
+    """What makes physical parameter ``values`` not a physical system ('' when they are one).
+
+    Parameters
+    ----------
+    values : Mapping[str, float]
+        Physical value per block [the block's unit].
+    quantities : Mapping[str, str]
+        Block name -> quantity (``"mass"``, ``"inertia"``, ``"modal frequency"``,
+        ``"stiffness"``, ``"damping"``; others are not checked).
+    bodies : sequence of BodyInertia
+        Inertia tensors to check: positive principal moments satisfying the triangle
+        inequality ``I_1 + I_2 >= I_3``.
+    """
+    positive = {"mass", "inertia", "modal frequency"}
+    non_negative = {"stiffness", "damping"}
+    for name, value in values.items():
+        quantity = quantities.get(name, "")
+        if quantity in positive and not value > 0:
+            return f"{name} = {value:.4g} <= 0 ({quantity})"
+        if quantity in non_negative and not value >= 0:
+            return f"{name} = {value:.4g} < 0 ({quantity})"
+    for body in bodies:
+        if not any(n in values for n in body.diagonal):
+            continue
+        tensor = np.array(body.tensor, dtype=float)
+        for i, n in enumerate(body.diagonal):
+            tensor[i, i] = values.get(n, tensor[i, i])
+        moments = np.sort(np.linalg.eigvalsh(0.5 * (tensor + tensor.T)))
+        if moments[0] <= 0 or moments[0] + moments[1] < moments[2]:
+            return (
+                f"inertia {', '.join(body.diagonal)}: principal moments "
+                f"{np.array2string(moments, precision=4)} break the triangle inequality"
+            )
+    return ""
+
+
+def ray_values(specs: Mapping, direction: Mapping[str, float], alpha: float) -> dict:
+    """Physical values of the real blocks at ``alpha`` times the normalized ``direction``."""
+    return {n: float(specs[n].to_physical(alpha * d)) for n, d in direction.items()}
+
+
+def physical_alpha_max(
+    specs: Mapping,
+    direction: Mapping[str, float],
+    bodies=(),
+    *,
+    alpha_limit: float = 4.0,
+    tol: float = 1e-6,
+) -> tuple[float, str]:
+    """Largest ``alpha`` along the ray for which the real parameters are a physical system.
+
+    Parameters
+    ----------
+    specs : Mapping
+        Block name -> ``ureal`` spec (``to_physical``, ``quantity``).
+    direction : Mapping[str, float]
+        Normalized worst value per real block [-].
+    bodies : sequence of BodyInertia
+    alpha_limit : float
+        Search end [-]: ``inf`` is returned when the ray is physical up to it.
+    tol : float
+        Absolute accuracy of the returned ``alpha`` [-].
+
+    Returns
+    -------
+    alpha : float
+        First ``alpha`` at which the parameters stop being physical (``inf``: not before
+        ``alpha_limit``).
+    reason : str
+        The violation just beyond ``alpha`` ('' if none).
+    """
+    quantities = {n: specs[n].quantity for n in direction}
+
+    def bad(alpha):
+        return physical_violation(ray_values(specs, direction, alpha), quantities, bodies)
+
+    grid = np.linspace(0.0, alpha_limit, 401)
+    first = next((a for a in grid if bad(a)), None)
+    if first is None:
+        return math.inf, ""
+    lo, hi = first - grid[1], first
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if bad(mid) else (mid, hi)
+    return lo, bad(hi)
+
+
+# -- linear predictions ---------------------------------------------------------------------------
+def boundary_along_ray(
+    unstable: Callable[[float], bool], alpha_limit: float, *, steps: int = 80, rtol: float = 1e-4
+) -> float:
+    """First ``alpha`` in ``(0, alpha_limit]`` where ``unstable(alpha)`` turns true (inf if
+    none): a grid of ``steps`` points, then bisection to ``rtol``."""
+    grid = np.linspace(alpha_limit / steps, alpha_limit, steps)
+    previous = 0.0
+    for alpha in grid:
+        if unstable(alpha):
+            lo, hi = previous, alpha
+            while hi - lo > rtol * max(hi, grid[0]):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (lo, mid) if unstable(mid) else (mid, hi)
+            return 0.5 * (lo + hi)
+        previous = alpha
+    return math.inf
+
+
+def substitution(peak: Peak, specs: Mapping, alpha: float, *, dt: float | None = None) -> dict:
+    """Normalized values of every block at ``alpha`` along the peak's ray: real blocks scaled,
+    complex blocks as ``alpha`` times their interpolant at the critical frequency (blocks the
+    peak's subset leaves out at zero)."""
+    from oos_drake.robust.interpolant import lti_interpolant
+
+    values = {}
+    for name, spec in specs.items():
+        value = peak.perturbation.get(name)
+        if spec.kind == "ureal":
+            values[name] = 0.0 if value is None else alpha * float(value)
+        elif value is None:
+            values[name] = np.zeros(spec.shape)
+        elif np.isinf(peak.omega):
+            values[name] = alpha * np.real(value)
+        else:
+            values[name] = alpha * lti_interpolant(value, peak.omega, dt=dt)
+    return values
+
+
+def _continuous_abscissa(closed, peak: Peak, alpha: float) -> tuple[float, float]:
+    from oos_drake.lfr import usubs
+
+    try:
+        loop = usubs(closed, substitution(peak, closed.uncertainty, alpha), normalized=True)
+    except (ValueError, np.linalg.LinAlgError):  # ill-posed: I - D Delta singular
+        return math.inf, math.inf
+    poles = np.linalg.eigvals(np.asarray(loop.to_ss().A))
+    k = int(np.argmax(poles.real))
+    return float(poles[k].real), abs(float(poles[k].imag))
+
+
+def sampled_loop_poles(plant_hat, peak: Peak, alpha: float, fsw, period: float) -> np.ndarray:
+    """Poles of the exact sampled-data loop (discrete, ``z``) at ``alpha`` along the ray.
+
+    ``plant_hat``: the uncertain plant ``T -> wdot`` (3x3) with its real and complex blocks;
+    the perturbed plant is augmented with ``w = int wdot``, ``phi = int w`` (small angles: the
+    roll-pitch-yaw rates are the body rates), discretized with a zero-order hold at ``period``
+    and closed with ``fsw`` (a ``DiscreteBlock``: ``[phi; w] -> T``, feedthrough at the sample).
+    """
+    from oos_drake.lfr import usubs
+
+    P = usubs(plant_hat, substitution(peak, plant_hat.uncertainty, alpha), normalized=True).to_ss()
+    A, B, C, D = (np.asarray(m, dtype=float) for m in (P.A, P.B, P.C, P.D))
+    n = A.shape[0]
+    Ag = np.zeros((n + 6, n + 6))
+    Ag[:n, :n] = A
+    Ag[n : n + 3, :n] = C  # w' = wdot
+    Ag[n + 3 :, n : n + 3] = np.eye(3)  # phi' = w
+    Bg = np.vstack([B, D, np.zeros((3, 3))])
+    Cg = np.zeros((6, n + 6))
+    Cg[:3, n + 3 :] = np.eye(3)  # [phi; w]
+    Cg[3:, n : n + 3] = np.eye(3)
+    Ad, Bd, *_ = scipy.signal.cont2discrete((Ag, Bg, Cg, np.zeros((6, 3))), period, method="zoh")
+    Ac, Bc, Cc, Dc = fsw.A, fsw.B, fsw.C, fsw.D
+    closed = np.block([[Ad + Bd @ Dc @ Cg, Bd @ Cc], [Bc @ Cg, Ac]])
+    return np.linalg.eigvals(closed)
+
+
+# -- nonlinear twin -------------------------------------------------------------------------------
+def _mission_window(sim, t_peak: float, duration: float) -> float:
+    """Start [s] of a window of ``duration`` near ``t_peak`` that no docking event (capture,
+    stiffness ramps) falls into: the connection state of the peak's time, held throughout.
+
+    A peak inside a ramp moves after it (the connection is then made); a window that would run
+    into the next event ends before it.
+    """
+    start = min(float(t_peak), sim.duration - duration)
+    for a, b in sim.schedule(sim.resolve(None)).ramp_intervals():
+        if a - 1e-9 <= t_peak < b:
+            start = b + 0.5
+        elif start < a < start + duration:
+            start = a - duration - 0.5
+    if start < 0.0 or start + duration > sim.duration:
+        raise ValueError(
+            f"confirm: no {duration} s window without a docking event near t = {t_peak} s"
+        )
+    return start
+
+
+class _Twin:
+    """One frozen Drake mission (built once per peak) and runs along the ray."""
+
+    def __init__(self, peak: Peak, K: np.ndarray, options: ConfirmOptions):
+        from oos_drake.multibody.mission import MissionOptions, make_mission_diagram
+        from oos_drake.multibody.mission_sim import MissionSimulation
+        from oos_drake.scenario.timeline import mission_timeline
+
+        mission_options = MissionOptions(log_rate=10.0, max_step=options.max_step)
+        timeline = mission_timeline().frozen(peak.time)
+        handles = make_mission_diagram(mission_options, K=K, timeline=timeline)
+        self.sim = MissionSimulation(handles=handles)
+        self.options = options
+        self.start = _mission_window(self.sim, peak.time, options.duration)
+        self.hub_q = self.sim.handles.hub_joint.position_start()
+
+    def run(self, values: Mapping[str, float]):
+        """``(growing, Oscillation or None, history DataFrame)`` of one run: ``growing`` when
+        the run diverged, the dominant oscillation grows or, without any oscillation, the
+        attitude's peak over the last quarter of the window exceeds that of the second."""
+        from oos_drake.analysis.oscillation import dominant_oscillation
+        from oos_drake.multibody.mission_sim import MissionDiverged
+
+        o = self.options
+        phi0 = o.initial_attitude
+        run_values = dict(values) | {f"phi0_{a}": phi0 for a in AXES}
+        holder = {}
+        diverged = False
+        try:
+            self.sim.run(
+                run_values,
+                0,
+                self.start,
+                self.start + o.duration,
+                log=False,
+                noise_table=np.zeros((1, 9)),
+                on_start=lambda context: holder.setdefault("context", context),
+                within_ranges=False,
+            )
+        except MissionDiverged:
+            diverged = True
+        times, states = self.sim.state_log(holder["context"])
+        phi = states[self.hub_q : self.hub_q + 3].T
+        history = pd.DataFrame(
+            {"time [s]": times - self.start}
+            | {f"phi_{a} [rad]": phi[:, i] for i, a in enumerate(AXES)}
+        )
+        window = (times - self.start >= o.settle) & np.all(np.isfinite(phi), axis=1)
+        oscillation = None
+        if np.count_nonzero(window) >= 40:
+            try:
+                oscillation = dominant_oscillation(times[window], phi[window])
+            except ValueError:
+                oscillation = None
+        if diverged or oscillation is not None:
+            return diverged or oscillation.decay_rate > 0, oscillation, history
+        quarters = np.array_split(np.abs(phi[window]).max(axis=1), 4)
+        return bool(quarters[3].max() > quarters[1].max()), None, history
+
+
+def _nonlinear_boundary(twin: _Twin, specs, direction, guess: float, alpha_top: float):
+    """Bisection of the decay rate's sign change near ``guess``, below ``alpha_top``."""
+    o = twin.options
+    runs = {}
+
+    def unstable(alpha):
+        runs[alpha] = twin.run(ray_values(specs, direction, alpha))
+        return runs[alpha][0]
+
+    lo = max(guess * (1.0 - o.bracket), 1e-3)
+    hi = min(guess * (1.0 + o.bracket), alpha_top)
+    while unstable(lo) and lo > 1e-2:
+        hi, lo = lo, lo * (1.0 - 3 * o.bracket)
+    if lo <= 1e-2 and runs[lo][0]:
+        return 0.0, runs
+    while not unstable(hi):
+        if hi >= alpha_top:
+            return math.inf, runs  # stable up to the top of the ray
+        lo, hi = hi, min(hi * (1.0 + 3 * o.bracket), alpha_top)
+    while hi - lo > o.rtol * hi:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if unstable(mid) else (mid, hi)
+    return 0.5 * (lo + hi), runs
+
+
+# -- one peak --------------------------------------------------------------------------------------
+def _peak_models(peak: Peak, controller, scenario):
+    from oos_drake.analysis.loop import close_loop, uncertain_plant
+    from oos_drake.analysis.models import docking_plant, mission_plants
+
+    if peak.study == "mission":
+        plant = mission_plants([peak.time], scenario).model(0)
+    else:
+        phase = peak.study.removeprefix("docking-")
+        plant = docking_plant(phase, [peak.stiffness], scenario=scenario).model(0)
+    return (
+        close_loop(plant, controller.K, controller.spec),
+        uncertain_plant(plant, controller.spec),
+    )
+
+
+def _target_body(scenario) -> BodyInertia:
+    hub = scenario.hubs["RH2"]
+    return BodyInertia(("Jxx_RH2", "Jyy_RH2", "Jzz_RH2"), np.asarray(hub.inertia, dtype=float))
+
+
+def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
+    """Linear predictions, physical limit and nonlinear boundary of one peak.
+
+    Returns
+    -------
+    row : dict
+        One row of ``confirmation.parquet``.
+    histories : pandas.DataFrame
+        Attitude histories of the runs on both sides of the boundary.
+    """
+    from oos_drake.multibody.flight_software import FlightSoftware, FlightSoftwareDesign
+    from oos_drake.scenario.data import load_scenario
+
+    scenario = load_scenario()
+    closed, plant_hat = _peak_models(peak, controller, scenario)
+    specs = closed.uncertainty
+    direction = {n: v for n, v in peak.perturbation.items() if specs[n].kind == "ureal"}
+    notes = []
+    # 1. continuous linear loop
+    alpha_c = boundary_along_ray(
+        lambda a: _continuous_abscissa(closed, peak, a)[0] > GROWTH_TOLERANCE, options.alpha_limit
+    )
+    f_c = (
+        _continuous_abscissa(closed, peak, alpha_c * (1 + 1e-3))[1] / (2 * np.pi)
+        if np.isfinite(alpha_c) and np.isfinite(peak.omega)
+        else math.nan  # beyond an ill-posed boundary the new pole comes back real, from infinity
+    )
+    # 2. sampled-data linear loop with the twin's flight software (its components are the
+    # paper's: DesignSpecification defaults, as make_mission_diagram builds them)
+    from oos_drake.control.components import DesignSpecification
+    from oos_drake.multibody.mission import MissionOptions
+
+    if controller.spec != DesignSpecification():
+        notes.append("the controller's design specification is not the twin's (paper) one")
+    design = FlightSoftwareDesign.create(controller.K, MissionOptions().control_rate)
+    fsw = FlightSoftware(design, 6, 6, 0, 0).linear_update()
+    period = design.period
+    alpha_s, f_s = math.nan, math.nan
+
+    def sampled_unstable(alpha):
+        try:  # near an ill-posed point the plant's fastest pole overflows the hold's expm
+            with np.errstate(over="ignore", invalid="ignore"):
+                poles = sampled_loop_poles(plant_hat, peak, alpha, fsw, period)
+        except (ValueError, np.linalg.LinAlgError):
+            return True
+        return bool(np.log(np.abs(poles).max()) / period > GROWTH_TOLERANCE)
+
+    alpha_s = boundary_along_ray(sampled_unstable, options.alpha_limit)
+    if np.isfinite(alpha_s) and np.isfinite(peak.omega):
+        poles = sampled_loop_poles(plant_hat, peak, alpha_s * (1 + 1e-3), fsw, period)
+        z = poles[np.argmax(np.abs(poles))]
+        f_s = abs(np.angle(z)) / (2 * np.pi * period)
+    if not np.isfinite(peak.omega):
+        notes.append(
+            "infinite frequency: the loop becomes ill-posed (a mass matrix singular) at alpha "
+            "= 1, a pole leaves through infinity: no oscillation to identify"
+        )
+    # 3. physical limit of the real parameters
+    alpha_phys, reason = physical_alpha_max(
+        specs, direction, (_target_body(scenario),), alpha_limit=options.alpha_limit
+    )
+    row = {
+        "study": peak.study,
+        "subset": peak.subset,
+        "time [s]": peak.time,
+        "stiffness [N/m or N m/rad]": peak.stiffness,
+        "critical frequency [Hz]": peak.omega / (2 * np.pi),
+        "mu lower [-]": peak.mu_lower,
+        "mu upper [-]": peak.mu_upper,
+        "alpha linear continuous [-]": alpha_c,
+        "frequency linear continuous [Hz]": f_c,
+        "alpha linear sampled [-]": alpha_s,
+        "frequency linear sampled [Hz]": f_s,
+        "alpha physical max [-]": alpha_phys,
+        "physical limit": reason,
+        "alpha nonlinear [-]": math.nan,
+        "oscillation frequency [Hz]": math.nan,
+        "decay rate below [1/s]": math.nan,
+        "decay rate above [1/s]": math.nan,
+        "nonlinear runs": 0,
+    }
+    histories = pd.DataFrame()
+    if peak.has_complex:
+        row["status"] = "linear only: complex blocks not realized on the twin"
+        notes.append(
+            "the twin's flight software realizes Delta_add/Delta_mul only as scalar all-passes "
+            "at a fixed frequency (issue 17 item 3)"
+        )
+    elif peak.study != "mission":
+        row["status"] = "linear only: docking configuration not simulated"
+    else:
+        twin = _Twin(peak, controller.K, options)
+        top = min(alpha_phys * (1 - 1e-3), options.alpha_limit)
+        guess = alpha_s if np.isfinite(alpha_s) else 1.0
+        if guess >= top:
+            runs = {top: twin.run(ray_values(specs, direction, top))}
+            alpha_n = math.inf
+            if runs[top][0]:  # unstable below the prediction: search under the top
+                alpha_n, below = _nonlinear_boundary(twin, specs, direction, top, top)
+                runs |= below
+        else:
+            alpha_n, runs = _nonlinear_boundary(twin, specs, direction, guess, top)
+        row["nonlinear runs"] = len(runs)
+        stable = [a for a, r in runs.items() if not r[0]]
+        unstable = [a for a, r in runs.items() if r[0]]
+        parts = []
+        if stable:
+            a = max(stable)
+            parts.append(runs[a][2].assign(side="stable", **{"alpha [-]": a}))
+            row["decay rate below [1/s]"] = runs[a][1].decay_rate if runs[a][1] else math.nan
+        if unstable:
+            a = min(unstable)
+            parts.append(runs[a][2].assign(side="unstable", **{"alpha [-]": a}))
+            osc = runs[a][1]
+            row["decay rate above [1/s]"] = osc.decay_rate if osc else math.nan
+        # the oscillation frequency closest to the boundary (the run nearest to it)
+        near = min(runs, key=lambda a: abs(a - alpha_n) if np.isfinite(alpha_n) else -a)
+        if runs[near][1] is not None:
+            row["oscillation frequency [Hz]"] = runs[near][1].frequency
+        row["alpha nonlinear [-]"] = alpha_n
+        if parts:
+            histories = pd.concat(parts, ignore_index=True).assign(
+                study=peak.study, subset=peak.subset
+            )
+        row["status"] = _status(row, alpha_n, np.isfinite(peak.omega))
+    row["notes"] = "; ".join(notes)
+    return row, histories
+
+
+def _status(row: Mapping, alpha_n: float, finite: bool) -> str:
+    """Verdict of one nonlinear confirmation (:data:`AGREEMENT` on alpha and frequency)."""
+    if np.isinf(alpha_n):
+        limit = "stable up to the physical limit"
+        return limit if finite else f"ill-posed at infinite frequency; {limit}"
+    if not finite:
+        return "ill-posed at infinite frequency; unstable below the physical limit"
+
+    def close(a, b):
+        return abs(a / b - 1.0) <= AGREEMENT
+
+    f = row["oscillation frequency [Hz]"]
+    if not (
+        close(alpha_n, row["alpha linear sampled [-]"])
+        and close(f, row["frequency linear sampled [Hz]"])
+    ):
+        return "mismatch with the sampled-data loop"
+    if close(f, row["critical frequency [Hz]"]):
+        return "confirmed"
+    return (
+        "confirmed on the sampled-data loop; its crossing frequency differs from the continuous one"
+    )
+
+
+def _confirm_task(args):
+    from oos_drake.blas import limit_blas_threads
+
+    limit_blas_threads(1)
+    return confirm_peak(*args)
+
+
+def confirm_peaks(peaks, controller, options: ConfirmOptions, *, workers=1, quiet=False):
+    """:func:`confirm_peak` for every peak on ``workers`` processes.
+
+    Returns
+    -------
+    table : pandas.DataFrame
+        One row per peak (``confirmation.parquet``).
+    histories : pandas.DataFrame
+        Attitude histories on both sides of each nonlinear boundary.
+    """
+    from tqdm import tqdm
+
+    from oos_drake.processes import process_pool
+
+    tasks = [(peak, controller, options) for peak in peaks]
+    # Drake-heavy peaks first so that the pool stays busy
+    order = sorted(range(len(tasks)), key=lambda i: peaks[i].has_complex)
+    results = {}
+    with process_pool(max(1, min(workers, len(tasks))), method="spawn") as pool:
+        futures = {pool.submit(_confirm_task, tasks[i]): i for i in order}
+        from concurrent.futures import as_completed
+
+        for future in tqdm(
+            as_completed(futures), total=len(futures), desc="confirm", disable=quiet
+        ):
+            results[futures[future]] = future.result()
+    rows = [results[i][0] for i in range(len(tasks))]
+    histories = [results[i][1] for i in range(len(tasks)) if not results[i][1].empty]
+    table = pd.DataFrame(rows)
+    history = pd.concat(histories, ignore_index=True) if histories else pd.DataFrame()
+    return table, history
+
+
+def confirmation_figure(
+    histories: pd.DataFrame, row: Mapping, path: Path, *, settle: float = ConfirmOptions.settle
+) -> None:
+    """Hub attitude on both sides of the nonlinear boundary of one peak (PNG): the window the
+    oscillation is identified on (after ``settle`` [s]), scaled to the critical oscillation of
+    its second half (the transient leaves the plot)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True, constrained_layout=True)
+    for ax, side in zip(axes, ("stable", "unstable"), strict=True):
+        part = histories[(histories["side"] == side) & (histories["time [s]"] >= settle)]
+        if part.empty:
+            ax.text(0.5, 0.5, f"no {side} run", ha="center", transform=ax.transAxes)
+            continue
+        alpha = float(part["alpha [-]"].iloc[0])
+        for a in AXES:
+            ax.plot(part["time [s]"], 1e6 * part[f"phi_{a} [rad]"], label=f"{a} axis")
+        # zoom on the second half of the window: the critical oscillation, not the transient
+        tail = part[part["time [s]"] >= 0.5 * (settle + part["time [s]"].max())]
+        top = 1.5e6 * float(np.abs(tail[[f"phi_{a} [rad]" for a in AXES]].to_numpy()).max())
+        if top > 0:
+            ax.set_ylim(-top, top)
+        ax.set_ylabel("hub attitude error [urad]")
+        ax.set_title(f"{side} side: alpha = {alpha:.4f}", fontsize=10)
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel(f"time since the window start [s] (first {settle:g} s of transient cut)")
+    fig.suptitle(
+        f"{row['study']} / {row['subset']}: nonlinear boundary alpha = "
+        f"{row['alpha nonlinear [-]']:.4f} (linear sampled {row['alpha linear sampled [-]']:.4f}, "
+        f"continuous {row['alpha linear continuous [-]']:.4f})",
+        fontsize=10,
+    )
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
