@@ -496,7 +496,7 @@ def _nonlinear_boundary(twin: _Twin, specs, direction, guess: float, alpha_top: 
 
 # -- one peak --------------------------------------------------------------------------------------
 def _peak_models(peak: Peak, controller, scenario):
-    from oos_drake.analysis.loop import close_loop, uncertain_plant
+    from oos_drake.control.analysis_model import close_loop, uncertain_plant
     from oos_drake.analysis.models import docking_plant, mission_plants
 
     if peak.study == "mission":

@@ -77,7 +77,7 @@ def _rows(result, time_s: float, loop: str) -> list[dict]:
 
 def mission_plants(times, scenario=None):
     """Nominal rotational plants ``T -> wdot`` at mission ``times`` [s] (a BatchedStateSpace)."""
-    from oos_drake.analysis.loop import rotational_channels
+    from oos_drake.control.analysis_model import rotational_channels
     from oos_drake.lfr import usubs
     from oos_drake.scenario.model import build_mission_model, mission_values
 
@@ -168,7 +168,7 @@ def ray_boundaries(
         ``ray``, ``time [s]``, ``boundary <loop> [-]`` for each loop, the relative errors of the
         two models against the exact loop, and the frequency [Hz] of the pole that crosses.
     """
-    from oos_drake.analysis.loop import rotational_channels
+    from oos_drake.control.analysis_model import rotational_channels
     from oos_drake.lfr import usubs
     from oos_drake.scenario.model import build_mission_model, mission_values
 
