@@ -26,16 +26,17 @@ with ``phi`` the hub roll-pitch-yaw angles (attitude reference zero), ``omega`` 
 a unit all-pass (the stable realization of the LTI perturbations: ``Delta_mul`` is the 3x3
 matrix of the dispersed scalars ``Delta_mul_xx .. Delta_mul_zz``, weighted entry by entry by
 ``W_mul``, ``delta_add`` = ``Delta_add``, all in [-1, 1]) and ``d_ext`` a unit
-white sequence shaped by ``W_n,ext``.
-
-The all-pass is set per run with the perturbation scalars (:meth:`FlightSoftware.set_perturbations`):
-its phase is -90 deg at the run's frequency ``f`` (the critical frequency of the campaign region
-the run explores, ``frequency [Hz]`` of ``worst_cases.parquet``), exactly also after the
-discretization (:func:`allpass_block` pre-warps the corner). A frequency at or above the Nyquist
-frequency of the flight software, an infinite one (an ill-posed mu peak) included, is realized
-as the static gain ``a = 1``: a real discrete-time system is real at ``z = -1``, and the value
-of a unit LTI perturbation at infinite frequency is real (the scalar's sign covers ``-1``). The torque ``T`` (hub axes) is held over the sample period
+white sequence shaped by ``W_n,ext``. The torque ``T`` (hub axes) is held over the sample period
 (zero-order hold) and applied to the hub's floating joint as ``R_WB T``.
+
+The all-pass is set per run with the perturbation scalars
+(:meth:`FlightSoftware.set_perturbations`): its phase is -90 deg at the run's frequency ``f``
+(the critical frequency of the campaign region the run explores, ``frequency [Hz]`` of
+``worst_cases.parquet``), exactly also after the discretization (:func:`allpass_block`
+pre-warps the corner). A frequency at or above the Nyquist frequency of the flight software, an
+infinite one (an ill-posed mu peak) included, is realized as the static gain ``a = 1``: a real
+discrete-time system is real at ``z = -1``, and the value of a unit LTI perturbation at
+infinite frequency is real (the scalar's sign covers ``-1``).
 
 Each linear block is discretized with the bilinear (Tustin) transform at the control rate, so a
 block with a bandwidth above the sample rate (gyro, wheels at 200 Hz) reduces to its DC gain with
@@ -494,9 +495,7 @@ class FlightSoftware(LeafSystem):
             d = self._design
             delta_add, delta_mul = perturbation[0], perturbation[1:10].reshape(3, 3)
             ap = allpass_block(perturbation[10], d.period)
-            A2, B2, C2, D2 = self._probe(
-                lambda x, z: self._stage2_reference(x, z, ap), self._n2, 6
-            )
+            A2, B2, C2, D2 = self._probe(lambda x, z: self._stage2_reference(x, z, ap), self._n2, 6)
             M2 = np.block([[A2, B2], [C2, D2]])
             eye = np.eye(3)
             mix = np.hstack([eye, eye, d.W_mul * delta_mul, delta_add * self._J_Wadd])

@@ -21,8 +21,9 @@ def test_override_replaces_the_regions(tmp_path):
 
 
 def test_override_on_a_plain_sampler_gives_the_peak_frequency(tmp_path):
-    """A sampler not guided by mu (Latin hypercube, plain Monte Carlo) takes only the frequency of the analysis' peak (largest mu_upper) from
-    a worst-cases file; a missing file is refused before anything is written."""
+    """A sampler not guided by mu (Latin hypercube, plain Monte Carlo) takes only the frequency
+    of the analysis' peak (largest mu_upper) from a worst-cases file; a missing file is refused
+    before anything is written."""
     with pytest.raises(ValueError, match="x.parquet: file not found"):
         prepare_campaign(CAMPAIGNS / "demo.toml", tmp_path / "out", tmp_path / "x.parquet")
     assert not (tmp_path / "out").exists()

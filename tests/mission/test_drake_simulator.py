@@ -184,7 +184,7 @@ def test_region_lti_perturbation_is_realized_at_the_region_frequency(
 
     spec, plan = plan_campaign(CAMPAIGNS / "paper.toml", synthetic_worst_cases)
     fsw = simulator.simulation.handles.flight_software
-    for region, (frequency_hz, _, perturbation) in enumerate(SYNTHETIC_REGIONS):
+    for region, (frequency_hz, _, _) in enumerate(SYNTHETIC_REGIONS):
         row = plan[plan["region"] == region].iloc[0]
         case = case_from_plan_row(spec, row)
         assert case.frequency == frequency_hz
