@@ -121,4 +121,3 @@ class DrakeMissionSimulator:
 def make_simulator(**options) -> DrakeMissionSimulator:
     """Factory for :class:`~oos_drake.campaign.simulator.SimulatorRecipe` (options as keywords)."""
     return DrakeMissionSimulator(**options)
-

@@ -445,13 +445,7 @@ def read_confirmation(path: Path) -> pd.DataFrame:
     ValueError
         A column of :data:`CONFIRMATION_COLUMNS` is missing.
     """
-    try:
-        table = pd.read_parquet(path)
-    except Exception as exc:  # noqa: BLE001 - any reader error is a bad file for the user
-        raise ValueError(f"{path}: cannot read Parquet: {exc}") from exc
-    missing = [c for c in CONFIRMATION_COLUMNS if c not in table.columns]
-    if missing:
-        raise ValueError(f"{path}: missing column(s) {', '.join(missing)}")
+    table = store.read_table(path, CONFIRMATION_COLUMNS, str(path))
     table = table[list(CONFIRMATION_COLUMNS)].copy()
     table["alpha certified (1/mu upper) [-]"] = 1.0 / table["mu upper [-]"]
     table["alpha destabilizing (1/mu lower) [-]"] = 1.0 / table["mu lower [-]"]

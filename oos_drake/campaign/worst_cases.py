@@ -157,13 +157,9 @@ def read_worst_cases(
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"worst cases file {path} not found (needed by the mu-guided sampler)")
-    try:
-        table = pd.read_parquet(path)
-    except Exception as exc:  # noqa: BLE001 - any reader error is a bad file for the user
-        raise ValueError(f"worst cases file {path}: cannot read Parquet: {exc}") from exc
-    missing = [c for c in BASE_COLUMNS if c not in table.columns]
-    if missing:
-        raise ValueError(f"worst cases file {path}: missing column(s) {', '.join(missing)}")
+    from oos_drake.campaign.store import read_table
+
+    table = read_table(path, BASE_COLUMNS, f"worst cases file {path}")
     if table.empty:
         raise ValueError(f"worst cases file {path}: no region")
     by_name = {p.name: p for p in parameters}
