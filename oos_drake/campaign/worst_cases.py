@@ -1,7 +1,10 @@
 """The ``worst_cases.parquet`` file: where the mu analysis says the danger is.
 
-The robust analysis writes it; the ``mu-guided`` campaign sampler reads it. One row per critical
-*region* (a configuration / time of the mission at which a worst case was found).
+The robust analysis writes it (``oos analyze``); the ``mu-guided`` campaign sampler draws around
+its regions, and every sampler takes from it the frequencies at which a simulator realizes its
+LTI perturbation blocks (:func:`oos_drake.campaign.samplers.make_plan`). One row per critical
+*region* (a configuration / time of the mission at which a worst case was found). No worst-case
+file of the Drake mission ships with the package: it must come from our own analysis.
 
 Schema
 ------
@@ -156,7 +159,7 @@ def read_worst_cases(
     """
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"worst cases file {path} not found (needed by the mu-guided sampler)")
+        raise ValueError(f"worst cases file {path} not found (written by oos analyze)")
     from oos_drake.campaign.store import read_table
 
     table = read_table(path, BASE_COLUMNS, f"worst cases file {path}")
