@@ -23,8 +23,9 @@ Files written in ``DIR/report/``:
   boundary of each certified peak against mu;
 - ``metric_distributions.png`` (histograms of unweighted runs; for importance-weighted runs the
   weighted empirical CDF, the estimate under the dispersions, beside the runs as drawn),
-  ``worst_runs.png``, ``pass_fail_vs_parameters.png``, and for mu-guided campaigns
-  ``regions_performance.png`` and ``stability_confirmation.png``.
+  ``worst_runs.png``, ``pass_fail_vs_parameters.png``, ``regions_performance.png`` (mu-guided,
+  when the worst cases carry gains) and ``stability_confirmation.png`` (with a confirmation
+  table).
 
 Like with like: mu is a stability margin, so it is compared with the stability boundary the
 nonlinear twin shows (``oos confirm``: the perturbation scale ``alpha`` at which the oscillation
