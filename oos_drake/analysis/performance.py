@@ -20,6 +20,9 @@ from oos_drake.robust.lfr_analysis import delta_channel_response
 
 #: Performance channels: name -> rows of ``e``.
 CHANNELS = {"e_p": (0, 1, 2), "e_u": (3, 4, 5)}
+#: Channel -> the campaign metric of the Drake mission whose requirement is its unit gain
+#: (``e_p``: the APE bound, ``e_u``: the 2 N m wheel command bound).
+REQUIREMENT_METRICS = {"e_p": "ape", "e_u": "peak_torque"}
 
 #: Columns of the performance table.
 PERFORMANCE_COLUMNS = [
@@ -157,3 +160,23 @@ def worst_case_gains(
                 )
             )
     return pd.concat(frames, ignore_index=True)[PERFORMANCE_COLUMNS], deltas
+
+
+def peak_gains(table: pd.DataFrame, subset: str, model: int) -> dict:
+    """Worst-case gains of one subset at one model, as campaign metric -> ``(lower, upper)``.
+
+    The peak over the table's frequency grid of each channel's bounds: the lower one is the gain
+    of a perturbation found (a true lower bound of the worst-case gain), the upper one the
+    largest skewed-mu upper bound at the grid frequencies (not proved between them) [-].
+    Channels without rows for ``(subset, model)`` are left out.
+    """
+    out = {}
+    rows = table[(table["subset"] == subset) & (table["model"] == model)]
+    for channel, metric in REQUIREMENT_METRICS.items():
+        chosen = rows[rows["channel"] == channel]
+        if len(chosen):
+            out[metric] = (
+                float(chosen["gain_lower [-]"].max()),
+                float(chosen["gain_upper [-]"].max()),
+            )
+    return out

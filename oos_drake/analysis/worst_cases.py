@@ -9,7 +9,7 @@ that scales the stable realization of its worst direction).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +29,8 @@ class Region:
     mu_lower: float
     subset: str
     normalized: dict  # block -> normalized destabilizing value (float or complex matrix)
+    #: campaign metric -> (lower, upper) worst-case performance gain (analysis.performance)
+    gains: dict = field(default_factory=dict)
 
 
 def block_parameters(sys):
@@ -101,6 +103,7 @@ def write_regions(regions, sys, path) -> Path:
                 float(min(r.mu_lower, r.mu_upper)),
                 r.subset,
                 values,
+                dict(r.gains),
             )
         )
     return write_worst_cases(out, params, Path(path))

@@ -128,7 +128,7 @@ def _rerun(args: argparse.Namespace) -> int:
 def _report(args: argparse.Namespace) -> int:
     from oos_drake.campaign.report import write_report
 
-    report = write_report(args.directory, worst=args.worst)
+    report = write_report(args.directory, worst=args.worst, confirm=args.confirm)
     print(report.text)
     print(f"report: {report.directory}")
     return 0
@@ -198,6 +198,13 @@ def register(subparsers) -> None:
     report = commands.add_parser("report", help="figures and summary tables")
     report.add_argument("directory", help="campaign directory")
     report.add_argument("--worst", type=int, default=5, help="worst runs to plot (default 5)")
+    report.add_argument(
+        "--confirm",
+        default=None,
+        metavar="DIR",
+        help="folder of oos confirm's confirmation.parquet: the stability boundary of the "
+        "nonlinear twin against mu (default: <campaign>/../confirm when it exists)",
+    )
     report.set_defaults(func=_report)
 
     replay = commands.add_parser(

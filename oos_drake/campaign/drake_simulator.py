@@ -107,7 +107,11 @@ class DrakeMissionSimulator:
 
         try:
             result = self.simulation.run(
-                dict(case.values), seed=case.seed, start=case.window.start, end=case.window.end
+                dict(case.values),
+                seed=case.seed,
+                start=case.window.start,
+                end=case.window.end,
+                perturbation_frequency_hz=case.frequency,
             )
         except MissionDiverged as exc:
             raise SimulationDiverged(str(exc)) from exc
@@ -117,66 +121,3 @@ class DrakeMissionSimulator:
 def make_simulator(**options) -> DrakeMissionSimulator:
     """Factory for :class:`~oos_drake.campaign.simulator.SimulatorRecipe` (options as keywords)."""
     return DrakeMissionSimulator(**options)
-
-
-def paper_worst_cases(scenario=None):
-    """Stand-in worst-case regions from the paper's published mu analysis (section 4).
-
-    Used by ``campaigns/paper.toml`` until ``oos analyze`` writes the analysis' own
-    ``worst_cases.parquet`` (the pipeline points the spec at that file). Regions:
-
-    - the mission peak of mu (paper: ``mu < 0.79`` around t = 275 s at 0.55 Hz), arm holding the
-      target, chaser array modes at their lowest frequency and the heaviest target;
-    - docking phase 7 (paper: ``mu = 1.04`` for a stiffness near 2.5e3 at 0.58 Hz): SM1 settling
-      at that stiffness;
-    - the arm pulling the target in (t = 600 s, largest nominal attitude excursion of the Drake
-      mission) with the same perturbation.
-
-    Values are physical and inside the simulator's ranges.
-
-    Returns
-    -------
-    tuple of WorstCaseRegion
-    """
-    from oos_drake.campaign.worst_cases import WorstCaseRegion
-    from oos_drake.multibody.mission_sim import mission_parameters
-    from oos_drake.scenario.data import load_scenario
-
-    scenario = scenario or load_scenario()
-    bounds = {p.name: (p.lower, p.upper) for p in mission_parameters(scenario)}
-    heavy = {
-        "m_RH2": bounds["m_RH2"][1],
-        "Jxx_RH2": bounds["Jxx_RH2"][1],
-        "Jyy_RH2": bounds["Jyy_RH2"][1],
-        "Jzz_RH2": bounds["Jzz_RH2"][1],
-        "w1_SA1": bounds["w1_SA1"][0],
-        "w1_SA2": bounds["w1_SA2"][0],
-        "Delta_add": 1.0,
-        **{f"Delta_mul_{a}{a}": 1.0 for a in "xyz"},
-    }
-    soft = dict(heavy, k_shear_SM1=2.5e3, k_tors_SM1=2.5e3)
-    return (
-        WorstCaseRegion(
-            0, "arm holding the target (mu peak)", 275.0, 0.55, 0.79, 0.77, "real,add,mul", heavy
-        ),
-        WorstCaseRegion(1, "docking phase 7", 255.0, 0.58, 1.04, 1.02, "real,SM1,add,mul", soft),
-        WorstCaseRegion(
-            2, "arm pulling the target in", 600.0, 0.55, 0.7, 0.68, "real,add,mul", heavy
-        ),
-    )
-
-
-def write_paper_worst_cases(path) -> None:
-    """Write :func:`paper_worst_cases` in the ``worst_cases.parquet`` schema at ``path``."""
-    from oos_drake.campaign.worst_cases import write_worst_cases
-    from oos_drake.multibody.mission_sim import mission_parameters
-    from oos_drake.scenario.data import load_scenario
-
-    scenario = load_scenario()
-    parameters = [
-        Parameter(
-            p.name, p.unit, p.nominal, p.lower, p.upper, ParameterKind.of_quantity(p.quantity)
-        )
-        for p in mission_parameters(scenario)
-    ]
-    write_worst_cases(paper_worst_cases(scenario), parameters, path)

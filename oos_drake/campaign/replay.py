@@ -148,6 +148,7 @@ def replay_case(
             end=case.window.end,
             log=False,
             on_start=capture,
+            perturbation_frequency_hz=case.frequency,
         )
     except MissionDiverged as exc:
         status, error = "diverged", str(exc)

@@ -16,10 +16,26 @@ Files written in ``DIR/report/``:
   violations, estimated violation probability, its standard error and a 95 % confidence
   interval that holds with zero violations too (:func:`probability_interval`);
 - ``status.parquet``: runs per status; ``worst_runs.parquet``: the worst runs by requirement
-  margin; ``regions.parquet`` (mu-guided): runs, failures and estimate per proposal region;
-- ``metric_distributions.png``, ``worst_runs.png``, ``pass_fail_vs_parameters.png``, and for
-  mu-guided campaigns ``regions_prediction.png`` (mu bounds of each critical region against the
-  worst requirement ratio of the nonlinear runs drawn around it).
+  margin; ``regions.parquet`` (mu-guided): runs, failures and estimate per proposal region,
+  with the analysis' worst-case performance gains of the region beside the worst metric of the
+  nonlinear runs drawn around it;
+- ``confirmation.parquet`` (when the ``oos confirm`` table is found): the nonlinear stability
+  boundary of each certified peak against mu;
+- ``metric_distributions.png`` (histograms of unweighted runs; for importance-weighted runs the
+  weighted empirical CDF, the estimate under the dispersions, beside the runs as drawn),
+  ``worst_runs.png``, ``pass_fail_vs_parameters.png``, ``regions_performance.png`` (mu-guided,
+  when the worst cases carry gains) and ``stability_confirmation.png`` (with a confirmation
+  table).
+
+Like with like: mu is a stability margin, so it is compared with the stability boundary the
+nonlinear twin shows (``oos confirm``: the perturbation scale ``alpha`` at which the oscillation
+stops decaying, against ``1 / mu``), and the nonlinear metrics (APE, wheel command) with the
+analysis' worst-case performance gains of the channels whose unit gain is their requirement
+(``wcgain:<metric>`` columns of ``worst_cases.parquet``). Both sides are normalized by the
+requirement, but they are not the same norm: the gain bounds a ratio of signal energies (the
+worst disturbance of unit energy, H-infinity), the campaign metric is a peak over the simulated
+window under the simulated noise, disturbance and initial errors. A nonlinear ratio above the
+linear worst-case gain is therefore a flag to investigate, not a contradiction by itself.
 """
 
 from __future__ import annotations
@@ -45,6 +61,25 @@ from oos_drake.campaign.runner import (  # noqa: E402
     metric_column,
 )
 from oos_drake.campaign.samplers import NOMINAL_COMPONENT  # noqa: E402
+
+#: File of ``oos confirm`` and the folder where ``oos run`` writes it (a sibling of the campaign).
+CONFIRMATION_FILE = "confirmation.parquet"
+CONFIRMATION_FOLDER = "confirm"
+#: Columns of the confirmation table the report reads.
+CONFIRMATION_COLUMNS = (
+    "study",
+    "subset",
+    "time [s]",
+    "critical frequency [Hz]",
+    "mu lower [-]",
+    "mu upper [-]",
+    "alpha linear continuous [-]",
+    "alpha linear sampled [-]",
+    "alpha nonlinear [-]",
+    "alpha physical max [-]",
+    "oscillation frequency [Hz]",
+    "status",
+)
 
 
 @dataclass(frozen=True)
@@ -191,6 +226,26 @@ def weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> floa
     return float(values[order][min(index, values.size - 1)])
 
 
+def weighted_ecdf(values: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted empirical CDF (self-normalized; NaNs dropped): sorted values and ``F`` [-]."""
+    values, weights = np.asarray(values, float), np.asarray(weights, float)
+    keep = np.isfinite(values)
+    values, weights = values[keep], weights[keep]
+    if values.size == 0:
+        return values, values
+    order = np.argsort(values, kind="stable")
+    cumulative = np.cumsum(weights[order])
+    return values[order], cumulative / cumulative[-1]
+
+
+def _max_requirement(spec, metric: str):
+    """The requirement with a positive max bound on ``metric``, or None."""
+    return next(
+        (r for r in spec.requirements if r.metric == metric and r.max is not None and r.max > 0),
+        None,
+    )
+
+
 def requirement_ratio(spec, runs: pd.DataFrame) -> pd.Series:
     """Worst ``metric / bound`` over the max-requirements per run (> 1: violated; NaN: no run)."""
     ratios = []
@@ -254,11 +309,20 @@ def _estimate(spec, weights, events) -> dict:
     }
 
 
+def _gain_metrics(spec) -> list[str]:
+    """Metrics with a max requirement and a worst-case gain in at least one region."""
+    with_gain = {m for r in spec.regions for m in r.gains}
+    return [m for m in spec.metrics if m in with_gain and _max_requirement(spec, m) is not None]
+
+
 def _regions_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
-    """Runs, failures and estimate per proposal component, with the linear prediction (mu)."""
+    """Per proposal component: runs, failures, P(fail) contribution; per region the analysis'
+    predictions (mu; worst-case gain per metric) beside the worst metric / requirement of the
+    nonlinear runs drawn around it."""
+    metrics = _gain_metrics(spec)
     rows = [{"region": NOMINAL_COMPONENT, "configuration": "nominal dispersions"}]
-    rows += [
-        {
+    for r in spec.regions:
+        row = {
             "region": r.region,
             "configuration": r.configuration,
             "time [s]": r.time,
@@ -266,60 +330,173 @@ def _regions_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
             "mu_upper": r.mu_upper,
             "mu_lower": r.mu_lower,
         }
-        for r in spec.regions
-    ]
+        for metric in metrics:
+            low, high = r.gains.get(metric, (math.nan, math.nan))
+            row[f"wcgain {metric} lower [-]"] = low
+            row[f"wcgain {metric} upper [-]"] = high
+        rows.append(row)
     table = pd.DataFrame(rows)
     n = len(runs)
     failed = ~runs["pass"]
-    ratio = requirement_ratio(spec, runs)
-    grouped = runs.assign(failed=failed, wf=runs["weight"] * failed, ratio=ratio).groupby("region")
+    extra = {
+        "failed": failed,
+        "wf": runs["weight"] * failed,
+        "ratio": requirement_ratio(spec, runs),
+    }
+    for metric in metrics:
+        extra[metric] = runs[metric_column(spec, metric)] / _max_requirement(spec, metric).max
+    grouped = runs.assign(**extra).groupby("region")
     table["runs"] = table["region"].map(grouped.size()).fillna(0).astype(int)
     table["failures"] = table["region"].map(grouped["failed"].sum()).fillna(0).astype(int)
     table["worst ratio (nonlinear) [-]"] = table["region"].map(grouped["ratio"].max())
+    for metric in metrics:
+        table[f"worst {metric} / requirement (nonlinear) [-]"] = table["region"].map(
+            grouped[metric].max()
+        )
     table["P(fail) contribution"] = table["region"].map(grouped["wf"].sum() / n).fillna(0.0)
     return table
 
 
-def _plot_regions(regions: pd.DataFrame, path: Path) -> Path | None:
-    """Linear prediction (mu bounds) against the nonlinear outcome of the runs near each region."""
+def _region_label(row: pd.Series) -> str:
+    """Y label of a region on three short lines: id and time, frequency and mu, failures."""
+    return (
+        f"region {int(row['region'])}: t = {row['time [s]']:.0f} s\n"
+        f"f = {row['frequency [Hz]']:.3g} Hz, mu <= {row['mu_upper']:.3g}\n"
+        f"{int(row['failures'])}/{int(row['runs'])} runs fail"
+    )
+
+
+def _plot_regions(spec, regions: pd.DataFrame, path: Path) -> Path | None:
+    """Per region and metric: the analysis' worst-case gain against the nonlinear worst ratio
+    (horizontal bars, one panel per metric that has a worst-case gain)."""
     guided = regions[regions["region"] != NOMINAL_COMPONENT]
-    if guided.empty:
+    metrics = _gain_metrics(spec)
+    if guided.empty or not metrics:
         return None
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
-    x = np.arange(len(guided))
-    ax.bar(
-        x - 0.2, guided["mu_upper"], width=0.4, color="tab:gray", label="mu upper bound (linear)"
+    y = np.arange(len(guided))[::-1]
+    fig, axes = plt.subplots(
+        1,
+        len(metrics),
+        figsize=(4.6 * len(metrics) + 2.0, 1.6 + 0.8 * len(guided)),
+        sharey=True,
+        squeeze=False,
     )
-    ax.scatter(
-        x - 0.2,
-        guided["mu_lower"],
-        color="black",
-        marker="_",
-        s=400,
-        label="mu lower bound (linear)",
+    for ax, metric in zip(axes[0], metrics, strict=True):
+        low = guided[f"wcgain {metric} lower [-]"].to_numpy(float)
+        high = guided[f"wcgain {metric} upper [-]"].to_numpy(float)
+        nonlinear = guided[f"worst {metric} / requirement (nonlinear) [-]"].to_numpy(float)
+        ax.barh(y + 0.2, high, height=0.38, color="lightgray", label="worst-case gain: upper")
+        ax.barh(y + 0.2, low, height=0.38, color="tab:blue", label="worst-case gain: lower")
+        ax.barh(
+            y - 0.2,
+            nonlinear,
+            height=0.38,
+            color="tab:orange",
+            label="nonlinear runs: worst metric / requirement",
+        )
+        ax.axvline(1.0, color="tab:red", ls="--", lw=1, label="requirement")
+        ax.set_xlabel(f"{metric} / requirement [-]")
+        ax.set_title(metric, fontsize=10)
+        ax.grid(alpha=0.3, axis="x")
+    axes[0, 0].set_yticks(y, [_region_label(r) for _, r in guided.iterrows()], fontsize=8)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=4)
+    fig.suptitle(
+        "Worst-case performance per region: analysis (H-infinity gain over the region's\n"
+        "subset, an energy ratio) against the nonlinear runs drawn around it (peak in the window)",
+        fontsize=10,
     )
-    ax.bar(
-        x + 0.2,
-        guided["worst ratio (nonlinear) [-]"],
-        width=0.4,
-        color="tab:orange",
-        label="worst metric / requirement of its runs (nonlinear)",
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    _save(fig, path)
+    return path
+
+
+def find_confirmation(directory: Path, confirm: str | Path | None = None) -> Path | None:
+    """The ``oos confirm`` table of a campaign.
+
+    ``confirm`` (a folder or the file) when given, else the ``oos run`` layout
+    (``<out>/confirm/confirmation.parquet`` beside the campaign folder); None when there is none
+    (the comparison is then left out of the report).
+
+    Raises
+    ------
+    ValueError
+        ``confirm`` given but no confirmation table there.
+    """
+    if confirm is not None:
+        path = Path(confirm)
+        path = path / CONFIRMATION_FILE if path.is_dir() else path
+        if not path.is_file():
+            raise ValueError(
+                f"--confirm {confirm}: no {CONFIRMATION_FILE} (written by oos confirm)"
+            )
+        return path
+    path = Path(directory).resolve().parent / CONFIRMATION_FOLDER / CONFIRMATION_FILE
+    return path if path.is_file() else None
+
+
+def read_confirmation(path: Path) -> pd.DataFrame:
+    """The confirmation table with mu's linear boundary as perturbation scales.
+
+    mu certifies stability for every perturbation scaled by ``alpha < 1 / mu_upper`` and finds
+    a destabilizing one at ``alpha = 1 / mu_lower``: the linear boundary lies in between.
+
+    Raises
+    ------
+    ValueError
+        A column of :data:`CONFIRMATION_COLUMNS` is missing.
+    """
+    table = store.read_table(path, CONFIRMATION_COLUMNS, str(path))
+    table = table[list(CONFIRMATION_COLUMNS)].copy()
+    table["alpha certified (1/mu upper) [-]"] = 1.0 / table["mu upper [-]"]
+    table["alpha destabilizing (1/mu lower) [-]"] = 1.0 / table["mu lower [-]"]
+    table["nonlinear / linear continuous [-]"] = (
+        table["alpha nonlinear [-]"] / table["alpha linear continuous [-]"]
     )
-    ax.axhline(1.0, color="tab:red", ls="--", lw=1, label="requirement limit")
+    table["nonlinear / linear sampled [-]"] = (
+        table["alpha nonlinear [-]"] / table["alpha linear sampled [-]"]
+    )
+    return table
+
+
+def _plot_confirmation(table: pd.DataFrame, path: Path) -> Path | None:
+    """Stability per certified peak: mu's interval for the linear boundary against the
+    boundaries of the linear loops and of the nonlinear twin (horizontal bars)."""
+    if table.empty:
+        return None
+    y = np.arange(len(table))[::-1]
+    fig, ax = plt.subplots(figsize=(8.5, 1.8 + 0.7 * len(table)))
+    low = table["alpha certified (1/mu upper) [-]"].to_numpy(float)
+    high = table["alpha destabilizing (1/mu lower) [-]"].to_numpy(float)
+    ax.barh(
+        y,
+        high - low,
+        left=low,
+        height=0.5,
+        color="lightgray",
+        edgecolor="gray",
+        label="mu: [1/mu upper, 1/mu lower]",
+    )
+    markers = (
+        ("alpha linear continuous [-]", "|", "black", "linear, continuous loop"),
+        ("alpha linear sampled [-]", "|", "tab:blue", "linear, sampled-data loop"),
+        ("alpha nonlinear [-]", "D", "tab:orange", "nonlinear twin (Drake)"),
+        ("alpha physical max [-]", ">", "tab:red", "largest physically valid alpha"),
+    )
+    for column, marker, color, label in markers:
+        values = table[column].to_numpy(float)
+        if np.isfinite(values).any():
+            ax.scatter(values, y, marker=marker, color=color, s=90, label=label, zorder=3)
     labels = [
-        f"region {int(r['region'])}\n{r['configuration']}, t = {r['time [s]']:g} s\n"
-        f"{int(r['failures'])}/{int(r['runs'])} runs fail"
-        for _, r in guided.iterrows()
+        f"{r['study']} / {r['subset']}: t = {r['time [s]']:.0f} s\n"
+        f"{r['critical frequency [Hz]']:.3g} Hz, {r['status']}"
+        for _, r in table.iterrows()
     ]
-    ax.set_xticks(x, labels, fontsize=8)
-    top = np.nanmax(
-        np.concatenate([guided["mu_upper"], guided["worst ratio (nonlinear) [-]"], [1.0]])
-    )
-    ax.set_ylim(0, 1.45 * top)
-    ax.set_ylabel("worst-case performance / requirement [-]")
-    ax.set_title("Linear prediction (mu) against nonlinear outcome at the critical cases")
-    ax.legend(fontsize=7, ncol=2, loc="upper center")
-    ax.grid(alpha=0.3, axis="y")
+    ax.set_yticks(y, labels, fontsize=8)
+    ax.set_xlabel("perturbation scale alpha at the stability boundary [-]")
+    ax.set_title("Stability: mu's boundary against the nonlinear twin's (oos confirm)", fontsize=10)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=3)
+    ax.grid(alpha=0.3, axis="x")
     fig.tight_layout()
     _save(fig, path)
     return path
@@ -336,47 +513,52 @@ def _worst_runs(spec, runs: pd.DataFrame, count: int) -> pd.DataFrame:
 
 
 def _plot_distributions(spec, runs: pd.DataFrame, path: Path) -> Path:
+    """One panel per metric: a histogram of unweighted runs, or for importance-weighted runs the
+    weighted empirical CDF (the estimate under the spec's dispersions) beside the CDF of the runs
+    as drawn; the requirement and its P(violation) with the confidence interval."""
     metrics = list(spec.metrics)
-    fig, axes = plt.subplots(1, len(metrics), figsize=(4.6 * len(metrics), 3.8), squeeze=False)
+    columns = min(3, len(metrics))
+    rows = math.ceil(len(metrics) / columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(4.8 * columns, 3.9 * rows), squeeze=False)
     weights = runs["weight"].to_numpy()
-    guided = runs["region"].to_numpy() != NOMINAL_COMPONENT
-    for ax, metric in zip(axes[0], metrics, strict=True):
+    weighted = not np.all(weights == 1.0)
+    for ax, metric in zip(axes.flat, metrics, strict=False):
         column = metric_column(spec, metric)
         values = runs[column].to_numpy(float)
         finite = np.isfinite(values)
-        if guided.any():
-            # raw run counts, split by where the sampler drew them (weights shown in the title)
-            ax.hist(
-                [values[finite & ~guided], values[finite & guided]],
-                bins=30,
-                stacked=True,
-                color=["tab:blue", "tab:orange"],
-                label=["drawn from the dispersions", "drawn around mu worst cases"],
-            )
+        if weighted:
+            x, cdf = weighted_ecdf(values, weights)
+            ax.step(x, cdf, where="post", color="tab:blue", label="weighted: under the dispersions")
+            x, cdf = weighted_ecdf(values, np.ones_like(weights))
+            ax.step(x, cdf, where="post", color="tab:gray", ls=":", label="runs as drawn")
+            ax.set_ylabel("P(metric <= value) [-]")
+            ax.set_ylim(0, 1.02)
         else:
             ax.hist(values[finite], bins=30, color="tab:blue", alpha=0.8, label="runs")
+            ax.set_ylabel("number of runs")
         title = f"{metric}: {int(finite.sum())} finished runs"
         for requirement in spec.requirements:
             if requirement.metric != metric:
                 continue
             for bound in (requirement.max, requirement.min):
                 if bound is not None:
-                    ax.axvline(
-                        bound,
-                        color="tab:red",
-                        linestyle="--",
-                        label=f"requirement {requirement.label}",
-                    )
+                    ax.axvline(bound, color="tab:red", linestyle="--", label="requirement")
             est = probability_interval(
                 weights, ~runs[requirement.column].to_numpy(bool), weight_bound=weight_bound(spec)
             )
-            title += f"\nP(violation) = {est.p:.3g}, 95 % in [{est.low:.2g}, {est.high:.2g}]"
+            title += (
+                f"\nP(violation) = {est.p:.2g}, 95 % [{est.low:.2g}, {est.high:.2g}]"
+                f"\n({est.method})"
+            )
         ax.set_xlabel(column)
-        ax.set_ylabel("number of runs")
-        ax.set_title(title, fontsize=10)
+        ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(5))
+        ax.set_title(title, fontsize=9)
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
-    fig.suptitle(f"Campaign {spec.name}: metric distributions against requirements")
+    for ax in list(axes.flat)[len(metrics) :]:
+        ax.set_visible(False)
+    kind = "weighted empirical CDFs" if weighted else "histograms"
+    fig.suptitle(f"Campaign {spec.name}: metric {kind} against requirements")
     fig.tight_layout()
     _save(fig, path)
     return path
@@ -488,7 +670,9 @@ def _plot_pass_fail(spec, runs: pd.DataFrame, path: Path) -> Path | None:
     return path
 
 
-def write_report(directory: str | Path, worst: int = 5) -> CampaignReport:
+def write_report(
+    directory: str | Path, worst: int = 5, confirm: str | Path | None = None
+) -> CampaignReport:
     """Write the tables and figures of a campaign directory into ``DIR/report``.
 
     Parameters
@@ -497,9 +681,14 @@ def write_report(directory: str | Path, worst: int = 5) -> CampaignReport:
         Campaign directory (finished or not: the finished runs are reported).
     worst : int
         Number of worst runs whose time histories are plotted.
+    confirm : path, optional
+        Folder (or file) of the ``oos confirm`` table; default: the ``oos run`` layout, see
+        :func:`find_confirmation`. Without one the stability comparison is left out.
     """
     directory = Path(directory)
     spec, plan = load_campaign(directory)
+    confirmation_path = find_confirmation(directory, confirm)
+    confirmation = read_confirmation(confirmation_path) if confirmation_path else None
     runs = store.load_runs(directory)
     if runs.empty:
         raise ValueError(f"{directory}: no finished run to report")
@@ -512,6 +701,8 @@ def write_report(directory: str | Path, worst: int = 5) -> CampaignReport:
     tables = {"summary": summary, "status": status, "worst_runs": worst_table}
     if spec.sampler.kind == "mu-guided":
         tables["regions"] = _regions_table(spec, runs)
+    if confirmation is not None:
+        tables["confirmation"] = confirmation
     for name, table in tables.items():
         store.atomic_write_parquet(table, out / f"{name}.parquet")
 
@@ -521,7 +712,9 @@ def write_report(directory: str | Path, worst: int = 5) -> CampaignReport:
         _plot_pass_fail(spec, runs, out / "pass_fail_vs_parameters.png"),
     ]
     if "regions" in tables:
-        figures.append(_plot_regions(tables["regions"], out / "regions_prediction.png"))
+        figures.append(_plot_regions(spec, tables["regions"], out / "regions_performance.png"))
+    if confirmation is not None:
+        figures.append(_plot_confirmation(confirmation, out / "stability_confirmation.png"))
     figures = tuple(f for f in figures if f is not None)
 
     with pd.option_context(
@@ -548,6 +741,27 @@ def write_report(directory: str | Path, worst: int = 5) -> CampaignReport:
                 f"guided runs {100 * guided_share:.2g} %: a guided draw that moves many blocks "
                 "near their worst-case values is improbable under the dispersions, so the guided "
                 "runs search the worst cases and the probabilities rest on the others."
+            )
+        if confirmation is not None:
+            shown = [
+                "study",
+                "subset",
+                "time [s]",
+                "critical frequency [Hz]",
+                "alpha certified (1/mu upper) [-]",
+                "alpha destabilizing (1/mu lower) [-]",
+                "alpha nonlinear [-]",
+                "nonlinear / linear continuous [-]",
+                "status",
+            ]
+            parts.append(
+                f"stability boundary, mu against the nonlinear twin ({confirmation_path}):\n"
+                + confirmation[shown].to_string(index=False)
+            )
+        else:
+            parts.append(
+                "stability boundary: no oos confirm table (give --confirm DIR); mu is not "
+                "compared with the campaign's performance metrics."
             )
         if spec.window.kind == "critical":
             parts.append(

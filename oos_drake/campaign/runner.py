@@ -25,7 +25,7 @@ from tqdm import tqdm
 
 from oos_drake.campaign import store
 from oos_drake.campaign.executors import RunResult, execute_case, make_executor
-from oos_drake.campaign.samplers import make_plan, region_counts
+from oos_drake.campaign.samplers import FREQUENCY_COLUMN, make_plan, region_counts
 from oos_drake.campaign.simulator import MissionWindow, RunCase, SimulatorRecipe
 from oos_drake.campaign.spec import CampaignSpec, load_spec, parse_spec, spec_to_toml
 
@@ -41,7 +41,8 @@ def case_from_plan_row(spec: CampaignSpec, row: pd.Series) -> RunCase:
     window = MissionWindow(
         float(row["window_start [s]"]), float(row["window_end [s]"]), str(row["window"])
     )
-    return RunCase(int(row["run_id"]), int(row["seed"]), values, window)
+    frequency = float(row.get(FREQUENCY_COLUMN, math.nan))
+    return RunCase(int(row["run_id"]), int(row["seed"]), values, window, frequency)
 
 
 def result_row(spec: CampaignSpec, plan_row: pd.Series, result: RunResult) -> pd.DataFrame:
@@ -213,21 +214,20 @@ def plan_campaign(
 ) -> tuple[CampaignSpec, pd.DataFrame]:
     """Validate the spec and build the plan; writes nothing.
 
-    ``worst_cases`` replaces the mu-guided sampler's ``worst_cases`` file of the spec (e.g. the
-    output of ``oos analyze``); ``simulator_options`` update the spec's simulator options (e.g. a
-    synthesized ``controller``). The modified spec is validated again.
+    ``worst_cases`` replaces the spec's ``worst_cases`` file (e.g. the output of ``oos
+    analyze``): the regions of the mu-guided sampler, and for every sampler the frequencies
+    that realize the LTI perturbations (see :func:`~oos_drake.campaign.samplers.make_plan`);
+    ``simulator_options`` update the spec's simulator options (e.g. a synthesized
+    ``controller``). The modified spec is validated again.
     """
-    spec = load_spec(spec_path)
     if worst_cases is not None:
-        if spec.sampler.kind != "mu-guided":
-            raise ValueError(f"--worst-cases given but spec {spec_path} is not mu-guided")
         worst_cases = Path(worst_cases).resolve()
         if not worst_cases.is_file():
             raise ValueError(f"--worst-cases {worst_cases}: file not found")
+    spec = load_spec(spec_path, worst_cases=worst_cases)
     if simulator_options:
         options = {**spec.simulator.option_dict, **simulator_options}
         spec = replace(spec, simulator=SimulatorRecipe.create(spec.simulator.name, options))
-    if worst_cases is not None or simulator_options:
         toml = spec_to_toml(spec, str(worst_cases) if worst_cases is not None else None)
         spec = parse_spec(toml, source=Path(spec_path))
     return spec, make_plan(spec)
@@ -238,7 +238,7 @@ def _write_campaign(directory: Path, spec: CampaignSpec, plan: pd.DataFrame) -> 
     _check_new_directory(directory)
     directory.mkdir(parents=True, exist_ok=True)
     worst_cases_name = None
-    if spec.sampler.kind == "mu-guided":
+    if spec.sampler.worst_cases is not None:
         worst_cases_name = store.WORST_CASES_FILE
         source = Path(spec.sampler.worst_cases).read_bytes()
         store.atomic_write_bytes(directory / worst_cases_name, lambda stream: stream.write(source))

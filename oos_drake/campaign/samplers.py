@@ -20,6 +20,16 @@
   ``E_q[w f] = E_p[f]`` (failure probabilities stay
   unbiased) and ``w <= 1 / alpha`` (the estimate cannot be ruined by one huge weight).
 
+Frequencies: a simulator realizes its LTI perturbation blocks (parameters of kind ``lti``:
+``Delta_add``, ``Delta_mul_*`` of the Drake mission) as stable systems whose phase turns at a
+frequency; each run gets the critical frequency of the analysis region it explores (plan column
+``frequency [Hz]``, :data:`FREQUENCY_COLUMN`): the region it was drawn from, else the region of
+its ``critical`` window, else (a run tied to no region: defensive draws with a mission or event
+window, plain Monte Carlo and Latin hypercube given a ``worst_cases`` file) the frequency of the
+analysis' peak, the region with the largest ``mu_upper``: the frequency where the analysis finds
+the loop closest to instability. Without a ``worst_cases`` file the column is NaN, and a plan
+whose runs disperse an LTI block is refused (no number of ours or the paper's stands in).
+
 Seeds: ``SeedSequence(random_seed).spawn(n_runs + 1)``: child ``i < n_runs`` seeds run ``i``
 (identical to ``SeedSequence(random_seed).spawn(n_runs)[i]``), the last child drives the sampler.
 """
@@ -38,10 +48,13 @@ from oos_drake.campaign.distributions import (
     TruncatedNormal,
     Uniform,
 )
+from oos_drake.campaign.simulator import ParameterKind
 from oos_drake.campaign.worst_cases import WorstCaseRegion
 
 #: Region id recorded for runs drawn from the nominal (defensive) component.
 NOMINAL_COMPONENT = -1
+#: Plan column: frequency [Hz] at which a run's LTI perturbations are realized.
+FREQUENCY_COLUMN = "frequency [Hz]"
 
 
 def run_seeds(random_seed: int, n_runs: int) -> tuple[np.ndarray, np.random.Generator]:
@@ -174,8 +187,14 @@ def make_plan(spec) -> pd.DataFrame:
     -------
     pandas.DataFrame
         One row per run: ``run_id``, ``seed``, ``region`` (-1: nominal draw), ``weight``,
-        ``window``, ``window_start [s]``, ``window_end [s]`` and one ``"name [unit]"`` column per
-        simulator parameter (dispersed value, or the nominal value).
+        ``window``, ``window_start [s]``, ``window_end [s]``, ``frequency [Hz]`` (see the module
+        docstring) and one ``"name [unit]"`` column per simulator parameter (dispersed value, or
+        the nominal value).
+
+    Raises
+    ------
+    ValueError
+        A run with a nonzero LTI perturbation and no frequency (no ``worst_cases`` file).
     """
     info = spec.info
     n = spec.n_runs
@@ -196,8 +215,9 @@ def make_plan(spec) -> pd.DataFrame:
         region = np.full(n, NOMINAL_COMPONENT)
         weight = np.ones(n)
 
+    by_id = {r.region: r for r in spec.regions}
+    window_region = region
     if spec.window.kind == "critical":
-        by_id = {r.region: r for r in spec.regions}
         shares = MuGuidedProposal(
             spec.dispersions, spec.regions, region_weighting=spec.sampler.region_weighting
         ).region_shares
@@ -208,6 +228,13 @@ def make_plan(spec) -> pd.DataFrame:
     else:
         windows = [spec.window.resolve(info)] * n
         labels = [w.label for w in windows]
+    frequency = np.full(n, np.nan)
+    if spec.regions:
+        peak = max(spec.regions, key=lambda r: r.mu_upper)
+        frequency = np.array(
+            [by_id[int(r)].frequency if r in by_id else peak.frequency for r in window_region],
+            dtype=float,
+        )
 
     table = pd.DataFrame(
         {
@@ -218,6 +245,7 @@ def make_plan(spec) -> pd.DataFrame:
             "window": labels,
             "window_start [s]": [w.start for w in windows],
             "window_end [s]": [w.end for w in windows],
+            FREQUENCY_COLUMN: frequency,
         }
     )
     for parameter in info.parameters:
@@ -226,6 +254,17 @@ def make_plan(spec) -> pd.DataFrame:
             np.asarray(column, dtype=float)
             if column is not None
             else np.full(n, float(parameter.nominal))
+        )
+    lti = [p for p in info.parameters if p.kind == ParameterKind.LTI]
+    perturbed = np.zeros(n, dtype=bool)
+    for parameter in lti:
+        perturbed |= table[parameter.column].to_numpy() != 0.0
+    if np.any(perturbed & np.isnan(frequency)):
+        names = ", ".join(p.name for p in lti if p.name in spec.dispersions) or lti[0].name
+        raise ValueError(
+            f"campaign {spec.name}: LTI perturbations ({names}) need the frequency that "
+            "realizes them: give the analysis' worst_cases.parquet (worst_cases = FILE in "
+            "[sampler] or --worst-cases FILE; runs use their region's critical frequency)"
         )
     return table
 

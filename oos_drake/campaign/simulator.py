@@ -149,12 +149,18 @@ class RunCase:
         Physical value of every parameter of the simulator (dispersed or nominal) [unit].
     window : MissionWindow
         Simulated time span.
+    frequency : float
+        Critical frequency [Hz] of the analysis region the run explores (``frequency [Hz]`` of
+        ``worst_cases.parquet``; may be ``inf``), NaN when none: where a simulator realizes its
+        LTI perturbation blocks (parameters of kind ``lti``). See
+        :func:`oos_drake.campaign.samplers.make_plan`.
     """
 
     run_id: int
     seed: int
     values: Mapping[str, float]
     window: MissionWindow
+    frequency: float = math.nan
 
 
 @dataclass(frozen=True)

@@ -86,7 +86,9 @@ class SamplerSpec:
 
     #: "monte-carlo" (i.i.d.), "latin-hypercube" (stratified marginals) or "mu-guided"
     kind: str = "monte-carlo"
-    #: mu-guided: path of the analysis' worst_cases.parquet (relative paths: to the spec file)
+    #: path of the analysis' worst_cases.parquet (relative paths: to the spec file); required
+    #: by mu-guided (its regions); for every sampler it gives the frequencies that realize LTI
+    #: perturbation blocks (see samplers.make_plan). Also given by ``--worst-cases``.
     worst_cases: Path | None = None
     #: mu-guided: share of runs drawn from the nominal dispersions (bounds the weights by 1/share)
     defensive_fraction: float = 0.2
@@ -198,7 +200,7 @@ class CampaignSpec:
     run_timeout: float | None = None
     #: simulator declarations gathered at load time (not part of the TOML)
     info: SimulatorInfo = field(compare=False, repr=False, default=None)
-    #: mu-guided: the regions read from worst_cases (not part of the TOML)
+    #: the regions read from worst_cases (not part of the TOML)
     regions: tuple[WorstCaseRegion, ...] = field(compare=False, repr=False, default=())
 
 
@@ -244,11 +246,12 @@ def packaged_spec(name: str) -> Path:
     return path
 
 
-def load_spec(path: str | Path) -> CampaignSpec:
+def load_spec(path: str | Path, worst_cases: str | Path | None = None) -> CampaignSpec:
     """Read and validate a campaign spec file.
 
     ``path`` may also be the bare name of a shipped spec (``"demo"``, see
     :func:`packaged_spec_names`) when no such file exists in the working directory.
+    ``worst_cases`` replaces the spec's ``[sampler] worst_cases`` (``--worst-cases``).
 
     Raises
     ------
@@ -263,11 +266,12 @@ def load_spec(path: str | Path) -> CampaignSpec:
         raise ValueError(
             f"spec {path}: file not found (shipped specs: {', '.join(packaged_spec_names())})"
         )
-    return parse_spec(path.read_text(encoding="utf-8"), source=path)
+    return parse_spec(path.read_text(encoding="utf-8"), source=path, worst_cases=worst_cases)
 
 
-def parse_spec(text: str, source: Path) -> CampaignSpec:
-    """Validate spec ``text``; relative paths are resolved against ``source``'s folder."""
+def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -> CampaignSpec:
+    """Validate spec ``text``; relative paths are resolved against ``source``'s folder;
+    ``worst_cases`` replaces the spec's ``[sampler] worst_cases``."""
     where = f"spec {source}"
     try:
         raw = tomllib.loads(text)
@@ -324,7 +328,7 @@ def parse_spec(text: str, source: Path) -> CampaignSpec:
     if kind not in SAMPLERS:
         raise _fail(sw, f"unknown sampler {kind!r}; use one of {', '.join(SAMPLERS)}")
     if kind != "mu-guided":
-        extra = sorted(set(sampler_raw) - {"kind"})
+        extra = sorted(set(sampler_raw) - {"kind", "worst_cases"})
         if extra:
             raise _fail(sw, f"{', '.join(extra)} only apply to the mu-guided sampler")
     worst_cases_path = None
@@ -332,15 +336,27 @@ def parse_spec(text: str, source: Path) -> CampaignSpec:
     defensive = sampler_raw.get("defensive_fraction", 0.2)
     spread = sampler_raw.get("spread", 0.1)
     weighting = sampler_raw.get("region_weighting", "mu_upper")
-    if kind == "mu-guided":
-        if "worst_cases" not in sampler_raw or not isinstance(sampler_raw["worst_cases"], str):
-            raise _fail(sw, 'mu-guided needs worst_cases = "path/to/worst_cases.parquet"')
+    if worst_cases is not None:
+        worst_cases_path = Path(worst_cases).resolve()
+    elif "worst_cases" in sampler_raw:
+        if not isinstance(sampler_raw["worst_cases"], str):
+            raise _fail(sw, 'worst_cases must be a path: "path/to/worst_cases.parquet"')
         worst_cases_path = Path(sampler_raw["worst_cases"])
         if not worst_cases_path.is_absolute():
             worst_cases_path = (source.parent / worst_cases_path).resolve()
+    if worst_cases_path is not None:
         if not worst_cases_path.is_file():
-            raise _fail(sw, f"worst_cases file {worst_cases_path} not found")
+            raise _fail(
+                sw, f"worst_cases file {worst_cases_path} not found (written by oos analyze)"
+            )
         regions = read_worst_cases(worst_cases_path, info.parameters)
+    elif kind == "mu-guided":
+        raise _fail(
+            sw,
+            "mu-guided needs the analysis' worst_cases.parquet (written by oos analyze): "
+            "give --worst-cases FILE or worst_cases = FILE",
+        )
+    if kind == "mu-guided":
         defensive = _positive_float(sw, "defensive_fraction", defensive)
         if not defensive < 1:
             raise _fail(sw, f"defensive_fraction = {defensive} must be in (0, 1)")
@@ -471,7 +487,7 @@ def spec_to_toml(spec: CampaignSpec, worst_cases_name: str | None = None) -> str
     Parameters
     ----------
     worst_cases_name : str, optional
-        Path written for the mu-guided ``worst_cases`` (the campaign directory's copy).
+        Path written for ``worst_cases`` (the campaign directory's copy).
     """
     document: dict[str, Any] = {
         "name": spec.name,
@@ -483,9 +499,10 @@ def spec_to_toml(spec: CampaignSpec, worst_cases_name: str | None = None) -> str
     if spec.run_timeout:
         document["run_timeout"] = spec.run_timeout
     sampler: dict[str, Any] = {"kind": spec.sampler.kind}
+    if spec.sampler.worst_cases is not None:
+        sampler["worst_cases"] = worst_cases_name or str(spec.sampler.worst_cases)
     if spec.sampler.kind == "mu-guided":
         sampler |= {
-            "worst_cases": worst_cases_name or str(spec.sampler.worst_cases),
             "defensive_fraction": spec.sampler.defensive_fraction,
             "spread": spec.sampler.spread,
             "region_weighting": spec.sampler.region_weighting,

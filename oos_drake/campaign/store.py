@@ -84,6 +84,24 @@ def atomic_write_parquet(table: pd.DataFrame, path: Path) -> Path:
     return _atomic_write(path, lambda stream: table.to_parquet(stream, index=False))
 
 
+def read_table(path: Path, columns, label: str) -> pd.DataFrame:
+    """Read a Parquet table a user gave, with its required ``columns``.
+
+    Raises
+    ------
+    ValueError
+        ``"<label>: cannot read Parquet: ..."`` or ``"<label>: missing column(s) ..."``.
+    """
+    try:
+        table = pd.read_parquet(path)
+    except Exception as exc:  # noqa: BLE001 - any reader error is a bad file for the user
+        raise ValueError(f"{label}: cannot read Parquet: {exc}") from exc
+    missing = [c for c in columns if c not in table.columns]
+    if missing:
+        raise ValueError(f"{label}: missing column(s) {', '.join(missing)}")
+    return table
+
+
 def atomic_write_bytes(path: Path, write) -> Path:
     """Call ``write(binary_stream)`` into a temporary file, then rename it to ``path``."""
     return _atomic_write(path, write)

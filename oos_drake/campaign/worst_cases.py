@@ -1,7 +1,10 @@
 """The ``worst_cases.parquet`` file: where the mu analysis says the danger is.
 
-The robust analysis writes it; the ``mu-guided`` campaign sampler reads it. One row per critical
-*region* (a configuration / time of the mission at which a worst case was found).
+The robust analysis writes it (``oos analyze``); the ``mu-guided`` campaign sampler draws around
+its regions, and every sampler takes from it the frequencies at which a simulator realizes its
+LTI perturbation blocks (:func:`oos_drake.campaign.samplers.make_plan`). One row per critical
+*region* (a configuration / time of the mission at which a worst case was found). No worst-case
+file of the Drake mission ships with the package: it must come from our own analysis.
 
 Schema
 ------
@@ -17,6 +20,11 @@ column                     dtype    meaning
 ``mu_lower``               float64  lower bound of mu at the peak [-] (<= ``mu_upper``)
 ``subset``                 string   the uncertain blocks analyzed, comma-separated
 ``wc:<block> [<unit>]``    float64  worst-case value of the named block, PHYSICAL units
+``wcgain:<metric> lower``  float64  optional: worst-case gain of the performance channel whose
+``[-]`` / ``upper [-]``             unit gain is the requirement on campaign metric
+                                    ``<metric>``, over the region's subset at its
+                                    configuration (lower: gain of a perturbation found; upper:
+                                    largest upper bound over the analysis' frequency grid)
 =========================  =======  ==========================================================
 
 A ``wc:`` column may be NaN in a row whose subset does not contain the block (the sampler then
@@ -35,7 +43,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +63,12 @@ BASE_COLUMNS: dict[str, str] = {
 }
 
 _WC_COLUMN = re.compile(r"^wc:(?P<name>[^\s\[\]]+) \[(?P<unit>[^\]]*)\]$")
+_GAIN_COLUMN = re.compile(r"^wcgain:(?P<metric>[^\s\[\]]+) (?P<bound>lower|upper) \[-\]$")
+
+
+def gain_column(metric: str, bound: str) -> str:
+    """Column of a worst-case gain bound, e.g. ``"wcgain:ape upper [-]"``."""
+    return f"wcgain:{metric} {bound} [-]"
 
 
 @dataclass(frozen=True)
@@ -77,6 +91,9 @@ class WorstCaseRegion:
         Blocks analyzed (comma-separated).
     perturbation : Mapping[str, float]
         Worst-case block values in physical units (only the blocks given for this region).
+    gains : Mapping[str, tuple of float]
+        Campaign metric -> ``(lower, upper)`` worst-case gain of the performance channel that
+        bounds it, normalized so that 1 is the requirement [-] (empty when not computed).
     """
 
     region: int
@@ -87,6 +104,7 @@ class WorstCaseRegion:
     mu_lower: float
     subset: str
     perturbation: Mapping[str, float]
+    gains: Mapping[str, tuple[float, float]] = field(default_factory=dict)
 
 
 def worst_case_column(parameter: Parameter) -> str:
@@ -120,6 +138,11 @@ def write_worst_cases(
         table[worst_case_column(by_name[name])] = [
             float(r.perturbation.get(name, np.nan)) for r in regions
         ]
+    for metric in sorted({m for r in regions for m in r.gains}):
+        for index, bound in enumerate(("lower", "upper")):
+            table[gain_column(metric, bound)] = [
+                float(r.gains[metric][index]) if metric in r.gains else np.nan for r in regions
+            ]
     return atomic_write_parquet(table, Path(path))
 
 
@@ -136,26 +159,31 @@ def read_worst_cases(
     """
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"worst cases file {path} not found (needed by the mu-guided sampler)")
-    try:
-        table = pd.read_parquet(path)
-    except Exception as exc:  # noqa: BLE001 - any reader error is a bad file for the user
-        raise ValueError(f"worst cases file {path}: cannot read Parquet: {exc}") from exc
-    missing = [c for c in BASE_COLUMNS if c not in table.columns]
-    if missing:
-        raise ValueError(f"worst cases file {path}: missing column(s) {', '.join(missing)}")
+        raise ValueError(f"worst cases file {path} not found (written by oos analyze)")
+    from oos_drake.campaign.store import read_table
+
+    table = read_table(path, BASE_COLUMNS, f"worst cases file {path}")
     if table.empty:
         raise ValueError(f"worst cases file {path}: no region")
     by_name = {p.name: p for p in parameters}
     blocks: dict[str, str] = {}
+    gain_columns: dict[str, tuple[str, str]] = {}
     for column in table.columns:
         if column in BASE_COLUMNS:
+            continue
+        gain = _GAIN_COLUMN.match(column)
+        if gain:
+            gain_columns[gain["metric"]] = (
+                gain_column(gain["metric"], "lower"),
+                gain_column(gain["metric"], "upper"),
+            )
             continue
         match = _WC_COLUMN.match(column)
         if not match:
             raise ValueError(
                 f"worst cases file {path}: unexpected column {column!r} "
-                "(perturbations are 'wc:<block> [<unit>]')"
+                "(perturbations are 'wc:<block> [<unit>]', gains 'wcgain:<metric> "
+                "lower|upper [-]')"
             )
         name, unit = match["name"], match["unit"]
         if name not in by_name:
@@ -206,6 +234,19 @@ def read_worst_cases(
                     f"[{parameter.lower:g}, {parameter.upper:g}]"
                 )
             perturbation[name] = value
+        gains = {}
+        for metric, (low_column, high_column) in gain_columns.items():
+            if low_column not in table.columns or high_column not in table.columns:
+                raise ValueError(
+                    f"worst cases file {path}: {metric} needs both {low_column!r} and "
+                    f"{high_column!r}"
+                )
+            low, high = float(record[low_column]), float(record[high_column])
+            if np.isnan(low) and np.isnan(high):
+                continue
+            if not low <= high * (1 + 1e-9):
+                raise ValueError(f"{where}: {low_column} {low} exceeds {high_column} {high}")
+            gains[metric] = (low, high)
         regions.append(
             WorstCaseRegion(
                 region=region,
@@ -216,6 +257,7 @@ def read_worst_cases(
                 mu_lower=mu_lower,
                 subset=str(record["subset"]),
                 perturbation=perturbation,
+                gains=gains,
             )
         )
     return tuple(regions)

@@ -29,6 +29,15 @@ matrix of the dispersed scalars ``Delta_mul_xx .. Delta_mul_zz``, weighted entry
 white sequence shaped by ``W_n,ext``. The torque ``T`` (hub axes) is held over the sample period
 (zero-order hold) and applied to the hub's floating joint as ``R_WB T``.
 
+The all-pass is set per run with the perturbation scalars
+(:meth:`FlightSoftware.set_perturbations`): its phase is -90 deg at the run's frequency ``f``
+(the critical frequency of the campaign region the run explores, ``frequency [Hz]`` of
+``worst_cases.parquet``), exactly also after the discretization (:func:`allpass_block`
+pre-warps the corner). A frequency at or above the Nyquist frequency of the flight software, an
+infinite one (an ill-posed mu peak) included, is realized as the static gain ``a = 1``: a real
+discrete-time system is real at ``z = -1``, and the value of a unit LTI perturbation at
+infinite frequency is real (the scalar's sign covers ``-1``).
+
 Each linear block is discretized with the bilinear (Tustin) transform at the control rate, so a
 block with a bandwidth above the sample rate (gyro, wheels at 200 Hz) reduces to its DC gain with
 no artificial one-sample delay. The blocks before the torque saturation and those after it are
@@ -59,6 +68,7 @@ __all__ = [
     "LOG_SIGNALS",
     "METRIC_SLOTS",
     "allpass",
+    "allpass_block",
     "discretize",
     "rpy_to_rotation",
 ]
@@ -112,11 +122,41 @@ def _per_axis(A, B, C, D) -> tuple[np.ndarray, ...]:
 def allpass(frequency_hz: float) -> tuple[np.ndarray, ...]:
     """``(A, B, C, D)`` of the unit all-pass ``a(s) = (p - s)/(p + s)``, ``p = 2 pi f`` [rad/s].
 
-    Stable, ``|a(j w)| = 1`` at every frequency, ``a(0) = 1``, phase -180 deg at high frequency:
-    the standard realization of a unit-norm LTI perturbation with a phase that turns at ``f``.
+    Stable, ``|a(j w)| = 1`` at every frequency, ``a(0) = 1``, ``a(j p) = -j`` (phase -90 deg at
+    ``f``), phase -180 deg at high frequency: the standard realization of a unit-norm LTI
+    perturbation with a phase that turns at ``f``.
     """
     p = 2.0 * np.pi * float(frequency_hz)
-    return np.array([[-p]]), np.array([[1.0]]), np.array([[-2.0 * p]]), np.array([[1.0]])
+    if not (np.isfinite(p) and p > 0):
+        raise ValueError(f"all-pass: frequency must be finite and > 0 Hz, got {frequency_hz}")
+    # a(s) = -1 + 2 p / (s + p)
+    return np.array([[-p]]), np.array([[1.0]]), np.array([[2.0 * p]]), np.array([[-1.0]])
+
+
+def allpass_block(frequency_hz: float, period: float) -> DiscreteBlock:
+    """The three-axis discrete all-pass of the LTI perturbations, phase -90 deg at ``frequency_hz``.
+
+    Tustin maps ``H_d(e^{j w T}) = H_c(j (2/T) tan(w T / 2))``, so the continuous corner is
+    pre-warped to ``p = (2/T) tan(pi f T)``: the discrete all-pass then equals ``a(j 2 pi f) = -j``
+    exactly at ``f``. ``f >= 1/(2T)`` (the Nyquist frequency, ``inf`` included) and NaN (no
+    frequency: only valid with zero perturbation scalars) give the static ``a = 1`` (one unused
+    state per axis, so the state layout does not depend on the frequency).
+
+    Parameters
+    ----------
+    frequency_hz : float
+        Frequency where the all-pass phase is -90 deg [Hz] (> 0, may be ``inf`` or NaN).
+    period : float
+        Sample period of the flight software [s].
+    """
+    f = float(frequency_hz)
+    if not (f > 0 or np.isnan(f)):
+        raise ValueError(f"all-pass: frequency must be > 0 Hz (or inf), got {frequency_hz}")
+    if np.isnan(f) or f * period >= 0.5:
+        zero = np.zeros((3, 3))
+        return DiscreteBlock(zero, zero, zero, np.eye(3))
+    warped_hz = np.tan(np.pi * f * period) / (np.pi * period)
+    return discretize(*_per_axis(*allpass(warped_hz)), period)
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,8 +169,9 @@ class FlightSoftwareDesign:
         Sample period [s].
     K : ndarray, shape (3, 6)
         Static gain ``[K_p, K_d]`` [N m/rad, N m s/rad].
-    star_tracker, gyro, rolloff, wheels, disturbance, perturbation : DiscreteBlock
-        SST, GYRO, F_ro, RW, W_n,ext and the all-pass of the LTI perturbations.
+    star_tracker, gyro, rolloff, wheels, disturbance : DiscreteBlock
+        SST, GYRO, F_ro, RW and W_n,ext (the all-pass of the LTI perturbations is set per run:
+        :func:`allpass_block`).
     noise_star_tracker : float
         Star tracker noise level W_n,sst [rad] (std of one sample).
     noise_gyro : float
@@ -152,7 +193,6 @@ class FlightSoftwareDesign:
     rolloff: DiscreteBlock
     wheels: DiscreteBlock
     disturbance: DiscreteBlock
-    perturbation: DiscreteBlock
     noise_star_tracker: float
     noise_gyro: float
     torque_limit: float
@@ -168,7 +208,6 @@ class FlightSoftwareDesign:
         *,
         spec: comp.DesignSpecification | None = None,
         torque_limit: float = 2.0,
-        perturbation_frequency_hz: float = 0.55,
         J_ref=None,
     ) -> FlightSoftwareDesign:
         """Discretize the paper's components at ``control_rate`` [Hz].
@@ -183,9 +222,6 @@ class FlightSoftwareDesign:
             Component data and weights (paper values by default).
         torque_limit : float
             Wheel torque limit [N m] (paper: 2).
-        perturbation_frequency_hz : float
-            Corner of the all-pass realizing Delta_add / Delta_mul [Hz] (default: the analysis'
-            critical frequency, 0.55 Hz).
         J_ref : array_like, shape (3, 3), optional
             Inertia for the additive perturbation [kg m^2] (default identity).
         """
@@ -221,7 +257,6 @@ class FlightSoftwareDesign:
                 *_per_axis(*comp.second_order(spec.wheel_frequency_hz, spec.wheel_damping)), T
             ),
             disturbance=disturbance,
-            perturbation=discretize(*_per_axis(*allpass(perturbation_frequency_hz)), T),
             noise_star_tracker=float(spec.noise_star_tracker),
             noise_gyro=float(spec.noise_gyro),
             torque_limit=float(torque_limit),
@@ -243,8 +278,8 @@ class FlightSoftwareDesign:
             "rolloff": self.rolloff.nstates,
             "wheels": self.wheels.nstates,
             "disturbance": self.disturbance.nstates,
-            "mul": self.perturbation.nstates,
-            "add": self.perturbation.nstates,
+            "mul": 3,
+            "add": 3,
             "tau_W": 3,
             "log": 3 * len(LOG_SIGNALS),
             "metrics": 3 * len(METRIC_SLOTS),
@@ -274,8 +309,8 @@ class FlightSoftware(LeafSystem):
 
     Context
     -------
-    numeric parameter 0 (10): ``[delta_add, Delta_mul (3x3, row-major)]`` [-], the LTI
-    perturbation scalars.
+    numeric parameter 0 (11): ``[delta_add, Delta_mul (3x3, row-major)]`` [-], the LTI
+    perturbation scalars, and the all-pass frequency [Hz] (NaN by default: no perturbation).
     abstract parameter 0: ``(n_samples, 9)`` array of unit noise ``[n_sst; n_gyro; d_ext]``
     (row ``k`` is used at the k-th sample after the start; rows wrap around).
     """
@@ -291,7 +326,8 @@ class FlightSoftware(LeafSystem):
         size = self._slices["counter"].stop
         self._state_index = self.DeclareDiscreteState(size)
         self._plant_state = self.DeclareVectorInputPort("plant_state", nq + nv)
-        self._perturbation_index = self.DeclareNumericParameter(BasicVector(np.zeros(10)))
+        default = np.concatenate([np.zeros(10), [np.nan]])
+        self._perturbation_index = self.DeclareNumericParameter(BasicVector(default))
         self._noise_index = self.DeclareAbstractParameter(
             AbstractValue.Make(np.zeros((1, NOISE_CHANNELS)))
         )
@@ -305,7 +341,7 @@ class FlightSoftware(LeafSystem):
         )
         d = design
         self._sst, self._gyro, self._ro, self._rw = d.star_tracker, d.gyro, d.rolloff, d.wheels
-        self._dist, self._ap = d.disturbance, d.perturbation
+        self._dist = d.disturbance
         self._Kp, self._Kd = d.K[:, :3], d.K[:, 3:]
         self._J_Wadd = d.J_ref * d.W_add
         self._build_stages()
@@ -320,12 +356,36 @@ class FlightSoftware(LeafSystem):
         """Named slices of the discrete state."""
         return dict(self._slices)
 
-    def set_perturbations(self, context, delta_mul, delta_add: float) -> None:
-        """Set the LTI perturbation scalars: ``delta_mul`` (3x3 matrix or a scalar for every
-        entry) and ``delta_add`` [-], each in [-1, 1]."""
+    def set_perturbations(
+        self, context, delta_mul, delta_add: float, frequency_hz: float = math.nan
+    ) -> None:
+        """Set the LTI perturbations of a run.
+
+        Parameters
+        ----------
+        delta_mul : array_like
+            3x3 matrix (or a scalar for every entry) of the multiplicative scalars [-], in [-1, 1].
+        delta_add : float
+            Additive scalar [-], in [-1, 1].
+        frequency_hz : float
+            Where the all-pass phase is -90 deg [Hz] (see :func:`allpass_block`); NaN only when
+            every scalar is zero.
+
+        Raises
+        ------
+        ValueError
+            A nonzero scalar without a frequency, or a frequency <= 0.
+        """
         matrix = np.broadcast_to(np.asarray(delta_mul, dtype=float), (3, 3))
+        frequency_hz = float(frequency_hz)
+        if np.isnan(frequency_hz) and (float(delta_add) != 0.0 or np.any(matrix != 0.0)):
+            raise ValueError(
+                "flight software: Delta_add / Delta_mul are nonzero but no frequency realizes "
+                "them (give the critical frequency of the region the run explores)"
+            )
+        allpass_block(frequency_hz, self._design.period)  # checks the frequency
         context.get_mutable_numeric_parameter(self._perturbation_index).SetFromVector(
-            np.concatenate([[float(delta_add)], matrix.ravel()])
+            np.concatenate([[float(delta_add)], matrix.ravel(), [frequency_hz]])
         )
 
     def set_noise(self, context, noise: np.ndarray) -> None:
@@ -383,13 +443,13 @@ class FlightSoftware(LeafSystem):
         out[s[2]] = ro.A @ x1[s[2]] + ro.B @ u_K
         return out, ro.C @ x1[s[2]] + ro.D @ u_K
 
-    def _stage2_reference(self, x2, z2):
-        """Wheels, disturbance and all-passes: ``z2 = [sat(u); d_ext]``,
+    def _stage2_reference(self, x2, z2, ap: DiscreteBlock):
+        """Wheels, disturbance and all-passes ``ap``: ``z2 = [sat(u); d_ext]``,
         ``x2 = [RW; W_n,ext; a_mul; a_add]`` -> ``(x2+, [T_rw; T_dist; a_mul; a_add])``."""
         d, s = self._design, self._stage2_slices
         sat_u, d_ext = z2[0:3], z2[3:6]
         out = np.empty_like(x2)
-        rw, dist, ap = d.wheels, d.disturbance, d.perturbation
+        rw, dist = d.wheels, d.disturbance
         out[s[0]] = rw.A @ x2[s[0]] + rw.B @ sat_u
         T_rw = rw.C @ x2[s[0]] + rw.D @ sat_u
         out[s[1]] = dist.A @ x2[s[1]] + dist.B @ d_ext
@@ -415,22 +475,15 @@ class FlightSoftware(LeafSystem):
         d, s = self._design, self._slices
         sizes1 = (d.star_tracker.nstates, d.gyro.nstates, d.rolloff.nstates)
         self._stage1_slices = _consecutive(sizes1)
-        sizes2 = (
-            d.wheels.nstates,
-            d.disturbance.nstates,
-            d.perturbation.nstates,
-            d.perturbation.nstates,
-        )
+        sizes2 = (d.wheels.nstates, d.disturbance.nstates, 3, 3)
         self._stage2_slices = _consecutive(sizes2)
         self._x1 = slice(s["star_tracker"].start, s["rolloff"].stop)
         self._x2 = slice(s["wheels"].start, s["add"].stop)
         assert self._x1.stop - self._x1.start == sum(sizes1)
         assert self._x2.stop - self._x2.start == sum(sizes2)
         A1, B1, C1, D1 = self._probe(self._stage1_reference, sum(sizes1), 12)
-        A2, B2, C2, D2 = self._probe(self._stage2_reference, sum(sizes2), 6)
-        # one product per stage: [x+; y] = M [x; z]
+        # one product per stage: [x+; y] = M [x; z] (stage 2: per all-pass, _output_stage)
         self._M1 = np.block([[A1, B1], [C1, D1]])
-        self._M2 = np.block([[A2, B2], [C2, D2]])
         self._n1, self._n2 = sum(sizes1), sum(sizes2)
         # the update writes the discrete state in one piece: check the layout it assumes
         order = ("tau_W", "log", "metrics", "counter")
@@ -451,20 +504,23 @@ class FlightSoftware(LeafSystem):
 
     # -- Drake callbacks ------------------------------------------------------------------------
     def _output_stage(self, perturbation: np.ndarray) -> np.ndarray:
-        """Stage 2 extended with the torque mixing for the run's perturbation scalars.
+        """Stage 2 extended with the torque mixing for the run's perturbations.
 
         ``[x2+; T_rw; T_dist; a_mul; a_add; T] = M [x2; sat(u); d_ext]`` with
-        ``T = T_rw + (W_mul o Delta_mul) a_mul + delta_add J_ref W_add a_add + T_dist``. The
-        matrix depends only on the (per-run constant) perturbation parameters, so it is kept
-        for the last value seen.
+        ``T = T_rw + (W_mul o Delta_mul) a_mul + delta_add J_ref W_add a_add + T_dist`` and the
+        all-passes at the run's frequency. The matrix depends only on the (per-run constant)
+        perturbation parameters, so it is kept for the last value seen.
         """
         key = perturbation.tobytes()
         if key != self._mix_key:
             d = self._design
-            delta_add, delta_mul = perturbation[0], perturbation[1:].reshape(3, 3)
+            delta_add, delta_mul = perturbation[0], perturbation[1:10].reshape(3, 3)
+            ap = allpass_block(perturbation[10], d.period)
+            A2, B2, C2, D2 = self._probe(lambda x, z: self._stage2_reference(x, z, ap), self._n2, 6)
+            M2 = np.block([[A2, B2], [C2, D2]])
             eye = np.eye(3)
             mix = np.hstack([eye, eye, d.W_mul * delta_mul, delta_add * self._J_Wadd])
-            self._mix = np.vstack([self._M2, mix @ self._M2[self._n2 :]])
+            self._mix = np.vstack([M2, mix @ M2[self._n2 :]])
             self._mix_key = key
         return self._mix
 

@@ -153,8 +153,6 @@ class MissionOptions:
         ~100 Hz; ``ramp_substeps`` 16 gives 0.08 %); session 1's error-controlled 1e-5 was
         7.4 %, 0.03 % and 3.5 % off on the same windows at about the same cost
         (``benchmarks/bench_mission_sim.py --accuracy-study``).
-    perturbation_frequency_hz : float
-        Corner of the all-pass realizing Delta_add / Delta_mul [Hz].
     divergence_limit : float
         Hub attitude beyond which a run is declared diverged [rad].
     check_interval : float
@@ -176,7 +174,6 @@ class MissionOptions:
     max_step: float | None = None
     error_control: bool | None = None
     accuracy: float = 1e-7
-    perturbation_frequency_hz: float = 0.55
     divergence_limit: float = 0.5
     check_interval: float = 50.0
 
@@ -190,7 +187,6 @@ class MissionOptions:
             "ramp_duration",
             "ramp_start_stiffness",
             "accuracy",
-            "perturbation_frequency_hz",
             "divergence_limit",
             "check_interval",
         ):
@@ -499,7 +495,6 @@ def make_mission_diagram(
         K,
         options.control_rate,
         torque_limit=options.torque_limit,
-        perturbation_frequency_hz=options.perturbation_frequency_hz,
         J_ref=J_ref,
     )
     hub = parts["hub_joint"]

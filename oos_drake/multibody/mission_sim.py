@@ -413,9 +413,12 @@ class MissionSimulation:
             dict(values),
         )
 
-    def apply_parameters(self, context, values: Mapping[str, float]) -> None:
+    def apply_parameters(
+        self, context, values: Mapping[str, float], perturbation_frequency_hz: float = math.nan
+    ) -> None:
         """Write the model parameters (target inertia, mode frequencies, perturbations) into a
-        root ``context``."""
+        root ``context``; the LTI perturbations' all-pass turns at ``perturbation_frequency_hz``
+        [Hz] (see :meth:`run`)."""
         h = self.handles
         pc = h.plant.GetMyMutableContextFromRoot(context)
         M0 = self._target_inertia
@@ -434,6 +437,7 @@ class MissionSimulation:
             h.flight_software.GetMyMutableContextFromRoot(context),
             [[values[f"Delta_mul_{r}{c}"] for c in AXES] for r in AXES],
             values["Delta_add"],
+            perturbation_frequency_hz,
         )
 
     def _set_bushings(self, context, settings) -> None:
@@ -468,21 +472,22 @@ class MissionSimulation:
         start: float,
         end: float,
         noise_table: np.ndarray | None = None,
+        perturbation_frequency_hz: float = math.nan,
         *,
         within_ranges: bool = True,
     ):
         """A root context at the window start with every value applied (see the module doc).
 
         ``noise_table`` (``(n, 9)``: unit ``[n_sst; n_gyro; d_ext]`` per sample) replaces the
-        seeded Gaussian noise (deterministic inputs for tests); ``within_ranges`` as in
-        :meth:`resolve`.
+        seeded Gaussian noise (deterministic inputs for tests); ``perturbation_frequency_hz``:
+        see :meth:`run`; ``within_ranges`` as in :meth:`resolve`.
         """
         h = self.handles
         values = self.resolve(values, within_ranges=within_ranges)
         context = h.diagram.CreateDefaultContext()
         context.SetTime(float(start))
         pc = h.plant.GetMyMutableContextFromRoot(context)
-        self.apply_parameters(context, values)
+        self.apply_parameters(context, values, perturbation_frequency_hz)
         t = float(start)
         config = h.timeline.configuration(t)
         rates = h.timeline.rates(t)
@@ -541,12 +546,17 @@ class MissionSimulation:
         noise_table: np.ndarray | None = None,
         on_start: Callable[[object], None] | None = None,
         within_ranges: bool = True,
+        perturbation_frequency_hz: float = math.nan,
     ) -> MissionResult:
         """Simulate ``[start, end]`` of the mission (default: all of it).
 
         ``values`` are physical parameter values (missing ones nominal), ``seed`` seeds the
         sensor noise and disturbance (unless ``noise_seed`` is dispersed), ``noise_table``
         replaces them by a given ``(n, 9)`` unit table (see :meth:`initial_context`).
+        ``perturbation_frequency_hz`` [Hz] is where the all-pass realizing the LTI perturbations
+        ``Delta_add``, ``Delta_mul_*`` has its -90 deg phase: the critical frequency of the region
+        the run explores (:func:`~oos_drake.multibody.flight_software.allpass_block`; ``inf``:
+        static). It is required (not NaN) when one of those scalars is nonzero.
         ``on_start(context)`` is called with the run's root context before the first step; a
         caller that keeps it can read the logs afterwards with :meth:`state_log`, also when the
         run diverged (the replay does this). ``within_ranges=False`` accepts values beyond the
@@ -565,7 +575,13 @@ class MissionSimulation:
             raise ValueError(f"mission window [{start}, {end}] s outside [0, {self.duration}] s")
         h, o = self.handles, self.options
         context, values, schedule = self.initial_context(
-            values, seed, start, end, noise_table, within_ranges=within_ranges
+            values,
+            seed,
+            start,
+            end,
+            noise_table,
+            perturbation_frequency_hz,
+            within_ranges=within_ranges,
         )
         if on_start is not None:
             on_start(context)

@@ -125,6 +125,20 @@ def test_worst_cases_file_reads_back_with_the_campaign_schema(analysis):
     assert {r.subset.split(",")[0] for r in regions}
     table = pd.read_parquet(out / "worst_cases.parquet")
     assert "wc:w1_SA3 [rad/s]" in table.columns and "wc:Delta_add [-]" in table.columns
+    # every region carries the worst-case gains of the channels bounding the campaign's APE and
+    # wheel command at its own configuration: an upper bound cannot be below the nominal gain
+    # (delta = 0 is in every set), and the performance table holds that configuration
+    performance = pd.read_parquet(out / "performance.parquet")
+    for region in regions:
+        assert set(region.gains) == {"ape", "peak_torque"}
+        for metric, channel in (("ape", "e_p"), ("peak_torque", "e_u")):
+            low, high = region.gains[metric]
+            rows = performance[
+                (performance["time [s]"] == region.time) & (performance["channel"] == channel)
+            ]
+            assert len(rows) > 0
+            assert 0 < low <= high * (1 + 1e-9)
+            assert high >= rows["gain_nominal [-]"].max() * (1 - 1e-6)
 
 
 def test_peak_bounds_meet(analysis):

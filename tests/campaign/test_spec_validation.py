@@ -77,7 +77,7 @@ BAD_SPECS = {
     ),
     "mu-guided without worst cases": (
         _replace('sampler = "monte-carlo"', 'sampler = "mu-guided"'),
-        r"mu-guided needs worst_cases",
+        r"mu-guided needs the analysis. worst_cases\.parquet .*--worst-cases",
     ),
     "unknown metric": (
         _replace('metrics = ["ape", "peak_torque"]', 'metrics = ["ape", "apex"]'),

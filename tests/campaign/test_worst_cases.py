@@ -112,7 +112,11 @@ def test_mu_guided_campaign_records_weights_regions_and_copies_worst_cases(write
     assert regions["runs"].sum() == 30
     assert regions.set_index("region").loc[0, "runs"] == (runs["region"] == 0).sum()
     assert "runs per region" in report.text
-    assert (out / "report" / "regions_prediction.png") in report.figures
+    # no worst-case gains in this file: no performance comparison figure (mu is not set beside
+    # a performance metric any more)
+    assert {p.name for p in report.figures}.isdisjoint(
+        {"regions_prediction.png", "regions_performance.png"}
+    )
     observed = regions.set_index("region").loc[0, "worst ratio (nonlinear) [-]"]
     near_ratio = np.maximum(near["ape [rad]"] / 0.0079, near["peak_torque [N m]"] / 2.0)
     assert observed == near_ratio.max()
@@ -131,3 +135,27 @@ def test_critical_window_centres_runs_on_region_times(write_spec, tmp_path):
         assert row["window_end [s]"] == starts[region] + 45.0
         if row["region"] != -1:
             assert region == row["region"]
+
+
+def test_worst_case_gains_round_trip_and_are_checked(tmp_path):
+    """Optional ``wcgain:<metric> lower|upper [-]`` columns: written, read back per region
+    (NaN pairs left out), refused when lower exceeds upper or a bound is missing."""
+    from dataclasses import replace
+
+    regions = (
+        replace(REGIONS[0], gains={"ape": (0.8, 0.9), "peak_torque": (0.1, 0.2)}),
+        replace(REGIONS[1], gains={"ape": (0.4, 0.45)}),
+    )
+    path = write_worst_cases(regions, PARAMETERS, tmp_path / "wc.parquet")
+    table = pd.read_parquet(path)
+    assert {"wcgain:ape lower [-]", "wcgain:peak_torque upper [-]"} <= set(table.columns)
+    back = read_worst_cases(path, PARAMETERS)
+    assert [dict(r.gains) for r in back] == [dict(r.gains) for r in regions]
+    bad = table.copy()
+    bad.loc[0, "wcgain:ape lower [-]"] = 1.5
+    bad.to_parquet(tmp_path / "bad.parquet")
+    with pytest.raises(ValueError, match="wcgain:ape lower"):
+        read_worst_cases(tmp_path / "bad.parquet", PARAMETERS)
+    table.drop(columns="wcgain:ape upper [-]").to_parquet(tmp_path / "half.parquet")
+    with pytest.raises(ValueError, match="needs both"):
+        read_worst_cases(tmp_path / "half.parquet", PARAMETERS)

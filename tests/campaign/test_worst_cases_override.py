@@ -20,10 +20,24 @@ def test_override_replaces_the_regions(tmp_path):
     assert (tmp_path / "out" / "worst_cases.parquet").read_bytes() == override.read_bytes()
 
 
-def test_override_on_plain_monte_carlo_is_refused(tmp_path):
-    with pytest.raises(ValueError, match="not mu-guided"):
+def test_override_on_a_plain_sampler_gives_the_peak_frequency(tmp_path):
+    """A sampler not guided by mu (Latin hypercube, plain Monte Carlo) takes only the frequency
+    of the analysis' peak (largest mu_upper) from a worst-cases file; a missing file is refused
+    before anything is written."""
+    with pytest.raises(ValueError, match="x.parquet: file not found"):
         prepare_campaign(CAMPAIGNS / "demo.toml", tmp_path / "out", tmp_path / "x.parquet")
     assert not (tmp_path / "out").exists()
+    table = pd.read_parquet(CAMPAIGNS / "demo_worst_cases.parquet")
+    table["frequency [Hz]"] = [0.3, 0.7, 0.2][: len(table)]
+    table["mu_upper"] = [1.0, 2.0, 1.5][: len(table)]
+    table["mu_lower"] = table["mu_upper"]
+    override = tmp_path / "wc.parquet"
+    table.to_parquet(override)
+    _, spec, plan = prepare_campaign(CAMPAIGNS / "demo.toml", tmp_path / "out", override)
+    assert spec.sampler.kind == "latin-hypercube"
+    assert (plan["region"] == -1).all()
+    assert (plan["frequency [Hz]"] == 0.7).all()
+    assert (tmp_path / "out" / "worst_cases.parquet").is_file()
 
 
 def test_simulator_option_override_reaches_the_resolved_spec(tmp_path):

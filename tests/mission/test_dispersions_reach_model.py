@@ -186,8 +186,13 @@ def test_lti_perturbations_reach_the_applied_torque(mission_10hz_log):
         for i, r in enumerate("xyz")
         for j, c in enumerate("xyz")
     }
+    frequency_hz = 0.3
     result = mission.run(
-        {**values, "Delta_add": delta_add}, start=start, end=end, noise_table=table
+        {**values, "Delta_add": delta_add},
+        start=start,
+        end=end,
+        noise_table=table,
+        perturbation_frequency_hz=frequency_hz,
     )
     ts = result.timeseries
     cols = lambda p: ts[[f"{p}_{a} [N m]" for a in "xyz"]].to_numpy()  # noqa: E731
@@ -199,7 +204,7 @@ def test_lti_perturbations_reach_the_applied_torque(mission_10hz_log):
     J_ref = mission.handles.flight_software.design.J_ref
     t = ts["time [s]"].to_numpy() - start
     filtered = np.stack(
-        [scipy.signal.lsim(allpass(0.55), T_rw[:, i], t)[1] for i in range(3)], axis=1
+        [scipy.signal.lsim(allpass(frequency_hz), T_rw[:, i], t)[1] for i in range(3)], axis=1
     )
     expected = filtered @ (delta_mul * W_mul + delta_add * spec.additive_weight * J_ref).T
     scale = np.abs(expected).max()

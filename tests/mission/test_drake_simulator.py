@@ -11,7 +11,6 @@ pytest.importorskip("pydrake")
 from oos_drake.campaign.drake_simulator import (  # noqa: E402
     FACTORY_PATH,
     DrakeMissionSimulator,
-    paper_worst_cases,
 )
 from oos_drake.campaign.simulator import (  # noqa: E402
     MissionWindow,
@@ -54,10 +53,6 @@ def test_declarations_cover_every_uncertain_block(simulator):
     assert simulator.events() == {"capture": 255.0, "docking": 880.0, "tilt": 1100.0}
     assert simulator.duration() == 1500.0
     assert set(simulator.metric_signals().values()) <= set(simulator.signal_units())
-    by_name = {p.name: p for p in simulator.parameters()}
-    for region in paper_worst_cases():
-        for name, value in region.perturbation.items():
-            assert by_name[name].lower <= value <= by_name[name].upper
 
 
 def test_rerun_reproduces_metrics_exactly(simulator):
@@ -66,6 +61,7 @@ def test_rerun_reproduces_metrics_exactly(simulator):
         12345,
         {"m_RH2": 26.0, "w1_SA1": 7.0, "Delta_mul_yy": 0.5},
         MissionWindow(250.0, 270.0, "event:capture"),
+        frequency=0.7,
     )
     first, second = simulator.run(case), simulator.run(case)
     assert dict(first.metrics) == dict(second.metrics)
@@ -96,13 +92,32 @@ def test_bad_options_and_values_are_rejected(simulator):
         simulator.run(RunCase(0, 1, {"mass": 1.0}, MissionWindow(0.0, 1.0)))
 
 
-@pytest.mark.parametrize("name", ["paper.toml", "paper_mc.toml"])
-def test_paper_campaign_specs_load_and_plan(name):
-    from oos_drake.campaign.samplers import make_plan
-    from oos_drake.campaign.spec import load_spec
+#: Synthetic regions (a test input, not results): LTI perturbations at three frequencies, one
+#: of them infinite (an ill-posed peak), with mu_upper values that make region 1 the peak.
+SYNTHETIC_REGIONS = (
+    (0.0889, 0.2, {"Delta_add": 1.0, "w1_SA1": 6.5}),
+    (0.8247, 0.4, {"Delta_mul_xx": 0.9, "Delta_mul_yz": -1.0, "m_RH2": 27.0}),
+    (math.inf, 0.1, {"Delta_add": -1.0, "Jxx_RH2": 2.9}),
+)
 
-    spec = load_spec(CAMPAIGNS / name)
-    plan = make_plan(spec)
+
+@pytest.fixture(scope="module")
+def synthetic_worst_cases(simulator, tmp_path_factory):
+    from oos_drake.campaign.worst_cases import WorstCaseRegion, write_worst_cases
+
+    regions = [
+        WorstCaseRegion(i, f"synthetic {i}", 300.0 + 100 * i, f, mu, mu, ",".join(p), p)
+        for i, (f, mu, p) in enumerate(SYNTHETIC_REGIONS)
+    ]
+    path = tmp_path_factory.mktemp("worst_cases") / "worst_cases.parquet"
+    return write_worst_cases(regions, simulator.parameters(), path)
+
+
+@pytest.mark.parametrize("name", ["paper.toml", "paper_mc.toml"])
+def test_paper_campaign_specs_load_and_plan(name, synthetic_worst_cases, tmp_path):
+    from oos_drake.campaign.runner import plan_campaign
+
+    spec, plan = plan_campaign(CAMPAIGNS / name, synthetic_worst_cases)
     assert len(plan) == spec.n_runs
     width = plan["window_end [s]"] - plan["window_start [s]"]
     np.testing.assert_allclose(width, 80.0)
@@ -110,6 +125,87 @@ def test_paper_campaign_specs_load_and_plan(name):
         assert len(spec.regions) == 3
         assert (plan["region"] >= 0).sum() > spec.n_runs / 2
         assert plan["weight"].max() <= 1.0 / spec.sampler.defensive_fraction + 1e-9
+        # every run is realized at the frequency of the region of its window
+        frequencies = {f"region:{i}": f for i, (f, _, _) in enumerate(SYNTHETIC_REGIONS)}
+        np.testing.assert_array_equal(
+            plan["frequency [Hz]"], plan["window"].map(frequencies).to_numpy(float)
+        )
+    else:  # not tied to a region: the analysis' peak (largest mu_upper)
+        assert (plan["frequency [Hz]"] == SYNTHETIC_REGIONS[1][0]).all()
+
+
+@pytest.mark.parametrize("name", ["paper", "paper_mc"])
+def test_paper_campaigns_without_worst_cases_are_refused(name, tmp_path, capsys):
+    """Through the CLI: exit 2, one line naming the missing worst_cases.parquet, nothing written
+    (no stand-in regions, no stand-in frequency)."""
+    from oos_drake.campaign.cli import main
+
+    out = tmp_path / "out"
+    assert main(["campaign", "run", name, "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "worst_cases.parquet" in err and "--worst-cases" in err
+    assert not out.exists()
+    missing = tmp_path / "no_analysis" / "worst_cases.parquet"
+    args = ["campaign", "run", name, "--out", str(out), "--worst-cases", str(missing)]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(missing) in err
+    assert not out.exists()
+
+
+def _allpass_response(fsw, perturbation, frequency_hz):
+    """Response at ``frequency_hz`` of the flight software's realized all-pass: the transfer
+    ``sat(u) -> a_mul`` of its stage-2 matrix divided by ``sat(u) -> T_rw`` (the all-pass filters
+    T_rw), evaluated on the unit circle from the matrix the update uses."""
+    M = fsw._output_stage(perturbation)
+    n2 = M.shape[1] - 6
+    A, B = M[:n2, :n2], M[:n2, n2 : n2 + 3]
+    z = np.exp(2j * np.pi * frequency_hz * fsw.design.period)
+    state = np.linalg.solve(z * np.eye(n2) - A, B)
+
+    def transfer(rows):
+        return M[rows, :n2] @ state + M[rows, n2 : n2 + 3]
+
+    T_rw = transfer(slice(n2, n2 + 3))
+    a_mul = transfer(slice(n2 + 6, n2 + 9))
+    a_add = transfer(slice(n2 + 9, n2 + 12))
+    return a_mul @ np.linalg.inv(T_rw), a_add @ np.linalg.inv(T_rw)
+
+
+def test_region_lti_perturbation_is_realized_at_the_region_frequency(
+    simulator, synthetic_worst_cases
+):
+    """From the plan row to the flight software: a run of region r carries r's frequency, and
+    the discrete all-pass the flight software applies equals a(j 2 pi f_r) = (p - j w)/(p + j w)
+    at w = p = 2 pi f_r, i.e. -j (closed form), whatever the region; at infinite frequency it is
+    the static 1 (the documented decision for ill-posed peaks)."""
+    from oos_drake.campaign.runner import case_from_plan_row, plan_campaign
+
+    spec, plan = plan_campaign(CAMPAIGNS / "paper.toml", synthetic_worst_cases)
+    fsw = simulator.simulation.handles.flight_software
+    for region, (frequency_hz, _, _) in enumerate(SYNTHETIC_REGIONS):
+        row = plan[plan["region"] == region].iloc[0]
+        case = case_from_plan_row(spec, row)
+        assert case.frequency == frequency_hz
+        context, _, _ = simulator.simulation.initial_context(
+            dict(case.values),
+            case.seed,
+            case.window.start,
+            case.window.end,
+            perturbation_frequency_hz=case.frequency,
+        )
+        parameter = fsw.GetMyContextFromRoot(context).get_numeric_parameter(0).get_value()
+        assert parameter[10] == frequency_hz
+        probe = 0.8247 if math.isinf(frequency_hz) else frequency_hz
+        expected = np.eye(3) * (1.0 if math.isinf(frequency_hz) else -1j)
+        for response in _allpass_response(fsw, parameter, probe):
+            np.testing.assert_allclose(response, expected, atol=1e-9)
+        # the other regions' frequencies are not where this run's all-pass is -j
+        for other, _, _ in SYNTHETIC_REGIONS:
+            if other != frequency_hz and math.isfinite(frequency_hz) and math.isfinite(other):
+                off = _allpass_response(fsw, parameter, other)[0][0, 0]
+                assert abs(off + 1j) > 0.1
 
 
 @pytest.mark.slow

@@ -11,6 +11,7 @@ from oos_drake.control import components as comp  # noqa: E402
 from oos_drake.multibody.flight_software import (  # noqa: E402
     FlightSoftwareDesign,
     allpass,
+    allpass_block,
     discretize,
 )
 from oos_drake.multibody.mission import (  # noqa: E402
@@ -48,12 +49,46 @@ def test_discretized_blocks_keep_dc_gain_and_match_the_continuous_response(rate)
 
 
 def test_allpass_has_unit_gain_and_is_stable():
-    A, B, C, D = allpass(0.55)
-    _, h = scipy.signal.freqresp((A, B, C, D), np.logspace(-3, 3, 50))
-    np.testing.assert_allclose(np.abs(h), 1.0, rtol=1e-12)
+    A, B, C, D = allpass(0.4)
+    w = np.logspace(-3, 3, 50)
+    _, h = scipy.signal.freqresp((A, B, C, D), w)
+    p = 2 * np.pi * 0.4
+    np.testing.assert_allclose(h, (p - 1j * w) / (p + 1j * w), rtol=1e-12)  # the closed form
     assert np.all(np.linalg.eigvals(A).real < 0)
     block = discretize(A, B, C, D, 0.1)
     assert np.all(np.abs(np.linalg.eigvals(block.A)) < 1)
+
+
+def _response(block, frequency_hz, period):
+    z = np.exp(2j * np.pi * frequency_hz * period)
+    n = block.A.shape[0]
+    return block.C @ np.linalg.solve(z * np.eye(n) - block.A, block.B) + block.D
+
+
+@pytest.mark.parametrize("rate", [10.0, 50.0])
+@pytest.mark.parametrize("frequency_hz", [0.0889, 0.8247, 3.0])
+def test_discrete_allpass_is_minus_j_at_its_frequency(rate, frequency_hz):
+    """Pre-warped Tustin: the discrete all-pass equals the continuous a(j 2 pi f) = -j at f
+    (closed form), has unit gain on the whole unit circle and is stable."""
+    T = 1.0 / rate
+    block = allpass_block(frequency_hz, T)
+    np.testing.assert_allclose(_response(block, frequency_hz, T), -1j * np.eye(3), atol=1e-12)
+    for f in np.geomspace(1e-3, 0.499 * rate, 40):
+        np.testing.assert_allclose(np.abs(np.diag(_response(block, f, T))), 1.0, rtol=1e-12)
+    assert np.all(np.abs(np.linalg.eigvals(block.A)) < 1)
+    # without pre-warping the phase at f would be off by the Tustin warp
+    plain = discretize(*[np.kron(np.eye(3), m) for m in allpass(frequency_hz)], T)
+    warp = abs(np.angle(_response(plain, frequency_hz, T)[0, 0]) + np.pi / 2)
+    assert warp > 1e-6  # the pre-warped one is exact to 1e-12
+
+
+@pytest.mark.parametrize("frequency_hz", [5.0, 7.0, np.inf, np.nan])
+def test_allpass_at_or_above_nyquist_is_static(frequency_hz):
+    block = allpass_block(frequency_hz, 0.1)
+    for f in (0.01, 1.0, 4.9):
+        np.testing.assert_allclose(_response(block, f, 0.1), np.eye(3), atol=0)
+    with pytest.raises(ValueError, match="frequency"):
+        allpass_block(0.0, 0.1)
 
 
 def test_design_rejects_bad_inputs():
@@ -107,9 +142,14 @@ def test_merged_stages_equal_the_block_by_block_chain():
     design = FlightSoftwareDesign.create(np.arange(18.0).reshape(3, 6) / 7.0, 10.0)
     fsw = FlightSoftware(design, nq=12, nv=12, hub_q_start=0, hub_v_start=0)
     rng = np.random.default_rng(0)
+    frequency_hz = 0.4
+    perturbation = np.concatenate([np.zeros(10), [frequency_hz]])
+    n2 = design.wheels.nstates + design.disturbance.nstates + 6
+    M2 = fsw._output_stage(perturbation)[: n2 + 12]  # without the torque mixing row
+    ap = allpass_block(frequency_hz, design.period)
     for stage, reference, nz in (
         (fsw._M1, fsw._stage1_reference, 12),
-        (fsw._M2, fsw._stage2_reference, 6),
+        (M2, lambda x, z: fsw._stage2_reference(x, z, ap), 6),
     ):
         nx = stage.shape[1] - nz
         x, z = rng.standard_normal(nx), rng.standard_normal(nz)
@@ -183,8 +223,13 @@ def test_update_equals_the_block_by_block_chain_with_perturbations():
     noise = rng.standard_normal((5, 9))
     fsw.set_noise(fc, noise)
     s = fsw.state_slices
-    for delta_mul, delta_add in ((rng.uniform(-1, 1, (3, 3)), 0.7), (np.eye(3) * -0.4, -1.0)):
-        fsw.set_perturbations(fc, delta_mul, delta_add)
+    with pytest.raises(ValueError, match="no frequency"):
+        fsw.set_perturbations(fc, np.eye(3), 0.0)
+    for delta_mul, delta_add, frequency_hz in (
+        (rng.uniform(-1, 1, (3, 3)), 0.7, 0.31),
+        (np.eye(3) * -0.4, -1.0, 0.82),
+    ):
+        fsw.set_perturbations(fc, delta_mul, delta_add, frequency_hz)
         x = rng.standard_normal(s["counter"].stop)
         x[s["metrics"]] = np.abs(x[s["metrics"]])
         x[s["counter"]] = 2.0
@@ -198,7 +243,9 @@ def test_update_equals_the_block_by_block_chain_with_perturbations():
         x1_next, u = fsw._stage1_reference(x1, np.concatenate([rpy, w_B, n[0:6]]))
         sat = np.clip(u, -design.torque_limit, design.torque_limit)
         x2 = x[s["wheels"].start : s["add"].stop]
-        x2_next, y2 = fsw._stage2_reference(x2, np.concatenate([sat, n[6:9]]))
+        x2_next, y2 = fsw._stage2_reference(
+            x2, np.concatenate([sat, n[6:9]]), allpass_block(frequency_hz, design.period)
+        )
         T_rw, T_dist, a_mul, a_add = y2.reshape(4, 3)
         T = (
             T_rw
