@@ -404,17 +404,21 @@ class FlightSoftware(LeafSystem):
         out["samples"] = float(x[self._slices["counter"]][0])
         return out
 
-    def linear_update(self, delta_mul=0.0, delta_add: float = 0.0) -> DiscreteBlock:
+    def linear_update(
+        self, delta_mul=0.0, delta_add: float = 0.0, frequency_hz: float = math.nan
+    ) -> DiscreteBlock:
         """The update as it runs, without noise and below the torque limit: a discrete system.
 
         ``x_{k+1} = A x_k + B [phi_k; w_k]``, ``T_k = C x_k + D [phi_k; w_k]`` with ``x`` the
         filter states (both stages), ``phi`` the hub roll-pitch-yaw angles [rad], ``w`` its body
         rate [rad/s] sampled at ``t_k`` and ``T`` the hub torque [N m] held over
         ``[t_k, t_{k+1})`` (no computation delay: the torque computed at ``t_k`` acts from
-        ``t_k``). ``delta_mul``, ``delta_add`` as in :meth:`set_perturbations`.
+        ``t_k``). ``delta_mul``, ``delta_add``, ``frequency_hz`` as in :meth:`set_perturbations`.
         """
         matrix = np.broadcast_to(np.asarray(delta_mul, dtype=float), (3, 3))
-        M2 = self._output_stage(np.concatenate([[float(delta_add)], matrix.ravel()]))
+        M2 = self._output_stage(
+            np.concatenate([[float(delta_add)], matrix.ravel(), [float(frequency_hz)]])
+        )
         n1, n2 = self._n1, self._n2
         A1, B1 = self._M1[:n1, :n1], self._M1[:n1, n1 : n1 + 6]
         C1, D1 = self._M1[n1:, :n1], self._M1[n1:, n1 : n1 + 6]
