@@ -7,7 +7,7 @@ printed as one line and give exit status 2.
 
 One name per option across commands: ``--out`` (where results go), ``--workers`` (parallel
 worker processes or threads), ``--quiet`` (no progress bars), ``--f-min``/``--f-max`` (frequency
-range [Hz]). Older spellings (``--jobs``, ``--no-progress``, ``--fmin``, ``--fmax``) are hidden
+range [Hz]), ``--scenario`` (the scenario data file: :func:`add_scenario_argument`). Older spellings (``--jobs``, ``--no-progress``, ``--fmin``, ``--fmax``) are hidden
 aliases that raise a ``DeprecationWarning`` (:func:`add_deprecated_alias`).
 """
 
@@ -67,6 +67,21 @@ def add_deprecated_alias(
     parser.add_argument(
         old, dest=dest, new=new, action=_DeprecatedAlias, default=argparse.SUPPRESS, **options
     )
+
+
+SCENARIO_HELP = (
+    "scenario data file (TOML: spacecraft, mission and [control] requirements) or the name of a "
+    "shipped one (paper, heavy_target); default: the paper's"
+)
+
+
+def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
+    """Add ``--scenario FILE`` (one name and help text for every command that builds a model).
+
+    The value stays a string (``None``: the paper's scenario) for
+    :func:`oos_drake.scenario.data.load_scenario`, which resolves shipped names.
+    """
+    parser.add_argument("--scenario", default=None, metavar="FILE", help=SCENARIO_HELP)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -5,21 +5,14 @@ from __future__ import annotations
 import argparse
 
 from oos_drake.analysis.stability import SweepOptions
-from oos_drake.cli import add_deprecated_alias
+from oos_drake.cli import add_deprecated_alias, add_scenario_argument
 
 
-def _controller(path):
-    from oos_drake.analysis.controller import baseline_controller, load_controller
+def _controller(path, scenario=None):
+    """:func:`oos_drake.analysis.controller.scenario_controller` (the name tests know)."""
+    from oos_drake.analysis.controller import scenario_controller
 
-    if path:
-        return load_controller(path)
-    from oos_drake.analysis.loop import rotational_channels
-    from oos_drake.control.baseline import TUNING_TIME_S
-    from oos_drake.lfr import usubs
-    from oos_drake.scenario.model import build_mission_model, mission_values
-
-    plant = usubs(build_mission_model(), mission_values([TUNING_TIME_S])).model(0)
-    return baseline_controller(rotational_channels(plant).nominal)
+    return scenario_controller(path, scenario)
 
 
 def _write_atomically(out, work):
@@ -48,8 +41,10 @@ def _write_atomically(out, work):
 def run_analyze(args) -> int:
     """Run the analysis; exit status 0."""
     from oos_drake.analysis.run import AnalysisOptions, run_analysis
+    from oos_drake.scenario.data import load_scenario
 
-    controller = _controller(args.controller)
+    scenario = load_scenario(args.scenario)
+    controller = _controller(args.controller, scenario)
     if controller.label == "baseline":
         print(
             "WARNING: no --controller given: analyzing the BASELINE PD controller "
@@ -80,8 +75,11 @@ def run_analyze(args) -> int:
         progress=not args.quiet,
         plant=args.plant,
     )
-    summary = _write_atomically(args.out, lambda tmp: run_analysis(controller, tmp, options))
+    summary = _write_atomically(
+        args.out, lambda tmp: run_analysis(controller, tmp, options, scenario=scenario)
+    )
     m = summary["mission"]
+    print(f"scenario: {scenario.name} ({scenario.source})")
     print(f"controller: {controller.label} ({controller.source}); plants: {args.plant}")
     print(
         f"mission: mu peak <= {m['mu_peak_upper']:.4g} "
@@ -109,8 +107,90 @@ def run_analyze(args) -> int:
     return 0
 
 
+def run_study_command(args) -> int:
+    """``oos study``: one table and one figure of the margin against a swept scenario value."""
+    from dataclasses import replace
+
+    from oos_drake.analysis.run import AnalysisOptions
+    from oos_drake.analysis.study import StudyOptions, Sweep, run_study
+
+    sweep = Sweep.parse(args.vary)
+    analysis = replace(
+        StudyOptions().analysis,
+        configurations=args.configurations,
+        docking_points=args.docking_points,
+        docking_phases=tuple(p for p in args.docking.split(",") if p),
+    )
+    options = StudyOptions(
+        controller=args.controller,
+        synthesize=args.synthesize,
+        synthesis_configurations=args.synthesis_configurations,
+        analysis=AnalysisOptions(**analysis.__dict__),
+        workers=args.workers,
+    )
+    table = _write_atomically(
+        args.out, lambda tmp: run_study(args.scenario, sweep, tmp, options, not args.quiet)
+    )
+    import json
+    from pathlib import Path
+
+    summary = json.loads((Path(args.out) / "summary.json").read_text())
+    columns = [sweep.column, "mu_upper [-]", "mu_lower [-]", "margin_lower [-]",
+               "margin_upper [-]", "worst study", "pointing worst gain upper [-]"]
+    if args.synthesize:
+        columns.append("gamma [-]")
+    print(table[columns].to_string(index=False))
+    crossing = summary["margin_reaches_1"]
+    print(
+        f"margin 1 reached: certified lower bound at {crossing['certified']}, attained upper "
+        f"bound at {crossing['attained']} ({sweep.column}; None: not within the sweep)"
+    )
+    print(f"outputs in {args.out}: study.parquet, study.csv, study.png, points/")
+    return 0
+
+
+def _register_study(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "study",
+        help="parameter study: the certified robustness margin against one scenario value",
+        description="Sweep one number of the scenario file (--vary PATH=start:stop:n, PATH a "
+        "dotted path such as hubs.RH2.mass or control.pointing_requirement), re-run the mu "
+        "analysis (and with --synthesize the synthesis) for each value in parallel, and write "
+        "one table (study.parquet/.csv) and one figure (study.png) of the margin 1/mu (upper "
+        "and lower bound) against the value.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    add_scenario_argument(parser)
+    parser.add_argument("--vary", required=True, metavar="PATH=start:stop:n", help="swept value")
+    parser.add_argument("--out", required=True, help="output directory")
+    parser.add_argument(
+        "--controller",
+        default=None,
+        help="controller JSON analyzed at every value (default: the BASELINE PD tuned on each "
+        "value's scenario); with --synthesize, the start of each synthesis",
+    )
+    parser.add_argument(
+        "--synthesize", action="store_true", help="re-synthesize the controller at every value"
+    )
+    parser.add_argument(
+        "--configurations", type=int, default=40, help="mission configurations per analysis"
+    )
+    parser.add_argument(
+        "--synthesis-configurations",
+        type=int,
+        default=40,
+        help="mission configurations per synthesis",
+    )
+    parser.add_argument("--docking", default="7,8", help="docking phases (comma-separated)")
+    parser.add_argument("--docking-points", type=int, default=40, help="stiffness values")
+    parser.add_argument("--workers", type=int, default=2, help="values analyzed in parallel")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.set_defaults(func=run_study_command)
+
+
 def register(subparsers) -> None:
-    """Add ``oos analyze``."""
+    """Add ``oos analyze`` and ``oos study``."""
+    _register_study(subparsers)
     parser = subparsers.add_parser(
         "analyze",
         help="worst-case mu analysis over the mission and the docking phases (paper section 4)",
@@ -195,6 +275,7 @@ def register(subparsers) -> None:
         "validated on intervals; slower, and loose where the optimizer stalls: see DESIGN.md)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_scenario_argument(parser)
     add_deprecated_alias(parser, "--fmin", "--f-min", type=float)
     add_deprecated_alias(parser, "--fmax", "--f-max", type=float)
     add_deprecated_alias(parser, "--jobs", "--workers", type=int)

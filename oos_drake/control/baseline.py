@@ -66,3 +66,15 @@ def inertia_from_plant(plant: BatchedStateSpace) -> np.ndarray:
         G0 = D
     J = np.linalg.inv(G0)
     return 0.5 * (J + np.swapaxes(J, -1, -2))
+
+
+def baseline_for(plants) -> np.ndarray:
+    """Baseline gain tuned on the configuration of ``plants`` (a ``PlantArray``) closest to the
+    first docking (t = 255 s)."""
+    table = plants.configurations
+    if "time_s" in table:
+        k = int(np.argmin(np.abs(table["time_s"].to_numpy() - TUNING_TIME_S)))
+    else:
+        k = 0
+    J = inertia_from_plant(plants.evaluate([k]))[0]
+    return baseline_gains(J)
