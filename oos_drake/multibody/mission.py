@@ -64,6 +64,7 @@ from pydrake.systems.primitives import (
 from pydrake.trajectories import PiecewisePolynomial
 
 from oos_drake.control.baseline import baseline_gains
+from oos_drake.control.components import DesignSpecification
 from oos_drake.multibody.flight_software import FlightSoftware, FlightSoftwareDesign
 from oos_drake.multibody.plant_parts import add_floating_joint, add_modal_residual
 from oos_drake.multibody.scenario_sdf import (
@@ -490,6 +491,7 @@ def make_mission_diagram(
     design = FlightSoftwareDesign.create(
         K,
         options.control_rate,
+        spec=DesignSpecification.from_requirements(scenario.control),
         torque_limit=options.torque_limit,
         perturbation_frequency_hz=options.perturbation_frequency_hz,
         J_ref=J_ref,
