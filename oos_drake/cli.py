@@ -7,8 +7,9 @@ printed as one line and give exit status 2.
 
 One name per option across commands: ``--out`` (where results go), ``--workers`` (parallel
 worker processes or threads), ``--quiet`` (no progress bars), ``--f-min``/``--f-max`` (frequency
-range [Hz]), ``--scenario`` (the scenario data file: :func:`add_scenario_argument`). Older spellings (``--jobs``, ``--no-progress``, ``--fmin``, ``--fmax``) are hidden
-aliases that raise a ``DeprecationWarning`` (:func:`add_deprecated_alias`).
+range [Hz]), ``--scenario`` (the scenario data file: :func:`add_scenario_argument`). Older
+spellings (``--jobs``, ``--no-progress``, ``--fmin``, ``--fmax``) are hidden aliases that raise
+a ``DeprecationWarning`` (:func:`add_deprecated_alias`).
 """
 
 from __future__ import annotations

@@ -5,9 +5,10 @@ Each stage writes one folder under ``--out``. A stage is skipped when its folder
 file the stage reads (``--scenario``: the physical data and mission for the model and the Drake
 check, plus its ``[control]`` section for the controller and everything after it; parsed content,
 so editing a comment recomputes nothing), the source code of the packages the stage depends on,
-the stage options and the keys of the stages it reads. A stage is computed in a temporary folder that replaces the old one only when it succeeds,
-so an interrupted ``oos run`` never leaves a half-written stage behind; the campaign stage instead
-resumes (no finished run is lost or repeated).
+the stage options and the keys of the stages it reads. A stage is computed in a temporary
+folder that replaces the old one only when it succeeds, so an interrupted ``oos run`` never
+leaves a half-written stage behind; the campaign stage instead resumes (no finished run is lost
+or repeated). The campaign spec must be written for the same scenario (its ``scenario`` key).
 """
 
 from __future__ import annotations
@@ -172,7 +173,9 @@ def run_pipeline(args: argparse.Namespace) -> int:
         ),
         timings,
     )
-    run_stage("validate", out / "validate", keys["validate"], lambda d: _validate(d, scenario), timings)
+    run_stage(
+        "validate", out / "validate", keys["validate"], lambda d: _validate(d, scenario), timings
+    )
     run_stage(
         "controller",
         out / "controller",
@@ -225,9 +228,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
     timings["campaign + report"] = time.perf_counter() - campaign_start
     total = time.perf_counter() - start
     (out / "timings.json").write_text(
-        json.dumps(
-            {"scenario": str(scenario), "stages_s": timings, "total_s": total}, indent=1
-        )
+        json.dumps({"scenario": str(scenario), "stages_s": timings, "total_s": total}, indent=1)
         + "\n"
     )
 

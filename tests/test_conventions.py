@@ -37,6 +37,7 @@ def _sources():
 # ---------------------------------------------------------------- D3: the oos parser
 COMMANDS = {
     "run", "model", "sdf", "validate", "synth", "analyze", "robust", "campaign", "ulinearize",
+    "study",
 }  # fmt: skip
 #: Every command line that runs something (README's `oos` table).
 RUNNABLE = {
@@ -44,6 +45,7 @@ RUNNABLE = {
     "validate",
     "synth",
     "analyze",
+    "study",
     "model info",
     "model figures",
     "sdf generate",

@@ -66,7 +66,9 @@ def test_scenario_edits_recompute_exactly_the_dependent_stages(tmp_path, stubbed
     _run(out, scenario, campaign)  # comments only: nothing to recompute
     assert _ran(out) == []
 
-    scenario.write_text(PAPER.replace("pointing_requirement = 0.0079", "pointing_requirement = 0.005"))
+    scenario.write_text(
+        PAPER.replace("pointing_requirement = 0.0079", "pointing_requirement = 0.005")
+    )
     _run(out, scenario, campaign)  # requirements: controller and after, not the model
     assert _ran(out) == ["analysis", "controller"]
 

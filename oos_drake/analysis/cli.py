@@ -135,8 +135,15 @@ def run_study_command(args) -> int:
     from pathlib import Path
 
     summary = json.loads((Path(args.out) / "summary.json").read_text())
-    columns = [sweep.column, "mu_upper [-]", "mu_lower [-]", "margin_lower [-]",
-               "margin_upper [-]", "worst study", "pointing worst gain upper [-]"]
+    columns = [
+        sweep.column,
+        "mu_upper [-]",
+        "mu_lower [-]",
+        "margin_lower [-]",
+        "margin_upper [-]",
+        "worst study",
+        "pointing worst gain upper [-]",
+    ]
     if args.synthesize:
         columns.append("gamma [-]")
     print(table[columns].to_string(index=False))

@@ -196,8 +196,8 @@ def _synthesize(scenario, options: StudyOptions, folder: Path) -> tuple[float, s
     """``oos synth`` on ``scenario`` (from ``options.controller`` or the baseline)."""
     from oos_drake.analysis.controller import load_controller
     from oos_drake.control.baseline import baseline_for
-    from oos_drake.control.plants import scenario_plants
     from oos_drake.control.components import DesignSpecification
+    from oos_drake.control.plants import scenario_plants
     from oos_drake.control.report import write_synthesis
     from oos_drake.control.synthesis import SynthesisOptions, synthesize
     from oos_drake.scenario.data import scenario_record

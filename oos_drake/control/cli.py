@@ -69,9 +69,7 @@ def run_synth(args) -> int:
     )
     K0 = baseline_for(plants)
     result = synthesize(plants, K0, spec=spec, options=options, progress=print)
-    paths = write_synthesis(
-        args.out, result, plants, options, scenario=scenario_record(scenario)
-    )
+    paths = write_synthesis(args.out, result, plants, options, scenario=scenario_record(scenario))
     print(f"scenario: {scenario.name} ({scenario.source})")
     active = result.models[result.models["active"]]
     print(

@@ -1210,14 +1210,19 @@ def _check_ik_waypoints(scenario: Scenario) -> None:
 
 
 def _set_value(document: dict[str, Any], path: str, value: float) -> None:
-    """Set the number at dotted ``path`` (``hubs.RH2.mass``, ``array_models.SA3_4.frequencies_hz.0``)."""
+    """Set the number at dotted ``path`` of a parsed scenario document.
+
+    ``hubs.RH2.mass``; list entries by index: ``array_models.SA3_4.frequencies_hz.0``.
+    """
     node: Any = document
     keys = path.split(".")
     for depth, key in enumerate(keys):
         where = ".".join(keys[:depth]) or "the scenario"
         if isinstance(node, list):
             if not key.isdigit() or int(key) >= len(node):
-                raise ScenarioError(path, f"unknown path: {where} is a list of {len(node)}, not '{key}'")
+                raise ScenarioError(
+                    path, f"unknown path: {where} is a list of {len(node)}, not '{key}'"
+                )
             index: Any = int(key)
         elif isinstance(node, dict):
             if key not in node:

@@ -136,7 +136,9 @@ def test_wheel_model_moves_the_actuator_poles():
 def test_rolloff_order_and_cutoff_move_the_butterworth_poles():
     """Butterworth of order n: poles w_c exp(j pi (2k + n + 1) / (2n)), k = 0..n-1."""
     n, fc = 2, 0.4
-    open_loop = poles(weighted_interconnection_open(spec_with(rolloff__order=n, rolloff__cutoff_hz=fc)))
+    open_loop = poles(
+        weighted_interconnection_open(spec_with(rolloff__order=n, rolloff__cutoff_hz=fc))
+    )
     for k in range(n):
         assert has_pole(open_loop, TWO_PI * fc * np.exp(1j * np.pi * (2 * k + n + 1) / (2 * n)))
     paper_pole = TWO_PI * 0.7 * np.exp(1j * np.pi * 5 / 8)
