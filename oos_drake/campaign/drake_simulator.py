@@ -187,13 +187,17 @@ def paper_worst_cases(scenario=None):
     )
 
 
-def write_paper_worst_cases(path) -> None:
-    """Write :func:`paper_worst_cases` in the ``worst_cases.parquet`` schema at ``path``."""
+def write_paper_worst_cases(path, scenario=None) -> None:
+    """Write :func:`paper_worst_cases` in the ``worst_cases.parquet`` schema at ``path``.
+
+    ``scenario`` (a loaded scenario; default the paper's) gives the parameter ranges: the
+    regions keep the paper's times and frequencies with that scenario's extreme values.
+    """
     from oos_drake.campaign.worst_cases import write_worst_cases
     from oos_drake.multibody.mission_sim import mission_parameters
     from oos_drake.scenario.data import load_scenario
 
-    scenario = load_scenario()
+    scenario = scenario or load_scenario()
     parameters = [
         Parameter(
             p.name, p.unit, p.nominal, p.lower, p.upper, ParameterKind.of_quantity(p.quantity)

@@ -96,7 +96,7 @@ def test_bad_options_and_values_are_rejected(simulator):
         simulator.run(RunCase(0, 1, {"mass": 1.0}, MissionWindow(0.0, 1.0)))
 
 
-@pytest.mark.parametrize("name", ["paper.toml", "paper_mc.toml"])
+@pytest.mark.parametrize("name", ["paper.toml", "paper_mc.toml", "heavy_target.toml"])
 def test_paper_campaign_specs_load_and_plan(name):
     from oos_drake.campaign.samplers import make_plan
     from oos_drake.campaign.spec import load_spec
