@@ -111,7 +111,6 @@ def run_study_command(args) -> int:
     """``oos study``: one table and one figure of the margin against a swept scenario value."""
     from dataclasses import replace
 
-    from oos_drake.analysis.run import AnalysisOptions
     from oos_drake.analysis.study import StudyOptions, Sweep, run_study
 
     sweep = Sweep.parse(args.vary)
@@ -125,7 +124,7 @@ def run_study_command(args) -> int:
         controller=args.controller,
         synthesize=args.synthesize,
         synthesis_configurations=args.synthesis_configurations,
-        analysis=AnalysisOptions(**analysis.__dict__),
+        analysis=analysis,
         workers=args.workers,
     )
     table = _write_atomically(

@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from oos_drake.analysis.run import AnalysisOptions
+from oos_drake.control.synthesis import SynthesisOptions
 
 #: Units of scenario fields by their last key (the comments of the scenario file say the same).
 FIELD_UNITS = {
@@ -120,6 +121,8 @@ class StudyOptions:
         ``synthesis_configurations`` configurations).
     synthesis_configurations : int
         Mission configurations of each synthesis.
+    synthesis : SynthesisOptions
+        Options of each synthesis (``oos synth``'s defaults, one worker).
     analysis : AnalysisOptions
         Options of each analysis (``sweep.n_jobs`` is forced to 1: the values run in parallel).
     workers : int
@@ -129,6 +132,7 @@ class StudyOptions:
     controller: str | None = None
     synthesize: bool = False
     synthesis_configurations: int = 40
+    synthesis: SynthesisOptions = field(default_factory=lambda: SynthesisOptions(workers=1))
     analysis: AnalysisOptions = field(
         default_factory=lambda: AnalysisOptions(
             configurations=40,
@@ -199,21 +203,22 @@ def _synthesize(scenario, options: StudyOptions, folder: Path) -> tuple[float, s
     from oos_drake.control.components import DesignSpecification
     from oos_drake.control.plants import scenario_plants
     from oos_drake.control.report import write_synthesis
-    from oos_drake.control.synthesis import SynthesisOptions, synthesize
+    from oos_drake.control.synthesis import synthesize
     from oos_drake.scenario.data import scenario_record
 
     plants = scenario_plants(options.synthesis_configurations, scenario)
     K0 = baseline_for(plants)
     if options.controller:
         K0 = load_controller(options.controller).K
-    synthesis = SynthesisOptions(workers=1)
     result = synthesize(
         plants,
         K0,
         spec=DesignSpecification.from_requirements(scenario.control),
-        options=synthesis,
+        options=options.synthesis,
     )
-    paths = write_synthesis(folder, result, plants, synthesis, scenario=scenario_record(scenario))
+    paths = write_synthesis(
+        folder, result, plants, options.synthesis, scenario=scenario_record(scenario)
+    )
     return float(result.gamma), str(paths["controller"])
 
 
