@@ -1282,7 +1282,7 @@ def scenario_path(name: str | Path | None = None) -> Path:
         No such file (the message lists the shipped scenarios).
     """
     if name is None:
-        return DEFAULT_SCENARIO_PATH
+        return DEFAULT_SCENARIO_PATH.resolve()
     path = Path(name)
     if not path.is_file() and path.parent == Path():
         shipped = SCENARIO_DIRECTORY / path.with_suffix(".toml").name
