@@ -207,7 +207,7 @@ def _synthesize(scenario, options: StudyOptions, folder: Path) -> tuple[float, s
     from oos_drake.scenario.data import scenario_record
 
     plants = scenario_plants(options.synthesis_configurations, scenario)
-    K0 = baseline_for(plants)
+    K0 = baseline_for(plants, scenario.mission.first_docking_time)
     if options.controller:
         K0 = load_controller(options.controller).K
     result = synthesize(

@@ -67,7 +67,7 @@ def run_synth(args) -> int:
         seed=args.seed,
         workers=args.workers,
     )
-    K0 = baseline_for(plants)
+    K0 = baseline_for(plants, scenario.mission.first_docking_time)
     result = synthesize(plants, K0, spec=spec, options=options, progress=print)
     paths = write_synthesis(args.out, result, plants, options, scenario=scenario_record(scenario))
     print(f"scenario: {scenario.name} ({scenario.source})")
