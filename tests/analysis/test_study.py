@@ -96,3 +96,40 @@ def test_tiny_mass_study_reaches_the_model(tmp_path):
         loop = mission_closed_loop(controller, mission_times(3, scenario), scenario)
         stable = int((np.linalg.eigvals(np.asarray(loop.system.A)).real.max(axis=-1) < 0).sum())
         assert table["nominal stable models [-]"][i] == stable
+
+
+@pytest.mark.slow
+def test_tiny_synthesis_study_tunes_on_each_value(tmp_path):
+    """--synthesize: each value's controller is tuned with that value's [control] (~15 s idle)."""
+    import json
+
+    from oos_drake.control.synthesis import SynthesisOptions
+
+    options = StudyOptions(
+        workers=2,
+        synthesize=True,
+        synthesis_configurations=6,
+        synthesis=SynthesisOptions(workers=1, restarts=0, max_iterations=20, worst_case_rounds=1),
+    )
+    options = replace(
+        options,
+        analysis=replace(
+            options.analysis,
+            configurations=3,
+            docking_phases=(),
+            performance_models=2,
+            performance_points=4,
+            spike_budget=20.0,
+        ),
+    )
+    sweep = Sweep.parse("control.pointing_requirement=0.004:0.008:2")
+    table = run_study("heavy_target", sweep, tmp_path / "study", options, progress=False)
+    for i, requirement in enumerate(sweep.values):
+        record = json.loads(
+            (tmp_path / "study" / "points" / str(i) / "controller" / "controller.json").read_text()
+        )
+        assert record["design_specification"]["pointing_requirement"] == requirement
+        assert record["scenario"]["overrides"] == {sweep.path: requirement}
+        assert record["scenario"]["name"] == "heavy_target"
+        assert table["gamma [-]"][i] == record["gamma"]
+        assert table["controller"][i] == "synthesized"
