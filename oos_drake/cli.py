@@ -7,8 +7,9 @@ printed as one line and give exit status 2.
 
 One name per option across commands: ``--out`` (where results go), ``--workers`` (parallel
 worker processes or threads), ``--quiet`` (no progress bars), ``--f-min``/``--f-max`` (frequency
-range [Hz]). Older spellings (``--jobs``, ``--no-progress``, ``--fmin``, ``--fmax``) are hidden
-aliases that raise a ``DeprecationWarning`` (:func:`add_deprecated_alias`).
+range [Hz]), ``--scenario`` (the scenario data file: :func:`add_scenario_argument`). Older
+spellings (``--jobs``, ``--no-progress``, ``--fmin``, ``--fmax``) are hidden aliases that raise
+a ``DeprecationWarning`` (:func:`add_deprecated_alias`).
 """
 
 from __future__ import annotations
@@ -101,6 +102,21 @@ def loop_specification(spec, args):
         raise ValueError("--delay needs --sampled (the continuous loop has no computation delay)")
     delay = spec.computation_delay_s if args.delay is None else float(args.delay)
     return dataclasses.replace(spec, sampled=bool(args.sampled), computation_delay_s=delay)
+
+
+SCENARIO_HELP = (
+    "scenario data file (TOML: spacecraft, mission and [control] requirements) or the name of a "
+    "shipped one (paper, heavy_target); default: the paper's"
+)
+
+
+def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
+    """Add ``--scenario FILE`` (one name and help text for every command that builds a model).
+
+    The value stays a string (``None``: the paper's scenario) for
+    :func:`oos_drake.scenario.data.load_scenario`, which resolves shipped names.
+    """
+    parser.add_argument("--scenario", default=None, metavar="FILE", help=SCENARIO_HELP)
 
 
 def build_parser() -> argparse.ArgumentParser:

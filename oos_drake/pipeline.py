@@ -1,12 +1,15 @@
 """The main job, ``oos run``: model -> controller -> analysis -> confirmation of the worst cases
-on the Drake twin -> mu-guided campaign -> report.
+on the Drake twin (paper's scenario) -> mu-guided campaign -> report.
 
 Each stage writes one folder under ``--out``. A stage is skipped when its folder holds a stamp
-(``stage.json``) whose key matches the current inputs: the key hashes the scenario data file, the
-source code of the packages the stage depends on, the stage options and the keys of the stages it
-reads. A stage is computed in a temporary folder that replaces the old one only when it succeeds,
-so an interrupted ``oos run`` never leaves a half-written stage behind; the campaign stage instead
-resumes (no finished run is lost or repeated).
+(``stage.json``) whose key matches the current inputs: the key hashes the part of the scenario
+file the stage reads (``--scenario``: the physical data and mission for the model and the Drake
+check, plus its ``[control]`` section for the controller and everything after it; parsed content,
+so editing a comment recomputes nothing), the source code of the packages the stage depends on,
+the stage options and the keys of the stages it reads. A stage is computed in a temporary
+folder that replaces the old one only when it succeeds, so an interrupted ``oos run`` never
+leaves a half-written stage behind; the campaign stage instead resumes (no finished run is lost
+or repeated). The campaign spec must be written for the same scenario (its ``scenario`` key).
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from oos_drake import __version__
+from oos_drake.cli import add_scenario_argument
 from oos_drake.resources import package_path
 
 PACKAGE_ROOT = package_path("oos_drake")
@@ -37,14 +41,48 @@ def _digest(*parts: str | bytes) -> str:
 
 
 def source_key(*packages: str) -> str:
-    """Hash of the scenario data file, the package's top-level modules (``blas.py``,
-    ``processes.py``, ... which every package may use) and the sources of ``packages``
-    (``oos_drake.<name>``)."""
-    files = [PACKAGE_ROOT / "scenario" / "data" / "paper.toml"]
-    files += sorted(PACKAGE_ROOT.glob("*.py"))
+    """Hash of the package's top-level modules (``blas.py``, ``processes.py``, ... which every
+    package may use) and the sources of ``packages`` (``oos_drake.<name>``)."""
+    files = sorted(PACKAGE_ROOT.glob("*.py"))
     for package in packages:
         files += sorted((PACKAGE_ROOT / package).rglob("*.py"))
     return _digest(__version__, *(f.read_bytes() for f in files))
+
+
+def scenario_keys(path: str | Path) -> dict[str, str]:
+    """Hashes of a scenario file's parsed content: ``"physical"`` (everything but ``[control]``)
+    and ``"control"`` (the ``[control]`` section)."""
+    import tomllib
+
+    try:
+        document = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as error:
+        raise ValueError(f"scenario {path}: invalid TOML ({error})") from None
+    control = document.pop("control", None)
+    return {
+        "physical": _digest(json.dumps(document, sort_keys=True)),
+        "control": _digest(json.dumps(control, sort_keys=True)),
+    }
+
+
+def stage_keys(scenario: str | Path, campaign_spec: str | Path, quick: bool) -> dict[str, str]:
+    """The key of every stage of ``oos run`` (see the module docstring)."""
+    parts = scenario_keys(scenario)
+    quick_options = ["--configurations", "40"] if quick else []
+    keys = {"model": _digest(parts["physical"], source_key("lfr", "titop", "scenario"))}
+    keys["validate"] = _digest(keys["model"], source_key("multibody"))
+    keys["controller"] = _digest(
+        keys["model"], parts["control"], source_key("control", "robust"), *quick_options
+    )
+    keys["analysis"] = _digest(keys["controller"], source_key("analysis", "robust"), *quick_options)
+    keys["confirm"] = _digest(keys["analysis"], keys["validate"])  # analysis: analysis/, robust/
+    keys["campaign"] = _digest(
+        keys["analysis"],
+        keys["validate"],
+        source_key("campaign"),
+        Path(campaign_spec).read_bytes(),
+    )
+    return keys
 
 
 def _stage_done(folder: Path, key: str) -> bool:
@@ -93,73 +131,102 @@ def _oos(*argv: str) -> None:
         raise SystemExit(status)
 
 
+def _check_campaign_scenario(campaign_spec: Path, scenario: Path) -> None:
+    """The campaign's dispersions are written for one scenario: it must be ``scenario``."""
+    import tomllib
+
+    from oos_drake.campaign.spec import spec_scenario
+
+    document = tomllib.loads(campaign_spec.read_text(encoding="utf-8"))
+    options = document.get("simulator", {}).get("options", {})
+    spec_file = spec_scenario(document.get("scenario", options.get("scenario")), campaign_spec)
+    if spec_file.read_bytes() != scenario.read_bytes():
+        raise ValueError(
+            f"campaign spec {campaign_spec} is written for scenario {spec_file}, not {scenario}: "
+            f"pass --campaign with a spec whose `scenario` key names it"
+        )
+
+
 def run_pipeline(args: argparse.Namespace) -> int:
     """Run every stage of the main job into ``args.out``; returns the exit status."""
+    from oos_drake.scenario.data import scenario_path
+
     campaign_spec = Path(args.campaign)
     if not campaign_spec.is_file():
         raise ValueError(f"campaign spec {campaign_spec}: file not found")
+    scenario = scenario_path(args.scenario)
+    _check_campaign_scenario(campaign_spec, scenario)
+    keys = stage_keys(scenario, campaign_spec, args.quick)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float | None] = {}
     start = time.perf_counter()
     quick = ["--configurations", "40"] if args.quick else []
+    on_scenario = ["--scenario", scenario]
+    print(f"[oos run] scenario: {scenario}")
 
-    model_key = source_key("lfr", "titop", "scenario")
     run_stage(
         "model",
         out / "model",
-        model_key,
-        lambda d: (_oos("model", "info"), _oos("model", "figures", "--out", d)),
+        keys["model"],
+        lambda d: (
+            _oos("model", "info", *on_scenario),
+            _oos("model", "figures", "--out", d, *on_scenario),
+        ),
         timings,
     )
-
-    multibody_key = _digest(model_key, source_key("multibody"))
-    run_stage("validate", out / "validate", multibody_key, _validate, timings)
-
-    controller_key = _digest(model_key, source_key("control", "robust"), *quick)
+    run_stage(
+        "validate", out / "validate", keys["validate"], lambda d: _validate(d, scenario), timings
+    )
     run_stage(
         "controller",
         out / "controller",
-        controller_key,
-        lambda d: _oos("synth", "--out", d, *quick),
+        keys["controller"],
+        lambda d: _oos("synth", "--out", d, *quick, *on_scenario),
         timings,
     )
     controller = out / "controller" / "controller.json"
 
-    analysis_key = _digest(controller_key, source_key("analysis", "robust"), *quick)
     run_stage(
         "analysis",
         out / "analysis",
-        analysis_key,
+        keys["analysis"],
         lambda d: _oos(
-            "analyze", "--controller", controller, "--out", d, "--workers", args.workers, *quick
-        ),
-        timings,
-    )
-
-    confirm_key = _digest(analysis_key, multibody_key)  # analysis_key covers analysis/ and robust/
-    run_stage(
-        "confirm",
-        out / "confirm",
-        confirm_key,
-        lambda d: _oos(
-            "confirm",
-            "--analysis",
-            out / "analysis",
+            "analyze",
             "--controller",
             controller,
             "--out",
             d,
             "--workers",
             args.workers,
+            *quick,
+            *on_scenario,
         ),
         timings,
     )
 
-    campaign_key = _digest(
-        analysis_key, multibody_key, source_key("campaign"), campaign_spec.read_bytes()
-    )
-    campaign = out / f"campaign-{campaign_key[:10]}"
+    if _is_paper(scenario):
+        run_stage(
+            "confirm",
+            out / "confirm",
+            keys["confirm"],
+            lambda d: _oos(
+                "confirm",
+                "--analysis",
+                out / "analysis",
+                "--controller",
+                controller,
+                "--out",
+                d,
+                "--workers",
+                args.workers,
+            ),
+            timings,
+        )
+    else:
+        print("[oos run] confirm: skipped (oos confirm runs the paper's Drake twin only)")
+
+    campaign = out / f"campaign-{keys['campaign'][:10]}"
     campaign_start = time.perf_counter()
     if (campaign / "spec.toml").is_file():
         print(f"[oos run] campaign: resuming {campaign}")
@@ -184,7 +251,8 @@ def run_pipeline(args: argparse.Namespace) -> int:
     timings["campaign + report"] = time.perf_counter() - campaign_start
     total = time.perf_counter() - start
     (out / "timings.json").write_text(
-        json.dumps({"stages_s": timings, "total_s": total}, indent=1) + "\n"
+        json.dumps({"scenario": str(scenario), "stages_s": timings, "total_s": total}, indent=1)
+        + "\n"
     )
 
     print("\n[oos run] wall time per stage:")
@@ -206,16 +274,34 @@ def run_pipeline(args: argparse.Namespace) -> int:
     return 0
 
 
-def _validate(folder: Path) -> None:
-    """``oos validate`` with its table saved next to the other results."""
+def _is_paper(scenario: Path) -> bool:
+    """Whether ``scenario`` is the paper's file (same content)."""
+    from oos_drake.scenario.data import scenario_path
+
+    return scenario_path(None).read_bytes() == Path(scenario).read_bytes()
+
+
+def _validate(folder: Path, scenario: Path) -> None:
+    """``oos validate`` with its table saved next to the other results.
+
+    The Drake twin is parsed from SDF files: the package's (generated from the paper's scenario)
+    when they match ``scenario``, otherwise files generated from ``scenario`` into
+    ``folder/sdf`` (``oos sdf generate``), so the twin always follows the scenario file.
+    """
     import contextlib
     import io
 
+    from oos_drake.cli import main
+    from oos_drake.multibody.scenario_sdf import SDF_DIRECTORY, stale_sdf_files
+    from oos_drake.scenario.data import load_scenario
+
+    sdf = SDF_DIRECTORY
+    if stale_sdf_files(SDF_DIRECTORY, load_scenario(scenario)):
+        sdf = folder / "sdf"
+        _oos("sdf", "generate", "--scenario", scenario, "--out", sdf)
     buffer = io.StringIO()
     with contextlib.redirect_stdout(buffer):
-        from oos_drake.cli import main
-
-        status = main(["validate"])
+        status = main(["validate", "--scenario", str(scenario), "--sdf-dir", str(sdf)])
     (folder / "validate.txt").write_text(buffer.getvalue())
     print(buffer.getvalue())
     if status:
@@ -226,7 +312,8 @@ def register(subparsers) -> None:
     """Add ``oos run`` (the main job of ``make run``)."""
     parser = subparsers.add_parser(
         "run",
-        help="the main job: model, Drake validation, controller, analysis, campaign, report",
+        help="the main job: model, Drake validation, controller, analysis, confirmation, campaign, "
+        "report",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -240,6 +327,7 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--quick", action="store_true", help="40 configurations instead of the paper's grids"
     )
+    add_scenario_argument(parser)
     parser.set_defaults(func=run_pipeline)
 
 

@@ -37,7 +37,7 @@ def _sources():
 # ---------------------------------------------------------------- D3: the oos parser
 COMMANDS = {
     "run", "model", "sdf", "validate", "synth", "analyze", "confirm", "robust", "campaign",
-    "ulinearize", "margins",
+    "ulinearize", "margins", "study",
 }  # fmt: skip
 #: Every command line that runs something (README's `oos` table).
 RUNNABLE = {
@@ -47,6 +47,7 @@ RUNNABLE = {
     "analyze",
     "margins",
     "confirm",
+    "study",
     "model info",
     "model figures",
     "sdf generate",

@@ -7,21 +7,19 @@ import dataclasses
 from pathlib import Path
 
 from oos_drake.analysis.stability import SweepOptions
-from oos_drake.cli import add_deprecated_alias, add_loop_arguments, loop_specification
+from oos_drake.cli import (
+    add_deprecated_alias,
+    add_loop_arguments,
+    add_scenario_argument,
+    loop_specification,
+)
 
 
-def _controller(path):
-    from oos_drake.analysis.controller import baseline_controller, load_controller
+def _controller(path, scenario=None):
+    """:func:`oos_drake.analysis.controller.scenario_controller` (the name tests know)."""
+    from oos_drake.analysis.controller import scenario_controller
 
-    if path:
-        return load_controller(path)
-    from oos_drake.control.analysis_model import rotational_channels
-    from oos_drake.control.baseline import TUNING_TIME_S
-    from oos_drake.lfr import usubs
-    from oos_drake.scenario.model import build_mission_model, mission_values
-
-    plant = usubs(build_mission_model(), mission_values([TUNING_TIME_S])).model(0)
-    return baseline_controller(rotational_channels(plant).nominal)
+    return scenario_controller(path, scenario)
 
 
 def _write_atomically(out, work, marker: str = "summary.json", what: str = "an analysis"):
@@ -51,8 +49,10 @@ def _write_atomically(out, work, marker: str = "summary.json", what: str = "an a
 def run_analyze(args) -> int:
     """Run the analysis; exit status 0."""
     from oos_drake.analysis.run import AnalysisOptions, run_analysis
+    from oos_drake.scenario.data import load_scenario
 
-    controller = _controller(args.controller)
+    scenario = load_scenario(args.scenario)
+    controller = _controller(args.controller, scenario)
     controller = dataclasses.replace(controller, spec=loop_specification(controller.spec, args))
     if controller.label == "baseline":
         print(
@@ -84,8 +84,11 @@ def run_analyze(args) -> int:
         progress=not args.quiet,
         plant=args.plant,
     )
-    summary = _write_atomically(args.out, lambda tmp: run_analysis(controller, tmp, options))
+    summary = _write_atomically(
+        args.out, lambda tmp: run_analysis(controller, tmp, options, scenario=scenario)
+    )
     m = summary["mission"]
+    print(f"scenario: {scenario.name} ({scenario.source})")
     loop = summary["loop"]
     print(
         f"controller: {controller.label} ({controller.source}); plants: {args.plant}; loop: "
@@ -211,6 +214,22 @@ def run_margins(args) -> int:
     return 0
 
 
+def _require_paper_scenario(record, analysis) -> None:
+    """``oos confirm`` builds the paper's Drake twin and flight software: refuse an analysis of
+    another scenario (``record``: its ``summary.json`` scenario entry) instead of confirming the
+    wrong spacecraft."""
+    from oos_drake.scenario.data import load_scenario, scenario_record
+
+    if record is None:
+        return  # an analysis written before scenarios were recorded: the paper's
+    paper = scenario_record(load_scenario())
+    if record.get("sha256") != paper["sha256"] or record.get("overrides"):
+        raise ValueError(
+            f"--analysis {analysis}: scenario {record.get('name')} is not the paper's; oos confirm "
+            "runs the paper's Drake twin only (other scenarios: not yet supported)"
+        )
+
+
 def _confirm_controller(args):
     """The controller of ``--controller``, else the one the analysis recorded; its gains must
     be the analysis' (``summary.json``)."""
@@ -222,7 +241,9 @@ def _confirm_controller(args):
     summary_file = Path(args.analysis) / "summary.json"
     if not summary_file.is_file():
         raise ValueError(f"--analysis {args.analysis}: summary.json not found (run `oos analyze`)")
-    recorded = json.loads(summary_file.read_text()).get("controller", {})
+    summary = json.loads(summary_file.read_text())
+    _require_paper_scenario(summary.get("scenario"), args.analysis)
+    recorded = summary.get("controller", {})
     path = args.controller
     if path is None and recorded.get("label") == "synthesized":
         path = recorded.get("source")
@@ -237,7 +258,6 @@ def _confirm_controller(args):
             f"--controller {path}: its gains differ from those the analysis {args.analysis} used"
         )
     return controller
-
 
 
 def run_confirm(args) -> int:
@@ -294,6 +314,92 @@ def run_confirm(args) -> int:
     return 0
 
 
+def run_study_command(args) -> int:
+    """``oos study``: one table and one figure of the margin against a swept scenario value."""
+    from dataclasses import replace
+
+    from oos_drake.analysis.study import StudyOptions, Sweep, run_study
+
+    sweep = Sweep.parse(args.vary)
+    analysis = replace(
+        StudyOptions().analysis,
+        configurations=args.configurations,
+        docking_points=args.docking_points,
+        docking_phases=tuple(p for p in args.docking.split(",") if p),
+    )
+    options = StudyOptions(
+        controller=args.controller,
+        synthesize=args.synthesize,
+        synthesis_configurations=args.synthesis_configurations,
+        analysis=analysis,
+        workers=args.workers,
+    )
+    table = _write_atomically(
+        args.out, lambda tmp: run_study(args.scenario, sweep, tmp, options, not args.quiet)
+    )
+    import json
+    from pathlib import Path
+
+    summary = json.loads((Path(args.out) / "summary.json").read_text())
+    columns = [
+        sweep.column,
+        "mu_upper [-]",
+        "mu_lower [-]",
+        "margin_lower [-]",
+        "margin_upper [-]",
+        "worst study",
+        "pointing worst gain upper [-]",
+    ]
+    if args.synthesize:
+        columns.append("gamma [-]")
+    print(table[columns].to_string(index=False))
+    crossing = summary["margin_reaches_1"]
+    print(
+        f"margin 1 reached: certified lower bound at {crossing['certified']}, attained upper "
+        f"bound at {crossing['attained']} ({sweep.column}; None: not within the sweep)"
+    )
+    print(f"outputs in {args.out}: study.parquet, study.csv, study.png, points/")
+    return 0
+
+
+def _register_study(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "study",
+        help="parameter study: the certified robustness margin against one scenario value",
+        description="Sweep one number of the scenario file (--vary PATH=start:stop:n, PATH a "
+        "dotted path such as hubs.RH2.mass or control.pointing_requirement), re-run the mu "
+        "analysis (and with --synthesize the synthesis) for each value in parallel, and write "
+        "one table (study.parquet/.csv) and one figure (study.png) of the margin 1/mu (upper "
+        "and lower bound) against the value.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    add_scenario_argument(parser)
+    parser.add_argument("--vary", required=True, metavar="PATH=start:stop:n", help="swept value")
+    parser.add_argument("--out", required=True, help="output directory")
+    parser.add_argument(
+        "--controller",
+        default=None,
+        help="controller JSON analyzed at every value (default: the BASELINE PD tuned on each "
+        "value's scenario); with --synthesize, the start of each synthesis",
+    )
+    parser.add_argument(
+        "--synthesize", action="store_true", help="re-synthesize the controller at every value"
+    )
+    parser.add_argument(
+        "--configurations", type=int, default=40, help="mission configurations per analysis"
+    )
+    parser.add_argument(
+        "--synthesis-configurations",
+        type=int,
+        default=40,
+        help="mission configurations per synthesis",
+    )
+    parser.add_argument("--docking", default="7,8", help="docking phases (comma-separated)")
+    parser.add_argument("--docking-points", type=int, default=40, help="stiffness values")
+    parser.add_argument("--workers", type=int, default=2, help="values analyzed in parallel")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.set_defaults(func=run_study_command)
+
 
 def _common_arguments(parser, *, configurations: int) -> None:
     """``--controller``, ``--out`` and ``--configurations`` of ``oos analyze`` / ``oos margins``."""
@@ -312,7 +418,8 @@ def _common_arguments(parser, *, configurations: int) -> None:
 
 
 def register(subparsers) -> None:
-    """Add ``oos analyze``, ``oos margins`` and ``oos confirm``."""
+    """Add ``oos analyze``, ``oos margins``, ``oos confirm`` and ``oos study``."""
+    _register_study(subparsers)
     parser = subparsers.add_parser(
         "analyze",
         help="worst-case mu analysis over the mission and the docking phases (paper section 4)",
@@ -390,6 +497,7 @@ def register(subparsers) -> None:
     )
     add_loop_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_scenario_argument(parser)
     add_deprecated_alias(parser, "--fmin", "--f-min", type=float)
     add_deprecated_alias(parser, "--fmax", "--f-max", type=float)
     add_deprecated_alias(parser, "--jobs", "--workers", type=int)

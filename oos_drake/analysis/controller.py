@@ -132,3 +132,38 @@ def baseline_controller(plant_rotational, spec: DesignSpecification | None = Non
         f"baseline PD (omega_att = 0.01 Hz, xi_att = 1) tuned at t = "
         f"{TUNING_TIME_S:g} s; NOT a synthesized controller",
     )
+
+
+def scenario_controller(path, scenario=None) -> Controller:
+    """The controller to analyze on ``scenario``, with the scenario's ``[control]`` design data.
+
+    ``path``: a ``controller.json`` of ``oos synth``, or None for the BASELINE PD tuned on the
+    scenario at its first docking; ``scenario``: a loaded scenario (default: the paper's).
+    The sensors, actuators and weights of the analysis are the scenario's (they belong to the
+    spacecraft and its requirements); a controller tuned with other design data is analyzed
+    with the scenario's, and a warning says so.
+    """
+    import dataclasses
+
+    from oos_drake.scenario.data import load_scenario
+
+    scenario = scenario or load_scenario()
+    spec = DesignSpecification.from_requirements(scenario.control)
+    if path:
+        controller = load_controller(path)
+        if controller.spec != spec:
+            changed = sorted(
+                k for k, v in spec.to_dict().items() if controller.spec.to_dict()[k] != v
+            )
+            print(
+                f"WARNING: {controller.source} was tuned with other design data "
+                f"({', '.join(changed)}); analyzing it with scenario {scenario.name}'s [control]"
+            )
+        return dataclasses.replace(controller, spec=spec)
+    from oos_drake.analysis.loop import rotational_channels
+    from oos_drake.lfr import usubs
+    from oos_drake.scenario.model import build_mission_model, mission_values
+
+    tuning_time = scenario.mission.first_docking_time
+    plant = usubs(build_mission_model(scenario), mission_values([tuning_time], scenario)).model(0)
+    return baseline_controller(rotational_channels(plant).nominal, spec)

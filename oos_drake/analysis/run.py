@@ -582,7 +582,10 @@ def run_analysis(
     tot = peaks[peaks["subset"] == "total"].iloc[0]
     ep = perf[perf["channel"] == "e_p"]
     ep_peak = ep.loc[ep["gain_upper [-]"].idxmax()]
+    from oos_drake.scenario.data import load_scenario, scenario_record
+
     summary = {
+        "scenario": scenario_record(scenario or load_scenario()),
         "controller": {
             "label": controller.label,
             "source": controller.source,

@@ -43,14 +43,23 @@ class DrakeMissionSimulator:
 
     Parameters
     ----------
+    scenario : str, optional
+        Scenario data file (a spec's ``scenario`` key; default: the paper's). The twin is
+        parsed from SDF files generated from it (the package's when they match it), and its
+        ``[control]`` section gives the default ``control_rate`` (flight software rate [Hz]) and
+        ``torque_limit`` [N m]; options given here override them.
     **options
         Fields of :class:`oos_drake.multibody.mission.MissionOptions` (``control_rate``,
         ``log_rate``, ``controller``, ``integrator``, ...).
     """
 
-    def __init__(self, **options):
-        from oos_drake.multibody.mission import MissionOptions
+    def __init__(self, scenario: str | None = None, **options):
+        import tempfile
+
+        from oos_drake.multibody.mission import MissionOptions, make_mission_diagram
         from oos_drake.multibody.mission_sim import MissionSimulation
+        from oos_drake.multibody.scenario_sdf import SDF_DIRECTORY, stale_sdf_files, write_sdf
+        from oos_drake.scenario.data import load_scenario
 
         known = {f.name for f in fields(MissionOptions)}
         unknown = sorted(set(options) - known)
@@ -59,7 +68,19 @@ class DrakeMissionSimulator:
                 f"drake-mission: unknown option(s) {', '.join(unknown)}; known: "
                 f"{', '.join(sorted(known))}"
             )
-        self.simulation = MissionSimulation(MissionOptions(**options))
+        data = load_scenario(scenario)
+        options = {
+            "control_rate": data.control.flight_software_rate_hz,
+            "torque_limit": data.control.torque_limit,
+            **options,
+        }
+        sdf = SDF_DIRECTORY
+        if stale_sdf_files(SDF_DIRECTORY, data):
+            self._sdf = tempfile.TemporaryDirectory(prefix="oos-sdf-")  # lives with the simulator
+            sdf = self._sdf.name
+            write_sdf(sdf, data)
+        handles = make_mission_diagram(MissionOptions(**options), scenario=data, sdf_directory=sdf)
+        self.simulation = MissionSimulation(handles=handles)
         self._parameters = tuple(
             Parameter(
                 p.name,

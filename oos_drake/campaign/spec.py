@@ -65,6 +65,7 @@ WINDOW_KINDS = ("mission", "event", "critical")
 KEEP_TIMESERIES = ("all", "failed", "none")
 REGION_WEIGHTINGS = ("mu_upper", "uniform")
 _TOP_KEYS = {
+    "scenario",
     "run_timeout",
     "name",
     "description",
@@ -204,6 +205,22 @@ class CampaignSpec:
     regions: tuple[WorstCaseRegion, ...] = field(compare=False, repr=False, default=())
 
 
+def spec_scenario(value: Any, spec_path: str | Path) -> Path:
+    """The scenario file a spec's ``scenario`` key names (None: the paper's).
+
+    A path is resolved against the spec's folder; a bare name may also be a shipped scenario
+    (``"heavy_target"``).
+    """
+    from oos_drake.scenario.data import scenario_path
+
+    if value is None:
+        return scenario_path(None)
+    if not isinstance(value, str):
+        raise _fail(f"spec {spec_path}", f"scenario = {value!r} must be a file name")
+    relative = Path(spec_path).parent / value
+    return relative.resolve() if relative.is_file() else scenario_path(value)
+
+
 def _fail(where: str, message: str) -> ValueError:
     return ValueError(f"{where}: {message}")
 
@@ -304,6 +321,16 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
     options = simulator_table.get("options", {})
     if not isinstance(options, Mapping):
         raise _fail(f"{where}: [simulator]", "options must be a table")
+    if "scenario" in raw:
+        # the simulator builds its model from this scenario file (an absolute path, so the
+        # resolved copy of the spec in the campaign folder names the same file)
+        if "scenario" in options:
+            raise _fail(where, "give the scenario once: top-level `scenario` or simulator option")
+        try:
+            scenario = spec_scenario(raw["scenario"], source)
+        except ValueError as exc:
+            raise _fail(where, str(exc)) from exc
+        options = {**options, "scenario": str(scenario)}
     try:
         recipe = SimulatorRecipe.create(simulator_name, options)
     except ValueError as exc:

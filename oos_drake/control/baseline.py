@@ -66,3 +66,16 @@ def inertia_from_plant(plant: BatchedStateSpace) -> np.ndarray:
         G0 = D
     J = np.linalg.inv(G0)
     return 0.5 * (J + np.swapaxes(J, -1, -2))
+
+
+def baseline_for(plants, tuning_time: float = TUNING_TIME_S) -> np.ndarray:
+    """Baseline gain tuned on the configuration of ``plants`` (a ``PlantArray``) closest to
+    ``tuning_time`` [s] (the first docking: the paper's 255 s, a scenario's
+    ``mission.first_docking_time``)."""
+    table = plants.configurations
+    if "time_s" in table:
+        k = int(np.argmin(np.abs(table["time_s"].to_numpy() - tuning_time)))
+    else:
+        k = 0
+    J = inertia_from_plant(plants.evaluate([k]))[0]
+    return baseline_gains(J)

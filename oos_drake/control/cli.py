@@ -1,4 +1,8 @@
-"""``oos synth``: multi-model structured H-infinity synthesis of the attitude controller."""
+"""``oos synth``: multi-model structured H-infinity synthesis of the attitude controller.
+
+``scenario_plants``, ``mission_times`` (:mod:`oos_drake.control.plants`) and ``baseline_for``
+(:mod:`oos_drake.control.baseline`) are imported here for the callers that know them from here.
+"""
 
 from __future__ import annotations
 
@@ -7,75 +11,51 @@ import os
 import time
 
 import numpy as np
-import pandas as pd
 
-from oos_drake.cli import add_loop_arguments, loop_specification
-from oos_drake.control.baseline import TUNING_TIME_S, baseline_gains, inertia_from_plant
+from oos_drake.cli import add_loop_arguments, add_scenario_argument, loop_specification
+from oos_drake.control.baseline import baseline_for
 from oos_drake.control.components import DesignSpecification
-from oos_drake.control.plants import PlantArray, from_lfr, synthetic_flexible_plants
+from oos_drake.control.plants import (
+    PlantArray,
+    mission_times,
+    scenario_plants,
+    synthetic_flexible_plants,
+)
 from oos_drake.control.report import write_synthesis
 from oos_drake.control.synthesis import SynthesisOptions, synthesize
 
-MISSION_DURATION_S = 1500.0
+__all__ = ["baseline_for", "drake_plants", "make_plants", "mission_times", "scenario_plants"]
 
 
-def scenario_plants(configurations: int) -> PlantArray:
-    """The paper's model array: the scenario LFR substituted at equally spaced mission times."""
-    try:
-        from oos_drake.scenario.model import build_mission_model, mission_values
-    except ModuleNotFoundError as exc:
-        raise ValueError(
-            "--plant lfr needs the scenario model (oos_drake.scenario.model), which is not "
-            "available; use --plant synthetic"
-        ) from exc
-    times = mission_times(configurations)
-    model = build_mission_model()
-    return from_lfr(model, mission_values(times), pd.DataFrame({"time_s": times}), source="lfr")
-
-
-def mission_times(configurations: int) -> np.ndarray:
-    """The synthesis configurations: ``configurations`` equally spaced mission times [s]."""
-    if configurations < 1:
-        raise ValueError(f"--configurations must be >= 1, got {configurations}")
-    return np.linspace(0.0, MISSION_DURATION_S, configurations)
-
-
-def drake_plants(configurations: int) -> PlantArray:
+def drake_plants(configurations: int, scenario=None) -> PlantArray:
     """The same model array from the Drake twin (imports pydrake lazily): nominal
     linearizations, and LFRs extracted per configuration for the worst-case search."""
     try:
         from oos_drake.multibody.synthesis_plants import drake_plant_array
     except ModuleNotFoundError as exc:
         raise ValueError(f"--plant drake needs pydrake ({exc}); use --plant lfr") from exc
-    return drake_plant_array(mission_times(configurations))
+    return drake_plant_array(mission_times(configurations, scenario), scenario)
 
 
-def make_plants(kind: str, configurations: int) -> PlantArray:
-    """Plant array for ``--plant`` (``lfr``, ``drake`` or ``synthetic``)."""
+def make_plants(kind: str, configurations: int, scenario=None) -> PlantArray:
+    """Plant array for ``--plant`` (``lfr``, ``drake`` or ``synthetic``) of ``scenario``."""
     if kind == "lfr":
-        return scenario_plants(configurations)
+        return scenario_plants(configurations, scenario)
     if kind == "drake":
-        return drake_plants(configurations)
+        return drake_plants(configurations, scenario)
     if kind == "synthetic":
         return synthetic_flexible_plants(configurations)
     raise ValueError(f"--plant must be lfr, drake or synthetic, got {kind!r}")
 
 
-def baseline_for(plants: PlantArray) -> np.ndarray:
-    """Baseline gain tuned on the configuration closest to the first docking (t = 255 s)."""
-    table = plants.configurations
-    if "time_s" in table:
-        k = int(np.argmin(np.abs(table["time_s"].to_numpy() - TUNING_TIME_S)))
-    else:
-        k = 0
-    J = inertia_from_plant(plants.evaluate([k]))[0]
-    return baseline_gains(J)
-
-
 def run_synth(args) -> int:
     """Run the synthesis and write the outputs; exit status 0."""
+    from oos_drake.scenario.data import load_scenario, scenario_record
+
     wall, cpu = time.perf_counter(), time.process_time()
-    plants = make_plants(args.plant, args.configurations)
+    scenario = load_scenario(args.scenario)
+    spec = loop_specification(DesignSpecification.from_requirements(scenario.control), args)
+    plants = make_plants(args.plant, args.configurations, scenario)
     print(
         f"model array: {plants.size} configurations from {plants.source!r}, "
         f"{len(plants.parameters)} real parameter(s), built in {time.perf_counter() - wall:.1f} s "
@@ -88,10 +68,10 @@ def run_synth(args) -> int:
         seed=args.seed,
         workers=args.workers,
     )
-    K0 = baseline_for(plants)
-    spec = loop_specification(DesignSpecification(), args)
+    K0 = baseline_for(plants, scenario.mission.first_docking_time)
     result = synthesize(plants, K0, spec=spec, options=options, progress=print)
-    paths = write_synthesis(args.out, result, plants, options)
+    paths = write_synthesis(args.out, result, plants, options, scenario=scenario_record(scenario))
+    print(f"scenario: {scenario.name} ({scenario.source})")
     active = result.models[result.models["active"]]
     print(
         f"gamma = {result.gamma:.6g} (baseline {result.gamma_start:.6g}), "
@@ -142,6 +122,7 @@ def register(subparsers) -> None:
         help="rounds of worst-case search over the real uncertainty",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of restarts and samples")
+    add_scenario_argument(parser)
     parser.add_argument(
         "--workers",
         type=int,

@@ -1,6 +1,8 @@
 """Sensors, actuators, roll-off filter and the weights of the paper's control design (section 3).
 
-All values default to the paper's (Fig. controldesign, Eq. controlreq). Every component is a
+All values default to the paper's (Fig. controldesign, Eq. controlreq), which are also the
+``[control]`` section of the paper's scenario file (``DesignSpecification.from_requirements``
+reads any scenario's; a test keeps the two equal). Every component is a
 per-axis SISO model replicated on the three axes, returned as a named
 :class:`~oos_drake.control.statespace.BatchedStateSpace`.
 """
@@ -119,6 +121,34 @@ class DesignSpecification:
             )
         if len(self.disturbance_gains) != 3 or len(self.disturbance_denominator) != 2:
             raise ValueError("DesignSpecification.disturbance_gains needs 3 values, denominator 2")
+
+    @classmethod
+    def from_requirements(cls, control) -> DesignSpecification:
+        """The specification of a scenario's ``[control]`` section.
+
+        Parameters
+        ----------
+        control : oos_drake.scenario.data.ControlRequirements
+            ``scenario.control``; the control weight is ``W_u = 1 / torque_limit`` [1/(N m)].
+        """
+        return cls(
+            star_tracker_cutoff_hz=control.star_tracker_cutoff_hz,
+            gyro_cutoff_hz=control.gyro_cutoff_hz,
+            wheel_frequency_hz=control.wheel_frequency_hz,
+            wheel_damping=control.wheel_damping,
+            rolloff_order=control.rolloff_order,
+            rolloff_cutoff_hz=control.rolloff_cutoff_hz,
+            noise_gyro=control.gyro_noise,
+            noise_star_tracker=control.star_tracker_noise,
+            disturbance_gains=tuple(control.disturbance_gains),
+            disturbance_denominator=tuple(control.disturbance_denominator),
+            pointing_requirement=control.pointing_requirement,
+            control_weight=1.0 / control.torque_limit,
+            additive_weight_db=control.additive_weight_db,
+            multiplicative_diagonal=control.multiplicative_diagonal,
+            multiplicative_off_diagonal=control.multiplicative_off_diagonal,
+            flight_software_rate_hz=control.flight_software_rate_hz,
+        )
 
     @property
     def additive_weight(self) -> float:

@@ -364,3 +364,29 @@ def from_lfr(
         configurations if configurations is not None else pd.DataFrame({"index": np.arange(N)})
     )
     return PlantArray(configurations, parameters, build, source)
+
+
+def scenario_plants(configurations: int, scenario=None) -> PlantArray:
+    """The scenario's model array: its LFR substituted at equally spaced mission times."""
+    try:
+        from oos_drake.scenario.model import build_mission_model, mission_values
+    except ModuleNotFoundError as exc:
+        raise ValueError(
+            "--plant lfr needs the scenario model (oos_drake.scenario.model), which is not "
+            "available; use --plant synthetic"
+        ) from exc
+    times = mission_times(configurations, scenario)
+    model = build_mission_model(scenario)
+    return from_lfr(
+        model, mission_values(times, scenario), pd.DataFrame({"time_s": times}), source="lfr"
+    )
+
+
+def mission_times(configurations: int, scenario=None) -> np.ndarray:
+    """The synthesis configurations: ``configurations`` equally spaced mission times [s]."""
+    from oos_drake.scenario.data import load_scenario
+
+    if configurations < 1:
+        raise ValueError(f"--configurations must be >= 1, got {configurations}")
+    mission = (scenario or load_scenario()).mission
+    return np.linspace(mission.t_start, mission.t_end, configurations)

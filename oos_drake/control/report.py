@@ -89,13 +89,24 @@ def closed_loop_array(result: SynthesisResult, plants: PlantArray):
 
 
 def write_synthesis(
-    out_dir, result: SynthesisResult, plants: PlantArray, options: SynthesisOptions | None = None
+    out_dir,
+    result: SynthesisResult,
+    plants: PlantArray,
+    options: SynthesisOptions | None = None,
+    *,
+    scenario: dict | None = None,
 ) -> dict[str, Path]:
-    """Write every synthesis output in ``out_dir`` (created); return name -> path."""
+    """Write every synthesis output in ``out_dir`` (created); return name -> path.
+
+    ``scenario`` (:func:`oos_drake.scenario.data.scenario_record`) is recorded in
+    ``controller.json`` as ``"scenario"``.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {}
     record = controller_record(result, plants, options)
+    if scenario is not None:
+        record["scenario"] = _json_ready(scenario)
     paths["controller"] = out / "controller.json"
     paths["controller"].write_text(json.dumps(record, indent=2))
     M = closed_loop_array(result, plants)

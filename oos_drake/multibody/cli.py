@@ -18,6 +18,8 @@ import sys
 import time
 from pathlib import Path
 
+from oos_drake.cli import add_scenario_argument
+
 CASE_GROUPS = ("all", "moments", "phase7", "phase8")
 
 
@@ -135,7 +137,7 @@ def register(subparsers) -> None:
     validate.add_argument(
         "--root-tolerance", type=float, default=1e-4, help="max relative pole/zero mismatch"
     )
-    validate.add_argument("--scenario", type=Path, default=None, help="scenario TOML file")
+    add_scenario_argument(validate)
     validate.add_argument("--sdf-dir", type=Path, default=SDF_DIRECTORY, help="SDF directory")
     validate.set_defaults(func=_validate)
 
@@ -171,5 +173,5 @@ def register(subparsers) -> None:
     ):
         command = sdf_commands.add_parser(name, help=text)
         command.add_argument("--out", type=Path, default=SDF_DIRECTORY, help="SDF directory")
-        command.add_argument("--scenario", type=Path, default=None, help="scenario TOML file")
+        add_scenario_argument(command)
         command.set_defaults(func=func)

@@ -494,6 +494,7 @@ def make_mission_diagram(
     design = FlightSoftwareDesign.create(
         K,
         options.control_rate,
+        spec=DesignSpecification.from_requirements(scenario.control),
         torque_limit=options.torque_limit,
         J_ref=J_ref,
     )

@@ -12,6 +12,8 @@ from __future__ import annotations
 import argparse
 import time
 
+from oos_drake.cli import add_scenario_argument
+
 
 def _info(args: argparse.Namespace) -> int:
     from oos_drake.scenario.data import load_scenario
@@ -83,7 +85,7 @@ def register(subparsers) -> None:
         default="mission",
         help="mission model (default) or a docking-phase model",
     )
-    info.add_argument("--scenario", default=None, help="scenario TOML (default: the paper's)")
+    add_scenario_argument(info)
     info.set_defaults(func=_info)
 
     figures = commands.add_parser("figures", help="paper section-2 figures (PNG) and their data")
@@ -99,5 +101,5 @@ def register(subparsers) -> None:
         "--samples", type=int, default=20, help="uncertain samples per moment (default 20)"
     )
     figures.add_argument("--seed", type=int, default=0, help="sampling seed")
-    figures.add_argument("--scenario", default=None, help="scenario TOML (default: the paper's)")
+    add_scenario_argument(figures)
     figures.set_defaults(func=_figures)

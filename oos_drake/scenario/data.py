@@ -17,7 +17,9 @@ parses it strictly (unknown keys are errors), checks the physics and returns a `
     ``ports["D1"|"D2"|"D3"]`` -> ``Port`` (body, G->D, R_G_D; ports mate when frames coincide);
     ``docking`` -> ``DockingSettings`` (spring-damper stiffness sweep and damping);
     ``mission`` -> ``Mission`` (event times, waypoints, connection states, the paper's six
-    moments and the docking phases 7 and 8).
+    moments and the docking phases 7 and 8);
+    ``control`` -> ``ControlRequirements`` (pointing requirement [rad], torque bound [N m],
+    flight software rate [Hz], sensor and actuator models, roll-off, weights).
 
 Conventions: SI units ([kg], [m], [kg m^2], [s], [rad]); ``p_A_B`` is the vector A -> B in A's
 frame; ``R_A_B`` has B's axes as columns, written in A (``v_A = R_A_B v_B``); 6-DOF vectors are
@@ -39,6 +41,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import functools
 import itertools
@@ -61,6 +64,7 @@ __all__ = [
     "ArmLink",
     "ArrayMount",
     "ConnectionState",
+    "ControlRequirements",
     "DockingPhaseSpec",
     "DockingSettings",
     "FlexibleArrayModel",
@@ -72,9 +76,13 @@ __all__ = [
     "ScenarioError",
     "Waypoints",
     "load_scenario",
+    "scenario_path",
+    "scenario_record",
+    "shipped_scenarios",
 ]
 
 DEFAULT_SCENARIO_PATH = package_path("oos_drake.scenario", "data", "paper.toml")
+SCENARIO_DIRECTORY = DEFAULT_SCENARIO_PATH.parent
 
 _ARRAY_NAMES = ("SA1", "SA2", "SA3", "SA4")
 _HUB_NAMES = ("RH1", "RH2")
@@ -504,6 +512,65 @@ class Mission:
     docking_phases: tuple[DockingPhaseSpec, ...]
 
 
+@dataclass(frozen=True)
+class ControlRequirements:
+    """The ``[control]`` section: requirements, sensors, actuators, weights, software rate.
+
+    ``oos_drake.control.components.DesignSpecification.from_requirements`` turns it into the
+    design data of the synthesis and the analysis; the Drake mission and the campaign take the
+    torque bound and the flight software rate from it.
+
+    Attributes
+    ----------
+    pointing_requirement : float
+        Absolute pointing error bound [rad] (performance weight ``W_p``: ``e_p = phi / W_p``).
+    torque_limit : float
+        Reaction-wheel torque bound [N m] (control weight ``W_u = 1 / torque_limit``; the
+        saturation of the Drake mission).
+    flight_software_rate_hz : float
+        Sample rate of the flight software [Hz] (Drake mission, campaigns).
+    star_tracker_cutoff_hz, gyro_cutoff_hz : float
+        First-order low-pass cut-offs of the star tracker and the gyroscope [Hz].
+    star_tracker_noise : float
+        Star-tracker noise weight ``W_n,sst`` [rad].
+    gyro_noise : float
+        Gyroscope noise weight ``W_n,gyro`` [rad/s].
+    wheel_frequency_hz : float
+        Reaction-wheel second-order natural frequency [Hz].
+    wheel_damping : float
+        Reaction-wheel damping ratio [-].
+    rolloff_order : int
+        Order of the Butterworth roll-off on the command [-].
+    rolloff_cutoff_hz : float
+        Roll-off cut-off [Hz].
+    disturbance_gains : tuple of float
+        Numerators of ``W_n,ext = diag(g_i) / (a s + b)`` [N m].
+    disturbance_denominator : tuple of float
+        ``(a, b)`` of ``W_n,ext``'s denominator [s, -].
+    additive_weight_db : float
+        ``W_add`` of ``Delta_add`` [dB].
+    multiplicative_diagonal, multiplicative_off_diagonal : float
+        ``W_mul`` on the diagonal and off-diagonal scalars of ``Delta_mul`` [-].
+    """
+
+    pointing_requirement: float
+    torque_limit: float
+    flight_software_rate_hz: float
+    star_tracker_cutoff_hz: float
+    gyro_cutoff_hz: float
+    star_tracker_noise: float
+    gyro_noise: float
+    wheel_frequency_hz: float
+    wheel_damping: float
+    rolloff_order: int
+    rolloff_cutoff_hz: float
+    disturbance_gains: tuple[float, float, float]
+    disturbance_denominator: tuple[float, float]
+    additive_weight_db: float
+    multiplicative_diagonal: float
+    multiplicative_off_diagonal: float
+
+
 @dataclass(frozen=True, eq=False)
 class Scenario:
     """The validated scenario (see the module docstring for the field map).
@@ -526,8 +593,12 @@ class Scenario:
         Spring-damper nominal values.
     mission : Mission
         Timeline data.
+    control : ControlRequirements
+        Control requirements and design data (``[control]``).
     source : pathlib.Path
         File the scenario was loaded from.
+    overrides : tuple of (str, float)
+        Values set over the file's (``load_scenario(path, overrides)``: parameter studies).
     """
 
     name: str
@@ -539,7 +610,9 @@ class Scenario:
     ports: Mapping[str, Port]
     docking: DockingSettings
     mission: Mission
+    control: ControlRequirements
     source: Path
+    overrides: tuple[tuple[str, float], ...] = ()
 
 
 # ----------------------------------------------------------------------------------------------
@@ -992,6 +1065,67 @@ def _read_mission(raw: Any) -> Mission:
     )
 
 
+def _read_control(raw: Any) -> ControlRequirements:
+    """``[control]``: every number checked with its unit; errors name ``control.<field>``."""
+    top = _Table(raw, "control")
+
+    def positive(table: _Table, key: str, unit: str, *, upper: float = math.inf) -> float:
+        value = table.number(key)
+        if not 0 < value < upper:
+            bound = "" if upper == math.inf else f" and < {upper:g} {unit}"
+            raise ScenarioError(
+                f"{table.body}.{key}", f"must be > 0 {unit}{bound}, got {value:g} {unit}"
+            )
+        return value
+
+    def positive_list(table: _Table, key: str, size: int, unit: str) -> tuple[float, ...]:
+        values = table.array(key, (size,))
+        if not np.all(values > 0):
+            raise ScenarioError(
+                f"{table.body}.{key}", f"must be > 0 {unit}, got {values.tolist()} {unit}"
+            )
+        return tuple(float(v) for v in values)
+
+    sensors, actuators = top.sub("sensors"), top.sub("actuators")
+    rolloff, weights = top.sub("rolloff"), top.sub("weights")
+    order = rolloff.number("order")
+    if order != int(order) or not 1 <= order <= 12:
+        raise ScenarioError("control.rolloff.order", f"must be an integer in 1..12, got {order:g}")
+    rate = positive(top, "flight_software_rate_hz", "Hz")
+    sensor_cutoffs = {
+        key: positive(sensors, key, "Hz") for key in ("star_tracker_cutoff_hz", "gyro_cutoff_hz")
+    }
+    rolloff_cutoff = positive(rolloff, "cutoff_hz", "Hz")
+    if rolloff_cutoff >= rate / 2:
+        raise ScenarioError(
+            "control.rolloff.cutoff_hz",
+            f"{rolloff_cutoff:g} Hz must be below the flight software's Nyquist frequency "
+            f"({rate / 2:g} Hz)",
+        )
+    additive_db = weights.number("additive_weight_db")
+    control = ControlRequirements(
+        pointing_requirement=positive(top, "pointing_requirement", "rad"),
+        torque_limit=positive(top, "torque_limit", "N m"),
+        flight_software_rate_hz=rate,
+        star_tracker_cutoff_hz=sensor_cutoffs["star_tracker_cutoff_hz"],
+        gyro_cutoff_hz=sensor_cutoffs["gyro_cutoff_hz"],
+        star_tracker_noise=positive(sensors, "star_tracker_noise", "rad"),
+        gyro_noise=positive(sensors, "gyro_noise", "rad/s"),
+        wheel_frequency_hz=positive(actuators, "wheel_frequency_hz", "Hz"),
+        wheel_damping=positive(actuators, "wheel_damping", "-"),
+        rolloff_order=int(order),
+        rolloff_cutoff_hz=rolloff_cutoff,
+        disturbance_gains=positive_list(weights, "disturbance_gains", 3, "N m"),
+        disturbance_denominator=positive_list(weights, "disturbance_denominator", 2, "s, -"),
+        additive_weight_db=additive_db,
+        multiplicative_diagonal=positive(weights, "multiplicative_diagonal", "-"),
+        multiplicative_off_diagonal=positive(weights, "multiplicative_off_diagonal", "-"),
+    )
+    for table in (sensors, actuators, rolloff, weights, top):
+        table.close()
+    return control
+
+
 def _named(table: _Table, key: str, names: tuple[str, ...]) -> dict[str, Any]:
     raw = table.get(key)
     if not isinstance(raw, dict):
@@ -1028,6 +1162,7 @@ def _parse(document: dict[str, Any], source: Path) -> Scenario:
     ports = {n: _read_port(n, raw) for n, raw in sorted(_named(top, "ports", _PORT_NAMES).items())}
     docking = _read_docking(top.get("docking"))
     mission = _read_mission(top.get("mission"))
+    control = _read_control(top.get("control"))
     top.close()
     scenario = Scenario(
         name=name,
@@ -1039,6 +1174,7 @@ def _parse(document: dict[str, Any], source: Path) -> Scenario:
         ports=MappingProxyType(ports),
         docking=docking,
         mission=mission,
+        control=control,
         source=source,
     )
     _check_ik_waypoints(scenario)
@@ -1073,24 +1209,105 @@ def _check_ik_waypoints(scenario: Scenario) -> None:
             )
 
 
+def _set_value(document: dict[str, Any], path: str, value: float) -> None:
+    """Set the number at dotted ``path`` of a parsed scenario document.
+
+    ``hubs.RH2.mass``; list entries by index: ``array_models.SA3_4.frequencies_hz.0``.
+    """
+    node: Any = document
+    keys = path.split(".")
+    for depth, key in enumerate(keys):
+        where = ".".join(keys[:depth]) or "the scenario"
+        if isinstance(node, list):
+            if not key.isdigit() or int(key) >= len(node):
+                raise ScenarioError(
+                    path, f"unknown path: {where} is a list of {len(node)}, not '{key}'"
+                )
+            index: Any = int(key)
+        elif isinstance(node, dict):
+            if key not in node:
+                close = difflib.get_close_matches(key, list(node))
+                hint = f" (did you mean '{close[0]}'?)" if close else f" (have {', '.join(node)})"
+                raise ScenarioError(path, f"unknown path: no '{key}' in {where}{hint}")
+            index = key
+        else:
+            raise ScenarioError(path, f"unknown path: {where} is a number, not a table")
+        if depth == len(keys) - 1:
+            old = node[index]
+            if isinstance(old, bool) or not isinstance(old, int | float):
+                raise ScenarioError(path, f"is not a number (it holds {type(old).__name__})")
+            node[index] = float(value) if isinstance(old, float) else value
+        node = node[index]
+
+
 @functools.lru_cache(maxsize=16)
-def _load_cached(path: str, mtime_ns: int, size: int) -> Scenario:
+def _load_cached(
+    path: str, mtime_ns: int, size: int, overrides: tuple[tuple[str, float], ...] = ()
+) -> Scenario:
     source = Path(path)
     try:
         with source.open("rb") as stream:
             document = tomllib.load(stream)
     except tomllib.TOMLDecodeError as error:
         raise ScenarioError(source.name, f"invalid TOML ({error})") from None
-    return _parse(document, source)
+    for key, value in overrides:
+        _set_value(document, key, value)
+    scenario = _parse(document, source)
+    return dataclasses.replace(scenario, overrides=overrides) if overrides else scenario
 
 
-def load_scenario(path: str | Path | None = None) -> Scenario:
+def scenario_record(scenario: Scenario) -> dict[str, Any]:
+    """What identifies a scenario in result summaries: name, file, its SHA-256, overrides."""
+    import hashlib
+
+    return {
+        "name": scenario.name,
+        "file": str(scenario.source),
+        "sha256": hashlib.sha256(scenario.source.read_bytes()).hexdigest(),
+        "overrides": dict(scenario.overrides),
+    }
+
+
+def shipped_scenarios() -> list[str]:
+    """Names of the scenario files shipped with the package (``paper``, ``heavy_target``)."""
+    return sorted(p.stem for p in SCENARIO_DIRECTORY.glob("*.toml"))
+
+
+def scenario_path(name: str | Path | None = None) -> Path:
+    """The scenario file for a path or the bare name of a shipped scenario (default: paper).
+
+    Raises
+    ------
+    ValueError
+        No such file (the message lists the shipped scenarios).
+    """
+    if name is None:
+        return DEFAULT_SCENARIO_PATH.resolve()
+    path = Path(name)
+    if not path.is_file() and path.parent == Path():
+        shipped = SCENARIO_DIRECTORY / path.with_suffix(".toml").name
+        path = shipped if shipped.is_file() else path
+    if not path.is_file():
+        raise ValueError(
+            f"scenario {name}: file not found (shipped scenarios: {', '.join(shipped_scenarios())})"
+        )
+    return path.resolve()
+
+
+def load_scenario(
+    path: str | Path | None = None, overrides: Mapping[str, float] | None = None
+) -> Scenario:
     """Load and validate a scenario data file.
 
     Parameters
     ----------
     path : str or Path, optional
-        TOML file; default: the paper's scenario ``oos_drake/scenario/data/paper.toml``.
+        TOML file, or the name of a shipped scenario (``"heavy_target"``); default: the paper's
+        scenario ``oos_drake/scenario/data/paper.toml``.
+    overrides : mapping of str to float, optional
+        Numbers set over the file's before validation, keyed by their dotted path in the file
+        (``{"hubs.RH2.mass": 100.0}``, ``"array_models.SA3_4.frequencies_hz.0"``): parameter
+        studies. An unknown path or a non-numeric entry is a ``ScenarioError`` naming the path.
 
     Returns
     -------
@@ -1101,9 +1318,10 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
     ------
     ScenarioError
         Invalid data; the one-line message names the body and the quantity.
-    FileNotFoundError
+    ValueError
         The file does not exist.
     """
-    source = Path(DEFAULT_SCENARIO_PATH if path is None else path).resolve()
+    source = scenario_path(path)
     stat = source.stat()
-    return _load_cached(str(source), stat.st_mtime_ns, stat.st_size)
+    key = tuple((str(k), v) for k, v in (overrides or {}).items())
+    return _load_cached(str(source), stat.st_mtime_ns, stat.st_size, key)

@@ -1,0 +1,95 @@
+"""``oos run --scenario``: the stage keys follow the parts of the scenario file each stage reads,
+so editing it recomputes exactly the dependent stages (heavy work stubbed)."""
+
+import json
+from types import SimpleNamespace
+
+import pytest
+
+from oos_drake import pipeline
+from oos_drake.scenario.data import DEFAULT_SCENARIO_PATH
+
+PAPER = DEFAULT_SCENARIO_PATH.read_text()
+CAMPAIGN = pipeline.DEFAULT_CAMPAIGN
+
+
+def _ran(out):
+    stages = json.loads((out / "timings.json").read_text())["stages_s"]
+    return sorted(k for k, v in stages.items() if v is not None and k != "campaign + report")
+
+
+@pytest.fixture
+def stubbed(monkeypatch):
+    """Every ``oos`` command and the Drake check replaced by a file write; the calls recorded."""
+    calls = []
+
+    def fake_oos(*argv):
+        calls.append([str(a) for a in argv])
+        if "--out" in argv:
+            folder = argv[list(argv).index("--out") + 1]
+            from pathlib import Path
+
+            Path(folder).mkdir(parents=True, exist_ok=True)
+
+    monkeypatch.setattr(pipeline, "_oos", fake_oos)
+    monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: calls.append(["validate"]))
+    return calls
+
+
+def _run(out, scenario, campaign=CAMPAIGN):
+    args = SimpleNamespace(
+        out=str(out), campaign=str(campaign), workers=1, quick=True, scenario=str(scenario)
+    )
+    assert pipeline.run_pipeline(args) == 0
+
+
+def _campaign_for(tmp_path, scenario):
+    spec = tmp_path / "campaign.toml"
+    spec.write_text(f'scenario = "{scenario.name}"\n' + CAMPAIGN.read_text())
+    return spec
+
+
+def test_scenario_edits_recompute_exactly_the_dependent_stages(tmp_path, stubbed):
+    scenario = tmp_path / "mine.toml"
+    scenario.write_text(PAPER)
+    campaign = _campaign_for(tmp_path, scenario)
+    out = tmp_path / "out"
+    _run(out, scenario, campaign)
+    assert _ran(out) == ["analysis", "controller", "model", "validate"]
+    synth = next(c for c in stubbed if c[0] == "synth")
+    assert synth[-2:] == ["--scenario", str(scenario.resolve())]
+
+    _run(out, scenario, campaign)
+    assert _ran(out) == []
+
+    scenario.write_text(PAPER.replace("# [kg] at G2", "# [kg] edited comment at G2"))
+    _run(out, scenario, campaign)  # comments only: nothing to recompute
+    assert _ran(out) == []
+
+    scenario.write_text(
+        PAPER.replace("pointing_requirement = 0.0079", "pointing_requirement = 0.005")
+    )
+    _run(out, scenario, campaign)  # requirements: controller and after, not the model
+    assert _ran(out) == ["analysis", "controller"]
+
+    edited = PAPER.replace("pointing_requirement = 0.0079", "pointing_requirement = 0.005")
+    scenario.write_text(edited.replace("mass = 24.96 ", "mass = 30.0 "))
+    _run(out, scenario, campaign)  # physical data: everything
+    assert _ran(out) == ["analysis", "controller", "model", "validate"]
+    assert len(list(out.glob("campaign-*"))) == 3  # a new campaign folder per campaign key
+
+
+def test_stage_keys_by_scenario_part(tmp_path):
+    first, second = tmp_path / "a.toml", tmp_path / "b.toml"
+    first.write_text(PAPER)
+    second.write_text(PAPER.replace("gyro_cutoff_hz = 200.0", "gyro_cutoff_hz = 150.0"))
+    a = pipeline.stage_keys(first, CAMPAIGN, quick=False)
+    b = pipeline.stage_keys(second, CAMPAIGN, quick=False)
+    assert [k for k in a if a[k] != b[k]] == ["controller", "analysis", "campaign"]
+    assert pipeline.stage_keys(first, CAMPAIGN, quick=True)["model"] == a["model"]
+
+
+def test_campaign_spec_of_another_scenario_is_refused(tmp_path, stubbed):
+    with pytest.raises(ValueError, match="is written for scenario .*paper.toml, not .*heavy"):
+        _run(tmp_path / "out", DEFAULT_SCENARIO_PATH.parent / "heavy_target.toml")
+    assert not (tmp_path / "out").exists()
