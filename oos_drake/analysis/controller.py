@@ -160,7 +160,7 @@ def scenario_controller(path, scenario=None) -> Controller:
                 f"({', '.join(changed)}); analyzing it with scenario {scenario.name}'s [control]"
             )
         return dataclasses.replace(controller, spec=spec)
-    from oos_drake.analysis.loop import rotational_channels
+    from oos_drake.control.analysis_model import rotational_channels
     from oos_drake.lfr import usubs
     from oos_drake.scenario.model import build_mission_model, mission_values
 
