@@ -1,5 +1,5 @@
 """The main job, ``oos run``: model -> controller -> analysis -> confirmation of the worst cases
-on the Drake twin (paper's scenario) -> mu-guided campaign -> report.
+on the Drake twin -> mu-guided campaign -> report.
 
 Each stage writes one folder under ``--out``. A stage is skipped when its folder holds a stamp
 (``stage.json``) whose key matches the current inputs: the key hashes the part of the scenario
@@ -205,26 +205,24 @@ def run_pipeline(args: argparse.Namespace) -> int:
         timings,
     )
 
-    if _is_paper(scenario):
-        run_stage(
+    run_stage(
+        "confirm",
+        out / "confirm",
+        keys["confirm"],
+        lambda d: _oos(
             "confirm",
-            out / "confirm",
-            keys["confirm"],
-            lambda d: _oos(
-                "confirm",
-                "--analysis",
-                out / "analysis",
-                "--controller",
-                controller,
-                "--out",
-                d,
-                "--workers",
-                args.workers,
-            ),
-            timings,
-        )
-    else:
-        print("[oos run] confirm: skipped (oos confirm runs the paper's Drake twin only)")
+            "--analysis",
+            out / "analysis",
+            "--controller",
+            controller,
+            "--out",
+            d,
+            "--workers",
+            args.workers,
+            *on_scenario,
+        ),
+        timings,
+    )
 
     campaign = out / f"campaign-{keys['campaign'][:10]}"
     campaign_start = time.perf_counter()
@@ -272,13 +270,6 @@ def run_pipeline(args: argparse.Namespace) -> int:
     ):
         print(f"  {label:28s} {path}")
     return 0
-
-
-def _is_paper(scenario: Path) -> bool:
-    """Whether ``scenario`` is the paper's file (same content)."""
-    from oos_drake.scenario.data import scenario_path
-
-    return scenario_path(None).read_bytes() == Path(scenario).read_bytes()
 
 
 def _validate(folder: Path, scenario: Path) -> None:

@@ -214,35 +214,59 @@ def run_margins(args) -> int:
     return 0
 
 
-def _require_paper_scenario(record, analysis) -> None:
-    """``oos confirm`` builds the paper's Drake twin and flight software: refuse an analysis of
-    another scenario (``record``: its ``summary.json`` scenario entry) instead of confirming the
-    wrong spacecraft."""
-    from oos_drake.scenario.data import load_scenario, scenario_record
+def _analysis_scenario(record, analysis, given) -> str | None:
+    """The scenario file an analysis ran on (``record``: its ``summary.json`` scenario entry;
+    None for analyses written before scenarios were recorded: the paper's). ``given``
+    (``--scenario``) must be that file.
+
+    Raises
+    ------
+    ValueError
+        The file changed since the analysis, the analysis overrode scenario values (an
+        ``oos study`` point), or ``--scenario`` names another scenario.
+    """
+    import hashlib
+    from pathlib import Path
+
+    from oos_drake.scenario.data import scenario_path
 
     if record is None:
-        return  # an analysis written before scenarios were recorded: the paper's
-    paper = scenario_record(load_scenario())
-    if record.get("sha256") != paper["sha256"] or record.get("overrides"):
-        raise ValueError(
-            f"--analysis {analysis}: scenario {record.get('name')} is not the paper's; oos confirm "
-            "runs the paper's Drake twin only (other scenarios: not yet supported)"
-        )
+        path = scenario_path(None)
+    else:
+        path = Path(record["file"])
+        if not path.is_file() or (
+            hashlib.sha256(path.read_bytes()).hexdigest() != record.get("sha256")
+        ):
+            raise ValueError(
+                f"--analysis {analysis}: its scenario file {path} is gone or changed since the "
+                "analysis; re-run oos analyze"
+            )
+        if record.get("overrides"):
+            raise ValueError(
+                f"--analysis {analysis}: it overrides scenario values {record['overrides']} "
+                "(an oos study point); confirm a plain analysis of a scenario file"
+            )
+    if given is not None and scenario_path(given).read_bytes() != path.read_bytes():
+        raise ValueError(f"--scenario {given}: not the scenario of --analysis {analysis} ({path})")
+    return str(path)
 
 
 def _confirm_controller(args):
-    """The controller of ``--controller``, else the one the analysis recorded; its gains must
-    be the analysis' (``summary.json``)."""
+    """``(controller, scenario file)`` of an analysis: the controller of ``--controller``, else
+    the one the analysis recorded (its gains must be the analysis', ``summary.json``), and the
+    scenario the analysis ran on (:func:`_analysis_scenario`)."""
     import json
     from pathlib import Path
 
     import numpy as np
 
+    from oos_drake.scenario.data import load_scenario
+
     summary_file = Path(args.analysis) / "summary.json"
     if not summary_file.is_file():
         raise ValueError(f"--analysis {args.analysis}: summary.json not found (run `oos analyze`)")
     summary = json.loads(summary_file.read_text())
-    _require_paper_scenario(summary.get("scenario"), args.analysis)
+    scenario = _analysis_scenario(summary.get("scenario"), args.analysis, args.scenario)
     recorded = summary.get("controller", {})
     path = args.controller
     if path is None and recorded.get("label") == "synthesized":
@@ -251,13 +275,13 @@ def _confirm_controller(args):
             raise ValueError(
                 f"--analysis {args.analysis}: its controller {path} is gone; pass --controller"
             )
-    controller = _controller(path)
+    controller = _controller(path, load_scenario(scenario))
     K = np.asarray(recorded.get("K", controller.K), dtype=float)
     if K.shape != controller.K.shape or not np.allclose(K, controller.K, rtol=1e-9, atol=0):
         raise ValueError(
             f"--controller {path}: its gains differ from those the analysis {args.analysis} used"
         )
-    return controller
+    return controller, scenario
 
 
 def run_confirm(args) -> int:
@@ -275,14 +299,18 @@ def run_confirm(args) -> int:
     )
 
     peaks = read_peaks(args.analysis)
-    controller = _confirm_controller(args)
+    controller, scenario = _confirm_controller(args)
     out = Path(args.out) if args.out else Path(args.analysis).parent / "confirm"
     start = time.perf_counter()
 
     def work(tmp):
         tmp.mkdir(parents=True)
         table, histories = confirm_peaks(
-            peaks, controller, ConfirmOptions(), workers=args.workers, quiet=args.quiet
+            peaks,
+            controller,
+            ConfirmOptions(scenario=scenario),
+            workers=args.workers,
+            quiet=args.quiet,
         )
         table.to_parquet(tmp / CONFIRMATION_FILE)
         histories.to_parquet(tmp / HISTORIES_FILE)
@@ -298,6 +326,7 @@ def run_confirm(args) -> int:
         return table
 
     table = _write_atomically(out, work, marker=CONFIRMATION_FILE, what="a confirmation")
+    print(f"scenario: {scenario}")
     print(f"controller: {controller.label} ({controller.source})")
     print(
         f"{'study':>10s} {'subset':>14s} {'f crit':>8s} {'a cont':>7s} {'a samp':>7s} "
@@ -549,6 +578,7 @@ def register(subparsers) -> None:
     confirm.add_argument(
         "--out", default=None, help="output directory (default: ANALYSIS/../confirm)"
     )
+    add_scenario_argument(confirm)
     confirm.add_argument("--workers", type=int, default=2, help="worker processes")
     confirm.add_argument("--quiet", action="store_true", help="no progress bars")
     confirm.set_defaults(func=run_confirm)

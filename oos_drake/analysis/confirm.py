@@ -40,6 +40,7 @@ matrix singular): it has no oscillation to confirm; its physical limit is report
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -98,6 +99,9 @@ class ConfirmOptions:
         Half-width of the first bracket around the sampled-data prediction [-] (relative).
     alpha_limit : float
         Largest ``alpha`` searched [-].
+    scenario : str, optional
+        Scenario file of the analysis (None: the paper's); the twin, its flight software and
+        the linear models are built from it.
     """
 
     duration: float = 45.0
@@ -107,6 +111,7 @@ class ConfirmOptions:
     max_step: float = 0.05
     bracket: float = 0.03
     alpha_limit: float = 4.0
+    scenario: str | None = None
 
     def __post_init__(self):
         for name in ("duration", "settle", "initial_attitude", "rtol", "max_step", "bracket"):
@@ -412,14 +417,23 @@ def _mission_window(sim, t_peak: float, duration: float) -> float:
 class _Twin:
     """One frozen Drake mission (built once per peak) and runs along the ray."""
 
-    def __init__(self, peak: Peak, K: np.ndarray, options: ConfirmOptions):
+    def __init__(self, peak: Peak, K: np.ndarray, options: ConfirmOptions, scenario):
         from oos_drake.multibody.mission import MissionOptions, make_mission_diagram
         from oos_drake.multibody.mission_sim import MissionSimulation
+        from oos_drake.multibody.scenario_sdf import scenario_sdf_directory
         from oos_drake.scenario.timeline import mission_timeline
 
-        mission_options = MissionOptions(log_rate=10.0, max_step=options.max_step)
-        timeline = mission_timeline().frozen(peak.time)
-        handles = make_mission_diagram(mission_options, K=K, timeline=timeline)
+        mission_options = MissionOptions(
+            log_rate=10.0,
+            max_step=options.max_step,
+            control_rate=scenario.control.flight_software_rate_hz,
+            torque_limit=scenario.control.torque_limit,
+        )
+        timeline = mission_timeline(scenario).frozen(peak.time)
+        sdf, self._sdf = scenario_sdf_directory(scenario)
+        handles = make_mission_diagram(
+            mission_options, K=K, timeline=timeline, scenario=scenario, sdf_directory=sdf
+        )
         self.sim = MissionSimulation(handles=handles)
         self.options = options
         self.start = _mission_window(self.sim, peak.time, options.duration)
@@ -496,8 +510,8 @@ def _nonlinear_boundary(twin: _Twin, specs, direction, guess: float, alpha_top: 
 
 # -- one peak --------------------------------------------------------------------------------------
 def _peak_models(peak: Peak, controller, scenario):
-    from oos_drake.control.analysis_model import close_loop, uncertain_plant
     from oos_drake.analysis.models import docking_plant, mission_plants
+    from oos_drake.control.analysis_model import close_loop, uncertain_plant
 
     if peak.study == "mission":
         plant = mission_plants([peak.time], scenario).model(0)
@@ -528,7 +542,7 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
     from oos_drake.multibody.flight_software import FlightSoftware, FlightSoftwareDesign
     from oos_drake.scenario.data import load_scenario
 
-    scenario = load_scenario()
+    scenario = load_scenario(options.scenario)
     closed, plant_hat = _peak_models(peak, controller, scenario)
     specs = closed.uncertainty
     direction = {n: v for n, v in peak.perturbation.items() if specs[n].kind == "ureal"}
@@ -543,13 +557,18 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
         else math.nan  # beyond an ill-posed boundary the new pole comes back real, from infinity
     )
     # 2. sampled-data linear loop with the twin's flight software (its components are the
-    # paper's: DesignSpecification defaults, as make_mission_diagram builds them)
+    # scenario's [control] data, as make_mission_diagram builds them)
     from oos_drake.control.components import DesignSpecification
-    from oos_drake.multibody.mission import MissionOptions
 
-    if controller.spec != DesignSpecification():
-        notes.append("the controller's design specification is not the twin's (paper) one")
-    design = FlightSoftwareDesign.create(controller.K, MissionOptions().control_rate)
+    twin_spec = DesignSpecification.from_requirements(scenario.control)
+    if dataclasses.replace(controller.spec, sampled=False) != twin_spec:
+        notes.append("the controller's design specification is not the twin's (scenario) one")
+    design = FlightSoftwareDesign.create(
+        controller.K,
+        scenario.control.flight_software_rate_hz,
+        spec=twin_spec,
+        torque_limit=scenario.control.torque_limit,
+    )
     fsw = FlightSoftware(design, 6, 6, 0, 0).linear_update()
     period = design.period
     alpha_s, f_s = math.nan, math.nan
@@ -606,7 +625,7 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
     elif peak.study != "mission":
         row["status"] = "linear only: docking configuration not simulated"
     else:
-        twin = _Twin(peak, controller.K, options)
+        twin = _Twin(peak, controller.K, options, scenario)
         top = min(alpha_phys * (1 - 1e-3), options.alpha_limit)
         guess = alpha_s if np.isfinite(alpha_s) else 1.0
         if guess >= top:

@@ -54,11 +54,9 @@ class DrakeMissionSimulator:
     """
 
     def __init__(self, scenario: str | None = None, **options):
-        import tempfile
-
         from oos_drake.multibody.mission import MissionOptions, make_mission_diagram
         from oos_drake.multibody.mission_sim import MissionSimulation
-        from oos_drake.multibody.scenario_sdf import SDF_DIRECTORY, stale_sdf_files, write_sdf
+        from oos_drake.multibody.scenario_sdf import scenario_sdf_directory
         from oos_drake.scenario.data import load_scenario
 
         known = {f.name for f in fields(MissionOptions)}
@@ -74,11 +72,7 @@ class DrakeMissionSimulator:
             "torque_limit": data.control.torque_limit,
             **options,
         }
-        sdf = SDF_DIRECTORY
-        if stale_sdf_files(SDF_DIRECTORY, data):
-            self._sdf = tempfile.TemporaryDirectory(prefix="oos-sdf-")  # lives with the simulator
-            sdf = self._sdf.name
-            write_sdf(sdf, data)
+        sdf, self._sdf = scenario_sdf_directory(data)  # the folder lives with the simulator
         handles = make_mission_diagram(MissionOptions(**options), scenario=data, sdf_directory=sdf)
         self.simulation = MissionSimulation(handles=handles)
         self._parameters = tuple(

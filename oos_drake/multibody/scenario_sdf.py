@@ -271,3 +271,23 @@ def stale_sdf_files(directory: str | Path = SDF_DIRECTORY, scenario=None) -> lis
         if not path.is_file() or not same_sdf_text(path.read_text(), text):
             stale.append(name)
     return stale
+
+
+def scenario_sdf_directory(scenario) -> tuple[Path, object]:
+    """The SDF folder of a loaded ``scenario``: the package's when its files match the scenario,
+    else a temporary folder the files are generated into.
+
+    Returns
+    -------
+    directory : Path
+        Folder holding ``oos_scenario.sdf`` for the scenario.
+    keeper : tempfile.TemporaryDirectory or None
+        Keep it alive as long as the folder is used (None: the package's folder).
+    """
+    import tempfile
+
+    if not stale_sdf_files(SDF_DIRECTORY, scenario):
+        return Path(SDF_DIRECTORY), None
+    keeper = tempfile.TemporaryDirectory(prefix="oos-sdf-")
+    write_sdf(keeper.name, scenario)
+    return Path(keeper.name), keeper

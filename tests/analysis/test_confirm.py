@@ -112,3 +112,24 @@ def test_read_peaks_refuses_a_peak_without_its_perturbation(tmp_path):
     assert Peak(
         "mission", "modal", 1.0, np.nan, 1.0, 0.3, 0.3, {"Delta_add": np.eye(3)}
     ).has_complex
+
+
+def test_confirm_runs_on_the_scenario_the_analysis_recorded(tmp_path):
+    from oos_drake.analysis.cli import _analysis_scenario
+    from oos_drake.scenario.data import scenario_path, scenario_record
+
+    paper, heavy = scenario_path("paper"), scenario_path("heavy_target")
+    assert _analysis_scenario(None, "A", None) == str(paper)  # analyses written before records
+    record = scenario_record(load_scenario("heavy_target"))
+    assert _analysis_scenario(record, "A", None) == str(heavy)
+    assert _analysis_scenario(record, "A", "heavy_target") == str(heavy)
+    with pytest.raises(ValueError, match="--scenario paper: not the scenario of --analysis A"):
+        _analysis_scenario(record, "A", "paper")
+    copy = tmp_path / "mine.toml"
+    copy.write_bytes(heavy.read_bytes())
+    mine = scenario_record(load_scenario(copy))
+    copy.write_text(copy.read_text() + "\n# edited after the analysis\n")
+    with pytest.raises(ValueError, match="gone or changed since the analysis"):
+        _analysis_scenario(mine, "A", None)
+    with pytest.raises(ValueError, match="overrides scenario values"):
+        _analysis_scenario(dict(record, overrides={"hubs.RH2.mass": 500.0}), "A", None)

@@ -20,8 +20,8 @@ from oos_drake.analysis.confirm import (  # noqa: E402
     sampled_loop_poles,
 )
 from oos_drake.analysis.controller import Controller  # noqa: E402
-from oos_drake.control.analysis_model import close_loop, uncertain_plant  # noqa: E402
 from oos_drake.analysis.models import mission_plants  # noqa: E402
+from oos_drake.control.analysis_model import close_loop, uncertain_plant  # noqa: E402
 from oos_drake.control.baseline import baseline_gains  # noqa: E402
 from oos_drake.control.components import DesignSpecification  # noqa: E402
 from oos_drake.multibody.flight_software import (  # noqa: E402

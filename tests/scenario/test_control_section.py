@@ -8,7 +8,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from oos_drake.control.analysis_model import close_loop, uncertain_plant, weighted_interconnection_open
+from oos_drake.control.analysis_model import (
+    close_loop,
+    uncertain_plant,
+    weighted_interconnection_open,
+)
 from oos_drake.control.components import DesignSpecification
 from oos_drake.lfr import usubs
 from oos_drake.scenario.data import (
