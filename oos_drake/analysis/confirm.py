@@ -417,7 +417,9 @@ def _mission_window(sim, t_peak: float, duration: float) -> float:
 class _Twin:
     """One frozen Drake mission (built once per peak) and runs along the ray."""
 
-    def __init__(self, peak: Peak, K: np.ndarray, options: ConfirmOptions, scenario):
+    def __init__(
+        self, peak: Peak, K: np.ndarray, options: ConfirmOptions, scenario, near_hz: float
+    ):
         from oos_drake.multibody.mission import MissionOptions, make_mission_diagram
         from oos_drake.multibody.mission_sim import MissionSimulation
         from oos_drake.multibody.scenario_sdf import scenario_sdf_directory
@@ -438,6 +440,7 @@ class _Twin:
         self.options = options
         self.start = _mission_window(self.sim, peak.time, options.duration)
         self.hub_q = self.sim.handles.hub_joint.position_start()
+        self.near_hz = near_hz  # the oscillation the verdict follows [Hz] (NaN: the dominant one)
 
     def run(self, values: Mapping[str, float]):
         """``(growing, Oscillation or None, history DataFrame)`` of one run: ``growing`` when
@@ -474,7 +477,7 @@ class _Twin:
         oscillation = None
         if np.count_nonzero(window) >= 40:
             try:
-                oscillation = dominant_oscillation(times[window], phi[window])
+                oscillation = dominant_oscillation(times[window], phi[window], near_hz=self.near_hz)
             except ValueError:
                 oscillation = None
         if diverged or oscillation is not None:
@@ -625,7 +628,7 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
     elif peak.study != "mission":
         row["status"] = "linear only: docking configuration not simulated"
     else:
-        twin = _Twin(peak, controller.K, options, scenario)
+        twin = _Twin(peak, controller.K, options, scenario, f_s)
         top = min(alpha_phys * (1 - 1e-3), options.alpha_limit)
         guess = alpha_s if np.isfinite(alpha_s) else 1.0
         if guess >= top:

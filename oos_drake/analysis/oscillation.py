@@ -97,7 +97,13 @@ def pencil_poles(signal: np.ndarray, dt: float, *, rtol: float = 1e-6, max_order
 
 
 def dominant_oscillation(
-    time, signal, *, f_min: float = 0.02, rtol: float = 1e-6, max_order: int = 24
+    time,
+    signal,
+    *,
+    f_min: float = 0.02,
+    near_hz: float | None = None,
+    rtol: float = 1e-6,
+    max_order: int = 24,
 ) -> Oscillation:
     """Frequency and decay rate of the oscillation that dominates the end of ``signal``.
 
@@ -109,6 +115,10 @@ def dominant_oscillation(
         Response after the transient (e.g. the attitude error [rad]).
     f_min : float
         Lowest frequency counted as an oscillation [Hz] (slower poles are drifts).
+    near_hz : float, optional
+        Expected frequency [Hz]: when oscillations within 25 % of it are found, the largest of
+        them is returned (a slower, larger mode decaying beside a growing critical one must not
+        decide the verdict); otherwise the largest of all.
     rtol, max_order
         See :func:`pencil_poles`.
 
@@ -130,6 +140,9 @@ def dominant_oscillation(
     span = t[-1] - t[0]
     # a conjugate pair contributes 2 |r| e^{sigma t}: compare at the end of the window
     amplitude = 2.0 * np.linalg.norm(residues, axis=1) * np.exp(poles.real * span)
+    if near_hz is not None and np.isfinite(near_hz) and near_hz > 0:
+        close = keep & (np.abs(frequency / near_hz - 1.0) <= 0.25)
+        keep = close if np.any(close) else keep
     index = np.flatnonzero(keep)[np.argmax(amplitude[keep])]
     return Oscillation(
         frequency=float(frequency[index]),

@@ -47,6 +47,23 @@ def test_matrix_pencil_sees_a_growing_oscillation_in_noise():
         dominant_oscillation(t, np.exp(-0.1 * t))
 
 
+def test_the_verdict_follows_the_expected_oscillation_not_a_larger_slower_one():
+    # a large, lightly damped attitude mode (0.13 Hz) decaying beside a small critical mode
+    # (0.77 Hz) that grows: the largest oscillation says "stable", the expected one "growing"
+    t = np.arange(0.0, 37.0, 0.1) + 8.0
+    y = 2e-3 * np.exp(-0.05 * t) * np.cos(2 * np.pi * 0.134 * t) + 1e-5 * np.exp(
+        0.02 * t
+    ) * np.cos(2 * np.pi * 0.77 * t + 0.4)
+    largest = dominant_oscillation(t, y)
+    assert largest.frequency == pytest.approx(0.134, rel=1e-6)
+    assert largest.decay_rate < 0
+    expected = dominant_oscillation(t, y, near_hz=0.75)
+    assert expected.frequency == pytest.approx(0.77, rel=1e-6)
+    assert expected.decay_rate == pytest.approx(0.02, abs=1e-6)
+    # nothing near the expected frequency: the largest oscillation, as without it
+    assert dominant_oscillation(t, y, near_hz=3.0).frequency == pytest.approx(0.134, rel=1e-6)
+
+
 def test_physical_limit_along_a_ray_matches_the_closed_forms():
     specs = physical_blocks(load_scenario())
     half = {n: 0.5 * (specs[n].range[1] - specs[n].range[0]) for n in specs}
