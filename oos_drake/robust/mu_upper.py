@@ -704,6 +704,7 @@ def mu_upper_bound(
         x[use], lmax0[use] = xw[use], lw[use]
     best_l = lmax0.copy()
     best_x = x.copy()
+    start_x = x.copy()  # where the optimizer starts: the fallback of _trusted
     iters_done = 0
     if p > 0 and max_iter > 0 and obj.compiled:  # the same optimizer, compiled
         its = np.zeros(nb, dtype=np.int64)
@@ -819,8 +820,11 @@ def mu_upper_bound(
                 break
     if balanced is not None:  # back to the scalings of M itself
         best_x = balanced.to_absolute(best_x)
+        start_x = balanced.to_absolute(start_x)
         obj_final.count += obj.count
         obj = obj_final
+    if p > 0 and max_iter > 0:
+        best_x = _trusted(obj, best_x, start_x)
     # exact lambda_max at the best scalings, and the scalings themselves
     upper, Dl, Dr, G, top, doubtful = _finish(obj, best_x, allidx, scale)
     if doubtful.size:  # only those whose certificate fails beyond round-off
@@ -847,6 +851,65 @@ def mu_upper_bound(
                 best[k][take] = v[take]
         upper[sub], Dl[sub], Dr[sub], G[sub], top[sub], best_x[sub] = best
     return UpperBoundResult(upper, Dl, Dr, G, top, iters_done, best_x, obj.count.copy())
+
+
+#: Two evaluations of ``lambda_max`` (relative to ``||M||_F^2``) that differ by more than this
+#: (relative, plus the same absolute amount) are round-off, not a value (:func:`_trusted`).
+TRUST_RTOL = 1e-6
+#: Fractions of the way from the optimizer's start to its end tried by :func:`_trusted`.
+TRUST_FRACTIONS = (0.9, 0.75, 0.5, 0.3, 0.15, 0.0)
+
+
+def _trusted(obj, best_x, start_x):
+    """The optimizer's scalings where their ``lambda_max`` is a value, not round-off.
+
+    The optimizer can follow round-off: near a bound reached only by singular scalings
+    (``T_r`` with condition numbers of ``1e10`` and more: a repeated real block whose channels
+    are nearly decoupled) the scaled matrix is formed from terms ``cond(T_r)^2`` times larger
+    than itself, the computed ``lambda_max`` is noise, and a line search accepts the noise
+    where it happens to be low. The exact evaluation at the end (a different rounding) then
+    returns a bound far above mu, even above ``||M||`` (a spike: 400x mu on the mission's
+    mechanical subset). Here each matrix's end point is evaluated by the two implementations
+    (compiled and numpy: different roundings); where they disagree by more than
+    :data:`TRUST_RTOL`, the point is replaced by the lowest trusted one on the segment back to
+    the start (:data:`TRUST_FRACTIONS`) or to ``D = I, G = 0`` (whose value is ``||M||_2^2``
+    exactly: the last resort); so is an end above ``||M||_2^2``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(B, n_params)`` scalings (``best_x`` where trusted).
+    """
+    nb = best_x.shape[0]
+    ref = _Objective(obj.M, obj.s, obj.L, use_compiled=False)
+
+    def values(x, rows):
+        one = np.ones(rows.size)
+        _, _, a, _ = obj(x, rows, one, need_grad=False)
+        _, _, b, _ = ref(x, rows, one, need_grad=False)
+        ok = np.abs(a - b) <= TRUST_RTOL * (np.maximum(np.abs(a), np.abs(b)) + 1e-3)
+        return np.maximum(a, b), ok
+
+    if not obj.compiled:  # one implementation only: nothing to compare with
+        return best_x
+    allidx = np.arange(nb)
+    val, ok = values(best_x, allidx)
+    # D = I, G = 0 gives ||M||_2^2 exactly: an end above it is no progress either (a start
+    # whose own evaluation was noise, e.g. balancing of a nearly decoupled |M|)
+    plain = np.linalg.norm(obj.M, ord=2, axis=(1, 2)) ** 2
+    bad = np.flatnonzero(~ok | (val > plain * (1 + TRUST_RTOL)))
+    if bad.size == 0:
+        return best_x
+    out = best_x.copy()
+    chosen = np.full(bad.size, np.inf)
+    zero = np.zeros_like(start_x[bad])
+    for origin in (start_x[bad], zero):
+        for frac in TRUST_FRACTIONS:
+            xs = origin + frac * (best_x[bad] - origin)
+            v, good = values(xs, bad)
+            take = good & (v < chosen)
+            out[bad[take]], chosen[take] = xs[take], v[take]
+    return out
 
 
 def _finish(obj, x, idx, scale):
