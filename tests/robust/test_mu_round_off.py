@@ -63,3 +63,33 @@ def test_bound_is_not_below_the_converged_lmi_bound():
         ref = scale * _lmi_dg_bound(M[k] / scale, s.blk, rtol=1e-3)
         ours = float(mussv(M[k], s.blk).upper)
         assert ours >= ref * (1 - 2e-3), (ours, ref)
+
+
+def test_long_runs_agree_on_one_mu_in_two_channel_bases():
+    """Fixture ``data/mu_two_bases.npz``: ``M(j omega)`` of the mission's total subset (baseline
+    PD, configuration 3 of 4, 0.78-0.86 Hz) from the Drake twin's LFR and from the TITOP LFR.
+    The two matrices differ (other channel bases of the repeated blocks), mu does not. With the
+    grid's budget the bounds differ by 5-7 % (both 10-20 % above the converged value: a stall
+    prone case); the long runs of the whole-axis guarantee (``POLISH_OPTIONS``, warm-started as
+    ``mu_solver`` does) agree within 0.5 % (issue 18's tolerance) and only ever lower a bound.
+    (An SDP solver's reference takes minutes on this 26 x 26, 18-block problem: not here.)"""
+    from oos_drake.robust.mu import UPPER_ITERATIONS, UPPER_PATIENCE, UPPER_TEMPERATURES, UPPER_TOL
+    from oos_drake.robust.mu_intervals import POLISH_OPTIONS
+
+    f = np.load(Path(__file__).parent / "data" / "mu_two_bases.npz")
+    s = parse_blk(f["blk"])
+    kw = dict(
+        max_iter=UPPER_ITERATIONS,
+        tol=UPPER_TOL,
+        temperatures=UPPER_TEMPERATURES,
+        patience=UPPER_PATIENCE,
+    )
+    short, long = {}, {}
+    for name in ("M_drake", "M_titop"):
+        M = f[name]
+        r = mu_upper_bound(M, s, **kw)
+        p = mu_upper_bound(M, s, x0=r.params, **POLISH_OPTIONS)
+        short[name], long[name] = r.upper, np.minimum(p.upper, r.upper)
+        assert np.all(lmi_residual(M, p.upper * (1 + 1e-7), p.D_left, p.D_right, p.G) <= 1e-12)
+    assert np.max(np.abs(short["M_drake"] / short["M_titop"] - 1)) > 0.02  # the stall is there
+    np.testing.assert_allclose(long["M_drake"], long["M_titop"], rtol=0.005)
