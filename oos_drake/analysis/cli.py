@@ -192,7 +192,7 @@ def register(subparsers) -> None:
         "--guarantee",
         action="store_true",
         help="also prove each configuration's mu peak on the whole frequency axis (D-G scalings "
-        "validated on intervals; slower, and loose where the optimizer stalls: see DESIGN.md)",
+        "validated on intervals; several times the grid-only mu stages: see DESIGN.md)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     add_deprecated_alias(parser, "--fmin", "--f-min", type=float)

@@ -670,7 +670,17 @@ def mu_solver(real: Realization, blk, *, slack: float = SLACK, polish_above: flo
             starts.append(np.asarray(solved_params)[near])
         for x0 in starts if redo.size else ():
             more = mu_upper_bound(M[redo], structure, x0=x0, **POLISH_OPTIONS)
-            better = more.upper < upper[redo]
+            # a point is only as good as the certificate the interval test accepts: converged
+            # scalings can be too close to singular for a strict LMI at the level
+            better = np.array(
+                [
+                    more.upper[j] < upper[i]
+                    and _proves(real, Scalings(more.D_left[j], more.D_right[j], more.G[j]),
+                                more.upper[j] * (1.0 + slack), omega[i])
+                    for j, i in enumerate(redo)
+                ],
+                dtype=bool,
+            )  # fmt: skip
             rows = redo[better]
             upper[rows], params[rows] = more.upper[better], more.params[better]
             Dl[rows], Dr[rows], G[rows] = more.D_left[better], more.D_right[better], more.G[better]
@@ -680,3 +690,12 @@ def mu_solver(real: Realization, blk, *, slack: float = SLACK, polish_above: flo
         return upper, upper * (1.0 + slack), scalings
 
     return solve
+
+
+def _proves(real: Realization, sc: Scalings, beta: float, omega: float) -> bool:
+    """True if the conditioned scalings prove ``mu <= beta`` strictly at ``omega`` [rad/s]."""
+    try:
+        mult = _Multiplier(real, sc.conditioned(), beta)
+    except np.linalg.LinAlgError:
+        return False
+    return bool(mult.max_eig([float(real.to_nu(omega))])[0] < -STRICT)
