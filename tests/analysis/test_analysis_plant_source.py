@@ -58,7 +58,6 @@ def test_unknown_plant_source_is_refused(controller):
         mission_closed_loop(controller, [0.0], source="simulink")
 
 
-@pytest.mark.slow  # about 20 s idle: two mission loops from the twin, 20 long mu runs
 def test_drake_and_titop_realizations_give_the_same_mu_upper_bound(controller):
     """The D-G bound depends on M(j omega) only, not on the realization: on the Drake and
     TITOP closed loops (different state coordinates and channel bases: the matrices differ,
