@@ -522,7 +522,7 @@ def register(subparsers) -> None:
         "--guarantee",
         action="store_true",
         help="also prove each configuration's mu peak on the whole frequency axis (D-G scalings "
-        "validated on intervals; slower, and loose where the optimizer stalls: see DESIGN.md)",
+        "validated on intervals; several times the grid-only mu stages: see DESIGN.md)",
     )
     add_loop_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bars")

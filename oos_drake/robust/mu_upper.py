@@ -704,6 +704,7 @@ def mu_upper_bound(
         x[use], lmax0[use] = xw[use], lw[use]
     best_l = lmax0.copy()
     best_x = x.copy()
+    start_x = x.copy()  # where the optimizer starts: the fallback of _trusted
     iters_done = 0
     if p > 0 and max_iter > 0 and obj.compiled:  # the same optimizer, compiled
         its = np.zeros(nb, dtype=np.int64)
@@ -819,10 +820,19 @@ def mu_upper_bound(
                 break
     if balanced is not None:  # back to the scalings of M itself
         best_x = balanced.to_absolute(best_x)
+        start_x = balanced.to_absolute(start_x)
         obj_final.count += obj.count
         obj = obj_final
     # exact lambda_max at the best scalings, and the scalings themselves
-    upper, Dl, Dr, G, top, doubtful = _finish(obj, best_x, allidx, scale)
+    upper, Dl, Dr, G, top, doubtful, d_min = _finish(obj, best_x, allidx, scale)
+    # ill-conditioned scalings, or a bound above ||M||_F >= ||M||_2: was it round-off?
+    risky = np.flatnonzero((d_min < TRUST_CONDITION) | (upper > scale)) if max_iter > 0 else []
+    if p > 0 and len(risky):
+        best_x[risky] = _trusted(obj, best_x[risky], start_x[risky], risky)
+        upper[risky], Dl[risky], Dr[risky], G[risky], top[risky], _, _ = _finish(
+            obj, best_x[risky], risky, scale[risky]
+        )
+        doubtful = np.flatnonzero(upper / scale < 1e-3)  # as _finish: lambda_max < 1e-6
     if doubtful.size:  # only those whose certificate fails beyond round-off
         doubtful = doubtful[
             ~_lmi_holds(M[doubtful], upper[doubtful], Dl[doubtful], Dr[doubtful], G[doubtful])
@@ -837,7 +847,7 @@ def mu_upper_bound(
         best = None
         for frac in (1.0, 0.9, 0.7, 0.5, 0.3, 0.1, 0.0):
             xs = x_bal + frac * (best_x[sub] - x_bal)
-            u, dl, dr, g, tp, _ = _finish(obj, xs, sub, scale[sub])
+            u, dl, dr, g, tp, _, _ = _finish(obj, xs, sub, scale[sub])
             u = _certified_beta(M[sub], u, dl, dr, g)
             if best is None:
                 best = [u, dl, dr, g, tp, xs]
@@ -849,12 +859,82 @@ def mu_upper_bound(
     return UpperBoundResult(upper, Dl, Dr, G, top, iters_done, best_x, obj.count.copy())
 
 
+#: Two evaluations of ``lambda_max`` (relative to ``||M||_F^2``) that differ by more than this
+#: (relative, plus the same absolute amount) are round-off, not a value (:func:`_trusted`).
+TRUST_RTOL = 1e-6
+#: Scalings whose ``D_r`` has eigenvalues below this fraction of its largest (``cond(T_r)`` above
+#: 1e4: the evaluation's round-off grows with ``cond(D_r) eps``) get the check of :func:`_trusted`.
+TRUST_CONDITION = 1e-8
+#: Fractions of the way from the optimizer's start to its end tried by :func:`_trusted`.
+TRUST_FRACTIONS = (0.9, 0.75, 0.5, 0.3, 0.15, 0.0)
+
+
+def _trusted(obj, best_x, start_x, rows):
+    """The optimizer's scalings where their ``lambda_max`` is a value, not round-off.
+
+    The optimizer can follow round-off: near a bound reached only by singular scalings
+    (``T_r`` with condition numbers of ``1e10`` and more: a repeated real block whose channels
+    are nearly decoupled) the scaled matrix is formed from terms ``cond(T_r)^2`` times larger
+    than itself, the computed ``lambda_max`` is noise, and a line search accepts the noise
+    where it happens to be low. The exact evaluation at the end (a different rounding) then
+    returns a bound far above mu, even above ``||M||`` (a spike: 400x mu on the mission's
+    mechanical subset). Here each matrix's end point is evaluated by the two implementations
+    (compiled and numpy: different roundings); where they disagree by more than
+    :data:`TRUST_RTOL`, the point is replaced by the lowest trusted one on the segment back to
+    the start (:data:`TRUST_FRACTIONS`) or to ``D = I, G = 0`` (whose value is ``||M||_2^2``
+    exactly: the last resort); so is an end above ``||M||_2^2``.
+
+    Parameters
+    ----------
+    obj : _Objective
+        The exact evaluation (compiled).
+    best_x, start_x : numpy.ndarray
+        ``(K, n_params)`` end and start of the optimizer for the rows ``rows`` of ``obj``.
+    rows : numpy.ndarray
+        ``(K,)`` rows of ``obj.M``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(K, n_params)`` scalings (``best_x`` where trusted).
+    """
+    ref = _Objective(obj.M, obj.s, obj.L, use_compiled=False)
+
+    def values(x, rows):
+        one = np.ones(rows.size)
+        _, _, a, _ = obj(x, rows, one, need_grad=False)
+        _, _, b, _ = ref(x, rows, one, need_grad=False)
+        ok = np.abs(a - b) <= TRUST_RTOL * (np.maximum(np.abs(a), np.abs(b)) + 1e-3)
+        return np.maximum(a, b), ok
+
+    if not obj.compiled:  # one implementation only: nothing to compare with
+        return best_x
+    val, ok = values(best_x, rows)
+    # D = I, G = 0 gives ||M||_2^2 exactly: an end above it is no progress either (a start
+    # whose own evaluation was noise, e.g. balancing of a nearly decoupled |M|)
+    plain = np.linalg.norm(obj.M[rows], ord=2, axis=(1, 2)) ** 2
+    bad = np.flatnonzero(~ok | (val > plain * (1 + TRUST_RTOL)))
+    if bad.size == 0:
+        return best_x
+    out = best_x.copy()
+    chosen = np.full(bad.size, np.inf)
+    zero = np.zeros_like(start_x[bad])
+    for origin in (start_x[bad], zero):
+        for frac in TRUST_FRACTIONS:
+            xs = origin + frac * (best_x[bad] - origin)
+            v, good = values(xs, rows[bad])
+            take = good & (v < chosen)
+            out[bad[take]], chosen[take] = xs[take], v[take]
+    return out
+
+
 def _finish(obj, x, idx, scale):
     """Exact bound, normalized scalings and top direction at ``x`` (rows ``idx`` of ``obj``).
 
-    Returns ``(upper, D_l, D_r, G, top, doubtful)``; ``doubtful`` are the rows (positions in
-    ``idx``) whose bound is near zero (relative to ``||M||_F``), where round-off can decide the
-    sign of the certificate.
+    Returns ``(upper, D_l, D_r, G, top, doubtful, d_min)``; ``doubtful`` are the rows (positions
+    in ``idx``) whose bound is near zero (relative to ``||M||_F``), where round-off can decide
+    the sign of the certificate; ``d_min`` the smallest eigenvalue of the normalized ``D_r``
+    (``1 / cond(D_r)``).
     """
     nb = len(idx)
     _, Tl, Tr, Gh = obj.scalings(x, idx)
@@ -868,14 +948,17 @@ def _finish(obj, x, idx, scale):
     G = scale[:, None, None] * Gh  # the multiplier G itself (not scaled by T)
     # an eigenvalue of zero (mu = 0 bound) keeps its sign; normalize D so that max eig(D_r) = 1
     dnorm = np.zeros(nb)  # largest eigenvalue of the block-diagonal D_r, block size by size
+    d_min = np.full(nb, np.inf)
     for _n, rows in obj.L.inv_groups:
         ii, jj = rows[:, :, None], rows[:, None, :]
-        dnorm = np.maximum(dnorm, np.linalg.eigvalsh(Dr[:, ii, jj]).max(axis=(1, 2)))
+        ev = np.linalg.eigvalsh(Dr[:, ii, jj])
+        dnorm = np.maximum(dnorm, ev.max(axis=(1, 2)))
+        d_min = np.minimum(d_min, ev.min(axis=(1, 2)))
     Dl, Dr, G = Dl / dnorm[:, None, None], Dr / dnorm[:, None, None], G / dnorm[:, None, None]
     # (ill-conditioned scalings alone are not re-checked here: the unscaled LMI of the check
     # can then disagree with the scaled eigenvalue the bound comes from; see lmi_residual)
     doubtful = np.flatnonzero(lmax < 1e-6)
-    return upper, Dl, Dr, G, top, doubtful
+    return upper, Dl, Dr, G, top, doubtful, d_min / np.maximum(dnorm, 1e-300)
 
 
 #: Residual of :func:`lmi_residual` accepted for the doubtful bounds of :func:`_finish`: the
