@@ -559,6 +559,21 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
         if np.isfinite(alpha_c) and np.isfinite(peak.omega)
         else math.nan  # beyond an ill-posed boundary the new pole comes back real, from infinity
     )
+    if np.isfinite(alpha_c) and alpha_c < 1.0 - options.rtol:
+        # the saved worst case is critical at alpha = 1: a crossing before it is one the analysis
+        # did not see (between its analyzed frequencies, or at another frequency)
+        crossing = _continuous_abscissa(closed, peak, alpha_c * (1 + 1e-3))[1] / (2 * np.pi)
+        implied = peak.mu_lower / alpha_c
+        notes.append(
+            f"the continuous loop is unstable from alpha = {alpha_c:.4g} (a pole crosses near "
+            f"{crossing:.4g} Hz): mu >= {implied:.4g}"
+            + (
+                f", ABOVE the analysis' upper bound {peak.mu_upper:.4g} (a peak between its "
+                "analyzed frequencies, which oos analyze --guarantee covers)"
+                if implied > peak.mu_upper
+                else ""
+            )
+        )
     # 2. sampled-data linear loop with the twin's flight software (its components are the
     # scenario's [control] data, as make_mission_diagram builds them)
     from oos_drake.control.components import DesignSpecification
