@@ -477,7 +477,7 @@ def run_analysis(
         from oos_drake.analysis.sensitivity import mu_sensitivity
 
         part = sweep[(sweep["subset"] == "total") & (sweep["model"] == crit_model)]
-        top = part.nlargest(6, "mu_upper")["frequency [Hz]"].to_numpy()
+        top = part.nlargest(6, "mu_upper [-]")["frequency [Hz]"].to_numpy()
         w_crit = 2 * np.pi * certs["total"][1]
         w_s = np.unique(np.concatenate([2 * np.pi * top, w_crit * np.geomspace(0.97, 1.03, 3)]))
         sens = mu_sensitivity(

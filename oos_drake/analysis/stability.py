@@ -40,18 +40,7 @@ from oos_drake.analysis.tightening import (
 from oos_drake.analysis.workers import CONVERGED_TEMPERATURES, ModelPool, PointTask
 from oos_drake.robust.blocks import parse_blk
 from oos_drake.robust.lfr_analysis import block_map, delta_channel_response, worst_case_values
-
-#: Columns of the sweep table (``tightened``: upper bound recomputed with many iterations).
-SWEEP_COLUMNS = [
-    "subset",
-    "model",
-    "time [s]",
-    "frequency [Hz]",
-    "mu_upper",
-    "mu_lower",
-    "refined",
-    "tightened",
-]
+from oos_drake.robust.tables import sweep_table
 
 
 @dataclass(frozen=True)
@@ -468,24 +457,22 @@ def _grid_points(pool, n_models, omega, parts, options, progress, description):
 
 
 def _table(points: dict, times) -> pd.DataFrame:
-    frames = []
-    for name, pts in points.items():
-        frames.append(
-            pd.DataFrame(
-                {
-                    "subset": name,
-                    "model": pts.model,
-                    "time [s]": times[pts.model],
-                    "frequency [Hz]": pts.omega / (2 * np.pi),
-                    "mu_upper": pts.upper,
-                    "mu_lower": pts.lower,
-                    "refined": pts.refined,
-                    "tightened": pts.tightened,
-                }
-            )
-        )
-    table = pd.concat(frames, ignore_index=True)[SWEEP_COLUMNS]
-    return table.sort_values(["subset", "model", "frequency [Hz]"], ignore_index=True)
+    """The sweep table (:data:`~oos_drake.robust.tables.SWEEP_COLUMNS`) of every subset's points."""
+    names = np.concatenate(
+        [np.full(pts.model.size, name, dtype=object) for name, pts in points.items()]
+    )
+    pts = list(points.values())
+    model = np.concatenate([p.model for p in pts])
+    return sweep_table(
+        names,
+        model,
+        times[model],
+        np.concatenate([p.omega for p in pts]),
+        np.concatenate([p.upper for p in pts]),
+        np.concatenate([p.lower for p in pts]),
+        np.concatenate([p.refined for p in pts]),
+        np.concatenate([p.tightened for p in pts]),
+    )
 
 
 def _check_sweep_input(sys, omega, times):
@@ -531,8 +518,8 @@ def mu_sweep(
     Returns
     -------
     pandas.DataFrame
-        Columns :data:`SWEEP_COLUMNS`: ``subset``, ``model`` (index), ``time [s]``,
-        ``frequency [Hz]``, ``mu_upper``, ``mu_lower`` (certified), ``refined``, ``tightened``.
+        Columns :data:`~oos_drake.robust.tables.SWEEP_COLUMNS` (``mu_lower [-]``: certified;
+        ``tightened``: upper bound recomputed with many iterations).
     """
     options = options or SweepOptions()
     omega, arrays, times = _check_sweep_input(sys, omega, times)
@@ -685,7 +672,8 @@ class StudyResult:
     Attributes
     ----------
     table : pandas.DataFrame
-        Columns :data:`SWEEP_COLUMNS` (grid points plus the refinement points).
+        Columns :data:`~oos_drake.robust.tables.SWEEP_COLUMNS` (grid points plus the
+        refinement points).
     certificates : dict
         Subset name -> :class:`PeakCertificate`.
     reports : dict
@@ -1208,22 +1196,3 @@ def certify_peak(
         worst,
         normalized,
     )
-
-
-def peaks_table(sweep: pd.DataFrame) -> pd.DataFrame:
-    """Per subset: the grid peak of the upper bound (model, time, frequency) and of the lower."""
-    rows = []
-    for name, group in sweep.groupby("subset", sort=False, observed=True):
-        iu = group["mu_upper"].idxmax()
-        il = group["mu_lower"].idxmax()
-        rows.append(
-            {
-                "subset": name,
-                "model": int(group.at[iu, "model"]),
-                "time [s]": float(group.at[iu, "time [s]"]),
-                "frequency [Hz]": float(group.at[iu, "frequency [Hz]"]),
-                "mu_upper": float(group.at[iu, "mu_upper"]),
-                "mu_lower_grid": float(group.at[il, "mu_lower"]),
-            }
-        )
-    return pd.DataFrame(rows)

@@ -30,6 +30,7 @@ from oos_drake.robust.lfr_analysis import (
 )
 from oos_drake.robust.mu import mussv
 from oos_drake.robust.mu_intervals import SLACK, AxisCertificate, Realization, cover_axis, mu_solver
+from oos_drake.robust.tables import sweep_table
 
 
 @dataclass(frozen=True)
@@ -77,6 +78,33 @@ class RobStabResult:
     def robustly_stable(self) -> bool:
         """True when the guaranteed margin exceeds 1 (stable for the whole uncertainty)."""
         return self.lower > 1.0
+
+    def table(self, subset: str = "total", time: float = float("nan")):
+        """The analyzed frequencies as a mu sweep table (:func:`~.tables.sweep_table`).
+
+        Parameters
+        ----------
+        subset : str
+            Label of the analyzed blocks (``subset`` column).
+        time : float
+            Mission time [s] (or scheduling value) of the model.
+
+        Returns
+        -------
+        pandas.DataFrame
+            One row per analyzed frequency (model 0, ``tightened`` everywhere), plus
+            :data:`~oos_drake.robust.tables.GUARANTEE_COLUMNS` when ``guarantee`` is set.
+        """
+        return sweep_table(
+            subset,
+            0,
+            time,
+            self.omega,
+            self.mu_upper,
+            self.mu_lower,
+            guaranteed=None if self.guarantee is None else self.guarantee.upper,
+            guarantee_points=None if self.guarantee is None else self.guarantee.omega.size,
+        )
 
 
 def _refine(omega, values, count=4, points=12):
@@ -224,7 +252,7 @@ def _polish_peaks(A, Bw, Cz, Dzw, structure, omega, up, lo, count=4, rounds=2):
     return up
 
 
-def mu_sweep(A, Bw, Cz, Dzw, blk, omega, *, refine_rounds=2, mu_options=None):
+def _refined_sweep(A, Bw, Cz, Dzw, blk, omega, *, refine_rounds=2, mu_options=None):
     """mu bounds of ``M11(j omega)`` on a grid refined around the peaks (single model).
 
     Returns
@@ -340,7 +368,7 @@ def robstab(
     omega = np.asarray(omega, dtype=float)
     if omega.ndim != 1 or omega.size == 0 or np.any(omega < 0) or not np.all(np.isfinite(omega)):
         raise ValueError("robstab: omega must be a non-empty 1-D array of frequencies >= 0 [rad/s]")
-    omega, up, lo, dl, structure = mu_sweep(
+    omega, up, lo, dl, structure = _refined_sweep(
         A, Bw, Cz, Dzw, bmap.blk, omega, refine_rounds=refine_rounds, mu_options=mu_options
     )
     guarantee = None

@@ -19,10 +19,7 @@ import numpy as np
 
 from oos_drake.processes import process_pool
 from oos_drake.robust.lfr_analysis import block_map, delta_channel_response, frequency_grid
-
-#: Columns of the table returned by :func:`robust_sweep` (the last two with ``guaranteed=True``).
-COLUMNS = ["model", "time", "frequency", "mu_lower", "mu_upper", "subset", "refined", "tightened"]
-GUARANTEE_COLUMNS = ["mu_upper_guaranteed", "guarantee_points"]
+from oos_drake.robust.tables import sweep_table
 
 
 def _polish_model_peaks(M, blk, up, lo, count):
@@ -310,7 +307,7 @@ def robust_sweep(
         Named subsets of block names (e.g. ``{"modal": [...], "total": [...]}``); default
         ``{"total": all blocks}``.
     times : array_like, optional
-        Mission time [s] of each model (a ``time`` column); default NaN.
+        Mission time [s] of each model (the ``time [s]`` column); default NaN.
     n_jobs : int
         Worker processes (1: in this process).
     refine_points : int
@@ -342,8 +339,8 @@ def robust_sweep(
     guaranteed : bool
         Also prove, for each model and subset, a bound of the peak of mu over the whole
         frequency axis (:func:`~oos_drake.robust.mu_intervals.cover_axis`, started from the
-        peaks of the grid): columns ``mu_upper_guaranteed`` (the same value on every row of the
-        model and subset; ``inf`` if the cover did not close) and ``guarantee_points``
+        peaks of the grid): columns ``mu_upper_guaranteed [-]`` (the same value on every row of
+        the model and subset; ``inf`` if the cover did not close) and ``guarantee_points``
         (frequencies solved for the proof). The per-frequency columns stay pointwise bounds.
     slack : float, optional
         Relative slack of the guaranteed bound (default
@@ -352,9 +349,10 @@ def robust_sweep(
     Returns
     -------
     pandas.DataFrame
-        Columns ``model`` (index in the array), ``time`` [s], ``frequency`` [Hz], ``mu_lower``,
-        ``mu_upper``, ``subset``, ``refined`` (True for peak-refinement points), ``tightened``
-        (True where the bounds have full accuracy; see ``mode``).
+        Columns :data:`~oos_drake.robust.tables.SWEEP_COLUMNS` (``model``: index in the array;
+        ``refined``: True for peak-refinement points; ``tightened``: True where the bounds have
+        full accuracy, see ``mode``), plus :data:`~oos_drake.robust.tables.GUARANTEE_COLUMNS`
+        with ``guaranteed=True``.
 
     Raises
     ------
@@ -362,8 +360,6 @@ def robust_sweep(
         For unknown block names, a ``times`` of the wrong length, or bad frequencies; with
         ``guaranteed=True``, for a model with a pole within round-off of the imaginary axis.
     """
-    import pandas as pd
-
     from oos_drake.lfr import as_lfr
 
     sys = as_lfr(sys)
@@ -430,26 +426,23 @@ def robust_sweep(
     else:
         with process_pool(n_jobs) as pool:
             results = list(pool.map(_sweep_models, tasks))
-    frames = []
-    for rows in results:
-        for model, w, lo, up, name, refined, tightened, (axis_up, axis_pts) in rows:
-            frames.append(
-                pd.DataFrame(
-                    {
-                        "model": np.full(w.size, model, dtype=int),
-                        "time": np.full(w.size, times[model]),
-                        "frequency": w / (2 * np.pi),
-                        "mu_lower": lo,
-                        "mu_upper": up,
-                        "subset": name,
-                        "refined": refined,
-                        "tightened": tightened,
-                        "mu_upper_guaranteed": np.full(w.size, axis_up),
-                        "guarantee_points": np.full(w.size, axis_pts, dtype=int),
-                    }
-                )
-            )
-    columns = COLUMNS + (GUARANTEE_COLUMNS if slack is not None else [])
-    table = pd.concat(frames, ignore_index=True)[columns]
-    table["subset"] = table["subset"].astype("category")
-    return table.sort_values(["subset", "model", "frequency"], ignore_index=True)
+    points = [row for rows in results for row in rows]  # (model, omega, lo, up, subset, ...)
+
+    def column(values):
+        return np.concatenate(
+            [np.broadcast_to(v, r[1].shape) for v, r in zip(values, points, strict=True)]
+        )
+
+    guaranteed = slack is not None
+    return sweep_table(
+        column([r[4] for r in points]),
+        column([r[0] for r in points]),
+        column([times[r[0]] for r in points]),
+        column([r[1] for r in points]),
+        column([r[3] for r in points]),
+        column([r[2] for r in points]),
+        column([r[5] for r in points]),
+        column([r[6] for r in points]),
+        guaranteed=column([r[7][0] for r in points]) if guaranteed else None,
+        guarantee_points=column([r[7][1] for r in points]) if guaranteed else None,
+    )

@@ -52,8 +52,8 @@ def test_full_analysis_of_the_baseline_controller(tmp_path):
     sweep = pd.read_parquet(tmp_path / "mu_mission.parquet")
     for _, row in peaks[peaks["study"] == "mission"].iterrows():
         sub = sweep[sweep["subset"] == row["subset"]]
-        assert sub["mu_upper"].max() <= row["mu_upper"] * (1 + 1e-9)
-        assert np.all(sub["mu_upper"] < row["mu_lower"] / 0.95)  # every point within 5 %
+        assert sub["mu_upper [-]"].max() <= row["mu_upper"] * (1 + 1e-9)
+        assert np.all(sub["mu_upper [-]"] < row["mu_lower"] / 0.95)  # every point within 5 %
     # the certified real-parameter perturbation (named, normalized values in the table) puts a
     # closed-loop pole on j omega: independent check with usubs, the other blocks nominal
     real = peaks[(peaks["study"] == "mission") & (peaks["subset"] == "real")].iloc[0]

@@ -81,7 +81,7 @@ def test_tables_have_documented_columns(analysis):
     out, _, _ = analysis
     from oos_drake.analysis.performance import PERFORMANCE_COLUMNS
     from oos_drake.analysis.sensitivity import SENSITIVITY_COLUMNS
-    from oos_drake.analysis.stability import SWEEP_COLUMNS
+    from oos_drake.robust.tables import SWEEP_COLUMNS
     from oos_drake.analysis.time_check import TIME_COLUMNS
 
     assert list(pd.read_parquet(out / "mu_mission.parquet").columns) == SWEEP_COLUMNS
@@ -110,7 +110,7 @@ def test_tables_have_documented_columns(analysis):
         "additive",
         "multiplicative",
     }
-    assert np.all(sweep["mu_lower"] <= sweep["mu_upper"] * (1 + 1e-9))
+    assert np.all(sweep["mu_lower [-]"] <= sweep["mu_upper [-]"] * (1 + 1e-9))
 
 
 def test_worst_cases_file_reads_back_with_the_campaign_schema(analysis):
@@ -163,7 +163,7 @@ def test_peak_bounds_meet(analysis):
             assert row["gap [%]"] < 5.0, (row["study"], row["subset"], row["gap [%]"])
     sweep = pd.read_parquet(out / "mu_mission.parquet")
     for _, row in peaks[peaks["study"] == "mission"].iterrows():
-        grid_max = sweep.loc[sweep["subset"] == row["subset"], "mu_upper"].max()
+        grid_max = sweep.loc[sweep["subset"] == row["subset"], "mu_upper [-]"].max()
         assert grid_max <= row["mu_upper"] * (1 + 1e-9)  # the peak covers every analyzed point
 
 

@@ -1,0 +1,40 @@
+"""The one mu sweep table: schema and the names of tables written before it."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from oos_drake.robust.tables import (
+    GUARANTEE_COLUMNS,
+    LEGACY_COLUMNS,
+    SWEEP_COLUMNS,
+    sweep_table,
+    upgrade_columns,
+)
+
+
+def test_every_column_follows_the_name_unit_convention():
+    for col in SWEEP_COLUMNS + GUARANTEE_COLUMNS:
+        if col.startswith(("mu_", "time", "frequency")):
+            assert col.endswith("]") and " [" in col, col
+    assert set(LEGACY_COLUMNS.values()) <= set(SWEEP_COLUMNS + GUARANTEE_COLUMNS)
+
+
+def test_sweep_table_builds_the_schema_and_converts_to_hz():
+    t = sweep_table("total", [1, 0, 0], 12.0, [2 * np.pi, 4 * np.pi, 2 * np.pi], 3.0, [1, 2, 3])
+    assert list(t.columns) == SWEEP_COLUMNS
+    assert t["frequency [Hz]"].tolist() == [1.0, 2.0, 1.0]  # sorted by model, then frequency
+    assert t["model"].tolist() == [0, 0, 1]
+    assert t["mu_lower [-]"].tolist() == [3.0, 2.0, 1.0]
+    g = sweep_table("s", 0, np.nan, [1.0], 1.0, 0.5, guaranteed=1.1, guarantee_points=7)
+    assert list(g.columns) == SWEEP_COLUMNS + GUARANTEE_COLUMNS
+    assert g["guarantee_points"].iloc[0] == 7
+
+
+def test_old_tables_are_renamed_and_mixed_ones_refused():
+    old = pd.DataFrame({"model": [0], "time": [1.0], "frequency": [0.5], "mu_upper": [0.4]})
+    new = upgrade_columns(old)
+    assert list(new.columns) == ["model", "time [s]", "frequency [Hz]", "mu_upper [-]"]
+    assert upgrade_columns(new) is new
+    with pytest.raises(ValueError, match="mu_upper"):
+        upgrade_columns(old.assign(**{"mu_upper [-]": [0.4]}))
