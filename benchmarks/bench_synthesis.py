@@ -35,8 +35,8 @@ from oos_drake.blas import single_threaded_blas
 from oos_drake.control.cli import baseline_for, make_plants
 from oos_drake.control.interconnection import weighted_interconnection
 from oos_drake.control.loop_response import LoopResponse, LoopSigma
-from oos_drake.control.peak_gain import peak_gain
 from oos_drake.control.synthesis import SynthesisOptions, synthesize
+from oos_drake.robust.peak_gain import peak_gain
 
 
 def ab13dd_all(M):

@@ -8,7 +8,7 @@ main entry points:
 - :func:`baseline_gains` -- ``K_att = [w^2 J_tot, 2 xi w J_tot]``;
 - :func:`synthesize` -- multi-model structured H-infinity synthesis of the 3x6 static gain over
   configurations and real uncertainty (nonsmooth BFGS-SQP, worst-case search);
-- :func:`peak_gain` -- batched H-infinity norms of model arrays;
+- :func:`peak_gain` -- batched H-infinity norms of model arrays (from :mod:`oos_drake.robust`);
 - :class:`LoopResponse` -- closed-loop responses from the plant's modal form (the fast path of
   every gamma evaluation: closed-loop eigenvalues only, no eigenvectors);
 - :func:`close_loop` -- the uncertain closed loop with Delta_add and Delta_mul (the analysis');
@@ -23,11 +23,11 @@ from oos_drake.control.baseline import baseline_gains, inertia_from_plant
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.interconnection import WeightedInterconnection, weighted_interconnection
 from oos_drake.control.loop_response import LoopResponse, LoopSigma
-from oos_drake.control.peak_gain import PeakGain, hinfnorm_hamiltonian, peak_gain
 from oos_drake.control.plants import PlantArray, UncertainParameter, from_lfr, from_statespace
 from oos_drake.control.report import write_synthesis
 from oos_drake.control.statespace import BatchedStateSpace, connect
 from oos_drake.control.synthesis import SynthesisOptions, SynthesisResult, synthesize
+from oos_drake.robust.peak_gain import PeakGain, hinfnorm_hamiltonian, peak_gain
 
 __all__ = [
     "BatchedStateSpace",

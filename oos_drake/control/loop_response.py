@@ -248,7 +248,7 @@ class LoopResponse:
 class LoopSigma:
     """``sigma_max`` of :meth:`LoopResponse.response` at a fixed gain, for the peak search.
 
-    Same interface as :class:`oos_drake.control.peak_gain.ModalResponse` for ``sigma`` and
+    Same interface as :class:`oos_drake.robust.peak_gain.ModalResponse` for ``sigma`` and
     ``take``.
     """
 
@@ -267,7 +267,7 @@ class LoopSigma:
 
     def sigma(self, omega, *, prune: bool = False) -> np.ndarray:
         """Largest singular value (N, F) (``prune``: see ``peak_gain.pruned_sigma``)."""
-        from oos_drake.control.peak_gain import _sigma_max, pruned_sigma
+        from oos_drake.robust.peak_gain import _sigma_max, pruned_sigma
 
         H = self.response(omega)
         return pruned_sigma(H) if prune else _sigma_max(H)

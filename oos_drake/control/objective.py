@@ -23,7 +23,7 @@ import numpy as np
 from oos_drake.blas import with_single_threaded_blas
 from oos_drake.control.interconnection import WeightedInterconnection
 from oos_drake.control.loop_response import LoopSigma
-from oos_drake.control.peak_gain import PeakGain, peak_gain
+from oos_drake.robust.peak_gain import PeakGain, peak_gain
 
 
 @dataclass(frozen=True)

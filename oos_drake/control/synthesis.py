@@ -45,8 +45,8 @@ from oos_drake.control.components import DesignSpecification
 from oos_drake.control.interconnection import WeightedInterconnection, weighted_interconnection
 from oos_drake.control.nonsmooth_bfgs import BfgsResult, minimize_bundle_bfgs, minimize_nonsmooth
 from oos_drake.control.objective import active_set, evaluate, loop_sigma, peak_gradients
-from oos_drake.control.peak_gain import peak_gain
 from oos_drake.control.plants import PlantArray
+from oos_drake.robust.peak_gain import peak_gain
 
 
 @dataclass(frozen=True)

@@ -1,20 +1,20 @@
-r"""H-infinity norm of continuous-time state-space models, batched.
+r"""H-infinity norm of continuous-time state-space models (MATLAB ``hinfnorm``), batched.
 
-Boyd-Balakrishnan / Bruinsma-Steinbuch level-set iteration: for a level ``gamma`` above
-``sigma_max(D)``, ``gamma`` is a singular value of ``G(j omega)`` exactly when the Hamiltonian
+The front end of the package's one H-infinity norm (:mod:`oos_drake.robust.peak_gain`): the
+peak is located on a modal-form frequency grid and refined (:func:`~.peak_gain.peak_gain`), then
+certified per model by the Boyd-Balakrishnan / Bruinsma-Steinbuch Hamiltonian test
+(:func:`~.peak_gain.hinfnorm_hamiltonian`): for a level ``gamma`` above ``sigma_max(D)``,
+``gamma`` is a singular value of ``G(j omega)`` exactly when the Hamiltonian
 
 .. math::
 
-    H(\gamma) = \begin{bmatrix} A + B R^{-1} D^T C & \gamma B R^{-1} B^T \\
-        -\gamma C^T S^{-1} C & -(A + B R^{-1} D^T C)^T \end{bmatrix},\quad
+    H(\gamma) = \begin{bmatrix} A + B R^{-1} D^T C & B R^{-1} B^T \\
+        -C^T \gamma^2 S^{-1} C & -(A + B R^{-1} D^T C)^T \end{bmatrix},\quad
     R = \gamma^2 I - D^T D,\ S = \gamma^2 I - D D^T
 
-(scaled form) has the eigenvalue ``j omega``. Starting from a lower bound (``sigma_max`` at
-``omega = 0``, ``infinity`` and the lightly damped pole frequencies), each step takes the
-imaginary-axis eigenvalues of ``H((1 + 2 tol) gamma_lb)``, evaluates ``sigma_max`` at the
-midpoints of the intervals they bound, and raises ``gamma_lb``; when ``H`` has no imaginary
-eigenvalue the level is an upper bound. Convergence is quadratic. All systems of a batch
-advance together (stacked eigenvalue problems).
+has the eigenvalue ``j omega``; at ``(1 + 2 tol)`` times the reported norm it has none, which
+makes that level a certified upper bound. Started from the refined grid peak, the test needs
+one or two eigenvalue problems per model (``benchmarks/bench_hinf_paths.py``).
 """
 
 from __future__ import annotations
@@ -22,6 +22,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from oos_drake.robust.peak_gain import hinfnorm_hamiltonian, peak_gain
 
 
 @dataclass(frozen=True)
@@ -46,7 +48,7 @@ class HinfResult:
 
 
 def _as_matrices(sys):
-    """``(A, B, C, D)`` float/complex arrays with matching batch dims from several inputs."""
+    """``(A, B, C, D)`` real arrays with matching batch dims from several inputs."""
     if isinstance(sys, tuple | list) and len(sys) == 4:
         A, B, C, D = (np.asarray(x) for x in sys)
     elif hasattr(sys, "A") and hasattr(sys, "B") and hasattr(sys, "dt"):
@@ -75,7 +77,9 @@ def _as_matrices(sys):
     for name, X in zip("ABCD", (A, B, C, D), strict=True):
         if not np.all(np.isfinite(X)):
             raise ValueError(f"hinfnorm: {name} has non-finite entries")
-    return A, B, C, D
+        if np.iscomplexobj(X) and np.any(X.imag != 0):
+            raise ValueError(f"hinfnorm: {name} is complex; only real models are supported")
+    return tuple(np.asarray(X.real if np.iscomplexobj(X) else X, dtype=float) for X in (A, B, C, D))
 
 
 def _lfr_matrices(sys):
@@ -85,28 +89,6 @@ def _lfr_matrices(sys):
             return sys.A, sys.B, sys.C, sys.D
     ss = sys.to_ss()
     return ss.A, ss.B, ss.C, ss.D
-
-
-def sigma_max_at(A, B, C, D, omega):
-    """``sigma_max(C (j omega I - A)^{-1} B + D)`` for batched systems ``(B, ...)`` and ``(B, F)``.
-
-    Parameters
-    ----------
-    A, B, C, D : arrays with a leading batch axis
-    omega : array (batch, F) [rad/s]
-
-    Returns
-    -------
-    numpy.ndarray (batch, F)
-    """
-    n = A.shape[-1]
-    eye = np.eye(n)
-    jw = 1j * omega[..., None, None]
-    X = np.linalg.solve(
-        jw * eye - A[:, None], np.broadcast_to(B[:, None], omega.shape + B.shape[-2:])
-    )
-    G = C[:, None] @ X + D[:, None]
-    return np.linalg.norm(G, ord=2, axis=(-2, -1))
 
 
 def hinfnorm(sys, *, tol: float = 1e-8, max_iter: int = 50) -> HinfResult:
@@ -159,80 +141,14 @@ def hinfnorm(sys, *, tol: float = 1e-8, max_iter: int = 50) -> HinfResult:
     unstable = np.any(poles.real >= -1e-12 * np.maximum(1.0, np.abs(poles)), axis=1)
     norm[unstable], peak[unstable], upper[unstable] = np.inf, np.nan, np.inf
     live = np.flatnonzero(~unstable)
-    if live.size == 0:
-        return _shape(batch, norm, peak, upper)
-    # initial lower bound: omega = 0, infinity and the pole frequencies (lightly damped first)
-    pl = poles[live]
-    wp = np.abs(pl)
-    damping = -pl.real / np.maximum(wp, 1e-300)
-    order = np.argsort(damping, axis=1)[:, : min(n, 12)]
-    wtest = np.concatenate(
-        [
-            np.zeros((live.size, 1)),
-            np.take_along_axis(np.abs(pl.imag), order, 1),
-            np.take_along_axis(wp, order, 1),
-        ],
-        axis=1,
-    )
-    Al, Bl, Cl, Dl = A[live], B[live], C[live], D[live]
-    s = sigma_max_at(Al, Bl, Cl, Dl, wtest)
-    best = np.argmax(s, axis=1)
-    glb = s[np.arange(live.size), best]
-    wpk = wtest[np.arange(live.size), best]
-    at_inf = sigD[live] >= glb
-    glb = np.where(at_inf, sigD[live], glb)
-    wpk = np.where(at_inf, np.inf, wpk)
-    gub = np.full(live.size, np.inf)
-    active = glb > 0
-    gub[~active] = 0.0
-    for _ in range(max_iter):
-        idx = np.flatnonzero(active)
-        if idx.size == 0:
-            break
-        gamma = (1 + 2 * tol) * glb[idx]
-        Ham = _hamiltonian(Al[idx], Bl[idx], Cl[idx], Dl[idx], gamma)
-        ev = np.linalg.eigvals(Ham)
-        scale = np.maximum(np.max(np.abs(ev), axis=1, keepdims=True), 1e-300)
-        imag_axis = np.abs(ev.real) <= 1e-7 * scale
-        for j, i in enumerate(idx):
-            w = np.sort(np.abs(ev[j].imag[imag_axis[j]]))
-            w = np.unique(np.round(w / scale[j, 0], 12)) * scale[j, 0] if w.size else w
-            if w.size == 0:
-                gub[i] = gamma[j]
-                active[i] = False
-                continue
-            mids = 0.5 * (w[:-1] + w[1:]) if w.size > 1 else w
-            mids = np.concatenate([mids, w])
-            sm = sigma_max_at(
-                Al[i : i + 1], Bl[i : i + 1], Cl[i : i + 1], Dl[i : i + 1], mids[None]
-            )[0]
-            k = int(np.argmax(sm))
-            if sm[k] <= glb[i] * (1 + tol):
-                gub[i] = gamma[j]
-                active[i] = False
-                continue
-            glb[i], wpk[i] = sm[k], mids[k]
-    gub = np.where(np.isinf(gub), glb * (1 + 2 * tol), gub)
-    norm[live], peak[live], upper[live] = glb, wpk, gub
+    if live.size:
+        estimate = peak_gain(A[live], B[live], C[live], D[live])
+        for i, g, w in zip(live, estimate.gamma, estimate.omega, strict=True):
+            norm[i], peak[i] = hinfnorm_hamiltonian(
+                A[i], B[i], C[i], D[i], rtol=tol, max_iterations=max_iter, start=(g, w)
+            )
+        upper[live] = (1 + 2 * tol) * norm[live]
     return _shape(batch, norm, peak, upper)
-
-
-def _hamiltonian(A, B, C, D, gamma):
-    m = B.shape[-1]
-    p = C.shape[-2]
-    g2 = (gamma**2)[:, None, None]
-    DT = np.swapaxes(D, -1, -2)
-    R = g2 * np.eye(m) - DT @ D
-    S = g2 * np.eye(p) - D @ DT
-    Ri = np.linalg.inv(R)
-    Si = np.linalg.inv(S)
-    BT = np.swapaxes(B, -1, -2)
-    CT = np.swapaxes(C, -1, -2)
-    F = A + B @ Ri @ DT @ C
-    g = gamma[:, None, None]
-    top = np.concatenate([F, g * (B @ Ri @ BT)], axis=-1)
-    bot = np.concatenate([-g * (CT @ Si @ C), -np.swapaxes(F, -1, -2)], axis=-1)
-    return np.concatenate([top, bot], axis=-2)
 
 
 def _shape(batch, norm, peak, upper):

@@ -8,8 +8,8 @@ from oos_drake.control.baseline import baseline_gains, inertia_from_plant
 from oos_drake.control.interconnection import WeightedInterconnection, weighted_interconnection
 from oos_drake.control.loop_response import OMEGA_MIN, LoopResponse, LoopSigma
 from oos_drake.control.objective import peak_gradients
-from oos_drake.control.peak_gain import peak_gain
 from oos_drake.control.plants import synthetic_flexible_plants
+from oos_drake.robust.peak_gain import peak_gain
 
 
 @pytest.fixture(scope="module")

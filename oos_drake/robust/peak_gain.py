@@ -1,6 +1,9 @@
 """Batched H-infinity norm (peak gain) of model arrays, vectorized over models and frequencies.
 
 The synthesis inner loop evaluates ``||M_i||_inf`` for hundreds of closed loops at every step.
+This is the package's one H-infinity norm; :func:`oos_drake.robust.hinfnorm` is its MATLAB-named
+front end (input checks, any batch shape, certified upper bound).
+
 Each model is diagonalized once (``A = V diag(lambda) V^-1``, batched LAPACK ``geev``), so its
 frequency response on any grid is one matrix product of the resolvent ``1/(j w - lambda)``
 with the residues ``(C V)_k (V^-1 B)_k``: no solve per frequency, no Python loop per model.
@@ -577,12 +580,15 @@ def hinfnorm_hamiltonian(A, B, C, D, *, rtol: float = 1e-7, max_iterations: int 
     rtol : float
         Relative accuracy of the returned norm.
     start : (float, float), optional
-        A lower bound and its frequency ``(gamma, omega)`` (default: :func:`peak_gain`).
+        A lower bound and its frequency ``(gamma, omega)`` (default: :func:`peak_gain`); raised
+        to ``sigma_max(D)`` (the gain at infinite frequency) when below it.
 
     Returns
     -------
     tuple of float
-        ``(gamma, omega_peak)`` [-, rad/s].
+        ``(gamma, omega_peak)`` [-, rad/s]: ``(1 + 2 rtol) gamma`` is a certified upper bound
+        of the norm when the iteration stops before ``max_iterations``; ``omega_peak`` is
+        ``inf`` when the peak is the gain at infinite frequency.
     """
     A, B, C, D = (np.asarray(M, dtype=float) for M in (A, B, C, D))
     if np.linalg.eigvals(A).real.max(initial=-np.inf) >= 0:
@@ -591,6 +597,11 @@ def hinfnorm_hamiltonian(A, B, C, D, *, rtol: float = 1e-7, max_iterations: int 
         first = peak_gain(A, B, C, D)
         start = (float(first.gamma[0]), float(first.omega[0]))
     gamma, omega = float(start[0]), float(start[1])
+    at_infinity = float(np.linalg.norm(D, ord=2)) if D.size else 0.0
+    if at_infinity >= gamma:  # the Hamiltonian needs a level above sigma_max(D)
+        gamma, omega = at_infinity, np.inf
+    if gamma <= 0.0:  # G = 0
+        return 0.0, omega
     for _ in range(max_iterations):
         g = (1.0 + 2.0 * rtol) * gamma
         R = g * g * np.eye(D.shape[1]) - D.T @ D

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from slycot import ab13dd
 
-from oos_drake.control.peak_gain import ModalResponse, eigenvalues, hinfnorm_hamiltonian, peak_gain
+from oos_drake.robust.peak_gain import ModalResponse, eigenvalues, hinfnorm_hamiltonian, peak_gain
 
 
 def ab13dd_norm(A, B, C, D):
