@@ -1,20 +1,20 @@
 r"""H-infinity norm of continuous-time state-space models (MATLAB ``hinfnorm``), batched.
 
-The front end of the package's one H-infinity norm (:mod:`oos_drake.robust.peak_gain`): the
-peak is located on a modal-form frequency grid and refined (:func:`~.peak_gain.peak_gain`), then
-certified per model by the Boyd-Balakrishnan / Bruinsma-Steinbuch Hamiltonian test
-(:func:`~.peak_gain.hinfnorm_hamiltonian`): for a level ``gamma`` above ``sigma_max(D)``,
+The front end of the package's one H-infinity norm (:mod:`oos_drake.robust.peak_gain`): a
+lower bound (``sigma_max`` at the pole frequencies; for larger models the peak of the modal
+frequency grid, :func:`~.peak_gain.peak_gain`) is raised to the norm and certified by the
+Boyd-Balakrishnan / Bruinsma-Steinbuch level sets (:func:`~.peak_gain.certify_peaks`, all
+models together): for a level ``gamma`` above ``sigma_max(D)``,
 ``gamma`` is a singular value of ``G(j omega)`` exactly when the Hamiltonian
 
 .. math::
 
-    H(\gamma) = \begin{bmatrix} A + B R^{-1} D^T C & B R^{-1} B^T \\
-        -C^T \gamma^2 S^{-1} C & -(A + B R^{-1} D^T C)^T \end{bmatrix},\quad
+    H(\gamma) = \begin{bmatrix} A + B R^{-1} D^T C & \gamma B R^{-1} B^T \\
+        -\gamma C^T S^{-1} C & -(A + B R^{-1} D^T C)^T \end{bmatrix},\quad
     R = \gamma^2 I - D^T D,\ S = \gamma^2 I - D D^T
 
 has the eigenvalue ``j omega``; at ``(1 + 2 tol)`` times the reported norm it has none, which
-makes that level a certified upper bound. Started from the refined grid peak, the test needs
-one or two eigenvalue problems per model (``benchmarks/bench_hinf_paths.py``).
+makes that level a certified upper bound (``benchmarks/bench_hinf_paths.py``).
 """
 
 from __future__ import annotations
@@ -23,7 +23,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from oos_drake.robust.peak_gain import hinfnorm_hamiltonian, peak_gain
+from oos_drake.robust.peak_gain import certify_peaks, peak_gain, sigma_max_exact
+
+#: Models with more states start the level sets from :func:`~.peak_gain.peak_gain`'s refined
+#: grid peak (fewer Hamiltonian eigenvalue problems); smaller ones from the pole frequencies
+#: (cheaper than the grid). Measured in ``benchmarks/bench_hinf_paths.py``.
+GRID_START_STATES = 12
 
 
 @dataclass(frozen=True)
@@ -141,13 +146,30 @@ def hinfnorm(sys, *, tol: float = 1e-8, max_iter: int = 50) -> HinfResult:
     unstable = np.any(poles.real >= -1e-12 * np.maximum(1.0, np.abs(poles)), axis=1)
     norm[unstable], peak[unstable], upper[unstable] = np.inf, np.nan, np.inf
     live = np.flatnonzero(~unstable)
-    if live.size:
-        estimate = peak_gain(A[live], B[live], C[live], D[live])
-        for i, g, w in zip(live, estimate.gamma, estimate.omega, strict=True):
-            norm[i], peak[i] = hinfnorm_hamiltonian(
-                A[i], B[i], C[i], D[i], rtol=tol, max_iterations=max_iter, start=(g, w)
-            )
-        upper[live] = (1 + 2 * tol) * norm[live]
+    if live.size == 0:
+        return _shape(batch, norm, peak, upper)
+    Al, Bl, Cl, Dl = A[live], B[live], C[live], D[live]
+    if n > GRID_START_STATES:  # start from the refined peak of the modal grid
+        grid = peak_gain(Al, Bl, Cl, Dl)
+        start, where = grid.gamma, grid.omega
+    else:  # start from sigma_max at omega = 0 and the (lightly damped first) pole frequencies
+        pl = poles[live]
+        wp = np.abs(pl)
+        order = np.argsort(-pl.real / np.maximum(wp, 1e-300), axis=1)[:, : min(n, 12)]
+        wtest = np.concatenate(
+            [
+                np.zeros((live.size, 1)),
+                np.take_along_axis(np.abs(pl.imag), order, 1),
+                np.take_along_axis(wp, order, 1),
+            ],
+            axis=1,
+        )
+        s = sigma_max_exact(Al, Bl, Cl, Dl, wtest)
+        best = np.argmax(s, axis=1)
+        start, where = s[np.arange(live.size), best], wtest[np.arange(live.size), best]
+    norm[live], peak[live], upper[live] = certify_peaks(
+        Al, Bl, Cl, Dl, start, where, rtol=tol, max_iterations=max_iter
+    )
     return _shape(batch, norm, peak, upper)
 
 

@@ -18,8 +18,9 @@ LoopSigma`) that samples the closed-loop gain from the plant's modal form, compu
 plant array: each gamma evaluation then needs only the closed-loop *eigenvalues* (stability,
 grid), and ``workers`` threads can share them (LAPACK runs without the GIL).
 
-:func:`hinfnorm_hamiltonian` certifies a result with the Hamiltonian test of
-Boyd-Balakrishnan-Bruinsma-Steinbuch (no imaginary eigenvalue above the reported gain).
+:func:`certify_peaks` certifies results with the Hamiltonian test of
+Boyd-Balakrishnan-Bruinsma-Steinbuch (no imaginary eigenvalue above the reported gain), all
+models together; :func:`hinfnorm_hamiltonian` is its one-model form.
 """
 
 from __future__ import annotations
@@ -450,8 +451,8 @@ def peak_gain(
         of the largest one are refined (the others keep their sampled peak, a lower bound), and
         nothing is computed when a model is unstable. ``None`` (default) refines all models.
     certify : bool
-        Check every stable model with the Hamiltonian test (:func:`hinfnorm_hamiltonian`,
-        started from the grid estimate) and correct it: catches peaks that fall between grid
+        Check every stable model with the Hamiltonian test (:func:`certify_peaks`, started
+        from the grid estimate) and correct it: catches peaks that fall between grid
         points (one 2n x 2n eigenvalue problem per model and iteration).
     refine : str
         ``"slope"`` (default): safeguarded secant on the analytic slope ``d sigma / d omega``
@@ -518,10 +519,10 @@ def peak_gain(
     peak_sigma = np.full((N, cand_w.shape[1]), np.nan)
     peak_omega[near], peak_sigma[near] = cand_w, cand_s
     if certify:
-        for i in np.flatnonzero(~unstable):
-            gamma[i], omega[i] = hinfnorm_hamiltonian(
-                A[i], B[i], C[i], D[i], start=(gamma[i], omega[i])
-            )
+        stable = np.flatnonzero(~unstable)
+        gamma[stable], omega[stable], _ = certify_peaks(
+            A[stable], B[stable], C[stable], D[stable], gamma[stable], omega[stable]
+        )
     gamma = np.where(unstable, np.inf, gamma)
     omega = np.where(unstable, np.nan, omega)
     return PeakGain(gamma, omega, abscissa, peak_omega, peak_sigma)
@@ -569,9 +570,8 @@ def _refine_peaks(
 def hinfnorm_hamiltonian(A, B, C, D, *, rtol: float = 1e-7, max_iterations: int = 30, start=None):
     """H-infinity norm of one stable model by the Hamiltonian (BBBS) iteration.
 
-    Starts from the peak-gain estimate; at each step checks the Hamiltonian at
-    ``(1 + 2 rtol) gamma`` for imaginary eigenvalues and, when some exist, evaluates the gain
-    at the midpoints of the intervals they bound (quadratic convergence).
+    One model of :func:`certify_peaks`, started from ``start`` or the :func:`peak_gain`
+    estimate.
 
     Parameters
     ----------
@@ -579,16 +579,15 @@ def hinfnorm_hamiltonian(A, B, C, D, *, rtol: float = 1e-7, max_iterations: int 
         One model (2-D matrices).
     rtol : float
         Relative accuracy of the returned norm.
+    max_iterations : int
+        Largest number of level-set steps.
     start : (float, float), optional
-        A lower bound and its frequency ``(gamma, omega)`` (default: :func:`peak_gain`); raised
-        to ``sigma_max(D)`` (the gain at infinite frequency) when below it.
+        A lower bound and its frequency ``(gamma, omega)`` (default: :func:`peak_gain`).
 
     Returns
     -------
     tuple of float
-        ``(gamma, omega_peak)`` [-, rad/s]: ``(1 + 2 rtol) gamma`` is a certified upper bound
-        of the norm when the iteration stops before ``max_iterations``; ``omega_peak`` is
-        ``inf`` when the peak is the gain at infinite frequency.
+        ``(gamma, omega_peak)`` [-, rad/s].
     """
     A, B, C, D = (np.asarray(M, dtype=float) for M in (A, B, C, D))
     if np.linalg.eigvals(A).real.max(initial=-np.inf) >= 0:
@@ -596,33 +595,93 @@ def hinfnorm_hamiltonian(A, B, C, D, *, rtol: float = 1e-7, max_iterations: int 
     if start is None:
         first = peak_gain(A, B, C, D)
         start = (float(first.gamma[0]), float(first.omega[0]))
-    gamma, omega = float(start[0]), float(start[1])
-    at_infinity = float(np.linalg.norm(D, ord=2)) if D.size else 0.0
-    if at_infinity >= gamma:  # the Hamiltonian needs a level above sigma_max(D)
-        gamma, omega = at_infinity, np.inf
-    if gamma <= 0.0:  # G = 0
-        return 0.0, omega
+    gamma, omega, _ = certify_peaks(
+        A[None],
+        B[None],
+        C[None],
+        D[None],
+        np.array([float(start[0])]),
+        np.array([float(start[1])]),
+        rtol=rtol,
+        max_iterations=max_iterations,
+    )
+    return float(gamma[0]), float(omega[0])
+
+
+def certify_peaks(A, B, C, D, gamma, omega, *, rtol: float = 1e-7, max_iterations: int = 30):
+    """Exact H-infinity norms of stable models from lower bounds, with certified upper bounds.
+
+    Boyd-Balakrishnan / Bruinsma-Steinbuch level sets, all models together (stacked eigenvalue
+    problems): each step takes the imaginary-axis eigenvalues of the Hamiltonian at
+    ``(1 + 2 rtol)`` times the current lower bound, evaluates ``sigma_max`` at them and at the
+    midpoints of the intervals they bound, and raises the lower bound; a level with no
+    imaginary eigenvalue is a certified upper bound. Convergence is quadratic: from a good
+    start (:func:`peak_gain`) one or two steps.
+
+    Parameters
+    ----------
+    A, B, C, D : numpy.ndarray
+        Stable models, leading dimension N.
+    gamma, omega : numpy.ndarray, shape (N,)
+        Lower bounds of the norms and their frequencies [rad/s]; raised to ``sigma_max(D)``
+        (the gain at infinite frequency, ``omega = inf``) where below it.
+    rtol : float
+        Relative accuracy.
+    max_iterations : int
+        Largest number of steps (an unfinished model keeps ``upper = (1 + 2 rtol) gamma``,
+        not certified).
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(gamma, omega, upper)``, each (N,).
+    """
+    p, m = C.shape[-2], B.shape[-1]
+    glb = np.asarray(gamma, dtype=float).copy()
+    wpk = np.asarray(omega, dtype=float).copy()
+    sigD = np.linalg.norm(D, ord=2, axis=(-2, -1)) if min(p, m) > 0 else np.zeros(glb.size)
+    at_inf = sigD >= glb
+    glb, wpk = np.where(at_inf, sigD, glb), np.where(at_inf, np.inf, wpk)
+    gub = np.full(glb.size, np.inf)
+    active = glb > 0
+    gub[~active] = 0.0
     for _ in range(max_iterations):
-        g = (1.0 + 2.0 * rtol) * gamma
-        R = g * g * np.eye(D.shape[1]) - D.T @ D
-        S = g * g * np.eye(D.shape[0]) - D @ D.T
-        Ri = np.linalg.inv(R)
-        Ah = A + B @ Ri @ D.T @ C
-        H = np.block([[Ah, B @ Ri @ B.T], [-C.T @ (g * g * np.linalg.inv(S)) @ C, -Ah.T]])
-        ev = np.linalg.eigvals(H)
-        scale = max(1.0, np.abs(ev).max(initial=0.0))
-        imag = np.sort(np.abs(ev[np.abs(ev.real) < 1e-8 * scale].imag))
-        imag = np.unique(np.round(imag, 12))
-        if imag.size < 1:
-            return gamma, omega
-        if imag.size == 1:
-            mids = imag
-        else:
-            mids = 0.5 * (imag[:-1] + imag[1:])
-        mids = np.concatenate([mids, imag])
-        s = sigma_max_exact(A[None], B[None], C[None], D[None], mids[None])[0]
-        best = int(np.argmax(s))
-        if s[best] <= gamma * (1.0 + rtol):
-            return gamma, omega
-        gamma, omega = float(s[best]), float(mids[best])
-    return gamma, omega
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        level = (1 + 2 * rtol) * glb[idx]
+        ev = np.linalg.eigvals(_hamiltonian(A[idx], B[idx], C[idx], D[idx], level))
+        scale = np.maximum(np.max(np.abs(ev), axis=1, keepdims=True), 1e-300)
+        imag_axis = np.abs(ev.real) <= 1e-7 * scale
+        for j, i in enumerate(idx):
+            w = np.sort(np.abs(ev[j].imag[imag_axis[j]]))
+            w = np.unique(np.round(w / scale[j, 0], 12)) * scale[j, 0] if w.size else w
+            if w.size == 0:
+                gub[i], active[i] = level[j], False
+                continue
+            mids = np.concatenate([0.5 * (w[:-1] + w[1:]) if w.size > 1 else w, w])
+            sm = sigma_max_exact(A[i : i + 1], B[i : i + 1], C[i : i + 1], D[i : i + 1], mids[None])
+            k = int(np.argmax(sm[0]))
+            if sm[0, k] <= glb[i] * (1 + rtol):
+                gub[i], active[i] = level[j], False
+                continue
+            glb[i], wpk[i] = sm[0, k], mids[k]
+    gub = np.where(np.isinf(gub), glb * (1 + 2 * rtol), gub)
+    return glb, wpk, gub
+
+
+def _hamiltonian(A, B, C, D, gamma):
+    """Stacked Hamiltonians of the level sets ``gamma`` (N,) (scaled form, ``gamma > sigma(D)``)."""
+    m = B.shape[-1]
+    p = C.shape[-2]
+    g2 = (gamma**2)[:, None, None]
+    DT = np.swapaxes(D, -1, -2)
+    Ri = np.linalg.inv(g2 * np.eye(m) - DT @ D)
+    Si = np.linalg.inv(g2 * np.eye(p) - D @ DT)
+    BT = np.swapaxes(B, -1, -2)
+    CT = np.swapaxes(C, -1, -2)
+    F = A + B @ Ri @ DT @ C
+    g = gamma[:, None, None]
+    top = np.concatenate([F, g * (B @ Ri @ BT)], axis=-1)
+    bot = np.concatenate([-g * (CT @ Si @ C), -np.swapaxes(F, -1, -2)], axis=-1)
+    return np.concatenate([top, bot], axis=-2)
