@@ -115,10 +115,10 @@ def main() -> None:
     for name, out, wall, cpu in runs:
         table = out if hasattr(out, "columns") else out.table
         table = table[table["subset"] == first]
-        spikes = int(np.sum(table["mu_upper [-]"].to_numpy() > 1.03 * lower))
+        spikes = int(np.sum(table["mu upper [-]"].to_numpy() > 1.03 * lower))
         print(
             f"{name:40s} {wall:9.1f} {cpu:9.1f} {len(table):7d} "
-            f"{table['mu_upper [-]'].max():10.4f} {spikes:7d}"
+            f"{table['mu upper [-]'].max():10.4f} {spikes:7d}"
         )
     cold, cont = runs[0], runs[1]
     print(f"continuation vs cold grid: CPU ratio {cold[3] / max(cont[3], 1e-9):.2f}x")

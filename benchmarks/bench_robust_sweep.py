@@ -133,15 +133,15 @@ def main(argv=None):
         f"{'extrapolated 330 models [s]':<28}{full * per_matrix / args.jobs:.0f} "
         f"on {args.jobs} cores"
     )
-    gap = (table["mu_upper [-]"] / np.maximum(table["mu_lower [-]"], 1e-300)).median()
+    gap = (table["mu upper [-]"] / np.maximum(table["mu lower [-]"], 1e-300)).median()
     print(f"{'median upper/lower':<28}{gap:.3f} (all frequencies)")
-    peaks = table.groupby("model").agg(up=("mu_upper [-]", "max"), lo=("mu_lower [-]", "max"))
+    peaks = table.groupby("model").agg(up=("mu upper [-]", "max"), lo=("mu lower [-]", "max"))
     peak_gap = peaks.up / peaks.lo
     print(
         f"{'peak upper/lower per model':<28}median {peak_gap.median():.4f}, "
         f"max {peak_gap.max():.4f} (analysis needs <= 1.05)"
     )
-    print(f"{'peak mu upper':<28}{table["mu_upper [-]"].max():.4f}")
+    print(f"{'peak mu upper':<28}{table["mu upper [-]"].max():.4f}")
 
 
 if __name__ == "__main__":

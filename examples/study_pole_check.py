@@ -78,10 +78,10 @@ def main() -> None:
     omega = float(saved[key + "omega [rad/s]"])
     print(
         f"{record['overrides']}: worst study {study} at {where}, f = {omega / 2 / np.pi:.4g} Hz, "
-        f"mu in [{row['mu_lower']:.4g}, {row['mu_upper']:.4g}], perturbation size "
-        f"1/mu_lower = {1 / row['mu_lower']:.4g}"
+        f"mu in [{row['mu lower [-]']:.4g}, {row['mu upper [-]']:.4g}], perturbation size "
+        f"1/mu_lower = {1 / row['mu lower [-]']:.4g}"
     )
-    for scale in (1.0, 0.98, 1.02, row["mu_lower"]):
+    for scale in (1.0, 0.98, 1.02, row["mu lower [-]"]):
         values = {}
         for name, spec in one.uncertainty.items():
             if key + name not in saved:
@@ -91,7 +91,7 @@ def main() -> None:
             values[name] = float(value) if spec.kind == "ureal" else interpolant(value, omega)
         poles = np.linalg.eigvals(np.asarray(usubs(one, values, normalized=True).A))
         nearest = poles[np.argmin(np.abs(poles - 1j * omega))]
-        size = scale / row["mu_lower"]
+        size = scale / row["mu lower [-]"]
         print(
             f"  perturbation size {size:.4g} (x{scale:.4g} the saved one): max Re(pole) = "
             f"{poles.real.max():+.3e} 1/s; pole nearest j*omega: {nearest:.5g} "

@@ -108,7 +108,7 @@ def test_every_certified_lower_bound_puts_a_pole_on_the_axis(default_run):
     saved = np.load(default_run / "analysis" / "peak_perturbations.npz")
     checked = 0
     for _, row in _peaks(default_run).iterrows():
-        if row["mu_lower"] <= 0:
+        if row["mu lower [-]"] <= 0:
             continue
         key = f"{row['study']}|{row['subset']}|"
         omega = float(saved[key + "omega [rad/s]"])
@@ -126,7 +126,7 @@ def test_every_certified_lower_bound_puts_a_pole_on_the_axis(default_run):
                 values[name] = float(value)
             else:  # M(inf) is real: a constant real matrix there
                 values[name] = value.real if np.isinf(omega) else _interpolant(value, omega)
-        assert largest == pytest.approx(1.0 / row["mu_lower"], rel=1e-6), key
+        assert largest == pytest.approx(1.0 / row["mu lower [-]"], rel=1e-6), key
         if np.isinf(omega):
             _check_ill_posed(one, values, key)
         else:
@@ -193,9 +193,9 @@ def test_every_certified_upper_bound_is_proved_by_scalings_at_its_peak(default_r
             M = Dzw + Cz @ np.linalg.solve(1j * omega * np.eye(A.shape[0]) - A, Bw)
         res = mussv(M, sub.blk, upper_iterations=1000, upper_tol=1e-9)
         assert _lmi_max_eig(M, res.upper * (1 + 1e-6), res.D_left, res.D_right, res.G) <= 1e-12
-        assert res.upper <= row["mu_upper"] * 1.005, (key, res.upper, row["mu_upper"])
-        assert res.lower <= row["mu_upper"] * (1 + 1e-9), key
-        assert row["mu_lower"] <= row["mu_upper"]
+        assert res.upper <= row["mu upper [-]"] * 1.005, (key, res.upper, row["mu upper [-]"])
+        assert res.lower <= row["mu upper [-]"] * (1 + 1e-9), key
+        assert row["mu lower [-]"] <= row["mu upper [-]"]
         assert row["gap [%]"] <= 100 * TARGET_GAP + 1e-9, (key, row["gap [%]"])
 
 
@@ -243,7 +243,7 @@ def test_the_worst_cases_drive_a_chaser_array_mode_below_its_range(default_run):
     for study in ("mission", "docking-7", "docking-8"):
         rows = worst[(worst["study"] == study) & (worst["subset"] == "total")]
         real = rows[rows["kind"] == "ureal"].set_index("block")["normalized_real [-]"]
-        size = 1.0 / peaks.loc[(study, "total"), "mu_lower"]
+        size = 1.0 / peaks.loc[(study, "total"), "mu lower [-]"]
         moved = real[np.abs(real) > 1e-9 * size]  # a vertex of the scaled box (or untouched)
         np.testing.assert_allclose(np.abs(moved), size, rtol=1e-6)
         assert real["w1_SA1"] < -1.0, study  # below its range

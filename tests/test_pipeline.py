@@ -91,7 +91,7 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(tmp_path):
         pd.read_parquet(out / "analysis" / "stability_peaks.parquet")["study"]
     )
     controller = json.loads((out / "controller" / "controller.json").read_text())
-    assert len(controller["configurations"]["time_s"]) == 40
+    assert len(controller["configurations"]["time [s]"]) == 40
     summary = json.loads((out / "analysis" / "summary.json").read_text())
     assert summary["mission"]["configurations"] == 40
     (campaign,) = out.glob("campaign-*")

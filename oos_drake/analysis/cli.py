@@ -110,7 +110,7 @@ def run_analyze(args) -> int:
     print("  (for comparison only, the paper's published value: mu < 0.79 near 275 s)")
     for s in summary["subsets"]:
         print(
-            f"  {s['subset']:>14s}: mu in [{s['mu_lower']:.4g}, {s['mu_upper']:.4g}] "
+            f"  {s['subset']:>14s}: mu in [{s['mu lower [-]']:.4g}, {s['mu upper [-]']:.4g}] "
             f"(gap {s['gap [%]']:.2g} %) at t = {s['time [s]']:.0f} s, "
             f"{s['frequency [Hz]']:.3g} Hz; spikes left {s['spikes_left']} "
             f"({s['spike_stop']}{', BUDGET EXHAUSTED' if s['budget_exhausted'] else ''})"

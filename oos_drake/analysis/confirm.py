@@ -179,11 +179,13 @@ def read_peaks(analysis: str | Path) -> list[Peak]:
     for name in (PEAKS_FILE, PERTURBATIONS_FILE):
         if not (folder / name).is_file():
             raise ValueError(f"--analysis {folder}: {name} not found (run `oos analyze` first)")
-    table = pd.read_parquet(folder / PEAKS_FILE)
+    from oos_drake.robust.tables import upgrade_columns
+
+    table = upgrade_columns(pd.read_parquet(folder / PEAKS_FILE))  # old folders too
     saved = np.load(folder / PERTURBATIONS_FILE)
     peaks = []
     for _, row in table.iterrows():
-        if not row["mu_lower"] > 0:
+        if not row["mu lower [-]"] > 0:
             continue
         key = f"{row['study']}|{row['subset']}|"
         if key + "omega [rad/s]" not in saved.files:
@@ -200,8 +202,8 @@ def read_peaks(analysis: str | Path) -> list[Peak]:
                 time=float(row["time [s]"]),
                 stiffness=float(row.get("stiffness [N/m or N m/rad]", math.nan)),
                 omega=float(saved[key + "omega [rad/s]"]),
-                mu_lower=float(row["mu_lower"]),
-                mu_upper=float(row["mu_upper"]),
+                mu_lower=float(row["mu lower [-]"]),
+                mu_upper=float(row["mu upper [-]"]),
                 perturbation=perturbation,
             )
         )

@@ -37,7 +37,7 @@ def mu_mission_figure(sweep: pd.DataFrame, common_hz, peaks: pd.DataFrame, path)
     fig = plt.figure(figsize=(15, 5.2))
     total = sweep[(sweep["subset"] == "total") & ~sweep["refined"]]
     total = total[np.isin(total["frequency [Hz]"].to_numpy(), common_hz)]
-    grid = total.pivot_table(index="time [s]", columns="frequency [Hz]", values="mu_upper [-]")
+    grid = total.pivot_table(index="time [s]", columns="frequency [Hz]", values="mu upper [-]")
     ax = fig.add_subplot(1, 3, 1, projection="3d")
     T, F = np.meshgrid(grid.index.to_numpy(), np.log10(grid.columns.to_numpy()), indexing="ij")
     ax.plot_surface(T, F, grid.to_numpy(), cmap="viridis", linewidth=0, antialiased=True)
@@ -49,15 +49,17 @@ def mu_mission_figure(sweep: pd.DataFrame, common_hz, peaks: pd.DataFrame, path)
     ax3 = fig.add_subplot(1, 3, 3)
     for name in _ordered(sweep["subset"].unique()):
         part = sweep[sweep["subset"] == name]
-        by_f = part.groupby("frequency [Hz]")["mu_upper [-]"].max()
-        by_t = part.groupby("time [s]")["mu_upper [-]"].max()
+        by_f = part.groupby("frequency [Hz]")["mu upper [-]"].max()
+        by_t = part.groupby("time [s]")["mu upper [-]"].max()
         ax2.semilogx(by_f.index, by_f.to_numpy(), label=name, lw=1.2)
         ax3.plot(by_t.index, by_t.to_numpy(), label=name, lw=1.2)
     for _, row in peaks.iterrows():
         if row["subset"] == "total":
-            ax2.plot(row["frequency [Hz]"], row["mu_lower"], "kv", ms=7, label="certified lower")
-            ax3.plot(row["time [s]"], row["mu_lower"], "kv", ms=7)
-            _guaranteed_line((ax2, ax3), row.get("mu_upper_guaranteed"), "(total)")
+            ax2.plot(
+                row["frequency [Hz]"], row["mu lower [-]"], "kv", ms=7, label="certified lower"
+            )
+            ax3.plot(row["time [s]"], row["mu lower [-]"], "kv", ms=7)
+            _guaranteed_line((ax2, ax3), row.get("mu upper guaranteed [-]"), "(total)")
     ax2.set_xlabel("frequency [Hz]")
     ax2.set_ylabel("max over time of mu upper bound [-]")
     ax2.set_title("(b) side view: frequency")
@@ -105,8 +107,8 @@ def docking_figure(sweeps: dict, peaks: dict, path) -> Path:
     fig, axes = plt.subplots(n, 2, figsize=(13, 4.2 * n), squeeze=False)
     for row, (phase, sweep) in enumerate(sweeps.items()):
         part = sweep[sweep["subset"] == "total"]
-        by_k = part.groupby("time [s]")["mu_upper [-]"].max()
-        by_f = part.groupby("frequency [Hz]")["mu_upper [-]"].max()
+        by_k = part.groupby("time [s]")["mu upper [-]"].max()
+        by_f = part.groupby("frequency [Hz]")["mu upper [-]"].max()
         ax1, ax2 = axes[row]
         ax1.semilogx(by_k.index, by_k.to_numpy(), lw=1.3)
         ax2.semilogx(by_f.index, by_f.to_numpy(), lw=1.3)

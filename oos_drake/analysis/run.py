@@ -5,7 +5,7 @@ Files written in ``out_dir`` (Parquet tables are tidy, units in column names):
 ``mu_mission.parquet``          mu bounds: subset x configuration x frequency (Fig. muanalysis)
 ``stability_peaks.parquet``     certified peak per subset: time, frequency, bounds, gap, margin; the
                                 peak upper bound proved on the whole frequency axis for each
-                                analyzed configuration (``mu_upper_guaranteed`` ...)
+                                analyzed configuration (``mu upper guaranteed [-]`` ...)
 ``worst_perturbations.parquet`` destabilizing perturbation of every peak, per block (physical)
 ``peak_perturbations.npz``      the same perturbations whole and normalized (complex blocks too)
 ``performance.parquet``         worst-case gains of d -> e_p, d -> e_u per subset (Fig. performance)
@@ -172,10 +172,10 @@ def _certify(array, study, subsets, *, configuration_label):
                 "model": model,
                 array.label: float(array.values[model]),
                 "frequency [Hz]": cert.frequency,
-                "mu_upper": upper,
-                "mu_lower": lower,
-                "mu_upper_at_critical": cert.mu_upper_critical,
-                "mu_upper_grid": upper,
+                "mu lower [-]": lower,
+                "mu upper [-]": upper,
+                "mu upper at critical [-]": cert.mu_upper_critical,
+                "mu upper grid [-]": upper,
                 "gap [%]": 100.0 * cert.gap,
                 "gap_at_critical [%]": 100.0 * cert.gap_critical,
                 "margin [-]": 1.0 / upper if upper > 0 else np.inf,
@@ -250,7 +250,7 @@ def _guarantee_columns(guarantee, lower, n_configurations) -> dict:
         return {}
     up = guarantee.mu_upper
     return {
-        "mu_upper_guaranteed": up,
+        "mu upper guaranteed [-]": up,
         "gap_guaranteed [%]": 100.0 * (up - lower) / up if up > 0 else 0.0,
         "margin_guaranteed [-]": 1.0 / up if up > 0 else np.inf,
         "guarantee_slack [%]": 100.0 * guarantee.slack,
@@ -406,16 +406,16 @@ def run_analysis(
         docking_peaks[phase] = {
             "stiffness": float(row["stiffness [N/m or N m/rad]"]),
             "gap [%]": float(row["gap [%]"]),
-            "mu_upper_grid": float(row["mu_upper_grid"]),
+            "mu_upper_grid": float(row["mu upper grid [-]"]),
             "frequency [Hz]": float(row["frequency [Hz]"]),
-            "mu_lower": float(row["mu_lower"]),
-            "mu_upper": float(row["mu_upper"]),
+            "mu_lower": float(row["mu lower [-]"]),
+            "mu_upper": float(row["mu upper [-]"]),
             "peak_stiffness": float(row["peak stiffness [N/m or N m/rad]"]),
             "peak_frequency [Hz]": float(row["peak_frequency [Hz]"]),
             "spikes_left": int(row["spikes_left"]),
             "spike_stop": str(row["spike_stop"]),
             "budget_exhausted": bool(row["budget_exhausted"]),
-            "mu_upper_guaranteed": float(row.get("mu_upper_guaranteed", np.nan)),
+            "mu_upper_guaranteed": float(row.get("mu upper guaranteed [-]", np.nan)),
         }
         timings[f"docking {phase} detail"] = {k: round(v, 2) for k, v in dres.timings.items()}
         lap(f"docking phase {phase}")
@@ -477,7 +477,7 @@ def run_analysis(
         from oos_drake.analysis.sensitivity import mu_sensitivity
 
         part = sweep[(sweep["subset"] == "total") & (sweep["model"] == crit_model)]
-        top = part.nlargest(6, "mu_upper [-]")["frequency [Hz]"].to_numpy()
+        top = part.nlargest(6, "mu upper [-]")["frequency [Hz]"].to_numpy()
         w_crit = 2 * np.pi * certs["total"][1]
         w_s = np.unique(np.concatenate([2 * np.pi * top, w_crit * np.geomspace(0.97, 1.03, 3)]))
         sens = mu_sensitivity(
@@ -602,10 +602,10 @@ def run_analysis(
             "configurations": int(times.size),
             "grid_frequencies": int(omega.size),
             "nominal_stable_models": int((abscissa < 0).sum()),
-            "mu_peak_upper": float(tot["mu_upper"]),
-            "mu_peak_upper_refined": float(tot["mu_upper"]),
-            "mu_peak_lower": float(tot["mu_lower"]),
-            "mu_upper_at_critical": float(tot["mu_upper_at_critical"]),
+            "mu_peak_upper": float(tot["mu upper [-]"]),
+            "mu_peak_upper_refined": float(tot["mu upper [-]"]),
+            "mu_peak_lower": float(tot["mu lower [-]"]),
+            "mu_upper_at_critical": float(tot["mu upper at critical [-]"]),
             "gap_percent": float(tot["gap [%]"]),
             "gap_at_critical_percent": float(tot["gap_at_critical [%]"]),
             "peak_time_s": float(tot["time [s]"]),

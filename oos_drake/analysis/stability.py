@@ -518,7 +518,7 @@ def mu_sweep(
     Returns
     -------
     pandas.DataFrame
-        Columns :data:`~oos_drake.robust.tables.SWEEP_COLUMNS` (``mu_lower [-]``: certified;
+        Columns :data:`~oos_drake.robust.tables.SWEEP_COLUMNS` (``mu lower [-]``: certified;
         ``tightened``: upper bound recomputed with many iterations).
     """
     options = options or SweepOptions()

@@ -327,8 +327,8 @@ def _regions_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
             "configuration": r.configuration,
             "time [s]": r.time,
             "frequency [Hz]": r.frequency,
-            "mu_upper": r.mu_upper,
-            "mu_lower": r.mu_lower,
+            "mu lower [-]": r.mu_lower,
+            "mu upper [-]": r.mu_upper,
         }
         for metric in metrics:
             low, high = r.gains.get(metric, (math.nan, math.nan))
@@ -361,7 +361,7 @@ def _region_label(row: pd.Series) -> str:
     """Y label of a region on three short lines: id and time, frequency and mu, failures."""
     return (
         f"region {int(row['region'])}: t = {row['time [s]']:.0f} s\n"
-        f"f = {row['frequency [Hz]']:.3g} Hz, mu <= {row['mu_upper']:.3g}\n"
+        f"f = {row['frequency [Hz]']:.3g} Hz, mu <= {row['mu upper [-]']:.3g}\n"
         f"{int(row['failures'])}/{int(row['runs'])} runs fail"
     )
 

@@ -277,7 +277,7 @@ def region_counts(plan: pd.DataFrame, regions: Sequence[WorstCaseRegion]) -> pd.
             "region": NOMINAL_COMPONENT,
             "configuration": "nominal dispersions",
             "time [s]": np.nan,
-            "mu_upper": np.nan,
+            "mu upper [-]": np.nan,
             "runs": int(counts.get(NOMINAL_COMPONENT, 0)),
         }
     ]
@@ -286,7 +286,7 @@ def region_counts(plan: pd.DataFrame, regions: Sequence[WorstCaseRegion]) -> pd.
             "region": r.region,
             "configuration": r.configuration,
             "time [s]": r.time,
-            "mu_upper": r.mu_upper,
+            "mu upper [-]": r.mu_upper,
             "runs": int(counts.get(r.region, 0)),
         }
         for r in regions

@@ -84,8 +84,11 @@ def atomic_write_parquet(table: pd.DataFrame, path: Path) -> Path:
     return _atomic_write(path, lambda stream: table.to_parquet(stream, index=False))
 
 
-def read_table(path: Path, columns, label: str) -> pd.DataFrame:
+def read_table(path: Path, columns, label: str, *, legacy: bool = False) -> pd.DataFrame:
     """Read a Parquet table a user gave, with its required ``columns``.
+
+    ``legacy``: rename the column names of tables written before the ``name [unit]``
+    convention first (:func:`oos_drake.robust.tables.upgrade_columns`).
 
     Raises
     ------
@@ -96,6 +99,13 @@ def read_table(path: Path, columns, label: str) -> pd.DataFrame:
         table = pd.read_parquet(path)
     except Exception as exc:  # noqa: BLE001 - any reader error is a bad file for the user
         raise ValueError(f"{label}: cannot read Parquet: {exc}") from exc
+    if legacy:
+        from oos_drake.robust.tables import upgrade_columns
+
+        try:
+            table = upgrade_columns(table)
+        except ValueError as exc:
+            raise ValueError(f"{label}: {exc}") from None
     missing = [c for c in columns if c not in table.columns]
     if missing:
         raise ValueError(f"{label}: missing column(s) {', '.join(missing)}")

@@ -16,8 +16,8 @@ column                     dtype    meaning
 ``configuration``          string   configuration label (``"capture"``, ``"docked-2"``, ...)
 ``time [s]``               float64  critical mission time [s] (>= 0)
 ``frequency [Hz]``         float64  critical frequency of the mu peak [Hz] (>= 0)
-``mu_upper``               float64  upper bound of mu at the peak [-]
-``mu_lower``               float64  lower bound of mu at the peak [-] (<= ``mu_upper``)
+``mu upper [-]``           float64  upper bound of mu at the peak [-]
+``mu lower [-]``           float64  lower bound of mu at the peak [-] (<= ``mu upper [-]``)
 ``subset``                 string   the uncertain blocks analyzed, comma-separated
 ``wc:<block> [<unit>]``    float64  worst-case value of the named block, PHYSICAL units
 ``wcgain:<metric> lower``  float64  optional: worst-case gain of the performance channel whose
@@ -35,8 +35,11 @@ the worst-case perturbation (the simulator parameter of kind ``lti``).
 
 Example::
 
-    region configuration time [s] frequency [Hz] mu_upper mu_lower subset       wc:J_hub [kg m^2]
-    0      capture       100.0    0.21           1.31     1.27     J_hub,k_dock 262.0
+    region configuration time [s] frequency [Hz] mu upper [-] mu lower [-] subset  wc:J_hub [kg m^2]
+    0      capture       100.0    0.21           1.31         1.27         J_hub,k_dock 262.0
+
+Files written before the ``name [unit]`` convention (``mu_upper``, ``mu_lower``) are read with
+their columns renamed (:data:`oos_drake.robust.tables.LEGACY_COLUMNS`).
 """
 
 from __future__ import annotations
@@ -57,8 +60,8 @@ BASE_COLUMNS: dict[str, str] = {
     "configuration": "string",
     "time [s]": "float64",
     "frequency [Hz]": "float64",
-    "mu_upper": "float64",
-    "mu_lower": "float64",
+    "mu upper [-]": "float64",
+    "mu lower [-]": "float64",
     "subset": "string",
 }
 
@@ -129,8 +132,8 @@ def write_worst_cases(
             "configuration": pd.array([r.configuration for r in regions], dtype="string"),
             "time [s]": [float(r.time) for r in regions],
             "frequency [Hz]": [float(r.frequency) for r in regions],
-            "mu_upper": [float(r.mu_upper) for r in regions],
-            "mu_lower": [float(r.mu_lower) for r in regions],
+            "mu upper [-]": [float(r.mu_upper) for r in regions],
+            "mu lower [-]": [float(r.mu_lower) for r in regions],
             "subset": pd.array([r.subset for r in regions], dtype="string"),
         }
     )
@@ -162,7 +165,7 @@ def read_worst_cases(
         raise ValueError(f"worst cases file {path} not found (written by oos analyze)")
     from oos_drake.campaign.store import read_table
 
-    table = read_table(path, BASE_COLUMNS, f"worst cases file {path}")
+    table = read_table(path, BASE_COLUMNS, f"worst cases file {path}", legacy=True)
     if table.empty:
         raise ValueError(f"worst cases file {path}: no region")
     by_name = {p.name: p for p in parameters}
@@ -208,7 +211,7 @@ def read_worst_cases(
         record = dict(zip(table.columns, row, strict=True))
         region = int(record["region"])
         where = f"worst cases file {path}: region {region}"
-        mu_upper, mu_lower = float(record["mu_upper"]), float(record["mu_lower"])
+        mu_upper, mu_lower = float(record["mu upper [-]"]), float(record["mu lower [-]"])
         if not (np.isfinite(mu_upper) and np.isfinite(mu_lower)) or mu_lower > mu_upper * (
             1 + 1e-9
         ):

@@ -73,8 +73,8 @@ def baseline_for(plants, tuning_time: float = TUNING_TIME_S) -> np.ndarray:
     ``tuning_time`` [s] (the first docking: the paper's 255 s, a scenario's
     ``mission.first_docking_time``)."""
     table = plants.configurations
-    if "time_s" in table:
-        k = int(np.argmin(np.abs(table["time_s"].to_numpy() - tuning_time)))
+    if "time [s]" in table:
+        k = int(np.argmin(np.abs(table["time [s]"].to_numpy() - tuning_time)))
     else:
         k = 0
     J = inertia_from_plant(plants.evaluate([k]))[0]

@@ -52,7 +52,7 @@ class PlantArray:
     Parameters
     ----------
     configurations : pandas.DataFrame
-        One row per configuration (e.g. column ``time_s``); row ``i`` is configuration ``i``.
+        One row per configuration (e.g. column ``time [s]``); row ``i`` is configuration ``i``.
     parameters : tuple of UncertainParameter
         The real uncertain parameters (may be empty).
     build : callable
@@ -266,7 +266,7 @@ def synthetic_flexible_plants(
         def build(index, values):  # noqa: F811 - nominal-only variant
             return inner(index, np.ones((index.size, 2)))
 
-    return PlantArray(pd.DataFrame({"time_s": t}), parameters, build, "synthetic")
+    return PlantArray(pd.DataFrame({"time [s]": t}), parameters, build, "synthetic")
 
 
 def lfr_statespace(model, values: dict):
@@ -378,7 +378,7 @@ def scenario_plants(configurations: int, scenario=None) -> PlantArray:
     times = mission_times(configurations, scenario)
     model = build_mission_model(scenario)
     return from_lfr(
-        model, mission_values(times, scenario), pd.DataFrame({"time_s": times}), source="lfr"
+        model, mission_values(times, scenario), pd.DataFrame({"time [s]": times}), source="lfr"
     )
 
 

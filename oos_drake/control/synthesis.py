@@ -138,9 +138,10 @@ class SynthesisResult:
     gamma_start : float
         Its gamma over the nominal configurations.
     models : pandas.DataFrame
-        One row per model of the final set: ``config``, parameter columns, ``gamma``,
-        ``omega_peak_rad_s``, ``worst_case`` (added by the uncertainty search), ``active``
-        (within 1e-3 of gamma).
+        One row per model of the final set: ``config``, configuration columns (``time [s]``),
+        parameter columns (physical values, named by parameter), ``gamma [-]``,
+        ``peak frequency [rad/s]``, ``spectral abscissa [1/s]``, ``worst_case`` (added by the
+        uncertainty search), ``active`` (within 1e-3 of gamma).
     runs : pandas.DataFrame
         One row per BFGS run: round, restart, gamma start/end, iterations, evaluations, message.
     worst_cases : pandas.DataFrame
@@ -497,9 +498,9 @@ def synthesize(
         table[p.name] = models.values[:, j]
     for column in plants.configurations.columns:
         table[column] = plants.configurations[column].to_numpy()[models.config_index]
-    table["gamma"] = final.gamma
-    table["omega_peak_rad_s"] = final.omega
-    table["spectral_abscissa"] = final.spectral_abscissa
+    table["gamma [-]"] = final.gamma
+    table["peak frequency [rad/s]"] = final.omega
+    table["spectral abscissa [1/s]"] = final.spectral_abscissa
     table["worst_case"] = added
     table["active"] = final.gamma >= gamma * (1.0 - 1e-3)
     return SynthesisResult(

@@ -323,7 +323,7 @@ class DrakePlantSource:
     def plant_array(self) -> PlantArray:
         """The synthesis' plant array (configurations table with ``time_s``)."""
         return PlantArray(
-            pd.DataFrame({"time_s": self.times}),
+            pd.DataFrame({"time [s]": self.times}),
             self.parameters,
             self.build,
             source="drake",

@@ -12,6 +12,7 @@ Examples::
     oos robust mussv sweep.npz --out bounds.npz  # batch: writes upper, lower, delta, D, G
     oos robust hinfnorm plant.npz
     oos robust robstab closed_loop.npz           # LFR file (lfr.to_npz / to_mat, oos ulinearize)
+    oos robust robstab loop.npz --out mu.csv     # also the mu bounds per frequency (sweep table)
 """
 
 from __future__ import annotations
@@ -82,6 +83,8 @@ def _robstab(args: argparse.Namespace) -> int:
     from oos_drake.lfr import load_lfr
     from oos_drake.robust import robstab
 
+    if args.out and Path(args.out).suffix not in (".csv", ".parquet"):
+        raise ValueError(f"--out {args.out}: expected a .csv or .parquet file")
     sys = load_lfr(args.file)
     res = robstab(sys, blocks=args.blocks)
     if not res.nominal_stable:
@@ -94,7 +97,23 @@ def _robstab(args: argparse.Namespace) -> int:
     )
     for name, value in res.worst_case.items():
         print(f"  destabilizing {name} = {value}")
+    if args.out:
+        _write_table(res.table(subset=",".join(args.blocks) if args.blocks else "total"), args.out)
+        print(f"mu bounds per frequency written to {args.out}")
     return 0
+
+
+def _write_table(table, path: str) -> None:
+    """Write a table atomically as CSV or Parquet, chosen by the suffix of ``path``."""
+    from oos_drake.campaign.store import atomic_write_parquet, atomic_write_text
+
+    suffix = Path(path).suffix
+    if suffix == ".parquet":
+        atomic_write_parquet(table, Path(path))
+    elif suffix == ".csv":
+        atomic_write_text(table.to_csv(index=False), Path(path))
+    else:
+        raise ValueError(f"--out {path}: expected a .csv or .parquet file")
 
 
 def register(subparsers) -> None:
@@ -116,4 +135,9 @@ def register(subparsers) -> None:
     stab = commands.add_parser("robstab", help="robust stability margin of a stored LFR")
     stab.add_argument("file", help=".npz or .mat LFR file (oos_drake.lfr.load_lfr)")
     stab.add_argument("--blocks", nargs="+", default=None, help="analyze only these blocks")
+    stab.add_argument(
+        "--out",
+        default=None,
+        help=".csv or .parquet file for the mu bounds per frequency (the mu sweep table)",
+    )
     stab.set_defaults(func=_robstab)

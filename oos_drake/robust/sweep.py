@@ -339,7 +339,7 @@ def robust_sweep(
     guaranteed : bool
         Also prove, for each model and subset, a bound of the peak of mu over the whole
         frequency axis (:func:`~oos_drake.robust.mu_intervals.cover_axis`, started from the
-        peaks of the grid): columns ``mu_upper_guaranteed [-]`` (the same value on every row of
+        peaks of the grid): columns ``mu upper guaranteed [-]`` (the same value on every row of
         the model and subset; ``inf`` if the cover did not close) and ``guarantee_points``
         (frequencies solved for the proof). The per-frequency columns stay pointwise bounds.
     slack : float, optional

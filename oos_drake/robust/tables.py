@@ -22,22 +22,25 @@ SWEEP_COLUMNS = [
     "model",
     "time [s]",
     "frequency [Hz]",
-    "mu_upper [-]",
-    "mu_lower [-]",
+    "mu lower [-]",
+    "mu upper [-]",
     "refined",
     "tightened",
 ]
 #: Extra columns when the peak over the whole frequency axis is proved (``guaranteed=True``):
 #: the same value on every row of a model and subset, and the frequencies solved for the proof.
-GUARANTEE_COLUMNS = ["mu_upper_guaranteed [-]", "guarantee_points"]
-#: Names used by tables written before the ``name [unit]`` convention -> current names
-#: (:func:`upgrade_columns` renames them when an old result folder is read).
+GUARANTEE_COLUMNS = ["mu upper guaranteed [-]", "guarantee_points"]
+#: Names used by tables written before the ``name [unit]`` convention -> current names: the
+#: sweep tables, ``stability_peaks.parquet`` and ``worst_cases.parquet`` of older result folders
+#: (:func:`upgrade_columns` renames them when such a folder is read).
 LEGACY_COLUMNS = {
     "time": "time [s]",
     "frequency": "frequency [Hz]",
-    "mu_upper": "mu_upper [-]",
-    "mu_lower": "mu_lower [-]",
-    "mu_upper_guaranteed": "mu_upper_guaranteed [-]",
+    "mu_upper": "mu upper [-]",
+    "mu_lower": "mu lower [-]",
+    "mu_upper_guaranteed": "mu upper guaranteed [-]",
+    "mu_upper_at_critical": "mu upper at critical [-]",
+    "mu_upper_grid": "mu upper grid [-]",
 }
 
 
@@ -120,13 +123,13 @@ def sweep_table(
         "model": full(model, int),
         "time [s]": full(time, float),
         "frequency [Hz]": omega / (2 * np.pi),
-        "mu_upper [-]": full(upper, float),
-        "mu_lower [-]": full(lower, float),
+        "mu lower [-]": full(lower, float),
+        "mu upper [-]": full(upper, float),
         "refined": full(refined, bool),
         "tightened": full(tightened, bool),
     }
     if guaranteed is not None:
-        data["mu_upper_guaranteed [-]"] = full(guaranteed, float)
+        data["mu upper guaranteed [-]"] = full(guaranteed, float)
         data["guarantee_points"] = full(0 if guarantee_points is None else guarantee_points, int)
     table = pd.DataFrame(data)
     return table.sort_values(

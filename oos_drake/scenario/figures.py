@@ -74,7 +74,7 @@ def sigma_moments_data(model, timeline, frequencies_hz, n_samples: int = 20, rng
     Returns
     -------
     pandas.DataFrame
-        Columns ``moment, time_s, model ("nominal" or "sample k"), frequency_hz, gain_db``.
+        Columns ``moment, time [s], model ("nominal" or "sample k"), frequency [Hz], gain [dB]``.
     """
     rng = np.random.default_rng(0) if rng is None else rng
     omega = 2 * np.pi * np.asarray(frequencies_hz, dtype=float)
@@ -87,10 +87,10 @@ def sigma_moments_data(model, timeline, frequencies_hz, n_samples: int = 20, rng
             pd.DataFrame(
                 {
                     "moment": name,
-                    "time_s": float(config.time),
+                    "time [s]": float(config.time),
                     "model": "nominal",
-                    "frequency_hz": frequencies_hz,
-                    "gain_db": _db(nominal),
+                    "frequency [Hz]": frequencies_hz,
+                    "gain [dB]": _db(nominal),
                 }
             )
         )
@@ -102,10 +102,10 @@ def sigma_moments_data(model, timeline, frequencies_hz, n_samples: int = 20, rng
                     pd.DataFrame(
                         {
                             "moment": name,
-                            "time_s": float(config.time),
+                            "time [s]": float(config.time),
                             "model": f"sample {k}",
-                            "frequency_hz": frequencies_hz,
-                            "gain_db": _db(response[k]),
+                            "frequency [Hz]": frequencies_hz,
+                            "gain [dB]": _db(response[k]),
                         }
                     )
                 )
@@ -140,7 +140,7 @@ def docking_sweeps_data(timeline, frequencies_hz, stiffness=None):
     Returns
     -------
     pandas.DataFrame
-        Columns ``panel, phase, swept, stiffness, frequency_hz, gain_db``.
+        Columns ``panel, phase, swept, stiffness [N/m or N m/rad], frequency [Hz], gain [dB]``.
     """
     from oos_drake.scenario.model import build_docking_model
 
@@ -176,9 +176,9 @@ def docking_sweeps_data(timeline, frequencies_hz, stiffness=None):
                         "panel": panel,
                         "phase": phase,
                         "swept": swept,
-                        "stiffness": stiffness[k],
-                        "frequency_hz": frequencies_hz,
-                        "gain_db": _db(response[k]),
+                        "stiffness [N/m or N m/rad]": stiffness[k],
+                        "frequency [Hz]": frequencies_hz,
+                        "gain [dB]": _db(response[k]),
                     }
                 )
             )
@@ -194,22 +194,22 @@ def inertia_history_data(model, timeline, times):
     Returns
     -------
     pandas.DataFrame
-        Columns ``time_s, mass_kg, Jxx, Jyy, Jzz, Jxy, Jxz, Jyz`` [kg m^2] (products as the
-        tensor's off-diagonal entries).
+        Columns ``time [s]``, ``mass [kg]``, ``Jxx [kg m^2]`` ... ``Jyz [kg m^2]`` (products as
+        the tensor's off-diagonal entries).
     """
     values = timeline.configuration(np.asarray(times, dtype=float)).parameters()
     gain = usubs(model, values).nominal.freqresp(np.array([0.0]))[:, 0].real
     inertia = np.linalg.inv(gain)
     return pd.DataFrame(
         {
-            "time_s": times,
-            "mass_kg": inertia[:, 0, 0],
-            "Jxx": inertia[:, 3, 3],
-            "Jyy": inertia[:, 4, 4],
-            "Jzz": inertia[:, 5, 5],
-            "Jxy": inertia[:, 3, 4],
-            "Jxz": inertia[:, 3, 5],
-            "Jyz": inertia[:, 4, 5],
+            "time [s]": times,
+            "mass [kg]": inertia[:, 0, 0],
+            "Jxx [kg m^2]": inertia[:, 3, 3],
+            "Jyy [kg m^2]": inertia[:, 4, 4],
+            "Jzz [kg m^2]": inertia[:, 5, 5],
+            "Jxy [kg m^2]": inertia[:, 3, 4],
+            "Jxz [kg m^2]": inertia[:, 3, 5],
+            "Jyz [kg m^2]": inertia[:, 4, 5],
         }
     )
 
@@ -289,8 +289,8 @@ def make_figures(
         for label, curve in group.groupby("model", sort=False):
             nominal = label == "nominal"
             ax.semilogx(
-                curve["frequency_hz"],
-                curve["gain_db"],
+                curve["frequency [Hz]"],
+                curve["gain [dB]"],
                 color="tab:red" if nominal else "tab:blue",
                 lw=1.6 if nominal else 0.5,
                 alpha=1.0 if nominal else 0.35,
@@ -298,7 +298,7 @@ def make_figures(
                 label="nominal" if nominal else None,
             )
         ax.semilogx([], [], color="tab:blue", lw=0.5, label=f"{n_samples} uncertain samples")
-        ax.set_title(f"moment {name} (t = {group['time_s'].iloc[0]:.0f} s)")
+        ax.set_title(f"moment {name} (t = {group['time [s]'].iloc[0]:.0f} s)")
         ax.grid(True, which="both", alpha=0.3)
     for ax in axes[-1]:
         ax.set_xlabel("frequency [Hz]")
@@ -323,12 +323,12 @@ def make_figures(
     }
     cmap = plt.get_cmap("viridis")
     for ax, (panel, group) in zip(axes, sweeps.groupby("panel", sort=True), strict=True):
-        values = np.sort(group["stiffness"].unique())
+        values = np.sort(group["stiffness [N/m or N m/rad]"].unique())
         for k, value in enumerate(values):
-            curve = group[group["stiffness"] == value]
+            curve = group[group["stiffness [N/m or N m/rad]"] == value]
             ax.semilogx(
-                curve["frequency_hz"],
-                curve["gain_db"],
+                curve["frequency [Hz]"],
+                curve["gain [dB]"],
                 color=cmap(k / max(1, len(values) - 1)),
                 lw=1.0,
                 label=f"K = {value:g}",
@@ -349,9 +349,9 @@ def make_figures(
     inertias = inertia_history_data(model, timeline, times)
     fig, (ax_moments, ax_products) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
     for key in ("Jxx", "Jyy", "Jzz"):
-        ax_moments.plot(inertias["time_s"], inertias[key], label=key)
+        ax_moments.plot(inertias["time [s]"], inertias[f"{key} [kg m^2]"], label=key)
     for key in ("Jxy", "Jxz", "Jyz"):
-        ax_products.plot(inertias["time_s"], inertias[key], label=key)
+        ax_products.plot(inertias["time [s]"], inertias[f"{key} [kg m^2]"], label=key)
     mission = timeline.scenario.mission
     for ax in (ax_moments, ax_products):
         for t, label in (
@@ -377,9 +377,9 @@ def make_figures(
     # -- Fig. surf
     surface = surface_data(model, timeline, times, frequencies)
     frame = pd.DataFrame(
-        surface, index=pd.Index(times, name="time_s"), columns=[f"{f:.6g}" for f in frequencies]
+        surface, index=pd.Index(times, name="time [s]"), columns=[f"{f:.6g}" for f in frequencies]
     )
-    frame.columns.name = "frequency_hz"
+    frame.columns.name = "frequency [Hz]"
     data_path = out / "surface.parquet"
     frame.to_parquet(data_path)
     fig = plt.figure(figsize=(15, 6.2))

@@ -35,10 +35,10 @@ def test_full_analysis_of_the_baseline_controller(tmp_path):
     assert 0 < m["mu_peak_lower"] <= m["mu_peak_upper"]
     peaks = pd.read_parquet(tmp_path / "stability_peaks.parquet")
     assert set(peaks["study"]) == {"mission", "docking-7", "docking-8"}
-    assert np.all(peaks["mu_lower"] <= peaks["mu_upper"] * (1 + 1e-9))
+    assert np.all(peaks["mu lower [-]"] <= peaks["mu upper [-]"] * (1 + 1e-9))
     for _, row in peaks.iterrows():
         key = (row["study"], row["subset"])
-        up, lo = row["mu_upper"], row["mu_lower"]
+        up, lo = row["mu upper [-]"], row["mu lower [-]"]
         # the gap column is the honest one: (largest upper bound anywhere - best lower) / upper
         np.testing.assert_allclose(row["gap [%]"], 100 * (up - lo) / up, rtol=1e-9, atol=1e-9)
         assert row["gap [%]"] < 5.0, (key, row["gap [%]"])
@@ -52,8 +52,8 @@ def test_full_analysis_of_the_baseline_controller(tmp_path):
     sweep = pd.read_parquet(tmp_path / "mu_mission.parquet")
     for _, row in peaks[peaks["study"] == "mission"].iterrows():
         sub = sweep[sweep["subset"] == row["subset"]]
-        assert sub["mu_upper [-]"].max() <= row["mu_upper"] * (1 + 1e-9)
-        assert np.all(sub["mu_upper [-]"] < row["mu_lower"] / 0.95)  # every point within 5 %
+        assert sub["mu upper [-]"].max() <= row["mu upper [-]"] * (1 + 1e-9)
+        assert np.all(sub["mu upper [-]"] < row["mu lower [-]"] / 0.95)  # every point within 5 %
     # the certified real-parameter perturbation (named, normalized values in the table) puts a
     # closed-loop pole on j omega: independent check with usubs, the other blocks nominal
     real = peaks[(peaks["study"] == "mission") & (peaks["subset"] == "real")].iloc[0]
@@ -65,7 +65,7 @@ def test_full_analysis_of_the_baseline_controller(tmp_path):
     poles = np.linalg.eigvals(np.asarray(usubs(one.model(0), values, normalized=True).A))
     w0 = 2 * np.pi * real["frequency [Hz]"]
     assert np.min(np.abs(poles - 1j * w0)) < 1e-3 * max(w0, 1.0)
-    assert np.isclose(np.max(np.abs(list(values.values()))), 1 / real["mu_lower"], rtol=1e-6)
+    assert np.isclose(np.max(np.abs(list(values.values()))), 1 / real["mu lower [-]"], rtol=1e-6)
     docking = pd.read_parquet(tmp_path / "docking_7.parquet")
     assert docking["model"].nunique() == 300
     assert summary["timings_s"]["total"] > 0

@@ -1,6 +1,7 @@
 """A small, fast configuration of the whole analysis: files, documented columns, certificates."""
 
 import json
+import re
 
 import numpy as np
 import pandas as pd
@@ -81,8 +82,8 @@ def test_tables_have_documented_columns(analysis):
     out, _, _ = analysis
     from oos_drake.analysis.performance import PERFORMANCE_COLUMNS
     from oos_drake.analysis.sensitivity import SENSITIVITY_COLUMNS
-    from oos_drake.robust.tables import SWEEP_COLUMNS
     from oos_drake.analysis.time_check import TIME_COLUMNS
+    from oos_drake.robust.tables import SWEEP_COLUMNS
 
     assert list(pd.read_parquet(out / "mu_mission.parquet").columns) == SWEEP_COLUMNS
     assert list(pd.read_parquet(out / "performance.parquet").columns) == PERFORMANCE_COLUMNS
@@ -93,12 +94,12 @@ def test_tables_have_documented_columns(analysis):
         "subset",
         "time [s]",
         "frequency [Hz]",
-        "mu_upper",
-        "mu_lower",
+        "mu upper [-]",
+        "mu lower [-]",
         "gap [%]",
         "margin [-]",
         "stiffness [N/m or N m/rad]",
-        "mu_upper_at_critical",
+        "mu upper at critical [-]",
     ):
         assert col in peaks.columns, col
     sweep = pd.read_parquet(out / "mu_mission.parquet")
@@ -110,7 +111,26 @@ def test_tables_have_documented_columns(analysis):
         "additive",
         "multiplicative",
     }
-    assert np.all(sweep["mu_lower [-]"] <= sweep["mu_upper [-]"] * (1 + 1e-9))
+    assert np.all(sweep["mu lower [-]"] <= sweep["mu upper [-]"] * (1 + 1e-9))
+
+
+def test_every_table_names_the_unit_of_its_quantities(analysis):
+    """Every float column of every Parquet table of the analysis is ``name [unit]`` (``[-]``
+    when dimensionless): labels, indices, counts and flags are not floats."""
+    out, _, _ = analysis
+    unit = re.compile(r"^[^\[\]]+ \[[^\[\]]+\]$")
+    tables = sorted(out.glob("*.parquet"))
+    assert {p.name for p in tables} >= {
+        "mu_mission.parquet",
+        "docking_7.parquet",
+        "stability_peaks.parquet",
+        "worst_cases.parquet",
+        "performance.parquet",
+    }
+    for path in tables:
+        table = pd.read_parquet(path)
+        bare = [c for c in table.columns if table[c].dtype.kind == "f" and not unit.match(c)]
+        assert not bare, (path.name, bare)
 
 
 def test_worst_cases_file_reads_back_with_the_campaign_schema(analysis):
@@ -152,10 +172,10 @@ def test_peak_bounds_meet(analysis):
     peaks = pd.read_parquet(out / "stability_peaks.parquet")
     target = 100 * FAST.tighten.target_gap
     for _, row in peaks.iterrows():
-        assert row["mu_lower"] > 0 or row["subset"] == "mechanical"
-        assert row["mu_lower"] <= row["mu_upper_at_critical"] * (1 + 1e-9)
-        assert row["mu_upper_at_critical"] <= row["mu_upper"] * (1 + 1e-9)
-        up, lo = row["mu_upper"], row["mu_lower"]
+        assert row["mu lower [-]"] > 0 or row["subset"] == "mechanical"
+        assert row["mu lower [-]"] <= row["mu upper at critical [-]"] * (1 + 1e-9)
+        assert row["mu upper at critical [-]"] <= row["mu upper [-]"] * (1 + 1e-9)
+        up, lo = row["mu upper [-]"], row["mu lower [-]"]
         np.testing.assert_allclose(row["gap [%]"], 100 * (up - lo) / up, rtol=1e-9, atol=1e-9)
         if row["spikes_left"] == 0 and lo > 0:
             assert row["gap [%]"] <= target * (1 + 1e-6) + 1e-9, (row["study"], row["subset"])
@@ -163,8 +183,8 @@ def test_peak_bounds_meet(analysis):
             assert row["gap [%]"] < 5.0, (row["study"], row["subset"], row["gap [%]"])
     sweep = pd.read_parquet(out / "mu_mission.parquet")
     for _, row in peaks[peaks["study"] == "mission"].iterrows():
-        grid_max = sweep.loc[sweep["subset"] == row["subset"], "mu_upper [-]"].max()
-        assert grid_max <= row["mu_upper"] * (1 + 1e-9)  # the peak covers every analyzed point
+        grid_max = sweep.loc[sweep["subset"] == row["subset"], "mu upper [-]"].max()
+        assert grid_max <= row["mu upper [-]"] * (1 + 1e-9)  # the peak covers every analyzed point
 
 
 def test_additive_peak_is_certified_exactly(analysis):

@@ -90,7 +90,7 @@ def test_certified_sweep_brackets_the_closed_form_peak():
     assert cert.gap <= 0.03 + 1e-9
     np.testing.assert_allclose(cert.mu_lower, exact, rtol=2e-3)
     table = res.table
-    assert np.all(table["mu_lower [-]"] <= table["mu_upper [-]"] * (1 + 1e-9))
+    assert np.all(table["mu lower [-]"] <= table["mu upper [-]"] * (1 + 1e-9))
     assert table["refined"].sum() >= 2  # peak refinement points
     # the certified perturbation destabilizes: k = 40 + 10 delta puts a pole on j omega
     value = cert.worst_case_normalized["k"]

@@ -37,8 +37,8 @@ def test_round_trip_and_schema(tmp_path):
         "configuration",
         "time [s]",
         "frequency [Hz]",
-        "mu_upper",
-        "mu_lower",
+        "mu upper [-]",
+        "mu lower [-]",
         "subset",
     ]
     assert {"wc:J_hub [kg m^2]", "wc:k_dock [N m/rad]", "wc:omega_capture [rad/s]"} <= set(table)
@@ -57,7 +57,10 @@ def test_round_trip_and_schema(tmp_path):
             lambda t: t.rename(columns={"wc:J_hub [kg m^2]": "wc:J_hub [g cm^2]"}),
             "has unit 'g cm\\^2'",
         ),
-        (lambda t: t.assign(mu_lower=[2.0, 0.6]), "mu_lower 2.0 must be <= mu_upper 1.4"),
+        (
+            lambda t: t.assign(**{"mu lower [-]": [2.0, 0.6]}),
+            "mu_lower 2.0 must be <= mu_upper 1.4",
+        ),
         (lambda t: t.drop(columns="subset"), "missing column\\(s\\) subset"),
         (
             lambda t: t.assign(**{"wc:J_hub [kg m^2]": [5000.0, np.nan]}),
@@ -159,3 +162,16 @@ def test_worst_case_gains_round_trip_and_are_checked(tmp_path):
     table.drop(columns="wcgain:ape upper [-]").to_parquet(tmp_path / "half.parquet")
     with pytest.raises(ValueError, match="needs both"):
         read_worst_cases(tmp_path / "half.parquet", PARAMETERS)
+
+
+def test_a_file_with_the_old_column_names_reads_the_same(tmp_path):
+    """Files written before the ``name [unit]`` convention (``mu_upper``, ``mu_lower``) still
+    read, to the same regions; a file mixing both names is refused in one line."""
+    path = write_worst_cases(REGIONS, PARAMETERS, tmp_path / "wc.parquet")
+    table = pd.read_parquet(path)
+    old = table.rename(columns={"mu upper [-]": "mu_upper", "mu lower [-]": "mu_lower"})
+    old.to_parquet(tmp_path / "old.parquet")
+    assert read_worst_cases(tmp_path / "old.parquet", PARAMETERS) == REGIONS
+    table.assign(mu_upper=table["mu upper [-]"]).to_parquet(tmp_path / "mixed.parquet")
+    with pytest.raises(ValueError, match="both old and new column names"):
+        read_worst_cases(tmp_path / "mixed.parquet", PARAMETERS)

@@ -29,8 +29,8 @@ def test_override_on_a_plain_sampler_gives_the_peak_frequency(tmp_path):
     assert not (tmp_path / "out").exists()
     table = pd.read_parquet(CAMPAIGNS / "demo_worst_cases.parquet")
     table["frequency [Hz]"] = [0.3, 0.7, 0.2][: len(table)]
-    table["mu_upper"] = [1.0, 2.0, 1.5][: len(table)]
-    table["mu_lower"] = table["mu_upper"]
+    table["mu upper [-]"] = [1.0, 2.0, 1.5][: len(table)]
+    table["mu lower [-]"] = table["mu upper [-]"]
     override = tmp_path / "wc.parquet"
     table.to_parquet(override)
     _, spec, plan = prepare_campaign(CAMPAIGNS / "demo.toml", tmp_path / "out", override)

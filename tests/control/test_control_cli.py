@@ -35,8 +35,10 @@ def test_synth_writes_every_output(tmp_path):
     assert len(record["model_sha256"]) == 64
     assert record["gamma"] <= record["gamma_baseline"]
     table = pd.read_parquet(out / "models.parquet")
-    assert len(table) == 3 and {"gamma", "omega_peak_rad_s", "time_s"} <= set(table.columns)
-    assert np.isclose(table["gamma"].max(), record["gamma"], rtol=1e-12)
+    assert len(table) == 3 and {"gamma [-]", "peak frequency [rad/s]", "time [s]"} <= set(
+        table.columns
+    )
+    assert np.isclose(table["gamma [-]"].max(), record["gamma"], rtol=1e-12)
     npz = np.load(out / "closed_loop.npz")
     assert npz["A"].shape[0] == 3 and npz["B"].shape[-1] == 9 and npz["C"].shape[-2] == 6
     mat = scipy.io.loadmat(out / "closed_loop.mat")

@@ -50,7 +50,7 @@ def test_synthesis_improves_on_the_baseline(small_result):
 def test_reported_norms_agree_with_ab13dd(small_problem, small_result):
     plants, _ = small_problem
     M = closed_loop_array(small_result, plants)
-    reported = small_result.models["gamma"].to_numpy()
+    reported = small_result.models["gamma [-]"].to_numpy()
     for i in range(M.A.shape[0]):
         ref = ab13dd_norm(M.A[i], M.B[i], M.C[i], M.D[i])
         assert reported[i] == pytest.approx(ref, rel=1e-4)

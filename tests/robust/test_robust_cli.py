@@ -61,3 +61,23 @@ def test_hinfnorm_reads_a_matlab_model_array(tmp_path, capsys):
     assert main(["robust", "hinfnorm", str(tmp_path / "p.mat")]) == 0
     text = capsys.readouterr().out
     assert "[0] ||G||_inf = 2 " in text and "[1] ||G||_inf = 0.5 " in text
+
+
+def test_robstab_writes_the_mu_sweep_table(tmp_path, capsys):
+    """``--out`` writes the one sweep table; a complex scalar's mu is |0.5 P / (1 + P)|."""
+    import control
+    import pandas as pd
+
+    from oos_drake.lfr import feedback, ucomplex
+    from oos_drake.robust.tables import GUARANTEE_COLUMNS, SWEEP_COLUMNS
+
+    loop = feedback(ucomplex("c", 1.0, 0.5) * control.tf([4.0], [1.0, 2.0, 1.0]), 1)
+    loop.to_npz(tmp_path / "loop.npz")
+    out = tmp_path / "mu.csv"
+    assert main(["robust", "robstab", str(tmp_path / "loop.npz"), "--out", str(out)]) == 0
+    table = pd.read_csv(out)
+    assert list(table.columns) == SWEEP_COLUMNS + GUARANTEE_COLUMNS
+    P = 4.0 / (2j * np.pi * table["frequency [Hz]"].to_numpy() + 1.0) ** 2
+    np.testing.assert_allclose(table["mu upper [-]"], np.abs(0.5 * P / (1 + P)), rtol=1e-6)
+    assert main(["robust", "robstab", str(tmp_path / "loop.npz"), "--out", "mu.txt"]) == 2
+    assert "expected a .csv or .parquet" in capsys.readouterr().err

@@ -47,11 +47,11 @@ def test_sigma_static_gains_are_inverse_rigid_inertia(model, timeline):
         reference = np.linalg.inv(
             rigid_spatial_inertia_at_G1(timeline.scenario, moment.configuration)
         )
-        rows = data[(data["moment"] == name) & (data["frequency_hz"] == 1e-4)]
-        nominal = rows[rows["model"] == "nominal"]["gain_db"].item()
+        rows = data[(data["moment"] == name) & (data["frequency [Hz]"] == 1e-4)]
+        nominal = rows[rows["model"] == "nominal"]["gain [dB]"].item()
         assert nominal == pytest.approx(20 * np.log10(reference[3, 3]), abs=1e-6)
         if name != "1":  # uncertain RH2 mass/inertia changes the static gain once docked
-            assert rows["gain_db"].std() > 1e-4
+            assert rows["gain [dB]"].std() > 1e-4
 
 
 def test_inertia_history_matches_kinematics(model, timeline):
@@ -59,22 +59,39 @@ def test_inertia_history_matches_kinematics(model, timeline):
     data = inertia_history_data(model, timeline, times)
     reference = inertia_history(timeline.scenario, times)
     for key, values in reference.entries().items():
-        np.testing.assert_allclose(data[key], values, rtol=1e-9, atol=1e-9, err_msg=key)
-    np.testing.assert_allclose(data["mass_kg"], reference.mass, rtol=1e-12)
+        np.testing.assert_allclose(
+            data[f"{key} [kg m^2]"], values, rtol=1e-9, atol=1e-9, err_msg=key
+        )
+    np.testing.assert_allclose(data["mass [kg]"], reference.mass, rtol=1e-12)
     # paper: inertia jumps at the first docking; Jyy constant while the arrays tilt about y
-    before = data[data["time_s"] < 255]["Jxx"].iloc[-1]
-    after = data[data["time_s"] > 255]["Jxx"].iloc[0]
+    before = data[data["time [s]"] < 255]["Jxx [kg m^2]"].iloc[-1]
+    after = data[data["time [s]"] > 255]["Jxx [kg m^2]"].iloc[0]
     assert after > before + 50
-    tilting = data[data["time_s"] >= 1100]
-    assert np.ptp(tilting["Jyy"]) < 1e-6 * tilting["Jyy"].mean()
-    assert np.ptp(tilting["Jxx"]) > 1.0
+    tilting = data[data["time [s]"] >= 1100]
+    assert np.ptp(tilting["Jyy [kg m^2]"]) < 1e-6 * tilting["Jyy [kg m^2]"].mean()
+    assert np.ptp(tilting["Jxx [kg m^2]"]) > 1.0
+
+
+def test_figure_tables_name_their_units(model, timeline):
+    """Every float column of the figures' tables is ``name [unit]``."""
+    import re
+
+    unit = re.compile(r"^[^\[\]]+ \[[^\[\]]+\]$")
+    frequencies = np.array([1e-3, 1.0])
+    for table in (
+        inertia_history_data(model, timeline, np.array([0.0, 300.0])),
+        sigma_moments_data(model, timeline, frequencies, n_samples=1, rng=np.random.default_rng(0)),
+        docking_sweeps_data(timeline, frequencies, stiffness=[1e3]),
+    ):
+        bare = [c for c in table.columns if table[c].dtype.kind == "f" and not unit.match(c)]
+        assert not bare, bare
 
 
 def test_docking_sweeps_static_gain_order(timeline):
     frequencies = np.array([1e-3, 0.65, 5.0])
     data = docking_sweeps_data(timeline, frequencies, stiffness=[0.1, 1e3, 1e5])
     assert set(data["panel"]) == {"a", "b", "c"}
-    low = data[data["frequency_hz"] == 1e-3].groupby("panel")["gain_db"].mean()
+    low = data[data["frequency [Hz]"] == 1e-3].groupby("panel")["gain [dB]"].mean()
     # paper: Jyy at G1 is larger in phase 7 (target on the arm, far) than in phase 8
     assert low["a"] < low["b"] - 1.0
     assert low["b"] == pytest.approx(low["c"], abs=0.05)
