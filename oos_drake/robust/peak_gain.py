@@ -217,12 +217,15 @@ class ModalResponse:
         H = flat.reshape(omega.shape + (self.p, self.m)) + self.D[:, None]
         if np.any(self.exact):
             idx = np.flatnonzero(self.exact)
-            A, B, C, D = self.A[idx], self.B[idx], self.C[idx], self.D[idx]
-            n = A.shape[-1]
-            M = 1j * omega[idx][..., None, None] * np.eye(n) - A[:, None]
-            X = np.linalg.solve(M, np.broadcast_to(B[:, None], M.shape[:2] + B.shape[-2:]) + 0j)
-            H[idx] = C[:, None] @ X + D[:, None]
+            _, _, H[idx] = self._lu_response(idx, omega[idx])
         return H
+
+    def _lu_response(self, idx, omega):
+        """``(j omega I - A, X = (j omega I - A)^-1 B, G)`` of the models ``idx`` by LU solves."""
+        A, B, C, D = self.A[idx], self.B[idx], self.C[idx], self.D[idx]
+        M = 1j * omega[..., None, None] * np.eye(A.shape[-1]) - A[:, None]
+        X = np.linalg.solve(M, np.broadcast_to(B[:, None], M.shape[:2] + B.shape[-2:]) + 0j)
+        return M, X, C[:, None] @ X + D[:, None]
 
     def sigma_and_slope(self, omega):
         """Largest singular value and its derivative ``d sigma / d omega`` at ``omega`` (N, K).
@@ -245,12 +248,8 @@ class ModalResponse:
         dH = flat[:, K:].reshape(N, K, self.p, self.m)
         if np.any(self.exact):
             idx = np.flatnonzero(self.exact)
-            A, B, C, D = self.A[idx], self.B[idx], self.C[idx], self.D[idx]
-            n = A.shape[-1]
-            M = 1j * omega[idx][..., None, None] * np.eye(n) - A[:, None]
-            X = np.linalg.solve(M, np.broadcast_to(B[:, None], M.shape[:2] + B.shape[-2:]) + 0j)
-            H[idx] = C[:, None] @ X + D[:, None]
-            dH[idx] = -1j * (C[:, None] @ np.linalg.solve(M, X))
+            M, X, H[idx] = self._lu_response(idx, omega[idx])
+            dH[idx] = -1j * (self.C[idx][:, None] @ np.linalg.solve(M, X))
         Hh = np.conj(np.swapaxes(H, -1, -2))
         if self.p <= self.m:
             w, U = np.linalg.eigh(H @ Hh)

@@ -103,3 +103,25 @@ def test_slope_is_the_derivative_of_sigma():
     numeric = (modal.sigma(omega + h) - modal.sigma(omega - h)) / (2 * h)
     np.testing.assert_allclose(sigma, modal.sigma(omega), rtol=1e-12)
     np.testing.assert_allclose(slope, numeric, rtol=1e-5, atol=1e-9 * np.abs(numeric).max())
+
+
+def test_lu_path_of_ill_conditioned_models_equals_the_modal_response():
+    """Models flagged ``exact`` (ill-conditioned eigenvectors) take LU solves: on a
+    well-conditioned model both paths give the same response and slope (finite differences)."""
+    rng = np.random.default_rng(5)
+    n = 6
+    A = rng.standard_normal((2, n, n)) - 4.0 * np.eye(n)
+    B, C = rng.standard_normal((2, n, 2)), rng.standard_normal((2, 3, n))
+    D = 0.1 * rng.standard_normal((2, 3, 2))
+    modal = ModalResponse(A, B, C, D)
+    lu = ModalResponse(A, B, C, D)
+    lu.exact = np.array([True, False])
+    omega = np.array([[0.3, 1.0, 2.5], [0.3, 1.0, 2.5]])
+    np.testing.assert_allclose(lu.response(omega), modal.response(omega), rtol=1e-10, atol=1e-12)
+    s_modal, d_modal = modal.sigma_and_slope(omega)
+    s_lu, d_lu = lu.sigma_and_slope(omega)
+    np.testing.assert_allclose(s_lu, s_modal, rtol=1e-10)
+    np.testing.assert_allclose(d_lu, d_modal, rtol=1e-7, atol=1e-10)
+    h = 1e-6
+    fd = (lu.sigma(omega + h) - lu.sigma(omega - h)) / (2 * h)
+    np.testing.assert_allclose(d_lu, fd, rtol=1e-5, atol=1e-8)
