@@ -14,7 +14,11 @@ with slycot's AB13DD (Fortran, one model per call) as the independent reference 
 baseline measured in the same run. Prints time per model, ratio to AB13DD and the largest
 relative difference to AB13DD.
 
-Run: ``.venv/bin/python benchmarks/bench_hinf_paths.py [--models 50] [--states 40 80]``
+``--closed-loops FILE`` adds the synthesis' closed loops (``closed_loop.npz`` of ``oos synth`` /
+``make run``: 204 models of 81 states for the paper) as a third model set.
+
+Run: ``.venv/bin/python benchmarks/bench_hinf_paths.py [--models 50] [--states 40 80]
+[--closed-loops out/controller/closed_loop.npz]``
 """
 
 from __future__ import annotations
@@ -50,13 +54,19 @@ def main(argv=None):
     parser.add_argument("--models", type=int, default=50)
     parser.add_argument("--states", type=int, nargs="+", default=[40, 80])
     parser.add_argument("--repeat", type=int, default=2)
+    parser.add_argument("--closed-loops", default=None, help="closed_loop.npz of oos synth")
     args = parser.parse_args(argv)
     limit_blas_threads(1)
     print(f"{args.models} models per size, 1 BLAS thread, best of {args.repeat}")
+    if args.closed_loops:
+        print(f"last set: the closed loops of {args.closed_loops}")
     print(f"{'states':>6} {'path':34}{'ms/model':>10}{'vs ab13dd':>11}{'max rel diff':>14}")
-    for n in args.states:
-        A, B, C, D = modal_models(args.models, n)
-        m, p = B.shape[-1], C.shape[-2]
+    sets = [modal_models(args.models, n) for n in args.states]
+    if args.closed_loops:
+        with np.load(args.closed_loops) as data:
+            sets.append(tuple(np.asarray(data[k], dtype=float) for k in "ABCD"))
+    for A, B, C, D in sets:
+        n, m, p = A.shape[-1], B.shape[-1], C.shape[-2]
 
         def ab13dd(A=A, B=B, C=C, D=D, n=n, m=m, p=p):
             return np.array(
@@ -80,7 +90,7 @@ def main(argv=None):
         for name, fn in paths.items():
             t, g = (ref_time, ref) if name.startswith("slycot") else _timed(fn, args.repeat)
             rel = np.max(np.abs(np.asarray(g) / ref - 1.0))
-            print(f"{n:6d} {name:34}{1e3 * t / args.models:10.2f}{t / ref_time:11.2f}{rel:14.2e}")
+            print(f"{n:6d} {name:34}{1e3 * t / A.shape[0]:10.2f}{t / ref_time:11.2f}{rel:14.2e}")
 
 
 if __name__ == "__main__":

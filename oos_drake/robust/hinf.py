@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from oos_drake.blas import with_single_threaded_blas
 from oos_drake.robust.peak_gain import certify_peaks, peak_gain, sigma_max_exact
 
 #: Models with more states start the level sets from :func:`~.peak_gain.peak_gain`'s refined
@@ -96,6 +97,7 @@ def _lfr_matrices(sys):
     return ss.A, ss.B, ss.C, ss.D
 
 
+@with_single_threaded_blas
 def hinfnorm(sys, *, tol: float = 1e-8, max_iter: int = 50) -> HinfResult:
     """H-infinity norm (peak gain over frequency) of continuous-time models.
 
