@@ -426,23 +426,25 @@ def robust_sweep(
     else:
         with process_pool(n_jobs) as pool:
             results = list(pool.map(_sweep_models, tasks))
-    points = [row for rows in results for row in rows]  # (model, omega, lo, up, subset, ...)
+    rows = [row for chunk in results for row in chunk]
+    model, freqs, lower, upper, subset, refined, tightened, axis = zip(*rows, strict=True)
+    sizes = [w.size for w in freqs]
 
-    def column(values):
+    def column(values):  # one value or one array per row of points -> one flat column
         return np.concatenate(
-            [np.broadcast_to(v, r[1].shape) for v, r in zip(values, points, strict=True)]
+            [np.broadcast_to(v, (n,)) for v, n in zip(values, sizes, strict=True)]
         )
 
     guaranteed = slack is not None
     return sweep_table(
-        column([r[4] for r in points]),
-        column([r[0] for r in points]),
-        column([times[r[0]] for r in points]),
-        column([r[1] for r in points]),
-        column([r[3] for r in points]),
-        column([r[2] for r in points]),
-        column([r[5] for r in points]),
-        column([r[6] for r in points]),
-        guaranteed=column([r[7][0] for r in points]) if guaranteed else None,
-        guarantee_points=column([r[7][1] for r in points]) if guaranteed else None,
+        column(subset),
+        column(model),
+        column(times[list(model)]),
+        column(freqs),
+        column(upper),
+        column(lower),
+        column(refined),
+        column(tightened),
+        guaranteed=column([a[0] for a in axis]) if guaranteed else None,
+        guarantee_points=column([a[1] for a in axis]) if guaranteed else None,
     )
