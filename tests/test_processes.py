@@ -31,6 +31,14 @@ def _children(pid: int) -> set[int]:
     return found
 
 
+def _descendants(pids: set[int]) -> set[int]:
+    found, frontier = set(), set(pids)
+    while frontier:
+        frontier = set().union(*(_children(p) for p in frontier)) - found
+        found |= frontier
+    return found
+
+
 def _alive(pid: int) -> bool:
     try:
         state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
@@ -64,6 +72,7 @@ def _kill_and_check_workers(command: list[str], workers: int, *, start_timeout: 
         kids = _wait_for(pool_children, start_timeout, period=0.2)
         assert kids, f"no worker processes appeared within {start_timeout} s"
         time.sleep(1.0)  # let them get busy
+        kids |= _descendants(kids)  # a Dask nanny's worker process, for instance
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
         survivors = _wait_for(lambda: {k for k in kids if _alive(k)} or None, 0.0)
@@ -103,6 +112,35 @@ def test_pool_workers_die_with_their_parent(tmp_path, method):
     script = tmp_path / "pool.py"
     script.write_text(POOL_SCRIPT)
     _kill_and_check_workers([sys.executable, str(script), method], 2, start_timeout=60)
+
+
+EXECUTOR_SCRIPT = """
+import sys, time
+from oos_drake.processes import make_executor
+
+def busy(seconds):
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        pass
+    return seconds
+
+if __name__ == "__main__":
+    with make_executor(2, sys.argv[1]) as executor:
+        print(executor.map(busy, [120.0] * 4))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
+@pytest.mark.parametrize("scheduler", ["processes", "dask"])
+def test_executor_workers_die_with_their_parent(tmp_path, scheduler):
+    """The executors of every parallel site: the process pool, and a local Dask cluster (whose
+    worker processes are Dask's, not watched by :func:`exit_with_parent`)."""
+    if scheduler == "dask":
+        pytest.importorskip("distributed", reason="dask.distributed is not installed")
+    script = tmp_path / "executor.py"
+    script.write_text(EXECUTOR_SCRIPT)
+    _kill_and_check_workers([sys.executable, str(script), scheduler], 2, start_timeout=120)
 
 
 @pytest.mark.slow
