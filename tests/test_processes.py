@@ -92,7 +92,7 @@ def _cmdline(pid: int) -> bytes:
 
 POOL_SCRIPT = """
 import sys, time
-from oos_drake.processes import process_pool
+from oos_drake.processes import make_executor, process_pool
 
 def busy(seconds):
     end = time.monotonic() + seconds
@@ -101,8 +101,13 @@ def busy(seconds):
     return seconds
 
 if __name__ == "__main__":
-    with process_pool(2, method=sys.argv[1]) as pool:
-        print(list(pool.map(busy, [120.0] * 4)))
+    kind, value = sys.argv[1:3]
+    if kind == "pool":  # value: the start method
+        with process_pool(2, method=value) as pool:
+            print(list(pool.map(busy, [120.0] * 4)))
+    else:  # value: the scheduler
+        with make_executor(2, value) as executor:
+            print(executor.map(busy, [120.0] * 4))
 """
 
 
@@ -111,23 +116,7 @@ if __name__ == "__main__":
 def test_pool_workers_die_with_their_parent(tmp_path, method):
     script = tmp_path / "pool.py"
     script.write_text(POOL_SCRIPT)
-    _kill_and_check_workers([sys.executable, str(script), method], 2, start_timeout=60)
-
-
-EXECUTOR_SCRIPT = """
-import sys, time
-from oos_drake.processes import make_executor
-
-def busy(seconds):
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        pass
-    return seconds
-
-if __name__ == "__main__":
-    with make_executor(2, sys.argv[1]) as executor:
-        print(executor.map(busy, [120.0] * 4))
-"""
+    _kill_and_check_workers([sys.executable, str(script), "pool", method], 2, start_timeout=60)
 
 
 @pytest.mark.slow
@@ -139,8 +128,10 @@ def test_executor_workers_die_with_their_parent(tmp_path, scheduler):
     if scheduler == "dask":
         pytest.importorskip("distributed", reason="dask.distributed is not installed")
     script = tmp_path / "executor.py"
-    script.write_text(EXECUTOR_SCRIPT)
-    _kill_and_check_workers([sys.executable, str(script), scheduler], 2, start_timeout=120)
+    script.write_text(POOL_SCRIPT)
+    _kill_and_check_workers(
+        [sys.executable, str(script), "executor", scheduler], 2, start_timeout=120
+    )
 
 
 @pytest.mark.slow
