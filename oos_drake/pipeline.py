@@ -163,7 +163,8 @@ def run_pipeline(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     quick = ["--configurations", "40"] if args.quick else []
     on_scenario = ["--scenario", scenario]
-    scheduler = ["--scheduler", args.scheduler] if args.scheduler else []
+    # (a namespace made by a caller before --scheduler existed runs on the default pool)
+    scheduler = ["--scheduler", args.scheduler] if getattr(args, "scheduler", None) else []
     print(f"[oos run] scenario: {scenario}")
 
     run_stage(
