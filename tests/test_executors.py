@@ -76,6 +76,15 @@ def test_bad_scheduler_and_workers_are_one_line_errors():
     assert scheduler_address("tcp://10.0.0.1:8786") == "tcp://10.0.0.1:8786"
 
 
+def test_dask_missing_is_a_one_line_error(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)  # import fails as if absent
+    with pytest.raises(ValueError, match=r"--scheduler dask needs Dask: pip install") as error:
+        make_executor(2, "dask")
+    assert "\n" not in str(error.value)
+
+
 def test_cli_rejects_a_bad_scheduler_with_status_2(tmp_path, capsys):
     from oos_drake.cli import main
 
