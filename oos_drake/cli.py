@@ -6,7 +6,8 @@ Errors that a user can fix (bad data, bad spec, unknown names) are ``ValueError`
 printed as one line and give exit status 2.
 
 One name per option across commands: ``--out`` (where results go), ``--workers`` (parallel
-worker processes or threads), ``--quiet`` (no progress bars), ``--f-min``/``--f-max`` (frequency
+worker processes or threads), ``--scheduler`` (where they run: local processes or Dask,
+:func:`add_scheduler_argument`), ``--quiet`` (no progress bars), ``--f-min``/``--f-max`` (frequency
 range [Hz]), ``--scenario`` (the scenario data file: :func:`add_scenario_argument`). Older
 spellings (``--jobs``, ``--no-progress``, ``--fmin``, ``--fmax``) are hidden aliases that raise
 a ``DeprecationWarning`` (:func:`add_deprecated_alias`).
@@ -102,6 +103,23 @@ def loop_specification(spec, args):
         raise ValueError("--delay needs --sampled (the continuous loop has no computation delay)")
     delay = spec.computation_delay_s if args.delay is None else float(args.delay)
     return dataclasses.replace(spec, sampled=bool(args.sampled), computation_delay_s=delay)
+
+
+def add_scheduler_argument(parser: argparse.ArgumentParser) -> None:
+    """Add ``--scheduler`` (one name and help text for every command with parallel work):
+    ``processes`` (default), ``dask``/``local`` or a Dask scheduler address; the value goes
+    to :func:`oos_drake.processes.make_executor`."""
+    from oos_drake.processes import SCHEDULER_HELP, check_scheduler
+
+    def scheduler(value: str) -> str:
+        try:
+            return check_scheduler(value)
+        except ValueError as exc:  # argparse: usage line, this message, exit status 2
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    parser.add_argument(
+        "--scheduler", default=None, type=scheduler, metavar="SCHEDULER", help=SCHEDULER_HELP
+    )
 
 
 SCENARIO_HELP = (

@@ -24,7 +24,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from oos_drake import __version__
-from oos_drake.cli import add_scenario_argument
+from oos_drake.cli import add_scenario_argument, add_scheduler_argument
 from oos_drake.resources import package_path
 
 PACKAGE_ROOT = package_path("oos_drake")
@@ -163,6 +163,8 @@ def run_pipeline(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     quick = ["--configurations", "40"] if args.quick else []
     on_scenario = ["--scenario", scenario]
+    # (a namespace made by a caller before --scheduler existed runs on the default pool)
+    scheduler = ["--scheduler", args.scheduler] if getattr(args, "scheduler", None) else []
     print(f"[oos run] scenario: {scenario}")
 
     run_stage(
@@ -199,6 +201,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
             d,
             "--workers",
             args.workers,
+            *scheduler,
             *quick,
             *on_scenario,
         ),
@@ -228,7 +231,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
     campaign_start = time.perf_counter()
     if (campaign / "spec.toml").is_file():
         print(f"[oos run] campaign: resuming {campaign}")
-        _oos("campaign", "resume", campaign, "--workers", args.workers)
+        _oos("campaign", "resume", campaign, "--workers", args.workers, *scheduler)
     else:
         shutil.rmtree(campaign, ignore_errors=True)
         print(f"[oos run] campaign -> {campaign}")
@@ -240,6 +243,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
             campaign,
             "--workers",
             args.workers,
+            *scheduler,
             "--worst-cases",
             out / "analysis" / "worst_cases.parquet",
             "--simulator-option",
@@ -315,6 +319,7 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--workers", type=int, default=2, help="worker processes of the analysis and the campaign"
     )
+    add_scheduler_argument(parser)
     parser.add_argument(
         "--quick", action="store_true", help="40 configurations instead of the paper's grids"
     )

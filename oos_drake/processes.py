@@ -1,7 +1,21 @@
-"""Worker process pools that never outlive the process that started them.
+"""Where parallel work runs: executors, and worker process pools that never outlive their parent.
 
-Every process pool of the package (mu sweeps, the analysis, worst-case gains, campaigns) is made
-by :func:`process_pool`. Its workers
+Every parallel site of the package (the mu sweeps, the analysis and its worst-case gains, the
+parameter study, the confirmation, the campaign's executors) runs on one small interface made
+by :func:`make_executor` from the CLI options ``--workers N`` and ``--scheduler``:
+
+- :class:`SerialExecutor`: in this process (one worker);
+- :class:`PoolExecutor`: a local pool of worker processes (the default);
+- :class:`DaskExecutor`: a local Dask cluster (``--scheduler dask``) or a running scheduler
+  (``--scheduler tcp://host:8786``); Dask is optional.
+
+Each has ``submit(fn, *args)`` (a future with ``result()`` and ``done()``), ``map(fn, items)``
+(results in order), ``as_completed(futures)``, ``workers``, ``shutdown()`` and is a context
+manager; an ``initializer`` runs once in every worker (model arrays installed once). The tasks
+are module-level functions and picklable arguments, so any executor can run them, with the same
+results.
+
+Every process pool is made by :func:`process_pool`. Its workers
 
 - run one OpenBLAS thread each (the parallelism is one process per core; batched small-matrix
   kernels only lose from more BLAS threads), and
@@ -15,12 +29,13 @@ by :func:`process_pool`. Its workers
 
 from __future__ import annotations
 
+import concurrent.futures
 import multiprocessing
 import os
 import threading
 import time
-from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
 
 #: Seconds between two checks of the parent process id in a worker.
 PARENT_POLL_S = 0.25
@@ -97,4 +112,289 @@ def process_pool(
         mp_context=multiprocessing.get_context(start_method(method)),
         initializer=_start_worker,
         initargs=(os.getpid(), initializer, initargs),
+    )
+
+
+# --- executors: one interface for every parallel site ------------------------------------------
+
+#: Help text of ``--scheduler`` (one text for every command).
+SCHEDULER_HELP = (
+    "where parallel work runs: 'processes' (default: a local pool of --workers processes), "
+    "'dask' or 'local' (a local Dask cluster of --workers processes), or the address of a "
+    "running Dask scheduler (tcp://host:8786)"
+)
+
+
+def _done_future(fn: Callable, args: tuple) -> Future:
+    future: Future = Future()
+    try:
+        future.set_result(fn(*args))
+    except BaseException as exc:  # noqa: BLE001 - delivered by future.result(), as in a pool
+        future.set_exception(exc)
+    return future
+
+
+class SerialExecutor:
+    """Runs every task at once in this process (``--workers 1``): no pickling, no processes.
+
+    Parameters
+    ----------
+    initializer : callable, optional
+        Called once in this process when the executor is made.
+    initargs : tuple
+        Arguments of ``initializer``.
+    """
+
+    workers = 1
+    kind = "serial"
+
+    def __init__(self, initializer: Callable | None = None, initargs: tuple = ()):
+        if initializer is not None:
+            initializer(*initargs)
+
+    def submit(self, fn: Callable, *args) -> Future:
+        """``fn(*args)`` now; its result (or exception) in a finished future."""
+        return _done_future(fn, args)
+
+    def map(self, fn: Callable, iterable: Iterable) -> list:
+        """``[fn(x) for x in iterable]``."""
+        return [fn(x) for x in iterable]
+
+    def as_completed(self, futures: Iterable) -> Iterator:
+        """The futures (all finished already)."""
+        return iter(list(futures))
+
+    def shutdown(self) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        self.shutdown()
+        return False
+
+
+class PoolExecutor(SerialExecutor):
+    """A local pool of worker processes made by :func:`process_pool` (they die with this process).
+
+    Parameters
+    ----------
+    workers : int
+        Worker processes (>= 1).
+    initializer, initargs :
+        Run in every worker at its start (after the parent watcher and the BLAS limit).
+    method : str, optional
+        Start method (default :func:`start_method`: ``fork`` where available).
+    """
+
+    kind = "processes"
+
+    def __init__(
+        self,
+        workers: int,
+        initializer: Callable | None = None,
+        initargs: tuple = (),
+        method: str | None = None,
+    ):
+        self.workers = int(workers)
+        self.pool = process_pool(workers, initializer=initializer, initargs=initargs, method=method)
+
+    def submit(self, fn: Callable, *args) -> Future:
+        """Start ``fn(*args)`` on a worker; a ``concurrent.futures.Future``."""
+        return self.pool.submit(fn, *args)
+
+    def map(self, fn: Callable, iterable: Iterable) -> list:
+        """``[fn(x) for x in iterable]`` on the workers, in order."""
+        return list(self.pool.map(fn, iterable))
+
+    def as_completed(self, futures: Iterable) -> Iterator:
+        """The futures in the order they finish."""
+        return concurrent.futures.as_completed(list(futures))
+
+    def kill(self) -> None:
+        """Stop every worker now, running tasks included (a pool offers no way to cancel one)."""
+        for process in list((getattr(self.pool, "_processes", None) or {}).values()):
+            process.kill()
+        self.shutdown()
+
+    def shutdown(self) -> None:
+        self.pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _dask_worker_setup(initializer: Callable | None, initargs: tuple) -> None:
+    from oos_drake.blas import limit_blas_threads
+
+    limit_blas_threads(1)
+    if initializer is not None:
+        initializer(*initargs)
+
+
+class DaskExecutor(SerialExecutor):
+    """Dask distributed: a local cluster, or a running scheduler.
+
+    Dask is an optional dependency (``pip install "dask[distributed]"``). The tasks and their
+    arguments are pickled to the workers (model arrays of an ``initializer`` once per worker).
+
+    Parameters
+    ----------
+    address : str or None
+        Scheduler address (``tcp://host:8786``); ``None`` starts a ``LocalCluster`` of
+        ``workers`` processes with one thread each.
+    workers : int
+        Workers of the local cluster.
+    initializer, initargs :
+        Run in every worker (present and future, through a worker plugin), after the BLAS limit
+        of one thread; on a local cluster of threads, once in this process (no BLAS limit).
+    processes : bool
+        Local cluster of worker processes (True) or of threads in this process (False).
+    """
+
+    kind = "dask"
+
+    def __init__(
+        self,
+        address: str | None = None,
+        workers: int = 2,
+        initializer: Callable | None = None,
+        initargs: tuple = (),
+        processes: bool = True,
+    ):
+        try:
+            from dask.distributed import Client, LocalCluster
+        except ImportError as exc:
+            raise ValueError(
+                '--scheduler dask needs Dask: pip install "dask[distributed]"'
+            ) from exc
+        if int(workers) < 1:
+            raise ValueError(f"--workers {workers}: need at least 1 worker")
+        self._cluster = None
+        if address is None:
+            self._cluster = LocalCluster(
+                n_workers=int(workers),
+                threads_per_worker=1,
+                processes=processes,
+                dashboard_address=None,
+            )
+            self.client = Client(self._cluster)
+        else:
+            try:
+                self.client = Client(address, timeout="10s")
+            except OSError as exc:
+                raise ValueError(f"--scheduler {address}: cannot connect: {exc}") from exc
+        if self._cluster is not None and not processes:  # threads of this process
+            if initializer is not None:
+                initializer(*initargs)
+        else:
+            self.client.register_plugin(
+                _worker_setup_plugin(initializer, initargs), name="oos-worker-setup"
+            )
+        self.workers = max(1, sum(self.client.nthreads().values()))
+
+    def submit(self, fn: Callable, *args):
+        """Start ``fn(*args)`` on a worker; a Dask future (``result()``, ``done()``)."""
+        return self.client.submit(fn, *args, pure=False)
+
+    def map(self, fn: Callable, iterable: Iterable) -> list:
+        """``[fn(x) for x in iterable]`` on the workers, in order."""
+        items = list(iterable)
+        if not items:
+            return []
+        return self.client.gather(self.client.map(fn, items, pure=False))
+
+    def as_completed(self, futures: Iterable) -> Iterator:
+        """The futures in the order they finish."""
+        from dask.distributed import as_completed
+
+        return iter(as_completed(list(futures)))
+
+    def shutdown(self) -> None:
+        self.client.close()
+        if self._cluster is not None:
+            self._cluster.close()
+
+
+def _worker_setup_plugin(initializer: Callable | None, initargs: tuple):
+    """A Dask worker plugin running :func:`_dask_worker_setup` in every worker that joins (Dask
+    refuses duck-typed plugins, and is imported only here: it is optional)."""
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    class WorkerSetup(WorkerPlugin):
+        def setup(self, worker) -> None:
+            _dask_worker_setup(initializer, initargs)
+
+    return WorkerSetup()
+
+
+Executor = SerialExecutor | PoolExecutor | DaskExecutor
+
+
+def make_executor(
+    workers: int,
+    scheduler: str | None = None,
+    *,
+    initializer: Callable | None = None,
+    initargs: tuple = (),
+    method: str | None = None,
+) -> Executor:
+    """The executor of the CLI options ``--workers N`` and ``--scheduler``.
+
+    Parameters
+    ----------
+    workers : int
+        Workers (>= 1). On the process pool, 1 runs the tasks in this process.
+    scheduler : str, optional
+        ``None`` or ``"processes"``: :class:`PoolExecutor` (:class:`SerialExecutor` for one
+        worker); ``"dask"`` or ``"local"``: a local Dask cluster; an address (``host:port``,
+        ``tcp://host:port``): that Dask scheduler (:func:`scheduler_address`).
+    initializer, initargs :
+        Run once in every worker (in this process for :class:`SerialExecutor`).
+    method : str, optional
+        Start method of the process pool (``"spawn"`` when this process holds Drake threads).
+
+    Returns
+    -------
+    SerialExecutor, PoolExecutor or DaskExecutor
+        Use it as a context manager (it shuts down at the end).
+    """
+    workers = int(workers)
+    if workers < 1:
+        raise ValueError(f"--workers {workers}: need at least 1 worker")
+    setup = {"initializer": initializer, "initargs": initargs}
+    if scheduler in (None, "", "processes"):
+        if workers == 1:
+            return SerialExecutor(**setup)
+        return PoolExecutor(workers, method=method, **setup)
+    return DaskExecutor(scheduler_address(scheduler), workers, **setup)
+
+
+def check_scheduler(scheduler: str | None) -> str | None:
+    """``scheduler`` if :func:`make_executor` accepts it (checked before any work starts).
+
+    Raises
+    ------
+    ValueError
+        Neither ``processes``, ``dask``, ``local`` nor a Dask scheduler address.
+    """
+    if scheduler not in (None, "", "processes"):
+        scheduler_address(scheduler)
+    return scheduler
+
+
+def scheduler_address(scheduler: str | None) -> str | None:
+    """The Dask scheduler address of ``--scheduler`` (None: a local cluster).
+
+    Raises
+    ------
+    ValueError
+        ``processes`` or a value that is neither ``dask``/``local`` nor an address (``host:port``
+        or ``tcp://host:port``).
+    """
+    if scheduler in ("dask", "local"):
+        return None
+    if scheduler and ":" in scheduler:
+        return scheduler
+    raise ValueError(
+        f"--scheduler {scheduler!r}: expected processes, dask, local or a Dask scheduler "
+        "address such as tcp://host:8786"
     )

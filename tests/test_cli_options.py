@@ -55,6 +55,20 @@ def test_long_running_commands_share_workers_and_quiet():
         assert {"--f-min", "--f-max"} <= _visible_options(commands[path]), path
 
 
+def test_parallel_commands_share_one_scheduler_option():
+    """``--scheduler`` (where the workers run) on every command whose work runs on the
+    executors, with one help text, and passed down by ``oos run``."""
+    from oos_drake.processes import SCHEDULER_HELP
+
+    commands = dict(_commands(build_parser()))
+    paths = [("analyze",), ("study",), ("run",), ("campaign", "run"), ("campaign", "resume")]
+    for path in paths:
+        (action,) = [a for a in commands[path]._actions if "--scheduler" in a.option_strings]
+        assert action.help == SCHEDULER_HELP and action.default is None, path
+    args = build_parser().parse_args(["analyze", "--out", "x", "--scheduler", "tcp://h:8786"])
+    assert args.scheduler == "tcp://h:8786"
+
+
 @pytest.mark.parametrize(
     "argv, dest, value",
     [

@@ -112,3 +112,22 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(tmp_path):
     again = json.loads((out / "timings.json").read_text())["stages_s"]
     assert [k for k, v in again.items() if v is not None] == ["campaign + report"]
     assert "0 run now" in second.stdout
+
+
+def test_oos_run_passes_the_scheduler_to_the_analysis_and_the_campaign(tmp_path, monkeypatch):
+    """``oos run --scheduler dask``: the stages that run on the executors get it, the others
+    (model, synthesis, confirmation) run as without it (stages replaced by a recorder)."""
+    import oos_drake.pipeline as pipeline
+    from oos_drake.cli import build_parser
+
+    calls = []
+    monkeypatch.setattr(pipeline, "_oos", lambda *argv: calls.append([str(a) for a in argv]))
+    monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: None)
+    args = build_parser().parse_args(["run", "--out", str(tmp_path), "--scheduler", "dask"])
+    assert pipeline.run_pipeline(args) == 0
+    by_command = {tuple(c[:2]) if c[0] == "campaign" else (c[0],): c for c in calls}
+    for key in [("analyze",), ("campaign", "run")]:
+        argv = by_command[key]
+        assert argv[argv.index("--scheduler") + 1] == "dask", key
+    for key in [("synth",), ("confirm",), ("campaign", "report")]:
+        assert "--scheduler" not in by_command[key], key

@@ -31,6 +31,14 @@ def _children(pid: int) -> set[int]:
     return found
 
 
+def _descendants(pids: set[int]) -> set[int]:
+    found, frontier = set(), set(pids)
+    while frontier:
+        frontier = set().union(*(_children(p) for p in frontier)) - found
+        found |= frontier
+    return found
+
+
 def _alive(pid: int) -> bool:
     try:
         state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
@@ -64,6 +72,7 @@ def _kill_and_check_workers(command: list[str], workers: int, *, start_timeout: 
         kids = _wait_for(pool_children, start_timeout, period=0.2)
         assert kids, f"no worker processes appeared within {start_timeout} s"
         time.sleep(1.0)  # let them get busy
+        kids |= _descendants(kids)  # a Dask nanny's worker process, for instance
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
         survivors = _wait_for(lambda: {k for k in kids if _alive(k)} or None, 0.0)
@@ -83,7 +92,7 @@ def _cmdline(pid: int) -> bytes:
 
 POOL_SCRIPT = """
 import sys, time
-from oos_drake.processes import process_pool
+from oos_drake.processes import make_executor, process_pool
 
 def busy(seconds):
     end = time.monotonic() + seconds
@@ -92,8 +101,13 @@ def busy(seconds):
     return seconds
 
 if __name__ == "__main__":
-    with process_pool(2, method=sys.argv[1]) as pool:
-        print(list(pool.map(busy, [120.0] * 4)))
+    kind, value = sys.argv[1:3]
+    if kind == "pool":  # value: the start method
+        with process_pool(2, method=value) as pool:
+            print(list(pool.map(busy, [120.0] * 4)))
+    else:  # value: the scheduler
+        with make_executor(2, value) as executor:
+            print(executor.map(busy, [120.0] * 4))
 """
 
 
@@ -102,7 +116,22 @@ if __name__ == "__main__":
 def test_pool_workers_die_with_their_parent(tmp_path, method):
     script = tmp_path / "pool.py"
     script.write_text(POOL_SCRIPT)
-    _kill_and_check_workers([sys.executable, str(script), method], 2, start_timeout=60)
+    _kill_and_check_workers([sys.executable, str(script), "pool", method], 2, start_timeout=60)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
+@pytest.mark.parametrize("scheduler", ["processes", "dask"])
+def test_executor_workers_die_with_their_parent(tmp_path, scheduler):
+    """The executors of every parallel site: the process pool, and a local Dask cluster (whose
+    worker processes are Dask's, not watched by :func:`exit_with_parent`)."""
+    if scheduler == "dask":
+        pytest.importorskip("distributed", reason="dask.distributed is not installed")
+    script = tmp_path / "executor.py"
+    script.write_text(POOL_SCRIPT)
+    _kill_and_check_workers(
+        [sys.executable, str(script), "executor", scheduler], 2, start_timeout=120
+    )
 
 
 @pytest.mark.slow
@@ -126,8 +155,9 @@ def test_kill_9_of_oos_analyze_leaves_no_worker(tmp_path):
 
 def test_every_process_pool_comes_from_processes_module():
     """Pools made elsewhere would not carry the parent watcher: only ``oos_drake.processes``
-    starts worker processes (the Dask executor's cluster manages its own workers)."""
-    starters = {"ProcessPoolExecutor", "Pool", "Process", "fork", "Popen"}
+    starts worker processes, and only its executors make Dask clusters and clients (every
+    parallel site runs on :func:`oos_drake.processes.make_executor`)."""
+    starters = {"ProcessPoolExecutor", "Pool", "Process", "fork", "Popen", "LocalCluster", "Client"}
     offenders = []
     for path in sorted(PACKAGE.rglob("*.py")):
         if path.name == "processes.py":

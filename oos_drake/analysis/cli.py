@@ -11,6 +11,7 @@ from oos_drake.cli import (
     add_deprecated_alias,
     add_loop_arguments,
     add_scenario_argument,
+    add_scheduler_argument,
     loop_specification,
 )
 
@@ -64,6 +65,7 @@ def run_analyze(args) -> int:
     sweep = SweepOptions(
         upper_iterations=args.iterations,
         n_jobs=args.workers,
+        scheduler=args.scheduler,
         refine_iterations=args.refine_iterations,
     )
     tighten = TightenOptions(target_gap=args.target_gap, rounds=args.spike_rounds)
@@ -366,6 +368,7 @@ def run_study_command(args) -> int:
         synthesis_configurations=args.synthesis_configurations,
         analysis=analysis,
         workers=args.workers,
+        scheduler=args.scheduler,
     )
     table = _write_atomically(
         args.out, lambda tmp: run_study(args.scenario, sweep, tmp, options, not args.quiet)
@@ -430,6 +433,7 @@ def _register_study(subparsers) -> None:
     parser.add_argument("--docking", default="7,8", help="docking phases (comma-separated)")
     parser.add_argument("--docking-points", type=int, default=40, help="stiffness values")
     parser.add_argument("--workers", type=int, default=2, help="values analyzed in parallel")
+    add_scheduler_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run_study_command)
 
@@ -515,6 +519,7 @@ def register(subparsers) -> None:
     parser.add_argument("--no-sensitivity", action="store_true", help="skip the sensitivity table")
     parser.add_argument("--no-time-check", action="store_true", help="skip the time-domain check")
     parser.add_argument("--workers", type=int, default=2, help="worker processes")
+    add_scheduler_argument(parser)
     parser.add_argument(
         "--plant",
         choices=("lfr", "drake"),

@@ -726,18 +726,16 @@ def confirm_peaks(peaks, controller, options: ConfirmOptions, *, workers=1, quie
     """
     from tqdm import tqdm
 
-    from oos_drake.processes import process_pool
+    from oos_drake.processes import PoolExecutor
 
     tasks = [(peak, controller, options) for peak in peaks]
     # Drake-heavy peaks first so that the pool stays busy
     order = sorted(range(len(tasks)), key=lambda i: peaks[i].has_complex)
     results = {}
-    with process_pool(max(1, min(workers, len(tasks))), method="spawn") as pool:
-        futures = {pool.submit(_confirm_task, tasks[i]): i for i in order}
-        from concurrent.futures import as_completed
-
+    with PoolExecutor(max(1, min(workers, len(tasks))), method="spawn") as executor:
+        futures = {executor.submit(_confirm_task, tasks[i]): i for i in order}
         for future in tqdm(
-            as_completed(futures), total=len(futures), desc="confirm", disable=quiet
+            executor.as_completed(futures), total=len(futures), desc="confirm", disable=quiet
         ):
             results[futures[future]] = future.result()
     rows = [results[i][0] for i in range(len(tasks))]

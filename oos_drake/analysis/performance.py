@@ -15,7 +15,7 @@ import pandas as pd
 
 from oos_drake.analysis.stability import subset_parts
 from oos_drake.blas import limit_blas_threads
-from oos_drake.processes import process_pool
+from oos_drake.processes import make_executor
 from oos_drake.robust.lfr_analysis import delta_channel_response
 
 #: Performance channels: name -> rows of ``e``.
@@ -64,6 +64,7 @@ def worst_case_gains(
     tol: float = 0.02,
     upper_iterations: int = 40,
     n_jobs: int = 2,
+    scheduler: str | None = None,
     progress: bool = True,
 ):
     """Worst-case gain bounds of ``e_p`` and ``e_u`` for chosen models, per subset.
@@ -86,6 +87,8 @@ def worst_case_gains(
         BFGS iterations of each mu upper bound.
     n_jobs : int
         Worker processes.
+    scheduler : str, optional
+        Where they run (``--scheduler``, :func:`oos_drake.processes.make_executor`).
     progress : bool
         tqdm bar over (channel, subset) tasks.
 
@@ -129,16 +132,12 @@ def worst_case_gains(
             keys.append((channel, name))
     bar = tqdm(total=len(tasks), desc="worst-case gains", unit="task", disable=not progress)
     results = []
-    if n_jobs <= 1:
-        limit_blas_threads(1)
-        for t in tasks:
-            results.append(_channel_task(t))
+    with make_executor(
+        max(1, n_jobs), scheduler, initializer=limit_blas_threads, initargs=(1,)
+    ) as executor:
+        for future in [executor.submit(_channel_task, t) for t in tasks]:
+            results.append(future.result())
             bar.update(1)
-    else:
-        with process_pool(n_jobs) as pool:
-            for r in pool.map(_channel_task, tasks):
-                results.append(r)
-                bar.update(1)
     bar.close()
     frames, deltas = [], {}
     hz = omega / (2 * np.pi)

@@ -449,6 +449,7 @@ def run_analysis(
         subsets,
         times=times,
         n_jobs=options.sweep.n_jobs,
+        scheduler=options.sweep.scheduler,
         progress=options.progress,
     )
     perf.to_parquet(out / "performance.parquet", index=False)

@@ -78,6 +78,9 @@ class SweepOptions:
         Models per worker task (0: one contiguous range per worker, the fewest cold starts).
     n_jobs : int
         Worker processes (1: in this process).
+    scheduler : str or None
+        Where the workers run (``--scheduler``, :func:`oos_drake.processes.make_executor`):
+        None for the local process pool, ``"dask"`` for a local Dask cluster, or an address.
     """
 
     upper_iterations: int = 30
@@ -95,6 +98,7 @@ class SweepOptions:
     pole_points: int = 1
     chunk_size: int = 0
     n_jobs: int = 2
+    scheduler: str | None = None
 
     def __post_init__(self):
         for name in ("upper_iterations", "lower_iterations", "n_jobs"):
@@ -437,12 +441,16 @@ def _grid_points(pool, n_models, omega, parts, options, progress, description):
     )
     step = 1.0 / max(len(parts), 1)
     results = []
-    if pool._pool is None:
+    if pool.serial:
         for task in tasks:
             results.append(_sweep_chunk(task))
             bar.update(task[1] - task[0])
     else:
-        futures = [pool._pool.submit(_sweep_chunk, t) for t in tasks]
+        futures = [pool.executor.submit(_sweep_chunk, t) for t in tasks]
+        if pool.queue is None:  # Dask: no progress queue, the bar moves by finished task
+            for future, task in zip(futures, tasks, strict=True):
+                future.result()
+                bar.update(task[1] - task[0])
         while not all(f.done() for f in futures):
             try:
                 pool.queue.get(timeout=0.5)
@@ -524,7 +532,7 @@ def mu_sweep(
     options = options or SweepOptions()
     omega, arrays, times = _check_sweep_input(sys, omega, times)
     parts = subset_parts(sys, subsets)
-    with ModelPool(arrays, options.n_jobs) as pool:
+    with ModelPool(arrays, options.n_jobs, options.scheduler) as pool:
         points, _ = _grid_points(
             pool, arrays[0].shape[0], omega, parts, options, progress, description
         )
@@ -753,7 +761,7 @@ def certified_sweep(
     timings = {}
     clock = _time.perf_counter()
     certificates, reports = {}, {}
-    with ModelPool(arrays, options.n_jobs) as pool:
+    with ModelPool(arrays, options.n_jobs, options.scheduler) as pool:
         points, lowers = _grid_points(pool, n_models, omega, parts, options, progress, description)
         timings["grid"] = _time.perf_counter() - clock
         clock = _time.perf_counter()

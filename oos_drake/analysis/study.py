@@ -5,7 +5,8 @@ file (a dotted path, ``hubs.RH2.mass``) to each value of a sweep, rebuilds the s
 like a file: :func:`oos_drake.scenario.data.load_scenario` with ``overrides``), optionally
 re-synthesizes the controller on it, and re-runs the worst-case mu analysis
 (:func:`oos_drake.analysis.run.run_analysis`). The values run in parallel on
-:func:`oos_drake.processes.process_pool` (one analysis per worker, one BLAS thread each).
+:func:`oos_drake.processes.make_executor` (``--scheduler``: local processes or Dask; one analysis
+per worker, one BLAS thread each).
 
 The margin of a value is the robust stability margin ``1 / mu`` of its worst study (the mission
 and the docking phases, subset ``total``): ``margin_lower = 1 / mu_upper`` is certified (no
@@ -127,6 +128,10 @@ class StudyOptions:
         Options of each analysis (``sweep.n_jobs`` is forced to 1: the values run in parallel).
     workers : int
         Values analyzed at the same time (worker processes).
+    scheduler : str or None
+        Where they run (``--scheduler``, :func:`oos_drake.processes.make_executor`): None for
+        the local process pool (one worker: in this process), ``"dask"`` for a local Dask
+        cluster, or an address.
     """
 
     controller: str | None = None
@@ -144,6 +149,7 @@ class StudyOptions:
         )
     )
     workers: int = 2
+    scheduler: str | None = None
 
 
 def _run_point(scenario_file: str, path: str, value: float, options: StudyOptions, folder: str):
@@ -160,7 +166,7 @@ def _run_point(scenario_file: str, path: str, value: float, options: StudyOption
     if options.synthesize:
         gamma, controller_file = _synthesize(scenario, options, folder / "controller")
     controller = scenario_controller(controller_file, scenario)
-    sweep = replace(options.analysis.sweep, n_jobs=1)
+    sweep = replace(options.analysis.sweep, n_jobs=1, scheduler=None)
     summary = run_analysis(
         controller,
         folder / "analysis",
@@ -236,11 +242,9 @@ def run_study(
     pandas.DataFrame
         One row per value (``name [unit]`` columns).
     """
-    from concurrent.futures import as_completed
-
     from tqdm import tqdm
 
-    from oos_drake.processes import process_pool
+    from oos_drake.processes import make_executor
     from oos_drake.scenario.data import load_scenario, scenario_path, scenario_record
 
     options = options or StudyOptions()
@@ -256,15 +260,15 @@ def run_study(
     start = time.perf_counter()
     rows: dict[int, dict] = {}
     workers = max(1, min(options.workers, len(sweep.values)))
-    with process_pool(workers) as pool:
+    with make_executor(workers, options.scheduler) as executor:
         futures = {
-            pool.submit(
+            executor.submit(
                 _run_point, scenario_file, sweep.path, value, options, str(out / "points" / f"{i}")
             ): i
             for i, value in enumerate(sweep.values)
         }
         bar = tqdm(total=len(futures), desc=f"study {sweep.path}", disable=not progress)
-        for future in as_completed(futures):
+        for future in executor.as_completed(futures):
             i = futures[future]
             rows[i] = {sweep.column: sweep.values[i], **future.result()}
             bar.update()

@@ -1,7 +1,8 @@
 """mu bounds at arbitrary (model, frequency) points of a model array, in worker processes.
 
 The model array's Delta-channel matrices ``(A, Bw, Cz, Dzw)`` are handed to the workers once,
-when the pool starts (fork: inherited, not pickled), so that a task is only a list of points:
+when the executor starts (process pool, fork: inherited, not pickled; Dask: pickled once per
+worker), so that a task is only a list of points:
 model indices, frequencies [rad/s], starting scalings of the upper bound, the subset's channels.
 Every worker uses one BLAS thread (:mod:`oos_drake.blas`): the parallelism is one process per
 core over batches of small matrices.
@@ -13,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from oos_drake.processes import process_pool, start_method
+from oos_drake.processes import make_executor, start_method
 from oos_drake.robust.blocks import parse_blk
 from oos_drake.robust.lfr_analysis import delta_channel_response
 
@@ -149,59 +150,73 @@ def _run_chunk(task: PointTask) -> PointBounds:
 
 
 class ModelPool:
-    """Worker processes holding one model array; evaluates :class:`PointTask` lists.
+    """Workers holding one model array; evaluates :class:`PointTask` lists.
 
-    Use as a context manager. ``n_jobs = 1`` evaluates in this process.
+    Use as a context manager. The workers come from :func:`oos_drake.processes.make_executor`:
+    ``n_jobs = 1`` on the process pool evaluates in this process.
 
     Parameters
     ----------
     arrays : tuple of numpy.ndarray
         ``(A, Bw, Cz, Dzw)`` of the model array, each ``(N, ...)``.
     n_jobs : int
-        Worker processes.
+        Workers.
+    scheduler : str, optional
+        ``--scheduler`` (``None``: the local process pool; ``"dask"``: a local Dask cluster;
+        an address: that Dask scheduler).
+
+    Attributes
+    ----------
+    executor : SerialExecutor, PoolExecutor or DaskExecutor
+        Where the tasks run (set inside the ``with`` block).
+    queue : multiprocessing.Queue or None
+        Progress ticks of the process pool's workers (None in this process and on Dask).
     """
 
-    def __init__(self, arrays, n_jobs: int = 2):
+    def __init__(self, arrays, n_jobs: int = 2, scheduler: str | None = None):
         if n_jobs < 1:
             raise ValueError(f"ModelPool: n_jobs must be >= 1, got {n_jobs}")
         self.arrays = arrays
         self.n_jobs = n_jobs
-        self._pool = None
+        self.scheduler = scheduler
+        self.executor = None
         self.queue = None
 
+    @property
+    def serial(self) -> bool:
+        """True when the tasks run in this process."""
+        return self.executor is None or self.executor.kind == "serial"
+
     def __enter__(self):
-        if self.n_jobs > 1:
+        if self.n_jobs > 1 and self.scheduler in (None, "", "processes"):
             import multiprocessing as mp
 
+            # progress ticks: a queue inherited by the forked workers (not for Dask's workers)
             self.queue = mp.get_context(start_method()).Queue()
-            self._pool = process_pool(
-                self.n_jobs, initializer=_install, initargs=(self.arrays, self.queue)
-            )
-        else:
-            self._previous = (_ARRAYS.get("models"), _ARRAYS.get("queue"))
-            _install(self.arrays)
+        self._previous = (_ARRAYS.get("models"), _ARRAYS.get("queue"))
+        self.executor = make_executor(
+            self.n_jobs, self.scheduler, initializer=_install, initargs=(self.arrays, self.queue)
+        )
         return self
 
     def __exit__(self, *exc):
-        if self._pool is not None:
-            self._pool.shutdown()
-            self._pool = None
-        elif getattr(self, "_previous", None) is not None:
-            _ARRAYS["models"], _ARRAYS["queue"] = self._previous
+        if self.executor is not None:
+            self.executor.shutdown()
+            if self.executor.kind == "serial":
+                _ARRAYS["models"], _ARRAYS["queue"] = self._previous
+            self.executor = None
         return False
 
     def map(self, fn, tasks):
         """``[fn(t) for t in tasks]`` in the workers (order kept)."""
-        if self._pool is None:
-            return [fn(t) for t in tasks]
-        return list(self._pool.map(fn, tasks))
+        return self.executor.map(fn, tasks)
 
     def bounds(self, task: PointTask, *, min_chunk: int = 16) -> PointBounds:
         """:func:`point_bounds` of ``task``, its points split over the workers."""
         n = task.models.size
         if n == 0:
             return PointBounds(np.zeros(0), None, np.zeros(0), -1, None)
-        k = max(1, min(self.n_jobs, n // min_chunk)) if self._pool is not None else 1
+        k = 1 if self.serial else max(1, min(self.n_jobs, n // min_chunk))
         if k == 1:
             return self.map(_run_chunk, [task])[0]
         # split by model (one eigen-decomposition per model and chunk), balanced in points

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from oos_drake.cli import add_deprecated_alias
+from oos_drake.cli import add_deprecated_alias, add_scheduler_argument
 
 
 def _add_executor_options(parser: argparse.ArgumentParser) -> None:
@@ -30,13 +30,7 @@ def _add_executor_options(parser: argparse.ArgumentParser) -> None:
         default=os.cpu_count() or 1,
         help="worker processes (default: CPU count; 1 runs in this process)",
     )
-    parser.add_argument(
-        "--scheduler",
-        default=None,
-        metavar="ADDRESS",
-        help="run on Dask: a scheduler address (tcp://host:8786) or 'local' "
-        "for a local cluster of --workers processes",
-    )
+    add_scheduler_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_deprecated_alias(parser, "--no-progress", "--quiet", flag=True)
 

@@ -10,7 +10,12 @@ every case it receives.
 - :class:`ProcessPoolExecutor`: a local pool of ``spawn`` ed processes (the default for
   ``--workers N > 1``; ``spawn`` rather than ``fork``: Drake's threads do not survive a fork).
 - :class:`DaskExecutor`: a Dask distributed cluster, either an existing scheduler
-  (``--scheduler tcp://host:8786``) or a local one (``--scheduler local``).
+  (``--scheduler tcp://host:8786``) or a local one (``--scheduler dask`` or ``local``).
+
+Both rest on the package's generic executors (:mod:`oos_drake.processes`: the same pool and
+Dask client run the mu sweeps and the analysis); this module adds what a campaign needs on top:
+a simulator built once per worker, run timeouts, the isolation of a case that kills its worker,
+and bounded submission.
 
 At most ``2 * workers`` cases are in flight at once, so a killed campaign loses little work and
 the progress bar moves steadily.
@@ -41,7 +46,8 @@ from oos_drake.campaign.simulator import (
     build_simulator,
     simulator_builds,
 )
-from oos_drake.processes import process_pool
+from oos_drake.processes import DaskExecutor as DaskTasks
+from oos_drake.processes import PoolExecutor, scheduler_address
 
 
 @dataclass(frozen=True)
@@ -191,13 +197,13 @@ class ProcessPoolExecutor:
             raise ValueError(f"run timeout {timeout} s must be positive")
         self.workers = workers
         self.timeout = timeout
-        self._pool: concurrent.futures.ProcessPoolExecutor | None = None
+        self._pool: PoolExecutor | None = None
 
     def start(self, recipe: SimulatorRecipe) -> None:
         """Start the processes and build the simulator in each (before any timing)."""
         if self._pool is None:
             # spawn rather than fork: Drake's threads do not survive a fork
-            self._pool = process_pool(
+            self._pool = PoolExecutor(
                 self.workers, initializer=_init_pool_worker, initargs=(recipe,), method="spawn"
             )
             # bring workers up now (one warm-up task each; the pool may reuse an idle one)
@@ -278,15 +284,12 @@ class ProcessPoolExecutor:
         """Stop every worker process now and forget the pool (the next ``start`` makes one)."""
         if self._pool is None:
             return
-        # concurrent.futures offers no way to stop a running task: kill its processes
-        for process in list(getattr(self._pool, "_processes", {}).values()):
-            process.kill()
-        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._pool.kill()
         self._pool = None
 
     def close(self) -> None:
         if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool.shutdown()
             self._pool = None
 
 
@@ -302,12 +305,14 @@ def _timeout_result(case: RunCase, timeout: float) -> RunResult:
 
 
 class DaskExecutor:
-    """Dask distributed: an existing scheduler, or a local cluster.
+    """Dask distributed: an existing scheduler, or a local cluster
+    (:class:`oos_drake.processes.DaskExecutor`).
 
     Parameters
     ----------
     address : str or None
-        Scheduler address (``tcp://host:8786``); ``None`` or ``"local"`` starts a LocalCluster.
+        Scheduler address (``tcp://host:8786``); ``None``, ``"dask"`` or ``"local"`` starts a
+        LocalCluster.
     workers : int
         Workers of the local cluster (one thread each).
     processes : bool
@@ -315,31 +320,18 @@ class DaskExecutor:
     """
 
     def __init__(self, address: str | None = None, workers: int = 2, processes: bool = True):
-        from dask.distributed import Client, LocalCluster
-
-        self._cluster = None
-        if address in (None, "local"):
-            self._cluster = LocalCluster(
-                n_workers=workers, threads_per_worker=1, processes=processes, dashboard_address=None
-            )
-            self._client = Client(self._cluster)
-        else:
-            try:
-                self._client = Client(address, timeout="10s")
-            except OSError as exc:
-                raise ValueError(f"--scheduler {address}: cannot connect: {exc}") from exc
-        self.workers = max(1, sum(self._client.nthreads().values()))
+        address = None if address is None else scheduler_address(address)
+        self._tasks = DaskTasks(address, workers, processes=processes)
+        self.workers = self._tasks.workers
 
     def start(self, recipe: SimulatorRecipe) -> None:
-        self._client.run(_warm_up, recipe)
+        self._tasks.client.run(_warm_up, recipe)
 
     def run(self, recipe: SimulatorRecipe, cases: Iterable[RunCase]) -> Iterator[RunResult]:
         from dask.distributed import wait
 
-        client = self._client
-
         def submit(case):
-            return client.submit(execute_case, recipe, case, pure=False)
+            return self._tasks.submit(execute_case, recipe, case)
 
         def wait_one(pending):
             result = wait(list(pending), return_when="FIRST_COMPLETED")
@@ -348,15 +340,14 @@ class DaskExecutor:
         yield from _bounded(submit, wait_one, cases, 2 * self.workers)
 
     def close(self) -> None:
-        self._client.close()
-        if self._cluster is not None:
-            self._cluster.close()
+        self._tasks.shutdown()
 
 
 def make_executor(
     workers: int, scheduler: str | None, timeout: float | None = None
 ) -> InlineExecutor | ProcessPoolExecutor | DaskExecutor:
-    """Executor for the CLI options ``--workers N`` and ``--scheduler ADDRESS``.
+    """Executor for the CLI options ``--workers N`` and ``--scheduler`` (``processes``, the
+    default; ``dask``/``local``; or a Dask scheduler address).
 
     A run ``timeout`` [s] needs worker processes that can be stopped: with it, one worker runs
     in a pool of one process rather than in this process. Dask does not stop running tasks, so
@@ -364,7 +355,7 @@ def make_executor(
     """
     if workers < 1:
         raise ValueError(f"--workers {workers}: need at least 1 worker")
-    if scheduler:
+    if scheduler and scheduler != "processes":
         if timeout:
             warnings.warn(f"run_timeout = {timeout} s is not enforced on Dask", stacklevel=2)
         return DaskExecutor(scheduler, workers=workers)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from oos_drake.processes import process_pool
+from oos_drake.processes import make_executor
 from oos_drake.robust.lfr_analysis import block_map, delta_channel_response, frequency_grid
 from oos_drake.robust.tables import sweep_table
 
@@ -286,6 +286,7 @@ def robust_sweep(
     subsets=None,
     times=None,
     n_jobs: int = 1,
+    scheduler: str | None = None,
     refine_points: int = 6,
     polish: int = 3,
     warm_start: bool = True,
@@ -310,6 +311,9 @@ def robust_sweep(
         Mission time [s] of each model (the ``time [s]`` column); default NaN.
     n_jobs : int
         Worker processes (1: in this process).
+    scheduler : str, optional
+        Where the workers run (``--scheduler``, :func:`oos_drake.processes.make_executor`):
+        None for the local process pool, ``"dask"`` for a local Dask cluster, or an address.
     refine_points : int
         Extra frequencies around each of the two highest peaks of each model and subset (0: off).
     polish : int
@@ -421,11 +425,8 @@ def robust_sweep(
         )
         for i in range(0, n_models, chunk_size)
     ]
-    if n_jobs == 1:
-        results = [_sweep_models(t) for t in tasks]
-    else:
-        with process_pool(n_jobs) as pool:
-            results = list(pool.map(_sweep_models, tasks))
+    with make_executor(n_jobs, scheduler) as executor:
+        results = list(executor.map(_sweep_models, tasks))
     rows = [row for chunk in results for row in chunk]
     model, freqs, lower, upper, subset, refined, tightened, axis = zip(*rows, strict=True)
     sizes = [w.size for w in freqs]
