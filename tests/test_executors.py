@@ -155,10 +155,11 @@ def test_mu_sweep_serial_and_pool_agree():
     pool = _robust_sweep(2, None)
     pd.testing.assert_frame_equal(serial, pool)
     # and the sweep is a real one: its bounds bracket the closed form at every point
-    exact = _closed_form(serial.model, serial.frequency)
-    assert np.all(serial.mu_lower <= exact * (1 + 1e-6))
-    assert np.all(serial.mu_upper >= exact * (1 - 1e-6))
-    assert np.all(serial.mu_upper[serial.tightened] <= exact[serial.tightened] * 1.01)
+    lower, upper = serial["mu lower [-]"], serial["mu upper [-]"]
+    exact = _closed_form(serial["model"], serial["frequency [Hz]"])
+    assert np.all(lower <= exact * (1 + 1e-6))
+    assert np.all(upper >= exact * (1 - 1e-6))
+    assert np.all(upper[serial["tightened"]] <= exact[serial["tightened"]] * 1.01)
 
 
 def test_analysis_sweep_serial_and_pool_agree():
