@@ -366,17 +366,57 @@ def _continuous_abscissa(closed, peak: Peak, alpha: float) -> tuple[float, float
     return float(poles[k].real), abs(float(poles[k].imag))
 
 
-def sampled_loop_poles(plant_hat, peak: Peak, alpha: float, fsw, period: float) -> np.ndarray:
+def complex_values(peak: Peak) -> dict:
+    """The peak's worst complex blocks as the flight software takes them: ``{"delta_mul":
+    3x3, "delta_add": 3x3}`` (normalized [-]; a block the subset leaves out is absent)."""
+    from oos_drake.control.analysis_model import ADDITIVE_BLOCK, MULTIPLICATIVE_BLOCKS
+
+    out = {}
+    if ADDITIVE_BLOCK in peak.perturbation:
+        out["delta_add"] = np.asarray(peak.perturbation[ADDITIVE_BLOCK], dtype=complex)
+    if any(n in peak.perturbation for n in MULTIPLICATIVE_BLOCKS):
+        mul = np.zeros((3, 3), dtype=complex)
+        for name in MULTIPLICATIVE_BLOCKS:
+            i, j = AXES.index(name[-2]), AXES.index(name[-1])
+            mul[i, j] = complex(np.ravel(peak.perturbation.get(name, 0.0))[0])
+        out["delta_mul"] = mul
+    return out
+
+
+def sampled_loop_poles(
+    plant_hat, peak: Peak, alpha: float, software, *, as_twin: bool = True
+) -> np.ndarray:
     """Poles of the exact sampled-data loop (discrete, ``z``) at ``alpha`` along the ray.
 
     ``plant_hat``: the uncertain plant ``T -> wdot`` (3x3) with its real and complex blocks;
     the perturbed plant is augmented with ``w = int wdot``, ``phi = int w`` (small angles: the
-    roll-pitch-yaw rates are the body rates), discretized with a zero-order hold at ``period``
-    and closed with ``fsw`` (a ``DiscreteBlock``: ``[phi; w] -> T``, feedthrough at the sample).
-    """
-    from oos_drake.lfr import usubs
+    roll-pitch-yaw rates are the body rates), discretized with a zero-order hold at the flight
+    software's period and closed with ``software``'s update
+    (:meth:`~oos_drake.multibody.flight_software.FlightSoftware.linear_update`, feedthrough at
+    the sample).
 
-    P = usubs(plant_hat, substitution(peak, plant_hat.uncertainty, alpha), normalized=True).to_ss()
+    ``as_twin``: ``Delta_mul`` as the twin realizes it, a discrete interpolant in the flight
+    software before the hold
+    (:func:`~oos_drake.multibody.flight_software.perturbation_block`); ``Delta_add`` stays the
+    continuous interpolant in the plant behind the hold, which is the same loop as the twin's
+    measurement-side realization up to two unobservable modes at ``z = 1``. ``False``: both
+    continuous in the plant (the analysis' loop with a hold; ``Delta_mul``'s interpolant then
+    also acts on the hold's harmonics).
+    """
+    from oos_drake.control.analysis_model import MULTIPLICATIVE_BLOCKS
+    from oos_drake.lfr import usubs
+    from oos_drake.multibody.flight_software import perturbation_block
+
+    period = software.design.period
+    values = substitution(peak, plant_hat.uncertainty, alpha)
+    dynamic = None
+    mul = complex_values(peak).get("delta_mul")
+    if as_twin and mul is not None:
+        for name in MULTIPLICATIVE_BLOCKS:
+            values[name] = np.zeros((1, 1))
+        dynamic = perturbation_block(software.design, peak.omega, delta_mul=alpha * mul)
+    fsw = software.linear_update(dynamic=dynamic)
+    P = usubs(plant_hat, values, normalized=True).to_ss()
     A, B, C, D = (np.asarray(m, dtype=float) for m in (P.A, P.B, P.C, P.D))
     n = A.shape[0]
     Ag = np.zeros((n + 6, n + 6))
@@ -415,11 +455,26 @@ def _mission_window(sim, t_peak: float, duration: float) -> float:
 
 
 class _Twin:
-    """One frozen Drake mission (built once per peak) and runs along the ray."""
+    """One frozen Drake mission (built once per peak) and runs along the peak's ray.
+
+    A mission peak freezes the arm and arrays at its time; a docking peak freezes them at its
+    phase's time and holds the docking spring-dampers at the peak's stiffness (the docking
+    study's settings, :func:`oos_drake.analysis.models.docking_springs`). The peak's complex
+    blocks are the flight software's dynamic perturbation
+    (:func:`~oos_drake.multibody.flight_software.perturbation_block`), scaled with ``alpha``.
+    """
 
     def __init__(
-        self, peak: Peak, K: np.ndarray, options: ConfirmOptions, scenario, near_hz: float
+        self,
+        peak: Peak,
+        K: np.ndarray,
+        options: ConfirmOptions,
+        scenario,
+        near_hz: float,
+        specs: Mapping,
+        design,
     ):
+        from oos_drake.multibody.flight_software import perturbation_block
         from oos_drake.multibody.mission import MissionOptions, make_mission_diagram
         from oos_drake.multibody.mission_sim import MissionSimulation
         from oos_drake.multibody.scenario_sdf import scenario_sdf_directory
@@ -431,29 +486,73 @@ class _Twin:
             control_rate=scenario.control.flight_software_rate_hz,
             torque_limit=scenario.control.torque_limit,
         )
-        timeline = mission_timeline(scenario).frozen(peak.time)
+        self.peak, self.specs = peak, specs
+        self.direction = {n: v for n, v in peak.perturbation.items() if specs[n].kind == "ureal"}
+        self.complex = complex_values(peak)
+        self.bushings = None
+        time = peak.time
+        if peak.study != "mission":
+            from oos_drake.analysis.models import docking_springs
+
+            phase = peak.study.removeprefix("docking-")
+            time = next(p.time for p in scenario.mission.docking_phases if p.name == phase)
+            springs = docking_springs(phase, peak.stiffness, scenario=scenario)
+            self.bushings = {n: (k, k, d, d) for n, (k, d) in springs.items()}
+        states = 0
+        if self.complex:
+            # the state count of the realization does not depend on alpha > 0
+            states = perturbation_block(design, peak.omega, **self.complex).nstates
+        timeline = mission_timeline(scenario).frozen(time)
         sdf, self._sdf = scenario_sdf_directory(scenario)
         handles = make_mission_diagram(
-            mission_options, K=K, timeline=timeline, scenario=scenario, sdf_directory=sdf
+            mission_options,
+            K=K,
+            timeline=timeline,
+            scenario=scenario,
+            sdf_directory=sdf,
+            perturbation_states=states,
         )
         self.sim = MissionSimulation(handles=handles)
         self.options = options
-        self.start = _mission_window(self.sim, peak.time, options.duration)
+        if self.bushings is None:
+            self.start = _mission_window(self.sim, time, options.duration)
+        else:  # the connection is held: no event in the window but the phase's own instant
+            self.start = float(time)
         self.hub_q = self.sim.handles.hub_joint.position_start()
         self.near_hz = near_hz  # the oscillation the verdict follows [Hz] (NaN: the dominant one)
 
-    def run(self, values: Mapping[str, float]):
-        """``(growing, Oscillation or None, history DataFrame)`` of one run: ``growing`` when
-        the run diverged, the dominant oscillation grows or, without any oscillation, the
-        attitude's peak over the last quarter of the window exceeds that of the second."""
+    def realization(self, alpha: float):
+        """The flight software's dynamic perturbation at ``alpha`` (None without complex
+        blocks)."""
+        from oos_drake.multibody.flight_software import perturbation_block
+
+        if not self.complex:
+            return None
+        design = self.sim.handles.flight_software.design
+        scaled = {k: alpha * v for k, v in self.complex.items()}
+        return perturbation_block(design, self.peak.omega, **scaled)
+
+    def run(self, alpha: float):
+        """``(growing, Oscillation or None, history DataFrame)`` of one run at ``alpha``:
+        ``growing`` when the run diverged, the dominant oscillation grows or, without any
+        oscillation, the attitude's peak over the last quarter of the window exceeds that of
+        the second."""
         from oos_drake.analysis.oscillation import dominant_oscillation
         from oos_drake.multibody.mission_sim import MissionDiverged
 
         o = self.options
         phi0 = o.initial_attitude
-        run_values = dict(values) | {f"phi0_{a}": phi0 for a in AXES}
+        values = ray_values(self.specs, self.direction, alpha)
+        run_values = values | {f"phi0_{a}": phi0 for a in AXES}
         holder = {}
         diverged = False
+        fsw = self.sim.handles.flight_software
+        block = self.realization(alpha)
+
+        def on_start(context):
+            holder["context"] = context
+            fsw.set_dynamic_perturbation(fsw.GetMyMutableContextFromRoot(context), block)
+
         try:
             self.sim.run(
                 run_values,
@@ -462,8 +561,9 @@ class _Twin:
                 self.start + o.duration,
                 log=False,
                 noise_table=np.zeros((1, 9)),
-                on_start=lambda context: holder.setdefault("context", context),
+                on_start=on_start,
                 within_ranges=False,
+                bushings=self.bushings,
             )
         except MissionDiverged:
             diverged = True
@@ -486,13 +586,13 @@ class _Twin:
         return bool(quarters[3].max() > quarters[1].max()), None, history
 
 
-def _nonlinear_boundary(twin: _Twin, specs, direction, guess: float, alpha_top: float):
+def _nonlinear_boundary(twin: _Twin, guess: float, alpha_top: float):
     """Bisection of the decay rate's sign change near ``guess``, below ``alpha_top``."""
     o = twin.options
     runs = {}
 
     def unstable(alpha):
-        runs[alpha] = twin.run(ray_values(specs, direction, alpha))
+        runs[alpha] = twin.run(alpha)
         return runs[alpha][0]
 
     lo = max(guess * (1.0 - o.bracket), 1e-3)
@@ -587,23 +687,42 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
         spec=twin_spec,
         torque_limit=scenario.control.torque_limit,
     )
-    fsw = FlightSoftware(design, 6, 6, 0, 0).linear_update()
+    software = FlightSoftware(design, 6, 6, 0, 0)
     period = design.period
+    nyquist = np.isfinite(peak.omega) and peak.omega * period >= np.pi
+    if peak.has_complex and nyquist:
+        notes.append("critical frequency at or beyond the flight software's Nyquist frequency")
+
+    def sampled_boundary(as_twin):
+        def unstable(alpha):
+            try:  # near an ill-posed point the plant's fastest pole overflows the hold's expm
+                with np.errstate(over="ignore", invalid="ignore"):
+                    poles = sampled_loop_poles(plant_hat, peak, alpha, software, as_twin=as_twin)
+            except (ValueError, np.linalg.LinAlgError):
+                return True
+            return bool(np.log(np.abs(poles).max()) / period > GROWTH_TOLERANCE)
+
+        alpha = boundary_along_ray(unstable, options.alpha_limit)
+        frequency = math.nan
+        if np.isfinite(alpha) and np.isfinite(peak.omega):
+            poles = sampled_loop_poles(
+                plant_hat, peak, alpha * (1 + 1e-3), software, as_twin=as_twin
+            )
+            z = poles[np.argmax(np.abs(poles))]
+            frequency = abs(np.angle(z)) / (2 * np.pi * period)
+        return alpha, frequency
+
     alpha_s, f_s = math.nan, math.nan
-
-    def sampled_unstable(alpha):
-        try:  # near an ill-posed point the plant's fastest pole overflows the hold's expm
-            with np.errstate(over="ignore", invalid="ignore"):
-                poles = sampled_loop_poles(plant_hat, peak, alpha, fsw, period)
-        except (ValueError, np.linalg.LinAlgError):
-            return True
-        return bool(np.log(np.abs(poles).max()) / period > GROWTH_TOLERANCE)
-
-    alpha_s = boundary_along_ray(sampled_unstable, options.alpha_limit)
-    if np.isfinite(alpha_s) and np.isfinite(peak.omega):
-        poles = sampled_loop_poles(plant_hat, peak, alpha_s * (1 + 1e-3), fsw, period)
-        z = poles[np.argmax(np.abs(poles))]
-        f_s = abs(np.angle(z)) / (2 * np.pi * period)
+    if not (peak.has_complex and nyquist):
+        alpha_s, f_s = sampled_boundary(True)
+    if "delta_mul" in complex_values(peak) and not nyquist:
+        # the twin computes Delta_mul at the sample, before the hold; the analysis' loop with a
+        # hold has it behind the hold (its interpolant then also filters the hold's harmonics)
+        alpha_h, f_h = sampled_boundary(False)
+        notes.append(
+            f"with Delta_mul behind the hold (continuous interpolant) the sampled loop's "
+            f"boundary is alpha = {alpha_h:.4f} at {f_h:.4f} Hz"
+        )
     if not np.isfinite(peak.omega):
         notes.append(
             "infinite frequency: the loop becomes ill-posed (a mass matrix singular) at alpha "
@@ -634,26 +753,20 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
         "nonlinear runs": 0,
     }
     histories = pd.DataFrame()
-    if peak.has_complex:
-        row["status"] = "linear only: complex blocks not realized on the twin"
-        notes.append(
-            "the twin's flight software realizes Delta_add/Delta_mul only as scalar all-passes "
-            "at a fixed frequency (issue 17 item 3)"
-        )
-    elif peak.study != "mission":
-        row["status"] = "linear only: docking configuration not simulated"
+    if peak.has_complex and nyquist:
+        row["status"] = "linear only: complex blocks beyond the flight software's Nyquist frequency"
     else:
-        twin = _Twin(peak, controller.K, options, scenario, f_s)
+        twin = _Twin(peak, controller.K, options, scenario, f_s, specs, design)
         top = min(alpha_phys * (1 - 1e-3), options.alpha_limit)
         guess = alpha_s if np.isfinite(alpha_s) else 1.0
         if guess >= top:
-            runs = {top: twin.run(ray_values(specs, direction, top))}
+            runs = {top: twin.run(top)}
             alpha_n = math.inf
             if runs[top][0]:  # unstable below the prediction: search under the top
-                alpha_n, below = _nonlinear_boundary(twin, specs, direction, top, top)
+                alpha_n, below = _nonlinear_boundary(twin, top, top)
                 runs |= below
         else:
-            alpha_n, runs = _nonlinear_boundary(twin, specs, direction, guess, top)
+            alpha_n, runs = _nonlinear_boundary(twin, guess, top)
         row["nonlinear runs"] = len(runs)
         stable = [a for a, r in runs.items() if not r[0]]
         unstable = [a for a, r in runs.items() if r[0]]
