@@ -383,9 +383,7 @@ def complex_values(peak: Peak) -> dict:
     return out
 
 
-def sampled_loop_poles(
-    plant_hat, peak: Peak, alpha: float, software, *, as_twin: bool = True
-) -> np.ndarray:
+def sampled_loop_poles(plant_hat, peak: Peak, alpha: float, software, mul_block=None):
     """Poles of the exact sampled-data loop (discrete, ``z``) at ``alpha`` along the ray.
 
     ``plant_hat``: the uncertain plant ``T -> wdot`` (3x3) with its real and complex blocks;
@@ -395,26 +393,27 @@ def sampled_loop_poles(
     (:meth:`~oos_drake.multibody.flight_software.FlightSoftware.linear_update`, feedthrough at
     the sample).
 
-    ``as_twin``: ``Delta_mul`` as the twin realizes it, a discrete interpolant in the flight
-    software before the hold
-    (:func:`~oos_drake.multibody.flight_software.perturbation_block`); ``Delta_add`` stays the
-    continuous interpolant in the plant behind the hold, which is the same loop as the twin's
-    measurement-side realization up to two unobservable modes at ``z = 1``. ``False``: both
-    continuous in the plant (the analysis' loop with a hold; ``Delta_mul``'s interpolant then
-    also acts on the hold's harmonics).
+    ``mul_block``: ``Delta_mul`` as the twin realizes it, the discrete interpolant in the flight
+    software before the hold (``perturbation_block(design, omega, delta_mul=...)`` at
+    ``alpha = 1``, scaled here); ``Delta_add`` stays the continuous interpolant in the plant
+    behind the hold, the same loop as the twin's measurement-side realization up to two
+    unobservable modes at ``z = 1``. None: every complex block continuous in the plant (the
+    analysis' loop with a hold; ``Delta_mul``'s interpolant then also acts on the hold's
+    harmonics).
     """
     from oos_drake.control.analysis_model import MULTIPLICATIVE_BLOCKS
     from oos_drake.lfr import usubs
-    from oos_drake.multibody.flight_software import perturbation_block
+    from oos_drake.multibody.flight_software import DiscreteBlock
 
     period = software.design.period
     values = substitution(peak, plant_hat.uncertainty, alpha)
     dynamic = None
-    mul = complex_values(peak).get("delta_mul")
-    if as_twin and mul is not None:
+    if mul_block is not None:
         for name in MULTIPLICATIVE_BLOCKS:
             values[name] = np.zeros((1, 1))
-        dynamic = perturbation_block(software.design, peak.omega, delta_mul=alpha * mul)
+        # the interpolant of alpha Delta is alpha times that of Delta (same sections)
+        b = mul_block
+        dynamic = DiscreteBlock(b.A, b.B, alpha * b.C, alpha * b.D)
     fsw = software.linear_update(dynamic=dynamic)
     P = usubs(plant_hat, values, normalized=True).to_ss()
     A, B, C, D = (np.asarray(m, dtype=float) for m in (P.A, P.B, P.C, P.D))
@@ -642,7 +641,11 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
     histories : pandas.DataFrame
         Attitude histories of the runs on both sides of the boundary.
     """
-    from oos_drake.multibody.flight_software import FlightSoftware, FlightSoftwareDesign
+    from oos_drake.multibody.flight_software import (
+        FlightSoftware,
+        FlightSoftwareDesign,
+        perturbation_block,
+    )
     from oos_drake.scenario.data import load_scenario
 
     scenario = load_scenario(options.scenario)
@@ -693,11 +696,16 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
     if peak.has_complex and nyquist:
         notes.append("critical frequency at or beyond the flight software's Nyquist frequency")
 
-    def sampled_boundary(as_twin):
+    mul = complex_values(peak).get("delta_mul")
+    mul_block = (
+        None if mul is None or nyquist else perturbation_block(design, peak.omega, delta_mul=mul)
+    )
+
+    def sampled_boundary(mul_block):
         def unstable(alpha):
             try:  # near an ill-posed point the plant's fastest pole overflows the hold's expm
                 with np.errstate(over="ignore", invalid="ignore"):
-                    poles = sampled_loop_poles(plant_hat, peak, alpha, software, as_twin=as_twin)
+                    poles = sampled_loop_poles(plant_hat, peak, alpha, software, mul_block)
             except (ValueError, np.linalg.LinAlgError):
                 return True
             return bool(np.log(np.abs(poles).max()) / period > GROWTH_TOLERANCE)
@@ -705,20 +713,18 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
         alpha = boundary_along_ray(unstable, options.alpha_limit)
         frequency = math.nan
         if np.isfinite(alpha) and np.isfinite(peak.omega):
-            poles = sampled_loop_poles(
-                plant_hat, peak, alpha * (1 + 1e-3), software, as_twin=as_twin
-            )
+            poles = sampled_loop_poles(plant_hat, peak, alpha * (1 + 1e-3), software, mul_block)
             z = poles[np.argmax(np.abs(poles))]
             frequency = abs(np.angle(z)) / (2 * np.pi * period)
         return alpha, frequency
 
     alpha_s, f_s = math.nan, math.nan
     if not (peak.has_complex and nyquist):
-        alpha_s, f_s = sampled_boundary(True)
-    if "delta_mul" in complex_values(peak) and not nyquist:
+        alpha_s, f_s = sampled_boundary(mul_block)
+    if mul_block is not None:
         # the twin computes Delta_mul at the sample, before the hold; the analysis' loop with a
         # hold has it behind the hold (its interpolant then also filters the hold's harmonics)
-        alpha_h, f_h = sampled_boundary(False)
+        alpha_h, f_h = sampled_boundary(None)
         notes.append(
             f"with Delta_mul behind the hold (continuous interpolant) the sampled loop's "
             f"boundary is alpha = {alpha_h:.4f} at {f_h:.4f} Hz"

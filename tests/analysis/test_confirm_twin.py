@@ -254,3 +254,44 @@ def test_confirmation_windows_hold_one_connection_state():
         inside = [b for a, b in ramps if a <= t < b]
         if inside:  # a peak inside a ramp: simulated with the connection made
             assert start == inside[0] + 0.5
+
+
+def test_a_docking_peak_runs_at_its_phase_with_the_peaks_stiffness():
+    """The twin of a docking-8 peak: arm and arrays at the phase's configuration, SM2 at the
+    peak's stiffness and the study's damping, SM1 at the rigid connection, held over the run."""
+    from oos_drake.analysis.confirm import _Twin
+    from oos_drake.analysis.models import phase_configuration
+
+    scenario = load_scenario()
+    stiffness = 3590.7
+    peak = Peak("docking-8", "total", np.nan, stiffness, 5.0, 0.3, 0.3, {})
+    K = np.zeros((3, 6))
+    twin = _Twin(peak, K, ConfirmOptions(), scenario, np.nan, {}, None)
+    docking = scenario.docking
+    assert twin.start == 880.0
+    holder = {}
+    twin.sim.run(
+        {},
+        0,
+        twin.start,
+        twin.start + 1.0,
+        log=False,
+        noise_table=np.zeros((1, 9)),
+        on_start=lambda context: holder.setdefault("context", context),
+        bushings=twin.bushings,
+    )
+    h = twin.sim.handles
+    pc = h.plant.GetMyContextFromRoot(holder["context"])
+    expected = {
+        "SM1": (docking.rigid_stiffness, docking.rigid_damping),
+        "SM2": (stiffness, docking.damping),
+    }
+    for name, (k, d) in expected.items():
+        bushing = h.bushings[name]
+        np.testing.assert_allclose(bushing.GetForceStiffnessConstants(pc), [k] * 3)
+        np.testing.assert_allclose(bushing.GetTorqueStiffnessConstants(pc), [k] * 3)
+        np.testing.assert_allclose(bushing.GetForceDampingConstants(pc), [d] * 3)
+        np.testing.assert_allclose(bushing.GetTorqueDampingConstants(pc), [d] * 3)
+    alpha = phase_configuration("8", scenario).configuration.alpha
+    angles = [joint.get_angle(pc) for joint in h.arm_joints]
+    np.testing.assert_allclose(angles, alpha, atol=1e-6)
