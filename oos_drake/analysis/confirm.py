@@ -15,8 +15,9 @@ values (for a fixed perturbation the loop is LTI):
    ``T -> [phi; omega]`` discretized exactly with a zero-order hold at the flight software's
    period and closed with the discrete flight software as it runs
    (:meth:`~oos_drake.multibody.flight_software.FlightSoftware.linear_update`: Tustin filters,
-   torque computed and applied at the sample, no computation delay). Eigenvalues on the unit
-   circle give its boundary ``alpha`` and crossing frequency.
+   torque computed and applied at the sample, no computation delay), with ``Delta_mul`` where
+   the twin has it (below). Eigenvalues on the unit circle give its boundary ``alpha`` and
+   crossing frequency.
 3. **nonlinear**: the Drake mission twin (``MissionSimulation``) with the arm and arrays frozen
    at the peak's configuration (``MissionTimeline.frozen``), the real parameters written as
    physical values, started from a small attitude error without noise. The decay rate and the
@@ -24,18 +25,36 @@ values (for a fixed perturbation the loop is LTI):
    by the matrix pencil (:mod:`oos_drake.analysis.oscillation`); a bisection on ``alpha`` to
    ``ConfirmOptions.rtol`` locates the sign change of the decay rate.
 
+Complex blocks on the twin (:func:`oos_drake.multibody.flight_software.perturbation_block`,
+scaled by ``alpha`` per run): ``Delta_mul`` (on the wheel torque) is the discrete interpolant
+of its worst value, computed by the flight software at the sample and held with the torque
+(it takes the worst value at ``e^{j omega dt}`` exactly); ``Delta_add`` (an angular
+acceleration ``W_add Delta_add(s) T``, which a multibody plant cannot take as such) is added to
+the measured attitude and rate as the exact zero-order-hold response of
+``[1/s^2; 1/s] W_add Delta_add(s)`` to the held torque: the loop the flight software closes is
+that of the plant ``P + W_add Delta_add(s)`` behind the hold. The linear sampled prediction
+uses the same realization (``Delta_add`` continuous behind the hold, ``Delta_mul`` in the
+flight software: the same loop up to two unobservable integrator modes); a note gives the
+boundary with ``Delta_mul`` behind the hold as well (its interpolant then also acts on the
+hold's harmonics). The hub attitude of such a run carries the offset ``-dphi`` of the realized
+acceleration (the loop regulates the measured sum), a slow mode the identification does not
+follow.
+
+Docking peaks: the twin is frozen at the docking phase's configuration (its time in the
+scenario) with the docking spring-dampers held at the peak's stiffness and the study's damping
+(:func:`oos_drake.analysis.models.docking_springs`: phase 7 SM1 swept, SM2 open; phase 8 SM2
+swept, SM1 rigid) for the whole run (``MissionSimulation.run(bushings=...)``).
+
 Physical validity: a worst perturbation may lie outside the physical domain (non-positive
 mass, an inertia breaking the triangle inequality, a non-positive modal frequency, negative
 stiffness or damping). :func:`physical_alpha_max` gives the largest ``alpha`` along the ray
 that is still a physical body; beyond it no simulation is run (Drake refuses some of these
 bodies, and a non-physical instability is no statement about the spacecraft).
 
-Limits: the Drake twin realizes the analysis' complex blocks only as the flight software's
-scalar all-passes at a fixed frequency, not the interpolants at each peak's frequency (issue
-17 item 3), so peaks whose worst perturbation has complex blocks get the two linear
-predictions only; docking peaks (swept stiffness at a docking phase's configuration) likewise
-stay linear. A peak at infinite frequency is an ill-posed loop (the perturbation makes a mass
-matrix singular): it has no oscillation to confirm; its physical limit is reported instead.
+Limits: a peak whose complex blocks have their critical frequency at or beyond the flight
+software's Nyquist frequency has no discrete realization and keeps the linear predictions. A
+peak at infinite frequency is an ill-posed loop (the perturbation makes a mass matrix
+singular): it has no oscillation to confirm; its physical limit is reported instead.
 """
 
 from __future__ import annotations

@@ -44,6 +44,13 @@ no artificial one-sample delay. The blocks before the torque saturation and thos
 merged into two linear stages (their matrices are obtained once by probing the block-by-block
 reference chain with unit vectors), so an update costs two small matrix products.
 
+A run may also carry a *dynamic perturbation* (:func:`perturbation_block`,
+:meth:`FlightSoftware.set_dynamic_perturbation`, states declared with the system): a discrete
+block from ``T_rw`` to a torque added to ``T`` and to an attitude and rate added to the
+measurements. ``oos confirm`` realizes the analysis' worst complex blocks with it, at the
+peak's frequency (``Delta_mul`` as the torque part, ``Delta_add`` as the exact sampled
+response of the acceleration it stands for).
+
 The discrete state also carries the run's metrics (running maxima of ``|phi|`` and ``|u|``,
 sum of squares), so they are computed at the control rate without any logging.
 """
