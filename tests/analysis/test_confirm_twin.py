@@ -194,7 +194,8 @@ def test_the_twins_measured_additive_perturbation_closes_the_analysis_sampled_lo
     plant_hat = uncertain_plant(plant, controller.spec)
     design = FlightSoftwareDesign.create(controller.K, 10.0)
     software = FlightSoftware(design, 6, 6, 0, 0)
-    expected = sampled_loop_poles(plant_hat, peak, 1.0, software)
+    mul_block = perturbation_block(design, omega, delta_mul=mul)
+    expected = sampled_loop_poles(plant_hat, peak, 1.0, software, mul_block)
     # the twin: the real plant behind the hold, every complex block in the flight software
     block = perturbation_block(design, omega, delta_mul=mul, delta_add=2.0 * add)
     twin_peak = Peak("mission", "real", TIME, np.nan, omega, 1.0, 1.0, {})
