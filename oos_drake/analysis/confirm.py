@@ -421,6 +421,7 @@ def sampled_loop_poles(plant_hat, peak: Peak, alpha: float, software, mul_block=
     harmonics).
     """
     from oos_drake.control.analysis_model import MULTIPLICATIVE_BLOCKS
+    from oos_drake.control.sampled import plant_with_integrators
     from oos_drake.lfr import usubs
     from oos_drake.multibody.flight_software import DiscreteBlock
 
@@ -435,16 +436,7 @@ def sampled_loop_poles(plant_hat, peak: Peak, alpha: float, software, mul_block=
         dynamic = DiscreteBlock(b.A, b.B, alpha * b.C, alpha * b.D)
     fsw = software.linear_update(dynamic=dynamic)
     P = usubs(plant_hat, values, normalized=True).to_ss()
-    A, B, C, D = (np.asarray(m, dtype=float) for m in (P.A, P.B, P.C, P.D))
-    n = A.shape[0]
-    Ag = np.zeros((n + 6, n + 6))
-    Ag[:n, :n] = A
-    Ag[n : n + 3, :n] = C  # w' = wdot
-    Ag[n + 3 :, n : n + 3] = np.eye(3)  # phi' = w
-    Bg = np.vstack([B, D, np.zeros((3, 3))])
-    Cg = np.zeros((6, n + 6))
-    Cg[:3, n + 3 :] = np.eye(3)  # [phi; w]
-    Cg[3:, n : n + 3] = np.eye(3)
+    Ag, Bg, Cg = plant_with_integrators(P.A, P.B, P.C, P.D)  # T -> [phi; w]
     Ad, Bd, *_ = scipy.signal.cont2discrete((Ag, Bg, Cg, np.zeros((6, 3))), period, method="zoh")
     Ac, Bc, Cc, Dc = fsw.A, fsw.B, fsw.C, fsw.D
     closed = np.block([[Ad + Bd @ Dc @ Cg, Bd @ Cc], [Bc @ Cg, Ac]])

@@ -370,18 +370,10 @@ def perturbation_block(
     if delta_add is None:
         Ad, Bd, Cd = np.zeros((0, 0)), np.zeros((0, 3)), np.zeros((6, 0))
     else:
+        from oos_drake.control.sampled import plant_with_integrators
+
         a = lti_interpolant(design.W_add * add, omega)
-        Aa, Ba, Ca, Da = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (a.A, a.B, a.C, a.D))
-        na = Aa.shape[0] if Aa.size else 0
-        Aa, Ba, Ca = Aa.reshape(na, na), Ba.reshape(na, 3), Ca.reshape(3, na)
-        Ac = np.zeros((na + 6, na + 6))
-        Ac[:na, :na] = Aa
-        Ac[na : na + 3, :na] = Ca
-        Ac[na + 3 :, na : na + 3] = np.eye(3)
-        Bc = np.vstack([Ba, Da, np.zeros((3, 3))])
-        Cc = np.zeros((6, na + 6))
-        Cc[:3, na + 3 :] = np.eye(3)  # dphi
-        Cc[3:, na : na + 3] = np.eye(3)  # dw
+        Ac, Bc, Cc = plant_with_integrators(a.A, a.B, a.C, a.D)  # outputs [dphi; dw]
         Ad, Bd, Cd, _, _ = scipy.signal.cont2discrete(
             (Ac, Bc, Cc, np.zeros((6, 3))), T, method="zoh"
         )

@@ -230,6 +230,12 @@ def test_a_worst_case_is_confirmed_on_the_nonlinear_twin(setup):
     development machine (load average 15), the heavier part of it the runs."""
     controller, _, peak = setup
     row, histories = confirm_peak(peak, controller, ConfirmOptions())
+    _assert_confirmed(row, histories)
+
+
+def _assert_confirmed(row, histories):
+    """The continuous boundary at 1; the Drake boundary and oscillation frequency those of the
+    sampled-data loop to :data:`AGREEMENT`, with a decaying and a growing run around it."""
     assert row["alpha linear continuous [-]"] == pytest.approx(1.0, abs=1e-3)
     assert np.isfinite(row["alpha nonlinear [-]"])
     assert row["alpha nonlinear [-]"] == pytest.approx(
@@ -247,7 +253,8 @@ def test_a_complex_block_worst_case_is_confirmed_on_the_nonlinear_twin(setup):
     """``Delta_add`` and ``Delta_mul`` (phase -90 deg) on the PD loop, realized on the twin
     (no real parameter): the Drake boundary against the sampled-data loop's. The interpolation
     frequency is moved twice to the continuous crossing (as a mu worst case sits there), the
-    perturbation normalized to ``alpha = 1``. Six to eight 45 s runs."""
+    perturbation normalized to ``alpha = 1``. Six to eight 45 s runs: 42 s measured on the
+    shared, loaded development machine (load average 12)."""
     controller, plant, _ = setup
     closed = close_loop(plant, controller.K, controller.spec)
     e_xx = np.zeros((3, 3))
@@ -256,7 +263,7 @@ def test_a_complex_block_worst_case_is_confirmed_on_the_nonlinear_twin(setup):
         f"Delta_mul_{a}{a}": np.array([[-10j]]) for a in "xyz"
     }
     omega = 2 * np.pi * 0.1
-    for _ in range(3):
+    for iteration in range(3):
         probe = Peak("mission", "total", TIME, np.nan, omega, 0.0, 0.0, direction)
         alpha = boundary_along_ray(
             lambda a, p=probe: _continuous_abscissa(closed, p, a)[0] > GROWTH_TOLERANCE,
@@ -266,21 +273,13 @@ def test_a_complex_block_worst_case_is_confirmed_on_the_nonlinear_twin(setup):
         )
         assert 0.1 < alpha < 4.0
         crossing = _continuous_abscissa(closed, probe, alpha * (1 + 1e-6))[1]
-        if _ < 2:
+        if iteration < 2:
             omega = crossing
     scaled = {n: alpha * v for n, v in direction.items()}
     peak = Peak("mission", "total", TIME, np.nan, omega, 1 / alpha, 1 / alpha, scaled)
     row, histories = confirm_peak(peak, controller, ConfirmOptions())
-    assert row["alpha linear continuous [-]"] == pytest.approx(1.0, abs=1e-3)
     assert row["nonlinear runs"] >= 3
-    assert row["alpha nonlinear [-]"] == pytest.approx(
-        row["alpha linear sampled [-]"], rel=AGREEMENT
-    )
-    assert row["oscillation frequency [Hz]"] == pytest.approx(
-        row["frequency linear sampled [Hz]"], rel=AGREEMENT
-    )
-    assert row["decay rate below [1/s]"] < 0 < row["decay rate above [1/s]"]
-    assert set(histories["side"]) == {"stable", "unstable"}
+    _assert_confirmed(row, histories)
 
 
 def test_confirmation_windows_hold_one_connection_state():
