@@ -34,7 +34,8 @@ the measured attitude and rate as the exact zero-order-hold response of
 ``[1/s^2; 1/s] W_add Delta_add(s)`` to the held torque: the loop the flight software closes is
 that of the plant ``P + W_add Delta_add(s)`` behind the hold. The linear sampled prediction
 uses the same realization (``Delta_add`` continuous behind the hold, ``Delta_mul`` in the
-flight software: the same loop up to two unobservable integrator modes); a note gives the
+flight software: the same loop up to six unobservable integrator states, a double integrator
+per axis, at ``z = 1``); a note gives the
 boundary with ``Delta_mul`` behind the hold as well (its interpolant then also acts on the
 hold's harmonics). The hub attitude of such a run carries the offset ``-dphi`` of the realized
 acceleration (the loop regulates the measured sum), a slow mode the identification does not
@@ -415,10 +416,10 @@ def sampled_loop_poles(plant_hat, peak: Peak, alpha: float, software, mul_block=
     ``mul_block``: ``Delta_mul`` as the twin realizes it, the discrete interpolant in the flight
     software before the hold (``perturbation_block(design, omega, delta_mul=...)`` at
     ``alpha = 1``, scaled here); ``Delta_add`` stays the continuous interpolant in the plant
-    behind the hold, the same loop as the twin's measurement-side realization up to two
-    unobservable modes at ``z = 1``. None: every complex block continuous in the plant (the
-    analysis' loop with a hold; ``Delta_mul``'s interpolant then also acts on the hold's
-    harmonics).
+    behind the hold, the same loop as the twin's measurement-side realization up to its six
+    unobservable integrator states at ``z = 1``. None: every complex block continuous in the
+    plant (the analysis' loop with a hold; ``Delta_mul``'s interpolant then also acts on the
+    hold's harmonics).
     """
     from oos_drake.control.analysis_model import MULTIPLICATIVE_BLOCKS
     from oos_drake.control.sampled import plant_with_integrators
@@ -857,8 +858,8 @@ def confirm_peaks(peaks, controller, options: ConfirmOptions, *, workers=1, quie
     from oos_drake.processes import process_pool
 
     tasks = [(peak, controller, options) for peak in peaks]
-    # Drake-heavy peaks first so that the pool stays busy
-    order = sorted(range(len(tasks)), key=lambda i: peaks[i].has_complex)
+    # every peak simulates; how many runs one needs is known only after its linear predictions
+    order = range(len(tasks))
     results = {}
     with process_pool(max(1, min(workers, len(tasks))), method="spawn") as pool:
         futures = {pool.submit(_confirm_task, tasks[i]): i for i in order}

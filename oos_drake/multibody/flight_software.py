@@ -331,7 +331,7 @@ def perturbation_block(
       (``Delta_add(s)`` the continuous interpolant) gives exactly the perturbation's attitude
       and rate at the samples: added to the measurements, it closes the same sampled-data loop
       as the plant ``P + W_add Delta_add(s)`` behind the hold (its double integrator duplicates
-      the plant's rigid-body one: the loop gains two unobservable modes at ``z = 1``, and the
+      the plant's rigid-body one: the loop gains six unobservable states at ``z = 1``, and the
       hub attitude drifts by the perturbation's ``-dphi``, the measured sum is regulated).
 
     Parameters
