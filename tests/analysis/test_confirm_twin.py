@@ -336,3 +336,20 @@ def test_a_docking_peak_runs_at_its_phase_with_the_peaks_stiffness():
     alpha = phase_configuration("8", scenario).configuration.alpha
     angles = [joint.get_angle(pc) for joint in h.arm_joints]
     np.testing.assert_allclose(angles, alpha, atol=1e-6)
+    # bad settings: one line naming the culprit
+    with pytest.raises(ValueError, match="unknown bushing.*SM3"):
+        twin.sim.run({}, 0, 880.0, 881.0, log=False, bushings={"SM3": (1.0, 1.0, 0.0, 0.0)})
+    with pytest.raises(ValueError, match="bushing SM2 settings"):
+        twin.sim.run({}, 0, 880.0, 881.0, log=False, bushings={"SM2": (-1.0, 1.0, 0.0, 0.0)})
+    with pytest.raises(ValueError, match="must not contain the capture"):
+        twin.sim.run({}, 0, 250.0, 260.0, log=False, bushings=twin.bushings)
+
+
+def test_dynamic_perturbation_of_the_wrong_size_is_refused():
+    design = FlightSoftwareDesign.create(np.zeros((3, 6)), 10.0)
+    block = perturbation_block(design, 5.0, delta_mul=np.full((3, 3), 1j))
+    fsw = FlightSoftware(design, 6, 6, 0, 0, perturbation_states=block.nstates + 1)
+    with pytest.raises(ValueError, match=f"must be a {block.nstates + 1}-state 3 -> 9 block"):
+        fsw.set_dynamic_perturbation(fsw.CreateDefaultContext(), block)
+    with pytest.raises(ValueError, match="Delta_mul and Delta_add must be 3x3"):
+        perturbation_block(design, 5.0, delta_add=np.ones((2, 2)))
