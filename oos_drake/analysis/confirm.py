@@ -880,8 +880,9 @@ def confirmation_figure(
     histories: pd.DataFrame, row: Mapping, path: Path, *, settle: float = ConfirmOptions.settle
 ) -> None:
     """Hub attitude on both sides of the nonlinear boundary of one peak (PNG): the window the
-    oscillation is identified on (after ``settle`` [s]), scaled to the critical oscillation of
-    its second half (the transient leaves the plot)."""
+    oscillation is identified on (after ``settle`` [s]), each axis about its mean over the second
+    half (given in the legend), scaled to the critical oscillation there (the transient leaves
+    the plot)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -894,14 +895,21 @@ def confirmation_figure(
             ax.text(0.5, 0.5, f"no {side} run", ha="center", transform=ax.transAxes)
             continue
         alpha = float(part["alpha [-]"].iloc[0])
-        for a in AXES:
-            ax.plot(part["time [s]"], 1e6 * part[f"phi_{a} [rad]"], label=f"{a} axis")
-        # zoom on the second half of the window: the critical oscillation, not the transient
+        # zoom on the second half of the window: the critical oscillation, not the transient,
+        # about its mean (a realized Delta_add leaves the hub attitude at an offset)
         tail = part[part["time [s]"] >= 0.5 * (settle + part["time [s]"].max())]
-        top = 1.5e6 * float(np.abs(tail[[f"phi_{a} [rad]" for a in AXES]].to_numpy()).max())
+        columns = [f"phi_{a} [rad]" for a in AXES]
+        offset = tail[columns].mean()
+        for a, column in zip(AXES, columns, strict=True):
+            ax.plot(
+                part["time [s]"],
+                1e6 * (part[column] - offset[column]),
+                label=f"{a} axis ({1e6 * offset[column]:+.0f} urad)",
+            )
+        top = 1.5e6 * float(np.abs((tail[columns] - offset).to_numpy()).max())
         if top > 0:
             ax.set_ylim(-top, top)
-        ax.set_ylabel("hub attitude error [urad]")
+        ax.set_ylabel("hub attitude error - mean [urad]")
         ax.set_title(f"{side} side: alpha = {alpha:.4f}", fontsize=10)
         ax.grid(True, alpha=0.3)
         ax.legend(loc="upper right", fontsize=8)
