@@ -1,5 +1,6 @@
 """The main job, ``oos run``: model -> controller -> analysis -> confirmation of the worst cases
-on the Drake twin -> mu-guided campaign -> report.
+on the Drake twin -> classical and disk margins (continuous and sampled loops, at
+:data:`MARGIN_CONFIGURATIONS` mission configurations) -> mu-guided campaign -> report.
 
 Each stage writes one folder under ``--out``. A stage is skipped when its folder holds a stamp
 (``stage.json``) whose key matches the current inputs: the key hashes the part of the scenario
@@ -30,6 +31,9 @@ from oos_drake.resources import package_path
 PACKAGE_ROOT = package_path("oos_drake")
 DEFAULT_CAMPAIGN = package_path("oos_drake.campaign", "specs", "paper.toml")
 STAMP = "stage.json"
+#: Mission configurations of the margins stage (``oos margins --configurations``): equally
+#: spaced, a coarser grid than the analysis' (about 1 s per configuration on 2 cores).
+MARGIN_CONFIGURATIONS = 12
 
 
 def _digest(*parts: str | bytes) -> str:
@@ -76,6 +80,7 @@ def stage_keys(scenario: str | Path, campaign_spec: str | Path, quick: bool) -> 
     )
     keys["analysis"] = _digest(keys["controller"], source_key("analysis", "robust"), *quick_options)
     keys["confirm"] = _digest(keys["analysis"], keys["validate"])  # analysis: analysis/, robust/
+    keys["margins"] = _digest(keys["analysis"], str(MARGIN_CONFIGURATIONS))
     keys["campaign"] = _digest(
         keys["analysis"],
         keys["validate"],
@@ -227,6 +232,26 @@ def run_pipeline(args: argparse.Namespace) -> int:
         timings,
     )
 
+    run_stage(
+        "margins",
+        out / "margins",
+        keys["margins"],
+        lambda d: _oos(
+            "margins",
+            "--controller",
+            controller,
+            "--analysis",
+            out / "analysis",
+            "--configurations",
+            MARGIN_CONFIGURATIONS,
+            "--out",
+            d,
+            "--quiet",
+            *on_scenario,
+        ),
+        timings,
+    )
+
     campaign = out / f"campaign-{keys['campaign'][:10]}"
     campaign_start = time.perf_counter()
     if (campaign / "spec.toml").is_file():
@@ -269,6 +294,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
         ("controller", controller),
         ("robust analysis", out / "analysis"),
         ("worst cases on the Drake twin", out / "confirm" / "confirmation.parquet"),
+        ("gain/phase/delay/disk margins", out / "margins" / "margins.png"),
         ("campaign results", campaign / "runs.parquet"),
         ("campaign report", campaign / "report"),
     ):

@@ -81,10 +81,11 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(tmp_path):
         "controller",
         "analysis",
         "confirm",
+        "margins",
         "campaign + report",
     }
     assert all(v is not None and v > 0 for v in timings["stages_s"].values())
-    for stage in ("model", "validate", "controller", "analysis", "confirm"):
+    for stage in ("model", "validate", "controller", "analysis", "confirm", "margins"):
         assert (out / stage / STAMP).is_file(), stage
     confirmation = pd.read_parquet(out / "confirm" / "confirmation.parquet")
     assert set(confirmation["study"]) == set(
@@ -103,6 +104,7 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(tmp_path):
         "controller",
         "robust analysis",
         "worst cases on the Drake twin",
+        "gain/phase/delay/disk margins",
         "campaign results",
     ):
         assert label in first.stdout

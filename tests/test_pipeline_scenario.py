@@ -55,7 +55,7 @@ def test_scenario_edits_recompute_exactly_the_dependent_stages(tmp_path, stubbed
     campaign = _campaign_for(tmp_path, scenario)
     out = tmp_path / "out"
     _run(out, scenario, campaign)
-    assert _ran(out) == ["analysis", "confirm", "controller", "model", "validate"]
+    assert _ran(out) == ["analysis", "confirm", "controller", "margins", "model", "validate"]
     synth = next(c for c in stubbed if c[0] == "synth")
     assert synth[-2:] == ["--scenario", str(scenario.resolve())]
     confirm = next(c for c in stubbed if c[0] == "confirm")
@@ -72,12 +72,12 @@ def test_scenario_edits_recompute_exactly_the_dependent_stages(tmp_path, stubbed
         PAPER.replace("pointing_requirement = 0.0079", "pointing_requirement = 0.005")
     )
     _run(out, scenario, campaign)  # requirements: controller and after, not the model
-    assert _ran(out) == ["analysis", "confirm", "controller"]
+    assert _ran(out) == ["analysis", "confirm", "controller", "margins"]
 
     edited = PAPER.replace("pointing_requirement = 0.0079", "pointing_requirement = 0.005")
     scenario.write_text(edited.replace("mass = 24.96 ", "mass = 30.0 "))
     _run(out, scenario, campaign)  # physical data: everything
-    assert _ran(out) == ["analysis", "confirm", "controller", "model", "validate"]
+    assert _ran(out) == ["analysis", "confirm", "controller", "margins", "model", "validate"]
     assert len(list(out.glob("campaign-*"))) == 3  # a new campaign folder per campaign key
 
 
@@ -87,7 +87,13 @@ def test_stage_keys_by_scenario_part(tmp_path):
     second.write_text(PAPER.replace("gyro_cutoff_hz = 200.0", "gyro_cutoff_hz = 150.0"))
     a = pipeline.stage_keys(first, CAMPAIGN, quick=False)
     b = pipeline.stage_keys(second, CAMPAIGN, quick=False)
-    assert [k for k in a if a[k] != b[k]] == ["controller", "analysis", "confirm", "campaign"]
+    assert [k for k in a if a[k] != b[k]] == [
+        "controller",
+        "analysis",
+        "confirm",
+        "margins",
+        "campaign",
+    ]
     assert pipeline.stage_keys(first, CAMPAIGN, quick=True)["model"] == a["model"]
 
 

@@ -141,15 +141,9 @@ def run_margins(args) -> int:
         ray_boundaries,
     )
     from oos_drake.analysis.models import mission_times
+    from oos_drake.scenario.data import load_scenario
 
-    controller = _controller(args.controller)
-    if args.delay is not None:
-        if args.delay < 0:
-            raise ValueError(f"--delay must be >= 0 s, got {args.delay}")
-        controller = dataclasses.replace(
-            controller, spec=dataclasses.replace(controller.spec, computation_delay_s=args.delay)
-        )
-    rays = {}
+    summary, scenario_file = None, args.scenario
     if args.analysis:
         record = Path(args.analysis) / "summary.json"
         if not record.is_file():
@@ -157,13 +151,25 @@ def run_margins(args) -> int:
                 f"--analysis {args.analysis}: no summary.json (not an oos analyze folder)"
             )
         summary = json.loads(record.read_text())
-        rays = analysis_rays(args.analysis, int(summary["mission"]["configurations"]))
-    times = mission_times(args.configurations)
+        # the rays are the analysis' blocks: its scenario (--scenario must be that one)
+        scenario_file = _analysis_scenario(summary.get("scenario"), args.analysis, args.scenario)
+    scenario = load_scenario(scenario_file)
+    controller = _controller(args.controller, scenario)
+    if args.delay is not None:
+        if args.delay < 0:
+            raise ValueError(f"--delay must be >= 0 s, got {args.delay}")
+        controller = dataclasses.replace(
+            controller, spec=dataclasses.replace(controller.spec, computation_delay_s=args.delay)
+        )
+    rays = {}
+    if summary is not None:
+        rays = analysis_rays(args.analysis, int(summary["mission"]["configurations"]), scenario)
+    times = mission_times(args.configurations, scenario)
     start = time.perf_counter()
 
     def work(tmp):
         tmp.mkdir(parents=True)
-        table = mission_margins(controller, times, progress=not args.quiet)
+        table = mission_margins(controller, times, scenario, progress=not args.quiet)
         table.to_parquet(tmp / "margins.parquet", index=False)
         margins_figure(table, tmp / "margins.png", controller.spec.flight_software_rate_hz)
         worst = {}
@@ -180,6 +186,7 @@ def run_margins(args) -> int:
                 )
             }
         record = {
+            "scenario": str(scenario.source),
             "controller": {"label": controller.label, "source": controller.source},
             "loop": {
                 "sample_rate_hz": controller.spec.flight_software_rate_hz,
@@ -190,7 +197,7 @@ def run_margins(args) -> int:
             "worst": worst,
         }
         if rays:
-            boundaries = ray_boundaries(controller, rays)
+            boundaries = ray_boundaries(controller, rays, scenario)
             boundaries.to_parquet(tmp / "ray_boundaries.parquet", index=False)
             record["rays"] = boundaries.to_dict(orient="records")
         record["time_s"] = round(time.perf_counter() - start, 2)
@@ -566,6 +573,7 @@ def register(subparsers) -> None:
         help="an `oos analyze` output folder: also compare the stability boundaries along its "
         "worst real-parameter perturbations",
     )
+    add_scenario_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run_margins)
 

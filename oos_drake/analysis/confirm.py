@@ -15,8 +15,9 @@ values (for a fixed perturbation the loop is LTI):
    ``T -> [phi; omega]`` discretized exactly with a zero-order hold at the flight software's
    period and closed with the discrete flight software as it runs
    (:meth:`~oos_drake.multibody.flight_software.FlightSoftware.linear_update`: Tustin filters,
-   torque computed and applied at the sample, no computation delay). Eigenvalues on the unit
-   circle give its boundary ``alpha`` and crossing frequency.
+   torque computed and applied at the sample, no computation delay), with ``Delta_mul`` where
+   the twin has it (below). Eigenvalues on the unit circle give its boundary ``alpha`` and
+   crossing frequency.
 3. **nonlinear**: the Drake mission twin (``MissionSimulation``) with the arm and arrays frozen
    at the peak's configuration (``MissionTimeline.frozen``), the real parameters written as
    physical values, started from a small attitude error without noise. The decay rate and the
@@ -24,18 +25,37 @@ values (for a fixed perturbation the loop is LTI):
    by the matrix pencil (:mod:`oos_drake.analysis.oscillation`); a bisection on ``alpha`` to
    ``ConfirmOptions.rtol`` locates the sign change of the decay rate.
 
+Complex blocks on the twin (:func:`oos_drake.multibody.flight_software.perturbation_block`,
+scaled by ``alpha`` per run): ``Delta_mul`` (on the wheel torque) is the discrete interpolant
+of its worst value, computed by the flight software at the sample and held with the torque
+(it takes the worst value at ``e^{j omega dt}`` exactly); ``Delta_add`` (an angular
+acceleration ``W_add Delta_add(s) T``, which a multibody plant cannot take as such) is added to
+the measured attitude and rate as the exact zero-order-hold response of
+``[1/s^2; 1/s] W_add Delta_add(s)`` to the held torque: the loop the flight software closes is
+that of the plant ``P + W_add Delta_add(s)`` behind the hold. The linear sampled prediction
+uses the same realization (``Delta_add`` continuous behind the hold, ``Delta_mul`` in the
+flight software: the same loop up to six unobservable integrator states, a double integrator
+per axis, at ``z = 1``); a note gives the
+boundary with ``Delta_mul`` behind the hold as well (its interpolant then also acts on the
+hold's harmonics). The hub attitude of such a run carries the offset ``-dphi`` of the realized
+acceleration (the loop regulates the measured sum), a slow mode the identification does not
+follow.
+
+Docking peaks: the twin is frozen at the docking phase's configuration (its time in the
+scenario) with the docking spring-dampers held at the peak's stiffness and the study's damping
+(:func:`oos_drake.analysis.models.docking_springs`: phase 7 SM1 swept, SM2 open; phase 8 SM2
+swept, SM1 rigid) for the whole run (``MissionSimulation.run(bushings=...)``).
+
 Physical validity: a worst perturbation may lie outside the physical domain (non-positive
 mass, an inertia breaking the triangle inequality, a non-positive modal frequency, negative
 stiffness or damping). :func:`physical_alpha_max` gives the largest ``alpha`` along the ray
 that is still a physical body; beyond it no simulation is run (Drake refuses some of these
 bodies, and a non-physical instability is no statement about the spacecraft).
 
-Limits: the Drake twin realizes the analysis' complex blocks only as the flight software's
-scalar all-passes at a fixed frequency, not the interpolants at each peak's frequency (issue
-17 item 3), so peaks whose worst perturbation has complex blocks get the two linear
-predictions only; docking peaks (swept stiffness at a docking phase's configuration) likewise
-stay linear. A peak at infinite frequency is an ill-posed loop (the perturbation makes a mass
-matrix singular): it has no oscillation to confirm; its physical limit is reported instead.
+Limits: a peak whose complex blocks have their critical frequency at or beyond the flight
+software's Nyquist frequency has no discrete realization and keeps the linear predictions. A
+peak at infinite frequency is an ill-posed loop (the perturbation makes a mass matrix
+singular): it has no oscillation to confirm; its physical limit is reported instead.
 """
 
 from __future__ import annotations
@@ -368,27 +388,58 @@ def _continuous_abscissa(closed, peak: Peak, alpha: float) -> tuple[float, float
     return float(poles[k].real), abs(float(poles[k].imag))
 
 
-def sampled_loop_poles(plant_hat, peak: Peak, alpha: float, fsw, period: float) -> np.ndarray:
+def complex_values(peak: Peak) -> dict:
+    """The peak's worst complex blocks as the flight software takes them: ``{"delta_mul":
+    3x3, "delta_add": 3x3}`` (normalized [-]; a block the subset leaves out is absent)."""
+    from oos_drake.control.analysis_model import ADDITIVE_BLOCK, MULTIPLICATIVE_BLOCKS
+
+    out = {}
+    if ADDITIVE_BLOCK in peak.perturbation:
+        out["delta_add"] = np.asarray(peak.perturbation[ADDITIVE_BLOCK], dtype=complex)
+    if any(n in peak.perturbation for n in MULTIPLICATIVE_BLOCKS):
+        mul = np.zeros((3, 3), dtype=complex)
+        for name in MULTIPLICATIVE_BLOCKS:
+            i, j = AXES.index(name[-2]), AXES.index(name[-1])
+            mul[i, j] = complex(np.ravel(peak.perturbation.get(name, 0.0))[0])
+        out["delta_mul"] = mul
+    return out
+
+
+def sampled_loop_poles(plant_hat, peak: Peak, alpha: float, software, mul_block=None):
     """Poles of the exact sampled-data loop (discrete, ``z``) at ``alpha`` along the ray.
 
     ``plant_hat``: the uncertain plant ``T -> wdot`` (3x3) with its real and complex blocks;
     the perturbed plant is augmented with ``w = int wdot``, ``phi = int w`` (small angles: the
-    roll-pitch-yaw rates are the body rates), discretized with a zero-order hold at ``period``
-    and closed with ``fsw`` (a ``DiscreteBlock``: ``[phi; w] -> T``, feedthrough at the sample).
-    """
-    from oos_drake.lfr import usubs
+    roll-pitch-yaw rates are the body rates), discretized with a zero-order hold at the flight
+    software's period and closed with ``software``'s update
+    (:meth:`~oos_drake.multibody.flight_software.FlightSoftware.linear_update`, feedthrough at
+    the sample).
 
-    P = usubs(plant_hat, substitution(peak, plant_hat.uncertainty, alpha), normalized=True).to_ss()
-    A, B, C, D = (np.asarray(m, dtype=float) for m in (P.A, P.B, P.C, P.D))
-    n = A.shape[0]
-    Ag = np.zeros((n + 6, n + 6))
-    Ag[:n, :n] = A
-    Ag[n : n + 3, :n] = C  # w' = wdot
-    Ag[n + 3 :, n : n + 3] = np.eye(3)  # phi' = w
-    Bg = np.vstack([B, D, np.zeros((3, 3))])
-    Cg = np.zeros((6, n + 6))
-    Cg[:3, n + 3 :] = np.eye(3)  # [phi; w]
-    Cg[3:, n : n + 3] = np.eye(3)
+    ``mul_block``: ``Delta_mul`` as the twin realizes it, the discrete interpolant in the flight
+    software before the hold (``perturbation_block(design, omega, delta_mul=...)`` at
+    ``alpha = 1``, scaled here); ``Delta_add`` stays the continuous interpolant in the plant
+    behind the hold, the same loop as the twin's measurement-side realization up to its six
+    unobservable integrator states at ``z = 1``. None: every complex block continuous in the
+    plant (the analysis' loop with a hold; ``Delta_mul``'s interpolant then also acts on the
+    hold's harmonics).
+    """
+    from oos_drake.control.analysis_model import MULTIPLICATIVE_BLOCKS
+    from oos_drake.control.sampled import plant_with_integrators
+    from oos_drake.lfr import usubs
+    from oos_drake.multibody.flight_software import DiscreteBlock
+
+    period = software.design.period
+    values = substitution(peak, plant_hat.uncertainty, alpha)
+    dynamic = None
+    if mul_block is not None:
+        for name in MULTIPLICATIVE_BLOCKS:
+            values[name] = np.zeros((1, 1))
+        # the interpolant of alpha Delta is alpha times that of Delta (same sections)
+        b = mul_block
+        dynamic = DiscreteBlock(b.A, b.B, alpha * b.C, alpha * b.D)
+    fsw = software.linear_update(dynamic=dynamic)
+    P = usubs(plant_hat, values, normalized=True).to_ss()
+    Ag, Bg, Cg = plant_with_integrators(P.A, P.B, P.C, P.D)  # T -> [phi; w]
     Ad, Bd, *_ = scipy.signal.cont2discrete((Ag, Bg, Cg, np.zeros((6, 3))), period, method="zoh")
     Ac, Bc, Cc, Dc = fsw.A, fsw.B, fsw.C, fsw.D
     closed = np.block([[Ad + Bd @ Dc @ Cg, Bd @ Cc], [Bc @ Cg, Ac]])
@@ -417,11 +468,26 @@ def _mission_window(sim, t_peak: float, duration: float) -> float:
 
 
 class _Twin:
-    """One frozen Drake mission (built once per peak) and runs along the ray."""
+    """One frozen Drake mission (built once per peak) and runs along the peak's ray.
+
+    A mission peak freezes the arm and arrays at its time; a docking peak freezes them at its
+    phase's time and holds the docking spring-dampers at the peak's stiffness (the docking
+    study's settings, :func:`oos_drake.analysis.models.docking_springs`). The peak's complex
+    blocks are the flight software's dynamic perturbation
+    (:func:`~oos_drake.multibody.flight_software.perturbation_block`), scaled with ``alpha``.
+    """
 
     def __init__(
-        self, peak: Peak, K: np.ndarray, options: ConfirmOptions, scenario, near_hz: float
+        self,
+        peak: Peak,
+        K: np.ndarray,
+        options: ConfirmOptions,
+        scenario,
+        near_hz: float,
+        specs: Mapping,
+        design,
     ):
+        from oos_drake.multibody.flight_software import perturbation_block
         from oos_drake.multibody.mission import MissionOptions, make_mission_diagram
         from oos_drake.multibody.mission_sim import MissionSimulation
         from oos_drake.multibody.scenario_sdf import scenario_sdf_directory
@@ -433,29 +499,73 @@ class _Twin:
             control_rate=scenario.control.flight_software_rate_hz,
             torque_limit=scenario.control.torque_limit,
         )
-        timeline = mission_timeline(scenario).frozen(peak.time)
+        self.peak, self.specs = peak, specs
+        self.direction = {n: v for n, v in peak.perturbation.items() if specs[n].kind == "ureal"}
+        self.complex = complex_values(peak)
+        self.bushings = None
+        time = peak.time
+        if peak.study != "mission":
+            from oos_drake.analysis.models import docking_springs
+
+            phase = peak.study.removeprefix("docking-")
+            time = next(p.time for p in scenario.mission.docking_phases if p.name == phase)
+            springs = docking_springs(phase, peak.stiffness, scenario=scenario)
+            self.bushings = {n: (k, k, d, d) for n, (k, d) in springs.items()}
+        states = 0
+        if self.complex:
+            # the state count of the realization does not depend on alpha > 0
+            states = perturbation_block(design, peak.omega, **self.complex).nstates
+        timeline = mission_timeline(scenario).frozen(time)
         sdf, self._sdf = scenario_sdf_directory(scenario)
         handles = make_mission_diagram(
-            mission_options, K=K, timeline=timeline, scenario=scenario, sdf_directory=sdf
+            mission_options,
+            K=K,
+            timeline=timeline,
+            scenario=scenario,
+            sdf_directory=sdf,
+            perturbation_states=states,
         )
         self.sim = MissionSimulation(handles=handles)
         self.options = options
-        self.start = _mission_window(self.sim, peak.time, options.duration)
+        if self.bushings is None:
+            self.start = _mission_window(self.sim, time, options.duration)
+        else:  # the connection is held: no event in the window but the phase's own instant
+            self.start = float(time)
         self.hub_q = self.sim.handles.hub_joint.position_start()
         self.near_hz = near_hz  # the oscillation the verdict follows [Hz] (NaN: the dominant one)
 
-    def run(self, values: Mapping[str, float]):
-        """``(growing, Oscillation or None, history DataFrame)`` of one run: ``growing`` when
-        the run diverged, the dominant oscillation grows or, without any oscillation, the
-        attitude's peak over the last quarter of the window exceeds that of the second."""
+    def realization(self, alpha: float):
+        """The flight software's dynamic perturbation at ``alpha`` (None without complex
+        blocks)."""
+        from oos_drake.multibody.flight_software import perturbation_block
+
+        if not self.complex:
+            return None
+        design = self.sim.handles.flight_software.design
+        scaled = {k: alpha * v for k, v in self.complex.items()}
+        return perturbation_block(design, self.peak.omega, **scaled)
+
+    def run(self, alpha: float):
+        """``(growing, Oscillation or None, history DataFrame)`` of one run at ``alpha``:
+        ``growing`` when the run diverged, the dominant oscillation grows or, without any
+        oscillation, the attitude's peak over the last quarter of the window exceeds that of
+        the second."""
         from oos_drake.analysis.oscillation import dominant_oscillation
         from oos_drake.multibody.mission_sim import MissionDiverged
 
         o = self.options
         phi0 = o.initial_attitude
-        run_values = dict(values) | {f"phi0_{a}": phi0 for a in AXES}
+        values = ray_values(self.specs, self.direction, alpha)
+        run_values = values | {f"phi0_{a}": phi0 for a in AXES}
         holder = {}
         diverged = False
+        fsw = self.sim.handles.flight_software
+        block = self.realization(alpha)
+
+        def on_start(context):
+            holder["context"] = context
+            fsw.set_dynamic_perturbation(fsw.GetMyMutableContextFromRoot(context), block)
+
         try:
             self.sim.run(
                 run_values,
@@ -464,8 +574,9 @@ class _Twin:
                 self.start + o.duration,
                 log=False,
                 noise_table=np.zeros((1, 9)),
-                on_start=lambda context: holder.setdefault("context", context),
+                on_start=on_start,
                 within_ranges=False,
+                bushings=self.bushings,
             )
         except MissionDiverged:
             diverged = True
@@ -488,13 +599,13 @@ class _Twin:
         return bool(quarters[3].max() > quarters[1].max()), None, history
 
 
-def _nonlinear_boundary(twin: _Twin, specs, direction, guess: float, alpha_top: float):
+def _nonlinear_boundary(twin: _Twin, guess: float, alpha_top: float):
     """Bisection of the decay rate's sign change near ``guess``, below ``alpha_top``."""
     o = twin.options
     runs = {}
 
     def unstable(alpha):
-        runs[alpha] = twin.run(ray_values(specs, direction, alpha))
+        runs[alpha] = twin.run(alpha)
         return runs[alpha][0]
 
     lo = max(guess * (1.0 - o.bracket), 1e-3)
@@ -544,7 +655,11 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
     histories : pandas.DataFrame
         Attitude histories of the runs on both sides of the boundary.
     """
-    from oos_drake.multibody.flight_software import FlightSoftware, FlightSoftwareDesign
+    from oos_drake.multibody.flight_software import (
+        FlightSoftware,
+        FlightSoftwareDesign,
+        perturbation_block,
+    )
     from oos_drake.scenario.data import load_scenario
 
     scenario = load_scenario(options.scenario)
@@ -589,23 +704,45 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
         spec=twin_spec,
         torque_limit=scenario.control.torque_limit,
     )
-    fsw = FlightSoftware(design, 6, 6, 0, 0).linear_update()
+    software = FlightSoftware(design, 6, 6, 0, 0)
     period = design.period
+    nyquist = np.isfinite(peak.omega) and peak.omega * period >= np.pi
+    if peak.has_complex and nyquist:
+        notes.append("critical frequency at or beyond the flight software's Nyquist frequency")
+
+    mul = complex_values(peak).get("delta_mul")
+    mul_block = (
+        None if mul is None or nyquist else perturbation_block(design, peak.omega, delta_mul=mul)
+    )
+
+    def sampled_boundary(mul_block):
+        def unstable(alpha):
+            try:  # near an ill-posed point the plant's fastest pole overflows the hold's expm
+                with np.errstate(over="ignore", invalid="ignore"):
+                    poles = sampled_loop_poles(plant_hat, peak, alpha, software, mul_block)
+            except (ValueError, np.linalg.LinAlgError):
+                return True
+            return bool(np.log(np.abs(poles).max()) / period > GROWTH_TOLERANCE)
+
+        alpha = boundary_along_ray(unstable, options.alpha_limit)
+        frequency = math.nan
+        if np.isfinite(alpha) and np.isfinite(peak.omega):
+            poles = sampled_loop_poles(plant_hat, peak, alpha * (1 + 1e-3), software, mul_block)
+            z = poles[np.argmax(np.abs(poles))]
+            frequency = abs(np.angle(z)) / (2 * np.pi * period)
+        return alpha, frequency
+
     alpha_s, f_s = math.nan, math.nan
-
-    def sampled_unstable(alpha):
-        try:  # near an ill-posed point the plant's fastest pole overflows the hold's expm
-            with np.errstate(over="ignore", invalid="ignore"):
-                poles = sampled_loop_poles(plant_hat, peak, alpha, fsw, period)
-        except (ValueError, np.linalg.LinAlgError):
-            return True
-        return bool(np.log(np.abs(poles).max()) / period > GROWTH_TOLERANCE)
-
-    alpha_s = boundary_along_ray(sampled_unstable, options.alpha_limit)
-    if np.isfinite(alpha_s) and np.isfinite(peak.omega):
-        poles = sampled_loop_poles(plant_hat, peak, alpha_s * (1 + 1e-3), fsw, period)
-        z = poles[np.argmax(np.abs(poles))]
-        f_s = abs(np.angle(z)) / (2 * np.pi * period)
+    if not (peak.has_complex and nyquist):
+        alpha_s, f_s = sampled_boundary(mul_block)
+    if mul_block is not None:
+        # the twin computes Delta_mul at the sample, before the hold; the analysis' loop with a
+        # hold has it behind the hold (its interpolant then also filters the hold's harmonics)
+        alpha_h, f_h = sampled_boundary(None)
+        notes.append(
+            f"with Delta_mul behind the hold (continuous interpolant) the sampled loop's "
+            f"boundary is alpha = {alpha_h:.4f} at {f_h:.4f} Hz"
+        )
     if not np.isfinite(peak.omega):
         notes.append(
             "infinite frequency: the loop becomes ill-posed (a mass matrix singular) at alpha "
@@ -636,26 +773,20 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
         "nonlinear runs": 0,
     }
     histories = pd.DataFrame()
-    if peak.has_complex:
-        row["status"] = "linear only: complex blocks not realized on the twin"
-        notes.append(
-            "the twin's flight software realizes Delta_add/Delta_mul only as scalar all-passes "
-            "at a fixed frequency (issue 17 item 3)"
-        )
-    elif peak.study != "mission":
-        row["status"] = "linear only: docking configuration not simulated"
+    if peak.has_complex and nyquist:
+        row["status"] = "linear only: complex blocks beyond the flight software's Nyquist frequency"
     else:
-        twin = _Twin(peak, controller.K, options, scenario, f_s)
+        twin = _Twin(peak, controller.K, options, scenario, f_s, specs, design)
         top = min(alpha_phys * (1 - 1e-3), options.alpha_limit)
         guess = alpha_s if np.isfinite(alpha_s) else 1.0
         if guess >= top:
-            runs = {top: twin.run(ray_values(specs, direction, top))}
+            runs = {top: twin.run(top)}
             alpha_n = math.inf
             if runs[top][0]:  # unstable below the prediction: search under the top
-                alpha_n, below = _nonlinear_boundary(twin, specs, direction, top, top)
+                alpha_n, below = _nonlinear_boundary(twin, top, top)
                 runs |= below
         else:
-            alpha_n, runs = _nonlinear_boundary(twin, specs, direction, guess, top)
+            alpha_n, runs = _nonlinear_boundary(twin, guess, top)
         row["nonlinear runs"] = len(runs)
         stable = [a for a, r in runs.items() if not r[0]]
         unstable = [a for a, r in runs.items() if r[0]]
@@ -729,8 +860,8 @@ def confirm_peaks(peaks, controller, options: ConfirmOptions, *, workers=1, quie
     from oos_drake.processes import PoolExecutor
 
     tasks = [(peak, controller, options) for peak in peaks]
-    # Drake-heavy peaks first so that the pool stays busy
-    order = sorted(range(len(tasks)), key=lambda i: peaks[i].has_complex)
+    # every peak simulates; how many runs one needs is known only after its linear predictions
+    order = range(len(tasks))
     results = {}
     with PoolExecutor(max(1, min(workers, len(tasks))), method="spawn") as executor:
         futures = {executor.submit(_confirm_task, tasks[i]): i for i in order}
@@ -749,8 +880,9 @@ def confirmation_figure(
     histories: pd.DataFrame, row: Mapping, path: Path, *, settle: float = ConfirmOptions.settle
 ) -> None:
     """Hub attitude on both sides of the nonlinear boundary of one peak (PNG): the window the
-    oscillation is identified on (after ``settle`` [s]), scaled to the critical oscillation of
-    its second half (the transient leaves the plot)."""
+    oscillation is identified on (after ``settle`` [s]), each axis about its mean over the second
+    half (given in the legend), scaled to the critical oscillation there (the transient leaves
+    the plot)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -763,14 +895,21 @@ def confirmation_figure(
             ax.text(0.5, 0.5, f"no {side} run", ha="center", transform=ax.transAxes)
             continue
         alpha = float(part["alpha [-]"].iloc[0])
-        for a in AXES:
-            ax.plot(part["time [s]"], 1e6 * part[f"phi_{a} [rad]"], label=f"{a} axis")
-        # zoom on the second half of the window: the critical oscillation, not the transient
+        # zoom on the second half of the window: the critical oscillation, not the transient,
+        # about its mean (a realized Delta_add leaves the hub attitude at an offset)
         tail = part[part["time [s]"] >= 0.5 * (settle + part["time [s]"].max())]
-        top = 1.5e6 * float(np.abs(tail[[f"phi_{a} [rad]" for a in AXES]].to_numpy()).max())
+        columns = [f"phi_{a} [rad]" for a in AXES]
+        offset = tail[columns].mean()
+        for a, column in zip(AXES, columns, strict=True):
+            ax.plot(
+                part["time [s]"],
+                1e6 * (part[column] - offset[column]),
+                label=f"{a} axis ({1e6 * offset[column]:+.0f} urad)",
+            )
+        top = 1.5e6 * float(np.abs((tail[columns] - offset).to_numpy()).max())
         if top > 0:
             ax.set_ylim(-top, top)
-        ax.set_ylabel("hub attitude error [urad]")
+        ax.set_ylabel("hub attitude error - mean [urad]")
         ax.set_title(f"{side} side: alpha = {alpha:.4f}", fontsize=10)
         ax.grid(True, alpha=0.3)
         ax.legend(loc="upper right", fontsize=8)

@@ -120,6 +120,25 @@ def docking_closed_loop(
     return ModelArray(system, stiffness, "stiffness [N/m or N m/rad]", f"docking-{phase}")
 
 
+def docking_springs(phase: str, stiffness, *, damping=None, scenario=None) -> dict:
+    """Spring-dampers of docking phase ``"7"`` or ``"8"`` as the docking study sets them.
+
+    Returns
+    -------
+    dict
+        ``{"SM1" or "SM2": (stiffness, damping)}``: the swept one (phase 7: SM1, phase 8: SM2)
+        at ``stiffness`` [N/m = N m/rad, shear and torsion alike] and ``damping`` [N s/m =
+        N m s/rad] (default: scenario), and in phase 8 SM1 at the scenario's rigid values.
+    """
+    scenario = _scenario(scenario)
+    settings = scenario.docking
+    damping = float(settings.damping if damping is None else damping)
+    springs = {"SM1" if str(phase) == "7" else "SM2": (stiffness, damping)}
+    if str(phase) == "8":
+        springs["SM1"] = (settings.rigid_stiffness, settings.rigid_damping)
+    return springs
+
+
 def docking_plant(phase: str, stiffness, *, damping=None, scenario=None, source="lfr") -> LFR:
     """Uncertain plant (``Delta_real`` blocks) of docking phase 7 or 8 for each swept stiffness.
 
@@ -158,21 +177,15 @@ def docking_plant(phase: str, stiffness, *, damping=None, scenario=None, source=
     cfg = named.configuration
     values = configuration_values(cfg.alpha, cfg.theta, cfg.delta_C1, cfg.delta_C2)
     swept = "SM1" if phase == "7" else "SM2"
-    values.update(
-        {
-            f"k_shear_{swept}": stiffness,
-            f"k_tors_{swept}": stiffness,
-            f"d_shear_{swept}": np.full(stiffness.size, damping),
-            f"d_tors_{swept}": np.full(stiffness.size, damping),
-        }
-    )
-    if phase == "8":
+    springs = docking_springs(phase, stiffness, damping=damping, scenario=scenario)
+    for name, (k, d) in springs.items():
+        size = stiffness.size if name == swept else None
         values.update(
             {
-                "k_shear_SM1": settings.rigid_stiffness,
-                "k_tors_SM1": settings.rigid_stiffness,
-                "d_shear_SM1": settings.rigid_damping,
-                "d_tors_SM1": settings.rigid_damping,
+                f"k_shear_{name}": k,
+                f"k_tors_{name}": k,
+                f"d_shear_{name}": d if size is None else np.full(size, d),
+                f"d_tors_{name}": d if size is None else np.full(size, d),
             }
         )
     present = model.uncertainty

@@ -44,6 +44,13 @@ no artificial one-sample delay. The blocks before the torque saturation and thos
 merged into two linear stages (their matrices are obtained once by probing the block-by-block
 reference chain with unit vectors), so an update costs two small matrix products.
 
+A run may also carry a *dynamic perturbation* (:func:`perturbation_block`,
+:meth:`FlightSoftware.set_dynamic_perturbation`, states declared with the system): a discrete
+block from ``T_rw`` to a torque added to ``T`` and to an attitude and rate added to the
+measurements. ``oos confirm`` realizes the analysis' worst complex blocks with it, at the
+peak's frequency (``Delta_mul`` as the torque part, ``Delta_add`` as the exact sampled
+response of the acceleration it stands for).
+
 The discrete state also carries the run's metrics (running maxima of ``|phi|`` and ``|u|``,
 sum of squares), so they are computed at the control rate without any logging.
 """
@@ -70,6 +77,7 @@ __all__ = [
     "allpass",
     "allpass_block",
     "discretize",
+    "perturbation_block",
     "rpy_to_rotation",
 ]
 
@@ -292,6 +300,98 @@ class FlightSoftwareDesign:
         return out
 
 
+def _zero_perturbation(n: int) -> DiscreteBlock:
+    """The zero dynamic perturbation with ``n`` states (input 3, outputs 9)."""
+    return DiscreteBlock(np.zeros((n, n)), np.zeros((n, 3)), np.zeros((9, n)), np.zeros((9, 3)))
+
+
+def perturbation_block(
+    design: FlightSoftwareDesign,
+    omega: float,
+    *,
+    delta_mul=None,
+    delta_add=None,
+) -> DiscreteBlock:
+    r"""The analysis' complex blocks as one discrete block of the flight software.
+
+    The analysis' plant is ``P_hat = (P + W_add Delta_add)(I + W_mul o Delta_mul)``
+    (:func:`oos_drake.control.analysis_model.uncertain_plant`, ``T -> wdot``). At a peak each
+    block has a worst complex value at the critical frequency ``omega``; both are realized
+    here as stable systems taking that value there
+    (:func:`oos_drake.robust.interpolant.lti_interpolant`, MATLAB ``wcu``'s interpolation):
+
+    - ``Delta_mul`` acts on the torque: ``T_m = T_rw + Delta_m(z) T_rw`` with ``Delta_m(z)``
+      the discrete interpolant of ``W_mul o Delta_mul`` (Tustin, pre-warped:
+      ``Delta_m(e^{j omega dt}) = W_mul o Delta_mul`` exactly), computed at the sample and held
+      with the torque.
+    - ``Delta_add`` is an angular acceleration ``W_add Delta_add(s) T_m`` of the hub, which a
+      multibody twin cannot take as a torque without inverting its plant. Its effect on what
+      the loop measures is ``[dphi; dw] = [I/s^2; I/s] W_add Delta_add(s) T_m``; ``T_m`` is
+      held over each period, so the zero-order-hold discretization of that continuous system
+      (``Delta_add(s)`` the continuous interpolant) gives exactly the perturbation's attitude
+      and rate at the samples: added to the measurements, it closes the same sampled-data loop
+      as the plant ``P + W_add Delta_add(s)`` behind the hold (its double integrator duplicates
+      the plant's rigid-body one: the loop gains six unobservable states at ``z = 1``, and the
+      hub attitude drifts by the perturbation's ``-dphi``, the measured sum is regulated).
+
+    Parameters
+    ----------
+    design : FlightSoftwareDesign
+        Period and the weights ``W_mul``, ``W_add``.
+    omega : float
+        Critical frequency [rad/s] (below the flight software's Nyquist frequency).
+    delta_mul : array_like, shape (3, 3), optional
+        Normalized worst ``Delta_mul`` (entry ``ij`` = ``Delta_mul_ij``) [-], complex.
+    delta_add : array_like, shape (3, 3), optional
+        Normalized worst ``Delta_add`` [-], complex.
+
+    Returns
+    -------
+    DiscreteBlock
+        Input ``T_rw`` [N m] (3), outputs ``[dT [N m]; dphi [rad]; dw [rad/s]]`` (9), for
+        :meth:`FlightSoftware.set_dynamic_perturbation`.
+    """
+    from oos_drake.robust.interpolant import lti_interpolant
+
+    T = design.period
+    zero = np.zeros((3, 3), dtype=complex)
+    mul = zero if delta_mul is None else np.asarray(delta_mul, dtype=complex)
+    add = zero if delta_add is None else np.asarray(delta_add, dtype=complex)
+    if mul.shape != (3, 3) or add.shape != (3, 3):
+        raise ValueError(
+            f"perturbation block: Delta_mul and Delta_add must be 3x3, got {mul.shape}, {add.shape}"
+        )
+    m = lti_interpolant(design.W_mul * mul, omega, dt=T)
+    Am, Bm, Cm, Dm = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (m.A, m.B, m.C, m.D))
+    nm = Am.shape[0] if Am.size else 0
+    Am, Bm, Cm = Am.reshape(nm, nm), Bm.reshape(nm, 3), Cm.reshape(3, nm)
+    # [dphi; dw] = [I/s^2; I/s] W_add Delta_add(s) T_m: states [x_a; w_a; phi_a] (none
+    # without Delta_add)
+    if delta_add is None:
+        Ad, Bd, Cd = np.zeros((0, 0)), np.zeros((0, 3)), np.zeros((6, 0))
+    else:
+        from oos_drake.control.sampled import plant_with_integrators
+
+        a = lti_interpolant(design.W_add * add, omega)
+        Ac, Bc, Cc = plant_with_integrators(a.A, a.B, a.C, a.D)  # outputs [dphi; dw]
+        Ad, Bd, Cd, _, _ = scipy.signal.cont2discrete(
+            (Ac, Bc, Cc, np.zeros((6, 3))), T, method="zoh"
+        )
+    n = nm + Ad.shape[0]
+    # T_m = Cm x_m + (I + Dm) T_rw drives the additive part
+    A = np.zeros((n, n))
+    A[:nm, :nm] = Am
+    A[nm:, :nm] = Bd @ Cm
+    A[nm:, nm:] = Ad
+    B = np.vstack([Bm, Bd @ (np.eye(3) + Dm)])
+    C = np.zeros((9, n))
+    C[:3, :nm] = Cm
+    C[3:, nm:] = Cd
+    D = np.zeros((9, 3))
+    D[:3] = Dm
+    return DiscreteBlock(A, B, C, D)
+
+
 def _consecutive(sizes) -> tuple[slice, ...]:
     """Consecutive slices of the given sizes."""
     bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
@@ -313,23 +413,51 @@ class FlightSoftware(LeafSystem):
     perturbation scalars, and the all-pass frequency [Hz] (NaN by default: no perturbation).
     abstract parameter 0: ``(n_samples, 9)`` array of unit noise ``[n_sst; n_gyro; d_ext]``
     (row ``k`` is used at the k-th sample after the start; rows wrap around).
+    abstract parameter 1: the dynamic perturbation (a :class:`DiscreteBlock` with
+    ``perturbation_states`` states, :func:`perturbation_block`; zero by default).
+
+    Parameters
+    ----------
+    design : FlightSoftwareDesign
+    nq, nv : int
+        Positions and velocities of the plant.
+    hub_q_start, hub_v_start : int
+        Start of the hub's floating joint in ``q`` and ``v``.
+    perturbation_states : int
+        States of the dynamic perturbation block set per run
+        (:meth:`set_dynamic_perturbation`); 0: none.
     """
 
     def __init__(
-        self, design: FlightSoftwareDesign, nq: int, nv: int, hub_q_start: int, hub_v_start: int
+        self,
+        design: FlightSoftwareDesign,
+        nq: int,
+        nv: int,
+        hub_q_start: int,
+        hub_v_start: int,
+        *,
+        perturbation_states: int = 0,
     ):
         super().__init__()
         self._design = design
         self._nq, self._nv = nq, nv
         self._qs, self._vs = hub_q_start, hub_v_start
         self._slices = design.slices()
-        size = self._slices["counter"].stop
+        n_p = int(perturbation_states)
+        if n_p < 0:
+            raise ValueError(f"flight software: perturbation_states must be >= 0, got {n_p}")
+        end = self._slices["counter"].stop
+        self._slices["perturbation"] = slice(end, end + n_p)
+        size = end + n_p
         self._state_index = self.DeclareDiscreteState(size)
         self._plant_state = self.DeclareVectorInputPort("plant_state", nq + nv)
         default = np.concatenate([np.zeros(10), [np.nan]])
         self._perturbation_index = self.DeclareNumericParameter(BasicVector(default))
         self._noise_index = self.DeclareAbstractParameter(
             AbstractValue.Make(np.zeros((1, NOISE_CHANNELS)))
+        )
+        self._dynamic_index = self.DeclareAbstractParameter(
+            AbstractValue.Make(_zero_perturbation(n_p))
         )
         self.DeclarePeriodicDiscreteUpdateEvent(design.period, 0.0, self._update)
         ticket = {self.xd_ticket()}
@@ -395,6 +523,34 @@ class FlightSoftware(LeafSystem):
             raise ValueError(f"flight software: noise table must be (n, 9), got {noise.shape}")
         context.get_mutable_abstract_parameter(self._noise_index).set_value(noise)
 
+    def set_dynamic_perturbation(self, context, block: DiscreteBlock | None) -> None:
+        """Set the dynamic perturbation of a run (None: zero).
+
+        ``block`` (:func:`perturbation_block`) has input ``T_rw`` [N m] (3) and outputs
+        ``[dT; dphi; dw]`` (9): ``dT`` [N m] is added to the hub torque, ``dphi`` [rad] and ``dw``
+        [rad/s] to the measured attitude and rate; its state count is the constructor's
+        ``perturbation_states`` and the measurement rows have no feedthrough.
+
+        Raises
+        ------
+        ValueError
+            Wrong shapes or a measurement feedthrough.
+        """
+        n = self._slices["perturbation"].stop - self._slices["perturbation"].start
+        block = _zero_perturbation(n) if block is None else block
+        shapes = (block.A.shape, block.B.shape, block.C.shape, block.D.shape)
+        if shapes != ((n, n), (n, 3), (9, n), (9, 3)):
+            raise ValueError(
+                f"flight software: dynamic perturbation must be a {n}-state 3 -> 9 block, got "
+                f"shapes {shapes}"
+            )
+        if np.any(block.D[3:] != 0.0):
+            raise ValueError(
+                "flight software: the measurement rows of a dynamic perturbation "
+                "must have no feedthrough (an algebraic loop)"
+            )
+        context.get_mutable_abstract_parameter(self._dynamic_index).set_value(block)
+
     def metrics(self, context) -> dict[str, np.ndarray]:
         """Running metrics: ``max_phi`` [rad], ``max_u`` [N m], ``sumsq_phi`` [rad^2],
         ``max_T`` [N m] (3 axes each) and ``samples``."""
@@ -405,29 +561,46 @@ class FlightSoftware(LeafSystem):
         return out
 
     def linear_update(
-        self, delta_mul=0.0, delta_add: float = 0.0, frequency_hz: float = math.nan
+        self,
+        delta_mul=0.0,
+        delta_add: float = 0.0,
+        frequency_hz: float = math.nan,
+        dynamic: DiscreteBlock | None = None,
     ) -> DiscreteBlock:
         """The update as it runs, without noise and below the torque limit: a discrete system.
 
         ``x_{k+1} = A x_k + B [phi_k; w_k]``, ``T_k = C x_k + D [phi_k; w_k]`` with ``x`` the
-        filter states (both stages), ``phi`` the hub roll-pitch-yaw angles [rad], ``w`` its body
-        rate [rad/s] sampled at ``t_k`` and ``T`` the hub torque [N m] held over
-        ``[t_k, t_{k+1})`` (no computation delay: the torque computed at ``t_k`` acts from
-        ``t_k``). ``delta_mul``, ``delta_add``, ``frequency_hz`` as in :meth:`set_perturbations`.
+        filter states (both stages, then those of ``dynamic``), ``phi`` the hub roll-pitch-yaw
+        angles [rad], ``w`` its body rate [rad/s] sampled at ``t_k`` and ``T`` the hub torque
+        [N m] held over ``[t_k, t_{k+1})`` (no computation delay: the torque computed at ``t_k``
+        acts from ``t_k``). ``delta_mul``, ``delta_add``, ``frequency_hz`` as in
+        :meth:`set_perturbations`, ``dynamic`` as in :meth:`set_dynamic_perturbation`.
         """
         matrix = np.broadcast_to(np.asarray(delta_mul, dtype=float), (3, 3))
         M2 = self._output_stage(
             np.concatenate([[float(delta_add)], matrix.ravel(), [float(frequency_hz)]])
         )
+        dynamic = _zero_perturbation(0) if dynamic is None else dynamic
         n1, n2 = self._n1, self._n2
         A1, B1 = self._M1[:n1, :n1], self._M1[:n1, n1 : n1 + 6]
         C1, D1 = self._M1[n1:, :n1], self._M1[n1:, n1 : n1 + 6]
         A2, B2 = M2[:n2, :n2], M2[:n2, n2 : n2 + 3]
-        C2, D2 = M2[n2 + 12 :, :n2], M2[n2 + 12 :, n2 : n2 + 3]
-        A = np.block([[A1, np.zeros((n1, n2))], [B2 @ C1, A2]])
-        B = np.vstack([B1, B2 @ D1])
-        C = np.hstack([D2 @ C1, C2])
-        return DiscreteBlock(A, B, C, D2 @ D1)
+        Cw, Dw = M2[n2 : n2 + 3, :n2], M2[n2 : n2 + 3, n2 : n2 + 3]  # T_rw
+        C2, D2 = M2[n2 + 12 :, :n2], M2[n2 + 12 :, n2 : n2 + 3]  # T
+        Ap, Bp, Cp, Dp = dynamic.A, dynamic.B, dynamic.C, dynamic.D
+        Ct, Dt, Cm = Cp[:3], Dp[:3], Cp[3:]  # dT; [dphi; dw] (no feedthrough)
+        # measurements z + Cm xp; u = C1 x1 + D1 (z + Cm xp); T_rw = Cw x2 + Dw u
+        zero = np.zeros
+        A = np.block(
+            [
+                [A1, zero((n1, n2)), B1 @ Cm],
+                [B2 @ C1, A2, B2 @ D1 @ Cm],
+                [Bp @ Dw @ C1, Bp @ Cw, Ap + Bp @ Dw @ D1 @ Cm],
+            ]
+        )
+        B = np.vstack([B1, B2 @ D1, Bp @ Dw @ D1])
+        C = np.hstack([(D2 + Dt @ Dw) @ C1, C2 + Dt @ Cw, Ct + (D2 + Dt @ Dw) @ D1 @ Cm])
+        return DiscreteBlock(A, B, C, (D2 + Dt @ Dw) @ D1)
 
     # -- the two linear stages ------------------------------------------------------------------
     def _stage1_reference(self, x1, z1):
@@ -535,12 +708,17 @@ class FlightSoftware(LeafSystem):
         rpy = plant_x[qs : qs + 3]
         R_WB = rpy_to_rotation(rpy[0], rpy[1], rpy[2])
         w_B = R_WB.T @ plant_x[vs : vs + 3]
-        k = int(x[-1])
+        k = int(x[self._slices["counter"].start])
         noise_table = context.get_abstract_parameter(self._noise_index).get_value()
         noise = noise_table[k % noise_table.shape[0]]
         M2 = self._output_stage(context.get_numeric_parameter(self._perturbation_index).get_value())
         n1, n2 = self._n1, self._n2
-        out1 = self._M1 @ np.concatenate([x[self._x1], rpy, w_B, noise[0:6]])
+        xp = x[self._slices["perturbation"]]
+        measured = np.concatenate([rpy, w_B])
+        if xp.size:
+            dynamic = context.get_abstract_parameter(self._dynamic_index).get_value()
+            measured = measured + dynamic.C[3:] @ xp
+        out1 = self._M1 @ np.concatenate([x[self._x1], measured, noise[0:6]])
         u = out1[n1:]
         limit = self._design.torque_limit
         out2 = M2 @ np.concatenate(
@@ -548,6 +726,9 @@ class FlightSoftware(LeafSystem):
         )
         # out2 = [x2+; T_rw; T_dist; a_mul; a_add; T]
         T_rw, T_dist, T = out2[n2 : n2 + 3], out2[n2 + 3 : n2 + 6], out2[n2 + 12 :]
+        if xp.size:
+            T = T + dynamic.C[:3] @ xp + dynamic.D[:3] @ T_rw
+            xp = dynamic.A @ xp + dynamic.B @ T_rw
         m = x[self._metrics]
         metrics = np.concatenate(
             [
@@ -559,9 +740,12 @@ class FlightSoftware(LeafSystem):
         )
         if not math.isfinite(metrics.sum()):  # entries are >= 0 or NaN
             metrics = np.full_like(metrics, np.inf)
-        # state layout: filters of stage 1 and 2, tau_W, log [u, T_rw, T, T_dist], metrics, k
+        # state layout: filters of stage 1 and 2, tau_W, log [u, T_rw, T, T_dist], metrics, k,
+        # dynamic perturbation
         discrete_state.get_mutable_vector(self._state_index).SetFromVector(
-            np.concatenate([out1[:n1], out2[:n2], R_WB @ T, u, T_rw, T, T_dist, metrics, [k + 1.0]])
+            np.concatenate(
+                [out1[:n1], out2[:n2], R_WB @ T, u, T_rw, T, T_dist, metrics, [k + 1.0], xp]
+            )
         )
 
     def _calc_force(self, context, output):

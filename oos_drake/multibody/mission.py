@@ -420,6 +420,7 @@ def make_mission_diagram(
     K=None,
     sdf_directory: str | Path = SDF_DIRECTORY,
     timeline: MissionTimeline | None = None,
+    perturbation_states: int = 0,
 ) -> MissionDiagram:
     """Build the closed-loop mission diagram (see the module docstring).
 
@@ -437,6 +438,9 @@ def make_mission_diagram(
         Trajectories the arm and array drives follow (default: the scenario's mission;
         ``mission_timeline(scenario).frozen(t)`` holds them at time ``t``). The joint PDs and
         the additive perturbation's inertia are sized on the scenario's own timeline either way.
+    perturbation_states : int
+        States of the flight software's dynamic perturbation block (the analysis' complex
+        blocks realized at a peak's frequency: ``oos confirm``); 0: none.
 
     Returns
     -------
@@ -501,7 +505,14 @@ def make_mission_diagram(
     hub = parts["hub_joint"]
     fsw = builder.AddNamedSystem(
         "flight_software",
-        FlightSoftware(design, nq, nv, hub.position_start(), hub.velocity_start()),
+        FlightSoftware(
+            design,
+            nq,
+            nv,
+            hub.position_start(),
+            hub.velocity_start(),
+            perturbation_states=perturbation_states,
+        ),
     )
     builder.Connect(plant.get_state_output_port(), fsw.get_input_port(0))
     forces = builder.AddNamedSystem("generalized_forces", Adder(3, nv))

@@ -276,6 +276,8 @@ class _Schedule:
     steps: int
     k0: float
     values: Mapping[str, float]
+    #: Settings held over the whole run instead of the mission's (``settings`` format).
+    frozen: Mapping[str, tuple[float, float, float, float]] | None = None
 
     def _ramp(self, t, t0, k_from, k_to):
         i = min(int(math.floor((t - t0) / self.duration * self.steps + 1e-9)), self.steps - 1)
@@ -286,6 +288,8 @@ class _Schedule:
         """``{"SM1": (k_shear, k_tors, d_shear, d_tors), "SM2": ...}`` at time ``t``."""
         v, k0, R = self.values, self.k0, self.duration
         out = {"SM1": (0.0, 0.0, 0.0, 0.0), "SM2": (0.0, 0.0, 0.0, 0.0)}
+        if self.frozen is not None:
+            return out | dict(self.frozen)
         sm1 = (v["k_shear_SM1"], v["k_tors_SM1"], v["d_shear_SM1"], v["d_tors_SM1"])
         sm2 = (v["k_shear_SM2"], v["k_tors_SM2"], v["d_shear_SM2"], v["d_tors_SM2"])
         if t < self.t_capture:
@@ -325,11 +329,15 @@ class _Schedule:
         """``[(start, end)]`` of the stiffness ramps [s]: capture (SM1 up), docking (SM2 up,
         then SM1 down)."""
         R = self.duration
+        if self.frozen is not None:
+            return []
         return [(self.t_capture, self.t_capture + R), (self.t_docking, self.t_docking + 2 * R)]
 
     def breakpoints(self, start: float, end: float) -> list[float]:
         """Times in ``(start, end)`` where the settings change."""
         R, n = self.duration, self.steps
+        if self.frozen is not None:
+            return []
         times = [self.t_capture + i * R / n for i in range(n + 1)]
         times += [self.t_docking + i * R / n for i in range(2 * n + 1)]
         return sorted(t for t in set(times) if start < t < end)
@@ -401,9 +409,21 @@ class MissionSimulation:
             out[name] = min(max(value, p.lower), p.upper)
         return out
 
-    def schedule(self, values: Mapping[str, float]) -> _Schedule:
-        """Docking bushing schedule of a run."""
+    def schedule(self, values: Mapping[str, float], bushings=None) -> _Schedule:
+        """Docking bushing schedule of a run (``bushings``: settings held throughout, see
+        :meth:`run`)."""
         o = self.options
+        if bushings is not None:
+            unknown = set(bushings) - {"SM1", "SM2"}
+            if unknown:
+                raise ValueError(f"mission: unknown bushing(s) {sorted(unknown)}; known: SM1, SM2")
+            for name, setting in bushings.items():
+                if len(setting) != 4 or not all(math.isfinite(v) and v >= 0 for v in setting):
+                    raise ValueError(
+                        f"mission: bushing {name} settings must be 4 finite values >= 0 "
+                        f"(k_shear, k_tors, d_shear, d_tors), got {setting!r}"
+                    )
+            bushings = MappingProxyType({k: tuple(map(float, v)) for k, v in bushings.items()})
         return _Schedule(
             self.events["capture"],
             self.events["docking"],
@@ -411,6 +431,7 @@ class MissionSimulation:
             int(o.ramp_steps),
             o.ramp_start_stiffness,
             dict(values),
+            bushings,
         )
 
     def apply_parameters(
@@ -475,12 +496,13 @@ class MissionSimulation:
         perturbation_frequency_hz: float = math.nan,
         *,
         within_ranges: bool = True,
+        bushings=None,
     ):
         """A root context at the window start with every value applied (see the module doc).
 
         ``noise_table`` (``(n, 9)``: unit ``[n_sst; n_gyro; d_ext]`` per sample) replaces the
-        seeded Gaussian noise (deterministic inputs for tests); ``perturbation_frequency_hz``:
-        see :meth:`run`; ``within_ranges`` as in :meth:`resolve`.
+        seeded Gaussian noise (deterministic inputs for tests); ``perturbation_frequency_hz``,
+        ``bushings``: see :meth:`run`; ``within_ranges`` as in :meth:`resolve`.
         """
         h = self.handles
         values = self.resolve(values, within_ranges=within_ranges)
@@ -502,7 +524,7 @@ class MissionSimulation:
         h.hub_joint.set_angles(pc, phi0)
         R_WB = RollPitchYaw(phi0).ToRotationMatrix().matrix()
         h.hub_joint.set_angular_velocity(pc, R_WB @ w0_B)
-        schedule = self.schedule(values)
+        schedule = self.schedule(values, bushings)
         if t < self.events["capture"]:
             # decoupled: put the target at its grasp pose (it is reset at the capture anyway)
             grasp = h.timeline.configuration(self.events["capture"])
@@ -547,6 +569,7 @@ class MissionSimulation:
         on_start: Callable[[object], None] | None = None,
         within_ranges: bool = True,
         perturbation_frequency_hz: float = math.nan,
+        bushings: Mapping[str, tuple[float, float, float, float]] | None = None,
     ) -> MissionResult:
         """Simulate ``[start, end]`` of the mission (default: all of it).
 
@@ -560,7 +583,11 @@ class MissionSimulation:
         ``on_start(context)`` is called with the run's root context before the first step; a
         caller that keeps it can read the logs afterwards with :meth:`state_log`, also when the
         run diverged (the replay does this). ``within_ranges=False`` accepts values beyond the
-        parameters' ranges (see :meth:`resolve`).
+        parameters' ranges (see :meth:`resolve`). ``bushings`` (``{"SM1": (k_shear, k_tors,
+        d_shear, d_tors), "SM2": ...}`` [N/m, N m/rad, N s/m, N m s/rad], a missing one open)
+        holds the docking connections at those settings for the whole window instead of the
+        mission's schedule (a docking phase frozen, as the docking study analyzes it); the
+        window must then not contain the capture.
 
         Raises
         ------
@@ -582,7 +609,13 @@ class MissionSimulation:
             noise_table,
             perturbation_frequency_hz,
             within_ranges=within_ranges,
+            bushings=bushings,
         )
+        if bushings is not None and start < self.events["capture"] < end:
+            raise ValueError(
+                f"mission: a window with frozen bushings must not contain the capture at "
+                f"{self.events['capture']} s"
+            )
         if on_start is not None:
             on_start(context)
         simulator = Simulator(h.diagram, context)

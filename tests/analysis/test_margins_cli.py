@@ -66,3 +66,18 @@ def test_margins_refuses_a_missing_analysis(tmp_path, capsys):
     assert status == 2
     assert "no summary.json" in capsys.readouterr().err
     assert not (tmp_path / "m").exists()
+
+
+def test_margins_follow_the_scenario(tmp_path):
+    """``--scenario``: the plants (and the baseline PD tuned on them) are the scenario's; the
+    summary names it. The heavy target moves the margins of the same command."""
+    tables = {}
+    for name in ("paper", "heavy_target"):
+        out = tmp_path / name
+        argv = ["margins", "--out", str(out), "--configurations", "1", "--quiet"]
+        assert main([*argv, "--scenario", name]) == 0
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["scenario"].endswith(f"{name}.toml")
+        tables[name] = pd.read_parquet(out / "margins.parquet")
+    paper, heavy = (tables[n].set_index(["loop", "channel"]) for n in ("paper", "heavy_target"))
+    assert not np.allclose(paper["disk margin [-]"], heavy["disk margin [-]"], rtol=1e-3)
