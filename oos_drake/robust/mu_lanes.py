@@ -910,10 +910,8 @@ def lane_layout(packed, structure) -> LaneLayout:
     """The :data:`LaneLayout` of ``structure`` from ``mu_kernels.pack_layout``'s arrays
     ``packed`` (the per-row maps are derived here)."""
     lay_i, lay_c, cb, rb, realb = packed
-    (
-        log_par, log_ent, re_par, im_par, lin_ent, lin_row, l_row, l_col, l_ent,
-        r_row, r_col, r_ent, rb_start, rb_size, g_row, g_col, gq_par, gq_pos1, gq_pos2,
-    ) = (np.ascontiguousarray(a) for a in mu_kernels.unpack_layout(lay_i))  # fmt: skip
+    # the 19 index arrays of pack_layout, in the order of the fields log_par .. gq_pos2
+    indices = [np.ascontiguousarray(a) for a in mu_kernels.unpack_layout(lay_i)]
     c, r = structure.n_cols, structure.n_rows
     rs = _row_starts(r, rb[0], rb[1]).astype(np.int64)
     rsz = np.ones(r, dtype=np.int64)
@@ -926,13 +924,24 @@ def lane_layout(packed, structure) -> LaneLayout:
         gco[ro : ro + m] = co
         rgsz[ro : ro + m] = m
     bw = int(max(1, rb[1].max(initial=1), cb[1].max(initial=1)))
-    n_gq = gq_par.size
+    n_gq = indices[-3].size  # gq_par
     return LaneLayout(
-        int(lay_i[0]), log_par, log_ent, re_par, im_par, lin_ent, lin_row, l_row, l_col, l_ent,
-        r_row, r_col, r_ent, rb_start, rb_size, g_row, g_col, gq_par, gq_pos1, gq_pos2,
-        np.ascontiguousarray(lay_c[:n_gq]), np.ascontiguousarray(lay_c[n_gq:]),
-        rs, rsz, cs, gco, rgsz, bw, lay_i, lay_c, cb, rb, realb,
-    )  # fmt: skip
+        int(lay_i[0]),
+        *indices,
+        gq_coef1=np.ascontiguousarray(lay_c[:n_gq]),
+        gq_coef2=np.ascontiguousarray(lay_c[n_gq:]),
+        row_block_start=rs,
+        row_block_size=rsz,
+        col_block_start=cs,
+        row_g_col=gco,
+        row_g_size=rgsz,
+        max_block=bw,
+        packed_int=lay_i,
+        packed_coef=lay_c,
+        c_blocks=cb,
+        r_blocks=rb,
+        real_blocks=realb,
+    )
 
 
 def lane_workspace(c: int, r: int, lay: LaneLayout) -> LaneWorkspace:

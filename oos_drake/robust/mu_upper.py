@@ -271,7 +271,7 @@ class _Objective:
     """Smoothed ``lambda_max`` of the scaled LMI matrix and its gradient, batched."""
 
     def __init__(
-        self, M: np.ndarray, structure: BlockStructure, layout: _Layout, use_compiled=True
+        self, M: np.ndarray, structure: BlockStructure, layout: _Layout, compiled=True
     ):
         self.M = np.ascontiguousarray(M)
         self.count = np.zeros(M.shape[0], dtype=np.int64)  # evaluations per matrix
@@ -287,7 +287,7 @@ class _Objective:
                 for a in range(block.cols):
                     sizes.setdefault(1, []).append(np.array([block.col_offset + a]))
         self.c_groups = tuple((n, np.array(v)) for n, v in sorted(sizes.items()))
-        self.compiled = use_compiled and mu_kernels.HAVE_NUMBA
+        self.compiled = compiled and mu_kernels.HAVE_NUMBA
         if self.compiled:
             key = (structure.blk.shape, structure.blk.tobytes())
             if key not in _PACKED or _PACKED[key][0] is not layout:
@@ -676,7 +676,7 @@ def mu_upper_bound(
     layout = _layout(structure)
     scale = np.linalg.norm(M, axis=(1, 2)) + 1e-300
     Mn = M / scale[:, None, None]
-    obj = _Objective(Mn, structure, layout, use_compiled=compiled)  # the final, exact evaluation
+    obj = _Objective(Mn, structure, layout, compiled=compiled)  # the final, exact evaluation
     x = _osborne_init(Mn, structure, layout, compiled=compiled)
     allidx = np.arange(nb)
     p = layout.n_params
@@ -687,7 +687,7 @@ def mu_upper_bound(
         x = coords.to_balanced(x)
         if x0 is not None:
             x0 = coords.to_balanced(np.array(x0, dtype=float).reshape(nb, p))
-        obj_final, obj = obj, _Objective(coords.M, structure, layout, use_compiled=compiled)
+        obj_final, obj = obj, _Objective(coords.M, structure, layout, compiled=compiled)
     lanes = obj.compiled and p > 0 and max_iter > 0
     if lanes and x0 is None:  # the lane optimizer evaluates the start itself
         lmax0 = np.full(nb, np.inf)
@@ -895,7 +895,7 @@ def _trusted(obj, best_x, start_x, rows):
     numpy.ndarray
         ``(K, n_params)`` scalings (``best_x`` where trusted).
     """
-    ref = _Objective(obj.M, obj.s, obj.L, use_compiled=False)
+    ref = _Objective(obj.M, obj.s, obj.L, compiled=False)
 
     def values(x, rows):
         one = np.ones(rows.size)

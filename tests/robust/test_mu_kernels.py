@@ -34,8 +34,8 @@ def _objective_pair(blk, seed, n_mat=12):
     M = _crandn(rng, n_mat, s.n_cols, s.n_rows)
     M /= np.linalg.norm(M, axis=(1, 2))[:, None, None]
     layout = mu._layout(s)
-    numpy_obj = mu._Objective(M, s, layout, use_compiled=False)
-    compiled_obj = mu._Objective(M, s, layout, use_compiled=True)
+    numpy_obj = mu._Objective(M, s, layout, compiled=False)
+    compiled_obj = mu._Objective(M, s, layout, compiled=True)
     x = mu._osborne_init(M, s, layout) + 0.3 * rng.standard_normal((n_mat, layout.n_params))
     return s, M, x, numpy_obj, compiled_obj
 

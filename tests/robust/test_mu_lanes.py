@@ -35,7 +35,7 @@ def _lane_problem(blk, seed):
     M = _crandn(rng, W, s.n_cols, s.n_rows)
     M /= np.linalg.norm(M, axis=(1, 2))[:, None, None]
     layout = mu._layout(s)
-    ref = mu._Objective(M, s, layout, use_compiled=False)
+    ref = mu._Objective(M, s, layout, compiled=False)
     x = mu._osborne_init(M, s, layout) + 0.3 * rng.standard_normal((W, layout.n_params))
     packed = mu._Objective(M, s, layout).packed
     return s, M, x, layout, ref, packed
