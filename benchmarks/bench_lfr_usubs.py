@@ -15,7 +15,7 @@ detects this and evaluates ``C (sI - A)^-1 B`` with the Woodbury identity, witho
 eigendecomposition (``oos_drake.lfr.coupled_modes``: one real matrix product and closed-form 3x3
 solves per model); models it cannot treat take the modal route (one LAPACK ``dgeev`` per model).
 The script prints how many models took each route. It is timed with 1 worker thread and with 2
-worker threads (``oos_drake.lfr.frequency.WORKERS`` / ``oos_drake.lfr.substitution.WORKERS``:
+worker threads (the ``workers`` argument of ``usubs`` and ``freqresp``:
 chunks of models on a thread pool; numpy's LAPACK/BLAS calls and array loops release the GIL).
 BLAS itself is single-threaded everywhere (``OPENBLAS_NUM_THREADS=OMP_NUM_THREADS=1``, set below
 before numpy is imported), so the baseline loop is single-threaded.
@@ -52,8 +52,7 @@ import numpy as np  # noqa: E402
 from scipy.linalg import lapack  # noqa: E402
 
 import oos_drake.lfr.frequency as lfr_frequency  # noqa: E402
-import oos_drake.lfr.substitution as lfr_substitution  # noqa: E402
-from oos_drake.lfr import append, feedback, inv, ureal, usubs  # noqa: E402
+from oos_drake.lfr import append, feedback, freqresp, inv, ureal, usubs  # noqa: E402
 
 
 def rotation_z(tau):
@@ -113,20 +112,11 @@ class Clock:
         self.cpu = time.process_time() - self.cpu0
 
 
-def set_workers(count: int) -> None:
-    lfr_frequency.WORKERS = count
-    lfr_substitution.WORKERS = count
-
-
 def fast_path(sys, values, omega, workers):
-    set_workers(workers)
-    try:
-        with Clock() as c_subs:
-            models = usubs(sys, values)
-        with Clock() as c_fr:
-            resp = models.freqresp(omega)
-    finally:
-        set_workers(1)
+    with Clock() as c_subs:
+        models = usubs(sys, values, workers=workers)
+    with Clock() as c_fr:
+        resp = freqresp(models, omega, workers=workers)
     return models, resp, c_subs, c_fr
 
 

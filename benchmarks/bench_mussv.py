@@ -98,7 +98,8 @@ def compile_times() -> tuple[float, float]:
     """(first call with an empty numba cache, first call with the cache filled) [s, wall].
 
     Each is a fresh process running ``mussv`` on 2 and on 8 matrices with the paper's
-    structure (the per-matrix and the lane optimizer) from a fresh cache directory: the first
+    structure (the lane optimizer with idle lanes and with all busy) from a fresh cache
+    directory: the first
     pays the compilation of the kernels (as CI does on a fresh clone), the second only loads
     them (as every later process does).
     """
@@ -191,7 +192,7 @@ def main(argv=None):
 
     t_compile = compile_times() if args.compile else None
     mussv(M[:16], PAPER_BLK)  # warm-up (imports, caches): the lane optimizer (batches) ...
-    upper(M[:1])  # ... and the per-matrix one (single-matrix calls)
+    upper(M[:1])  # ... and single-matrix calls (seven idle lanes)
     reps = max(1, args.repeats)
 
     def best(run):
@@ -212,6 +213,7 @@ def main(argv=None):
         )
     )
     # the same algorithm without numba (numpy path), same run: the speed-up is load-robust
+    # (mussv has no option for it: numba's absence is simulated)
     from oos_drake.robust import mu_kernels
 
     have = mu_kernels.HAVE_NUMBA

@@ -40,7 +40,7 @@ whose coefficients are all real: with ``1/d(j omega) = U + jV`` per pair, the wh
 ``[U, V, omega U, omega V, 1, omega^-r] @ R``, written straight into the complex output.
 Models that this route cannot treat exactly (ill-conditioned or
 defective eigenvalues, small poles next to an integrator tail, complex data) fall back to the
-general path above, model by model. Chunks of models can be processed by :data:`WORKERS`
+general path above, model by model. Chunks of models can be processed by ``workers``
 threads (LAPACK and BLAS release the GIL); the result does not depend on the thread count.
 """
 
@@ -67,20 +67,13 @@ CLUSTER_SEP_RTOL = 1e-6
 MAX_CLUSTER = 24
 #: Target size (complex entries) of temporary arrays per chunk.
 CHUNK_ENTRIES = 1_500_000
-#: Threads evaluating chunks of a model array in parallel (1: single-threaded). Results are
-#: bitwise independent of this setting; set it (e.g. to ``os.cpu_count()``) for large arrays.
-#: Each worker runs its BLAS calls single-threaded (:func:`oos_drake.blas.single_threaded_blas`).
-WORKERS = 1
-#: Use the real-arithmetic pairwise modal route for real models (False: general path only).
-REAL_PAIR_PATH = True
-#: Try the eigendecomposition-free route of :mod:`oos_drake.lfr.coupled_modes` first for real
-#: models whose state matrix is 2x2-block diagonal up to a low-rank coupling.
-COUPLED_PATH = True
 #: Models per chunk on the block + low-rank route (at most; chunks come in even numbers).
 COUPLED_CHUNK = 64
 
 
-def freqresp(sys, omega) -> np.ndarray:
+def freqresp(
+    sys, omega, *, workers: int = 1, coupled: bool = True, real_pairs: bool = True
+) -> np.ndarray:
     """Frequency response ``G(j omega)`` of an LFR or model array.
 
     Parameters
@@ -90,6 +83,17 @@ def freqresp(sys, omega) -> np.ndarray:
         (like MATLAB's ``freqresp`` of an uncertain model); substitute them first with ``usubs``.
     omega : array_like
         Frequencies [rad/s], shape ``(F,)``.
+    workers : int
+        Threads evaluating chunks of a model array in parallel (1: single-threaded; e.g.
+        ``os.cpu_count()`` for large arrays). Results are bitwise independent of it; each
+        worker runs its BLAS calls single-threaded.
+    coupled : bool
+        Try the eigendecomposition-free route of :mod:`oos_drake.lfr.coupled_modes` first for
+        real models whose state matrix is 2x2-block diagonal up to a low-rank coupling (the
+        default); False skips it (for tests and benchmarks: the same response).
+    real_pairs : bool
+        Use the real-arithmetic pairwise modal route for real models (the default); False: the
+        general path only (for tests).
 
     Returns
     -------
@@ -114,7 +118,7 @@ def freqresp(sys, omega) -> np.ndarray:
     pattern = np.logical_or.reduce(M[:, :n, :n], axis=0)  # nonzero anywhere in the batch
     core, tail, powers = _integrator_tail(M[:, :n, :n], pattern)
     pairs = None
-    if COUPLED_PATH and core.size and not np.iscomplexobj(M):
+    if coupled and core.size and not np.iscomplexobj(M):
         pairs = block_pairs(pattern[np.ix_(core, core)])
     n_core = core.size
     per_model = omega.size * (n_core + 4 * ny * nu * (1 + powers)) + 6 * n * n
@@ -124,7 +128,7 @@ def freqresp(sys, omega) -> np.ndarray:
     chunk = sub
     if pairs is not None:
         # an even number of equal chunks (balanced on two worker threads; the chunking must
-        # not depend on WORKERS, so that results are bitwise independent of it)
+        # not depend on workers, so that results are bitwise independent of it)
         pieces = 2 * max(1, -(-nb // (2 * max(sub, COUPLED_CHUNK))))
         chunk = max(1, -(-nb // pieces))
     starts = range(0, nb, chunk)
@@ -135,14 +139,15 @@ def freqresp(sys, omega) -> np.ndarray:
         if not hasattr(local, "ws"):
             local.ws = Workspace()
         _block_response(
-            M[start:stop], n, core, tail, powers, omega, out[start:stop], local.ws, pairs, sub
-        )
+            M[start:stop], n, core, tail, powers, omega, out[start:stop], local.ws, pairs, sub,
+            real_pairs,
+        )  # fmt: skip
 
     def threaded_work(start):
         with single_threaded_blas():  # this thread's BLAS calls: no nested BLAS threads
             work(start)
 
-    workers = max(1, int(WORKERS))
+    workers = max(1, int(workers))
     if workers > 1 and len(starts) > 1:
         with ThreadPoolExecutor(max_workers=min(workers, len(starts))) as pool:
             for _ in pool.map(threaded_work, starts):
@@ -153,30 +158,34 @@ def freqresp(sys, omega) -> np.ndarray:
     return out.reshape(batch + out.shape[1:])
 
 
-def _block_response(M, n, core, tail, powers, omega, out, ws=None, pairs=None, sub=None):
+def _block_response(
+    M, n, core, tail, powers, omega, out, ws=None, pairs=None, sub=None, real_pairs=True
+):
     """Response of one chunk of models into ``out``: the block + low-rank route
     (:mod:`oos_drake.lfr.coupled_modes`, when ``pairs`` is given), then the real pairwise modal
-    route, then the general path (:func:`_tail_response` / :func:`_chunk_response`), each for
-    the models the previous one could not treat (in pieces of at most ``sub`` models)."""
+    route (if ``real_pairs``), then the general path (:func:`_tail_response` /
+    :func:`_chunk_response`), each for the models the previous one could not treat (in pieces
+    of at most ``sub`` models)."""
     todo = np.arange(M.shape[0])
-    if COUPLED_PATH and pairs is not None and core.size and not np.iscomplexobj(M):
+    if pairs is not None and core.size and not np.iscomplexobj(M):
         ok = coupled_response(M, n, core, tail, powers, omega, pairs, out, ws)
         todo = np.flatnonzero(~ok)
     sub = M.shape[0] if sub is None else max(1, int(sub))
     for start in range(0, todo.size, sub):
         idx = todo[start : start + sub]
         if idx.size == M.shape[0]:
-            _fallback_response(M, n, core, tail, powers, omega, out, ws)
+            _fallback_response(M, n, core, tail, powers, omega, out, ws, real_pairs)
         else:
             part = np.empty((idx.size,) + out.shape[1:], dtype=complex)
-            _fallback_response(M[idx], n, core, tail, powers, omega, part, ws)
+            _fallback_response(M[idx], n, core, tail, powers, omega, part, ws, real_pairs)
             out[idx] = part
 
 
-def _fallback_response(M, n, core, tail, powers, omega, out, ws=None):
-    """The real pairwise modal route where it applies, the general path for the other models."""
+def _fallback_response(M, n, core, tail, powers, omega, out, ws=None, real_pairs=True):
+    """The real pairwise modal route where it applies (if ``real_pairs``), the general path for
+    the other models."""
     s = 1j * omega
-    if REAL_PAIR_PATH and core.size and not np.iscomplexobj(M):
+    if real_pairs and core.size and not np.iscomplexobj(M):
         _, ok = _real_pair_response(M, n, core, tail, powers, omega, out, ws)
         rest = np.flatnonzero(~ok)
         if rest.size:

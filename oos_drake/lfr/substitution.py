@@ -25,10 +25,6 @@ from oos_drake.lfr.core import LFR
 
 #: Work-array size (entries) per chunk of models in the batched substitution.
 SUBS_CHUNK_ENTRIES = 1_000_000
-#: Threads closing chunks of a model array in parallel (1: single-threaded). Results do not
-#: depend on this setting (numpy releases the GIL in its array loops and BLAS calls); each worker
-#: runs its BLAS calls single-threaded (:func:`oos_drake.blas.single_threaded_blas`).
-WORKERS = 1
 
 
 def nominal(sys: LFR) -> LFR:
@@ -113,7 +109,7 @@ def _normalize_ureals(sys, specs, values, names):
     return {k: delta[i] for i, k in enumerate(names)}
 
 
-def usubs(sys: LFR, values: Mapping, *, normalized: bool = False) -> LFR:
+def usubs(sys: LFR, values: Mapping, *, normalized: bool = False, workers: int = 1) -> LFR:
     """Substitute values for some or all uncertain blocks.
 
     Parameters
@@ -130,6 +126,10 @@ def usubs(sys: LFR, values: Mapping, *, normalized: bool = False) -> LFR:
     normalized : bool
         If True the values are normalized ``delta`` (no range check), e.g. worst-case deltas from a
         mu analysis.
+    workers : int
+        Threads closing chunks of a model array in parallel (1: single-threaded). Results do
+        not depend on it (numpy releases the GIL in its array loops and BLAS calls); each
+        worker runs its BLAS calls single-threaded.
 
     Returns
     -------
@@ -156,12 +156,12 @@ def usubs(sys: LFR, values: Mapping, *, normalized: bool = False) -> LFR:
         if dynamic:
             static = {k: v for k, v in values.items() if k not in dynamic}
             return _substitute_systems(
-                usubs(sys, static, normalized=normalized), dynamic, normalized
+                usubs(sys, static, normalized=normalized, workers=workers), dynamic, normalized
             )
     deltas = _normalized_values(sys, values, normalized)
     if not deltas:
         return sys
-    return close_blocks(sys, deltas)
+    return close_blocks(sys, deltas, workers=workers)
 
 
 def _is_system(value) -> bool:
@@ -204,8 +204,9 @@ def _substitute_systems(sys: LFR, systems: Mapping, normalized: bool) -> LFR:
     return lft(append_systems(pieces), M, nu=n_w, ny=n_z)
 
 
-def close_blocks(sys: LFR, deltas: Mapping) -> LFR:
-    """Close the named blocks with NORMALIZED values ``deltas`` (see :func:`usubs`)."""
+def close_blocks(sys: LFR, deltas: Mapping, *, workers: int = 1) -> LFR:
+    """Close the named blocks with NORMALIZED values ``deltas`` (see :func:`usubs`, also for
+    ``workers``)."""
     specs = sys.uncertainty
     unknown = [k for k in deltas if k not in specs]
     if unknown:
@@ -213,7 +214,7 @@ def close_blocks(sys: LFR, deltas: Mapping) -> LFR:
     scalar = {k: v for k, v in deltas.items() if specs[k].kind != "ultidyn"}
     full = {k: v for k, v in deltas.items() if specs[k].kind == "ultidyn"}
     if scalar:
-        sys = _close_scalar(sys, scalar)
+        sys = _close_scalar(sys, scalar, workers)
     if full:
         sys = _close_full(sys, full)
     return sys
@@ -322,7 +323,7 @@ def _scalar_plan(sys: LFR, names):
     return plan
 
 
-def _close_scalar(sys: LFR, deltas: Mapping) -> LFR:
+def _close_scalar(sys: LFR, deltas: Mapping, workers: int = 1) -> LFR:
     names = sorted(deltas)
     plan = _scalar_plan(sys, names)
     entries = {e.spec.name: e for e in sys.block_entries}
@@ -351,7 +352,7 @@ def _close_scalar(sys: LFR, deltas: Mapping) -> LFR:
             with single_threaded_blas():  # this thread's BLAS calls: no nested BLAS threads
                 work(k)
 
-        workers = max(1, int(WORKERS))
+        workers = max(1, int(workers))
         if workers > 1 and len(starts) > 1:
             with ThreadPoolExecutor(max_workers=min(workers, len(starts))) as pool:
                 for _ in pool.map(threaded_work, starts):

@@ -10,9 +10,9 @@ with ``mu = 0`` when no structured ``Delta`` makes ``I - M Delta`` singular.
 Cost (paper-sized problem: 26 x 26, 16 blocks, one core, ``benchmarks/bench_mussv.py``): the
 upper bound takes about 53 Hermitian eigenvalue problems per matrix (two smoothing stages,
 per-matrix stopping) and lands within ~0.2 % (at most ~0.7 %) of the fully converged D-G
-bound; with ``continuation=True`` (frequency responses) about 22-30. Batches of four or more
-matrices are optimized eight at a time in SIMD lanes (:mod:`mu_lanes`, about 20 us per matrix
-and evaluation); smaller ones matrix by matrix (:mod:`mu_kernels`, about 40 us). The lower
+bound; with ``continuation=True`` (frequency responses) about 22-30. Matrices are optimized
+eight at a time in SIMD lanes (:mod:`mu_lanes`, about 20 us per matrix and evaluation; a batch
+of fewer than eight leaves lanes idle). The lower
 bound runs two power-iteration starts per matrix and three more only where the gap still
 exceeds 2 %, polishes the most promising start of each matrix, and certifies each ``delta``
 with a residual vector (an SVD only when that is inconclusive).
@@ -33,7 +33,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from oos_drake.robust import mu_kernels, mu_upper
+from oos_drake.robust import mu_kernels
 from oos_drake.robust.blocks import BlockStructure, check_matrix, parse_blk
 from oos_drake.robust.mu_lower import LowerBoundResult, certificate_residual, mu_lower_bound
 from oos_drake.robust.mu_upper import UpperBoundResult, lmi_residual, mu_upper_bound
@@ -151,7 +151,7 @@ def _upper_bound(part, structure, iterations, tol, *, continuation=False):
     """The D-G upper bound of :func:`mussv` (optionally with continuation along the batch)."""
     nb = part.shape[0]
     stride = CONTINUATION_STRIDE
-    compiled = mu_kernels.HAVE_NUMBA and mu_upper.USE_COMPILED
+    compiled = mu_kernels.HAVE_NUMBA
     cold_options = dict(
         max_iter=iterations, tol=tol, temperatures=UPPER_TEMPERATURES, patience=UPPER_PATIENCE
     )

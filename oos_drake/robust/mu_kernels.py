@@ -1,4 +1,11 @@
-r"""Compiled (numba) per-matrix kernels of the mu bounds.
+r"""Compiled (numba) per-matrix kernels of the mu upper bound: evaluation, layout, balancing.
+
+The D-G optimizer itself is :func:`oos_drake.robust.mu_lanes.dg_minimize_lanes` (eight
+matrices per evaluation, any batch size). This module holds what it and ``mu_upper`` share:
+the packed layout (:func:`pack_layout`, :func:`unpack_layout`), the Osborne balancing of the
+start (:func:`osborne`), :func:`warm_up`, and the per-matrix evaluation :func:`dg_objective`
+(the exact final evaluation of ``mu_upper``, its round-off cross-check against numpy, and the
+fallback of a lane whose QR did not converge).
 
 :func:`dg_objective` evaluates, for each matrix of a batch, the smoothed ``lambda_max`` of the
 scaled D-G matrix of :mod:`oos_drake.robust.mu_upper` and its gradient. It is the same function
@@ -16,9 +23,8 @@ the batched fancy-indexing temporaries:
   back-transformation). About 36 us per 26 x 26 evaluation (LAPACK ``zhetrd``/``zunmtr``:
   40 us; a full ``eigh``: 60 us).
 
-Batches of matrices are better served by :mod:`oos_drake.robust.mu_lanes` (eight matrices
-per evaluation, in SIMD lanes); these per-matrix kernels remain for small batches, the final
-evaluations of ``mu_upper`` and the fallback of a lane.
+Without numba (``HAVE_NUMBA`` False) ``mu_upper`` runs its numpy implementation of the same
+algorithm (slower, about 3x; otherwise the test oracle of the compiled one).
 
 If the eigenvector step fails (``dstein`` not converged) the kernel falls back to a full
 ``numpy.linalg.eigh`` for that matrix. Whatever the kernel returns only steers the optimizer:
@@ -78,8 +84,9 @@ WEIGHT_FLOOR = 1e-5
 
 
 @_jit
-def _unpack_layout(lay_i):
-    """The 19 index arrays packed in ``lay_i`` (see :func:`pack_layout`), as views:
+def unpack_layout(lay_i):
+    """The 19 index arrays packed in ``lay_i`` (see :func:`pack_layout`), as views (named by
+    ``mu_lanes.LaneLayout``):
     ``log_par, log_ent, re_par, im_par, lin_ent, lin_row, l_row, l_col, l_ent, r_row, r_col,
     r_ent, rb_start, rb_size, g_row, g_col, gq_par, gq_pos1, gq_pos2``."""
     o = lay_i[1:]
@@ -161,7 +168,7 @@ def _scalings(x, lay_i, lay_c, Tl, Tri, G):
         gq_par,
         gq_pos1,
         gq_pos2,
-    ) = _unpack_layout(lay_i)
+    ) = unpack_layout(lay_i)
     E = np.zeros(n_ent, dtype=np.complex128)
     for k in range(n_log):
         E[log_ent[k]] = np.exp(min(max(x[log_par[k]], -60.0), 60.0))
@@ -577,7 +584,7 @@ def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax,
         gq_par,
         gq_pos1,
         gq_pos2,
-    ) = _unpack_layout(lay_i)
+    ) = unpack_layout(lay_i)
     g_coef1 = lay_c[:n_gq]
     g_coef2 = lay_c[n_gq:]
     cb_start, cb_size = cb[0], cb[1]
@@ -806,173 +813,6 @@ def _real_blocks(L) -> np.ndarray:
     return np.array(out, dtype=np.int64).reshape(-1, 3).T.copy()
 
 
-# --------------------------------------------------------------------------------------------
-# upper bound: the smoothed L-BFGS of mu_upper.mu_upper_bound, matrix by matrix
-
-
-@_jit_fast
-def _dot(a, b):
-    """Real dot product (a loop: no BLAS call for 80-element vectors)."""
-    acc = 0.0
-    for i in range(a.size):
-        acc += a[i] * b[i]
-    return acc
-
-
-@_jit
-def _lbfgs_dir(g, S, Y, rho, count, head, out):
-    """``out = -H g`` by the L-BFGS two-loop recursion over the ``count`` newest pairs
-    (circular buffers ``S``, ``Y``, ``rho`` with the newest at ``head``)."""
-    m = S.shape[0]
-    q = g.copy()
-    alpha = np.zeros(m)
-    for i in range(count):
-        k = (head - i) % m
-        alpha[k] = rho[k] * _dot(S[k], q)
-        q -= alpha[k] * Y[k]
-    gamma = 1.0
-    if count > 0:
-        yy = _dot(Y[head], Y[head])
-        if yy > 0:
-            gamma = _dot(S[head], Y[head]) / yy
-    rr = gamma * q
-    for i in range(count - 1, -1, -1):
-        k = (head - i) % m
-        beta = rho[k] * _dot(Y[k], rr)
-        rr += S[k] * (alpha[k] - beta)
-    for i in range(g.size):
-        out[i] = -rr[i]
-
-
-@_jit
-def dg_minimize(
-    M, x, lmax0, temps, max_iter, tol, patience, memory, log_par,
-    lay_i, lay_c, cb, rb, realb, best_x, best_l, iters, evals,
-    chain, chain_temps, chain_patience,
-):  # fmt: skip
-    """Minimize the smoothed ``lambda_max`` per matrix (the algorithm of ``mu_upper_bound``).
-
-    For each matrix: temperature stages ``t = tau / lambda_best``; in each stage an L-BFGS
-    (``memory`` pairs, Armijo backtracking from the unit step, log-scale steps capped at 2)
-    stops after ``patience`` consecutive relative decreases below ``tol[stage]`` (the last
-    entry for later stages and chained matrices), three failed line
-    searches, or its share of ``max_iter``. ``best_x``/``best_l`` receive the scalings with the
-    smallest exact ``lambda_max`` met, ``iters`` the iterations and ``evals`` the evaluations
-    (eigen-decompositions) used.
-
-    With ``chain`` (continuation along the batch, e.g. a frequency grid) each matrix after the
-    first also tries the scalings reached on the previous one: where they beat its own start,
-    it starts there and runs the ``chain_temps`` stages with ``chain_patience`` instead.
-    """
-    nb, c, r = M.shape
-    p = x.shape[1]
-    S = np.zeros((memory, p))
-    Y = np.zeros((memory, p))
-    rho = np.zeros(memory)
-    d = np.zeros(p)
-    xt = np.zeros((1, p))
-    g = np.zeros(p)
-    gt = np.zeros((1, p))
-    f1 = np.zeros(1)
-    l1 = np.zeros(1)
-    t1 = np.zeros(1)
-    top1 = np.zeros((1, r), dtype=np.complex128)
-    for b in range(nb):
-        Mb = M[b : b + 1]
-        xb = x[b].copy()
-        best_x[b] = xb
-        best_l[b] = lmax0[b]
-        it_total = 0
-        n_eval = 0
-        stages = temps
-        pat = patience
-        if chain and b > 0:  # the previous matrix's scalings, if they start lower
-            xt[0] = best_x[b - 1]
-            t1[0] = 1.0
-            dg_objective(Mb, xt, t1, False, lay_i, lay_c, cb, rb, realb, f1, gt, l1, top1)
-            n_eval += 1
-            if l1[0] < lmax0[b]:
-                xb[:] = best_x[b - 1]
-                best_x[b] = xb
-                best_l[b] = l1[0]
-                stages = chain_temps
-                pat = chain_patience
-        nst = stages.size
-        per_stage = max(max_iter // nst, min(max_iter, 5))
-        for st in range(nst):
-            t1[0] = stages[st] / max(best_l[b], 1e-12)
-            xt[0] = xb
-            dg_objective(Mb, xt, t1, True, lay_i, lay_c, cb, rb, realb, f1, gt, l1, top1)
-            n_eval += 1
-            f = f1[0]
-            g[:] = gt[0]
-            if l1[0] < best_l[b]:
-                best_l[b] = l1[0]
-                best_x[b] = xb
-            if st == 0:  # the curvature pairs carry over to the next stage
-                count = 0
-                head = memory - 1
-            stall = 0
-            fails = 0
-            for _ in range(per_stage):
-                it_total += 1
-                _lbfgs_dir(g, S, Y, rho, count, head, d)
-                slope = _dot(d, g)
-                if slope >= 0:
-                    d[:] = -g
-                    slope = -_dot(g, g)
-                    count = 0
-                dmax = 0.0
-                for k in range(log_par.size):
-                    dmax = max(dmax, abs(d[log_par[k]]))
-                if log_par.size:
-                    d *= min(1.0, 2.0 / max(dmax, 1e-300))
-                alpha = 1.0
-                ok = False
-                for _ls in range(12):
-                    for i in range(p):
-                        xt[0, i] = xb[i] + alpha * d[i]
-                    dg_objective(Mb, xt, t1, True, lay_i, lay_c, cb, rb, realb, f1, gt, l1, top1)
-                    n_eval += 1
-                    if np.isfinite(f1[0]) and f1[0] <= f + 1e-4 * alpha * slope:
-                        ok = True
-                        break
-                    alpha *= 0.3
-                if ok:
-                    s_ = xt[0] - xb
-                    y_ = gt[0] - g
-                    sy = _dot(s_, y_)
-                    if sy > 1e-14 * max(np.sqrt(_dot(s_, s_) * _dot(y_, y_)), 1e-300):
-                        head = (head + 1) % memory
-                        S[head] = s_
-                        Y[head] = y_
-                        rho[head] = 1.0 / sy
-                        count = min(count + 1, memory)
-                    rel = (f - f1[0]) / max(abs(f), 1e-300)
-                    xb[:] = xt[0]
-                    f = f1[0]
-                    g[:] = gt[0]
-                    if l1[0] < best_l[b]:
-                        best_l[b] = l1[0]
-                        best_x[b] = xb
-                    fails = 0
-                    if rel < tol[min(st, tol.size - 1)]:
-                        stall += 1
-                    else:
-                        stall = 0
-                    if stall >= pat:
-                        break
-                else:  # forget the curvature pairs and retry along the gradient
-                    count = 0
-                    fails += 1
-                    if fails >= 3:
-                        break
-            if it_total >= max_iter:
-                break
-        iters[b] = it_total
-        evals[b] = n_eval
-
-
 @_jit
 def osborne(P, iters, logd):
     """Osborne balancing sweeps of ``mu_upper._osborne_init`` (the same arithmetic and the same
@@ -1010,8 +850,7 @@ def warm_up() -> float:
     clone) is paid at setup, not inside the first analysis or inside several worker processes
     at once. It runs :func:`oos_drake.robust.mussv` on small matrices with the paper's block
     structure (repeated real, full complex and complex scalar blocks), on 3 and on 9 matrices
-    (the per-matrix and the lane optimizer), cold and with continuation, which reaches every
-    compiled path.
+    (idle lanes and full ones), cold and with continuation, which reaches every compiled path.
     """
     import time
 
@@ -1021,7 +860,7 @@ def warm_up() -> float:
     blk = [[-3, 0], [-2, 0], [3, 3], [1, 0], [1, 0]]
     rng = np.random.default_rng(0)
     M = rng.standard_normal((9, 10, 10)) + 1j * rng.standard_normal((9, 10, 10))
-    for part in (M[:3], M):  # matrix by matrix (small batches) and in SIMD lanes (mu_lanes)
+    for part in (M[:3], M):  # the lane optimizer (mu_lanes) with idle lanes and with all busy
         mussv(part, blk)
         mussv(part, blk, continuation=True)
     for only in ([[-3, 0], [-2, 0], [-5, 0]], [[3, 3], [1, 0], [6, 0]]):  # real only, complex only

@@ -1,9 +1,11 @@
 r"""The D-G upper bound optimizer, compiled, eight matrices in lock-step (one per SIMD lane).
 
-:func:`dg_minimize_lanes` runs the algorithm of :func:`mu_kernels.dg_minimize` (smoothed
-``lambda_max``, temperature stages, L-BFGS with Armijo backtracking, patience stopping) on
-every matrix of a batch, eight at a time: each lane runs its own optimizer (a small state
-machine that asks for the next point to evaluate) and one evaluation serves the eight lanes.
+The one compiled D-G optimizer of the product. :func:`dg_minimize_lanes` runs the algorithm of
+``mu_upper.mu_upper_bound`` (smoothed ``lambda_max``, temperature stages, L-BFGS with Armijo
+backtracking, patience stopping; its numpy version there is the test oracle) on every matrix
+of a batch of any size, eight at a time (lanes without a matrix idle): each lane runs its own
+optimizer (a small state machine that asks for the next point to evaluate) and one evaluation
+serves the eight lanes.
 The linear algebra of an evaluation then works on 8-vectors, one entry per matrix, which the
 compiler maps onto SIMD registers (AVX-512: one register; AVX2: two) instead of the short,
 latency-bound loops of one 26 x 26 problem:
@@ -17,6 +19,11 @@ latency-bound loops of one 26 x 26 problem:
   the Householder reflectors (eigenvectors of the top eigenvalues);
 * the gradient of :func:`mu_kernels.dg_objective`.
 
+Kernel arguments are grouped in named tuples (numba passes them to compiled code as structs):
+the layout of the structure (:data:`LaneLayout`), the optimizer's options
+(:data:`LaneOptions`) and the work arrays (:data:`LaneWorkspace`). The line-search constants
+(:data:`ARMIJO`, ...) are defined here once.
+
 The 8-vectors are tuples handled by the small helpers below (``_ld``, ``_fma``, ..., inlined):
 tuples are values, not memory, so all loads of a step come before its stores and LLVM's SLP
 vectorizer can pack them (numba leaves it off by default: :func:`compile_with_slp`). A lane
@@ -28,17 +35,35 @@ optimizer does, ``mu_upper`` re-evaluates the bound exactly at the returned scal
 from __future__ import annotations
 
 import contextlib
+from collections import namedtuple
 
 import numpy as np
 
 from oos_drake.robust import mu_kernels
-from oos_drake.robust.mu_kernels import HAVE_NUMBA, WEIGHT_FLOOR, _unpack_layout
+from oos_drake.robust.mu_kernels import HAVE_NUMBA, WEIGHT_FLOOR
 
 #: Matrices evaluated together (8 doubles: one AVX-512 register).
 W = 8
 #: QR rotation steps allowed per evaluation, per row squared (a lane needs about 1.1 n^2).
 QR_STEP_BUDGET = 8
 _FM = {"reassoc", "contract", "nsz", "arcp"}
+
+# The line search of the D-G optimizer, defined once: the lanes here and the numpy oracle of
+# mu_upper read these (numba freezes them into the compiled code: edit, then recompile).
+#: Armijo sufficient-decrease constant.
+ARMIJO = 1e-4
+#: Factor by which a rejected step is shortened.
+BACKTRACK = 0.3
+#: Trial steps per line search (the unit step and its shortenings).
+MAX_TRIALS = 12
+#: Largest change of a log-scaling per iteration (``e^{+-2}``: larger steps never help).
+MAX_LOG_STEP = 2.0
+#: Failed line searches in a row after which a matrix's stage stops.
+MAX_FAILED_SEARCHES = 3
+#: A curvature pair ``(s, y)`` is kept if ``s.y > CURVATURE_FLOOR |s| |y|``.
+CURVATURE_FLOOR = 1e-14
+#: Stage budget: ``max(max_iter // n_stages, min(max_iter, MIN_STAGE_ITERATIONS))``.
+MIN_STAGE_ITERATIONS = 5
 
 if HAVE_NUMBA:
     import numba
@@ -48,12 +73,102 @@ if HAVE_NUMBA:
     # helpers: LLVM inlines them (numba's own inline="always" compiles 1.5x slower, runs slower)
     _vec = numba.njit(fastmath=_FM, error_model="numpy")
     _jit_exact = numba.njit(cache=True, nogil=True, error_model="numpy")
+    # the L-BFGS recursion: exact arithmetic, dot products reassociated (vectorized)
+    _jit_lbfgs = numba.njit(cache=True, nogil=True)
+    _jit_dot = numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
 else:  # pragma: no cover
 
     def _jit(f):
         return f
 
-    _vec = _jit_exact = _jit
+    _vec = _jit_exact = _jit_lbfgs = _jit_dot = _jit
+
+
+#: The parameter layout of one BLK for the lane kernels (built by :func:`lane_layout`; index
+#: arrays are int64, one entry per item). ``T = diag(e^s) (I + N)`` per diagonal block.
+LaneLayout = namedtuple(
+    "LaneLayout",
+    [
+        "n_entries",  # number of distinct entries of T (int)
+        "log_par",  # parameters that are the log of a diagonal entry of T ...
+        "log_ent",  # ... and that entry
+        "re_par",  # parameters that are Re / Im of an off-diagonal entry of N ...
+        "im_par",
+        "lin_ent",  # ... that entry
+        "lin_row",  # ... and the log-parameter of its row
+        "l_row",  # position (row, column) in T_l of each of its entries, and the entry
+        "l_col",
+        "l_ent",
+        "r_row",  # the same in T_r
+        "r_col",
+        "r_ent",
+        "rb_start",  # diagonal blocks of T_r: first row and size
+        "rb_size",
+        "g_row",  # positions of the entries of G (row in r-space, column in c-space)
+        "g_col",
+        "gq_par",  # each G parameter feeds one or two positions of G (index into g_row,
+        "gq_pos1",  # g_col; -1: none) with complex coefficients
+        "gq_pos2",
+        "gq_coef1",
+        "gq_coef2",
+        "row_block_start",  # per r-space row: first row and size of its diagonal block
+        "row_block_size",
+        "col_block_start",  # per c-space row: first row of its diagonal block
+        "row_g_col",  # per r-space row: first column of its real block's G (and its size;
+        "row_g_size",  # 0: not a real block)
+        "max_block",  # largest diagonal block (int): width of the row storage
+        "packed_int",  # the packed arrays of mu_kernels.pack_layout, for the per-matrix
+        "packed_coef",  # evaluation of a lane whose QR did not converge
+        "c_blocks",
+        "r_blocks",
+        "real_blocks",
+    ],
+)
+
+#: Options of :func:`dg_minimize_lanes` (see ``mu_upper.mu_upper_bound``).
+LaneOptions = namedtuple(
+    "LaneOptions",
+    [
+        "temperatures",  # (n_stages,) float: smoothing temperatures relative to the bound
+        "max_iter",  # int: L-BFGS iterations in total
+        "tol",  # (n_stages,) float: relative decrease counted as a stall, per stage
+        "patience",  # int: stalls in a row that end a stage
+        "memory",  # int: L-BFGS correction pairs
+        "chain",  # bool: continuation along the batch
+        "chain_temperatures",  # (n,) float: stages of a chained matrix
+        "chain_patience",  # int
+    ],
+)
+
+#: Work arrays of :func:`_lane_eval` (eight lanes in the last axis; ``_re``/``_im``: real and
+#: imaginary parts). Block-diagonal matrices are stored by rows (``T[i, j - start(i)]``).
+LaneWorkspace = namedtuple(
+    "LaneWorkspace",
+    [
+        "tl_re", "tl_im",  # T_l (c, max_block)
+        "tri_re", "tri_im",  # T_r^{-1} (r, max_block)
+        "tr_re", "tr_im",  # T_r (r, max_block)
+        "g_re", "g_im",  # G (r, max_block)
+        "ent_re", "ent_im",  # entries of T (n_entries)
+        "x_re", "x_im",  # X = M T_r^{-1} (c, r)
+        "mht_re", "mht_im",  # Mh = T_l X, transposed (r, c)
+        "gx_re", "gx_im",  # G X on the rows of real blocks (r, r)
+        "h_re", "h_im",  # H, then the Householder reflectors (n, n)
+        "diag", "offdiag",  # the tridiagonal (n), then the eigenvalues in diag
+        "tau_re", "tau_im",  # Householder scalars (n)
+        "p_re", "p_im", "v_re", "v_im",  # tridiagonalization scratch (n)
+        "rot_row", "rot_cos", "rot_sin",  # QR rotations, recorded (QR_STEP_BUDGET n^2 + n)
+        "qr_lo", "qr_hi", "qr_x", "qr_z", "qr_ok",  # QR state per lane
+        "top_index",  # indices of the top eigenvalues (n)
+        "top_weight",  # their weights in the smoothed maximum (n)
+        "top_lam",  # their values (n)
+        "vec_re", "vec_im",  # their eigenvectors (n, n)
+        "tv_re", "tv_im",  # T_r^{-1} V (n, r)
+        "xv_re", "xv_im",  # M T_r^{-1} V (n, c)
+        "mv_re", "mv_im",  # T_l M T_r^{-1} V (n, c)
+        "grad_t_re", "grad_t_im",  # gradient with respect to the entries of T (n_entries)
+    ],
+)  # fmt: skip
 
 
 @contextlib.contextmanager
@@ -234,18 +349,21 @@ def _scatter_rows(rows, cols, ents, starts, Er, Ei, Tr_, Ti_):
 
 
 @_jit
-def _lane_scalings(x, lay_i, lay_c, rs, cs, gco, Tlr, Tli, Tir, Tii, Gr, Gi, Er, Ei, Trr, Tri):
-    """``T_l``, ``T_r^{-1}`` and ``G`` of the eight lanes from the parameters ``x`` (p, 8).
+def _lane_scalings(x, lay, ws):
+    """``T_l``, ``T_r^{-1}`` and ``G`` of the eight lanes from the parameters ``x`` (p, 8), into
+    the workspace ``ws`` (:data:`LaneWorkspace`; ``lay``: :data:`LaneLayout`).
 
     Block-diagonal matrices are stored by rows: ``T[i, j] = T_[i, j - start(i)]`` for ``j`` in
-    the block of row ``i`` (``rs``/``cs``: block start of each r-/c-space row); ``G`` likewise
-    with ``gco`` (column offset of the real block of each r-space row). ``Er, Ei`` receive the
-    entries of ``T`` (n_ent, 8).
+    the block of row ``i``; ``G`` likewise (from the first column of the row's real block).
+    ``ent_re, ent_im`` receive the entries of ``T`` (n_ent, 8).
     """
-    (
-        log_par, log_ent, re_par, im_par, lin_ent, lin_row, l_row, l_col, l_ent,
-        r_row, r_col, r_ent, rb_start, rb_size, g_row, g_col, gq_par, gq_pos1, gq_pos2,
-    ) = _unpack_layout(lay_i)  # fmt: skip
+    log_par, log_ent, lin_ent, lin_row = lay.log_par, lay.log_ent, lay.lin_ent, lay.lin_row
+    re_par, im_par, rb_start, rb_size = lay.re_par, lay.im_par, lay.rb_start, lay.rb_size
+    g_row, g_col, gq_par = lay.g_row, lay.g_col, lay.gq_par
+    gq_pos1, gq_pos2 = lay.gq_pos1, lay.gq_pos2
+    rs, cs, gco = lay.row_block_start, lay.col_block_start, lay.row_g_col
+    Tlr, Tli, Tir, Tii, Trr, Tri = ws.tl_re, ws.tl_im, ws.tri_re, ws.tri_im, ws.tr_re, ws.tr_im
+    Gr, Gi, Er, Ei = ws.g_re, ws.g_im, ws.ent_re, ws.ent_im
     n_gq = gq_par.size
     for k in range(log_par.size):
         for w in range(W):
@@ -256,8 +374,8 @@ def _lane_scalings(x, lay_i, lay_c, rs, cs, gco, Tlr, Tli, Tir, Tii, Gr, Gi, Er,
             sc = np.exp(min(max(x[lin_row[k], w], -60.0), 60.0))
             Er[lin_ent[k], w] = sc * x[re_par[k], w]
             Ei[lin_ent[k], w] = sc * x[im_par[k], w]
-    _scatter_rows(l_row, l_col, l_ent, cs, Er, Ei, Tlr, Tli)
-    _scatter_rows(r_row, r_col, r_ent, rs, Er, Ei, Trr, Tri)
+    _scatter_rows(lay.l_row, lay.l_col, lay.l_ent, cs, Er, Ei, Tlr, Tli)
+    _scatter_rows(lay.r_row, lay.r_col, lay.r_ent, rs, Er, Ei, Trr, Tri)
     # inverse of each lower-triangular diagonal block of T_r (real positive diagonal)
     Tir[:] = 0.0
     Tii[:] = 0.0
@@ -280,8 +398,8 @@ def _lane_scalings(x, lay_i, lay_c, rs, cs, gco, Tlr, Tli, Tir, Tii, Gr, Gi, Er,
                 _st(Tii[i, j - s], _neg(_mul(ai, inv)))
     Gr[:] = 0.0
     Gi[:] = 0.0
-    coef1 = lay_c[:n_gq]
-    coef2 = lay_c[n_gq:]
+    coef1 = lay.gq_coef1
+    coef2 = lay.gq_coef2
     for q in range(n_gq):
         v = _ld(x[gq_par[q]])
         for kk in range(2):
@@ -295,12 +413,15 @@ def _lane_scalings(x, lay_i, lay_c, rs, cs, gco, Tlr, Tli, Tir, Tii, Gr, Gi, Er,
 
 
 @_jit
-def _lane_form_h(
-    Mr, Mi, rs, rsz, cs, gco, rgsz, Tlr, Tli, Tir, Tii, Gr, Gi, Xr, Xi, MTr, MTi, GXr, GXi,
-    Hr, Hi,
-):  # fmt: skip
-    """Lower triangle of ``H = Mh^* Mh + j (Y X - (Y X)^*)`` for the eight lanes, with
-    ``X = M T_r^{-1}``, ``Mh = T_l X`` (kept transposed in ``MT``) and ``Y = T_r^{-*} G``."""
+def _lane_form_h(Mr, Mi, lay, ws):
+    """Lower triangle of ``H = Mh^* Mh + j (Y X - (Y X)^*)`` for the eight lanes (into
+    ``ws.h_re, ws.h_im``), with ``X = M T_r^{-1}``, ``Mh = T_l X`` (kept transposed in
+    ``ws.mht_*``) and ``Y = T_r^{-*} G``."""
+    rs, rsz, cs = lay.row_block_start, lay.row_block_size, lay.col_block_start
+    gco, rgsz = lay.row_g_col, lay.row_g_size
+    Tlr, Tli, Tir, Tii, Gr, Gi = ws.tl_re, ws.tl_im, ws.tri_re, ws.tri_im, ws.g_re, ws.g_im
+    Xr, Xi, MTr, MTi, GXr, GXi = ws.x_re, ws.x_im, ws.mht_re, ws.mht_im, ws.gx_re, ws.gx_im
+    Hr, Hi = ws.h_re, ws.h_im
     c, r, _ = Mr.shape
     zero = _splat(0.0)
     for i in range(c):  # X[i, j] = sum_{k >= j in the block of j} M[i, k] Tinv[k, j]
@@ -626,21 +747,23 @@ def _weighted_cross(Ar, Ai, i, Br, Bi, j, wts, K):
 
 
 @_jit
-def _lane_gradient(
-    Mr, Mi, x, sel, K, lam, pk, rs, cs, lay_i, lay_c, Tlr, Tli, Tir, Tii, Er, Ei,
-    Vr, Vi, TVr, TVi, XVr, XVi, MVr, MVi, gTr, gTi, g,
-):  # fmt: skip
-    """Gradient ``g`` (p, 8) of the smoothed ``lambda_max`` from the top eigenvectors ``V``
-    (K, n, 8), their weights ``pk`` and eigenvalues ``lam`` (K, 8; overwritten), as in
-    :func:`mu_kernels.dg_objective`."""
-    (
-        log_par, log_ent, re_par, im_par, lin_ent, lin_row, l_row, l_col, l_ent,
-        r_row, r_col, r_ent, _, _, g_row, g_col, gq_par, gq_pos1, gq_pos2,
-    ) = _unpack_layout(lay_i)  # fmt: skip
+def _lane_gradient(Mr, Mi, x, K, lay, ws, g):
+    """Gradient ``g`` (p, 8) of the smoothed ``lambda_max`` from the ``K`` top eigenvectors
+    ``ws.vec_*`` (K, n, 8), their weights ``ws.top_weight`` and eigenvalues ``ws.top_lam``
+    (K, 8; overwritten), as in :func:`mu_kernels.dg_objective`."""
+    log_par, log_ent, lin_ent, lin_row = lay.log_par, lay.log_ent, lay.lin_ent, lay.lin_row
+    re_par, im_par, l_row, l_col, l_ent = lay.re_par, lay.im_par, lay.l_row, lay.l_col, lay.l_ent
+    r_row, r_col, r_ent, g_row, g_col = lay.r_row, lay.r_col, lay.r_ent, lay.g_row, lay.g_col
+    gq_par, gq_pos1, gq_pos2 = lay.gq_par, lay.gq_pos1, lay.gq_pos2
+    rs, cs = lay.row_block_start, lay.col_block_start
+    Tlr, Tli, Tir, Tii, Er, Ei = ws.tl_re, ws.tl_im, ws.tri_re, ws.tri_im, ws.ent_re, ws.ent_im
+    Vr, Vi, TVr, TVi, XVr, XVi = ws.vec_re, ws.vec_im, ws.tv_re, ws.tv_im, ws.xv_re, ws.xv_im
+    MVr, MVi, gTr, gTi = ws.mv_re, ws.mv_im, ws.grad_t_re, ws.grad_t_im
+    lam, pk = ws.top_lam, ws.top_weight
     c, r, _ = Mr.shape
     n_gq = gq_par.size
-    coef1 = lay_c[:n_gq]
-    coef2 = lay_c[n_gq:]
+    coef1 = lay.gq_coef1
+    coef2 = lay.gq_coef2
     zero = _splat(0.0)
     for q in range(K):  # TV = T_r^{-1} V, XV = M TV, MV = T_l XV
         _block_rows_times(Tir, Tii, rs, Vr[q], Vi[q], TVr[q], TVi[q])
@@ -693,25 +816,25 @@ def _lane_gradient(
 
 
 @_jit
-def _lane_eval(
-    Mr, Mi, Mc, x, tq, lay_i, lay_c, cb, rb, realb, rs, rsz, cs, gco, rgsz,
-    Tlr, Tli, Tir, Tii, Trr, Tri, Gr, Gi, Er, Ei, Xr, Xi, MTr, MTi, GXr, GXi, Hr, Hi,
-    d, e, taur, taui, pr, pi, vr, vi, rot_k, rot_c, rot_s, lo, hi, x0, z0, okq,
-    sel, pk, lam, Vr, Vi, TVr, TVi, XVr, XVi, MVr, MVi, gTr, gTi, f, g, lmax,
-):  # fmt: skip
-    """Objective, gradient and exact ``lambda_max`` at the eight points ``x`` (p, 8).
+def _lane_eval(Mr, Mi, Mc, x, tq, lay, ws, f, g, lmax):
+    """Objective ``f``, gradient ``g`` (p, 8) and exact ``lambda_max`` at the eight points
+    ``x`` (p, 8) for the lane matrices ``Mr + j Mi`` (c, r, 8; ``Mc``: the same, (8, c, r)
+    complex), with the layout ``lay`` (:data:`LaneLayout`) and the work arrays ``ws``
+    (:data:`LaneWorkspace`).
 
     ``tq[w] > 0`` is lane ``w``'s temperature; ``tq[w] < 0`` means ``t = -tq[w] / lambda_max``
     (relative to the lane's own ``lambda_max``). Returns the temperatures used (8,).
     """
+    Hr, Hi, d, taur, taui = ws.h_re, ws.h_im, ws.diag, ws.tau_re, ws.tau_im
+    rot_k, rot_c, rot_s, okq = ws.rot_row, ws.rot_cos, ws.rot_sin, ws.qr_ok
+    sel, pk, lam = ws.top_index, ws.top_weight, ws.top_lam
     n = Hr.shape[0]
-    _lane_scalings(x, lay_i, lay_c, rs, cs, gco, Tlr, Tli, Tir, Tii, Gr, Gi, Er, Ei, Trr, Tri)
-    _lane_form_h(
-        Mr, Mi, rs, rsz, cs, gco, rgsz, Tlr, Tli, Tir, Tii, Gr, Gi, Xr, Xi, MTr, MTi, GXr, GXi,
-        Hr, Hi,
-    )  # fmt: skip
-    _lane_tridiag(Hr, Hi, d, e, taur, taui, pr, pi, vr, vi)
-    nsteps = _lane_qr(d, e, rot_k, rot_c, rot_s, lo, hi, x0, z0, okq)
+    _lane_scalings(x, lay, ws)
+    _lane_form_h(Mr, Mi, lay, ws)
+    _lane_tridiag(Hr, Hi, d, ws.offdiag, taur, taui, ws.p_re, ws.p_im, ws.v_re, ws.v_im)
+    nsteps = _lane_qr(
+        d, ws.offdiag, rot_k, rot_c, rot_s, ws.qr_lo, ws.qr_hi, ws.qr_x, ws.qr_z, okq
+    )
     t = np.empty(W)
     kw = np.zeros(W, dtype=np.int64)
     K = 1
@@ -753,11 +876,8 @@ def _lane_eval(
             sel[q, w] = sel[max(kw[w] - 1, 0), w]
             lam[q, w] = 0.0
             pk[q, w] = 0.0
-    _lane_vectors(nsteps, rot_k, rot_c, rot_s, sel, K, Hr, Hi, taur, taui, Vr, Vi)
-    _lane_gradient(
-        Mr, Mi, x, sel, K, lam, pk, rs, cs, lay_i, lay_c, Tlr, Tli, Tir, Tii, Er, Ei,
-        Vr, Vi, TVr, TVi, XVr, XVi, MVr, MVi, gTr, gTi, g,
-    )  # fmt: skip
+    _lane_vectors(nsteps, rot_k, rot_c, rot_s, sel, K, Hr, Hi, taur, taui, ws.vec_re, ws.vec_im)
+    _lane_gradient(Mr, Mi, x, K, lay, ws, g)
     for w in range(W):  # a lane whose QR did not converge: the per-matrix kernel
         if okq[w]:
             continue
@@ -771,14 +891,13 @@ def _lane_eval(
         top1 = np.empty((1, Mc.shape[2]), dtype=np.complex128)
         t1 = np.ones(1)
         Mw = Mc[w : w + 1]
+        packed = (lay.packed_int, lay.packed_coef, lay.c_blocks, lay.r_blocks, lay.real_blocks)
         if tq[w] < 0:
-            mu_kernels.dg_objective(
-                Mw, xw, t1, False, lay_i, lay_c, cb, rb, realb, f1, g1, l1, top1
-            )
+            mu_kernels.dg_objective(Mw, xw, t1, False, *packed, f1, g1, l1, top1)
             t1[0] = -tq[w] / max(l1[0], 1e-12)
         else:
             t1[0] = tq[w]
-        mu_kernels.dg_objective(Mw, xw, t1, True, lay_i, lay_c, cb, rb, realb, f1, g1, l1, top1)
+        mu_kernels.dg_objective(Mw, xw, t1, True, *packed, f1, g1, l1, top1)
         f[w] = f1[0]
         lmax[w] = l1[0]
         t[w] = t1[0]
@@ -787,12 +906,12 @@ def _lane_eval(
     return t
 
 
-def lane_layout(packed, structure) -> tuple:
-    """Row maps of the lane kernels from ``mu_kernels.pack_layout``'s arrays: ``(rs, rsz, cs,
-    gco, rgsz, bw)``: block start and size of each r-space row, block start of each c-space
-    row, column offset and size of the real block of each r-space row (size 0: none), and
-    the largest block size."""
-    _, _, cb, rb, realb = packed
+def lane_layout(packed, structure) -> LaneLayout:
+    """The :data:`LaneLayout` of ``structure`` from ``mu_kernels.pack_layout``'s arrays
+    ``packed`` (the per-row maps are derived here)."""
+    lay_i, lay_c, cb, rb, realb = packed
+    # the 19 index arrays of pack_layout, in the order of the fields log_par .. gq_pos2
+    indices = [np.ascontiguousarray(a) for a in mu_kernels.unpack_layout(lay_i)]
     c, r = structure.n_cols, structure.n_rows
     rs = _row_starts(r, rb[0], rb[1]).astype(np.int64)
     rsz = np.ones(r, dtype=np.int64)
@@ -805,18 +924,34 @@ def lane_layout(packed, structure) -> tuple:
         gco[ro : ro + m] = co
         rgsz[ro : ro + m] = m
     bw = int(max(1, rb[1].max(initial=1), cb[1].max(initial=1)))
-    return rs, rsz, cs, gco, rgsz, bw
+    n_gq = indices[-3].size  # gq_par
+    return LaneLayout(
+        int(lay_i[0]),
+        *indices,
+        gq_coef1=np.ascontiguousarray(lay_c[:n_gq]),
+        gq_coef2=np.ascontiguousarray(lay_c[n_gq:]),
+        row_block_start=rs,
+        row_block_size=rsz,
+        col_block_start=cs,
+        row_g_col=gco,
+        row_g_size=rgsz,
+        max_block=bw,
+        packed_int=lay_i,
+        packed_coef=lay_c,
+        c_blocks=cb,
+        r_blocks=rb,
+        real_blocks=realb,
+    )
 
 
-@_jit_exact
-def _workspace(c, r, n_entries, bw):
-    """The work arrays of :func:`_lane_eval`, in its argument order (after ``rgsz``)."""
-    n = r
+def lane_workspace(c: int, r: int, lay: LaneLayout) -> LaneWorkspace:
+    """Zeroed work arrays of :func:`_lane_eval` for ``c x r`` matrices with the layout ``lay``."""
+    n, bw, ne = r, lay.max_block, lay.n_entries
     cap = QR_STEP_BUDGET * n * n + n
     z = np.zeros
-    return (
+    return LaneWorkspace(
         z((c, bw, W)), z((c, bw, W)), z((r, bw, W)), z((r, bw, W)), z((r, bw, W)),
-        z((r, bw, W)), z((r, bw, W)), z((r, bw, W)), z((n_entries, W)), z((n_entries, W)),
+        z((r, bw, W)), z((r, bw, W)), z((r, bw, W)), z((ne, W)), z((ne, W)),
         z((c, r, W)), z((c, r, W)), z((r, c, W)), z((r, c, W)), z((r, r, W)), z((r, r, W)),
         z((n, n, W)), z((n, n, W)), z((n, W)), z((n, W)), z((n, W)), z((n, W)),
         z((n, W)), z((n, W)), z((n, W)), z((n, W)),
@@ -824,7 +959,7 @@ def _workspace(c, r, n_entries, bw):
         z(W, dtype=np.int64), z(W), z(W), np.ones(W, dtype=np.bool_),
         z((n, W), dtype=np.int64), z((n, W)), z((n, W)), z((n, n, W)), z((n, n, W)),
         z((n, r, W)), z((n, r, W)), z((n, c, W)), z((n, c, W)), z((n, c, W)), z((n, c, W)),
-        z((n_entries, W)), z((n_entries, W)),
+        z((ne, W)), z((ne, W)),
     )  # fmt: skip
 
 
@@ -851,38 +986,77 @@ def _load_lane(w, b, M, x0, Mr, Mi, Mc, xc, xq, tq, temps):
 
 @_jit_exact
 def _cap_step(dvec, log_par):
-    """Cap the log-scale steps at 2 (``e^{+-2}`` per iteration), like the per-matrix kernel."""
+    """Cap the log-scale steps at :data:`MAX_LOG_STEP` per iteration."""
     dmax = 0.0
     for k in range(log_par.size):
         dmax = max(dmax, abs(dvec[log_par[k]]))
     if log_par.size:
-        fac = min(1.0, 2.0 / max(dmax, 1e-300))
+        fac = min(1.0, MAX_LOG_STEP / max(dmax, 1e-300))
         for i in range(dvec.size):
             dvec[i] *= fac
 
 
-@_jit_exact
-def dg_minimize_lanes(
-    M, x0, temps, max_iter, tol, patience, memory, log_par, lay_i, lay_c, cb, rb, realb,
-    rs, rsz, cs, gco, rgsz, bw, best_x, best_l, iters, evals, chain, chain_temps,
-    chain_patience,
-):  # fmt: skip
-    """The optimizer of :func:`mu_kernels.dg_minimize`, eight matrices at a time.
+@_jit_dot
+def _dot(a, b):
+    """Real dot product (a loop: no BLAS call for 80-element vectors)."""
+    acc = 0.0
+    for i in range(a.size):
+        acc += a[i] * b[i]
+    return acc
 
-    Same arguments and outputs as ``mu_kernels.dg_minimize`` except that the starting
-    ``lambda_max`` is computed here (``x0``: starting scalings, (B, p)) and the lane row maps
-    (:func:`lane_layout`) are passed. Lanes take the next matrix as soon as theirs is done;
-    with ``chain`` the batch is cut into 8 contiguous segments, one per lane, so that each
-    matrix can start from the previous one's scalings.
+
+@_jit_lbfgs
+def _lbfgs_dir(g, S, Y, rho, count, head, out):
+    """``out = -H g`` by the L-BFGS two-loop recursion over the ``count`` newest pairs
+    (circular buffers ``S``, ``Y``, ``rho`` with the newest at ``head``)."""
+    m = S.shape[0]
+    q = g.copy()
+    alpha = np.zeros(m)
+    for i in range(count):
+        k = (head - i) % m
+        alpha[k] = rho[k] * _dot(S[k], q)
+        q -= alpha[k] * Y[k]
+    gamma = 1.0
+    if count > 0:
+        yy = _dot(Y[head], Y[head])
+        if yy > 0:
+            gamma = _dot(S[head], Y[head]) / yy
+    rr = gamma * q
+    for i in range(count - 1, -1, -1):
+        k = (head - i) % m
+        beta = rho[k] * _dot(Y[k], rr)
+        rr += S[k] * (alpha[k] - beta)
+    for i in range(g.size):
+        out[i] = -rr[i]
+
+
+@_jit_exact
+def dg_minimize_lanes(M, x0, opts, lay, ws, best_x, best_l, iters, evals):
+    """Minimize the smoothed ``lambda_max`` of each matrix of ``M`` (B, c, r), eight matrices
+    at a time (any ``B >= 1``: lanes without a matrix idle).
+
+    For each matrix: temperature stages ``t = tau / lambda_best``; in each stage an L-BFGS
+    (``opts.memory`` pairs, Armijo backtracking from the unit step, log-scale steps capped at
+    :data:`MAX_LOG_STEP`) stops after ``opts.patience`` consecutive relative decreases below
+    ``opts.tol[stage]`` (the last entry for later stages and chained matrices),
+    :data:`MAX_FAILED_SEARCHES` failed line searches, or its share of ``opts.max_iter``.
+
+    ``x0`` (B, p) are the starting scalings, ``opts`` a :data:`LaneOptions`, ``lay`` the
+    :data:`LaneLayout`, ``ws`` a :data:`LaneWorkspace` (:func:`lane_workspace`). Outputs:
+    ``best_x``/``best_l`` the scalings with the smallest exact ``lambda_max`` met, ``iters``
+    the iterations and ``evals`` the evaluations (one per lane and eigen-decomposition) used.
+    Lanes take the next matrix as soon as theirs is done. With ``opts.chain`` (continuation
+    along the batch, e.g. a frequency grid) the batch is cut into 8 contiguous segments, one
+    per lane, and each matrix after the first of its segment also tries the scalings reached
+    on the previous one: where they beat its own start, it starts there and runs the
+    ``opts.chain_temperatures`` stages with ``opts.chain_patience`` instead.
     """
     nb, c, r = M.shape
     p = x0.shape[1]
-    n_ent = lay_i[0]
-    (
-        Tlr, Tli, Tir, Tii, Trr, Tri, Gr, Gi, Er, Ei, Xr, Xi, MTr, MTi, GXr, GXi, Hr, Hi,
-        d, e, taur, taui, pr, pi, vr, vi, rot_k, rot_c, rot_s, lo, hi, q0, z0, okq,
-        sel, pk, lam, Vr, Vi, TVr, TVi, XVr, XVi, MVr, MVi, gTr, gTi,
-    ) = _workspace(c, r, n_ent, bw)  # fmt: skip
+    temps, max_iter, tol, patience = opts.temperatures, opts.max_iter, opts.tol, opts.patience
+    memory, chain = opts.memory, opts.chain
+    chain_temps, chain_patience = opts.chain_temperatures, opts.chain_patience
+    log_par = lay.log_par
     Mr = np.zeros((c, r, W))
     Mi = np.zeros((c, r, W))
     Mc = np.zeros((W, c, r), dtype=np.complex128)
@@ -943,12 +1117,7 @@ def dg_minimize_lanes(
             _load_lane(w, b, M, x0, Mr, Mi, Mc, xc, xq, tq, temps)
             active += 1
     while active > 0:
-        tused = _lane_eval(
-            Mr, Mi, Mc, xq, tq, lay_i, lay_c, cb, rb, realb, rs, rsz, cs, gco, rgsz,
-            Tlr, Tli, Tir, Tii, Trr, Tri, Gr, Gi, Er, Ei, Xr, Xi, MTr, MTi, GXr, GXi, Hr, Hi,
-            d, e, taur, taui, pr, pi, vr, vi, rot_k, rot_c, rot_s, lo, hi, q0, z0, okq,
-            sel, pk, lam, Vr, Vi, TVr, TVi, XVr, XVi, MVr, MVi, gTr, gTi, f, g, lm,
-        )  # fmt: skip
+        tused = _lane_eval(Mr, Mi, Mc, xq, tq, lay, ws, f, g, lm)
         for w in range(W):
             b = mat[w]
             if b < 0:
@@ -1015,8 +1184,8 @@ def dg_minimize_lanes(
             elif ph == _SEARCH:
                 pat = chain_patience if chained[w] else patience
                 nst = chain_temps.size if chained[w] else temps.size
-                per_stage = max(max_iter // nst, min(max_iter, 5))
-                if np.isfinite(f[w]) and f[w] <= fc[w] + 1e-4 * alpha[w] * slope[w]:
+                per_stage = max(max_iter // nst, min(max_iter, MIN_STAGE_ITERATIONS))
+                if np.isfinite(f[w]) and f[w] <= fc[w] + ARMIJO * alpha[w] * slope[w]:
                     sy = 0.0
                     ss_ = 0.0
                     yy = 0.0
@@ -1026,7 +1195,7 @@ def dg_minimize_lanes(
                         sy += si * yi
                         ss_ += si * si
                         yy += yi * yi
-                    if sy > 1e-14 * max(np.sqrt(ss_ * yy), 1e-300):
+                    if sy > CURVATURE_FLOOR * max(np.sqrt(ss_ * yy), 1e-300):
                         h = (head[w] + 1) % memory
                         head[w] = h
                         for i in range(p):
@@ -1051,15 +1220,15 @@ def dg_minimize_lanes(
                     else:
                         begin = True
                 else:
-                    alpha[w] *= 0.3
+                    alpha[w] *= BACKTRACK
                     ls[w] += 1
-                    if ls[w] < 12:
+                    if ls[w] < MAX_TRIALS:
                         for i in range(p):
                             xq[i, w] = xc[w, i] + alpha[w] * dv[w, i]
                         continue
                     count[w] = 0  # forget the curvature pairs, retry along the gradient
                     fails[w] += 1
-                    if fails[w] >= 3 or it_stage[w] >= per_stage:
+                    if fails[w] >= MAX_FAILED_SEARCHES or it_stage[w] >= per_stage:
                         end_stage = True
                     else:
                         begin = True
@@ -1098,7 +1267,7 @@ def dg_minimize_lanes(
                 it_stage[w] += 1
                 for i in range(p):
                     dtmp[i] = gc[w, i]
-                mu_kernels._lbfgs_dir(dtmp, S[w], Y[w], rho[w], count[w], head[w], dv[w])
+                _lbfgs_dir(dtmp, S[w], Y[w], rho[w], count[w], head[w], dv[w])
                 sl = 0.0
                 for i in range(p):
                     sl += dv[w, i] * gc[w, i]
@@ -1108,7 +1277,7 @@ def dg_minimize_lanes(
                         dv[w, i] = -gc[w, i]
                         sl -= gc[w, i] * gc[w, i]
                     count[w] = 0
-                slope[w] = sl  # before the cap, as the per-matrix kernel does
+                slope[w] = sl  # before the cap (as the numpy oracle of mu_upper)
                 _cap_step(dv[w], log_par)
                 alpha[w] = 1.0
                 ls[w] = 0

@@ -21,7 +21,8 @@ otherwise that candidate is dropped (and the bound lowered, to 0 if no candidate
 
 With numba installed the power iteration, the eigenvalue polish and the residual-vector check
 run compiled, start by start (:mod:`oos_drake.robust.mu_lower_kernels`, the same arithmetic up to
-round-off; the numpy code here is the fallback and the reference of the tests).
+round-off): that is the product's one lower-bound path. The numpy code here
+(``compiled=False``) is the oracle of the tests, and what runs when numba is not installed.
 """
 
 from __future__ import annotations
@@ -36,9 +37,6 @@ from oos_drake.robust.memory import reuse_freed_memory
 
 #: Matrices per internal batch of :func:`mu_lower_bound` (bounds the memory of huge batches).
 CHUNK = 1024
-
-#: Use the compiled power iteration (:mod:`mu_kernels`) when numba is available.
-USE_COMPILED = True
 
 #: Relative tolerance on ``sigma_min(I - M delta)`` accepted as "singular".
 CERTIFICATE_RTOL = 1e-7
@@ -238,18 +236,15 @@ def _kernel_blocks(structure: BlockStructure) -> np.ndarray:
     ).T.copy()
 
 
-def _compiled() -> bool:
-    return mu_kernels.HAVE_NUMBA and USE_COMPILED
-
-
-def _power_iteration(M, structure, a, z, iters, kappa, rng):
+def _power_iteration(M, structure, a, z, iters, kappa, rng, compiled=True):
     """Run the mixed power iteration from vectors ``a`` (c-space) and ``z`` (c-space).
 
     ``M`` is ``(nb, c, r)`` and ``a``, ``z`` are ``(N, c)`` with ``N`` a multiple of ``nb``:
-    start ``s`` runs on ``M[s % nb]`` (several starts per matrix).
+    start ``s`` runs on ``M[s % nb]`` (several starts per matrix). ``compiled``: by
+    :func:`mu_lower_kernels.power_iteration` when numba is installed.
     """
     nb = a.shape[0]
-    if _compiled():  # the same iteration, compiled per start
+    if compiled and mu_kernels.HAVE_NUMBA:  # the same iteration, compiled per start
         real0 = [rng.uniform(-1.0, 1.0, nb) for b in structure.blocks if b.kind == REAL]
         real0 = np.stack(real0, axis=1) if real0 else np.zeros((nb, 0))
         delta = np.empty((nb, structure.n_rows, structure.n_cols), dtype=complex)
@@ -426,6 +421,7 @@ def mu_lower_bound(
     kappa: float = 0.5,
     rng: np.random.Generator | None = None,
     polish_starts: int | None = 2,
+    compiled: bool = True,
 ) -> LowerBoundResult:
     """Certified lower bound of mixed mu for a flat batch of matrices.
 
@@ -451,6 +447,10 @@ def mu_lower_bound(
     polish_starts : int or None
         Starts per matrix (the best by their Rayleigh quotient after the power iteration) that
         get the eigenvalue polish and the certificate check; None: all.
+    compiled : bool
+        Run the compiled kernels (:mod:`mu_lower_kernels`) when numba is installed (the
+        default). False runs the numpy implementation of the same algorithm (the oracle of the
+        tests; also what runs without numba).
 
     Returns
     -------
@@ -470,6 +470,7 @@ def mu_lower_bound(
                 kappa=kappa,
                 rng=rng,
                 polish_starts=polish_starts,
+                compiled=compiled,
             )
             for i in range(0, M.shape[0], CHUNK)
         ]
@@ -501,8 +502,8 @@ def mu_lower_bound(
     mat = np.tile(np.arange(nb), ns)  # the matrix of each start
     a = np.concatenate(starts_a, axis=0)
     z = np.concatenate(starts_z, axis=0)
-    delta_unit, a = _power_iteration(M, structure, a, z, iters, kappa, rng)
-    compiled = _compiled()
+    delta_unit, a = _power_iteration(M, structure, a, z, iters, kappa, rng, compiled)
+    compiled = compiled and mu_kernels.HAVE_NUMBA
     if compiled:
         M = np.ascontiguousarray(M, dtype=complex)
         blocks = _kernel_blocks(structure)

@@ -29,12 +29,15 @@ repeated block), or a warm start. Whatever the optimizer reaches, the returned v
 exact ``lambda_max`` at the returned scalings, so the bound is always valid; the scalings are
 returned so that the LMI can be checked independently (:func:`lmi_residual`).
 
-Speed: with numba installed the objective, the L-BFGS loop and the balancing run compiled.
-Batches of :data:`LANES_MIN_BATCH` matrices or more are optimized eight at a time, one matrix
-per SIMD lane (:mod:`oos_drake.robust.mu_lanes`: about 16-20 us per 26 x 26 matrix and
-evaluation); smaller ones matrix by matrix (:mod:`oos_drake.robust.mu_kernels`: about 36-45 us;
-numpy: about 100 us). Without numba the numpy implementation below runs the same algorithm
-(batched over matrices).
+Speed: with numba installed (``mu_kernels.HAVE_NUMBA``) the optimizer is the one compiled
+D-G optimizer, :func:`oos_drake.robust.mu_lanes.dg_minimize_lanes`: eight matrices at a time,
+one per SIMD lane (about 16-20 us per 26 x 26 matrix and evaluation), for batches of any size
+(a batch of fewer than eight leaves lanes idle: slower per matrix, see
+``benchmarks/bench_mussv.py``); the balancing and the final exact evaluation run compiled too
+(:mod:`oos_drake.robust.mu_kernels`). The numpy implementation below (``compiled=False``) runs
+the same algorithm batched over matrices (about 3x slower): it is the oracle of the tests, and
+the path taken when numba is not installed. Both read the line-search constants of
+:mod:`~oos_drake.robust.mu_lanes`.
 """
 
 from __future__ import annotations
@@ -51,20 +54,6 @@ from oos_drake.robust.memory import reuse_freed_memory
 #: Matrices per internal batch of :func:`mu_upper_bound`: bounds the memory of huge batches, and
 #: keeps the temporaries (~50 per matrix) in cache: 512 runs ~25 % faster per matrix than 2048.
 CHUNK = 512
-
-#: Use the compiled kernels (:mod:`mu_kernels`) when numba is available; False forces the
-#: numpy implementation (same algorithm, used for cross-checks).
-USE_COMPILED = True
-
-#: Optimize in the coordinates of the balanced matrix (:class:`_Balanced`): the same bound,
-#: better conditioned when the channels of a repeated real block are scaled very differently.
-BALANCED_COORDINATES = True
-
-#: Run the compiled optimizer eight matrices at a time (:mod:`mu_lanes`, 2.8x faster per
-#: matrix on the paper-sized benchmark) for batches of at least :data:`LANES_MIN_BATCH`
-#: matrices; smaller batches, where most lanes would idle, run matrix by matrix.
-USE_LANES = True
-LANES_MIN_BATCH = 4
 
 
 @dataclass(frozen=True)
@@ -101,7 +90,7 @@ class _Layout:
 
 _LAYOUTS: dict = {}  # BLK -> _Layout
 _PACKED: dict = {}  # BLK -> (_Layout, packed arrays of mu_kernels.pack_layout)
-_LANE_ROWS: dict = {}  # BLK -> row maps of mu_lanes.lane_layout
+_LANE_LAYOUTS: dict = {}  # BLK -> mu_lanes.LaneLayout
 
 
 def _layout(structure: BlockStructure) -> _Layout:
@@ -282,7 +271,7 @@ class _Objective:
     """Smoothed ``lambda_max`` of the scaled LMI matrix and its gradient, batched."""
 
     def __init__(
-        self, M: np.ndarray, structure: BlockStructure, layout: _Layout, use_compiled=True
+        self, M: np.ndarray, structure: BlockStructure, layout: _Layout, compiled=True
     ):
         self.M = np.ascontiguousarray(M)
         self.count = np.zeros(M.shape[0], dtype=np.int64)  # evaluations per matrix
@@ -298,7 +287,7 @@ class _Objective:
                 for a in range(block.cols):
                     sizes.setdefault(1, []).append(np.array([block.col_offset + a]))
         self.c_groups = tuple((n, np.array(v)) for n, v in sorted(sizes.items()))
-        self.compiled = use_compiled and USE_COMPILED and mu_kernels.HAVE_NUMBA
+        self.compiled = compiled and mu_kernels.HAVE_NUMBA
         if self.compiled:
             key = (structure.blk.shape, structure.blk.tobytes())
             if key not in _PACKED or _PACKED[key][0] is not layout:
@@ -308,14 +297,14 @@ class _Objective:
             self.packed = _PACKED[key][1]
 
     @property
-    def lane_rows(self):
-        """Row maps of the lane kernels (:func:`mu_lanes.lane_layout`), cached per BLK."""
+    def lane_layout(self) -> mu_lanes.LaneLayout:
+        """The layout of the lane kernels (:func:`mu_lanes.lane_layout`), cached per BLK."""
         key = (self.s.blk.shape, self.s.blk.tobytes())
-        if key not in _LANE_ROWS:
-            if len(_LANE_ROWS) > 64:
-                _LANE_ROWS.clear()
-            _LANE_ROWS[key] = mu_lanes.lane_layout(self.packed, self.s)
-        return _LANE_ROWS[key]
+        if key not in _LANE_LAYOUTS or _LANE_LAYOUTS[key].packed_int is not self.packed[0]:
+            if len(_LANE_LAYOUTS) > 64:
+                _LANE_LAYOUTS.clear()
+            _LANE_LAYOUTS[key] = mu_lanes.lane_layout(self.packed, self.s)
+        return _LANE_LAYOUTS[key]
 
     def _compiled(self, x, idx, t, need_grad):
         """The same evaluation by the compiled kernel (:mod:`mu_kernels`)."""
@@ -507,9 +496,12 @@ def _balance_maps(structure: BlockStructure, L: _Layout):
     return _BALANCE_MAPS[key]
 
 
-def _osborne_init(M: np.ndarray, structure: BlockStructure, layout: _Layout, iters: int = 20):
+def _osborne_init(
+    M: np.ndarray, structure: BlockStructure, layout: _Layout, iters: int = 20, compiled=True
+):
     """Diagonal ``D`` from Osborne balancing of ``|M|``: one scaling per full block and one per
-    channel of a repeated block (a diagonal ``D_k`` is a valid start for the full Hermitian one)."""
+    channel of a repeated block (a diagonal ``D_k`` is a valid start for the full Hermitian one).
+    ``compiled``: the sweeps by :func:`mu_kernels.osborne` when numba is installed."""
     nb, c, r = M.shape
     Sc, Sr, par = [], [], []
     for block, pars in zip(structure.blocks, layout.block_log_par, strict=True):
@@ -536,7 +528,7 @@ def _osborne_init(M: np.ndarray, structure: BlockStructure, layout: _Layout, ite
     P[:, np.eye(k, dtype=bool)] = 0.0
     P += 1e-300
     logd = np.zeros((nb, k))  # log of d_e^2
-    if USE_COMPILED and mu_kernels.HAVE_NUMBA:  # the same sweeps, compiled
+    if compiled and mu_kernels.HAVE_NUMBA:  # the same sweeps, compiled
         mu_kernels.osborne(np.ascontiguousarray(P), int(iters), logd)
         iters = 0
     for _ in range(iters):
@@ -601,6 +593,7 @@ def mu_upper_bound(
     chain: bool = False,
     chain_temperatures=(500.0,),
     chain_patience: int = 2,
+    compiled: bool = True,
 ) -> UpperBoundResult:
     """D-G upper bound of mixed mu for a flat batch of matrices.
 
@@ -626,13 +619,19 @@ def mu_upper_bound(
     patience : int
         Consecutive small decreases (see ``tol``) that stop a matrix's stage.
     chain : bool
-        Continuation along the batch (compiled path only; ignored by the numpy one): each
-        matrix also tries the scalings reached on the previous one and, where they start lower
-        than its own start, runs ``chain_temperatures`` with ``chain_patience`` from there.
+        Continuation along the batch (compiled path only; ignored by the numpy one): the batch
+        is cut into eight contiguous segments (one per lane) and each matrix after the first of
+        its segment also tries the scalings reached on the previous one and, where they start
+        lower than its own start, runs ``chain_temperatures`` with ``chain_patience`` from
+        there (a batch of eight or fewer: no chaining).
     chain_temperatures : sequence of float
         Stages of the chained matrices.
     chain_patience : int
         Patience of the chained matrices.
+    compiled : bool
+        Run the compiled optimizer (:func:`mu_lanes.dg_minimize_lanes`) when numba is
+        installed (the default). False runs the numpy implementation of the same algorithm:
+        the oracle of the tests, about 3x slower; it is also what runs without numba.
 
     Returns
     -------
@@ -653,6 +652,7 @@ def mu_upper_bound(
                 chain=chain,
                 chain_temperatures=chain_temperatures,
                 chain_patience=chain_patience,
+                compiled=compiled,
             )
             for i in range(0, M.shape[0], CHUNK)
         ]
@@ -676,21 +676,19 @@ def mu_upper_bound(
     layout = _layout(structure)
     scale = np.linalg.norm(M, axis=(1, 2)) + 1e-300
     Mn = M / scale[:, None, None]
-    obj = _Objective(Mn, structure, layout)  # the final, exact evaluation
-    x = _osborne_init(Mn, structure, layout)
+    obj = _Objective(Mn, structure, layout, compiled=compiled)  # the final, exact evaluation
+    x = _osborne_init(Mn, structure, layout, compiled=compiled)
     allidx = np.arange(nb)
     p = layout.n_params
-    balanced = None
-    if BALANCED_COORDINATES and p > 0 and max_iter > 0:
+    coords = None
+    if p > 0 and max_iter > 0:
         # optimize over the same function in balanced coordinates (see _Balanced)
-        balanced = _Balanced(obj, x)
-        x = balanced.to_balanced(x)
+        coords = _Balanced(obj, x)
+        x = coords.to_balanced(x)
         if x0 is not None:
-            x0 = balanced.to_balanced(np.array(x0, dtype=float).reshape(nb, p))
-        obj_final, obj = obj, _Objective(balanced.M, structure, layout)
-    lanes = (
-        obj.compiled and USE_LANES and p > 0 and max_iter > 0 and nb >= LANES_MIN_BATCH
-    )
+            x0 = coords.to_balanced(np.array(x0, dtype=float).reshape(nb, p))
+        obj_final, obj = obj, _Objective(coords.M, structure, layout, compiled=compiled)
+    lanes = obj.compiled and p > 0 and max_iter > 0
     if lanes and x0 is None:  # the lane optimizer evaluates the start itself
         lmax0 = np.full(nb, np.inf)
     elif max_iter > 0 or x0 is not None:
@@ -706,33 +704,31 @@ def mu_upper_bound(
     best_x = x.copy()
     start_x = x.copy()  # where the optimizer starts: the fallback of _trusted
     iters_done = 0
-    if p > 0 and max_iter > 0 and obj.compiled:  # the same optimizer, compiled
+    if lanes:  # the compiled optimizer: eight matrices in lock-step (mu_lanes)
         its = np.zeros(nb, dtype=np.int64)
         n_evals = np.zeros(nb, dtype=np.int64)
-        settings = (
-            np.asarray(temperatures, dtype=float),
-            int(max_iter),
-            tols,
-            int(patience),
-            int(memory),
-            layout.log_par.astype(np.int64),
-            *obj.packed,
+        options = mu_lanes.LaneOptions(
+            temperatures=np.asarray(temperatures, dtype=float),
+            max_iter=int(max_iter),
+            tol=tols,
+            patience=int(patience),
+            memory=int(memory),
+            chain=bool(chain),
+            chain_temperatures=np.asarray(chain_temperatures, dtype=float),
+            chain_patience=int(chain_patience),
         )
-        outputs = (best_x, best_l, its, n_evals)
-        chaining = (bool(chain), np.asarray(chain_temperatures, dtype=float), int(chain_patience))
+        lay = obj.lane_layout
+        work = mu_lanes.lane_workspace(c, r, lay)
         start = np.ascontiguousarray(x)
         # one BLAS thread: threads on 26 x 26 LAPACK calls are 100x slower
         with single_threaded_blas(), mu_lanes.compile_with_slp():
-            if lanes:  # eight matrices in lock-step (mu_lanes)
-                mu_lanes.dg_minimize_lanes(
-                    obj.M, start, *settings, *obj.lane_rows, *outputs, *chaining
-                )
-            else:  # matrix by matrix
-                mu_kernels.dg_minimize(obj.M, start, lmax0, *settings, *outputs, *chaining)
+            mu_lanes.dg_minimize_lanes(
+                obj.M, start, options, lay, work, best_x, best_l, its, n_evals
+            )
         iters_done = int(its.max(initial=0))
         obj.count += n_evals
     elif p > 0 and max_iter > 0:  # max_iter = 0: the balancing (or warm start) alone
-        per_stage = max(max_iter // len(temperatures), min(max_iter, 5))
+        per_stage = max(max_iter // len(temperatures), min(max_iter, mu_lanes.MIN_STAGE_ITERATIONS))
         for stage, tau in enumerate(temperatures):
             t = tau / np.maximum(best_l, 1e-12)
             f, g, lmax, _ = obj(x, allidx, t)
@@ -765,7 +761,7 @@ def mu_upper_bound(
                     if layout.log_par.size
                     else np.zeros(len(d))
                 )
-                d *= np.minimum(1.0, 2.0 / np.maximum(dmax, 1e-300))[:, None]
+                d *= np.minimum(1.0, mu_lanes.MAX_LOG_STEP / np.maximum(dmax, 1e-300))[:, None]
                 alpha = np.ones(idx.size)
                 pending = np.ones(idx.size, dtype=bool)
                 f_new = f[idx].copy()
@@ -773,25 +769,26 @@ def mu_upper_bound(
                 l_new = np.full(idx.size, np.inf)
                 x_new = x[idx].copy()
                 accepted = np.zeros(idx.size, dtype=bool)
-                for _ls in range(12):
+                for _ls in range(mu_lanes.MAX_TRIALS):
                     sub = np.flatnonzero(pending)
                     if sub.size == 0:
                         break
                     xt = x[idx[sub]] + alpha[sub, None] * d[sub]
                     ft, gt, lt, _ = obj(xt, idx[sub], t[idx[sub]])
-                    ok = np.isfinite(ft) & (ft <= f[idx[sub]] + 1e-4 * alpha[sub] * slope[sub])
+                    armijo = f[idx[sub]] + mu_lanes.ARMIJO * alpha[sub] * slope[sub]
+                    ok = np.isfinite(ft) & (ft <= armijo)
                     acc = sub[ok]
                     f_new[acc], g_new[acc], l_new[acc], x_new[acc] = ft[ok], gt[ok], lt[ok], xt[ok]
                     accepted[acc] = True
                     pending[acc] = False
-                    alpha[sub[~ok]] *= 0.3
+                    alpha[sub[~ok]] *= mu_lanes.BACKTRACK
                 # L-BFGS memory update
                 for_upd = np.flatnonzero(accepted)
                 gi = idx[for_upd]
                 s_ = x_new[for_upd] - x[gi]
                 y_ = g_new[for_upd] - g[gi]
                 sy = np.einsum("bi,bi->b", s_, y_)
-                good = sy > 1e-14 * np.maximum(
+                good = sy > mu_lanes.CURVATURE_FLOOR * np.maximum(
                     np.linalg.norm(s_, axis=1) * np.linalg.norm(y_, axis=1), 1e-300
                 )
                 if np.any(good):
@@ -810,17 +807,17 @@ def mu_upper_bound(
                 stall[gi[~small]] = 0
                 active[gi[stall[gi] >= patience]] = False
                 # a failed line search: forget the curvature pairs and retry along the gradient;
-                # give up after three failures in a row
+                # give up after MAX_FAILED_SEARCHES failures in a row
                 failed = idx[~accepted]
                 fails[failed] += 1
                 fails[gi] = 0
                 S[failed], Y[failed], rho[failed] = 0.0, 0.0, 0.0
-                active[failed[fails[failed] >= 3]] = False
+                active[failed[fails[failed] >= mu_lanes.MAX_FAILED_SEARCHES]] = False
             if iters_done >= max_iter:
                 break
-    if balanced is not None:  # back to the scalings of M itself
-        best_x = balanced.to_absolute(best_x)
-        start_x = balanced.to_absolute(start_x)
+    if coords is not None:  # back to the scalings of M itself
+        best_x = coords.to_absolute(best_x)
+        start_x = coords.to_absolute(start_x)
         obj_final.count += obj.count
         obj = obj_final
     # exact lambda_max at the best scalings, and the scalings themselves
@@ -843,7 +840,7 @@ def mu_upper_bound(
         # until it holds), also at points between balancing and the optimizer's scalings, and
         # keep the best certified one
         sub = doubtful
-        x_bal = _osborne_init(Mn[sub], structure, layout)
+        x_bal = _osborne_init(Mn[sub], structure, layout, compiled=compiled)
         best = None
         for frac in (1.0, 0.9, 0.7, 0.5, 0.3, 0.1, 0.0):
             xs = x_bal + frac * (best_x[sub] - x_bal)
@@ -898,7 +895,7 @@ def _trusted(obj, best_x, start_x, rows):
     numpy.ndarray
         ``(K, n_params)`` scalings (``best_x`` where trusted).
     """
-    ref = _Objective(obj.M, obj.s, obj.L, use_compiled=False)
+    ref = _Objective(obj.M, obj.s, obj.L, compiled=False)
 
     def values(x, rows):
         one = np.ones(rows.size)

@@ -183,16 +183,14 @@ def _small_spacecraft():
     return append(*([integ * integ] * 3)) * accel
 
 
-def test_spacecraft_model_array_takes_the_route_and_matches_control(monkeypatch):
+def test_spacecraft_model_array_takes_the_route_and_matches_control():
     sys = _small_spacecraft()
     rng = np.random.default_rng(12)
     values = {name: spec.sample(rng, 6) for name, spec in sys.uncertainty.items()}
     models = usubs(sys, values)
     ok, resp = _route(models)
     assert ok.all()
-    monkeypatch.setattr(fr, "COUPLED_PATH", False)
-    modal = freqresp(models, OMEGA)
-    monkeypatch.setattr(fr, "COUPLED_PATH", True)
+    modal = freqresp(models, OMEGA, coupled=False)
     full = freqresp(models, OMEGA)
     for k in range(6):
         one = usubs(sys, {name: v[k] for name, v in values.items()}).to_ss()
@@ -206,9 +204,8 @@ def test_result_independent_of_threads_and_chunks(monkeypatch):
     values = {name: spec.sample(rng, 40) for name, spec in sys.uncertainty.items()}
     models = usubs(sys, values)
     ref = freqresp(models, OMEGA)
-    monkeypatch.setattr(fr, "WORKERS", 2)
     monkeypatch.setattr(fr, "COUPLED_CHUNK", 8)
-    assert np.array_equal(freqresp(models, OMEGA), freqresp(models, OMEGA))
+    assert np.array_equal(freqresp(models, OMEGA, workers=2), freqresp(models, OMEGA))
     monkeypatch.setattr(cm, "SUB_CHUNK_ENTRIES", 1)
     assert_response_close(freqresp(models, OMEGA).reshape(-1, 9), ref.reshape(-1, 9), rtol=1e-12)
 

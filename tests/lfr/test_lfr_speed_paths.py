@@ -2,7 +2,7 @@
 
 * ``freqresp``: the real pairwise modal route (LAPACK ``dgeev`` real eigenvector basis, real
   pair sums, one matrix product per model) against the general complex path of the same module
-  (``REAL_PAIR_PATH = False``), the exact direct solve ``C (jwI - A)^-1 B + D`` and
+  (``real_pairs=False``), the exact direct solve ``C (jwI - A)^-1 B + D`` and
   python-control; with integrator tails, odd core sizes, all-real spectra, ill-conditioned models
   mixed into a batch, complex data, and worker threads (bitwise identical results).
 * ``usubs``: the threaded batched substitution against the single-threaded one and a per-sample
@@ -35,10 +35,8 @@ def _direct(sys_ss, omega=OMEGA):
     return fr._direct_response(sys_ss.A, sys_ss.B, sys_ss.C, sys_ss.D, 1j * omega)
 
 
-def _general(sys, omega, monkeypatch):
-    with monkeypatch.context() as patch:
-        patch.setattr(fr, "REAL_PAIR_PATH", False)
-        return freqresp(sys, omega)
+def _general(sys, omega):
+    return freqresp(sys, omega, real_pairs=False)
 
 
 def _with_tail(rng, core_ss, chain: int):
@@ -83,7 +81,7 @@ def _lightly_damped(rng, modes: int, reals: int, ny: int, nu: int):
     ("modes", "reals", "chain"),
     [(3, 0, 0), (2, 1, 0), (2, 3, 0), (0, 5, 0), (4, 2, 2), (3, 1, 1), (2, 0, 3)],
 )
-def test_real_pair_path_matches_direct_solve_and_control(modes, reals, chain, monkeypatch):
+def test_real_pair_path_matches_direct_solve_and_control(modes, reals, chain):
     rng = np.random.default_rng(100 + 10 * modes + reals + 7 * chain)
     systems = []
     for _ in range(4):
@@ -103,7 +101,7 @@ def test_real_pair_path_matches_direct_solve_and_control(modes, reals, chain, mo
     assert ok.tolist() == expected_fast.tolist()
     assert ok.any() or chain == 3
     resp = freqresp(batch, OMEGA)
-    general = _general(batch, OMEGA, monkeypatch)
+    general = _general(batch, OMEGA)
     for k, sys in enumerate(systems):
         assert_response_close(resp[k], _direct(sys), rtol=RTOL)
         # python-control's own evaluation loses digits on a triple integrator at w = 0.01
@@ -122,7 +120,7 @@ def test_random_dense_batches_match_control():
             assert_response_close(resp[k], control_response(sys, OMEGA), rtol=RTOL)
 
 
-def test_ill_conditioned_models_fall_back_inside_a_batch(monkeypatch):
+def test_ill_conditioned_models_fall_back_inside_a_batch():
     """A defective (Jordan) model and a small-pole model with an integrator tail among good
     models: the fast route flags them and the general path computes them exactly."""
     rng = np.random.default_rng(3)
@@ -148,9 +146,7 @@ def test_ill_conditioned_models_fall_back_inside_a_batch(monkeypatch):
     resp = freqresp(batch, OMEGA)
     for k, sys in enumerate(systems):
         assert_response_close(resp[k], _direct(sys), rtol=RTOL)
-    assert_response_close(
-        resp.reshape(-1, 2), _general(batch, OMEGA, monkeypatch).reshape(-1, 2), rtol=RTOL
-    )
+    assert_response_close(resp.reshape(-1, 2), _general(batch, OMEGA).reshape(-1, 2), rtol=RTOL)
 
 
 def test_complex_data_uses_the_general_path():
@@ -168,8 +164,7 @@ def test_worker_threads_give_bitwise_identical_responses(monkeypatch):
     batch = _batch(systems)
     monkeypatch.setattr(fr, "CHUNK_ENTRIES", 1)  # one model per chunk: many tasks
     single = freqresp(batch, OMEGA)
-    monkeypatch.setattr(fr, "WORKERS", 2)
-    threaded = freqresp(batch, OMEGA)
+    threaded = freqresp(batch, OMEGA, workers=2)
     assert np.array_equal(single, threaded)
 
 
@@ -203,11 +198,9 @@ def test_usubs_then_freqresp_matches_a_per_sample_control_loop(monkeypatch):
     monkeypatch.setattr(subs, "SUBS_CHUNK_ENTRIES", 1)  # one model per chunk
     chunked = usubs(sys, values)
     np.testing.assert_allclose(chunked.M, models.M, rtol=1e-12, atol=1e-12 * np.abs(models.M).max())
-    monkeypatch.setattr(subs, "WORKERS", 2)
-    monkeypatch.setattr(fr, "WORKERS", 2)
-    threaded = usubs(sys, values)
+    threaded = usubs(sys, values, workers=2)
     assert np.array_equal(threaded.M, chunked.M)  # same chunks: bitwise equal
-    assert np.array_equal(threaded.freqresp(OMEGA), chunked.freqresp(OMEGA))
+    assert np.array_equal(freqresp(threaded, OMEGA, workers=2), chunked.freqresp(OMEGA))
     for k in range(9):
         ss_k = usubs(sys, {name: v[k] for name, v in values.items()}).to_ss()
         assert_response_close(resp[k], control_response(ss_k, OMEGA), rtol=RTOL)
@@ -234,7 +227,7 @@ def test_left_and_right_substitution_recursions_agree_with_the_general_solve():
     np.testing.assert_allclose(right, general, rtol=0, atol=1e-12 * scale)
 
 
-def test_duplicated_subsystems_use_an_exact_path(monkeypatch):
+def test_duplicated_subsystems_use_an_exact_path():
     """Redundant LFR algebra (``P b + P b`` in parallel, then in series; found by hypothesis):
     repeated eigenvalues, some flagged ill-conditioned and some not. The clustered-block method
     would divide by their (near-zero) separation (1e-7 errors); such models take the direct
@@ -250,8 +243,7 @@ def test_duplicated_subsystems_use_an_exact_path(monkeypatch):
         expr, {"a": np.array([-1.0, 0.0, 1.0]), "b": np.array([-1.0, 0.0, 1.0])}, normalized=True
     )
     n = models.nstates
-    monkeypatch.setattr(fr, "COUPLED_PATH", False)
-    resp = freqresp(models, OMEGA)
+    resp = freqresp(models, OMEGA, coupled=False)
     for k in range(3):
         M = models.M[k]
         direct = fr._direct_response(M[:n, :n], M[:n, n:], M[n:, :n], M[n:, n:], 1j * OMEGA)

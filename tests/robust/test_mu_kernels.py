@@ -34,8 +34,8 @@ def _objective_pair(blk, seed, n_mat=12):
     M = _crandn(rng, n_mat, s.n_cols, s.n_rows)
     M /= np.linalg.norm(M, axis=(1, 2))[:, None, None]
     layout = mu._layout(s)
-    numpy_obj = mu._Objective(M, s, layout, use_compiled=False)
-    compiled_obj = mu._Objective(M, s, layout, use_compiled=True)
+    numpy_obj = mu._Objective(M, s, layout, compiled=False)
+    compiled_obj = mu._Objective(M, s, layout, compiled=True)
     x = mu._osborne_init(M, s, layout) + 0.3 * rng.standard_normal((n_mat, layout.n_params))
     return s, M, x, numpy_obj, compiled_obj
 
@@ -90,18 +90,15 @@ def test_compiled_gradient_matches_finite_differences(blk):
 
 
 def test_compiled_optimizer_reproduces_the_numpy_optimizer():
-    # the same algorithm, per matrix instead of batched (and the gradient without eigenvalues
-    # of weight < WEIGHT_FLOOR): bounds within the optimizer's own stopping tolerance
+    # the same algorithm, eight matrices per lane evaluation instead of batched (and the
+    # gradient without eigenvalues of weight < WEIGHT_FLOOR): bounds within the optimizer's
+    # own stopping tolerance
     rng = np.random.default_rng(11)
     s = parse_blk(MIXED)
     M = _crandn(rng, 16, 9, 9)
     kw = dict(max_iter=60, tol=2e-4, temperatures=(50.0, 500.0), patience=3)
     fast = mu.mu_upper_bound(M, s, **kw)
-    try:
-        mu.USE_COMPILED = False
-        ref = mu.mu_upper_bound(M, s, **kw)
-    finally:
-        mu.USE_COMPILED = True
+    ref = mu.mu_upper_bound(M, s, **kw, compiled=False)
     rel = fast.upper / ref.upper - 1
     assert np.median(np.abs(rel)) < 1e-5
     assert np.max(np.abs(rel)) < 5e-3
@@ -119,11 +116,8 @@ def test_compiled_power_iteration_equals_the_numpy_one(blk):
     a = _crandn(rng, 30, s.n_cols)
     out = []
     for compiled in (False, True):
-        ml.USE_COMPILED = compiled
-        try:
-            out.append(ml._power_iteration(M, s, a, a.copy(), 40, 0.5, np.random.default_rng(5)))
-        finally:
-            ml.USE_COMPILED = True
+        rng5 = np.random.default_rng(5)
+        out.append(ml._power_iteration(M, s, a, a.copy(), 40, 0.5, rng5, compiled=compiled))
     assert_allclose(out[1][0], out[0][0], atol=1e-7)
     assert_allclose(out[1][1], out[0][1], atol=1e-7)
 

@@ -1,8 +1,8 @@
 """The lock-step (SIMD lane) D-G optimizer, ``oos_drake.robust.mu_lanes`` (issue 5 speed work).
 
 Checked against independent computations: the numpy objective of ``mu_upper`` (batched
-``eigh``), the per-matrix compiled optimizer (``mu_kernels.dg_minimize``), fully converged D-G
-bounds and the LMI certificate of every returned bound.
+``eigh``), the numpy optimizer of ``mu_upper`` (the same algorithm, ``compiled=False``), fully
+converged D-G bounds and the LMI certificate of every returned bound.
 """
 
 import numpy as np
@@ -35,28 +35,30 @@ def _lane_problem(blk, seed):
     M = _crandn(rng, W, s.n_cols, s.n_rows)
     M /= np.linalg.norm(M, axis=(1, 2))[:, None, None]
     layout = mu._layout(s)
-    ref = mu._Objective(M, s, layout, use_compiled=False)
+    ref = mu._Objective(M, s, layout, compiled=False)
     x = mu._osborne_init(M, s, layout) + 0.3 * rng.standard_normal((W, layout.n_params))
     packed = mu._Objective(M, s, layout).packed
     return s, M, x, layout, ref, packed
 
 
 def _lane_eval(s, M, x, layout, packed, tq, cap=None):
-    rows = mu_lanes.lane_layout(packed, s)
-    ws = list(mu_lanes._workspace(s.n_cols, s.n_rows, layout.n_entries, rows[-1]))
+    lay = mu_lanes.lane_layout(packed, s)
+    ws = mu_lanes.lane_workspace(s.n_cols, s.n_rows, lay)
     if cap is not None:  # a tiny QR step budget: every lane takes the per-matrix fallback
-        ws[26] = np.zeros(cap, dtype=np.int64)
-        ws[27] = np.zeros((cap, W))
-        ws[28] = np.zeros((cap, W))
+        ws = ws._replace(
+            rot_row=np.zeros(cap, dtype=np.int64),
+            rot_cos=np.zeros((cap, W)),
+            rot_sin=np.zeros((cap, W)),
+        )
     f, g, lmax = np.zeros(W), np.zeros((layout.n_params, W)), np.zeros(W)
     Mr = np.ascontiguousarray(M.real.transpose(1, 2, 0))
     Mi = np.ascontiguousarray(M.imag.transpose(1, 2, 0))
     with mu_lanes.compile_with_slp():
         t = mu_lanes._lane_eval(
             Mr, Mi, np.ascontiguousarray(M), np.ascontiguousarray(x.T), np.asarray(tq, float),
-            *packed, *rows[:-1], *ws, f, g, lmax,
+            lay, ws, f, g, lmax,
         )  # fmt: skip
-    return f, g.T, lmax, t, ws[33]
+    return f, g.T, lmax, t, ws.qr_ok
 
 
 @pytest.mark.parametrize("blk", [PAPER, MIXED, RECT, COMPLEX, FULL])
@@ -90,30 +92,32 @@ def test_lanes_whose_qr_exceeds_its_budget_fall_back_to_the_per_matrix_kernel():
     assert np.max(np.abs(g1 - g0)) <= 1e-3 * np.max(np.abs(g0))
 
 
-def _upper(M, s, lanes, **kw):
-    old = mu.USE_LANES
-    mu.USE_LANES = lanes
-    try:
-        return mu.mu_upper_bound(
-            M, s, max_iter=100, tol=2e-4, temperatures=(30.0, 300.0), patience=3, **kw
-        )
-    finally:
-        mu.USE_LANES = old
+def _upper(M, s, compiled, **kw):
+    return mu.mu_upper_bound(
+        M, s, max_iter=100, tol=2e-4, temperatures=(30.0, 300.0), patience=3, compiled=compiled,
+        **kw,
+    )  # fmt: skip
 
 
 @pytest.mark.parametrize("blk,nb", [(PAPER, 13), (MIXED, 21), (RECT, 5)])
-def test_lane_optimizer_reproduces_the_per_matrix_optimizer(blk, nb):
+def test_lane_optimizer_reproduces_the_numpy_optimizer(blk, nb):
     s = parse_blk(blk)
     M = _crandn(np.random.default_rng(nb), nb, s.n_cols, s.n_rows)
     lanes = _upper(M, s, True)
-    single = _upper(M, s, False)
-    # the same algorithm (one evaluation fewer: the start's is reused for the first stage);
-    # round-off in the eigen-solvers may flip a line-search decision, hence the tolerances
-    rel = np.abs(lanes.upper / single.upper - 1)
-    assert np.median(rel) < 1e-8
-    assert np.max(rel) < 2e-2
-    assert np.mean(lanes.evaluations <= single.evaluations) >= 0.8
-    for res in (lanes, single):  # both certified by the independent LMI check
+    oracle = _upper(M, s, False)
+    # the same algorithm, but the lanes leave eigenvalues of weight < WEIGHT_FLOOR out of the
+    # gradient and round-off in the eigen-solvers may flip a line-search decision: the two
+    # stop at different points within the stopping tolerance (tol = 2e-4 per iteration)
+    rel = np.abs(lanes.upper / oracle.upper - 1)
+    assert np.median(rel) < 1e-4
+    assert np.max(rel) < 5e-3
+    converged = mu.mu_upper_bound(
+        M, s, max_iter=600, tol=1e-12, temperatures=(30.0, 300.0, 3000.0, 30000.0)
+    ).upper
+    for res in (lanes, oracle):  # both valid (not below the converged bound) and close to it
+        assert np.all(res.upper >= converged * (1 - 1e-9))
+        assert np.max(res.upper / converged - 1) < 2e-2
+    for res in (lanes, oracle):  # both certified by the independent LMI check
         assert np.all(mu.lmi_residual(M, res.upper * (1 + 1e-7), res.D_left, res.D_right, res.G)
                       <= mu.LMI_ROUNDOFF)  # fmt: skip
 
@@ -138,27 +142,29 @@ def test_slp_switch_is_restored():
     assert numba.config.SLP_VECTORIZE == before
 
 
-@pytest.mark.parametrize("batch", [mu.LANES_MIN_BATCH - 1, mu.LANES_MIN_BATCH])
-def test_batches_below_the_lane_threshold_go_matrix_by_matrix(monkeypatch, batch):
-    """DESIGN.md: batches of fewer than LANES_MIN_BATCH matrices are optimized by the per-matrix
-    kernel, larger ones eight at a time in the lanes."""
-    calls = {"lanes": 0, "per matrix": 0}
-    lanes, per_matrix = mu_lanes.dg_minimize_lanes, mu_kernels.dg_minimize
+@pytest.mark.parametrize("batch", [1, 2, 3, 7])
+def test_small_batches_run_on_the_lanes_with_the_values_of_a_full_batch(monkeypatch, batch):
+    """DESIGN.md: every batch runs on the lane optimizer; lanes without a matrix idle. Lanes
+    share only the length of the gradient's eigenvector sums (the largest over the lanes: the
+    summation order), so a matrix gets the bound it gets inside a batch of eight up to
+    round-off, which can flip a line-search decision: the two stop within the stopping
+    tolerance (tol = 2e-4 per iteration) of each other."""
+    calls = []
+    lanes = mu_lanes.dg_minimize_lanes
 
     def spy_lanes(*args, **kwargs):
-        calls["lanes"] += 1
+        calls.append(args[0].shape[0])
         return lanes(*args, **kwargs)
 
-    def spy_per_matrix(*args, **kwargs):
-        calls["per matrix"] += 1
-        return per_matrix(*args, **kwargs)
-
-    monkeypatch.setattr(mu_lanes, "dg_minimize_lanes", spy_lanes)
-    monkeypatch.setattr(mu_kernels, "dg_minimize", spy_per_matrix)
+    s = parse_blk(MIXED)
     rng = np.random.default_rng(5)
-    M = rng.standard_normal((batch, 9, 9)) + 1j * rng.standard_normal((batch, 9, 9))
-    mussv(M, [[-2, 0], [-1, 0], [2, 2], [2, 0], [1, 0], [1, 0]])
-    if batch < mu.LANES_MIN_BATCH:
-        assert calls["lanes"] == 0 and calls["per matrix"] >= 1
-    else:
-        assert calls["lanes"] >= 1
+    M = rng.standard_normal((W, 9, 9)) + 1j * rng.standard_normal((W, 9, 9))
+    full = _upper(M, s, True)
+    monkeypatch.setattr(mu_lanes, "dg_minimize_lanes", spy_lanes)
+    part = _upper(M[:batch], s, True)
+    assert calls == [batch]
+    rel = np.abs(part.upper / full.upper[:batch] - 1)
+    assert np.median(rel) < 1e-4
+    assert np.max(rel) < 5e-3
+    assert np.all(mu.lmi_residual(M[:batch], part.upper * (1 + 1e-7), part.D_left,
+                                  part.D_right, part.G) <= mu.LMI_ROUNDOFF)  # fmt: skip

@@ -36,11 +36,7 @@ def _unit(rng, n, c):
 
 
 def _numpy_path(fn, *args, **kwargs):
-    ml.USE_COMPILED = False
-    try:
-        return fn(*args, **kwargs)
-    finally:
-        ml.USE_COMPILED = True
+    return fn(*args, **kwargs, compiled=False)
 
 
 @pytest.mark.parametrize("blk", [MIXED, RECT, COMPLEX, [[2, 2], [3, 3]]])

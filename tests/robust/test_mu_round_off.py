@@ -24,8 +24,8 @@ def _fixture():
     return f["M"], parse_blk(f["blk"])
 
 
-@pytest.mark.parametrize("lanes", [True, False], ids=["lanes", "per-matrix"])
-def test_bound_never_above_the_plain_norm_and_certified(lanes):
+@pytest.mark.parametrize("mode", ["batch", "single", "numpy"])
+def test_bound_never_above_the_plain_norm_and_certified(mode):
     from oos_drake.robust.mu import UPPER_ITERATIONS, UPPER_PATIENCE, UPPER_TEMPERATURES, UPPER_TOL
 
     M, s = _fixture()
@@ -35,11 +35,12 @@ def test_bound_never_above_the_plain_norm_and_certified(lanes):
         temperatures=UPPER_TEMPERATURES,
         patience=UPPER_PATIENCE,
     )
-    if lanes:  # one batch (lock-step lanes), the same matrix repeated too
+    if mode == "batch":  # one batch (lock-step lanes), the same matrix repeated too
         res = [mu_upper_bound(np.concatenate([M, M[2:3].repeat(2, 0)]), s, **kw)]
         upper = res[0].upper[: len(M)]
         Dl, Dr, G = (x[: len(M)] for x in (res[0].D_left, res[0].D_right, res[0].G))
-    else:  # matrix by matrix (the compiled per-matrix kernel)
+    else:  # matrix by matrix: the lanes with seven idle, or the numpy oracle
+        kw["compiled"] = mode != "numpy"
         res = [mu_upper_bound(M[i : i + 1], s, **kw) for i in range(len(M))]
         upper = np.array([r.upper[0] for r in res])
         Dl, Dr, G = (np.array([getattr(r, a)[0] for r in res]) for a in ("D_left", "D_right", "G"))
