@@ -598,6 +598,10 @@ class AxisGuarantee:
         Relative slack above each point's bound.
     seconds : float
         Wall-clock time of the covers [s].
+    models : numpy.ndarray
+        ``(N,)`` the configurations (model indices) of ``levels``.
+    grid_upper, grid_lower : numpy.ndarray
+        ``(N,)`` each configuration's largest upper / lower bound on the analyzed frequencies.
     """
 
     mu_upper: float
@@ -607,6 +611,9 @@ class AxisGuarantee:
     failures: tuple
     slack: float
     seconds: float
+    models: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    grid_upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    grid_lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def raised(self) -> int:
@@ -696,6 +703,9 @@ def axis_guarantee(
         failures=failures,
         slack=slack,
         seconds=_time.perf_counter() - clock,
+        models=models.astype(int),
+        grid_upper=np.array([pts.upper[pts.model == m].max() for m in models], dtype=float),
+        grid_lower=np.array([pts.lower[pts.model == m].max() for m in models], dtype=float),
     )
 
 
