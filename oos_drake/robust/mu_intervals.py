@@ -164,9 +164,10 @@ class Realization:
         return out
 
     def modal(self):
-        """``(poles, V, V^{-1})`` of the continuous-time ``A`` (:meth:`continuous`), or None
-        when its eigenvectors are too ill-conditioned (condition number above 1e8); computed
-        once per realization (every interval of a cover shares it)."""
+        """``(poles, V, V^{-1})`` of the continuous-time ``A`` (:meth:`continuous`);
+        ``(poles, None, None)`` when its eigenvectors are too ill-conditioned (condition number
+        above 1e8), None without states; computed once per realization (every interval of a
+        cover shares it)."""
         if "_modal" not in self.__dict__:
             A = self.continuous()[0]
             modal = None
