@@ -395,6 +395,7 @@ def run_analysis(
             description=description,
             time_budget=max(options.spike_budget - spike_seconds[0], 1e-3),
             guarantee=options.guarantee,
+            guarantee_gap=options.tighten.target_gap,
         )
         spike_seconds[0] += sum(r.seconds for r in res.reports.values())
         return res
