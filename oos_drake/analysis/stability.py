@@ -572,15 +572,17 @@ class AxisGuarantee:
 
     Every configuration's bound is proved by D-G scalings on frequency intervals that cover
     ``[0, inf)`` (:func:`~oos_drake.robust.mu_intervals.cover_axis`), all at a common level
-    (at least ``floor``, the subset's certified lower bound plus the slack). Configurations
-    between the analyzed ones are NOT covered: they remain sampled.
+    (at least ``floor``: the subset's certified lower bound plus the target gap, raised where
+    a configuration's mu is above it). Configurations between the analyzed ones are NOT
+    covered: they remain sampled.
 
     Attributes
     ----------
     mu_upper : float
         ``max`` over configurations of the proved level (``inf`` if one has no certificate).
     floor : float
-        The common starting level ``(1 + slack) mu_lower`` [-].
+        The common starting level ``(1 + gap) mu_lower`` [-] (``gap``: see
+        :func:`axis_guarantee`).
     levels : numpy.ndarray
         ``(N,)`` level proved for each configuration.
     points : numpy.ndarray
@@ -591,6 +593,10 @@ class AxisGuarantee:
         Relative slack above each point's bound.
     seconds : float
         Wall-clock time of the covers [s].
+    models : numpy.ndarray
+        ``(N,)`` the configurations (model indices) of ``levels``.
+    grid_upper, grid_lower : numpy.ndarray
+        ``(N,)`` each configuration's largest upper / lower bound on the analyzed frequencies.
     """
 
     mu_upper: float
@@ -600,6 +606,9 @@ class AxisGuarantee:
     failures: tuple
     slack: float
     seconds: float
+    models: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    grid_upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    grid_lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def raised(self) -> int:
@@ -609,24 +618,29 @@ class AxisGuarantee:
 
 def _axis_task(task):
     """Worker: the cover of one configuration and subset -> ``(level, points, failure)``."""
-    from oos_drake.robust.mu_intervals import Realization, cover_axis, mu_solver
+    from oos_drake.robust.mu_intervals import Realization, cover_axis, mu_solver, scalings_at
 
-    A, Bw, Cz, Dzw, blk, seeds, floor, slack = task
+    A, Bw, Cz, Dzw, blk, seeds, floor, slack, grid_omega, grid_params = task
     real = Realization(A, Bw, Cz, Dzw)
     try:
+        # the grid's own scalings are the first candidates: no second optimization there
+        grid_upper, grid_scalings = scalings_at(real, blk, grid_omega, grid_params)
         cert = cover_axis(
             real,
             mu_solver(real, blk, slack=slack, polish_above=floor / (1 + slack)),
             seeds,
             floor=floor,
             slack=slack,
+            known=(grid_omega, grid_upper, grid_scalings),
         )
     except ValueError as err:
         return np.inf, 0, str(err)
     return float(cert.upper), int(cert.omega.size), "" if cert.covered else "cover did not close"
 
 
-def axis_guarantee(pool, pts, parts, lower: float, model_matrices, slack=None) -> AxisGuarantee:
+def axis_guarantee(
+    pool, pts, parts, lower: float, model_matrices, slack=None, gap=None
+) -> AxisGuarantee:
     """Prove the peak of mu of every configuration of one subset on the whole frequency axis.
 
     Parameters
@@ -638,11 +652,21 @@ def axis_guarantee(pool, pts, parts, lower: float, model_matrices, slack=None) -
     parts : tuple
         ``(z rows, w columns, BLK)`` of the subset.
     lower : float
-        The subset's certified lower bound: the common level starts at ``(1 + slack) lower``.
+        The subset's certified lower bound: the common level starts at ``(1 + gap) lower``.
     model_matrices : callable
         ``model -> (A, Bw, Cz, Dzw)`` of the subset's Delta channels.
     slack : float, optional
-        Default :data:`oos_drake.robust.mu_intervals.SLACK`.
+        Relative slack above each solved point's bound; default
+        :data:`oos_drake.robust.mu_intervals.SLACK`.
+    gap : float, optional
+        Relative gap of the starting level above ``lower`` (default and at least ``slack``).
+        The cost of the covers falls fast as it grows (a level close to mu over a wide band
+        needs many narrow intervals); the analysis uses its target gap, so the guaranteed
+        peak is within the target of the lower bound unless a configuration's mu is above it.
+
+    Each configuration's cover starts from the grid's own scalings (an interval test each,
+    no optimization: :func:`~oos_drake.robust.mu_intervals.scalings_at`); only the gaps they
+    leave are solved, and the grid's peaks only where their grid bound is above the level.
     """
     import time as _time
 
@@ -652,13 +676,17 @@ def axis_guarantee(pool, pts, parts, lower: float, model_matrices, slack=None) -
     clock = _time.perf_counter()
     blk = parts[2]
     models = np.unique(pts.model)
-    floor = (1.0 + slack) * max(float(lower), 0.0)
+    gap = slack if gap is None else max(float(gap), slack)
+    floor = (1.0 + gap) * max(float(lower), 0.0)
     tasks = []
     for m in models:
         mine = pts.model == m
         w, up, lo = pts.omega[mine], pts.upper[mine], pts.lower[mine]
-        seeds = np.unique([w[np.argmax(up)], w[np.argmax(lo)]])
-        tasks.append((*model_matrices(int(m)), blk, seeds, floor, slack))
+        # the peaks are solved (long runs where their bound is above the floor) unless their
+        # grid scalings prove the floor already
+        peaks = np.unique([np.argmax(up), np.argmax(lo)])
+        seeds = w[peaks[up[peaks] * (1.0 + slack) > floor]]
+        tasks.append((*model_matrices(int(m)), blk, seeds, floor, slack, w, pts.params[mine]))
     out = pool.map(_axis_task, tasks)
     levels = np.array([o[0] for o in out], dtype=float)
     failures = tuple(f"model {m}: {o[2]}" for m, o in zip(models, out, strict=True) if o[2])
@@ -670,6 +698,9 @@ def axis_guarantee(pool, pts, parts, lower: float, model_matrices, slack=None) -
         failures=failures,
         slack=slack,
         seconds=_time.perf_counter() - clock,
+        models=models.astype(int),
+        grid_upper=np.array([pts.upper[pts.model == m].max() for m in models], dtype=float),
+        grid_lower=np.array([pts.lower[pts.model == m].max() for m in models], dtype=float),
     )
 
 
@@ -712,6 +743,7 @@ def certified_sweep(
     description: str = "mu sweep",
     time_budget: float = float("inf"),
     guarantee: bool = False,
+    guarantee_gap: float | None = None,
 ) -> StudyResult:
     """Grid sweep, spike resolution and certified peak of every subset.
 
@@ -742,6 +774,10 @@ def certified_sweep(
     guarantee : bool
         Also prove each configuration's peak on the whole frequency axis
         (:func:`axis_guarantee`, timed as ``guarantee``).
+    guarantee_gap : float, optional
+        ``gap`` of :func:`axis_guarantee`: the level starts at ``(1 + guarantee_gap)`` times
+        the certified lower bound (default the slack: tightest, most points; the analysis
+        passes its target gap).
 
     Returns
     -------
@@ -854,6 +890,7 @@ def certified_sweep(
                     parts[name],
                     certificates[name].mu_lower,
                     lambda m, name=name: matrices(m, name),
+                    gap=guarantee_gap,
                 )
             timings["guarantee"] = _time.perf_counter() - clock
     return StudyResult(_table(points, times), certificates, reports, timings, guarantees)

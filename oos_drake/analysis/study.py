@@ -146,6 +146,7 @@ class StudyOptions:
             time_check=False,
             open_loop_samples=0,
             progress=False,
+            guarantee=False,  # many analyses: grid-only upper bounds (the cost of one guarantee each)
         )
     )
     workers: int = 2

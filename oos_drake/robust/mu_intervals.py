@@ -150,6 +150,8 @@ class Realization:
         """``(A, B, C, D)`` whose response at ``j nu`` is ``M`` at :meth:`to_nu` ``(omega)``."""
         if self.sample_time is None:
             return self.A, self.B, self.C, self.D
+        if "_continuous" in self.__dict__:
+            return self.__dict__["_continuous"]
         n = self.A.shape[0]
         if n == 0:
             return self.A, self.B, self.C, self.D
@@ -157,7 +159,26 @@ class Realization:
         Pi_B = np.linalg.solve(P, self.B)
         C_Pi = np.linalg.solve(P.T, self.C.T).T
         Ac = np.linalg.solve(P, self.A - np.eye(n))
-        return Ac, np.sqrt(2.0) * Pi_B, np.sqrt(2.0) * C_Pi, self.D - self.C @ Pi_B
+        out = (Ac, np.sqrt(2.0) * Pi_B, np.sqrt(2.0) * C_Pi, self.D - self.C @ Pi_B)
+        object.__setattr__(self, "_continuous", out)  # computed once per realization
+        return out
+
+    def modal(self):
+        """``(poles, V, V^{-1})`` of the continuous-time ``A`` (:meth:`continuous`);
+        ``(poles, None, None)`` when its eigenvectors are too ill-conditioned (condition number
+        above 1e8), None without states; computed once per realization (every interval of a
+        cover shares it)."""
+        if "_modal" not in self.__dict__:
+            A = self.continuous()[0]
+            modal = None
+            if A.shape[0]:
+                lam, V = np.linalg.eig(A)
+                cond = np.linalg.cond(V)
+                modal = (lam, V, np.linalg.inv(V)) if np.isfinite(cond) and cond < 1e8 else None
+                if modal is None:
+                    modal = (lam, None, None)
+            object.__setattr__(self, "_modal", modal)
+        return self.__dict__["_modal"]
 
     def to_nu(self, omega):
         """Continuous-time frequency of the Cayley image (identity in continuous time)."""
@@ -252,10 +273,10 @@ class _Multiplier:
         self._modal = None
         self.poles = np.zeros(0)
         if A.shape[0]:
-            lam, V = np.linalg.eig(A)
+            lam, V, V_inv = real.modal()
             self.poles = lam
-            if np.isfinite(np.linalg.cond(V)) and np.linalg.cond(V) < 1e8:
-                self._modal = (lam, C @ V, np.linalg.solve(V, B))
+            if V is not None:
+                self._modal = (lam, C @ V, V_inv @ B)
         self.ref = np.linalg.norm(self.P22, 2)
 
     def max_eig(self, nu) -> np.ndarray:
@@ -532,6 +553,7 @@ def cover_axis(
     performance_rows: int = 0,
     max_rounds: int = 40,
     progress=None,
+    known=None,
 ) -> AxisCertificate:
     """Cover the frequency axis with intervals proved by D-G scalings.
 
@@ -556,6 +578,12 @@ def cover_axis(
         Rounds of gap filling before giving up (then ``covered`` is False and ``upper`` inf).
     progress : callable, optional
         Called with the number of points after each round.
+    known : tuple, optional
+        ``(omega, optimal, scalings)`` of points whose scalings are already known (e.g. a
+        grid sweep's, :func:`scalings_at`): before solving new points in a gap, the cover
+        tries the known points inside it (nearest to each edge first), no optimization. They
+        never raise the level: a known point whose scalings do not prove the current level
+        (a stalled optimizer) simply proves no interval, and the gap is solved.
 
     Returns
     -------
@@ -564,15 +592,17 @@ def cover_axis(
     real.check_axis()
     end = real.nyquist
     omega = np.unique(np.clip(np.asarray(seeds, dtype=float), 0.0, end))
-    opt, lmin, scs = solve(omega)
+    opt, lmin, scs = solve(omega) if omega.size else ([], [], [])
     opt, lmin, scs = list(opt), list(lmin), list(scs)
     omega, added = list(omega), [False] * len(omega)
     level = max(float(floor), max(lmin, default=0.0))
+    spare = _Spare(known, omega)
     # an interval proved at a lower level also proves any higher one (Phi only decreases), so
     # each point keeps the interval of the level current when it was solved: no recomputation
     proved = {}
     covered = False
-    for _ in range(max_rounds):
+    rounds = 0  # rounds that solved new points (the known points' rounds are free)
+    while rounds < max_rounds:
         for i, w in enumerate(omega):
             if i not in proved:
                 proved[i] = (level, _interval_at(real, performance_rows, scs[i], level, w))
@@ -580,9 +610,19 @@ def cover_axis(
         if not gaps:
             covered = True
             break
+        take = spare.take(gaps, level / (1.0 + slack))
+        if take:  # known scalings first: an interval test, no optimization
+            for w, o, sc in take:
+                omega.append(w)
+                opt.append(o)
+                lmin.append(o * (1.0 + slack))
+                scs.append(sc)
+                added.append(False)
+            continue
         new = _new_points(gaps, end, omega)
         if new.size == 0:
             break
+        rounds += 1
         o2, l2, s2 = solve(new)
         omega.extend(new.tolist())
         opt.extend(list(o2))
@@ -610,6 +650,59 @@ def cover_axis(
         realization=real,
         performance_rows=performance_rows,
     )
+
+
+class _Spare:
+    """Known points of :func:`cover_axis` not used yet (``known``), sorted by frequency."""
+
+    def __init__(self, known, used):
+        if known is None:
+            self.omega, self.optimal, self.scalings = np.zeros(0), np.zeros(0), []
+            return
+        w, o, sc = known
+        w, o, used = (np.asarray(x, dtype=float).ravel() for x in (w, o, used))
+        keep = np.isfinite(o)  # a point solved already (a seed) is not tried twice
+        if used.size and w.size:
+            dist = np.min(np.abs(w[:, None] - used[None, :]), axis=1)
+            keep &= dist > 1e-12 * np.maximum(w, 1e-300)
+        rows = np.flatnonzero(keep)[np.argsort(w[keep], kind="stable")]
+        self.omega, self.optimal = w[rows], o[rows]
+        self.scalings = [sc[i] for i in rows]
+
+    def take(self, gaps, below: float) -> list:
+        """``(omega, optimal, scalings)`` of the unused known points nearest to each edge of
+        each gap (inside it) whose bound is at most ``below`` (the others cannot prove the
+        level); removed from the spares."""
+        chosen = set()
+        for a, b in gaps:
+            inside = np.flatnonzero((self.omega >= a) & (self.omega <= b) & (self.optimal <= below))
+            if inside.size:
+                chosen.update((int(inside[0]), int(inside[-1])))
+        if not chosen:
+            return []
+        out = [(float(self.omega[i]), float(self.optimal[i]), self.scalings[i]) for i in chosen]
+        rest = np.setdiff1d(np.arange(self.omega.size), sorted(chosen))
+        self.omega, self.optimal = self.omega[rest], self.optimal[rest]
+        self.scalings = [self.scalings[i] for i in rest]
+        return out
+
+
+def scalings_at(real: Realization, blk, omega, params) -> tuple:
+    """``(upper, scalings)`` of the raw D-G parameters ``params`` (``UpperBoundResult.params``
+    of a sweep at the frequencies ``omega`` [rad/s]): the bound they give exactly at each
+    frequency and the (conditioned) :class:`Scalings`, no optimization. For the ``known``
+    points of :func:`cover_axis`."""
+    from oos_drake.robust.blocks import parse_blk
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    omega = np.asarray(omega, dtype=float)
+    if omega.size == 0:
+        return np.zeros(0), []
+    res = mu_upper_bound(real.response(omega), parse_blk(blk), max_iter=0, x0=np.asarray(params))
+    scalings = [
+        Scalings(res.D_left[i], res.D_right[i], res.G[i]).conditioned() for i in range(omega.size)
+    ]
+    return res.upper, scalings
 
 
 def _interval_at(real, performance_rows, sc, level, omega0):

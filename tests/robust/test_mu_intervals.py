@@ -19,6 +19,7 @@ from oos_drake.robust.mu_intervals import (
     cover_axis,
     dg_interval,
     mu_solver,
+    scalings_at,
 )
 from oos_drake.robust.mu_upper import lmi_residual
 
@@ -152,6 +153,42 @@ def test_cover_proves_every_frequency():
     lower = np.max(mussv(Ms[::10], blk).lower)
     assert lower == pytest.approx(0.5, rel=1e-3)
     assert lower <= cert.upper <= 1.02 * lower
+
+
+def test_cover_from_known_grid_scalings():
+    """``cover_axis(known=...)`` (the analysis' path): a sweep's raw scalings, a stalled one
+    among them (D = I, G = 0: the plain norm, far above mu), are tried before any solve; the
+    stalled point proves no interval and does not raise the level; every frequency is
+    proved (dense LMI check) and the level is within 2 % of the exact peak 0.5."""
+    from oos_drake.robust.blocks import parse_blk
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    real, blk = delta_realization(two_modes())
+    grid = np.geomspace(0.1, 10.0, 25)
+    res = mu_upper_bound(real.response(grid), parse_blk(blk), max_iter=30)
+    params = res.params.copy()
+    params[12] = 0.0  # a stalled point: the identity scalings
+    upper, scalings = scalings_at(real, blk, grid, params)
+    assert upper[12] == pytest.approx(np.linalg.norm(real.response(grid[12:13])[0], 2))
+    cert = cover_axis(
+        real,
+        mu_solver(real, blk, polish_above=0.5),
+        [],
+        floor=1.005 * 0.5,
+        known=(grid, upper, scalings),
+    )
+    assert cert.covered and cert.check()["intervals_hold"] and cert.check()["covered"]
+    assert 0.5 <= cert.upper <= 1.02 * 0.5
+    assert np.sum(~cert.added) >= 2  # known points were used, not solved again
+    dense = np.linspace(0.0, 6.0, 6001)
+    Ms = real.response(dense)
+    proved = np.zeros(dense.size, dtype=bool)
+    for (lo, hi), sc, lev in zip(cert.interval, cert.scalings, cert.level, strict=True):
+        if np.isfinite(lo):
+            inside = (dense >= lo) & (dense <= hi)
+            assert np.all(lmi_residual(Ms[inside], lev, sc.D_left, sc.D_right, sc.G) <= 0.0)
+            proved |= inside
+    assert np.all(proved)
 
 
 @pytest.mark.parametrize(
