@@ -141,7 +141,7 @@ def main(argv=None):
         f"{'peak upper/lower per model':<28}median {peak_gap.median():.4f}, "
         f"max {peak_gap.max():.4f} (analysis needs <= 1.05)"
     )
-    print(f"{'peak mu upper':<28}{table["mu upper [-]"].max():.4f}")
+    print(f"{'peak mu upper':<28}{table['mu upper [-]'].max():.4f}")
 
 
 if __name__ == "__main__":
