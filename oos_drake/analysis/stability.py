@@ -472,14 +472,14 @@ def _table(points: dict, times) -> pd.DataFrame:
     pts = list(points.values())
     model = np.concatenate([p.model for p in pts])
     return sweep_table(
-        names,
-        model,
-        times[model],
-        np.concatenate([p.omega for p in pts]),
-        np.concatenate([p.upper for p in pts]),
-        np.concatenate([p.lower for p in pts]),
-        np.concatenate([p.refined for p in pts]),
-        np.concatenate([p.tightened for p in pts]),
+        subset=names,
+        model=model,
+        time=times[model],
+        omega=np.concatenate([p.omega for p in pts]),
+        upper=np.concatenate([p.upper for p in pts]),
+        lower=np.concatenate([p.lower for p in pts]),
+        refined=np.concatenate([p.refined for p in pts]),
+        tightened=np.concatenate([p.tightened for p in pts]),
     )
 
 

@@ -96,12 +96,12 @@ class RobStabResult:
             :data:`~oos_drake.robust.tables.GUARANTEE_COLUMNS` when ``guarantee`` is set.
         """
         return sweep_table(
-            subset,
-            0,
-            time,
-            self.omega,
-            self.mu_upper,
-            self.mu_lower,
+            subset=subset,
+            model=0,
+            time=time,
+            omega=self.omega,
+            upper=self.mu_upper,
+            lower=self.mu_lower,
             guaranteed=None if self.guarantee is None else self.guarantee.upper,
             guarantee_points=None if self.guarantee is None else self.guarantee.omega.size,
         )

@@ -438,14 +438,14 @@ def robust_sweep(
 
     guaranteed = slack is not None
     return sweep_table(
-        column(subset),
-        column(model),
-        column(times[list(model)]),
-        column(freqs),
-        column(upper),
-        column(lower),
-        column(refined),
-        column(tightened),
+        subset=column(subset),
+        model=column(model),
+        time=column(times[list(model)]),
+        omega=column(freqs),
+        upper=column(upper),
+        lower=column(lower),
+        refined=column(refined),
+        tightened=column(tightened),
         guaranteed=column([a[0] for a in axis]) if guaranteed else None,
         guarantee_points=column([a[1] for a in axis]) if guaranteed else None,
     )

@@ -73,6 +73,7 @@ def upgrade_columns(table, legacy: dict | None = None):
 
 
 def sweep_table(
+    *,
     subset,
     model,
     time,

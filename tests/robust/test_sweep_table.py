@@ -25,12 +25,28 @@ def test_every_column_follows_the_name_unit_convention():
 
 
 def test_sweep_table_builds_the_schema_and_converts_to_hz():
-    t = sweep_table("total", [1, 0, 0], 12.0, [2 * np.pi, 4 * np.pi, 2 * np.pi], 3.0, [1, 2, 3])
+    t = sweep_table(
+        subset="total",
+        model=[1, 0, 0],
+        time=12.0,
+        omega=[2 * np.pi, 4 * np.pi, 2 * np.pi],
+        upper=3.0,
+        lower=[1, 2, 3],
+    )
     assert list(t.columns) == SWEEP_COLUMNS
     assert t["frequency [Hz]"].tolist() == [1.0, 2.0, 1.0]  # sorted by model, then frequency
     assert t["model"].tolist() == [0, 0, 1]
     assert t["mu lower [-]"].tolist() == [3.0, 2.0, 1.0]
-    g = sweep_table("s", 0, np.nan, [1.0], 1.0, 0.5, guaranteed=1.1, guarantee_points=7)
+    g = sweep_table(
+        subset="s",
+        model=0,
+        time=np.nan,
+        omega=[1.0],
+        upper=1.0,
+        lower=0.5,
+        guaranteed=1.1,
+        guarantee_points=7,
+    )
     assert list(g.columns) == SWEEP_COLUMNS + GUARANTEE_COLUMNS
     assert g["guarantee_points"].iloc[0] == 7
 
