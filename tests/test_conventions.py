@@ -314,3 +314,48 @@ def test_readme_snippet_substitutes_the_schedule_and_keeps_delta_real(capsys):
     for k in (0, 217, 329):
         alone = usubs(model, mission_values(times[k : k + 1])).model(0)
         np.testing.assert_allclose(array.model(k).M, alone.M, rtol=1e-12, atol=1e-12)
+
+
+# ---------------------------------------------------------------- benchmarks stay runnable
+BENCHMARKS = sorted((PACKAGE.parent / "benchmarks").glob("bench_*.py"))
+
+
+def _package_imports(tree):
+    """``(module, name)`` of every ``from oos_drake... import name`` in a parsed file, except
+    fallbacks in ``except ImportError:`` handlers (imports of older checkouts, for comparisons)."""
+    fallbacks = {
+        id(node)
+        for handler in ast.walk(tree)
+        if isinstance(handler, ast.ExceptHandler)
+        for node in ast.walk(handler)
+    }
+    return [
+        (node.module, alias.name)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom)
+        and (node.module or "").startswith("oos_drake")
+        and id(node) not in fallbacks
+        for alias in node.names
+    ]
+
+
+def test_the_benchmark_scan_catches_a_missing_name():
+    tree = ast.parse("from oos_drake.robust.mu import no_such_function\n")
+    missing = [
+        (m, n) for m, n in _package_imports(tree) if not hasattr(__import__(m, fromlist=[n]), n)
+    ]
+    assert missing == [("oos_drake.robust.mu", "no_such_function")]
+
+
+@pytest.mark.parametrize("path", BENCHMARKS, ids=lambda p: p.name)
+def test_benchmarks_compile_and_import_names_that_exist(path):
+    """CI does not run ``benchmarks/`` (timing scripts); this keeps them valid Python of the
+    supported version and their package imports pointing at names that exist."""
+    source = path.read_text()
+    tree = ast.parse(source, filename=str(path))  # a SyntaxError names the file and line
+    compile(source, str(path), "exec")
+    for module, name in _package_imports(tree):
+        mod = __import__(module, fromlist=[name])
+        assert hasattr(mod, name) or (module + "." + name) in sys.modules, (
+            f"{path.name}: {module} has no {name}"
+        )
