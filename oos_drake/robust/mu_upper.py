@@ -25,9 +25,20 @@ the two and stalls on ill-conditioned matrices). ``lambda_max`` is smoothed by t
 the eigenvalues (temperature raised in stages) and minimized by a batched L-BFGS over all
 matrices at once; the gradient uses only the few eigenvectors that carry the smoothed maximum.
 Initialization: Osborne balancing of ``|M|`` (one scaling per full block and per channel of a
-repeated block), or a warm start. Whatever the optimizer reaches, the returned value is the
-exact ``lambda_max`` at the returned scalings, so the bound is always valid; the scalings are
-returned so that the LMI can be checked independently (:func:`lmi_residual`).
+repeated block), or a warm start.
+
+Certificate: whatever the optimizer reaches, every returned bound is proved by the returned
+scalings (:func:`certified_upper`): the LMI is checked in the scaled coordinates of
+:func:`lmi_residual` with an a priori bound of the check's own round-off
+(:func:`check_roundoff`), and the bound is raised, in closed form, by what that check needs.
+The value the optimizer reports comes from a compiled fastmath evaluation whose rounding can
+change with the process' history (which copy of a cached kernel was loaded first); the
+certificate does not depend on it. Where the optimizer's scalings are so ill-conditioned that
+their LMI terms dwarf the bound (mu about 0 approached by scalings running off to infinity:
+the cancellation is beyond double precision), points back to its start and ``D = I, G = 0``
+(the plain bound ``||M||_2``) are certified too and the lowest bound is kept; the optimizers
+keep their best point by ``lambda_max`` plus what certifying it would add
+(:data:`CERT_SIZE_FACTOR`).
 
 Speed: with numba installed (``mu_kernels.HAVE_NUMBA``) the optimizer is the one compiled
 D-G optimizer, :func:`oos_drake.robust.mu_lanes.dg_minimize_lanes`: eight matrices at a time,
