@@ -893,6 +893,9 @@ TRUST_FRACTIONS = (0.9, 0.75, 0.5, 0.3, 0.15, 0.0)
 #: is ``||M_hat||^2 + 2 ||G_hat|| ||M_hat||``, and ``||G_hat||`` is about ``||M_hat||`` or less
 #: at points with a low ``lambda_max``). Negligible unless the scalings are ill-conditioned.
 CERT_SIZE_FACTOR = 3.0
+#: Conditioning floors (relative to ``lambda_max(D_r)``) added to both ``D`` by
+#: :func:`certified_upper` where the scalings as they are need a raise above :data:`CERT_RAISE`.
+CERT_FLOORS = (1e-14, 1e-12, 1e-10, 1e-8, 1e-6)
 #: A bound that :func:`certified_upper` raises by more than this (relative) was not proved by the
 #: optimizer's scalings beyond round-off: other scalings are certified too (``mu_upper_bound``).
 CERT_RAISE = 1e-6
@@ -1016,9 +1019,13 @@ def certified_upper(M, beta, D_left, D_right, G):
     <= 0`` with ``e`` = :func:`check_roundoff`: ``beta'^2 = (lambda_0 + e R) / (1 - e)``, in
     closed form (no bisection). Where that is below ``beta`` the bound stays; where it is above,
     the bound is raised to it (by round-off only, unless the bound came from an evaluation the
-    check does not reproduce). Where a ``D`` is not numerically positive definite (no Cholesky
-    factor: the check cannot run in scaled form) the plain bound ``||M||_2`` with ``D = I``,
-    ``G = 0`` is returned instead, certified the same way.
+    check does not reproduce). Where that raise exceeds :data:`CERT_RAISE` (scalings so
+    ill-conditioned that the LMI's terms dwarf the bound), the same scalings conditioned,
+    ``D_l + e I`` and ``D_r + e I`` with ``e`` = :data:`CERT_FLOORS` times ``lambda_max(D_r)``
+    (the structure is kept; the LMI changes by ``e (M^* M - beta^2 I)``, which the check
+    sees), are certified too and the lowest bound kept. Where no ``D`` has a Cholesky factor
+    (the check cannot run in scaled form) the plain bound ``||M||_2`` with ``D = I``, ``G = 0``
+    is returned instead, certified the same way.
 
     What is proved: the LMI with the Cholesky factors and the products ``M_hat``, ``G_hat`` as
     computed; their own rounding (Cholesky and triangular solves, componentwise backward stable)
@@ -1042,19 +1049,34 @@ def certified_upper(M, beta, D_left, D_right, G):
     M = np.asarray(M, dtype=complex)
     beta = np.array(beta, dtype=float)
     Dl, Dr, G = (np.array(a, dtype=complex) for a in (D_left, D_right, G))
+    c, r = M.shape[1:]
+    out = _certified_at(M, beta, Dl, Dr, G)
+    moved = np.flatnonzero(~(out <= beta * (1 + CERT_RAISE)))  # NaN or inf included
+    if moved.size:  # the same scalings conditioned: D + floor lambda_max(D_r) I
+        with np.errstate(all="ignore"):
+            top = np.max(np.abs(np.linalg.eigvals(_herm(Dr[moved]))), axis=1)
+        for floor in CERT_FLOORS:
+            e = (floor * top)[:, None, None]
+            dl, dr = Dl[moved] + e * np.eye(c), Dr[moved] + e * np.eye(r)
+            b = _certified_at(M[moved], beta[moved], dl, dr, G[moved])
+            take = b < out[moved]
+            rows = moved[take]
+            out[rows], Dl[rows], Dr[rows] = b[take], dl[take], dr[take]
+    bad = np.flatnonzero(~np.isfinite(out))
+    if bad.size:  # no scaled form: the plain bound
+        Dl[bad], Dr[bad], G[bad] = np.eye(c), np.eye(r), 0.0
+        out[bad] = _certified_at(M[bad], np.zeros(bad.size), Dl[bad], Dr[bad], G[bad])
+    return out, Dl, Dr, G
+
+
+def _certified_at(M, beta, Dl, Dr, G):
+    """:func:`certified_upper` at the given scalings only (inf where the check cannot run)."""
     sc = _power_of_two_scale(M)
     lam, size = _scaled_lmi(M / sc[:, None, None], Dl, Dr, G / sc[:, None, None])
-    bad = np.flatnonzero(~np.isfinite(lam))
-    if bad.size:  # no scaled form: the plain bound
-        Dl[bad] = np.eye(M.shape[1])
-        Dr[bad] = np.eye(M.shape[2])
-        G[bad] = 0.0
-        beta[bad] = 0.0
-        lam[bad], size[bad] = _scaled_lmi(M[bad] / sc[bad, None, None], Dl[bad], Dr[bad], G[bad])
     e = check_roundoff(M.shape[2])
     need = (lam + e * size) / (1.0 - e) * (1.0 + 8.0 * np.finfo(float).eps)
-    beta = np.maximum(beta, sc * np.sqrt(np.maximum(need, 0.0)))
-    return beta, Dl, Dr, G
+    out = np.maximum(beta, sc * np.sqrt(np.maximum(need, 0.0)))
+    return np.where(np.isfinite(lam) & np.isfinite(size), out, np.inf)
 
 
 def _power_of_two_scale(M):
