@@ -35,10 +35,10 @@ The value the optimizer reports comes from a compiled fastmath evaluation whose 
 change with the process' history (which copy of a cached kernel was loaded first); the
 certificate does not depend on it. Where the optimizer's scalings are so ill-conditioned that
 their LMI terms dwarf the bound (mu about 0 approached by scalings running off to infinity:
-the cancellation is beyond double precision), points back to its start and ``D = I, G = 0``
-(the plain bound ``||M||_2``) are certified too and the lowest bound is kept; the optimizers
-keep their best point by ``lambda_max`` plus what certifying it would add
-(:data:`CERT_SIZE_FACTOR`).
+the cancellation is beyond double precision), the same scalings conditioned (``D + e I``), then
+points back to its start and ``D = I, G = 0`` (the plain bound ``||M||_2``) are certified too
+and the lowest bound is kept; the optimizers keep their best point by ``lambda_max`` plus what
+certifying it would add (:data:`CERT_SIZE_FACTOR`).
 
 Speed: with numba installed (``mu_kernels.HAVE_NUMBA``) the optimizer is the one compiled
 D-G optimizer, :func:`oos_drake.robust.mu_lanes.dg_minimize_lanes`: eight matrices at a time,
