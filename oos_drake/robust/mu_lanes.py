@@ -137,6 +137,7 @@ LaneOptions = namedtuple(
         "chain",  # bool: continuation along the batch
         "chain_temperatures",  # (n,) float: stages of a chained matrix
         "chain_patience",  # int
+        "size_weight",  # float: weight of ||M_hat||_F^2 in the value that picks the best point
     ],
 )
 
@@ -167,6 +168,7 @@ LaneWorkspace = namedtuple(
         "xv_re", "xv_im",  # M T_r^{-1} V (n, c)
         "mv_re", "mv_im",  # T_l M T_r^{-1} V (n, c)
         "grad_t_re", "grad_t_im",  # gradient with respect to the entries of T (n_entries)
+        "size",  # ||M_hat||_F^2 per lane (8)
     ],
 )  # fmt: skip
 
@@ -878,6 +880,12 @@ def _lane_eval(Mr, Mi, Mc, x, tq, lay, ws, f, g, lmax):
             pk[q, w] = 0.0
     _lane_vectors(nsteps, rot_k, rot_c, rot_s, sel, K, Hr, Hi, taur, taui, ws.vec_re, ws.vec_im)
     _lane_gradient(Mr, Mi, x, K, lay, ws, g)
+    for w in range(W):  # the size of the LMI's terms, for the choice of the best point
+        acc = 0.0
+        for i in range(ws.mht_re.shape[0]):
+            for j in range(ws.mht_re.shape[1]):
+                acc += ws.mht_re[i, j, w] ** 2 + ws.mht_im[i, j, w] ** 2
+        ws.size[w] = acc
     for w in range(W):  # a lane whose QR did not converge: the per-matrix kernel
         if okq[w]:
             continue
@@ -959,7 +967,7 @@ def lane_workspace(c: int, r: int, lay: LaneLayout) -> LaneWorkspace:
         z(W, dtype=np.int64), z(W), z(W), np.ones(W, dtype=np.bool_),
         z((n, W), dtype=np.int64), z((n, W)), z((n, W)), z((n, n, W)), z((n, n, W)),
         z((n, r, W)), z((n, r, W)), z((n, c, W)), z((n, c, W)), z((n, c, W)), z((n, c, W)),
-        z((ne, W)), z((ne, W)),
+        z((ne, W)), z((ne, W)), z(W),
     )  # fmt: skip
 
 
@@ -1043,13 +1051,17 @@ def dg_minimize_lanes(M, x0, opts, lay, ws, best_x, best_l, iters, evals):
 
     ``x0`` (B, p) are the starting scalings, ``opts`` a :data:`LaneOptions`, ``lay`` the
     :data:`LaneLayout`, ``ws`` a :data:`LaneWorkspace` (:func:`lane_workspace`). Outputs:
-    ``best_x``/``best_l`` the scalings with the smallest exact ``lambda_max`` met, ``iters``
+    ``best_x``/``best_l`` the best scalings met (below) and their exact ``lambda_max``, ``iters``
     the iterations and ``evals`` the evaluations (one per lane and eigen-decomposition) used.
-    Lanes take the next matrix as soon as theirs is done. With ``opts.chain`` (continuation
-    along the batch, e.g. a frequency grid) the batch is cut into 8 contiguous segments, one
-    per lane, and each matrix after the first of its segment also tries the scalings reached
-    on the previous one: where they beat its own start, it starts there and runs the
-    ``opts.chain_temperatures`` stages with ``opts.chain_patience`` instead.
+    The best point is the one with the smallest ``lambda_max + opts.size_weight ||M_hat||_F^2``
+    (``M_hat = T_l M T_r^{-1}``): the round-off of the certificate check grows with the size
+    of the LMI's terms, so a point lower by less than what its certification adds is not
+    better (``mu_upper.certified_upper``). Lanes take the next matrix as soon as theirs is
+    done. With ``opts.chain`` (continuation along the batch, e.g. a frequency grid) the batch
+    is cut into 8 contiguous segments, one per lane, and each matrix after the first of its
+    segment also tries the scalings reached on the previous one: where they beat its own
+    start, it starts there and runs the ``opts.chain_temperatures`` stages with
+    ``opts.chain_patience`` instead.
     """
     nb, c, r = M.shape
     p = x0.shape[1]
@@ -1093,6 +1105,8 @@ def dg_minimize_lanes(M, x0, opts, lay, ws, best_x, best_l, iters, evals):
     count = np.zeros(W, dtype=np.int64)
     head = np.full(W, memory - 1, dtype=np.int64)
     dtmp = np.zeros(p)
+    best_v = np.zeros(nb)  # the value that picks the best point (lambda_max + size)
+    sw = opts.size_weight
     # which matrices each lane takes
     seg = (nb + W - 1) // W
     for w in range(W):
@@ -1126,8 +1140,10 @@ def dg_minimize_lanes(M, x0, opts, lay, ws, best_x, best_l, iters, evals):
             ph = phase[w]
             begin = False  # start an L-BFGS iteration from (xc, fc, gc)
             end_stage = False
+            val = lm[w] + sw * ws.size[w]
             if ph == _INIT:
                 best_l[b] = lm[w]
+                best_v[b] = val
                 for i in range(p):
                     best_x[b, i] = xc[w, i]
                 stage[w] = 0
@@ -1152,8 +1168,9 @@ def dg_minimize_lanes(M, x0, opts, lay, ws, best_x, best_l, iters, evals):
                 it_stage[w] = 0
                 begin = True
             elif ph == _CHAIN:
-                if lm[w] < best_l[b]:  # the neighbour's scalings start lower
+                if val < best_v[b]:  # the neighbour's scalings start lower
                     best_l[b] = lm[w]
+                    best_v[b] = val
                     for i in range(p):
                         xc[w, i] = best_x[b - 1, i]
                         best_x[b, i] = xc[w, i]
@@ -1173,8 +1190,9 @@ def dg_minimize_lanes(M, x0, opts, lay, ws, best_x, best_l, iters, evals):
                 fc[w] = f[w]
                 for i in range(p):
                     gc[w, i] = g[i, w]
-                if lm[w] < best_l[b]:
+                if val < best_v[b]:
                     best_l[b] = lm[w]
+                    best_v[b] = val
                     for i in range(p):
                         best_x[b, i] = xc[w, i]
                 stall[w] = 0
@@ -1208,8 +1226,9 @@ def dg_minimize_lanes(M, x0, opts, lay, ws, best_x, best_l, iters, evals):
                         xc[w, i] = xq[i, w]
                         gc[w, i] = g[i, w]
                     fc[w] = f[w]
-                    if lm[w] < best_l[b]:
+                    if val < best_v[b]:
                         best_l[b] = lm[w]
+                        best_v[b] = val
                         for i in range(p):
                             best_x[b, i] = xc[w, i]
                     fails[w] = 0

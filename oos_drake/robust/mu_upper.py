@@ -25,9 +25,20 @@ the two and stalls on ill-conditioned matrices). ``lambda_max`` is smoothed by t
 the eigenvalues (temperature raised in stages) and minimized by a batched L-BFGS over all
 matrices at once; the gradient uses only the few eigenvectors that carry the smoothed maximum.
 Initialization: Osborne balancing of ``|M|`` (one scaling per full block and per channel of a
-repeated block), or a warm start. Whatever the optimizer reaches, the returned value is the
-exact ``lambda_max`` at the returned scalings, so the bound is always valid; the scalings are
-returned so that the LMI can be checked independently (:func:`lmi_residual`).
+repeated block), or a warm start.
+
+Certificate: whatever the optimizer reaches, every returned bound is proved by the returned
+scalings (:func:`certified_upper`): the LMI is checked in the scaled coordinates of
+:func:`lmi_residual` with an a priori bound of the check's own round-off
+(:func:`check_roundoff`), and the bound is raised, in closed form, by what that check needs.
+The value the optimizer reports comes from a compiled fastmath evaluation whose rounding can
+change with the process' history (which copy of a cached kernel was loaded first); the
+certificate does not depend on it. Where the optimizer's scalings are so ill-conditioned that
+their LMI terms dwarf the bound (mu about 0 approached by scalings running off to infinity:
+the cancellation is beyond double precision), the same scalings conditioned (``D + e I``), then
+points back to its start and ``D = I, G = 0`` (the plain bound ``||M||_2``) are certified too
+and the lowest bound is kept; the optimizers keep their best point by ``lambda_max`` plus what
+certifying it would add (:data:`CERT_SIZE_FACTOR`).
 
 Speed: with numba installed (``mu_kernels.HAVE_NUMBA``) the optimizer is the one compiled
 D-G optimizer, :func:`oos_drake.robust.mu_lanes.dg_minimize_lanes`: eight matrices at a time,
@@ -321,6 +332,13 @@ class _Objective:
         if not need_grad:
             return f, None, lmax, None
         return f, grad, lmax, top
+
+    def size(self, x, idx):
+        """``||M_hat||_F^2`` (``M_hat = T_l M T_r^{-1}``) at ``x`` for the batch rows ``idx``."""
+        _, Tl, Tr, _ = self.scalings(x, idx)
+        tr = lambda A: np.swapaxes(A, -1, -2)  # noqa: E731
+        X = tr(np.linalg.solve(tr(Tr), tr(self.M[idx])))  # M T_r^{-1}
+        return np.linalg.norm(Tl @ X, axis=(1, 2)) ** 2
 
     def scalings(self, x, idx):
         L = self.L
@@ -700,7 +718,10 @@ def mu_upper_bound(
         _, _, lw, _ = obj(xw, allidx, np.ones(nb), need_grad=False)
         use = lw < lmax0
         x[use], lmax0[use] = xw[use], lw[use]
+    # the optimizers keep the point with the smallest lambda_max + size_weight ||M_hat||_F^2
+    size_weight = CERT_SIZE_FACTOR * check_roundoff(r)
     best_l = lmax0.copy()
+    best_v = best_l + (size_weight * obj.size(x, allidx) if np.all(np.isfinite(best_l)) else 0.0)
     best_x = x.copy()
     start_x = x.copy()  # where the optimizer starts: the fallback of _trusted
     iters_done = 0
@@ -716,6 +737,7 @@ def mu_upper_bound(
             chain=bool(chain),
             chain_temperatures=np.asarray(chain_temperatures, dtype=float),
             chain_patience=int(chain_patience),
+            size_weight=float(size_weight),
         )
         lay = obj.lane_layout
         work = mu_lanes.lane_workspace(c, r, lay)
@@ -732,8 +754,9 @@ def mu_upper_bound(
         for stage, tau in enumerate(temperatures):
             t = tau / np.maximum(best_l, 1e-12)
             f, g, lmax, _ = obj(x, allidx, t)
-            better = lmax < best_l
-            best_l[better], best_x[better] = lmax[better], x[better]
+            val = lmax + size_weight * obj.size(x, allidx)
+            better = val < best_v
+            best_l[better], best_v[better], best_x[better] = lmax[better], val[better], x[better]
             if stage == 0:  # L-BFGS pairs, newest first (zeros = empty slots); kept across stages
                 S = np.zeros((nb, memory, p))
                 Y = np.zeros((nb, memory, p))
@@ -799,8 +822,10 @@ def mu_upper_bound(
                     S[gg, 0], Y[gg, 0], rho[gg, 0] = s_[good], y_[good], 1.0 / sy[good]
                 rel = (f[gi] - f_new[for_upd]) / np.maximum(np.abs(f[gi]), 1e-300)
                 x[gi], f[gi], g[gi] = x_new[for_upd], f_new[for_upd], g_new[for_upd]
-                improved = l_new[for_upd] < best_l[gi]
+                v_new = l_new[for_upd] + size_weight * obj.size(x_new[for_upd], gi)
+                improved = v_new < best_v[gi]
                 best_l[gi[improved]] = l_new[for_upd][improved]
+                best_v[gi[improved]] = v_new[improved]
                 best_x[gi[improved]] = x_new[for_upd][improved]
                 small = rel < tols[stage]
                 stall[gi[small]] += 1
@@ -821,38 +846,35 @@ def mu_upper_bound(
         obj_final.count += obj.count
         obj = obj_final
     # exact lambda_max at the best scalings, and the scalings themselves
-    upper, Dl, Dr, G, top, doubtful, d_min = _finish(obj, best_x, allidx, scale)
+    upper, Dl, Dr, G, top, d_min = _finish(obj, best_x, allidx, scale)
     # ill-conditioned scalings, or a bound above ||M||_F >= ||M||_2: was it round-off?
     risky = np.flatnonzero((d_min < TRUST_CONDITION) | (upper > scale)) if max_iter > 0 else []
     if p > 0 and len(risky):
         best_x[risky] = _trusted(obj, best_x[risky], start_x[risky], risky)
-        upper[risky], Dl[risky], Dr[risky], G[risky], top[risky], _, _ = _finish(
+        upper[risky], Dl[risky], Dr[risky], G[risky], top[risky], _ = _finish(
             obj, best_x[risky], risky, scale[risky]
         )
-        doubtful = np.flatnonzero(upper / scale < 1e-3)  # as _finish: lambda_max < 1e-6
-    if doubtful.size:  # only those whose certificate fails beyond round-off
-        doubtful = doubtful[
-            ~_lmi_holds(M[doubtful], upper[doubtful], Dl[doubtful], Dr[doubtful], G[doubtful])
-        ]
-    if doubtful.size:
-        # a bound near zero (mu = 0 approached by scalings running off to infinity) can be
-        # undone by round-off: certify those with the check's own formula (raising the bound
-        # until it holds), also at points between balancing and the optimizer's scalings, and
-        # keep the best certified one
-        sub = doubtful
-        x_bal = _osborne_init(Mn[sub], structure, layout, compiled=compiled)
-        best = None
-        for frac in (1.0, 0.9, 0.7, 0.5, 0.3, 0.1, 0.0):
-            xs = x_bal + frac * (best_x[sub] - x_bal)
-            u, dl, dr, g, tp, _, _ = _finish(obj, xs, sub, scale[sub])
-            u = _certified_beta(M[sub], u, dl, dr, g)
-            if best is None:
-                best = [u, dl, dr, g, tp, xs]
-                continue
-            take = u < best[0]
-            for k, v in enumerate((u, dl, dr, g, tp, xs)):
-                best[k][take] = v[take]
-        upper[sub], Dl[sub], Dr[sub], G[sub], top[sub], best_x[sub] = best
+    # every bound is proved by its scalings: certified_upper raises it where its check needs
+    # (the value above comes from a compiled, fastmath evaluation whose rounding, and with it
+    # the optimizer's path on round-off-dominated matrices, may differ between processes)
+    cert, Dl, Dr, G = certified_upper(M, upper, Dl, Dr, G)
+    moved = np.flatnonzero(cert > upper * (1 + CERT_RAISE)) if p > 0 else []
+    upper = cert
+    if len(moved):
+        # scalings so ill-conditioned that the LMI's terms dwarf the bound (their cancellation
+        # is beyond double precision: mu about 0 approached by scalings running off to
+        # infinity): certify the points back to the optimizer's start and to D = I, G = 0 (the
+        # plain bound ||M||_2), and keep the lowest certified bound
+        best = [upper[moved], Dl[moved], Dr[moved], G[moved], top[moved], best_x[moved]]
+        for origin in (start_x[moved], np.zeros_like(start_x[moved])):
+            for frac in TRUST_FRACTIONS:
+                xs = origin + frac * (best_x[moved] - origin)
+                u, dl, dr, g, tp, _ = _finish(obj, xs, moved, scale[moved])
+                u, dl, dr, g = certified_upper(M[moved], u, dl, dr, g)
+                take = u < best[0]
+                for k, v in enumerate((u, dl, dr, g, tp, xs)):
+                    best[k][take] = v[take]
+        upper[moved], Dl[moved], Dr[moved], G[moved], top[moved], best_x[moved] = best
     return UpperBoundResult(upper, Dl, Dr, G, top, iters_done, best_x, obj.count.copy())
 
 
@@ -862,8 +884,21 @@ TRUST_RTOL = 1e-6
 #: Scalings whose ``D_r`` has eigenvalues below this fraction of its largest (``cond(T_r)`` above
 #: 1e4: the evaluation's round-off grows with ``cond(D_r) eps``) get the check of :func:`_trusted`.
 TRUST_CONDITION = 1e-8
-#: Fractions of the way from the optimizer's start to its end tried by :func:`_trusted`.
+#: Fractions of the way from the optimizer's start to its end tried by :func:`_trusted` (and,
+#: from the start and from ``D = I, G = 0``, for a bound the certificate check raised by more
+#: than :data:`CERT_RAISE`).
 TRUST_FRACTIONS = (0.9, 0.75, 0.5, 0.3, 0.15, 0.0)
+#: The optimizers keep the point with the smallest ``lambda_max + w ||M_hat||_F^2``, ``w`` this
+#: times :func:`check_roundoff`: about what certifying it adds (``R`` of :func:`certified_upper`
+#: is ``||M_hat||^2 + 2 ||G_hat|| ||M_hat||``, and ``||G_hat||`` is about ``||M_hat||`` or less
+#: at points with a low ``lambda_max``). Negligible unless the scalings are ill-conditioned.
+CERT_SIZE_FACTOR = 3.0
+#: Conditioning floors (relative to ``lambda_max(D_r)``) added to both ``D`` by
+#: :func:`certified_upper` where the scalings as they are need a raise above :data:`CERT_RAISE`.
+CERT_FLOORS = (1e-14, 1e-12, 1e-10, 1e-8, 1e-6)
+#: A bound that :func:`certified_upper` raises by more than this (relative) was not proved by the
+#: optimizer's scalings beyond round-off: other scalings are certified too (``mu_upper_bound``).
+CERT_RAISE = 1e-6
 
 
 def _trusted(obj, best_x, start_x, rows):
@@ -928,10 +963,9 @@ def _trusted(obj, best_x, start_x, rows):
 def _finish(obj, x, idx, scale):
     """Exact bound, normalized scalings and top direction at ``x`` (rows ``idx`` of ``obj``).
 
-    Returns ``(upper, D_l, D_r, G, top, doubtful, d_min)``; ``doubtful`` are the rows (positions
-    in ``idx``) whose bound is near zero (relative to ``||M||_F``), where round-off can decide
-    the sign of the certificate; ``d_min`` the smallest eigenvalue of the normalized ``D_r``
-    (``1 / cond(D_r)``).
+    Returns ``(upper, D_l, D_r, G, top, d_min)``; ``d_min`` is the smallest eigenvalue of the
+    normalized ``D_r`` (``1 / cond(D_r)``). ``upper`` is the evaluation's value, not yet
+    certified (:func:`certified_upper`).
     """
     nb = len(idx)
     _, Tl, Tr, Gh = obj.scalings(x, idx)
@@ -952,45 +986,154 @@ def _finish(obj, x, idx, scale):
         dnorm = np.maximum(dnorm, ev.max(axis=(1, 2)))
         d_min = np.minimum(d_min, ev.min(axis=(1, 2)))
     Dl, Dr, G = Dl / dnorm[:, None, None], Dr / dnorm[:, None, None], G / dnorm[:, None, None]
-    # (ill-conditioned scalings alone are not re-checked here: the unscaled LMI of the check
-    # can then disagree with the scaled eigenvalue the bound comes from; see lmi_residual)
-    doubtful = np.flatnonzero(lmax < 1e-6)
-    return upper, Dl, Dr, G, top, doubtful, d_min / np.maximum(dnorm, 1e-300)
+    return upper, Dl, Dr, G, top, d_min / np.maximum(dnorm, 1e-300)
 
 
-#: Residual of :func:`lmi_residual` accepted for the doubtful bounds of :func:`_finish`: the
-#: round-off of forming and diagonalizing the LMI, relative to the size of its factors (about
-#: 2 n eps for n = 26, with a safety factor).
+#: Floor of the round-off bound of the certificate check (:func:`check_roundoff`), relative to
+#: the size of the LMI's terms. A piece of the frequency axis counts as proved where the scaled
+#: LMI eigenvalue is below minus this (``mu_intervals.STRICT``).
 LMI_ROUNDOFF = 1e-13
 
 
-def _lmi_holds(M, beta, Dl, Dr, G, rtol=1e-7):
-    """True where the LMI check passes at ``beta (1 + rtol)`` (up to round-off)."""
-    return lmi_residual(M, beta * (1 + rtol) + 1e-300, Dl, Dr, G) <= LMI_ROUNDOFF
+def check_roundoff(n: int) -> float:
+    r"""Bound of the round-off of the certificate check for an ``n x n`` LMI, relative to the size
+    of its terms (``beta^2 + ||M_hat||_F^2 + 2 ||G_hat||_F ||M_hat||_F``, see :func:`lmi_residual`).
+
+    A priori bounds with unit constants: forming ``M_hat^* M_hat`` and ``G_hat M_hat`` (complex
+    inner products of length ``<= n``: ``(n + 4) eps`` of the products of the absolute values,
+    whose Frobenius norms are at most the terms above), the Householder tridiagonalization of
+    LAPACK's ``zheevd`` (backward error ``n^2 eps`` in the Frobenius norm, the worst case of
+    ``n - 1`` reflectors of ``n eps`` each) and its tridiagonal eigensolver (``n eps``):
+    ``(n + 4)^2 eps`` in all, and never below :data:`LMI_ROUNDOFF` (2e-13 for ``n = 26``).
+    """
+    return max(LMI_ROUNDOFF, (n + 4.0) ** 2 * np.finfo(float).eps)
 
 
-def _certified_beta(M, beta, Dl, Dr, G, rtol=1e-7):
-    """Smallest ``beta' >= beta`` (to ~1e-12 relative) whose LMI check passes at
-    ``beta' (1 + rtol)`` with the given scalings (``D_r > 0``: it does for ``beta'`` large)."""
+def certified_upper(M, beta, D_left, D_right, G):
+    r"""The smallest bound ``>= beta`` that the scalings prove, with the scalings that prove it.
+
+    The check is :func:`lmi_residual`'s scaled LMI: with ``lambda_0`` the computed largest
+    eigenvalue of ``M_hat^* M_hat + j (G_hat M_hat - M_hat^* G_hat^*)`` and ``R`` the size of its
+    terms, the LMI holds at ``beta'`` (its largest eigenvalue is ``lambda_0 - beta'^2`` in exact
+    arithmetic: the congruence turns ``D_r`` into ``I``) if ``lambda_0 - beta'^2 + e (beta'^2 + R)
+    <= 0`` with ``e`` = :func:`check_roundoff`: ``beta'^2 = (lambda_0 + e R) / (1 - e)``, in
+    closed form (no bisection). Where that is below ``beta`` the bound stays; where it is above,
+    the bound is raised to it (by round-off only, unless the bound came from an evaluation the
+    check does not reproduce). Where that raise exceeds :data:`CERT_RAISE` (scalings so
+    ill-conditioned that the LMI's terms dwarf the bound), the same scalings conditioned,
+    ``D_l + e I`` and ``D_r + e I`` with ``e`` = :data:`CERT_FLOORS` times ``lambda_max(D_r)``
+    (the structure is kept; the LMI changes by ``e (M^* M - beta^2 I)``, which the check
+    sees), are certified too and the lowest bound kept. Where no ``D`` has a Cholesky factor
+    (the check cannot run in scaled form) the plain bound ``||M||_2`` with ``D = I``, ``G = 0``
+    is returned instead, certified the same way.
+
+    What is proved: the LMI with the Cholesky factors and the products ``M_hat``, ``G_hat`` as
+    computed; their own rounding (Cholesky and triangular solves, componentwise backward stable)
+    amounts to relative perturbations of the scalings of order ``n eps``.
+
+    Parameters
+    ----------
+    M : numpy.ndarray
+        ``(B, c, r)`` complex.
+    beta : numpy.ndarray
+        ``(B,)`` bounds to certify.
+    D_left, D_right, G : numpy.ndarray
+        ``(B, c, c)``, ``(B, r, r)``, ``(B, r, c)`` scalings.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(beta', D_left, D_right, G)``: ``lmi_residual(M, beta', D_left, D_right, G) <=
+        -check_roundoff(r)`` for every matrix.
+    """
+    M = np.asarray(M, dtype=complex)
     beta = np.array(beta, dtype=float)
-    bad = np.flatnonzero(~_lmi_holds(M, beta, Dl, Dr, G, rtol))
-    if bad.size == 0:
-        return beta
-    Mb, Dlb, Drb, Gb = M[bad], Dl[bad], Dr[bad], G[bad]
-    lo = beta[bad].copy()
-    hi = np.maximum(lo, 1e-12 * (np.linalg.norm(Mb, ord=2, axis=(1, 2)) + 1e-300))
-    for _ in range(200):  # doubling until certified
-        fail = ~_lmi_holds(Mb, hi, Dlb, Drb, Gb, rtol)
-        if not np.any(fail):
-            break
-        hi[fail] *= 2.0
-    for _ in range(40):  # bisection
-        mid = 0.5 * (lo + hi)
-        passed = _lmi_holds(Mb, mid, Dlb, Drb, Gb, rtol)
-        hi = np.where(passed, mid, hi)
-        lo = np.where(passed, lo, mid)
-    beta[bad] = hi
-    return beta
+    Dl, Dr, G = (np.array(a, dtype=complex) for a in (D_left, D_right, G))
+    c, r = M.shape[1:]
+    out = _certified_at(M, beta, Dl, Dr, G)
+    moved = np.flatnonzero(~(out <= beta * (1 + CERT_RAISE)))  # NaN or inf included
+    if moved.size:  # the same scalings conditioned: D + floor lambda_max(D_r) I
+        with np.errstate(all="ignore"):
+            top = np.max(np.abs(np.linalg.eigvals(_herm(Dr[moved]))), axis=1)
+        for floor in CERT_FLOORS:
+            e = (floor * top)[:, None, None]
+            dl, dr = Dl[moved] + e * np.eye(c), Dr[moved] + e * np.eye(r)
+            b = _certified_at(M[moved], beta[moved], dl, dr, G[moved])
+            take = b < out[moved]
+            rows = moved[take]
+            out[rows], Dl[rows], Dr[rows] = b[take], dl[take], dr[take]
+    bad = np.flatnonzero(~np.isfinite(out))
+    if bad.size:  # no scaled form: the plain bound
+        Dl[bad], Dr[bad], G[bad] = np.eye(c), np.eye(r), 0.0
+        out[bad] = _certified_at(M[bad], np.zeros(bad.size), Dl[bad], Dr[bad], G[bad])
+    return out, Dl, Dr, G
+
+
+def _certified_at(M, beta, Dl, Dr, G):
+    """:func:`certified_upper` at the given scalings only (inf where the check cannot run)."""
+    sc = _power_of_two_scale(M)
+    lam, size = _scaled_lmi(M / sc[:, None, None], Dl, Dr, G / sc[:, None, None])
+    e = check_roundoff(M.shape[2])
+    need = (lam + e * size) / (1.0 - e) * (1.0 + 8.0 * np.finfo(float).eps)
+    out = np.maximum(beta, sc * np.sqrt(np.maximum(need, 0.0)))
+    return np.where(np.isfinite(lam) & np.isfinite(size), out, np.inf)
+
+
+def _power_of_two_scale(M):
+    """Per matrix, the power of two nearest its largest entry (1 for a zero matrix): the LMI is
+    homogeneous in ``(M, beta, G)``, dividing by it avoids overflow without rounding."""
+    peak = np.max(np.abs(M), axis=(-2, -1))
+    return np.where(peak > 0, np.exp2(np.round(np.log2(np.where(peak > 0, peak, 1.0)))), 1.0)
+
+
+def _herm(A):
+    return 0.5 * (A + np.conj(np.swapaxes(A, -1, -2)))
+
+
+def _cholesky(D):
+    """Lower Cholesky factors of a batch ``(B, n, n)``; NaN where one does not exist."""
+    try:
+        return np.linalg.cholesky(_herm(D))
+    except np.linalg.LinAlgError:  # one failed: factor them one by one
+        out = np.full(D.shape, np.nan, dtype=complex)
+        for k in range(D.shape[0]):
+            try:
+                out[k] = np.linalg.cholesky(_herm(D[k]))
+            except np.linalg.LinAlgError:
+                pass
+        return out
+
+
+def _scaled_lmi(M, Dl, Dr, G):
+    r"""``(lambda_0, R)`` of the scaled LMI of a batch (see :func:`lmi_residual`).
+
+    ``lambda_0``: largest eigenvalue of ``M_hat^* M_hat + j (G_hat M_hat - M_hat^* G_hat^*)``
+    with ``M_hat = L_l^* M L_r^{-*}``, ``G_hat = L_r^{-1} G L_l^{-*}`` (``D = L L^*``); ``R =
+    ||M_hat||_F^2 + 2 ||G_hat||_F ||M_hat||_F``. NaN where a ``D`` has no Cholesky factor or
+    the scaled matrices overflow.
+    """
+    B, c, r = M.shape
+    lam = np.full(B, np.nan)
+    size = np.full(B, np.nan)
+    with np.errstate(all="ignore"):
+        Ll, Lr = _cholesky(Dl), _cholesky(Dr)
+        ok = np.all(np.isfinite(Ll), axis=(1, 2)) & np.all(np.isfinite(Lr), axis=(1, 2))
+        if not np.any(ok):
+            return lam, size
+        Ll, Lr, M, G = Ll[ok], Lr[ok], M[ok], G[ok]
+        adj = lambda A: np.conj(np.swapaxes(A, -1, -2))  # noqa: E731
+        Mh = adj(Ll) @ adj(np.linalg.solve(Lr, adj(M)))  # L_l^* M L_r^{-*}
+        Gh = np.linalg.solve(Lr, adj(np.linalg.solve(Ll, adj(G))))  # L_r^{-1} G L_l^{-*}
+        GM = Gh @ Mh
+        H = adj(Mh) @ Mh + 1j * (GM - adj(GM))
+        nm = np.linalg.norm(Mh, axis=(1, 2))
+        R = nm**2 + 2 * np.linalg.norm(Gh, axis=(1, 2)) * nm
+        fin = np.all(np.isfinite(H), axis=(1, 2)) & np.isfinite(R)
+        ev = np.full(H.shape[0], np.nan)
+        if np.any(fin):
+            ev[fin] = np.linalg.eigvalsh(_herm(H[fin]))[:, -1]
+    lam[ok], size[ok] = ev, np.where(fin, R, np.nan)
+    return lam, size
 
 
 def lmi_residual(M, beta, D_left, D_right, G) -> np.ndarray:
@@ -1001,12 +1144,13 @@ def lmi_residual(M, beta, D_left, D_right, G) -> np.ndarray:
 
     .. math::
 
-        \hat M^* \hat M + j (\hat G \hat M - \hat M^* \hat G^*) - eta^2 I, \qquad
+        \hat M^* \hat M + j (\hat G \hat M - \hat M^* \hat G^*) - \beta^2 I, \qquad
         \hat M = L_l^* M L_r^{-*}, \quad \hat G = L_r^{-1} G L_l^{-*},
 
     which stays accurate when the scalings are ill-conditioned (the unscaled matrix then loses
     the small directions to round-off). Where a ``D`` is not numerically positive definite the
-    unscaled form is used.
+    unscaled form is used. A value ``<= -check_roundoff(r)`` proves the bound beyond the
+    check's own round-off (:func:`certified_upper` returns such bounds).
 
     Parameters
     ----------
@@ -1018,51 +1162,34 @@ def lmi_residual(M, beta, D_left, D_right, G) -> np.ndarray:
     -------
     numpy.ndarray
         ``(...)`` largest eigenvalue relative to the size of the terms
-        ``beta^2 + ||M_hat||^2 + 2 ||G_hat|| ||M_hat||`` (a bound of zero reached by scalings
-        running off to infinity then gets a round-off-level residual, not ``0 / 0``). Its sign
-        is that of the largest eigenvalue of the LMI.
+        ``beta^2 + ||M_hat||_F^2 + 2 ||G_hat||_F ||M_hat||_F`` (a bound of zero reached by
+        scalings running off to infinity then gets a round-off-level residual, not ``0 / 0``).
+        Its sign is that of the largest eigenvalue of the LMI.
     """
     M = np.asarray(M, dtype=complex)
     beta = np.asarray(beta, dtype=float)
-    D_left = np.asarray(D_left, dtype=complex)
-    D_right = np.asarray(D_right, dtype=complex)
-    # the LMI is homogeneous in (M, beta, G): divide by a power of two to avoid overflow
-    peak = np.max(np.abs(M), axis=(-2, -1))
-    sc = np.where(peak > 0, np.exp2(np.round(np.log2(np.where(peak > 0, peak, 1.0)))), 1.0)
-    M = M / sc[..., None, None]
-    beta = beta / sc
-    G = np.asarray(G, dtype=complex) / sc[..., None, None]
     shape = np.broadcast_shapes(M.shape[:-2], beta.shape)
-    M, beta = np.broadcast_to(M, shape + M.shape[-2:]), np.broadcast_to(beta, shape)
-    D_left = np.broadcast_to(D_left, shape + D_left.shape[-2:])
-    D_right = np.broadcast_to(D_right, shape + D_right.shape[-2:])
-    G = np.broadcast_to(G, shape + G.shape[-2:])
-    out = np.empty(shape)
-    flat = [x.reshape((-1,) + x.shape[len(shape) :]) for x in (M, beta, D_left, D_right, G)]
-    res = out.reshape(-1)
-    for k in range(res.size):
-        res[k] = _lmi_residual_one(*(x[k] for x in flat))
-    return out
+    c, r = M.shape[-2:]
+    flat = lambda A, tail: np.broadcast_to(np.asarray(A), shape + tail).reshape((-1,) + tail)  # noqa: E731
+    M = flat(M, (c, r))
+    beta = flat(beta, ())
+    Dl, Dr, G = flat(D_left, (c, c)), flat(D_right, (r, r)), flat(G, (r, c))
+    # the LMI is homogeneous in (M, beta, G): divide by a power of two to avoid overflow
+    sc = _power_of_two_scale(M)
+    M, beta, G = M / sc[:, None, None], beta / sc, G.astype(complex) / sc[:, None, None]
+    Dl, Dr = Dl.astype(complex), Dr.astype(complex)
+    lam, size = _scaled_lmi(M, Dl, Dr, G)
+    out = (lam - beta**2) / np.maximum(beta**2 + size, 1e-300)
+    for k in np.flatnonzero(~np.isfinite(lam)):  # unscaled form
+        out[k] = _lmi_residual_unscaled(M[k], beta[k], Dl[k], Dr[k], G[k])
+    return out.reshape(shape)
 
 
-def _lmi_residual_one(M, beta, Dl, Dr, G) -> float:
-    """:func:`lmi_residual` for one matrix (scaled form, unscaled if a Cholesky fails)."""
-    herm = lambda A: 0.5 * (A + np.conj(A.T))  # noqa: E731
-    try:
-        Ll = np.linalg.cholesky(herm(Dl))
-        Lr = np.linalg.cholesky(herm(Dr))
-        Mh = np.conj(Ll.T) @ np.linalg.solve(Lr, np.conj(M.T)).conj().T  # L_l^* M L_r^{-*}
-        Gh = np.linalg.solve(Lr, np.linalg.solve(Ll, np.conj(G.T)).conj().T)  # L_r^{-1} G L_l^{-*}
-        GM = Gh @ Mh
-        H = np.conj(Mh.T) @ Mh + 1j * (GM - np.conj(GM.T)) - beta**2 * np.eye(Mh.shape[1])
-        ref = beta**2 + np.linalg.norm(Mh) ** 2 + 2 * np.linalg.norm(Gh) * np.linalg.norm(Mh)
-        if np.all(np.isfinite(H)):
-            return float(np.linalg.eigvalsh(herm(H))[-1] / max(ref, 1e-300))
-    except np.linalg.LinAlgError:
-        pass
+def _lmi_residual_unscaled(M, beta, Dl, Dr, G) -> float:
+    """:func:`lmi_residual` for one matrix whose ``D`` has no Cholesky factor."""
     GM = G @ M
     H = np.conj(M.T) @ Dl @ M + 1j * (GM - np.conj(GM.T)) - beta**2 * Dr
-    ref = beta**2 * np.linalg.eigvalsh(herm(Dr))[-1]
-    ref += np.linalg.norm(M) ** 2 * np.linalg.eigvalsh(herm(Dl))[-1]
+    ref = beta**2 * np.linalg.eigvalsh(_herm(Dr))[-1]
+    ref += np.linalg.norm(M) ** 2 * np.linalg.eigvalsh(_herm(Dl))[-1]
     ref += 2 * np.linalg.norm(M) * np.linalg.norm(G)
-    return float(np.linalg.eigvalsh(herm(H))[-1] / max(ref, 1e-300))
+    return float(np.linalg.eigvalsh(_herm(H))[-1] / max(ref, 1e-300))

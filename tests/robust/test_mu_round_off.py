@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from oos_drake.robust.blocks import parse_blk
-from oos_drake.robust.mu_upper import LMI_ROUNDOFF, lmi_residual, mu_upper_bound
+from oos_drake.robust.mu_upper import check_roundoff, lmi_residual, mu_upper_bound
 
 DATA = Path(__file__).parent / "data" / "mu_round_off_stall.npz"
 
@@ -46,8 +46,10 @@ def test_bound_never_above_the_plain_norm_and_certified(mode):
         Dl, Dr, G = (np.array([getattr(r, a)[0] for r in res]) for a in ("D_left", "D_right", "G"))
     plain = np.linalg.norm(M, ord=2, axis=(1, 2))  # D = I, G = 0: an independent valid bound
     assert np.all(upper <= plain * (1 + 1e-6)), upper / plain
-    # the returned scalings prove the returned bound (the check's own, Cholesky-scaled formula)
-    assert np.all(lmi_residual(M, upper * (1 + 1e-7), Dl, Dr, G) <= LMI_ROUNDOFF)
+    # the returned scalings prove the returned bound (the check's own, Cholesky-scaled formula,
+    # beyond its own round-off), whatever ran before in this process (test_mu_certificate.py
+    # runs this after the lane tests in a fresh process: the history that once broke it)
+    assert np.all(lmi_residual(M, upper, Dl, Dr, G) <= -check_roundoff(s.n_rows))
 
 
 def test_bound_is_not_below_the_converged_lmi_bound():
