@@ -277,10 +277,6 @@ class ModalResponse:
         H = self.response(omega)
         return pruned_sigma(H) if prune else _sigma_max(H)
 
-    def default_grid(self, points_per_decade: int = 12) -> np.ndarray:
-        """Per-model starting grid [rad/s] of the peak search (see :func:`peak_search_grid`)."""
-        return peak_search_grid(self.lam, points_per_decade)
-
 
 def peak_search_grid(lam, points_per_decade: int = 12) -> np.ndarray:
     """Per-model starting points [rad/s] of the H-infinity peak search, shape (N, F), increasing.

@@ -74,11 +74,6 @@ class RobStabResult:
     mu_lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
     guarantee: AxisCertificate | None = None
 
-    @property
-    def robustly_stable(self) -> bool:
-        """True when the guaranteed margin exceeds 1 (stable for the whole uncertainty)."""
-        return self.lower > 1.0
-
     def table(self, subset: str = "total", time: float = float("nan")):
         """The analyzed frequencies as a mu sweep table (:func:`~.tables.sweep_table`).
 

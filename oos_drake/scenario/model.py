@@ -31,12 +31,12 @@ Signal names used in the assembly (all 6-vectors): ``xdd_<point>_<frame>`` accel
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
-from oos_drake.lfr import LFR, usubs
+from oos_drake.lfr import LFR
 from oos_drake.titop import (
     Component,
     angle_parameter,
@@ -528,10 +528,6 @@ class MissionValues:
     delta_C1: np.ndarray
     delta_C2: np.ndarray
 
-    def as_dict(self) -> dict[str, np.ndarray]:
-        """``{block name: physical values (N,)}`` for :func:`oos_drake.lfr.usubs`."""
-        return configuration_values(self.alpha, self.theta, self.delta_C1, self.delta_C2)
-
 
 def configuration_values(alpha, theta, delta_C1, delta_C2) -> dict[str, np.ndarray]:
     """Block values ``tau_alpha<i> = tan(alpha_i/4)``, ``tau_theta<k>``, ``delta_C1``, ``delta_C2``.
@@ -592,11 +588,6 @@ def mission_values(times, scenario=None) -> dict[str, np.ndarray]:
     return configuration_values(config.alpha, config.theta, config.delta_C1, config.delta_C2)
 
 
-def substitute_mission(model: LFR, times, scenario=None) -> LFR:
-    """``usubs(model, mission_values(times))``: model array with batch dimension ``len(times)``."""
-    return usubs(model, mission_values(times, scenario))
-
-
 # -------------------------------------------------------------------------------------- tables
 def delta_block_table(model: LFR):
     """Table of the model's blocks: name, paper group, kind, occurrences, nominal and range.
@@ -643,12 +634,3 @@ def paper_delta_table(model: LFR):
         raise ValueError(f"paper_delta_table: occurrences (model, paper) differ: {wrong}")
     rows.append({"sub_block": "Delta_P", "content": "total", "size": sum(r["size"] for r in rows)})
     return pd.DataFrame(rows)
-
-
-def configuration_names() -> Sequence[str]:
-    """Names of the scheduled blocks (substituted along the mission)."""
-    return (
-        [f"tau_alpha{i}" for i in range(1, 7)]
-        + [f"tau_theta{k}" for k in range(1, 5)]
-        + ["delta_C1", "delta_C2"]
-    )
