@@ -111,6 +111,31 @@ def block_map(sys) -> BlockMap:
     )
 
 
+def model_matrices(sys, names=("A", "Bw", "Cz", "Dzw")) -> tuple[np.ndarray, ...]:
+    """The state matrices ``names`` of an LFR model array, each as an ``(N, rows, columns)`` array.
+
+    ``N`` is the number of models (1 for a single model). Raises ``ValueError`` for a batch
+    shape of more than one dimension.
+    """
+    if len(sys.batch_shape) > 1:
+        raise ValueError(f"expected a 1-D model array, got batch shape {sys.batch_shape}")
+    n_models = sys.batch_shape[0] if sys.batch_shape else 1
+    return tuple(
+        np.asarray(x).reshape((n_models,) + np.shape(x)[-2:])
+        for x in (getattr(sys, name) for name in names)
+    )
+
+
+def subset_parts(sys, subsets: dict) -> dict:
+    """Subset name -> ``(z rows, w columns, BLK)`` of the Delta channels of ``sys``."""
+    bmap = block_map(sys)
+    parts = {}
+    for name, members in subsets.items():
+        sub, zrows, wcols = bmap.subset(list(members))
+        parts[name] = (zrows, wcols, sub.blk)
+    return parts
+
+
 def delta_channel_response(A, Bw, Cz, Dzw, omega) -> np.ndarray:
     """``Dzw + Cz (j omega I - A)^{-1} Bw`` for batched matrices: ``batch + (F, nz, nw)``.
 
