@@ -1312,3 +1312,8 @@ def load_scenario(
     stat = source.stat()
     key = tuple((str(k), v) for k, v in (overrides or {}).items())
     return _load_cached(str(source), stat.st_mtime_ns, stat.st_size, key)
+
+
+def default_scenario(scenario: Scenario | None = None) -> Scenario:
+    """``scenario``, or the paper's (:func:`load_scenario`) when it is None."""
+    return load_scenario() if scenario is None else scenario

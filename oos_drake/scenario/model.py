@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from oos_drake.lfr import LFR
+from oos_drake.scenario.data import default_scenario
 from oos_drake.titop import (
     Component,
     angle_parameter,
@@ -128,14 +129,6 @@ DELTA_GROUPS: dict[str, str] = {
 }
 
 
-def _scenario(scenario):
-    if scenario is None:
-        from oos_drake.scenario.data import load_scenario
-
-        return load_scenario()
-    return scenario
-
-
 # ------------------------------------------------------------------------------------------ blocks
 def _hub_parameters(hub):
     """Mass and inertia of a hub: ureal blocks when its data declare uncertainty."""
@@ -185,7 +178,7 @@ def physical_blocks(scenario=None) -> dict:
     dict
         Block name -> block spec (:class:`~oos_drake.lfr.blocks.UReal`), sorted by name.
     """
-    scenario = _scenario(scenario)
+    scenario = default_scenario(scenario)
     parts = [p for hub in scenario.hubs.values() for p in _hub_parameters(hub)]
     parts += [_first_mode_parameter(mount) for mount in scenario.arrays.values()]
     for name in ("SM1", "SM2"):
@@ -312,7 +305,7 @@ def build_mission_model(scenario=None) -> LFR:
     >>> models.freqresp(2 * np.pi * np.logspace(-2, 2, 500)).shape
     (330, 500, 6, 6)
     """
-    return _mission_model(_scenario(scenario))
+    return _mission_model(default_scenario(scenario))
 
 
 @functools.lru_cache(maxsize=4)
@@ -395,7 +388,7 @@ def build_docking_model(phase: str, scenario=None, *, spring_dampers=None) -> LF
     phase = str(phase)
     if phase not in ("7", "8"):
         raise ValueError(f"build_docking_model: phase must be '7' or '8', got {phase!r}")
-    scenario = _scenario(scenario)
+    scenario = default_scenario(scenario)
     if spring_dampers is None:
         return _default_docking_model(phase, scenario)
     return _docking_model(phase, scenario, spring_dampers)
@@ -583,7 +576,7 @@ def mission_values(times, scenario=None) -> dict[str, np.ndarray]:
     """
     from oos_drake.scenario.timeline import mission_timeline
 
-    timeline = mission_timeline(_scenario(scenario))
+    timeline = mission_timeline(default_scenario(scenario))
     config = timeline.configuration(np.atleast_1d(np.asarray(times, dtype=float)))
     return configuration_values(config.alpha, config.theta, config.delta_C1, config.delta_C2)
 
