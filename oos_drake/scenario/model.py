@@ -219,7 +219,7 @@ def _array_component(mount, parent_frame: str) -> Component:
     )
 
 
-def _arm_components(arm, tip_signals: bool = True) -> list[Component]:
+def _arm_components(arm) -> list[Component]:
     """Base connection, links L0..L6 and motion-driven joints alpha_1..6 (16 occurrences each)."""
     components = [
         Component(
