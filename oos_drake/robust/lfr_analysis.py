@@ -241,18 +241,32 @@ def worst_case_values(bmap: BlockMap, structure, delta: np.ndarray, omega: float
     response at ``omega`` [rad/s] equals the worst complex matrix, with H-infinity norm equal to
     its norm (scaled by the block's bound).
     """
+    normalized = normalized_worst_case(bmap, structure, delta)
     values = {}
-    for name, kind, spec, rows in zip(
-        bmap.names, bmap.kinds, bmap.specs, bmap.blk_rows, strict=True
-    ):
+    for name, kind, spec in zip(bmap.names, bmap.kinds, bmap.specs, strict=True):
+        if kind == "ureal":
+            values[name] = float(spec.to_physical(normalized[name]))
+        elif kind == "ucomplex":
+            values[name] = complex(spec.to_physical(normalized[name]))
+        else:
+            values[name] = realize_complex_matrix(spec.bound * normalized[name], omega)
+    return values
+
+
+def normalized_worst_case(bmap: BlockMap, structure, delta: np.ndarray) -> dict:
+    """Map a normalized perturbation (mussv ``delta``) to named NORMALIZED block values:
+    ``ureal`` a float in [-1, 1], ``ucomplex`` a complex value, ``ultidyn`` its complex matrix."""
+    values = {}
+    for name, kind, rows in zip(bmap.names, bmap.kinds, bmap.blk_rows, strict=True):
         block = structure.blocks[rows[0]]
         sub = delta[block.r_slice, block.c_slice]
-        if kind == "ureal":
-            values[name] = float(spec.to_physical(float(np.real(sub[0, 0]))))
-        elif kind == "ucomplex":
-            values[name] = complex(spec.to_physical(complex(sub[0, 0])))
-        else:
-            values[name] = realize_complex_matrix(spec.bound * sub, omega)
+        values[name] = (
+            float(sub[0, 0].real)
+            if kind == "ureal"
+            else complex(sub[0, 0])
+            if kind == "ucomplex"
+            else sub
+        )
     return values
 
 
