@@ -15,7 +15,9 @@ import numpy as np
 
 from oos_drake.analysis.controller import Controller
 from oos_drake.control.analysis_model import close_loop
+from oos_drake.control.plants import mission_times  # noqa: F401  (the synthesis's mission grid)
 from oos_drake.lfr import LFR, usubs
+from oos_drake.scenario.data import default_scenario as _scenario
 
 
 @dataclass(frozen=True)
@@ -38,26 +40,6 @@ class ModelArray:
     values: np.ndarray
     label: str
     study: str
-
-
-def _scenario(scenario):
-    if scenario is None:
-        from oos_drake.scenario.data import load_scenario
-
-        return load_scenario()
-    return scenario
-
-
-def mission_times(n_configurations: int, scenario=None) -> np.ndarray:
-    """``n`` equally spaced times over the mission [s] (paper: 330)."""
-    from oos_drake.scenario.timeline import mission_timeline
-
-    if n_configurations < 1:
-        raise ValueError(f"configurations must be >= 1, got {n_configurations}")
-    timeline = mission_timeline(_scenario(scenario))
-    if n_configurations == 1:
-        return np.array([timeline.t_start])
-    return np.linspace(timeline.t_start, timeline.t_end, n_configurations)
 
 
 def _check_source(source: str) -> None:

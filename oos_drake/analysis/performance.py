@@ -13,10 +13,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from oos_drake.analysis.stability import subset_parts
 from oos_drake.blas import limit_blas_threads
 from oos_drake.processes import make_executor
-from oos_drake.robust.lfr_analysis import delta_channel_response
+from oos_drake.robust.lfr_analysis import delta_channel_response, model_matrices, subset_parts
 
 #: Performance channels: name -> rows of ``e``.
 CHANNELS = {"e_p": (0, 1, 2), "e_u": (3, 4, 5)}
@@ -105,15 +104,8 @@ def worst_case_gains(
     omega = np.unique(np.asarray(omega, dtype=float))
     n_all = sys.batch_shape[0] if sys.batch_shape else 1
     times = np.full(n_all, np.nan) if times is None else np.asarray(times, dtype=float)
-    A = np.asarray(sys.A).reshape((n_all,) + sys.A.shape[-2:])[models]
-    Bw = np.asarray(sys.Bw).reshape((n_all,) + sys.Bw.shape[-2:])[models]
-    Bu = np.asarray(sys.Bu).reshape((n_all,) + sys.Bu.shape[-2:])[models]
-    Cz = np.asarray(sys.Cz).reshape((n_all,) + sys.Cz.shape[-2:])[models]
-    Cy = np.asarray(sys.Cy).reshape((n_all,) + sys.Cy.shape[-2:])[models]
-    Dzw = np.asarray(sys.Dzw).reshape((n_all,) + sys.Dzw.shape[-2:])[models]
-    Dzu = np.asarray(sys.Dzu).reshape((n_all,) + sys.Dzu.shape[-2:])[models]
-    Dyw = np.asarray(sys.Dyw).reshape((n_all,) + sys.Dyw.shape[-2:])[models]
-    Dyu = np.asarray(sys.Dyu).reshape((n_all,) + sys.Dyu.shape[-2:])[models]
+    names = ("A", "Bw", "Bu", "Cz", "Cy", "Dzw", "Dzu", "Dyw", "Dyu")
+    A, Bw, Bu, Cz, Cy, Dzw, Dzu, Dyw, Dyu = (x[models] for x in model_matrices(sys, names))
     parts = subset_parts(sys, subsets)
     tasks, keys = [], []
     for channel, rows in CHANNELS.items():

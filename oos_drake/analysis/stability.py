@@ -39,7 +39,13 @@ from oos_drake.analysis.tightening import (
 )
 from oos_drake.analysis.workers import CONVERGED_TEMPERATURES, ModelPool, PointTask
 from oos_drake.robust.blocks import parse_blk
-from oos_drake.robust.lfr_analysis import block_map, delta_channel_response, worst_case_values
+from oos_drake.robust.lfr_analysis import (
+    block_map,
+    delta_channel_response,
+    subset_parts,
+    worst_case_values,
+)
+from oos_drake.robust.sweep import check_sweep_input
 from oos_drake.robust.tables import sweep_table
 
 
@@ -106,25 +112,6 @@ class SweepOptions:
                 raise ValueError(f"SweepOptions.{name} must be >= 1, got {getattr(self, name)}")
         if self.chunk_size < 0:
             raise ValueError(f"SweepOptions.chunk_size must be >= 0, got {self.chunk_size}")
-
-
-def delta_matrices(sys):
-    """``(A, Bw, Cz, Dzw)`` of an LFR model array as ``(N, ...)`` arrays."""
-    n_models = sys.batch_shape[0] if sys.batch_shape else 1
-    return tuple(
-        np.asarray(x).reshape((n_models,) + np.shape(x)[-2:])
-        for x in (sys.A, sys.Bw, sys.Cz, sys.Dzw)
-    )
-
-
-def subset_parts(sys, subsets: dict) -> dict:
-    """Subset name -> ``(z rows, w columns, BLK)`` of the Delta channels of ``sys``."""
-    bmap = block_map(sys)
-    parts = {}
-    for name, members in subsets.items():
-        sub, zrows, wcols = bmap.subset(list(members))
-        parts[name] = (zrows, wcols, sub.blk)
-    return parts
 
 
 def grid_bounds(M, blk, options: SweepOptions):
@@ -483,18 +470,6 @@ def _table(points: dict, times) -> pd.DataFrame:
     )
 
 
-def _check_sweep_input(sys, omega, times):
-    omega = np.unique(np.asarray(omega, dtype=float))
-    if omega.size == 0 or np.any(omega <= 0) or not np.all(np.isfinite(omega)):
-        raise ValueError("mu_sweep: omega must hold finite frequencies > 0 [rad/s]")
-    arrays = delta_matrices(sys)
-    n_models = arrays[0].shape[0]
-    times = np.full(n_models, np.nan) if times is None else np.asarray(times, dtype=float)
-    if times.shape != (n_models,):
-        raise ValueError(f"mu_sweep: times has shape {times.shape}, expected ({n_models},)")
-    return omega, arrays, times
-
-
 def mu_sweep(
     sys,
     omega,
@@ -530,7 +505,7 @@ def mu_sweep(
         ``tightened``: upper bound recomputed with many iterations).
     """
     options = options or SweepOptions()
-    omega, arrays, times = _check_sweep_input(sys, omega, times)
+    omega, arrays, times = check_sweep_input(sys, omega, times, caller="mu_sweep", zero=False)
     parts = subset_parts(sys, subsets)
     with ModelPool(arrays, options.n_jobs, options.scheduler) as pool:
         points, _ = _grid_points(
@@ -790,7 +765,7 @@ def certified_sweep(
 
     options = options or SweepOptions()
     tighten = tighten or TightenOptions()
-    omega, arrays, times = _check_sweep_input(sys, omega, times)
+    omega, arrays, times = check_sweep_input(sys, omega, times, caller="mu_sweep", zero=False)
     n_models = arrays[0].shape[0]
     parts = subset_parts(sys, subsets)
     bmap_all = block_map(sys)

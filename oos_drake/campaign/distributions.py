@@ -25,20 +25,11 @@ from oos_drake.campaign.simulator import Parameter
 
 
 @dataclass(frozen=True)
-class Uniform:
-    """Uniform on ``[low, high]`` [unit of the parameter]."""
+class _Interval:
+    """A law on ``[low, high]`` [unit of the parameter]: support and spec entry."""
 
     low: float
     high: float
-    kind = "uniform"
-
-    def ppf(self, u: np.ndarray) -> np.ndarray:
-        return self.low + np.asarray(u) * (self.high - self.low)
-
-    def pdf(self, x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x, dtype=float)
-        inside = (x >= self.low) & (x <= self.high)
-        return np.where(inside, 1.0 / (self.high - self.low), 0.0)
 
     @property
     def support(self) -> tuple[float, float]:
@@ -49,11 +40,24 @@ class Uniform:
 
 
 @dataclass(frozen=True)
-class LogUniform:
+class Uniform(_Interval):
+    """Uniform on ``[low, high]`` [unit of the parameter]."""
+
+    kind = "uniform"
+
+    def ppf(self, u: np.ndarray) -> np.ndarray:
+        return self.low + np.asarray(u) * (self.high - self.low)
+
+    def pdf(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        inside = (x >= self.low) & (x <= self.high)
+        return np.where(inside, 1.0 / (self.high - self.low), 0.0)
+
+
+@dataclass(frozen=True)
+class LogUniform(_Interval):
     """Log-uniform on ``[low, high]``, ``0 < low < high``: ``log x`` is uniform."""
 
-    low: float
-    high: float
     kind = "log-uniform"
 
     def ppf(self, u: np.ndarray) -> np.ndarray:
@@ -64,13 +68,6 @@ class LogUniform:
         inside = (x >= self.low) & (x <= self.high)
         safe = np.where(inside, x, 1.0)
         return np.where(inside, 1.0 / (safe * math.log(self.high / self.low)), 0.0)
-
-    @property
-    def support(self) -> tuple[float, float]:
-        return self.low, self.high
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"distribution": self.kind, "low": self.low, "high": self.high}
 
 
 @dataclass(frozen=True)

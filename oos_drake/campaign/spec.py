@@ -253,16 +253,6 @@ def packaged_spec_names() -> list[str]:
     return sorted(p.stem for p in SPEC_DIRECTORY.glob("*.toml"))
 
 
-def packaged_spec(name: str) -> Path:
-    """Path of the shipped spec ``name`` (``"paper"`` or ``"paper.toml"``)."""
-    path = SPEC_DIRECTORY / Path(name).with_suffix(".toml").name
-    if not path.is_file():
-        raise ValueError(
-            f"no shipped campaign spec {name!r}; shipped: {', '.join(packaged_spec_names())}"
-        )
-    return path
-
-
 def load_spec(path: str | Path, worst_cases: str | Path | None = None) -> CampaignSpec:
     """Read and validate a campaign spec file.
 

@@ -23,7 +23,7 @@ from oos_drake.control.baseline import baseline_gains, inertia_from_plant
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.interconnection import WeightedInterconnection, weighted_interconnection
 from oos_drake.control.loop_response import LoopResponse, LoopSigma
-from oos_drake.control.plants import PlantArray, UncertainParameter, from_lfr, from_statespace
+from oos_drake.control.plants import PlantArray, UncertainParameter, from_lfr
 from oos_drake.control.report import write_synthesis
 from oos_drake.control.statespace import BatchedStateSpace, connect
 from oos_drake.control.synthesis import SynthesisOptions, SynthesisResult, synthesize
@@ -44,7 +44,6 @@ __all__ = [
     "close_loop",
     "connect",
     "from_lfr",
-    "from_statespace",
     "hinfnorm_hamiltonian",
     "inertia_from_plant",
     "peak_gain",

@@ -129,22 +129,6 @@ class PlantArray:
         return digest.hexdigest()
 
 
-def from_statespace(A, B, C, D, configurations: pd.DataFrame | None = None, source="statespace"):
-    """A :class:`PlantArray` without uncertain parameters from batched matrices ``(N, ...)``."""
-    A, B, C, D = (np.asarray(M, dtype=float) for M in (A, B, C, D))
-    if A.ndim == 2:
-        A, B, C, D = A[None], B[None], C[None], D[None]
-    N = A.shape[0]
-    configurations = (
-        configurations if configurations is not None else pd.DataFrame({"index": np.arange(N)})
-    )
-
-    def build(index, values):
-        return A[index], B[index], C[index], D[index]
-
-    return PlantArray(configurations, (), build, source)
-
-
 def flexible_rotational_plant(J_residual, L, frequencies, damping):
     """State-space of a rigid hub with cantilevered flexible modes, ``T -> wdot`` (batched).
 

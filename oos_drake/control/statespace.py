@@ -102,14 +102,6 @@ class BatchedStateSpace:
             outputs,
         )
 
-    @classmethod
-    def from_control(cls, sys, inputs, outputs) -> BatchedStateSpace:
-        """Return the model of a python-control ``StateSpace`` or ``TransferFunction``."""
-        import control
-
-        ss = control.ss(sys)
-        return cls(ss.A, ss.B, ss.C, ss.D, inputs, outputs)
-
     def replicate(self, copies: int, inputs, outputs) -> BatchedStateSpace:
         """Return ``copies`` independent copies of this model, stacked block-diagonally.
 
@@ -137,18 +129,6 @@ class BatchedStateSpace:
             raise ValueError(f"unknown input channel {missing[0]!r}")
         return [lookup[name] for name in names]
 
-    def select(self, outputs: Sequence[str], inputs: Sequence[str]) -> BatchedStateSpace:
-        """Return the sub-model from the named inputs to the named outputs."""
-        rows, cols = self.index_outputs(outputs), self.index_inputs(inputs)
-        return BatchedStateSpace(
-            self.A,
-            self.B[..., :, cols],
-            self.C[..., rows, :],
-            self.D[..., rows, :][..., :, cols],
-            tuple(inputs),
-            tuple(outputs),
-        )
-
     def take(self, index) -> BatchedStateSpace:
         """Return the models ``index`` of the first batch dimension (int, slice or array)."""
         return BatchedStateSpace(
@@ -170,12 +150,6 @@ class BatchedStateSpace:
             ).astype(complex)
         X = np.linalg.solve(s * np.eye(n) - A, self.B[..., None, :, :].astype(complex))
         return self.C[..., None, :, :] @ X + self.D[..., None, :, :]
-
-    def to_control(self, index=()):
-        """Return model ``index`` of the batch as a python-control ``StateSpace``."""
-        import control
-
-        return control.ss(self.A[index], self.B[index], self.C[index], self.D[index])
 
 
 def append(systems: Sequence[BatchedStateSpace]) -> BatchedStateSpace:

@@ -409,19 +409,10 @@ def synthesize(
             starts.append(K_best * np.exp(options.restart_spread * rng.normal(size=K0.shape)))
         for r, Ks in enumerate(starts):
             g0 = evaluate(W, Ks, workers=workers).gamma
+            run = dict(round=round_, restart=r, models=len(working.config_index), gamma_start=g0)
             if not np.isfinite(g0):
-                runs.append(
-                    dict(
-                        round=round_,
-                        restart=r,
-                        models=len(working.config_index),
-                        gamma_start=g0,
-                        gamma_end=np.inf,
-                        iterations=0,
-                        evaluations=1,
-                        message="unstable start",
-                    )
-                )
+                end = dict(gamma_end=np.inf, iterations=0, evaluations=1, message="unstable start")
+                runs.append(run | end)
                 continue
             K, g, res = tune(
                 W,
@@ -431,18 +422,8 @@ def synthesize(
                 method=options.method,
                 workers=workers,
             )
-            runs.append(
-                dict(
-                    round=round_,
-                    restart=r,
-                    models=len(working.config_index),
-                    gamma_start=g0,
-                    gamma_end=g,
-                    iterations=res.iterations,
-                    evaluations=res.evaluations,
-                    message=res.message,
-                )
-            )
+            end = dict(gamma_end=g, iterations=res.iterations, evaluations=res.evaluations)
+            runs.append(run | end | dict(message=res.message))
             log(
                 f"round {round_} run {r}: gamma {g0:.6g} -> {g:.6g} over "
                 f"{len(working.config_index)} models ({res.iterations} it, {res.message})"

@@ -220,11 +220,6 @@ class UReal:
         """``(lower, upper)`` physical range."""
         return (self.lower, self.upper)
 
-    @property
-    def blk_row(self) -> list[list[int]]:
-        """MATLAB ``mussv`` BLK row of one block with one occurrence: ``[-1, 0]``."""
-        return [-1, 0]
-
     def describe(self) -> str:
         return (
             f"ureal {self.name}{_facts(self)}: nominal {self.nominal:.6g}, "
@@ -306,10 +301,6 @@ class UComplex:
     @property
     def range(self):
         return None
-
-    @property
-    def blk_row(self):
-        return [1, 0]
 
     def describe(self) -> str:
         return (
@@ -413,10 +404,6 @@ class ULTIDyn:
     @property
     def range(self):
         return None
-
-    @property
-    def blk_row(self):
-        return list(self.io_shape)
 
     def describe(self) -> str:
         return (

@@ -48,13 +48,12 @@ from __future__ import annotations
 
 import functools
 import threading
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import scipy.linalg
 from scipy.linalg import lapack
 
-from oos_drake.blas import single_threaded_blas
+from oos_drake.blas import run_threaded
 from oos_drake.lfr.core import as_lfr
 from oos_drake.lfr.coupled_modes import block_pairs, coupled_response, tail_terms
 from oos_drake.lfr.workspace import Workspace
@@ -143,18 +142,7 @@ def freqresp(
             real_pairs,
         )  # fmt: skip
 
-    def threaded_work(start):
-        with single_threaded_blas():  # this thread's BLAS calls: no nested BLAS threads
-            work(start)
-
-    workers = max(1, int(workers))
-    if workers > 1 and len(starts) > 1:
-        with ThreadPoolExecutor(max_workers=min(workers, len(starts))) as pool:
-            for _ in pool.map(threaded_work, starts):
-                pass
-    else:
-        for start in starts:
-            work(start)
+    run_threaded(work, starts, workers)
     return out.reshape(batch + out.shape[1:])
 
 

@@ -14,13 +14,12 @@ whose occurrences do not form algebraic loops costs matrix products only. Full b
 from __future__ import annotations
 
 from collections.abc import Mapping
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from oos_drake.blas import single_threaded_blas
+from oos_drake.blas import run_threaded
 from oos_drake.lfr.core import LFR
 
 #: Work-array size (entries) per chunk of models in the batched substitution.
@@ -348,18 +347,7 @@ def _close_scalar(sys: LFR, deltas: Mapping, workers: int = 1) -> LFR:
         def work(k):
             new_M[k : k + step] = _close_scalar_values_batched(plan, flat[k : k + step], names)
 
-        def threaded_work(k):
-            with single_threaded_blas():  # this thread's BLAS calls: no nested BLAS threads
-                work(k)
-
-        workers = max(1, int(workers))
-        if workers > 1 and len(starts) > 1:
-            with ThreadPoolExecutor(max_workers=min(workers, len(starts))) as pool:
-                for _ in pool.map(threaded_work, starts):
-                    pass
-        else:
-            for k in starts:
-                work(k)
+        run_threaded(work, starts, workers)
         new_M = new_M.reshape(batch + new_M.shape[-2:])
     else:
         new_M = _close_scalar_general(plan, d, batch, names)

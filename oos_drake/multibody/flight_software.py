@@ -273,11 +273,6 @@ class FlightSoftwareDesign:
             J_ref=np.eye(3) if J_ref is None else np.asarray(J_ref, dtype=float),
         )
 
-    @property
-    def block_order(self) -> tuple[str, ...]:
-        """Blocks whose states make up the filter part of the discrete state, in order."""
-        return ("star_tracker", "gyro", "rolloff", "wheels", "disturbance", "mul", "add")
-
     def slices(self) -> dict[str, slice]:
         """Block name -> slice of the discrete state (filters, held outputs, metrics, counter)."""
         sizes = {

@@ -30,6 +30,7 @@ from oos_drake.multibody.operating_point import OperatingPoint, set_operating_po
 from oos_drake.multibody.scenario_plant import cached_scenario_diagram
 from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL
 from oos_drake.multibody.uncertain_linearization import PhysicalParameter, ulinearize
+from oos_drake.scenario.data import default_scenario as _scenario
 
 __all__ = [
     "SPRING_QUANTITIES",
@@ -47,14 +48,6 @@ SPRING_QUANTITIES = {
     "d_tors": "torque_damping",
 }
 _BUSHING_FRAMES = {"SM1": "J7/D2", "SM2": "D1/D3"}
-
-
-def _scenario(scenario):
-    if scenario is None:
-        from oos_drake.scenario.data import load_scenario
-
-        return load_scenario()
-    return scenario
 
 
 def uncertain_parameters(scenario=None):

@@ -111,6 +111,31 @@ def block_map(sys) -> BlockMap:
     )
 
 
+def model_matrices(sys, names=("A", "Bw", "Cz", "Dzw")) -> tuple[np.ndarray, ...]:
+    """The state matrices ``names`` of an LFR model array, each as an ``(N, rows, columns)`` array.
+
+    ``N`` is the number of models (1 for a single model). Raises ``ValueError`` for a batch
+    shape of more than one dimension.
+    """
+    if len(sys.batch_shape) > 1:
+        raise ValueError(f"expected a 1-D model array, got batch shape {sys.batch_shape}")
+    n_models = sys.batch_shape[0] if sys.batch_shape else 1
+    return tuple(
+        np.asarray(x).reshape((n_models,) + np.shape(x)[-2:])
+        for x in (getattr(sys, name) for name in names)
+    )
+
+
+def subset_parts(sys, subsets: dict) -> dict:
+    """Subset name -> ``(z rows, w columns, BLK)`` of the Delta channels of ``sys``."""
+    bmap = block_map(sys)
+    parts = {}
+    for name, members in subsets.items():
+        sub, zrows, wcols = bmap.subset(list(members))
+        parts[name] = (zrows, wcols, sub.blk)
+    return parts
+
+
 def delta_channel_response(A, Bw, Cz, Dzw, omega) -> np.ndarray:
     """``Dzw + Cz (j omega I - A)^{-1} Bw`` for batched matrices: ``batch + (F, nz, nw)``.
 
@@ -216,70 +241,48 @@ def worst_case_values(bmap: BlockMap, structure, delta: np.ndarray, omega: float
     response at ``omega`` [rad/s] equals the worst complex matrix, with H-infinity norm equal to
     its norm (scaled by the block's bound).
     """
+    normalized = normalized_worst_case(bmap, structure, delta)
     values = {}
-    for name, kind, spec, rows in zip(
-        bmap.names, bmap.kinds, bmap.specs, bmap.blk_rows, strict=True
-    ):
-        block = structure.blocks[rows[0]]
-        sub = delta[block.r_slice, block.c_slice]
+    for name, kind, spec in zip(bmap.names, bmap.kinds, bmap.specs, strict=True):
         if kind == "ureal":
-            values[name] = float(spec.to_physical(float(np.real(sub[0, 0]))))
+            values[name] = float(spec.to_physical(normalized[name]))
         elif kind == "ucomplex":
-            values[name] = complex(spec.to_physical(complex(sub[0, 0])))
+            values[name] = complex(spec.to_physical(normalized[name]))
         else:
-            values[name] = realize_complex_matrix(spec.bound * sub, omega)
+            values[name] = realize_complex_matrix(spec.bound * normalized[name], omega)
     return values
 
 
-def _allpass_factor(c: complex, omega: float):
-    """Stable real ``g(s) = k (s - a)/(s + a)`` (or a constant) with ``g(j omega) = c``.
-
-    At ``omega = 0`` or ``inf`` the response of a real system is real: the constant ``Re c``
-    (the worst perturbation there is real, as ``M`` is).
-    """
-    import control
-
-    mag = abs(c)
-    if mag == 0 or omega <= 0 or np.isinf(omega):
-        return control.ss([], [], [], [[float(np.real(c)) if mag else 0.0]])
-    phase = np.angle(c)
-    sign = 1.0
-    # (j w - a)/(j w + a) has phase pi - 2 atan(w / a) in (0, pi); a negative gain adds pi
-    if phase < 0:
-        phase += np.pi
-        sign = -1.0
-    if phase < 1e-12:
-        return control.ss([], [], [], [[sign * mag]])
-    if phase > np.pi - 1e-12:
-        return control.ss([], [], [], [[-sign * mag]])
-    a = omega / np.tan((np.pi - phase) / 2.0)
-    return control.ss(control.tf([sign * mag, -sign * mag * a], [1.0, a]))
+def normalized_worst_case(bmap: BlockMap, structure, delta: np.ndarray) -> dict:
+    """Map a normalized perturbation (mussv ``delta``) to named NORMALIZED block values:
+    ``ureal`` a float in [-1, 1], ``ucomplex`` a complex value, ``ultidyn`` its complex matrix."""
+    values = {}
+    for name, kind, rows in zip(bmap.names, bmap.kinds, bmap.blk_rows, strict=True):
+        block = structure.blocks[rows[0]]
+        sub = delta[block.r_slice, block.c_slice]
+        values[name] = (
+            float(sub[0, 0].real)
+            if kind == "ureal"
+            else complex(sub[0, 0])
+            if kind == "ucomplex"
+            else sub
+        )
+    return values
 
 
 def realize_complex_matrix(value: np.ndarray, omega: float):
     """Stable real-rational ``Delta(s)``: ``Delta(j omega) = value``, ``||Delta||_inf = ||value||``.
 
-    Uses the rank-one form of the worst perturbation (``value = u v^*``, exact for the power
-    iteration's full blocks; otherwise its dominant singular pair, which keeps the norm) with
-    all-pass factors per entry.
+    The rank-one form of the worst perturbation (``value = u v^*``, exact for the power
+    iteration's full blocks; otherwise its dominant singular pair, which keeps the norm),
+    realized with all-pass factors per entry by
+    :func:`~oos_drake.robust.interpolant.lti_interpolant`. At ``omega = 0`` or ``inf`` the
+    response of a real system is real: the real part of the rank-one value.
     """
-    import control
+    from oos_drake.robust.interpolant import lti_interpolant
 
-    value = np.asarray(value, dtype=complex)
-    U, sv, Vh = np.linalg.svd(value)
-    u = U[:, 0] * sv[0]
-    v = Vh[0, :]  # value ~ u v (v is a row)
-    p, q = value.shape
-    left = (
-        control.append(*[_allpass_factor(ui, omega) for ui in u])
-        if p > 1
-        else _allpass_factor(u[0], omega)
-    )
-    right = (
-        control.append(*[_allpass_factor(vi, omega) for vi in v])
-        if q > 1
-        else _allpass_factor(v[0], omega)
-    )
-    # Delta(s) = diag(u_i(s)) 1_p 1_q^T diag(v_j(s))
-    ones = control.ss([], [], [], np.ones((p, q)))
-    return left * ones * right
+    U, sv, Vh = np.linalg.svd(np.atleast_2d(np.asarray(value, dtype=complex)))
+    rank_one = sv[0] * np.outer(U[:, 0], Vh[0, :])
+    if omega <= 0 or np.isinf(omega):
+        return lti_interpolant(rank_one.real, max(float(omega), 0.0))
+    return lti_interpolant(rank_one, omega)

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from oos_drake.blas import single_threaded_blas, with_single_threaded_blas
+from oos_drake.blas import with_single_threaded_blas
 
 #: Eigenvector basis condition number above which the exact (LU) response is used instead
 #: (below it the modal response is accurate to ~cond * 1e-16, enough to locate peaks; the
@@ -122,51 +122,46 @@ def _sigma_max(H) -> np.ndarray:
     return np.sqrt(np.maximum(np.linalg.eigvalsh(G)[..., -1], 0.0))
 
 
-def _eig_and_inverse(A):
-    with single_threaded_blas():
-        lam, V = np.linalg.eig(A)
-        return lam, V, np.linalg.inv(V)
-
-
 @functools.cache
 def _executor(workers: int) -> ThreadPoolExecutor:
     return ThreadPoolExecutor(max_workers=workers, thread_name_prefix="peak_gain")
 
 
-def _eigendecompose(A, workers: int = 1):
-    """``(lambda, V, V^-1)`` of a stack of matrices, in ``workers`` threads over model chunks.
+def _over_chunks(function, A, workers: int) -> list:
+    """``function`` of model chunks of ``A`` in ``workers`` threads: the chunks' results, in order.
 
     LAPACK's ``geev`` runs without the GIL, so threads use the cores without pickling; each
-    thread keeps one BLAS thread (many small problems: batching is the parallelism).
+    ``function`` keeps one BLAS thread (many small problems: batching is the parallelism).
     """
     workers = int(workers)
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
-    N = A.shape[0]
-    if workers == 1 or N < 2 * workers:
-        return _eig_and_inverse(A)
-    chunks = np.array_split(np.arange(N), workers)
-    parts = list(_executor(workers).map(lambda idx: _eig_and_inverse(A[idx]), chunks))
+    if workers == 1 or A.shape[0] < 2 * workers:
+        return [function(A)]
+    chunks = np.array_split(np.arange(A.shape[0]), workers)
+    return list(_executor(workers).map(lambda idx: function(A[idx]), chunks))
+
+
+@with_single_threaded_blas
+def _eig_and_inverse(A):
+    lam, V = np.linalg.eig(A)
+    return lam, V, np.linalg.inv(V)
+
+
+def _eigendecompose(A, workers: int = 1):
+    """``(lambda, V, V^-1)`` of a stack of matrices, in ``workers`` threads over model chunks."""
+    parts = _over_chunks(_eig_and_inverse, A, workers)
     return tuple(np.concatenate([part[k] for part in parts]) for k in range(3))
 
 
-def _eigvals_chunk(A):
-    with single_threaded_blas():
-        return np.linalg.eigvals(A)
+@with_single_threaded_blas
+def _eigvals(A):
+    return np.linalg.eigvals(A) if A.shape[-1] else np.zeros((A.shape[0], 0), dtype=complex)
 
 
 def eigenvalues(A, workers: int = 1) -> np.ndarray:
     """Eigenvalues of a stack of matrices (no vectors), in ``workers`` threads over chunks."""
-    workers = int(workers)
-    if workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
-    N = A.shape[0]
-    if A.shape[-1] == 0:
-        return np.zeros((N, 0), dtype=complex)
-    if workers == 1 or N < 2 * workers:
-        return _eigvals_chunk(A)
-    chunks = np.array_split(np.arange(N), workers)
-    return np.concatenate(list(_executor(workers).map(lambda idx: _eigvals_chunk(A[idx]), chunks)))
+    return np.concatenate(_over_chunks(_eigvals, A, workers))
 
 
 class ModalResponse:
@@ -276,10 +271,6 @@ class ModalResponse:
         """
         H = self.response(omega)
         return pruned_sigma(H) if prune else _sigma_max(H)
-
-    def default_grid(self, points_per_decade: int = 12) -> np.ndarray:
-        """Per-model starting grid [rad/s] of the peak search (see :func:`peak_search_grid`)."""
-        return peak_search_grid(self.lam, points_per_decade)
 
 
 def peak_search_grid(lam, points_per_decade: int = 12) -> np.ndarray:

@@ -26,6 +26,7 @@ from oos_drake.robust.lfr_analysis import (
     block_map,
     delta_channel_response,
     frequency_grid,
+    normalized_worst_case,
     worst_case_values,
 )
 from oos_drake.robust.mu import mussv
@@ -74,11 +75,6 @@ class RobStabResult:
     mu_lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
     guarantee: AxisCertificate | None = None
 
-    @property
-    def robustly_stable(self) -> bool:
-        """True when the guaranteed margin exceeds 1 (stable for the whole uncertainty)."""
-        return self.lower > 1.0
-
     def table(self, subset: str = "total", time: float = float("nan")):
         """The analyzed frequencies as a mu sweep table (:func:`~.tables.sweep_table`).
 
@@ -125,6 +121,26 @@ def _refine(omega, values, count=4, points=12):
         if hi > lo:
             new.append(np.linspace(lo, hi, points + 2)[1:-1])
     return np.concatenate(new) if new else np.zeros(0)
+
+
+def _merged(omega, arrays, new, new_arrays):
+    """``omega`` and its per-frequency ``arrays`` with the points ``new`` added, sorted (stable)."""
+    omega = np.concatenate([omega, new])
+    order = np.argsort(omega, kind="stable")
+    merged = (np.concatenate(pair)[order] for pair in zip(arrays, new_arrays, strict=True))
+    return omega[order], tuple(merged)
+
+
+def _refined_grid(omega, arrays, evaluate, curves, rounds):
+    """Per-frequency ``arrays`` on a grid refined ``rounds`` times next to the highest peaks of
+    ``curves(arrays)``; ``evaluate(new)`` returns the arrays at new frequencies."""
+    for _ in range(rounds):
+        new = np.concatenate([_refine(omega, values) for values in curves(arrays)])
+        new = np.setdiff1d(np.unique(new), omega)
+        if new.size == 0:
+            break
+        omega, arrays = _merged(omega, arrays, new, evaluate(new))
+    return omega, arrays
 
 
 def _eig_near(Mw, delta, target):
@@ -263,20 +279,13 @@ def _refined_sweep(A, Bw, Cz, Dzw, blk, omega, *, refine_rounds=2, mu_options=No
     omega = np.unique(np.asarray(omega, dtype=float))
     M = delta_channel_response(A, Bw, Cz, Dzw, omega)
     res = mussv(M, blk, **mu_options)
-    up, lo, dl = np.atleast_1d(res.upper), np.atleast_1d(res.lower), res.delta
-    for _ in range(refine_rounds):
-        new = np.concatenate([_refine(omega, up), _refine(omega, lo)])
-        new = np.setdiff1d(np.unique(new), omega)
-        if new.size == 0:
-            break
-        Mn = delta_channel_response(A, Bw, Cz, Dzw, new)
-        rn = mussv(Mn, blk, **mu_options)
-        omega = np.concatenate([omega, new])
-        up = np.concatenate([up, np.atleast_1d(rn.upper)])
-        lo = np.concatenate([lo, np.atleast_1d(rn.lower)])
-        dl = np.concatenate([dl, rn.delta])
-        order = np.argsort(omega)
-        omega, up, lo, dl = omega[order], up[order], lo[order], dl[order]
+
+    def evaluate(new):
+        rn = mussv(delta_channel_response(A, Bw, Cz, Dzw, new), blk, **mu_options)
+        return np.atleast_1d(rn.upper), np.atleast_1d(rn.lower), rn.delta
+
+    first = (np.atleast_1d(res.upper), np.atleast_1d(res.lower), res.delta)
+    omega, (up, lo, dl) = _refined_grid(omega, first, evaluate, lambda a: a[:2], refine_rounds)
     up = _polish_peaks(A, Bw, Cz, Dzw, res.structure, omega, up, lo)
     if res.structure.has_real:
         wx, lx, dx = _frequency_crossings(A, Bw, Cz, Dzw, res.structure, omega, up, lo)
@@ -285,12 +294,7 @@ def _refined_sweep(A, Bw, Cz, Dzw, blk, omega, *, refine_rounds=2, mu_options=No
             ux = np.atleast_1d(
                 mussv(delta_channel_response(A, Bw, Cz, Dzw, wx), res.structure, **mu_options).upper
             )
-            omega = np.concatenate([omega, wx])
-            up = np.concatenate([up, np.maximum(ux, lx)])
-            lo = np.concatenate([lo, lx])
-            dl = np.concatenate([dl, dx])
-            order = np.argsort(omega, kind="stable")
-            omega, up, lo, dl = omega[order], up[order], lo[order], dl[order]
+            omega, (up, lo, dl) = _merged(omega, (up, lo, dl), wx, (np.maximum(ux, lx), lx, dx))
     return omega, up, lo, dl, res.structure
 
 
@@ -385,16 +389,7 @@ def robstab(
     if peak_lo > 0:
         wc = float(omega[k])
         worst = worst_case_values(bmap, structure, dl[k], wc)
-        for name, kind, rows in zip(bmap.names, bmap.kinds, bmap.blk_rows, strict=True):
-            b = structure.blocks[rows[0]]
-            sub = dl[k][b.r_slice, b.c_slice]
-            worst_norm[name] = (
-                float(sub[0, 0].real)
-                if kind == "ureal"
-                else complex(sub[0, 0])
-                if kind == "ucomplex"
-                else sub
-            )
+        worst_norm = normalized_worst_case(bmap, structure, dl[k])
     return RobStabResult(lower, upper, wc, worst, worst_norm, True, omega, up, lo, guarantee)
 
 

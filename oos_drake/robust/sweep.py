@@ -18,7 +18,13 @@ from __future__ import annotations
 import numpy as np
 
 from oos_drake.processes import make_executor
-from oos_drake.robust.lfr_analysis import block_map, delta_channel_response, frequency_grid
+from oos_drake.robust.lfr_analysis import (
+    block_map,
+    delta_channel_response,
+    frequency_grid,
+    model_matrices,
+    subset_parts,
+)
 from oos_drake.robust.tables import sweep_table
 
 
@@ -279,6 +285,28 @@ def _axis_peak(A, Bw, Cz, Dzw, blk, omega, up, lo, slack, model):
     return float(cert.upper), int(cert.omega.size)
 
 
+def check_sweep_input(sys, omega, times, *, caller: str, zero: bool = True):
+    """The checked inputs of a mu sweep: ``(omega, (A, Bw, Cz, Dzw), times)``.
+
+    ``omega`` [rad/s] comes back sorted without duplicates (None: :func:`frequency_grid` of all
+    models' poles, 20 points per decade; 0 allowed only with ``zero``), ``times`` [s] as one value
+    per model (None: NaN). Errors (``ValueError``) start with ``caller``.
+    """
+    arrays = model_matrices(sys)
+    n_models = arrays[0].shape[0]
+    if omega is None:
+        omega = frequency_grid(arrays[0], points_per_decade=20)
+    omega = np.unique(np.asarray(omega, dtype=float))
+    bad = np.any(omega < 0) if zero else np.any(omega <= 0)
+    if omega.size == 0 or bad or not np.all(np.isfinite(omega)):
+        bound = ">= 0" if zero else "> 0"
+        raise ValueError(f"{caller}: omega must hold finite frequencies {bound} [rad/s]")
+    times = np.full(n_models, np.nan) if times is None else np.asarray(times, dtype=float)
+    if times.shape != (n_models,):
+        raise ValueError(f"{caller}: times has shape {times.shape}, expected ({n_models},)")
+    return omega, arrays, times
+
+
 def robust_sweep(
     sys,
     omega=None,
@@ -367,30 +395,9 @@ def robust_sweep(
     from oos_drake.lfr import as_lfr
 
     sys = as_lfr(sys)
-    batch = sys.batch_shape
-    if len(batch) > 1:
-        raise ValueError(f"robust_sweep: expected a 1-D model array, got batch shape {batch}")
-    n_models = batch[0] if batch else 1
-    bmap = block_map(sys)
-    subsets = dict(subsets) if subsets else {"total": list(bmap.names)}
-    parts = {}
-    for name, members in subsets.items():
-        sub, zrows, wcols = bmap.subset(list(members))
-        parts[name] = (zrows, wcols, sub.blk)
-    A = np.asarray(sys.A).reshape((n_models,) + sys.A.shape[-2:])
-    Bw = np.asarray(sys.Bw).reshape((n_models,) + sys.Bw.shape[-2:])
-    Cz = np.asarray(sys.Cz).reshape((n_models,) + sys.Cz.shape[-2:])
-    Dzw = np.asarray(sys.Dzw).reshape((n_models,) + sys.Dzw.shape[-2:])
-    if omega is None:
-        omega = frequency_grid(A, points_per_decade=20)
-    omega = np.unique(np.asarray(omega, dtype=float))
-    if omega.size == 0 or np.any(omega < 0) or not np.all(np.isfinite(omega)):
-        raise ValueError("robust_sweep: omega must hold finite frequencies >= 0 [rad/s]")
-    if times is None:
-        times = np.full(n_models, np.nan)
-    times = np.asarray(times, dtype=float)
-    if times.shape != (n_models,):
-        raise ValueError(f"robust_sweep: times has shape {times.shape}, expected ({n_models},)")
+    omega, (A, Bw, Cz, Dzw), times = check_sweep_input(sys, omega, times, caller="robust_sweep")
+    n_models = A.shape[0]
+    parts = subset_parts(sys, dict(subsets) if subsets else {"total": list(block_map(sys).names)})
     mu_options = dict(mu_options or {})
     if mode not in ("peak", "full"):
         raise ValueError(f"robust_sweep: mode must be 'peak' or 'full', got {mode!r}")

@@ -35,6 +35,7 @@ from oos_drake.robust.lfr_analysis import (
     block_map,
     delta_channel_response,
     frequency_grid,
+    normalized_worst_case,
     worst_case_values,
 )
 from oos_drake.robust.mu_intervals import (
@@ -260,22 +261,15 @@ def wcgain(
         M = delta_channel_response(A, B, C, D, w)
         return skewed_gain_bounds(M, nz, nw, bmap.blk, tol=tol, upper_iterations=upper_iterations)
 
-    lo, up, dl, nom = evaluate(omega)
-    from oos_drake.robust.robstab import _refine, peak_seeds
+    from oos_drake.robust.robstab import _refined_grid, peak_seeds
 
-    for _ in range(refine_rounds):
-        fin_up = np.where(np.isfinite(up), up, np.nanmax(np.where(np.isfinite(up), up, 0)) * 10 + 1)
-        fin_lo = np.where(np.isfinite(lo), lo, np.nanmax(np.where(np.isfinite(lo), lo, 0)) * 10 + 1)
-        new = np.setdiff1d(
-            np.unique(np.concatenate([_refine(omega, fin_up), _refine(omega, fin_lo)])), omega
-        )
-        if new.size == 0:
-            break
-        l2, u2, d2, n2 = evaluate(new)
-        omega = np.concatenate([omega, new])
-        lo, up, dl, nom = (np.concatenate(x) for x in ((lo, l2), (up, u2), (dl, d2), (nom, n2)))
-        order = np.argsort(omega)
-        omega, lo, up, dl, nom = omega[order], lo[order], up[order], dl[order], nom[order]
+    def finite(values):  # an infinite bound counts as a peak above every finite one
+        big = np.nanmax(np.where(np.isfinite(values), values, 0)) * 10 + 1
+        return np.where(np.isfinite(values), values, big)
+
+    omega, (lo, up, dl, nom) = _refined_grid(
+        omega, evaluate(omega), evaluate, lambda a: (finite(a[1]), finite(a[0])), refine_rounds
+    )
     k = int(np.argmax(lo))
     structure = parse_blk(bmap.blk)
     worst = worst_case_values(bmap, structure, dl[k], float(omega[k]))
@@ -306,17 +300,7 @@ def wcgain(
             upper = guarantee.upper
         else:
             upper = np.inf
-    worst_norm = {}
-    for name, kind, rows in zip(bmap.names, bmap.kinds, bmap.blk_rows, strict=True):
-        b = structure.blocks[rows[0]]
-        sub = dl[k][b.r_slice, b.c_slice]
-        worst_norm[name] = (
-            float(sub[0, 0].real)
-            if kind == "ureal"
-            else (complex(sub[0, 0]) if kind == "ucomplex" else sub)
-        )
-    if searched is not None:
-        worst_norm = searched
+    worst_norm = normalized_worst_case(bmap, structure, dl[k]) if searched is None else searched
     return WcGainResult(
         best_lower,
         max(float(upper), best_lower),

@@ -111,14 +111,6 @@ class ScenarioError(ValueError):
         super().__init__(f"{body}: {detail}")
 
 
-def _ro(values: Any, shape: tuple[int, ...] | None = None) -> np.ndarray:
-    array = np.array(values, dtype=float)
-    if shape is not None and array.shape != shape:
-        raise ValueError(f"expected shape {shape}, got {array.shape}")
-    array.setflags(write=False)
-    return array
-
-
 # ----------------------------------------------------------------------------------------------
 # dataclasses
 # ----------------------------------------------------------------------------------------------
@@ -283,11 +275,6 @@ class ArmLink:
     inertia: np.ndarray
     p_J_Jnext: np.ndarray
     joint_axis: np.ndarray | None
-
-    @property
-    def spatial_inertia_at_joint(self) -> np.ndarray:
-        """Rigid spatial inertia at J_i in R_Li (6x6)."""
-        return rigid_spatial_inertia(self.mass, self.inertia, self.p_J_G)
 
 
 @dataclass(frozen=True, eq=False)
@@ -1325,3 +1312,8 @@ def load_scenario(
     stat = source.stat()
     key = tuple((str(k), v) for k, v in (overrides or {}).items())
     return _load_cached(str(source), stat.st_mtime_ns, stat.st_size, key)
+
+
+def default_scenario(scenario: Scenario | None = None) -> Scenario:
+    """``scenario``, or the paper's (:func:`load_scenario`) when it is None."""
+    return load_scenario() if scenario is None else scenario

@@ -31,12 +31,13 @@ Signal names used in the assembly (all 6-vectors): ``xdd_<point>_<frame>`` accel
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
-from oos_drake.lfr import LFR, usubs
+from oos_drake.lfr import LFR
+from oos_drake.scenario.data import default_scenario
 from oos_drake.titop import (
     Component,
     angle_parameter,
@@ -128,14 +129,6 @@ DELTA_GROUPS: dict[str, str] = {
 }
 
 
-def _scenario(scenario):
-    if scenario is None:
-        from oos_drake.scenario.data import load_scenario
-
-        return load_scenario()
-    return scenario
-
-
 # ------------------------------------------------------------------------------------------ blocks
 def _hub_parameters(hub):
     """Mass and inertia of a hub: ureal blocks when its data declare uncertainty."""
@@ -185,7 +178,7 @@ def physical_blocks(scenario=None) -> dict:
     dict
         Block name -> block spec (:class:`~oos_drake.lfr.blocks.UReal`), sorted by name.
     """
-    scenario = _scenario(scenario)
+    scenario = default_scenario(scenario)
     parts = [p for hub in scenario.hubs.values() for p in _hub_parameters(hub)]
     parts += [_first_mode_parameter(mount) for mount in scenario.arrays.values()]
     for name in ("SM1", "SM2"):
@@ -226,7 +219,7 @@ def _array_component(mount, parent_frame: str) -> Component:
     )
 
 
-def _arm_components(arm, tip_signals: bool = True) -> list[Component]:
+def _arm_components(arm) -> list[Component]:
     """Base connection, links L0..L6 and motion-driven joints alpha_1..6 (16 occurrences each)."""
     components = [
         Component(
@@ -312,7 +305,7 @@ def build_mission_model(scenario=None) -> LFR:
     >>> models.freqresp(2 * np.pi * np.logspace(-2, 2, 500)).shape
     (330, 500, 6, 6)
     """
-    return _mission_model(_scenario(scenario))
+    return _mission_model(default_scenario(scenario))
 
 
 @functools.lru_cache(maxsize=4)
@@ -395,7 +388,7 @@ def build_docking_model(phase: str, scenario=None, *, spring_dampers=None) -> LF
     phase = str(phase)
     if phase not in ("7", "8"):
         raise ValueError(f"build_docking_model: phase must be '7' or '8', got {phase!r}")
-    scenario = _scenario(scenario)
+    scenario = default_scenario(scenario)
     if spring_dampers is None:
         return _default_docking_model(phase, scenario)
     return _docking_model(phase, scenario, spring_dampers)
@@ -528,10 +521,6 @@ class MissionValues:
     delta_C1: np.ndarray
     delta_C2: np.ndarray
 
-    def as_dict(self) -> dict[str, np.ndarray]:
-        """``{block name: physical values (N,)}`` for :func:`oos_drake.lfr.usubs`."""
-        return configuration_values(self.alpha, self.theta, self.delta_C1, self.delta_C2)
-
 
 def configuration_values(alpha, theta, delta_C1, delta_C2) -> dict[str, np.ndarray]:
     """Block values ``tau_alpha<i> = tan(alpha_i/4)``, ``tau_theta<k>``, ``delta_C1``, ``delta_C2``.
@@ -587,14 +576,9 @@ def mission_values(times, scenario=None) -> dict[str, np.ndarray]:
     """
     from oos_drake.scenario.timeline import mission_timeline
 
-    timeline = mission_timeline(_scenario(scenario))
+    timeline = mission_timeline(default_scenario(scenario))
     config = timeline.configuration(np.atleast_1d(np.asarray(times, dtype=float)))
     return configuration_values(config.alpha, config.theta, config.delta_C1, config.delta_C2)
-
-
-def substitute_mission(model: LFR, times, scenario=None) -> LFR:
-    """``usubs(model, mission_values(times))``: model array with batch dimension ``len(times)``."""
-    return usubs(model, mission_values(times, scenario))
 
 
 # -------------------------------------------------------------------------------------- tables
@@ -643,12 +627,3 @@ def paper_delta_table(model: LFR):
         raise ValueError(f"paper_delta_table: occurrences (model, paper) differ: {wrong}")
     rows.append({"sub_block": "Delta_P", "content": "total", "size": sum(r["size"] for r in rows)})
     return pd.DataFrame(rows)
-
-
-def configuration_names() -> Sequence[str]:
-    """Names of the scheduled blocks (substituted along the mission)."""
-    return (
-        [f"tau_alpha{i}" for i in range(1, 7)]
-        + [f"tau_theta{k}" for k in range(1, 5)]
-        + ["delta_C1", "delta_C2"]
-    )

@@ -132,10 +132,3 @@ def assemble(components: Sequence[Component], inputs: Sequence[str], outputs: Se
     plant = append(*[c.system for c in components])
     closed = feedback(plant, as_lfr(q), sign=+1)
     return s @ closed @ r
-
-
-def signal_names(components: Sequence[Component]) -> dict[str, list[str]]:
-    """Return ``{"produced": [...], "consumed": [...]}``: every signal name, for documentation."""
-    produced = [s for c in components for s in c.outputs]
-    consumed = [s for c in components for s in c.inputs]
-    return {"produced": produced, "consumed": consumed}

@@ -7,9 +7,7 @@ import pytest
 from oos_drake.analysis.stability import (
     SweepOptions,
     certified_sweep,
-    delta_matrices,
     local_spikes,
-    subset_parts,
 )
 from oos_drake.analysis.tightening import (
     LowerCertificate,
@@ -20,6 +18,7 @@ from oos_drake.analysis.tightening import (
 )
 from oos_drake.analysis.workers import ModelPool, PointTask
 from oos_drake.lfr import feedback, ucomplex, ureal, usubs
+from oos_drake.robust.lfr_analysis import model_matrices, subset_parts
 
 FAST = SweepOptions(n_jobs=1, converge_passes=1, converge_iterations=60)
 
@@ -119,7 +118,7 @@ def test_resolve_spikes_removes_an_inflated_bound():
     omega = 2 * np.pi * np.geomspace(0.2, 2.0, 9)
     models = np.repeat([0, 1], omega.size)
     freqs = np.tile(omega, 2)
-    with ModelPool(delta_matrices(arr), 1) as pool:
+    with ModelPool(model_matrices(arr), 1) as pool:
         first = pool.bounds(
             PointTask(models, freqs, None, *parts, 100, lower_restarts=2, lower_iterations=40)
         )

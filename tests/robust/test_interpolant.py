@@ -61,3 +61,28 @@ def test_static_cases_and_bad_input():
         lti_interpolant(1 + 1j, 40.0, dt=0.1)
     with pytest.raises(ValueError, match="omega"):
         lti_interpolant(1 + 1j, -1.0)
+
+
+def test_worst_case_realization_of_a_dynamic_block():
+    """``realize_complex_matrix`` (the ultidyn worst case of robstab/wcgain/the analysis): the
+    dominant singular pair of the value at ``omega``, a norm equal to the value's on the whole
+    axis, and a real gain at ``omega = 0``; checked by evaluating the systems directly."""
+    from oos_drake.robust.lfr_analysis import realize_complex_matrix
+
+    rng = np.random.default_rng(3)
+    u, v = (
+        rng.normal(size=2) + 1j * rng.normal(size=2),
+        rng.normal(size=3) + 1j * rng.normal(size=3),
+    )
+    rank_one = np.outer(u, v)
+    G = realize_complex_matrix(rank_one, 0.7)
+    np.testing.assert_allclose(G(0.7j), rank_one, atol=1e-12)
+    assert np.all(np.linalg.eigvals(G.A).real < 0)
+    assert _peak_gain(G) == pytest.approx(np.linalg.norm(rank_one, 2), rel=1e-9)
+    full = rank_one + 0.3 * np.outer(rng.normal(size=2), rng.normal(size=3))
+    U, S, Vh = np.linalg.svd(full)
+    np.testing.assert_allclose(
+        realize_complex_matrix(full, 2.0)(2.0j), S[0] * np.outer(U[:, 0], Vh[0]), atol=1e-12
+    )
+    real = np.outer([1.0, -2.0], [0.5, 1.0, 3.0])
+    np.testing.assert_allclose(realize_complex_matrix(real, 0.0).D, real, atol=1e-12)
