@@ -115,13 +115,16 @@ def test_extracted_lfr_equals_the_hand_lfr(extracted):
     assert relative_error(extracted, hand, {}).max() < 1e-12 + 1e-9
 
 
-def test_extracted_lfr_matches_drake_at_the_context_values():
-    """Setting the parameters in the Context and linearizing plainly gives the same model."""
+@pytest.mark.parametrize("scaled", [False, True])
+def test_extracted_lfr_matches_drake_at_the_context_values(scaled):
+    """Setting the parameters in the Context and linearizing plainly gives the same model: in
+    Drake's states, or with the hinge angle scaled by ``w / w0`` (``x = S x~``: ``S^-1 A S``)."""
     from pydrake.systems.primitives import FirstOrderTaylorApproximation
 
     plant, context = sdf_plant(SDF)
     declared = load_parameters(PARAMETERS)
-    G = ulinearize(plant, context, declared, INPUTS, OUTPUTS, prune=False)
+    G = ulinearize(plant, context, declared, INPUTS, OUTPUTS, prune=False,
+                   scale_modal_states=scaled)  # fmt: skip
     values = {"m_hub": 95.0, "Izz_hub": 32.0, "w_panel": 5.2, "k_dock": 2300.0,
               "kt_dock": 400.0, "m_client": 58.0}  # fmt: skip
     plant_context = plant.GetMyMutableContextFromRoot(context)
@@ -153,7 +156,13 @@ def test_extracted_lfr_matches_drake_at_the_context_values():
         output_port_index=plant.GetOutputPort("servicer_state").get_index(),
     )  # fmt: skip
     rows = [0, 1, 2, 7, 8, 9]
-    reference = np.block([[taylor.A(), taylor.B()], [taylor.C()[rows], taylor.D()[rows]]])
+    A, B, C = taylor.A(), taylor.B(), taylor.C()[rows]
+    if scaled:
+        hinge = plant.GetJointByName("panel_hinge").position_start()  # the plant's state = [q; v]
+        S = np.eye(A.shape[0])
+        S[hinge, hinge] = 6.0 / 5.2  # q = (w0 / w) q~
+        A, B, C = np.linalg.solve(S, A @ S), np.linalg.solve(S, B), C @ S
+    reference = np.block([[A, B], [C, taylor.D()[rows]]])
     model = usubs(G, values).nominal
     np.testing.assert_allclose(model.M, reference, rtol=0, atol=1e-9 * np.abs(reference).max())
 
