@@ -195,6 +195,65 @@ def test_robstab_agrees_with_a_dense_pole_sweep(extracted):
     assert closest < 1e-6 * max(1.0, result.critical_frequency)
 
 
+def test_modal_frequency_is_affine_in_the_scaled_states():
+    """``w_panel`` (spring ``400 (w/6)^2``, damper ``2 w/6``) enters Drake's coordinates as
+    ``w^2``: two cascaded channels, the second reading only the first (a nilpotent self-loop
+    in ``M11``). With the hinge angle scaled by ``w / w0`` it is affine: the LFR is a polynomial
+    of degree 1 in ``delta`` (the model at ``delta = 1/2`` is the mean of those at 0 and 1)."""
+    plant, context = sdf_plant(SDF)
+    declared = [p for p in load_parameters(PARAMETERS) if p.name == "w_panel"]
+    # a centred range (affine normalization), so that affine in w is affine in delta
+    centred = [PhysicalParameter("w_panel", declared[0].element, "frequency", 6.0, 5.0, 7.0)]
+
+    def matrices(scaled):
+        G = ulinearize(plant, context, centred, INPUTS, OUTPUTS, scale_modal_states=scaled)
+        return [np.asarray(usubs(G, {"w_panel": d}, normalized=True).nominal.M)
+                for d in (0.0, 0.5, 1.0)]  # fmt: skip
+
+    for scaled, affine in ((True, True), (False, False)):
+        m0, m_half, m1 = matrices(scaled)
+        curvature = np.abs(m_half - 0.5 * (m0 + m1)).max() / np.abs(m1 - m0).max()
+        assert (curvature < 1e-10) == affine, (scaled, curvature)
+
+
+def test_channel_basis_is_canonical():
+    """The channels are balanced on input-output Gram matrices only: the extracted LFR with
+    its states and each block's channels transformed at random (an exact equivalent, as the
+    TITOP LFR is for the twin's) is balanced to the same matrix up to channel signs."""
+    from oos_drake.multibody.uncertain_linearization import _balance_channels
+
+    plant, context = sdf_plant(SDF)
+    G = ulinearize(plant, context, load_parameters(PARAMETERS), INPUTS, OUTPUTS)
+    rng = np.random.default_rng(5)
+    n, nz, M = G.nstates, G.nz, np.array(G.M)
+    L = np.eye(M.shape[0])  # rows [x'; z; y]
+    L[:n, :n] = rng.standard_normal((n, n)) + 3 * np.eye(n)  # state coordinates
+    start = n
+    for entry in G.block_entries:  # each block's channels: z -> T z, w -> T w
+        k = slice(start, start + entry.reps)
+        start += entry.reps
+        L[k, k] = rng.standard_normal((entry.reps, entry.reps)) + 2 * np.eye(entry.reps)
+    R = np.eye(M.shape[1])  # columns [x; w; u]
+    R[: n + nz, : n + nz] = np.linalg.inv(L[: n + nz, : n + nz])
+    other = LFR(L @ M @ R, n, G.block_entries,
+                input_names=G.input_names, output_names=G.output_names)  # fmt: skip
+    assert np.abs(np.asarray(other.M) - M).max() > 1e-2 * np.abs(M).max()  # really different
+
+    def response(sys, omega):  # [z; y] <- [w; u]
+        Ms = np.asarray(sys.M)
+        A, B, C, D = Ms[:n, :n], Ms[:n, n:], Ms[n:, :n], Ms[n:, n:]
+        return np.array([D + C @ np.linalg.solve(1j * w * np.eye(n) - A, B) for w in omega])
+
+    omega = np.array([0.3, 2.0, 9.0])  # rad/s
+    a = response(_balance_channels(G), omega)
+    b = response(_balance_channels(other), omega)
+    assert np.abs(np.abs(b) - np.abs(a)).max() < 1e-8 * np.abs(a).max()
+    # the same channel basis up to signs: each z channel's entries all flip or none
+    ratio = np.where(np.abs(a) > 1e-6 * np.abs(a).max(), b / np.where(a == 0, 1, a), np.nan)
+    signs = np.nanmedian(ratio.real, axis=(0, 2))[:nz]
+    assert np.allclose(np.abs(signs), 1.0, atol=1e-6)
+
+
 # ----------------------------------------------------------------------------- bad input
 def test_unknown_names_and_bad_ranges_are_refused():
     plant, context = sdf_plant(SDF)
