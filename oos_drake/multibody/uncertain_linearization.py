@@ -414,7 +414,8 @@ def _port(system, text: str, direction: str):
         count = system.num_input_ports() if direction == "input" else system.num_output_ports()
         port = system.get_input_port if direction == "input" else system.get_output_port
         names = [port(i).get_name() for i in range(count)]
-        raise ValueError(f"no {direction} port {name!r} on {system.get_name()!r}; ports: {names}")
+        owner = system.get_name() or type(system).__name__
+        raise ValueError(f"no {direction} port {name!r} on {owner!r}; ports: {names}")
     port = get(name)
     from pydrake.systems.framework import PortDataType
 

@@ -364,7 +364,12 @@ def test_cli_writes_mat_and_npz_that_load_back(tmp_path, capsys):
          "makes the mass of 'hub' non-positive"),
         (("nominal = 500.0\npercent = 30", "nominal = 500.0\nrange = [-10.0, 600.0]"), None,
          "makes the torque_stiffness_z of 'dock/client_dock' non-positive"),
+        (("nominal = 2000.0\npercent = 20", "nominal = 2000.0\nrange = [0.0, 4000.0]"), None,
+         "makes the force_stiffness of 'dock/client_dock' non-positive"),
+        (('element = "dock/client_dock"', 'element = "dock/client"'), None,
+         "no bushing between frames 'dock' and 'client'"),
         (None, ("--input", "thrusters"), "no input port 'thrusters'"),
+        (None, ("--output", "hub_state"), "no output port 'hub_state' on 'MultibodyPlant'"),
         (None, ("--output", "servicer_state[40]"), "selection outside its 14 entries"),
     ],
 )  # fmt: skip
