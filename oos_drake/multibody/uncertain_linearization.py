@@ -810,7 +810,9 @@ def _balance_channels(sys: LFR) -> LFR:
     ``T = S^(1/2) U^T L^-1`` with ``P = L L^T``, ``L^T Q L = U S^2 U^T``. Both depend on the
     model's input-output maps only: two LFRs that differ by a change of state coordinates and
     of each block's channel basis (the twin's and TITOP's) get the same channels (up to
-    signs). The mu bounds are invariant under ``T``, but their optimizers start from
+    signs; the sign of each channel is fixed by its driven response, so that neighbouring
+    configurations of a model array get neighbouring channels). The mu bounds are invariant
+    under ``T``, but their optimizers start from
     diagonal scalings, and the D-G optimizer is sensitive to how a repeated block's channels
     are scaled and mixed (a ``diag(e^3, e^-3)`` on a TITOP modal block doubled its converged
     bound on the mission). Measured on the mission twin (4 configurations, the analysis grid
@@ -845,6 +847,14 @@ def _balance_channels(sys: LFR) -> LFR:
         root = s2**0.25  # S^(1/2), S = sqrt(s2)
         T = root[:, None] * np.linalg.solve(L.T, U).T  # S^(1/2) U^T L^-1
         T_inv = L @ U / root[None, :]  # L U S^(-1/2)
+        # signs: each channel's largest driven response entry positive (the SVD's signs are
+        # arbitrary; a flip between neighbouring configurations breaks the analysis'
+        # model-to-model continuation)
+        response = np.einsum("ij,fjm->ifm", T, driven).reshape(T.shape[0], -1)
+        stacked = np.concatenate([response.real, response.imag], axis=1)
+        sign = np.sign(stacked[np.arange(T.shape[0]), np.abs(stacked).argmax(axis=1)])
+        sign[sign == 0] = 1.0
+        T, T_inv = sign[:, None] * T, T_inv * sign[None, :]
         rows = slice(n + k.start, n + k.stop)
         M[rows] = T @ M[rows]
         M[:, rows] = M[:, rows] @ T_inv
