@@ -809,17 +809,17 @@ def _balance_channels(sys: LFR) -> LFR:
 
     ``T = S^(1/2) U^T L^-1`` with ``P = L L^T``, ``L^T Q L = U S^2 U^T``. Both depend on the
     model's input-output maps only: two LFRs that differ by a change of state coordinates and
-    of each block's channel basis (the twin's and TITOP's) get the same channels (up to
-    signs; the sign of each channel is fixed by its driven response, so that neighbouring
-    configurations of a model array get neighbouring channels). The mu bounds are invariant
-    under ``T``, but their optimizers start from
-    diagonal scalings, and the D-G optimizer is sensitive to how a repeated block's channels
-    are scaled and mixed (a ``diag(e^3, e^-3)`` on a TITOP modal block doubled its converged
-    bound on the mission). Measured on the mission twin (4 configurations, the analysis grid
-    of the total subset, its converged passes): the bounds in this basis are within -18 %/+13 %
-    of those on the TITOP LFR point by point, the peaks 0.5 % to 0.8 % lower; before (Gram
-    matrices of the rows and columns of ``M``, which depend on the state coordinates, and
-    ``omega^2`` cascades) up to 2.45 times higher.
+    of each block's channel basis (the twin's and TITOP's) get the same channels (each
+    channel's sign is fixed by its driven response, so that neighbouring configurations of a
+    model array get neighbouring channels). The mu bounds are invariant
+    under ``T``, but their optimizers start from diagonal scalings, and the D-G optimizer is
+    sensitive to how a repeated block's channels are scaled and mixed (a ``diag(e^3, e^-3)``
+    on a TITOP modal block doubled its converged bound on the mission). Measured on the
+    mission twin (4 configurations, the analysis grid of the total subset, its converged
+    passes): the bounds in this basis are within -18 %/+13 % of those on the TITOP LFR point
+    by point, the peaks 0.5 % to 0.8 % lower; before (Gram matrices of the rows and columns
+    of ``M``, which depend on the state coordinates, and ``omega^2`` cascades) up to 2.45
+    times higher.
     """
     n, nz = sys.nstates, sys.nz
     M = np.array(sys.M, dtype=float)
@@ -874,9 +874,9 @@ class _ModalStates:
     v``, the form of TITOP's modal block (``omega I_2``, two channels of equal weight). Same
     input-output map and repetitions; the D-G mu upper bound is the same infimum on both
     realizations, but its optimizer converges on this one (measured on the mission twin: the
-    grid bounds of the total subset up to 2.4 times the converged value before, see
-    docs/DESIGN.md). Only where exact: a joint whose angle is read by anything but its own
-    spring (an output, a bushing) keeps Drake's coordinates (the fit is checked).
+    grid bounds of the total subset up to 2.45 times TITOP's before, docs/DESIGN.md). Only
+    where exact: a joint whose angle is read by anything but its own spring (an output, a
+    bushing) keeps Drake's coordinates (the fit is checked).
 
     Attributes
     ----------
@@ -924,7 +924,7 @@ class _ModalStates:
         R[self.rows] *= ratio[:, None]
         return R
 
-    def state_space(self, ABCD: np.ndarray, values, n: int) -> np.ndarray:
+    def state_space(self, ABCD: np.ndarray, values) -> np.ndarray:
         """``[A B; C D]`` of Drake's states in the scaled ones (``x = S x~``)."""
         if not self.rows.size:
             return ABCD
@@ -1124,7 +1124,7 @@ def _check(problem, lfr, linearize, h, count, tolerance, rng, modal):
         }
         model = usubs(lfr, deltas, normalized=True).nominal
         reference = modal.state_space(
-            np.block([[lin["A"], lin["B"]], [lin["C"], lin["D"]]]), values, lin["A"].shape[0]
+            np.block([[lin["A"], lin["B"]], [lin["C"], lin["D"]]]), values
         )
         error = _relative(np.asarray(model.M), reference)
         if not error <= tolerance:
