@@ -40,8 +40,14 @@ model's equations is assumed beyond what Drake itself computes:
    structurally cannot reach an output or be reached from an input (through any uncertain
    channel) are removed, and so are such channels. The result is checked against Drake's own
    linearization at random parameter values inside and outside the ranges. Finally each
-   repeated block's channels are balanced (an exact change of coordinates that helps the mu
-   optimizers).
+   block's channels are put in a canonical, balanced basis (an exact change of coordinates
+   that depends on the model's input-output maps only, and helps the mu optimizers:
+   :func:`_balance_channels`).
+
+A modal frequency would enter Drake's coordinates as ``omega^2`` (two cascaded channels of
+very different weight, on which the D-G mu upper bound's optimizer stalls); by default the
+joint's angle is scaled by ``omega / omega_0`` in the state, which makes ``omega`` affine
+(TITOP's modal form, :class:`_ModalStates`).
 
 Parameters are declared with :class:`PhysicalParameter` (or a TOML file, :func:`load_parameters`).
 """
@@ -270,6 +276,7 @@ class _Binding:
 
         self.parameter = parameter
         self.plant = plant
+        self.position_row = None  # diagram state index of a free joint's angle (_problem)
         kind, element, quantity = parameter.kind, parameter.element, parameter.quantity
         label = f"parameter {parameter.name!r}"
         if kind == "body":
@@ -407,7 +414,8 @@ def _port(system, text: str, direction: str):
         count = system.num_input_ports() if direction == "input" else system.num_output_ports()
         port = system.get_input_port if direction == "input" else system.get_output_port
         names = [port(i).get_name() for i in range(count)]
-        raise ValueError(f"no {direction} port {name!r} on {system.get_name()!r}; ports: {names}")
+        owner = system.get_name() or type(system).__name__
+        raise ValueError(f"no {direction} port {name!r} on {owner!r}; ports: {names}")
     port = get(name)
     from pydrake.systems.framework import PortDataType
 
@@ -587,6 +595,9 @@ def _problem(system, context, parameters, inputs, outputs) -> _Problem:
             locked[joint.velocity_start() : joint.velocity_start() + joint.num_velocities()] = True
     free = np.flatnonzero(~locked)
     velocity_rows = plant_state[nq:][free].astype(int)
+    for binding in bindings:
+        if binding.parameter.quantity == "frequency" and not binding.joint.is_locked(plant_context):
+            binding.position_row = int(plant_state[binding.joint.position_start()])
     return _Problem(system, plant, context, bindings, in_ports, out_ports, velocity_rows, free)
 
 
@@ -774,40 +785,168 @@ def _prune(sys: LFR, rtol: float = 1e-13) -> LFR:
     )
 
 
-def _balance_channels(sys: LFR) -> LFR:
-    """Balance the channels of each repeated block: ``z -> T z``, ``w -> T w`` (exact, since
-    ``delta I`` commutes with ``T``), with ``T`` making the Gram matrices of the block's rows
-    of ``M`` (how ``z`` reads) and of its columns (how ``w`` writes) equal and diagonal (the
-    balanced-realization transformation ``T = S^(1/2) U^T L^-1`` with ``P = L L^T``,
-    ``L^T Q L = U S^2 U^T``).
+def _balancing_frequencies(A: np.ndarray, per_decade: int = 10) -> np.ndarray:
+    """Log grid [rad/s] over the model's own time scales: a decade below its slowest nonzero
+    pole to a decade above its fastest (``0.1 .. 10`` rad/s when every pole is at zero).
+    Poles below ``1e-6`` times the fastest count as zero (rigid-body poles, whose round-off
+    depends on the state coordinates)."""
+    size = np.abs(np.linalg.eigvals(A)) if A.size else np.zeros(0)
+    size = size[size > 1e-6 * max(size.max(initial=0.0), 1e-300)]
+    low, high = (size.min() / 10, size.max() * 10) if size.size else (0.1, 10.0)
+    count = max(int(np.ceil(per_decade * np.log10(high / low))) + 1, 3)
+    return np.geomspace(low, high, count)
 
-    The factors of step 3 are balanced in scaled units, not physical ones (a stiffness
-    channel may read entries ~1e6 and write ~1e-6). The mu bounds are invariant under ``T``
-    but their optimizers start from diagonal scalings and converge much better from balanced
-    data. Measured: mission twin at 273 s, 0.75 Hz, ``||M11||`` 23 -> 6.3 and the default
-    ``mussv`` upper bound 0.455 -> 0.334 (TITOP LFR: 0.329); servicer robstab margin bounds
-    [0.15, 2.82] -> [2.32, 2.67].
+
+def _balance_channels(sys: LFR) -> LFR:
+    r"""Put each block's channels in a canonical basis: ``z -> T z``, ``w -> T w`` (exact,
+    since ``delta I`` commutes with ``T``), with ``T`` making two Gram matrices of the block
+    equal and diagonal (balanced): how its ``z`` is driven by the inputs and how its ``w``
+    reaches the outputs, over a log frequency grid of the model's time scales
+    (:func:`_balancing_frequencies`),
+
+    .. math::  P = \sum_f \mathrm{Re}\, H_{z u}(j\omega_f) H_{z u}^*, \qquad
+               Q = \sum_f \mathrm{Re}\, H_{y w}^* H_{y w}(j\omega_f),
+
+    ``T = S^(1/2) U^T L^-1`` with ``P = L L^T``, ``L^T Q L = U S^2 U^T``. Both depend on the
+    model's input-output maps only: two LFRs that differ by a change of state coordinates and
+    of each block's channel basis (the twin's and TITOP's) get the same channels (each
+    channel's sign is fixed by its driven response, so that neighbouring configurations of a
+    model array get neighbouring channels). The mu bounds are invariant
+    under ``T``, but their optimizers start from diagonal scalings, and the D-G optimizer is
+    sensitive to how a repeated block's channels are scaled and mixed (a ``diag(e^3, e^-3)``
+    on a TITOP modal block doubled its converged bound on the mission). Measured on the
+    mission twin (4 configurations, the analysis grid of the total subset, its converged
+    passes): the bounds in this basis are within -18 %/+13 % of those on the TITOP LFR point
+    by point, the peaks 0.5 % to 0.8 % lower; before (Gram matrices of the rows and columns
+    of ``M``, which depend on the state coordinates, and ``omega^2`` cascades) up to 2.45
+    times higher.
     """
-    n = sys.nstates
+    n, nz = sys.nstates, sys.nz
     M = np.array(sys.M, dtype=float)
-    start = n
+    A, B, C, D = M[:n, :n], M[:n, n:], M[n:, :n], M[n:, n:]
+    omega = _balancing_frequencies(A)
+    if n:
+        resolvent = np.linalg.solve(1j * omega[:, None, None] * np.eye(n) - A, B)
+        H = D + C @ resolvent  # (F, nz + ny, nw + nu)
+    else:
+        H = np.broadcast_to(D.astype(complex), (omega.size,) + D.shape)
+    start = 0
     for entry in sys.block_entries:
         k = slice(start, start + entry.reps)
         start += entry.reps
-        P, Q = M[k] @ M[k].T, M[:, k].T @ M[:, k]
+        driven, reaching = H[:, k, nz:], H[:, nz:, k]
+        P = np.einsum("fim,fjm->ij", driven, driven.conj()).real
+        Q = np.einsum("fmi,fmj->ij", reaching.conj(), reaching).real
         try:
             L = np.linalg.cholesky(P)
             U, s2, _ = np.linalg.svd(L.T @ Q @ L)
         except np.linalg.LinAlgError:
-            continue  # a channel that reads or writes nothing: leave it
+            continue  # a channel driven by nothing: leave the block as it is
         if s2.min(initial=1.0) <= 1e-300:
             continue
         root = s2**0.25  # S^(1/2), S = sqrt(s2)
         T = root[:, None] * np.linalg.solve(L.T, U).T  # S^(1/2) U^T L^-1
         T_inv = L @ U / root[None, :]  # L U S^(-1/2)
-        M[k] = T @ M[k]
-        M[:, k] = M[:, k] @ T_inv
+        # signs: each channel's largest driven response entry positive (the SVD's signs are
+        # arbitrary; a flip between neighbouring configurations breaks the analysis'
+        # model-to-model continuation)
+        response = np.einsum("ij,fjm->ifm", T, driven).reshape(T.shape[0], -1)
+        stacked = np.concatenate([response.real, response.imag], axis=1)
+        sign = np.sign(stacked[np.arange(T.shape[0]), np.abs(stacked).argmax(axis=1)])
+        sign[sign == 0] = 1.0
+        T, T_inv = sign[:, None] * T, T_inv * sign[None, :]
+        rows = slice(n + k.start, n + k.stop)
+        M[rows] = T @ M[rows]
+        M[:, rows] = M[:, rows] @ T_inv
     return LFR(M, n, sys.block_entries, input_names=sys.input_names, output_names=sys.output_names)
+
+
+@dataclass(frozen=True)
+class _ModalStates:
+    r"""The angles of modal-frequency joints, scaled by ``omega / omega_0`` in the state.
+
+    With the joint's spring ``k = J omega^2`` and damper ``d = 2 xi J omega``, Drake's
+    coordinates make ``omega`` enter quadratically (``omega^2`` on the angle ``q``): two
+    channels, the second one reading the first (``delta (delta ...)``), about
+    ``2 omega_0 / (omega - omega_0)`` times weaker. With the state ``q~ = (omega / omega_0) q``
+    (and the angle's kinematic row ``q' = v`` multiplied by ``omega / omega_0``) it enters
+    affinely: ``q~' = (omega / omega_0) v``, ``k q = J omega_0 omega q~``, ``d v = 2 xi J omega
+    v``, the form of TITOP's modal block (``omega I_2``, two channels of equal weight). Same
+    input-output map and repetitions; the D-G mu upper bound is the same infimum on both
+    realizations, but its optimizer converges on this one (measured on the mission twin: the
+    grid bounds of the total subset up to 2.45 times TITOP's before, docs/DESIGN.md). Only
+    where exact: a joint whose angle is read by anything but its own spring (an output, a
+    bushing) keeps Drake's coordinates (the fit is checked).
+
+    Attributes
+    ----------
+    parameters : numpy.ndarray
+        Binding indices of the frequency parameters whose joint angle is scaled.
+    rows : numpy.ndarray
+        Their angles' indices in the system's continuous state.
+    nominal : numpy.ndarray
+        Their nominal frequencies ``omega_0`` [rad/s].
+    """
+
+    parameters: np.ndarray
+    rows: np.ndarray
+    nominal: np.ndarray
+
+    @classmethod
+    def none(cls) -> _ModalStates:
+        return cls(np.zeros(0, int), np.zeros(0, int), np.zeros(0))
+
+    @classmethod
+    def of(cls, problem) -> _ModalStates:
+        """Every frequency parameter of ``problem`` whose joint is free (a candidate)."""
+        chosen = [
+            (i, b.position_row, b.parameter.nominal)
+            for i, b in enumerate(problem.bindings)
+            if b.parameter.quantity == "frequency" and b.position_row is not None
+        ]
+        if not chosen:
+            return cls.none()
+        index, rows, nominal = (np.array(c) for c in zip(*chosen, strict=True))
+        return cls(index.astype(int), rows.astype(int), nominal.astype(float))
+
+    def _ratios(self, values) -> np.ndarray:
+        return np.asarray(values, dtype=float)[self.parameters] / self.nominal
+
+    def implicit(self, R: np.ndarray, values, n: int, ny: int) -> np.ndarray:
+        """``R [x'; y; x; u] = 0`` in the scaled states (columns ``x'``, ``x`` of each angle
+        divided by ``omega / omega_0``, its kinematic row multiplied)."""
+        if not self.rows.size:
+            return R
+        ratio = self._ratios(values)
+        R = R.copy()
+        R[:, self.rows] /= ratio
+        R[:, n + ny + self.rows] /= ratio
+        R[self.rows] *= ratio[:, None]
+        return R
+
+    def state_space(self, ABCD: np.ndarray, values) -> np.ndarray:
+        """``[A B; C D]`` of Drake's states in the scaled ones (``x = S x~``)."""
+        if not self.rows.size:
+            return ABCD
+        ratio = self._ratios(values)
+        ABCD = ABCD.copy()
+        ABCD[self.rows] *= ratio[:, None]
+        ABCD[:, self.rows] /= ratio
+        return ABCD
+
+    def where_affine(self, evaluate, nominal, R0, coefficients, h, scale, tolerance):
+        """The candidates along whose axis the scaled relation is affine (a
+        :class:`_ModalStates`): the linear model matches an evaluation at ``nominal + h / 2``
+        within ``tolerance`` (column-scaled)."""
+        keep = []
+        for k, i in enumerate(self.parameters):
+            values = np.array(nominal, dtype=float)
+            values[i] += 0.5 * h[i]
+            linear = R0 + 0.5 * h[i] * coefficients[i][0]
+            if np.max(np.abs(evaluate(values) - linear) / scale) <= tolerance:
+                keep.append(k)
+        keep = np.array(keep, dtype=int)
+        return _ModalStates(self.parameters[keep], self.rows[keep], self.nominal[keep])
 
 
 def _relative(a, b) -> float:
@@ -826,6 +965,7 @@ def ulinearize(
     check_tolerance: float = 1e-6,
     prune: bool = True,
     unused: str = "error",
+    scale_modal_states: bool = True,
     rng: np.random.Generator | None = None,
 ) -> LFR:
     r"""Linearize a Drake system into an uncertain LFR with named physical parameters.
@@ -862,15 +1002,21 @@ def ulinearize(
         ``"error"`` (default): a parameter that does not change the linearization is refused;
         ``"drop"``: it is left out of the LFR (zero repetitions, e.g. the target's inertia
         while the target floats free).
+    scale_modal_states : bool
+        True (default): the angle of a joint whose modal frequency ``omega`` is a parameter is
+        the state ``(omega / omega_0) q``, which makes ``omega`` enter affinely (TITOP's modal
+        form, where the mu upper bound's optimizer converges; :class:`_ModalStates`), where
+        that is exact (the angle read only by its spring); False: Drake's ``q`` (``omega``
+        enters as ``omega^2``, two cascaded channels). Same repetitions and input-output map.
     rng : numpy.random.Generator, optional
         For the check points (default: ``numpy.random.default_rng(0)``).
 
     Returns
     -------
     LFR
-        Upper LFT in the states of Drake's linearization (``[q; v]`` order, pruned), inputs
-        and outputs named ``port[i]``; one ``ureal`` block per parameter with the minimal
-        number of repetitions.
+        Upper LFT in the states of Drake's linearization (``[q; v]`` order, pruned; modal
+        angles scaled, see ``scale_modal_states``), inputs and outputs named ``port[i]``; one
+        ``ureal`` block per parameter with the minimal number of repetitions.
 
     Raises
     ------
@@ -891,10 +1037,15 @@ def ulinearize(
     problem = _problem(system, context, parameters, inputs, outputs)
     if unused not in ("error", "drop"):
         raise ValueError(f"ulinearize: unused must be 'error' or 'drop', got {unused!r}")
-    return _extract(problem, rtol, check_points, check_tolerance, prune, rng, unused)
+    return _extract(
+        problem, rtol, check_points, check_tolerance, prune, rng, unused, scale_modal_states
+    )
 
 
-def _extract(problem, rtol, check_points, check_tolerance, prune, rng, unused="error") -> LFR:
+def _extract(
+    problem, rtol, check_points, check_tolerance, prune, rng, unused="error",
+    scale_modal_states=True,
+) -> LFR:  # fmt: skip
     """Steps 1-4 of the module docstring on a bound problem (anything with ``linearize``)."""
     rng = np.random.default_rng(0) if rng is None else rng
     nominal = problem.nominal
@@ -915,12 +1066,19 @@ def _extract(problem, rtol, check_points, check_tolerance, prune, rng, unused="e
             f"ulinearize: the context is not an equilibrium (max |v'| = {np.abs(vdot).max():.3g})"
         )
     Cd = problem.acceleration_map()
+    modal = _ModalStates.of(problem) if scale_modal_states else _ModalStates.none()
 
     def evaluate(values):
-        return _implicit(problem, linearize(values), Cd)
+        return modal.implicit(_implicit(problem, linearize(values), Cd), values, n, ny)
 
     R0, coefficients = _fit_axes(problem, evaluate, h)
     scale = _scales(R0, coefficients, h)
+    if modal.parameters.size:  # keep the scaled angles that make omega affine, refit
+        modal = modal.where_affine(evaluate, nominal, R0, coefficients, h, scale, check_tolerance)
+        R0, coefficients = _fit_axes(problem, evaluate, h)
+        for i in modal.parameters:  # exactly affine (checked): no round-off second channel
+            coefficients[i] = (coefficients[i][0], np.zeros_like(R0))
+        scale = _scales(R0, coefficients, h)
     for i, binding in enumerate(problem.bindings):  # degree <= 2 along each axis
         point = nominal.copy()
         point[i] = nominal[i] + 0.5 * h[i]
@@ -933,7 +1091,7 @@ def _extract(problem, rtol, check_points, check_tolerance, prune, rng, unused="e
     names = [f"{name}[{k}]" for _, rows, name in problem.inputs for k in rows]
     out_names = [f"{name}[{k}]" for _, rows, name in problem.outputs for k in rows]
     lfr = _assemble(problem, R0, coefficients, h, scale, n, nu, ny, rtol, (names, out_names))
-    _check(problem, lfr, linearize, h, check_points, check_tolerance, rng)
+    _check(problem, lfr, linearize, h, check_points, check_tolerance, rng, modal)
     lfr = _balance_channels(_prune(lfr) if prune else lfr)
     missing = [
         b.parameter.name for b in problem.bindings if b.parameter.name not in lfr.uncertainty
@@ -946,8 +1104,9 @@ def _extract(problem, rtol, check_points, check_tolerance, prune, rng, unused="e
     return lfr
 
 
-def _check(problem, lfr, linearize, h, count, tolerance, rng):
-    """Compare the LFR with Drake's linearization at random points (inside and outside)."""
+def _check(problem, lfr, linearize, h, count, tolerance, rng, modal):
+    """Compare the LFR with Drake's linearization at random points (inside and outside), in
+    the LFR's states (``modal``: the scaled angles)."""
     from oos_drake.lfr import usubs
 
     specs = [b.parameter for b in problem.bindings]
@@ -964,7 +1123,9 @@ def _check(problem, lfr, linearize, h, count, tolerance, rng):
             if p.name in lfr.uncertainty
         }
         model = usubs(lfr, deltas, normalized=True).nominal
-        reference = np.block([[lin["A"], lin["B"]], [lin["C"], lin["D"]]])
+        reference = modal.state_space(
+            np.block([[lin["A"], lin["B"]], [lin["C"], lin["D"]]]), values
+        )
         error = _relative(np.asarray(model.M), reference)
         if not error <= tolerance:
             worst = ", ".join(f"{p.name}={v:.6g}" for p, v in zip(specs, values, strict=True))

@@ -115,13 +115,16 @@ def test_extracted_lfr_equals_the_hand_lfr(extracted):
     assert relative_error(extracted, hand, {}).max() < 1e-12 + 1e-9
 
 
-def test_extracted_lfr_matches_drake_at_the_context_values():
-    """Setting the parameters in the Context and linearizing plainly gives the same model."""
+@pytest.mark.parametrize("scaled", [False, True])
+def test_extracted_lfr_matches_drake_at_the_context_values(scaled):
+    """Setting the parameters in the Context and linearizing plainly gives the same model: in
+    Drake's states, or with the hinge angle scaled by ``w / w0`` (``x = S x~``: ``S^-1 A S``)."""
     from pydrake.systems.primitives import FirstOrderTaylorApproximation
 
     plant, context = sdf_plant(SDF)
     declared = load_parameters(PARAMETERS)
-    G = ulinearize(plant, context, declared, INPUTS, OUTPUTS, prune=False)
+    G = ulinearize(plant, context, declared, INPUTS, OUTPUTS, prune=False,
+                   scale_modal_states=scaled)  # fmt: skip
     values = {"m_hub": 95.0, "Izz_hub": 32.0, "w_panel": 5.2, "k_dock": 2300.0,
               "kt_dock": 400.0, "m_client": 58.0}  # fmt: skip
     plant_context = plant.GetMyMutableContextFromRoot(context)
@@ -153,7 +156,13 @@ def test_extracted_lfr_matches_drake_at_the_context_values():
         output_port_index=plant.GetOutputPort("servicer_state").get_index(),
     )  # fmt: skip
     rows = [0, 1, 2, 7, 8, 9]
-    reference = np.block([[taylor.A(), taylor.B()], [taylor.C()[rows], taylor.D()[rows]]])
+    A, B, C = taylor.A(), taylor.B(), taylor.C()[rows]
+    if scaled:
+        hinge = plant.GetJointByName("panel_hinge").position_start()  # the plant's state = [q; v]
+        S = np.eye(A.shape[0])
+        S[hinge, hinge] = 6.0 / 5.2  # q = (w0 / w) q~
+        A, B, C = np.linalg.solve(S, A @ S), np.linalg.solve(S, B), C @ S
+    reference = np.block([[A, B], [C, taylor.D()[rows]]])
     model = usubs(G, values).nominal
     np.testing.assert_allclose(model.M, reference, rtol=0, atol=1e-9 * np.abs(reference).max())
 
@@ -184,6 +193,64 @@ def test_robstab_agrees_with_a_dense_pole_sweep(extracted):
     worst = usubs(loop, result.worst_case_normalized, normalized=True).nominal
     closest = np.abs(np.linalg.eigvals(np.asarray(worst.A)) - 1j * result.critical_frequency).min()
     assert closest < 1e-6 * max(1.0, result.critical_frequency)
+
+
+def test_modal_frequency_is_affine_in_the_scaled_states():
+    """``w_panel`` (spring ``400 (w/6)^2``, damper ``2 w/6``) enters Drake's coordinates as
+    ``w^2``: two cascaded channels, the second reading only the first (a nilpotent self-loop
+    in ``M11``). With the hinge angle scaled by ``w / w0`` it is affine: the LFR is a polynomial
+    of degree 1 in ``delta`` (the model at ``delta = 1/2`` is the mean of those at 0 and 1)."""
+    plant, context = sdf_plant(SDF)
+    declared = [p for p in load_parameters(PARAMETERS) if p.name == "w_panel"]
+    # a centred range (affine normalization), so that affine in w is affine in delta
+    centred = [PhysicalParameter("w_panel", declared[0].element, "frequency", 6.0, 5.0, 7.0)]
+
+    def matrices(scaled):
+        G = ulinearize(plant, context, centred, INPUTS, OUTPUTS, scale_modal_states=scaled)
+        return [np.asarray(usubs(G, {"w_panel": d}, normalized=True).nominal.M)
+                for d in (0.0, 0.5, 1.0)]  # fmt: skip
+
+    for scaled, affine in ((True, True), (False, False)):
+        m0, m_half, m1 = matrices(scaled)
+        curvature = np.abs(m_half - 0.5 * (m0 + m1)).max() / np.abs(m1 - m0).max()
+        assert (curvature < 1e-10) == affine, (scaled, curvature)
+
+
+def test_channel_basis_is_canonical():
+    """The channels are balanced on input-output Gram matrices only: the extracted LFR with
+    its states and each block's channels transformed at random (an exact equivalent, as the
+    TITOP LFR is for the twin's) is balanced to the same channels."""
+    from oos_drake.multibody.uncertain_linearization import _balance_channels
+
+    plant, context = sdf_plant(SDF)
+    G = ulinearize(plant, context, load_parameters(PARAMETERS), INPUTS, OUTPUTS)
+    rng = np.random.default_rng(5)
+    n, nz, M = G.nstates, G.nz, np.array(G.M)
+    L = np.eye(M.shape[0])  # rows [x'; z; y]
+    L[:n, :n] = rng.standard_normal((n, n)) + 3 * np.eye(n)  # state coordinates
+    start = n
+    for entry in G.block_entries:  # each block's channels: z -> T z, w -> T w
+        k = slice(start, start + entry.reps)
+        start += entry.reps
+        L[k, k] = rng.standard_normal((entry.reps, entry.reps)) + 2 * np.eye(entry.reps)
+    R = np.eye(M.shape[1])  # columns [x; w; u]
+    R[: n + nz, : n + nz] = np.linalg.inv(L[: n + nz, : n + nz])
+    other = LFR(L @ M @ R, n, G.block_entries,
+                input_names=G.input_names, output_names=G.output_names)  # fmt: skip
+    assert np.abs(np.asarray(other.M) - M).max() > 1e-2 * np.abs(M).max()  # really different
+
+    def response(sys, omega):  # [z; y] <- [w; u]
+        Ms = np.asarray(sys.M)
+        A, B, C, D = Ms[:n, :n], Ms[:n, n:], Ms[n:, :n], Ms[n:, n:]
+        return np.array([D + C @ np.linalg.solve(1j * w * np.eye(n) - A, B) for w in omega])
+
+    omega = np.array([0.3, 2.0, 9.0])  # rad/s
+    a = response(_balance_channels(G), omega)
+    b = response(_balance_channels(other), omega)
+    # the same channels, signs included (fixed by each channel's driven response): a model
+    # array's neighbouring configurations get neighbouring channels
+    assert np.abs(b - a).max() < 1e-8 * np.abs(a).max()
+    assert np.abs(response(other, omega) - a).max() > 1e-2 * np.abs(a).max()  # it mattered
 
 
 # ----------------------------------------------------------------------------- bad input
@@ -296,7 +363,12 @@ def test_cli_writes_mat_and_npz_that_load_back(tmp_path, capsys):
          "makes the mass of 'hub' non-positive"),
         (("nominal = 500.0\npercent = 30", "nominal = 500.0\nrange = [-10.0, 600.0]"), None,
          "makes the torque_stiffness_z of 'dock/client_dock' non-positive"),
+        (("nominal = 2000.0\npercent = 20", "nominal = 2000.0\nrange = [0.0, 4000.0]"), None,
+         "makes the force_stiffness of 'dock/client_dock' non-positive"),
+        (('element = "dock/client_dock"', 'element = "dock/client"'), None,
+         "no bushing between frames 'dock' and 'client'"),
         (None, ("--input", "thrusters"), "no input port 'thrusters'"),
+        (None, ("--output", "hub_state"), "no output port 'hub_state' on 'MultibodyPlant'"),
         (None, ("--output", "servicer_state[40]"), "selection outside its 14 entries"),
     ],
 )  # fmt: skip
