@@ -261,6 +261,7 @@ def _guarantee_columns(guarantee, lower, n_configurations) -> dict:
         "margin_guaranteed [-]": 1.0 / up if up > 0 else np.inf,
         "guarantee_slack [%]": 100.0 * guarantee.slack,
         "guarantee_points": int(guarantee.points.sum()),
+        "guarantee_solved_points": int(guarantee.solved.sum()),
         "guarantee_raised_configurations": guarantee.raised,
         "guarantee_failures": len(guarantee.failures),
         "guarantee_time [s]": round(guarantee.seconds, 2),
@@ -287,6 +288,7 @@ def guaranteed_table(study: str, result, label: str, values) -> pd.DataFrame:
                     "mu upper on grid [-]": g.grid_upper,
                     "mu lower on grid [-]": g.grid_lower,
                     "cover points": g.points,
+                    "cover solved points": g.solved,
                     "level raised": g.levels > g.floor * (1 + 1e-12),
                 }
             )
