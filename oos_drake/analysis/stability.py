@@ -723,7 +723,9 @@ def axis_guarantee(
     n_tasks = min(len(configurations), CHUNKS_PER_WORKER * pool.n_jobs)
     bounds = np.linspace(0, len(configurations), n_tasks + 1).round().astype(int)
     tasks = [
-        (blk, floor, slack, configurations[a:b]) for a, b in zip(bounds[:-1], bounds[1:]) if b > a
+        (blk, floor, slack, configurations[a:b])
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True)
+        if b > a
     ]
     out = [o for chunk in pool.map(_axis_task, tasks) for o in chunk]
     levels = np.array([o[0] for o in out], dtype=float)

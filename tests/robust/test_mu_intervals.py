@@ -15,8 +15,8 @@ from oos_drake.robust.hinf import hinfnorm
 from oos_drake.robust.lfr_analysis import block_map
 from oos_drake.robust.mu_intervals import (
     Realization,
-    _gaps,
     Scalings,
+    _gaps,
     cover_axis,
     dg_interval,
     mu_solver,
