@@ -101,10 +101,10 @@ class AnalysisOptions:
         (:func:`~oos_drake.analysis.stability.axis_guarantee`, from the level
         ``(1 + tighten.target_gap)`` times the certified lower bound; timed as ``guarantee`` in
         each study's timing detail, beside the grid-only ``grid`` and ``tighten+certify``).
-        Off by default (``oos analyze --guarantee`` turns it on): it costs about 9 times the
-        grid-only mu stages (session 7), too much for ``make run`` today. Without it the upper
-        bounds hold on the analyzed frequencies only (``oos confirm`` found one broken between
-        them, docs/CLAIMS.md A11).
+        Off by default (``oos analyze --guarantee`` turns it on): the analysis with it costs
+        about RATIO_FINAL times the grid-only analysis (session 8, measured on a reduced run;
+        the aim for the default is 2x). Without it the upper bounds hold on the analyzed
+        frequencies only (``oos confirm`` found one broken between them, docs/CLAIMS.md A11).
     progress : bool
         tqdm progress bars.
     plant : str
