@@ -13,10 +13,13 @@ each study's timing detail of ``summary.json`` (``oos analyze``), beside ``grid`
 ``--mission FIRST:LAST``: the analysis' covers (:mod:`oos_drake.analysis.stability`) of the
 consecutive mission configurations ``FIRST .. LAST - 1`` of 330 (make-run controller
 ``--controller``, default the baseline PD), one subset, all at the level ``1.03`` times the
-largest lower bound found on the grid: each configuration alone (the session-7 path: grid
-scalings, then solves) against each continued from the previous one's essential scalings
-(``cover_axis(prior=...)``, the analysis today), in this process: CPU time, solved points,
-tested points, the largest level.
+largest lower bound found on the grid, or ``--level``: each configuration alone (the
+session-7 path: grid scalings, then solves) against each continued from the previous one's
+essential scalings (``cover_axis(prior=...)``, the analysis today), in this process: CPU time,
+solved points, tested points, the largest level. The grid's power-iteration lower bound can be
+far below mu with real parameters; then covers raise their level one by one and the prior
+scalings (proved at a higher level) prove nothing at the next configuration's start: give the
+analysis' level, ``(1 + target gap)`` times its certified lower bound (``--level``).
 """
 
 from __future__ import annotations
@@ -62,7 +65,7 @@ def timed(fn, *args, **kwargs):
     return out, time.perf_counter() - t
 
 
-def mission(first, last, subset, controller):
+def mission(first, last, subset, controller, level=None):
     """Covers of consecutive mission configurations, alone and continued (see the docstring)."""
     from oos_drake.analysis.controller import scenario_controller
     from oos_drake.analysis.models import mission_closed_loop, mission_times
@@ -90,7 +93,7 @@ def mission(first, last, subset, controller):
         lo = mu_lower_bound(M, parse_blk(blk), start_inputs=up.worst_input)
         lower = max(lower, float(np.max(lo.lower)))
         problems.append((real, blk, w, up.params))
-    floor = 1.03 * lower
+    floor = 1.03 * lower if level is None else level
     print(f"mission configurations {first}..{last - 1}, subset {subset}, level {floor:.5g}")
     print(f"{'covers':10s} {'CPU [s]':>8s} {'solved':>7s} {'tested':>7s} {'max level':>10s}")
     rows = {}
@@ -122,10 +125,11 @@ def main():
     parser.add_argument("--mission", default=None, help="FIRST:LAST mission configurations")
     parser.add_argument("--subset", default="total")
     parser.add_argument("--controller", default=None, help="controller JSON (default: baseline)")
+    parser.add_argument("--level", type=float, default=None, help="level of every cover [-]")
     args = parser.parse_args()
     if args.mission:
         first, last = (int(x) for x in args.mission.split(":"))
-        mission(first, last, args.subset, args.controller)
+        mission(first, last, args.subset, args.controller, args.level)
         return
     print(
         f"{'case':18s} {'fn':8s} {'grid [s]':>9s} {'guar [s]':>9s} {'ratio':>6s} "
