@@ -539,7 +539,7 @@ def register(subparsers) -> None:
         "--guarantee",
         action="store_true",
         help="prove each analyzed configuration's mu peak on the whole frequency axis (D-G "
-        "scalings validated on intervals; the analysis then takes about RATIO_FINALx as long: see "
+        "scalings validated on intervals; the analysis then takes about 3.7x as long: see "
         "DESIGN.md); "
         "default: upper bounds hold on the analyzed frequencies only",
     )
