@@ -627,7 +627,7 @@ class AxisGuarantee:
 
 def _axis_task(task):
     """Worker: the covers of a range of neighbouring configurations of one subset ->
-    ``[(level, points, failure), ...]``.
+    ``[(level, tested points, failure, solved points), ...]``.
 
     Each cover tries first the scalings that covered the previous configuration (its
     :meth:`~oos_drake.robust.mu_intervals.AxisCertificate.essential` points: neighbouring
