@@ -65,6 +65,19 @@ def interval_and_sampled(real, blk, w0, grid):
     return (lo, hi, *sampled_component(real, sc, beta, w0, grid), sc, beta)
 
 
+def assert_every_frequency_proved(real, cert, dense):
+    """Each frequency of ``dense`` lies in an interval of ``cert`` whose scalings satisfy the LMI
+    there at its level (the sign of ``lambda_max``, sampled on ``real``'s own response)."""
+    Ms = real.response(dense)
+    proved = np.zeros(dense.size, dtype=bool)
+    for (lo, hi), sc, lev in zip(cert.interval, cert.scalings, cert.level, strict=True):
+        if np.isfinite(lo):
+            inside = (dense >= lo) & (dense <= hi)
+            assert np.all(lmi_residual(Ms[inside], lev, sc.D_left, sc.D_right, sc.G) <= 0.0)
+            proved |= inside
+    assert np.all(proved)
+
+
 def two_modes():
     k1, c1 = ureal("k1", 1.0, plusminus=0.3), ureal("c1", 0.01, plusminus=0.005)
     k2, c2 = ureal("k2", 9.0, plusminus=3.0), ureal("c2", 0.03, plusminus=0.01)
@@ -181,15 +194,7 @@ def test_cover_from_known_grid_scalings():
     assert cert.covered and cert.check()["intervals_hold"] and cert.check()["covered"]
     assert 0.5 <= cert.upper <= 1.02 * 0.5
     assert np.sum(~cert.added) >= 2  # known points were used, not solved again
-    dense = np.linspace(0.0, 6.0, 6001)
-    Ms = real.response(dense)
-    proved = np.zeros(dense.size, dtype=bool)
-    for (lo, hi), sc, lev in zip(cert.interval, cert.scalings, cert.level, strict=True):
-        if np.isfinite(lo):
-            inside = (dense >= lo) & (dense <= hi)
-            assert np.all(lmi_residual(Ms[inside], lev, sc.D_left, sc.D_right, sc.G) <= 0.0)
-            proved |= inside
-    assert np.all(proved)
+    assert_every_frequency_proved(real, cert, np.linspace(0.0, 6.0, 6001))
 
 
 @pytest.mark.parametrize(
@@ -290,14 +295,7 @@ def test_cover_continued_from_a_neighbouring_model():
     assert warm.added.sum() < cold.added.sum()
     assert np.isnan(warm.optimal[~warm.added]).any()  # prior points: not solved here
     assert peak <= warm.upper <= 1.02 * floor
-    Ms = near.response(dense)
-    proved = np.zeros(dense.size, dtype=bool)
-    for (lo, hi), sc, lev in zip(warm.interval, warm.scalings, warm.level, strict=True):
-        if np.isfinite(lo):
-            inside = (dense >= lo) & (dense <= hi)
-            assert np.all(lmi_residual(Ms[inside], lev, sc.D_left, sc.D_right, sc.G) <= 0.0)
-            proved |= inside
-    assert np.all(proved)
+    assert_every_frequency_proved(near, warm, dense)
     # a far model: the prior proves (almost) nothing, the cover still closes on its own
     other = cover_axis(far, mu_solver(far, blk, polish_above=peak), [], floor=floor, prior=prior)
     assert other.covered and other.check()["intervals_hold"] and other.check()["covered"]
