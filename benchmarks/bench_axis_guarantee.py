@@ -1,6 +1,6 @@
 """Cost of the whole-axis guarantee (robust.mu_intervals) against the grid-only bounds.
 
-Run: ``.venv/bin/python benchmarks/bench_axis_guarantee.py``
+Run: ``.venv/bin/python benchmarks/bench_axis_guarantee.py [--mission 50:70] [--subset total]``
 
 For the examples of the tests (lightly damped oscillators with real parameters, two modes, a
 third-order loop whose crossing frequency moves), ``robstab`` and ``wcgain`` with
@@ -9,13 +9,26 @@ the bounds and the number of frequencies the cover solved. Timings on a shared m
 noisy: read the ratios of the same run. The analysis' own ratio is in the ``guarantee`` entry of
 each study's timing detail of ``summary.json`` (``oos analyze``), beside ``grid`` and
 ``tighten+certify``.
+
+``--mission FIRST:LAST``: the analysis' covers (:mod:`oos_drake.analysis.stability`) of the
+consecutive mission configurations ``FIRST .. LAST - 1`` of 330 (make-run controller
+``--controller``, default the baseline PD), one subset, all at the level ``1.03`` times the
+largest lower bound found on the grid, or ``--level``: each configuration alone (the
+session-7 path: grid scalings, then solves) against each continued from the previous one's
+essential scalings (``cover_axis(prior=...)``, the analysis today), in this process: CPU time,
+solved points, tested points, the largest level. The grid's power-iteration lower bound can be
+far below mu with real parameters; then covers raise their level one by one and the prior
+scalings (proved at a higher level) prove nothing at the next configuration's start: give the
+analysis' level, ``(1 + target gap)`` times its certified lower bound (``--level``).
 """
 
 from __future__ import annotations
 
+import argparse
 import time
 
 import control
+import numpy as np
 
 from oos_drake.lfr import as_lfr, feedback, ureal
 from oos_drake.robust import robstab, wcgain
@@ -52,7 +65,72 @@ def timed(fn, *args, **kwargs):
     return out, time.perf_counter() - t
 
 
+def mission(first, last, subset, controller, level=None):
+    """Covers of consecutive mission configurations, alone and continued (see the docstring)."""
+    from oos_drake.analysis.controller import scenario_controller
+    from oos_drake.analysis.models import mission_closed_loop, mission_times
+    from oos_drake.analysis.run import AnalysisOptions
+    from oos_drake.analysis.stability import _analysis_model, model_grid
+    from oos_drake.analysis.subsets import uncertainty_subsets
+    from oos_drake.blas import limit_blas_threads
+    from oos_drake.robust.blocks import parse_blk
+    from oos_drake.robust.mu_intervals import Realization, cover_axis, mu_solver, scalings_at
+    from oos_drake.robust.mu_lower import mu_lower_bound
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    limit_blas_threads(1)
+    times = mission_times(330)[first:last]
+    system = mission_closed_loop(scenario_controller(controller), times).system
+    members = uncertainty_subsets(system.uncertainty)[subset]
+    grid = AnalysisOptions().grid()
+    problems, lower = [], 0.0
+    for j in range(times.size):
+        A, Bw, Cz, Dzw, blk, _, _ = _analysis_model(system, j, members)
+        real = Realization(A, Bw, Cz, Dzw)
+        w = model_grid(A, grid)
+        M = real.response(w)
+        up = mu_upper_bound(M, parse_blk(blk), max_iter=100)
+        lo = mu_lower_bound(M, parse_blk(blk), start_inputs=up.worst_input)
+        lower = max(lower, float(np.max(lo.lower)))
+        problems.append((real, blk, w, up.params))
+    floor = 1.03 * lower if level is None else level
+    print(f"mission configurations {first}..{last - 1}, subset {subset}, level {floor:.5g}")
+    print(f"{'covers':10s} {'CPU [s]':>8s} {'solved':>7s} {'tested':>7s} {'max level':>10s}")
+    rows = {}
+    for mode in ("alone", "continued"):
+        clock, solved, tested, top, prior = time.process_time(), 0, 0, 0.0, None
+        for real, blk, w, params in problems:
+            upper, scalings = scalings_at(real, blk, w, params)
+            cert = cover_axis(
+                real,
+                mu_solver(real, blk, polish_above=floor / 1.005, starts=(w, params)),
+                [],
+                floor=floor,
+                known=(w, upper, scalings),
+                prior=prior,
+            )
+            keep = cert.essential()
+            if mode == "continued" and keep.size:
+                prior = (cert.omega[keep], [cert.scalings[i] for i in keep])
+            solved += int(cert.added.sum())
+            tested += cert.omega.size
+            top = max(top, cert.upper)
+        rows[mode] = time.process_time() - clock
+        print(f"{mode:10s} {rows[mode]:8.2f} {solved:7d} {tested:7d} {top:10.5g}")
+    print(f"continued / alone: {rows['continued'] / rows['alone']:.2f}")
+
+
 def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--mission", default=None, help="FIRST:LAST mission configurations")
+    parser.add_argument("--subset", default="total")
+    parser.add_argument("--controller", default=None, help="controller JSON (default: baseline)")
+    parser.add_argument("--level", type=float, default=None, help="level of every cover [-]")
+    args = parser.parse_args()
+    if args.mission:
+        first, last = (int(x) for x in args.mission.split(":"))
+        mission(first, last, args.subset, args.controller, args.level)
+        return
     print(
         f"{'case':18s} {'fn':8s} {'grid [s]':>9s} {'guar [s]':>9s} {'ratio':>6s} "
         f"{'grid upper':>11s} {'guar upper':>11s} {'lower':>10s} {'points':>6s}"

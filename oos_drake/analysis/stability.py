@@ -541,6 +541,11 @@ def _analysis_model(sys, model: int, members):
     return A, Bw, Cz, Dzw, sub.blk, sub, reduced
 
 
+#: Contiguous ranges of configurations per worker in :func:`axis_guarantee` (each range starts
+#: its continuation cold).
+CHUNKS_PER_WORKER = 3
+
+
 @dataclass(frozen=True)
 class AxisGuarantee:
     """The peak of mu proved on the whole frequency axis, for every analyzed configuration.
@@ -561,7 +566,10 @@ class AxisGuarantee:
     levels : numpy.ndarray
         ``(N,)`` level proved for each configuration.
     points : numpy.ndarray
-        ``(N,)`` frequencies solved for each configuration's cover.
+        ``(N,)`` frequencies whose scalings each configuration's cover tested.
+    solved : numpy.ndarray
+        ``(N,)`` of them optimized for the cover (the others: the grid's or the previous
+        configuration's scalings).
     failures : tuple of str
         Configurations without a certificate and why (e.g. a pole on the imaginary axis).
     slack : float
@@ -584,6 +592,7 @@ class AxisGuarantee:
     models: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     grid_upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
     grid_lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    solved: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
 
     @property
     def raised(self) -> int:
@@ -592,25 +601,47 @@ class AxisGuarantee:
 
 
 def _axis_task(task):
-    """Worker: the cover of one configuration and subset -> ``(level, points, failure)``."""
+    """Worker: the covers of a range of neighbouring configurations of one subset ->
+    ``[(level, tested points, failure, solved points), ...]``.
+
+    Each cover tries first the scalings that covered the previous configuration (its
+    :meth:`~oos_drake.robust.mu_intervals.AxisCertificate.essential` points: neighbouring
+    configurations are close problems, so they usually prove the same level on nearly the same
+    intervals, with no optimization), then the grid's own scalings, and only then solves.
+    """
     from oos_drake.robust.mu_intervals import Realization, cover_axis, mu_solver, scalings_at
 
-    A, Bw, Cz, Dzw, blk, seeds, floor, slack, grid_omega, grid_params = task
-    real = Realization(A, Bw, Cz, Dzw)
-    try:
-        # the grid's own scalings are the first candidates: no second optimization there
-        grid_upper, grid_scalings = scalings_at(real, blk, grid_omega, grid_params)
-        cert = cover_axis(
-            real,
-            mu_solver(real, blk, slack=slack, polish_above=floor / (1 + slack)),
-            seeds,
-            floor=floor,
-            slack=slack,
-            known=(grid_omega, grid_upper, grid_scalings),
-        )
-    except ValueError as err:
-        return np.inf, 0, str(err)
-    return float(cert.upper), int(cert.omega.size), "" if cert.covered else "cover did not close"
+    blk, floor, slack, configurations = task
+    out, prior = [], None
+    for A, Bw, Cz, Dzw, seeds, grid_omega, grid_params in configurations:
+        real = Realization(A, Bw, Cz, Dzw)
+        try:
+            # the grid's own scalings are the next candidates: no second optimization there
+            grid_upper, grid_scalings = scalings_at(real, blk, grid_omega, grid_params)
+            cert = cover_axis(
+                real,
+                mu_solver(
+                    real,
+                    blk,
+                    slack=slack,
+                    polish_above=floor / (1 + slack),
+                    starts=(grid_omega, grid_params),
+                ),
+                seeds,
+                floor=floor,
+                slack=slack,
+                known=(grid_omega, grid_upper, grid_scalings),
+                prior=prior,
+            )
+        except ValueError as err:
+            out.append((np.inf, 0, str(err), 0))
+            prior = None
+            continue
+        keep = cert.essential()
+        prior = (cert.omega[keep], [cert.scalings[i] for i in keep]) if keep.size else None
+        failure = "" if cert.covered else "cover did not close"
+        out.append((float(cert.upper), int(cert.omega.size), failure, int(cert.added.sum())))
+    return out
 
 
 def axis_guarantee(
@@ -653,7 +684,7 @@ def axis_guarantee(
     models = np.unique(pts.model)
     gap = slack if gap is None else max(float(gap), slack)
     floor = (1.0 + gap) * max(float(lower), 0.0)
-    tasks = []
+    configurations = []
     for m in models:
         mine = pts.model == m
         w, up, lo = pts.omega[mine], pts.upper[mine], pts.lower[mine]
@@ -661,8 +692,17 @@ def axis_guarantee(
         # grid scalings prove the floor already
         peaks = np.unique([np.argmax(up), np.argmax(lo)])
         seeds = w[peaks[up[peaks] * (1.0 + slack) > floor]]
-        tasks.append((*model_matrices(int(m)), blk, seeds, floor, slack, w, pts.params[mine]))
-    out = pool.map(_axis_task, tasks)
+        configurations.append((*model_matrices(int(m)), seeds, w, pts.params[mine]))
+    # contiguous ranges (continuation from one configuration to the next), a few per worker
+    # so that the costly ranges (configurations near the peak) spread over the workers
+    n_tasks = min(len(configurations), CHUNKS_PER_WORKER * pool.n_jobs)
+    bounds = np.linspace(0, len(configurations), n_tasks + 1).round().astype(int)
+    tasks = [
+        (blk, floor, slack, configurations[a:b])
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True)
+        if b > a
+    ]
+    out = [o for chunk in pool.map(_axis_task, tasks) for o in chunk]
     levels = np.array([o[0] for o in out], dtype=float)
     failures = tuple(f"model {m}: {o[2]}" for m, o in zip(models, out, strict=True) if o[2])
     return AxisGuarantee(
@@ -676,6 +716,7 @@ def axis_guarantee(
         models=models.astype(int),
         grid_upper=np.array([pts.upper[pts.model == m].max() for m in models], dtype=float),
         grid_lower=np.array([pts.lower[pts.model == m].max() for m in models], dtype=float),
+        solved=np.array([o[3] for o in out], dtype=int),
     )
 
 

@@ -287,9 +287,11 @@ class _Multiplier:
         M[~fin] = self.D
         if np.any(fin) and self._modal is not None:
             lam, CV, VB = self._modal
-            M[fin] = self.D + np.einsum(
-                "in,fn,nj->fij", CV, 1.0 / (1j * nu[fin, None] - lam[None, :]), VB
-            )
+            # (C V) diag(1 / (j nu - lambda)) (V^-1 B) at every frequency as ONE matrix product
+            # (a numpy einsum of three operands loops in C without BLAS: 10-100x slower here)
+            resolvent = 1.0 / (1j * nu[fin, None] - lam[None, :])
+            left = (CV[None, :, :] * resolvent[:, None, :]).reshape(-1, lam.size)
+            M[fin] = self.D + (left @ VB).reshape(resolvent.shape[0], *self.D.shape)
         elif np.any(fin):
             M[fin] = delta_channel_response(self.A, self.B, self.C, self.D, nu[fin])
         MH = np.conj(np.swapaxes(M, -1, -2))
@@ -440,7 +442,8 @@ class AxisCertificate:
     omega : numpy.ndarray
         ``(K,)`` frequencies [rad/s] where scalings were computed, sorted.
     optimal : numpy.ndarray
-        ``(K,)`` bound found at each point (mu upper bound, or worst-case gain level).
+        ``(K,)`` bound found at each point (mu upper bound, or worst-case gain level; NaN for
+        a ``prior`` point of :func:`cover_axis`, whose scalings come from another model).
     level : numpy.ndarray
         ``(K,)`` level proved on each point's interval (``>= (1 + slack) optimal``).
     interval : numpy.ndarray
@@ -476,6 +479,26 @@ class AxisCertificate:
     def nyquist(self) -> float:
         """End of the frequency axis [rad/s]."""
         return self.realization.nyquist
+
+    def essential(self) -> np.ndarray:
+        """Indices of a smallest subset of the points whose intervals still cover the axis
+        (greedy: from 0, always the interval that reaches farthest); empty if not covered.
+        Their scalings are the natural first candidates of a neighbouring model's cover
+        (``prior`` of :func:`cover_axis`)."""
+        if not self.covered:
+            return np.zeros(0, dtype=int)
+        rows = np.flatnonzero(np.all(np.isfinite(self.interval) | np.isposinf(self.interval), 1))
+        chosen, reach = [], 0.0
+        while reach < self.nyquist:
+            start = rows[self.interval[rows, 0] <= reach]
+            if not start.size:
+                break
+            best = start[np.argmax(self.interval[start, 1])]
+            if self.interval[best, 1] <= reach:
+                break
+            chosen.append(int(best))
+            reach = float(self.interval[best, 1])
+        return np.array(sorted(chosen), dtype=int)
 
     def check(self) -> dict:
         """Prove the cover again: recompute every interval from its scalings and level.
@@ -554,6 +577,7 @@ def cover_axis(
     max_rounds: int = 40,
     progress=None,
     known=None,
+    prior=None,
 ) -> AxisCertificate:
     """Cover the frequency axis with intervals proved by D-G scalings.
 
@@ -584,6 +608,12 @@ def cover_axis(
         tries the known points inside it (nearest to each edge first), no optimization. They
         never raise the level: a known point whose scalings do not prove the current level
         (a stalled optimizer) simply proves no interval, and the gap is solved.
+    prior : tuple, optional
+        ``(omega, scalings)`` tried first, all of them, before ``known`` and any optimization
+        (e.g. the :meth:`AxisCertificate.essential` points of a neighbouring model's cover:
+        neighbouring configurations are close problems). Like ``known`` they never raise the
+        level; one that does not prove it here proves nothing. Their ``optimal`` is NaN (not
+        solved for this ``M``).
 
     Returns
     -------
@@ -597,6 +627,13 @@ def cover_axis(
     omega, added = list(omega), [False] * len(omega)
     level = max(float(floor), max(lmin, default=0.0))
     spare = _Spare(known, omega)
+    if prior is not None:
+        for w, sc in zip(*prior, strict=True):
+            omega.append(float(np.clip(w, 0.0, end)))
+            opt.append(np.nan)
+            lmin.append(0.0)
+            scs.append(sc)
+            added.append(False)
     # an interval proved at a lower level also proves any higher one (Phi only decreases), so
     # each point keeps the interval of the level current when it was solved: no recomputation
     proved = {}
@@ -619,7 +656,10 @@ def cover_axis(
                 scs.append(sc)
                 added.append(False)
             continue
-        new = _new_points(gaps, end, omega)
+        # not again where a point was solved or proved an interval (a known or prior point
+        # whose scalings proved nothing there does not stop a solve at its frequency)
+        tried = [w for i, w in enumerate(omega) if added[i] or np.isfinite(proved[i][1][0])]
+        new = _new_points(gaps, end, tried)
         if new.size == 0:
             break
         rounds += 1
@@ -727,13 +767,19 @@ POLISH_OPTIONS = dict(
 )
 
 
-def mu_solver(real: Realization, blk, *, slack: float = SLACK, polish_above: float = 0.0):
+def mu_solver(
+    real: Realization, blk, *, slack: float = SLACK, polish_above: float = 0.0, starts=None
+):
     """The ``solve`` of :func:`cover_axis` for ``mu(M(j omega))`` (D-G bound of ``mussv``).
 
     Points whose bound exceeds ``polish_above`` get long optimizer runs (:data:`POLISH_OPTIONS`)
-    from their own scalings and from those of the nearest point solved before (the scalings of
-    a neighbouring frequency are often a better start than a cold one, near lightly damped
-    modes), and keep the lowest of the bounds (each exact at its scalings).
+    from their own scalings, from those of the nearest point solved before or given in
+    ``starts`` (the scalings of a neighbouring frequency are often a better start than a cold
+    one, near lightly damped modes), and, for those still above, from the nearest point of the
+    same batch; each keeps the lowest of its bounds (each exact at its scalings).
+
+    ``starts`` : ``(omega, params)`` raw D-G parameters at frequencies [rad/s] (e.g. a grid
+    sweep's ``UpperBoundResult.params``), extra warm starts only.
     """
     from oos_drake.robust.blocks import parse_blk
     from oos_drake.robust.mu import UPPER_ITERATIONS, UPPER_PATIENCE, UPPER_TEMPERATURES, UPPER_TOL
@@ -741,6 +787,9 @@ def mu_solver(real: Realization, blk, *, slack: float = SLACK, polish_above: flo
 
     structure = parse_blk(blk)
     solved_omega, solved_params = [], []  # every point solved so far, for warm starts
+    if starts is not None:
+        solved_omega.extend(np.asarray(starts[0], dtype=float).tolist())
+        solved_params.extend(list(np.asarray(starts[1])))
 
     def solve(omega):
         omega = np.asarray(omega, dtype=float)
@@ -756,12 +805,21 @@ def mu_solver(real: Realization, blk, *, slack: float = SLACK, polish_above: flo
         upper, params = res.upper.copy(), res.params.copy()
         Dl, Dr, G = res.D_left.copy(), res.D_right.copy(), res.G.copy()
         redo = np.flatnonzero(upper > polish_above)
-        starts = [params[redo]]
+        x0s = [params[redo]]
         if redo.size and solved_omega:
             known = np.asarray(solved_omega)
             near = np.argmin(np.abs(np.log1p(known[None, :]) - np.log1p(omega[redo, None])), axis=1)
-            starts.append(np.asarray(solved_params)[near])
-        for x0 in starts if redo.size else ():
+            x0s.append(np.asarray(solved_params)[near])
+        if redo.size and omega.size > 1:
+            x0s.append(None)  # the nearest other point of this batch, after the passes above
+        for x0 in x0s if redo.size else ():
+            if x0 is None:
+                redo = redo[upper[redo] > polish_above]
+                if not redo.size:
+                    break
+                dist = np.abs(np.log1p(omega[None, :]) - np.log1p(omega[redo, None]))
+                dist[np.arange(redo.size), redo] = np.inf
+                x0 = params[np.argmin(dist, axis=1)]
             more = mu_upper_bound(M[redo], structure, x0=x0, **POLISH_OPTIONS)
             # a point is only as good as the certificate the interval test accepts: converged
             # scalings can be too close to singular for a strict LMI at the level

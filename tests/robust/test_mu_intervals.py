@@ -16,6 +16,7 @@ from oos_drake.robust.lfr_analysis import block_map
 from oos_drake.robust.mu_intervals import (
     Realization,
     Scalings,
+    _gaps,
     cover_axis,
     dg_interval,
     mu_solver,
@@ -62,6 +63,19 @@ def interval_and_sampled(real, blk, w0, grid):
     beta = 1.005 * float(res.upper[0])
     lo, hi = dg_interval(real, sc, beta, w0)
     return (lo, hi, *sampled_component(real, sc, beta, w0, grid), sc, beta)
+
+
+def assert_every_frequency_proved(real, cert, dense):
+    """Each frequency of ``dense`` lies in an interval of ``cert`` whose scalings satisfy the LMI
+    there at its level (the sign of ``lambda_max``, sampled on ``real``'s own response)."""
+    Ms = real.response(dense)
+    proved = np.zeros(dense.size, dtype=bool)
+    for (lo, hi), sc, lev in zip(cert.interval, cert.scalings, cert.level, strict=True):
+        if np.isfinite(lo):
+            inside = (dense >= lo) & (dense <= hi)
+            assert np.all(lmi_residual(Ms[inside], lev, sc.D_left, sc.D_right, sc.G) <= 0.0)
+            proved |= inside
+    assert np.all(proved)
 
 
 def two_modes():
@@ -180,15 +194,7 @@ def test_cover_from_known_grid_scalings():
     assert cert.covered and cert.check()["intervals_hold"] and cert.check()["covered"]
     assert 0.5 <= cert.upper <= 1.02 * 0.5
     assert np.sum(~cert.added) >= 2  # known points were used, not solved again
-    dense = np.linspace(0.0, 6.0, 6001)
-    Ms = real.response(dense)
-    proved = np.zeros(dense.size, dtype=bool)
-    for (lo, hi), sc, lev in zip(cert.interval, cert.scalings, cert.level, strict=True):
-        if np.isfinite(lo):
-            inside = (dense >= lo) & (dense <= hi)
-            assert np.all(lmi_residual(Ms[inside], lev, sc.D_left, sc.D_right, sc.G) <= 0.0)
-            proved |= inside
-    assert np.all(proved)
+    assert_every_frequency_proved(real, cert, np.linspace(0.0, 6.0, 6001))
 
 
 @pytest.mark.parametrize(
@@ -264,3 +270,32 @@ def test_bad_input():
     k = ureal("k", 1.0, plusminus=0.5)
     res = robstab(feedback(as_lfr(2.0) * k, 1))
     assert res.guarantee.covered and res.guarantee.interval[0, 1] == np.inf
+
+
+def test_cover_continued_from_a_neighbouring_model():
+    """``cover_axis(prior=...)`` (the analysis' continuation between configurations): the
+    essential scalings of one model's cover, tried first on a neighbouring model, prove its
+    level with fewer solved points; every frequency of the neighbour is still proved (dense LMI
+    check on the neighbour's own ``M``) and its level is above its sampled mu peak. Scalings that
+    prove nothing on the neighbour (a far model's) are simply not used."""
+    first, blk = delta_realization(oscillator(k0=1.0))
+    near, _ = delta_realization(oscillator(k0=1.01))
+    far, _ = delta_realization(oscillator(k0=4.0))
+    dense = np.concatenate([np.linspace(0.0, 6.0, 30001), np.logspace(0.8, 4, 200)])
+    peak = float(np.max(mussv(near.response(dense[::20]), blk).lower))
+    floor = 1.03 * peak
+    cert = cover_axis(first, mu_solver(first, blk, polish_above=peak), [], floor=floor)
+    keep = cert.essential()
+    assert cert.covered and 0 < keep.size <= cert.omega.size
+    assert not _gaps(cert.interval[keep], first.nyquist)  # the essential subset covers alone
+    prior = (cert.omega[keep], [cert.scalings[i] for i in keep])
+    cold = cover_axis(near, mu_solver(near, blk, polish_above=peak), [], floor=floor)
+    warm = cover_axis(near, mu_solver(near, blk, polish_above=peak), [], floor=floor, prior=prior)
+    assert warm.covered and warm.check()["intervals_hold"] and warm.check()["covered"]
+    assert warm.added.sum() < cold.added.sum()
+    assert np.isnan(warm.optimal[~warm.added]).any()  # prior points: not solved here
+    assert peak <= warm.upper <= 1.02 * floor
+    assert_every_frequency_proved(near, warm, dense)
+    # a far model: the prior proves (almost) nothing, the cover still closes on its own
+    other = cover_axis(far, mu_solver(far, blk, polish_above=peak), [], floor=floor, prior=prior)
+    assert other.covered and other.check()["intervals_hold"] and other.check()["covered"]
