@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 from pathlib import Path
 
 from oos_drake.analysis.stability import SweepOptions
@@ -102,7 +103,7 @@ def run_analyze(args) -> int:
         )
     )
     total = next((s for s in summary["subsets"] if s.get("subset") == "total"), {})
-    if "mu upper guaranteed [-]" in total:
+    if math.isfinite(total.get("mu upper guaranteed [-]", math.nan)):
         scope = (
             f"<= {total['mu upper guaranteed [-]']:.4g} on the whole frequency axis "
             f"(guaranteed), <= {m['mu_peak_upper']:.4g} on the grid,"
@@ -126,7 +127,7 @@ def run_analyze(args) -> int:
             f"  {s['subset']:>14s}: mu in [{s['mu lower [-]']:.4g}, {s['mu upper [-]']:.4g}] "
             + (
                 f"(whole axis <= {s['mu upper guaranteed [-]']:.4g}) "
-                if "mu upper guaranteed [-]" in s
+                if math.isfinite(s.get("mu upper guaranteed [-]", math.nan))
                 else ""
             )
             + f"(gap {s['gap [%]']:.2g} %) at t = {s['time [s]']:.0f} s, "
@@ -136,7 +137,12 @@ def run_analyze(args) -> int:
     for phase, pk in summary["docking"].items():
         print(
             f"docking {phase}: mu in [{pk['mu_lower']:.4g}, {pk['mu_upper']:.4g}] "
-            f"(gap {pk['gap [%]']:.2g} %) at k = {pk['stiffness']:.3g}, "
+            + (
+                f"(whole axis <= {pk['mu_upper_guaranteed']:.4g}) "
+                if math.isfinite(pk.get("mu_upper_guaranteed", math.nan))
+                else ""
+            )
+            + f"(gap {pk['gap [%]']:.2g} %) at k = {pk['stiffness']:.3g}, "
             f"f = {pk['frequency [Hz]']:.3g} Hz; spikes left {pk['spikes_left']} "
             f"({pk['spike_stop']}{', BUDGET EXHAUSTED' if pk['budget_exhausted'] else ''})"
         )
