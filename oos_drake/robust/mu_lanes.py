@@ -29,7 +29,8 @@ tuples are values, not memory, so all loads of a step come before its stores and
 vectorizer can pack them (numba leaves it off by default: :func:`compile_with_slp`). A lane
 whose QR does not converge within the step budget (never seen) is evaluated again by the
 per-matrix kernel :func:`mu_kernels.dg_objective` (``zheevd`` fallback). Whatever the
-optimizer does, ``mu_upper`` re-evaluates the bound exactly at the returned scalings.
+optimizer does, ``mu_upper.certified_upper`` proves the returned bound at the returned
+scalings (an LMI check with a bounded round-off, raising the bound where needed).
 """
 
 from __future__ import annotations
