@@ -103,8 +103,9 @@ class AnalysisOptions:
         each study's timing detail, beside the grid-only ``grid`` and ``tighten+certify``).
         Off by default (``oos analyze --guarantee`` turns it on): the analysis with it costs
         3.8 times the grid-only analysis in wall time, 4.3 times in CPU (session 8, the default
-        mission on an idle machine; the aim for the default is 2x). Without it the upper bounds hold on the analyzed
-        frequencies only (``oos confirm`` found one broken between them, docs/CLAIMS.md A11).
+        mission on an idle machine; the aim for the default is 2x). Without it the upper bounds
+        hold on the analyzed frequencies only (``oos confirm`` found one broken between them,
+        docs/CLAIMS.md A11).
     progress : bool
         tqdm progress bars.
     plant : str
