@@ -17,7 +17,7 @@ from oos_drake.analysis.controller import Controller
 from oos_drake.control.analysis_model import close_loop
 from oos_drake.control.plants import mission_times  # noqa: F401  (the synthesis's mission grid)
 from oos_drake.lfr import LFR, usubs
-from oos_drake.scenario.data import default_scenario as _scenario
+from oos_drake.scenario.data import default_scenario
 
 
 @dataclass(frozen=True)
@@ -61,7 +61,7 @@ def mission_plants(times, scenario=None, *, source: str = "lfr") -> LFR:
     from oos_drake.scenario.model import build_mission_model, mission_values
 
     _check_source(source)
-    scenario = _scenario(scenario)
+    scenario = default_scenario(scenario)
     times = np.atleast_1d(np.asarray(times, dtype=float))
     if source == "drake":
         from oos_drake.multibody.mission_lfr import twin_mission_plants
@@ -85,7 +85,7 @@ def phase_configuration(phase: str, scenario=None):
     """Named configuration of docking phase ``"7"`` or ``"8"`` (timeline)."""
     from oos_drake.scenario.timeline import mission_timeline
 
-    phases = mission_timeline(_scenario(scenario)).docking_phases
+    phases = mission_timeline(default_scenario(scenario)).docking_phases
     if str(phase) not in phases:
         raise ValueError(f"docking phase must be one of {sorted(phases)}, got {phase!r}")
     return phases[str(phase)]
@@ -112,7 +112,7 @@ def docking_springs(phase: str, stiffness, *, damping=None, scenario=None) -> di
         at ``stiffness`` [N/m = N m/rad, shear and torsion alike] and ``damping`` [N s/m =
         N m s/rad] (default: scenario), and in phase 8 SM1 at the scenario's rigid values.
     """
-    scenario = _scenario(scenario)
+    scenario = default_scenario(scenario)
     settings = scenario.docking
     damping = float(settings.damping if damping is None else damping)
     springs = {"SM1" if str(phase) == "7" else "SM2": (stiffness, damping)}
@@ -143,7 +143,7 @@ def docking_plant(phase: str, stiffness, *, damping=None, scenario=None, source=
     from oos_drake.scenario.model import build_docking_model, configuration_values
 
     _check_source(source)
-    scenario = _scenario(scenario)
+    scenario = default_scenario(scenario)
     phase = str(phase)
     stiffness = np.atleast_1d(np.asarray(stiffness, dtype=float))
     if np.any(stiffness < 0) or not np.all(np.isfinite(stiffness)):

@@ -30,7 +30,7 @@ from oos_drake.multibody.operating_point import OperatingPoint, set_operating_po
 from oos_drake.multibody.scenario_plant import cached_scenario_diagram
 from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL
 from oos_drake.multibody.uncertain_linearization import PhysicalParameter, ulinearize
-from oos_drake.scenario.data import default_scenario as _scenario
+from oos_drake.scenario.data import default_scenario
 
 __all__ = [
     "SPRING_QUANTITIES",
@@ -71,7 +71,7 @@ def uncertain_parameters(scenario=None):
     from oos_drake.control.plants import UncertainParameter
     from oos_drake.titop.parameters import inertia_names, mass_name, mode_frequency_name
 
-    scenario = _scenario(scenario)
+    scenario = default_scenario(scenario)
     parameters = []
 
     def add(name, nominal, percent):
@@ -99,7 +99,7 @@ def uncertain_parameters(scenario=None):
 
 def mission_parameters(scenario=None) -> tuple[PhysicalParameter, ...]:
     """The scenario's real uncertain parameters as Drake declarations (TITOP names and ranges)."""
-    scenario = _scenario(scenario)
+    scenario = default_scenario(scenario)
     hubs = {hub.name for hub in scenario.hubs.values()}
     arrays = {mount.name for mount in scenario.arrays.values()}
     declared = []
@@ -236,7 +236,7 @@ def twin_mission_plants(times, scenario=None, *, progress=None) -> LFR:
     from oos_drake.multibody.operating_point import operating_point
     from oos_drake.scenario.timeline import mission_timeline
 
-    scenario = _scenario(scenario)
+    scenario = default_scenario(scenario)
     times = np.atleast_1d(np.asarray(times, dtype=float))
     timeline = mission_timeline(scenario)
     declared = mission_parameters(scenario)
@@ -271,7 +271,7 @@ def twin_docking_plants(phase: str, stiffness, damping: float, scenario=None) ->
     from oos_drake.multibody.operating_point import operating_point
     from oos_drake.scenario.timeline import mission_timeline
 
-    scenario = _scenario(scenario)
+    scenario = default_scenario(scenario)
     stiffness = np.atleast_1d(np.asarray(stiffness, dtype=float))
     if not np.all(np.isfinite(stiffness)) or np.any(stiffness <= 0):
         raise ValueError("twin_docking_plants: stiffness values must be finite and > 0")

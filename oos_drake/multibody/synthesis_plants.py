@@ -55,7 +55,6 @@ from oos_drake.multibody.appendage_sdf import MODE_JOINT
 from oos_drake.multibody.linearization import structural_prune
 from oos_drake.multibody.mission_lfr import (
     PADDING_POLE,
-    _scenario,
     mission_parameters,
     twin_lfr,
     uncertain_parameters,
@@ -63,6 +62,7 @@ from oos_drake.multibody.mission_lfr import (
 from oos_drake.multibody.operating_point import linearize_at, operating_point
 from oos_drake.multibody.scenario_plant import ScenarioDiagram, cached_scenario_diagram
 from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL
+from oos_drake.scenario.data import default_scenario
 
 __all__ = [
     "PADDING_POLE",
@@ -110,7 +110,7 @@ def apply_physical_values(
     """
     from oos_drake.titop.parameters import inertia_names, mass_name, mode_frequency_name
 
-    scenario = _scenario(scenario)
+    scenario = default_scenario(scenario)
     plant = handles.plant
     plant_context = plant.GetMyMutableContextFromRoot(context)
     hub_names = {}
@@ -234,7 +234,7 @@ class DrakePlantSource:
     ):
         from oos_drake.scenario.timeline import mission_timeline
 
-        self.scenario = _scenario(scenario)
+        self.scenario = default_scenario(scenario)
         self.times = np.asarray(times, dtype=float).ravel()
         if self.times.size == 0 or not np.all(np.isfinite(self.times)):
             raise ValueError(f"DrakePlantSource: times must be finite and non-empty, got {times}")
