@@ -33,10 +33,9 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from oos_drake.robust import mu_kernels
 from oos_drake.robust.blocks import BlockStructure, check_matrix, parse_blk
 from oos_drake.robust.mu_lower import LowerBoundResult, certificate_residual, mu_lower_bound
-from oos_drake.robust.mu_upper import UpperBoundResult, lmi_residual, mu_upper_bound
+from oos_drake.robust.mu_upper import lmi_residual, mu_upper_bound
 
 
 @dataclass(frozen=True)
@@ -133,12 +132,9 @@ UPPER_TOL = 2e-4
 UPPER_PATIENCE = 3
 
 
-#: Continuation (``mussv(..., continuation=True)``): with the compiled kernels each matrix
-#: also tries the previous one's scalings and, where they start lower, runs one stage at
-#: :data:`CONTINUATION_TEMPERATURE` with patience :data:`CONTINUATION_PATIENCE` from there;
-#: without numba every :data:`CONTINUATION_STRIDE`-th matrix is solved from balancing and the
-#: others start from their nearest solved neighbour.
-CONTINUATION_STRIDE = 8
+#: Continuation (``mussv(..., continuation=True)``): each matrix also tries the previous one's
+#: scalings and, where they start lower, runs one stage at :data:`CONTINUATION_TEMPERATURE` with
+#: patience :data:`CONTINUATION_PATIENCE` from there.
 CONTINUATION_TEMPERATURE = 300.0
 CONTINUATION_PATIENCE = 2
 #: Random restarts of the lower bound (besides the neighbours' vectors) with continuation.
@@ -149,47 +145,19 @@ CONTINUATION_LOWER_ITERATIONS = 60
 
 def _upper_bound(part, structure, iterations, tol, *, continuation=False):
     """The D-G upper bound of :func:`mussv` (optionally with continuation along the batch)."""
-    nb = part.shape[0]
-    stride = CONTINUATION_STRIDE
-    compiled = mu_kernels.HAVE_NUMBA
     cold_options = dict(
         max_iter=iterations, tol=tol, temperatures=UPPER_TEMPERATURES, patience=UPPER_PATIENCE
     )
-    if not continuation or (nb <= stride and not compiled) or nb < 2:
+    if not continuation or part.shape[0] < 2:
         return mu_upper_bound(part, structure, **cold_options)
-    if compiled:  # chain matrix by matrix
-        return mu_upper_bound(
-            part,
-            structure,
-            **cold_options,
-            chain=True,
-            chain_temperatures=(CONTINUATION_TEMPERATURE,),
-            chain_patience=CONTINUATION_PATIENCE,
-        )
-    # numpy: every stride-th matrix from balancing, the others from the nearest of those
-    cold = np.arange(0, nb, stride)
-    warm = np.setdiff1d(np.arange(nb), cold)
-    near = np.clip(np.round(warm / stride).astype(int), 0, cold.size - 1)
-    first = mu_upper_bound(part[cold], structure, **cold_options)
-    second = mu_upper_bound(
-        part[warm],
+    return mu_upper_bound(  # chained matrix by matrix
+        part,
         structure,
-        max_iter=iterations,
-        tol=tol,
-        temperatures=(CONTINUATION_TEMPERATURE,),
-        patience=CONTINUATION_PATIENCE,
-        x0=first.params[near],
+        **cold_options,
+        chain=True,
+        chain_temperatures=(CONTINUATION_TEMPERATURE,),
+        chain_patience=CONTINUATION_PATIENCE,
     )
-    merged = {}
-    for f in fields(UpperBoundResult):
-        a, b = getattr(first, f.name), getattr(second, f.name)
-        if f.name == "iterations":
-            merged[f.name] = max(a, b)
-            continue
-        out = np.empty((nb,) + a.shape[1:], dtype=a.dtype)
-        out[cold], out[warm] = a, b
-        merged[f.name] = out
-    return UpperBoundResult(**merged)
 
 
 def _lower_bound(part, structure, up, *, restarts, iters, rng, restart_gap, continuation=False):
@@ -278,16 +246,13 @@ def mussv(
     rng : numpy.random.Generator, optional
         Random starts of the lower bound (default: seeded, reproducible).
     continuation : bool
-        Treat consecutive matrices of the batch (in C order: neighbouring frequencies of a
-        frequency response along the last batch axis) as neighbours. The upper bound of each
-        matrix also tries the scalings reached on the previous one and, where they start lower
-        than balancing, runs one short smoothing stage from there (without numba: every
-        :data:`CONTINUATION_STRIDE`-th matrix is solved from balancing and the others start
-        from the nearest of those); the lower bound's extra restarts start from the
-        neighbours' eigenvectors instead of random vectors. Faster on smooth frequency
-        responses, and as valid (each upper bound is the exact ``lambda_max`` at its own
-        scalings, each lower bound has its own verified ``delta``); independent matrices
-        should keep the default (False).
+        Treat consecutive matrices of the batch (in C order: neighbouring frequencies of a frequency
+        response along the last batch axis) as neighbours. The upper bound of each matrix also tries
+        the scalings reached on the previous one and, where they start lower than balancing, runs
+        one short smoothing stage from there; the lower bound's extra restarts start from the
+        neighbours' eigenvectors instead of random vectors. Faster on smooth frequency responses,
+        and as valid (each upper bound is the exact ``lambda_max`` at its own scalings, each lower
+        bound has its own verified ``delta``); independent matrices should keep the default (False).
 
     Returns
     -------

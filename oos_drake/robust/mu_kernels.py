@@ -9,7 +9,8 @@ fallback of a lane whose QR did not converge).
 
 :func:`dg_objective` evaluates, for each matrix of a batch, the smoothed ``lambda_max`` of the
 scaled D-G matrix of :mod:`oos_drake.robust.mu_upper` and its gradient. It is the same function
-as the numpy ``_Objective`` there (a test checks both agree to round-off), written without
+as the numpy oracle of the tests (``tests/robust/oracles.py``; tests check both agree to
+round-off), written without
 the batched fancy-indexing temporaries:
 
 * the scalings are block diagonal with blocks of size <= 3: ``X = M T_r^{-1}``,
@@ -22,9 +23,6 @@ the batched fancy-indexing temporaries:
   eigenvalues that carry the smoothed maximum (``dstein`` on the tridiagonal, then our own
   back-transformation). About 36 us per 26 x 26 evaluation (LAPACK ``zhetrd``/``zunmtr``:
   40 us; a full ``eigh``: 60 us).
-
-Without numba (``HAVE_NUMBA`` False) ``mu_upper`` runs its numpy implementation of the same
-algorithm (slower, about 3x; otherwise the test oracle of the compiled one).
 
 If the eigenvector step fails (``dstein`` not converged) the kernel falls back to a full
 ``numpy.linalg.eigh`` for that matrix. Whatever the kernel returns only steers the optimizer:
@@ -40,43 +38,27 @@ from __future__ import annotations
 
 import numpy as np
 
-try:  # numba is optional: without it mu_upper uses its numpy objective
+try:  # numba is a dependency (pyproject): there is no slower copy to run without it
     import llvmlite.binding as _ll
     import numba
     from numba import types
     from numba.extending import get_cython_function_address
+except ImportError as err:  # pragma: no cover - exercised only without numba
+    raise ImportError(f"oos_drake.robust needs numba (pip install numba): {err}") from err
 
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover - exercised only without numba
-    HAVE_NUMBA = False
-
-_LAPACK = ("dsterf", "dstein", "zheevd")
-_BLAS = ("zherk", "zgemm")
-
-if HAVE_NUMBA:
-    for _name in _LAPACK:
-        _ll.add_symbol(
-            f"oosd_{_name}", get_cython_function_address("scipy.linalg.cython_lapack", _name)
-        )
-    for _name in _BLAS:
-        _ll.add_symbol(
-            f"oosd_{_name}", get_cython_function_address("scipy.linalg.cython_blas", _name)
-        )
-    _P = types.voidptr
-    _zheevd = types.ExternalFunction("oosd_zheevd", types.void(*([_P] * 13)))
-    _zherk = types.ExternalFunction("oosd_zherk", types.void(*([_P] * 10)))
-    _zgemm = types.ExternalFunction("oosd_zgemm", types.void(*([_P] * 13)))
-    _dsterf = types.ExternalFunction("oosd_dsterf", types.void(*([_P] * 4)))
-    _dstein = types.ExternalFunction("oosd_dstein", types.void(*([_P] * 13)))
-    _jit = numba.njit(cache=True, nogil=True, fastmath=False)
-    # reassociation lets LLVM vectorize the real dot products of the split complex products
-    _jit_fast = numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
-else:  # pragma: no cover
-
-    def _jit(f):
-        return f
-
-    _jit_fast = _jit
+for _lib, _names in (("lapack", ("dsterf", "dstein", "zheevd")), ("blas", ("zherk", "zgemm"))):
+    for _name in _names:
+        _address = get_cython_function_address(f"scipy.linalg.cython_{_lib}", _name)
+        _ll.add_symbol(f"oosd_{_name}", _address)
+_P = types.voidptr
+_zheevd = types.ExternalFunction("oosd_zheevd", types.void(*([_P] * 13)))
+_zherk = types.ExternalFunction("oosd_zherk", types.void(*([_P] * 10)))
+_zgemm = types.ExternalFunction("oosd_zgemm", types.void(*([_P] * 13)))
+_dsterf = types.ExternalFunction("oosd_dsterf", types.void(*([_P] * 4)))
+_dstein = types.ExternalFunction("oosd_dstein", types.void(*([_P] * 13)))
+_jit = numba.njit(cache=True, nogil=True, fastmath=False)
+# reassociation lets LLVM vectorize the real dot products of the split complex products
+_jit_fast = numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
 
 
 #: Weight below which an eigenvalue is left out of the smoothed maximum's gradient.

@@ -38,10 +38,11 @@ from __future__ import annotations
 import contextlib
 from collections import namedtuple
 
+import numba
 import numpy as np
 
 from oos_drake.robust import mu_kernels
-from oos_drake.robust.mu_kernels import HAVE_NUMBA, WEIGHT_FLOOR
+from oos_drake.robust.mu_kernels import WEIGHT_FLOOR
 
 #: Matrices evaluated together (8 doubles: one AVX-512 register).
 W = 8
@@ -66,23 +67,14 @@ CURVATURE_FLOOR = 1e-14
 #: Stage budget: ``max(max_iter // n_stages, min(max_iter, MIN_STAGE_ITERATIONS))``.
 MIN_STAGE_ITERATIONS = 5
 
-if HAVE_NUMBA:
-    import numba
-
-    # error_model="numpy": no zero-check branch on every division (it blocks vectorization)
-    _jit = numba.njit(cache=True, nogil=True, fastmath=_FM, error_model="numpy")
-    # helpers: LLVM inlines them (numba's own inline="always" compiles 1.5x slower, runs slower)
-    _vec = numba.njit(fastmath=_FM, error_model="numpy")
-    _jit_exact = numba.njit(cache=True, nogil=True, error_model="numpy")
-    # the L-BFGS recursion: exact arithmetic, dot products reassociated (vectorized)
-    _jit_lbfgs = numba.njit(cache=True, nogil=True)
-    _jit_dot = numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
-else:  # pragma: no cover
-
-    def _jit(f):
-        return f
-
-    _vec = _jit_exact = _jit_lbfgs = _jit_dot = _jit
+# error_model="numpy": no zero-check branch on every division (it blocks vectorization)
+_jit = numba.njit(cache=True, nogil=True, fastmath=_FM, error_model="numpy")
+# helpers: LLVM inlines them (numba's own inline="always" compiles 1.5x slower, runs slower)
+_vec = numba.njit(fastmath=_FM, error_model="numpy")
+_jit_exact = numba.njit(cache=True, nogil=True, error_model="numpy")
+# the L-BFGS recursion: exact arithmetic, dot products reassociated (vectorized)
+_jit_lbfgs = numba.njit(cache=True, nogil=True)
+_jit_dot = numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
 
 
 #: The parameter layout of one BLK for the lane kernels (built by :func:`lane_layout`; index
@@ -179,9 +171,6 @@ def compile_with_slp():
     """Turn on LLVM's SLP vectorizer while the lane kernels compile (numba's default is off;
     the cached machine code keeps it). Process-wide for the duration: other code compiled
     meanwhile only gets the same, semantics-preserving, optimization."""
-    if not HAVE_NUMBA:
-        yield
-        return
     old = numba.config.SLP_VECTORIZE
     numba.config.SLP_VECTORIZE = 1
     try:

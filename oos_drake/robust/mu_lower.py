@@ -19,10 +19,9 @@ Several starts run at once (the worst direction of the upper bound and random ve
 returned ``delta`` is checked: ``sigma_min(I - M delta)`` must be at the round-off level,
 otherwise that candidate is dropped (and the bound lowered, to 0 if no candidate passes).
 
-With numba installed the power iteration, the eigenvalue polish and the residual-vector check
-run compiled, start by start (:mod:`oos_drake.robust.mu_lower_kernels`, the same arithmetic up to
-round-off): that is the product's one lower-bound path. The numpy code here
-(``compiled=False``) is the oracle of the tests, and what runs when numba is not installed.
+The power iteration, the eigenvalue polish and the residual-vector check run compiled, start by
+start (:mod:`oos_drake.robust.mu_lower_kernels`); a numpy implementation of the same algorithm is
+the tests' oracle (``tests/robust/oracles.py``).
 """
 
 from __future__ import annotations
@@ -31,7 +30,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from oos_drake.robust import mu_kernels, mu_lower_kernels
+from oos_drake.robust import mu_lower_kernels
 from oos_drake.robust.blocks import FULL, REAL, BlockStructure
 from oos_drake.robust.memory import reuse_freed_memory
 
@@ -62,92 +61,6 @@ class LowerBoundResult:
     )
     raw_lambda: np.ndarray | None = None  # (B,) its eigenvalue of M raw_delta
     vector: np.ndarray | None = None  # (B, c): eigenvector of M delta of the returned candidate
-
-
-def _assemble(structure: BlockStructure, params, nb):
-    delta = np.zeros((nb, structure.n_rows, structure.n_cols), dtype=complex)
-    for block, value in zip(structure.blocks, params, strict=True):
-        if block.kind == FULL:
-            delta[:, block.r_slice, block.c_slice] = value
-        else:
-            idx = np.arange(block.rows)
-            delta[:, block.row_offset + idx, block.col_offset + idx] = value[:, None]
-    return delta
-
-
-def _update_blocks(structure, params, phi, a, w, za, lam, eta):
-    """One update of every block from the eigen-pair estimate (``za = z^* a``, ``lam``).
-
-    The complex blocks are aligned so that each adds ``e^{j phi}`` times a positive number to
-    ``lam``; the real blocks and the common phase ``phi`` take a Newton step towards
-    ``Im(lam) = 0`` plus an ascent step on ``Re(lam)`` that leaves ``Im(lam)`` unchanged to first
-    order (``phi`` plays the part of Young's multiplier ``x = tan(phi)`` in the rank-one formula).
-    Returns ``(params, phi)``.
-    """
-    nb = a.shape[0]
-    new = []
-    real_idx = []
-    g_real = []
-    h = np.zeros(nb, dtype=complex)
-    rot = np.exp(1j * phi)
-    zas = np.where(np.abs(za) > 1e-300, za, 1e-300)
-    for k, (block, value) in enumerate(zip(structure.blocks, params, strict=True)):
-        ak = a[:, block.c_slice]
-        wk = w[:, block.r_slice]
-        if block.kind == FULL:
-            na = np.linalg.norm(ak, axis=1)
-            nw = np.linalg.norm(wk, axis=1)
-            den = np.maximum(na * nw, 1e-300)
-            upd = (rot / den)[:, None, None] * wk[:, :, None] * np.conj(ak)[:, None, :]
-            keep = (na * nw) < 1e-300
-            upd[keep] = value[keep]
-            new.append(upd)
-            h += rot * na * nw / zas
-        else:
-            ip = np.sum(np.conj(wk) * ak, axis=1)
-            if block.kind == REAL:
-                real_idx.append(k)
-                g_real.append(ip / zas)
-                new.append(value)
-            else:
-                mag = np.abs(ip)
-                upd = np.where(mag > 1e-300, rot * np.conj(ip) / np.maximum(mag, 1e-300), value)
-                new.append(upd)
-                h += rot * mag / zas
-    cols_p, cols_q = [], []
-    for g in g_real:
-        cols_p.append(g.real)
-        cols_q.append(g.imag)
-    has_c = len(real_idx) < len(structure.blocks)
-    if has_c:
-        cols_p.append(-h.imag)  # d lam / d phi = j h
-        cols_q.append(h.real)
-    if real_idx and cols_p:
-        P = np.stack(cols_p, axis=1)
-        Q = np.stack(cols_q, axis=1)
-        # real parameters at a bound only move inwards
-        free = np.ones_like(P, dtype=bool)
-        for j, k in enumerate(real_idx):
-            free[:, j] = np.abs(params[k]) < 1.0 - 1e-12
-        Qf = np.where(free, Q, 0.0)
-        q2 = np.sum(Qf * Qf, axis=1) + 1e-300
-        corr = (-lam.imag / q2)[:, None] * Qf
-        asc = P - (np.sum(P * Qf, axis=1) / q2)[:, None] * Qf
-        asc = asc / np.maximum(np.linalg.norm(asc, axis=1, keepdims=True), 1e-300)
-        step = corr + eta * asc
-        nstep = np.linalg.norm(step, axis=1, keepdims=True)
-        step = step * np.minimum(1.0, 0.5 / np.maximum(nstep, 1e-300))
-        for j, k in enumerate(real_idx):
-            new[k] = np.clip(params[k] + step[:, j], -1.0, 1.0)
-        if has_c:
-            phi = phi + step[:, -1]
-            rot = np.exp(1j * step[:, -1])
-            for k, block in enumerate(structure.blocks):
-                if block.kind == FULL:
-                    new[k] = new[k] * rot[:, None, None]
-                elif block.kind != REAL:
-                    new[k] = new[k] * rot
-    return new, phi
 
 
 def _mv(A, v):
@@ -192,37 +105,6 @@ def _max_block_norm(structure: BlockStructure, delta: np.ndarray) -> np.ndarray:
     return out
 
 
-class _BlockDiag:
-    """Apply a block-diagonal ``Delta`` given per block (no dense ``(B, r, c)`` assembly)."""
-
-    def __init__(self, structure: BlockStructure):
-        rep = [(k, b) for k, b in enumerate(structure.blocks) if b.repeated]
-        self.rep_k = [k for k, _ in rep]
-        self.rep_of = np.concatenate([np.full(b.rows, j) for j, (_, b) in enumerate(rep)] or [[]])
-        self.rep_of = self.rep_of.astype(int)
-        self.rep_rows = np.concatenate([np.arange(b.rows) + b.row_offset for _, b in rep] or [[]])
-        self.rep_rows = self.rep_rows.astype(int)
-        self.rep_cols = np.concatenate([np.arange(b.cols) + b.col_offset for _, b in rep] or [[]])
-        self.rep_cols = self.rep_cols.astype(int)
-        self.full = [(k, b) for k, b in enumerate(structure.blocks) if b.kind == FULL]
-        self.r, self.c = structure.n_rows, structure.n_cols
-
-    def apply(self, params, a, adjoint=False):
-        """``Delta a`` (``a`` in c-space) or, with ``adjoint``, ``Delta^* z`` (``z`` in r-space)."""
-        nb = a.shape[0]
-        out = np.zeros((nb, self.c if adjoint else self.r), dtype=complex)
-        src, dst = (self.rep_rows, self.rep_cols) if adjoint else (self.rep_cols, self.rep_rows)
-        if self.rep_k:
-            vals = np.stack([params[k] for k in self.rep_k], axis=1)[:, self.rep_of]
-            out[:, dst] = (np.conj(vals) if adjoint else vals) * a[:, src]
-        for k, b in self.full:
-            if adjoint:
-                out[:, b.c_slice] = _mv(np.conj(np.swapaxes(params[k], -1, -2)), a[:, b.r_slice])
-            else:
-                out[:, b.r_slice] = _mv(params[k], a[:, b.c_slice])
-        return out
-
-
 def _kernel_blocks(structure: BlockStructure) -> np.ndarray:
     """Block description of the compiled kernels: ``(5, n_blocks)`` integers, kind (0 real,
     1 repeated complex, 2 full), rows, columns, row offset, column offset."""
@@ -236,170 +118,30 @@ def _kernel_blocks(structure: BlockStructure) -> np.ndarray:
     ).T.copy()
 
 
-def _power_iteration(M, structure, a, z, iters, kappa, rng, compiled=True):
-    """Run the mixed power iteration from vectors ``a`` (c-space) and ``z`` (c-space).
+def _power_iteration(M, structure, a, z, iters, kappa, rng):
+    """Run the mixed power iteration (:func:`mu_lower_kernels.power_iteration`) from vectors
+    ``a`` (c-space) and ``z`` (c-space); return ``(delta, a)``.
 
     ``M`` is ``(nb, c, r)`` and ``a``, ``z`` are ``(N, c)`` with ``N`` a multiple of ``nb``:
-    start ``s`` runs on ``M[s % nb]`` (several starts per matrix). ``compiled``: by
-    :func:`mu_lower_kernels.power_iteration` when numba is installed.
+    start ``s`` runs on ``M[s % nb]`` (several starts per matrix).
     """
     nb = a.shape[0]
-    if compiled and mu_kernels.HAVE_NUMBA:  # the same iteration, compiled per start
-        real0 = [rng.uniform(-1.0, 1.0, nb) for b in structure.blocks if b.kind == REAL]
-        real0 = np.stack(real0, axis=1) if real0 else np.zeros((nb, 0))
-        delta = np.empty((nb, structure.n_rows, structure.n_cols), dtype=complex)
-        a_out = np.empty((nb, structure.n_cols), dtype=complex)
-        mu_lower_kernels.power_iteration(
-            np.ascontiguousarray(M, dtype=complex),
-            np.ascontiguousarray(a, dtype=complex),
-            np.ascontiguousarray(z, dtype=complex),
-            real0,
-            _kernel_blocks(structure),
-            int(iters),
-            float(kappa),
-            delta,
-            a_out,
-        )
-        return delta, a_out
-    if M.shape[0] != nb:
-        M = np.broadcast_to(M[None], (nb // M.shape[0],) + M.shape).reshape((nb,) + M.shape[1:])
-    MH = np.ascontiguousarray(np.conj(np.swapaxes(M, -1, -2)))
-    w = _mv(MH, z)
-    bd = _BlockDiag(structure)
-    params = []
-    for block in structure.blocks:  # complex blocks start aligned, real ones at a random point
-        if block.kind == FULL:
-            params.append(np.zeros((nb, block.rows, block.cols), dtype=complex))
-        elif block.kind == REAL:
-            params.append(rng.uniform(-1.0, 1.0, nb))
-        else:
-            params.append(np.ones(nb, dtype=complex))
-    za = np.sum(np.conj(z) * a, axis=1)
-    phi = np.zeros(nb)
-    params, phi = _update_blocks(structure, params, phi, a, w, za, np.zeros(nb, dtype=complex), 0.0)
-    real_only = all(b.kind == REAL for b in structure.blocks)
-    real_pos = [k for k, b in enumerate(structure.blocks) if b.kind == REAL]
-    for it in range(iters):
-        MDa = _mv(M, bd.apply(params, a))
-        lam = np.sum(np.conj(z) * MDa, axis=1) / np.where(np.abs(za) > 1e-300, za, 1e-300)
-        if real_only:  # |lam| is what counts: make Re(lam) >= 0 by flipping the sign of delta
-            flip = lam.real < 0
-            if np.any(flip):
-                for k in real_pos:
-                    params[k] = np.where(flip, -params[k], params[k])
-                lam = np.where(flip, -lam, lam)
-                MDa = np.where(flip[:, None], -MDa, MDa)
-        a = _normalize(MDa)
-        z = _normalize(bd.apply(params, w, adjoint=True))  # w = M^* z of the previous z
-        za = np.sum(np.conj(z) * a, axis=1)
-        z = z * (za / np.maximum(np.abs(za), 1e-300))[:, None]
-        za = np.abs(za)
-        w = _mv(MH, z)
-        eta = kappa * max(0.0, 1.0 - it / (0.7 * iters))
-        params, phi = _update_blocks(structure, params, phi, a, w, za, lam, eta)
-    return _assemble(structure, params, nb), a
-
-
-def _polish_eigenvalue(MD, a, steps=_POLISH_STEPS):
-    """Eigenvalue of ``MD`` nearest the Rayleigh quotient of ``a`` (shifted inverse iteration)."""
-    n = MD.shape[-1]
-    lam = np.sum(np.conj(a) * _mv(MD, a), axis=1)
-    eye = np.eye(n)
-    for _ in range(steps):
-        shift = lam * (1 + 1e-10) + 1e-14
-        try:
-            x = np.linalg.solve(MD - shift[:, None, None] * eye, a[:, :, None])[:, :, 0]
-        except np.linalg.LinAlgError:
-            break
-        a = _normalize(np.where(np.isfinite(x), x, a))
-        lam = np.sum(np.conj(a) * _mv(MD, a), axis=1)
-    return lam, a
-
-
-def _make_eigenvalue_real(M, structure, delta, a, steps=_REAL_ROUNDS):
-    """Newton steps on the real blocks (and a common phase of the complex blocks) to Im(lam) = 0.
-
-    Returns ``(delta, lam)`` with ``lam`` the eigenvalue of ``M delta`` tracked from ``a``.
-    """
-    nb, c, r = M.shape
-    real_blocks = [b for b in structure.blocks if b.kind == REAL]
-    cplx_blocks = [b for b in structure.blocks if b.kind != REAL]
-    eye = np.eye(c)
-    delta = delta.copy()
-    a = a.copy()
-    z_all = a.copy()
-    lam_all = np.zeros(nb, dtype=complex)
-    act = np.arange(nb)  # rows whose eigenvalue is not yet real: the others stop early
-    for rnd in range(steps + 1):
-        Ma = M[act]
-        da = delta[act]
-        MD = Ma @ da
-        lam, aa = _polish_eigenvalue(MD, a[act], steps=_REAL_STEPS)
-        a[act], lam_all[act] = aa, lam
-        done = np.abs(lam.imag) <= 1e-13 * np.abs(lam)
-        if rnd == steps or np.all(done):
-            break
-        # left eigenvector by inverse iteration on (M delta)^*
-        MDH = np.conj(np.swapaxes(MD, -1, -2))
-        z = z_all[act]
-        for _k in range(2):
-            shift = np.conj(lam) * (1 + 1e-10) + 1e-14
-            try:
-                zz = np.linalg.solve(MDH - shift[:, None, None] * eye, z[:, :, None])[:, :, 0]
-            except np.linalg.LinAlgError:
-                break
-            z = _normalize(np.where(np.isfinite(zz), zz, z))
-        z_all[act] = z
-        za = np.sum(np.conj(z) * aa, axis=1)
-        za = np.where(np.abs(za) > 1e-300, za, 1e-300)
-        w = _mv(np.conj(np.swapaxes(Ma, -1, -2)), z)
-        coeffs, targets = [], []
-        for b in real_blocks:
-            g = np.sum(np.conj(w[:, b.r_slice]) * aa[:, b.c_slice], axis=1) / za
-            d = da[:, b.row_offset, b.col_offset].real
-            free = np.abs(d) < 1.0 - 1e-12
-            coeffs.append(np.where(free, g.imag, 0.0))
-            targets.append(("real", b))
-        if cplx_blocks:
-            h = np.zeros(act.size, dtype=complex)
-            for b in cplx_blocks:
-                Da = _mv(da[:, b.r_slice, b.c_slice], aa[:, b.c_slice])
-                h += np.sum(np.conj(w[:, b.r_slice]) * Da, axis=1) / za
-            coeffs.append((1j * h).imag)
-            targets.append(("phase", None))
-        if not coeffs:
-            break
-        C = np.stack(coeffs, axis=1)
-        c2 = np.sum(C * C, axis=1) + 1e-300
-        step = (-lam.imag / c2)[:, None] * C
-        nstep = np.linalg.norm(step, axis=1, keepdims=True)
-        step = step * np.minimum(1.0, 0.2 / np.maximum(nstep, 1e-300))
-        step[done] = 0.0
-        for j, (kind, b) in enumerate(targets):
-            if kind == "real":
-                idx = np.arange(b.rows)
-                d = da[:, b.row_offset, b.col_offset].real
-                dn = np.clip(d + step[:, j], -1.0, 1.0)
-                da[:, b.row_offset + idx, b.col_offset + idx] = dn[:, None]
-            else:
-                rot = np.exp(1j * step[:, j])[:, None, None]
-                for bc in cplx_blocks:
-                    da[:, bc.r_slice, bc.c_slice] *= rot
-        delta[act] = da
-        act = act[~done]
-    return delta, lam_all, a
-
-
-def _vector_residual(M, delta, a):
-    """Upper bound of ``sigma_min(I - M delta) / (1 + ||M delta||_2)`` from a vector ``a``.
-
-    ``sigma_min(I - M delta) <= ||(I - M delta) a|| / ||a||`` and ``||M delta||_2 >=
-    ||M delta a|| / ||a||``: a small value proves near-singularity as the SVD would, at the cost
-    of two matrix-vector products.
-    """
-    na = np.maximum(np.linalg.norm(a, axis=1), 1e-300)
-    mda = _mv(M, _mv(delta, a))
-    return (np.linalg.norm(a - mda, axis=1) / na) / (1.0 + np.linalg.norm(mda, axis=1) / na)
+    real0 = [rng.uniform(-1.0, 1.0, nb) for b in structure.blocks if b.kind == REAL]
+    real0 = np.stack(real0, axis=1) if real0 else np.zeros((nb, 0))
+    delta = np.empty((nb, structure.n_rows, structure.n_cols), dtype=complex)
+    a_out = np.empty((nb, structure.n_cols), dtype=complex)
+    mu_lower_kernels.power_iteration(
+        np.ascontiguousarray(M, dtype=complex),
+        np.ascontiguousarray(a, dtype=complex),
+        np.ascontiguousarray(z, dtype=complex),
+        real0,
+        _kernel_blocks(structure),
+        int(iters),
+        float(kappa),
+        delta,
+        a_out,
+    )
+    return delta, a_out
 
 
 def certificate_residual(M, delta):
@@ -421,7 +163,6 @@ def mu_lower_bound(
     kappa: float = 0.5,
     rng: np.random.Generator | None = None,
     polish_starts: int | None = 2,
-    compiled: bool = True,
 ) -> LowerBoundResult:
     """Certified lower bound of mixed mu for a flat batch of matrices.
 
@@ -447,10 +188,6 @@ def mu_lower_bound(
     polish_starts : int or None
         Starts per matrix (the best by their Rayleigh quotient after the power iteration) that
         get the eigenvalue polish and the certificate check; None: all.
-    compiled : bool
-        Run the compiled kernels (:mod:`mu_lower_kernels`) when numba is installed (the
-        default). False runs the numpy implementation of the same algorithm (the oracle of the
-        tests; also what runs without numba).
 
     Returns
     -------
@@ -470,14 +207,43 @@ def mu_lower_bound(
                 kappa=kappa,
                 rng=rng,
                 polish_starts=polish_starts,
-                compiled=compiled,
             )
             for i in range(0, M.shape[0], CHUNK)
         ]
         return LowerBoundResult(
             *(np.concatenate([getattr(q, f.name) for q in parts]) for f in fields(LowerBoundResult))
         )
-    nb, c, r = M.shape
+    nb = M.shape[0]
+    a, z = _starts(M, start_inputs, start_vectors, restarts, rng)
+    ns = a.shape[0] // nb
+    mat = np.tile(np.arange(nb), ns)  # the matrix of each start
+    delta_unit, a = _power_iteration(M, structure, a, z, iters, kappa, rng)
+    M = np.ascontiguousarray(M, dtype=complex)
+    blocks = _kernel_blocks(structure)
+    if polish_starts is not None and 0 < polish_starts < ns:
+        est = np.empty(a.shape[0], dtype=complex)
+        mu_lower_kernels.rayleigh_quotients(M, delta_unit, a, blocks, est)
+        keep = _best_starts(structure, np.abs(est), delta_unit, ns, polish_starts)
+        ns = polish_starts
+        mat, delta_unit, a = mat[keep], delta_unit[keep], a[keep]
+    delta_unit = np.ascontiguousarray(delta_unit)
+    a = np.ascontiguousarray(a)
+    lam = np.empty(a.shape[0], dtype=complex)
+    rounds, steps = (_REAL_ROUNDS, _REAL_STEPS) if structure.has_real else (0, _POLISH_STEPS)
+    mu_lower_kernels.eigen_polish(M, mat, delta_unit, a, blocks, rounds, steps, lam)
+
+    def residual(M, mat, delta, a, rows):
+        out = np.empty(a.shape[0])
+        mu_lower_kernels.vector_residual(M, mat, delta, a, blocks, out)
+        return out[rows]
+
+    return _conclude(M, structure, mat, delta_unit, a, lam, ns, residual)
+
+
+def _starts(M, start_inputs, start_vectors, restarts, rng):
+    """``(a, z)``: the starting vectors of the power iteration, ``(ns * B, c)`` each, start by
+    start (``start_inputs``, ``start_vectors``, then ``restarts`` random ones)."""
+    nb, c, _ = M.shape
     starts_a, starts_z = [], []
     if start_inputs is not None:
         a0 = _normalize(_mv(M, start_inputs))
@@ -498,47 +264,28 @@ def mu_lower_bound(
     if not starts_a:
         starts_a.append(_normalize(np.ones((nb, c), dtype=complex)))
         starts_z.append(starts_a[0])
-    ns = len(starts_a)
-    mat = np.tile(np.arange(nb), ns)  # the matrix of each start
-    a = np.concatenate(starts_a, axis=0)
-    z = np.concatenate(starts_z, axis=0)
-    delta_unit, a = _power_iteration(M, structure, a, z, iters, kappa, rng, compiled)
-    compiled = compiled and mu_kernels.HAVE_NUMBA
-    if compiled:
-        M = np.ascontiguousarray(M, dtype=complex)
-        blocks = _kernel_blocks(structure)
-    if polish_starts is not None and 0 < polish_starts < ns:
-        # the eigenvalue polish and the certificate cost more than the power iteration itself:
-        # keep only the most promising starts of each matrix (Rayleigh quotient estimate)
-        if compiled:
-            est = np.empty(a.shape[0], dtype=complex)
-            mu_lower_kernels.rayleigh_quotients(M, delta_unit, a, blocks, est)
-            est = np.abs(est)
-        else:
-            est = np.abs(np.sum(np.conj(a) * _mv(M[mat], _mv(delta_unit, a)), axis=1))
-        est = est / np.maximum(_max_block_norm(structure, delta_unit), 1e-300)
-        order = np.argsort(-est.reshape(ns, nb), axis=0, kind="stable")[:polish_starts]
-        keep = (order * nb + np.arange(nb)[None, :]).ravel()
-        ns = polish_starts
-        mat, delta_unit, a = mat[keep], delta_unit[keep], a[keep]
-    if compiled:  # the same polish, compiled per matrix
-        delta_unit = np.ascontiguousarray(delta_unit)
-        a = np.ascontiguousarray(a)
-        lam = np.empty(a.shape[0], dtype=complex)
-        mu_lower_kernels.eigen_polish(
-            M,
-            mat,
-            delta_unit,
-            a,
-            blocks,
-            _REAL_ROUNDS if structure.has_real else 0,
-            _REAL_STEPS if structure.has_real else _POLISH_STEPS,
-            lam,
-        )
-    elif structure.has_real:
-        delta_unit, lam, a = _make_eigenvalue_real(M[mat], structure, delta_unit, a)
-    else:
-        lam, a = _polish_eigenvalue(M[mat] @ delta_unit, a)
+    return np.concatenate(starts_a, axis=0), np.concatenate(starts_z, axis=0)
+
+
+def _best_starts(structure, est, delta_unit, ns, polish_starts):
+    """Indices of the ``polish_starts`` most promising starts of each matrix (by the Rayleigh
+    quotient estimate ``est`` relative to the perturbation's size): the eigenvalue polish and
+    the certificate cost more than the power iteration itself."""
+    nb = est.size // ns
+    est = est / np.maximum(_max_block_norm(structure, delta_unit), 1e-300)
+    order = np.argsort(-est.reshape(ns, nb), axis=0, kind="stable")[:polish_starts]
+    return (order * nb + np.arange(nb)[None, :]).ravel()
+
+
+def _conclude(M, structure, mat, delta_unit, a, lam, ns, residual):
+    """The certified lower bound from the polished candidates (``ns`` per matrix, start ``s`` on
+    ``M[mat[s]]``, eigenvalue ``lam`` of ``M delta_unit`` with eigenvector ``a``).
+
+    ``residual(M, mat, delta, a, rows)`` bounds ``sigma_min(I - M delta)`` from the vectors (the
+    certificate's first check) on the candidates ``rows``; those it leaves above
+    :data:`CERTIFICATE_RTOL` get the SVD, then a full ``eig`` retry.
+    """
+    nb = M.shape[0]
     lam_raw = lam.copy()
     mag = np.abs(lam)
     if structure.has_real:
@@ -555,12 +302,7 @@ def mu_lower_bound(
     )
     resid = np.full(candidate.shape, np.inf)
     if np.any(usable):
-        if compiled:
-            vres = np.empty(a.shape[0])
-            mu_lower_kernels.vector_residual(M, mat, delta, a, blocks, vres)
-            resid[usable] = vres[usable]
-        else:
-            resid[usable] = _vector_residual(M[mat[usable]], delta[usable], a[usable])
+        resid[usable] = residual(M, mat, delta, a, usable)
         exact = np.flatnonzero(usable & (resid > CERTIFICATE_RTOL))  # inconclusive: SVD
         if exact.size:
             resid[exact] = certificate_residual(M[mat[exact]], delta[exact])

@@ -1,21 +1,22 @@
 r"""Compiled (numba) per-matrix kernels of the mu lower bound (:mod:`oos_drake.robust.mu_lower`).
 
-* :func:`power_iteration`: the mixed power iteration of ``mu_lower._power_iteration`` (its numpy
-  code is the reference; a test checks both agree to round-off), with real and imaginary parts
+* :func:`power_iteration`: the mixed power iteration of the module docstring of ``mu_lower`` (its
+  numpy version in ``tests/robust/oracles.py`` is the reference; tests check both agree to
+  round-off), with real and imaginary parts
   in separate arrays, one pass over ``M`` per
   step for both ``M Delta a`` and ``M^* z`` (``M^* (c z) = c M^* z`` for the scalar ``c`` that
   normalizes and rotates ``z``), four rows of ``M`` at a time, reciprocals and ``sqrt`` instead
   of complex divisions and ``hypot``, helpers inlined (a numba call passes each array as seven
   arguments). Several starts per matrix read the same ``M`` (no replicated batch).
-* :func:`eigen_polish`: ``mu_lower._polish_eigenvalue`` (shifted inverse iteration for the
-  eigen-pair of ``M Delta``) and ``mu_lower._make_eigenvalue_real`` (its Newton steps on the
+* :func:`eigen_polish`: ``oracles.polish_eigenvalue`` (shifted inverse iteration for the
+  eigen-pair of ``M Delta``) and ``oracles.make_eigenvalue_real`` (its Newton steps on the
   real blocks and on the common phase of the complex blocks towards a real eigenvalue), matrix
   by matrix, with the same arithmetic and stopping rules. ``M Delta`` is formed block by block,
   the shifted systems are solved by a small complex LU with partial pivoting (split real and
   imaginary parts) and the left eigenvector's two solves with ``(M Delta - s I)^*`` share one
   factorization (numpy factors twice).
 * :func:`rayleigh_quotients` (the score that picks the starts to polish) and
-  :func:`vector_residual` (``mu_lower._vector_residual``, the certificate's first check).
+  :func:`vector_residual` (``oracles.vector_residual``, the certificate's first check).
 
 Paper-sized problem (26 x 26, 16 blocks), one core: about 47 us per power-iteration start of 60
 steps (the earlier per-matrix kernel: 88 us) and about 60 us per polished start (numpy: about
@@ -29,30 +30,17 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
-from oos_drake.robust import mu_kernels
-
-HAVE_NUMBA = mu_kernels.HAVE_NUMBA
-
-if HAVE_NUMBA:
-    import numba
-
-    # numpy's error model: float division by zero gives inf/nan (no exception branches)
-    _opts = dict(cache=True, nogil=True, error_model="numpy")
-    _jit = numba.njit(**_opts)
-    # small helpers called in the inner loops: inlined by numba (a call passes every array as
-    # seven arguments, which costs more than the helper's own work)
-    _jit_inline = numba.njit(**_opts, inline="always")
-    # reassociation and FMA contraction let LLVM vectorize the split complex loops
-    _jit_fast = numba.njit(**_opts, fastmath={"reassoc", "contract"})
-else:  # pragma: no cover - exercised only without numba
-
-    def _jit(f):
-        return f
-
-    _jit_fast = _jit
-    _jit_inline = _jit
+# numpy's error model: float division by zero gives inf/nan (no exception branches)
+_opts = dict(cache=True, nogil=True, error_model="numpy")
+_jit = numba.njit(**_opts)
+# small helpers called in the inner loops: inlined by numba (a call passes every array as
+# seven arguments, which costs more than the helper's own work)
+_jit_inline = numba.njit(**_opts, inline="always")
+# reassociation and FMA contraction let LLVM vectorize the split complex loops
+_jit_fast = numba.njit(**_opts, fastmath={"reassoc", "contract"})
 
 # --------------------------------------------------------------------------------------------
 # power iteration
@@ -329,7 +317,7 @@ def _update(kind, rows, cols, roff, coff, pr, pi, fr, fi, phi, ar, ai, wr, wi, z
 
 @_jit_fast
 def power_iteration(M, a0, z0, real0, blocks, iters, kappa, delta, a_out):
-    """The mixed power iteration of ``mu_lower._power_iteration``, start by start.
+    """The mixed power iteration (``oracles.power_iteration``), start by start.
 
     Parameters
     ----------
@@ -704,7 +692,7 @@ def _finite_normalize(xr, xi, ar, ai, n):
 
 @_jit_inline
 def _inverse_iteration(Dr, Di, n, ar, ai, steps, Fr, Fi, piv, ur, ui, xr, xi):
-    """``mu_lower._polish_eigenvalue`` for one matrix (in place on ``a``); returns ``lam``."""
+    """``oracles.polish_eigenvalue`` for one matrix (in place on ``a``); returns ``lam``."""
     lam = _rayleigh(Dr, Di, n, ar, ai)
     for _ in range(steps):
         if not _shifted_lu(Dr, Di, n, lam, Fr, Fi, piv, ur, ui):
@@ -761,8 +749,8 @@ def _form_md(Mr, Mi, db, kind, rows, cols, roff, coff, row_of, cblk_of, vr, vi, 
 
 @_jit_fast
 def eigen_polish(M, mat, delta, a, blocks, rounds, steps, lam):
-    """Eigenvalue polish of ``M delta`` (``mu_lower._polish_eigenvalue``) and, with
-    ``rounds > 0``, the search for a real eigenvalue (``mu_lower._make_eigenvalue_real``).
+    """Eigenvalue polish of ``M delta`` (``oracles.polish_eigenvalue``) and, with
+    ``rounds > 0``, the search for a real eigenvalue (``oracles.make_eigenvalue_real``).
 
     Parameters
     ----------
@@ -776,8 +764,8 @@ def eigen_polish(M, mat, delta, a, blocks, rounds, steps, lam):
     blocks : int array (5, n_blocks)
         kind (0 real, 1 repeated complex, 2 full), rows, cols, row offset, column offset.
     rounds : int
-        0: inverse iteration only (``_polish_eigenvalue(M delta, a, steps)``); otherwise the
-        Newton rounds of ``_make_eigenvalue_real(..., steps=rounds)`` (each with ``steps``
+        0: inverse iteration only (``polish_eigenvalue(M delta, a, steps)``); otherwise the
+        Newton rounds of ``make_eigenvalue_real(..., steps=rounds)`` (each with ``steps``
         inverse iteration steps).
     steps : int
         Inverse iteration steps per polish.
@@ -956,7 +944,7 @@ def rayleigh_quotients(M, delta, a, blocks, out):
 
 @_jit
 def vector_residual(M, mat, delta, a, blocks, out):
-    """``mu_lower._vector_residual``: ``||a - M delta a|| / ||a|| / (1 + ||M delta a|| / ||a||)``,
+    """``oracles.vector_residual``: ``||a - M delta a|| / ||a|| / (1 + ||M delta a|| / ||a||)``,
     an upper bound of ``sigma_min(I - M delta) / (1 + ||M delta||_2)``.
 
     Parameters

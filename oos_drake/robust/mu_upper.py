@@ -40,15 +40,12 @@ points back to its start and ``D = I, G = 0`` (the plain bound ``||M||_2``) are 
 and the lowest bound is kept; the optimizers keep their best point by ``lambda_max`` plus what
 certifying it would add (:data:`CERT_SIZE_FACTOR`).
 
-Speed: with numba installed (``mu_kernels.HAVE_NUMBA``) the optimizer is the one compiled
-D-G optimizer, :func:`oos_drake.robust.mu_lanes.dg_minimize_lanes`: eight matrices at a time,
-one per SIMD lane (about 16-20 us per 26 x 26 matrix and evaluation), for batches of any size
-(a batch of fewer than eight leaves lanes idle: slower per matrix, see
-``benchmarks/bench_mussv.py``); the balancing and the final exact evaluation run compiled too
-(:mod:`oos_drake.robust.mu_kernels`). The numpy implementation below (``compiled=False``) runs
-the same algorithm batched over matrices (about 3x slower): it is the oracle of the tests, and
-the path taken when numba is not installed. Both read the line-search constants of
-:mod:`~oos_drake.robust.mu_lanes`.
+Speed: the optimizer is the one compiled D-G optimizer,
+:func:`oos_drake.robust.mu_lanes.dg_minimize_lanes`: eight matrices at a time, one per SIMD lane
+(about 16-20 us per 26 x 26 matrix and evaluation), for batches of any size (a batch of fewer
+than eight leaves lanes idle: slower per matrix, see ``benchmarks/bench_mussv.py``); the
+balancing and the final exact evaluation run compiled too (:mod:`oos_drake.robust.mu_kernels`).
+A numpy implementation of the same algorithm is the tests' oracle (``tests/robust/oracles.py``).
 """
 
 from __future__ import annotations
@@ -85,8 +82,6 @@ class _Layout:
     r_row: np.ndarray  # positions in T_r
     r_col: np.ndarray
     r_ent: np.ndarray
-    sel_l: np.ndarray  # (n_l_pos, n_entries) indicator
-    sel_r: np.ndarray
     g_row: np.ndarray  # positions of Gh entries (row in r-space, column in c-space)
     g_col: np.ndarray
     g_map: np.ndarray  # (n_g_params, n_g_pos) complex: Gh[pos] = x_g @ g_map
@@ -216,11 +211,6 @@ def _build_layout(structure: BlockStructure) -> _Layout:
         g_row, g_col, list(range(len(g_row))), structure.n_rows, len(g_row)
     )
 
-    def sel(ent):
-        s = np.zeros((len(ent), n_ent))
-        s[np.arange(len(ent)), ent] = 1.0
-        return s
-
     ints = lambda v: np.asarray(v, dtype=int)  # noqa: E731
     return _Layout(
         n_params=n_par,
@@ -237,8 +227,6 @@ def _build_layout(structure: BlockStructure) -> _Layout:
         r_row=ints(r_row),
         r_col=ints(r_col),
         r_ent=ints(r_ent),
-        sel_l=sel(l_ent),
-        sel_r=sel(r_ent),
         g_row=ints(g_row),
         g_col=ints(g_col),
         g_map=g_map,
@@ -279,11 +267,10 @@ def _blockdiag_times(blocks, groups, A, adjoint=False):
 
 
 class _Objective:
-    """Smoothed ``lambda_max`` of the scaled LMI matrix and its gradient, batched."""
+    """Smoothed ``lambda_max`` of the scaled LMI matrix and its gradient, batched (compiled:
+    :func:`mu_kernels.dg_objective`); :meth:`matrix` forms the matrix in numpy."""
 
-    def __init__(
-        self, M: np.ndarray, structure: BlockStructure, layout: _Layout, compiled=True
-    ):
+    def __init__(self, M: np.ndarray, structure: BlockStructure, layout: _Layout):
         self.M = np.ascontiguousarray(M)
         self.count = np.zeros(M.shape[0], dtype=np.int64)  # evaluations per matrix
         self.MH = np.ascontiguousarray(np.conj(np.swapaxes(M, -1, -2)))
@@ -298,14 +285,12 @@ class _Objective:
                 for a in range(block.cols):
                     sizes.setdefault(1, []).append(np.array([block.col_offset + a]))
         self.c_groups = tuple((n, np.array(v)) for n, v in sorted(sizes.items()))
-        self.compiled = compiled and mu_kernels.HAVE_NUMBA
-        if self.compiled:
-            key = (structure.blk.shape, structure.blk.tobytes())
-            if key not in _PACKED or _PACKED[key][0] is not layout:
-                if len(_PACKED) > 64:
-                    _PACKED.clear()
-                _PACKED[key] = (layout, mu_kernels.pack_layout(layout, self.c_groups))
-            self.packed = _PACKED[key][1]
+        key = (structure.blk.shape, structure.blk.tobytes())
+        if key not in _PACKED or _PACKED[key][0] is not layout:
+            if len(_PACKED) > 64:
+                _PACKED.clear()
+            _PACKED[key] = (layout, mu_kernels.pack_layout(layout, self.c_groups))
+        self.packed = _PACKED[key][1]
 
     @property
     def lane_layout(self) -> mu_lanes.LaneLayout:
@@ -317,8 +302,10 @@ class _Objective:
             _LANE_LAYOUTS[key] = mu_lanes.lane_layout(self.packed, self.s)
         return _LANE_LAYOUTS[key]
 
-    def _compiled(self, x, idx, t, need_grad):
-        """The same evaluation by the compiled kernel (:mod:`mu_kernels`)."""
+    def __call__(self, x, idx, t, need_grad=True):
+        """Return ``(f, grad, lam_max, top_vec)`` for the batch rows ``idx`` (``grad`` and
+        ``top_vec`` None without ``need_grad``); ``t`` is the smoothing temperature."""
+        self.count[idx] += 1
         nb = len(idx)
         M = self.M if nb == self.M.shape[0] else np.ascontiguousarray(self.M[idx])
         f = np.empty(nb)
@@ -328,7 +315,7 @@ class _Objective:
         x = np.ascontiguousarray(x, dtype=float)
         t = np.ascontiguousarray(np.broadcast_to(t, (nb,)), dtype=float)
         with single_threaded_blas():  # threads on 26 x 26 LAPACK calls: 100x slower
-            mu_kernels.dg_objective(M, x, t, need_grad, *self.packed, f, grad, lmax, top)
+            mu_kernels.dg_objective(M, x, t, bool(need_grad), *self.packed, f, grad, lmax, top)
         if not need_grad:
             return f, None, lmax, None
         return f, grad, lmax, top
@@ -359,11 +346,10 @@ class _Objective:
             Gh[:, L.g_row, L.g_col] = x[:, L.g_par] @ L.g_map
         return E, Tl, Tr, Gh
 
-    def __call__(self, x, idx, t, need_grad=True):
-        """Return ``(f, grad, lam_max, top_vec)`` for the batch rows ``idx``."""
-        self.count[idx] += 1
-        if self.compiled and not isinstance(need_grad, str):  # "top": the numpy path below
-            return self._compiled(x, idx, t, bool(need_grad))
+    def matrix(self, x, idx):
+        """The scaled LMI matrix ``H`` (its largest eigenvalue is ``beta^2``) formed in numpy for
+        the batch rows ``idx``, with ``(E, T_r^{-1}, M_hat)``: a second rounding of what
+        :meth:`__call__` evaluates (:func:`_trusted`; the tests' oracle adds the gradient)."""
         L = self.L
         M = self.M[idx]
         E, Tl, Tr, Gh = self.scalings(x, idx)
@@ -400,49 +386,7 @@ class _Objective:
             Z -= 1j * _times_blockdiag(GhH, rg, tri_b)
         W = _blockdiag_times(tri_b, rg, self.MH[idx], adjoint=True) @ Z
         H = W + np.conj(np.swapaxes(W, -1, -2))
-        if not need_grad:
-            lam = np.linalg.eigvalsh(H)
-            lmax = lam[:, -1]
-            tt = t[:, None]
-            f = lmax + np.log(np.sum(np.exp(tt * (lam - lmax[:, None])), axis=1)) / t
-            return f, None, lmax, None
-        lam, V = np.linalg.eigh(H)
-        lmax = lam[:, -1]
-        if need_grad == "top":  # the exact value and the top eigenvector only
-            return lmax, None, lmax, (Tri @ V[:, :, -1:])[:, :, 0]
-        z = np.exp(t[:, None] * (lam - lmax[:, None]))
-        ssum = z.sum(axis=1)
-        f = lmax + np.log(ssum) / t
-        p = z / ssum[:, None]
-        # W = df/dH = V diag(p) V^* has numerical rank K (eigenvalues near the top): with
-        # H = T_r^{-*} A T_r^{-1}, A = M^* D_l M + j (G M - M^* G^*), the gradient is
-        #   d/dT_l: 2 (X V) p (Mh V)^*,  d/dT_r: -2 (T_r^{-1} V) p lam V^*,
-        #   d/dG: 2j (X V) p (T_r^{-1} V)^*
-        K = int(np.max(np.sum(p > 1e-15, axis=1)))
-        Vk = V[:, :, -K:]
-        pk = p[:, -K:]
-        lk = lam[:, -K:]
-        TV = Tri @ Vk  # (B, r, K)
-        XV = M @ TV  # X Vk
-        MV = Mh @ Vk
-        # coefficient matrices by batched products (K columns), then the structured entries
-        XVp = XV * pk[:, None, :]
-        coef_l = 2.0 * (XVp @ np.conj(np.swapaxes(MV, -1, -2)))[:, L.l_col, L.l_row]
-        TVp = TV * (pk * lk)[:, None, :]
-        coef_r = -2.0 * (TVp @ np.conj(np.swapaxes(Vk, -1, -2)))[:, L.r_col, L.r_row]
-        gT = coef_l @ L.sel_l + coef_r @ L.sel_r
-        grad = np.zeros_like(x)
-        grad[:, L.log_par] = np.real(gT[:, L.log_ent] * E[:, L.log_ent])
-        if len(L.lin_ent):
-            gE = gT[:, L.lin_ent] * E[:, L.lin_ent]  # d/ds of the row scale
-            np.add.at(grad, (slice(None), L.lin_row_par), np.real(gE))
-            rowscale = np.exp(np.clip(x[:, L.lin_row_par], -60.0, 60.0))
-            grad[:, L.lin_re_par] = np.real(gT[:, L.lin_ent]) * rowscale
-            grad[:, L.lin_im_par] = -np.imag(gT[:, L.lin_ent]) * rowscale
-        if len(L.g_par):
-            coef_g = 2j * (XVp @ np.conj(np.swapaxes(TV, -1, -2)))[:, L.g_col, L.g_row]
-            grad[:, L.g_par] = np.real(coef_g @ L.g_map.T)
-        return f, grad, lmax, TV[:, :, -1]
+        return H, E, Tri, Mh
 
 
 class _Balanced:
@@ -514,74 +458,40 @@ def _balance_maps(structure: BlockStructure, L: _Layout):
     return _BALANCE_MAPS[key]
 
 
-def _osborne_init(
-    M: np.ndarray, structure: BlockStructure, layout: _Layout, iters: int = 20, compiled=True
-):
-    """Diagonal ``D`` from Osborne balancing of ``|M|``: one scaling per full block and one per
-    channel of a repeated block (a diagonal ``D_k`` is a valid start for the full Hermitian one).
-    ``compiled``: the sweeps by :func:`mu_kernels.osborne` when numba is installed."""
-    nb, c, r = M.shape
+def _osborne_init(M: np.ndarray, structure: BlockStructure, layout: _Layout, iters: int = 20):
+    """Diagonal ``D`` from Osborne balancing of ``|M|`` (:func:`mu_kernels.osborne`): one scaling
+    per full block and one per channel of a repeated block (a diagonal ``D_k`` is a valid start
+    for the full Hermitian one). Returns ``(B, n_params)`` parameters."""
+    P, par = _osborne_problem(M, structure, layout)
+    logd = np.zeros(P.shape[:2])  # log of d_e^2
+    mu_kernels.osborne(P, int(iters), logd)
+    x = np.zeros((M.shape[0], layout.n_params))
+    x[:, par] = 0.5 * logd
+    return x
+
+
+def _osborne_problem(M, structure, layout):
+    """``(P, par)``: the ``(B, E, E)`` matrix of the balancing (``|M|^2`` summed over the channels
+    of each scaling ``e``, zero diagonal) and the log-parameter of each scaling."""
+    c, r = M.shape[1:]
     Sc, Sr, par = [], [], []
     for block, pars in zip(structure.blocks, layout.block_log_par, strict=True):
-        if block.repeated:
-            for a in range(block.rows):
-                sc = np.zeros(c)
-                sc[block.col_offset + a] = 1.0
-                sr = np.zeros(r)
-                sr[block.row_offset + a] = 1.0
-                Sc.append(sc)
-                Sr.append(sr)
-                par.append(pars[a])
-        else:
-            sc = np.zeros(c)
-            sc[block.c_slice] = 1.0
-            sr = np.zeros(r)
-            sr[block.r_slice] = 1.0
+        chans = range(block.rows) if block.repeated else [None]
+        for a in chans:
+            sc, sr = np.zeros(c), np.zeros(r)
+            if a is None:
+                sc[block.c_slice], sr[block.r_slice] = 1.0, 1.0
+            else:
+                sc[block.col_offset + a], sr[block.row_offset + a] = 1.0, 1.0
             Sc.append(sc)
             Sr.append(sr)
-            par.append(pars[0])
+            par.append(pars[0 if a is None else a])
     Sc, Sr = np.array(Sc).T, np.array(Sr).T  # (c, E), (r, E)
     k = Sc.shape[1]
     P = Sc.T @ (np.abs(M) ** 2) @ Sr  # (B, E, E) real
     P[:, np.eye(k, dtype=bool)] = 0.0
     P += 1e-300
-    logd = np.zeros((nb, k))  # log of d_e^2
-    if compiled and mu_kernels.HAVE_NUMBA:  # the same sweeps, compiled
-        mu_kernels.osborne(np.ascontiguousarray(P), int(iters), logd)
-        iters = 0
-    for _ in range(iters):
-        biggest = 0.0
-        for i in range(k):  # sequential (Gauss-Seidel) sweeps converge, simultaneous ones may not
-            e = np.exp(logd - logd[:, [i]])
-            R = (P[:, i, :] / e).sum(axis=1)
-            C = (P[:, :, i] * e).sum(axis=1)
-            step = np.clip(0.5 * (np.log(C) - np.log(R)), -5.0, 5.0)
-            logd[:, i] += step
-            biggest = max(biggest, float(np.max(np.abs(step))))
-        logd = np.clip(logd - logd.mean(axis=1, keepdims=True), -40.0, 40.0)
-        if biggest < 1e-3:
-            break
-    x = np.zeros((nb, layout.n_params))
-    x[:, np.array(par, dtype=int)] = 0.5 * logd
-    return x
-
-
-def _lbfgs_direction(g, S, Y, rho):
-    """Batched L-BFGS two-loop recursion: approximately ``H^{-1} g`` (empty slots are zeros)."""
-    q = g.copy()
-    m = S.shape[1]
-    alpha = np.zeros((g.shape[0], m))
-    for i in range(m):
-        alpha[:, i] = rho[:, i] * np.einsum("bi,bi->b", S[:, i], q)
-        q -= alpha[:, i, None] * Y[:, i]
-    yy = np.einsum("bi,bi->b", Y[:, 0], Y[:, 0])
-    sy = np.einsum("bi,bi->b", S[:, 0], Y[:, 0])
-    gamma = np.where(yy > 0, sy / np.where(yy > 0, yy, 1.0), 1.0)
-    r = gamma[:, None] * q
-    for i in range(m - 1, -1, -1):
-        beta = rho[:, i] * np.einsum("bi,bi->b", Y[:, i], r)
-        r += S[:, i] * (alpha[:, i] - beta)[:, None]
-    return r
+    return np.ascontiguousarray(P), np.array(par, dtype=int)
 
 
 @dataclass(frozen=True)
@@ -611,7 +521,6 @@ def mu_upper_bound(
     chain: bool = False,
     chain_temperatures=(500.0,),
     chain_patience: int = 2,
-    compiled: bool = True,
 ) -> UpperBoundResult:
     """D-G upper bound of mixed mu for a flat batch of matrices.
 
@@ -637,19 +546,14 @@ def mu_upper_bound(
     patience : int
         Consecutive small decreases (see ``tol``) that stop a matrix's stage.
     chain : bool
-        Continuation along the batch (compiled path only; ignored by the numpy one): the batch
-        is cut into eight contiguous segments (one per lane) and each matrix after the first of
-        its segment also tries the scalings reached on the previous one and, where they start
-        lower than its own start, runs ``chain_temperatures`` with ``chain_patience`` from
-        there (a batch of eight or fewer: no chaining).
+        Continuation along the batch: the batch is cut into eight contiguous segments (one per lane)
+        and each matrix after the first of its segment also tries the scalings reached on the
+        previous one and, where they start lower than its own start, runs ``chain_temperatures``
+        with ``chain_patience`` from there (a batch of eight or fewer: no chaining).
     chain_temperatures : sequence of float
         Stages of the chained matrices.
     chain_patience : int
         Patience of the chained matrices.
-    compiled : bool
-        Run the compiled optimizer (:func:`mu_lanes.dg_minimize_lanes`) when numba is
-        installed (the default). False runs the numpy implementation of the same algorithm:
-        the oracle of the tests, about 3x slower; it is also what runs without numba.
 
     Returns
     -------
@@ -670,7 +574,6 @@ def mu_upper_bound(
                 chain=chain,
                 chain_temperatures=chain_temperatures,
                 chain_patience=chain_patience,
-                compiled=compiled,
             )
             for i in range(0, M.shape[0], CHUNK)
         ]
@@ -683,6 +586,60 @@ def mu_upper_bound(
             )
         )
     nb, c, r = M.shape
+    tols = _stage_tolerances(tol, temperatures)
+    layout = _layout(structure)
+    scale = np.linalg.norm(M, axis=(1, 2)) + 1e-300
+    obj = _Objective(M / scale[:, None, None], structure, layout)  # the final, exact evaluation
+    x = _osborne_init(obj.M, structure, layout)
+    if layout.n_params == 0 or max_iter <= 0:  # the balancing (or a warm start) alone
+        if x0 is not None:
+            x, _ = _warm_start(obj, x, np.array(x0, dtype=float).reshape(x.shape))
+        return _conclude(M, obj, scale, x, x, iterations=0, optimized=max_iter > 0)
+    # optimize over the same function in balanced coordinates (see _Balanced)
+    coords = _Balanced(obj, x)
+    balanced = _Objective(coords.M, structure, layout)
+    x = coords.to_balanced(x)
+    lmax0 = np.full(nb, np.inf)  # the lane optimizer evaluates the start itself
+    if x0 is not None:
+        xw = coords.to_balanced(np.array(x0, dtype=float).reshape(x.shape))
+        x, lmax0 = _warm_start(balanced, x, xw)
+    # the compiled optimizer: eight matrices in lock-step (mu_lanes); it keeps the point with the
+    # smallest lambda_max + size_weight ||M_hat||_F^2
+    best_x = x.copy()
+    its = np.zeros(nb, dtype=np.int64)
+    n_evals = np.zeros(nb, dtype=np.int64)
+    options = mu_lanes.LaneOptions(
+        temperatures=np.asarray(temperatures, dtype=float),
+        max_iter=int(max_iter),
+        tol=tols,
+        patience=int(patience),
+        memory=int(memory),
+        chain=bool(chain),
+        chain_temperatures=np.asarray(chain_temperatures, dtype=float),
+        chain_patience=int(chain_patience),
+        size_weight=float(CERT_SIZE_FACTOR * check_roundoff(r)),
+    )
+    lay = balanced.lane_layout
+    work = mu_lanes.lane_workspace(c, r, lay)
+    # one BLAS thread: threads on 26 x 26 LAPACK calls are 100x slower
+    with single_threaded_blas(), mu_lanes.compile_with_slp():
+        mu_lanes.dg_minimize_lanes(
+            balanced.M, np.ascontiguousarray(x), options, lay, work, best_x, lmax0, its, n_evals
+        )
+    obj.count += balanced.count + n_evals
+    return _conclude(
+        M,
+        obj,
+        scale,
+        coords.to_absolute(best_x),
+        coords.to_absolute(x),
+        iterations=int(its.max(initial=0)),
+        optimized=True,
+    )
+
+
+def _stage_tolerances(tol, temperatures) -> np.ndarray:
+    """``tol`` of :func:`mu_upper_bound`, one per temperature stage."""
     tols = np.asarray(tol, dtype=float).reshape(-1)
     if tols.size == 1:
         tols = np.full(len(temperatures), tols[0])
@@ -691,164 +648,47 @@ def mu_upper_bound(
             f"tol: {tols.size} values for {len(temperatures)} temperature stages (give one or one "
             "per stage)"
         )
-    layout = _layout(structure)
-    scale = np.linalg.norm(M, axis=(1, 2)) + 1e-300
-    Mn = M / scale[:, None, None]
-    obj = _Objective(Mn, structure, layout, compiled=compiled)  # the final, exact evaluation
-    x = _osborne_init(Mn, structure, layout, compiled=compiled)
-    allidx = np.arange(nb)
-    p = layout.n_params
-    coords = None
-    if p > 0 and max_iter > 0:
-        # optimize over the same function in balanced coordinates (see _Balanced)
-        coords = _Balanced(obj, x)
-        x = coords.to_balanced(x)
-        if x0 is not None:
-            x0 = coords.to_balanced(np.array(x0, dtype=float).reshape(nb, p))
-        obj_final, obj = obj, _Objective(coords.M, structure, layout, compiled=compiled)
-    lanes = obj.compiled and p > 0 and max_iter > 0
-    if lanes and x0 is None:  # the lane optimizer evaluates the start itself
-        lmax0 = np.full(nb, np.inf)
-    elif max_iter > 0 or x0 is not None:
-        _, _, lmax0, _ = obj(x, allidx, np.ones(nb), need_grad=False)
-    else:  # balancing alone: the final evaluation below gives the value
-        lmax0 = np.full(nb, np.inf)
-    if x0 is not None:  # warm start where it beats balancing (it may not, e.g. across a resonance)
-        xw = np.array(x0, dtype=float).reshape(nb, layout.n_params)
-        _, _, lw, _ = obj(xw, allidx, np.ones(nb), need_grad=False)
-        use = lw < lmax0
-        x[use], lmax0[use] = xw[use], lw[use]
-    # the optimizers keep the point with the smallest lambda_max + size_weight ||M_hat||_F^2
-    size_weight = CERT_SIZE_FACTOR * check_roundoff(r)
-    best_l = lmax0.copy()
-    best_v = best_l + (size_weight * obj.size(x, allidx) if np.all(np.isfinite(best_l)) else 0.0)
-    best_x = x.copy()
-    start_x = x.copy()  # where the optimizer starts: the fallback of _trusted
-    iters_done = 0
-    if lanes:  # the compiled optimizer: eight matrices in lock-step (mu_lanes)
-        its = np.zeros(nb, dtype=np.int64)
-        n_evals = np.zeros(nb, dtype=np.int64)
-        options = mu_lanes.LaneOptions(
-            temperatures=np.asarray(temperatures, dtype=float),
-            max_iter=int(max_iter),
-            tol=tols,
-            patience=int(patience),
-            memory=int(memory),
-            chain=bool(chain),
-            chain_temperatures=np.asarray(chain_temperatures, dtype=float),
-            chain_patience=int(chain_patience),
-            size_weight=float(size_weight),
-        )
-        lay = obj.lane_layout
-        work = mu_lanes.lane_workspace(c, r, lay)
-        start = np.ascontiguousarray(x)
-        # one BLAS thread: threads on 26 x 26 LAPACK calls are 100x slower
-        with single_threaded_blas(), mu_lanes.compile_with_slp():
-            mu_lanes.dg_minimize_lanes(
-                obj.M, start, options, lay, work, best_x, best_l, its, n_evals
-            )
-        iters_done = int(its.max(initial=0))
-        obj.count += n_evals
-    elif p > 0 and max_iter > 0:  # max_iter = 0: the balancing (or warm start) alone
-        per_stage = max(max_iter // len(temperatures), min(max_iter, mu_lanes.MIN_STAGE_ITERATIONS))
-        for stage, tau in enumerate(temperatures):
-            t = tau / np.maximum(best_l, 1e-12)
-            f, g, lmax, _ = obj(x, allidx, t)
-            val = lmax + size_weight * obj.size(x, allidx)
-            better = val < best_v
-            best_l[better], best_v[better], best_x[better] = lmax[better], val[better], x[better]
-            if stage == 0:  # L-BFGS pairs, newest first (zeros = empty slots); kept across stages
-                S = np.zeros((nb, memory, p))
-                Y = np.zeros((nb, memory, p))
-                rho = np.zeros((nb, memory))
-            active = np.ones(nb, dtype=bool)
-            stall = np.zeros(nb, dtype=int)
-            fails = np.zeros(nb, dtype=int)
-            for _ in range(per_stage):
-                idx = np.flatnonzero(active)
-                if idx.size == 0:
-                    break
-                iters_done += 1
-                d = -_lbfgs_direction(g[idx], S[idx], Y[idx], rho[idx])
-                slope = np.einsum("bi,bi->b", d, g[idx])
-                bad = slope >= 0
-                if np.any(bad):
-                    d[bad] = -g[idx][bad]
-                    slope[bad] = -np.einsum("bi,bi->b", g[idx][bad], g[idx][bad])
-                    S[idx[bad]] = 0.0
-                    Y[idx[bad]] = 0.0
-                    rho[idx[bad]] = 0.0
-                # cap the step: log-scalings beyond e^{+-2} per iteration are never useful
-                dmax = (
-                    np.max(np.abs(d[:, layout.log_par]), axis=1)
-                    if layout.log_par.size
-                    else np.zeros(len(d))
-                )
-                d *= np.minimum(1.0, mu_lanes.MAX_LOG_STEP / np.maximum(dmax, 1e-300))[:, None]
-                alpha = np.ones(idx.size)
-                pending = np.ones(idx.size, dtype=bool)
-                f_new = f[idx].copy()
-                g_new = g[idx].copy()
-                l_new = np.full(idx.size, np.inf)
-                x_new = x[idx].copy()
-                accepted = np.zeros(idx.size, dtype=bool)
-                for _ls in range(mu_lanes.MAX_TRIALS):
-                    sub = np.flatnonzero(pending)
-                    if sub.size == 0:
-                        break
-                    xt = x[idx[sub]] + alpha[sub, None] * d[sub]
-                    ft, gt, lt, _ = obj(xt, idx[sub], t[idx[sub]])
-                    armijo = f[idx[sub]] + mu_lanes.ARMIJO * alpha[sub] * slope[sub]
-                    ok = np.isfinite(ft) & (ft <= armijo)
-                    acc = sub[ok]
-                    f_new[acc], g_new[acc], l_new[acc], x_new[acc] = ft[ok], gt[ok], lt[ok], xt[ok]
-                    accepted[acc] = True
-                    pending[acc] = False
-                    alpha[sub[~ok]] *= mu_lanes.BACKTRACK
-                # L-BFGS memory update
-                for_upd = np.flatnonzero(accepted)
-                gi = idx[for_upd]
-                s_ = x_new[for_upd] - x[gi]
-                y_ = g_new[for_upd] - g[gi]
-                sy = np.einsum("bi,bi->b", s_, y_)
-                good = sy > mu_lanes.CURVATURE_FLOOR * np.maximum(
-                    np.linalg.norm(s_, axis=1) * np.linalg.norm(y_, axis=1), 1e-300
-                )
-                if np.any(good):
-                    gg = gi[good]
-                    S[gg] = np.roll(S[gg], 1, axis=1)
-                    Y[gg] = np.roll(Y[gg], 1, axis=1)
-                    rho[gg] = np.roll(rho[gg], 1, axis=1)
-                    S[gg, 0], Y[gg, 0], rho[gg, 0] = s_[good], y_[good], 1.0 / sy[good]
-                rel = (f[gi] - f_new[for_upd]) / np.maximum(np.abs(f[gi]), 1e-300)
-                x[gi], f[gi], g[gi] = x_new[for_upd], f_new[for_upd], g_new[for_upd]
-                v_new = l_new[for_upd] + size_weight * obj.size(x_new[for_upd], gi)
-                improved = v_new < best_v[gi]
-                best_l[gi[improved]] = l_new[for_upd][improved]
-                best_v[gi[improved]] = v_new[improved]
-                best_x[gi[improved]] = x_new[for_upd][improved]
-                small = rel < tols[stage]
-                stall[gi[small]] += 1
-                stall[gi[~small]] = 0
-                active[gi[stall[gi] >= patience]] = False
-                # a failed line search: forget the curvature pairs and retry along the gradient;
-                # give up after MAX_FAILED_SEARCHES failures in a row
-                failed = idx[~accepted]
-                fails[failed] += 1
-                fails[gi] = 0
-                S[failed], Y[failed], rho[failed] = 0.0, 0.0, 0.0
-                active[failed[fails[failed] >= mu_lanes.MAX_FAILED_SEARCHES]] = False
-            if iters_done >= max_iter:
-                break
-    if coords is not None:  # back to the scalings of M itself
-        best_x = coords.to_absolute(best_x)
-        start_x = coords.to_absolute(start_x)
-        obj_final.count += obj.count
-        obj = obj_final
+    return tols
+
+
+def _warm_start(obj, x, xw):
+    """``(x, lambda_max)``: per matrix, the warm start ``xw`` where it beats ``x`` (it may not,
+    e.g. across a resonance)."""
+    allidx, one = np.arange(len(x)), np.ones(len(x))
+    _, _, lmax0, _ = obj(x, allidx, one, need_grad=False)
+    _, _, lw, _ = obj(xw, allidx, one, need_grad=False)
+    use = lw < lmax0
+    x, lmax0 = x.copy(), lmax0.copy()
+    x[use], lmax0[use] = xw[use], lw[use]
+    return x, lmax0
+
+
+def _conclude(M, obj, scale, best_x, start_x, *, iterations, optimized):
+    """The result at the optimizer's end point ``best_x`` (started at ``start_x``), certified.
+
+    Parameters
+    ----------
+    M : numpy.ndarray
+        ``(B, c, r)`` the matrices as given.
+    obj : _Objective
+        The evaluation of ``M / scale`` (its ``count``: evaluations spent so far).
+    scale : numpy.ndarray
+        ``(B,)`` ``||M||_F`` (plus a tiny floor).
+    best_x, start_x : numpy.ndarray
+        ``(B, n_params)`` end and start of the optimizer (scalings of ``M`` itself).
+    iterations : int
+        Iterations done (the result's ``iterations``).
+    optimized : bool
+        Whether an optimizer ran (``max_iter > 0``): only then is its end checked by
+        :func:`_trusted`.
+    """
+    p = obj.L.n_params
+    best_x = best_x.copy()
+    allidx = np.arange(M.shape[0])
     # exact lambda_max at the best scalings, and the scalings themselves
     upper, Dl, Dr, G, top, d_min = _finish(obj, best_x, allidx, scale)
     # ill-conditioned scalings, or a bound above ||M||_F >= ||M||_2: was it round-off?
-    risky = np.flatnonzero((d_min < TRUST_CONDITION) | (upper > scale)) if max_iter > 0 else []
+    risky = np.flatnonzero((d_min < TRUST_CONDITION) | (upper > scale)) if optimized else []
     if p > 0 and len(risky):
         best_x[risky] = _trusted(obj, best_x[risky], start_x[risky], risky)
         upper[risky], Dl[risky], Dr[risky], G[risky], top[risky], _ = _finish(
@@ -875,7 +715,7 @@ def mu_upper_bound(
                 for k, v in enumerate((u, dl, dr, g, tp, xs)):
                     best[k][take] = v[take]
         upper[moved], Dl[moved], Dr[moved], G[moved], top[moved], best_x[moved] = best
-    return UpperBoundResult(upper, Dl, Dr, G, top, iters_done, best_x, obj.count.copy())
+    return UpperBoundResult(upper, Dl, Dr, G, top, iterations, best_x, obj.count.copy())
 
 
 #: Two evaluations of ``lambda_max`` (relative to ``||M||_F^2``) that differ by more than this
@@ -910,8 +750,8 @@ def _trusted(obj, best_x, start_x, rows):
     than itself, the computed ``lambda_max`` is noise, and a line search accepts the noise
     where it happens to be low. The exact evaluation at the end (a different rounding) then
     returns a bound far above mu, even above ``||M||`` (a spike: 400x mu on the mission's
-    mechanical subset). Here each matrix's end point is evaluated by the two implementations
-    (compiled and numpy: different roundings); where they disagree by more than
+    mechanical subset). Here each matrix's end point is evaluated twice (compiled, and formed in
+    numpy by :meth:`_Objective.matrix`: different roundings); where they disagree by more than
     :data:`TRUST_RTOL`, the point is replaced by the lowest trusted one on the segment back to
     the start (:data:`TRUST_FRACTIONS`) or to ``D = I, G = 0`` (whose value is ``||M||_2^2``
     exactly: the last resort); so is an end above ``||M||_2^2``.
@@ -930,17 +770,13 @@ def _trusted(obj, best_x, start_x, rows):
     numpy.ndarray
         ``(K, n_params)`` scalings (``best_x`` where trusted).
     """
-    ref = _Objective(obj.M, obj.s, obj.L, compiled=False)
 
     def values(x, rows):
-        one = np.ones(rows.size)
-        _, _, a, _ = obj(x, rows, one, need_grad=False)
-        _, _, b, _ = ref(x, rows, one, need_grad=False)
+        _, _, a, _ = obj(x, rows, np.ones(rows.size), need_grad=False)
+        b = np.linalg.eigvalsh(obj.matrix(x, rows)[0])[:, -1]
         ok = np.abs(a - b) <= TRUST_RTOL * (np.maximum(np.abs(a), np.abs(b)) + 1e-3)
         return np.maximum(a, b), ok
 
-    if not obj.compiled:  # one implementation only: nothing to compare with
-        return best_x
     val, ok = values(best_x, rows)
     # D = I, G = 0 gives ||M||_2^2 exactly: an end above it is no progress either (a start
     # whose own evaluation was noise, e.g. balancing of a nearly decoupled |M|)
@@ -969,10 +805,8 @@ def _finish(obj, x, idx, scale):
     """
     nb = len(idx)
     _, Tl, Tr, Gh = obj.scalings(x, idx)
-    if obj.compiled:  # infinite temperature: the top eigenvalue and its eigenvector only
-        _, _, lmax, top = obj(x, idx, np.full(nb, 1e300))
-    else:
-        _, _, lmax, top = obj(x, idx, np.ones(nb), need_grad="top")
+    # infinite temperature: the top eigenvalue and its eigenvector only
+    _, _, lmax, top = obj(x, idx, np.full(nb, 1e300))
     upper = scale * np.sqrt(np.maximum(lmax, 0.0))
     Dl = np.conj(np.swapaxes(Tl, -1, -2)) @ Tl
     Dr = np.conj(np.swapaxes(Tr, -1, -2)) @ Tr

@@ -1,11 +1,15 @@
 """The compiled kernels of the mu bounds (``oos_drake.robust.mu_kernels``, issue 5 speed work).
 
 Checked against independent computations: the numpy implementation of the same objective
-(batched ``eigh``), central finite differences of the smoothed objective, the numpy power
-iteration, and fully converged D-G bounds.
+(batched ``eigh``), optimizer, balancing and power iteration (``oracles``), central finite
+differences of the smoothed objective, and fully converged D-G bounds.
 """
 
+import subprocess
+import sys
+
 import numpy as np
+import oracles  # tests/robust is on sys.path (rootdir imports)
 import pytest
 from numpy.testing import assert_allclose
 
@@ -14,10 +18,6 @@ from oos_drake.robust import mu_lower as ml
 from oos_drake.robust import mu_upper as mu
 from oos_drake.robust.blocks import parse_blk
 from oos_drake.robust.lfr_analysis import delta_channel_response
-
-# numba is a dependency: its absence fails these tests (it must never turn them into skips)
-if not mu_kernels.HAVE_NUMBA:
-    raise ImportError("numba could not be imported: the compiled mu kernels are not tested")
 
 PAPER = [[-3, 0], [-3, 0]] + [[-2, 0]] * 4 + [[3, 3]] + [[1, 0]] * 9  # 26 x 26, 16 blocks
 MIXED = [[-2, 0], [-1, 0], [2, 2], [2, 0], [1, 0], [1, 0]]  # 9 x 9
@@ -34,8 +34,8 @@ def _objective_pair(blk, seed, n_mat=12):
     M = _crandn(rng, n_mat, s.n_cols, s.n_rows)
     M /= np.linalg.norm(M, axis=(1, 2))[:, None, None]
     layout = mu._layout(s)
-    numpy_obj = mu._Objective(M, s, layout, compiled=False)
-    compiled_obj = mu._Objective(M, s, layout, compiled=True)
+    numpy_obj = oracles.NumpyObjective(M, s, layout)
+    compiled_obj = mu._Objective(M, s, layout)
     x = mu._osborne_init(M, s, layout) + 0.3 * rng.standard_normal((n_mat, layout.n_params))
     return s, M, x, numpy_obj, compiled_obj
 
@@ -98,7 +98,7 @@ def test_compiled_optimizer_reproduces_the_numpy_optimizer():
     M = _crandn(rng, 16, 9, 9)
     kw = dict(max_iter=60, tol=2e-4, temperatures=(50.0, 500.0), patience=3)
     fast = mu.mu_upper_bound(M, s, **kw)
-    ref = mu.mu_upper_bound(M, s, **kw, compiled=False)
+    ref = oracles.mu_upper_bound(M, s, **kw)
     rel = fast.upper / ref.upper - 1
     assert np.median(np.abs(rel)) < 1e-5
     assert np.max(np.abs(rel)) < 5e-3
@@ -115,9 +115,9 @@ def test_compiled_power_iteration_equals_the_numpy_one(blk):
     M = _crandn(rng, 30, s.n_cols, s.n_rows)
     a = _crandn(rng, 30, s.n_cols)
     out = []
-    for compiled in (False, True):
+    for power_iteration in (oracles.power_iteration, ml._power_iteration):
         rng5 = np.random.default_rng(5)
-        out.append(ml._power_iteration(M, s, a, a.copy(), 40, 0.5, rng5, compiled=compiled))
+        out.append(power_iteration(M, s, a, a.copy(), 40, 0.5, rng5))
     assert_allclose(out[1][0], out[0][0], atol=1e-7)
     assert_allclose(out[1][1], out[0][1], atol=1e-7)
 
@@ -154,18 +154,6 @@ def test_continuation_gives_certified_bounds_close_to_independent_ones():
         assert np.all(chk["singularity"][ok] < 1e-7)
         assert np.all(res.upper <= converged * 1.01)
         assert np.all(res.upper >= converged * (1 - 1e-3))
-    # the numpy path (no numba) continues by strides: also certified and close
-    import oos_drake.robust.mu as mu_module
-
-    mu_module_have = mu_kernels.HAVE_NUMBA
-    try:
-        mu_kernels.HAVE_NUMBA = False
-        strided = mu_module.mussv(M, MIXED, continuation=True)
-    finally:
-        mu_kernels.HAVE_NUMBA = mu_module_have
-    assert np.all(strided.check(M)["lmi_max_eig"] <= 0)
-    assert np.all(strided.upper <= converged * 1.01)
-    assert np.all(strided.lower <= strided.upper)
     # on unrelated matrices continuation is merely useless, never wrong
     rng = np.random.default_rng(2)
     R = _crandn(rng, 20, 9, 9)
@@ -209,12 +197,15 @@ def test_real_matrices_run_with_one_blas_thread_whatever_the_process_setting(mon
     assert np.all(res.check(M)["lmi_max_eig"] <= 0)
 
 
-def test_numpy_fallback_without_numba_gives_the_same_bounds(monkeypatch):
-    # the numpy implementation stays as the path without numba: same algorithm, same bounds
+def test_numpy_oracles_in_mussv_give_the_same_bounds(monkeypatch):
+    # mussv with the numpy oracles of both bounds in place of the kernels: same bounds
+    import oos_drake.robust.mu as mu_module
+
     rng = np.random.default_rng(5)
     M = _crandn(rng, 10, 9, 9)
     fast = mussv(M, MIXED)
-    monkeypatch.setattr(mu_kernels, "HAVE_NUMBA", False)
+    monkeypatch.setattr(mu_module, "mu_upper_bound", oracles.mu_upper_bound)
+    monkeypatch.setattr(mu_module, "mu_lower_bound", oracles.mu_lower_bound)
     slow = mussv(M, MIXED)
     assert np.median(np.abs(slow.upper / fast.upper - 1)) < 1e-5
     assert np.max(np.abs(slow.upper / fast.upper - 1)) < 5e-3
@@ -242,3 +233,23 @@ def test_full_eigendecomposition_fallback_matches_numpy():
     for k in range(K):  # ascending: row k of Vk is the eigenvector of eigenvalue 26 - K + k
         v = Vk[k]
         assert_allclose(abs(np.vdot(V_ref[:, 26 - K + k], v)), 1.0, atol=1e-10)
+
+
+@pytest.mark.parametrize("blk", [PAPER, MIXED, RECT])
+def test_compiled_balancing_equals_the_numpy_sweeps(blk):
+    s = parse_blk(blk)
+    M = _crandn(np.random.default_rng(12), 20, s.n_cols, s.n_rows)
+    M[:, :, 0] *= 1e3  # badly scaled: the sweeps have work to do
+    layout = mu._layout(s)
+    x = mu._osborne_init(M, s, layout)
+    assert np.max(np.abs(x)) > 1.0
+    assert_allclose(x, oracles.osborne_init(M, s, layout), rtol=1e-10, atol=1e-10)
+
+
+def test_import_without_numba_fails_with_one_line_naming_numba():
+    # numba is a dependency: no slower copy runs without it, the import says what is missing
+    code = "import sys; sys.modules['numba'] = None; import oos_drake.robust"
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode != 0
+    last = res.stderr.strip().splitlines()[-1]
+    assert last.startswith(("ImportError", "ModuleNotFoundError")) and "numba" in last, last

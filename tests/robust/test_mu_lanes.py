@@ -1,21 +1,18 @@
 """The lock-step (SIMD lane) D-G optimizer, ``oos_drake.robust.mu_lanes`` (issue 5 speed work).
 
-Checked against independent computations: the numpy objective of ``mu_upper`` (batched
-``eigh``), the numpy optimizer of ``mu_upper`` (the same algorithm, ``compiled=False``), fully
+Checked against independent computations: the numpy objective (batched ``eigh``) and the numpy
+optimizer (the same algorithm) of ``oracles``, fully
 converged D-G bounds and the LMI certificate of every returned bound.
 """
 
 import numpy as np
+import oracles  # tests/robust is on sys.path (rootdir imports)
 import pytest
 from numpy.testing import assert_allclose
 
 from oos_drake.robust import mu_kernels, mu_lanes, mussv
 from oos_drake.robust import mu_upper as mu
 from oos_drake.robust.blocks import parse_blk
-
-# numba is a dependency: its absence fails these tests (it must never turn them into skips)
-if not mu_kernels.HAVE_NUMBA:
-    raise ImportError("numba could not be imported: the compiled mu kernels are not tested")
 
 PAPER = [[-3, 0], [-3, 0]] + [[-2, 0]] * 4 + [[3, 3]] + [[1, 0]] * 9  # 26 x 26, 16 blocks
 MIXED = [[-2, 0], [-1, 0], [2, 2], [2, 0], [1, 0], [1, 0]]  # 9 x 9
@@ -35,7 +32,7 @@ def _lane_problem(blk, seed):
     M = _crandn(rng, W, s.n_cols, s.n_rows)
     M /= np.linalg.norm(M, axis=(1, 2))[:, None, None]
     layout = mu._layout(s)
-    ref = mu._Objective(M, s, layout, compiled=False)
+    ref = oracles.NumpyObjective(M, s, layout)
     x = mu._osborne_init(M, s, layout) + 0.3 * rng.standard_normal((W, layout.n_params))
     packed = mu._Objective(M, s, layout).packed
     return s, M, x, layout, ref, packed
@@ -93,9 +90,9 @@ def test_lanes_whose_qr_exceeds_its_budget_fall_back_to_the_per_matrix_kernel():
 
 
 def _upper(M, s, compiled, **kw):
-    return mu.mu_upper_bound(
-        M, s, max_iter=100, tol=2e-4, temperatures=(30.0, 300.0), patience=3, compiled=compiled,
-        **kw,
+    upper_bound = mu.mu_upper_bound if compiled else oracles.mu_upper_bound
+    return upper_bound(
+        M, s, max_iter=100, tol=2e-4, temperatures=(30.0, 300.0), patience=3, **kw
     )  # fmt: skip
 
 

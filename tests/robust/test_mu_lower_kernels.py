@@ -1,23 +1,18 @@
 """The compiled kernels of the mu lower bound (``oos_drake.robust.mu_lower_kernels``).
 
-Checked against the numpy implementation in ``mu_lower`` (the fallback without numba) and the
-earlier compiled power iteration of ``mu_kernels``; the certificate of the lower bound
-(``sigma_min(I - M delta)`` at round-off level, ``||delta|| = 1 / lower``, ``delta`` in the
-block structure) is checked independently on random matrices with mixed structures.
+Checked against the numpy implementation of the same algorithm (``oracles``); the certificate
+of the lower bound (``sigma_min(I - M delta)`` at round-off level, ``||delta|| = 1 / lower``,
+``delta`` in the block structure) is checked independently on random matrices with mixed structures.
 """
 
 import numpy as np
+import oracles  # tests/robust is on sys.path (rootdir imports)
 import pytest
 from numpy.testing import assert_allclose
 
-from oos_drake.robust import mu_kernels
 from oos_drake.robust import mu_lower as ml
 from oos_drake.robust import mu_lower_kernels as mlk
 from oos_drake.robust.blocks import FULL, REAL, parse_blk
-
-# numba is a dependency: its absence fails these tests (it must never turn them into skips)
-if not mu_kernels.HAVE_NUMBA:
-    raise ImportError("numba could not be imported: the compiled mu kernels are not tested")
 
 PAPER = [[-3, 0], [-3, 0]] + [[-2, 0]] * 4 + [[3, 3]] + [[1, 0]] * 9  # 26 x 26, 16 blocks
 MIXED = [[-2, 0], [-1, 0], [2, 2], [2, 0], [1, 0], [1, 0]]  # 9 x 9
@@ -35,10 +30,6 @@ def _unit(rng, n, c):
     return a / np.linalg.norm(a, axis=1, keepdims=True)
 
 
-def _numpy_path(fn, *args, **kwargs):
-    return fn(*args, **kwargs, compiled=False)
-
-
 @pytest.mark.parametrize("blk", [MIXED, RECT, COMPLEX, [[2, 2], [3, 3]]])
 def test_power_iteration_starts_share_matrices(blk):
     """Several starts per matrix (``M[s % nb]``) give the numpy iteration's results."""
@@ -47,7 +38,7 @@ def test_power_iteration_starts_share_matrices(blk):
     M = _crandn(rng, 10, s.n_cols, s.n_rows)
     a = _unit(rng, 20, s.n_cols)
     fast = ml._power_iteration(M, s, a, a.copy(), 30, 0.5, np.random.default_rng(3))
-    slow = _numpy_path(ml._power_iteration, M, s, a, a.copy(), 30, 0.5, np.random.default_rng(3))
+    slow = oracles.power_iteration(M, s, a, a.copy(), 30, 0.5, np.random.default_rng(3))
     assert_allclose(fast[0], slow[0], atol=1e-8)
     assert_allclose(fast[1], slow[1], atol=1e-8)
 
@@ -63,9 +54,9 @@ def _iterates(blk, n_mat, seed):
 
 @pytest.mark.parametrize("blk", [COMPLEX, [[2, 2], [3, 3], [1, 0]]])
 def test_polish_equals_numpy(blk):
-    """Complex structures: shifted inverse iteration, as ``_polish_eigenvalue``."""
+    """Complex structures: shifted inverse iteration, as ``polish_eigenvalue``."""
     s, M, delta, a = _iterates(blk, 40, 5)
-    lam_np, a_np = ml._polish_eigenvalue(M @ delta, a)
+    lam_np, a_np = oracles.polish_eigenvalue(M @ delta, a)
     lam = np.empty(len(M), dtype=complex)
     a_k = a.copy()
     mlk.eigen_polish(M, np.arange(len(M)), delta.copy(), a_k, ml._kernel_blocks(s), 0, 3, lam)
@@ -75,11 +66,11 @@ def test_polish_equals_numpy(blk):
 
 @pytest.mark.parametrize("blk", [PAPER, MIXED, RECT, REAL_ONLY])
 def test_real_eigenvalue_search_equals_numpy(blk):
-    """Structures with real blocks: the Newton rounds of ``_make_eigenvalue_real``. Rounds that
+    """Structures with real blocks: the Newton rounds of ``make_eigenvalue_real``. Rounds that
     do not converge (a zero or clustered eigenvalue: round-off decides where they go) may end
     elsewhere on a few matrices; the others agree to round-off."""
     s, M, delta, a = _iterates(blk, 60, 6)
-    d_np, lam_np, _ = ml._make_eigenvalue_real(M, s, delta, a)
+    d_np, lam_np, _ = oracles.make_eigenvalue_real(M, s, delta, a)
     d_k, a_k = delta.copy(), a.copy()
     lam = np.empty(len(M), dtype=complex)
     mlk.eigen_polish(M, np.arange(len(M)), d_k, a_k, ml._kernel_blocks(s), 8, 2, lam)
@@ -100,7 +91,7 @@ def test_residual_and_rayleigh_kernels(blk):
     mat = np.arange(len(M))
     res = np.empty(len(M))
     mlk.vector_residual(M, mat, delta, a, ml._kernel_blocks(s), res)
-    assert_allclose(res, ml._vector_residual(M, delta, a), rtol=1e-12)
+    assert_allclose(res, oracles.vector_residual(M, delta, a), rtol=1e-12)
     rq = np.empty(len(M), dtype=complex)
     mlk.rayleigh_quotients(M, delta, a, ml._kernel_blocks(s), rq)
     assert_allclose(rq, np.sum(np.conj(a) * ml._mv(M, ml._mv(delta, a)), axis=1), rtol=1e-12)
@@ -168,7 +159,7 @@ def test_lower_bound_compiled_equals_numpy(blk):
     start = _crandn(rng, 40, s.n_rows)
     kwargs = dict(start_inputs=start, restarts=2, rng=None, polish_starts=1)
     fast = ml.mu_lower_bound(M, s, **kwargs)
-    slow = _numpy_path(ml.mu_lower_bound, M, s, **kwargs)
+    slow = oracles.mu_lower_bound(M, s, **kwargs)
     _check_certificate(M, s, fast)
     _check_certificate(M, s, slow)
     close = np.abs(fast.lower - slow.lower) <= 1e-10 * slow.lower
@@ -184,7 +175,7 @@ def test_real_only_lower_bound_close_to_numpy():
     rng = np.random.default_rng(12)
     M = rng.standard_normal((60, s.n_cols, s.n_rows))
     fast = ml.mu_lower_bound(M, s, restarts=3, rng=np.random.default_rng(0))
-    slow = _numpy_path(ml.mu_lower_bound, M, s, restarts=3, rng=np.random.default_rng(0))
+    slow = oracles.mu_lower_bound(M, s, restarts=3, rng=np.random.default_rng(0))
     _check_certificate(M, s, fast)
     close = np.abs(fast.lower - slow.lower) <= 1e-10 * np.maximum(slow.lower, 1e-300)
     assert np.mean(close) >= 0.8
