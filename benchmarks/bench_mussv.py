@@ -11,7 +11,7 @@ beta. Both are timed in the same run, on one BLAS thread.
 Prints wall and CPU time per matrix for both bounds and each bound (CPU is the robust figure on
 a shared machine) for independent matrices (the headline) and with ``continuation=True``
 (neighbouring frequencies warm-start each other: the sweep use case), the same algorithm
-without numba (numpy path) in the same run, the first-call compile time of the numba kernels
+in numpy (the tests' oracles) in the same run, the first-call compile time of the numba kernels
 (fresh processes, excluded from the per-matrix times), eigen-decompositions per matrix, the
 speed-up over cvxpy and the relative difference of the values (same run), the upper/lower gap
 and the certificate checks; ``--frontier`` adds the time vs accuracy of the upper bound for
@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 
 import numpy as np
@@ -212,16 +213,22 @@ def main(argv=None):
             M, s, up, restarts=4, iters=60, rng=np.random.default_rng(0), restart_gap=1.02
         )
     )
-    # the same algorithm without numba (numpy path), same run: the speed-up is load-robust
-    # (mussv has no option for it: numba's absence is simulated)
-    from oos_drake.robust import mu_kernels
+    # the same algorithms in numpy (the tests' oracles, tests/robust/oracles.py) in mussv's
+    # place of the kernels, same run: the speed-up is load-robust
+    import oos_drake.robust.mu as mu_module
 
-    have = mu_kernels.HAVE_NUMBA
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "../tests/robust"))
+    import oracles
+
+    kernels = mu_module.mu_upper_bound, mu_module.mu_lower_bound
     try:
-        mu_kernels.HAVE_NUMBA = False
+        mu_module.mu_upper_bound, mu_module.mu_lower_bound = (
+            oracles.mu_upper_bound,
+            oracles.mu_lower_bound,
+        )
         res_np, t_both_np = best(lambda: mussv(M, PAPER_BLK))
     finally:
-        mu_kernels.HAVE_NUMBA = have
+        mu_module.mu_upper_bound, mu_module.mu_lower_bound = kernels
     # continuation along the frequency axis (neighbouring frequencies warm-start each other)
     res_c, t_both_c = best(lambda: mussv(M, PAPER_BLK, continuation=True))
     up_c, t_up_c = best(lambda: _upper_bound(M, s, UPPER_ITERATIONS, UPPER_TOL, continuation=True))
@@ -251,9 +258,6 @@ def main(argv=None):
         f"frequency-response matrices, 1 BLAS thread, load average {os.getloadavg()[0]:.1f}; "
         f"times: fastest of {reps} runs"
     )
-    from oos_drake.robust.mu_kernels import HAVE_NUMBA
-
-    print(f"compiled kernels (numba): {'yes' if HAVE_NUMBA else 'NO (numpy fallback)'}")
     if t_compile is not None:
         print(
             f"first call in a fresh process, wall (not in the per-matrix times): "
@@ -266,7 +270,7 @@ def main(argv=None):
         ("  upper bound only", t_up),
         ("  lower bound only", t_lo),
         ("  upper bound, single-matrix call", one_t),
-        ("mussv, both bounds, numpy path (no numba)", t_both_np),
+        ("mussv, both bounds, numpy oracles (tests)", t_both_np),
         ("mussv, both bounds (continuation)", t_both_c),
         ("  upper bound only (continuation)", t_up_c),
         ("cvxpy LMI D-G bound (bisection)", lmi_t),
@@ -279,8 +283,8 @@ def main(argv=None):
         f"(CPU {t_both_c[1] * 1e3:.2f} ms)"
     )
     print(
-        f"compiled vs numpy path (same run, CPU): {t_both_np[1] / t_both[1]:.2f}x; "
-        f"numpy-path bounds vs compiled: upper max rel. diff "
+        f"compiled vs numpy oracles (same run, CPU): {t_both_np[1] / t_both[1]:.2f}x; "
+        f"numpy-oracle bounds vs compiled: upper max rel. diff "
         f"{np.max(np.abs(res_np.upper / res.upper - 1)):.1e}"
     )
     print(
