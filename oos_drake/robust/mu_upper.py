@@ -94,19 +94,23 @@ class _Layout:
     inv_groups: tuple  # ((size, (n_blocks, size) indices), ...): diagonal blocks of T_r
 
 
-_LAYOUTS: dict = {}  # BLK -> _Layout
-_PACKED: dict = {}  # BLK -> (_Layout, packed arrays of mu_kernels.pack_layout)
-_LANE_LAYOUTS: dict = {}  # BLK -> mu_lanes.LaneLayout
+_PER_BLK: dict = {}  # (what, BLK) -> what _per_blk built
+
+
+def _per_blk(what: str, structure: BlockStructure, build):
+    """``build()``, once per block structure and ``what`` (layouts and index maps: single-matrix
+    calls repeat them; every entry is a function of the BLK alone)."""
+    key = (what, structure.blk.shape, structure.blk.tobytes())
+    if key not in _PER_BLK:
+        if len(_PER_BLK) > 256:
+            _PER_BLK.clear()
+        _PER_BLK[key] = build()
+    return _PER_BLK[key]
 
 
 def _layout(structure: BlockStructure) -> _Layout:
-    """The parameter layout of ``structure`` (cached: single-matrix calls repeat it)."""
-    key = (structure.blk.shape, structure.blk.tobytes())
-    if key not in _LAYOUTS:
-        if len(_LAYOUTS) > 64:
-            _LAYOUTS.clear()
-        _LAYOUTS[key] = _build_layout(structure)
-    return _LAYOUTS[key]
+    """The parameter layout of ``structure``."""
+    return _per_blk("layout", structure, lambda: _build_layout(structure))
 
 
 def _build_layout(structure: BlockStructure) -> _Layout:
@@ -285,22 +289,14 @@ class _Objective:
                 for a in range(block.cols):
                     sizes.setdefault(1, []).append(np.array([block.col_offset + a]))
         self.c_groups = tuple((n, np.array(v)) for n, v in sorted(sizes.items()))
-        key = (structure.blk.shape, structure.blk.tobytes())
-        if key not in _PACKED or _PACKED[key][0] is not layout:
-            if len(_PACKED) > 64:
-                _PACKED.clear()
-            _PACKED[key] = (layout, mu_kernels.pack_layout(layout, self.c_groups))
-        self.packed = _PACKED[key][1]
+        self.packed = _per_blk(
+            "packed", structure, lambda: mu_kernels.pack_layout(layout, self.c_groups)
+        )
 
     @property
     def lane_layout(self) -> mu_lanes.LaneLayout:
-        """The layout of the lane kernels (:func:`mu_lanes.lane_layout`), cached per BLK."""
-        key = (self.s.blk.shape, self.s.blk.tobytes())
-        if key not in _LANE_LAYOUTS or _LANE_LAYOUTS[key].packed_int is not self.packed[0]:
-            if len(_LANE_LAYOUTS) > 64:
-                _LANE_LAYOUTS.clear()
-            _LANE_LAYOUTS[key] = mu_lanes.lane_layout(self.packed, self.s)
-        return _LANE_LAYOUTS[key]
+        """The layout of the lane kernels (:func:`mu_lanes.lane_layout`)."""
+        return _per_blk("lanes", self.s, lambda: mu_lanes.lane_layout(self.packed, self.s))
 
     def __call__(self, x, idx, t, need_grad=True):
         """Return ``(f, grad, lam_max, top_vec)`` for the batch rows ``idx`` (``grad`` and
@@ -319,13 +315,6 @@ class _Objective:
         if not need_grad:
             return f, None, lmax, None
         return f, grad, lmax, top
-
-    def size(self, x, idx):
-        """``||M_hat||_F^2`` (``M_hat = T_l M T_r^{-1}``) at ``x`` for the batch rows ``idx``."""
-        _, Tl, Tr, _ = self.scalings(x, idx)
-        tr = lambda A: np.swapaxes(A, -1, -2)  # noqa: E731
-        X = tr(np.linalg.solve(tr(Tr), tr(self.M[idx])))  # M T_r^{-1}
-        return np.linalg.norm(Tl @ X, axis=(1, 2)) ** 2
 
     def scalings(self, x, idx):
         L = self.L
@@ -427,35 +416,29 @@ class _Balanced:
         return x_b / self.factor + self.shift
 
 
-_BALANCE_MAPS: dict = {}  # BLK -> index arrays of _balance_maps
-
-
 def _balance_maps(structure: BlockStructure, L: _Layout):
     """For each off-diagonal ``T`` entry, the log-parameter of its column's channel; for each
     ``G`` parameter, the log-parameters of the r-space row and c-space column of its entry
-    (``L`` is the layout of ``structure``; cached per BLK like the layout)."""
-    key = (structure.blk.shape, structure.blk.tobytes())
-    if len(_BALANCE_MAPS) > 64:
-        _BALANCE_MAPS.clear()
-    if key not in _BALANCE_MAPS:
-        diag_par_r, diag_par_l = {}, {}
-        ent_par = dict(zip(L.log_ent.tolist(), L.log_par.tolist(), strict=True))
-        for i, j, e in zip(L.r_row, L.r_col, L.r_ent, strict=True):
-            if i == j:
-                diag_par_r[int(i)] = ent_par[int(e)]
-        for i, j, e in zip(L.l_row, L.l_col, L.l_ent, strict=True):
-            if i == j:
-                diag_par_l[int(i)] = ent_par[int(e)]
-        r_pos = {
-            int(e): (int(i), int(j)) for i, j, e in zip(L.r_row, L.r_col, L.r_ent, strict=True)
-        }
-        lin_col = np.array([diag_par_r[r_pos[int(e)][1]] for e in L.lin_ent], dtype=int)
-        # a position of each G parameter (none without real blocks)
-        first = np.argmax(np.abs(L.g_map) > 0, axis=1) if L.g_map.size else np.zeros(0, int)
-        g_row = np.array([diag_par_r[int(L.g_row[q])] for q in first], dtype=int)
-        g_col = np.array([diag_par_l[int(L.g_col[q])] for q in first], dtype=int)
-        _BALANCE_MAPS[key] = (lin_col, g_row, g_col)
-    return _BALANCE_MAPS[key]
+    (``L`` is the layout of ``structure``)."""
+    return _per_blk("balance", structure, lambda: _build_balance_maps(L))
+
+
+def _build_balance_maps(L: _Layout):
+    diag_par_r, diag_par_l = {}, {}
+    ent_par = dict(zip(L.log_ent.tolist(), L.log_par.tolist(), strict=True))
+    for i, j, e in zip(L.r_row, L.r_col, L.r_ent, strict=True):
+        if i == j:
+            diag_par_r[int(i)] = ent_par[int(e)]
+    for i, j, e in zip(L.l_row, L.l_col, L.l_ent, strict=True):
+        if i == j:
+            diag_par_l[int(i)] = ent_par[int(e)]
+    r_pos = {int(e): (int(i), int(j)) for i, j, e in zip(L.r_row, L.r_col, L.r_ent, strict=True)}
+    lin_col = np.array([diag_par_r[r_pos[int(e)][1]] for e in L.lin_ent], dtype=int)
+    # a position of each G parameter (none without real blocks)
+    first = np.argmax(np.abs(L.g_map) > 0, axis=1) if L.g_map.size else np.zeros(0, int)
+    g_row = np.array([diag_par_r[int(L.g_row[q])] for q in first], dtype=int)
+    g_col = np.array([diag_par_l[int(L.g_col[q])] for q in first], dtype=int)
+    return lin_col, g_row, g_col
 
 
 def _osborne_init(M: np.ndarray, structure: BlockStructure, layout: _Layout, iters: int = 20):

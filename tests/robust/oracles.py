@@ -34,6 +34,13 @@ class NumpyObjective(mu._Objective):
         self.sel_l = np.eye(layout.n_entries)[layout.l_ent]
         self.sel_r = np.eye(layout.n_entries)[layout.r_ent]
 
+    def size(self, x, idx):
+        """``||M_hat||_F^2`` (``M_hat = T_l M T_r^{-1}``) at ``x`` for the batch rows ``idx``."""
+        _, Tl, Tr, _ = self.scalings(x, idx)
+        tr = lambda A: np.swapaxes(A, -1, -2)  # noqa: E731
+        X = tr(np.linalg.solve(tr(Tr), tr(self.M[idx])))  # M T_r^{-1}
+        return np.linalg.norm(Tl @ X, axis=(1, 2)) ** 2
+
     def __call__(self, x, idx, t, need_grad=True):
         """Return ``(f, grad, lam_max, top_vec)`` for the batch rows ``idx``."""
         self.count[idx] += 1
