@@ -35,7 +35,7 @@ import numpy as np
 
 from oos_drake.robust.blocks import BlockStructure, check_matrix, parse_blk
 from oos_drake.robust.mu_lower import LowerBoundResult, certificate_residual, mu_lower_bound
-from oos_drake.robust.mu_upper import lmi_residual, mu_upper_bound
+from oos_drake.robust.mu_upper import lmi_residual, mu_upper_bound, power_of_two_scale
 
 
 @dataclass(frozen=True)
@@ -268,9 +268,7 @@ def mussv(
     batch = M.shape[:-2]
     c, r = structure.m_shape
     flat = M.reshape((-1, c, r))
-    # exact power-of-two scaling to entries of order one (no overflow for huge or tiny M)
-    peak = np.max(np.abs(flat), axis=(1, 2))
-    scale = np.where(peak > 0, np.exp2(np.round(np.log2(np.where(peak > 0, peak, 1.0)))), 1.0)
+    scale = power_of_two_scale(flat)  # entries of order one: no overflow for huge or tiny M
     flat = flat / scale[:, None, None]
     rng = np.random.default_rng(0) if rng is None else rng
     ups, los = [], []

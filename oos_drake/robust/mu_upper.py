@@ -22,8 +22,9 @@ scalings is
 
 which is minimized over ``(T, G)`` (``G`` itself, not scaled by ``T``: a scaled ``G`` couples
 the two and stalls on ill-conditioned matrices). ``lambda_max`` is smoothed by the log-sum-exp of
-the eigenvalues (temperature raised in stages) and minimized by a batched L-BFGS over all
-matrices at once; the gradient uses only the few eigenvectors that carry the smoothed maximum.
+the eigenvalues (temperature raised in stages) and minimized by L-BFGS, matrix by matrix (eight
+in lock-step, see Speed); the gradient uses only the few eigenvectors that carry the smoothed
+maximum.
 Initialization: Osborne balancing of ``|M|`` (one scaling per full block and per channel of a
 repeated block), or a warm start.
 
@@ -888,7 +889,7 @@ def certified_upper(M, beta, D_left, D_right, G):
 
 def _certified_at(M, beta, Dl, Dr, G):
     """:func:`certified_upper` at the given scalings only (inf where the check cannot run)."""
-    sc = _power_of_two_scale(M)
+    sc = power_of_two_scale(M)
     lam, size = _scaled_lmi(M / sc[:, None, None], Dl, Dr, G / sc[:, None, None])
     e = check_roundoff(M.shape[2])
     need = (lam + e * size) / (1.0 - e) * (1.0 + 8.0 * np.finfo(float).eps)
@@ -896,9 +897,10 @@ def _certified_at(M, beta, Dl, Dr, G):
     return np.where(np.isfinite(lam) & np.isfinite(size), out, np.inf)
 
 
-def _power_of_two_scale(M):
-    """Per matrix, the power of two nearest its largest entry (1 for a zero matrix): the LMI is
-    homogeneous in ``(M, beta, G)``, dividing by it avoids overflow without rounding."""
+def power_of_two_scale(M):
+    """Per matrix of ``(..., c, r)``, the power of two nearest its largest entry (1 for a zero
+    matrix): mu and the LMI are homogeneous in ``(M, beta, G)``, dividing by it avoids overflow
+    and underflow without rounding."""
     peak = np.max(np.abs(M), axis=(-2, -1))
     return np.where(peak > 0, np.exp2(np.round(np.log2(np.where(peak > 0, peak, 1.0)))), 1.0)
 
@@ -992,7 +994,7 @@ def lmi_residual(M, beta, D_left, D_right, G) -> np.ndarray:
     beta = flat(beta, ())
     Dl, Dr, G = flat(D_left, (c, c)), flat(D_right, (r, r)), flat(G, (r, c))
     # the LMI is homogeneous in (M, beta, G): divide by a power of two to avoid overflow
-    sc = _power_of_two_scale(M)
+    sc = power_of_two_scale(M)
     M, beta, G = M / sc[:, None, None], beta / sc, G.astype(complex) / sc[:, None, None]
     Dl, Dr = Dl.astype(complex), Dr.astype(complex)
     lam, size = _scaled_lmi(M, Dl, Dr, G)
