@@ -12,7 +12,8 @@ from numpy.testing import assert_allclose
 from oos_drake.robust import mussv
 from oos_drake.robust.blocks import parse_blk
 from oos_drake.robust.lfr_analysis import delta_channel_response
-from oos_drake.robust.mu_lower import certificate_residual, mu_lower_bound
+from oos_drake.robust.mu_lower import _kernel_blocks, certificate_residual, mu_lower_bound
+from oos_drake.robust.mu_lower_kernels import vector_residual
 from oos_drake.robust.mu_upper import lmi_residual, mu_upper_bound
 from oos_drake.robust.sweep import _pruned_sweep
 
@@ -58,16 +59,22 @@ def test_vector_residual_bounds_the_svd_certificate_from_above():
     M = _crandn(rng, 40, 6, 6)
     delta = _crandn(rng, 40, 6, 6) * 0.3
     a = _crandn(rng, 40, 6)
-    assert np.all(
-        oracles.vector_residual(M, delta, a) >= certificate_residual(M, delta) * (1 - 1e-12)
-    )
-    # and it is at round-off for an exact eigenvector of M delta with eigenvalue 1
-    ev, V = np.linalg.eig(M @ delta)
-    k = np.argmax(np.abs(ev), axis=1)
-    lam = ev[np.arange(40), k]
-    vec = V[np.arange(40), :, k]
-    d1 = delta / lam[:, None, None]
-    assert np.all(oracles.vector_residual(M, d1, vec) < 1e-12)
+    blocks = _kernel_blocks(parse_blk([[6, 6]]))  # one full block: delta is any 6 x 6 matrix
+
+    def compiled(M, delta, a):  # the product's check (mu_lower_kernels), and the numpy oracle
+        out = np.empty(len(M))
+        vector_residual(M, np.arange(len(M)), delta, np.ascontiguousarray(a), blocks, out)
+        return out
+
+    for residual in (compiled, oracles.vector_residual):
+        assert np.all(residual(M, delta, a) >= certificate_residual(M, delta) * (1 - 1e-12))
+        # and it is at round-off for an exact eigenvector of M delta with eigenvalue 1
+        ev, V = np.linalg.eig(M @ delta)
+        k = np.argmax(np.abs(ev), axis=1)
+        lam = ev[np.arange(40), k]
+        vec = V[np.arange(40), :, k]
+        d1 = delta / lam[:, None, None]
+        assert np.all(residual(M, d1, vec) < 1e-12)
 
 
 def test_lower_bound_with_fewer_polished_starts_stays_certified():
