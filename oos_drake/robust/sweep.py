@@ -1,37 +1,14 @@
 """The package's one mu sweep: bounds over model arrays, frequencies and uncertainty subsets.
 
 :func:`sweep_models` is the one loop behind :func:`~oos_drake.robust.robstab`,
-:func:`robust_sweep`, :func:`mu_sweep`, the analysis (:mod:`oos_drake.analysis.stability`) and
-``oos robust``. For every subset of the uncertain blocks (blocks outside it stay nominal) and
-every model of a chunk it runs these steps, each steered by :class:`SweepOptions`:
-
-1. grid: ``M11(j omega)`` on the common grid (plus, with ``pole_points``, points on each
-   model's lightly damped poles) and bounds of mu there, by one of four methods (``grid``):
-
-   * ``"continued"``: upper bounds of consecutive models started from the previous model's
-     scalings (the first model of a chunk, or one after a configuration jump, converged by
-     frequency continuation; local spikes recomputed from their neighbours' scalings), lower
-     bounds at the ``lower_points`` highest upper bounds of every model (0 elsewhere);
-   * ``"pruned"``: cheap valid bounds everywhere, full ones only where the cheap upper bound
-     exceeds the model's best lower bound (branch and prune over frequency);
-   * ``"warm"``: all models together walk up the frequency axis, warm-started;
-   * ``"cold"``: :func:`~oos_drake.robust.mussv` at every point (``mu_options``);
-
-2. refinement: ``refine_rounds`` rounds of ``refine_points`` new frequencies between the
-   neighbours of the ``refine_peaks`` highest local maxima of each model's upper (and, with
-   ``refine_lower``, lower) bounds, all models in one batch;
-3. polish: long upper-bound runs at each model's ``polish_points`` highest upper bounds, for
-   up to ``polish_rounds`` rounds (until the model's maximum has been polished);
-4. crossings (``crossings``, real blocks only): lower bounds at the frequencies where an
-   eigenvalue of ``M(j omega) Delta`` crosses the real axis (mu of real blocks can be
-   discontinuous in omega; a grid never hits those frequencies);
-5. guarantee (``slack`` set): the peak of mu proved on the whole frequency axis
-   (:func:`~oos_drake.robust.mu_intervals.cover_axis`), seeded from the peaks of the points.
-
-The result per subset is a :class:`SweepPoints` (one row per model and frequency, sorted by
-model then frequency, with each model's best certified lower bound and its perturbation);
-:func:`mu_sweep` spreads chunks of models over worker processes and returns the table of
-:func:`~oos_drake.robust.tables.sweep_table`.
+:func:`robust_sweep`, :func:`mu_sweep`, ``oos robust`` and the analysis
+(:mod:`oos_drake.analysis.stability`). For every subset of the uncertain blocks (blocks outside
+it stay nominal) and every model of a chunk it runs, as :class:`SweepOptions` says: grid bounds
+(one of four methods), refinement next to the peaks, a long polish of the highest upper bounds,
+the search of real-axis crossings (real blocks) and the proof of the peak on the whole
+frequency axis. Each model's points come back sorted by frequency (:class:`SweepPoints`);
+:func:`mu_sweep` spreads chunks of models over worker processes and returns the one table
+(:func:`~oos_drake.robust.tables.sweep_table`).
 """
 
 from __future__ import annotations
@@ -65,7 +42,12 @@ class SweepOptions:
     Attributes
     ----------
     grid : {"continued", "pruned", "warm", "cold"}
-        How the grid bounds are computed (see the module docstring).
+        How the grid bounds are computed. ``"continued"`` (the analysis): upper bounds of
+        consecutive models started from the previous model's scalings (:func:`_continued_grid`),
+        lower bounds at each model's highest upper bounds (0 elsewhere). ``"pruned"``: cheap
+        valid bounds everywhere, full ones only where a model's peak may be
+        (:func:`_pruned_grid`). ``"warm"``: all models walk up the frequency axis warm-started
+        (:func:`_warm_grid`). ``"cold"``: :func:`~oos_drake.robust.mussv` everywhere.
     upper_iterations : int
         BFGS iterations of the D-G upper bound at the grid frequencies (``"continued"``: cold
         starts).
@@ -220,10 +202,14 @@ def refine_frequencies(omega, values, count=4, points=12):
 
 
 def merged(omega, arrays, new, new_arrays):
-    """``omega`` and its per-frequency ``arrays`` with the points ``new`` added, sorted (stable)."""
+    """``omega`` and its per-frequency ``arrays`` with the points ``new`` added, sorted (stable);
+    an array that is None on either side is None."""
     omega = np.concatenate([omega, new])
     order = np.argsort(omega, kind="stable")
-    out = (np.concatenate(pair)[order] for pair in zip(arrays, new_arrays, strict=True))
+    out = (
+        None if a is None or b is None else np.concatenate([a, b])[order]
+        for a, b in zip(arrays, new_arrays, strict=True)
+    )
     return omega[order], tuple(out)
 
 
@@ -760,7 +746,9 @@ def axis_certificate(real, structure, omega, up, lo, slack):
 
 def _update_best(best, model, omega, lower, delta):
     """Keep each model's largest certified lower bound (the first one on ties)."""
-    for i in range(lower.size):
+    order = np.lexsort((-lower, model))  # stable: the first of equal values leads
+    heads = order[np.r_[True, model[order][1:] != model[order][:-1]]] if order.size else order
+    for i in heads:
         m = int(model[i])
         if m not in best or lower[i] > best[m][0]:
             best[m] = (float(lower[i]), float(omega[i]), delta[i])
@@ -831,23 +819,24 @@ def sweep_models(A, Bw, Cz, Dzw, omega, parts, options: SweepOptions, *, first=0
                 tick()
         best = {}
         _update_best(best, model_of[grid.at], omega_of[grid.at], grid.lower[grid.at], grid.delta)
-        # per model: [omega, upper, lower, refined, tightened, params]
         edges = np.cumsum([0] + [g.size for g in grids])
-        keep_params = grid.params is not None
+        # per model: [omega, (upper, lower, refined, tightened, params)]
         points = [
             [
                 grids[j],
-                grid.upper[a:b].copy(),
-                grid.lower[a:b].copy(),
-                np.zeros(b - a, dtype=bool),
-                grid.tightened[a:b].copy(),
-                grid.params[a:b] if keep_params else np.zeros((b - a, 0)),
+                (grid.upper[a:b].copy(), grid.lower[a:b].copy(), np.zeros(b - a, bool))
+                + (grid.tightened[a:b], None if grid.params is None else grid.params[a:b]),
             ]
             for j, (a, b) in enumerate(zip(edges[:-1], edges[1:], strict=True))
         ]
+
+        def insert(j, w, upper, lower, tightened, params, points=points):  # sorted in
+            new = (upper, lower, np.ones(w.size, dtype=bool), tightened, params)
+            points[j] = list(merged(*points[j], w, new))
+
         for _ in range(opt.refine_rounds if opt.refine_points > 0 else 0):
             extra = []
-            for w, up, lo, *_ in points:
+            for w, (up, lo, *_) in points:
                 curves = (up, lo) if opt.refine_lower else (up,)
                 new = [
                     refine_frequencies(w, c, opt.refine_peaks, opt.refine_points) for c in curves
@@ -855,60 +844,44 @@ def sweep_models(A, Bw, Cz, Dzw, omega, parts, options: SweepOptions, *, first=0
                 extra.append(np.setdiff1d(np.unique(np.concatenate(new)), w))
             if not any(e.size for e in extra):
                 break
-            Mr = np.concatenate([response(j, e) for j, e in enumerate(extra) if e.size])
-            got = _refine_bounds(Mr, structure, opt)
-            keep_params = keep_params and got.params is not None
+            got = _refine_bounds(
+                np.concatenate([response(j, e) for j, e in enumerate(extra) if e.size]),
+                structure,
+                opt,
+            )
             em = np.concatenate([np.full(e.size, first + j) for j, e in enumerate(extra)])
-            ew = np.concatenate(extra)
-            _update_best(best, em, ew, got.lower, got.delta)
-            k = 0
+            _update_best(best, em, np.concatenate(extra), got.lower, got.delta)
+            ends = np.cumsum([0] + [e.size for e in extra])
             for j, e in enumerate(extra):
-                if e.size:
-                    s = slice(k, k + e.size)
-                    pars = got.params[s] if keep_params else np.zeros((e.size, 0))
-                    new = (
-                        got.upper[s],
-                        got.lower[s],
-                        np.ones(e.size, bool),
-                        got.tightened[s],
-                        pars,
-                    )
-                    w, rest = merged(points[j][0], points[j][1:], e, new)
-                    points[j] = [w, *rest]
-                    k += e.size
+                k = slice(ends[j], ends[j + 1])
+                pars = None if got.params is None else got.params[k]
+                insert(j, e, got.upper[k], got.lower[k], got.tightened[k], pars)
         if opt.polish_points > 0:
-            _polish(response, structure, points, opt)
+            _polish(response, structure, [(w, *cols) for w, cols in points], opt)
         if opt.crossings and structure.has_real:
-            for j, pt in enumerate(points):
-                wx, lx, dx = _frequency_crossings(*channels(j), structure, pt[0], pt[1], pt[2])
-                if wx.size == 0:
-                    continue
-                # mu_upper at the crossing frequencies too, so that lower <= upper pointwise
-                ux = _mussv_points(response(j, wx), structure, opt).upper
-                keep_params = False
-                _update_best(best, np.full(wx.size, first + j), wx, lx, dx)
-                ones = np.ones(wx.size, dtype=bool)
-                new = (np.maximum(ux, lx), lx, ones, ones, np.zeros((wx.size, 0)))
-                w, rest = merged(pt[0], pt[1:], wx, new)
-                points[j] = [w, *rest]
+            for j, (w, (up, lo, *_)) in enumerate(points):
+                wx, lx, dx = _frequency_crossings(*channels(j), structure, w, up, lo)
+                if wx.size:
+                    # mu_upper at the crossing frequencies too: lower <= upper pointwise
+                    ux = _mussv_points(response(j, wx), structure, opt).upper
+                    _update_best(best, np.full(wx.size, first + j), wx, lx, dx)
+                    insert(j, wx, np.maximum(ux, lx), lx, np.ones(wx.size, bool), None)
         guarantees = {}
-        if opt.slack is not None:
-            for j, (w, up, lo, *_) in enumerate(points):
-                try:
-                    guarantees[first + j] = axis_certificate(
-                        Realization(*channels(j)), structure, w, up, lo, opt.slack
-                    )
-                except ValueError as err:
-                    raise ValueError(f"model {first + j}: {err}") from None
-        cols = list(zip(*points, strict=True))
+        for j, (w, (up, lo, *_)) in enumerate(points if opt.slack is not None else []):
+            try:
+                real = Realization(*channels(j))
+                guarantees[first + j] = axis_certificate(real, structure, w, up, lo, opt.slack)
+            except ValueError as err:
+                raise ValueError(f"model {first + j}: {err}") from None
+        cols = [
+            None if any(x is None for x in c) else np.concatenate(c)
+            for c in zip(*(p[1] for p in points), strict=True)
+        ]
         out[name] = SweepPoints(
-            model=np.concatenate([np.full(w.size, first + j) for j, w in enumerate(cols[0])]),
-            omega=np.concatenate(cols[0]),
-            upper=np.maximum(np.concatenate(cols[1]), np.concatenate(cols[2])),
-            lower=np.concatenate(cols[2]),
-            refined=np.concatenate(cols[3]),
-            tightened=np.concatenate(cols[4]),
-            params=np.concatenate(cols[5]) if keep_params else None,
+            np.concatenate([np.full(w.size, first + j) for j, (w, _) in enumerate(points)]),
+            np.concatenate([w for w, _ in points]),
+            np.maximum(cols[0], cols[1]),
+            *cols[1:],
             best=best,
             guarantees=guarantees,
         )
