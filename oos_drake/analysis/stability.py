@@ -48,23 +48,12 @@ from oos_drake.robust.lfr_analysis import (
 from oos_drake.robust.sweep import (
     SweepOptions,
     check_sweep_input,
+    chunk_ranges,
     joined_points,
-    mu_sweep,
     sweep_models,
     sweep_table_of,
 )
-
-#: ``SweepOptions`` and ``mu_sweep`` live in :mod:`oos_drake.robust.sweep` (re-exported here).
-__all__ = [
-    "AxisGuarantee",
-    "PeakCertificate",
-    "StudyResult",
-    "SweepOptions",
-    "axis_guarantee",
-    "certified_sweep",
-    "certify_peak",
-    "mu_sweep",
-]
+from oos_drake.robust.sweep import mu_sweep as mu_sweep  # the analysis's grid-only sweep
 
 
 def _sweep_chunk(task):
@@ -106,8 +95,7 @@ def _grid_points(pool, n_models, omega, parts, options, progress, description):
 
     from tqdm.auto import tqdm
 
-    size = options.chunk_size or int(np.ceil(n_models / pool.n_jobs))
-    tasks = [(i, min(i + size, n_models), omega, parts, options) for i in range(0, n_models, size)]
+    tasks = [(a, b, omega, parts, options) for a, b in chunk_ranges(n_models, options)]
     bar = tqdm(
         total=n_models,
         desc=description,

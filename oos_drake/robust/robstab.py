@@ -13,7 +13,8 @@ stable for the whole modeled uncertainty. The bounds:
   physical values), puts a closed-loop pole on the imaginary axis at ``critical_frequency``.
 
 Frequencies are chosen from the system's poles (log grid, dense clusters around lightly damped
-poles, ``omega = 0``) and refined around the peaks of both bounds.
+poles, ``omega = 0``) and refined around the peaks of both bounds; the bounds come from the
+package's one mu sweep (:func:`oos_drake.robust.sweep.sweep_models`).
 """
 
 from __future__ import annotations

@@ -957,31 +957,13 @@ def sweep_table_of(points: dict, times):
     )
 
 
-def sweep_points(
-    sys,
-    omega,
-    subsets,
-    *,
-    options: SweepOptions,
-    caller: str,
-    progress=False,
-    description="mu sweep",
-    times=None,
-):
-    """Run :func:`sweep_models` over the whole model array ``sys`` in chunks on the workers.
-
-    Returns
-    -------
-    tuple
-        ``(points, times)``: subset name -> :class:`SweepPoints` of all models, and the checked
-        ``times``.
-    """
+def _sweep(sys, omega, subsets, times, options: SweepOptions, caller, progress, description):
+    """:func:`sweep_models` over the whole model array in chunks on the workers -> the table."""
     from tqdm.auto import tqdm
 
     zero = options.grid != "continued"  # the continuation compares log frequencies
     omega, (A, Bw, Cz, Dzw), times = check_sweep_input(sys, omega, times, caller=caller, zero=zero)
-    names = subsets if subsets else {"total": list(block_map(sys).names)}
-    parts = subset_parts(sys, dict(names))
+    parts = subset_parts(sys, dict(subsets or {"total": list(block_map(sys).names)}))
     ranges = chunk_ranges(A.shape[0], options)
     tasks = [(a, A[a:b], Bw[a:b], Cz[a:b], Dzw[a:b], omega, parts, options) for a, b in ranges]
     bar = tqdm(total=A.shape[0], desc=description, disable=not progress, unit="model")
@@ -996,7 +978,7 @@ def sweep_points(
     finally:
         bar.close()
     points = {name: joined_points([r[name] for r in results]) for name in parts}
-    return points, times
+    return sweep_table_of(points, times)
 
 
 def joined_points(chunks) -> SweepPoints:
@@ -1054,17 +1036,7 @@ def mu_sweep(
         full accuracy), plus :data:`~oos_drake.robust.tables.GUARANTEE_COLUMNS` with ``slack``.
     """
     options = options or SweepOptions()
-    points, times = sweep_points(
-        sys,
-        omega,
-        subsets,
-        options=options,
-        caller="mu_sweep",
-        progress=progress,
-        description=description,
-        times=times,
-    )
-    return sweep_table_of(points, times)
+    return _sweep(sys, omega, subsets, times, options, "mu_sweep", progress, description)
 
 
 def robust_sweep(
@@ -1084,8 +1056,8 @@ def robust_sweep(
     guaranteed: bool = True,
     slack: float | None = None,
 ):
-    """mu bounds for every model, frequency and uncertainty subset (:func:`mu_sweep` with
-    keyword options).
+    """mu bounds for every model, frequency and uncertainty subset: :func:`mu_sweep` with
+    keyword options (every upper bound valid, every lower bound certified).
 
     Parameters
     ----------
@@ -1110,25 +1082,18 @@ def robust_sweep(
         bound gets a long run (300 iterations): this settles the slow cases (e.g. a real block
         whose ``M`` is nearly real, where the optimal ``G`` is large).
     warm_start : bool
-        Walk up the frequency grid reusing the scalings of the previous frequency (20
-        iterations per frequency instead of 40-80; the grid must be fine enough for the
-        scalings to change little between neighbours). False: independent ``mussv`` calls.
-        Only used with ``mode="full"``.
+        ``mode="full"`` only: walk up the frequency grid reusing the previous frequency's
+        scalings (``grid="warm"``; the grid must be fine enough for the scalings to change
+        little between neighbours; upper bounds 1-4 % above converged ones away from the
+        polished peaks). False: independent ``mussv`` calls (``grid="cold"``).
     mode : {"peak", "full"}
-        ``"peak"`` (default): a cheap valid upper bound and a cheap certified lower bound at every
-        frequency, full-accuracy bounds only at the frequencies whose cheap upper bound exceeds the
-        model's best lower bound (branch and prune over frequency: exact for each model's peak,
-        honest elsewhere; the ``tightened`` column says which frequencies got full bounds).
+        ``"peak"`` (default, ``grid="pruned"``): full-accuracy bounds only where a model's
+        peak may be, cheap valid ones elsewhere (the ``tightened`` column says which).
         ``"full"``: full-accuracy bounds at every frequency (the whole curve), slower.
     chunk_size : int, optional
-        Models per task (default: at most 40, with a number of tasks that is a multiple of
-        ``n_jobs``, so that no worker idles at the end).
+        Models per task (default: at most 40, a multiple of ``n_jobs`` tasks).
     mu_options : dict, optional
-        Options of :func:`~oos_drake.robust.mussv` for the refinement points and, with
-        ``mode="full", warm_start=False``, for the grid; default: mussv's defaults (upper bound
-        within ~0.25 % of a fully converged one). With ``mode="full", warm_start=True`` the grid
-        upper bound is 1-4 % above a converged one away from the polished peaks; every upper
-        bound is valid.
+        Options of :func:`~oos_drake.robust.mussv` (refinement points, ``"cold"`` grid).
     guaranteed : bool
         Also prove, for each model and subset, a bound of the peak of mu over the whole
         frequency axis (:func:`~oos_drake.robust.mu_intervals.cover_axis`, started from the
@@ -1173,7 +1138,4 @@ def robust_sweep(
         n_jobs=max(1, int(n_jobs)),
         scheduler=scheduler,
     )
-    points, times = sweep_points(
-        as_lfr(sys), omega, subsets, options=options, caller="robust_sweep", times=times
-    )
-    return sweep_table_of(points, times)
+    return _sweep(as_lfr(sys), omega, subsets, times, options, "robust_sweep", False, "")
