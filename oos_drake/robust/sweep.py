@@ -303,22 +303,27 @@ class _Grid:
     delta: np.ndarray
 
 
-def grid_bounds(M, blk, options: SweepOptions):
-    """Upper and lower bounds of mu for a flat batch ``M`` ``(B, c, r)`` (cold, batched)."""
+def _quick_bounds(M, structure, iterations, restarts=2, steps=40) -> _Grid:
+    """Cold bounds of a flat batch ``M``: ``iterations`` BFGS iterations of the upper bound,
+    the power iteration (``restarts``, ``steps``) from its worst directions."""
     from oos_drake.robust.mu_lower import mu_lower_bound
     from oos_drake.robust.mu_upper import mu_upper_bound
 
-    structure = parse_blk(blk)
-    M = np.ascontiguousarray(M)
-    up = mu_upper_bound(M, structure, max_iter=options.upper_iterations)
-    lo = mu_lower_bound(
-        M,
-        structure,
-        start_inputs=up.worst_input,
-        restarts=options.lower_restarts,
-        iters=options.lower_iterations,
+    up = mu_upper_bound(M, structure, max_iter=iterations)
+    lo = mu_lower_bound(M, structure, start_inputs=up.worst_input, restarts=restarts, iters=steps)
+    n = up.upper.size
+    lower = np.minimum(lo.lower, up.upper)
+    return _Grid(up.upper, lower, np.zeros(n, dtype=bool), up.params, np.arange(n), lo.delta)
+
+
+def grid_bounds(M, blk, options: SweepOptions):
+    """Upper and lower bounds of mu for a flat batch ``M`` ``(B, c, r)`` (cold, batched)."""
+    opt = options
+    M, structure = np.ascontiguousarray(M), parse_blk(blk)
+    got = _quick_bounds(
+        M, structure, opt.upper_iterations, opt.lower_restarts, opt.lower_iterations
     )
-    return up.upper, np.minimum(lo.lower, up.upper)
+    return got.upper, got.lower
 
 
 def _converge_model(M, structure, opt):
@@ -572,16 +577,9 @@ def _mussv_points(M, structure, opt) -> _Grid:
 
 def _refine_bounds(M, structure, opt) -> _Grid:
     """Bounds at refinement points: ``refine_iterations`` BFGS iterations, or mussv."""
-    from oos_drake.robust.mu_lower import mu_lower_bound
-    from oos_drake.robust.mu_upper import mu_upper_bound
-
     if opt.refine_iterations is None:
         return _mussv_points(M, structure, opt)
-    ur = mu_upper_bound(M, structure, max_iter=opt.refine_iterations)
-    lr = mu_lower_bound(M, structure, start_inputs=ur.worst_input, restarts=2, iters=40)
-    n = ur.upper.size
-    lower = np.minimum(lr.lower, ur.upper)
-    return _Grid(ur.upper, lower, np.zeros(n, dtype=bool), ur.params, np.arange(n), lr.delta)
+    return _quick_bounds(M, structure, opt.refine_iterations)
 
 
 # --- the later steps (one model at a time or all models in one batch) ------------------------
