@@ -1,4 +1,4 @@
-"""``oos robust mussv|hinfnorm``: mu bounds and H-infinity norms of matrices stored in files.
+"""``oos robust mussv|hinfnorm|robstab|sweep``: mu bounds, H-infinity norms, stability margins.
 
 Files are ``.npz`` (numpy) or ``.mat`` (MATLAB, e.g. written by ``save``): ``mussv`` reads the
 variables ``M`` and ``blk`` (MATLAB BLK rows); ``hinfnorm`` reads ``A``, ``B``, ``C``, ``D``.
