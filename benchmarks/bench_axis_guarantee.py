@@ -70,13 +70,14 @@ def mission(first, last, subset, controller, level=None):
     from oos_drake.analysis.controller import scenario_controller
     from oos_drake.analysis.models import mission_closed_loop, mission_times
     from oos_drake.analysis.run import AnalysisOptions
-    from oos_drake.analysis.stability import _analysis_model, model_grid
+    from oos_drake.analysis.stability import _analysis_model
     from oos_drake.analysis.subsets import uncertainty_subsets
     from oos_drake.blas import limit_blas_threads
     from oos_drake.robust.blocks import parse_blk
     from oos_drake.robust.mu_intervals import Realization, cover_axis, mu_solver, scalings_at
     from oos_drake.robust.mu_lower import mu_lower_bound
     from oos_drake.robust.mu_upper import mu_upper_bound
+    from oos_drake.robust.sweep import model_grid
 
     limit_blas_threads(1)
     times = mission_times(330)[first:last]

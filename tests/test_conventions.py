@@ -55,6 +55,7 @@ RUNNABLE = {
     "robust mussv",
     "robust hinfnorm",
     "robust robstab",
+    "robust sweep",
     "ulinearize",
     "campaign run",
     "campaign resume",

@@ -16,9 +16,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from oos_drake.analysis.stability import SweepOptions, grid_bounds
 from oos_drake.analysis.subsets import block_group
 from oos_drake.robust.lfr_analysis import block_map, delta_channel_response
+from oos_drake.robust.sweep import SweepOptions, grid_bounds
 
 #: Columns of the sensitivity table.
 SENSITIVITY_COLUMNS = [

@@ -7,10 +7,10 @@ bounds are computed:
 
 * grid: a common logarithmic grid plus, per model, points on its lightly damped closed-loop
   poles (where the real modal uncertainty makes mu peak);
-* upper bound: the D-G bound of :func:`oos_drake.robust.mu_upper.mu_upper_bound`, all models
-  and frequencies of a chunk in one batch (every value is a valid bound whatever the iterations);
-* lower bound: the power iteration of :func:`oos_drake.robust.mu_lower.mu_lower_bound` started
-  from the upper bound's worst direction (certified: ``det(I - M delta) = 0``).
+* bounds: the package's one sweep (:func:`oos_drake.robust.sweep.sweep_models`, grid method
+  ``"continued"``): D-G upper bounds continued from configuration to configuration (every
+  value is a valid bound whatever the iterations), power-iteration lower bounds at each
+  configuration's highest upper bounds (certified: ``det(I - M delta) = 0``).
 
 :func:`certified_sweep` then resolves the upper-bound spikes of every subset
 (:mod:`oos_drake.analysis.tightening`: warm-started passes, local frequency refinement,
@@ -45,370 +45,47 @@ from oos_drake.robust.lfr_analysis import (
     subset_parts,
     worst_case_values,
 )
-from oos_drake.robust.sweep import check_sweep_input
-from oos_drake.robust.tables import sweep_table
-
-
-@dataclass(frozen=True)
-class SweepOptions:
-    """Accuracy and parallelism of :func:`mu_sweep`.
-
-    Attributes
-    ----------
-    upper_iterations : int
-        BFGS iterations of the D-G upper bound at the grid frequencies.
-    lower_restarts, lower_iterations : int
-        Random restarts and power-iteration steps of the grid lower bound.
-    refine_points : int
-        Extra frequencies between the neighbours of the highest peak of each model (0: off;
-        the spike resolution of :func:`certified_sweep` refines where the peak may be).
-    refine_iterations : int
-        BFGS iterations at the refinement frequencies.
-    continuation_iterations : int
-        BFGS iterations of every model but the first of a chunk, started from the previous
-        model's scalings (0: every model from Osborne balancing with ``upper_iterations``).
-    pole_points : int
-        Extra grid points per lightly damped closed-loop pole of each model (0: common grid).
-    converge_passes, converge_iterations : int
-        Frequency-continuation passes and their BFGS iterations on the first model of a range.
-    spike_ratio, despike_points : float, int
-        The ``despike_points`` highest continued bounds above ``spike_ratio`` times both
-        frequency neighbours are recomputed from the neighbours' scalings.
-    jump_ratio : float
-        A model whose ``M11`` differs from its predecessor's by more than this (relative, at
-        some frequency) is converged from scratch: a configuration switch (docking) breaks
-        the continuation.
-    lower_points : int
-        Grid lower bounds are computed at this many highest upper bounds of every model.
-    chunk_size : int
-        Models per worker task (0: one contiguous range per worker, the fewest cold starts).
-    n_jobs : int
-        Worker processes (1: in this process).
-    scheduler : str or None
-        Where the workers run (``--scheduler``, :func:`oos_drake.processes.make_executor`):
-        None for the local process pool, ``"dask"`` for a local Dask cluster, or an address.
-    """
-
-    upper_iterations: int = 30
-    lower_restarts: int = 2
-    lower_iterations: int = 40
-    refine_points: int = 0
-    refine_iterations: int = 100
-    continuation_iterations: int = 15
-    converge_passes: int = 1
-    converge_iterations: int = 150
-    spike_ratio: float = 1.1
-    despike_points: int = 4
-    jump_ratio: float = 0.5
-    lower_points: int = 3
-    pole_points: int = 1
-    chunk_size: int = 0
-    n_jobs: int = 2
-    scheduler: str | None = None
-
-    def __post_init__(self):
-        for name in ("upper_iterations", "lower_iterations", "n_jobs"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"SweepOptions.{name} must be >= 1, got {getattr(self, name)}")
-        if self.chunk_size < 0:
-            raise ValueError(f"SweepOptions.chunk_size must be >= 0, got {self.chunk_size}")
-
-
-def grid_bounds(M, blk, options: SweepOptions):
-    """Upper and lower bounds of mu for a flat batch ``M`` ``(B, c, r)`` (cold, batched)."""
-    from oos_drake.robust.mu_lower import mu_lower_bound
-    from oos_drake.robust.mu_upper import mu_upper_bound
-
-    structure = parse_blk(blk)
-    M = np.ascontiguousarray(M)
-    up = mu_upper_bound(M, structure, max_iter=options.upper_iterations)
-    lo = mu_lower_bound(
-        M,
-        structure,
-        start_inputs=up.worst_input,
-        restarts=options.lower_restarts,
-        iters=options.lower_iterations,
-    )
-    return up.upper, np.minimum(lo.lower, up.upper)
-
-
-def model_grid(A, omega, *, band=None, max_damping: float = 0.05, points: int = 1) -> np.ndarray:
-    """``omega`` plus, per lightly damped closed-loop pole in ``band``, points on its peak.
-
-    Parameters
-    ----------
-    A : numpy.ndarray
-        Closed-loop state matrix of one model.
-    omega : numpy.ndarray
-        Common grid [rad/s].
-    band : (float, float), optional
-        Frequency band [rad/s] (default: the span of ``omega``).
-    max_damping : float
-        Poles with a damping ratio below this get extra points.
-    points : int
-        Points per pole, spread over ``+-zeta omega_n`` around ``omega_n``.
-    """
-    lo, hi = band if band is not None else (omega.min(), omega.max())
-    p = np.linalg.eigvals(A)
-    wn = np.abs(p)
-    zeta = -p.real / np.maximum(wn, 1e-300)
-    keep = (p.imag > 0) & (zeta < max_damping) & (wn >= lo) & (wn <= hi)
-    offsets = np.linspace(-1.0, 1.0, points) if points > 1 else np.zeros(1)
-    extra = [
-        w0 * (1.0 + max(z0, 1e-3) * offsets) for w0, z0 in zip(wn[keep], zeta[keep], strict=True)
-    ]
-    return np.unique(np.concatenate([omega] + extra)) if extra else omega
-
-
-def _peak_frequencies(omega, values, points):
-    from oos_drake.robust.robstab import _refine
-
-    return np.setdiff1d(_refine(omega, values, count=1, points=points), omega)
-
-
-def _nearest(grid_from, grid_to):
-    """Index in ``grid_from`` of the nearest (log) frequency of every point of ``grid_to``."""
-    lf, lt = np.log(grid_from), np.log(grid_to)
-    if lf.size == 1:
-        return np.zeros(lt.size, dtype=int)
-    k = np.clip(np.searchsorted(lf, lt), 1, lf.size - 1)
-    return np.where(np.abs(lt - lf[k - 1]) <= np.abs(lf[k] - lt), k - 1, k)
-
-
-def _converge_model(M, structure, opt):
-    """Converged upper bounds on one model's grid: cold start, then frequency continuation.
-
-    Each pass restarts every frequency from its own scalings and from those of both frequency
-    neighbours (``converge_iterations`` each, four smoothing stages) and keeps the smallest
-    bound: started cold, the optimizer often stalls far above the converged value near lightly
-    damped modes; a neighbour's converged scalings do not.
-    """
-    from oos_drake.robust.mu_upper import mu_upper_bound
-
-    res = mu_upper_bound(M, structure, max_iter=opt.upper_iterations)
-    upper, params, worst = res.upper.copy(), res.params.copy(), res.worst_input.copy()
-    if M.shape[0] < 2:
-        return upper, params, worst
-    for _ in range(opt.converge_passes):
-        for shift in (1, -1, 0):
-            x0 = params[np.clip(np.arange(M.shape[0]) - shift, 0, M.shape[0] - 1)]
-            r = mu_upper_bound(
-                M,
-                structure,
-                max_iter=opt.converge_iterations,
-                temperatures=CONVERGED_TEMPERATURES,
-                x0=x0,
-            )
-            better = r.upper < upper
-            upper[better], params[better] = r.upper[better], r.params[better]
-            worst[better] = r.worst_input[better]
-    return upper, params, worst
-
-
-def local_spikes(upper: np.ndarray, ratio: float) -> np.ndarray:
-    """Indices of values above ``ratio`` times both neighbours (one neighbour at the ends)."""
-    if upper.size < 2:
-        return np.zeros(0, dtype=int)
-    left = np.r_[upper[1], upper[:-1]]
-    right = np.r_[upper[1:], upper[-2]]
-    return np.flatnonzero(upper > ratio * np.maximum(left, right))
-
-
-def _despike(M, structure, upper, params, worst, opt):
-    """Recompute one model's highest local spikes from their frequency neighbours' scalings.
-
-    Continuation can carry a stalled point from model to model; a genuine resonance peak is
-    only recomputed (the smaller bound is kept: both are valid).
-    """
-    from oos_drake.robust.mu_upper import mu_upper_bound
-
-    spikes = local_spikes(upper, opt.spike_ratio)
-    if spikes.size == 0 or opt.despike_points <= 0:
-        return upper, params, worst
-    spikes = spikes[np.argsort(-upper[spikes])][: opt.despike_points]
-    n = upper.size
-    idx = np.concatenate([spikes, spikes])
-    src = np.concatenate([np.maximum(spikes - 1, 0), np.minimum(spikes + 1, n - 1)])
-    src = np.where(src == idx, np.where(idx == 0, 1, n - 2), src)
-    r = mu_upper_bound(
-        M[idx],
-        structure,
-        max_iter=opt.converge_iterations,
-        temperatures=CONVERGED_TEMPERATURES,
-        x0=params[src],
-    )
-    upper, params, worst = upper.copy(), params.copy(), worst.copy()
-    for k, i in enumerate(idx):
-        if r.upper[k] < upper[i]:
-            upper[i], params[i], worst[i] = r.upper[k], r.params[k], r.worst_input[k]
-    return upper, params, worst
-
-
-def _jump(M_prev, M, nearest) -> float:
-    """Largest relative change of ``M11`` between consecutive models over the grid [-].
-
-    Channels that are numerically zero (a body not connected yet: norms below 1e-6) never
-    count as a jump.
-    """
-    norm = np.linalg.norm(M, axis=(1, 2))
-    if norm.size == 0 or np.max(norm) < 1e-6:
-        return 0.0
-    diff = np.linalg.norm(M - M_prev[nearest], axis=(1, 2))
-    return float(np.max(diff / np.maximum(norm, 1e-6 * np.max(norm))))
-
-
-def _continued_upper(subs, grids, structure, opt, tick):
-    """Upper bounds of consecutive models, each started from its predecessor's scalings.
-
-    The first model of the chunk, and any model after a jump of the configuration, is
-    converged (:func:`_converge_model`); model ``j`` starts
-    from model ``j - 1``'s scalings at the nearest frequency, or from balancing where that is
-    better, for ``continuation_iterations`` at one high smoothing temperature. Neighbouring
-    configurations are close problems: measured on the mission, this is four times cheaper than
-    a cold start and leaves no spike. ``continuation_iterations = 0``: every model cold.
-    """
-    from oos_drake.robust.mu_upper import mu_upper_bound
-
-    ups, pars, worsts, prev = [], [], [], None
-    for j, M in enumerate(subs):
-        if opt.continuation_iterations <= 0:
-            r = mu_upper_bound(M, structure, max_iter=opt.upper_iterations)
-            u, p, w = r.upper, r.params, r.worst_input
-        elif prev is None or _jump(subs[j - 1], M, near := _nearest(grids[j - 1], grids[j])) > (
-            opt.jump_ratio
-        ):
-            u, p, w = _converge_model(M, structure, opt)  # first model, or a switch
-        else:
-            r = mu_upper_bound(
-                M,
-                structure,
-                max_iter=opt.continuation_iterations,
-                temperatures=(1000.0,),
-                x0=prev[near],
-            )
-            u, p, w = _despike(M, structure, r.upper, r.params, r.worst_input, opt)
-        prev = p
-        ups.append(u)
-        pars.append(p)
-        worsts.append(w)
-        tick()
-    return np.concatenate(ups), np.concatenate(pars), worsts
-
-
-def _top_points(upper, model_of, count):
-    """Indices of the ``count`` largest values of ``upper`` per model."""
-    order = np.lexsort((-upper, model_of))
-    first = np.searchsorted(model_of[order], model_of[order], side="left")
-    return np.sort(order[(np.arange(order.size) - first) < count])
+from oos_drake.robust.sweep import (
+    SweepOptions,
+    check_sweep_input,
+    chunk_ranges,
+    joined_points,
+    sweep_models,
+    sweep_table_of,
+)
+from oos_drake.robust.sweep import mu_sweep as mu_sweep  # the analysis's grid-only sweep
 
 
 def _sweep_chunk(task):
-    """Worker: every subset and frequency of a range of models (model arrays in the worker).
-
-    Returns, per subset, the rows ``(model, omega, upper, lower, params, refined)`` and the best
-    lower bound of the range with its perturbation. Lower bounds are computed at the
-    ``lower_points`` highest upper bounds of every model (0 elsewhere: a valid, trivial bound).
-    """
+    """Worker: :func:`~oos_drake.robust.sweep.sweep_models` on a range of models (model arrays
+    in the worker, one progress tick per model and subset)."""
     from oos_drake.analysis.workers import _ARRAYS
-    from oos_drake.robust.mu_lower import mu_lower_bound
-    from oos_drake.robust.mu_upper import mu_upper_bound
 
     first, last, omega, parts, opt = task
-    A, Bw, Cz, Dzw = _ARRAYS["models"]
+    A, Bw, Cz, Dzw = (x[first:last] for x in _ARRAYS["models"])
     queue = _ARRAYS.get("queue")
-
-    def tick():
-        if queue is not None:
-            queue.put(1)
-
-    models = range(first, last)
-    grids = [
-        model_grid(A[j], omega, points=opt.pole_points) if opt.pole_points else omega
-        for j in models
-    ]
-    Ms = [
-        delta_channel_response(A[j], Bw[j], Cz[j], Dzw[j], g)
-        for j, g in zip(models, grids, strict=True)
-    ]
-    model_of = np.concatenate([np.full(g.size, j) for j, g in zip(models, grids, strict=True)])
-    omega_of = np.concatenate(grids)
-    out = {}
-    for name, (zrows, wcols, blk) in parts.items():
-        structure = parse_blk(blk)
-        subs = [M[:, zrows][:, :, wcols] for M in Ms]
-        flat = np.concatenate(subs)
-        upper, params, worsts = _continued_upper(subs, grids, structure, opt, tick)
-        lower = np.zeros(flat.shape[0])
-        top = _top_points(upper, model_of, max(opt.lower_points, 1))
-        lo = mu_lower_bound(
-            flat[top],
-            structure,
-            start_inputs=np.concatenate(worsts)[top],
-            restarts=opt.lower_restarts,
-            iters=opt.lower_iterations,
-        )
-        lower[top] = np.minimum(lo.lower, upper[top])
-        rows = [(model_of, omega_of, upper, lower, params, np.zeros(flat.shape[0], bool))]
-        k = int(np.argmax(lower[top]))
-        best = LowerCertificate(
-            float(lower[top][k]),
-            int(model_of[top][k]),
-            float(omega_of[top][k]),
-            lo.delta[k],
-            "grid",
-        )
-        if opt.refine_points > 0:
-            extra_m, extra_w = [], []
-            for j, g in zip(models, grids, strict=True):
-                sel = model_of == j
-                e = _peak_frequencies(g, upper[sel], opt.refine_points)
-                extra_m.append(np.full(e.size, j))
-                extra_w.append(e)
-            em, ew = np.concatenate(extra_m), np.concatenate(extra_w)
-            if em.size:
-                Mr = np.concatenate(
-                    [
-                        delta_channel_response(A[j], Bw[j], Cz[j], Dzw[j], ew[em == j])[:, zrows][
-                            :, :, wcols
-                        ]
-                        for j in np.unique(em)
-                    ]
-                )
-                order = np.argsort(em, kind="stable")  # np.unique order = sorted by model
-                em, ew = em[order], ew[order]
-                ur = mu_upper_bound(Mr, structure, max_iter=opt.refine_iterations)
-                lr = mu_lower_bound(
-                    Mr, structure, start_inputs=ur.worst_input, restarts=2, iters=40
-                )
-                lower_r = np.minimum(lr.lower, ur.upper)
-                rows.append((em, ew, ur.upper, lower_r, ur.params, np.ones(em.size, bool)))
-                k = int(np.argmax(lower_r))
-                if lower_r[k] > best.value:
-                    best = LowerCertificate(
-                        float(lower_r[k]), int(em[k]), float(ew[k]), lr.delta[k], "grid"
-                    )
-        out[name] = (rows, best)
-    return out
+    tick = None if queue is None else (lambda: queue.put(1))
+    return sweep_models(A, Bw, Cz, Dzw, omega, parts, opt, first=first, tick=tick)
 
 
 def _collect(results, parts):
-    """Merge the chunks' rows into one :class:`SubsetPoints` and best lower bound per subset."""
+    """Merge the chunks' points into one :class:`SubsetPoints` and best lower bound per subset
+    (the first model with the largest one)."""
     points, lowers = {}, {}
     for name in parts:
-        rows = [r for res in results for r in res[name][0]]
-        pts = SubsetPoints(
-            np.concatenate([r[0] for r in rows]).astype(int),
-            np.concatenate([r[1] for r in rows]).astype(float),
-            np.concatenate([r[2] for r in rows]),
-            np.concatenate([r[3] for r in rows]),
-            np.concatenate([r[4] for r in rows]),
-            np.concatenate([r[5] for r in rows]),
-            np.zeros(sum(r[0].size for r in rows), dtype=bool),
+        pts = joined_points([res[name] for res in results])
+        points[name] = SubsetPoints(
+            pts.model.astype(int),
+            pts.omega.astype(float),
+            pts.upper,
+            pts.lower,
+            pts.params,
+            pts.refined,
+            pts.tightened,
         )
-        pts.upper = np.maximum(pts.upper, pts.lower)
-        pts.sort()
-        points[name] = pts
-        lowers[name] = max((res[name][1] for res in results), key=lambda c: c.value)
+        model = max(sorted(pts.best), key=lambda m: pts.best[m][0])
+        value, omega, delta = pts.best[model]
+        lowers[name] = LowerCertificate(value, int(model), omega, delta, "grid")
     return points, lowers
 
 
@@ -418,8 +95,7 @@ def _grid_points(pool, n_models, omega, parts, options, progress, description):
 
     from tqdm.auto import tqdm
 
-    size = options.chunk_size or int(np.ceil(n_models / pool.n_jobs))
-    tasks = [(i, min(i + size, n_models), omega, parts, options) for i in range(0, n_models, size)]
+    tasks = [(a, b, omega, parts, options) for a, b in chunk_ranges(n_models, options)]
     bar = tqdm(
         total=n_models,
         desc=description,
@@ -449,69 +125,6 @@ def _grid_points(pool, n_models, omega, parts, options, progress, description):
     bar.refresh()
     bar.close()
     return _collect(results, parts)
-
-
-def _table(points: dict, times) -> pd.DataFrame:
-    """The sweep table (:data:`~oos_drake.robust.tables.SWEEP_COLUMNS`) of every subset's points."""
-    names = np.concatenate(
-        [np.full(pts.model.size, name, dtype=object) for name, pts in points.items()]
-    )
-    pts = list(points.values())
-    model = np.concatenate([p.model for p in pts])
-    return sweep_table(
-        subset=names,
-        model=model,
-        time=times[model],
-        omega=np.concatenate([p.omega for p in pts]),
-        upper=np.concatenate([p.upper for p in pts]),
-        lower=np.concatenate([p.lower for p in pts]),
-        refined=np.concatenate([p.refined for p in pts]),
-        tightened=np.concatenate([p.tightened for p in pts]),
-    )
-
-
-def mu_sweep(
-    sys,
-    omega,
-    subsets: dict,
-    *,
-    times=None,
-    options: SweepOptions | None = None,
-    progress: bool = True,
-    description: str = "mu sweep",
-) -> pd.DataFrame:
-    """mu bounds for every model of ``sys``, frequency of ``omega`` and subset (no tightening).
-
-    Parameters
-    ----------
-    sys : LFR
-        Uncertain closed loop, a model array ``(N,)`` (or one model).
-    omega : array_like
-        Frequency grid [rad/s] (> 0), plus per model points on its lightly damped poles.
-    subsets : dict
-        Subset name -> block names.
-    times : array_like, optional
-        Mission time [s] (or any scheduling value) of each model, stored as ``time [s]``.
-    options : SweepOptions, optional
-    progress : bool
-        Show a tqdm progress bar (chunks of models).
-    description : str
-        Label of the progress bar.
-
-    Returns
-    -------
-    pandas.DataFrame
-        Columns :data:`~oos_drake.robust.tables.SWEEP_COLUMNS` (``mu lower [-]``: certified;
-        ``tightened``: upper bound recomputed with many iterations).
-    """
-    options = options or SweepOptions()
-    omega, arrays, times = check_sweep_input(sys, omega, times, caller="mu_sweep", zero=False)
-    parts = subset_parts(sys, subsets)
-    with ModelPool(arrays, options.n_jobs, options.scheduler) as pool:
-        points, _ = _grid_points(
-            pool, arrays[0].shape[0], omega, parts, options, progress, description
-        )
-    return _table(points, times)
 
 
 def _search_task(task):
@@ -805,6 +418,11 @@ def certified_sweep(
     from tqdm.auto import tqdm
 
     options = options or SweepOptions()
+    if options.grid != "continued" or options.refine_iterations is None:
+        raise ValueError(
+            "certified_sweep: SweepOptions.grid must be 'continued' and refine_iterations set "
+            "(the spike resolution restarts from every point's scalings)"
+        )
     tighten = tighten or TightenOptions()
     omega, arrays, times = check_sweep_input(sys, omega, times, caller="mu_sweep", zero=False)
     n_models = arrays[0].shape[0]
@@ -909,7 +527,7 @@ def certified_sweep(
                     gap=guarantee_gap,
                 )
             timings["guarantee"] = _time.perf_counter() - clock
-    return StudyResult(_table(points, times), certificates, reports, timings, guarantees)
+    return StudyResult(sweep_table_of(points, times), certificates, reports, timings, guarantees)
 
 
 def _certificate(

@@ -17,9 +17,7 @@ import numpy as np
 from oos_drake.processes import make_executor, start_method
 from oos_drake.robust.blocks import parse_blk
 from oos_drake.robust.lfr_analysis import delta_channel_response
-
-#: Smoothing stages of the converged upper bounds (one more than mussv's default).
-CONVERGED_TEMPERATURES = (30.0, 300.0, 3000.0, 30000.0)
+from oos_drake.robust.sweep import CONVERGED_TEMPERATURES
 
 _ARRAYS: dict = {}
 

@@ -1,4 +1,4 @@
-"""``oos robust mussv|hinfnorm``: mu bounds and H-infinity norms of matrices stored in files.
+"""``oos robust mussv|hinfnorm|robstab|sweep``: mu bounds, H-infinity norms, stability margins.
 
 Files are ``.npz`` (numpy) or ``.mat`` (MATLAB, e.g. written by ``save``): ``mussv`` reads the
 variables ``M`` and ``blk`` (MATLAB BLK rows); ``hinfnorm`` reads ``A``, ``B``, ``C``, ``D``.
@@ -13,6 +13,7 @@ Examples::
     oos robust hinfnorm plant.npz
     oos robust robstab closed_loop.npz           # LFR file (lfr.to_npz / to_mat, oos ulinearize)
     oos robust robstab loop.npz --out mu.csv     # also the mu bounds per frequency (sweep table)
+    oos robust sweep loops.npz --out mu.parquet  # LFR model array: every model (robust_sweep)
 """
 
 from __future__ import annotations
@@ -103,6 +104,32 @@ def _robstab(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sweep(args: argparse.Namespace) -> int:
+    from oos_drake.lfr import load_lfr
+    from oos_drake.robust import robust_sweep
+
+    if args.out and Path(args.out).suffix not in (".csv", ".parquet"):
+        raise ValueError(f"--out {args.out}: expected a .csv or .parquet file")
+    sys = load_lfr(args.file)
+    subsets = {",".join(args.blocks): args.blocks} if args.blocks else None
+    table = robust_sweep(sys, subsets=subsets, n_jobs=args.workers)
+    print(f"{args.file}: {table['model'].nunique()} model(s), blocks {list(sys.occurrences)}")
+    peaks = table.groupby(["subset", "model"], sort=False).agg(
+        lower=("mu lower [-]", "max"),
+        upper=("mu upper [-]", "max"),
+        guaranteed=("mu upper guaranteed [-]", "first"),
+    )
+    for (subset, model), row in peaks.iterrows():
+        print(
+            f"  {subset} [{model}]: peak mu in [{row.lower:.6g}, {row.upper:.6g}] on the grid, "
+            f"<= {row.guaranteed:.6g} on the whole frequency axis"
+        )
+    if args.out:
+        _write_table(table, args.out)
+        print(f"mu bounds per model and frequency written to {args.out}")
+    return 0
+
+
 def _write_table(table, path: str) -> None:
     """Write a table atomically as CSV or Parquet, chosen by the suffix of ``path``."""
     from oos_drake.campaign.store import atomic_write_parquet, atomic_write_text
@@ -141,3 +168,11 @@ def register(subparsers) -> None:
         help=".csv or .parquet file for the mu bounds per frequency (the mu sweep table)",
     )
     stab.set_defaults(func=_robstab)
+    sweep = commands.add_parser(
+        "sweep", help="mu bounds of every model of a stored LFR model array (robust_sweep)"
+    )
+    sweep.add_argument("file", help=".npz or .mat LFR file, possibly a model array")
+    sweep.add_argument("--blocks", nargs="+", default=None, help="analyze only these blocks")
+    sweep.add_argument("--workers", type=int, default=1, help="worker processes")
+    sweep.add_argument("--out", default=None, help=".csv or .parquet file for the mu sweep table")
+    sweep.set_defaults(func=_sweep)

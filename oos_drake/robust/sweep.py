@@ -1,23 +1,24 @@
-"""mu bounds over model arrays, frequencies and uncertainty subsets (the paper's Fig. muanalysis).
+"""The package's one mu sweep: bounds over model arrays, frequencies and uncertainty subsets.
 
-:func:`robust_sweep` evaluates ``mu(M11(j omega))`` for every model of an LFR model array (e.g.
-330 configurations along the mission), every frequency of a grid and every named subset of the
-uncertain blocks (blocks outside a subset stay nominal), refines around each model's peak, and
-returns a tidy ``pandas.DataFrame``. Models are spread over worker processes.
-
-What a sweep needs is each model's peak with a tight certified bracket. The default ``"peak"``
-mode gets it by branch and prune over frequency: cheap valid bounds everywhere (balancing plus
-two descent steps for the upper bound, one power-iteration start for the lower one), full
-bounds only where the cheap upper bound exceeds the best lower bound of the model (about 2 %
-of a 500-point grid on the paper-sized benchmark), so the peak is bracketed as in the
-``"full"`` mode for a fraction of the cost. The ``tightened`` column says where.
+:func:`sweep_models` is the one loop behind :func:`~oos_drake.robust.robstab`,
+:func:`robust_sweep`, :func:`mu_sweep`, ``oos robust`` and the analysis
+(:mod:`oos_drake.analysis.stability`). For every subset of the uncertain blocks (blocks outside
+it stay nominal) and every model of a chunk it runs, as :class:`SweepOptions` says: grid bounds
+(one of four methods), refinement next to the peaks, a long polish of the highest upper bounds,
+the search of real-axis crossings (real blocks) and the proof of the peak on the whole
+frequency axis. Each model's points come back sorted by frequency (:class:`SweepPoints`);
+:func:`mu_sweep` spreads chunks of models over worker processes and returns the one table
+(:func:`~oos_drake.robust.tables.sweep_table`).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from oos_drake.processes import make_executor
+from oos_drake.robust.blocks import parse_blk
 from oos_drake.robust.lfr_analysis import (
     block_map,
     delta_channel_response,
@@ -27,97 +28,445 @@ from oos_drake.robust.lfr_analysis import (
 )
 from oos_drake.robust.tables import sweep_table
 
+#: Smoothing stages of the converged upper bounds (one more than mussv's default).
+CONVERGED_TEMPERATURES = (30.0, 300.0, 3000.0, 30000.0)
 
-def _polish_model_peaks(M, blk, up, lo, count):
-    """Long upper-bound runs at each model's ``count`` highest frequencies (min of two bounds)."""
-    from oos_drake.robust.blocks import parse_blk
-    from oos_drake.robust.mu_upper import mu_upper_bound
-
-    nm, F = up.shape
-    top = np.argsort(up, axis=1)[:, ::-1][:, : min(count, F)]
-    rows = np.repeat(np.arange(nm), top.shape[1])
-    cols = top.ravel()
-    better = mu_upper_bound(M[rows, cols], parse_blk(blk), max_iter=300).upper
-    up[rows, cols] = np.maximum(np.minimum(up[rows, cols], better), lo[rows, cols])
-    return up
+#: Grid methods of :class:`SweepOptions`.
+GRID_METHODS = ("continued", "pruned", "warm", "cold")
 
 
-def _warm_sweep(M, blk, *, warm_iterations=20, lower_restarts=2, lower_iterations=40):
-    """Bounds for ``M`` ``(nm, F, c, r)`` walking up the frequency axis with warm starts.
+@dataclass(frozen=True)
+class SweepOptions:
+    """The steps of :func:`sweep_models`, their accuracy and the parallelism.
 
-    The first frequency starts from Osborne balancing (80 iterations); each next one from the
-    scalings of the previous frequency or from balancing, whichever is better, for
-    ``warm_iterations`` iterations at a single high smoothing temperature. The lower bound runs
-    once on the whole batch, started from the upper bound's worst directions.
+    Attributes
+    ----------
+    grid : {"continued", "pruned", "warm", "cold"}
+        How the grid bounds are computed. ``"continued"`` (the analysis): upper bounds of
+        consecutive models started from the previous model's scalings (:func:`_continued_grid`),
+        lower bounds at each model's highest upper bounds (0 elsewhere). ``"pruned"``: cheap
+        valid bounds everywhere, full ones only where a model's peak may be
+        (:func:`_pruned_grid`). ``"warm"``: all models walk up the frequency axis warm-started
+        (:func:`_warm_grid`). ``"cold"``: :func:`~oos_drake.robust.mussv` everywhere.
+    upper_iterations : int
+        BFGS iterations of the D-G upper bound at the grid frequencies (``"continued"``: cold
+        starts).
+    lower_restarts, lower_iterations : int
+        Random restarts and power-iteration steps of the grid lower bound (``"continued"``).
+    lower_points : int
+        ``"continued"``: grid lower bounds at this many highest upper bounds of every model.
+    continuation_iterations : int
+        ``"continued"``: BFGS iterations of every model but the first of a chunk, started
+        from the previous model's scalings (0: every model from balancing with
+        ``upper_iterations``).
+    converge_passes, converge_iterations : int
+        ``"continued"``: frequency-continuation passes and their BFGS iterations on the first
+        model of a chunk.
+    spike_ratio, despike_points : float, int
+        ``"continued"``: the ``despike_points`` highest continued bounds above ``spike_ratio``
+        times both frequency neighbours are recomputed from the neighbours' scalings.
+    jump_ratio : float
+        ``"continued"``: a model whose ``M11`` differs from its predecessor's by more than this
+        (relative, at some frequency) is converged from scratch (a configuration switch).
+    pole_points : int
+        Extra grid points per lightly damped closed-loop pole of each model (0: common grid;
+        ``"warm"`` needs the common grid).
+    mu_options : dict, optional
+        Options of :func:`~oos_drake.robust.mussv` (``"cold"`` grid, refinement with
+        ``refine_iterations=None``, crossings).
+    refine_points : int
+        New frequencies per refined peak (0: no refinement).
+    refine_peaks : int
+        Highest local maxima refined per model and curve.
+    refine_rounds : int
+        Refinement rounds (each on the grid refined so far).
+    refine_lower : bool
+        Also refine around the peaks of the lower bound.
+    refine_iterations : int or None
+        BFGS iterations of the upper bound at the refinement points (lower bound: power
+        iteration, 2 restarts of 40 steps); None: :func:`~oos_drake.robust.mussv` with
+        ``mu_options``.
+    polish_points, polish_rounds, polish_iterations : int
+        Long upper-bound runs (``polish_iterations``) at the ``polish_points`` highest
+        upper bounds of each model, for up to ``polish_rounds`` rounds (0 points: off).
+    polish_temperatures : tuple of float, optional
+        Smoothing stages of the polish (default: those of the upper-bound optimizer).
+    crossings : bool
+        Search the real-axis crossings of ``M(j omega) Delta`` (real blocks only).
+    slack : float, optional
+        Prove each model's peak on the whole frequency axis with this relative slack
+        (None: no guarantee).
+    chunk_size : int
+        Models per worker task (0: ``"continued"``: one contiguous range per worker, the
+        fewest cold starts; other methods: at most 40 models, a multiple of ``n_jobs`` tasks).
+    n_jobs : int
+        Worker processes (1: in this process).
+    scheduler : str or None
+        Where the workers run (``--scheduler``, :func:`oos_drake.processes.make_executor`):
+        None for the local process pool, ``"dask"`` for a local Dask cluster, or an address.
     """
-    from oos_drake.robust.blocks import parse_blk
+
+    grid: str = "continued"
+    upper_iterations: int = 30
+    lower_restarts: int = 2
+    lower_iterations: int = 40
+    lower_points: int = 3
+    continuation_iterations: int = 15
+    converge_passes: int = 1
+    converge_iterations: int = 150
+    spike_ratio: float = 1.1
+    despike_points: int = 4
+    jump_ratio: float = 0.5
+    pole_points: int = 1
+    mu_options: dict | None = None
+    refine_points: int = 0
+    refine_peaks: int = 1
+    refine_rounds: int = 1
+    refine_lower: bool = False
+    refine_iterations: int | None = 100
+    polish_points: int = 0
+    polish_rounds: int = 1
+    polish_iterations: int = 300
+    polish_temperatures: tuple | None = None
+    crossings: bool = False
+    slack: float | None = None
+    chunk_size: int = 0
+    n_jobs: int = 2
+    scheduler: str | None = None
+
+    def __post_init__(self):
+        for name in ("upper_iterations", "lower_iterations", "n_jobs"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"SweepOptions.{name} must be >= 1, got {getattr(self, name)}")
+        if self.chunk_size < 0:
+            raise ValueError(f"SweepOptions.chunk_size must be >= 0, got {self.chunk_size}")
+        if self.grid not in GRID_METHODS:
+            raise ValueError(f"SweepOptions.grid must be one of {GRID_METHODS}, got {self.grid!r}")
+        if self.grid == "warm" and self.pole_points:
+            raise ValueError("SweepOptions.pole_points must be 0 with grid='warm' (common grid)")
+
+
+@dataclass
+class SweepPoints:
+    """The points of one subset (one row per model and frequency, sorted by model, frequency).
+
+    Attributes
+    ----------
+    model, omega, upper, lower : numpy.ndarray
+        Model index, frequency [rad/s], bounds of mu [-] (``lower``: certified, 0 where not
+        computed).
+    refined, tightened : numpy.ndarray
+        Added by the refinement or the crossing search; bounds of full accuracy.
+    params : numpy.ndarray or None
+        Upper-bound scalings of every point (None when a step used ``mussv``).
+    best : dict
+        Model -> ``(lower, omega, delta)``: its best certified lower bound, where, and the
+        perturbation (``det(I - M delta) = 0``, ``||delta|| = 1 / lower``).
+    guarantees : dict
+        Model -> :class:`~oos_drake.robust.mu_intervals.AxisCertificate` (``slack`` set).
+    """
+
+    model: np.ndarray
+    omega: np.ndarray
+    upper: np.ndarray
+    lower: np.ndarray
+    refined: np.ndarray
+    tightened: np.ndarray
+    params: np.ndarray | None
+    best: dict
+    guarantees: dict
+
+
+# --- frequency points -------------------------------------------------------------------------
+
+
+def refine_frequencies(omega, values, count=4, points=12):
+    """New frequencies between the neighbours of the ``count`` highest local maxima of
+    ``values`` (``points`` per maximum)."""
+    if omega.size < 3:
+        return np.zeros(0)
+    interior = (values[1:-1] >= values[:-2]) & (values[1:-1] >= values[2:])
+    peaks = np.flatnonzero(interior) + 1
+    ends = [i for i in (0, omega.size - 1) if values[i] == values.max()]
+    peaks = np.concatenate([peaks, ends]).astype(int)
+    if peaks.size == 0:
+        return np.zeros(0)
+    peaks = peaks[np.argsort(values[peaks])[::-1][:count]]
+    new = []
+    for i in peaks:
+        lo = omega[max(i - 1, 0)]
+        hi = omega[min(i + 1, omega.size - 1)]
+        if hi > lo:
+            new.append(np.linspace(lo, hi, points + 2)[1:-1])
+    return np.concatenate(new) if new else np.zeros(0)
+
+
+def merged(omega, arrays, new, new_arrays):
+    """``omega`` and its per-frequency ``arrays`` with the points ``new`` added, sorted (stable);
+    an array that is None on either side is None."""
+    omega = np.concatenate([omega, new])
+    order = np.argsort(omega, kind="stable")
+    out = (
+        None if a is None or b is None else np.concatenate([a, b])[order]
+        for a, b in zip(arrays, new_arrays, strict=True)
+    )
+    return omega[order], tuple(out)
+
+
+def refined_grid(omega, arrays, evaluate, curves, rounds):
+    """Per-frequency ``arrays`` on a grid refined ``rounds`` times next to the 4 highest peaks
+    of each of ``curves(arrays)``; ``evaluate(new)`` returns the arrays at new frequencies (the
+    refinement of :func:`~oos_drake.robust.wcgain`, whose points are not mu bounds)."""
+    for _ in range(rounds):
+        new = np.concatenate([refine_frequencies(omega, values) for values in curves(arrays)])
+        new = np.setdiff1d(np.unique(new), omega)
+        if new.size == 0:
+            break
+        omega, arrays = merged(omega, arrays, new, evaluate(new))
+    return omega, arrays
+
+
+def peak_seeds(omega, values, count: int = 6) -> np.ndarray:
+    """Frequencies of the ``count`` highest local maxima of ``values`` (plus 0): where a cover
+    of the frequency axis starts."""
+    interior = np.r_[True, values[1:] >= values[:-1]] & np.r_[values[:-1] >= values[1:], True]
+    peaks = np.flatnonzero(interior)
+    peaks = peaks[np.argsort(values[peaks])[::-1][:count]]
+    return np.unique(np.concatenate([[0.0], omega[peaks]]))
+
+
+def model_grid(A, omega, *, band=None, max_damping: float = 0.05, points: int = 1) -> np.ndarray:
+    """``omega`` plus, per lightly damped closed-loop pole in ``band``, points on its peak.
+
+    Parameters
+    ----------
+    A : numpy.ndarray
+        Closed-loop state matrix of one model.
+    omega : numpy.ndarray
+        Common grid [rad/s].
+    band : (float, float), optional
+        Frequency band [rad/s] (default: the span of ``omega``).
+    max_damping : float
+        Poles with a damping ratio below this get extra points.
+    points : int
+        Points per pole, spread over ``+-zeta omega_n`` around ``omega_n``.
+    """
+    lo, hi = band if band is not None else (omega.min(), omega.max())
+    p = np.linalg.eigvals(A)
+    wn = np.abs(p)
+    zeta = -p.real / np.maximum(wn, 1e-300)
+    keep = (p.imag > 0) & (zeta < max_damping) & (wn >= lo) & (wn <= hi)
+    offsets = np.linspace(-1.0, 1.0, points) if points > 1 else np.zeros(1)
+    extra = [
+        w0 * (1.0 + max(z0, 1e-3) * offsets) for w0, z0 in zip(wn[keep], zeta[keep], strict=True)
+    ]
+    return np.unique(np.concatenate([omega] + extra)) if extra else omega
+
+
+def _nearest(grid_from, grid_to):
+    """Index in ``grid_from`` of the nearest (log) frequency of every point of ``grid_to``."""
+    lf, lt = np.log(grid_from), np.log(grid_to)
+    if lf.size == 1:
+        return np.zeros(lt.size, dtype=int)
+    k = np.clip(np.searchsorted(lf, lt), 1, lf.size - 1)
+    return np.where(np.abs(lt - lf[k - 1]) <= np.abs(lf[k] - lt), k - 1, k)
+
+
+def local_spikes(upper: np.ndarray, ratio: float) -> np.ndarray:
+    """Indices of values above ``ratio`` times both neighbours (one neighbour at the ends)."""
+    if upper.size < 2:
+        return np.zeros(0, dtype=int)
+    left = np.r_[upper[1], upper[:-1]]
+    right = np.r_[upper[1:], upper[-2]]
+    return np.flatnonzero(upper > ratio * np.maximum(left, right))
+
+
+def _top_points(upper, model_of, count):
+    """Indices of the ``count`` largest values of ``upper`` per model (sorted)."""
+    order = np.lexsort((-upper, model_of))
+    first = np.searchsorted(model_of[order], model_of[order], side="left")
+    return np.sort(order[(np.arange(order.size) - first) < count])
+
+
+# --- grid methods -----------------------------------------------------------------------------
+
+
+@dataclass
+class _Grid:
+    """Flat grid bounds of one subset: lower bounds computed at ``at`` (with ``delta``)."""
+
+    upper: np.ndarray
+    lower: np.ndarray
+    tightened: np.ndarray
+    params: np.ndarray | None
+    at: np.ndarray
+    delta: np.ndarray
+
+
+def _quick_bounds(M, structure, iterations, restarts=2, steps=40) -> _Grid:
+    """Cold bounds of a flat batch ``M``: ``iterations`` BFGS iterations of the upper bound,
+    the power iteration (``restarts``, ``steps``) from its worst directions."""
     from oos_drake.robust.mu_lower import mu_lower_bound
     from oos_drake.robust.mu_upper import mu_upper_bound
 
-    s = parse_blk(blk)
-    nm, F = M.shape[:2]
-    up = np.empty((nm, F))
-    worst = np.empty((nm, F, s.n_rows), dtype=complex)
-    x = None
-    for f in range(F):
-        if x is None:
-            res = mu_upper_bound(M[:, f], s, max_iter=80)
-        else:
-            res = mu_upper_bound(M[:, f], s, max_iter=warm_iterations, temperatures=(1000.0,), x0=x)
-        x = res.params
-        up[:, f] = res.upper
-        worst[:, f] = res.worst_input
-    flat = M.reshape((-1,) + M.shape[2:])
-    starts = worst.reshape(-1, s.n_rows)
-    lo = np.concatenate(
-        [
-            mu_lower_bound(
-                flat[i : i + 2048],
-                s,
-                start_inputs=starts[i : i + 2048],
-                restarts=lower_restarts,
-                iters=lower_iterations,
-            ).lower
-            for i in range(0, flat.shape[0], 2048)
-        ]
-    ).reshape(nm, F)
-    return np.maximum(up, lo), lo
+    up = mu_upper_bound(M, structure, max_iter=iterations)
+    lo = mu_lower_bound(M, structure, start_inputs=up.worst_input, restarts=restarts, iters=steps)
+    n = up.upper.size
+    lower = np.minimum(lo.lower, up.upper)
+    return _Grid(up.upper, lower, np.zeros(n, dtype=bool), up.params, np.arange(n), lo.delta)
 
 
-def _pruned_sweep(
-    M,
-    blk,
-    *,
-    cheap_iterations=2,
-    first_round=3,
-    round_size=16,
-    upper_iterations=None,
-    upper_tol=None,
-    lower_restarts=4,
-    lower_iterations=60,
-):
-    """Peak mode: cheap bounds everywhere, full bounds only where the peak may be.
+def grid_bounds(M, blk, options: SweepOptions):
+    """Upper and lower bounds of mu for a flat batch ``M`` ``(B, c, r)`` (cold, batched)."""
+    opt = options
+    M, structure = np.ascontiguousarray(M), parse_blk(blk)
+    got = _quick_bounds(
+        M, structure, opt.upper_iterations, opt.lower_restarts, opt.lower_iterations
+    )
+    return got.upper, got.lower
 
-    1. Every frequency gets a cheap valid upper bound (Osborne balancing and ``cheap_iterations``
-       L-BFGS iterations) and a cheap certified lower bound (one power-iteration start from the
-       upper bound's worst direction).
-    2. Per model, ``L*`` is the best lower bound found so far. A frequency whose upper bound is
-       ``<= L*`` cannot hold the model's peak (``mu <= upper <= L* <= peak``): it is left alone.
-       The others are tightened (the upper bound of :func:`~oos_drake.robust.mussv`
-       warm-started from the cheap scalings, its lower bound with restarts), highest first:
-       ``first_round`` per model, then ``round_size`` per model, doubling every round,
-       updating ``L*`` between rounds, until no untightened frequency has an upper bound above
-       ``L*``.
 
-    The peak of each model is therefore bracketed by full-accuracy bounds (exactly as in the
-    full mode); elsewhere the upper bound is valid but up to a few percent looser.
+def _converge_model(M, structure, opt):
+    """Converged upper bounds on one model's grid: cold start, then frequency continuation.
 
-    Returns
-    -------
-    tuple of numpy.ndarray
-        ``(upper, lower, tightened)``, each ``(nm, F)``.
+    Each pass restarts every frequency from its own scalings and from those of both frequency
+    neighbours (``converge_iterations`` each, four smoothing stages) and keeps the smallest
+    bound: started cold, the optimizer often stalls far above the converged value near lightly
+    damped modes; a neighbour's converged scalings do not.
     """
-    from oos_drake.robust.blocks import parse_blk
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    res = mu_upper_bound(M, structure, max_iter=opt.upper_iterations)
+    upper, params, worst = res.upper.copy(), res.params.copy(), res.worst_input.copy()
+    if M.shape[0] < 2:
+        return upper, params, worst
+    for _ in range(opt.converge_passes):
+        for shift in (1, -1, 0):
+            x0 = params[np.clip(np.arange(M.shape[0]) - shift, 0, M.shape[0] - 1)]
+            r = mu_upper_bound(
+                M,
+                structure,
+                max_iter=opt.converge_iterations,
+                temperatures=CONVERGED_TEMPERATURES,
+                x0=x0,
+            )
+            better = r.upper < upper
+            upper[better], params[better] = r.upper[better], r.params[better]
+            worst[better] = r.worst_input[better]
+    return upper, params, worst
+
+
+def _despike(M, structure, upper, params, worst, opt):
+    """Recompute one model's highest local spikes from their frequency neighbours' scalings.
+
+    Continuation can carry a stalled point from model to model; a genuine resonance peak is
+    only recomputed (the smaller bound is kept: both are valid).
+    """
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    spikes = local_spikes(upper, opt.spike_ratio)
+    if spikes.size == 0 or opt.despike_points <= 0:
+        return upper, params, worst
+    spikes = spikes[np.argsort(-upper[spikes])][: opt.despike_points]
+    n = upper.size
+    idx = np.concatenate([spikes, spikes])
+    src = np.concatenate([np.maximum(spikes - 1, 0), np.minimum(spikes + 1, n - 1)])
+    src = np.where(src == idx, np.where(idx == 0, 1, n - 2), src)
+    r = mu_upper_bound(
+        M[idx],
+        structure,
+        max_iter=opt.converge_iterations,
+        temperatures=CONVERGED_TEMPERATURES,
+        x0=params[src],
+    )
+    upper, params, worst = upper.copy(), params.copy(), worst.copy()
+    for k, i in enumerate(idx):
+        if r.upper[k] < upper[i]:
+            upper[i], params[i], worst[i] = r.upper[k], r.params[k], r.worst_input[k]
+    return upper, params, worst
+
+
+def _jump(M_prev, M, nearest) -> float:
+    """Largest relative change of ``M11`` between consecutive models over the grid [-].
+
+    Channels that are numerically zero (a body not connected yet: norms below 1e-6) never
+    count as a jump.
+    """
+    norm = np.linalg.norm(M, axis=(1, 2))
+    if norm.size == 0 or np.max(norm) < 1e-6:
+        return 0.0
+    diff = np.linalg.norm(M - M_prev[nearest], axis=(1, 2))
+    return float(np.max(diff / np.maximum(norm, 1e-6 * np.max(norm))))
+
+
+def _continued_grid(subs, grids, structure, opt, model_of, tick) -> _Grid:
+    """Upper bounds of consecutive models, each started from its predecessor's scalings, and
+    lower bounds at each model's ``lower_points`` highest upper bounds.
+
+    The first model of the chunk, and any model after a jump of the configuration, is
+    converged (:func:`_converge_model`); model ``j`` starts from model ``j - 1``'s scalings at
+    the nearest frequency, or from balancing where that is better, for
+    ``continuation_iterations`` at one high smoothing temperature. Neighbouring configurations
+    are close problems: measured on the mission, this is four times cheaper than a cold start
+    and leaves no spike. ``continuation_iterations = 0``: every model cold.
+    """
+    from oos_drake.robust.mu_lower import mu_lower_bound
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    ups, pars, worsts, prev = [], [], [], None
+    for j, M in enumerate(subs):
+        if opt.continuation_iterations <= 0:
+            r = mu_upper_bound(M, structure, max_iter=opt.upper_iterations)
+            u, p, w = r.upper, r.params, r.worst_input
+        elif prev is None or _jump(subs[j - 1], M, near := _nearest(grids[j - 1], grids[j])) > (
+            opt.jump_ratio
+        ):
+            u, p, w = _converge_model(M, structure, opt)  # first model, or a switch
+        else:
+            r = mu_upper_bound(
+                M,
+                structure,
+                max_iter=opt.continuation_iterations,
+                temperatures=(1000.0,),
+                x0=prev[near],
+            )
+            u, p, w = _despike(M, structure, r.upper, r.params, r.worst_input, opt)
+        prev = p
+        ups.append(u)
+        pars.append(p)
+        worsts.append(w)
+        tick()
+    upper = np.concatenate(ups)
+    top = _top_points(upper, model_of, max(opt.lower_points, 1))
+    lo = mu_lower_bound(
+        np.concatenate(subs)[top],
+        structure,
+        start_inputs=np.concatenate(worsts)[top],
+        restarts=opt.lower_restarts,
+        iters=opt.lower_iterations,
+    )
+    lower = np.zeros(upper.size)
+    lower[top] = np.minimum(lo.lower, upper[top])
+    tight = np.zeros(upper.size, dtype=bool)
+    return _Grid(upper, lower, tight, np.concatenate(pars), top, lo.delta)
+
+
+def _pruned_grid(flat, structure, model_of) -> _Grid:
+    """Cheap bounds everywhere, full bounds only where a model's peak may be.
+
+    1. Every point gets a cheap valid upper bound (Osborne balancing and 2 L-BFGS iterations)
+       and a cheap certified lower bound (one power-iteration start from the upper bound's
+       worst direction).
+    2. Per model, ``L*`` is the best lower bound found so far. A point whose upper bound is
+       ``<= L*`` cannot hold the model's peak (``mu <= upper <= L* <= peak``): it is left
+       alone. The others are tightened (the upper bound of :func:`~oos_drake.robust.mussv`
+       warm-started from the cheap scalings, its lower bound with restarts), highest first: 3
+       per model, then 16 per model, doubling every round, updating ``L*`` between rounds,
+       until no untightened point has an upper bound above ``L*``.
+
+    The peak of each model is therefore bracketed by full-accuracy bounds (as with
+    ``"cold"``); elsewhere the upper bound is valid but up to a few percent looser.
+    """
     from oos_drake.robust.mu import (
         UPPER_ITERATIONS,
         UPPER_PATIENCE,
@@ -128,161 +477,413 @@ def _pruned_sweep(
     from oos_drake.robust.mu_lower import mu_lower_bound
     from oos_drake.robust.mu_upper import mu_upper_bound
 
-    s = parse_blk(blk)
+    first_round, round_size = 3, 16
     rng = np.random.default_rng(0)
-    nm, F = M.shape[:2]
-    flat = M.reshape((nm * F,) + M.shape[2:])
-    cheap = mu_upper_bound(flat, s, max_iter=cheap_iterations, temperatures=(300.0,))
-    lo = mu_lower_bound(
-        flat, s, start_inputs=cheap.worst_input, restarts=0, iters=30, polish_starts=1
-    ).lower
+    cheap = mu_upper_bound(flat, structure, max_iter=2, temperatures=(300.0,))
+    low = mu_lower_bound(
+        flat, structure, start_inputs=cheap.worst_input, restarts=0, iters=30, polish_starts=1
+    )
+    lo, delta = low.lower, low.delta.copy()
     up = np.maximum(cheap.upper, lo)
-    params = cheap.params
-    tight = np.zeros(nm * F, dtype=bool)
-    model = np.repeat(np.arange(nm), F)
+    tight = np.zeros(up.size, dtype=bool)
     per_round = first_round
+    nm = int(model_of.max()) + 1 if model_of.size else 0
     while True:
         best = np.zeros(nm)
-        np.maximum.at(best, model, lo)
-        cand = np.flatnonzero(~tight & (up > best[model]))
+        np.maximum.at(best, model_of, lo)
+        cand = np.flatnonzero(~tight & (up > best[model_of]))
         if cand.size == 0:
             break
         # highest ``per_round`` candidates of each model
-        order = cand[np.lexsort((-up[cand], model[cand]))]
-        first = np.searchsorted(model[order], model[order], side="left")
+        order = cand[np.lexsort((-up[cand], model_of[cand]))]
+        first = np.searchsorted(model_of[order], model_of[order], side="left")
         rank = np.arange(order.size) - first
         sel = order[rank < per_round]
         full_up = mu_upper_bound(
             flat[sel],
-            s,
-            max_iter=UPPER_ITERATIONS if upper_iterations is None else upper_iterations,
-            tol=UPPER_TOL if upper_tol is None else upper_tol,
+            structure,
+            max_iter=UPPER_ITERATIONS,
+            tol=UPPER_TOL,
             temperatures=UPPER_TEMPERATURES,
             patience=UPPER_PATIENCE,
-            x0=params[sel],
+            x0=cheap.params[sel],
         )
-        full_lo = _lower_bound(
-            flat[sel],
-            s,
-            full_up,
-            restarts=lower_restarts,
-            iters=lower_iterations,
-            rng=rng,
-            restart_gap=1.02,
-        ).lower
-        lo[sel] = np.maximum(lo[sel], full_lo)
+        full = _lower_bound(
+            flat[sel], structure, full_up, restarts=4, iters=60, rng=rng, restart_gap=1.02
+        )
+        better = full.lower > lo[sel]
+        delta[sel[better]] = full.delta[better]
+        lo[sel] = np.maximum(lo[sel], full.lower)
         up[sel] = np.maximum(np.minimum(up[sel], full_up.upper), lo[sel])
         tight[sel] = True
         # few rounds even where nothing prunes (e.g. mu = 0 of a real-only structure)
         per_round = round_size if per_round == first_round else 2 * per_round
-    return up.reshape(nm, F), lo.reshape(nm, F), tight.reshape(nm, F)
+    return _Grid(up, lo, tight, None, np.arange(up.size), delta)
 
 
-def _sweep_models(task):
-    """Worker: all subsets and frequencies for a chunk of models (plain arrays in, arrays out).
+def _warm_grid(Ms, structure) -> _Grid:
+    """Bounds for ``Ms`` ``(nm, F, c, r)`` walking up the frequency axis with warm starts.
 
-    All models and frequencies of the chunk go through ``mussv`` as one batch per subset, so the
-    Python overhead of the iterations is shared by thousands of matrices.
+    The first frequency starts from Osborne balancing (80 iterations); each next one from the
+    scalings of the previous frequency or from balancing, whichever is better, for 20
+    iterations at a single high smoothing temperature. The lower bound runs once on the whole
+    batch (2 restarts of 40 steps), started from the upper bound's worst directions.
     """
-    from oos_drake.robust.mu import mussv
-    from oos_drake.robust.robstab import _refine
+    from oos_drake.robust.mu_lower import mu_lower_bound
+    from oos_drake.robust.mu_upper import mu_upper_bound
 
-    (
-        A,
-        Bw,
-        Cz,
-        Dzw,
-        first,
-        omega,
-        subsets,
-        refine_points,
-        polish,
-        warm_start,
-        mode,
-        mu_options,
-        slack,
-    ) = task
-    nm, F = A.shape[0], omega.size
-    M = delta_channel_response(A, Bw, Cz, Dzw, omega)  # (nm, F, nz, nw)
-    rows = []
-    for name, (zrows, wcols, blk) in subsets.items():
-        Msub = M[:, :, zrows][:, :, :, wcols]
-        tight = np.ones((nm, F), dtype=bool)
-        if mode == "peak":
-            up, lo, tight = _pruned_sweep(Msub, blk)
-        elif warm_start:
-            up, lo = _warm_sweep(Msub, blk)
+    nm, F = Ms.shape[:2]
+    up = np.empty((nm, F))
+    worst = np.empty((nm, F, structure.n_rows), dtype=complex)
+    x = None
+    for f in range(F):
+        if x is None:
+            res = mu_upper_bound(Ms[:, f], structure, max_iter=80)
         else:
-            res = mussv(Msub, blk, **mu_options)
-            up = np.asarray(res.upper).reshape(nm, F).copy()
-            lo = np.asarray(res.lower).reshape(nm, F)
-        if polish > 0:
-            up = _polish_model_peaks(Msub, blk, up, lo, polish)
-        axis = [(np.nan, 0)] * nm
-        if slack is not None:
-            axis = [
-                _axis_peak(
-                    A[j],
-                    Bw[j][:, wcols],
-                    Cz[j][zrows],
-                    Dzw[j][np.ix_(zrows, wcols)],
-                    blk,
-                    omega,
-                    up[j],
-                    lo[j],
-                    slack,
-                    first + j,
-                )
-                for j in range(nm)
-            ]
-        for j in range(nm):
-            rows.append(
-                (first + j, omega, lo[j], up[j], name, np.zeros(F, dtype=bool), tight[j], axis[j])
-            )
-        if refine_points <= 0 or F < 3:
-            continue
-        extra = [
-            np.setdiff1d(_refine(omega, up[j], count=2, points=refine_points), omega)
-            for j in range(nm)
-        ]
-        if not any(e.size for e in extra):
-            continue
-        Ms = [
-            delta_channel_response(A[j], Bw[j], Cz[j], Dzw[j], e)[:, zrows][:, :, wcols]
-            for j, e in enumerate(extra)
-            if e.size
-        ]
-        rn = mussv(np.concatenate(Ms), blk, **mu_options)
-        up_n, lo_n = np.atleast_1d(rn.upper), np.atleast_1d(rn.lower)
+            res = mu_upper_bound(Ms[:, f], structure, max_iter=20, temperatures=(1000.0,), x0=x)
+        x = res.params
+        up[:, f] = res.upper
+        worst[:, f] = res.worst_input
+    flat = Ms.reshape((-1,) + Ms.shape[2:])
+    starts = worst.reshape(-1, structure.n_rows)
+    lows = [
+        mu_lower_bound(
+            flat[i : i + 2048], structure, start_inputs=starts[i : i + 2048], restarts=2, iters=40
+        )
+        for i in range(0, flat.shape[0], 2048)
+    ]
+    lo = np.concatenate([r.lower for r in lows])
+    up = np.maximum(up.ravel(), lo)
+    delta = np.concatenate([r.delta for r in lows])
+    return _Grid(up, lo, np.ones(up.size, dtype=bool), None, np.arange(up.size), delta)
+
+
+def _mussv_points(M, structure, opt) -> _Grid:
+    """:func:`~oos_drake.robust.mussv` at every point of the flat batch ``M``."""
+    from oos_drake.robust.mu import mussv
+
+    res = mussv(M, structure, **(opt.mu_options or {}))
+    up, lo = np.atleast_1d(res.upper), np.atleast_1d(res.lower)
+    n = up.size
+    return _Grid(
+        up,
+        lo,
+        np.ones(n, dtype=bool),
+        None,
+        np.arange(n),
+        res.delta.reshape(n, *res.delta.shape[-2:]),
+    )
+
+
+def _refine_bounds(M, structure, opt) -> _Grid:
+    """Bounds at refinement points: ``refine_iterations`` BFGS iterations, or mussv."""
+    if opt.refine_iterations is None:
+        return _mussv_points(M, structure, opt)
+    return _quick_bounds(M, structure, opt.refine_iterations)
+
+
+# --- the later steps (one model at a time or all models in one batch) ------------------------
+
+
+def _polish(response, structure, points, opt):
+    """Long upper-bound runs at each model's highest upper bounds (the peak matters most).
+
+    Ill-conditioned matrices (lightly damped modes with repeated real parameters) need hundreds
+    of iterations; spending them on a few frequencies keeps the sweep fast. ``points`` is the
+    list of per-model ``[omega, upper, lower, ...]``; ``response(j, omega)`` gives ``M``.
+    """
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    done = [set() for _ in points]
+    active = list(range(len(points)))
+    for _ in range(opt.polish_rounds):
+        picks = []
+        for j in active:
+            up = points[j][1]
+            order = [int(i) for i in np.argsort(up)[::-1] if int(i) not in done[j]]
+            picks.append((j, order[: opt.polish_points]))
+        picks = [(j, idx) for j, idx in picks if idx]
+        if not picks:
+            break
+        M = np.concatenate([response(j, points[j][0][idx]) for j, idx in picks])
+        temps = {} if opt.polish_temperatures is None else {"temperatures": opt.polish_temperatures}
+        better = mu_upper_bound(M, structure, max_iter=opt.polish_iterations, **temps).upper
         k = 0
-        for j, e in enumerate(extra):
-            if e.size:
-                rows.append(
-                    (
-                        first + j,
-                        e,
-                        lo_n[k : k + e.size],
-                        up_n[k : k + e.size],
-                        name,
-                        np.ones(e.size, dtype=bool),
-                        np.ones(e.size, dtype=bool),
-                        axis[j],
-                    )
-                )
-                k += e.size
-    return rows
+        for j, idx in picks:
+            up, lo = points[j][1], points[j][2]
+            for i in idx:
+                up[i] = max(min(up[i], better[k]), lo[i])
+                done[j].add(i)
+                k += 1
+        active = [j for j, _ in picks if int(np.argmax(points[j][1])) not in done[j]]
 
 
-def _axis_peak(A, Bw, Cz, Dzw, blk, omega, up, lo, slack, model):
-    """``(guaranteed peak of mu over [0, inf), points solved)`` of one model and subset."""
+def _eig_near(Mw, delta, target):
+    ev = np.linalg.eigvals(Mw @ delta)
+    return ev[np.argmin(np.abs(ev - target))]
+
+
+def _frequency_crossings(A, Bw, Cz, Dzw, structure, omega, up, lo, count=6, samples=16, window=8):
+    """Lower-bound candidates that also move the frequency.
+
+    With real blocks, mu can be discontinuous in omega: a destabilizing ``Delta`` gives a real
+    eigenvalue of ``M(j omega) Delta`` only at isolated frequencies that a grid never hits. For
+    the best unit perturbation found at a peak (of the upper bound or of the unconstrained
+    power-iteration gain), follow the eigenvalues of
+    ``M(j omega) Delta`` over the neighbouring interval and solve ``Im(lambda(omega)) = 0``
+    (Illinois regula falsi); each root gives a certified bound ``|lambda| / ||Delta||`` at that
+    frequency. Returns ``(omega_new, lower_new, delta_new)``.
+    """
+    from oos_drake.robust.mu_lower import certificate_residual, mu_lower_bound
+
+    if omega.size < 2:
+        return np.zeros(0), np.zeros(0), np.zeros((0, structure.n_rows, structure.n_cols))
+
+    def top_peaks(values):
+        interior = np.r_[True, values[1:] >= values[:-1]] & np.r_[values[:-1] >= values[1:], True]
+        peaks = np.flatnonzero(interior)
+        return peaks[np.argsort(values[peaks])[::-1][:count]]
+
+    # candidates: peaks of the upper bound, and peaks of |lambda| of the best unit perturbation
+    # (real parameters at a vertex) whatever its phase: continuous in omega where mu is not
+    Mall = delta_channel_response(A, Bw, Cz, Dzw, omega)
+    raw = mu_lower_bound(Mall, structure, restarts=2, iters=40)
+    dn_all = np.max(structure.block_norms(raw.raw_delta), axis=1)
+    score = np.where(dn_all > 0, np.abs(raw.raw_lambda) / np.maximum(dn_all, 1e-300), 0.0)
+    score = np.where(np.isfinite(score), score, 0.0)
+    peaks = np.unique(np.concatenate([top_peaks(up), top_peaks(score)]))
+    out_w, out_lo, out_d = [], [], []
+    floor = float(np.max(lo)) if lo.size else 0.0
+    for k in peaks:
+        D = raw.raw_delta[k]
+        dn = float(dn_all[k])
+        if dn <= 0 or not np.isfinite(raw.raw_lambda[k]):
+            continue
+        # follow the eigenvalues over the whole grid (plus a dense patch around the peak): the
+        # crossing of the real axis need not be next to the peak
+        lo_i, hi_i = max(k - window, 0), min(k + window, omega.size - 1)
+        ws = np.unique(np.concatenate([omega, np.linspace(omega[lo_i], omega[hi_i], samples + 1)]))
+        Ms = delta_channel_response(A, Bw, Cz, Dzw, ws)
+        evs = np.linalg.eigvals(Ms @ D)  # (S, n)
+        if ws[0] == 0.0:  # at omega = 0 a real M gives real eigenvalues: no sign to compare
+            ws, evs = ws[1:], evs[1:]
+        best = (0.0, None, None)
+        for i0 in range(evs.shape[1]):  # follow every eigenvalue of the first sample
+            lam = evs[0, i0]
+            track = [lam]
+            for s in range(1, ws.size):
+                lam = evs[s][np.argmin(np.abs(evs[s] - lam))]
+                track.append(lam)
+            track = np.array(track)
+            for s in np.flatnonzero(np.sign(track.imag[:-1]) * np.sign(track.imag[1:]) < 0):
+                wl, wr, fl, fr = ws[s], ws[s + 1], track[s].imag, track[s + 1].imag
+                ll, lr = track[s], track[s + 1]
+                # a crossing only matters if it can beat the best lower bound known so far
+                if 1.5 * max(abs(ll), abs(lr)) / dn <= max(best[0], floor):
+                    continue
+                lam_m, side = ll, 0
+                for _ in range(60):
+                    wm = wr - fr * (wr - wl) / (fr - fl)
+                    if not (min(wl, wr) < wm < max(wl, wr)):
+                        wm = 0.5 * (wl + wr)
+                    Mm = delta_channel_response(A, Bw, Cz, Dzw, [wm])[0]
+                    lam_m = _eig_near(Mm, D, 0.5 * (ll + lr))
+                    fm = lam_m.imag
+                    if abs(fm) <= 1e-13 * abs(lam_m) or abs(wr - wl) <= 1e-15 * wr:
+                        break
+                    if np.sign(fm) == np.sign(fl):
+                        wl, fl, ll = wm, fm, lam_m
+                        if side == -1:
+                            fr *= 0.5
+                        side = -1
+                    else:
+                        wr, fr, lr = wm, fm, lam_m
+                        if side == 1:
+                            fl *= 0.5
+                        side = 1
+                if abs(lam_m.imag) > 1e-9 * abs(lam_m) or lam_m.real == 0:
+                    continue
+                value = abs(lam_m.real) / dn
+                if value > best[0]:
+                    best = (value, wm, D / lam_m.real)
+        if best[1] is not None:
+            Mm = delta_channel_response(A, Bw, Cz, Dzw, [best[1]])[0]
+            if certificate_residual(Mm, best[2]) <= 1e-7:
+                out_w.append(best[1])
+                out_lo.append(best[0])
+                out_d.append(best[2])
+    if not out_w:
+        return np.zeros(0), np.zeros(0), np.zeros((0, structure.n_rows, structure.n_cols))
+    return np.array(out_w), np.array(out_lo), np.array(out_d)
+
+
+def axis_certificate(real, structure, omega, up, lo, slack):
+    """Cover ``[0, inf)`` starting from the peaks of the points' bounds, at a level no lower
+    than ``(1 + slack)`` times the best certified lower bound (a common level widens the
+    intervals; the points whose bound exceeds it get long optimizer runs, so that an
+    optimizer stall does not raise the level).
+
+    Returns
+    -------
+    AxisCertificate
+    """
+    from oos_drake.robust.mu_intervals import cover_axis, mu_solver
+
+    best = float(lo.max())
+    return cover_axis(
+        real,
+        mu_solver(real, structure, slack=slack, polish_above=best),
+        np.union1d(peak_seeds(omega, up), peak_seeds(omega, lo)),
+        floor=(1.0 + slack) * best,
+        slack=slack,
+    )
+
+
+# --- the sweep --------------------------------------------------------------------------------
+
+
+def _update_best(best, model, omega, lower, delta):
+    """Keep each model's largest certified lower bound (the first one on ties)."""
+    order = np.lexsort((-lower, model))  # stable: the first of equal values leads
+    heads = order[np.r_[True, model[order][1:] != model[order][:-1]]] if order.size else order
+    for i in heads:
+        m = int(model[i])
+        if m not in best or lower[i] > best[m][0]:
+            best[m] = (float(lower[i]), float(omega[i]), delta[i])
+
+
+def sweep_models(A, Bw, Cz, Dzw, omega, parts, options: SweepOptions, *, first=0, tick=None):
+    """Every step of the sweep for a chunk of models (plain arrays in, :class:`SweepPoints` out).
+
+    Parameters
+    ----------
+    A, Bw, Cz, Dzw : numpy.ndarray
+        ``(nm, ...)`` Delta-channel matrices of the chunk's models.
+    omega : numpy.ndarray
+        Common frequency grid [rad/s] (sorted, unique).
+    parts : dict
+        Subset name -> ``(z rows, w columns, BLK)`` (:func:`~.lfr_analysis.subset_parts`; rows
+        and columns may be ``slice(None)``: all channels, no copy).
+    options : SweepOptions
+    first : int
+        Index of the chunk's first model in the whole array (``model`` column).
+    tick : callable, optional
+        Called once per model and subset after its grid bounds (progress).
+
+    Returns
+    -------
+    dict
+        Subset name -> :class:`SweepPoints`.
+
+    Raises
+    ------
+    ValueError
+        With ``slack`` set, for a model with a pole within round-off of the imaginary axis.
+    """
     from oos_drake.robust.mu_intervals import Realization
-    from oos_drake.robust.robstab import _guarantee
 
-    try:
-        cert = _guarantee(Realization(A, Bw, Cz, Dzw), blk, omega, up, lo, slack)
-    except ValueError as err:
-        raise ValueError(f"robust_sweep: model {model}: {err}") from None
-    return float(cert.upper), int(cert.omega.size)
+    opt = options
+    tick = tick or (lambda: None)
+    nm = A.shape[0]
+    grids = [
+        model_grid(A[j], omega, points=opt.pole_points) if opt.pole_points else omega
+        for j in range(nm)
+    ]
+    Ms = [delta_channel_response(A[j], Bw[j], Cz[j], Dzw[j], g) for j, g in enumerate(grids)]
+    model_of = np.concatenate([np.full(g.size, first + j) for j, g in enumerate(grids)])
+    omega_of = np.concatenate(grids)
+    out = {}
+    for name, (zrows, wcols, blk) in parts.items():
+        structure = parse_blk(blk)
+        subs = [M[:, zrows][:, :, wcols] for M in Ms]
+
+        def response(j, w, zrows=zrows, wcols=wcols):
+            return delta_channel_response(A[j], Bw[j], Cz[j], Dzw[j], w)[:, zrows][:, :, wcols]
+
+        def channels(j, zrows=zrows, wcols=wcols):  # the subset's Delta channels of model j
+            rows_cols = (zrows, wcols) if isinstance(zrows, slice) else np.ix_(zrows, wcols)
+            return A[j], Bw[j][:, wcols], Cz[j][zrows], Dzw[j][rows_cols]
+
+        if opt.grid == "continued":
+            grid = _continued_grid(subs, grids, structure, opt, model_of, tick)
+        else:
+            if opt.grid == "warm":
+                grid = _warm_grid(np.stack(subs), structure)
+            elif opt.grid == "pruned":
+                grid = _pruned_grid(np.concatenate(subs), structure, model_of - first)
+            else:
+                grid = _mussv_points(np.concatenate(subs), structure, opt)
+            for _ in range(nm):
+                tick()
+        best = {}
+        _update_best(best, model_of[grid.at], omega_of[grid.at], grid.lower[grid.at], grid.delta)
+        edges = np.cumsum([0] + [g.size for g in grids])
+        # per model: [omega, (upper, lower, refined, tightened, params)]
+        points = [
+            [
+                grids[j],
+                (grid.upper[a:b].copy(), grid.lower[a:b].copy(), np.zeros(b - a, bool))
+                + (grid.tightened[a:b], None if grid.params is None else grid.params[a:b]),
+            ]
+            for j, (a, b) in enumerate(zip(edges[:-1], edges[1:], strict=True))
+        ]
+
+        def insert(j, w, upper, lower, tightened, params, points=points):  # sorted in
+            new = (upper, lower, np.ones(w.size, dtype=bool), tightened, params)
+            points[j] = list(merged(*points[j], w, new))
+
+        for _ in range(opt.refine_rounds if opt.refine_points > 0 else 0):
+            extra = []
+            for w, (up, lo, *_) in points:
+                curves = (up, lo) if opt.refine_lower else (up,)
+                new = [
+                    refine_frequencies(w, c, opt.refine_peaks, opt.refine_points) for c in curves
+                ]
+                extra.append(np.setdiff1d(np.unique(np.concatenate(new)), w))
+            if not any(e.size for e in extra):
+                break
+            got = _refine_bounds(
+                np.concatenate([response(j, e) for j, e in enumerate(extra) if e.size]),
+                structure,
+                opt,
+            )
+            em = np.concatenate([np.full(e.size, first + j) for j, e in enumerate(extra)])
+            _update_best(best, em, np.concatenate(extra), got.lower, got.delta)
+            ends = np.cumsum([0] + [e.size for e in extra])
+            for j, e in enumerate(extra):
+                k = slice(ends[j], ends[j + 1])
+                pars = None if got.params is None else got.params[k]
+                insert(j, e, got.upper[k], got.lower[k], got.tightened[k], pars)
+        if opt.polish_points > 0:
+            _polish(response, structure, [(w, *cols) for w, cols in points], opt)
+        if opt.crossings and structure.has_real:
+            for j, (w, (up, lo, *_)) in enumerate(points):
+                wx, lx, dx = _frequency_crossings(*channels(j), structure, w, up, lo)
+                if wx.size:
+                    # mu_upper at the crossing frequencies too: lower <= upper pointwise
+                    ux = _mussv_points(response(j, wx), structure, opt).upper
+                    _update_best(best, np.full(wx.size, first + j), wx, lx, dx)
+                    insert(j, wx, np.maximum(ux, lx), lx, np.ones(wx.size, bool), None)
+        guarantees = {}
+        for j, (w, (up, lo, *_)) in enumerate(points if opt.slack is not None else []):
+            try:
+                real = Realization(*channels(j))
+                guarantees[first + j] = axis_certificate(real, structure, w, up, lo, opt.slack)
+            except ValueError as err:
+                raise ValueError(f"model {first + j}: {err}") from None
+        cols = [
+            None if any(x is None for x in c) else np.concatenate(c)
+            for c in zip(*(p[1] for p in points), strict=True)
+        ]
+        out[name] = SweepPoints(
+            np.concatenate([np.full(w.size, first + j) for j, (w, _) in enumerate(points)]),
+            np.concatenate([w for w, _ in points]),
+            np.maximum(cols[0], cols[1]),
+            *cols[1:],
+            best=best,
+            guarantees=guarantees,
+        )
+    return out
 
 
 def check_sweep_input(sys, omega, times, *, caller: str, zero: bool = True):
@@ -307,6 +908,135 @@ def check_sweep_input(sys, omega, times, *, caller: str, zero: bool = True):
     return omega, arrays, times
 
 
+def chunk_ranges(n_models: int, options: SweepOptions) -> list:
+    """``[(first, last), ...]`` model ranges of the worker tasks (see ``chunk_size``)."""
+    size = options.chunk_size
+    if not size and options.grid == "continued":
+        size = int(np.ceil(n_models / options.n_jobs))
+    elif not size:
+        # big batches share the Python overhead of the iterations; 40 models x 500 frequencies
+        # of 26 x 26 matrices are ~200 MB per copy, which bounds the memory of a worker. The
+        # number of tasks is a multiple of n_jobs (no idle worker at the end).
+        rounds = int(np.ceil(n_models / (options.n_jobs * 40)))
+        size = max(1, int(np.ceil(n_models / (options.n_jobs * rounds))))
+    return [(i, min(i + size, n_models)) for i in range(0, n_models, size)]
+
+
+def _sweep_task(task):
+    """Worker: :func:`sweep_models` on one range of models."""
+    first, A, Bw, Cz, Dzw, omega, parts, options = task
+    return sweep_models(A, Bw, Cz, Dzw, omega, parts, options, first=first)
+
+
+def sweep_table_of(points: dict, times):
+    """The sweep table (:data:`~oos_drake.robust.tables.SWEEP_COLUMNS`, plus
+    :data:`~oos_drake.robust.tables.GUARANTEE_COLUMNS` when every model has a guarantee) of
+    subset name -> :class:`SweepPoints` (or any points with the same arrays, e.g. the
+    analysis's tightened points)."""
+    pts = list(points.values())
+    model = np.concatenate([p.model for p in pts])
+    guaranteed = bool(pts) and all(getattr(p, "guarantees", None) for p in pts)
+
+    def per_model(value):  # one value per model -> one per row
+        values = [{m: value(c) for m, c in p.guarantees.items()} for p in pts]
+        return np.concatenate([[v[m] for m in p.model] for v, p in zip(values, pts, strict=True)])
+
+    return sweep_table(
+        subset=np.concatenate([np.full(p.model.size, n, dtype=object) for n, p in points.items()]),
+        model=model,
+        time=np.asarray(times, dtype=float)[model],
+        omega=np.concatenate([p.omega for p in pts]),
+        upper=np.concatenate([p.upper for p in pts]),
+        lower=np.concatenate([p.lower for p in pts]),
+        refined=np.concatenate([p.refined for p in pts]),
+        tightened=np.concatenate([p.tightened for p in pts]),
+        guaranteed=per_model(lambda c: float(c.upper)) if guaranteed else None,
+        guarantee_points=per_model(lambda c: int(c.omega.size)) if guaranteed else None,
+    )
+
+
+def _sweep(sys, omega, subsets, times, options: SweepOptions, caller, progress, description):
+    """:func:`sweep_models` over the whole model array in chunks on the workers -> the table."""
+    from tqdm.auto import tqdm
+
+    zero = options.grid != "continued"  # the continuation compares log frequencies
+    omega, (A, Bw, Cz, Dzw), times = check_sweep_input(sys, omega, times, caller=caller, zero=zero)
+    parts = subset_parts(sys, dict(subsets or {"total": list(block_map(sys).names)}))
+    ranges = chunk_ranges(A.shape[0], options)
+    tasks = [(a, A[a:b], Bw[a:b], Cz[a:b], Dzw[a:b], omega, parts, options) for a, b in ranges]
+    bar = tqdm(total=A.shape[0], desc=description, disable=not progress, unit="model")
+    results = []
+    try:
+        with make_executor(options.n_jobs, options.scheduler) as executor:
+            for (a, b), res in zip(ranges, executor.map(_sweep_task, tasks), strict=True):
+                results.append(res)
+                bar.update(b - a)
+    except ValueError as err:
+        raise ValueError(f"{caller}: {err}") from None
+    finally:
+        bar.close()
+    points = {name: joined_points([r[name] for r in results]) for name in parts}
+    return sweep_table_of(points, times)
+
+
+def joined_points(chunks) -> SweepPoints:
+    """One :class:`SweepPoints` of consecutive chunks of models."""
+    fields = ("model", "omega", "upper", "lower", "refined", "tightened")
+    cat = {f: np.concatenate([getattr(c, f) for c in chunks]) for f in fields}
+    params = [c.params for c in chunks]
+    best, guarantees = {}, {}
+    for c in chunks:
+        best.update(c.best)
+        guarantees.update(c.guarantees)
+    return SweepPoints(
+        **cat,
+        params=None if any(p is None for p in params) else np.concatenate(params),
+        best=best,
+        guarantees=guarantees,
+    )
+
+
+def mu_sweep(
+    sys,
+    omega=None,
+    subsets: dict | None = None,
+    *,
+    times=None,
+    options: SweepOptions | None = None,
+    progress: bool = True,
+    description: str = "mu sweep",
+):
+    """mu bounds for every model of ``sys``, frequency and uncertainty subset.
+
+    Parameters
+    ----------
+    sys : LFR
+        Uncertain closed loop, a model array ``(N,)`` (or one model).
+    omega : array_like, optional
+        Common frequency grid [rad/s] (default: :func:`frequency_grid` of all models' poles);
+        with ``pole_points``, plus per model points on its lightly damped poles.
+    subsets : dict, optional
+        Subset name -> block names (default ``{"total": all blocks}``).
+    times : array_like, optional
+        Mission time [s] (or any scheduling value) of each model, stored as ``time [s]``.
+    options : SweepOptions, optional
+        The steps of the sweep (default: the analysis's grid, see :class:`SweepOptions`).
+    progress : bool
+        Show a tqdm progress bar (models).
+    description : str
+        Label of the progress bar.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns :data:`~oos_drake.robust.tables.SWEEP_COLUMNS` (``mu lower [-]``: certified;
+        ``refined``: added by the refinement or the crossing search; ``tightened``: bounds of
+        full accuracy), plus :data:`~oos_drake.robust.tables.GUARANTEE_COLUMNS` with ``slack``.
+    """
+    options = options or SweepOptions()
+    return _sweep(sys, omega, subsets, times, options, "mu_sweep", progress, description)
+
+
 def robust_sweep(
     sys,
     omega=None,
@@ -324,7 +1054,8 @@ def robust_sweep(
     guaranteed: bool = True,
     slack: float | None = None,
 ):
-    """mu bounds for every model, frequency and uncertainty subset.
+    """mu bounds for every model, frequency and uncertainty subset: :func:`mu_sweep` with
+    keyword options (every upper bound valid, every lower bound certified).
 
     Parameters
     ----------
@@ -345,35 +1076,29 @@ def robust_sweep(
     refine_points : int
         Extra frequencies around each of the two highest peaks of each model and subset (0: off).
     polish : int
-        Frequencies per model and subset (the highest) whose upper bound gets a long run
-        (300 iterations) after the grid pass: this settles the slow cases (e.g. a real block
+        Frequencies per model and subset (the highest, refinement points included) whose upper
+        bound gets a long run (300 iterations): this settles the slow cases (e.g. a real block
         whose ``M`` is nearly real, where the optimal ``G`` is large).
     warm_start : bool
-        Walk up the frequency grid reusing the scalings of the previous frequency (20
-        iterations per frequency instead of 40-80; the grid must be fine enough for the
-        scalings to change little between neighbours). False: independent ``mussv`` calls.
-        Only used with ``mode="full"``.
+        ``mode="full"`` only: walk up the frequency grid reusing the previous frequency's
+        scalings (``grid="warm"``; the grid must be fine enough for the scalings to change
+        little between neighbours; upper bounds 1-4 % above converged ones away from the
+        polished peaks). False: independent ``mussv`` calls (``grid="cold"``).
     mode : {"peak", "full"}
-        ``"peak"`` (default): a cheap valid upper bound and a cheap certified lower bound at every
-        frequency, full-accuracy bounds only at the frequencies whose cheap upper bound exceeds the
-        model's best lower bound (branch and prune over frequency: exact for each model's peak,
-        honest elsewhere; the ``tightened`` column says which frequencies got full bounds).
+        ``"peak"`` (default, ``grid="pruned"``): full-accuracy bounds only where a model's
+        peak may be, cheap valid ones elsewhere (the ``tightened`` column says which).
         ``"full"``: full-accuracy bounds at every frequency (the whole curve), slower.
     chunk_size : int, optional
-        Models per task (default: at most 40, with a number of tasks that is a multiple of
-        ``n_jobs``, so that no worker idles at the end).
+        Models per task (default: at most 40, a multiple of ``n_jobs`` tasks).
     mu_options : dict, optional
-        Options of :func:`~oos_drake.robust.mussv` for the refinement points and, with
-        ``mode="full", warm_start=False``, for the grid; default: mussv's defaults (upper bound
-        within ~0.25 % of a fully converged one). With ``mode="full", warm_start=True`` the grid
-        upper bound is 1-4 % above a converged one away from the polished peaks; every upper
-        bound is valid.
+        Options of :func:`~oos_drake.robust.mussv` (refinement points, ``"cold"`` grid).
     guaranteed : bool
         Also prove, for each model and subset, a bound of the peak of mu over the whole
         frequency axis (:func:`~oos_drake.robust.mu_intervals.cover_axis`, started from the
-        peaks of the grid): columns ``mu upper guaranteed [-]`` (the same value on every row of
-        the model and subset; ``inf`` if the cover did not close) and ``guarantee_points``
-        (frequencies solved for the proof). The per-frequency columns stay pointwise bounds.
+        peaks of the analyzed points): columns ``mu upper guaranteed [-]`` (the same value on
+        every row of the model and subset; ``inf`` if the cover did not close) and
+        ``guarantee_points`` (frequencies solved for the proof). The per-frequency columns stay
+        pointwise bounds.
     slack : float, optional
         Relative slack of the guaranteed bound (default
         :data:`~oos_drake.robust.mu_intervals.SLACK`).
@@ -393,66 +1118,22 @@ def robust_sweep(
         ``guaranteed=True``, for a model with a pole within round-off of the imaginary axis.
     """
     from oos_drake.lfr import as_lfr
+    from oos_drake.robust.mu_intervals import SLACK
 
-    sys = as_lfr(sys)
-    omega, (A, Bw, Cz, Dzw), times = check_sweep_input(sys, omega, times, caller="robust_sweep")
-    n_models = A.shape[0]
-    parts = subset_parts(sys, dict(subsets) if subsets else {"total": list(block_map(sys).names)})
-    mu_options = dict(mu_options or {})
     if mode not in ("peak", "full"):
         raise ValueError(f"robust_sweep: mode must be 'peak' or 'full', got {mode!r}")
-    n_jobs = max(1, int(n_jobs))
-    if guaranteed:
-        from oos_drake.robust.mu_intervals import SLACK
-
-        slack = SLACK if slack is None else float(slack)
-    else:
-        slack = None
-    if chunk_size is None:
-        # big batches share the Python overhead of the iterations; 40 models x 500 frequencies
-        # of 26 x 26 matrices are ~200 MB per copy, which bounds the memory of a worker. The
-        # number of tasks is a multiple of n_jobs (no idle worker at the end).
-        rounds = int(np.ceil(n_models / (n_jobs * 40)))
-        chunk_size = max(1, int(np.ceil(n_models / (n_jobs * rounds))))
-    tasks = [
-        (
-            A[i : i + chunk_size],
-            Bw[i : i + chunk_size],
-            Cz[i : i + chunk_size],
-            Dzw[i : i + chunk_size],
-            i,
-            omega,
-            parts,
-            refine_points,
-            int(polish),
-            bool(warm_start),
-            mode,
-            mu_options,
-            slack,
-        )
-        for i in range(0, n_models, chunk_size)
-    ]
-    with make_executor(n_jobs, scheduler) as executor:
-        results = list(executor.map(_sweep_models, tasks))
-    rows = [row for chunk in results for row in chunk]
-    model, freqs, lower, upper, subset, refined, tightened, axis = zip(*rows, strict=True)
-    sizes = [w.size for w in freqs]
-
-    def column(values):  # one value or one array per row of points -> one flat column
-        return np.concatenate(
-            [np.broadcast_to(v, (n,)) for v, n in zip(values, sizes, strict=True)]
-        )
-
-    guaranteed = slack is not None
-    return sweep_table(
-        subset=column(subset),
-        model=column(model),
-        time=column(times[list(model)]),
-        omega=column(freqs),
-        upper=column(upper),
-        lower=column(lower),
-        refined=column(refined),
-        tightened=column(tightened),
-        guaranteed=column([a[0] for a in axis]) if guaranteed else None,
-        guarantee_points=column([a[1] for a in axis]) if guaranteed else None,
+    grid = "pruned" if mode == "peak" else ("warm" if warm_start else "cold")
+    options = SweepOptions(
+        grid=grid,
+        pole_points=0,
+        mu_options=dict(mu_options or {}),
+        refine_points=int(refine_points),
+        refine_peaks=2,
+        refine_iterations=None,
+        polish_points=int(polish),
+        slack=(SLACK if slack is None else float(slack)) if guaranteed else None,
+        chunk_size=int(chunk_size or 0),
+        n_jobs=max(1, int(n_jobs)),
+        scheduler=scheduler,
     )
+    return _sweep(as_lfr(sys), omega, subsets, times, options, "robust_sweep", False, "")

@@ -48,6 +48,7 @@ from oos_drake.robust.mu_intervals import (
 )
 from oos_drake.robust.mu_lower import mu_lower_bound
 from oos_drake.robust.mu_upper import mu_upper_bound
+from oos_drake.robust.sweep import peak_seeds, refined_grid
 
 #: Largest number of ``ureal`` parameters for the parameter-box search of the lower bound
 #: (corners: ``2^k`` closed loops; a 5-level grid up to three parameters).
@@ -261,13 +262,11 @@ def wcgain(
         M = delta_channel_response(A, B, C, D, w)
         return skewed_gain_bounds(M, nz, nw, bmap.blk, tol=tol, upper_iterations=upper_iterations)
 
-    from oos_drake.robust.robstab import _refined_grid, peak_seeds
-
     def finite(values):  # an infinite bound counts as a peak above every finite one
         big = np.nanmax(np.where(np.isfinite(values), values, 0)) * 10 + 1
         return np.where(np.isfinite(values), values, big)
 
-    omega, (lo, up, dl, nom) = _refined_grid(
+    omega, (lo, up, dl, nom) = refined_grid(
         omega, evaluate(omega), evaluate, lambda a: (finite(a[1]), finite(a[0])), refine_rounds
     )
     k = int(np.argmax(lo))

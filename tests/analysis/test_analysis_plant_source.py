@@ -101,13 +101,13 @@ def test_grid_bounds_on_the_drake_loops_are_as_tight_as_on_the_titop_loops(contr
     (0.5 %). Before the twin's modal frequencies were affine and its channels canonical, the
     same optimizer stopped up to 2.45 times higher on the twin (issue 18's spike)."""
     from oos_drake.analysis.run import AnalysisOptions
-    from oos_drake.analysis.stability import SweepOptions, _converge_model, model_grid
     from oos_drake.robust.blocks import parse_blk
     from oos_drake.robust.lfr_analysis import (
         delta_channel_response,
         model_matrices,
         subset_parts,
     )
+    from oos_drake.robust.sweep import SweepOptions, _converge_model, model_grid
 
     times = mission_times(4)[3:]  # tilted arrays (the mission's peak)
     omega = AnalysisOptions().grid()

@@ -4,11 +4,7 @@ import control
 import numpy as np
 import pytest
 
-from oos_drake.analysis.stability import (
-    SweepOptions,
-    certified_sweep,
-    local_spikes,
-)
+from oos_drake.analysis.stability import SweepOptions, certified_sweep
 from oos_drake.analysis.tightening import (
     LowerCertificate,
     SubsetPoints,
@@ -19,6 +15,7 @@ from oos_drake.analysis.tightening import (
 from oos_drake.analysis.workers import ModelPool, PointTask
 from oos_drake.lfr import feedback, ucomplex, ureal, usubs
 from oos_drake.robust.lfr_analysis import model_matrices, subset_parts
+from oos_drake.robust.sweep import local_spikes
 
 FAST = SweepOptions(n_jobs=1, converge_passes=1, converge_iterations=60)
 

@@ -78,3 +78,52 @@ def test_analysis_sweeps_match_the_closed_form():
         top = table.groupby("model")["mu upper [-]"].idxmax()
         np.testing.assert_allclose(lower[top], mu[top], rtol=1e-6)
         np.testing.assert_allclose(table["time [s]"], 5.0 * table["model"])
+
+
+def test_every_step_of_the_one_sweep_matches_the_closed_form():
+    """``sweep_models`` with each grid method, refinement, polish and guarantee: every row is
+    the closed form (upper and lower where computed), refinement points lie between grid
+    points next to each model's peak, the best lower bound's perturbation makes
+    ``I - M delta`` singular, and the guarantee holds the dense-grid peak within its slack."""
+    from oos_drake.robust.lfr_analysis import (
+        delta_channel_response,
+        model_matrices,
+        subset_parts,
+    )
+    from oos_drake.robust.sweep import SweepOptions as Options
+    from oos_drake.robust.sweep import sweep_models
+
+    arr, exact = complex_scalar_array()
+    A, Bw, Cz, Dzw = model_matrices(arr)
+    parts = subset_parts(arr, {"c": ["c"]})
+    omega = np.geomspace(0.1, 10.0, 25)
+    dense = np.linspace(0.0, 20.0, 200001)
+    for grid in ("continued", "pruned", "warm", "cold"):
+        options = Options(
+            grid=grid,
+            pole_points=0,
+            converge_iterations=60,
+            refine_points=5,
+            refine_iterations=None if grid == "cold" else 60,
+            polish_points=2,
+            slack=0.02 if grid == "cold" else None,
+            n_jobs=1,
+        )
+        pts = sweep_models(A, Bw, Cz, Dzw, omega, parts, options)["c"]
+        mu = exact(pts.model, pts.omega)
+        np.testing.assert_allclose(pts.upper, mu, rtol=1e-6, err_msg=grid)
+        computed = pts.lower > 0
+        np.testing.assert_allclose(pts.lower[computed], mu[computed], rtol=1e-6, err_msg=grid)
+        assert np.all(np.diff(pts.omega[pts.model == 0]) > 0)
+        for j in range(GAINS.size):
+            mine = pts.model == j
+            w_peak = pts.omega[mine][np.argmax(exact(j, pts.omega[mine]))]
+            new = pts.omega[mine & pts.refined]
+            assert new.size == 5 and np.all(np.abs(np.log(new / w_peak)) < 0.2), grid
+            value, w_best, delta = pts.best[j]
+            np.testing.assert_allclose(value, exact(j, dense).max(), rtol=2e-3)
+            M = delta_channel_response(A[j], Bw[j], Cz[j], Dzw[j], [w_best])[0]
+            assert abs(np.linalg.det(np.eye(M.shape[0]) - M @ delta)) < 1e-9
+            if options.slack is not None:
+                peak = exact(j, dense).max()
+                assert peak <= pts.guarantees[j].upper <= 1.05 * peak

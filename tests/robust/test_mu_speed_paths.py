@@ -15,7 +15,7 @@ from oos_drake.robust.lfr_analysis import delta_channel_response
 from oos_drake.robust.mu_lower import _kernel_blocks, certificate_residual, mu_lower_bound
 from oos_drake.robust.mu_lower_kernels import vector_residual
 from oos_drake.robust.mu_upper import lmi_residual, mu_upper_bound
-from oos_drake.robust.sweep import _pruned_sweep
+from oos_drake.robust.sweep import _pruned_grid
 
 MIXED = [[-2, 0], [-1, 0], [2, 2], [2, 0], [1, 0], [1, 0]]  # 9 x 9: real, full, complex
 
@@ -125,8 +125,8 @@ def test_pruned_sweep_is_exact_at_the_peak_and_honest_elsewhere():
     A, Bw, Cz, Dzw = _lightly_damped_loop(4)
     omega = np.geomspace(0.3, 30.0, 90)
     M = delta_channel_response(A, Bw, Cz, Dzw, omega)  # (F, 9, 9)
-    up, lo, tight = _pruned_sweep(M[None], MIXED)
-    up, lo, tight = up[0], lo[0], tight[0]
+    grid = _pruned_grid(M, parse_blk(MIXED), np.zeros(omega.size, dtype=int))
+    up, lo, tight = grid.upper, grid.lower, grid.tightened
     ref = mussv(M, MIXED)  # independent full-accuracy bounds at every frequency
     # both are valid bounds of the same mu at every frequency
     assert np.all(up >= ref.lower * (1 - 1e-9))

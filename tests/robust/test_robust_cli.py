@@ -81,3 +81,35 @@ def test_robstab_writes_the_mu_sweep_table(tmp_path, capsys):
     np.testing.assert_allclose(table["mu upper [-]"], np.abs(0.5 * P / (1 + P)), rtol=1e-6)
     assert main(["robust", "robstab", str(tmp_path / "loop.npz"), "--out", "mu.txt"]) == 2
     assert "expected a .csv or .parquet" in capsys.readouterr().err
+
+
+def test_sweep_of_a_stored_model_array(tmp_path, capsys):
+    """``oos robust sweep`` on a stored LFR model array: one table row per model and
+    frequency, equal to the closed form |0.5 g P / (1 + g P)| of a complex scalar block."""
+    import control
+    import pandas as pd
+
+    from oos_drake.lfr import feedback, ucomplex, ureal, usubs
+    from oos_drake.robust.tables import GUARANTEE_COLUMNS, SWEEP_COLUMNS
+
+    gains = np.array([0.8, 1.25])
+    P = control.tf([4.0], [1.0, 2.0, 1.0])
+    g = ureal("g", 1.0, plusminus=0.5)
+    arr = usubs(feedback(ucomplex("c", 1.0, 0.5) * g * P, 1), {"g": gains})
+    arr.to_npz(tmp_path / "loops.npz")
+    out = tmp_path / "mu.parquet"
+    assert main(["robust", "sweep", str(tmp_path / "loops.npz"), "--out", str(out)]) == 0
+    table = pd.read_parquet(out)
+    assert list(table.columns) == SWEEP_COLUMNS + GUARANTEE_COLUMNS
+    assert sorted(table["model"].unique()) == [0, 1]
+    gP = (
+        gains[table["model"].to_numpy()]
+        * 4.0
+        / ((2j * np.pi * table["frequency [Hz]"].to_numpy() + 1.0) ** 2)
+    )
+    mu = np.abs(0.5 * gP / (1 + gP))
+    np.testing.assert_allclose(table["mu upper [-]"], mu, rtol=1e-6)
+    assert np.all(table["mu lower [-]"] <= mu * (1 + 1e-9))
+    text = capsys.readouterr().out
+    assert "total [1]: peak mu in" in text and "on the whole frequency axis" in text
+    assert main(["robust", "sweep", str(tmp_path / "loops.npz"), "--out", "mu.txt"]) == 2
