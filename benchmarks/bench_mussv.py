@@ -30,6 +30,9 @@ import numpy as np
 
 from oos_drake.robust.blocks import REAL, parse_blk
 
+#: Sizes of the small batches timed matrix by matrix (lone matrices, warm-started points).
+SMALL_BATCHES = (1, 2, 4, 8)
+
 
 def cvxpy_dg_upper_bound(M, blk, *, rtol: float = 1e-4, solver: str = "CLARABEL"):
     """Return ``(beta, n_solves)``: the LMI D-G upper bound of mu by bisection on beta."""
@@ -171,6 +174,17 @@ def main(argv=None):
         action="store_true",
         help="also print time vs accuracy of the upper bound for several iteration budgets",
     )
+    parser.add_argument(
+        "--save-values",
+        metavar="NPZ",
+        help="write the upper bounds (full batch, small batches) to this file, e.g. to compare "
+        "two checkouts with --compare-values",
+    )
+    parser.add_argument(
+        "--compare-values",
+        metavar="NPZ",
+        help="print the relative difference of the upper bounds to those saved by --save-values",
+    )
     args = parser.parse_args(argv)
     limit_blas_threads(1)
     warnings.filterwarnings("ignore")
@@ -206,6 +220,14 @@ def main(argv=None):
 
     res, t_both = best(lambda: mussv(M, PAPER_BLK))
     up, t_up = best(lambda: upper(M))
+    # small batches (a lone matrix, warm-started points): contiguous slices spread over the grid
+    small = {}
+    for size in SMALL_BATCHES:
+        starts = np.linspace(0, n - size, min(8, n - size + 1)).round().astype(int)
+        vals, t_small = best(
+            lambda size=size, starts=starts: [upper(M[k : k + size]).upper for k in starts]
+        )
+        small[size] = (np.concatenate(vals), tuple(v * n / (size * len(starts)) for v in t_small))
     evals = float(np.mean(up.evaluations))
     _, t_lo = best(
         lambda: _lower_bound(
@@ -272,6 +294,19 @@ def main(argv=None):
         ("cvxpy LMI D-G bound (bisection)", lmi_t),
     ):
         print(f"{name:44}{t[0] * 1e3:10.2f}{t[1] * 1e3:10.2f}")
+    print(f"{'upper bound, small batches (per matrix)':44}")
+    for size, (_, t) in small.items():
+        print(f"{f'  batch of {size}':44}{t[0] * 1e3:10.2f}{t[1] * 1e3:10.2f}")
+    values = {"full": up.upper, **{f"batch{k}": v for k, (v, _) in small.items()}}
+    if args.save_values:
+        np.savez(args.save_values, **values)
+    if args.compare_values:
+        with np.load(args.compare_values) as ref:
+            for key, v in values.items():
+                print(
+                    f"upper bounds vs {args.compare_values} ({key}): max rel. diff "
+                    f"{np.max(np.abs(v / ref[key] - 1)):.1e}"
+                )
     print(
         f"target <= 2 ms per matrix for both bounds: independent matrices "
         f"{'MET' if t_both[1] <= 2e-3 else 'NOT met'} (CPU {t_both[1] * 1e3:.2f} ms), "
