@@ -14,10 +14,17 @@ a shared machine) for independent matrices (the headline) and with ``continuatio
 without numba (numpy path) in the same run, the first-call compile time of the numba kernels
 (fresh processes, excluded from the per-matrix times), eigen-decompositions per matrix, the
 speed-up over cvxpy and the relative difference of the values (same run), the upper/lower gap
-and the certificate checks; ``--frontier`` adds the time vs accuracy of the upper bound for
-several iteration budgets.
+and the certificate checks, and the per-matrix time of the upper bound on small batches (1, 2, 4
+and 8 matrices: lone calls, warm-started points); ``--frontier`` adds the time vs accuracy of the
+upper bound for several iteration budgets.
 
 Run: ``.venv/bin/python benchmarks/bench_mussv.py [--matrices 200] [--lmi 3] [--frontier]``
+
+Two checkouts back to back (same load; the bounds of the second against the first's)::
+
+    cd benchmarks
+    PYTHONPATH=/path/to/main python bench_mussv.py --no-compile --save-values /tmp/main.npz
+    PYTHONPATH=/path/to/branch python bench_mussv.py --no-compile --compare-values /tmp/main.npz
 """
 
 from __future__ import annotations
