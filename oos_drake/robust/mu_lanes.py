@@ -926,8 +926,8 @@ def _eval_lane_alone(Mc, w, x, tq, lay, f, g, lmax, t, size):
     t1 = np.ones(1)
     Mw = Mc[w : w + 1]
     packed = (lay.packed_int, lay.packed_coef, lay.c_blocks, lay.r_blocks, lay.real_blocks)
-    if tq[w] < 0:
-        mu_kernels.dg_objective(Mw, xw, t1, False, *packed, f1, g1, l1, top1)
+    if tq[w] < 0:  # (size passed as below: one compiled signature of dg_objective, not two)
+        mu_kernels.dg_objective(Mw, xw, t1, False, *packed, f1, g1, l1, top1, s1)
         t1[0] = -tq[w] / max(l1[0], 1e-12)
     else:
         t1[0] = tq[w]
