@@ -14,10 +14,17 @@ a shared machine) for independent matrices (the headline) and with ``continuatio
 in numpy (the tests' oracles) in the same run, the first-call compile time of the numba kernels
 (fresh processes, excluded from the per-matrix times), eigen-decompositions per matrix, the
 speed-up over cvxpy and the relative difference of the values (same run), the upper/lower gap
-and the certificate checks; ``--frontier`` adds the time vs accuracy of the upper bound for
-several iteration budgets.
+and the certificate checks, and the per-matrix time of the upper bound on small batches (1, 2, 4
+and 8 matrices: lone calls, warm-started points); ``--frontier`` adds the time vs accuracy of the
+upper bound for several iteration budgets.
 
 Run: ``.venv/bin/python benchmarks/bench_mussv.py [--matrices 200] [--lmi 3] [--frontier]``
+
+Two checkouts back to back (same load; the bounds of the second against the first's)::
+
+    cd benchmarks
+    PYTHONPATH=/path/to/main python bench_mussv.py --no-compile --save-values /tmp/main.npz
+    PYTHONPATH=/path/to/branch python bench_mussv.py --no-compile --compare-values /tmp/main.npz
 """
 
 from __future__ import annotations
@@ -30,6 +37,9 @@ import time
 import numpy as np
 
 from oos_drake.robust.blocks import REAL, parse_blk
+
+#: Sizes of the small batches timed matrix by matrix (lone matrices, warm-started points).
+SMALL_BATCHES = (1, 2, 4, 8)
 
 
 def cvxpy_dg_upper_bound(M, blk, *, rtol: float = 1e-4, solver: str = "CLARABEL"):
@@ -172,6 +182,17 @@ def main(argv=None):
         action="store_true",
         help="also print time vs accuracy of the upper bound for several iteration budgets",
     )
+    parser.add_argument(
+        "--save-values",
+        metavar="NPZ",
+        help="write the upper bounds (full batch, small batches) to this file, e.g. to compare "
+        "two checkouts with --compare-values",
+    )
+    parser.add_argument(
+        "--compare-values",
+        metavar="NPZ",
+        help="print the relative difference of the upper bounds to those saved by --save-values",
+    )
     args = parser.parse_args(argv)
     limit_blas_threads(1)
     warnings.filterwarnings("ignore")
@@ -207,6 +228,14 @@ def main(argv=None):
 
     res, t_both = best(lambda: mussv(M, PAPER_BLK))
     up, t_up = best(lambda: upper(M))
+    # small batches (a lone matrix, warm-started points): contiguous slices spread over the grid
+    small = {}
+    for size in SMALL_BATCHES:
+        starts = np.linspace(0, n - size, min(8, n - size + 1)).round().astype(int)
+        vals, t_small = best(
+            lambda size=size, starts=starts: [upper(M[k : k + size]).upper for k in starts]
+        )
+        small[size] = (np.concatenate(vals), tuple(v * n / (size * len(starts)) for v in t_small))
     evals = float(np.mean(up.evaluations))
     _, t_lo = best(
         lambda: _lower_bound(
@@ -276,6 +305,19 @@ def main(argv=None):
         ("cvxpy LMI D-G bound (bisection)", lmi_t),
     ):
         print(f"{name:44}{t[0] * 1e3:10.2f}{t[1] * 1e3:10.2f}")
+    print(f"{'upper bound, small batches (per matrix)':44}")
+    for size, (_, t) in small.items():
+        print(f"{f'  batch of {size}':44}{t[0] * 1e3:10.2f}{t[1] * 1e3:10.2f}")
+    values = {"full": up.upper, **{f"batch{k}": v for k, (v, _) in small.items()}}
+    if args.save_values:
+        np.savez(args.save_values, **values)
+    if args.compare_values:
+        with np.load(args.compare_values) as ref:
+            for key, v in values.items():
+                print(
+                    f"upper bounds vs {args.compare_values} ({key}): max rel. diff "
+                    f"{np.max(np.abs(v / ref[key] - 1)):.1e}"
+                )
     print(
         f"target <= 2 ms per matrix for both bounds: independent matrices "
         f"{'MET' if t_both[1] <= 2e-3 else 'NOT met'} (CPU {t_both[1] * 1e3:.2f} ms), "

@@ -519,7 +519,7 @@ def _eig_full(H, w_all, Vk, K_max, t, ints):
 
 
 @_jit
-def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax, top):
+def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax, top, size=None):
     r"""Smoothed ``lambda_max`` of the scaled D-G matrix and its gradient, matrix by matrix.
 
     Parameters
@@ -537,6 +537,9 @@ def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax,
         Packed layout (:func:`pack_layout`).
     f, grad, lmax, top : arrays (B,), (B, p), (B,), (B, r)
         Outputs (``top``: ``T_r^{-1} v`` for the top eigenvector ``v``).
+    size : array (B,), optional
+        Output: ``||M_hat||_F^2`` (``M_hat = T_l M T_r^{-1}``), the size of the LMI's terms
+        by which the lane optimizer picks its best point (:mod:`mu_lanes`).
 
     Returns
     -------
@@ -619,6 +622,12 @@ def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax,
                         acc += Mb[i, k] * Tri[k, j]
                     X[i, j] = acc
         _lower_tri_times(Tl, X, cb_start, cb_size, Mh)
+        if size is not None:
+            acc_size = 0.0
+            for i in range(c):
+                for j in range(r):
+                    acc_size += Mh[i, j].real ** 2 + Mh[i, j].imag ** 2
+            size[b] = acc_size
         # G X: G is non-zero on the real blocks only
         for q in range(realb.shape[1]):
             ro, co, m = realb[0, q], realb[1, q], realb[2, q]

@@ -24,6 +24,12 @@ the layout of the structure (:data:`LaneLayout`), the optimizer's options
 (:data:`LaneOptions`) and the work arrays (:data:`LaneWorkspace`). The line-search constants
 (:data:`ARMIJO`, ...) are defined here once.
 
+An eight-lane evaluation costs the same whatever the number of busy lanes (about three
+per-matrix evaluations inside the optimizer, four in isolation). With at most ``LaneOptions.per_matrix_lanes`` busy lanes (a lone matrix, a small
+batch, the tail of a batch) the optimizer evaluates them one by one instead, with the
+per-matrix kernel :func:`mu_kernels.dg_objective` (the same function; LAPACK's eigen-solvers):
+one optimizer, its state machine, line search and stopping rules unchanged, two evaluators.
+
 The 8-vectors are tuples handled by the small helpers below (``_ld``, ``_fma``, ..., inlined):
 tuples are values, not memory, so all loads of a step come before its stores and LLVM's SLP
 vectorizer can pack them (numba leaves it off by default: :func:`compile_with_slp`). A lane
@@ -131,7 +137,11 @@ LaneOptions = namedtuple(
         "chain_temperatures",  # (n,) float: stages of a chained matrix
         "chain_patience",  # int
         "size_weight",  # float: weight of ||M_hat||_F^2 in the value that picks the best point
+        "per_matrix_lanes",  # int: with at most this many busy lanes, evaluate them one by one
     ],
+    # one eight-lane evaluation costs about three per-matrix ones in the optimizer (26 x 26,
+    # AVX-512; benchmarks/bench_mussv.py): 3 is the break-even; 0: always the eight lanes
+    defaults=(3,),
 )
 
 #: Work arrays of :func:`_lane_eval` (eight lanes in the last axis; ``_re``/``_im``: real and
@@ -877,31 +887,46 @@ def _lane_eval(Mr, Mi, Mc, x, tq, lay, ws, f, g, lmax):
                 acc += ws.mht_re[i, j, w] ** 2 + ws.mht_im[i, j, w] ** 2
         ws.size[w] = acc
     for w in range(W):  # a lane whose QR did not converge: the per-matrix kernel
-        if okq[w]:
-            continue
-        p = x.shape[0]
-        xw = np.empty((1, p))
-        for i in range(p):
-            xw[0, i] = x[i, w]
-        f1 = np.empty(1)
-        l1 = np.empty(1)
-        g1 = np.empty((1, p))
-        top1 = np.empty((1, Mc.shape[2]), dtype=np.complex128)
-        t1 = np.ones(1)
-        Mw = Mc[w : w + 1]
-        packed = (lay.packed_int, lay.packed_coef, lay.c_blocks, lay.r_blocks, lay.real_blocks)
-        if tq[w] < 0:
-            mu_kernels.dg_objective(Mw, xw, t1, False, *packed, f1, g1, l1, top1)
-            t1[0] = -tq[w] / max(l1[0], 1e-12)
-        else:
-            t1[0] = tq[w]
-        mu_kernels.dg_objective(Mw, xw, t1, True, *packed, f1, g1, l1, top1)
-        f[w] = f1[0]
-        lmax[w] = l1[0]
-        t[w] = t1[0]
-        for i in range(p):
-            g[i, w] = g1[0, i]
+        if not okq[w]:
+            _eval_lane_alone(Mc, w, x, tq, lay, f, g, lmax, t, ws.size)
     return t
+
+
+@_jit_exact
+def _eval_lane_alone(Mc, w, x, tq, lay, f, g, lmax, t, size):
+    """What :func:`_lane_eval` computes, for lane ``w`` only, by the per-matrix kernel
+    :func:`mu_kernels.dg_objective` (LAPACK eigen-solvers): ``f[w]``, ``g[:, w]``,
+    ``lmax[w]``, the temperature used ``t[w]`` and ``size[w]`` (``||M_hat||_F^2``).
+
+    The evaluation of a lane whose QR did not converge, and of every busy lane when so few are
+    busy that one eight-lane evaluation costs more than theirs one by one
+    (``LaneOptions.per_matrix_lanes``). A temperature relative to the lane's own
+    ``lambda_max`` (``tq[w] < 0``) costs one more evaluation, eigenvalues only.
+    """
+    p = x.shape[0]
+    xw = np.empty((1, p))
+    for i in range(p):
+        xw[0, i] = x[i, w]
+    f1 = np.empty(1)
+    l1 = np.empty(1)
+    g1 = np.empty((1, p))
+    s1 = np.empty(1)
+    top1 = np.empty((1, Mc.shape[2]), dtype=np.complex128)
+    t1 = np.ones(1)
+    Mw = Mc[w : w + 1]
+    packed = (lay.packed_int, lay.packed_coef, lay.c_blocks, lay.r_blocks, lay.real_blocks)
+    if tq[w] < 0:  # (size passed as below: one compiled signature of dg_objective, not two)
+        mu_kernels.dg_objective(Mw, xw, t1, False, *packed, f1, g1, l1, top1, s1)
+        t1[0] = -tq[w] / max(l1[0], 1e-12)
+    else:
+        t1[0] = tq[w]
+    mu_kernels.dg_objective(Mw, xw, t1, True, *packed, f1, g1, l1, top1, s1)
+    f[w] = f1[0]
+    lmax[w] = l1[0]
+    t[w] = t1[0]
+    size[w] = s1[0]
+    for i in range(p):
+        g[i, w] = g1[0, i]
 
 
 def lane_layout(packed, structure) -> LaneLayout:
@@ -1043,6 +1068,8 @@ def dg_minimize_lanes(M, x0, opts, lay, ws, best_x, best_l, iters, evals):
     :data:`LaneLayout`, ``ws`` a :data:`LaneWorkspace` (:func:`lane_workspace`). Outputs:
     ``best_x``/``best_l`` the best scalings met (below) and their exact ``lambda_max``, ``iters``
     the iterations and ``evals`` the evaluations (one per lane and eigen-decomposition) used.
+    An evaluation runs on the eight lanes (:func:`_lane_eval`) while more than
+    ``opts.per_matrix_lanes`` lanes are busy, else lane by lane (:func:`_eval_lane_alone`).
     The best point is the one with the smallest ``lambda_max + opts.size_weight ||M_hat||_F^2``
     (``M_hat = T_l M T_r^{-1}``): the round-off of the certificate check grows with the size
     of the LMI's terms, so a point lower by less than what its certification adds is not
@@ -1120,8 +1147,14 @@ def dg_minimize_lanes(M, x0, opts, lay, ws, best_x, best_l, iters, evals):
             phase[w] = _INIT
             _load_lane(w, b, M, x0, Mr, Mi, Mc, xc, xq, tq, temps)
             active += 1
+    tused = np.zeros(W)
     while active > 0:
-        tused = _lane_eval(Mr, Mi, Mc, xq, tq, lay, ws, f, g, lm)
+        if active > opts.per_matrix_lanes:
+            tused = _lane_eval(Mr, Mi, Mc, xq, tq, lay, ws, f, g, lm)
+        else:  # few busy lanes (a lone matrix, a batch's tail): cheaper one by one
+            for w in range(W):
+                if mat[w] >= 0:
+                    _eval_lane_alone(Mc, w, xq, tq, lay, f, g, lm, tused, ws.size)
         for w in range(W):
             b = mat[w]
             if b < 0:

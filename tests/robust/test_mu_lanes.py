@@ -165,3 +165,53 @@ def test_small_batches_run_on_the_lanes_with_the_values_of_a_full_batch(monkeypa
     assert np.max(rel) < 5e-3
     assert np.all(mu.lmi_residual(M[:batch], part.upper * (1 + 1e-7), part.D_left,
                                   part.D_right, part.G) <= mu.LMI_ROUNDOFF)  # fmt: skip
+
+
+def test_a_lane_evaluated_alone_equals_the_numpy_objective():
+    """The per-matrix evaluator of the lane optimizer (few busy lanes, QR fallback): value,
+    gradient, lambda_max, temperature and ||M_hat||_F^2 against numpy (batched eigh, solve)."""
+    s, M, x, layout, ref, packed = _lane_problem(PAPER, seed=11)
+    lay = mu_lanes.lane_layout(packed, s)
+    idx = np.arange(W)
+    _, _, lmax, _ = ref(x, idx, np.ones(W), need_grad=False)
+    t = 100.0 / lmax
+    f0, g0, l0, _ = ref(x, idx, t)
+    size0 = ref.size(x, idx)
+    floor = s.n_rows * mu_kernels.WEIGHT_FLOOR  # eigenvalues of smaller weight are left out
+    xq = np.ascontiguousarray(x.T)
+    for tq in (t, np.full(W, -100.0)):  # absolute, and relative to each lane's own lambda_max
+        f, l1, t1, size = np.zeros((4, W))
+        g = np.zeros((layout.n_params, W))
+        for w in range(W):
+            mu_lanes._eval_lane_alone(np.ascontiguousarray(M), w, xq, tq, lay, f, g, l1, t1, size)
+        assert_allclose(t1, t, rtol=1e-12)
+        assert_allclose(l1, l0, rtol=1e-12)
+        assert_allclose(f, f0, rtol=1e-12)
+        assert_allclose(size, size0, rtol=1e-12)
+        assert np.max(np.abs(g.T - g0)) <= 10 * floor * np.max(np.abs(g0))
+
+
+@pytest.mark.parametrize("chain", [False, True])
+def test_evaluating_lanes_one_by_one_gives_the_bounds_of_the_eight_lane_evaluation(
+    monkeypatch, chain
+):
+    """LaneOptions.per_matrix_lanes picks the evaluator, not the optimizer: every evaluation
+    one by one (per_matrix_lanes = W) and every one on the eight lanes (0) give the same bounds
+    up to round-off flipping a line-search decision (within the stopping tolerance), all
+    certified by the independent LMI check."""
+    lanes = mu_lanes.dg_minimize_lanes
+    s = parse_blk(PAPER)
+    M = _crandn(np.random.default_rng(3), 13, s.n_cols, s.n_rows)
+    got = {}
+    for per_matrix in (0, W):
+
+        def forced(M_, x0, opts, *args, per_matrix=per_matrix):
+            return lanes(M_, x0, opts._replace(per_matrix_lanes=per_matrix), *args)
+
+        monkeypatch.setattr(mu_lanes, "dg_minimize_lanes", forced)
+        got[per_matrix] = res = _upper(M, s, True, chain=chain)
+        assert np.all(mu.lmi_residual(M, res.upper * (1 + 1e-7), res.D_left, res.D_right, res.G)
+                      <= mu.LMI_ROUNDOFF)  # fmt: skip
+    rel = np.abs(got[W].upper / got[0].upper - 1)
+    assert np.median(rel) < 1e-4
+    assert np.max(rel) < 5e-3
