@@ -26,8 +26,8 @@ the batched fancy-indexing temporaries:
 
 If the eigenvector step fails (``dstein`` not converged) the kernel falls back to a full
 ``numpy.linalg.eigh`` for that matrix. Whatever the kernel returns only steers the optimizer:
-the returned bound is always re-evaluated exactly (``numpy.linalg.eigh``) at the final
-scalings.
+every returned bound is proved at the final scalings by ``mu_upper.certified_upper`` (the LMI
+with an a priori bound on its own round-off).
 
 The LAPACK routines are bound by symbol name (``llvmlite.binding.add_symbol``) so that the
 compiled code can be cached on disk (``cache=True``): the first call in a fresh checkout

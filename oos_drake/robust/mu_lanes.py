@@ -2,7 +2,8 @@ r"""The D-G upper bound optimizer, compiled, eight matrices in lock-step (one pe
 
 The one compiled D-G optimizer of the product. :func:`dg_minimize_lanes` runs the algorithm of
 ``mu_upper.mu_upper_bound`` (smoothed ``lambda_max``, temperature stages, L-BFGS with Armijo
-backtracking, patience stopping; its numpy version there is the test oracle) on every matrix
+backtracking, patience stopping; its numpy version, ``tests/robust/oracles.py``, is the test
+oracle) on every matrix
 of a batch of any size, eight at a time (lanes without a matrix idle): each lane runs its own
 optimizer (a small state machine that asks for the next point to evaluate) and one evaluation
 serves the eight lanes.
@@ -57,7 +58,7 @@ QR_STEP_BUDGET = 8
 _FM = {"reassoc", "contract", "nsz", "arcp"}
 
 # The line search of the D-G optimizer, defined once: the lanes here and the numpy oracle of
-# mu_upper read these (numba freezes them into the compiled code: edit, then recompile).
+# the tests read these (numba freezes them into the compiled code: edit, then recompile).
 #: Armijo sufficient-decrease constant.
 ARMIJO = 1e-4
 #: Factor by which a rejected step is shortened.
@@ -1319,7 +1320,7 @@ def dg_minimize_lanes(M, x0, opts, lay, ws, best_x, best_l, iters, evals):
                         dv[w, i] = -gc[w, i]
                         sl -= gc[w, i] * gc[w, i]
                     count[w] = 0
-                slope[w] = sl  # before the cap (as the numpy oracle of mu_upper)
+                slope[w] = sl  # before the cap (as the numpy oracle of the tests)
                 _cap_step(dv[w], log_par)
                 alpha[w] = 1.0
                 ls[w] = 0
