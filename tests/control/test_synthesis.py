@@ -6,6 +6,7 @@ from perturbed gains must reach the same gamma. The restarts as executor tasks (
 Dask) give the serial synthesis number for number.
 """
 
+import dataclasses
 import importlib.util
 
 import numpy as np
@@ -32,19 +33,22 @@ def small_problem():
     return plants, baseline_gains(J)
 
 
+#: One optimizer run, then a worst-case round and a warm-started run.
+SMALL_OPTIONS = SynthesisOptions(
+    restarts=0,
+    max_iterations=25,
+    worst_case_rounds=1,
+    worst_case_configurations=1,
+    worst_case_samples=4,
+    worst_case_ascent_steps=1,
+    working_set=0,
+)
+
+
 @pytest.fixture(scope="module")
 def small_result(small_problem):
     plants, K0 = small_problem
-    options = SynthesisOptions(
-        restarts=0,
-        max_iterations=25,
-        worst_case_rounds=1,
-        worst_case_configurations=1,
-        worst_case_samples=4,
-        worst_case_ascent_steps=1,
-        working_set=0,
-    )
-    return synthesize(plants, K0, options=options)
+    return synthesize(plants, K0, options=SMALL_OPTIONS)
 
 
 def test_synthesis_improves_on_the_baseline(small_result):
@@ -96,18 +100,8 @@ def test_perturbed_starts_reach_the_same_gamma():
         assert run(start, seed) == pytest.approx(reference, rel=1e-2)
 
 
-#: A small synthesis with three independent runs in round 0 (start point and two restarts),
-#: then a worst-case round and a warm-started run.
-PARALLEL_OPTIONS = SynthesisOptions(
-    restarts=2,
-    max_iterations=8,
-    worst_case_rounds=1,
-    worst_case_configurations=1,
-    worst_case_samples=4,
-    worst_case_ascent_steps=1,
-    working_set=0,
-    workers=2,
-)
+#: Three independent runs in round 0 (start point and two restarts), short ones.
+PARALLEL_OPTIONS = dataclasses.replace(SMALL_OPTIONS, restarts=2, max_iterations=8, workers=2)
 
 
 class _Recording:
