@@ -26,6 +26,7 @@ models together; :func:`hinfnorm_hamiltonian` is its one-model form.
 from __future__ import annotations
 
 import functools
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -123,8 +124,10 @@ def _sigma_max(H) -> np.ndarray:
 
 
 @functools.cache
-def _executor(workers: int) -> ThreadExecutor:
-    return ThreadExecutor(workers)  # kept for the process's life: one per gamma evaluation
+def _executor(workers: int, pid: int) -> ThreadExecutor:
+    """Threads kept for the process's life (``pid``: a forked worker makes its own; the
+    parent's threads do not exist there)."""
+    return ThreadExecutor(workers)
 
 
 def _over_chunks(function, A, workers: int) -> list:
@@ -139,7 +142,7 @@ def _over_chunks(function, A, workers: int) -> list:
     if workers == 1 or A.shape[0] < 2 * workers:
         return [function(A)]
     chunks = np.array_split(np.arange(A.shape[0]), workers)
-    return _executor(workers).map(lambda idx: function(A[idx]), chunks)
+    return _executor(workers, os.getpid()).map(lambda idx: function(A[idx]), chunks)
 
 
 @with_single_threaded_blas
