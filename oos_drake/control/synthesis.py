@@ -88,7 +88,8 @@ class SynthesisOptions:
         Total rounds (optimizer run + checks).
     workers : int
         Threads for the per-model eigendecompositions of every gamma evaluation (2 on the
-        paper's 2-core target machine).
+        paper's 2-core target machine); the runs that :func:`synthesize` gives its executor
+        share them (``workers // executor.workers`` each, at least one).
     """
 
     restarts: int = 2
