@@ -222,12 +222,20 @@ def stack_models(models) -> LFR:
 
 
 def _twin_lfr_at(scenario, time: float) -> LFR:
-    """The twin's LFR at mission ``time`` [s] (one extraction job: an executor task)."""
+    """The twin's LFR at mission ``time`` [s] of ``scenario``."""
     from oos_drake.multibody.operating_point import operating_point
     from oos_drake.scenario.timeline import mission_timeline
 
     point = operating_point(mission_timeline(scenario).configuration(float(time)))
     return twin_lfr(point, mission_parameters(scenario))
+
+
+def _twin_lfr_task(source: str, overrides: tuple, time: float) -> LFR:
+    """:func:`_twin_lfr_at` as an executor task: a ``Scenario`` does not pickle, its file and
+    overrides do (loading is cached per process)."""
+    from oos_drake.scenario.data import load_scenario
+
+    return _twin_lfr_at(load_scenario(source, dict(overrides)), time)
 
 
 def twin_mission_plants(times, scenario=None, *, progress=None, executor=None) -> LFR:
@@ -241,9 +249,10 @@ def twin_mission_plants(times, scenario=None, *, progress=None, executor=None) -
         ``progress(done, total)``.
     executor : optional
         Where the extractions run, one task per time (:func:`oos_drake.processes.make_executor`;
-        a process pool must spawn its workers: Drake's threads do not survive a fork);
-        ``None``: one after the other here. Same LFRs either way (each extraction starts from a
-        fresh context, with its own seeded checks).
+        a process pool must spawn its workers: Drake's threads do not survive a fork; the
+        workers load the scenario from its file and overrides); ``None``: one after the other
+        here. Same LFRs either way (each extraction starts from a fresh context, with its own
+        seeded checks).
     """
     import numpy as np
 
@@ -252,7 +261,8 @@ def twin_mission_plants(times, scenario=None, *, progress=None, executor=None) -
     if executor is None:
         jobs = (_twin_lfr_at(scenario, t) for t in times)
     else:
-        futures = [executor.submit(_twin_lfr_at, scenario, t) for t in times]
+        source = (str(scenario.source), scenario.overrides)
+        futures = [executor.submit(_twin_lfr_task, *source, float(t)) for t in times]
         jobs = (future.result() for future in futures)
     models = []
     for model in jobs:
