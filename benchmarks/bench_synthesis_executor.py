@@ -17,23 +17,16 @@ Run: ``PYTHONPATH=. python benchmarks/bench_synthesis_executor.py [--configurati
 from __future__ import annotations
 
 import argparse
-import resource
 import time
 
 import numpy as np
+from bench_analysis import _cpu  # CPU of this process and its finished workers
 
 from oos_drake.control.cli import baseline_for, make_plants
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.synthesis import SynthesisOptions, synthesize
 from oos_drake.processes import SCHEDULER_HELP, make_executor
 from oos_drake.scenario.data import load_scenario
-
-
-def _cpu() -> float:
-    """CPU time of this process and of its finished children (the pool's workers) [s]."""
-    own = resource.getrusage(resource.RUSAGE_SELF)
-    children = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 def main() -> None:
