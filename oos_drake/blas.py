@@ -14,7 +14,6 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import functools
-from concurrent.futures import ThreadPoolExecutor
 
 _LOCAL_SETTER = "openblas_set_num_threads_local"  # returns the previous value, calling thread only
 _GLOBAL = (
@@ -114,19 +113,3 @@ def with_single_threaded_blas(function):
             return function(*args, **kwargs)
 
     return wrapper
-
-
-def run_threaded(work, items, workers: int = 1) -> None:
-    """Call ``work(item)`` for every item of ``items``, in ``workers`` threads.
-
-    Each thread runs with one BLAS thread (no nested BLAS threads); with ``workers <= 1`` or a
-    single item everything runs in the calling thread, with the BLAS setting unchanged.
-    """
-    items = list(items)
-    workers = max(1, int(workers))
-    if workers > 1 and len(items) > 1:
-        with ThreadPoolExecutor(max_workers=min(workers, len(items))) as pool:
-            list(pool.map(with_single_threaded_blas(work), items))
-    else:
-        for item in items:
-            work(item)

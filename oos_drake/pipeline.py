@@ -189,7 +189,9 @@ def run_pipeline(args: argparse.Namespace) -> int:
         "controller",
         out / "controller",
         keys["controller"],
-        lambda d: _oos("synth", "--out", d, *quick, *on_scenario),
+        lambda d: _oos(
+            "synth", "--out", d, "--workers", args.workers, *scheduler, *quick, *on_scenario
+        ),
         timings,
     )
     controller = out / "controller" / "controller.json"
@@ -227,6 +229,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
             d,
             "--workers",
             args.workers,
+            *scheduler,
             *on_scenario,
         ),
         timings,
@@ -343,7 +346,10 @@ def register(subparsers) -> None:
         "--campaign", default=str(DEFAULT_CAMPAIGN), help="campaign spec (default: paper.toml)"
     )
     parser.add_argument(
-        "--workers", type=int, default=2, help="worker processes of the analysis and the campaign"
+        "--workers",
+        type=int,
+        default=2,
+        help="worker processes of the synthesis, the analysis, the confirmation and the campaign",
     )
     add_scheduler_argument(parser)
     parser.add_argument(

@@ -5,6 +5,9 @@ parameter study, the confirmation, the campaign's executors) runs on one small i
 by :func:`make_executor` from the CLI options ``--workers N`` and ``--scheduler``:
 
 - :class:`SerialExecutor`: in this process (one worker);
+- :class:`ThreadExecutor`: threads of this process, one BLAS thread each (the fine grain: many
+  small GIL-free LAPACK calls on shared arrays, e.g. the per-model eigendecompositions of a
+  gamma evaluation; not a ``--scheduler`` choice: only for work that is thread-safe);
 - :class:`PoolExecutor`: a local pool of worker processes (the default);
 - :class:`DaskExecutor`: a local Dask cluster (``--scheduler dask``) or a running scheduler
   (``--scheduler tcp://host:8786``); Dask is optional.
@@ -35,7 +38,9 @@ import os
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
+
+from oos_drake.blas import limit_blas_threads, single_threaded_blas, with_single_threaded_blas
 
 #: Seconds between two checks of the parent process id in a worker.
 PARENT_POLL_S = 0.25
@@ -64,8 +69,6 @@ def exit_with_parent(parent_pid: int, period: float = PARENT_POLL_S) -> None:
 
 
 def _start_worker(parent_pid: int, initializer: Callable | None, initargs: tuple) -> None:
-    from oos_drake.blas import limit_blas_threads
-
     exit_with_parent(parent_pid)
     limit_blas_threads(1)
     if initializer is not None:
@@ -175,6 +178,54 @@ class SerialExecutor:
         return False
 
 
+def _single_blas_call(fn: Callable, args: tuple):
+    with single_threaded_blas():
+        return fn(*args)
+
+
+class ThreadExecutor(SerialExecutor):
+    """Threads of this process, each task with one BLAS thread (no nested BLAS threads).
+
+    For the fine grain where pickling would cost more than the work: GIL-free LAPACK calls on
+    arrays this process holds. A single task (``map`` of one item) runs in the calling thread
+    with the BLAS setting unchanged.
+
+    Parameters
+    ----------
+    workers : int
+        Threads (>= 1).
+    initializer, initargs :
+        Called once in this process when the executor is made.
+    """
+
+    kind = "threads"
+
+    def __init__(self, workers: int, initializer: Callable | None = None, initargs: tuple = ()):
+        if int(workers) < 1:
+            raise ValueError(f"--workers {workers}: need at least 1 worker")
+        super().__init__(initializer, initargs)
+        self.workers = int(workers)
+        self.pool = ThreadPoolExecutor(max_workers=self.workers, thread_name_prefix="oos")
+
+    def submit(self, fn: Callable, *args) -> Future:
+        """Start ``fn(*args)`` on a thread (one BLAS thread); a ``concurrent.futures.Future``."""
+        return self.pool.submit(_single_blas_call, fn, args)
+
+    def map(self, fn: Callable, iterable: Iterable) -> list:
+        """``[fn(x) for x in iterable]`` on the threads, in order."""
+        items = list(iterable)
+        if len(items) < 2:
+            return [fn(x) for x in items]
+        return list(self.pool.map(with_single_threaded_blas(fn), items))
+
+    def as_completed(self, futures: Iterable) -> Iterator:
+        """The futures in the order they finish."""
+        return concurrent.futures.as_completed(list(futures))
+
+    def shutdown(self) -> None:
+        self.pool.shutdown(wait=True, cancel_futures=True)
+
+
 class PoolExecutor(SerialExecutor):
     """A local pool of worker processes made by :func:`process_pool` (they die with this process).
 
@@ -223,8 +274,6 @@ class PoolExecutor(SerialExecutor):
 
 
 def _dask_worker_setup(initializer: Callable | None, initargs: tuple) -> None:
-    from oos_drake.blas import limit_blas_threads
-
     limit_blas_threads(1)
     if initializer is not None:
         initializer(*initargs)
@@ -326,7 +375,7 @@ def _worker_setup_plugin(initializer: Callable | None, initargs: tuple):
     return WorkerSetup()
 
 
-Executor = SerialExecutor | PoolExecutor | DaskExecutor
+Executor = SerialExecutor | ThreadExecutor | PoolExecutor | DaskExecutor
 
 
 def make_executor(
@@ -345,8 +394,10 @@ def make_executor(
         Workers (>= 1). On the process pool, 1 runs the tasks in this process.
     scheduler : str, optional
         ``None`` or ``"processes"``: :class:`PoolExecutor` (:class:`SerialExecutor` for one
-        worker); ``"dask"`` or ``"local"``: a local Dask cluster; an address (``host:port``,
-        ``tcp://host:port``): that Dask scheduler (:func:`scheduler_address`).
+        worker); ``"threads"``: :class:`ThreadExecutor` (:class:`SerialExecutor` for one
+        worker; for thread-safe work only, so not a ``--scheduler`` value); ``"dask"`` or
+        ``"local"``: a local Dask cluster; an address (``host:port``, ``tcp://host:port``): that
+        Dask scheduler (:func:`scheduler_address`).
     initializer, initargs :
         Run once in every worker (in this process for :class:`SerialExecutor`).
     method : str, optional
@@ -354,7 +405,7 @@ def make_executor(
 
     Returns
     -------
-    SerialExecutor, PoolExecutor or DaskExecutor
+    SerialExecutor, ThreadExecutor, PoolExecutor or DaskExecutor
         Use it as a context manager (it shuts down at the end).
     """
     workers = int(workers)
@@ -365,6 +416,8 @@ def make_executor(
         if workers == 1:
             return SerialExecutor(**setup)
         return PoolExecutor(workers, method=method, **setup)
+    if scheduler == "threads":
+        return SerialExecutor(**setup) if workers == 1 else ThreadExecutor(workers, **setup)
     return DaskExecutor(scheduler_address(scheduler), workers, **setup)
 
 

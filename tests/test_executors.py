@@ -20,6 +20,7 @@ from oos_drake.processes import (
     DaskExecutor,
     PoolExecutor,
     SerialExecutor,
+    ThreadExecutor,
     make_executor,
     scheduler_address,
 )
@@ -57,6 +58,20 @@ def _check_interface(executor) -> set[int]:
     return {m[1] for m in mapped}
 
 
+def test_thread_executor_runs_here_with_one_blas_thread():
+    """The fine-grain kind (``make_executor(n, "threads")``): same interface, tasks in threads
+    of this process, each with one OpenBLAS thread (checked where OpenBLAS is found)."""
+    from oos_drake.blas import _global_pair, _libraries
+
+    with make_executor(2, "threads", initializer=_remember, initargs=(3,)) as threads:
+        assert isinstance(threads, ThreadExecutor) and threads.workers == 2
+        assert _check_interface(threads) == {os.getpid()}
+        getters = [pair[1] for pair in map(_global_pair, _libraries()) if pair is not None]
+        inside = threads.submit(lambda: [get() for get in getters]).result()
+        assert all(n == 1 for n in inside)
+    assert isinstance(make_executor(1, "threads"), SerialExecutor)
+
+
 def test_serial_executor_runs_here_and_pool_in_workers():
     with make_executor(1, initializer=_remember, initargs=(3,)) as serial:
         assert isinstance(serial, SerialExecutor)
@@ -88,11 +103,27 @@ def test_dask_missing_is_a_one_line_error(monkeypatch):
 def test_cli_rejects_a_bad_scheduler_with_status_2(tmp_path, capsys):
     from oos_drake.cli import main
 
-    for command in (["analyze"], ["study", "--vary", "hubs.RH2.mass=1:2:2"], ["run"]):
+    for command in (
+        ["analyze"],
+        ["study", "--vary", "hubs.RH2.mass=1:2:2"],
+        ["run"],
+        ["synth"],
+        ["confirm", "--analysis", str(tmp_path)],
+    ):
         with pytest.raises(SystemExit) as exit_:
             main([*command, "--out", str(tmp_path / "a"), "--scheduler", "dsak"])
         assert exit_.value.code == 2
         assert "--scheduler 'dsak'" in capsys.readouterr().err
+    assert not (tmp_path / "a").exists()
+
+
+def test_synth_rejects_zero_workers_with_status_2(tmp_path, capsys):
+    """Before any model is built: one line naming the option."""
+    from oos_drake.cli import main
+
+    status = main(["synth", "--plant", "synthetic", "--out", str(tmp_path / "a"), "--workers", "0"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(err) == 1 and "--workers 0" in err[0]
     assert not (tmp_path / "a").exists()
 
 

@@ -116,20 +116,22 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(tmp_path):
     assert "0 run now" in second.stdout
 
 
-def test_oos_run_passes_the_scheduler_to_the_analysis_and_the_campaign(tmp_path, monkeypatch):
-    """``oos run --scheduler dask``: the stages that run on the executors get it, the others
-    (model, synthesis, confirmation) run as without it (stages replaced by a recorder)."""
+def test_oos_run_passes_the_scheduler_to_the_stages_with_parallel_work(tmp_path, monkeypatch):
+    """``oos run --scheduler dask --workers 3``: the stages that run on the executors
+    (synthesis, analysis, confirmation, campaign) get both, the report runs as without them
+    (stages replaced by a recorder)."""
     import oos_drake.pipeline as pipeline
     from oos_drake.cli import build_parser
 
     calls = []
     monkeypatch.setattr(pipeline, "_oos", lambda *argv: calls.append([str(a) for a in argv]))
     monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: None)
-    args = build_parser().parse_args(["run", "--out", str(tmp_path), "--scheduler", "dask"])
-    assert pipeline.run_pipeline(args) == 0
+    argv = ["run", "--out", str(tmp_path), "--scheduler", "dask", "--workers", "3"]
+    assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
     by_command = {tuple(c[:2]) if c[0] == "campaign" else (c[0],): c for c in calls}
-    for key in [("analyze",), ("campaign", "run")]:
+    for key in [("synth",), ("analyze",), ("confirm",), ("campaign", "run")]:
         argv = by_command[key]
         assert argv[argv.index("--scheduler") + 1] == "dask", key
-    for key in [("synth",), ("confirm",), ("campaign", "report")]:
+        assert argv[argv.index("--workers") + 1] == "3", key
+    for key in [("model",), ("campaign", "report")]:
         assert "--scheduler" not in by_command[key], key

@@ -155,9 +155,18 @@ def test_kill_9_of_oos_analyze_leaves_no_worker(tmp_path):
 
 def test_every_process_pool_comes_from_processes_module():
     """Pools made elsewhere would not carry the parent watcher: only ``oos_drake.processes``
-    starts worker processes, and only its executors make Dask clusters and clients (every
-    parallel site runs on :func:`oos_drake.processes.make_executor`)."""
-    starters = {"ProcessPoolExecutor", "Pool", "Process", "fork", "Popen", "LocalCluster", "Client"}
+    starts worker processes and thread pools, and only its executors make Dask clusters and
+    clients (every parallel site runs on :func:`oos_drake.processes.make_executor`)."""
+    starters = {
+        "ProcessPoolExecutor",
+        "ThreadPoolExecutor",
+        "Pool",
+        "Process",
+        "fork",
+        "Popen",
+        "LocalCluster",
+        "Client",
+    }
     offenders = []
     for path in sorted(PACKAGE.rglob("*.py")):
         if path.name == "processes.py":

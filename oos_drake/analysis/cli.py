@@ -341,6 +341,7 @@ def run_confirm(args) -> int:
             controller,
             ConfirmOptions(scenario=scenario),
             workers=args.workers,
+            scheduler=args.scheduler,
             quiet=args.quiet,
         )
         table.to_parquet(tmp / CONFIRMATION_FILE)
@@ -627,5 +628,6 @@ def register(subparsers) -> None:
     )
     add_scenario_argument(confirm)
     confirm.add_argument("--workers", type=int, default=2, help="worker processes")
+    add_scheduler_argument(confirm)
     confirm.add_argument("--quiet", action="store_true", help="no progress bars")
     confirm.set_defaults(func=run_confirm)

@@ -845,8 +845,13 @@ def _confirm_task(args):
     return confirm_peak(*args)
 
 
-def confirm_peaks(peaks, controller, options: ConfirmOptions, *, workers=1, quiet=False):
+def confirm_peaks(
+    peaks, controller, options: ConfirmOptions, *, workers=1, scheduler=None, quiet=False
+):
     """:func:`confirm_peak` for every peak on ``workers`` processes.
+
+    ``scheduler``: where they run (:func:`oos_drake.processes.make_executor`; the local pool's
+    workers are spawned, not forked: Drake's threads do not survive a fork).
 
     Returns
     -------
@@ -857,13 +862,13 @@ def confirm_peaks(peaks, controller, options: ConfirmOptions, *, workers=1, quie
     """
     from tqdm import tqdm
 
-    from oos_drake.processes import PoolExecutor
+    from oos_drake.processes import make_executor
 
     tasks = [(peak, controller, options) for peak in peaks]
     # every peak simulates; how many runs one needs is known only after its linear predictions
     order = range(len(tasks))
     results = {}
-    with PoolExecutor(max(1, min(workers, len(tasks))), method="spawn") as executor:
+    with make_executor(max(1, min(workers, len(tasks))), scheduler, method="spawn") as executor:
         futures = {executor.submit(_confirm_task, tasks[i]): i for i in order}
         for future in tqdm(
             executor.as_completed(futures), total=len(futures), desc="confirm", disable=quiet

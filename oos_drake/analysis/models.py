@@ -51,12 +51,13 @@ def _check_source(source: str) -> None:
 PLANT_SOURCES = ("lfr", "drake")
 
 
-def mission_plants(times, scenario=None, *, source: str = "lfr") -> LFR:
+def mission_plants(times, scenario=None, *, source: str = "lfr", executor=None) -> LFR:
     """The uncertain 6x6 plants ``[F; T] at G1 -> [a; wdot]`` at mission ``times`` [s].
 
     A model array ``(N,)`` whose blocks are ``Delta_real``: the TITOP LFR with the configuration
     substituted (``source="lfr"``) or the Drake twin's LFRs extracted by ``ulinearize``
-    (``source="drake"``, :func:`oos_drake.multibody.mission_lfr.twin_mission_plants`).
+    (``source="drake"``, :func:`oos_drake.multibody.mission_lfr.twin_mission_plants`, one
+    extraction per time, as tasks of ``executor`` when given: spawned workers).
     """
     from oos_drake.scenario.model import build_mission_model, mission_values
 
@@ -66,17 +67,17 @@ def mission_plants(times, scenario=None, *, source: str = "lfr") -> LFR:
     if source == "drake":
         from oos_drake.multibody.mission_lfr import twin_mission_plants
 
-        return twin_mission_plants(times, scenario)
+        return twin_mission_plants(times, scenario, executor=executor)
     return usubs(build_mission_model(scenario), mission_values(times, scenario))
 
 
 def mission_closed_loop(
-    controller: Controller, times, scenario=None, *, source: str = "lfr"
+    controller: Controller, times, scenario=None, *, source: str = "lfr", executor=None
 ) -> ModelArray:
     """``M_hat_N``: the uncertain closed loop at mission ``times`` [s] (plants of
-    :func:`mission_plants` from ``source``)."""
+    :func:`mission_plants` from ``source``, extracted on ``executor``)."""
     times = np.atleast_1d(np.asarray(times, dtype=float))
-    plant = mission_plants(times, scenario, source=source)
+    plant = mission_plants(times, scenario, source=source, executor=executor)
     system = close_loop(plant, controller.K, controller.spec)
     return ModelArray(system, times, "time [s]", "mission")
 

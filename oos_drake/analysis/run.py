@@ -354,6 +354,7 @@ def run_analysis(
     from oos_drake.analysis.subsets import uncertainty_subsets
     from oos_drake.analysis.worst_cases import Region, write_regions
     from oos_drake.blas import limit_blas_threads
+    from oos_drake.processes import make_executor
 
     limit_blas_threads(1)
     options = options or AnalysisOptions()
@@ -374,7 +375,15 @@ def run_analysis(
     omega = options.grid()
     # ------------------------------------------------------------------ mission stability
     times = mission_times(options.configurations, scenario)
-    mission = mission_closed_loop(controller, times, scenario, source=options.plant)
+    if options.plant == "drake":  # one ulinearize per configuration: on spawned workers
+        with make_executor(
+            options.sweep.n_jobs, options.sweep.scheduler, method="spawn"
+        ) as extraction:
+            mission = mission_closed_loop(
+                controller, times, scenario, source="drake", executor=extraction
+            )
+    else:
+        mission = mission_closed_loop(controller, times, scenario, source=options.plant)
     subsets = uncertainty_subsets(mission.system.uncertainty)
     abscissa = np.linalg.eigvals(np.asarray(mission.system.A)).real.max(axis=-1)
     lap("build mission models")

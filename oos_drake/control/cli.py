@@ -12,7 +12,12 @@ import time
 
 import numpy as np
 
-from oos_drake.cli import add_loop_arguments, add_scenario_argument, loop_specification
+from oos_drake.cli import (
+    add_loop_arguments,
+    add_scenario_argument,
+    add_scheduler_argument,
+    loop_specification,
+)
 from oos_drake.control.baseline import baseline_for
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.plants import (
@@ -23,6 +28,7 @@ from oos_drake.control.plants import (
 )
 from oos_drake.control.report import write_synthesis
 from oos_drake.control.synthesis import SynthesisOptions, synthesize
+from oos_drake.processes import make_executor
 
 __all__ = ["baseline_for", "drake_plants", "make_plants", "mission_times", "scenario_plants"]
 
@@ -52,6 +58,8 @@ def run_synth(args) -> int:
     """Run the synthesis and write the outputs; exit status 0."""
     from oos_drake.scenario.data import load_scenario, scenario_record
 
+    if args.workers < 1:  # before the model array is built
+        raise ValueError(f"--workers {args.workers}: need at least 1 worker")
     wall, cpu = time.perf_counter(), time.process_time()
     scenario = load_scenario(args.scenario)
     spec = loop_specification(DesignSpecification.from_requirements(scenario.control), args)
@@ -69,7 +77,12 @@ def run_synth(args) -> int:
         workers=args.workers,
     )
     K0 = baseline_for(plants, scenario.mission.first_docking_time)
-    result = synthesize(plants, K0, spec=spec, options=options, progress=print)
+    # the restarts run as executor tasks; spawned workers when this process holds Drake threads
+    method = "spawn" if args.plant == "drake" else None
+    with make_executor(args.workers, args.scheduler, method=method) as executor:
+        result = synthesize(
+            plants, K0, spec=spec, options=options, progress=print, executor=executor
+        )
     paths = write_synthesis(args.out, result, plants, options, scenario=scenario_record(scenario))
     print(f"scenario: {scenario.name} ({scenario.source})")
     active = result.models[result.models["active"]]
@@ -127,7 +140,9 @@ def register(subparsers) -> None:
         "--workers",
         type=int,
         default=min(2, os.cpu_count() or 1),
-        help="threads for the per-model eigendecompositions",
+        help="worker processes of the independent optimizer runs (start point and random "
+        "restarts), and threads of the per-model eigendecompositions of a single run",
     )
+    add_scheduler_argument(parser)
     add_loop_arguments(parser)
     parser.set_defaults(func=run_synth)

@@ -88,7 +88,8 @@ class SynthesisOptions:
         Total rounds (optimizer run + checks).
     workers : int
         Threads for the per-model eigendecompositions of every gamma evaluation (2 on the
-        paper's 2-core target machine).
+        paper's 2-core target machine); the runs that :func:`synthesize` gives its executor
+        share them (``workers // executor.workers`` each, at least one).
     """
 
     restarts: int = 2
@@ -341,6 +342,37 @@ def _worst_case_search(plants: PlantArray, configs, K, spec, options, rng):
 
 
 @with_single_threaded_blas
+def _tune_start(interconnection: WeightedInterconnection, K_start, scale, options, threads: int):
+    """One optimizer run of a round (an executor task): ``(gamma at the start, tune's result)``,
+    the result ``None`` for an unstable start."""
+    g0 = evaluate(interconnection, K_start, workers=threads).gamma
+    if not np.isfinite(g0):
+        return g0, None
+    tuned = tune(
+        interconnection,
+        K_start,
+        max_iterations=options.max_iterations,
+        scale=scale,
+        method=options.method,
+        workers=threads,
+    )
+    return g0, tuned
+
+
+def _tune_starts(interconnection, starts, scale, options: SynthesisOptions, executor) -> list:
+    """:func:`_tune_start` of every start, in order: one start runs here with
+    ``options.workers`` threads; several (the restarts) run as tasks of ``executor``, the
+    threads shared among its workers."""
+    if len(starts) == 1 or executor is None or executor.workers == 1:
+        return [_tune_start(interconnection, Ks, scale, options, options.workers) for Ks in starts]
+    threads = max(1, options.workers // executor.workers)
+    tasks = [
+        executor.submit(_tune_start, interconnection, Ks, scale, options, threads) for Ks in starts
+    ]
+    return [task.result() for task in tasks]
+
+
+@with_single_threaded_blas
 def synthesize(
     plants: PlantArray,
     K0,
@@ -348,6 +380,7 @@ def synthesize(
     spec: DesignSpecification | None = None,
     options: SynthesisOptions | None = None,
     progress=None,
+    executor=None,
 ) -> SynthesisResult:
     """Tune the static 3x6 gain over a plant array with real uncertainty (see module doc).
 
@@ -362,6 +395,10 @@ def synthesize(
     options : SynthesisOptions, optional
     progress : callable, optional
         ``progress(message: str)`` for log lines.
+    executor : optional
+        Where the independent optimizer runs of a round (the start point and the random
+        restarts) run as tasks (:func:`oos_drake.processes.make_executor`: process pool, Dask);
+        ``None``: one after the other in this process. The result is the same either way.
 
     Returns
     -------
@@ -407,21 +444,13 @@ def synthesize(
         starts = [K_best]
         for _ in range(options.restarts if round_ == 0 else 0):
             starts.append(K_best * np.exp(options.restart_spread * rng.normal(size=K0.shape)))
-        for r, Ks in enumerate(starts):
-            g0 = evaluate(W, Ks, workers=workers).gamma
+        for r, (g0, tuned) in enumerate(_tune_starts(W, starts, scale, options, executor)):
             run = dict(round=round_, restart=r, models=len(working.config_index), gamma_start=g0)
-            if not np.isfinite(g0):
+            if tuned is None:
                 end = dict(gamma_end=np.inf, iterations=0, evaluations=1, message="unstable start")
                 runs.append(run | end)
                 continue
-            K, g, res = tune(
-                W,
-                Ks,
-                max_iterations=options.max_iterations,
-                scale=scale,
-                method=options.method,
-                workers=workers,
-            )
+            K, g, res = tuned
             end = dict(gamma_end=g, iterations=res.iterations, evaluations=res.evaluations)
             runs.append(run | end | dict(message=res.message))
             log(

@@ -53,10 +53,10 @@ import numpy as np
 import scipy.linalg
 from scipy.linalg import lapack
 
-from oos_drake.blas import run_threaded
 from oos_drake.lfr.core import as_lfr
 from oos_drake.lfr.coupled_modes import block_pairs, coupled_response, tail_terms
 from oos_drake.lfr.workspace import Workspace
+from oos_drake.processes import make_executor
 
 #: Eigenvalues whose condition number ``||v|| ||w||`` exceeds this go to the clustered block.
 EIG_COND_LIMIT = 1e5
@@ -142,7 +142,8 @@ def freqresp(
             real_pairs,
         )  # fmt: skip
 
-    run_threaded(work, starts, workers)
+    with make_executor(workers, "threads") as threads:
+        threads.map(work, starts)
     return out.reshape(batch + out.shape[1:])
 
 

@@ -19,8 +19,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from oos_drake.blas import run_threaded
 from oos_drake.lfr.core import LFR
+from oos_drake.processes import make_executor
 
 #: Work-array size (entries) per chunk of models in the batched substitution.
 SUBS_CHUNK_ENTRIES = 1_000_000
@@ -347,7 +347,8 @@ def _close_scalar(sys: LFR, deltas: Mapping, workers: int = 1) -> LFR:
         def work(k):
             new_M[k : k + step] = _close_scalar_values_batched(plan, flat[k : k + step], names)
 
-        run_threaded(work, starts, workers)
+        with make_executor(workers, "threads") as threads:
+            threads.map(work, starts)
         new_M = new_M.reshape(batch + new_M.shape[-2:])
     else:
         new_M = _close_scalar_general(plan, d, batch, names)

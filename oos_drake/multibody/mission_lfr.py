@@ -221,7 +221,24 @@ def stack_models(models) -> LFR:
     )  # fmt: skip
 
 
-def twin_mission_plants(times, scenario=None, *, progress=None) -> LFR:
+def _twin_lfr_at(scenario, time: float) -> LFR:
+    """The twin's LFR at mission ``time`` [s] of ``scenario``."""
+    from oos_drake.multibody.operating_point import operating_point
+    from oos_drake.scenario.timeline import mission_timeline
+
+    point = operating_point(mission_timeline(scenario).configuration(float(time)))
+    return twin_lfr(point, mission_parameters(scenario))
+
+
+def _twin_lfr_task(source: str, overrides: tuple, time: float) -> LFR:
+    """:func:`_twin_lfr_at` as an executor task: a ``Scenario`` does not pickle, its file and
+    overrides do (loading is cached per process)."""
+    from oos_drake.scenario.data import load_scenario
+
+    return _twin_lfr_at(load_scenario(source, dict(overrides)), time)
+
+
+def twin_mission_plants(times, scenario=None, *, progress=None, executor=None) -> LFR:
     """The twin's uncertain 6x6 plants at mission ``times`` [s] (model array, TITOP blocks).
 
     Parameters
@@ -230,21 +247,28 @@ def twin_mission_plants(times, scenario=None, *, progress=None) -> LFR:
         Mission times [s] (rigid connections from the timeline's switches).
     progress : callable, optional
         ``progress(done, total)``.
+    executor : optional
+        Where the extractions run, one task per time (:func:`oos_drake.processes.make_executor`;
+        a process pool must spawn its workers: Drake's threads do not survive a fork; the
+        workers load the scenario from its file and overrides); ``None``: one after the other
+        here. Same LFRs either way (each extraction starts from a fresh context, with its own
+        seeded checks).
     """
     import numpy as np
 
-    from oos_drake.multibody.operating_point import operating_point
-    from oos_drake.scenario.timeline import mission_timeline
-
     scenario = default_scenario(scenario)
     times = np.atleast_1d(np.asarray(times, dtype=float))
-    timeline = mission_timeline(scenario)
-    declared = mission_parameters(scenario)
+    if executor is None:
+        jobs = (_twin_lfr_at(scenario, t) for t in times)
+    else:
+        source = (str(scenario.source), scenario.overrides)
+        futures = [executor.submit(_twin_lfr_task, *source, float(t)) for t in times]
+        jobs = (future.result() for future in futures)
     models = []
-    for k, t in enumerate(times):
-        models.append(twin_lfr(operating_point(timeline.configuration(float(t))), declared))
+    for model in jobs:
+        models.append(model)
         if progress is not None:
-            progress(k + 1, times.size)
+            progress(len(models), times.size)
     return stack_models(models)
 
 

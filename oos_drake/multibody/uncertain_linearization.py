@@ -73,6 +73,7 @@ __all__ = [
     "BODY_QUANTITIES",
     "JOINT_QUANTITIES",
     "BUSHING_QUANTITIES",
+    "ExtractionOptions",
     "PhysicalParameter",
     "load_parameters",
     "parse_port",
@@ -953,6 +954,38 @@ def _relative(a, b) -> float:
     return float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-300))
 
 
+@dataclass(frozen=True)
+class ExtractionOptions:
+    """Options of the LFR extraction (the keyword arguments of :func:`ulinearize`).
+
+    Attributes
+    ----------
+    rtol : float
+        Rank tolerance of the coefficient factorizations [-].
+    check_points : int
+        Random parameter points where the LFR is checked against Drake's linearization.
+    check_tolerance : float
+        Largest relative error of ``[A B; C D]`` allowed there [-].
+    prune : bool
+        Remove structurally unreachable or unobservable states.
+    unused : str
+        ``"error"`` or ``"drop"``: what a parameter that does not change the model does.
+    scale_modal_states : bool
+        Scaled modal angles (``omega`` enters affinely).
+    """
+
+    rtol: float = 1e-6
+    check_points: int = 4
+    check_tolerance: float = 1e-6
+    prune: bool = True
+    unused: str = "error"
+    scale_modal_states: bool = True
+
+    def __post_init__(self):
+        if self.unused not in ("error", "drop"):
+            raise ValueError(f"ulinearize: unused must be 'error' or 'drop', got {self.unused!r}")
+
+
 def ulinearize(
     system,
     context,
@@ -1034,19 +1067,21 @@ def ulinearize(
     >>> G.occurrences["w_panel"]                                   # k ~ w^2, d ~ w: w I2
     2
     """
-    problem = _problem(system, context, parameters, inputs, outputs)
-    if unused not in ("error", "drop"):
-        raise ValueError(f"ulinearize: unused must be 'error' or 'drop', got {unused!r}")
-    return _extract(
-        problem, rtol, check_points, check_tolerance, prune, rng, unused, scale_modal_states
+    options = ExtractionOptions(
+        rtol=rtol,
+        check_points=check_points,
+        check_tolerance=check_tolerance,
+        prune=prune,
+        unused=unused,
+        scale_modal_states=scale_modal_states,
     )
+    problem = _problem(system, context, parameters, inputs, outputs)
+    return _extract(problem, options, rng)
 
 
-def _extract(
-    problem, rtol, check_points, check_tolerance, prune, rng, unused="error",
-    scale_modal_states=True,
-) -> LFR:  # fmt: skip
+def _extract(problem, options: ExtractionOptions, rng=None) -> LFR:
     """Steps 1-4 of the module docstring on a bound problem (anything with ``linearize``)."""
+    rtol, check_tolerance = options.rtol, options.check_tolerance
     rng = np.random.default_rng(0) if rng is None else rng
     nominal = problem.nominal
     h = np.array([0.5 * (b.parameter.upper - b.parameter.lower) for b in problem.bindings])
@@ -1066,7 +1101,7 @@ def _extract(
             f"ulinearize: the context is not an equilibrium (max |v'| = {np.abs(vdot).max():.3g})"
         )
     Cd = problem.acceleration_map()
-    modal = _ModalStates.of(problem) if scale_modal_states else _ModalStates.none()
+    modal = _ModalStates.of(problem) if options.scale_modal_states else _ModalStates.none()
 
     def evaluate(values):
         return modal.implicit(_implicit(problem, linearize(values), Cd), values, n, ny)
@@ -1091,12 +1126,12 @@ def _extract(
     names = [f"{name}[{k}]" for _, rows, name in problem.inputs for k in rows]
     out_names = [f"{name}[{k}]" for _, rows, name in problem.outputs for k in rows]
     lfr = _assemble(problem, R0, coefficients, h, scale, n, nu, ny, rtol, (names, out_names))
-    _check(problem, lfr, linearize, h, check_points, check_tolerance, rng, modal)
-    lfr = _balance_channels(_prune(lfr) if prune else lfr)
+    _check(problem, lfr, linearize, h, options.check_points, check_tolerance, rng, modal)
+    lfr = _balance_channels(_prune(lfr) if options.prune else lfr)
     missing = [
         b.parameter.name for b in problem.bindings if b.parameter.name not in lfr.uncertainty
     ]
-    if missing and unused == "error":
+    if missing and options.unused == "error":
         raise ValueError(
             f"parameter {missing[0]!r} does not change the linearization from "
             f"{[p[2] for p in problem.inputs]} to {[p[2] for p in problem.outputs]}"

@@ -26,12 +26,13 @@ models together; :func:`hinfnorm_hamiltonian` is its one-model form.
 from __future__ import annotations
 
 import functools
-from concurrent.futures import ThreadPoolExecutor
+import os
 from dataclasses import dataclass
 
 import numpy as np
 
 from oos_drake.blas import with_single_threaded_blas
+from oos_drake.processes import ThreadExecutor
 
 #: Eigenvector basis condition number above which the exact (LU) response is used instead
 #: (below it the modal response is accurate to ~cond * 1e-16, enough to locate peaks; the
@@ -123,8 +124,10 @@ def _sigma_max(H) -> np.ndarray:
 
 
 @functools.cache
-def _executor(workers: int) -> ThreadPoolExecutor:
-    return ThreadPoolExecutor(max_workers=workers, thread_name_prefix="peak_gain")
+def _executor(workers: int, pid: int) -> ThreadExecutor:
+    """Threads kept for the process's life (``pid``: a forked worker makes its own; the
+    parent's threads do not exist there)."""
+    return ThreadExecutor(workers)
 
 
 def _over_chunks(function, A, workers: int) -> list:
@@ -139,7 +142,7 @@ def _over_chunks(function, A, workers: int) -> list:
     if workers == 1 or A.shape[0] < 2 * workers:
         return [function(A)]
     chunks = np.array_split(np.arange(A.shape[0]), workers)
-    return list(_executor(workers).map(lambda idx: function(A[idx]), chunks))
+    return _executor(workers, os.getpid()).map(lambda idx: function(A[idx]), chunks)
 
 
 @with_single_threaded_blas

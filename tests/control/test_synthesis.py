@@ -2,10 +2,15 @@
 
 Checks against independent computations: every closed-loop H-infinity norm reported by the
 synthesis is recomputed with slycot's ab13dd (MATLAB's norm(sys, inf) algorithm), and restarts
-from perturbed gains must reach the same gamma.
+from perturbed gains must reach the same gamma. The restarts as executor tasks (process pool,
+Dask) give the serial synthesis number for number.
 """
 
+import dataclasses
+import importlib.util
+
 import numpy as np
+import pandas as pd
 import pytest
 from slycot import ab13dd
 
@@ -13,6 +18,7 @@ from oos_drake.control.baseline import baseline_gains, inertia_from_plant
 from oos_drake.control.plants import synthetic_flexible_plants
 from oos_drake.control.report import closed_loop_array
 from oos_drake.control.synthesis import SynthesisOptions, synthesize
+from oos_drake.processes import make_executor
 
 
 def ab13dd_norm(A, B, C, D):
@@ -27,19 +33,22 @@ def small_problem():
     return plants, baseline_gains(J)
 
 
+#: One optimizer run, then a worst-case round and a warm-started run.
+SMALL_OPTIONS = SynthesisOptions(
+    restarts=0,
+    max_iterations=25,
+    worst_case_rounds=1,
+    worst_case_configurations=1,
+    worst_case_samples=4,
+    worst_case_ascent_steps=1,
+    working_set=0,
+)
+
+
 @pytest.fixture(scope="module")
 def small_result(small_problem):
     plants, K0 = small_problem
-    options = SynthesisOptions(
-        restarts=0,
-        max_iterations=25,
-        worst_case_rounds=1,
-        worst_case_configurations=1,
-        worst_case_samples=4,
-        worst_case_ascent_steps=1,
-        working_set=0,
-    )
-    return synthesize(plants, K0, options=options)
+    return synthesize(plants, K0, options=SMALL_OPTIONS)
 
 
 def test_synthesis_improves_on_the_baseline(small_result):
@@ -89,3 +98,53 @@ def test_perturbed_starts_reach_the_same_gamma():
     for seed in (1, 2):
         start = K0 * np.exp(0.3 * rng.normal(size=K0.shape))
         assert run(start, seed) == pytest.approx(reference, rel=1e-2)
+
+
+#: Three independent runs in round 0 (start point and two restarts), short ones.
+PARALLEL_OPTIONS = dataclasses.replace(SMALL_OPTIONS, restarts=2, max_iterations=8, workers=2)
+
+
+class _Recording:
+    """An executor that records the tasks it is given (so the test knows they ran on it)."""
+
+    def __init__(self, executor):
+        self.executor, self.workers, self.tasks = executor, executor.workers, []
+
+    def submit(self, fn, *args):
+        self.tasks.append(fn.__name__)
+        return self.executor.submit(fn, *args)
+
+
+def _assert_same_synthesis(a, b):
+    assert np.array_equal(a.K, b.K) and a.gamma == b.gamma
+    pd.testing.assert_frame_equal(a.runs, b.runs)
+    pd.testing.assert_frame_equal(a.models, b.models)
+    pd.testing.assert_frame_equal(a.worst_cases, b.worst_cases)
+
+
+def _parallel_synthesis(small_problem, scheduler):
+    plants, K0 = small_problem
+    with make_executor(2, scheduler) as executor:
+        recording = _Recording(executor)
+        result = synthesize(plants, K0, options=PARALLEL_OPTIONS, executor=recording)
+    assert recording.tasks == ["_tune_start"] * 3  # the three runs of round 0, nothing else
+    return result
+
+
+@pytest.fixture(scope="module")
+def serial_restarts(small_problem):
+    plants, K0 = small_problem
+    return synthesize(plants, K0, options=PARALLEL_OPTIONS)
+
+
+def test_restarts_on_a_process_pool_give_the_serial_synthesis(small_problem, serial_restarts):
+    assert len(serial_restarts.runs) == 4 and (serial_restarts.runs["round"] == 0).sum() == 3
+    _assert_same_synthesis(_parallel_synthesis(small_problem, None), serial_restarts)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(
+    importlib.util.find_spec("distributed") is None, reason="dask.distributed is not installed"
+)
+def test_restarts_on_dask_give_the_serial_synthesis(small_problem, serial_restarts):
+    _assert_same_synthesis(_parallel_synthesis(small_problem, "dask"), serial_restarts)

@@ -85,3 +85,25 @@ def test_spring_parameter_names_are_the_titop_blocks(titop):
     for prefix in SPRING_QUANTITIES:
         for spring in ("SM1", "SM2"):
             assert f"{prefix}_{spring}" in models["8"].uncertainty
+
+
+def test_extractions_on_spawned_workers_equal_the_serial_ones():
+    """``twin_mission_plants`` on an executor (2 spawned workers, one task per time) gives the
+    serial model array entry for entry: the LFRs do not depend on where they were extracted."""
+    from oos_drake.control.plants import mission_times
+    from oos_drake.multibody.mission_lfr import twin_mission_plants
+    from oos_drake.processes import make_executor
+
+    scenario = load_scenario()
+    times = mission_times(3, scenario)
+    done = []
+    with make_executor(2, method="spawn") as executor:
+        pooled = twin_mission_plants(
+            times, scenario, executor=executor, progress=lambda k, n: done.append((k, n))
+        )
+    serial = twin_mission_plants(times, scenario)
+    assert done == [(1, 3), (2, 3), (3, 3)]
+    assert pooled.batch_shape == (3,)
+    assert np.array_equal(np.asarray(pooled.M), np.asarray(serial.M))
+    assert pooled.block_entries == serial.block_entries
+    assert (pooled.input_names, pooled.output_names) == (serial.input_names, serial.output_names)

@@ -11,6 +11,7 @@ pytest.importorskip("pydrake")
 
 from oos_drake.lfr import LFR, feedback, hstack, inv, lft, ureal, usubs, vstack  # noqa: E402
 from oos_drake.multibody.uncertain_linearization import (  # noqa: E402
+    ExtractionOptions,
     PhysicalParameter,
     _extract,
     load_parameters,
@@ -320,7 +321,9 @@ class _RationalProblem:
 
 def test_non_polynomial_dependence_is_refused_naming_the_parameter():
     with pytest.raises(ValueError, match=r"parameter 'k': .* not polynomial of degree <= 2 in it"):
-        _extract(_RationalProblem(), 1e-9, 2, 1e-7, True, None)
+        _extract(
+            _RationalProblem(), ExtractionOptions(rtol=1e-9, check_points=2, check_tolerance=1e-7)
+        )
 
 
 # ----------------------------------------------------------------------------- command line
