@@ -55,6 +55,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.linalg
 
 from oos_drake.robust.lfr_analysis import delta_channel_response
 from oos_drake.robust.mu_upper import LMI_ROUNDOFF
@@ -180,6 +181,32 @@ class Realization:
             object.__setattr__(self, "_modal", modal)
         return self.__dict__["_modal"]
 
+    def hamiltonian_modes(self) -> np.ndarray | None:
+        """Boolean mask of the modes of :meth:`modal` that the Hamiltonian test keeps; None
+        without a usable modal form (then the test uses the whole realization).
+
+        A mode whose residue bound ``|C v_i| |w_i B| / |Re lambda_i|`` (its largest
+        contribution to ``M`` at any frequency) is below ``cond(V) eps 1e-3`` times the
+        largest one is not seen by ``M`` to the round-off of the modal form itself, which every
+        evaluation of ``M`` in :class:`_Multiplier` already carries: it is uncontrollable or
+        unobservable from the channels of ``M`` (the subsets' ``M`` of a closed loop see about
+        50 of its 81 modes). Leaving those modes out of the Hamiltonian changes none of its
+        imaginary-axis eigenvalues beyond that round-off and makes its eigenproblem
+        ``(2 k)^2`` instead of ``(2 n)^2`` (cost ``k^3``); the signs between its candidates are
+        still evaluated on the whole ``M``. Computed once per realization.
+        """
+        if "_hamiltonian_modes" not in self.__dict__:
+            keep = None
+            lam, V, V_inv = self.modal() or (None, None, None)
+            if V is not None:
+                _, B, C, _ = self.continuous()
+                reach = np.linalg.norm(C @ V, axis=0) * np.linalg.norm(V_inv @ B, axis=1)
+                reach = reach / np.maximum(np.abs(lam.real), 1e-300)
+                tol = 1e-3 * np.linalg.cond(V) * np.finfo(float).eps
+                keep = reach > tol * max(float(np.max(reach)), 1e-300)
+            object.__setattr__(self, "_hamiltonian_modes", keep)
+        return self.__dict__["_hamiltonian_modes"]
+
     def to_nu(self, omega):
         """Continuous-time frequency of the Cayley image (identity in continuous time)."""
         omega = np.asarray(omega, dtype=float)
@@ -271,12 +298,14 @@ class _Multiplier:
         self.A, self.B, self.C, self.D = A, B, C, D
         # modal form, once: every later evaluation of M is O(n) per entry (ends are bisected)
         self._modal = None
+        self._keep = None
         self.poles = np.zeros(0)
         if A.shape[0]:
             lam, V, V_inv = real.modal()
             self.poles = lam
             if V is not None:
                 self._modal = (lam, C @ V, V_inv @ B)
+                self._keep = real.hamiltonian_modes()
         self.ref = np.linalg.norm(self.P22, 2)
 
     def max_eig(self, nu) -> np.ndarray:
@@ -310,6 +339,9 @@ class _Multiplier:
         Raises ``ValueError`` when ``Phi(inf)`` is singular (the Hamiltonian does not exist).
         """
         A, B, C, D = self.A, self.B, self.C, self.D
+        if self._keep is not None:  # the modes M sees (Realization.hamiltonian_modes)
+            lam, CV, VB = self._modal
+            A, B, C = np.diag(lam[self._keep]), VB[self._keep], CV[:, self._keep]
         n = A.shape[0]
         if n == 0:
             return np.zeros(0)
@@ -330,7 +362,7 @@ class _Multiplier:
                 [-Q + S @ RiSH, -np.conj(A.T) + S @ RiBH],
             ]
         )
-        lam = np.linalg.eigvals(H)
+        lam = scipy.linalg.eigvals(H, overwrite_a=True, check_finite=False)
         scale = max(float(np.max(np.abs(lam))), 1e-300)
         near = np.abs(lam.real) <= AXIS_TOLERANCE * scale
         w = lam.imag[near]
@@ -805,17 +837,22 @@ def mu_solver(
         upper, params = res.upper.copy(), res.params.copy()
         Dl, Dr, G = res.D_left.copy(), res.D_right.copy(), res.G.copy()
         redo = np.flatnonzero(upper > polish_above)
-        x0s = [params[redo]]
-        if redo.size and solved_omega:
-            known = np.asarray(solved_omega)
-            near = np.argmin(np.abs(np.log1p(known[None, :]) - np.log1p(omega[redo, None])), axis=1)
-            x0s.append(np.asarray(solved_params)[near])
-        if redo.size and omega.size > 1:
-            x0s.append(None)  # the nearest other point of this batch, after the passes above
-        for x0 in x0s if redo.size else ():
-            if x0 is None:
-                redo = redo[upper[redo] > polish_above]
-                if not redo.size:
+        known = np.asarray(solved_omega, dtype=float)
+        for start in ("own", "known", "batch"):
+            # each further start only for the points still above: a point at or below
+            # ``polish_above`` proves the level already, a lower bound there changes nothing
+            redo = redo[upper[redo] > polish_above]
+            if not redo.size:
+                break
+            if start == "own":
+                x0 = params[redo]
+            elif start == "known":
+                if not known.size:
+                    continue
+                near = np.argmin(np.abs(np.log1p(known[None, :]) - np.log1p(omega[redo, None])), 1)
+                x0 = np.asarray(solved_params)[near]
+            else:  # the nearest other point of this batch, after the passes above
+                if omega.size < 2:
                     break
                 dist = np.abs(np.log1p(omega[None, :]) - np.log1p(omega[redo, None]))
                 dist[np.arange(redo.size), redo] = np.inf
