@@ -617,11 +617,15 @@ def _axis_task(task):
     clock = _time.perf_counter()
     blk, floor, slack, configurations = task
     out, prior = [], None
-    for A, Bw, Cz, Dzw, seeds, grid_omega, grid_params in configurations:
+    for A, Bw, Cz, Dzw, seeds, grid_omega, grid_params, grid_upper in configurations:
         real = Realization(A, Bw, Cz, Dzw)
+
+        def grid_scalings(rows, real=real, w=grid_omega, params=grid_params):
+            return scalings_at(real, blk, w[rows], params[rows])
+
         try:
             # the grid's own scalings are the next candidates: no second optimization there
-            grid_upper, grid_scalings = scalings_at(real, blk, grid_omega, grid_params)
+            # (evaluated only where the cover tries them)
             cert = cover_axis(
                 real,
                 mu_solver(
@@ -720,7 +724,7 @@ def axis_guarantee(pool, subsets: dict, slack=None, gap=None) -> dict:
             # their grid scalings prove the floor already
             peaks = np.unique([np.argmax(up), np.argmax(lo)])
             seeds = w[peaks[up[peaks] * (1.0 + slack) > floor]]
-            configurations.append((*sub.model_matrices(int(m)), seeds, w, pts.params[mine]))
+            configurations.append((*sub.model_matrices(int(m)), seeds, w, pts.params[mine], up))
         # contiguous ranges (continuation from one configuration to the next), a few per
         # worker so that the costly ranges (configurations near the peak) spread over them
         n_tasks = min(len(configurations), CHUNKS_PER_WORKER * pool.n_jobs)

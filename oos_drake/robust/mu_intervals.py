@@ -639,7 +639,10 @@ def cover_axis(
         grid sweep's, :func:`scalings_at`): before solving new points in a gap, the cover
         tries the known points inside it (nearest to each edge first), no optimization. They
         never raise the level: a known point whose scalings do not prove the current level
-        (a stalled optimizer) simply proves no interval, and the gap is solved.
+        (a stalled optimizer) simply proves no interval, and the gap is solved. ``scalings``
+        may be a callable ``rows -> (optimal, scalings)`` of the points ``omega[rows]``
+        (e.g. :func:`scalings_at` of a sweep's parameters): then only the points the cover
+        tries are evaluated, and ``optimal`` (e.g. the sweep's bounds) only chooses them.
     prior : tuple, optional
         ``(omega, scalings)`` tried first, all of them, before ``known`` and any optimization
         (e.g. the :meth:`AxisCertificate.essential` points of a neighbouring model's cover:
@@ -659,6 +662,7 @@ def cover_axis(
     omega, added = list(omega), [False] * len(omega)
     level = max(float(floor), max(lmin, default=0.0))
     spare = _Spare(known, omega)
+    first_prior = len(omega)
     if prior is not None:
         for w, sc in zip(*prior, strict=True):
             omega.append(float(np.clip(w, 0.0, end)))
@@ -692,6 +696,18 @@ def cover_axis(
         # whose scalings proved nothing there does not stop a solve at its frequency)
         tried = [w for i, w in enumerate(omega) if added[i] or np.isfinite(proved[i][1][0])]
         new = _new_points(gaps, end, tried)
+        if rounds == 0 and prior is not None:
+            # the prior points whose scalings prove nothing here (a band where mu is close to
+            # the level: they covered it on the neighbouring model): solved in this first
+            # round, all together, instead of one gap edge per round
+            retry = np.array(
+                [
+                    omega[i]
+                    for i in range(first_prior, first_prior + len(prior[0]))
+                    if not np.isfinite(proved[i][1][0]) and any(a <= omega[i] <= b for a, b in gaps)
+                ]
+            )
+            new = np.union1d(new, retry)
         if new.size == 0:
             break
         rounds += 1
@@ -739,7 +755,9 @@ class _Spare:
             keep &= dist > 1e-12 * np.maximum(w, 1e-300)
         rows = np.flatnonzero(keep)[np.argsort(w[keep], kind="stable")]
         self.omega, self.optimal = w[rows], o[rows]
-        self.scalings = [sc[i] for i in rows]
+        # a callable gives the scalings (and their exact bound) of the points taken only
+        self.source = sc if callable(sc) else None
+        self.scalings = list(rows) if callable(sc) else [sc[i] for i in rows]
 
     def take(self, gaps, below: float) -> list:
         """``(omega, optimal, scalings)`` of the unused known points nearest to each edge of
@@ -752,8 +770,16 @@ class _Spare:
                 chosen.update((int(inside[0]), int(inside[-1])))
         if not chosen:
             return []
-        out = [(float(self.omega[i]), float(self.optimal[i]), self.scalings[i]) for i in chosen]
-        rest = np.setdiff1d(np.arange(self.omega.size), sorted(chosen))
+        chosen = sorted(chosen)
+        if self.source is None:
+            out = [(float(self.omega[i]), float(self.optimal[i]), self.scalings[i]) for i in chosen]
+        else:
+            optimal, scalings = self.source(np.array([self.scalings[i] for i in chosen], int))
+            out = [
+                (float(self.omega[i]), float(o), sc)
+                for i, o, sc in zip(chosen, optimal, scalings, strict=True)
+            ]
+        rest = np.setdiff1d(np.arange(self.omega.size), chosen)
         self.omega, self.optimal = self.omega[rest], self.optimal[rest]
         self.scalings = [self.scalings[i] for i in rest]
         return out
