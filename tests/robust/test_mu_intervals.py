@@ -325,9 +325,10 @@ def test_hamiltonian_test_leaves_out_the_modes_M_does_not_see():
     modal form of ``M`` at all, as the modes of the mission's closed loops that a subset's
     channels miss: 1e-31 of the largest) are left out; the unobservable ones, whose trace in
     the computed modal form is round-off of 1e-11 amplified by their light damping, are kept
-    (only modes below the modal form's own round-off go). The response is unchanged and every interval equals the one of
-    the realization without the hidden modes (whose Hamiltonian keeps every mode: a second
-    computation), checked against dense sampling of the LMI on the larger realization."""
+    (only modes below the modal form's own round-off go). The response is unchanged and every
+    interval equals the one of the realization without the hidden modes (whose Hamiltonian
+    keeps every mode: a second computation), checked against dense sampling of the LMI on the
+    larger realization."""
     real, blk = delta_realization(two_modes())
     big = with_hidden_modes(real)
     assert real.hamiltonian_modes().all()
