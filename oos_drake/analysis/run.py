@@ -102,7 +102,7 @@ class AnalysisOptions:
         ``(1 + tighten.target_gap)`` times the certified lower bound; timed as ``guarantee`` in
         each study's timing detail, beside the grid-only ``grid`` and ``tighten+certify``).
         Off by default (``oos analyze --guarantee`` turns it on): the analysis with it costs
-        3.2 times the grid-only analysis in CPU (session 9, full size, loaded machine; 4.2
+        3.2-3.6 times the grid-only analysis in CPU (session 9, full size, loaded machine; 4.2
         times before that session's changes, 4.3 times on an idle machine in session 8; the
         aim for the default is 2x). Without it the upper bounds
         hold on the analyzed frequencies only (``oos confirm`` found one broken between them,
