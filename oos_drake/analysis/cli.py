@@ -562,8 +562,8 @@ def register(subparsers) -> None:
         "--guarantee",
         action="store_true",
         help="prove each analyzed configuration's mu peak on the whole frequency axis (D-G "
-        "scalings validated on intervals; the analysis then takes about 4x as long: see "
-        "docs/ANALYSIS-RESULTS.md); "
+        "scalings validated on intervals; the analysis then costs about 3x the CPU of the "
+        "grid-only one: see docs/ANALYSIS-RESULTS.md); "
         "default: upper bounds hold on the analyzed frequencies only",
     )
     whole_axis.add_argument(

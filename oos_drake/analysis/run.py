@@ -102,8 +102,9 @@ class AnalysisOptions:
         ``(1 + tighten.target_gap)`` times the certified lower bound; timed as ``guarantee`` in
         each study's timing detail, beside the grid-only ``grid`` and ``tighten+certify``).
         Off by default (``oos analyze --guarantee`` turns it on): the analysis with it costs
-        3.8 times the grid-only analysis in wall time, 4.3 times in CPU (session 8, the default
-        mission on an idle machine; the aim for the default is 2x). Without it the upper bounds
+        3.2-3.6 times the grid-only analysis in CPU (session 9, full size, loaded machine; 4.2
+        times before that session's changes, 4.3 times on an idle machine in session 8; the
+        aim for the default is 2x). Without it the upper bounds
         hold on the analyzed frequencies only (``oos confirm`` found one broken between them,
         docs/CLAIMS.md A11).
     progress : bool

@@ -188,7 +188,8 @@ class AxisGuarantee:
     slack : float
         Relative slack above each point's bound.
     seconds : float
-        Wall-clock time of the covers [s].
+        Time the workers spent on this subset's covers [s] (the sum over its ranges of
+        configurations; the covers of all the subsets of a study run in one map).
     models : numpy.ndarray
         ``(N,)`` the configurations (model indices) of ``levels``.
     grid_upper, grid_lower : numpy.ndarray
@@ -215,22 +216,29 @@ class AxisGuarantee:
 
 def _axis_task(task):
     """Worker: the covers of a range of neighbouring configurations of one subset ->
-    ``[(level, tested points, failure, solved points), ...]``.
+    ``([(level, tested points, failure, solved points), ...], seconds)``.
 
     Each cover tries first the scalings that covered the previous configuration (its
     :meth:`~oos_drake.robust.mu_intervals.AxisCertificate.essential` points: neighbouring
     configurations are close problems, so they usually prove the same level on nearly the same
     intervals, with no optimization), then the grid's own scalings, and only then solves.
     """
+    import time as _time
+
     from oos_drake.robust.mu_intervals import Realization, cover_axis, mu_solver, scalings_at
 
+    clock = _time.perf_counter()
     blk, floor, slack, configurations = task
     out, prior = [], None
-    for A, Bw, Cz, Dzw, seeds, grid_omega, grid_params in configurations:
+    for A, Bw, Cz, Dzw, seeds, grid_omega, grid_params, grid_upper in configurations:
         real = Realization(A, Bw, Cz, Dzw)
+
+        def grid_scalings(rows, real=real, w=grid_omega, params=grid_params):
+            return scalings_at(real, blk, w[rows], params[rows])
+
         try:
             # the grid's own scalings are the next candidates: no second optimization there
-            grid_upper, grid_scalings = scalings_at(real, blk, grid_omega, grid_params)
+            # (evaluated only where the cover tries them)
             cert = cover_axis(
                 real,
                 mu_solver(
@@ -254,19 +262,16 @@ def _axis_task(task):
         prior = (cert.omega[keep], [cert.scalings[i] for i in keep]) if keep.size else None
         failure = "" if cert.covered else "cover did not close"
         out.append((float(cert.upper), int(cert.omega.size), failure, int(cert.added.sum())))
-    return out
+    return out, _time.perf_counter() - clock
 
 
-def axis_guarantee(
-    pool, pts, parts, lower: float, model_matrices, slack=None, gap=None
-) -> AxisGuarantee:
-    """Prove the peak of mu of every configuration of one subset on the whole frequency axis.
+@dataclass(frozen=True)
+class GuaranteeSubset:
+    """What :func:`axis_guarantee` needs of one subset.
 
-    Parameters
+    Attributes
     ----------
-    pool : ModelPool
-        Worker processes.
-    pts : SubsetPoints
+    points : SubsetPoints
         The subset's points (their peaks seed each configuration's cover).
     parts : tuple
         ``(z rows, w columns, BLK)`` of the subset.
@@ -274,6 +279,23 @@ def axis_guarantee(
         The subset's certified lower bound: the common level starts at ``(1 + gap) lower``.
     model_matrices : callable
         ``model -> (A, Bw, Cz, Dzw)`` of the subset's Delta channels.
+    """
+
+    points: object
+    parts: tuple
+    lower: float
+    model_matrices: object
+
+
+def axis_guarantee(pool, subsets: dict, slack=None, gap=None) -> dict:
+    """Prove the peak of mu of every configuration of each subset on the whole frequency axis.
+
+    Parameters
+    ----------
+    pool : ModelPool
+        Worker processes.
+    subsets : dict
+        Subset name -> :class:`GuaranteeSubset`.
     slack : float, optional
         Relative slack above each solved point's bound; default
         :data:`oos_drake.robust.mu_intervals.SLACK`.
@@ -283,54 +305,71 @@ def axis_guarantee(
         needs many narrow intervals); the analysis uses its target gap, so the guaranteed
         peak is within the target of the lower bound unless a configuration's mu is above it.
 
+    Returns
+    -------
+    dict
+        Subset name -> :class:`AxisGuarantee`.
+
     Each configuration's cover starts from the grid's own scalings (an interval test each,
     no optimization: :func:`~oos_drake.robust.mu_intervals.scalings_at`); only the gaps they
     leave are solved, and the grid's peaks only where their grid bound is above the level.
+    The covers of all the subsets go to the workers in one map (contiguous ranges of
+    configurations, a few per worker and subset, the subsets with the largest ``M`` first), so
+    that both workers stay busy to the end instead of waiting for each subset's last range.
     """
-    import time as _time
-
     from oos_drake.robust.mu_intervals import SLACK
 
     slack = SLACK if slack is None else float(slack)
-    clock = _time.perf_counter()
-    blk = parts[2]
-    models = np.unique(pts.model)
     gap = slack if gap is None else max(float(gap), slack)
-    floor = (1.0 + gap) * max(float(lower), 0.0)
-    configurations = []
-    for m in models:
-        mine = pts.model == m
-        w, up, lo = pts.omega[mine], pts.upper[mine], pts.lower[mine]
-        # the peaks are solved (long runs where their bound is above the floor) unless their
-        # grid scalings prove the floor already
-        peaks = np.unique([np.argmax(up), np.argmax(lo)])
-        seeds = w[peaks[up[peaks] * (1.0 + slack) > floor]]
-        configurations.append((*model_matrices(int(m)), seeds, w, pts.params[mine]))
-    # contiguous ranges (continuation from one configuration to the next), a few per worker
-    # so that the costly ranges (configurations near the peak) spread over the workers
-    n_tasks = min(len(configurations), CHUNKS_PER_WORKER * pool.n_jobs)
-    bounds = np.linspace(0, len(configurations), n_tasks + 1).round().astype(int)
-    tasks = [
-        (blk, floor, slack, configurations[a:b])
-        for a, b in zip(bounds[:-1], bounds[1:], strict=True)
-        if b > a
-    ]
-    out = [o for chunk in pool.map(_axis_task, tasks) for o in chunk]
-    levels = np.array([o[0] for o in out], dtype=float)
-    failures = tuple(f"model {m}: {o[2]}" for m, o in zip(models, out, strict=True) if o[2])
-    return AxisGuarantee(
-        mu_upper=float(np.max(levels)) if levels.size else 0.0,
-        floor=floor,
-        levels=levels,
-        points=np.array([o[1] for o in out], dtype=int),
-        failures=failures,
-        slack=slack,
-        seconds=_time.perf_counter() - clock,
-        models=models.astype(int),
-        grid_upper=np.array([pts.upper[pts.model == m].max() for m in models], dtype=float),
-        grid_lower=np.array([pts.lower[pts.model == m].max() for m in models], dtype=float),
-        solved=np.array([o[3] for o in out], dtype=int),
-    )
+    tasks, owner, prepared = [], [], {}
+    # largest M first: the costly covers start first and the cheap ones fill the end
+    order = sorted(subsets, key=lambda name: -len(subsets[name].parts[0]))
+    for name in order:
+        sub = subsets[name]
+        pts, blk = sub.points, sub.parts[2]
+        models = np.unique(pts.model)
+        floor = (1.0 + gap) * max(float(sub.lower), 0.0)
+        configurations = []
+        for m in models:
+            mine = pts.model == m
+            w, up, lo = pts.omega[mine], pts.upper[mine], pts.lower[mine]
+            # the peaks are solved (long runs where their bound is above the floor) unless
+            # their grid scalings prove the floor already
+            peaks = np.unique([np.argmax(up), np.argmax(lo)])
+            seeds = w[peaks[up[peaks] * (1.0 + slack) > floor]]
+            configurations.append((*sub.model_matrices(int(m)), seeds, w, pts.params[mine], up))
+        # contiguous ranges (continuation from one configuration to the next), a few per
+        # worker so that the costly ranges (configurations near the peak) spread over them
+        n_tasks = min(len(configurations), CHUNKS_PER_WORKER * pool.n_jobs)
+        bounds = np.linspace(0, len(configurations), n_tasks + 1).round().astype(int)
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+            if b > a:
+                tasks.append((blk, floor, slack, configurations[a:b]))
+                owner.append(name)
+        prepared[name] = (models, floor)
+    done = pool.map(_axis_task, tasks)
+    result = {}
+    for name in subsets:
+        models, floor = prepared[name]
+        mine = [d for d, o in zip(done, owner, strict=True) if o == name]
+        out = [o for chunk, _ in mine for o in chunk]
+        pts = subsets[name].points
+        levels = np.array([o[0] for o in out], dtype=float)
+        failures = tuple(f"model {m}: {o[2]}" for m, o in zip(models, out, strict=True) if o[2])
+        result[name] = AxisGuarantee(
+            mu_upper=float(np.max(levels)) if levels.size else 0.0,
+            floor=floor,
+            levels=levels,
+            points=np.array([o[1] for o in out], dtype=int),
+            failures=failures,
+            slack=slack,
+            seconds=float(sum(t for _, t in mine)),
+            models=models.astype(int),
+            grid_upper=np.array([pts.upper[pts.model == m].max() for m in models], dtype=float),
+            grid_lower=np.array([pts.lower[pts.model == m].max() for m in models], dtype=float),
+            solved=np.array([o[3] for o in out], dtype=int),
+        )
+    return result
 
 
 @dataclass(frozen=True)
@@ -517,15 +556,19 @@ def certified_sweep(
                 zrows, wcols, _ = parts[name]
                 return A, Bw[:, wcols], Cz[zrows], Dzw[np.ix_(zrows, wcols)]
 
-            for name in parts:
-                guarantees[name] = axis_guarantee(
-                    pool,
-                    points[name],
-                    parts[name],
-                    certificates[name].mu_lower,
-                    lambda m, name=name: matrices(m, name),
-                    gap=guarantee_gap,
-                )
+            guarantees = axis_guarantee(
+                pool,
+                {
+                    name: GuaranteeSubset(
+                        points[name],
+                        parts[name],
+                        certificates[name].mu_lower,
+                        lambda m, name=name: matrices(m, name),
+                    )
+                    for name in parts
+                },
+                gap=guarantee_gap,
+            )
             timings["guarantee"] = _time.perf_counter() - clock
     return StudyResult(sweep_table_of(points, times), certificates, reports, timings, guarantees)
 

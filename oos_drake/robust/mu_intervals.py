@@ -55,6 +55,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.linalg
 
 from oos_drake.robust.lfr_analysis import delta_channel_response
 from oos_drake.robust.mu_upper import LMI_ROUNDOFF
@@ -180,6 +181,34 @@ class Realization:
             object.__setattr__(self, "_modal", modal)
         return self.__dict__["_modal"]
 
+    def hamiltonian_modes(self) -> np.ndarray | None:
+        """Boolean mask of the modes of :meth:`modal` that the Hamiltonian test keeps; None
+        without a usable modal form (then the test uses the whole realization).
+
+        A mode whose residue bound ``|C v_i| |w_i B| / |Re lambda_i|`` (its largest
+        contribution to ``M`` at any frequency) is below ``cond(V) eps 1e-3`` times the
+        largest one is not seen by ``M`` to the round-off of the modal form itself, which every
+        evaluation of ``M`` in :class:`_Multiplier` already carries: it is uncontrollable or
+        unobservable from the channels of ``M`` (the make-run mission subsets' ``M`` keep 38-78
+        of the closed loop's 81 modes, the modes left out at most 3e-14 of the largest, 1000
+        times below the modal form's round-off; the docking loops' total subset keeps nearly
+        all). Leaving those modes out of the Hamiltonian changes none of its
+        imaginary-axis eigenvalues beyond that round-off and makes its eigenproblem
+        ``(2 k)^2`` instead of ``(2 n)^2`` (cost ``k^3``); the signs between its candidates are
+        still evaluated on the whole ``M``. Computed once per realization.
+        """
+        if "_hamiltonian_modes" not in self.__dict__:
+            keep = None
+            lam, V, V_inv = self.modal() or (None, None, None)
+            if V is not None:
+                _, B, C, _ = self.continuous()
+                reach = np.linalg.norm(C @ V, axis=0) * np.linalg.norm(V_inv @ B, axis=1)
+                reach = reach / np.maximum(np.abs(lam.real), 1e-300)
+                tol = 1e-3 * np.linalg.cond(V) * np.finfo(float).eps
+                keep = reach > tol * max(float(np.max(reach)), 1e-300)
+            object.__setattr__(self, "_hamiltonian_modes", keep)
+        return self.__dict__["_hamiltonian_modes"]
+
     def to_nu(self, omega):
         """Continuous-time frequency of the Cayley image (identity in continuous time)."""
         omega = np.asarray(omega, dtype=float)
@@ -271,12 +300,14 @@ class _Multiplier:
         self.A, self.B, self.C, self.D = A, B, C, D
         # modal form, once: every later evaluation of M is O(n) per entry (ends are bisected)
         self._modal = None
+        self._keep = None
         self.poles = np.zeros(0)
         if A.shape[0]:
             lam, V, V_inv = real.modal()
             self.poles = lam
             if V is not None:
                 self._modal = (lam, C @ V, V_inv @ B)
+                self._keep = real.hamiltonian_modes()
         self.ref = np.linalg.norm(self.P22, 2)
 
     def max_eig(self, nu) -> np.ndarray:
@@ -310,6 +341,9 @@ class _Multiplier:
         Raises ``ValueError`` when ``Phi(inf)`` is singular (the Hamiltonian does not exist).
         """
         A, B, C, D = self.A, self.B, self.C, self.D
+        if self._keep is not None:  # the modes M sees (Realization.hamiltonian_modes)
+            lam, CV, VB = self._modal
+            A, B, C = np.diag(lam[self._keep]), VB[self._keep], CV[:, self._keep]
         n = A.shape[0]
         if n == 0:
             return np.zeros(0)
@@ -330,7 +364,7 @@ class _Multiplier:
                 [-Q + S @ RiSH, -np.conj(A.T) + S @ RiBH],
             ]
         )
-        lam = np.linalg.eigvals(H)
+        lam = scipy.linalg.eigvals(H, overwrite_a=True, check_finite=False)
         scale = max(float(np.max(np.abs(lam))), 1e-300)
         near = np.abs(lam.real) <= AXIS_TOLERANCE * scale
         w = lam.imag[near]
@@ -607,7 +641,10 @@ def cover_axis(
         grid sweep's, :func:`scalings_at`): before solving new points in a gap, the cover
         tries the known points inside it (nearest to each edge first), no optimization. They
         never raise the level: a known point whose scalings do not prove the current level
-        (a stalled optimizer) simply proves no interval, and the gap is solved.
+        (a stalled optimizer) simply proves no interval, and the gap is solved. ``scalings``
+        may be a callable ``rows -> (optimal, scalings)`` of the points ``omega[rows]``
+        (e.g. :func:`scalings_at` of a sweep's parameters): then only the points the cover
+        tries are evaluated, and ``optimal`` (e.g. the sweep's bounds) only chooses them.
     prior : tuple, optional
         ``(omega, scalings)`` tried first, all of them, before ``known`` and any optimization
         (e.g. the :meth:`AxisCertificate.essential` points of a neighbouring model's cover:
@@ -627,6 +664,7 @@ def cover_axis(
     omega, added = list(omega), [False] * len(omega)
     level = max(float(floor), max(lmin, default=0.0))
     spare = _Spare(known, omega)
+    first_prior = len(omega)
     if prior is not None:
         for w, sc in zip(*prior, strict=True):
             omega.append(float(np.clip(w, 0.0, end)))
@@ -660,6 +698,18 @@ def cover_axis(
         # whose scalings proved nothing there does not stop a solve at its frequency)
         tried = [w for i, w in enumerate(omega) if added[i] or np.isfinite(proved[i][1][0])]
         new = _new_points(gaps, end, tried)
+        if rounds == 0 and prior is not None:
+            # the prior points whose scalings prove nothing here (a band where mu is close to
+            # the level: they covered it on the neighbouring model): solved in this first
+            # round, all together, instead of one gap edge per round
+            retry = np.array(
+                [
+                    omega[i]
+                    for i in range(first_prior, first_prior + len(prior[0]))
+                    if not np.isfinite(proved[i][1][0]) and any(a <= omega[i] <= b for a, b in gaps)
+                ]
+            )
+            new = np.union1d(new, retry)
         if new.size == 0:
             break
         rounds += 1
@@ -707,7 +757,9 @@ class _Spare:
             keep &= dist > 1e-12 * np.maximum(w, 1e-300)
         rows = np.flatnonzero(keep)[np.argsort(w[keep], kind="stable")]
         self.omega, self.optimal = w[rows], o[rows]
-        self.scalings = [sc[i] for i in rows]
+        # a callable gives the scalings (and their exact bound) of the points taken only
+        self.source = sc if callable(sc) else None
+        self.scalings = list(rows) if callable(sc) else [sc[i] for i in rows]
 
     def take(self, gaps, below: float) -> list:
         """``(omega, optimal, scalings)`` of the unused known points nearest to each edge of
@@ -720,8 +772,16 @@ class _Spare:
                 chosen.update((int(inside[0]), int(inside[-1])))
         if not chosen:
             return []
-        out = [(float(self.omega[i]), float(self.optimal[i]), self.scalings[i]) for i in chosen]
-        rest = np.setdiff1d(np.arange(self.omega.size), sorted(chosen))
+        chosen = sorted(chosen)
+        if self.source is None:
+            out = [(float(self.omega[i]), float(self.optimal[i]), self.scalings[i]) for i in chosen]
+        else:
+            optimal, scalings = self.source(np.array([self.scalings[i] for i in chosen], int))
+            out = [
+                (float(self.omega[i]), float(o), sc)
+                for i, o, sc in zip(chosen, optimal, scalings, strict=True)
+            ]
+        rest = np.setdiff1d(np.arange(self.omega.size), chosen)
         self.omega, self.optimal = self.omega[rest], self.optimal[rest]
         self.scalings = [self.scalings[i] for i in rest]
         return out
@@ -773,10 +833,12 @@ def mu_solver(
     """The ``solve`` of :func:`cover_axis` for ``mu(M(j omega))`` (D-G bound of ``mussv``).
 
     Points whose bound exceeds ``polish_above`` get long optimizer runs (:data:`POLISH_OPTIONS`)
-    from their own scalings, from those of the nearest point solved before or given in
-    ``starts`` (the scalings of a neighbouring frequency are often a better start than a cold
-    one, near lightly damped modes), and, for those still above, from the nearest point of the
-    same batch; each keeps the lowest of its bounds (each exact at its scalings).
+    from their own scalings, then, for those still above, from those of the nearest point
+    solved before or given in ``starts`` (the scalings of a neighbouring frequency are often a
+    better start than a cold one, near lightly damped modes), and, for those still above, from
+    the nearest point of the same batch; each keeps the lowest of its bounds (each exact at its
+    scalings). A point at or below ``polish_above`` after a run gets no further run: it proves
+    the level already.
 
     ``starts`` : ``(omega, params)`` raw D-G parameters at frequencies [rad/s] (e.g. a grid
     sweep's ``UpperBoundResult.params``), extra warm starts only.
@@ -805,17 +867,22 @@ def mu_solver(
         upper, params = res.upper.copy(), res.params.copy()
         Dl, Dr, G = res.D_left.copy(), res.D_right.copy(), res.G.copy()
         redo = np.flatnonzero(upper > polish_above)
-        x0s = [params[redo]]
-        if redo.size and solved_omega:
-            known = np.asarray(solved_omega)
-            near = np.argmin(np.abs(np.log1p(known[None, :]) - np.log1p(omega[redo, None])), axis=1)
-            x0s.append(np.asarray(solved_params)[near])
-        if redo.size and omega.size > 1:
-            x0s.append(None)  # the nearest other point of this batch, after the passes above
-        for x0 in x0s if redo.size else ():
-            if x0 is None:
-                redo = redo[upper[redo] > polish_above]
-                if not redo.size:
+        known = np.asarray(solved_omega, dtype=float)
+        for start in ("own", "known", "batch"):
+            # each further start only for the points still above: a point at or below
+            # ``polish_above`` proves the level already, a lower bound there changes nothing
+            redo = redo[upper[redo] > polish_above]
+            if not redo.size:
+                break
+            if start == "own":
+                x0 = params[redo]
+            elif start == "known":
+                if not known.size:
+                    continue
+                near = np.argmin(np.abs(np.log1p(known[None, :]) - np.log1p(omega[redo, None])), 1)
+                x0 = np.asarray(solved_params)[near]
+            else:  # the nearest other point of this batch, after the passes above
+                if omega.size < 2:
                     break
                 dist = np.abs(np.log1p(omega[None, :]) - np.log1p(omega[redo, None]))
                 dist[np.arange(redo.size), redo] = np.inf

@@ -299,3 +299,82 @@ def test_cover_continued_from_a_neighbouring_model():
     # a far model: the prior proves (almost) nothing, the cover still closes on its own
     other = cover_axis(far, mu_solver(far, blk, polish_above=peak), [], floor=floor, prior=prior)
     assert other.covered and other.check()["intervals_hold"] and other.check()["covered"]
+
+
+def with_hidden_modes(real, seed=0):
+    """``real`` with four lightly damped modes ``M`` does not see, coupled to its states: two
+    unobservable (0.3 % damping at 1 rad/s, where ``M`` peaks) and two uncontrollable; the
+    same ``M``, a twice as large Hamiltonian."""
+    rng = np.random.default_rng(seed)
+    n, r, c = real.A.shape[0], real.B.shape[1], real.C.shape[0]
+    hidden = []
+    for w, z in ((1.0, 0.003), (3.0, 0.01)):
+        hidden.append(np.array([[0.0, w], [-w, -2 * z * w]]))
+    unobs, unctrl = hidden
+    A = np.zeros((n + 4, n + 4))
+    A[:n, :n], A[n : n + 2, n : n + 2], A[n + 2 :, n + 2 :] = real.A, unobs, unctrl
+    A[n : n + 2, :n] = rng.standard_normal((2, n))  # driven by the states M sees: unobservable
+    A[:n, n + 2 :] = rng.standard_normal((n, 2))  # drives them: uncontrollable
+    B = np.vstack([real.B, rng.standard_normal((2, r)), np.zeros((2, r))])
+    C = np.hstack([real.C, np.zeros((c, 2)), rng.standard_normal((c, 2))])
+    return Realization(A, B, C, real.D)
+
+
+def test_hamiltonian_test_leaves_out_the_modes_M_does_not_see():
+    """``Realization.hamiltonian_modes``: the uncontrollable modes (no trace in the computed
+    modal form of ``M`` at all, as the modes of the mission's closed loops that a subset's
+    channels miss: 1e-31 of the largest) are left out; the unobservable ones, whose trace in
+    the computed modal form is round-off of 1e-11 amplified by their light damping, are kept
+    (only modes below the modal form's own round-off go). The response is unchanged and every
+    interval equals the one of the realization without the hidden modes (whose Hamiltonian
+    keeps every mode: a second computation), checked against dense sampling of the LMI on the
+    larger realization."""
+    real, blk = delta_realization(two_modes())
+    big = with_hidden_modes(real)
+    assert real.hamiltonian_modes().all()
+    keep = big.hamiltonian_modes()
+    n = real.A.shape[0]
+    assert keep.size == n + 4 and keep.sum() == n + 2
+    uncontrollable = np.linalg.eigvals(big.A[n + 2 :, n + 2 :])
+    dropped = big.modal()[0][~keep]
+    np.testing.assert_allclose(np.sort_complex(dropped), np.sort_complex(uncontrollable), 1e-9)
+    w = np.linspace(0.0, 6.0, 61)
+    M = real.response(w)
+    np.testing.assert_allclose(big.response(w), M, rtol=1e-9, atol=1e-10 * np.abs(M).max())
+    for w0 in (0.5, 1.0, 2.0, 3.0, 3.3):
+        res = mussv(real.response([w0]), blk)
+        sc = Scalings(res.D_left[0], res.D_right[0], res.G[0]).conditioned()
+        beta = 1.005 * float(res.upper[0])
+        lo, hi = dg_interval(real, sc, beta, w0)
+        lo_b, hi_b = dg_interval(big, sc, beta, w0)
+        assert lo_b == pytest.approx(lo, rel=1e-6, abs=1e-9)
+        assert hi_b == pytest.approx(hi, rel=1e-6) or (np.isinf(hi) and np.isinf(hi_b))
+        inner = np.linspace(lo_b, min(hi_b, 1e3), 2001)
+        assert np.all(lmi_residual(big.response(inner), beta, sc.D_left, sc.D_right, sc.G) <= 0)
+
+
+def test_cover_evaluates_known_scalings_only_where_it_tries_them():
+    """``cover_axis(known=(omega, optimal, callable))`` (the analysis' path): the grid's
+    scalings are evaluated only for the points the cover tries, fewer than all; the cover
+    closes at the same kind of level as with every point evaluated up front and every
+    frequency is proved (dense LMI check)."""
+    from oos_drake.robust.blocks import parse_blk
+    from oos_drake.robust.mu_upper import mu_upper_bound
+
+    real, blk = delta_realization(two_modes())
+    grid = np.geomspace(0.1, 10.0, 25)
+    res = mu_upper_bound(real.response(grid), parse_blk(blk), max_iter=30)
+    asked = []
+
+    def lazy(rows):
+        asked.extend(np.asarray(rows).tolist())
+        return scalings_at(real, blk, grid[rows], res.params[rows])
+
+    cert = cover_axis(
+        real, mu_solver(real, blk, polish_above=0.5), [], floor=1.005 * 0.5,
+        known=(grid, res.upper, lazy),
+    )  # fmt: skip
+    assert cert.covered and cert.check()["intervals_hold"] and cert.check()["covered"]
+    assert 0 < len(asked) < grid.size and len(set(asked)) == len(asked)
+    assert 0.5 <= cert.upper <= 1.02 * 0.5
+    assert_every_frequency_proved(real, cert, np.linspace(0.0, 6.0, 6001))
