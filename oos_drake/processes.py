@@ -40,7 +40,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 
-from oos_drake.blas import limit_blas_threads, single_threaded_blas, with_single_threaded_blas
+from oos_drake.blas import limit_blas_threads, with_single_threaded_blas
 
 #: Seconds between two checks of the parent process id in a worker.
 PARENT_POLL_S = 0.25
@@ -178,11 +178,6 @@ class SerialExecutor:
         return False
 
 
-def _single_blas_call(fn: Callable, args: tuple):
-    with single_threaded_blas():
-        return fn(*args)
-
-
 class ThreadExecutor(SerialExecutor):
     """Threads of this process, each task with one BLAS thread (no nested BLAS threads).
 
@@ -209,7 +204,7 @@ class ThreadExecutor(SerialExecutor):
 
     def submit(self, fn: Callable, *args) -> Future:
         """Start ``fn(*args)`` on a thread (one BLAS thread); a ``concurrent.futures.Future``."""
-        return self.pool.submit(_single_blas_call, fn, args)
+        return self.pool.submit(with_single_threaded_blas(fn), *args)
 
     def map(self, fn: Callable, iterable: Iterable) -> list:
         """``[fn(x) for x in iterable]`` on the threads, in order."""
