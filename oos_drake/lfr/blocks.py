@@ -121,12 +121,8 @@ class UReal:
         _check_name(self.name)
         _check_facts(self)
         for label in ("nominal", "lower", "upper"):
-            object.__setattr__(self, label, float(getattr(self, label)))
-        for label, value in (
-            ("nominal", self.nominal),
-            ("lower", self.lower),
-            ("upper", self.upper),
-        ):
+            value = float(getattr(self, label))
+            object.__setattr__(self, label, value)
             if not math.isfinite(value):
                 raise ValueError(f"ureal {self.name!r}: {label} must be finite, got {value!r}")
         if not self.lower < self.upper:
@@ -493,31 +489,23 @@ def make_ureal_spec(
             raise ValueError(f"ureal {name!r}: {label} must be a scalar or a pair, got {value!r}")
         return arr[0], arr[1], None
 
-    if percent is not None:
-        lo_pct, hi_pct, scalar = pair(percent, "percent")
+    if percent is not None or plusminus is not None:
+        label, value = ("percent", percent) if percent is not None else ("plusminus", plusminus)
+        low, high, scalar = pair(value, label)
         if scalar is not None and scalar < 0:
-            raise ValueError(f"ureal {name!r}: percent must be >= 0, got {scalar:.6g}")
-        if scalar is None and (lo_pct > 0 or hi_pct < 0):
+            raise ValueError(f"ureal {name!r}: {label} must be >= 0, got {scalar:.6g}")
+        if scalar is None and (low > 0 or high < 0):
             raise ValueError(
-                f"ureal {name!r}: percent pair must be [-a, b] with a, b >= 0, "
-                f"got {list(percent)!r}"
+                f"ureal {name!r}: {label} pair must be [-a, b] with a, b >= 0, got {list(value)!r}"
             )
-        if nominal == 0.0:
-            raise ValueError(f"ureal {name!r}: percent uncertainty needs a nonzero nominal, got 0")
-        scale = abs(nominal) / 100.0
-        return UReal(
-            name, nominal, nominal + lo_pct * scale, nominal + hi_pct * scale, "percent", **facts
-        )
-    if plusminus is not None:
-        lo_pm, hi_pm, scalar = pair(plusminus, "plusminus")
-        if scalar is not None and scalar < 0:
-            raise ValueError(f"ureal {name!r}: plusminus must be >= 0, got {scalar:.6g}")
-        if scalar is None and (lo_pm > 0 or hi_pm < 0):
-            raise ValueError(
-                f"ureal {name!r}: plusminus pair must be [-a, b] with a, b >= 0, "
-                f"got {list(plusminus)!r}"
-            )
-        return UReal(name, nominal, nominal + lo_pm, nominal + hi_pm, "plusminus", **facts)
+        scale = 1.0  # plusminus: absolute deviations
+        if label == "percent":
+            if nominal == 0.0:
+                raise ValueError(
+                    f"ureal {name!r}: percent uncertainty needs a nonzero nominal, got 0"
+                )
+            scale = abs(nominal) / 100.0
+        return UReal(name, nominal, nominal + low * scale, nominal + high * scale, label, **facts)
     arr = np.asarray(range, dtype=float).ravel()
     if arr.size != 2:
         raise ValueError(f"ureal {name!r}: range must be a pair (lower, upper), got {range!r}")

@@ -421,67 +421,43 @@ class LFR:
             M = np.array(self._M, dtype=np.result_type(self._M, other))
             M[..., self._n + self.nz :, :] *= other
             return self._replace(M)
-        try:
-            other = as_lfr(other)
-        except TypeError:
-            return NotImplemented
-        return series(other, self)
+        other = _operand(other)
+        return NotImplemented if other is None else series(other, self)
 
     def __rmul__(self, other) -> LFR:
         if _is_scalar(other):
             return self.__mul__(other)
-        try:
-            other = as_lfr(other)
-        except TypeError:
-            return NotImplemented
-        return series(self, other)
+        other = _operand(other)
+        return NotImplemented if other is None else series(self, other)
 
     __matmul__ = __mul__
     __rmatmul__ = __rmul__
 
     def __add__(self, other) -> LFR:
-        try:
-            other = as_lfr(other)
-        except TypeError:
-            return NotImplemented
-        return parallel(self, other, 1.0)
+        other = _operand(other)
+        return NotImplemented if other is None else parallel(self, other, 1.0)
 
     def __radd__(self, other) -> LFR:
-        try:
-            other = as_lfr(other)
-        except TypeError:
-            return NotImplemented
-        return parallel(other, self, 1.0)
+        other = _operand(other)
+        return NotImplemented if other is None else parallel(other, self, 1.0)
 
     def __sub__(self, other) -> LFR:
-        try:
-            other = as_lfr(other)
-        except TypeError:
-            return NotImplemented
-        return parallel(self, other, -1.0)
+        other = _operand(other)
+        return NotImplemented if other is None else parallel(self, other, -1.0)
 
     def __rsub__(self, other) -> LFR:
-        try:
-            other = as_lfr(other)
-        except TypeError:
-            return NotImplemented
-        return parallel(other, self, -1.0)
+        other = _operand(other)
+        return NotImplemented if other is None else parallel(other, self, -1.0)
 
     def __truediv__(self, other) -> LFR:
         if _is_scalar(other):
             return self.__mul__(1.0 / other)
-        try:
-            other = as_lfr(other)
-        except TypeError:
-            return NotImplemented
-        return self * inverse(other)
+        other = _operand(other)
+        return NotImplemented if other is None else self * inverse(other)
 
     def __rtruediv__(self, other) -> LFR:
-        try:
-            other = as_lfr(other)
-        except TypeError:
-            return NotImplemented
-        return other * inverse(self)
+        other = _operand(other)
+        return NotImplemented if other is None else other * inverse(self)
 
     def __pow__(self, power) -> LFR:
         if not isinstance(power, numbers.Integral):
@@ -645,6 +621,14 @@ def as_lfr(value) -> LFR:
             raise TypeError(f"as_lfr: cannot convert array of dtype {arr.dtype}")
         return LFR.from_matrix(arr)
     raise TypeError(f"as_lfr: cannot convert {type(value).__name__} to an LFR")
+
+
+def _operand(value) -> LFR | None:
+    """The other operand of an LFR operator as an LFR; None when it is no system or number."""
+    try:
+        return as_lfr(value)
+    except TypeError:
+        return None
 
 
 # ====================================================================== primitives

@@ -119,54 +119,37 @@ def append(*systems) -> LFR:
 
 def hstack(systems: Sequence) -> LFR:
     """``[sys1, sys2, ...]``: inputs stacked, outputs added (MATLAB horizontal concatenation)."""
-    systems = [as_lfr(s) for s in systems]
-    if not systems:
-        raise ValueError("hstack: no systems given")
-    ny = systems[0].noutputs
-    for k, sys in enumerate(systems):
-        if sys.noutputs != ny:
-            raise ValueError(f"hstack: system {k} has {sys.noutputs} outputs, expected {ny}")
-    if len(systems) == 1:
-        return systems[0]
-    G = append_systems(systems)
-    m = G.ninputs
-    K = np.zeros((m, G.noutputs))
-    F = np.hstack([np.eye(ny)] * len(systems))
-    return close_static(
-        G,
-        K,
-        np.eye(m),
-        F,
-        np.zeros((ny, m)),
-        input_names=G.input_names,
-        output_names=systems[0].output_names,
-    )
+    return _concatenate(systems, horizontal=True)
 
 
 def vstack(systems: Sequence) -> LFR:
     """``[sys1; sys2; ...]``: shared inputs, outputs stacked (MATLAB vertical concatenation)."""
+    return _concatenate(systems, horizontal=False)
+
+
+def _concatenate(systems: Sequence, *, horizontal: bool) -> LFR:
+    """``hstack`` (the systems' outputs added) or ``vstack`` (their inputs shared)."""
+    what, shared = ("hstack", "outputs") if horizontal else ("vstack", "inputs")
     systems = [as_lfr(s) for s in systems]
     if not systems:
-        raise ValueError("vstack: no systems given")
-    nu = systems[0].ninputs
+        raise ValueError(f"{what}: no systems given")
+    size = systems[0].noutputs if horizontal else systems[0].ninputs
     for k, sys in enumerate(systems):
-        if sys.ninputs != nu:
-            raise ValueError(f"vstack: system {k} has {sys.ninputs} inputs, expected {nu}")
+        got = sys.noutputs if horizontal else sys.ninputs
+        if got != size:
+            raise ValueError(f"{what}: system {k} has {got} {shared}, expected {size}")
     if len(systems) == 1:
         return systems[0]
     G = append_systems(systems)
-    p = G.noutputs
-    K = np.zeros((G.ninputs, p))
-    E = np.vstack([np.eye(nu)] * len(systems))
-    return close_static(
-        G,
-        K,
-        E,
-        np.eye(p),
-        np.zeros((p, nu)),
-        input_names=systems[0].input_names,
-        output_names=G.output_names,
-    )
+    m, p = G.ninputs, G.noutputs
+    K = np.zeros((m, p))
+    if horizontal:
+        E, F, H = np.eye(m), np.hstack([np.eye(size)] * len(systems)), np.zeros((size, m))
+        names = {"input_names": G.input_names, "output_names": systems[0].output_names}
+    else:
+        E, F, H = np.vstack([np.eye(size)] * len(systems)), np.eye(p), np.zeros((p, size))
+        names = {"input_names": systems[0].input_names, "output_names": G.output_names}
+    return close_static(G, K, E, F, H, **names)
 
 
 def inv(sys) -> LFR:
