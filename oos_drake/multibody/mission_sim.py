@@ -138,30 +138,22 @@ def mission_parameters(scenario) -> tuple[MissionParameter, ...]:
                 name, block.unit, block.nominal, lower, upper, block.quantity, description
             )
         )
-    for axis in AXES:
-        params.append(
+    for prefix, unit, bound, what in (
+        ("phi0", "rad", 0.05, "attitude error"),
+        ("w0", "rad/s", 0.01, "body rate error"),
+    ):
+        params += [
             MissionParameter(
-                f"phi0_{axis}",
-                "rad",
+                f"{prefix}_{axis}",
+                unit,
                 0.0,
-                -0.05,
-                0.05,
+                -bound,
+                bound,
                 "initial condition",
-                f"initial hub attitude error ({axis})",
+                f"initial hub {what} ({axis})",
             )
-        )
-    for axis in AXES:
-        params.append(
-            MissionParameter(
-                f"w0_{axis}",
-                "rad/s",
-                0.0,
-                -0.01,
-                0.01,
-                "initial condition",
-                f"initial hub body rate error ({axis})",
-            )
-        )
+            for axis in AXES
+        ]
     params.append(
         MissionParameter(
             "noise_seed",
@@ -173,19 +165,19 @@ def mission_parameters(scenario) -> tuple[MissionParameter, ...]:
             "seed of sensor noise and disturbances (0: the run seed)",
         )
     )
-    for row in AXES:
-        for col in AXES:
-            params.append(
-                MissionParameter(
-                    f"Delta_mul_{row}{col}",
-                    "-",
-                    0.0,
-                    -1.0,
-                    1.0,
-                    "multiplicative dynamics",
-                    f"entry {row}{col} of the multiplicative actuator all-pass perturbation",
-                )
-            )
+    params += [
+        MissionParameter(
+            f"Delta_mul_{row}{col}",
+            "-",
+            0.0,
+            -1.0,
+            1.0,
+            "multiplicative dynamics",
+            f"entry {row}{col} of the multiplicative actuator all-pass perturbation",
+        )
+        for row in AXES
+        for col in AXES
+    ]
     params.append(
         MissionParameter(
             "Delta_add",
@@ -284,9 +276,16 @@ class _Schedule:
         frac = i / (self.steps - 1) if self.steps > 1 else 1.0
         return k_from * (k_to / k_from) ** frac
 
+    def _ramped(self, t, t0, setting, up: bool):
+        """``setting`` with its two stiffnesses on the ramp from ``t0``: from ``k0`` up to them
+        (``up``) or from them down to ``k0``; the dampings are kept."""
+        k_shear, k_tors, d_shear, d_tors = setting
+        ends = [(self.k0, k) if up else (k, self.k0) for k in (k_shear, k_tors)]
+        return (*(self._ramp(t, t0, *pair) for pair in ends), d_shear, d_tors)
+
     def settings(self, t: float) -> dict[str, tuple[float, float, float, float]]:
         """``{"SM1": (k_shear, k_tors, d_shear, d_tors), "SM2": ...}`` at time ``t``."""
-        v, k0, R = self.values, self.k0, self.duration
+        v, R = self.values, self.duration
         out = {"SM1": (0.0, 0.0, 0.0, 0.0), "SM2": (0.0, 0.0, 0.0, 0.0)}
         if self.frozen is not None:
             return out | dict(self.frozen)
@@ -295,34 +294,18 @@ class _Schedule:
         if t < self.t_capture:
             return out
         if t < self.t_capture + R:
-            out["SM1"] = (
-                self._ramp(t, self.t_capture, k0, sm1[0]),
-                self._ramp(t, self.t_capture, k0, sm1[1]),
-                sm1[2],
-                sm1[3],
-            )
+            out["SM1"] = self._ramped(t, self.t_capture, sm1, up=True)
             return out
         if t < self.t_docking:
             out["SM1"] = sm1
             return out
         if t < self.t_docking + R:
             out["SM1"] = sm1
-            out["SM2"] = (
-                self._ramp(t, self.t_docking, k0, sm2[0]),
-                self._ramp(t, self.t_docking, k0, sm2[1]),
-                sm2[2],
-                sm2[3],
-            )
+            out["SM2"] = self._ramped(t, self.t_docking, sm2, up=True)
             return out
         out["SM2"] = sm2
         if t < self.t_docking + 2 * R:
-            t1 = self.t_docking + R
-            out["SM1"] = (
-                self._ramp(t, t1, sm1[0], k0),
-                self._ramp(t, t1, sm1[1], k0),
-                sm1[2],
-                sm1[3],
-            )
+            out["SM1"] = self._ramped(t, self.t_docking + R, sm1, up=False)
         return out
 
     def ramp_intervals(self) -> list[tuple[float, float]]:

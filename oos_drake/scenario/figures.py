@@ -307,11 +307,9 @@ def make_figures(
     axes.flat[0].legend(loc="lower left", fontsize=8)
     fig.suptitle("T_ext{1} -> wdot{1} at the six moments (paper Fig. sigma_plot)")
     fig.tight_layout()
-    files["sigma_moments"] = (
-        _savefig(fig, out / "sigma_moments.png"),
-        _write(sigma, out / "sigma_moments.csv"),
+    files["sigma_moments"] = _save(
+        fig, out / "sigma_moments.png", _write(sigma, out / "sigma_moments.csv")
     )
-    plt.close(fig)
 
     # -- Fig. sigma_plot_springmass
     sweeps = docking_sweeps_data(timeline, frequencies)
@@ -339,11 +337,9 @@ def make_figures(
     axes[0].set_ylabel("|T_ext,y -> wdot_y| [dB rel. 1 rad/s^2 per N m]")
     axes[0].legend(fontsize=7, title="stiffness [N/m, N m/rad]\ndamping 100", title_fontsize=7)
     fig.tight_layout()
-    files["docking_sweeps"] = (
-        _savefig(fig, out / "docking_sweeps.png"),
-        _write(sweeps, out / "docking_sweeps.csv"),
+    files["docking_sweeps"] = _save(
+        fig, out / "docking_sweeps.png", _write(sweeps, out / "docking_sweeps.csv")
     )
-    plt.close(fig)
 
     # -- Fig. inertias
     inertias = inertia_history_data(model, timeline, times)
@@ -368,11 +364,7 @@ def make_figures(
     ax_products.set_xlabel("mission time [s]")
     fig.suptitle("Inertia tensor of the system at G1 in R_RH1 (paper Fig. inertias)")
     fig.tight_layout()
-    files["inertias"] = (
-        _savefig(fig, out / "inertias.png"),
-        _write(inertias, out / "inertias.csv"),
-    )
-    plt.close(fig)
+    files["inertias"] = _save(fig, out / "inertias.png", _write(inertias, out / "inertias.csv"))
 
     # -- Fig. surf
     surface = surface_data(model, timeline, times, frequencies)
@@ -411,11 +403,14 @@ def make_figures(
     ax_map.set_title("map (dashed: 1st docking, 2nd docking, arrays tilt)")
     fig.suptitle("T_ext{1} -> phi{1} (nominal) over the mission (paper Fig. surf)")
     fig.tight_layout()
-    files["surface"] = (_savefig(fig, out / "surface.png"), data_path)
-    plt.close(fig)
+    files["surface"] = _save(fig, out / "surface.png", data_path)
     return FigureFiles(files)
 
 
-def _savefig(fig, path: Path) -> Path:
+def _save(fig, path: Path, data_path: Path) -> tuple[Path, Path]:
+    """Save ``fig`` as ``path`` (PNG), close it; ``(path, data_path)`` for the file table."""
+    import matplotlib.pyplot as plt
+
     fig.savefig(path, dpi=110)
-    return path
+    plt.close(fig)
+    return path, data_path
