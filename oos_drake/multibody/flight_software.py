@@ -57,6 +57,7 @@ sum of squares), so they are computed at the control rate without any logging.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -288,11 +289,7 @@ class FlightSoftwareDesign:
             "metrics": 3 * len(METRIC_SLOTS),
             "counter": 1,
         }
-        out, start = {}, 0
-        for name, size in sizes.items():
-            out[name] = slice(start, start + size)
-            start += size
-        return out
+        return dict(zip(sizes, _consecutive(sizes.values()), strict=True))
 
 
 def _zero_perturbation(n: int) -> DiscreteBlock:
@@ -388,9 +385,9 @@ def perturbation_block(
 
 
 def _consecutive(sizes) -> tuple[slice, ...]:
-    """Consecutive slices of the given sizes."""
-    bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
-    return tuple(slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True))
+    """Consecutive slices of the given sizes (Python ``int`` bounds)."""
+    bounds = [0, *itertools.accumulate(int(size) for size in sizes)]
+    return tuple(itertools.starmap(slice, itertools.pairwise(bounds)))
 
 
 class FlightSoftware(LeafSystem):
@@ -462,11 +459,8 @@ class FlightSoftware(LeafSystem):
         self.DeclareVectorOutputPort(
             "log", 3 * len(LOG_SIGNALS), self._calc_log, prerequisites_of_calc=ticket
         )
-        d = design
-        self._sst, self._gyro, self._ro, self._rw = d.star_tracker, d.gyro, d.rolloff, d.wheels
-        self._dist = d.disturbance
-        self._Kp, self._Kd = d.K[:, :3], d.K[:, 3:]
-        self._J_Wadd = d.J_ref * d.W_add
+        self._Kp, self._Kd = design.K[:, :3], design.K[:, 3:]
+        self._J_Wadd = design.J_ref * design.W_add
         self._build_stages()
 
     @property

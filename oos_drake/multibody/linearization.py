@@ -171,19 +171,20 @@ def structural_keep(edges: np.ndarray, sources: np.ndarray, sinks: np.ndarray) -
     sources, sinks : numpy.ndarray of bool, shape (N,)
         Nodes driven by an input, nodes read by an output.
     """
-    observable = np.array(sinks, dtype=bool)
-    frontier = observable.copy()
+    edges = np.asarray(edges, dtype=bool)
+    return _reached(edges, sinks) & _reached(edges.T, sources)
+
+
+def _reached(edges: np.ndarray, start) -> np.ndarray:
+    """Nodes that drive a ``start`` node through ``edges`` (``edges[i, j]``: ``j`` drives ``i``),
+    ``start`` included."""
+    reached = np.array(start, dtype=bool)
+    frontier = reached.copy()
     while frontier.any():
-        new = edges[frontier].any(axis=0) & ~observable
-        observable |= new
+        new = edges[frontier].any(axis=0) & ~reached
+        reached |= new
         frontier = new
-    controllable = np.array(sources, dtype=bool)
-    frontier = controllable.copy()
-    while frontier.any():
-        new = edges[:, frontier].any(axis=1) & ~controllable
-        controllable |= new
-        frontier = new
-    return observable & controllable
+    return reached
 
 
 def structural_prune(system: control.StateSpace, rtol: float = 1e-13) -> control.StateSpace:

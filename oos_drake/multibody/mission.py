@@ -47,7 +47,6 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import (
-    ForceElementIndex,
     LinearBushingRollPitchYaw,
     ModelInstanceIndex,
     RevoluteSpring,
@@ -66,7 +65,7 @@ from pydrake.trajectories import PiecewisePolynomial
 from oos_drake.control.baseline import baseline_gains
 from oos_drake.control.components import DesignSpecification
 from oos_drake.multibody.flight_software import FlightSoftware, FlightSoftwareDesign
-from oos_drake.multibody.plant_parts import add_floating_joint, add_modal_residual
+from oos_drake.multibody.plant_parts import add_floating_joint, add_modal_residual, force_elements
 from oos_drake.multibody.scenario_sdf import (
     ARM_MODEL,
     ASSEMBLY_FILE,
@@ -386,11 +385,7 @@ def _add_plant(builder: DiagramBuilder, sdf_directory: Path):
     arm_joints = tuple(plant.GetJointByName(arm_joint_name(i), arm) for i in range(1, 7))
     drive_joints = tuple(plant.GetJointByName(drive_joint_name(a), instance(a)) for a in ARRAYS)
     mode_joints, mode_springs = {}, {}
-    elements = (
-        plant.get_force_element(ForceElementIndex(i)) for i in range(plant.num_force_elements())
-    )
-    springs = [e for e in elements if isinstance(e, RevoluteSpring)]
-    by_joint = {s.joint().index(): s for s in springs}
+    by_joint = {s.joint().index(): s for s in force_elements(plant, RevoluteSpring)}
     for array in ARRAYS:
         joints = []
         index = 1

@@ -47,12 +47,12 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 from pydrake.math import RollPitchYaw
-from pydrake.multibody.tree import RotationalInertia, SpatialInertia
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 
 from oos_drake.lfr.blocks import RANGE_RTOL
 from oos_drake.multibody.flight_software import NOISE_CHANNELS
 from oos_drake.multibody.mission import ARRAYS, MissionDiagram, MissionOptions, make_mission_diagram
+from oos_drake.multibody.plant_parts import spatial_inertia_from_central
 from oos_drake.scenario.model import physical_blocks
 
 __all__ = [
@@ -428,9 +428,8 @@ class MissionSimulation:
         M0 = self._target_inertia
         I = M0.CalcRotationalInertia().CopyToFullMatrix3()
         I[0, 0], I[1, 1], I[2, 2] = values["Jxx_RH2"], values["Jyy_RH2"], values["Jzz_RH2"]
-        inertia = RotationalInertia(I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])
         h.target_body.SetSpatialInertiaInBodyFrame(
-            pc, SpatialInertia.MakeFromCentralInertia(values["m_RH2"], M0.get_com(), inertia)
+            pc, spatial_inertia_from_central(values["m_RH2"], M0.get_com(), I)
         )
         for array in ARRAYS:
             stiffness, damping = self._default_springs[array]

@@ -10,8 +10,11 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import (
     FixedOffsetFrame,
+    ForceElementIndex,
     ModelInstanceIndex,
+    RevoluteSpring,
     RigidBody,
+    RotationalInertia,
     RpyFloatingJoint,
     SpatialInertia,
     UnitInertia,
@@ -22,7 +25,11 @@ from oos_drake.multibody.appendage_sdf import MODE_JOINT, ROOT_LINK
 __all__ = [
     "add_modal_residual",
     "add_floating_joint",
+    "central_inertia",
     "drake_spatial_inertia_to_matrix",
+    "force_elements",
+    "revolute_spring",
+    "spatial_inertia_from_central",
 ]
 
 RESIDUAL_BODY = "modal_residual"
@@ -33,6 +40,37 @@ def drake_spatial_inertia_to_matrix(M) -> np.ndarray:
     K = M.CopyToFullMatrix6()
     perm = [3, 4, 5, 0, 1, 2]
     return K[np.ix_(perm, perm)]
+
+
+def central_inertia(M) -> tuple[float, np.ndarray, np.ndarray]:
+    """``(mass [kg], p_BoBcm [m], 3x3 inertia about the centre of mass [kg m^2])`` of a Drake
+    ``SpatialInertia`` ``M`` about the body origin, body axes."""
+    mass, com = M.get_mass(), M.get_com()
+    return mass, com, M.Shift(com).CalcRotationalInertia().CopyToFullMatrix3()
+
+
+def spatial_inertia_from_central(mass: float, p_BoBcm, inertia) -> SpatialInertia:
+    """Drake ``SpatialInertia`` of ``mass`` [kg] with its centre of mass at ``p_BoBcm`` [m] and
+    the symmetric 3x3 ``inertia`` about it [kg m^2] (body axes): the inverse of
+    :func:`central_inertia`."""
+    I = inertia
+    rotational = RotationalInertia(I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])
+    return SpatialInertia.MakeFromCentralInertia(mass, p_BoBcm, rotational)
+
+
+def force_elements(plant: MultibodyPlant, kind: type) -> list:
+    """The force elements of ``plant`` that are instances of ``kind`` (``RevoluteSpring``, ...)."""
+    elements = (
+        plant.get_force_element(ForceElementIndex(i)) for i in range(plant.num_force_elements())
+    )
+    return [element for element in elements if isinstance(element, kind)]
+
+
+def revolute_spring(plant: MultibodyPlant, joint):
+    """The ``RevoluteSpring`` on ``joint`` (the first one), None when it has none."""
+    index = joint.index()
+    springs = [s for s in force_elements(plant, RevoluteSpring) if s.joint().index() == index]
+    return springs[0] if springs else None
 
 
 def add_modal_residual(plant: MultibodyPlant, model_instance: ModelInstanceIndex) -> RigidBody:

@@ -94,6 +94,8 @@ def _visuals(handles):
     from pydrake.geometry import Box, Cylinder, Sphere
     from pydrake.math import RigidTransform, RotationMatrix
 
+    from oos_drake.multibody.plant_parts import central_inertia
+
     plant = handles.plant
     shapes, bodies = [], {}
 
@@ -110,10 +112,7 @@ def _visuals(handles):
     hub_bodies = [handles.hub_joint.child_body(), handles.target_body]
     panels = [joint.child_body() for joint in handles.drive_joints]
     for body in hub_bodies + panels:
-        M = body.default_spatial_inertia()
-        mass = M.get_mass()
-        com = M.get_com()
-        inertia = M.Shift(com).CalcRotationalInertia().CopyToFullMatrix3()
+        mass, com, inertia = central_inertia(body.default_spatial_inertia())
         sides, axes = equivalent_box(mass, inertia)
         _, instance = body_path(body)
         add(

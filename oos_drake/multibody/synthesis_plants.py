@@ -47,7 +47,6 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
-from pydrake.multibody.tree import RevoluteSpring, RotationalInertia, SpatialInertia
 
 from oos_drake.control.plants import PlantArray, lfr_statespace
 from oos_drake.lfr import LFR
@@ -60,6 +59,7 @@ from oos_drake.multibody.mission_lfr import (
     uncertain_parameters,
 )
 from oos_drake.multibody.operating_point import linearize_at, operating_point
+from oos_drake.multibody.plant_parts import revolute_spring, spatial_inertia_from_central
 from oos_drake.multibody.scenario_plant import ScenarioDiagram, cached_scenario_diagram
 from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL
 from oos_drake.scenario.data import default_scenario
@@ -71,21 +71,6 @@ __all__ = [
     "DrakePlantSource",
     "drake_plant_array",
 ]
-
-
-def _mode_spring(handles: ScenarioDiagram, joint) -> RevoluteSpring:
-    plant = handles.plant
-    for i in range(plant.num_force_elements()):
-        element = plant.get_force_element(_force_element_index(i))
-        if isinstance(element, RevoluteSpring) and element.joint().index() == joint.index():
-            return element
-    raise ValueError(f"no RevoluteSpring on joint {joint.name()!r} of the Drake twin")
-
-
-def _force_element_index(i: int):
-    from pydrake.multibody.tree import ForceElementIndex
-
-    return ForceElementIndex(i)
 
 
 def apply_physical_values(
@@ -138,7 +123,9 @@ def apply_physical_values(
             mount = array_names[name]
             instance = plant.GetModelInstanceByName(f"{ASSEMBLY_MODEL}::{mount.name}")
             joint = plant.GetJointByName(MODE_JOINT.format(1), instance)
-            spring = _mode_spring(handles, joint)
+            spring = revolute_spring(plant, joint)
+            if spring is None:
+                raise ValueError(f"no RevoluteSpring on joint {joint.name()!r} of the Drake twin")
             ratio = value / float(mount.model.omega[0])
             spring.SetStiffness(plant_context, spring.default_stiffness() * ratio**2)
             joint.SetDampingVector(plant_context, joint.default_damping_vector() * ratio)
@@ -148,12 +135,9 @@ def apply_physical_values(
     for hub_name, (mass, inertia) in hubs_touched.items():
         instance = plant.GetModelInstanceByName(f"{ASSEMBLY_MODEL}::{hub_name}")
         body = plant.GetBodyByName(hub_name, instance)
-        I = RotationalInertia(
-            inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]
-        )
         # the hub link frame is at its centre of mass (SDF writer), so the CoM offset is zero
         body.SetSpatialInertiaInBodyFrame(
-            plant_context, SpatialInertia.MakeFromCentralInertia(mass, np.zeros(3), I)
+            plant_context, spatial_inertia_from_central(mass, np.zeros(3), inertia)
         )
 
 

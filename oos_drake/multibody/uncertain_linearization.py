@@ -68,6 +68,12 @@ from oos_drake.lfr import LFR
 from oos_drake.lfr.blocks import UReal, make_ureal_spec
 from oos_drake.lfr.core import BlockEntry
 from oos_drake.multibody.linearization import structural_keep
+from oos_drake.multibody.plant_parts import (
+    central_inertia,
+    force_elements,
+    revolute_spring,
+    spatial_inertia_from_central,
+)
 
 __all__ = [
     "BODY_QUANTITIES",
@@ -261,19 +267,11 @@ def _scoped(plant, name: str, has, get, kind: str):
         ) from None
 
 
-def _force_elements(plant):
-    from pydrake.multibody.tree import ForceElementIndex
-
-    return [
-        plant.get_force_element(ForceElementIndex(i)) for i in range(plant.num_force_elements())
-    ]
-
-
 class _Binding:
     """A parameter bound to its Drake element, with the base context's values it scales."""
 
     def __init__(self, parameter: PhysicalParameter, plant, plant_context):
-        from pydrake.multibody.tree import LinearBushingRollPitchYaw, RevoluteSpring
+        from pydrake.multibody.tree import LinearBushingRollPitchYaw
 
         self.parameter = parameter
         self.plant = plant
@@ -289,11 +287,7 @@ class _Binding:
             if joint.num_velocities() != 1 or joint.type_name() != "revolute":
                 raise ValueError(f"{label}: joint {element!r} is not a revolute joint")
             self.joint = joint
-            springs = [
-                f for f in _force_elements(plant)
-                if isinstance(f, RevoluteSpring) and f.joint().index() == joint.index()
-            ]  # fmt: skip
-            self.spring = springs[0] if springs else None
+            self.spring = revolute_spring(plant, joint)
             if quantity in ("stiffness", "frequency") and self.spring is None:
                 raise ValueError(f"{label}: joint {element!r} has no spring (RevoluteSpring)")
             self.k0 = self.spring.GetStiffness(plant_context) if self.spring else 0.0
@@ -303,9 +297,8 @@ class _Binding:
             if len(frames) != 2:
                 raise ValueError(f"{label}: a bushing is named 'frameA/frameC', got {element!r}")
             matches = [
-                f for f in _force_elements(plant)
-                if isinstance(f, LinearBushingRollPitchYaw)
-                and (f.frameA().name(), f.frameC().name()) == tuple(frames)
+                f for f in force_elements(plant, LinearBushingRollPitchYaw)
+                if (f.frameA().name(), f.frameC().name()) == tuple(frames)
             ]  # fmt: skip
             if len(matches) != 1:
                 raise ValueError(
@@ -318,16 +311,12 @@ class _Binding:
             self.axes = [{"x": 0, "y": 1, "z": 2}[axis]] if axis else [0, 1, 2]
 
     def _check_inertia(self, plant_context):
-        from pydrake.multibody.tree import SpatialInertia
-
         for value in (self.parameter.lower, self.parameter.upper):
             mass, com, inertia = self._central(plant_context)
             axis = BODY_QUANTITIES.index(self.parameter.quantity) - 1
             inertia[axis, axis] = value
             if (
-                not SpatialInertia.MakeFromCentralInertia(
-                    mass, com, _rotational(inertia)
-                ).IsPhysicallyValid()
+                not spatial_inertia_from_central(mass, com, inertia).IsPhysicallyValid()
                 or np.linalg.eigvalsh(inertia).min() <= 0
             ):
                 raise ValueError(
@@ -337,17 +326,12 @@ class _Binding:
                 )
 
     def _central(self, plant_context):
-        M = self.body.CalcSpatialInertiaInBodyFrame(plant_context)
-        mass, com = M.get_mass(), M.get_com()
-        inertia = M.Shift(com).CalcRotationalInertia().CopyToFullMatrix3()
-        return mass, com, inertia
+        return central_inertia(self.body.CalcSpatialInertiaInBodyFrame(plant_context))
 
     def apply(self, plant_context, value: float) -> None:
         """Write ``value`` (physical) into ``plant_context``."""
         quantity = self.parameter.quantity
         if self.parameter.kind == "body":
-            from pydrake.multibody.tree import SpatialInertia
-
             mass, com, inertia = self._central(plant_context)
             if quantity == "mass":
                 mass = value
@@ -355,8 +339,7 @@ class _Binding:
                 axis = BODY_QUANTITIES.index(quantity) - 1
                 inertia[axis, axis] = value
             self.body.SetSpatialInertiaInBodyFrame(
-                plant_context,
-                SpatialInertia.MakeFromCentralInertia(mass, com, _rotational(inertia)),
+                plant_context, spatial_inertia_from_central(mass, com, inertia)
             )
         elif self.parameter.kind == "joint":
             if quantity == "stiffness":
@@ -377,13 +360,6 @@ class _Binding:
 
 def _camel(kind: str) -> str:
     return "".join(part.capitalize() for part in kind.split("_"))
-
-
-def _rotational(inertia: np.ndarray):
-    from pydrake.multibody.tree import RotationalInertia
-
-    I = inertia
-    return RotationalInertia(I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])
 
 
 _PORT = re.compile(r"^\s*([^\[\]]+?)\s*(?:\[([0-9,:\s]*)\])?\s*$")
