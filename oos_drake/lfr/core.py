@@ -719,6 +719,25 @@ def append_systems(systems: Sequence[LFR]) -> LFR:
     )
 
 
+def quarters(sys: LFR) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(M11, M12, M21, M22)`` of ``sys.M``: internal rows and columns (states and uncertain
+    channels) first, external (outputs, inputs) second."""
+    rows, cols = sys.nstates + sys.nz, sys.nstates + sys.nw
+    M = sys.M
+    return M[..., :rows, :cols], M[..., :rows, cols:], M[..., rows:, :cols], M[..., rows:, cols:]
+
+
+def join_quarters(M11, M12, M21, M22) -> np.ndarray:
+    """``[[M11, M12], [M21, M22]]`` with the batch dimensions broadcast (inverse of
+    :func:`quarters`)."""
+    batch = np.broadcast_shapes(*(m.shape[:-2] for m in (M11, M12, M21, M22)))
+    rows = [
+        np.concatenate([np.broadcast_to(m, batch + m.shape[-2:]) for m in pair], axis=-1)
+        for pair in ((M11, M12), (M21, M22))
+    ]
+    return np.concatenate(rows, axis=-2)
+
+
 def close_static(G: LFR, K, E, F, H, *, input_names=None, output_names=None) -> LFR:
     """Close a static interconnection around the external channels of ``G``.
 
@@ -731,13 +750,7 @@ def close_static(G: LFR, K, E, F, H, *, input_names=None, output_names=None) -> 
     K, E, F, H = (
         np.asarray(x, dtype=float) if np.isrealobj(x) else np.asarray(x) for x in (K, E, F, H)
     )
-    n_int_r = G.nstates + G.nz
-    n_int_c = G.nstates + G.nw
-    M = G.M
-    M11 = M[..., :n_int_r, :n_int_c]
-    M12 = M[..., :n_int_r, n_int_c:]
-    M21 = M[..., n_int_r:, :n_int_c]
-    M22 = M[..., n_int_r:, n_int_c:]
+    M11, M12, M21, M22 = quarters(G)
     p_a, m_a = M22.shape[-2:]
     if K.shape != (m_a, p_a) or E.shape[0] != m_a or F.shape[1] != p_a:
         raise ValueError(
@@ -758,25 +771,8 @@ def close_static(G: LFR, K, E, F, H, *, input_names=None, output_names=None) -> 
         new12 = M12 @ E
         new21 = F @ M21
         new22 = F @ M22 @ E + H
-    batch = np.broadcast_shapes(
-        new11.shape[:-2], new12.shape[:-2], new21.shape[:-2], new22.shape[:-2]
-    )
-    top = np.concatenate(
-        [
-            np.broadcast_to(new11, batch + new11.shape[-2:]),
-            np.broadcast_to(new12, batch + new12.shape[-2:]),
-        ],
-        axis=-1,
-    )
-    bottom = np.concatenate(
-        [
-            np.broadcast_to(new21, batch + new21.shape[-2:]),
-            np.broadcast_to(new22, batch + new22.shape[-2:]),
-        ],
-        axis=-1,
-    )
     return LFR(
-        np.concatenate([top, bottom], axis=-2),
+        join_quarters(new11, new12, new21, new22),
         G.nstates,
         G.block_entries,
         input_names=input_names,
@@ -889,28 +885,14 @@ def inverse(sys: LFR) -> LFR:
     ny, nu = sys.shape
     if ny != nu:
         raise ValueError(f"inv: system must be square, got shape {sys.shape}")
-    n_int_r = sys.nstates + sys.nz
-    n_int_c = sys.nstates + sys.nw
-    M = sys.M
-    M11 = M[..., :n_int_r, :n_int_c]
-    M12 = M[..., :n_int_r, n_int_c:]
-    M21 = M[..., n_int_r:, :n_int_c]
-    M22 = M[..., n_int_r:, n_int_c:]
+    M11, M12, M21, M22 = quarters(sys)
     cond = np.linalg.cond(M22) if ny else np.array(1.0)
     if not np.all(np.isfinite(cond)) or np.any(cond > 1e13):
         raise ValueError(f"inv: feedthrough Dyu is singular (condition number {np.max(cond):.3g})")
     Di = np.linalg.inv(M22)
     Di_M21 = Di @ M21
-    top = np.concatenate([M11 - M12 @ Di_M21, M12 @ Di], axis=-1)
-    bottom = np.concatenate(
-        [
-            np.broadcast_to(-Di_M21, top.shape[:-2] + Di_M21.shape[-2:]),
-            np.broadcast_to(Di, top.shape[:-2] + Di.shape[-2:]),
-        ],
-        axis=-1,
-    )
     return LFR(
-        np.concatenate([top, bottom], axis=-2),
+        join_quarters(M11 - M12 @ Di_M21, M12 @ Di, -Di_M21, Di),
         sys.nstates,
         sys.block_entries,
         input_names=sys.output_names,

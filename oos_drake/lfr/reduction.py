@@ -20,7 +20,7 @@ import dataclasses
 
 import numpy as np
 
-from oos_drake.lfr.core import LFR, BlockEntry
+from oos_drake.lfr.core import LFR, BlockEntry, join_quarters, quarters
 
 
 def _groups(sys: LFR):
@@ -111,21 +111,9 @@ def _project(sys: LFR, bases) -> LFR:
         T_right[cols, c0 : c0 + br.shape[1]] = br
         r0 += bl.shape[1]
         c0 += br.shape[1]
-    M11 = M[..., :n_int_r, :n_int_c]
-    M12 = M[..., :n_int_r, n_int_c:]
-    M21 = M[..., n_int_r:, :n_int_c]
-    M22 = M[..., n_int_r:, n_int_c:]
+    M11, M12, M21, M22 = quarters(sys)
     TlH = T_left.conj().T
-    top = np.concatenate([TlH @ M11 @ T_right, TlH @ M12], axis=-1)
-    bottom = np.concatenate([M21 @ T_right, M22], axis=-1)
-    batch = np.broadcast_shapes(top.shape[:-2], bottom.shape[:-2])
-    new_M = np.concatenate(
-        [
-            np.broadcast_to(top, batch + top.shape[-2:]),
-            np.broadcast_to(bottom, batch + bottom.shape[-2:]),
-        ],
-        axis=-2,
-    )
+    new_M = join_quarters(TlH @ M11 @ T_right, TlH @ M12, M21 @ T_right, M22)
     n_new = bases[0].shape[1]
     entries = []
     for (_, _, reducible, entry), basis in zip(groups[1:], bases[1:], strict=True):
