@@ -278,6 +278,37 @@ def _docking_switches(delta_c1: LFR, delta_c2: LFR, dcm_rh2_l6, dcm_rh2_rh1) -> 
     return spread_1 @ repeat(delta_c1, 12) @ select_1 + spread_2 @ repeat(delta_c2, 12) @ select_2
 
 
+def _chaser_components(scenario, with_d1: bool) -> list[Component]:
+    """RH1 (inverse model, external wrench at G1; ports at its arrays' mounts, J0 and, with
+    ``with_d1``, D1), its arrays and the arm."""
+    mounts = scenario.arrays
+    on_rh1 = [m for m in ARRAY_NAMES if mounts[m].parent == "RH1"]
+    rh1_ports = [mounts[m].p_G_P for m in on_rh1] + [scenario.arm.p_G_J0]
+    rh1_in = ["W_ext_G1"] + [f"W_P{m[-1]}_RH1" for m in on_rh1] + ["W_J0_RH1"]
+    rh1_out = ["xdd_G1_RH1"] + [f"xdd_P{m[-1]}_RH1" for m in on_rh1] + ["xdd_J0_RH1"]
+    if with_d1:
+        rh1_ports.append(scenario.ports["D1"].p_G_D)
+        rh1_in.append("W_D1_RH1")
+        rh1_out.append("xdd_D1_RH1")
+    mass1, inertia1 = _hub_parameters(scenario.hubs["RH1"])
+    components = [
+        Component(
+            "RH1", rigid_body_inverse(mass1, inertia1, rh1_ports, body="RH1"), rh1_in, rh1_out
+        )
+    ]
+    components += [_array_component(mounts[m], "RH1") for m in on_rh1]
+    return components + _arm_components(scenario.arm)
+
+
+def _assemble_at_G1(components: list[Component]) -> LFR:
+    """The assembly from the external wrench at G1 to the acceleration twist of G1, named
+    ``Fx_G1 .. Tz_G1`` -> ``ax_G1 .. wdot_z_G1``."""
+    model = assemble(components, inputs=["W_ext_G1"], outputs=["xdd_G1_RH1"])
+    names = ["Fx", "Fy", "Fz", "Tx", "Ty", "Tz"]
+    outs = ["ax", "ay", "az", "wdot_x", "wdot_y", "wdot_z"]
+    return model.with_names(inputs=[f"{n}_G1" for n in names], outputs=[f"{n}_G1" for n in outs])
+
+
 def build_mission_model(scenario=None) -> LFR:
     """Full mission LFR: external wrench at G1 (6) -> acceleration twist of RH1 at G1 (6).
 
@@ -310,27 +341,11 @@ def build_mission_model(scenario=None) -> LFR:
 
 @functools.lru_cache(maxsize=4)
 def _mission_model(scenario) -> LFR:
-    rh1, rh2 = scenario.hubs["RH1"], scenario.hubs["RH2"]
+    rh2 = scenario.hubs["RH2"]
     mounts = scenario.arrays
     ports = scenario.ports
-    on_rh1 = [m for m in ARRAY_NAMES if mounts[m].parent == "RH1"]
     on_rh2 = [m for m in ARRAY_NAMES if mounts[m].parent == "RH2"]
-    rh1_ports = [mounts[m].p_G_P for m in on_rh1] + [scenario.arm.p_G_J0, ports["D1"].p_G_D]
-    mass1, inertia1 = _hub_parameters(rh1)
-    components = [
-        Component(
-            "RH1",
-            rigid_body_inverse(mass1, inertia1, rh1_ports, body="RH1"),
-            inputs=("W_ext_G1",)
-            + tuple(f"W_P{m[-1]}_RH1" for m in on_rh1)
-            + ("W_J0_RH1", "W_D1_RH1"),
-            outputs=("xdd_G1_RH1",)
-            + tuple(f"xdd_P{m[-1]}_RH1" for m in on_rh1)
-            + ("xdd_J0_RH1", "xdd_D1_RH1"),
-        )
-    ]
-    components += [_array_component(mounts[m], "RH1") for m in on_rh1]
-    components += _arm_components(scenario.arm)
+    components = _chaser_components(scenario, with_d1=True)
     delta_c1 = connection_parameter("delta_C1")
     delta_c2 = connection_parameter("delta_C2")
     mass2, inertia2 = _hub_parameters(rh2)
@@ -358,10 +373,7 @@ def _mission_model(scenario) -> LFR:
             outputs=("xdd_D_RH2", "W_J7_L6", "W_D1_RH1"),
         )
     )
-    model = assemble(components, inputs=["W_ext_G1"], outputs=["xdd_G1_RH1"])
-    names = ["Fx", "Fy", "Fz", "Tx", "Ty", "Tz"]
-    outs = ["ax", "ay", "az", "wdot_x", "wdot_y", "wdot_z"]
-    return model.with_names(inputs=[f"{n}_G1" for n in names], outputs=[f"{n}_G1" for n in outs])
+    return _assemble_at_G1(components)
 
 
 def build_docking_model(phase: str, scenario=None, *, spring_dampers=None) -> LFR:
@@ -410,27 +422,12 @@ def _docking_model(phase: str, scenario, spring_dampers) -> LFR:
         else:
             blocks = dict(given)
         params[sm] = blocks
-    rh1, rh2 = scenario.hubs["RH1"], scenario.hubs["RH2"]
+    rh2 = scenario.hubs["RH2"]
     mounts = scenario.arrays
     ports = scenario.ports
-    on_rh1 = [m for m in ARRAY_NAMES if mounts[m].parent == "RH1"]
     on_rh2 = [m for m in ARRAY_NAMES if mounts[m].parent == "RH2"]
     with_d1 = "SM2" in active
-    rh1_ports = [mounts[m].p_G_P for m in on_rh1] + [scenario.arm.p_G_J0]
-    rh1_in = ["W_ext_G1"] + [f"W_P{m[-1]}_RH1" for m in on_rh1] + ["W_J0_RH1"]
-    rh1_out = ["xdd_G1_RH1"] + [f"xdd_P{m[-1]}_RH1" for m in on_rh1] + ["xdd_J0_RH1"]
-    if with_d1:
-        rh1_ports.append(ports["D1"].p_G_D)
-        rh1_in.append("W_D1_RH1")
-        rh1_out.append("xdd_D1_RH1")
-    mass1, inertia1 = _hub_parameters(rh1)
-    components = [
-        Component(
-            "RH1", rigid_body_inverse(mass1, inertia1, rh1_ports, body="RH1"), rh1_in, rh1_out
-        )
-    ]
-    components += [_array_component(mounts[m], "RH1") for m in on_rh1]
-    components += _arm_components(scenario.arm)
+    components = _chaser_components(scenario, with_d1)
     rh2_ports = [ports["D2"].p_G_D] + [mounts[m].p_G_P for m in on_rh2]
     rh2_in = ["W_D2_RH2"] + [f"W_P{m[-1]}_RH2" for m in on_rh2]
     rh2_out = ["xdd_D2_RH2"] + [f"xdd_P{m[-1]}_RH2" for m in on_rh2]
@@ -462,10 +459,7 @@ def _docking_model(phase: str, scenario, spring_dampers) -> LFR:
                 outputs=("W_D3_RH2", "W_D1_RH1"),
             )
         )
-    model = assemble(components, inputs=["W_ext_G1"], outputs=["xdd_G1_RH1"])
-    names = ["Fx", "Fy", "Fz", "Tx", "Ty", "Tz"]
-    outs = ["ax", "ay", "az", "wdot_x", "wdot_y", "wdot_z"]
-    return model.with_names(inputs=[f"{n}_G1" for n in names], outputs=[f"{n}_G1" for n in outs])
+    return _assemble_at_G1(components)
 
 
 def _spring_damper_between(blocks: Mapping, dcm_c_sm) -> LFR:
