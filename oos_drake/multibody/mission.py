@@ -44,7 +44,6 @@ from types import MappingProxyType
 
 import numpy as np
 from pydrake.math import RigidTransform
-from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import (
     LinearBushingRollPitchYaw,
@@ -64,17 +63,16 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from oos_drake.control.baseline import baseline_gains
 from oos_drake.control.components import DesignSpecification
+from oos_drake.multibody.appendage_sdf import MODE_JOINT
 from oos_drake.multibody.flight_software import FlightSoftware, FlightSoftwareDesign
-from oos_drake.multibody.plant_parts import add_floating_joint, add_modal_residual, force_elements
-from oos_drake.multibody.scenario_sdf import (
-    ARM_MODEL,
-    ASSEMBLY_FILE,
-    ASSEMBLY_MODEL,
-    SDF_DIRECTORY,
-    SDF_PACKAGE,
-    arm_joint_name,
-    drive_joint_name,
+from oos_drake.multibody.plant_parts import add_floating_joint, force_elements
+from oos_drake.multibody.scenario_plant import (
+    ARRAYS,
+    add_docking_bushings,
+    add_scenario_plant,
+    prescribed_joints,
 )
+from oos_drake.multibody.scenario_sdf import SDF_DIRECTORY
 from oos_drake.scenario.data import Scenario, load_scenario
 from oos_drake.scenario.kinematics import rigid_spatial_inertia_at_G1
 from oos_drake.scenario.timeline import MissionTimeline, QuinticTrajectory, mission_timeline
@@ -90,11 +88,8 @@ __all__ = [
     "quintic_piecewise_polynomial",
 ]
 
-ARRAYS = ("SA1", "SA2", "SA3", "SA4")
 #: Drake integrators (``ResetIntegratorFromFlags`` names) that are stable on the stiff mission.
 IMPLICIT_INTEGRATORS = frozenset({"radau1", "radau3", "implicit_euler", "velocity_implicit_euler"})
-#: Modes per array in the SDF (mode_1_hinge .. mode_6_hinge).
-MODE_JOINT = "mode_{}_hinge"
 
 
 @dataclass(frozen=True)
@@ -346,44 +341,16 @@ def controller_gain(path: str | Path | None, scenario: Scenario | None = None) -
 
 
 def _add_plant(builder: DiagramBuilder, sdf_directory: Path):
-    plant = builder.AddNamedSystem("plant", MultibodyPlant(time_step=0.0))
-    plant.mutable_gravity_field().set_gravity_vector(np.zeros(3))
-    parser = Parser(plant)
-    parser.package_map().Add(SDF_PACKAGE, str(sdf_directory))
-    parser.AddModels(str(sdf_directory / ASSEMBLY_FILE))
-
-    def instance(name: str):
-        return plant.GetModelInstanceByName(f"{ASSEMBLY_MODEL}::{name}")
-
-    for array in ARRAYS:
-        add_modal_residual(plant, instance(array))
-    chaser = plant.GetBodyByName("RH1", instance("RH1"))
-    target = plant.GetBodyByName("RH2", instance("RH2"))
-    frames = {
-        "G1": chaser.body_frame(),
-        "G2": target.body_frame(),
-        "D1": plant.GetFrameByName("D1", instance("RH1")),
-        "D2": plant.GetFrameByName("D2", instance("RH2")),
-        "D3": plant.GetFrameByName("D3", instance("RH2")),
-        "J7": plant.GetFrameByName("J7", instance(ARM_MODEL)),
-    }
-    hub_joint = add_floating_joint(plant, chaser, RigidTransform(), name="RH1_floating")
+    plant, instance, frames, hub_joint = add_scenario_plant(builder, sdf_directory)
+    target = frames["G2"].body()
     target_joint = add_floating_joint(plant, target, RigidTransform(), name="RH2_floating")
-    zeros = [0.0] * 3
-    bushings = {
-        name: plant.AddForceElement(
-            LinearBushingRollPitchYaw(frames[a], frames[c], zeros, zeros, zeros, zeros)
-        )
-        for name, (a, c) in {"SM1": ("J7", "D2"), "SM2": ("D1", "D3")}.items()
-    }
+    bushings = add_docking_bushings(plant, frames)
     # no gravity in orbit: the gravity vector is zero, and disabling the element per model
     # instance also skips computing its (zero) generalized forces at every derivative evaluation
     for index in range(plant.num_model_instances()):
         plant.set_gravity_enabled(ModelInstanceIndex(index), False)
     plant.Finalize()
-    arm = instance(ARM_MODEL)
-    arm_joints = tuple(plant.GetJointByName(arm_joint_name(i), arm) for i in range(1, 7))
-    drive_joints = tuple(plant.GetJointByName(drive_joint_name(a), instance(a)) for a in ARRAYS)
+    arm_joints, drive_joints = prescribed_joints(plant, instance)
     mode_joints, mode_springs = {}, {}
     by_joint = {s.joint().index(): s for s in force_elements(plant, RevoluteSpring)}
     for array in ARRAYS:

@@ -63,9 +63,12 @@ from oos_drake.multibody.sdf_validation import validate_sdf_tree
 __all__ = [
     "CONNECTIONS",
     "ScenarioDiagram",
+    "add_docking_bushings",
+    "add_scenario_plant",
     "build_scenario_diagram",
     "cached_scenario_diagram",
     "connection_for",
+    "prescribed_joints",
     "set_spring_damper",
 ]
 
@@ -155,6 +158,70 @@ def connection_for(delta_C1: float, delta_C2: float, spring_dampers: tuple[str, 
     return "arm" if c1 else ("hub" if c2 else "free")
 
 
+def add_scenario_plant(builder: DiagramBuilder, sdf_directory: str | Path):
+    """Parse the scenario's SDF assembly into a continuous plant in ``builder`` (not finalized).
+
+    The plant (system ``plant``, zero gravity vector) gets the arrays' modal residuals and the
+    chaser's floating joint ``RH1_floating`` (zero = world frame), in that order.
+
+    Returns
+    -------
+    plant : MultibodyPlant
+        The plant.
+    instance : callable
+        Model instance of an assembly part by name (``"RH1"``, ``"SA3"``, ``ARM_MODEL``).
+    frames : dict of str to Frame
+        Hub frames ``G1``, ``G2`` and port frames ``D1``, ``D2``, ``D3``, ``J7``.
+    hub_joint : RpyFloatingJoint
+        The chaser's floating joint.
+    """
+    plant = builder.AddNamedSystem("plant", MultibodyPlant(time_step=0.0))
+    plant.mutable_gravity_field().set_gravity_vector(np.zeros(3))
+    parser = Parser(plant)
+    parser.package_map().Add(SDF_PACKAGE, str(sdf_directory))
+    parser.AddModels(str(Path(sdf_directory) / ASSEMBLY_FILE))
+
+    def instance(name: str):
+        return plant.GetModelInstanceByName(f"{ASSEMBLY_MODEL}::{name}")
+
+    for array in ARRAYS:
+        add_modal_residual(plant, instance(array))
+    chaser = plant.GetBodyByName(CHASER, instance(CHASER))
+    target = plant.GetBodyByName(TARGET, instance(TARGET))
+    frames = {
+        "G1": chaser.body_frame(),
+        "G2": target.body_frame(),
+        "D1": plant.GetFrameByName("D1", instance(CHASER)),
+        "D2": plant.GetFrameByName("D2", instance(TARGET)),
+        "D3": plant.GetFrameByName("D3", instance(TARGET)),
+        "J7": plant.GetFrameByName("J7", instance(ARM_MODEL)),
+    }
+    hub_joint = add_floating_joint(plant, chaser, RigidTransform(), name="RH1_floating")
+    return plant, instance, frames, hub_joint
+
+
+def add_docking_bushings(
+    plant: MultibodyPlant, frames: Mapping, stiffness: float = 0.0, damping: float = 0.0
+) -> dict[str, LinearBushingRollPitchYaw]:
+    """The docking spring-dampers ``SM1`` (J7 - D2) and ``SM2`` (D1 - D3) as bushings with
+    ``stiffness`` [N/m = N m/rad] and ``damping`` [N s/m = N m s/rad] on every axis."""
+    k, d = [stiffness] * 3, [damping] * 3
+    return {
+        name: plant.AddForceElement(LinearBushingRollPitchYaw(frames[a], frames[c], k, d, k, d))
+        for name, (a, c) in {"SM1": ("J7", "D2"), "SM2": ("D1", "D3")}.items()
+    }
+
+
+def prescribed_joints(plant: MultibodyPlant, instance) -> tuple[tuple, tuple]:
+    """``(arm joints alpha_1..6, array drive joints theta_SA1..4)`` of a finalized
+    :func:`add_scenario_plant` plant."""
+    arm = instance(ARM_MODEL)
+    return (
+        tuple(plant.GetJointByName(arm_joint_name(i), arm) for i in range(1, 7)),
+        tuple(plant.GetJointByName(drive_joint_name(a), instance(a)) for a in ARRAYS),
+    )
+
+
 def build_scenario_diagram(
     connection: str = "spring_damper",
     *,
@@ -186,28 +253,8 @@ def build_scenario_diagram(
     validate_sdf_tree(assembly, required_frames=REQUIRED_FRAMES)
 
     builder = DiagramBuilder()
-    plant = builder.AddNamedSystem("plant", MultibodyPlant(time_step=0.0))
-    plant.mutable_gravity_field().set_gravity_vector(np.zeros(3))
-    parser = Parser(plant)
-    parser.package_map().Add(SDF_PACKAGE, str(sdf_directory))
-    parser.AddModels(str(assembly))
-
-    def instance(name: str):
-        return plant.GetModelInstanceByName(f"{ASSEMBLY_MODEL}::{name}")
-
-    for array in ARRAYS:
-        add_modal_residual(plant, instance(array))
-    chaser = plant.GetBodyByName(CHASER, instance(CHASER))
-    target = plant.GetBodyByName(TARGET, instance(TARGET))
-    frames = {
-        "G1": chaser.body_frame(),
-        "G2": target.body_frame(),
-        "D1": plant.GetFrameByName("D1", instance(CHASER)),
-        "D2": plant.GetFrameByName("D2", instance(TARGET)),
-        "D3": plant.GetFrameByName("D3", instance(TARGET)),
-        "J7": plant.GetFrameByName("J7", instance(ARM_MODEL)),
-    }
-    hub_joint = add_floating_joint(plant, chaser, RigidTransform(), name="RH1_floating")
+    plant, instance, frames, hub_joint = add_scenario_plant(builder, sdf_directory)
+    target = frames["G2"].body()
     target_joint = target_frame = None
     bushings = {}
     if connection == "arm":
@@ -218,22 +265,16 @@ def build_scenario_diagram(
         # relative to the chaser: forces then do not depend on the chaser's pose, so the global
         # rigid-body motion is exactly the chaser's own (q, v) and drops out structurally
         target_joint = add_floating_joint(
-            plant, target, RigidTransform(), name="RH2_floating", parent=chaser.body_frame()
+            plant, target, RigidTransform(), name="RH2_floating", parent=frames["G1"]
         )
         target_frame = target_joint.frame_on_parent()
     if connection == "spring_damper":
-        k, d = (float(v) for v in spring_damper)
-        for name, (frame_a, frame_c) in {"SM1": ("J7", "D2"), "SM2": ("D1", "D3")}.items():
-            bushings[name] = plant.AddForceElement(
-                LinearBushingRollPitchYaw(
-                    frames[frame_a], frames[frame_c], [k] * 3, [d] * 3, [k] * 3, [d] * 3
-                )
-            )
+        bushings = add_docking_bushings(plant, frames, *(float(v) for v in spring_damper))
     plant.Finalize()
     ports = add_hub_io(builder, plant, hub_joint)
     diagram = builder.Build()
     diagram.set_name(f"oos_scenario_{connection}")
-    arm = instance(ARM_MODEL)
+    arm_joints, drive_joints = prescribed_joints(plant, instance)
     return ScenarioDiagram(
         diagram=diagram,
         plant=plant,
@@ -242,8 +283,8 @@ def build_scenario_diagram(
         hub_joint=hub_joint,
         target_joint=target_joint,
         target_operating_frame=target_frame,
-        arm_joints=tuple(plant.GetJointByName(arm_joint_name(i), arm) for i in range(1, 7)),
-        drive_joints=tuple(plant.GetJointByName(drive_joint_name(a), instance(a)) for a in ARRAYS),
+        arm_joints=arm_joints,
+        drive_joints=drive_joints,
         bushings=MappingProxyType(bushings),
         frames=MappingProxyType(frames),
     )
