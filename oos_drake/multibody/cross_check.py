@@ -30,6 +30,7 @@ from oos_drake.multibody.operating_point import (
     operating_point,
 )
 from oos_drake.robust.lfr_analysis import frequency_grid
+from oos_drake.titop.parameters import spring_damper_values
 
 __all__ = [
     "CaseResult",
@@ -188,10 +189,6 @@ class ValidationCase:
     values: Mapping[str, float]
 
 
-def _spring_values(name: str, k: float, d: float) -> dict[str, float]:
-    return {f"k_shear_{name}": k, f"k_tors_{name}": k, f"d_shear_{name}": d, f"d_tors_{name}": d}
-
-
 def validation_cases(
     scenario=None, stiffness: Iterable[float] | None = None
 ) -> list[ValidationCase]:
@@ -244,7 +241,7 @@ def validation_cases(
         for label, springs in runs:
             values = dict(base)
             for sm, (k, dd) in springs.items():
-                values.update(_spring_values(sm, float(k), float(dd)))
+                values.update(spring_damper_values(sm, float(k), float(dd)))
             cases.append(
                 ValidationCase(label, operating_point(c, springs, label=label), phase, values)
             )

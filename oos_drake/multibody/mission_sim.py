@@ -53,6 +53,7 @@ from oos_drake.lfr.blocks import RANGE_RTOL
 from oos_drake.multibody.flight_software import NOISE_CHANNELS
 from oos_drake.multibody.mission import ARRAYS, MissionDiagram, MissionOptions, make_mission_diagram
 from oos_drake.multibody.plant_parts import spatial_inertia_from_central
+from oos_drake.multibody.scenario_plant import set_bushing
 from oos_drake.scenario.model import physical_blocks
 
 __all__ = [
@@ -445,12 +446,8 @@ class MissionSimulation:
 
     def _set_bushings(self, context, settings) -> None:
         pc = self.handles.plant.GetMyMutableContextFromRoot(context)
-        for name, (ks, kt, ds, dt) in settings.items():
-            bushing = self.handles.bushings[name]
-            bushing.SetForceStiffnessConstants(pc, [ks] * 3)
-            bushing.SetTorqueStiffnessConstants(pc, [kt] * 3)
-            bushing.SetForceDampingConstants(pc, [ds] * 3)
-            bushing.SetTorqueDampingConstants(pc, [dt] * 3)
+        for name, setting in settings.items():
+            set_bushing(self.handles.bushings[name], pc, setting)
 
     def _place_target(self, context, on: str) -> None:
         """Put the target so that D2 = J7 (``on="arm"``) or D3 = D1 (``on="hub"``), moving with

@@ -69,6 +69,7 @@ __all__ = [
     "cached_scenario_diagram",
     "connection_for",
     "prescribed_joints",
+    "set_bushing",
     "set_spring_damper",
 ]
 
@@ -330,8 +331,14 @@ def set_spring_damper(
     for label, value in (("stiffness", (k_shear, k_tors)), ("damping", (d_shear, d_tors))):
         if not np.all(np.isfinite(value)) or min(value) < 0:
             raise ValueError(f"{name}: {label} must be finite and >= 0, got {value}")
-    bushing = handles.bushings[name]
     plant_context = handles.plant.GetMyMutableContextFromRoot(context)
+    set_bushing(handles.bushings[name], plant_context, (k_shear, k_tors, d_shear, d_tors))
+
+
+def set_bushing(bushing: LinearBushingRollPitchYaw, plant_context, setting) -> None:
+    """Write ``setting = (k_shear, k_tors, d_shear, d_tors)`` [N/m, N m/rad, N s/m, N m s/rad]
+    on every axis of ``bushing`` in a plant context (not checked: see :func:`set_spring_damper`)."""
+    k_shear, k_tors, d_shear, d_tors = setting
     bushing.SetForceStiffnessConstants(plant_context, [k_shear] * 3)
     bushing.SetTorqueStiffnessConstants(plant_context, [k_tors] * 3)
     bushing.SetForceDampingConstants(plant_context, [d_shear] * 3)

@@ -224,16 +224,7 @@ class DrakePlantSource:
             raise ValueError(f"DrakePlantSource: times must be finite and non-empty, got {times}")
         timeline = mission_timeline(self.scenario)
         batch = timeline.configuration(self.times)
-        self.configurations = [
-            type(batch)(
-                time=batch.time[i],
-                alpha=batch.alpha[i],
-                theta=batch.theta[i],
-                delta_C1=batch.delta_C1[i],
-                delta_C2=batch.delta_C2[i],
-            )
-            for i in range(self.times.size)
-        ]
+        self.configurations = [batch[i] for i in range(self.times.size)]
         self.parameters = uncertain_parameters(self.scenario)
         self.declared = mission_parameters(self.scenario)
         self._lfrs: dict[int, LFR] = {}

@@ -439,10 +439,9 @@ class _Problem:
     def nominal(self) -> np.ndarray:
         return np.array([b.parameter.nominal for b in self.bindings])
 
-    def linearize(self, values) -> dict:
-        """Drake's Taylor linearization and mass matrix at physical ``values`` (one per binding)."""
-        from pydrake.systems.primitives import FirstOrderTaylorApproximation
-
+    def context_at(self, values):
+        """A clone of the context (and its plant context) with the parameters at physical
+        ``values`` (one per binding) and every unset input port at zero."""
         context = self.context.Clone()
         plant_context = self.plant.GetMyMutableContextFromRoot(context)
         for binding, value in zip(self.bindings, values, strict=True):
@@ -450,6 +449,13 @@ class _Problem:
         for port, _, _ in self.inputs:
             if not port.HasValue(context):
                 port.FixValue(context, np.zeros(port.size()))
+        return context, plant_context
+
+    def linearize(self, values) -> dict:
+        """Drake's Taylor linearization and mass matrix at physical ``values`` (one per binding)."""
+        from pydrake.systems.primitives import FirstOrderTaylorApproximation
+
+        context, plant_context = self.context_at(values)
         B, C, D = [], [], []
         A = None
         for k, (out_port, out_rows, _) in enumerate(self.outputs):
@@ -490,14 +496,8 @@ class _Problem:
         from pydrake.multibody.math import SpatialForce
         from pydrake.multibody.plant import ExternallyAppliedSpatialForce
 
-        context = self.context.Clone()
-        for port, _, _ in self.inputs:
-            if not port.HasValue(context):
-                port.FixValue(context, np.zeros(port.size()))
+        context, plant_context = self.context_at(self.nominal)
         plant = self.plant
-        plant_context = plant.GetMyMutableContextFromRoot(context)
-        for binding, value in zip(self.bindings, self.nominal, strict=True):
-            binding.apply(plant_context, float(value))
         force_port = plant.get_applied_spatial_force_input_port()
         acceleration = plant.get_generalized_acceleration_output_port()
 
@@ -937,63 +937,6 @@ class ExtractionOptions:
     Attributes
     ----------
     rtol : float
-        Rank tolerance of the coefficient factorizations [-].
-    check_points : int
-        Random parameter points where the LFR is checked against Drake's linearization.
-    check_tolerance : float
-        Largest relative error of ``[A B; C D]`` allowed there [-].
-    prune : bool
-        Remove structurally unreachable or unobservable states.
-    unused : str
-        ``"error"`` or ``"drop"``: what a parameter that does not change the model does.
-    scale_modal_states : bool
-        Scaled modal angles (``omega`` enters affinely).
-    """
-
-    rtol: float = 1e-6
-    check_points: int = 4
-    check_tolerance: float = 1e-6
-    prune: bool = True
-    unused: str = "error"
-    scale_modal_states: bool = True
-
-    def __post_init__(self):
-        if self.unused not in ("error", "drop"):
-            raise ValueError(f"ulinearize: unused must be 'error' or 'drop', got {self.unused!r}")
-
-
-def ulinearize(
-    system,
-    context,
-    parameters: Sequence[PhysicalParameter],
-    inputs: str | Sequence[str],
-    outputs: str | Sequence[str],
-    *,
-    rtol: float = 1e-6,
-    check_points: int = 4,
-    check_tolerance: float = 1e-6,
-    prune: bool = True,
-    unused: str = "error",
-    scale_modal_states: bool = True,
-    rng: np.random.Generator | None = None,
-) -> LFR:
-    r"""Linearize a Drake system into an uncertain LFR with named physical parameters.
-
-    Parameters
-    ----------
-    system : MultibodyPlant or Diagram
-        Continuous system holding exactly one finalized ``MultibodyPlant``.
-    context : Context
-        Root context at the operating point: an equilibrium (generalized accelerations zero
-        with zero inputs); locked joints are motion-driven (their states are dropped as
-        unreachable). Not modified.
-    parameters : sequence of PhysicalParameter
-        Declared uncertain parameters (see :class:`PhysicalParameter`); the context's own
-        values are replaced by the declared nominal values at the nominal point.
-    inputs, outputs : str or sequence of str
-        Port names of ``system``, optionally with a row selection ``"y_G1[0:6]"`` or
-        ``"state[2,9]"``. Input ports not listed keep their context values (fixed).
-    rtol : float
         Rank tolerance of the coefficient factorizations, relative to what each column of the
         implicit relation reaches over the ranges. Round-off of ``E A`` grows with the
         conditioning of the mass matrix and the stiffness: up to 4e-7 for the mission twin with
@@ -1017,8 +960,51 @@ def ulinearize(
         form, where the mu upper bound's optimizer converges; :class:`_ModalStates`), where
         that is exact (the angle read only by its spring); False: Drake's ``q`` (``omega``
         enters as ``omega^2``, two cascaded channels). Same repetitions and input-output map.
+    """
+
+    rtol: float = 1e-6
+    check_points: int = 4
+    check_tolerance: float = 1e-6
+    prune: bool = True
+    unused: str = "error"
+    scale_modal_states: bool = True
+
+    def __post_init__(self):
+        if self.unused not in ("error", "drop"):
+            raise ValueError(f"ulinearize: unused must be 'error' or 'drop', got {self.unused!r}")
+
+
+def ulinearize(
+    system,
+    context,
+    parameters: Sequence[PhysicalParameter],
+    inputs: str | Sequence[str],
+    outputs: str | Sequence[str],
+    *,
+    rng: np.random.Generator | None = None,
+    **options,
+) -> LFR:
+    r"""Linearize a Drake system into an uncertain LFR with named physical parameters.
+
+    Parameters
+    ----------
+    system : MultibodyPlant or Diagram
+        Continuous system holding exactly one finalized ``MultibodyPlant``.
+    context : Context
+        Root context at the operating point: an equilibrium (generalized accelerations zero
+        with zero inputs); locked joints are motion-driven (their states are dropped as
+        unreachable). Not modified.
+    parameters : sequence of PhysicalParameter
+        Declared uncertain parameters (see :class:`PhysicalParameter`); the context's own
+        values are replaced by the declared nominal values at the nominal point.
+    inputs, outputs : str or sequence of str
+        Port names of ``system``, optionally with a row selection ``"y_G1[0:6]"`` or
+        ``"state[2,9]"``. Input ports not listed keep their context values (fixed).
     rng : numpy.random.Generator, optional
         For the check points (default: ``numpy.random.default_rng(0)``).
+    **options
+        The fields of :class:`ExtractionOptions` (``rtol``, ``check_points``,
+        ``check_tolerance``, ``prune``, ``unused``, ``scale_modal_states``), as keywords.
 
     Returns
     -------
@@ -1043,14 +1029,7 @@ def ulinearize(
     >>> G.occurrences["w_panel"]                                   # k ~ w^2, d ~ w: w I2
     2
     """
-    options = ExtractionOptions(
-        rtol=rtol,
-        check_points=check_points,
-        check_tolerance=check_tolerance,
-        prune=prune,
-        unused=unused,
-        scale_modal_states=scale_modal_states,
-    )
+    options = ExtractionOptions(**options)
     problem = _problem(system, context, parameters, inputs, outputs)
     return _extract(problem, options, rng)
 

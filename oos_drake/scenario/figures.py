@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from oos_drake.lfr import usample, usubs
+from oos_drake.titop.parameters import spring_damper_values
 
 __all__ = [
     "FigureFiles",
@@ -112,15 +113,6 @@ def sigma_moments_data(model, timeline, frequencies_hz, n_samples: int = 20, rng
     return pd.concat(rows, ignore_index=True)
 
 
-def _spring_values(sm: str, stiffness, damping) -> dict:
-    return {
-        f"k_shear_{sm}": stiffness,
-        f"k_tors_{sm}": stiffness,
-        f"d_shear_{sm}": damping,
-        f"d_tors_{sm}": damping,
-    }
-
-
 def docking_sweeps_data(timeline, frequencies_hz, stiffness=None):
     """Gain of ``T_ext{2} -> wdot{2}`` during docking (paper Fig. sigma_plot_springmass).
 
@@ -150,10 +142,11 @@ def docking_sweeps_data(timeline, frequencies_hz, stiffness=None):
     omega = 2 * np.pi * np.asarray(frequencies_hz, dtype=float)
     n = stiffness.size
     rows = []
+    rigid = (docking.rigid_stiffness, docking.rigid_damping)
     panels = (
         ("a", "7", "SM1", {}),
-        ("b", "8", "SM2", _spring_values("SM1", docking.rigid_stiffness, docking.rigid_damping)),
-        ("c", "8", "SM1", _spring_values("SM2", docking.rigid_stiffness, docking.rigid_damping)),
+        ("b", "8", "SM2", spring_damper_values("SM1", *rigid)),
+        ("c", "8", "SM1", spring_damper_values("SM2", *rigid)),
     )
     models = {}
     for panel, phase, swept, fixed_springs in panels:
@@ -167,7 +160,7 @@ def docking_sweeps_data(timeline, frequencies_hz, stiffness=None):
             if k in model.occurrences
         }
         values.update({k: np.full(n, float(v)) for k, v in fixed_springs.items()})
-        values.update(_spring_values(swept, stiffness, np.full(n, docking.damping)))
+        values.update(spring_damper_values(swept, stiffness, np.full(n, docking.damping)))
         response = usubs(model, values).nominal.freqresp(omega)[..., TORQUE_Y, TORQUE_Y]
         for k in range(n):
             rows.append(

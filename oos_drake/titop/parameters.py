@@ -38,6 +38,7 @@ __all__ = [
     "inertia_names",
     "mode_frequency_name",
     "check_name",
+    "spring_damper_values",
 ]
 
 _NAME_PATTERN = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
@@ -109,3 +110,15 @@ def inertia_names(body: str) -> tuple[str, str, str]:
 def mode_frequency_name(appendage: str, mode: int = 1) -> str:
     """Block name of an appendage mode frequency: ``w<mode>_<appendage>``."""
     return f"w{mode}_{appendage}"
+
+
+def spring_damper_values(name: str, stiffness, damping) -> dict:
+    """Values of the four blocks of spring-damper ``name`` (``k_shear_<name>``, ``k_tors_<name>``,
+    ``d_shear_<name>``, ``d_tors_<name>``) with one ``stiffness`` [N/m = N m/rad] and one
+    ``damping`` [N s/m = N m s/rad] for shear and torsion."""
+    return {
+        f"k_shear_{name}": stiffness,
+        f"k_tors_{name}": stiffness,
+        f"d_shear_{name}": damping,
+        f"d_tors_{name}": damping,
+    }
