@@ -110,6 +110,10 @@ class DiscreteBlock:
         """Number of states."""
         return int(self.A.shape[0])
 
+    def step(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(x+, y) = (A x + B u, C x + D u)``."""
+        return self.A @ x + self.B @ u, self.C @ x + self.D @ u
+
 
 def discretize(A, B, C, D, period: float) -> DiscreteBlock:
     """Bilinear (Tustin) discretization of a continuous block at ``period`` [s]."""
@@ -599,15 +603,13 @@ class FlightSoftware(LeafSystem):
         rpy, w_B, n_sst, n_gyro = z1[0:3], z1[3:6], z1[6:9], z1[9:12]
         out = np.empty_like(x1)
         sst, gyro, ro = d.star_tracker, d.gyro, d.rolloff
-        out[s[0]] = sst.A @ x1[s[0]] + sst.B @ rpy
-        phi_sst = sst.C @ x1[s[0]] + sst.D @ rpy
-        out[s[1]] = gyro.A @ x1[s[1]] + gyro.B @ w_B
-        w_gyro = gyro.C @ x1[s[1]] + gyro.D @ w_B
+        out[s[0]], phi_sst = sst.step(x1[s[0]], rpy)
+        out[s[1]], w_gyro = gyro.step(x1[s[1]], w_B)
         y_att = -(phi_sst + d.noise_star_tracker * n_sst)
         y_rate = -(w_gyro + d.noise_gyro * n_gyro)
         u_K = self._Kp @ y_att + self._Kd @ y_rate
-        out[s[2]] = ro.A @ x1[s[2]] + ro.B @ u_K
-        return out, ro.C @ x1[s[2]] + ro.D @ u_K
+        out[s[2]], u = ro.step(x1[s[2]], u_K)
+        return out, u
 
     def _stage2_reference(self, x2, z2, ap: DiscreteBlock):
         """Wheels, disturbance and all-passes ``ap``: ``z2 = [sat(u); d_ext]``,
@@ -616,14 +618,10 @@ class FlightSoftware(LeafSystem):
         sat_u, d_ext = z2[0:3], z2[3:6]
         out = np.empty_like(x2)
         rw, dist = d.wheels, d.disturbance
-        out[s[0]] = rw.A @ x2[s[0]] + rw.B @ sat_u
-        T_rw = rw.C @ x2[s[0]] + rw.D @ sat_u
-        out[s[1]] = dist.A @ x2[s[1]] + dist.B @ d_ext
-        T_dist = dist.C @ x2[s[1]] + dist.D @ d_ext
-        out[s[2]] = ap.A @ x2[s[2]] + ap.B @ T_rw
-        a_mul = ap.C @ x2[s[2]] + ap.D @ T_rw
-        out[s[3]] = ap.A @ x2[s[3]] + ap.B @ T_rw
-        a_add = ap.C @ x2[s[3]] + ap.D @ T_rw
+        out[s[0]], T_rw = rw.step(x2[s[0]], sat_u)
+        out[s[1]], T_dist = dist.step(x2[s[1]], d_ext)
+        out[s[2]], a_mul = ap.step(x2[s[2]], T_rw)
+        out[s[3]], a_add = ap.step(x2[s[3]], T_rw)
         return out, np.concatenate([T_rw, T_dist, a_mul, a_add])
 
     @staticmethod
