@@ -26,13 +26,13 @@ the tests' oracle (``tests/robust/oracles.py``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
 from oos_drake.robust import mu_lower_kernels
 from oos_drake.robust.blocks import FULL, REAL, BlockStructure
-from oos_drake.robust.memory import reuse_freed_memory
+from oos_drake.robust.memory import in_chunks, reuse_freed_memory
 
 #: Matrices per internal batch of :func:`mu_lower_bound` (bounds the memory of huge batches).
 CHUNK = 1024
@@ -196,23 +196,10 @@ def mu_lower_bound(
     rng = np.random.default_rng(0) if rng is None else rng
     reuse_freed_memory()
     if M.shape[0] > CHUNK:  # bounded memory: (restarts + 1) copies of the batch are in flight
-        parts = [
-            mu_lower_bound(
-                M[i : i + CHUNK],
-                structure,
-                start_inputs=None if start_inputs is None else start_inputs[i : i + CHUNK],
-                start_vectors=None if start_vectors is None else start_vectors[i : i + CHUNK],
-                restarts=restarts,
-                iters=iters,
-                kappa=kappa,
-                rng=rng,
-                polish_starts=polish_starts,
-            )
-            for i in range(0, M.shape[0], CHUNK)
-        ]
-        return LowerBoundResult(
-            *(np.concatenate([getattr(q, f.name) for q in parts]) for f in fields(LowerBoundResult))
-        )
+        starts = {"start_inputs": start_inputs, "start_vectors": start_vectors}
+        options = dict(restarts=restarts, iters=iters, kappa=kappa, polish_starts=polish_starts)
+        options.update(structure=structure, rng=rng)
+        return in_chunks(mu_lower_bound, M, CHUNK, LowerBoundResult, starts, **options)
     nb = M.shape[0]
     a, z = _starts(M, start_inputs, start_vectors, restarts, rng)
     ns = a.shape[0] // nb
