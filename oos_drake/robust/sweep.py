@@ -324,11 +324,8 @@ def _quick_bounds(M, structure, iterations, restarts=2, steps=40) -> _Grid:
 
 def grid_bounds(M, blk, options: SweepOptions):
     """Upper and lower bounds of mu for a flat batch ``M`` ``(B, c, r)`` (cold, batched)."""
-    opt = options
-    M, structure = np.ascontiguousarray(M), parse_blk(blk)
-    got = _quick_bounds(
-        M, structure, opt.upper_iterations, opt.lower_restarts, opt.lower_iterations
-    )
+    steps = (options.upper_iterations, options.lower_restarts, options.lower_iterations)
+    got = _quick_bounds(np.ascontiguousarray(M), parse_blk(blk), *steps)
     return got.upper, got.lower
 
 
@@ -561,14 +558,8 @@ def _mussv_points(M, structure, opt) -> _Grid:
     res = mussv(M, structure, **(opt.mu_options or {}))
     up, lo = np.atleast_1d(res.upper), np.atleast_1d(res.lower)
     n = up.size
-    return _Grid(
-        up,
-        lo,
-        np.ones(n, dtype=bool),
-        None,
-        np.arange(n),
-        res.delta.reshape(n, *res.delta.shape[-2:]),
-    )
+    delta = res.delta.reshape(n, *res.delta.shape[-2:])
+    return _Grid(up, lo, np.ones(n, dtype=bool), None, np.arange(n), delta)
 
 
 def _refine_bounds(M, structure, opt) -> _Grid:
@@ -632,8 +623,9 @@ def _frequency_crossings(A, Bw, Cz, Dzw, structure, omega, up, lo, count=6, samp
     """
     from oos_drake.robust.mu_lower import certificate_residual, mu_lower_bound
 
+    none = (np.zeros(0), np.zeros(0), np.zeros((0, structure.n_rows, structure.n_cols)))
     if omega.size < 2:
-        return np.zeros(0), np.zeros(0), np.zeros((0, structure.n_rows, structure.n_cols))
+        return none
 
     # candidates: peaks of the upper bound, and peaks of |lambda| of the best unit perturbation
     # (real parameters at a vertex) whatever its phase: continuous in omega where mu is not
@@ -703,9 +695,7 @@ def _frequency_crossings(A, Bw, Cz, Dzw, structure, omega, up, lo, count=6, samp
                 out_w.append(best[1])
                 out_lo.append(best[0])
                 out_d.append(best[2])
-    if not out_w:
-        return np.zeros(0), np.zeros(0), np.zeros((0, structure.n_rows, structure.n_cols))
-    return np.array(out_w), np.array(out_lo), np.array(out_d)
+    return (np.array(out_w), np.array(out_lo), np.array(out_d)) if out_w else none
 
 
 def axis_certificate(real, structure, omega, up, lo, slack):
