@@ -293,11 +293,10 @@ class _Objective:
         self.packed = _per_blk(
             "packed", structure, lambda: mu_kernels.pack_layout(layout, self.c_groups)
         )
-
-    @property
-    def lane_layout(self) -> mu_lanes.LaneLayout:
-        """The layout of the lane kernels (:func:`mu_lanes.lane_layout`)."""
-        return _per_blk("lanes", self.s, lambda: mu_lanes.lane_layout(self.packed, self.s))
+        #: The layout of the compiled kernels (:func:`mu_lanes.lane_layout`).
+        self.lane_layout = _per_blk(
+            "lanes", structure, lambda: mu_lanes.lane_layout(self.packed, structure)
+        )
 
     def __call__(self, x, idx, t, need_grad=True):
         """Return ``(f, grad, lam_max, top_vec)`` for the batch rows ``idx`` (``grad`` and
@@ -312,7 +311,8 @@ class _Objective:
         x = np.ascontiguousarray(x, dtype=float)
         t = np.ascontiguousarray(np.broadcast_to(t, (nb,)), dtype=float)
         with single_threaded_blas():  # threads on 26 x 26 LAPACK calls: 100x slower
-            mu_kernels.dg_objective(M, x, t, bool(need_grad), *self.packed, f, grad, lmax, top)
+            lay = self.lane_layout
+            mu_kernels.dg_objective(M, x, t, bool(need_grad), lay, f, grad, lmax, top)
         if not need_grad:
             return f, None, lmax, None
         return f, grad, lmax, top
