@@ -300,15 +300,7 @@ def _conclude(M, structure, mat, delta_unit, a, lam, ns, residual):
         # may shrink the real parameters: take the largest admissible eigenvalue of a full eig,
         # for the iterate and for its real parameters pushed to the vertex of their sign
         M_retry = M[mat[retry]]
-        vertex = delta_unit[retry].copy()
-        for block in structure.blocks:
-            if block.kind == REAL:
-                idx = np.arange(block.rows)
-                d = vertex[:, block.row_offset, block.col_offset].real
-                vertex[:, block.row_offset + idx, block.col_offset + idx] = np.where(
-                    d < 0, -1.0, 1.0
-                )[:, None]
-        for trial in (delta_unit[retry], vertex):
+        for trial in (delta_unit[retry], _at_vertex(structure, delta_unit[retry])):
             tn = _max_block_norm(structure, trial)
             ev = np.linalg.eigvals(M_retry @ trial)
             if structure.has_real:
@@ -335,12 +327,18 @@ def _conclude(M, structure, mat, delta_unit, a, lam, ns, residual):
     # best candidate whatever its eigenvalue (for searches that also move the frequency)
     score = (np.abs(lam_raw) / np.maximum(norm_unit, 1e-300)).reshape(ns, nb)
     best_raw = np.argmax(score, axis=0) * nb + np.arange(nb)
-    raw = delta_unit[best_raw].copy()
-    for block in structure.blocks:  # real parameters pushed to the vertex of their sign
+    raw = _at_vertex(structure, delta_unit[best_raw])
+    return LowerBoundResult(lower, out_delta, out_resid, raw, lam_raw[best_raw], a[pick])
+
+
+def _at_vertex(structure, delta):
+    """A copy of the perturbations ``delta`` ``(B, r, c)`` with their real parameters pushed
+    to the vertex of their sign (``+-1``)."""
+    out = delta.copy()
+    for block in structure.blocks:
         if block.kind == REAL:
             idx = np.arange(block.rows)
-            d = raw[:, block.row_offset, block.col_offset].real
-            raw[:, block.row_offset + idx, block.col_offset + idx] = np.where(d < 0, -1.0, 1.0)[
-                :, None
-            ]
-    return LowerBoundResult(lower, out_delta, out_resid, raw, lam_raw[best_raw], a[pick])
+            d = out[:, block.row_offset, block.col_offset].real
+            sign = np.where(d < 0, -1.0, 1.0)[:, None]
+            out[:, block.row_offset + idx, block.col_offset + idx] = sign
+    return out
