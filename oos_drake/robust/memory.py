@@ -1,4 +1,8 @@
-"""Keep freed heap memory in the process for the batched mu kernels (glibc only, else no-op).
+"""Memory of the batched mu bounds: freed heap kept for reuse, big batches in chunks.
+
+:func:`in_chunks` runs a bound on bounded chunks of a batch and :func:`joined` joins the
+chunks' results (``mu_upper_bound``, ``mu_lower_bound``, ``mussv``, the sweeps).
+:func:`reuse_freed_memory` keeps freed heap memory in the process (glibc only, else no-op).
 
 The kernels allocate and free many temporaries of 1-20 MB per iteration (a batch of 26 x 26
 complex matrices). With glibc's defaults, memory above the trim threshold (dynamically about
