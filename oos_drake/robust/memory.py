@@ -1,4 +1,8 @@
-"""Keep freed heap memory in the process for the batched mu kernels (glibc only, else no-op).
+"""Memory of the batched mu bounds: freed heap kept for reuse, big batches in chunks.
+
+:func:`in_chunks` runs a bound on bounded chunks of a batch and :func:`joined` joins the
+chunks' results (``mu_upper_bound``, ``mu_lower_bound``, ``mussv``, the sweeps).
+:func:`reuse_freed_memory` keeps freed heap memory in the process (glibc only, else no-op).
 
 The kernels allocate and free many temporaries of 1-20 MB per iteration (a batch of 26 x 26
 complex matrices). With glibc's defaults, memory above the trim threshold (dynamically about
@@ -13,6 +17,9 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import functools
+from dataclasses import fields
+
+import numpy as np
 
 _M_TRIM_THRESHOLD = -1
 _M_TOP_PAD = -2
@@ -46,3 +53,40 @@ def reuse_freed_memory() -> bool:
     ok &= mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD)
     ok &= mallopt(_M_TOP_PAD, TOP_PAD)
     return bool(ok)
+
+
+def joined(result_type, parts):
+    """One ``result_type`` (a dataclass) of the results of consecutive chunks of a batch.
+
+    Array fields are concatenated along the batch axis (None if None in any part), ``int``
+    fields take their largest value (e.g. iterations) and ``dict`` fields are merged.
+    """
+    values = {}
+    for f in fields(result_type):
+        got = [getattr(p, f.name) for p in parts]
+        if any(v is None for v in got):
+            values[f.name] = None
+        elif all(isinstance(v, int) for v in got):
+            values[f.name] = max(got)
+        elif all(isinstance(v, dict) for v in got):
+            values[f.name] = {k: v for d in got for k, v in d.items()}
+        else:
+            values[f.name] = np.concatenate(got, axis=0)
+    return result_type(**values)
+
+
+def in_chunks(function, M, size: int, result_type, per_matrix: dict, **options):
+    """``function`` on chunks of at most ``size`` matrices of the batch ``M`` (bounded memory).
+
+    ``per_matrix`` holds the arguments with one row per matrix (None: not given), sliced with
+    ``M``; ``options`` go to every call unchanged. The results are :func:`joined`.
+    """
+    parts = [
+        function(
+            M[i : i + size],
+            **{k: None if v is None else v[i : i + size] for k, v in per_matrix.items()},
+            **options,
+        )
+        for i in range(0, M.shape[0], size)
+    ]
+    return joined(result_type, parts)

@@ -34,8 +34,14 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from oos_drake.robust.blocks import BlockStructure, check_matrix, parse_blk
+from oos_drake.robust.memory import joined
 from oos_drake.robust.mu_lower import LowerBoundResult, certificate_residual, mu_lower_bound
-from oos_drake.robust.mu_upper import lmi_residual, mu_upper_bound, power_of_two_scale
+from oos_drake.robust.mu_upper import (
+    UpperBoundResult,
+    lmi_residual,
+    mu_upper_bound,
+    power_of_two_scale,
+)
 
 
 @dataclass(frozen=True)
@@ -105,16 +111,6 @@ class MuResult:
 
 #: Matrices per internal batch (memory: about 1 MB per 26 x 26 matrix in flight).
 CHUNK = 2048
-
-
-class _Joined:
-    """Concatenate the array fields of per-chunk results."""
-
-    def __init__(self, parts):
-        self._parts = parts
-
-    def __getattr__(self, name):
-        return np.concatenate([getattr(p, name) for p in self._parts], axis=0)
 
 
 #: Upper bound settings of :func:`mussv`: two smoothing stages (temperatures relative to the
@@ -289,8 +285,7 @@ def mussv(
                 continuation=continuation,
             )
         )
-    up = _Joined(ups)
-    lo = _Joined(los)
+    up, lo = joined(UpperBoundResult, ups), joined(LowerBoundResult, los)
     lower = lo.lower * scale
     # both bounds are certified; where they meet (full block, rank one) round-off may put the
     # lower one a few ulps above: raising a valid upper bound keeps it valid

@@ -2,7 +2,7 @@ r"""Compiled (numba) per-matrix kernels of the mu upper bound: evaluation, layou
 
 The D-G optimizer itself is :func:`oos_drake.robust.mu_lanes.dg_minimize_lanes` (eight
 matrices per evaluation, any batch size). This module holds what it and ``mu_upper`` share:
-the packed layout (:func:`pack_layout`, :func:`unpack_layout`), the Osborne balancing of the
+the layout's index arrays (:func:`pack_layout`), the Osborne balancing of the
 start (:func:`osborne`), :func:`warm_up`, and the per-matrix evaluation :func:`dg_objective`
 (the exact final evaluation of ``mu_upper``, its round-off cross-check against numpy, and the
 fallback of a lane whose QR did not converge).
@@ -66,108 +66,29 @@ WEIGHT_FLOOR = 1e-5
 
 
 @_jit
-def unpack_layout(lay_i):
-    """The 19 index arrays packed in ``lay_i`` (see :func:`pack_layout`), as views (named by
-    ``mu_lanes.LaneLayout``):
-    ``log_par, log_ent, re_par, im_par, lin_ent, lin_row, l_row, l_col, l_ent, r_row, r_col,
-    r_ent, rb_start, rb_size, g_row, g_col, gq_par, gq_pos1, gq_pos2``."""
-    o = lay_i[1:]
-    n_log, n_lin, n_l, n_r, n_rb, n_g, n_gq = o[0], o[1], o[2], o[3], o[4], o[5], o[6]
-    lengths = (
-        n_log,
-        n_log,
-        n_lin,
-        n_lin,
-        n_lin,
-        n_lin,
-        n_l,
-        n_l,
-        n_l,
-        n_r,
-        n_r,
-        n_r,
-        n_rb,
-        n_rb,
-        n_g,
-        n_g,
-        n_gq,
-        n_gq,
-        n_gq,
-    )
-    starts = np.zeros(20, dtype=np.int64)
-    starts[0] = 7
-    for k in range(19):
-        starts[k + 1] = starts[k] + lengths[k]
-    return (
-        o[starts[0] : starts[1]],
-        o[starts[1] : starts[2]],
-        o[starts[2] : starts[3]],
-        o[starts[3] : starts[4]],
-        o[starts[4] : starts[5]],
-        o[starts[5] : starts[6]],
-        o[starts[6] : starts[7]],
-        o[starts[7] : starts[8]],
-        o[starts[8] : starts[9]],
-        o[starts[9] : starts[10]],
-        o[starts[10] : starts[11]],
-        o[starts[11] : starts[12]],
-        o[starts[12] : starts[13]],
-        o[starts[13] : starts[14]],
-        o[starts[14] : starts[15]],
-        o[starts[15] : starts[16]],
-        o[starts[16] : starts[17]],
-        o[starts[17] : starts[18]],
-        o[starts[18] : starts[19]],
-    )
-
-
-@_jit
-def _scalings(x, lay_i, lay_c, Tl, Tri, G):
+def _scalings(x, lay, Tl, Tri, G):
     """Fill ``T_l`` (c x c), ``T_r^{-1}`` (r x r) and ``G`` (r x c) from the parameters ``x``.
 
-    ``lay_i`` packs the integer layout (see :func:`pack_layout`), ``lay_c`` the complex
-    coefficients of the ``G`` parameters. Returns the entry values ``E`` of ``T``.
+    ``lay`` is the layout (``mu_lanes.LaneLayout``, from :func:`pack_layout`). Returns the
+    entry values ``E`` of ``T``.
     """
-    n_ent = lay_i[0]
-    n_log, n_lin, n_l, n_r, n_rb, n_g, n_gq = lay_i[1:8]
-    (
-        log_par,
-        log_ent,
-        re_par,
-        im_par,
-        lin_ent,
-        lin_row,
-        l_row,
-        l_col,
-        l_ent,
-        r_row,
-        r_col,
-        r_ent,
-        rb_start,
-        rb_size,
-        g_row,
-        g_col,
-        gq_par,
-        gq_pos1,
-        gq_pos2,
-    ) = unpack_layout(lay_i)
-    E = np.zeros(n_ent, dtype=np.complex128)
-    for k in range(n_log):
-        E[log_ent[k]] = np.exp(min(max(x[log_par[k]], -60.0), 60.0))
-    for k in range(n_lin):
-        E[lin_ent[k]] = np.exp(min(max(x[lin_row[k]], -60.0), 60.0)) * (
-            x[re_par[k]] + 1j * x[im_par[k]]
+    E = np.zeros(lay.n_entries, dtype=np.complex128)
+    for k in range(lay.log_par.size):
+        E[lay.log_ent[k]] = np.exp(min(max(x[lay.log_par[k]], -60.0), 60.0))
+    for k in range(lay.lin_ent.size):
+        E[lay.lin_ent[k]] = np.exp(min(max(x[lay.lin_row[k]], -60.0), 60.0)) * (
+            x[lay.re_par[k]] + 1j * x[lay.im_par[k]]
         )
     Tl[:, :] = 0.0
-    for k in range(n_l):
-        Tl[l_row[k], l_col[k]] = E[l_ent[k]]
+    for k in range(lay.l_row.size):
+        Tl[lay.l_row[k], lay.l_col[k]] = E[lay.l_ent[k]]
     Tr = np.zeros_like(Tri)
-    for k in range(n_r):
-        Tr[r_row[k], r_col[k]] = E[r_ent[k]]
+    for k in range(lay.r_row.size):
+        Tr[lay.r_row[k], lay.r_col[k]] = E[lay.r_ent[k]]
     # T_r is block diagonal with lower-triangular blocks: invert each by forward substitution
     Tri[:, :] = 0.0
-    for b in range(n_rb):
-        s, m = rb_start[b], rb_size[b]
+    for b in range(lay.rb_start.size):
+        s, m = lay.rb_start[b], lay.rb_size[b]
         for j in range(s, s + m):
             Tri[j, j] = 1.0 / Tr[j, j]
             for i in range(j + 1, s + m):
@@ -176,15 +97,14 @@ def _scalings(x, lay_i, lay_c, Tl, Tri, G):
                     acc += Tr[i, q] * Tri[q, j]
                 Tri[i, j] = -acc / Tr[i, i]
     G[:, :] = 0.0
-    g_coef1 = lay_c[:n_gq]
-    g_coef2 = lay_c[n_gq:]
-    for q in range(n_gq):
-        v = x[gq_par[q]]
-        k1 = gq_pos1[q]
-        G[g_row[k1], g_col[k1]] += v * g_coef1[q]
-        k2 = gq_pos2[q]
+    g_row, g_col = lay.g_row, lay.g_col
+    for q in range(lay.gq_par.size):
+        v = x[lay.gq_par[q]]
+        k1 = lay.gq_pos1[q]
+        G[g_row[k1], g_col[k1]] += v * lay.gq_coef1[q]
+        k2 = lay.gq_pos2[q]
         if k2 >= 0:
-            G[g_row[k2], g_col[k2]] += v * g_coef2[q]
+            G[g_row[k2], g_col[k2]] += v * lay.gq_coef2[q]
     return E
 
 
@@ -519,7 +439,7 @@ def _eig_full(H, w_all, Vk, K_max, t, ints):
 
 
 @_jit
-def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax, top, size=None):
+def dg_objective(M, x, t, need_grad, lay, f, grad, lmax, top, size=None):
     r"""Smoothed ``lambda_max`` of the scaled D-G matrix and its gradient, matrix by matrix.
 
     Parameters
@@ -533,8 +453,8 @@ def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax,
         ``f = lambda_max + log(sum exp(t (lam - lambda_max))) / t``.
     need_grad : bool
         Also compute ``grad`` and ``top``.
-    lay_i, lay_c, cb, rb, realb : arrays
-        Packed layout (:func:`pack_layout`).
+    lay : mu_lanes.LaneLayout
+        The layout (:func:`pack_layout`; the per-row maps of the lanes are not read here).
     f, grad, lmax, top : arrays (B,), (B, p), (B,), (B, r)
         Outputs (``top``: ``T_r^{-1} v`` for the top eigenvector ``v``).
     size : array (B,), optional
@@ -547,33 +467,9 @@ def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax,
         Number of matrices whose eigenvectors needed the ``eigh`` fallback.
     """
     nb, c, r = M.shape
-    n_ent = lay_i[0]
-    n_log, n_lin, n_l, n_r, n_rb, n_g, n_gq = lay_i[1:8]
-    (
-        log_par,
-        log_ent,
-        re_par,
-        im_par,
-        lin_ent,
-        lin_row,
-        l_row,
-        l_col,
-        l_ent,
-        r_row,
-        r_col,
-        r_ent,
-        _,
-        _,
-        g_row,
-        g_col,
-        gq_par,
-        gq_pos1,
-        gq_pos2,
-    ) = unpack_layout(lay_i)
-    g_coef1 = lay_c[:n_gq]
-    g_coef2 = lay_c[n_gq:]
-    cb_start, cb_size = cb[0], cb[1]
-    rb_start, rb_size = rb[0], rb[1]
+    cb_start, cb_size = lay.c_blocks[0], lay.c_blocks[1]
+    rb_start, rb_size = lay.rb_start, lay.rb_size
+    realb = lay.real_blocks
     n = r
     Tl = np.zeros((c, c), dtype=np.complex128)
     Tri = np.zeros((r, r), dtype=np.complex128)
@@ -604,17 +500,17 @@ def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax,
     pi = np.zeros(n)
     vr = np.zeros(n)
     vi = np.zeros(n)
-    gT = np.zeros(n_ent, dtype=np.complex128)
+    gT = np.zeros(lay.n_entries, dtype=np.complex128)
     reals = np.array([1.0, 0.0])
     creals = np.array([1.0 + 0.0j, 0.0j])
     fallbacks = 0
     for b in range(nb):
         Mb = M[b]
         xb = x[b]
-        E = _scalings(xb, lay_i, lay_c, Tl, Tri, G)
+        E = _scalings(xb, lay, Tl, Tri, G)
         # X = M T_r^{-1} (T_r^{-1} block diagonal, lower triangular blocks)
         for i in range(c):
-            for q in range(n_rb):
+            for q in range(rb_start.size):
                 s, m = rb_start[q], rb_size[q]
                 for j in range(s, s + m):
                     acc = 0.0j
@@ -668,7 +564,7 @@ def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax,
         #   T_r entry (i, j): -2 sum_k TV[j,k] p_k l_k conj(V[i,k]),  TV = T_r^{-1} V
         #   G entry (i, j):   2j sum_k XV[j,k] p_k conj(TV[i,k])
         TV = np.zeros((r, K), dtype=np.complex128)
-        for q in range(n_rb):
+        for q in range(rb_start.size):
             s, m = rb_start[q], rb_size[q]
             for i in range(s, s + m):
                 for k in range(K):
@@ -692,58 +588,58 @@ def dg_objective(M, x, t, need_grad, lay_i, lay_c, cb, rb, realb, f, grad, lmax,
         for k in range(K):
             pk[k] = np.exp(tb * (w_all[n - K + k] - lm)) / ssum
         gT[:] = 0.0
-        for q in range(n_l):
-            i, j = l_row[q], l_col[q]
+        for q in range(lay.l_row.size):
+            i, j = lay.l_row[q], lay.l_col[q]
             acc = 0.0j
             for k in range(K):
                 acc += XV[j, k] * pk[k] * np.conj(MV[i, k])
-            gT[l_ent[q]] += 2.0 * acc
-        for q in range(n_r):
-            i, j = r_row[q], r_col[q]
+            gT[lay.l_ent[q]] += 2.0 * acc
+        for q in range(lay.r_row.size):
+            i, j = lay.r_row[q], lay.r_col[q]
             acc = 0.0j
             for k in range(K):
                 acc += TV[j, k] * (pk[k] * w_all[n - K + k]) * np.conj(Vk[k, i])
-            gT[r_ent[q]] -= 2.0 * acc
+            gT[lay.r_ent[q]] -= 2.0 * acc
         gb = grad[b]
         gb[:] = 0.0
-        for q in range(n_log):
-            gb[log_par[q]] = (gT[log_ent[q]] * E[log_ent[q]]).real
-        for q in range(n_lin):
-            en = lin_ent[q]
-            gb[lin_row[q]] += (gT[en] * E[en]).real
-            rs = np.exp(min(max(xb[lin_row[q]], -60.0), 60.0))
-            gb[re_par[q]] = gT[en].real * rs
-            gb[im_par[q]] = -gT[en].imag * rs
-        for q in range(n_gq):
-            k1 = gq_pos1[q]
-            i, j = g_row[k1], g_col[k1]
+        for q in range(lay.log_par.size):
+            gb[lay.log_par[q]] = (gT[lay.log_ent[q]] * E[lay.log_ent[q]]).real
+        for q in range(lay.lin_ent.size):
+            en = lay.lin_ent[q]
+            gb[lay.lin_row[q]] += (gT[en] * E[en]).real
+            rs = np.exp(min(max(xb[lay.lin_row[q]], -60.0), 60.0))
+            gb[lay.re_par[q]] = gT[en].real * rs
+            gb[lay.im_par[q]] = -gT[en].imag * rs
+        for q in range(lay.gq_par.size):
+            k1 = lay.gq_pos1[q]
+            i, j = lay.g_row[k1], lay.g_col[k1]
             acc = 0.0j
             for k in range(K):
                 acc += XV[j, k] * pk[k] * np.conj(TV[i, k])
-            val = 2j * acc * g_coef1[q]
-            k2 = gq_pos2[q]
+            val = 2j * acc * lay.gq_coef1[q]
+            k2 = lay.gq_pos2[q]
             if k2 >= 0:
-                i, j = g_row[k2], g_col[k2]
+                i, j = lay.g_row[k2], lay.g_col[k2]
                 acc = 0.0j
                 for k in range(K):
                     acc += XV[j, k] * pk[k] * np.conj(TV[i, k])
-                val += 2j * acc * g_coef2[q]
-            gb[gq_par[q]] = val.real
+                val += 2j * acc * lay.gq_coef2[q]
+            gb[lay.gq_par[q]] = val.real
         for i in range(r):
             top[b, i] = TV[i, K - 1]
     return fallbacks
 
 
-def pack_layout(layout, c_groups) -> tuple:
-    """Pack ``mu_upper._Layout`` into the flat arrays of :func:`dg_objective`.
+def pack_layout(layout, c_groups) -> dict:
+    """The index arrays of ``mu_upper._Layout`` as the kernels read them.
 
-    Returns ``(lay_i, lay_c, cb, rb, realb)``: integer layout, complex ``G`` coefficients,
-    c-space and r-space diagonal blocks ``(2, n_blocks)`` (start, size) and real blocks
-    ``(3, n_real)`` (row offset, column offset, size).
+    Returns the fields of ``mu_lanes.LaneLayout`` up to ``gq_coef2`` (int64 index arrays,
+    complex ``G`` coefficients), plus ``c_blocks``, the c-space diagonal blocks ``(2, n_blocks)``
+    (start, size), and ``real_blocks``, the real blocks ``(3, n_real)`` (row offset, column
+    offset, size); :func:`mu_lanes.lane_layout` adds the per-row maps of the lanes.
     """
     L = layout
     rb = _blocks_from_groups(L.inv_groups)
-    cb = _blocks_from_groups(c_groups)
     # G parameters: each maps to one or two positions of G with complex coefficients
     gq_par, pos1, pos2, coef1, coef2 = [], [], [], [], []
     for q in range(L.g_map.shape[0]):
@@ -757,20 +653,21 @@ def pack_layout(layout, c_groups) -> tuple:
         else:
             pos2.append(-1)
             coef2.append(0.0)
-    parts = [
-        L.log_par, L.log_ent, L.lin_re_par, L.lin_im_par, L.lin_ent, L.lin_row_par,
-        L.l_row, L.l_col, L.l_ent, L.r_row, L.r_col, L.r_ent, rb[0], rb[1],
-        L.g_row, L.g_col, gq_par, pos1, pos2,
-    ]  # fmt: skip
-    counts = [len(L.log_par), len(L.lin_ent), len(L.l_row), len(L.r_row), rb.shape[1]]
-    counts += [len(L.g_row), len(gq_par)]
-    lay_i = np.concatenate(
-        [[L.n_entries], counts] + [np.asarray(v, dtype=np.int64) for v in parts]
-    ).astype(np.int64)
-    lay_c = np.array(coef1 + coef2, dtype=np.complex128)
-    # real blocks: G's diagonal blocks (r offset, c offset, size), read from the G positions
-    realb = _real_blocks(L)
-    return lay_i, lay_c, cb, rb, realb
+    index = dict(
+        log_par=L.log_par, log_ent=L.log_ent, re_par=L.lin_re_par, im_par=L.lin_im_par,
+        lin_ent=L.lin_ent, lin_row=L.lin_row_par, l_row=L.l_row, l_col=L.l_col, l_ent=L.l_ent,
+        r_row=L.r_row, r_col=L.r_col, r_ent=L.r_ent, rb_start=rb[0], rb_size=rb[1],
+        g_row=L.g_row, g_col=L.g_col, gq_par=gq_par, gq_pos1=pos1, gq_pos2=pos2,
+    )  # fmt: skip
+    return dict(
+        n_entries=int(L.n_entries),
+        **{k: np.ascontiguousarray(v, dtype=np.int64) for k, v in index.items()},
+        gq_coef1=np.array(coef1, dtype=np.complex128),
+        gq_coef2=np.array(coef2, dtype=np.complex128),
+        c_blocks=_blocks_from_groups(c_groups),
+        # real blocks: G's diagonal blocks (r offset, c offset, size), read from the G positions
+        real_blocks=_real_blocks(L),
+    )
 
 
 def _blocks_from_groups(groups) -> np.ndarray:

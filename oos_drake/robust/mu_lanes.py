@@ -117,11 +117,8 @@ LaneLayout = namedtuple(
         "row_g_col",  # per r-space row: first column of its real block's G (and its size;
         "row_g_size",  # 0: not a real block)
         "max_block",  # largest diagonal block (int): width of the row storage
-        "packed_int",  # the packed arrays of mu_kernels.pack_layout, for the per-matrix
-        "packed_coef",  # evaluation of a lane whose QR did not converge
-        "c_blocks",
-        "r_blocks",
-        "real_blocks",
+        "c_blocks",  # diagonal blocks of T_l (2, n): start, size (mu_kernels.dg_objective)
+        "real_blocks",  # real blocks (3, n): row offset, column offset, size (the same)
     ],
 )
 
@@ -915,13 +912,12 @@ def _eval_lane_alone(Mc, w, x, tq, lay, f, g, lmax, t, size):
     top1 = np.empty((1, Mc.shape[2]), dtype=np.complex128)
     t1 = np.ones(1)
     Mw = Mc[w : w + 1]
-    packed = (lay.packed_int, lay.packed_coef, lay.c_blocks, lay.r_blocks, lay.real_blocks)
     if tq[w] < 0:  # (size passed as below: one compiled signature of dg_objective, not two)
-        mu_kernels.dg_objective(Mw, xw, t1, False, *packed, f1, g1, l1, top1, s1)
+        mu_kernels.dg_objective(Mw, xw, t1, False, lay, f1, g1, l1, top1, s1)
         t1[0] = -tq[w] / max(l1[0], 1e-12)
     else:
         t1[0] = tq[w]
-    mu_kernels.dg_objective(Mw, xw, t1, True, *packed, f1, g1, l1, top1, s1)
+    mu_kernels.dg_objective(Mw, xw, t1, True, lay, f1, g1, l1, top1, s1)
     f[w] = f1[0]
     lmax[w] = l1[0]
     t[w] = t1[0]
@@ -933,9 +929,8 @@ def _eval_lane_alone(Mc, w, x, tq, lay, f, g, lmax, t, size):
 def lane_layout(packed, structure) -> LaneLayout:
     """The :data:`LaneLayout` of ``structure`` from ``mu_kernels.pack_layout``'s arrays
     ``packed`` (the per-row maps are derived here)."""
-    lay_i, lay_c, cb, rb, realb = packed
-    # the 19 index arrays of pack_layout, in the order of the fields log_par .. gq_pos2
-    indices = [np.ascontiguousarray(a) for a in mu_kernels.unpack_layout(lay_i)]
+    cb, realb = packed["c_blocks"], packed["real_blocks"]
+    rb = (packed["rb_start"], packed["rb_size"])
     c, r = structure.n_cols, structure.n_rows
     rs = _row_starts(r, rb[0], rb[1]).astype(np.int64)
     rsz = np.ones(r, dtype=np.int64)
@@ -948,23 +943,14 @@ def lane_layout(packed, structure) -> LaneLayout:
         gco[ro : ro + m] = co
         rgsz[ro : ro + m] = m
     bw = int(max(1, rb[1].max(initial=1), cb[1].max(initial=1)))
-    n_gq = indices[-3].size  # gq_par
     return LaneLayout(
-        int(lay_i[0]),
-        *indices,
-        gq_coef1=np.ascontiguousarray(lay_c[:n_gq]),
-        gq_coef2=np.ascontiguousarray(lay_c[n_gq:]),
+        **packed,
         row_block_start=rs,
         row_block_size=rsz,
         col_block_start=cs,
         row_g_col=gco,
         row_g_size=rgsz,
         max_block=bw,
-        packed_int=lay_i,
-        packed_coef=lay_c,
-        c_blocks=cb,
-        r_blocks=rb,
-        real_blocks=realb,
     )
 
 

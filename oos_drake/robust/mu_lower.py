@@ -26,13 +26,13 @@ the tests' oracle (``tests/robust/oracles.py``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
 from oos_drake.robust import mu_lower_kernels
 from oos_drake.robust.blocks import FULL, REAL, BlockStructure
-from oos_drake.robust.memory import reuse_freed_memory
+from oos_drake.robust.memory import in_chunks, reuse_freed_memory
 
 #: Matrices per internal batch of :func:`mu_lower_bound` (bounds the memory of huge batches).
 CHUNK = 1024
@@ -196,23 +196,10 @@ def mu_lower_bound(
     rng = np.random.default_rng(0) if rng is None else rng
     reuse_freed_memory()
     if M.shape[0] > CHUNK:  # bounded memory: (restarts + 1) copies of the batch are in flight
-        parts = [
-            mu_lower_bound(
-                M[i : i + CHUNK],
-                structure,
-                start_inputs=None if start_inputs is None else start_inputs[i : i + CHUNK],
-                start_vectors=None if start_vectors is None else start_vectors[i : i + CHUNK],
-                restarts=restarts,
-                iters=iters,
-                kappa=kappa,
-                rng=rng,
-                polish_starts=polish_starts,
-            )
-            for i in range(0, M.shape[0], CHUNK)
-        ]
-        return LowerBoundResult(
-            *(np.concatenate([getattr(q, f.name) for q in parts]) for f in fields(LowerBoundResult))
-        )
+        starts = {"start_inputs": start_inputs, "start_vectors": start_vectors}
+        options = dict(restarts=restarts, iters=iters, kappa=kappa, polish_starts=polish_starts)
+        options.update(structure=structure, rng=rng)
+        return in_chunks(mu_lower_bound, M, CHUNK, LowerBoundResult, starts, **options)
     nb = M.shape[0]
     a, z = _starts(M, start_inputs, start_vectors, restarts, rng)
     ns = a.shape[0] // nb
@@ -313,15 +300,7 @@ def _conclude(M, structure, mat, delta_unit, a, lam, ns, residual):
         # may shrink the real parameters: take the largest admissible eigenvalue of a full eig,
         # for the iterate and for its real parameters pushed to the vertex of their sign
         M_retry = M[mat[retry]]
-        vertex = delta_unit[retry].copy()
-        for block in structure.blocks:
-            if block.kind == REAL:
-                idx = np.arange(block.rows)
-                d = vertex[:, block.row_offset, block.col_offset].real
-                vertex[:, block.row_offset + idx, block.col_offset + idx] = np.where(
-                    d < 0, -1.0, 1.0
-                )[:, None]
-        for trial in (delta_unit[retry], vertex):
+        for trial in (delta_unit[retry], _at_vertex(structure, delta_unit[retry])):
             tn = _max_block_norm(structure, trial)
             ev = np.linalg.eigvals(M_retry @ trial)
             if structure.has_real:
@@ -348,12 +327,18 @@ def _conclude(M, structure, mat, delta_unit, a, lam, ns, residual):
     # best candidate whatever its eigenvalue (for searches that also move the frequency)
     score = (np.abs(lam_raw) / np.maximum(norm_unit, 1e-300)).reshape(ns, nb)
     best_raw = np.argmax(score, axis=0) * nb + np.arange(nb)
-    raw = delta_unit[best_raw].copy()
-    for block in structure.blocks:  # real parameters pushed to the vertex of their sign
+    raw = _at_vertex(structure, delta_unit[best_raw])
+    return LowerBoundResult(lower, out_delta, out_resid, raw, lam_raw[best_raw], a[pick])
+
+
+def _at_vertex(structure, delta):
+    """A copy of the perturbations ``delta`` ``(B, r, c)`` with their real parameters pushed
+    to the vertex of their sign (``+-1``)."""
+    out = delta.copy()
+    for block in structure.blocks:
         if block.kind == REAL:
             idx = np.arange(block.rows)
-            d = raw[:, block.row_offset, block.col_offset].real
-            raw[:, block.row_offset + idx, block.col_offset + idx] = np.where(d < 0, -1.0, 1.0)[
-                :, None
-            ]
-    return LowerBoundResult(lower, out_delta, out_resid, raw, lam_raw[best_raw], a[pick])
+            d = out[:, block.row_offset, block.col_offset].real
+            sign = np.where(d < 0, -1.0, 1.0)[:, None]
+            out[:, block.row_offset + idx, block.col_offset + idx] = sign
+    return out

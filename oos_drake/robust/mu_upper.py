@@ -51,14 +51,14 @@ A numpy implementation of the same algorithm is the tests' oracle (``tests/robus
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
 from oos_drake.blas import single_threaded_blas
 from oos_drake.robust import mu_kernels, mu_lanes
 from oos_drake.robust.blocks import REAL, BlockStructure
-from oos_drake.robust.memory import reuse_freed_memory
+from oos_drake.robust.memory import in_chunks, reuse_freed_memory
 
 #: Matrices per internal batch of :func:`mu_upper_bound`: bounds the memory of huge batches, and
 #: keeps the temporaries (~50 per matrix) in cache: 512 runs ~25 % faster per matrix than 2048.
@@ -293,11 +293,10 @@ class _Objective:
         self.packed = _per_blk(
             "packed", structure, lambda: mu_kernels.pack_layout(layout, self.c_groups)
         )
-
-    @property
-    def lane_layout(self) -> mu_lanes.LaneLayout:
-        """The layout of the lane kernels (:func:`mu_lanes.lane_layout`)."""
-        return _per_blk("lanes", self.s, lambda: mu_lanes.lane_layout(self.packed, self.s))
+        #: The layout of the compiled kernels (:func:`mu_lanes.lane_layout`).
+        self.lane_layout = _per_blk(
+            "lanes", structure, lambda: mu_lanes.lane_layout(self.packed, structure)
+        )
 
     def __call__(self, x, idx, t, need_grad=True):
         """Return ``(f, grad, lam_max, top_vec)`` for the batch rows ``idx`` (``grad`` and
@@ -312,7 +311,8 @@ class _Objective:
         x = np.ascontiguousarray(x, dtype=float)
         t = np.ascontiguousarray(np.broadcast_to(t, (nb,)), dtype=float)
         with single_threaded_blas():  # threads on 26 x 26 LAPACK calls: 100x slower
-            mu_kernels.dg_objective(M, x, t, bool(need_grad), *self.packed, f, grad, lmax, top)
+            lay = self.lane_layout
+            mu_kernels.dg_objective(M, x, t, bool(need_grad), lay, f, grad, lmax, top)
         if not need_grad:
             return f, None, lmax, None
         return f, grad, lmax, top
@@ -545,30 +545,10 @@ def mu_upper_bound(
     """
     reuse_freed_memory()  # ~30 % faster evaluations: no page faults on the temporaries
     if M.shape[0] > CHUNK:  # bounded memory: temporaries are ~50 matrices per input matrix
-        parts = [
-            mu_upper_bound(
-                M[i : i + CHUNK],
-                structure,
-                max_iter=max_iter,
-                tol=tol,
-                temperatures=temperatures,
-                memory=memory,
-                x0=None if x0 is None else x0[i : i + CHUNK],
-                patience=patience,
-                chain=chain,
-                chain_temperatures=chain_temperatures,
-                chain_patience=chain_patience,
-            )
-            for i in range(0, M.shape[0], CHUNK)
-        ]
-        return UpperBoundResult(
-            *(
-                max(getattr(q, f.name) for q in parts)
-                if f.name == "iterations"
-                else np.concatenate([getattr(q, f.name) for q in parts])
-                for f in fields(UpperBoundResult)
-            )
-        )
+        options = dict(max_iter=max_iter, tol=tol, temperatures=temperatures, memory=memory)
+        options.update(patience=patience, chain=chain, chain_temperatures=chain_temperatures)
+        options.update(structure=structure, chain_patience=chain_patience)
+        return in_chunks(mu_upper_bound, M, CHUNK, UpperBoundResult, {"x0": x0}, **options)
     nb, c, r = M.shape
     tols = _stage_tolerances(tol, temperatures)
     layout = _layout(structure)

@@ -13,7 +13,7 @@ frequency axis. Each model's points come back sorted by frequency (:class:`Sweep
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -26,6 +26,7 @@ from oos_drake.robust.lfr_analysis import (
     model_matrices,
     subset_parts,
 )
+from oos_drake.robust.memory import in_chunks, joined
 from oos_drake.robust.tables import sweep_table
 
 #: Smoothing stages of the converged upper bounds (one more than mussv's default).
@@ -226,13 +227,17 @@ def refined_grid(omega, arrays, evaluate, curves, rounds):
     return omega, arrays
 
 
+def top_peaks(values, count: int) -> np.ndarray:
+    """Indices of the ``count`` highest local maxima of ``values`` (the ends included)."""
+    interior = np.r_[True, values[1:] >= values[:-1]] & np.r_[values[:-1] >= values[1:], True]
+    peaks = np.flatnonzero(interior)
+    return peaks[np.argsort(values[peaks])[::-1][:count]]
+
+
 def peak_seeds(omega, values, count: int = 6) -> np.ndarray:
     """Frequencies of the ``count`` highest local maxima of ``values`` (plus 0): where a cover
     of the frequency axis starts."""
-    interior = np.r_[True, values[1:] >= values[:-1]] & np.r_[values[:-1] >= values[1:], True]
-    peaks = np.flatnonzero(interior)
-    peaks = peaks[np.argsort(values[peaks])[::-1][:count]]
-    return np.unique(np.concatenate([[0.0], omega[peaks]]))
+    return np.unique(np.concatenate([[0.0], omega[top_peaks(values, count)]]))
 
 
 def model_grid(A, omega, *, band=None, max_damping: float = 0.05, points: int = 1) -> np.ndarray:
@@ -282,10 +287,11 @@ def local_spikes(upper: np.ndarray, ratio: float) -> np.ndarray:
 
 
 def _top_points(upper, model_of, count):
-    """Indices of the ``count`` largest values of ``upper`` per model (sorted)."""
+    """Indices of the ``count`` largest values of ``upper`` per model (by model, largest
+    first)."""
     order = np.lexsort((-upper, model_of))
     first = np.searchsorted(model_of[order], model_of[order], side="left")
-    return np.sort(order[(np.arange(order.size) - first) < count])
+    return order[(np.arange(order.size) - first) < count]
 
 
 # --- grid methods -----------------------------------------------------------------------------
@@ -318,11 +324,8 @@ def _quick_bounds(M, structure, iterations, restarts=2, steps=40) -> _Grid:
 
 def grid_bounds(M, blk, options: SweepOptions):
     """Upper and lower bounds of mu for a flat batch ``M`` ``(B, c, r)`` (cold, batched)."""
-    opt = options
-    M, structure = np.ascontiguousarray(M), parse_blk(blk)
-    got = _quick_bounds(
-        M, structure, opt.upper_iterations, opt.lower_restarts, opt.lower_iterations
-    )
+    steps = (options.upper_iterations, options.lower_restarts, options.lower_iterations)
+    got = _quick_bounds(np.ascontiguousarray(M), parse_blk(blk), *steps)
     return got.upper, got.lower
 
 
@@ -437,7 +440,7 @@ def _continued_grid(subs, grids, structure, opt, model_of, tick) -> _Grid:
         worsts.append(w)
         tick()
     upper = np.concatenate(ups)
-    top = _top_points(upper, model_of, max(opt.lower_points, 1))
+    top = np.sort(_top_points(upper, model_of, max(opt.lower_points, 1)))
     lo = mu_lower_bound(
         np.concatenate(subs)[top],
         structure,
@@ -494,11 +497,7 @@ def _pruned_grid(flat, structure, model_of) -> _Grid:
         cand = np.flatnonzero(~tight & (up > best[model_of]))
         if cand.size == 0:
             break
-        # highest ``per_round`` candidates of each model
-        order = cand[np.lexsort((-up[cand], model_of[cand]))]
-        first = np.searchsorted(model_of[order], model_of[order], side="left")
-        rank = np.arange(order.size) - first
-        sel = order[rank < per_round]
+        sel = cand[_top_points(up[cand], model_of[cand], per_round)]  # highest first, per model
         full_up = mu_upper_bound(
             flat[sel],
             structure,
@@ -529,7 +528,7 @@ def _warm_grid(Ms, structure) -> _Grid:
     iterations at a single high smoothing temperature. The lower bound runs once on the whole
     batch (2 restarts of 40 steps), started from the upper bound's worst directions.
     """
-    from oos_drake.robust.mu_lower import mu_lower_bound
+    from oos_drake.robust.mu_lower import LowerBoundResult, mu_lower_bound
     from oos_drake.robust.mu_upper import mu_upper_bound
 
     nm, F = Ms.shape[:2]
@@ -545,17 +544,11 @@ def _warm_grid(Ms, structure) -> _Grid:
         up[:, f] = res.upper
         worst[:, f] = res.worst_input
     flat = Ms.reshape((-1,) + Ms.shape[2:])
-    starts = worst.reshape(-1, structure.n_rows)
-    lows = [
-        mu_lower_bound(
-            flat[i : i + 2048], structure, start_inputs=starts[i : i + 2048], restarts=2, iters=40
-        )
-        for i in range(0, flat.shape[0], 2048)
-    ]
-    lo = np.concatenate([r.lower for r in lows])
-    up = np.maximum(up.ravel(), lo)
-    delta = np.concatenate([r.delta for r in lows])
-    return _Grid(up, lo, np.ones(up.size, dtype=bool), None, np.arange(up.size), delta)
+    starts = {"start_inputs": worst.reshape(-1, structure.n_rows)}
+    options = dict(structure=structure, restarts=2, iters=40)  # a fresh rng per chunk
+    low = in_chunks(mu_lower_bound, flat, 2048, LowerBoundResult, starts, **options)
+    up = np.maximum(up.ravel(), low.lower)
+    return _Grid(up, low.lower, np.ones(up.size, dtype=bool), None, np.arange(up.size), low.delta)
 
 
 def _mussv_points(M, structure, opt) -> _Grid:
@@ -565,14 +558,8 @@ def _mussv_points(M, structure, opt) -> _Grid:
     res = mussv(M, structure, **(opt.mu_options or {}))
     up, lo = np.atleast_1d(res.upper), np.atleast_1d(res.lower)
     n = up.size
-    return _Grid(
-        up,
-        lo,
-        np.ones(n, dtype=bool),
-        None,
-        np.arange(n),
-        res.delta.reshape(n, *res.delta.shape[-2:]),
-    )
+    delta = res.delta.reshape(n, *res.delta.shape[-2:])
+    return _Grid(up, lo, np.ones(n, dtype=bool), None, np.arange(n), delta)
 
 
 def _refine_bounds(M, structure, opt) -> _Grid:
@@ -636,13 +623,9 @@ def _frequency_crossings(A, Bw, Cz, Dzw, structure, omega, up, lo, count=6, samp
     """
     from oos_drake.robust.mu_lower import certificate_residual, mu_lower_bound
 
+    none = (np.zeros(0), np.zeros(0), np.zeros((0, structure.n_rows, structure.n_cols)))
     if omega.size < 2:
-        return np.zeros(0), np.zeros(0), np.zeros((0, structure.n_rows, structure.n_cols))
-
-    def top_peaks(values):
-        interior = np.r_[True, values[1:] >= values[:-1]] & np.r_[values[:-1] >= values[1:], True]
-        peaks = np.flatnonzero(interior)
-        return peaks[np.argsort(values[peaks])[::-1][:count]]
+        return none
 
     # candidates: peaks of the upper bound, and peaks of |lambda| of the best unit perturbation
     # (real parameters at a vertex) whatever its phase: continuous in omega where mu is not
@@ -651,7 +634,7 @@ def _frequency_crossings(A, Bw, Cz, Dzw, structure, omega, up, lo, count=6, samp
     dn_all = np.max(structure.block_norms(raw.raw_delta), axis=1)
     score = np.where(dn_all > 0, np.abs(raw.raw_lambda) / np.maximum(dn_all, 1e-300), 0.0)
     score = np.where(np.isfinite(score), score, 0.0)
-    peaks = np.unique(np.concatenate([top_peaks(up), top_peaks(score)]))
+    peaks = np.unique(np.concatenate([top_peaks(up, count), top_peaks(score, count)]))
     out_w, out_lo, out_d = [], [], []
     floor = float(np.max(lo)) if lo.size else 0.0
     for k in peaks:
@@ -712,9 +695,7 @@ def _frequency_crossings(A, Bw, Cz, Dzw, structure, omega, up, lo, count=6, samp
                 out_w.append(best[1])
                 out_lo.append(best[0])
                 out_d.append(best[2])
-    if not out_w:
-        return np.zeros(0), np.zeros(0), np.zeros((0, structure.n_rows, structure.n_cols))
-    return np.array(out_w), np.array(out_lo), np.array(out_d)
+    return (np.array(out_w), np.array(out_lo), np.array(out_d)) if out_w else none
 
 
 def axis_certificate(real, structure, omega, up, lo, slack):
@@ -871,18 +852,11 @@ def sweep_models(A, Bw, Cz, Dzw, omega, parts, options: SweepOptions, *, first=0
                 guarantees[first + j] = axis_certificate(real, structure, w, up, lo, opt.slack)
             except ValueError as err:
                 raise ValueError(f"model {first + j}: {err}") from None
-        cols = [
-            None if any(x is None for x in c) else np.concatenate(c)
-            for c in zip(*(p[1] for p in points), strict=True)
+        per_model = [  # the best lower bounds and the guarantees are the chunk's
+            SweepPoints(np.full(w.size, first + j), w, np.maximum(up, lo), lo, *cols, {}, {})
+            for j, (w, (up, lo, *cols)) in enumerate(points)
         ]
-        out[name] = SweepPoints(
-            np.concatenate([np.full(w.size, first + j) for j, (w, _) in enumerate(points)]),
-            np.concatenate([w for w, _ in points]),
-            np.maximum(cols[0], cols[1]),
-            *cols[1:],
-            best=best,
-            guarantees=guarantees,
-        )
+        out[name] = replace(joined(SweepPoints, per_model), best=best, guarantees=guarantees)
     return out
 
 
@@ -981,19 +955,7 @@ def _sweep(sys, omega, subsets, times, options: SweepOptions, caller, progress, 
 
 def joined_points(chunks) -> SweepPoints:
     """One :class:`SweepPoints` of consecutive chunks of models."""
-    fields = ("model", "omega", "upper", "lower", "refined", "tightened")
-    cat = {f: np.concatenate([getattr(c, f) for c in chunks]) for f in fields}
-    params = [c.params for c in chunks]
-    best, guarantees = {}, {}
-    for c in chunks:
-        best.update(c.best)
-        guarantees.update(c.guarantees)
-    return SweepPoints(
-        **cat,
-        params=None if any(p is None for p in params) else np.concatenate(params),
-        best=best,
-        guarantees=guarantees,
-    )
+    return joined(SweepPoints, chunks)
 
 
 def mu_sweep(
