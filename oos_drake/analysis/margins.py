@@ -281,10 +281,9 @@ def _boundary(abscissa, scale_max: float, iterations: int = 40) -> float:
 def margins_figure(table: pd.DataFrame, path, rate_hz: float) -> Path:
     """Margins over the mission: gain, phase, delay and disk margins, continuous (solid),
     exact sampled (dashed), per channel; the multiloop disk margin in black."""
-    import matplotlib
+    from oos_drake.analysis.figures import pyplot, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(2, 2, figsize=(13, 8), sharex=True)
     panels = [
@@ -328,8 +327,4 @@ def margins_figure(table: pd.DataFrame, path, rate_hz: float) -> Path:
         "Loop-at-a-time margins at the wheel input (others closed) and disk margins: "
         f"continuous loop (solid) vs exact {rate_hz:g} Hz sampled-data loop (dashed)"
     )
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
