@@ -132,10 +132,6 @@ def _warm_up(recipe: SimulatorRecipe) -> None:
     build_simulator(recipe)
 
 
-def _init_pool_worker(recipe: SimulatorRecipe) -> None:
-    _warm_up(recipe)
-
-
 class Executor(Protocol):
     """Runs cases and yields their results as they complete (in any order)."""
 
@@ -204,7 +200,7 @@ class ProcessPoolExecutor:
         if self._pool is None:
             # spawn rather than fork: Drake's threads do not survive a fork
             self._pool = PoolExecutor(
-                self.workers, initializer=_init_pool_worker, initargs=(recipe,), method="spawn"
+                self.workers, initializer=_warm_up, initargs=(recipe,), method="spawn"
             )
             # bring workers up now (one warm-up task each; the pool may reuse an idle one)
             list(self._pool.map(_warm_up, [recipe] * self.workers))
@@ -271,14 +267,7 @@ class ProcessPoolExecutor:
             return _timeout_result(case, self.timeout)
         except BrokenProcessPool as exc:
             self._kill_pool()
-            return RunResult(
-                case.run_id,
-                "failed",
-                f"WorkerDied: its worker process died ({exc})",
-                {},
-                None,
-                math.nan,
-            )
+            return _failed_result(case, f"WorkerDied: its worker process died ({exc})")
 
     def _kill_pool(self) -> None:
         """Stop every worker process now and forget the pool (the next ``start`` makes one)."""
@@ -293,14 +282,14 @@ class ProcessPoolExecutor:
             self._pool = None
 
 
+def _failed_result(case: RunCase, error: str, wall_time: float = math.nan) -> RunResult:
+    """The record of a case its worker did not finish (a timeout, a dead worker)."""
+    return RunResult(case.run_id, "failed", error, {}, None, wall_time)
+
+
 def _timeout_result(case: RunCase, timeout: float) -> RunResult:
-    return RunResult(
-        case.run_id,
-        "failed",
-        f"Timeout: the run exceeded {timeout:g} s and was stopped",
-        {},
-        None,
-        float(timeout),
+    return _failed_result(
+        case, f"Timeout: the run exceeded {timeout:g} s and was stopped", float(timeout)
     )
 
 
