@@ -75,19 +75,12 @@ def _rows(result, time_s: float, loop: str) -> list[dict]:
     return rows
 
 
-def mission_plants(times, scenario=None):
+def nominal_plants(times, scenario=None):
     """Nominal rotational plants ``T -> wdot`` at mission ``times`` [s] (a BatchedStateSpace)."""
+    from oos_drake.analysis.models import mission_plants
     from oos_drake.control.analysis_model import rotational_channels
-    from oos_drake.lfr import usubs
-    from oos_drake.scenario.model import build_mission_model, mission_values
 
-    if scenario is None:
-        from oos_drake.scenario.data import load_scenario
-
-        scenario = load_scenario()
-    times = np.atleast_1d(np.asarray(times, dtype=float))
-    model = usubs(build_mission_model(scenario), mission_values(times, scenario))
-    P = rotational_channels(model.nominal)
+    P = rotational_channels(mission_plants(times, scenario).nominal)
     A, B, C, D = (np.asarray(m, dtype=float) for m in (P.A, P.B, P.C, P.D))
     if A.ndim == 2:
         A, B, C, D = (m[None] for m in (A, B, C, D))
@@ -118,7 +111,7 @@ def mission_margins(
     from tqdm import tqdm
 
     times = np.atleast_1d(np.asarray(times, dtype=float))
-    plants = mission_plants(times, scenario)
+    plants = nominal_plants(times, scenario)
     specs = {
         "continuous": dataclasses.replace(controller.spec, sampled=False),
         "sampled model": dataclasses.replace(controller.spec, sampled=True),
@@ -170,12 +163,10 @@ def ray_boundaries(
     """
     from oos_drake.control.analysis_model import rotational_channels
     from oos_drake.lfr import usubs
+    from oos_drake.scenario.data import default_scenario
     from oos_drake.scenario.model import build_mission_model, mission_values
 
-    if scenario is None:
-        from oos_drake.scenario.data import load_scenario
-
-        scenario = load_scenario()
+    scenario = default_scenario(scenario)
     model = build_mission_model(scenario)
     spec_c = dataclasses.replace(controller.spec, sampled=False)
     spec_s = dataclasses.replace(controller.spec, sampled=True)
@@ -259,23 +250,15 @@ def analysis_rays(analysis_dir, configurations: int, scenario=None) -> dict:
     return rays
 
 
-def _boundary(abscissa, scale_max: float, iterations: int = 40) -> float:
+def _boundary(abscissa, scale_max: float) -> float:
     """Smallest scale in ``[0, scale_max]`` with ``abscissa(scale) >= 0`` (a scan of 60 steps,
-    then bisection to ``scale_max 2^-46``); ``inf`` when there is none."""
+    then bisection to a relative ``1e-12``: :func:`~oos_drake.analysis.confirm.
+    boundary_along_ray`); ``inf`` when there is none."""
+    from oos_drake.analysis.confirm import boundary_along_ray
+
     if abscissa(0.0) >= 0:
         return 0.0
-    lo = 0.0
-    for s in np.linspace(0, scale_max, 61)[1:]:
-        if abscissa(s) >= 0:
-            hi = s
-            break
-        lo = s
-    else:
-        return np.inf
-    for _ in range(iterations):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if abscissa(mid) >= 0 else (mid, hi)
-    return 0.5 * (lo + hi)
+    return boundary_along_ray(lambda s: abscissa(s) >= 0, scale_max, steps=60, rtol=1e-12)
 
 
 def margins_figure(table: pd.DataFrame, path, rate_hz: float) -> Path:
