@@ -164,6 +164,12 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 1
+    return run_command(args)
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """Run the parsed command ``args.func(args)``; its exit status. A user-fixable error
+    (``ValueError``, ``FileNotFoundError``, ``KeyError``) is printed as one line: status 2."""
     try:
         status = args.func(args)
     except (ValueError, FileNotFoundError, KeyError) as exc:
