@@ -561,15 +561,10 @@ def run_analysis(
             k_model = int(np.flatnonzero(models == crit_model)[0])
             dl = perf_deltas[("e_p", "total")][k_model, j]
             from oos_drake.robust.blocks import parse_blk
-            from oos_drake.robust.lfr_analysis import block_map
+            from oos_drake.robust.lfr_analysis import block_map, normalized_worst_case
 
             bmap = block_map(one)
-            structure = parse_blk(bmap.blk)
-            norm_p = {}
-            for bname, kind, brows in zip(bmap.names, bmap.kinds, bmap.blk_rows, strict=True):
-                b = structure.blocks[brows[0]]
-                blk = dl[b.r_slice, b.c_slice]
-                norm_p[bname] = float(blk[0, 0].real) if kind == "ureal" else blk.copy()
+            norm_p = normalized_worst_case(bmap, parse_blk(bmap.blk), dl)
             cases.append(("worst APE gain (unit size)", norm_p, 1.0, wj))
         for case, values, scale, w in cases:
             scaled = {k: v * scale for k, v in values.items()}  # unit size: inside the set
