@@ -167,11 +167,11 @@ def run_margins(args) -> int:
     from oos_drake.analysis.models import mission_times
     from oos_drake.scenario.data import load_scenario
 
-    summary, scenario_file = None, args.scenario
+    scenario_file = args.scenario
     if args.analysis:
-        summary = _read_summary(args.analysis)
         # the rays are the analysis' blocks: its scenario (--scenario must be that one)
-        scenario_file = _analysis_scenario(summary.get("scenario"), args.analysis, args.scenario)
+        recorded = _read_summary(args.analysis).get("scenario")
+        scenario_file = _analysis_scenario(recorded, args.analysis, args.scenario)
     scenario = load_scenario(scenario_file)
     controller = _controller(args.controller, scenario)
     if args.delay is not None:
@@ -180,9 +180,7 @@ def run_margins(args) -> int:
         controller = dataclasses.replace(
             controller, spec=dataclasses.replace(controller.spec, computation_delay_s=args.delay)
         )
-    rays = {}
-    if summary is not None:
-        rays = analysis_rays(args.analysis, int(summary["mission"]["configurations"]), scenario)
+    rays = analysis_rays(args.analysis, scenario) if args.analysis else {}
     times = mission_times(args.configurations, scenario)
     start = time.perf_counter()
 

@@ -203,50 +203,39 @@ def ray_boundaries(
     return pd.DataFrame(rows)
 
 
-def analysis_rays(analysis_dir, configurations: int, scenario=None) -> dict:
+def analysis_rays(analysis_dir, scenario=None) -> dict:
     """Rays of the mission's worst real-parameter perturbations of an ``oos analyze`` folder.
 
-    Reads ``peak_perturbations.npz`` (normalized values) and keeps the mission subsets whose
-    perturbation has only blocks of the scenario model (``ureal``) and a finite critical
-    frequency; each ray is the
-    perturbation divided by its largest entry, so the scale is the normalized size (mu's
-    boundary is ``1 / mu`` on it).
+    Reads its certified peaks (:func:`~oos_drake.analysis.confirm.read_peaks`: normalized
+    values) and keeps the mission subsets whose perturbation has only blocks of the scenario
+    model (``ureal``) and a finite critical frequency; each ray is the perturbation divided by
+    its largest entry, so the scale is the normalized size (mu's boundary is ``1 / mu`` on it).
 
     Parameters
     ----------
     analysis_dir : path
         Output folder of ``oos analyze``.
-    configurations : int
-        The analysis' number of mission configurations (its ``summary.json``).
-    """
-    from oos_drake.analysis.models import mission_times
 
-    path = Path(analysis_dir) / "peak_perturbations.npz"
-    if not path.is_file():
-        raise ValueError(f"--analysis: {path} not found")
+    Returns
+    -------
+    dict
+        Subset -> ``(time [s], {block: normalized value})``, subsets in alphabetical order.
+    """
+    from oos_drake.analysis.confirm import read_peaks
     from oos_drake.scenario.model import build_mission_model
 
-    data = np.load(path, allow_pickle=False)
     real_blocks = build_mission_model(scenario).uncertainty  # the plant's ureal blocks
-    times = mission_times(configurations, scenario)
-    subsets = sorted({k.split("|")[1] for k in data.files if k.startswith("mission|")})
     rays = {}
-    for subset in subsets:
-        prefix = f"mission|{subset}|"
-        blocks = {
-            k[len(prefix) :]: data[k]
-            for k in data.files
-            if k.startswith(prefix) and k[len(prefix) :] not in ("model", "omega [rad/s]")
-        }
-        omega = float(data[prefix + "omega [rad/s]"])
-        if not blocks or not np.isfinite(omega) or not set(blocks) <= set(real_blocks):
+    for peak in sorted(read_peaks(analysis_dir), key=lambda p: p.subset):
+        blocks = peak.perturbation
+        if peak.study != "mission" or not np.isfinite(peak.omega):
+            continue
+        if not blocks or not set(blocks) <= set(real_blocks):
             continue
         values = {k: float(np.real(np.ravel(v)[0])) for k, v in blocks.items()}
         size = max(abs(v) for v in values.values())
-        if size == 0:
-            continue
-        model = int(data[prefix + "model"])
-        rays[subset] = (float(times[model]), {k: v / size for k, v in values.items()})
+        if size > 0:
+            rays[peak.subset] = (peak.time, {k: v / size for k, v in values.items()})
     return rays
 
 
