@@ -25,13 +25,14 @@ from __future__ import annotations
 
 import collections
 import concurrent.futures
+import itertools
 import math
 import os
 import socket
 import time
 import traceback
 import warnings
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterable, Iterator
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Protocol
@@ -154,24 +155,6 @@ class InlineExecutor:
 
     def close(self) -> None:
         pass
-
-
-def _bounded(submit: Callable, wait_one: Callable, cases: Iterable[RunCase], limit: int):
-    """Keep at most ``limit`` futures in flight; yield results as they complete."""
-    pending = set()
-    iterator = iter(cases)
-    exhausted = False
-    while True:
-        while not exhausted and len(pending) < limit:
-            try:
-                pending.add(submit(next(iterator)))
-            except StopIteration:
-                exhausted = True
-        if not pending:
-            return
-        done, pending = wait_one(pending)
-        for future in done:
-            yield future.result()
 
 
 class ProcessPoolExecutor:
@@ -317,16 +300,19 @@ class DaskExecutor:
         self._tasks.client.run(_warm_up, recipe)
 
     def run(self, recipe: SimulatorRecipe, cases: Iterable[RunCase]) -> Iterator[RunResult]:
+        """Run the cases, at most ``2 * workers`` in flight; results as they complete."""
         from dask.distributed import wait
 
-        def submit(case):
-            return self._tasks.submit(execute_case, recipe, case)
-
-        def wait_one(pending):
+        pending, iterator = set(), iter(cases)
+        while True:
+            for case in itertools.islice(iterator, 2 * self.workers - len(pending)):
+                pending.add(self._tasks.submit(execute_case, recipe, case))
+            if not pending:
+                return
             result = wait(list(pending), return_when="FIRST_COMPLETED")
-            return set(result.done), set(result.not_done)
-
-        yield from _bounded(submit, wait_one, cases, 2 * self.workers)
+            pending = set(result.not_done)
+            for future in result.done:
+                yield future.result()
 
     def close(self) -> None:
         self._tasks.shutdown()
