@@ -170,6 +170,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
     on_scenario = ["--scenario", scenario]
     # (a namespace made by a caller before --scheduler existed runs on the default pool)
     scheduler = ["--scheduler", args.scheduler] if getattr(args, "scheduler", None) else []
+    workers = ["--workers", args.workers, *scheduler]
     print(f"[oos run] scenario: {scenario}")
 
     run_stage(
@@ -189,9 +190,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
         "controller",
         out / "controller",
         keys["controller"],
-        lambda d: _oos(
-            "synth", "--out", d, "--workers", args.workers, *scheduler, *quick, *on_scenario
-        ),
+        lambda d: _oos("synth", "--out", d, *workers, *quick, *on_scenario),
         timings,
     )
     controller = out / "controller" / "controller.json"
@@ -201,37 +200,17 @@ def run_pipeline(args: argparse.Namespace) -> int:
         out / "analysis",
         keys["analysis"],
         lambda d: _oos(
-            "analyze",
-            "--controller",
-            controller,
-            "--out",
-            d,
-            "--workers",
-            args.workers,
-            *scheduler,
-            *quick,
-            *on_scenario,
+            "analyze", "--controller", controller, "--out", d, *workers, *quick, *on_scenario
         ),
         timings,
     )
+    analyzed = ["--analysis", out / "analysis", "--controller", controller]
 
     run_stage(
         "confirm",
         out / "confirm",
         keys["confirm"],
-        lambda d: _oos(
-            "confirm",
-            "--analysis",
-            out / "analysis",
-            "--controller",
-            controller,
-            "--out",
-            d,
-            "--workers",
-            args.workers,
-            *scheduler,
-            *on_scenario,
-        ),
+        lambda d: _oos("confirm", *analyzed, "--out", d, *workers, *on_scenario),
         timings,
     )
 
@@ -241,10 +220,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
         keys["margins"],
         lambda d: _oos(
             "margins",
-            "--controller",
-            controller,
-            "--analysis",
-            out / "analysis",
+            *analyzed,
             "--configurations",
             MARGIN_CONFIGURATIONS,
             "--out",
@@ -259,7 +235,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
     campaign_start = time.perf_counter()
     if (campaign / "spec.toml").is_file():
         print(f"[oos run] campaign: resuming {campaign}")
-        _oos("campaign", "resume", campaign, "--workers", args.workers, *scheduler)
+        _oos("campaign", "resume", campaign, *workers)
     else:
         shutil.rmtree(campaign, ignore_errors=True)
         print(f"[oos run] campaign -> {campaign}")
@@ -269,9 +245,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
             campaign_spec,
             "--out",
             campaign,
-            "--workers",
-            args.workers,
-            *scheduler,
+            *workers,
             "--worst-cases",
             out / "analysis" / "worst_cases.parquet",
             "--simulator-option",

@@ -178,7 +178,19 @@ class SerialExecutor:
         return False
 
 
-class ThreadExecutor(SerialExecutor):
+class _LocalPoolExecutor(SerialExecutor):
+    """What the thread and process pools share: ``self.pool`` is a ``concurrent.futures``
+    executor."""
+
+    def as_completed(self, futures: Iterable) -> Iterator:
+        """The futures in the order they finish."""
+        return concurrent.futures.as_completed(list(futures))
+
+    def shutdown(self) -> None:
+        self.pool.shutdown(wait=True, cancel_futures=True)
+
+
+class ThreadExecutor(_LocalPoolExecutor):
     """Threads of this process, each task with one BLAS thread (no nested BLAS threads).
 
     For the fine grain where pickling would cost more than the work: GIL-free LAPACK calls on
@@ -213,15 +225,8 @@ class ThreadExecutor(SerialExecutor):
             return [fn(x) for x in items]
         return list(self.pool.map(with_single_threaded_blas(fn), items))
 
-    def as_completed(self, futures: Iterable) -> Iterator:
-        """The futures in the order they finish."""
-        return concurrent.futures.as_completed(list(futures))
 
-    def shutdown(self) -> None:
-        self.pool.shutdown(wait=True, cancel_futures=True)
-
-
-class PoolExecutor(SerialExecutor):
+class PoolExecutor(_LocalPoolExecutor):
     """A local pool of worker processes made by :func:`process_pool` (they die with this process).
 
     Parameters
@@ -254,18 +259,11 @@ class PoolExecutor(SerialExecutor):
         """``[fn(x) for x in iterable]`` on the workers, in order."""
         return list(self.pool.map(fn, iterable))
 
-    def as_completed(self, futures: Iterable) -> Iterator:
-        """The futures in the order they finish."""
-        return concurrent.futures.as_completed(list(futures))
-
     def kill(self) -> None:
         """Stop every worker now, running tasks included (a pool offers no way to cancel one)."""
         for process in list((getattr(self.pool, "_processes", None) or {}).values()):
             process.kill()
         self.shutdown()
-
-    def shutdown(self) -> None:
-        self.pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _dask_worker_setup(initializer: Callable | None, initargs: tuple) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 from pathlib import Path
 
@@ -30,7 +31,6 @@ def _write_atomically(out, work, marker: str = "summary.json", what: str = "an a
     existing ``out`` is replaced only if it holds a previous result (its ``marker`` file, ``what``
     names it in the error)."""
     import shutil
-    from pathlib import Path
 
     out = Path(out).resolve()
     if out.exists() and any(out.iterdir()) and not (out / marker).is_file():
@@ -46,6 +46,14 @@ def _write_atomically(out, work, marker: str = "summary.json", what: str = "an a
         shutil.rmtree(out)
     tmp.rename(out)
     return result
+
+
+def _read_summary(analysis) -> dict:
+    """The ``summary.json`` of the ``oos analyze`` folder ``analysis`` (``--analysis``)."""
+    record = Path(analysis) / "summary.json"
+    if not record.is_file():
+        raise ValueError(f"--analysis {analysis}: no summary.json (not an oos analyze folder)")
+    return json.loads(record.read_text())
 
 
 def run_analyze(args) -> int:
@@ -123,36 +131,30 @@ def run_analyze(args) -> int:
     )
     print("  (for comparison only, the paper's published value: mu < 0.79 near 275 s)")
     for s in summary["subsets"]:
-        print(
-            f"  {s['subset']:>14s}: mu in [{s['mu lower [-]']:.4g}, {s['mu upper [-]']:.4g}] "
-            + (
-                f"(whole axis <= {s['mu upper guaranteed [-]']:.4g}) "
-                if math.isfinite(s.get("mu upper guaranteed [-]", math.nan))
-                else ""
-            )
-            + f"(gap {s['gap [%]']:.2g} %) at t = {s['time [s]']:.0f} s, "
-            f"{s['frequency [Hz]']:.3g} Hz; spikes left {s['spikes_left']} "
-            f"({s['spike_stop']}{', BUDGET EXHAUSTED' if s['budget_exhausted'] else ''})"
-        )
+        where = f"t = {s['time [s]']:.0f} s, {s['frequency [Hz]']:.3g} Hz"
+        bounds = (s["mu lower [-]"], s["mu upper [-]"], s.get("mu upper guaranteed [-]", math.nan))
+        print(f"  {s['subset']:>14s}: " + _peak_line(*bounds, s, where))
     for phase, pk in summary["docking"].items():
-        print(
-            f"docking {phase}: mu in [{pk['mu_lower']:.4g}, {pk['mu_upper']:.4g}] "
-            + (
-                f"(whole axis <= {pk['mu_upper_guaranteed']:.4g}) "
-                if math.isfinite(pk.get("mu_upper_guaranteed", math.nan))
-                else ""
-            )
-            + f"(gap {pk['gap [%]']:.2g} %) at k = {pk['stiffness']:.3g}, "
-            f"f = {pk['frequency [Hz]']:.3g} Hz; spikes left {pk['spikes_left']} "
-            f"({pk['spike_stop']}{', BUDGET EXHAUSTED' if pk['budget_exhausted'] else ''})"
-        )
+        where = f"k = {pk['stiffness']:.3g}, f = {pk['frequency [Hz]']:.3g} Hz"
+        bounds = (pk["mu_lower"], pk["mu_upper"], pk.get("mu_upper_guaranteed", math.nan))
+        print(f"docking {phase}: " + _peak_line(*bounds, pk, where))
     print(f"total time {summary['timings_s']['total']:.1f} s; outputs in {args.out}")
     return 0
 
 
+def _peak_line(lower, upper, guaranteed, peak: dict, where: str) -> str:
+    """``mu in [lower, upper] (whole axis <= guaranteed) (gap ..) at WHERE; spikes left ..``:
+    one certified peak of the summary (``peak``: its gap and spike-resolution entries)."""
+    axis = f"(whole axis <= {guaranteed:.4g}) " if math.isfinite(guaranteed) else ""
+    exhausted = ", BUDGET EXHAUSTED" if peak["budget_exhausted"] else ""
+    return (
+        f"mu in [{lower:.4g}, {upper:.4g}] {axis}(gap {peak['gap [%]']:.2g} %) at {where}; "
+        f"spikes left {peak['spikes_left']} ({peak['spike_stop']}{exhausted})"
+    )
+
+
 def run_margins(args) -> int:
     """Margins over the mission, continuous and sampled loops; exit status 0."""
-    import json
     import time
 
     from oos_drake.analysis.margins import (
@@ -165,16 +167,11 @@ def run_margins(args) -> int:
     from oos_drake.analysis.models import mission_times
     from oos_drake.scenario.data import load_scenario
 
-    summary, scenario_file = None, args.scenario
+    scenario_file = args.scenario
     if args.analysis:
-        record = Path(args.analysis) / "summary.json"
-        if not record.is_file():
-            raise ValueError(
-                f"--analysis {args.analysis}: no summary.json (not an oos analyze folder)"
-            )
-        summary = json.loads(record.read_text())
         # the rays are the analysis' blocks: its scenario (--scenario must be that one)
-        scenario_file = _analysis_scenario(summary.get("scenario"), args.analysis, args.scenario)
+        recorded = _read_summary(args.analysis).get("scenario")
+        scenario_file = _analysis_scenario(recorded, args.analysis, args.scenario)
     scenario = load_scenario(scenario_file)
     controller = _controller(args.controller, scenario)
     if args.delay is not None:
@@ -183,9 +180,7 @@ def run_margins(args) -> int:
         controller = dataclasses.replace(
             controller, spec=dataclasses.replace(controller.spec, computation_delay_s=args.delay)
         )
-    rays = {}
-    if summary is not None:
-        rays = analysis_rays(args.analysis, int(summary["mission"]["configurations"]), scenario)
+    rays = analysis_rays(args.analysis, scenario) if args.analysis else {}
     times = mission_times(args.configurations, scenario)
     start = time.perf_counter()
 
@@ -257,7 +252,6 @@ def _analysis_scenario(record, analysis, given) -> str | None:
         ``oos study`` point), or ``--scenario`` names another scenario.
     """
     import hashlib
-    from pathlib import Path
 
     from oos_drake.scenario.data import scenario_path
 
@@ -286,17 +280,11 @@ def _confirm_controller(args):
     """``(controller, scenario file)`` of an analysis: the controller of ``--controller``, else
     the one the analysis recorded (its gains must be the analysis', ``summary.json``), and the
     scenario the analysis ran on (:func:`_analysis_scenario`)."""
-    import json
-    from pathlib import Path
-
     import numpy as np
 
     from oos_drake.scenario.data import load_scenario
 
-    summary_file = Path(args.analysis) / "summary.json"
-    if not summary_file.is_file():
-        raise ValueError(f"--analysis {args.analysis}: summary.json not found (run `oos analyze`)")
-    summary = json.loads(summary_file.read_text())
+    summary = _read_summary(args.analysis)
     scenario = _analysis_scenario(summary.get("scenario"), args.analysis, args.scenario)
     recorded = summary.get("controller", {})
     path = args.controller
@@ -318,7 +306,6 @@ def _confirm_controller(args):
 def run_confirm(args) -> int:
     """Confirm the analysis' certified peaks on the Drake twin; exit status 0."""
     import time
-    from pathlib import Path
 
     from oos_drake.analysis.confirm import (
         CONFIRMATION_FILE,
@@ -403,9 +390,6 @@ def run_study_command(args) -> int:
     table = _write_atomically(
         args.out, lambda tmp: run_study(args.scenario, sweep, tmp, options, not args.quiet)
     )
-    import json
-    from pathlib import Path
-
     summary = json.loads((Path(args.out) / "summary.json").read_text())
     columns = [
         sweep.column,

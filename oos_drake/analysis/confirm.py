@@ -888,10 +888,9 @@ def confirmation_figure(
     oscillation is identified on (after ``settle`` [s]), each axis about its mean over the second
     half (given in the legend), scaled to the critical oscillation there (the transient leaves
     the plot)."""
-    import matplotlib
+    from oos_drake.analysis.figures import pyplot, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True, constrained_layout=True)
     for ax, side in zip(axes, ("stable", "unstable"), strict=True):
@@ -925,5 +924,4 @@ def confirmation_figure(
         f"continuous {row['alpha linear continuous [-]']:.4f})",
         fontsize=10,
     )
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110, tight=False)

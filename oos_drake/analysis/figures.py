@@ -10,13 +10,24 @@ import pandas as pd
 from oos_drake.analysis.subsets import SUBSET_ORDER
 
 
-def _plt():
+def pyplot():
+    """``matplotlib.pyplot`` on the non-interactive Agg backend (figures go to files)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def save_figure(fig, path, *, dpi: int = 120, tight: bool = True) -> Path:
+    """Write ``fig`` to ``path`` (PNG at ``dpi``), after ``tight_layout`` if ``tight``; close
+    it and return the path."""
+    if tight:
+        fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    pyplot().close(fig)
+    return Path(path)
 
 
 def _ordered(names):
@@ -33,7 +44,7 @@ def _guaranteed_line(axes, value, suffix):
 
 def mu_mission_figure(sweep: pd.DataFrame, common_hz, peaks: pd.DataFrame, path) -> Path:
     """(a) surface of the total-set upper bound over time x frequency; (b) side views."""
-    plt = _plt()
+    plt = pyplot()
     fig = plt.figure(figsize=(15, 5.2))
     total = sweep[(sweep["subset"] == "total") & ~sweep["refined"]]
     total = total[np.isin(total["frequency [Hz]"].to_numpy(), common_hz)]
@@ -70,15 +81,12 @@ def mu_mission_figure(sweep: pd.DataFrame, common_hz, peaks: pd.DataFrame, path)
         a.grid(True, which="both", alpha=0.3)
         a.axhline(1.0, color="r", ls="--", lw=0.8)
     ax2.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path)
 
 
 def performance_figure(table: pd.DataFrame, path) -> Path:
     """Worst-case gain upper bounds per subset, max over the analyzed configurations."""
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(13, 4.8))
     titles = {"e_p": "(a) d -> e_p (APE / requirement)", "e_u": "(b) d -> e_u (torque / 2 N m)"}
     for ax, channel in zip(axes, ["e_p", "e_u"], strict=True):
@@ -94,15 +102,12 @@ def performance_figure(table: pd.DataFrame, path) -> Path:
         ax.set_title(titles[channel])
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path)
 
 
 def docking_figure(sweeps: dict, peaks: dict, path) -> Path:
     """Side views of mu (Delta_tot) over the swept stiffness and over frequency, per phase."""
-    plt = _plt()
+    plt = pyplot()
     n = len(sweeps)
     fig, axes = plt.subplots(n, 2, figsize=(13, 4.2 * n), squeeze=False)
     for row, (phase, sweep) in enumerate(sweeps.items()):
@@ -125,15 +130,12 @@ def docking_figure(sweeps: dict, peaks: dict, path) -> Path:
             a.axhline(1.0, color="r", ls="--", lw=0.8)
             a.grid(True, which="both", alpha=0.3)
             a.set_title(f"docking phase {phase}")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path)
 
 
 def sensitivity_figure(table: pd.DataFrame, path) -> Path:
     """Bars: drop of the peak without each block, and its mu-sensitivity."""
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(13, 4.8))
     t = table.sort_values("drop [%]", ascending=True)
     axes[0].barh(t["block"], t["drop [%]"])
@@ -144,15 +146,12 @@ def sensitivity_figure(table: pd.DataFrame, path) -> Path:
     for a in axes:
         a.grid(True, axis="x", alpha=0.3)
     fig.suptitle("Which uncertainty moves the worst-case mu (critical configuration)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path)
 
 
 def time_check_figure(signals: pd.DataFrame, summary: pd.DataFrame, path) -> Path:
     """Pointing error and torque of the perturbed closed loops against the requirements."""
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(13, 4.8))
     for case, part in signals.groupby("case", sort=False):
         t = part["t [s]"].to_numpy()
@@ -177,15 +176,12 @@ def time_check_figure(signals: pd.DataFrame, summary: pd.DataFrame, path) -> Pat
         a.grid(True, which="both", alpha=0.3)
         a.legend(fontsize=7)
     fig.suptitle("Linear time-domain check: d_ext = step + sine at the critical frequency")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path)
 
 
 def open_loop_figure(table: pd.DataFrame, title: str, path) -> Path:
     """One panel per subset: sampled gains (grey) over the nominal (black)."""
-    plt = _plt()
+    plt = pyplot()
     names = _ordered([s for s in table["subset"].unique() if s != "nominal"])
     cols = 3
     rows = int(np.ceil(len(names) / cols))
@@ -202,7 +198,4 @@ def open_loop_figure(table: pd.DataFrame, title: str, path) -> Path:
     for ax in axes.ravel()[len(names) :]:
         ax.set_visible(False)
     fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path)

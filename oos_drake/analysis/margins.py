@@ -75,19 +75,12 @@ def _rows(result, time_s: float, loop: str) -> list[dict]:
     return rows
 
 
-def mission_plants(times, scenario=None):
+def nominal_plants(times, scenario=None):
     """Nominal rotational plants ``T -> wdot`` at mission ``times`` [s] (a BatchedStateSpace)."""
+    from oos_drake.analysis.models import mission_plants
     from oos_drake.control.analysis_model import rotational_channels
-    from oos_drake.lfr import usubs
-    from oos_drake.scenario.model import build_mission_model, mission_values
 
-    if scenario is None:
-        from oos_drake.scenario.data import load_scenario
-
-        scenario = load_scenario()
-    times = np.atleast_1d(np.asarray(times, dtype=float))
-    model = usubs(build_mission_model(scenario), mission_values(times, scenario))
-    P = rotational_channels(model.nominal)
+    P = rotational_channels(mission_plants(times, scenario).nominal)
     A, B, C, D = (np.asarray(m, dtype=float) for m in (P.A, P.B, P.C, P.D))
     if A.ndim == 2:
         A, B, C, D = (m[None] for m in (A, B, C, D))
@@ -118,7 +111,7 @@ def mission_margins(
     from tqdm import tqdm
 
     times = np.atleast_1d(np.asarray(times, dtype=float))
-    plants = mission_plants(times, scenario)
+    plants = nominal_plants(times, scenario)
     specs = {
         "continuous": dataclasses.replace(controller.spec, sampled=False),
         "sampled model": dataclasses.replace(controller.spec, sampled=True),
@@ -170,12 +163,10 @@ def ray_boundaries(
     """
     from oos_drake.control.analysis_model import rotational_channels
     from oos_drake.lfr import usubs
+    from oos_drake.scenario.data import default_scenario
     from oos_drake.scenario.model import build_mission_model, mission_values
 
-    if scenario is None:
-        from oos_drake.scenario.data import load_scenario
-
-        scenario = load_scenario()
+    scenario = default_scenario(scenario)
     model = build_mission_model(scenario)
     spec_c = dataclasses.replace(controller.spec, sampled=False)
     spec_s = dataclasses.replace(controller.spec, sampled=True)
@@ -212,79 +203,59 @@ def ray_boundaries(
     return pd.DataFrame(rows)
 
 
-def analysis_rays(analysis_dir, configurations: int, scenario=None) -> dict:
+def analysis_rays(analysis_dir, scenario=None) -> dict:
     """Rays of the mission's worst real-parameter perturbations of an ``oos analyze`` folder.
 
-    Reads ``peak_perturbations.npz`` (normalized values) and keeps the mission subsets whose
-    perturbation has only blocks of the scenario model (``ureal``) and a finite critical
-    frequency; each ray is the
-    perturbation divided by its largest entry, so the scale is the normalized size (mu's
-    boundary is ``1 / mu`` on it).
+    Reads its certified peaks (:func:`~oos_drake.analysis.confirm.read_peaks`: normalized
+    values) and keeps the mission subsets whose perturbation has only blocks of the scenario
+    model (``ureal``) and a finite critical frequency; each ray is the perturbation divided by
+    its largest entry, so the scale is the normalized size (mu's boundary is ``1 / mu`` on it).
 
     Parameters
     ----------
     analysis_dir : path
         Output folder of ``oos analyze``.
-    configurations : int
-        The analysis' number of mission configurations (its ``summary.json``).
-    """
-    from oos_drake.analysis.models import mission_times
 
-    path = Path(analysis_dir) / "peak_perturbations.npz"
-    if not path.is_file():
-        raise ValueError(f"--analysis: {path} not found")
+    Returns
+    -------
+    dict
+        Subset -> ``(time [s], {block: normalized value})``, subsets in alphabetical order.
+    """
+    from oos_drake.analysis.confirm import read_peaks
     from oos_drake.scenario.model import build_mission_model
 
-    data = np.load(path, allow_pickle=False)
     real_blocks = build_mission_model(scenario).uncertainty  # the plant's ureal blocks
-    times = mission_times(configurations, scenario)
-    subsets = sorted({k.split("|")[1] for k in data.files if k.startswith("mission|")})
     rays = {}
-    for subset in subsets:
-        prefix = f"mission|{subset}|"
-        blocks = {
-            k[len(prefix) :]: data[k]
-            for k in data.files
-            if k.startswith(prefix) and k[len(prefix) :] not in ("model", "omega [rad/s]")
-        }
-        omega = float(data[prefix + "omega [rad/s]"])
-        if not blocks or not np.isfinite(omega) or not set(blocks) <= set(real_blocks):
+    for peak in sorted(read_peaks(analysis_dir), key=lambda p: p.subset):
+        blocks = peak.perturbation
+        if peak.study != "mission" or not np.isfinite(peak.omega):
+            continue
+        if not blocks or not set(blocks) <= set(real_blocks):
             continue
         values = {k: float(np.real(np.ravel(v)[0])) for k, v in blocks.items()}
         size = max(abs(v) for v in values.values())
-        if size == 0:
-            continue
-        model = int(data[prefix + "model"])
-        rays[subset] = (float(times[model]), {k: v / size for k, v in values.items()})
+        if size > 0:
+            rays[peak.subset] = (peak.time, {k: v / size for k, v in values.items()})
     return rays
 
 
-def _boundary(abscissa, scale_max: float, iterations: int = 40) -> float:
+def _boundary(abscissa, scale_max: float) -> float:
     """Smallest scale in ``[0, scale_max]`` with ``abscissa(scale) >= 0`` (a scan of 60 steps,
-    then bisection to ``scale_max 2^-46``); ``inf`` when there is none."""
+    then bisection to a relative ``1e-12``: :func:`~oos_drake.analysis.confirm.
+    boundary_along_ray`); ``inf`` when there is none."""
+    from oos_drake.analysis.confirm import boundary_along_ray
+
     if abscissa(0.0) >= 0:
         return 0.0
-    lo = 0.0
-    for s in np.linspace(0, scale_max, 61)[1:]:
-        if abscissa(s) >= 0:
-            hi = s
-            break
-        lo = s
-    else:
-        return np.inf
-    for _ in range(iterations):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if abscissa(mid) >= 0 else (mid, hi)
-    return 0.5 * (lo + hi)
+    return boundary_along_ray(lambda s: abscissa(s) >= 0, scale_max, steps=60, rtol=1e-12)
 
 
 def margins_figure(table: pd.DataFrame, path, rate_hz: float) -> Path:
     """Margins over the mission: gain, phase, delay and disk margins, continuous (solid),
     exact sampled (dashed), per channel; the multiloop disk margin in black."""
-    import matplotlib
+    from oos_drake.analysis.figures import pyplot, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(2, 2, figsize=(13, 8), sharex=True)
     panels = [
@@ -328,8 +299,4 @@ def margins_figure(table: pd.DataFrame, path, rate_hz: float) -> Path:
         "Loop-at-a-time margins at the wheel input (others closed) and disk margins: "
         f"continuous loop (solid) vs exact {rate_hz:g} Hz sampled-data loop (dashed)"
     )
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

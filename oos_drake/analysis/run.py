@@ -208,7 +208,7 @@ def _certify(array, study, subsets, *, configuration_label):
         certificates[name] = (model, cert.frequency, lower, upper, normalized)
         one = sys.model(model) if sys.batch_shape else sys
         specs = one.uncertainty
-        phys_unit = physical_values(one, normalized, lower) if lower > 0 else {}
+        phys_unit = physical_values(one, normalized, lower)
         for bname, value in normalized.items():
             arr = np.atleast_2d(np.asarray(value, dtype=complex))
             kind = specs[bname].kind
@@ -353,8 +353,9 @@ def run_analysis(
     from oos_drake.analysis.models import docking_closed_loop, mission_closed_loop, mission_times
     from oos_drake.analysis.stability import certified_sweep
     from oos_drake.analysis.subsets import uncertainty_subsets
-    from oos_drake.analysis.worst_cases import Region, write_regions
+    from oos_drake.analysis.worst_cases import block_parameters, physical_values
     from oos_drake.blas import limit_blas_threads
+    from oos_drake.campaign.worst_cases import WorstCaseRegion, write_worst_cases
     from oos_drake.processes import make_executor
 
     limit_blas_threads(1)
@@ -509,21 +510,23 @@ def run_analysis(
     lap("worst-case performance")
     # ------------------------------------------------------------------ worst cases file
     regions = []
-    for _, row in peaks.iterrows():
-        model, freq, lower, upper, normalized = certs[row["subset"]]
+    for index, subset in enumerate(peaks["subset"]):
+        model, freq, lower, upper, normalized = certs[subset]
         regions.append(
-            Region(
+            WorstCaseRegion(
+                index,
                 label(model),
-                float(times[model]),
+                max(float(times[model]), 0.0),
                 float(freq),
                 float(upper),
-                float(lower),
-                ",".join(subsets[row["subset"]]),
-                normalized,
-                peak_gains(perf, row["subset"], int(model)),
+                float(min(lower, upper)),
+                ",".join(subsets[subset]),
+                physical_values(mission.system, normalized, lower),
+                peak_gains(perf, subset, int(model)),
             )
         )
-    paths["worst_cases"] = write_regions(regions, mission.system, out / "worst_cases.parquet")
+    parameters = block_parameters(mission.system)
+    paths["worst_cases"] = write_worst_cases(regions, parameters, out / "worst_cases.parquet")
     # ------------------------------------------------------------------ sensitivity
     sens = None
     if options.sensitivity:
@@ -558,15 +561,10 @@ def run_analysis(
             k_model = int(np.flatnonzero(models == crit_model)[0])
             dl = perf_deltas[("e_p", "total")][k_model, j]
             from oos_drake.robust.blocks import parse_blk
-            from oos_drake.robust.lfr_analysis import block_map
+            from oos_drake.robust.lfr_analysis import block_map, normalized_worst_case
 
             bmap = block_map(one)
-            structure = parse_blk(bmap.blk)
-            norm_p = {}
-            for bname, kind, brows in zip(bmap.names, bmap.kinds, bmap.blk_rows, strict=True):
-                b = structure.blocks[brows[0]]
-                blk = dl[b.r_slice, b.c_slice]
-                norm_p[bname] = float(blk[0, 0].real) if kind == "ureal" else blk.copy()
+            norm_p = normalized_worst_case(bmap, parse_blk(bmap.blk), dl)
             cases.append(("worst APE gain (unit size)", norm_p, 1.0, wj))
         for case, values, scale, w in cases:
             scaled = {k: v * scale for k, v in values.items()}  # unit size: inside the set

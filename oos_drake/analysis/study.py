@@ -317,10 +317,9 @@ def margin_crossing(table: pd.DataFrame, column: str) -> dict:
 
 def study_figure(table: pd.DataFrame, sweep: Sweep, path) -> Path:
     """The certified margin band ``[1/mu_upper, 1/mu_lower]`` against the swept value."""
-    import matplotlib
+    from oos_drake.analysis.figures import pyplot, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     x = table[sweep.column].to_numpy(dtype=float)
     fig, ax = plt.subplots(figsize=(7, 4.2))
@@ -339,7 +338,4 @@ def study_figure(table: pd.DataFrame, sweep: Sweep, path) -> Path:
     ax.set_title(f"Robust stability margin against {sweep.path}")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path)

@@ -288,7 +288,6 @@ def _warm_pass(pool, pts, act, parts, iterations, lower, converged=None):
     Returns ``(evaluations, found)``: upper-bound problems solved and a better lower bound.
     """
     before = pts.upper[act].copy()
-    zrows, wcols, blk = parts
     nb = neighbours(pts.model, pts.omega)
     owner = [act]
     source = [act]
@@ -300,15 +299,7 @@ def _warm_pass(pool, pts, act, parts, iterations, lower, converged=None):
     owner = np.concatenate(owner)
     source = np.concatenate(source)
     res = pool.bounds(
-        PointTask(
-            pts.model[owner],
-            pts.omega[owner],
-            pts.params[source],
-            zrows,
-            wcols,
-            blk,
-            iterations,
-        )
+        PointTask(pts.model[owner], pts.omega[owner], pts.params[source], *parts, iterations)
     )
     # the scalings of each owner's best candidate
     order = np.lexsort((res.upper, owner))
@@ -336,9 +327,7 @@ def _warm_pass(pool, pts, act, parts, iterations, lower, converged=None):
                     pts.model[still],
                     pts.omega[still],
                     pts.params[still],
-                    zrows,
-                    wcols,
-                    blk,
+                    *parts,
                     1,  # one iteration from the converged scalings: the worst direction
                     lower_restarts=lower[1],
                     lower_iterations=lower[2],
@@ -346,20 +335,12 @@ def _warm_pass(pool, pts, act, parts, iterations, lower, converged=None):
             )
             pts.lower[still] = np.maximum(pts.lower[still], low.lower)
             if low.best >= 0:
-                k = still[low.best]
-                found = LowerCertificate(
-                    float(low.lower[low.best]),
-                    int(pts.model[k]),
-                    float(pts.omega[k]),
-                    low.best_delta,
-                    "grid",
-                )
+                found = _grid_certificate(low, pts.model[still], pts.omega[still])
     return evaluations, found
 
 
 def _refine(pool, pts, act, parts, iterations, options, lower_star):
     """Log midpoints towards both neighbours of spikes that are local maxima of their model."""
-    zrows, wcols, blk = parts
     nb = neighbours(pts.model, pts.omega)
     new_model, new_omega, seed = [], [], []
     for i in act:
@@ -381,9 +362,7 @@ def _refine(pool, pts, act, parts, iterations, options, lower_star):
             new_model,
             new_omega,
             pts.params[seed],
-            zrows,
-            wcols,
-            blk,
+            *parts,
             iterations,
             lower_restarts=options.lower_restarts,
             lower_iterations=options.lower_iterations,
@@ -393,14 +372,17 @@ def _refine(pool, pts, act, parts, iterations, options, lower_star):
     pts.append(new_model, new_omega, np.maximum(res.upper, lower), lower, res.params)
     found = None
     if res.best >= 0 and res.lower[res.best] > lower_star:
-        found = LowerCertificate(
-            float(res.lower[res.best]),
-            int(new_model[res.best]),
-            float(new_omega[res.best]),
-            res.best_delta,
-            "grid",
-        )
+        found = _grid_certificate(res, new_model, new_omega)
     return new_model.size, found
+
+
+def _grid_certificate(bounds, model: np.ndarray, omega: np.ndarray) -> LowerCertificate:
+    """The certificate of the best lower bound of ``bounds`` (a :class:`PointBounds` of the
+    points ``model``, ``omega`` [rad/s])."""
+    best = bounds.best
+    return LowerCertificate(
+        float(bounds.lower[best]), int(model[best]), float(omega[best]), bounds.best_delta, "grid"
+    )
 
 
 def resolve_spikes(

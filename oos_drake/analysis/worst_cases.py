@@ -1,36 +1,19 @@
-"""Write the analysis' critical regions as ``worst_cases.parquet`` (schema of the campaign).
+"""The analysis' critical regions in the campaign's terms (``worst_cases.parquet``).
 
-The schema is :mod:`oos_drake.campaign.worst_cases`. Each certified peak becomes a region; its
-perturbation is the destabilizing one scaled onto the modeled uncertainty set (``||delta|| = 1``,
-i.e. ``delta * mu_lower``): the worst case INSIDE the ranges the campaign can sample, in
+The schema is :mod:`oos_drake.campaign.worst_cases`, the blocks are its parameters
+(:func:`block_parameters`). Each certified peak becomes a region
+(:func:`oos_drake.analysis.run.run_analysis`); its perturbation is the destabilizing one scaled
+onto the modeled uncertainty set (``||delta|| = 1``, i.e. ``delta * mu_lower``,
+:func:`physical_values`): the worst case INSIDE the ranges the campaign can sample, in
 physical units (``ureal``: the parameter value; ``ultidyn``: the norm of the block, the scalar
 that scales the stable realization of its worst direction).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from pathlib import Path
-
 import numpy as np
 
 from oos_drake.campaign.simulator import Parameter, ParameterKind
-from oos_drake.campaign.worst_cases import WorstCaseRegion, write_worst_cases
-
-
-@dataclass(frozen=True)
-class Region:
-    """A critical region: where and how the loop is closest to instability."""
-
-    configuration: str
-    time: float
-    frequency_hz: float
-    mu_upper: float
-    mu_lower: float
-    subset: str
-    normalized: dict  # block -> normalized destabilizing value (float or complex matrix)
-    #: campaign metric -> (lower, upper) worst-case performance gain (analysis.performance)
-    gains: dict = field(default_factory=dict)
 
 
 def block_parameters(sys):
@@ -70,7 +53,10 @@ def block_parameters(sys):
 
 
 def physical_values(sys, normalized: dict, scale: float) -> dict:
-    """Block -> physical value of ``scale * normalized`` (ureal values clipped to the range)."""
+    """Block -> physical value of ``scale * normalized`` (ureal values clipped to the range);
+    with ``scale = mu_lower`` the worst case inside the set (empty when ``scale <= 0``)."""
+    if not scale > 0:  # (NaN included)
+        return {}
     out = {}
     specs = sys.uncertainty
     for name, value in normalized.items():
@@ -83,27 +69,3 @@ def physical_values(sys, normalized: dict, scale: float) -> dict:
             norm = float(np.linalg.norm(np.atleast_2d(np.asarray(value)), ord=2)) * scale
             out[name] = float(min(norm, 1.0) * spec.bound)
     return out
-
-
-def write_regions(regions, sys, path) -> Path:
-    """Write ``regions`` (list of :class:`Region`) for the blocks of ``sys`` to ``path``."""
-
-    params = block_parameters(sys)
-    out = []
-    for i, r in enumerate(regions):
-        scale = r.mu_lower if r.mu_lower > 0 else 0.0
-        values = physical_values(sys, r.normalized, scale) if scale > 0 else {}
-        out.append(
-            WorstCaseRegion(
-                i,
-                r.configuration,
-                float(max(r.time, 0.0)),
-                float(r.frequency_hz),
-                float(r.mu_upper),
-                float(min(r.mu_lower, r.mu_upper)),
-                r.subset,
-                values,
-                dict(r.gains),
-            )
-        )
-    return write_worst_cases(out, params, Path(path))

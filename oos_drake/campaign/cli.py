@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from oos_drake.cli import add_deprecated_alias, add_scheduler_argument
+from oos_drake.cli import add_deprecated_alias, add_scheduler_argument, run_command
 
 
 def _add_executor_options(parser: argparse.ArgumentParser) -> None:
@@ -224,13 +224,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     parser = argparse.ArgumentParser(prog="oos")
     register(parser.add_subparsers(dest="command", metavar="COMMAND", required=True))
-    args = parser.parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError, KeyError) as exc:
-        message = exc.args[0] if exc.args else exc
-        print(f"oos {args.command}: error: {message}", file=sys.stderr)
-        return 2
+    return run_command(parser.parse_args(argv))
 
 
 if __name__ == "__main__":

@@ -174,7 +174,9 @@ _KEYS: dict[str, tuple[set[str], set[str]]] = {
 }
 
 
-def _number(where: str, key: str, value: Any) -> float:
+def finite_number(where: str, key: str, value: Any) -> float:
+    """``value`` as a float; ``ValueError`` ``"<where>: <key> = <value> is not a finite number"``
+    for anything else (booleans, strings, NaN, inf)."""
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise ValueError(f"{where}: {key} = {value!r} is not a finite number")
     return float(value)
@@ -230,17 +232,17 @@ def parse_distribution(where: str, table: Any, parameter: Parameter) -> Distribu
         return min(max(value, lo), hi)
 
     if name == "fixed":
-        return Fixed(in_range("value", _number(where, "value", table["value"])))
+        return Fixed(in_range("value", finite_number(where, "value", table["value"])))
     if name == "choice":
         raw = table["values"]
         if not isinstance(raw, list) or not raw:
             raise ValueError(f"{where}: values must be a non-empty list")
-        values = tuple(in_range("values", _number(where, "values", v)) for v in raw)
+        values = tuple(in_range("values", finite_number(where, "values", v)) for v in raw)
         if "probabilities" in table:
             praw = table["probabilities"]
             if not isinstance(praw, list) or len(praw) != len(values):
                 raise ValueError(f"{where}: probabilities must be a list as long as values")
-            probabilities = tuple(_number(where, "probabilities", p) for p in praw)
+            probabilities = tuple(finite_number(where, "probabilities", p) for p in praw)
             if any(p < 0 for p in probabilities) or not math.isclose(
                 sum(probabilities), 1.0, rel_tol=1e-9
             ):
@@ -251,17 +253,17 @@ def parse_distribution(where: str, table: Any, parameter: Parameter) -> Distribu
             probabilities = tuple(1.0 / len(values) for _ in values)
         return Choice(values, probabilities)
     if name == "normal":
-        mean = in_range("mean", _number(where, "mean", table["mean"]))
-        std = _number(where, "std", table["std"])
+        mean = in_range("mean", finite_number(where, "mean", table["mean"]))
+        std = finite_number(where, "std", table["std"])
         if std <= 0:
             raise ValueError(f"{where}: std = {std:g} {unit} must be positive")
-        low = in_range("low", _number(where, "low", table.get("low", lo)))
-        high = in_range("high", _number(where, "high", table.get("high", hi)))
+        low = in_range("low", finite_number(where, "low", table.get("low", lo)))
+        high = in_range("high", finite_number(where, "high", table.get("high", hi)))
         if not low < high:
             raise ValueError(f"{where}: low = {low:g} must be below high = {high:g} {unit}")
         return TruncatedNormal(mean, std, low, high)
-    low = in_range("low", _number(where, "low", table["low"]))
-    high = in_range("high", _number(where, "high", table["high"]))
+    low = in_range("low", finite_number(where, "low", table["low"]))
+    high = in_range("high", finite_number(where, "high", table["high"]))
     if not low < high:
         raise ValueError(f"{where}: low = {low:g} must be below high = {high:g} {unit}")
     if name == "log-uniform":

@@ -25,13 +25,14 @@ from __future__ import annotations
 
 import collections
 import concurrent.futures
+import itertools
 import math
 import os
 import socket
 import time
 import traceback
 import warnings
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterable, Iterator
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Protocol
@@ -132,10 +133,6 @@ def _warm_up(recipe: SimulatorRecipe) -> None:
     build_simulator(recipe)
 
 
-def _init_pool_worker(recipe: SimulatorRecipe) -> None:
-    _warm_up(recipe)
-
-
 class Executor(Protocol):
     """Runs cases and yields their results as they complete (in any order)."""
 
@@ -158,24 +155,6 @@ class InlineExecutor:
 
     def close(self) -> None:
         pass
-
-
-def _bounded(submit: Callable, wait_one: Callable, cases: Iterable[RunCase], limit: int):
-    """Keep at most ``limit`` futures in flight; yield results as they complete."""
-    pending = set()
-    iterator = iter(cases)
-    exhausted = False
-    while True:
-        while not exhausted and len(pending) < limit:
-            try:
-                pending.add(submit(next(iterator)))
-            except StopIteration:
-                exhausted = True
-        if not pending:
-            return
-        done, pending = wait_one(pending)
-        for future in done:
-            yield future.result()
 
 
 class ProcessPoolExecutor:
@@ -204,7 +183,7 @@ class ProcessPoolExecutor:
         if self._pool is None:
             # spawn rather than fork: Drake's threads do not survive a fork
             self._pool = PoolExecutor(
-                self.workers, initializer=_init_pool_worker, initargs=(recipe,), method="spawn"
+                self.workers, initializer=_warm_up, initargs=(recipe,), method="spawn"
             )
             # bring workers up now (one warm-up task each; the pool may reuse an idle one)
             list(self._pool.map(_warm_up, [recipe] * self.workers))
@@ -271,14 +250,7 @@ class ProcessPoolExecutor:
             return _timeout_result(case, self.timeout)
         except BrokenProcessPool as exc:
             self._kill_pool()
-            return RunResult(
-                case.run_id,
-                "failed",
-                f"WorkerDied: its worker process died ({exc})",
-                {},
-                None,
-                math.nan,
-            )
+            return _failed_result(case, f"WorkerDied: its worker process died ({exc})")
 
     def _kill_pool(self) -> None:
         """Stop every worker process now and forget the pool (the next ``start`` makes one)."""
@@ -293,14 +265,14 @@ class ProcessPoolExecutor:
             self._pool = None
 
 
+def _failed_result(case: RunCase, error: str, wall_time: float = math.nan) -> RunResult:
+    """The record of a case its worker did not finish (a timeout, a dead worker)."""
+    return RunResult(case.run_id, "failed", error, {}, None, wall_time)
+
+
 def _timeout_result(case: RunCase, timeout: float) -> RunResult:
-    return RunResult(
-        case.run_id,
-        "failed",
-        f"Timeout: the run exceeded {timeout:g} s and was stopped",
-        {},
-        None,
-        float(timeout),
+    return _failed_result(
+        case, f"Timeout: the run exceeded {timeout:g} s and was stopped", float(timeout)
     )
 
 
@@ -328,16 +300,19 @@ class DaskExecutor:
         self._tasks.client.run(_warm_up, recipe)
 
     def run(self, recipe: SimulatorRecipe, cases: Iterable[RunCase]) -> Iterator[RunResult]:
+        """Run the cases, at most ``2 * workers`` in flight; results as they complete."""
         from dask.distributed import wait
 
-        def submit(case):
-            return self._tasks.submit(execute_case, recipe, case)
-
-        def wait_one(pending):
+        pending, iterator = set(), iter(cases)
+        while True:
+            for case in itertools.islice(iterator, 2 * self.workers - len(pending)):
+                pending.add(self._tasks.submit(execute_case, recipe, case))
+            if not pending:
+                return
             result = wait(list(pending), return_when="FIRST_COMPLETED")
-            return set(result.done), set(result.not_done)
-
-        yield from _bounded(submit, wait_one, cases, 2 * self.workers)
+            pending = set(result.not_done)
+            for future in result.done:
+                yield future.result()
 
     def close(self) -> None:
         self._tasks.shutdown()

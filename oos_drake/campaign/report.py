@@ -104,10 +104,13 @@ class CampaignReport:
     tables: dict
 
 
-def _save(fig, path: Path) -> None:
-    """Save a figure as PNG atomically (temp file + rename) and close it."""
+def _save(fig, path: Path, rect=None) -> Path:
+    """Lay out ``fig`` (``tight_layout``, in ``rect`` if given), save it as PNG atomically
+    (temp file + rename), close it and return ``path``."""
+    fig.tight_layout(rect=rect)
     store.atomic_write_bytes(path, lambda stream: fig.savefig(stream, format="png", dpi=110))
     plt.close(fig)
+    return path
 
 
 def weighted_probability(weights: np.ndarray, indicator: np.ndarray) -> tuple[float, float]:
@@ -406,9 +409,7 @@ def _plot_regions(spec, regions: pd.DataFrame, path: Path) -> Path | None:
         "subset, an energy ratio) against the nonlinear runs drawn around it (peak in the window)",
         fontsize=10,
     )
-    fig.tight_layout(rect=(0, 0.08, 1, 1))
-    _save(fig, path)
-    return path
+    return _save(fig, path, rect=(0, 0.08, 1, 1))
 
 
 def find_confirmation(directory: Path, confirm: str | Path | None = None) -> Path | None:
@@ -497,9 +498,7 @@ def _plot_confirmation(table: pd.DataFrame, path: Path) -> Path | None:
     ax.set_title("Stability: mu's boundary against the nonlinear twin's (oos confirm)", fontsize=10)
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=3)
     ax.grid(alpha=0.3, axis="x")
-    fig.tight_layout()
-    _save(fig, path)
-    return path
+    return _save(fig, path)
 
 
 def _worst_runs(spec, runs: pd.DataFrame, count: int) -> pd.DataFrame:
@@ -559,9 +558,7 @@ def _plot_distributions(spec, runs: pd.DataFrame, path: Path) -> Path:
         ax.set_visible(False)
     kind = "weighted empirical CDFs" if weighted else "histograms"
     fig.suptitle(f"Campaign {spec.name}: metric {kind} against requirements")
-    fig.tight_layout()
-    _save(fig, path)
-    return path
+    return _save(fig, path)
 
 
 def _series_for(directory: Path, spec, plan: pd.DataFrame, run_id: int) -> pd.DataFrame | None:
@@ -617,9 +614,7 @@ def _plot_worst(
     axes[0, 0].legend(fontsize=7, ncol=3, loc="upper right")
     axes[-1, 0].set_xlabel("time [s]")
     fig.suptitle(f"Campaign {spec.name}: time histories of the {len(series)} worst runs")
-    fig.tight_layout()
-    _save(fig, path)
-    return path
+    return _save(fig, path)
 
 
 def _plot_pass_fail(spec, runs: pd.DataFrame, path: Path) -> Path | None:
@@ -665,9 +660,7 @@ def _plot_pass_fail(spec, runs: pd.DataFrame, path: Path) -> Path | None:
         f"Campaign {spec.name}: pass/fail against each dispersed parameter "
         "(ratio > 1 violates a requirement)"
     )
-    fig.tight_layout()
-    _save(fig, path)
-    return path
+    return _save(fig, path)
 
 
 def write_report(

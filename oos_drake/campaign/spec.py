@@ -50,7 +50,7 @@ from typing import Any
 
 import tomli_w
 
-from oos_drake.campaign.distributions import Distribution, parse_distribution
+from oos_drake.campaign.distributions import Distribution, finite_number, parse_distribution
 from oos_drake.campaign.simulator import (
     MissionWindow,
     SimulatorInfo,
@@ -237,8 +237,7 @@ def _check_keys(where: str, table: Any, allowed: set[str]) -> Mapping[str, Any]:
 
 
 def _positive_float(where: str, key: str, value: Any, allow_zero: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise _fail(where, f"{key} = {value!r} is not a finite number")
+    finite_number(where, key, value)
     if value < 0 or (value == 0 and not allow_zero):
         raise _fail(where, f"{key} = {value!r} must be {'>= 0' if allow_zero else '> 0'}")
     return float(value)
@@ -451,15 +450,7 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
         bounds = _check_keys(rw, bounds, {"max", "min"})
         if not bounds:
             raise _fail(rw, "give max and/or min")
-        values = {}
-        for key, value in bounds.items():
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, int | float)
-                or not math.isfinite(value)
-            ):
-                raise _fail(rw, f"{key} = {value!r} is not a finite number")
-            values[key] = float(value)
+        values = {key: finite_number(rw, key, value) for key, value in bounds.items()}
         if "max" in values and "min" in values and values["min"] > values["max"]:
             raise _fail(rw, f"min {values['min']} exceeds max {values['max']}")
         requirements.append(

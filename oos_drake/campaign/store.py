@@ -59,7 +59,8 @@ def _file_mode() -> int:
 _FILE_MODE = _file_mode()
 
 
-def _atomic_write(path: Path, write) -> Path:
+def atomic_write_bytes(path: Path, write) -> Path:
+    """Call ``write(binary_stream)`` into a temporary file, then rename it to ``path``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -81,7 +82,7 @@ def _atomic_write(path: Path, write) -> Path:
 
 def atomic_write_parquet(table: pd.DataFrame, path: Path) -> Path:
     """Write ``table`` to ``path`` as Parquet, atomically."""
-    return _atomic_write(path, lambda stream: table.to_parquet(stream, index=False))
+    return atomic_write_bytes(path, lambda stream: table.to_parquet(stream, index=False))
 
 
 def read_table(path: Path, columns, label: str, *, legacy: bool = False) -> pd.DataFrame:
@@ -112,14 +113,9 @@ def read_table(path: Path, columns, label: str, *, legacy: bool = False) -> pd.D
     return table
 
 
-def atomic_write_bytes(path: Path, write) -> Path:
-    """Call ``write(binary_stream)`` into a temporary file, then rename it to ``path``."""
-    return _atomic_write(path, write)
-
-
 def atomic_write_text(text: str, path: Path) -> Path:
     """Write ``text`` (UTF-8) to ``path``, atomically."""
-    return _atomic_write(path, lambda stream: stream.write(text.encode("utf-8")))
+    return atomic_write_bytes(path, lambda stream: stream.write(text.encode("utf-8")))
 
 
 def environment() -> dict[str, str]:

@@ -44,6 +44,18 @@ class BfgsResult:
     message: str
 
 
+def _bfgs_update(H: np.ndarray, s: np.ndarray, y: np.ndarray, sy: float) -> np.ndarray:
+    """The BFGS update of the inverse Hessian ``H`` from the step ``s`` and the gradient change
+    ``y`` (``sy = s @ y > 0``; Nocedal-Wright (6.17))."""
+    rho = 1.0 / sy
+    Hy = H @ y
+    return (
+        H
+        - rho * (np.outer(s, Hy) + np.outer(Hy, s))
+        + (rho * rho * (y @ Hy) + rho) * np.outer(s, s)
+    )
+
+
 def _weak_wolfe(fun, x, f0, g0, d, c1=1e-4, c2=0.9, max_steps=40):
     """Bisection/expansion weak Wolfe line search; returns ``(t, x, f, g, evals, ok)``."""
     slope = float(g0 @ d)
@@ -116,13 +128,7 @@ def minimize_nonsmooth(
         s, y = x_new - x, g_new - g
         sy = float(s @ y)
         if sy > 1e-16 * np.linalg.norm(s) * np.linalg.norm(y):
-            rho = 1.0 / sy
-            Hy = H @ y
-            H = (
-                H
-                - rho * (np.outer(s, Hy) + np.outer(Hy, s))
-                + (rho * rho * (y @ Hy) + rho) * np.outer(s, s)
-            )
+            H = _bfgs_update(H, s, y, sy)
         decrease = f - f_new
         x, f, g = x_new, f_new, g_new
         history.append(f)
@@ -276,13 +282,7 @@ def minimize_bundle_bfgs(
             if fresh:  # Nocedal-Wright (6.20): size the first metric from the curvature seen
                 H = np.eye(n) * (sy / float(y @ y))
                 fresh = False
-            rho = 1.0 / sy
-            Hy = H @ y
-            H = (
-                H
-                - rho * (np.outer(s, Hy) + np.outer(Hy, s))
-                + (rho * rho * (y @ Hy) + rho) * np.outer(s, s)
-            )
+            H = _bfgs_update(H, s, y, sy)
         d, lam, predicted = step(H, f, vals, grads)
         if len(history) > stall_window and (history[-stall_window - 1] - f <= stall_rtol * abs(f)):
             message = f"stalled (< {stall_rtol:g} relative decrease in {stall_window} iterations)"

@@ -352,13 +352,8 @@ def from_lfr(
 
 def scenario_plants(configurations: int, scenario=None) -> PlantArray:
     """The scenario's model array: its LFR substituted at equally spaced mission times."""
-    try:
-        from oos_drake.scenario.model import build_mission_model, mission_values
-    except ModuleNotFoundError as exc:
-        raise ValueError(
-            "--plant lfr needs the scenario model (oos_drake.scenario.model), which is not "
-            "available; use --plant synthetic"
-        ) from exc
+    from oos_drake.scenario.model import build_mission_model, mission_values
+
     times = mission_times(configurations, scenario)
     model = build_mission_model(scenario)
     return from_lfr(

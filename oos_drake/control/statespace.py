@@ -113,22 +113,6 @@ class BatchedStateSpace:
             kron(self.A), kron(self.B), kron(self.C), kron(self.D), inputs, outputs
         )
 
-    def index_outputs(self, names: Sequence[str]) -> list[int]:
-        """Return the row indices of the named outputs (``ValueError`` naming an unknown one)."""
-        lookup = {name: i for i, name in enumerate(self.outputs)}
-        missing = [name for name in names if name not in lookup]
-        if missing:
-            raise ValueError(f"unknown output channel {missing[0]!r}")
-        return [lookup[name] for name in names]
-
-    def index_inputs(self, names: Sequence[str]) -> list[int]:
-        """Return the column indices of the named inputs (``ValueError`` naming an unknown one)."""
-        lookup = {name: i for i, name in enumerate(self.inputs)}
-        missing = [name for name in names if name not in lookup]
-        if missing:
-            raise ValueError(f"unknown input channel {missing[0]!r}")
-        return [lookup[name] for name in names]
-
     def take(self, index) -> BatchedStateSpace:
         """Return the models ``index`` of the first batch dimension (int, slice or array)."""
         return BatchedStateSpace(
