@@ -154,9 +154,11 @@ def _analysis_model(sys, model: int, members):
     return A, Bw, Cz, Dzw, sub.blk, sub, reduced
 
 
-#: Contiguous ranges of configurations per worker in :func:`axis_guarantee` (each range starts
-#: its continuation cold).
+#: Tasks per worker and subset in :func:`axis_guarantee`.
 CHUNKS_PER_WORKER = 3
+#: Contiguous ranges of configurations per task of :func:`axis_guarantee`, advanced in
+#: lock-step (each range starts its continuation cold).
+LOCKSTEP_RANGES = 4
 
 
 @dataclass(frozen=True)
@@ -215,20 +217,36 @@ class AxisGuarantee:
 
 
 def _axis_task(task):
-    """Worker: the covers of a range of neighbouring configurations of one subset ->
-    ``([(level, tested points, failure, solved points), ...], seconds)``.
+    """Worker: the covers of a few ranges of neighbouring configurations of one subset ->
+    ``([[(level, tested points, failure, solved points), ...] per range], seconds)``.
+
+    The ranges advance in lock-step (:func:`~oos_drake.robust.mu_intervals.lockstep`): the
+    points their current covers need solved go to the optimizer together
+    (:func:`~oos_drake.robust.mu_intervals.solve_mu_batch`), which costs about the same for a
+    few matrices as for one.
+    """
+    import time as _time
+
+    from oos_drake.robust.mu_intervals import lockstep, solve_mu_batch
+
+    clock = _time.perf_counter()
+    blk, floor, slack, ranges = task
+    out = lockstep([_range_covers(blk, floor, slack, r) for r in ranges], solve_mu_batch)
+    return out, _time.perf_counter() - clock
+
+
+def _range_covers(blk, floor, slack, configurations):
+    """The covers of a range of neighbouring configurations, one after the other, as a
+    generator of solve requests (:func:`~oos_drake.robust.mu_intervals.cover_steps`) that
+    returns ``[(level, tested points, failure, solved points), ...]``.
 
     Each cover tries first the scalings that covered the previous configuration (its
     :meth:`~oos_drake.robust.mu_intervals.AxisCertificate.essential` points: neighbouring
     configurations are close problems, so they usually prove the same level on nearly the same
     intervals, with no optimization), then the grid's own scalings, and only then solves.
     """
-    import time as _time
+    from oos_drake.robust.mu_intervals import Realization, cover_steps, mu_solver, scalings_at
 
-    from oos_drake.robust.mu_intervals import Realization, cover_axis, mu_solver, scalings_at
-
-    clock = _time.perf_counter()
-    blk, floor, slack, configurations = task
     out, prior = [], None
     for A, Bw, Cz, Dzw, seeds, grid_omega, grid_params, grid_upper in configurations:
         real = Realization(A, Bw, Cz, Dzw)
@@ -239,7 +257,7 @@ def _axis_task(task):
         try:
             # the grid's own scalings are the next candidates: no second optimization there
             # (evaluated only where the cover tries them)
-            cert = cover_axis(
+            cert = yield from cover_steps(
                 real,
                 mu_solver(
                     real,
@@ -262,7 +280,7 @@ def _axis_task(task):
         prior = (cert.omega[keep], [cert.scalings[i] for i in keep]) if keep.size else None
         failure = "" if cert.covered else "cover did not close"
         out.append((float(cert.upper), int(cert.omega.size), failure, int(cert.added.sum())))
-    return out, _time.perf_counter() - clock
+    return out
 
 
 @dataclass(frozen=True)
@@ -287,7 +305,9 @@ class GuaranteeSubset:
     model_matrices: object
 
 
-def axis_guarantee(pool, subsets: dict, slack=None, gap=None) -> dict:
+def axis_guarantee(
+    pool, subsets: dict, slack=None, gap=None, ranges_per_task: int = LOCKSTEP_RANGES
+) -> dict:
     """Prove the peak of mu of every configuration of each subset on the whole frequency axis.
 
     Parameters
@@ -304,6 +324,9 @@ def axis_guarantee(pool, subsets: dict, slack=None, gap=None) -> dict:
         The cost of the covers falls fast as it grows (a level close to mu over a wide band
         needs many narrow intervals); the analysis uses its target gap, so the guaranteed
         peak is within the target of the lower bound unless a configuration's mu is above it.
+    ranges_per_task : int
+        Contiguous ranges of configurations each task covers in lock-step (their solves
+        batched; 1: one range after the other, each cover alone).
 
     Returns
     -------
@@ -313,14 +336,19 @@ def axis_guarantee(pool, subsets: dict, slack=None, gap=None) -> dict:
     Each configuration's cover starts from the grid's own scalings (an interval test each,
     no optimization: :func:`~oos_drake.robust.mu_intervals.scalings_at`); only the gaps they
     leave are solved, and the grid's peaks only where their grid bound is above the level.
-    The covers of all the subsets go to the workers in one map (contiguous ranges of
-    configurations, a few per worker and subset, the subsets with the largest ``M`` first), so
-    that both workers stay busy to the end instead of waiting for each subset's last range.
+    The covers of all the subsets go to the workers in one map (a few tasks per worker and
+    subset, the subsets with the largest ``M`` first), so that both workers stay busy to the
+    end instead of waiting for each subset's last task. A task covers ``ranges_per_task``
+    contiguous ranges of configurations in lock-step: within a range each cover continues from
+    the previous one, and the solves of the ranges' current covers are batched.
     """
     from oos_drake.robust.mu_intervals import SLACK
 
     slack = SLACK if slack is None else float(slack)
     gap = slack if gap is None else max(float(gap), slack)
+    if int(ranges_per_task) < 1:
+        raise ValueError(f"axis_guarantee: ranges_per_task must be >= 1, got {ranges_per_task!r}")
+    ranges_per_task = int(ranges_per_task)
     tasks, owner, prepared = [], [], {}
     # largest M first: the costly covers start first and the cheap ones fill the end
     order = sorted(subsets, key=lambda name: -len(subsets[name].parts[0]))
@@ -338,13 +366,15 @@ def axis_guarantee(pool, subsets: dict, slack=None, gap=None) -> dict:
             peaks = np.unique([np.argmax(up), np.argmax(lo)])
             seeds = w[peaks[up[peaks] * (1.0 + slack) > floor]]
             configurations.append((*sub.model_matrices(int(m)), seeds, w, pts.params[mine], up))
-        # contiguous ranges (continuation from one configuration to the next), a few per
+        # contiguous ranges (continuation from one configuration to the next), a few tasks per
         # worker so that the costly ranges (configurations near the peak) spread over them
         n_tasks = min(len(configurations), CHUNKS_PER_WORKER * pool.n_jobs)
         bounds = np.linspace(0, len(configurations), n_tasks + 1).round().astype(int)
         for a, b in zip(bounds[:-1], bounds[1:], strict=True):
             if b > a:
-                tasks.append((blk, floor, slack, configurations[a:b]))
+                cut = np.linspace(a, b, min(b - a, ranges_per_task) + 1).round().astype(int)
+                ranges = [configurations[i:j] for i, j in zip(cut[:-1], cut[1:], strict=True)]
+                tasks.append((blk, floor, slack, ranges))
                 owner.append(name)
         prepared[name] = (models, floor)
     done = pool.map(_axis_task, tasks)
@@ -352,7 +382,7 @@ def axis_guarantee(pool, subsets: dict, slack=None, gap=None) -> dict:
     for name in subsets:
         models, floor = prepared[name]
         mine = [d for d, o in zip(done, owner, strict=True) if o == name]
-        out = [o for chunk, _ in mine for o in chunk]
+        out = [o for ranges, _ in mine for chunk in ranges for o in chunk]
         pts = subsets[name].points
         levels = np.array([o[0] for o in out], dtype=float)
         failures = tuple(f"model {m}: {o[2]}" for m, o in zip(models, out, strict=True) if o[2])
