@@ -441,7 +441,7 @@ def run_analysis(
         )
         docking_tables.append(dp)
         guaranteed_rows.append(
-            guaranteed_table(f"docking {phase}", dres, "stiffness [N/m or N m/rad]", stiffness)
+            guaranteed_table(f"docking-{phase}", dres, "stiffness [N/m or N m/rad]", stiffness)
         )
         docking_perturbations.append(dpert)
         docking_certs[phase] = (arr, dc["total"])

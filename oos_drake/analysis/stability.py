@@ -158,7 +158,7 @@ def _analysis_model(sys, model: int, members):
 CHUNKS_PER_WORKER = 3
 #: Contiguous ranges of configurations per task of :func:`axis_guarantee`, advanced in
 #: lock-step (each range starts its continuation cold).
-LOCKSTEP_RANGES = 4
+LOCKSTEP_RANGES = 8
 
 
 @dataclass(frozen=True)
