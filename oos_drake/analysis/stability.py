@@ -154,11 +154,13 @@ def _analysis_model(sys, model: int, members):
     return A, Bw, Cz, Dzw, sub.blk, sub, reduced
 
 
-#: Tasks per worker and subset in :func:`axis_guarantee`.
+#: Contiguous ranges of configurations per worker and subset in :func:`axis_guarantee` (each
+#: range starts its continuation cold).
 CHUNKS_PER_WORKER = 3
-#: Contiguous ranges of configurations per task of :func:`axis_guarantee`, advanced in
-#: lock-step (each range starts its continuation cold).
-LOCKSTEP_RANGES = 8
+#: Ranges per task of :func:`axis_guarantee`, advanced in lock-step. More ranges (8 per task,
+#: 48 per subset) batched better but their cold starts tripled the solved points at full size
+#: (docs/DESIGN.md "Session 10"): the ranges stay those of one range per task.
+LOCKSTEP_RANGES = 3
 
 
 @dataclass(frozen=True)
@@ -325,8 +327,8 @@ def axis_guarantee(
         needs many narrow intervals); the analysis uses its target gap, so the guaranteed
         peak is within the target of the lower bound unless a configuration's mu is above it.
     ranges_per_task : int
-        Contiguous ranges of configurations each task covers in lock-step (their solves
-        batched; 1: one range after the other, each cover alone).
+        Ranges of configurations each task covers in lock-step (their solves batched; 1: each
+        task one range, its covers solved alone). The ranges are the same whatever its value.
 
     Returns
     -------
@@ -336,11 +338,11 @@ def axis_guarantee(
     Each configuration's cover starts from the grid's own scalings (an interval test each,
     no optimization: :func:`~oos_drake.robust.mu_intervals.scalings_at`); only the gaps they
     leave are solved, and the grid's peaks only where their grid bound is above the level.
-    The covers of all the subsets go to the workers in one map (a few tasks per worker and
-    subset, the subsets with the largest ``M`` first), so that both workers stay busy to the
-    end instead of waiting for each subset's last task. A task covers ``ranges_per_task``
-    contiguous ranges of configurations in lock-step: within a range each cover continues from
-    the previous one, and the solves of the ranges' current covers are batched.
+    The covers of all the subsets go to the workers in one map (contiguous ranges of
+    configurations, a few per worker and subset, the subsets with the largest ``M`` first), so
+    that both workers stay busy to the end instead of waiting for each subset's last range. A
+    task covers ``ranges_per_task`` consecutive ranges in lock-step: within a range each cover
+    continues from the previous one, and the solves of the ranges' current covers are batched.
     """
     from oos_drake.robust.mu_intervals import SLACK
 
@@ -366,16 +368,15 @@ def axis_guarantee(
             peaks = np.unique([np.argmax(up), np.argmax(lo)])
             seeds = w[peaks[up[peaks] * (1.0 + slack) > floor]]
             configurations.append((*sub.model_matrices(int(m)), seeds, w, pts.params[mine], up))
-        # contiguous ranges (continuation from one configuration to the next), a few tasks per
-        # worker so that the costly ranges (configurations near the peak) spread over them
-        n_tasks = min(len(configurations), CHUNKS_PER_WORKER * pool.n_jobs)
-        bounds = np.linspace(0, len(configurations), n_tasks + 1).round().astype(int)
-        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
-            if b > a:
-                cut = np.linspace(a, b, min(b - a, ranges_per_task) + 1).round().astype(int)
-                ranges = [configurations[i:j] for i, j in zip(cut[:-1], cut[1:], strict=True)]
-                tasks.append((blk, floor, slack, ranges))
-                owner.append(name)
+        # contiguous ranges (continuation from one configuration to the next), a few per
+        # worker so that the costly ranges (configurations near the peak) spread over them;
+        # ``ranges_per_task`` consecutive ones per task
+        n_ranges = min(len(configurations), CHUNKS_PER_WORKER * pool.n_jobs)
+        bounds = np.linspace(0, len(configurations), n_ranges + 1).round().astype(int)
+        ranges = [configurations[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+        for first in range(0, n_ranges, ranges_per_task):
+            tasks.append((blk, floor, slack, ranges[first : first + ranges_per_task]))
+            owner.append(name)
         prepared[name] = (models, floor)
     done = pool.map(_axis_task, tasks)
     result = {}
