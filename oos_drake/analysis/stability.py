@@ -157,10 +157,10 @@ def _analysis_model(sys, model: int, members):
 #: Contiguous ranges of configurations per worker and subset in :func:`axis_guarantee` (each
 #: range starts its continuation cold).
 CHUNKS_PER_WORKER = 3
-#: Ranges per task of :func:`axis_guarantee`, advanced in lock-step. More ranges (8 per task,
-#: 48 per subset) batched better but their cold starts tripled the solved points at full size
-#: (docs/DESIGN.md "Session 10"): the ranges stay those of one range per task.
-LOCKSTEP_RANGES = 3
+#: Ranges per task of :func:`axis_guarantee`, advanced in lock-step. 1: measured at full size
+#: (docs/DESIGN.md "Session 10"), 8 ranges per task (48 per subset) tripled the solved points
+#: (cold starts) and 3 per task (the same 6 ranges) saved nothing (small batches): no gain yet.
+LOCKSTEP_RANGES = 1
 
 
 @dataclass(frozen=True)
