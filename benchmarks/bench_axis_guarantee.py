@@ -13,13 +13,19 @@ each study's timing detail of ``summary.json`` (``oos analyze``), beside ``grid`
 ``--mission FIRST:LAST``: the analysis' covers (:mod:`oos_drake.analysis.stability`) of the
 consecutive mission configurations ``FIRST .. LAST - 1`` of 330 (make-run controller
 ``--controller``, default the baseline PD), one subset, all at the level ``1.03`` times the
-largest lower bound found on the grid, or ``--level``: each configuration alone (the
-session-7 path: grid scalings, then solves) against each continued from the previous one's
-essential scalings (``cover_axis(prior=...)``, the analysis today), in this process: CPU time,
-solved points, tested points, the largest level. The grid's power-iteration lower bound can be
-far below mu with real parameters; then covers raise their level one by one and the prior
-scalings (proved at a higher level) prove nothing at the next configuration's start: give the
-analysis' level, ``(1 + target gap)`` times its certified lower bound (``--level``).
+largest lower bound found on the grid, or ``--level`` (give the analysis' level,
+``(1 + target gap)`` times its certified lower bound: the grid's power-iteration lower bound
+can be far below mu with real parameters, and then covers raise their level one by one), in
+this process, CPU time (``time.process_time``), solved points, tested points and the largest
+level of: ``alone`` (each configuration its own cover, grid scalings then solves), ``1 range``
+(each cover continued from the previous one's essential scalings, solved one by one: a task
+of the analysis, ``LOCKSTEP_RANGES = 1``), and, for ``R`` in ``--ranges`` (default 2,4,8),
+the configurations cut into ``R`` contiguous ranges, each continued, covered ``one by one`` (range after range) and
+in ``lock-step`` (:func:`~oos_drake.robust.mu_intervals.lockstep`, the solves of the ranges'
+current covers batched by :func:`~oos_drake.robust.mu_intervals.solve_mu_batch`: a task of
+``axis_guarantee(ranges_per_task=R)``). Ratios are against ``1 range`` of the same run. On a
+slice this short the ranges are short too: at full size a range's cold start costs relatively
+more (docs/DESIGN.md "Session 10": lock-step did not pay there).
 """
 
 from __future__ import annotations
@@ -65,16 +71,23 @@ def timed(fn, *args, **kwargs):
     return out, time.perf_counter() - t
 
 
-def mission(first, last, subset, controller, level=None):
-    """Covers of consecutive mission configurations, alone and continued (see the docstring)."""
+def mission(first, last, subset, controller, level=None, ranges=(2, 4, 8)):
+    """Covers of consecutive mission configurations, alone, continued and in lock-step (see
+    the docstring)."""
     from oos_drake.analysis.controller import scenario_controller
     from oos_drake.analysis.models import mission_closed_loop, mission_times
     from oos_drake.analysis.run import AnalysisOptions
-    from oos_drake.analysis.stability import _analysis_model
+    from oos_drake.analysis.stability import _analysis_model, _range_covers
     from oos_drake.analysis.subsets import uncertainty_subsets
     from oos_drake.blas import limit_blas_threads
     from oos_drake.robust.blocks import parse_blk
-    from oos_drake.robust.mu_intervals import Realization, cover_axis, mu_solver, scalings_at
+    from oos_drake.robust.mu_intervals import (
+        SLACK,
+        Realization,
+        lockstep,
+        solve_each,
+        solve_mu_batch,
+    )
     from oos_drake.robust.mu_lower import mu_lower_bound
     from oos_drake.robust.mu_upper import mu_upper_bound
     from oos_drake.robust.sweep import model_grid
@@ -87,38 +100,46 @@ def mission(first, last, subset, controller, level=None):
     problems, lower = [], 0.0
     for j in range(times.size):
         A, Bw, Cz, Dzw, blk, _, _ = _analysis_model(system, j, members)
-        real = Realization(A, Bw, Cz, Dzw)
         w = model_grid(A, grid)
-        M = real.response(w)
+        M = Realization(A, Bw, Cz, Dzw).response(w)
         up = mu_upper_bound(M, parse_blk(blk), max_iter=100)
         lo = mu_lower_bound(M, parse_blk(blk), start_inputs=up.worst_input)
         lower = max(lower, float(np.max(lo.lower)))
-        problems.append((real, blk, w, up.params))
+        problems.append((A, Bw, Cz, Dzw, w, up.params, up.upper, lo.lower))
     floor = 1.03 * lower if level is None else level
+    configurations = []  # as axis_guarantee gives them to its tasks
+    for A, Bw, Cz, Dzw, w, params, up, lo in problems:
+        peaks = np.unique([np.argmax(up), np.argmax(lo)])
+        seeds = w[peaks[up[peaks] * (1.0 + SLACK) > floor]]
+        configurations.append((A, Bw, Cz, Dzw, seeds, w, params, up))
     print(f"mission configurations {first}..{last - 1}, subset {subset}, level {floor:.5g}")
-    print(f"{'covers':10s} {'CPU [s]':>8s} {'solved':>7s} {'tested':>7s} {'max level':>10s}")
-    rows = {}
-    for mode in ("alone", "continued"):
-        clock, solved, tested, top, prior = time.process_time(), 0, 0, 0.0, None
-        for real, blk, w, params in problems:
-            upper, scalings = scalings_at(real, blk, w, params)
-            cert = cover_axis(
-                real,
-                mu_solver(real, blk, polish_above=floor / 1.005, starts=(w, params)),
-                [],
-                floor=floor,
-                known=(w, upper, scalings),
-                prior=prior,
-            )
-            keep = cert.essential()
-            if mode == "continued" and keep.size:
-                prior = (cert.omega[keep], [cert.scalings[i] for i in keep])
-            solved += int(cert.added.sum())
-            tested += cert.omega.size
-            top = max(top, cert.upper)
-        rows[mode] = time.process_time() - clock
-        print(f"{mode:10s} {rows[mode]:8.2f} {solved:7d} {tested:7d} {top:10.5g}")
-    print(f"continued / alone: {rows['continued'] / rows['alone']:.2f}")
+    head = ("CPU [s]", 8), ("ratio", 6), ("solved", 7), ("tested", 7), ("max level", 10)
+    print(f"{'covers':22s} " + " ".join(f"{h:>{n}s}" for h, n in head))
+
+    def cut(n_ranges):
+        edges = np.linspace(0, len(configurations), n_ranges + 1).round().astype(int)
+        return [configurations[a:b] for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
+    def run(name, parts, together):
+        clock = time.process_time()
+        if together:
+            out = lockstep([_range_covers(blk, floor, SLACK, r) for r in parts], solve_mu_batch)
+        else:
+            out = [lockstep([_range_covers(blk, floor, SLACK, r)], solve_each)[0] for r in parts]
+        seconds = time.process_time() - clock
+        rows = [o for part in out for o in part]
+        base = results.setdefault("1 range", seconds)
+        print(
+            f"{name:22s} {seconds:8.2f} {seconds / base:6.2f} {sum(o[3] for o in rows):7d} "
+            f"{sum(o[1] for o in rows):7d} {max(o[0] for o in rows):10.5g}"
+        )
+
+    results = {}
+    run("1 range", cut(1), False)
+    run("alone", cut(len(configurations)), False)
+    for n_ranges in ranges:
+        run(f"{n_ranges} ranges, one by one", cut(n_ranges), False)
+        run(f"{n_ranges} ranges, lock-step", cut(n_ranges), True)
 
 
 def main():
@@ -127,10 +148,12 @@ def main():
     parser.add_argument("--subset", default="total")
     parser.add_argument("--controller", default=None, help="controller JSON (default: baseline)")
     parser.add_argument("--level", type=float, default=None, help="level of every cover [-]")
+    parser.add_argument("--ranges", default="2,4,8", help="numbers of ranges (lock-step) to time")
     args = parser.parse_args()
     if args.mission:
         first, last = (int(x) for x in args.mission.split(":"))
-        mission(first, last, args.subset, args.controller, args.level)
+        ranges = [int(x) for x in args.ranges.split(",")]
+        mission(first, last, args.subset, args.controller, args.level, ranges)
         return
     print(
         f"{'case':18s} {'fn':8s} {'grid [s]':>9s} {'guar [s]':>9s} {'ratio':>6s} "

@@ -96,3 +96,17 @@ def test_version():
         check=True,
     )
     assert result.stdout.strip() == f"oos_drake {__version__}"
+
+
+def test_analyze_proves_the_whole_axis_unless_grid_only():
+    """The whole-axis guarantee is ``oos analyze``'s default; ``--grid-only`` turns it off,
+    ``--guarantee`` (the opt-in of session 9) is still accepted, both together are refused."""
+    parser = build_parser()
+    assert parser.parse_args(["analyze", "--out", "x"]).guarantee is True
+    assert parser.parse_args(["analyze", "--out", "x", "--guarantee"]).guarantee is True
+    assert parser.parse_args(["analyze", "--out", "x", "--grid-only"]).guarantee is False
+    with pytest.raises(SystemExit):
+        parser.parse_args(["analyze", "--out", "x", "--grid-only", "--guarantee"])
+    from oos_drake.analysis.run import AnalysisOptions
+
+    assert AnalysisOptions().guarantee is True

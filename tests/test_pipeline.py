@@ -135,3 +135,32 @@ def test_oos_run_passes_the_scheduler_to_the_stages_with_parallel_work(tmp_path,
         assert argv[argv.index("--workers") + 1] == "3", key
     for key in [("model",), ("campaign", "report")]:
         assert "--scheduler" not in by_command[key], key
+
+
+def test_oos_run_proves_the_whole_axis_unless_grid_only(tmp_path, monkeypatch):
+    """``oos run`` analyzes with the whole-axis guarantee (``oos analyze``'s default);
+    ``oos run --grid-only`` passes ``--grid-only`` to the analysis stage only, and the analysis
+    key (and so the stages after it) changes with it (stages replaced by a recorder)."""
+    import oos_drake.pipeline as pipeline
+    from oos_drake.cli import build_parser
+
+    analyze = []
+    for i, extra in enumerate(([], ["--grid-only"])):
+        calls = []
+        monkeypatch.setattr(
+            pipeline, "_oos", lambda *argv, c=calls: c.append([str(a) for a in argv])
+        )
+        monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: None)
+        argv = ["run", "--out", str(tmp_path / str(i)), *extra]
+        assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
+        (command,) = [c for c in calls if c[0] == "analyze"]
+        analyze.append(command)
+        assert all("--grid-only" not in c for c in calls if c[0] != "analyze")
+    assert "--grid-only" not in analyze[0] and "--grid-only" in analyze[1]
+    from oos_drake.scenario.data import scenario_path
+
+    scenario, campaign = scenario_path(None), pipeline.DEFAULT_CAMPAIGN
+    keys = pipeline.stage_keys(scenario, campaign, False)
+    grid_only = pipeline.stage_keys(scenario, campaign, False, grid_only=True)
+    assert keys["controller"] == grid_only["controller"]
+    assert keys["analysis"] != grid_only["analysis"] and keys["campaign"] != grid_only["campaign"]

@@ -686,7 +686,7 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
             f"{crossing:.4g} Hz): mu >= {implied:.4g}"
             + (
                 f", ABOVE the analysis' upper bound {peak.mu_upper:.4g} (a peak between its "
-                "analyzed frequencies, which oos analyze --guarantee covers)"
+                "analyzed frequencies: oos analyze --grid-only does not cover them)"
                 if implied > peak.mu_upper
                 else ""
             )

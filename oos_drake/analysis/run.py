@@ -8,7 +8,7 @@ Files written in ``out_dir`` (Parquet tables are tidy, units in column names):
                                 analyzed configuration (``mu upper guaranteed [-]`` ...)
 ``stability_guaranteed.parquet`` per study, subset and analyzed configuration: the peak of mu
                                 proved on the whole frequency axis beside the largest lower and
-                                upper bounds on the analyzed frequencies (with ``--guarantee``)
+                                upper bounds on the analyzed frequencies (not with ``--grid-only``)
 ``worst_perturbations.parquet`` destabilizing perturbation of every peak, per block (physical)
 ``peak_perturbations.npz``      the same perturbations whole and normalized (complex blocks too)
 ``performance.parquet``         worst-case gains of d -> e_p, d -> e_u per subset (Fig. performance)
@@ -101,12 +101,9 @@ class AnalysisOptions:
         (:func:`~oos_drake.analysis.stability.axis_guarantee`, from the level
         ``(1 + tighten.target_gap)`` times the certified lower bound; timed as ``guarantee`` in
         each study's timing detail, beside the grid-only ``grid`` and ``tighten+certify``).
-        Off by default (``oos analyze --guarantee`` turns it on): the analysis with it costs
-        3.2-3.6 times the grid-only analysis in CPU (session 9, full size, loaded machine; 4.2
-        times before that session's changes, 4.3 times on an idle machine in session 8; the
-        aim for the default is 2x). Without it the upper bounds
-        hold on the analyzed frequencies only (``oos confirm`` found one broken between them,
-        docs/CLAIMS.md A11).
+        On by default (``oos analyze --grid-only`` turns it off; cost: docs/ANALYSIS-RESULTS.md).
+        Without it the upper bounds hold on the analyzed frequencies only (``oos confirm``
+        found one broken between them, docs/CLAIMS.md A11).
     progress : bool
         tqdm progress bars.
     plant : str
@@ -131,7 +128,7 @@ class AnalysisOptions:
     sensitivity_iterations: int = 150
     time_check: bool = True
     time_check_duration: float = 600.0
-    guarantee: bool = False
+    guarantee: bool = True
     progress: bool = True
     plant: str = "lfr"
 
@@ -445,7 +442,7 @@ def run_analysis(
         )
         docking_tables.append(dp)
         guaranteed_rows.append(
-            guaranteed_table(f"docking {phase}", dres, "stiffness [N/m or N m/rad]", stiffness)
+            guaranteed_table(f"docking-{phase}", dres, "stiffness [N/m or N m/rad]", stiffness)
         )
         docking_perturbations.append(dpert)
         docking_certs[phase] = (arr, dc["total"])

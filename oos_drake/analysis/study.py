@@ -146,7 +146,7 @@ class StudyOptions:
             time_check=False,
             open_loop_samples=0,
             progress=False,
-            guarantee=False,  # many analyses: grid-only bounds (a guarantee costs ~9x)
+            guarantee=False,  # many analyses: grid-only (the guarantee's cost: ANALYSIS-RESULTS)
         )
     )
     workers: int = 2

@@ -43,6 +43,9 @@ interval: ``-L^2 D_r`` decreases; an interval proved at a lower level stays vali
 grows), and adds points at the edges and in the middle of every gap until the intervals cover
 the axis. The guaranteed bound is the largest level; the :class:`AxisCertificate` keeps the
 points, their scalings, levels and intervals, and :meth:`AxisCertificate.check` proves them again.
+:func:`cover_steps` is the same cover as a generator of solve requests: :func:`lockstep` advances
+several covers together (e.g. of neighbouring configurations) and :func:`solve_mu_batch` solves
+their requests in one optimizer call.
 
 The same works for the skewed-mu bound of :func:`~oos_drake.robust.wcgain`: the rows of the
 performance outputs are divided by the gain level ``gamma`` and the LMI is taken at
@@ -600,7 +603,17 @@ def _new_points(gaps, end, known):
     return pts
 
 
-def cover_axis(
+def cover_axis(real: Realization, solve, seeds, **options) -> AxisCertificate:
+    """Cover the frequency axis with intervals proved by D-G scalings.
+
+    One :func:`cover_steps` driven to its end, ``solve`` called on each of its requests (the
+    parameters are those of :func:`cover_steps`). :func:`lockstep` drives several covers at
+    once, their requests solved together.
+    """
+    return lockstep([cover_steps(real, solve, seeds, **options)], solve_each)[0]
+
+
+def cover_steps(
     real: Realization,
     solve,
     seeds,
@@ -612,8 +625,14 @@ def cover_axis(
     progress=None,
     known=None,
     prior=None,
-) -> AxisCertificate:
-    """Cover the frequency axis with intervals proved by D-G scalings.
+):
+    """The cover of :func:`cover_axis` as a resumable computation (a generator).
+
+    It yields each set of frequencies it needs solved as a request ``(solve, omega)`` and
+    expects to be sent back ``solve(omega)`` (or the same computed together with other
+    requests, e.g. :func:`solve_mu_batch`); it returns (``StopIteration.value``, or the value
+    of ``yield from``) the :class:`AxisCertificate`. Nothing else differs from calling
+    ``solve`` itself: the same rounds, levels and points.
 
     Parameters
     ----------
@@ -654,12 +673,13 @@ def cover_axis(
 
     Returns
     -------
-    AxisCertificate
+    generator
+        Requests ``(solve, omega)``; returns the :class:`AxisCertificate`.
     """
     real.check_axis()
     end = real.nyquist
     omega = np.unique(np.clip(np.asarray(seeds, dtype=float), 0.0, end))
-    opt, lmin, scs = solve(omega) if omega.size else ([], [], [])
+    opt, lmin, scs = (yield solve, omega) if omega.size else ([], [], [])
     opt, lmin, scs = list(opt), list(lmin), list(scs)
     omega, added = list(omega), [False] * len(omega)
     level = max(float(floor), max(lmin, default=0.0))
@@ -713,7 +733,7 @@ def cover_axis(
         if new.size == 0:
             break
         rounds += 1
-        o2, l2, s2 = solve(new)
+        o2, l2, s2 = yield solve, new
         omega.extend(new.tolist())
         opt.extend(list(o2))
         lmin.extend(list(l2))
@@ -740,6 +760,44 @@ def cover_axis(
         realization=real,
         performance_rows=performance_rows,
     )
+
+
+def solve_each(requests) -> list:
+    """The requests ``(solve, omega)`` of :func:`cover_steps` solved one by one."""
+    return [solve(omega) for solve, omega in requests]
+
+
+def lockstep(steps, solve_requests) -> list:
+    """Drive several generators of requests (:func:`cover_steps`, or generators that
+    ``yield from`` it, e.g. a range of covers each continued from the previous one) in
+    lock-step: every round, the pending requests of all those not finished go to
+    ``solve_requests`` together.
+
+    Parameters
+    ----------
+    steps : iterable of generator
+        Each yields requests ``(solve, omega)``, is sent the reply, and returns its result.
+    solve_requests : callable
+        ``solve_requests([(solve, omega), ...]) -> [reply, ...]`` in the same order
+        (:func:`solve_each`, or :func:`solve_mu_batch` for the solvers of :func:`mu_solver`).
+
+    Returns
+    -------
+    list
+        The value each generator returned, in the order of ``steps``.
+    """
+    steps = list(steps)
+    results, replies = [None] * len(steps), {k: None for k in range(len(steps))}
+    while replies:
+        requests = {}
+        for k, reply in replies.items():
+            try:
+                requests[k] = steps[k].send(reply)
+            except StopIteration as stop:
+                results[k] = stop.value
+        answers = solve_requests(list(requests.values())) if requests else []
+        replies = dict(zip(requests, answers, strict=True))
+    return results
 
 
 class _Spare:
@@ -842,72 +900,123 @@ def mu_solver(
 
     ``starts`` : ``(omega, params)`` raw D-G parameters at frequencies [rad/s] (e.g. a grid
     sweep's ``UpperBoundResult.params``), extra warm starts only.
+
+    The solver keeps the points it solved (its warm starts). The requests of several such
+    solvers of one BLK (e.g. the covers of several configurations advanced by
+    :func:`lockstep`) are solved together by :func:`solve_mu_batch`: the same bounds (to
+    round-off), with one optimizer call per pass on all their matrices.
     """
-    from oos_drake.robust.blocks import parse_blk
+    return _MuSolver(real, blk, slack, polish_above, starts)
+
+
+class _MuSolver:
+    """State of one :func:`mu_solver`: the problem and the points solved so far."""
+
+    def __init__(self, real, blk, slack, polish_above, starts):
+        from oos_drake.robust.blocks import parse_blk
+
+        self.real, self.blk, self.structure = real, blk, parse_blk(blk)
+        self.slack, self.polish_above = float(slack), float(polish_above)
+        self.solved_omega, self.solved_params = [], []  # for warm starts
+        if starts is not None:
+            self.solved_omega.extend(np.asarray(starts[0], dtype=float).tolist())
+            self.solved_params.extend(list(np.asarray(starts[1])))
+
+    def __call__(self, omega):
+        return solve_mu_batch([(self, omega)])[0]
+
+
+def solve_mu_batch(requests) -> list:
+    """The requests ``(solver, omega)`` of :func:`mu_solver` solvers of one BLK, together.
+
+    Each request gets what its solver alone would return, to round-off (the optimizer runs
+    every matrix of a batch on its own, but a lone matrix goes through the per-matrix
+    evaluator: results move by about 1e-12 of the bound), and every pass of the optimizer (the
+    first run, then the long runs from each kind of start) runs once on the matrices of all
+    the requests: an eight-lane evaluation of
+    :func:`~oos_drake.robust.mu_upper.mu_upper_bound` costs about three per-matrix ones.
+
+    Parameters
+    ----------
+    requests : list of tuple
+        ``(solver, omega)``: a solver of :func:`mu_solver` and frequencies [rad/s].
+
+    Returns
+    -------
+    list of tuple
+        ``(optimal, level_min, scalings)`` of each request (see :func:`cover_axis`).
+    """
     from oos_drake.robust.mu import UPPER_ITERATIONS, UPPER_PATIENCE, UPPER_TEMPERATURES, UPPER_TOL
     from oos_drake.robust.mu_upper import mu_upper_bound
 
-    structure = parse_blk(blk)
-    solved_omega, solved_params = [], []  # every point solved so far, for warm starts
-    if starts is not None:
-        solved_omega.extend(np.asarray(starts[0], dtype=float).tolist())
-        solved_params.extend(list(np.asarray(starts[1])))
+    solvers = [solver for solver, _ in requests]
+    if len({np.asarray(s.blk).tobytes() for s in solvers}) > 1:
+        raise ValueError("solve_mu_batch: the solvers of one batch must share their BLK")
+    omegas = [np.asarray(w, dtype=float).reshape(-1) for _, w in requests]
+    owner = np.repeat(np.arange(len(requests)), [w.size for w in omegas])
+    omega = np.concatenate(omegas)
+    M = np.concatenate([s.real.response(w) for s, w in zip(solvers, omegas, strict=True)])
+    structure = solvers[0].structure
+    res = mu_upper_bound(
+        M,
+        structure,
+        max_iter=UPPER_ITERATIONS,
+        tol=UPPER_TOL,
+        temperatures=UPPER_TEMPERATURES,
+        patience=UPPER_PATIENCE,
+    )
+    upper, params = res.upper.copy(), res.params.copy()
+    Dl, Dr, G = res.D_left.copy(), res.D_right.copy(), res.G.copy()
+    above = np.array([solvers[k].polish_above for k in owner])
+    slack = np.array([solvers[k].slack for k in owner])
+    redo = np.flatnonzero(upper > above)
+    for start in ("own", "known", "batch"):
+        # each further start only for the points still above: a point at or below
+        # ``polish_above`` proves the level already, a lower bound there changes nothing
+        redo = redo[upper[redo] > above[redo]]
+        if start == "own":
+            rows, x0 = redo, params[redo]
+        elif start == "known":  # the nearest point its solver solved before
+            rows = np.array([i for i in redo if solvers[owner[i]].solved_omega], dtype=int)
+            x0 = [_nearest_start(solvers[owner[i]], omega[i]) for i in rows]
+        else:  # the nearest other point of the same request, after the passes above
+            rows = np.array([i for i in redo if omegas[owner[i]].size > 1], dtype=int)
+            dist = np.abs(np.log1p(omega[None, :]) - np.log1p(omega[rows, None]))
+            other = (owner[None, :] != owner[rows, None]) | (np.arange(omega.size) == rows[:, None])
+            dist[other] = np.inf
+            x0 = params[np.argmin(dist, axis=1)] if rows.size else []
+        if not rows.size:
+            continue
+        more = mu_upper_bound(M[rows], structure, x0=np.asarray(x0), **POLISH_OPTIONS)
+        # a point is only as good as the certificate the interval test accepts: converged
+        # scalings can be too close to singular for a strict LMI at the level
+        better = np.array(
+            [
+                more.upper[j] < upper[i]
+                and _proves(solvers[owner[i]].real,
+                            Scalings(more.D_left[j], more.D_right[j], more.G[j]),
+                            more.upper[j] * (1.0 + slack[i]), omega[i])
+                for j, i in enumerate(rows)
+            ],
+            dtype=bool,
+        )  # fmt: skip
+        rows = rows[better]
+        upper[rows], params[rows] = more.upper[better], more.params[better]
+        Dl[rows], Dr[rows], G[rows] = more.D_left[better], more.D_right[better], more.G[better]
+    out = []
+    for k, solver in enumerate(solvers):
+        mine = np.flatnonzero(owner == k)
+        solver.solved_omega.extend(omega[mine].tolist())
+        solver.solved_params.extend(list(params[mine]))
+        scalings = [Scalings(Dl[i], Dr[i], G[i]).conditioned() for i in mine]
+        out.append((upper[mine], upper[mine] * (1.0 + solver.slack), scalings))
+    return out
 
-    def solve(omega):
-        omega = np.asarray(omega, dtype=float)
-        M = real.response(omega)
-        res = mu_upper_bound(
-            M,
-            structure,
-            max_iter=UPPER_ITERATIONS,
-            tol=UPPER_TOL,
-            temperatures=UPPER_TEMPERATURES,
-            patience=UPPER_PATIENCE,
-        )
-        upper, params = res.upper.copy(), res.params.copy()
-        Dl, Dr, G = res.D_left.copy(), res.D_right.copy(), res.G.copy()
-        redo = np.flatnonzero(upper > polish_above)
-        known = np.asarray(solved_omega, dtype=float)
-        for start in ("own", "known", "batch"):
-            # each further start only for the points still above: a point at or below
-            # ``polish_above`` proves the level already, a lower bound there changes nothing
-            redo = redo[upper[redo] > polish_above]
-            if not redo.size:
-                break
-            if start == "own":
-                x0 = params[redo]
-            elif start == "known":
-                if not known.size:
-                    continue
-                near = np.argmin(np.abs(np.log1p(known[None, :]) - np.log1p(omega[redo, None])), 1)
-                x0 = np.asarray(solved_params)[near]
-            else:  # the nearest other point of this batch, after the passes above
-                if omega.size < 2:
-                    break
-                dist = np.abs(np.log1p(omega[None, :]) - np.log1p(omega[redo, None]))
-                dist[np.arange(redo.size), redo] = np.inf
-                x0 = params[np.argmin(dist, axis=1)]
-            more = mu_upper_bound(M[redo], structure, x0=x0, **POLISH_OPTIONS)
-            # a point is only as good as the certificate the interval test accepts: converged
-            # scalings can be too close to singular for a strict LMI at the level
-            better = np.array(
-                [
-                    more.upper[j] < upper[i]
-                    and _proves(real, Scalings(more.D_left[j], more.D_right[j], more.G[j]),
-                                more.upper[j] * (1.0 + slack), omega[i])
-                    for j, i in enumerate(redo)
-                ],
-                dtype=bool,
-            )  # fmt: skip
-            rows = redo[better]
-            upper[rows], params[rows] = more.upper[better], more.params[better]
-            Dl[rows], Dr[rows], G[rows] = more.D_left[better], more.D_right[better], more.G[better]
-        solved_omega.extend(omega.tolist())
-        solved_params.extend(list(params))
-        scalings = [Scalings(Dl[i], Dr[i], G[i]).conditioned() for i in range(upper.size)]
-        return upper, upper * (1.0 + slack), scalings
 
-    return solve
+def _nearest_start(solver: _MuSolver, omega: float) -> np.ndarray:
+    """Parameters of the point nearest to ``omega`` (log scale) that ``solver`` solved before."""
+    known = np.asarray(solver.solved_omega, dtype=float)
+    return solver.solved_params[int(np.argmin(np.abs(np.log1p(known) - np.log1p(omega))))]
 
 
 def _proves(real: Realization, sc: Scalings, beta: float, omega: float) -> bool:

@@ -25,6 +25,7 @@ def test_full_analysis_of_the_baseline_controller(tmp_path):
     # no wall-clock budget: what stops the resolution must not depend on the machine's load
     # (the work budgets, deterministic, stay the defaults)
     options = AnalysisOptions(
+        guarantee=False,  # grid-only: this test checks the grid's certified peaks
         progress=False,
         spike_budget=float("inf"),
         tighten=TightenOptions(time_budget=float("inf")),
