@@ -20,8 +20,8 @@ this process, CPU time (``time.process_time``), solved points, tested points and
 level of: ``alone`` (each configuration its own cover, grid scalings then solves), ``1 range``
 (each cover continued from the previous one's essential scalings, solved one by one: a task
 of the analysis, ``LOCKSTEP_RANGES = 1``), and, for ``R`` in ``--ranges`` (default 2,4,8),
-the configurations cut into ``R`` contiguous ranges, each continued, covered ``one by one`` (range after range) and
-in ``lock-step`` (:func:`~oos_drake.robust.mu_intervals.lockstep`, the solves of the ranges'
+the configurations cut into ``R`` contiguous ranges, each continued, covered ``one by one``
+(range after range) and in ``lock-step`` (:func:`~oos_drake.robust.mu_intervals.lockstep`, the solves of the ranges'
 current covers batched by :func:`~oos_drake.robust.mu_intervals.solve_mu_batch`: a task of
 ``axis_guarantee(ranges_per_task=R)``). Ratios are against ``1 range`` of the same run. On a
 slice this short the ranges are short too: at full size a range's cold start costs relatively
