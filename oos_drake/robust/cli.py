@@ -55,16 +55,14 @@ def _mussv(args: argparse.Namespace) -> int:
             print(f"  [{k}] mu in [{lo:.6g}, {u:.6g}]")
     print(f"peak: mu in [{lower.max():.6g}, {upper.max():.6g}]")
     if args.out:
-        np.savez(
-            args.out,
-            upper=res.upper,
-            lower=res.lower,
-            delta=res.delta,
-            D_left=res.D_left,
-            D_right=res.D_right,
-            G=res.G,
-        )
-        print(f"bounds and certificates written to {args.out}")
+        from oos_drake.campaign.store import atomic_write_bytes
+
+        # np.savez's own naming (".npz" appended when missing), written atomically
+        out = Path(args.out if str(args.out).endswith(".npz") else f"{args.out}.npz")
+        arrays = dict(upper=res.upper, lower=res.lower, delta=res.delta)
+        arrays.update(D_left=res.D_left, D_right=res.D_right, G=res.G)
+        atomic_write_bytes(out, lambda stream: np.savez(stream, **arrays))
+        print(f"bounds and certificates written to {out}")
     return 0
 
 

@@ -1,6 +1,7 @@
 """``oos robust`` commands: bounds from files, clear errors."""
 
 import numpy as np
+import pytest
 from scipy.io import savemat
 
 from oos_drake.cli import main
@@ -14,6 +15,25 @@ def test_mussv_from_mat_file(tmp_path, capsys):
     assert "peak: mu in [3, 3" in capsys.readouterr().out
     with np.load(out) as data:
         assert abs(float(data["upper"]) - 3.0) < 1e-3
+
+
+def test_mussv_out_is_written_whole_or_not_at_all(tmp_path, capsys, monkeypatch):
+    """``--out`` as ``np.savez`` names it (``.npz`` appended), through a temporary file: a
+    write that fails half-way leaves neither the file nor the temporary one."""
+    savemat(tmp_path / "case.mat", {"M": np.eye(2), "blk": np.array([[1, 1], [1, 1]])})
+    assert main(["robust", "mussv", str(tmp_path / "case.mat"), "--out", str(tmp_path / "b")]) == 0
+    with np.load(tmp_path / "b.npz") as data:
+        assert set(data.files) == {"upper", "lower", "delta", "D_left", "D_right", "G"}
+
+    def broken(stream, **arrays):
+        stream.write(b"PK partial")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(np, "savez", broken)
+    out = tmp_path / "c.npz"
+    with pytest.raises(OSError, match="disk full"):
+        main(["robust", "mussv", str(tmp_path / "case.mat"), "--out", str(out)])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.npz", "case.mat"]
 
 
 def test_hinfnorm_from_npz(tmp_path, capsys):
