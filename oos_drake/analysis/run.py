@@ -35,6 +35,7 @@ import pandas as pd
 from oos_drake.analysis.controller import Controller
 from oos_drake.analysis.stability import SweepOptions
 from oos_drake.analysis.tightening import TightenOptions
+from oos_drake.files import atomic_write_bytes
 
 #: The paper's published numbers (section 4), written to the summary under ``"paper"`` for the
 #: comparison only: none of them is a default or an input of our analysis or campaign (its
@@ -245,8 +246,7 @@ def _write_perturbations(path: Path, study_certs: dict) -> Path:
             arrays[f"{study}|{subset}|omega [rad/s]"] = np.float64(2 * np.pi * frequency)
             for block, value in normalized.items():
                 arrays[f"{study}|{subset}|{block}"] = np.asarray(value)
-    np.savez(path, **arrays)
-    return path
+    return atomic_write_bytes(path, lambda stream: np.savez(stream, **arrays))
 
 
 def _guarantee_columns(guarantee, lower, n_configurations) -> dict:

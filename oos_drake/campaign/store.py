@@ -31,11 +31,12 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
-import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 import pandas as pd
+
+from oos_drake.files import FILE_MODE, atomic_write_bytes
 
 SPEC_FILE = "spec.toml"
 PLAN_FILE = "plan.parquet"
@@ -47,37 +48,6 @@ TIMESERIES_DIR = "timeseries"
 REPORT_DIR = "report"
 LOCK_FILE = ".lock"
 QUARANTINE_DIR = "quarantine"
-
-
-def _file_mode() -> int:
-    """Mode of a newly created file under the current umask (mkstemp would give 0600)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-_FILE_MODE = _file_mode()
-
-
-def atomic_write_bytes(path: Path, write) -> Path:
-    """Call ``write(binary_stream)`` into a temporary file, then rename it to ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            write(stream)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.chmod(temporary, _FILE_MODE)
-        os.replace(temporary, path)
-    except BaseException:
-        try:
-            os.unlink(temporary)
-        except FileNotFoundError:
-            pass
-        raise
-    return path
 
 
 def atomic_write_parquet(table: pd.DataFrame, path: Path) -> Path:
@@ -171,7 +141,7 @@ def campaign_lock(directory: Path) -> Iterator[None]:
     """
     path = Path(directory) / LOCK_FILE
     path.parent.mkdir(parents=True, exist_ok=True)
-    handle = os.open(path, os.O_RDWR | os.O_CREAT, _FILE_MODE)
+    handle = os.open(path, os.O_RDWR | os.O_CREAT, FILE_MODE)
     try:
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)

@@ -26,6 +26,7 @@ import numpy as np
 from oos_drake.control.interconnection import DISTURBANCES, ERRORS, weighted_interconnection
 from oos_drake.control.plants import PlantArray
 from oos_drake.control.synthesis import SynthesisOptions, SynthesisResult
+from oos_drake.files import atomic_write_bytes
 from oos_drake.lfr.matfile import write_mat
 
 
@@ -128,7 +129,7 @@ def write_synthesis(
         "parameter_names": np.array(result.parameter_names, dtype=str),
     }
     paths["npz"] = out / "closed_loop.npz"
-    np.savez_compressed(paths["npz"], **arrays, **names)
+    atomic_write_bytes(paths["npz"], lambda stream: np.savez_compressed(stream, **arrays, **names))
     paths["mat"] = write_mat(
         out / "closed_loop.mat",
         {

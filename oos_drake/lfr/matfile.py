@@ -10,13 +10,12 @@ atomically (temporary file, then rename).
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import scipy.io
 
+from oos_drake.files import atomic_write_bytes
 from oos_drake.lfr.blocks import UComplex, ULTIDyn, UReal
 from oos_drake.lfr.core import LFR, BlockEntry
 
@@ -96,7 +95,7 @@ def write_mat(path, variables, matrices=()) -> Path:
     names = set(matrices)
     data = {k: matlab_layout(v) if k in names else v for k, v in variables.items()}
     path = Path(path)
-    _atomic(
+    atomic_write_bytes(
         path, lambda stream: scipy.io.savemat(stream, data, do_compression=True, oned_as="column")
     )
     return path
@@ -144,19 +143,7 @@ def to_npz(sys: LFR, path) -> None:
         "output_names",
     ):
         data[key] = np.array([str(x) for x in data[key]], dtype=str)
-    _atomic(path, lambda stream: np.savez_compressed(stream, **data))
-
-
-def _atomic(path: Path, write) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            write(stream)
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
+    atomic_write_bytes(path, lambda stream: np.savez_compressed(stream, **data))
 
 
 def _variables(sys: LFR) -> dict:

@@ -55,7 +55,7 @@ def _mussv(args: argparse.Namespace) -> int:
             print(f"  [{k}] mu in [{lo:.6g}, {u:.6g}]")
     print(f"peak: mu in [{lower.max():.6g}, {upper.max():.6g}]")
     if args.out:
-        from oos_drake.campaign.store import atomic_write_bytes
+        from oos_drake.files import atomic_write_bytes
 
         # np.savez's own naming (".npz" appended when missing), written atomically
         out = Path(args.out if str(args.out).endswith(".npz") else f"{args.out}.npz")
