@@ -63,9 +63,8 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from oos_drake.control.baseline import baseline_gains
 from oos_drake.control.components import DesignSpecification
-from oos_drake.multibody.appendage_sdf import MODE_JOINT
 from oos_drake.multibody.flight_software import FlightSoftware, FlightSoftwareDesign
-from oos_drake.multibody.plant_parts import add_floating_joint, force_elements
+from oos_drake.multibody.plant_parts import add_floating_joint, force_elements, modal_hinges
 from oos_drake.multibody.scenario_plant import (
     ARRAYS,
     add_docking_bushings,
@@ -354,13 +353,8 @@ def _add_plant(builder: DiagramBuilder, sdf_directory: Path):
     mode_joints, mode_springs = {}, {}
     by_joint = {s.joint().index(): s for s in force_elements(plant, RevoluteSpring)}
     for array in ARRAYS:
-        joints = []
-        index = 1
-        while plant.HasJointNamed(MODE_JOINT.format(index), instance(array)):
-            joints.append(plant.GetJointByName(MODE_JOINT.format(index), instance(array)))
-            index += 1
-        mode_joints[array] = tuple(joints)
-        mode_springs[array] = tuple(by_joint[j.index()] for j in joints)
+        mode_joints[array] = tuple(modal_hinges(plant, instance(array)))
+        mode_springs[array] = tuple(by_joint[j.index()] for j in mode_joints[array])
     return dict(
         plant=plant,
         hub_joint=hub_joint,

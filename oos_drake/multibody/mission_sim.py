@@ -52,7 +52,7 @@ from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 from oos_drake.lfr.blocks import RANGE_RTOL
 from oos_drake.multibody.flight_software import NOISE_CHANNELS
 from oos_drake.multibody.mission import ARRAYS, MissionDiagram, MissionOptions, make_mission_diagram
-from oos_drake.multibody.plant_parts import spatial_inertia_from_central
+from oos_drake.multibody.plant_parts import set_central_inertia, set_mode_frequency
 from oos_drake.multibody.scenario_plant import set_bushing
 from oos_drake.scenario.model import physical_blocks
 
@@ -355,14 +355,6 @@ class MissionSimulation:
             }
         )
         self.duration = float(mission.t_end - mission.t_start)
-        plant = self.handles.plant
-        default = plant.CreateDefaultContext()
-        self._default_springs = {
-            a: (s[0].GetStiffness(default), self.handles.mode_joints[a][0].GetDamping(default))
-            for a, s in self.handles.mode_springs.items()
-        }
-        target = self.handles.target_body
-        self._target_inertia = target.default_spatial_inertia()
 
     # -- values ---------------------------------------------------------------------------------
     def resolve(
@@ -426,17 +418,11 @@ class MissionSimulation:
         [Hz] (see :meth:`run`)."""
         h = self.handles
         pc = h.plant.GetMyMutableContextFromRoot(context)
-        M0 = self._target_inertia
-        I = M0.CalcRotationalInertia().CopyToFullMatrix3()
-        I[0, 0], I[1, 1], I[2, 2] = values["Jxx_RH2"], values["Jyy_RH2"], values["Jzz_RH2"]
-        h.target_body.SetSpatialInertiaInBodyFrame(
-            pc, spatial_inertia_from_central(values["m_RH2"], M0.get_com(), I)
-        )
+        moments = {0: values["Jxx_RH2"], 1: values["Jyy_RH2"], 2: values["Jzz_RH2"]}
+        set_central_inertia(h.target_body, pc, values["m_RH2"], moments)
         for array in ARRAYS:
-            stiffness, damping = self._default_springs[array]
             ratio = values[f"w1_{array}"] / self._by_name[f"w1_{array}"].nominal
-            h.mode_springs[array][0].SetStiffness(pc, stiffness * ratio**2)
-            h.mode_joints[array][0].SetDamping(pc, damping * ratio)
+            set_mode_frequency(h.mode_springs[array][0], h.mode_joints[array][0], pc, ratio)
         h.flight_software.set_perturbations(
             h.flight_software.GetMyMutableContextFromRoot(context),
             [[values[f"Delta_mul_{r}{c}"] for c in AXES] for r in AXES],

@@ -1,6 +1,6 @@
-"""Pieces added to a MultibodyPlant after parsing the SDF: modal residuals, floating joints, welds.
-
-All functions act on a plant that is not finalized yet.
+"""Pieces added to a MultibodyPlant after parsing the SDF (modal residuals, floating joints:
+on a plant not finalized yet), and the one way of writing physical values (inertias, modal
+hinge frequencies) into a plant context.
 """
 
 from __future__ import annotations
@@ -26,8 +26,11 @@ __all__ = [
     "add_modal_residual",
     "add_floating_joint",
     "central_inertia",
+    "set_central_inertia",
+    "set_mode_frequency",
     "drake_spatial_inertia_to_matrix",
     "force_elements",
+    "modal_hinges",
     "revolute_spring",
     "spatial_inertia_from_central",
 ]
@@ -58,6 +61,30 @@ def spatial_inertia_from_central(mass: float, p_BoBcm, inertia) -> SpatialInerti
     return SpatialInertia.MakeFromCentralInertia(mass, p_BoBcm, rotational)
 
 
+def set_central_inertia(body, plant_context, mass=None, moments=None) -> None:
+    """Write a new ``mass`` [kg] and/or diagonal ``moments`` ``{axis: J [kg m^2]}`` (axis 0..2)
+    of the inertia about the centre of mass (body axes) of ``body`` into ``plant_context``; the
+    centre of mass, the products of inertia and what is not given keep their context values."""
+    current_mass, com, inertia = central_inertia(body.CalcSpatialInertiaInBodyFrame(plant_context))
+    for axis, value in (moments or {}).items():
+        inertia[axis, axis] = value
+    mass = current_mass if mass is None else mass
+    body.SetSpatialInertiaInBodyFrame(
+        plant_context, spatial_inertia_from_central(mass, com, inertia)
+    )
+
+
+def set_mode_frequency(spring, joint, plant_context, ratio: float, nominal=None) -> None:
+    """Scale a modal hinge's frequency by ``ratio`` (same damping ratio, same participation):
+    stiffness ``k0 ratio^2`` [N m/rad], damping ``d0 ratio`` [N m s/rad] of the ``spring`` on
+    ``joint``, with ``nominal = (k0, d0)`` (default: the elements' default values)."""
+    if nominal is None:
+        nominal = (spring.default_stiffness(), joint.default_damping_vector()[0])
+    stiffness, damping = nominal
+    spring.SetStiffness(plant_context, stiffness * ratio**2)
+    joint.SetDampingVector(plant_context, [damping * ratio])
+
+
 def force_elements(plant: MultibodyPlant, kind: type) -> list:
     """The force elements of ``plant`` that are instances of ``kind`` (``RevoluteSpring``, ...)."""
     elements = (
@@ -71,6 +98,14 @@ def revolute_spring(plant: MultibodyPlant, joint):
     index = joint.index()
     springs = [s for s in force_elements(plant, RevoluteSpring) if s.joint().index() == index]
     return springs[0] if springs else None
+
+
+def modal_hinges(plant: MultibodyPlant, model_instance: ModelInstanceIndex) -> list:
+    """The mode hinges ``mode_1_hinge``, ``mode_2_hinge``, ... of a modal appendage, in order."""
+    hinges = []
+    while plant.HasJointNamed(MODE_JOINT.format(len(hinges) + 1), model_instance):
+        hinges.append(plant.GetJointByName(MODE_JOINT.format(len(hinges) + 1), model_instance))
+    return hinges
 
 
 def add_modal_residual(plant: MultibodyPlant, model_instance: ModelInstanceIndex) -> RigidBody:
@@ -95,9 +130,8 @@ def add_modal_residual(plant: MultibodyPlant, model_instance: ModelInstanceIndex
     """
     root = plant.GetBodyByName(ROOT_LINK, model_instance)
     total = SpatialInertia.Zero()
-    index = 1
-    while plant.HasJointNamed(MODE_JOINT.format(index), model_instance):
-        joint = plant.GetJointByName(MODE_JOINT.format(index), model_instance)
+    hinges = modal_hinges(plant, model_instance)
+    for joint in hinges:
         X_RF = joint.frame_on_parent().GetFixedPoseInBodyFrame()
         X_BM = joint.frame_on_child().GetFixedPoseInBodyFrame()
         X_RB = X_RF @ X_BM.inverse()  # joint at q = 0: M coincides with F
@@ -105,8 +139,7 @@ def add_modal_residual(plant: MultibodyPlant, model_instance: ModelInstanceIndex
         M_BBo_R = M_BBo_B.ReExpress(X_RB.rotation())
         M_BRo_R = M_BBo_R.Shift(-X_RB.translation())
         total += M_BRo_R
-        index += 1
-    if index == 1:
+    if not hinges:
         raise ValueError(
             f"model {plant.GetModelInstanceName(model_instance)}: no joint "
             f"'{MODE_JOINT.format(1)}' found, not a modal appendage"

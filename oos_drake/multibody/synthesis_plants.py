@@ -59,7 +59,11 @@ from oos_drake.multibody.mission_lfr import (
     uncertain_parameters,
 )
 from oos_drake.multibody.operating_point import linearize_at, operating_point
-from oos_drake.multibody.plant_parts import revolute_spring, spatial_inertia_from_central
+from oos_drake.multibody.plant_parts import (
+    revolute_spring,
+    set_central_inertia,
+    set_mode_frequency,
+)
 from oos_drake.multibody.scenario_plant import ScenarioDiagram, cached_scenario_diagram
 from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL
 from oos_drake.scenario.data import default_scenario
@@ -100,25 +104,22 @@ def apply_physical_values(
     plant_context = plant.GetMyMutableContextFromRoot(context)
     hub_names = {}
     for hub in scenario.hubs.values():
-        hub_names[mass_name(hub.name)] = (hub, "mass", None)
+        hub_names[mass_name(hub.name)] = (hub.name, None)
         for axis, name in enumerate(inertia_names(hub.name)):
-            hub_names[name] = (hub, "inertia", axis)
+            hub_names[name] = (hub.name, axis)
     array_names = {mode_frequency_name(m.name, 1): m for m in scenario.arrays.values()}
-    hubs_touched = {}
+    hubs_touched = {}  # hub name -> (mass, {axis: moment}), written at once (physical together)
     for name, value in values.items():
         value = float(value)
         if not (np.isfinite(value) and value > 0):
             raise ValueError(f"physical value of {name!r} must be finite and > 0, got {value}")
         if name in hub_names:
-            hub, kind, axis = hub_names[name]
-            mass, inertia = hubs_touched.get(
-                hub.name, (float(hub.mass), np.array(hub.inertia, dtype=float))
-            )
-            if kind == "mass":
-                mass = value
+            hub_name, axis = hub_names[name]
+            mass, moments = hubs_touched.setdefault(hub_name, (None, {}))
+            if axis is None:
+                hubs_touched[hub_name] = (value, moments)
             else:
-                inertia[axis, axis] = value
-            hubs_touched[hub.name] = (mass, inertia)
+                moments[axis] = value
         elif name in array_names:
             mount = array_names[name]
             instance = plant.GetModelInstanceByName(f"{ASSEMBLY_MODEL}::{mount.name}")
@@ -126,19 +127,14 @@ def apply_physical_values(
             spring = revolute_spring(plant, joint)
             if spring is None:
                 raise ValueError(f"no RevoluteSpring on joint {joint.name()!r} of the Drake twin")
-            ratio = value / float(mount.model.omega[0])
-            spring.SetStiffness(plant_context, spring.default_stiffness() * ratio**2)
-            joint.SetDampingVector(plant_context, joint.default_damping_vector() * ratio)
+            set_mode_frequency(spring, joint, plant_context, value / float(mount.model.omega[0]))
         else:
             known = sorted(hub_names) + sorted(array_names)
             raise ValueError(f"unknown real parameter {name!r} for the Drake twin; known: {known}")
-    for hub_name, (mass, inertia) in hubs_touched.items():
+    for hub_name, (mass, moments) in hubs_touched.items():
         instance = plant.GetModelInstanceByName(f"{ASSEMBLY_MODEL}::{hub_name}")
         body = plant.GetBodyByName(hub_name, instance)
-        # the hub link frame is at its centre of mass (SDF writer), so the CoM offset is zero
-        body.SetSpatialInertiaInBodyFrame(
-            plant_context, spatial_inertia_from_central(mass, np.zeros(3), inertia)
-        )
+        set_central_inertia(body, plant_context, mass, moments)
 
 
 def rotational_plant(

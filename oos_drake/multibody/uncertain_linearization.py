@@ -72,6 +72,8 @@ from oos_drake.multibody.plant_parts import (
     central_inertia,
     force_elements,
     revolute_spring,
+    set_central_inertia,
+    set_mode_frequency,
     spatial_inertia_from_central,
 )
 
@@ -312,7 +314,8 @@ class _Binding:
 
     def _check_inertia(self, plant_context):
         for value in (self.parameter.lower, self.parameter.upper):
-            mass, com, inertia = self._central(plant_context)
+            M = self.body.CalcSpatialInertiaInBodyFrame(plant_context)
+            mass, com, inertia = central_inertia(M)
             axis = BODY_QUANTITIES.index(self.parameter.quantity) - 1
             inertia[axis, axis] = value
             if (
@@ -325,22 +328,15 @@ class _Binding:
                     "(triangle inequality or non-positive moment)"
                 )
 
-    def _central(self, plant_context):
-        return central_inertia(self.body.CalcSpatialInertiaInBodyFrame(plant_context))
-
     def apply(self, plant_context, value: float) -> None:
         """Write ``value`` (physical) into ``plant_context``."""
         quantity = self.parameter.quantity
         if self.parameter.kind == "body":
-            mass, com, inertia = self._central(plant_context)
             if quantity == "mass":
-                mass = value
+                set_central_inertia(self.body, plant_context, mass=value)
             else:
                 axis = BODY_QUANTITIES.index(quantity) - 1
-                inertia[axis, axis] = value
-            self.body.SetSpatialInertiaInBodyFrame(
-                plant_context, spatial_inertia_from_central(mass, com, inertia)
-            )
+                set_central_inertia(self.body, plant_context, moments={axis: value})
         elif self.parameter.kind == "joint":
             if quantity == "stiffness":
                 self.spring.SetStiffness(plant_context, value)
@@ -348,8 +344,9 @@ class _Binding:
                 self.joint.SetDampingVector(plant_context, [value])
             else:
                 ratio = value / self.parameter.nominal
-                self.spring.SetStiffness(plant_context, self.k0 * ratio**2)
-                self.joint.SetDampingVector(plant_context, [self.d0 * ratio])
+                set_mode_frequency(
+                    self.spring, self.joint, plant_context, ratio, (self.k0, self.d0)
+                )
         else:
             getter = getattr(self.bushing, f"Get{_camel(self.bushing_kind)}Constants")
             setter = getattr(self.bushing, f"Set{_camel(self.bushing_kind)}Constants")
