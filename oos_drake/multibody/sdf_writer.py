@@ -90,15 +90,8 @@ class Inertial:
         ET.SubElement(element, "mass").text = _num(self.mass)
         inertia = ET.SubElement(element, "inertia")
         J = np.asarray(self.inertia, dtype=float)
-        for tag, (i, j) in (
-            ("ixx", (0, 0)),
-            ("ixy", (0, 1)),
-            ("ixz", (0, 2)),
-            ("iyy", (1, 1)),
-            ("iyz", (1, 2)),
-            ("izz", (2, 2)),
-        ):
-            ET.SubElement(inertia, tag).text = _num(J[i, j])
+        for tag in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):  # i<row><column>
+            ET.SubElement(inertia, tag).text = _num(J["xyz".index(tag[1]), "xyz".index(tag[2])])
         return element
 
 
