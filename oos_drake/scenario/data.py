@@ -682,6 +682,11 @@ def _check_positive(body: str, quantity: str, value: float) -> None:
         raise ScenarioError(body, f"{quantity} must be > 0, got {value:g}")
 
 
+def _check_nonnegative(body: str, quantity: str, value: float) -> None:
+    if value < 0:
+        raise ScenarioError(body, f"{quantity} must be >= 0, got {value:g}")
+
+
 def _check_percent(body: str, quantity: str, value: np.ndarray | float, upper: float) -> None:
     values = np.atleast_1d(value)
     if np.any(values < 0):
@@ -787,8 +792,7 @@ def _read_array_model(name: str, raw: Any) -> FlexibleArrayModel:
         raise ScenarioError(
             name, f"damping_ratios has {model.damping_ratios.shape[0]} entries for {n} modes"
         )
-    if np.any(model.damping_ratios < 0):
-        raise ScenarioError(name, f"damping ratio must be >= 0, got {model.damping_ratios.min():g}")
+    _check_nonnegative(name, "damping ratio", model.damping_ratios.min())
     _check_percent(
         name, "first-mode frequency uncertainty", model.first_mode_uncertainty_percent, 100.0
     )
@@ -895,9 +899,8 @@ def _read_docking(raw: Any) -> DockingSettings:
     sweep = settings.stiffness_sweep
     if sweep.size == 0 or np.any(sweep <= 0) or np.any(np.diff(sweep) <= 0):
         raise ScenarioError("docking", "stiffness_sweep must be positive and increasing")
-    for key in ("damping", "rigid_damping"):
-        if getattr(settings, key) < 0:
-            raise ScenarioError("docking", f"{key} must be >= 0, got {getattr(settings, key):g}")
+    _check_nonnegative("docking", "damping", settings.damping)
+    _check_nonnegative("docking", "rigid_damping", settings.rigid_damping)
     _check_positive("docking", "rigid_stiffness", settings.rigid_stiffness)
     return settings
 
@@ -943,11 +946,9 @@ def _read_mission(raw: Any) -> Mission:
             f"{t_end:g} s",
         )
     standoff = t.number("first_docking_standoff")
-    if standoff < 0:
-        raise ScenarioError("mission", f"first_docking_standoff must be >= 0, got {standoff:g}")
+    _check_nonnegative("mission", "first_docking_standoff", standoff)
     approach = t.number("grasp_approach_distance")
-    if approach < 0:
-        raise ScenarioError("mission", f"grasp_approach_distance must be >= 0, got {approach:g}")
+    _check_nonnegative("mission", "grasp_approach_distance", approach)
     target_angles = t.array("target_array_angles", (2,))
     _check_angles("mission", "target_array_angles", target_angles)
     arm_wp = _read_waypoints(

@@ -50,12 +50,6 @@ def _db(values) -> np.ndarray:
     return 20.0 * np.log10(np.maximum(np.abs(values), 1e-300))
 
 
-def _timeline(scenario):
-    from oos_drake.scenario.timeline import mission_timeline
-
-    return mission_timeline(scenario)
-
-
 def sigma_moments_data(model, timeline, frequencies_hz, n_samples: int = 20, rng=None):
     """Gain of ``T_ext{1} -> wdot{1}`` at the six moments (nominal and ``n_samples`` samples).
 
@@ -83,33 +77,23 @@ def sigma_moments_data(model, timeline, frequencies_hz, n_samples: int = 20, rng
     for name, moment in timeline.moments.items():
         config = moment.configuration
         fixed = usubs(model, config.parameters())
-        nominal = fixed.nominal.freqresp(omega)[:, TORQUE_X, TORQUE_X]
-        rows.append(
-            pd.DataFrame(
-                {
-                    "moment": name,
-                    "time [s]": float(config.time),
-                    "model": "nominal",
-                    "frequency [Hz]": frequencies_hz,
-                    "gain [dB]": _db(nominal),
-                }
-            )
-        )
+        curves = {"nominal": fixed.nominal.freqresp(omega)[:, TORQUE_X, TORQUE_X]}
         if n_samples:
             samples, _ = usample(fixed, n_samples, rng)
             response = samples.freqresp(omega)[..., TORQUE_X, TORQUE_X]
-            for k in range(n_samples):
-                rows.append(
-                    pd.DataFrame(
-                        {
-                            "moment": name,
-                            "time [s]": float(config.time),
-                            "model": f"sample {k}",
-                            "frequency [Hz]": frequencies_hz,
-                            "gain [dB]": _db(response[k]),
-                        }
-                    )
+            curves.update({f"sample {k}": response[k] for k in range(n_samples)})
+        for label, gain in curves.items():
+            rows.append(
+                pd.DataFrame(
+                    {
+                        "moment": name,
+                        "time [s]": float(config.time),
+                        "model": label,
+                        "frequency [Hz]": frequencies_hz,
+                        "gain [dB]": _db(gain),
+                    }
                 )
+            )
     return pd.concat(rows, ignore_index=True)
 
 
@@ -266,10 +250,11 @@ def make_figures(
     import matplotlib.pyplot as plt
 
     from oos_drake.scenario.model import build_mission_model
+    from oos_drake.scenario.timeline import mission_timeline
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    timeline = _timeline(scenario)
+    timeline = mission_timeline(scenario)
     model = build_mission_model(timeline.scenario) if model is None else model
     frequencies = np.logspace(-2, 2, n_frequencies)
     times = np.linspace(timeline.t_start, timeline.t_end, n_times)

@@ -440,24 +440,15 @@ def _docking_model(phase: str, scenario, spring_dampers) -> LFR:
     components.append(Component("RH2", rh2_model, rh2_in, rh2_out))
     components += [_array_component(mounts[m], "RH2") for m in on_rh2]
     dcm_rh2_l6, dcm_rh2_rh1 = _port_frames(scenario)
-    # SM1 in the frame of J7 (= D2): C = RH2 at D2, P = arm tip J7
-    components.append(
-        Component(
-            "SM1",
-            _spring_damper_between(params["SM1"], dcm_rh2_l6),
-            inputs=("xdd_D2_RH2", "xdd_J7_L6"),
-            outputs=("W_D2_RH2", "W_J7_L6"),
-        )
-    )
+    # SM1 in the frame of J7 (= D2): C = RH2 at D2, P = arm tip J7;
+    # SM2 in the frame of D1 (= D3): C = RH2 at D3, P = RH1 at D1
+    springs = [("SM1", "D2_RH2", "J7_L6", dcm_rh2_l6)]
     if with_d1:
-        # SM2 in the frame of D1 (= D3): C = RH2 at D3, P = RH1 at D1
+        springs.append(("SM2", "D3_RH2", "D1_RH1", dcm_rh2_rh1))
+    for name, c, p, dcm in springs:
+        blocks = _spring_damper_between(params[name], dcm)
         components.append(
-            Component(
-                "SM2",
-                _spring_damper_between(params["SM2"], dcm_rh2_rh1),
-                inputs=("xdd_D3_RH2", "xdd_D1_RH1"),
-                outputs=("W_D3_RH2", "W_D1_RH1"),
-            )
+            Component(name, blocks, inputs=(f"xdd_{c}", f"xdd_{p}"), outputs=(f"W_{c}", f"W_{p}"))
         )
     return _assemble_at_G1(components)
 

@@ -408,31 +408,25 @@ class MissionTimeline:
     @property
     def moments(self) -> Mapping[str, NamedConfiguration]:
         """The paper's six moments ``"1"`` .. ``"6"``."""
-        return MappingProxyType(
-            {
-                m.name: NamedConfiguration(
-                    name=m.name,
-                    kind="moment",
-                    description=m.description,
-                    configuration=self.configuration(m.time),
-                )
-                for m in self.scenario.mission.moments
-            }
-        )
+        return self._named("moment", self.scenario.mission.moments)
 
     @property
     def docking_phases(self) -> Mapping[str, NamedConfiguration]:
         """Docking phases ``"7"`` (arm docks to the target) and ``"8"`` (target docks to RH1)."""
+        return self._named("docking phase", self.scenario.mission.docking_phases)
+
+    def _named(self, kind: str, specs) -> Mapping[str, NamedConfiguration]:
+        """``MomentSpec`` or ``DockingPhaseSpec`` entries as named configurations."""
         return MappingProxyType(
             {
-                p.name: NamedConfiguration(
-                    name=p.name,
-                    kind="docking phase",
-                    description=p.description,
-                    configuration=self.configuration(p.time),
-                    spring_dampers=p.spring_dampers,
+                spec.name: NamedConfiguration(
+                    name=spec.name,
+                    kind=kind,
+                    description=spec.description,
+                    configuration=self.configuration(spec.time),
+                    spring_dampers=getattr(spec, "spring_dampers", ()),
                 )
-                for p in self.scenario.mission.docking_phases
+                for spec in specs
             }
         )
 
