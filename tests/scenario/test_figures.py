@@ -4,6 +4,7 @@ import argparse
 
 import numpy as np
 import pytest
+from kinematic_oracles import inertia_history  # tests/scenario is on sys.path (rootdir imports)
 
 from oos_drake.scenario.figures import (
     docking_sweeps_data,
@@ -11,7 +12,7 @@ from oos_drake.scenario.figures import (
     sigma_moments_data,
     surface_data,
 )
-from oos_drake.scenario.kinematics import inertia_history, rigid_spatial_inertia_at_G1
+from oos_drake.scenario.kinematics import rigid_spatial_inertia_at_G1
 from oos_drake.scenario.model import build_mission_model
 from oos_drake.scenario.timeline import mission_timeline
 

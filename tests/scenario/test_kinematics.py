@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from kinematic_oracles import inertia_history  # tests/scenario is on sys.path (rootdir imports)
 
 from oos_drake.scenario.data import load_scenario
 from oos_drake.scenario.kinematics import (
@@ -13,7 +14,6 @@ from oos_drake.scenario.kinematics import (
     arm_tip_pose,
     first_docking_ik,
     forward_kinematics,
-    inertia_history,
     pose_error,
     rigid_spatial_inertia_at_G1,
     rotation_about_axis,
