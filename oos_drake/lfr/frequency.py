@@ -455,20 +455,13 @@ def _chunk_response(M: np.ndarray, n: int, s: np.ndarray, tail_C=None) -> np.nda
     result = np.empty((nb, s.size, ny, nu), dtype=complex)
     direct = np.zeros(nb, dtype=bool)
     with np.errstate(all="ignore"):
-        lam, V = np.linalg.eig(A)
-        # V^-1 [B, probes]: the random probes estimate the norms of the rows of V^-1 (left
-        # eigenvectors), i.e. each eigenvalue's condition number, without forming V^-1
-        probes = _probes(n)
-        X, singular = _safe_solve(
-            V, np.concatenate([B.astype(complex), np.broadcast_to(probes, (nb, n, 2))], axis=2)
-        )
-        kappa = np.sqrt(n) * np.max(np.abs(X[:, :, nu:]), axis=2) * np.linalg.norm(V, axis=-2)
+        lam, V, X, kappa, singular = _modal_basis(A, B)
         bad = ~np.isfinite(kappa) | (kappa > EIG_COND_LIMIT)
         bad[singular] = True
         nbad = bad.sum(axis=1)
         plain = np.flatnonzero(nbad == 0)
         if plain.size:
-            result[plain] = _modal_sum(C[plain] @ V[plain], lam[plain], X[plain, :, :nu], s)
+            result[plain] = _modal_sum(C[plain] @ V[plain], lam[plain], X[plain], s)
             result[plain] += D[plain][:, None, :, :]
         for k in np.unique(nbad[nbad > 0]):
             group = np.flatnonzero(nbad == k)
@@ -496,12 +489,7 @@ def _chunk_response_tail(M, n, s, tail_C, safe_ratio: float = 1e6):
     nb, ny, nu = M.shape[0], M.shape[1] - n, M.shape[2] - n
     A, B, C = M[:, :n, :n], M[:, :n, n:], M[:, n:, :n]
     result = np.empty((nb, s.size, ny, nu), dtype=complex)
-    lam, V = np.linalg.eig(A)
-    probes = _probes(n)
-    X, singular = _safe_solve(
-        V, np.concatenate([B.astype(complex), np.broadcast_to(probes, (nb, n, 2))], axis=2)
-    )
-    kappa = np.sqrt(n) * np.max(np.abs(X[:, :, nu:]), axis=2) * np.linalg.norm(V, axis=-2)
+    lam, V, X, kappa, singular = _modal_basis(A, B)
     well = np.all(np.isfinite(kappa) & (kappa <= EIG_COND_LIMIT), axis=1) & ~singular
     lam_min = np.min(np.abs(lam), axis=1)
     smax = np.max(np.abs(s)) if s.size else 0.0
@@ -509,7 +497,7 @@ def _chunk_response_tail(M, n, s, tail_C, safe_ratio: float = 1e6):
         fast = well & (lam_min > 0) & ((smax / lam_min) ** q < safe_ratio)
     idx = np.flatnonzero(fast)
     if idx.size:
-        Vf, lamf, Bt = V[idx], lam[idx], X[idx, :, :nu]
+        Vf, lamf, Bt = V[idx], lam[idx], X[idx]
         CpV = [Cp[idx] @ Vf for Cp in tail_C]
         inv_lam = 1.0 / lamf
         Ct = C[idx] @ Vf
@@ -537,6 +525,19 @@ def _chunk_response_tail(M, n, s, tail_C, safe_ratio: float = 1e6):
             out += aug[:, :, ny * (p + 1) : ny * (p + 2), :] * (s ** -(p + 1))[None, :, None, None]
         result[rest] = out
     return result
+
+
+def _modal_basis(A, B):
+    """``(lam, V, X, kappa, singular)`` of a chunk: ``A V = V diag(lam)``, ``X = V^-1 B`` and
+    each eigenvalue's condition estimate ``kappa``: ``V^-1`` applied to random probes estimates
+    the norms of its rows (left eigenvectors) without forming it; ``singular`` flags exactly
+    singular ``V`` (see :func:`_safe_solve`)."""
+    nb, n, nu = B.shape
+    lam, V = np.linalg.eig(A)
+    probes = np.broadcast_to(_probes(n), (nb, n, 2))
+    X, singular = _safe_solve(V, np.concatenate([B.astype(complex), probes], axis=2))
+    kappa = np.sqrt(n) * np.max(np.abs(X[:, :, nu:]), axis=2) * np.linalg.norm(V, axis=-2)
+    return lam, V, X[:, :, :nu], kappa, singular
 
 
 @functools.lru_cache(maxsize=64)
