@@ -116,6 +116,7 @@ class UReal:
     quantity: str = ""
 
     kind = "ureal"
+    shape = (1, 1)  # (p, q) of one occurrence: w rows, z rows
 
     def __post_init__(self):
         _check_name(self.name)
@@ -150,11 +151,6 @@ class UReal:
         if beta == 0.0:
             return 0.5 * (self.upper - self.lower)
         return self.upper * (1.0 + beta) - self.nominal
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """Size ``(p, q)`` of one occurrence: ``w`` rows, ``z`` rows."""
-        return (1, 1)
 
     @property
     def is_affine(self) -> bool:
@@ -246,6 +242,8 @@ class UComplex:
     quantity: str = ""
 
     kind = "ucomplex"
+    shape = (1, 1)
+    range = None  # a disc, not an interval
 
     def __post_init__(self):
         _check_name(self.name)
@@ -257,10 +255,6 @@ class UComplex:
             )
         if not self.radius > 0:
             raise ValueError(f"ucomplex {self.name!r}: radius must be > 0, got {self.radius!r}")
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        return (1, 1)
 
     def atom(self) -> np.ndarray:
         root = math.sqrt(self.radius)
@@ -293,10 +287,6 @@ class UComplex:
         """Physical values drawn uniformly in the disc."""
         radius = self.radius * np.sqrt(rng.uniform(0.0, 1.0, size))
         return self.nominal + radius * np.exp(2j * np.pi * rng.uniform(0.0, 1.0, size))
-
-    @property
-    def range(self):
-        return None
 
     def describe(self) -> str:
         return (
@@ -345,6 +335,7 @@ class ULTIDyn:
             raise ValueError(f"ultidyn {self.name!r}: bound must be > 0, got {self.bound!r}")
 
     nominal = 0.0
+    range = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -396,10 +387,6 @@ class ULTIDyn:
         norms = np.linalg.norm(raw, ord=2, axis=(-2, -1))
         scale = self.bound * rng.uniform(0.0, 1.0, size) / np.where(norms > 0, norms, 1.0)
         return raw * scale[:, None, None]
-
-    @property
-    def range(self):
-        return None
 
     def describe(self) -> str:
         return (

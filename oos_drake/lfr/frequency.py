@@ -528,10 +528,8 @@ def _chunk_response_tail(M, n, s, tail_C, safe_ratio: float = 1e6):
 
 
 def _modal_basis(A, B):
-    """``(lam, V, X, kappa, singular)`` of a chunk: ``A V = V diag(lam)``, ``X = V^-1 B`` and
-    each eigenvalue's condition estimate ``kappa``: ``V^-1`` applied to random probes estimates
-    the norms of its rows (left eigenvectors) without forming it; ``singular`` flags exactly
-    singular ``V`` (see :func:`_safe_solve`)."""
+    """``A V = V diag(lam)``, ``X = V^-1 B``, eigenvalue condition estimates ``kappa`` (random
+    probes estimate the norms of the rows of ``V^-1`` without forming it) and ``singular``."""
     nb, n, nu = B.shape
     lam, V = np.linalg.eig(A)
     probes = np.broadcast_to(_probes(n), (nb, n, 2))

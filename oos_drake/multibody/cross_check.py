@@ -90,10 +90,7 @@ def match_roots(test: np.ndarray, reference: np.ndarray) -> float:
 
 def minimal(system: control.StateSpace, tol: float | None = None) -> control.StateSpace:
     """Minimal realization: structural pruning, then ``control.minreal`` (Slicot TB01PD)."""
-    pruned = structural_prune(system)
-    if tol is None:
-        return control.minreal(pruned, verbose=False)
-    return control.minreal(pruned, tol=tol, verbose=False)
+    return control.minreal(structural_prune(system), tol=tol, verbose=False)
 
 
 def transmission_zeros(system: control.StateSpace) -> np.ndarray:
