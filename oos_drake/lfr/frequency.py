@@ -243,7 +243,7 @@ def _real_pair_response(
         T = np.take_along_axis(T, order[:, None, :], axis=2)
         is_cplx = np.take_along_axis(is_cplx, order, axis=1)
         X, singular = _safe_solve(
-            T, np.concatenate([B1, np.broadcast_to(_real_probes(m), (g, m, 2))], axis=2)
+            T, np.concatenate([B1, np.broadcast_to(_probes(m, real=True), (g, m, 2))], axis=2)
         )
         ok &= ~singular
         first = is_cplx & (lam.imag > 0)
@@ -358,16 +358,6 @@ def _pair_columns(Y, first, second, sign):
     out.imag = np.where(fm, sign * nxt, np.where(sm, -sign * Y, 0.0))
     out.real = np.where(sm, prv, Y)
     return out
-
-
-@functools.lru_cache(maxsize=64)
-def _real_probes(n: int) -> np.ndarray:
-    """Two fixed unit-norm real Gaussian probe vectors (deterministic, seeded by ``n``)."""
-    rng = np.random.default_rng(20_240_602 + n)
-    probe = rng.standard_normal((n, 2))
-    probe = probe / np.linalg.norm(probe, axis=0)
-    probe.flags.writeable = False
-    return probe
 
 
 def _tail_response(M, n, core, tail, powers, s):
@@ -538,11 +528,14 @@ def _modal_basis(A, B):
     return lam, V, X[:, :, :nu], kappa, singular
 
 
-@functools.lru_cache(maxsize=64)
-def _probes(n: int) -> np.ndarray:
-    """Two fixed unit-norm complex Gaussian probe vectors (deterministic, seeded by ``n``)."""
-    rng = np.random.default_rng(20_240_601 + n)
-    probe = rng.standard_normal((n, 2)) + 1j * rng.standard_normal((n, 2))
+@functools.lru_cache(maxsize=128)
+def _probes(n: int, real: bool = False) -> np.ndarray:
+    """Two fixed unit-norm complex (or real) Gaussian probe vectors (deterministic, by ``n``)."""
+    if real:
+        probe = np.random.default_rng(20_240_602 + n).standard_normal((n, 2))
+    else:
+        rng = np.random.default_rng(20_240_601 + n)
+        probe = rng.standard_normal((n, 2)) + 1j * rng.standard_normal((n, 2))
     probe = probe / np.linalg.norm(probe, axis=0)
     probe.flags.writeable = False
     return probe

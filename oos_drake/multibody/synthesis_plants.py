@@ -197,8 +197,8 @@ class DrakePlantSource:
     ----------
     nominal_matrices : tuple of numpy.ndarray
         ``(A, B, C, D)`` batched over the configurations (padded to :attr:`order`).
-    build_time_s, build_cpu_s : float
-        Wall and CPU time of the nominal linearizations [s].
+    build_time_s : float
+        Wall time of the nominal linearizations [s].
     extractions : int
         LFRs extracted so far (at most one per configuration).
     extraction_time_s : float
@@ -226,7 +226,7 @@ class DrakePlantSource:
         self._lfrs: dict[int, LFR] = {}
         self.extractions = 0
         self.extraction_time_s = 0.0
-        wall, cpu = time.perf_counter(), time.process_time()
+        wall = time.perf_counter()
         raw = []
         for i, configuration in enumerate(self.configurations):
             raw.append(rotational_plant(configuration, scenario=self.scenario))
@@ -237,7 +237,6 @@ class DrakePlantSource:
         padded = [_pad(*m, self.order) for m in raw]
         self.nominal_matrices = tuple(np.stack([m[k] for m in padded]) for k in range(4))
         self.build_time_s = time.perf_counter() - wall
-        self.build_cpu_s = time.process_time() - cpu
 
     def lfr(self, index: int) -> LFR:
         """The uncertain plant ``T -> wdot`` of configuration ``index`` (extracted once).
