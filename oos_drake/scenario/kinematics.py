@@ -38,7 +38,7 @@ import numpy as np
 
 from oos_drake.scenario.data import Scenario, load_scenario
 from oos_drake.scenario.timeline import Configuration
-from oos_drake.titop.spatial import rigid_spatial_inertia, skew
+from oos_drake.titop.spatial import rigid_spatial_inertia, rotation_matrix
 
 __all__ = [
     "BODY_NAMES",
@@ -52,7 +52,6 @@ __all__ = [
     "forward_kinematics",
     "pose_error",
     "rigid_spatial_inertia_at_G1",
-    "rotation_about_axis",
     "second_docking_ik",
     "solve_arm_ik",
     "waypoint_ik",
@@ -65,26 +64,6 @@ BODY_NAMES = (
     "RH1", "L0", "L1", "L2", "L3", "L4", "L5", "L6", "SA1", "SA2", "RH2", "SA3", "SA4",
 )  # fmt: skip
 _TARGET_BODIES = ("RH2", "SA3", "SA4")
-
-
-def rotation_about_axis(axis: np.ndarray, angle) -> np.ndarray:
-    """Rotation matrix of ``angle`` about the unit ``axis`` (Rodrigues), batched over ``angle``.
-
-    Parameters
-    ----------
-    axis : (3,) array
-        Unit axis.
-    angle : float or array_like
-        Angle(s) [rad].
-
-    Returns
-    -------
-    ndarray
-        Shape ``angle.shape + (3, 3)``.
-    """
-    angle = np.asarray(angle, dtype=float)[..., None, None]
-    K = skew(np.asarray(axis, dtype=float))
-    return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)
 
 
 @dataclass(frozen=True, eq=False)
@@ -167,7 +146,7 @@ def _arm_frames(scenario: Scenario, alpha: np.ndarray) -> tuple[list[Pose], Pose
     for i, link in enumerate(arm.links[1:], start=1):
         parent = arm.links[i - 1]
         joint = Pose(
-            rotation_about_axis(link.joint_axis, alpha[..., i - 1]),
+            rotation_matrix(link.joint_axis, alpha[..., i - 1]),
             np.broadcast_to(parent.p_J_Jnext, batch + (3,)),
         )
         frame = frame @ joint
@@ -287,7 +266,7 @@ def forward_kinematics(scenario: Scenario, configuration: Configuration) -> Syst
     for name, mount in scenario.arrays.items():
         index = int(name[2:]) - 1
         local = Pose(
-            mount.R_G_P0 @ rotation_about_axis(mount.axis, configuration.theta[..., index]),
+            mount.R_G_P0 @ rotation_matrix(mount.axis, configuration.theta[..., index]),
             np.broadcast_to(mount.p_G_P, batch + (3,)),
         )
         bodies[name] = bodies[mount.parent] @ local

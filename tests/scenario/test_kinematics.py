@@ -16,12 +16,12 @@ from oos_drake.scenario.kinematics import (
     forward_kinematics,
     pose_error,
     rigid_spatial_inertia_at_G1,
-    rotation_about_axis,
     second_docking_ik,
     solve_arm_ik,
     waypoint_tip_pose,
 )
 from oos_drake.scenario.timeline import Configuration, mission_timeline
+from oos_drake.titop.spatial import rotation_matrix
 
 D1, A2, A3, D4, D5, D6 = 0.089159, 0.425, 0.39225, 0.10915, 0.09465, 0.0823
 
@@ -118,10 +118,10 @@ def test_arm_reach_bound(scenario):
 
 def test_rotation_about_axis_closed_form():
     np.testing.assert_allclose(
-        rotation_about_axis([0, 1, 0], np.pi / 2), [[0, 0, 1], [0, 1, 0], [-1, 0, 0]], atol=1e-15
+        rotation_matrix([0, 1, 0], np.pi / 2), [[0, 0, 1], [0, 1, 0], [-1, 0, 0]], atol=1e-15
     )
-    R = rotation_about_axis([0, 0, -1], np.array([0.3, 1.2]))
-    np.testing.assert_allclose(R[1], rotation_about_axis([0, 0, 1], -1.2), atol=1e-15)
+    R = rotation_matrix([0, 0, -1], np.array([0.3, 1.2]))
+    np.testing.assert_allclose(R[1], rotation_matrix([0, 0, 1], -1.2), atol=1e-15)
 
 
 def _batch(alpha, delta_C1=0.0, delta_C2=0.0):
@@ -354,7 +354,7 @@ def test_inertia_history(scenario):
 @pytest.mark.parametrize("angle", [1e-9, 0.3, 2.0, np.pi])
 def test_pose_error_is_the_rotation_vector(angle):
     axis = np.array([1.0, 2.0, -2.0]) / 3.0
-    actual = Pose(rotation_about_axis(axis, angle), np.array([1.0, 2.0, 3.0]))
+    actual = Pose(rotation_matrix(axis, angle), np.array([1.0, 2.0, 3.0]))
     desired = Pose(np.eye(3), np.array([1.0, 2.0, 2.5]))
     error = pose_error(actual, desired)
     np.testing.assert_allclose(error[:3], [0, 0, 0.5], atol=1e-15)
