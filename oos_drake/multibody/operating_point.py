@@ -111,13 +111,10 @@ def set_operating_point(handles: ScenarioDiagram, context, point: OperatingPoint
     plant = handles.plant
     plant_context = plant.GetMyMutableContextFromRoot(context)
     plant.SetPositionsAndVelocities(plant_context, np.zeros(plant.num_multibody_states()))
-    for joint in handles.prescribed_joints:
+    angles = np.concatenate([point.alpha, point.theta])
+    for joint, angle in zip(handles.prescribed_joints, angles, strict=True):
         joint.Unlock(plant_context)
-    for joint, angle in zip(handles.arm_joints, point.alpha, strict=True):
         joint.set_angle(plant_context, angle)
-    for joint, angle in zip(handles.drive_joints, point.theta, strict=True):
-        joint.set_angle(plant_context, angle)
-    for joint in handles.prescribed_joints:
         joint.Lock(plant_context)
     if handles.target_operating_frame is not None:
         frames = handles.frames
