@@ -56,20 +56,11 @@ def _check_inertial(link: ET.Element, path: Path) -> None:
     if not np.isfinite(mass) or mass <= 0:
         raise SdfError(f"{path}: {where}: mass must be > 0 kg, got {mass:g}")
     inertia = inertial.find("inertia")
-    values = {tag: _float(inertia, tag, path, where) for tag in ("ixx", "iyy", "izz")}
-    for tag in ("ixy", "ixz", "iyz"):
-        values[tag] = (
-            0.0
-            if inertia is None or inertia.find(tag) is None
-            else _float(inertia, tag, path, where)
-        )
-    J = np.array(
-        [
-            [values["ixx"], values["ixy"], values["ixz"]],
-            [values["ixy"], values["iyy"], values["iyz"]],
-            [values["ixz"], values["iyz"], values["izz"]],
-        ]
-    )
+    J = np.zeros((3, 3))
+    for tag in ("ixx", "iyy", "izz", "ixy", "ixz", "iyz"):  # i<row><column>; products optional
+        if tag[1] == tag[2] or (inertia is not None and inertia.find(tag) is not None):
+            i, j = "xyz".index(tag[1]), "xyz".index(tag[2])
+            J[i, j] = J[j, i] = _float(inertia, tag, path, where)
     if not np.all(np.isfinite(J)):
         raise SdfError(f"{path}: {where}: inertia has non-finite entries")
     moments = np.linalg.eigvalsh(J)
