@@ -249,19 +249,6 @@ def _write_campaign(directory: Path, spec: CampaignSpec, plan: pd.DataFrame) -> 
     store.atomic_write_text(spec_to_toml(spec, worst_cases_name), directory / store.SPEC_FILE)
 
 
-def prepare_campaign(
-    spec_path: str | Path,
-    out: str | Path,
-    worst_cases: str | Path | None = None,
-    simulator_options: Mapping[str, Any] | None = None,
-) -> tuple[Path, CampaignSpec, pd.DataFrame]:
-    """Validate the spec, build the plan, then (only then) create the campaign directory
-    (arguments of :func:`plan_campaign`)."""
-    spec, plan = plan_campaign(spec_path, worst_cases, simulator_options)
-    _write_campaign(Path(out), spec, plan)
-    return Path(out), spec, plan
-
-
 def run_campaign(
     spec_path: str | Path,
     out: str | Path,
