@@ -203,17 +203,14 @@ def parse_distribution(where: str, table: Any, parameter: Parameter) -> Distribu
     lo, hi = parameter.lower, parameter.upper
     unit = parameter.unit
 
-    # a bound written in decimal (2.552) may miss the computed range (2.32 * 1.1) by round-off:
-    # accept, and clip, within 1e-9 of the range's scale
-    slack = 1e-9 * max(abs(lo), abs(hi), hi - lo)
-
     def in_range(key: str, value: float) -> float:
-        if not (lo - slack <= value <= hi + slack):
+        clipped = parameter.clip(value)
+        if clipped is None:
             raise ValueError(
                 f"{where}: {key} = {value:g} {unit} outside the range of {parameter.name} "
                 f"[{lo:g}, {hi:g}] {unit}"
             )
-        return min(max(value, lo), hi)
+        return clipped
 
     if name == "fixed":
         return Fixed(in_range("value", finite_number(where, "value", table["value"])))

@@ -112,6 +112,16 @@ class Parameter:
         """Table column name with the unit, e.g. ``"J_hub [kg m^2]"``."""
         return f"{self.name} [{self.unit}]"
 
+    def clip(self, value: float) -> float | None:
+        """``value`` [unit] clipped to the range, or None when it lies outside.
+
+        A value written in decimal (2.552) may miss a computed bound (2.32 * 1.1) by round-off:
+        within 1e-9 of the range's scale it counts as inside.
+        """
+        lo, hi = self.lower, self.upper
+        slack = 1e-9 * max(abs(lo), abs(hi), hi - lo)
+        return min(max(value, lo), hi) if lo - slack <= value <= hi + slack else None
+
 
 @dataclass(frozen=True)
 class MissionWindow:
