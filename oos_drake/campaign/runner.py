@@ -338,9 +338,8 @@ def rerun_case(directory: str | Path, run_id: int) -> RerunResult:
             index=columns,
         )
         comparison["difference"] = comparison["recomputed"] - comparison["recorded"]
-        same_metrics = all(
-            (np.isnan(a) and np.isnan(b)) or a == b
-            for a, b in zip(comparison["recorded"], comparison["recomputed"], strict=True)
+        same_metrics = np.array_equal(
+            comparison["recorded"], comparison["recomputed"], equal_nan=True
         )
         identical = bool(same_metrics and recorded["status"] == row["status"].iloc[0])
     changes = {}
