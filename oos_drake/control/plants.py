@@ -244,12 +244,6 @@ def synthetic_flexible_plants(
         if uncertain
         else ()
     )
-    if not uncertain:
-        inner = build
-
-        def build(index, values):  # noqa: F811 - nominal-only variant
-            return inner(index, np.ones((index.size, 2)))
-
     return PlantArray(pd.DataFrame({"time [s]": t}), parameters, build, "synthetic")
 
 
