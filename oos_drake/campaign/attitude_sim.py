@@ -41,6 +41,7 @@ from oos_drake.campaign.simulator import (
     RunCase,
     RunOutput,
     SimulationDiverged,
+    check_options,
 )
 
 _REAL, _STIFF = ParameterKind.REAL_BLOCK, ParameterKind.STIFFNESS
@@ -285,11 +286,5 @@ class FlexibleAttitudeSimulator:
 
 def make_simulator(**options) -> FlexibleAttitudeSimulator:
     """Factory registered as ``"flexible-attitude"``; options are the dataclass fields."""
-    known = set(FlexibleAttitudeSimulator.__dataclass_fields__)
-    unknown = sorted(set(options) - known)
-    if unknown:
-        raise ValueError(
-            f"flexible-attitude: unknown option(s) {', '.join(unknown)}; known: "
-            f"{', '.join(sorted(known))}"
-        )
+    check_options("flexible-attitude", options, set(FlexibleAttitudeSimulator.__dataclass_fields__))
     return FlexibleAttitudeSimulator(**options)

@@ -287,6 +287,16 @@ def registered_simulators() -> dict[str, str]:
     return dict(_REGISTRY)
 
 
+def check_options(simulator: str, options: Mapping[str, Any], known: set[str]) -> None:
+    """A factory's check of its options: ``ValueError`` naming the unknown ones and ``known``."""
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise ValueError(
+            f"{simulator}: unknown option(s) {', '.join(unknown)}; known: "
+            f"{', '.join(sorted(known))}"
+        )
+
+
 def _resolve_factory(name: str, path: str):
     module_name, _, attr = path.partition(":")
     try:
