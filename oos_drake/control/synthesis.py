@@ -240,10 +240,7 @@ def tune(
             )
             return values, (grads * scale).reshape(models.size, -1)
 
-        # the metric learnt along nonsmooth valleys goes stale: restart it every
-        # `restart_every` iterations until a cycle no longer improves gamma by `restart_rtol`;
-        # then (a stall at a kink: "line search failed") restart up to `kicks` times from a small
-        # deterministic perturbation of the best point and keep what improves
+        # metric cycles, then kicks (see the docstring): the metric goes stale along valleys
         x = x_best = x0
         f_best, used, history, evaluations, messages, kicks_left = None, 0, [], 0, [], kicks
         while used < max_iterations:
