@@ -38,6 +38,7 @@ import scipy.linalg
 import scipy.signal
 
 from oos_drake.control import components as comp
+from oos_drake.control.statespace import BatchedStateSpace
 
 __all__ = [
     "SampledLoop",
@@ -164,17 +165,17 @@ class SampledLoop:
         spec, T = self.spec, self.period
         omega = np.atleast_1d(np.asarray(omega, dtype=float))
         z = np.exp(1j * omega * T)
-        s_w = 1j * (2.0 / T) * np.tan(np.minimum(omega * T / 2.0, np.pi / 2 - 1e-9))
+        w_w = (2.0 / T) * np.tan(np.minimum(omega * T / 2.0, np.pi / 2 - 1e-9))  # s_w = j w_w
         n = self.Phi.shape[0]
         M = z[:, None, None] * np.eye(n) - self.Phi
         rhs = (self.Gamma0 + self.Gamma1 / z[:, None, None]) * z[:, None, None] ** (-self.shift)
         G = self.C @ np.linalg.solve(M, rhs)  # (F, 6, 3): T -> [phi; w]
         sst, gyro, rolloff, wheels = _filters(spec)
         sensors = np.concatenate(
-            [np.repeat(_siso(sst, s_w)[:, None], 3, 1), np.repeat(_siso(gyro, s_w)[:, None], 3, 1)],
+            [np.repeat(_siso(sst, w_w)[:, None], 3, 1), np.repeat(_siso(gyro, w_w)[:, None], 3, 1)],
             axis=1,
         )
-        c = _siso(rolloff, s_w) * _siso(wheels, s_w)
+        c = _siso(rolloff, w_w) * _siso(wheels, w_w)
         return c[:, None, None] * ((self.K * sensors[:, None, :]) @ G)
 
 
@@ -189,12 +190,9 @@ def _filters(spec: comp.DesignSpecification) -> tuple:
     )
 
 
-def _siso(siso, s) -> np.ndarray:
-    """Response of a SISO ``(A, B, C, D)`` at the points ``s``."""
-    A, B, C, D = (np.atleast_2d(np.asarray(m, dtype=float)) for m in siso)
-    n = A.shape[0]
-    X = np.linalg.solve(s[:, None, None] * np.eye(n) - A, np.broadcast_to(B, (s.size, n, 1)))
-    return (C @ X)[:, 0, 0] + D[0, 0]
+def _siso(siso, omega) -> np.ndarray:
+    """Response of a SISO ``(A, B, C, D)`` at ``j omega`` (``omega`` [rad/s])."""
+    return BatchedStateSpace(*siso, ("in",), ("out",)).freqresp(omega)[:, 0, 0]
 
 
 def sampled_loop(plant, K, spec: comp.DesignSpecification | None = None) -> SampledLoop:
