@@ -31,7 +31,6 @@ measure the error of the rational hold model that keeps the LFR structure.
 from __future__ import annotations
 
 import dataclasses
-import functools
 
 import numpy as np
 import scipy.linalg
@@ -68,7 +67,7 @@ def controller_chain(K, spec: comp.DesignSpecification) -> tuple[np.ndarray, ...
 
     ``u = F_ro K [-(SST phi); -(GYRO w)]``, ``T_rw = RW u`` (noise-free, reference zero).
     """
-    sst, gyro, rolloff, wheels = (_axes(f) for f in _filters(spec))
+    sst, gyro, rolloff, wheels = (_axes(f) for f in comp.filters(spec))
     sensors = tuple(scipy.linalg.block_diag(a, b) for a, b in zip(sst, gyro, strict=True))
     gain = (np.zeros((0, 0)), np.zeros((0, 6)), np.zeros((3, 0)), -np.asarray(K, dtype=float))
     return _series(_series(_series(sensors, gain), rolloff), wheels)
@@ -170,24 +169,13 @@ class SampledLoop:
         M = z[:, None, None] * np.eye(n) - self.Phi
         rhs = (self.Gamma0 + self.Gamma1 / z[:, None, None]) * z[:, None, None] ** (-self.shift)
         G = self.C @ np.linalg.solve(M, rhs)  # (F, 6, 3): T -> [phi; w]
-        sst, gyro, rolloff, wheels = _filters(spec)
+        sst, gyro, rolloff, wheels = comp.filters(spec)
         sensors = np.concatenate(
             [np.repeat(_siso(sst, w_w)[:, None], 3, 1), np.repeat(_siso(gyro, w_w)[:, None], 3, 1)],
             axis=1,
         )
         c = _siso(rolloff, w_w) * _siso(wheels, w_w)
         return c[:, None, None] * ((self.K * sensors[:, None, :]) @ G)
-
-
-@functools.lru_cache(maxsize=8)
-def _filters(spec: comp.DesignSpecification) -> tuple:
-    """SISO realizations of star tracker, gyro, roll-off and wheels (one per specification)."""
-    return (
-        comp.first_order_lowpass(spec.star_tracker_cutoff_hz),
-        comp.first_order_lowpass(spec.gyro_cutoff_hz),
-        comp.butterworth(spec.rolloff_order, spec.rolloff_cutoff_hz),
-        comp.second_order(spec.wheel_frequency_hz, spec.wheel_damping),
-    )
 
 
 def _siso(siso, omega) -> np.ndarray:
