@@ -297,15 +297,6 @@ def check_options(simulator: str, options: Mapping[str, Any], known: set[str]) -
         )
 
 
-def _resolve_factory(name: str, path: str):
-    module_name, _, attr = path.partition(":")
-    try:
-        module = importlib.import_module(module_name)
-        return getattr(module, attr)
-    except (ImportError, AttributeError) as exc:
-        raise ValueError(f"simulator {name!r}: cannot import factory {path!r}: {exc}") from exc
-
-
 #: Per-thread cache of built simulators: a simulator (a Drake context, say) is never shared by
 #: two threads, and a worker process with one thread builds each recipe exactly once.
 _BUILT = threading.local()
@@ -334,7 +325,13 @@ def simulator_builds() -> int:
 
 
 def _build(recipe: SimulatorRecipe) -> Simulator:
-    factory = _resolve_factory(recipe.name, recipe.factory)
+    module_name, _, attr = recipe.factory.partition(":")
+    try:
+        factory = getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError) as exc:
+        raise ValueError(
+            f"simulator {recipe.name!r}: cannot import factory {recipe.factory!r}: {exc}"
+        ) from exc
     try:
         simulator = factory(**recipe.option_dict)
     except TypeError as exc:
