@@ -298,17 +298,21 @@ def _worst_case_search(plants: PlantArray, configs, K, spec, options, rng):
     """
     lower, upper = plants.bounds
     P = lower.size
-    C = len(configs)
+    configs = np.asarray(configs)
+    C = configs.size
+
+    def gamma(repeat: int, values) -> np.ndarray:
+        """Gamma of the configurations, each repeated ``repeat`` times, at ``values``."""
+        models = ModelSet(np.repeat(configs, repeat), values)
+        return gamma_over(plants, models, K, spec, workers=options.workers).gamma
+
     samples = [plants.nominal_values[None]]
     if P <= 6:
         samples.append(np.array(list(itertools.product(*zip(lower, upper, strict=True)))))
     samples.append(lower + (upper - lower) * rng.random((options.worst_case_samples, P)))
     samples = np.concatenate(samples)
     S = samples.shape[0]
-    idx = np.repeat(np.asarray(configs), S)
-    vals = np.tile(samples, (C, 1))
-    workers = options.workers
-    g = gamma_over(plants, ModelSet(idx, vals), K, spec, workers=workers).gamma.reshape(C, S)
+    g = gamma(S, np.tile(samples, (C, 1))).reshape(C, S)
     best = np.argmax(g, axis=1)
     x = samples[best]
     fx = g[np.arange(C), best]
@@ -319,18 +323,12 @@ def _worst_case_search(plants: PlantArray, configs, K, spec, options, rng):
         # central differences, batched over configurations and parameters
         plus = np.clip(x[:, None, :] + np.eye(P) * h, lower, upper)
         minus = np.clip(x[:, None, :] - np.eye(P) * h, lower, upper)
-        pts = np.concatenate([plus, minus], axis=1).reshape(-1, P)
-        gp = gamma_over(
-            plants, ModelSet(np.repeat(configs, 2 * P), pts), K, spec, workers=workers
-        ).gamma
-        gp = gp.reshape(C, 2, P)
+        gp = gamma(2 * P, np.concatenate([plus, minus], axis=1).reshape(-1, P)).reshape(C, 2, P)
         denom = (plus - minus)[:, np.arange(P), np.arange(P)]
         grad = np.where(denom > 0, (gp[:, 0] - gp[:, 1]) / np.where(denom > 0, denom, 1), 0.0)
         grad = np.where(np.isfinite(grad), grad, 0.0)
         trial = np.clip(x + step * np.sign(grad), lower, upper)
-        ft = gamma_over(
-            plants, ModelSet(np.asarray(configs), trial), K, spec, workers=workers
-        ).gamma
+        ft = gamma(1, trial)
         better = ft > fx
         x = np.where(better[:, None], trial, x)
         fx = np.where(better, ft, fx)
