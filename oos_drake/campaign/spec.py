@@ -332,7 +332,7 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
         sampler_raw = {"kind": sampler_raw}
     sw = f"{where}: [sampler]"
     sampler_raw = _check_keys(sw, sampler_raw, _keys(SamplerSpec))
-    kind = sampler_raw.get("kind", "monte-carlo")
+    kind = sampler_raw.get("kind", SamplerSpec.kind)
     if kind not in SAMPLERS:
         raise _fail(sw, f"unknown sampler {kind!r}; use one of {', '.join(SAMPLERS)}")
     if kind != "mu-guided":
@@ -341,9 +341,9 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
             raise _fail(sw, f"{', '.join(extra)} only apply to the mu-guided sampler")
     worst_cases_path = None
     regions: tuple[WorstCaseRegion, ...] = ()
-    defensive = sampler_raw.get("defensive_fraction", 0.2)
-    spread = sampler_raw.get("spread", 0.1)
-    weighting = sampler_raw.get("region_weighting", "mu_upper")
+    defensive = sampler_raw.get("defensive_fraction", SamplerSpec.defensive_fraction)
+    spread = sampler_raw.get("spread", SamplerSpec.spread)
+    weighting = sampler_raw.get("region_weighting", SamplerSpec.region_weighting)
     if worst_cases is not None:
         worst_cases_path = Path(worst_cases).resolve()
     elif "worst_cases" in sampler_raw:
@@ -450,7 +450,7 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
     # time series -----------------------------------------------------------------------------
     tw = f"{where}: [timeseries]"
     ts_raw = _check_keys(tw, raw.get("timeseries", {}), _keys(TimeseriesSpec))
-    keep = ts_raw.get("keep", "all")
+    keep = ts_raw.get("keep", TimeseriesSpec.keep)
     if keep not in KEEP_TIMESERIES:
         raise _fail(tw, f"keep = {keep!r} not in {', '.join(KEEP_TIMESERIES)}")
     signals = ts_raw.get("signals", [])
