@@ -226,12 +226,13 @@ def read_worst_cases(
                 continue
             parameter = by_name[name]
             # a vertex of the uncertainty box may miss its bound by round-off (Parameter.clip)
-            perturbation[name] = parameter.clip(value)
-            if perturbation[name] is None:
+            clipped = parameter.clip(value)
+            if clipped is None:
                 raise ValueError(
                     f"{where}: {column} = {value:g} outside the range of {name} "
                     f"[{parameter.lower:g}, {parameter.upper:g}]"
                 )
+            perturbation[name] = clipped
         gains = {}
         for metric, (low_column, high_column) in gain_columns.items():
             if low_column not in table.columns or high_column not in table.columns:
