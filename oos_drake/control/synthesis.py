@@ -418,14 +418,8 @@ def synthesize(
         raise ValueError("synthesize: the start gain K0 does not stabilize every configuration")
     log(f"start gamma = {gamma_start:.6g} over {N} configurations")
     if 0 < options.working_set < N:
-        chosen = np.unique(
-            np.concatenate(
-                [
-                    np.round(np.linspace(0, N - 1, options.working_set)).astype(int),
-                    [int(np.argmax(start_peaks.gamma))],
-                ]
-            )
-        )
+        spaced = np.round(np.linspace(0, N - 1, options.working_set)).astype(int)
+        chosen = np.unique(np.append(spaced, np.argmax(start_peaks.gamma)))
     else:
         chosen = np.arange(N)
     working = ModelSet(chosen, nominal[chosen])
