@@ -41,94 +41,42 @@ from oos_drake.campaign.simulator import (
     RunCase,
     RunOutput,
     SimulationDiverged,
+    check_options,
 )
 
-_PARAMETERS = (
-    Parameter(
-        "J_hub",
-        "kg m^2",
-        500.0,
-        250.0,
-        750.0,
-        ParameterKind.REAL_BLOCK,
-        "chaser hub inertia about the axis",
-    ),
-    Parameter(
-        "J_target",
-        "kg m^2",
-        300.0,
-        150.0,
-        450.0,
-        ParameterKind.REAL_BLOCK,
-        "target inertia about the axis",
-    ),
-    Parameter(
-        "f_array",
-        "Hz",
-        0.3,
-        0.1,
-        1.0,
-        ParameterKind.REAL_BLOCK,
-        "first cantilevered array mode frequency",
-    ),
-    Parameter(
-        "k_dock",
-        "N m/rad",
-        2.0e3,
-        1.0e2,
-        1.0e5,
-        ParameterKind.STIFFNESS,
-        "docking torsional stiffness after capture",
-    ),
-    Parameter(
-        "c_dock",
-        "N m s/rad",
-        50.0,
-        0.0,
-        500.0,
-        ParameterKind.STIFFNESS,
-        "docking torsional damping after capture",
-    ),
-    Parameter(
+_REAL, _STIFF = ParameterKind.REAL_BLOCK, ParameterKind.STIFFNESS
+_INIT, _LTI = ParameterKind.INITIAL_CONDITION, ParameterKind.LTI
+#: The fields of one :class:`Parameter` per row: name, unit, nominal, lower, upper, kind,
+#: description.
+_ROWS = (
+    ("J_hub", "kg m^2", 500.0, 250.0, 750.0, _REAL, "chaser hub inertia about the axis"),
+    ("J_target", "kg m^2", 300.0, 150.0, 450.0, _REAL, "target inertia about the axis"),
+    ("f_array", "Hz", 0.3, 0.1, 1.0, _REAL, "first cantilevered array mode frequency"),
+    ("k_dock", "N m/rad", 2e3, 1e2, 1e5, _STIFF, "docking torsional stiffness after capture"),
+    ("c_dock", "N m s/rad", 50.0, 0.0, 500.0, _STIFF, "docking torsional damping after capture"),
+    (
         "delta_mul",
         "-",
         0.0,
         -0.3,
         0.3,
-        ParameterKind.LTI,
+        _LTI,
         "static multiplicative actuator perturbation (Delta_mul gain)",
     ),
-    Parameter(
-        "T_ext",
-        "N m",
-        0.005,
-        -0.05,
-        0.05,
-        ParameterKind.REAL_BLOCK,
-        "constant external disturbance torque",
-    ),
-    Parameter(
-        "theta0",
-        "rad",
-        0.0,
-        -0.005,
-        0.005,
-        ParameterKind.INITIAL_CONDITION,
-        "initial hub attitude error",
-    ),
-    Parameter(
-        "omega0", "rad/s", 0.0, -0.1, 0.1, ParameterKind.INITIAL_CONDITION, "initial hub rate error"
-    ),
-    Parameter(
+    ("T_ext", "N m", 0.005, -0.05, 0.05, _REAL, "constant external disturbance torque"),
+    ("theta0", "rad", 0.0, -0.005, 0.005, _INIT, "initial hub attitude error"),
+    ("omega0", "rad/s", 0.0, -0.1, 0.1, _INIT, "initial hub rate error"),
+    (
         "omega_capture",
         "rad/s",
         0.002,
         -0.01,
         0.01,
-        ParameterKind.INITIAL_CONDITION,
+        _INIT,
         "target rate relative to the hub at capture",
     ),
 )
+_PARAMETERS = tuple(Parameter(*row) for row in _ROWS)
 
 _METRICS = {"ape": "rad", "peak_torque": "N m", "rms_attitude": "rad"}
 _SIGNALS = {
@@ -338,11 +286,5 @@ class FlexibleAttitudeSimulator:
 
 def make_simulator(**options) -> FlexibleAttitudeSimulator:
     """Factory registered as ``"flexible-attitude"``; options are the dataclass fields."""
-    known = set(FlexibleAttitudeSimulator.__dataclass_fields__)
-    unknown = sorted(set(options) - known)
-    if unknown:
-        raise ValueError(
-            f"flexible-attitude: unknown option(s) {', '.join(unknown)}; known: "
-            f"{', '.join(sorted(known))}"
-        )
+    check_options("flexible-attitude", options, set(FlexibleAttitudeSimulator.__dataclass_fields__))
     return FlexibleAttitudeSimulator(**options)

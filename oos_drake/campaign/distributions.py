@@ -24,19 +24,26 @@ import numpy as np
 from oos_drake.campaign.simulator import Parameter
 
 
-@dataclass(frozen=True)
-class _Interval:
-    """A law on ``[low, high]`` [unit of the parameter]: support and spec entry."""
-
-    low: float
-    high: float
+class _Law:
+    """What every law has besides ``ppf`` and ``pdf``: its support and its spec entry."""
 
     @property
     def support(self) -> tuple[float, float]:
+        """Smallest and largest value [unit of the parameter]."""
         return self.low, self.high
 
     def to_dict(self) -> dict[str, Any]:
-        return {"distribution": self.kind, "low": self.low, "high": self.high}
+        """The spec's inline table: ``distribution`` and the fields (tuples as lists)."""
+        fields = {k: list(v) if isinstance(v, tuple) else v for k, v in vars(self).items()}
+        return {"distribution": self.kind} | fields
+
+
+@dataclass(frozen=True)
+class _Interval(_Law):
+    """A law on ``[low, high]`` [unit of the parameter]."""
+
+    low: float
+    high: float
 
 
 @dataclass(frozen=True)
@@ -71,7 +78,7 @@ class LogUniform(_Interval):
 
 
 @dataclass(frozen=True)
-class TruncatedNormal:
+class TruncatedNormal(_Law):
     """Normal(``mean``, ``std``) truncated to ``[low, high]`` (the parameter range by default)."""
 
     mean: float
@@ -95,22 +102,9 @@ class TruncatedNormal:
     def pdf(self, x: np.ndarray) -> np.ndarray:
         return self.law.pdf(np.asarray(x, dtype=float))
 
-    @property
-    def support(self) -> tuple[float, float]:
-        return self.low, self.high
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "distribution": self.kind,
-            "mean": self.mean,
-            "std": self.std,
-            "low": self.low,
-            "high": self.high,
-        }
-
 
 @dataclass(frozen=True)
-class Fixed:
+class Fixed(_Law):
     """A single value (degenerate distribution); its ``pdf`` is 1 so likelihood ratios ignore it."""
 
     value: float
@@ -126,12 +120,9 @@ class Fixed:
     def support(self) -> tuple[float, float]:
         return self.value, self.value
 
-    def to_dict(self) -> dict[str, Any]:
-        return {"distribution": self.kind, "value": self.value}
-
 
 @dataclass(frozen=True)
-class Choice:
+class Choice(_Law):
     """Discrete values with probabilities (equal by default); ``pdf`` is the probability mass."""
 
     values: tuple[float, ...]
@@ -153,13 +144,6 @@ class Choice:
     @property
     def support(self) -> tuple[float, float]:
         return min(self.values), max(self.values)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "distribution": self.kind,
-            "values": list(self.values),
-            "probabilities": list(self.probabilities),
-        }
 
 
 Distribution = Uniform | LogUniform | TruncatedNormal | Fixed | Choice
@@ -219,17 +203,14 @@ def parse_distribution(where: str, table: Any, parameter: Parameter) -> Distribu
     lo, hi = parameter.lower, parameter.upper
     unit = parameter.unit
 
-    # a bound written in decimal (2.552) may miss the computed range (2.32 * 1.1) by round-off:
-    # accept, and clip, within 1e-9 of the range's scale
-    slack = 1e-9 * max(abs(lo), abs(hi), hi - lo)
-
     def in_range(key: str, value: float) -> float:
-        if not (lo - slack <= value <= hi + slack):
+        clipped = parameter.clip(value)
+        if clipped is None:
             raise ValueError(
                 f"{where}: {key} = {value:g} {unit} outside the range of {parameter.name} "
                 f"[{lo:g}, {hi:g}] {unit}"
             )
-        return min(max(value, lo), hi)
+        return clipped
 
     if name == "fixed":
         return Fixed(in_range("value", finite_number(where, "value", table["value"])))

@@ -28,6 +28,7 @@ from oos_drake.campaign.simulator import (
     RunCase,
     RunOutput,
     SimulationDiverged,
+    check_options,
 )
 
 __all__ = ["DrakeMissionSimulator", "make_simulator", "FACTORY_PATH"]
@@ -59,13 +60,7 @@ class DrakeMissionSimulator:
         from oos_drake.multibody.scenario_sdf import scenario_sdf_directory
         from oos_drake.scenario.data import load_scenario
 
-        known = {f.name for f in fields(MissionOptions)}
-        unknown = sorted(set(options) - known)
-        if unknown:
-            raise ValueError(
-                f"drake-mission: unknown option(s) {', '.join(unknown)}; known: "
-                f"{', '.join(sorted(known))}"
-            )
+        check_options("drake-mission", options, {f.name for f in fields(MissionOptions)})
         data = load_scenario(scenario)
         options = {
             "control_rate": data.control.flight_software_rate_hz,

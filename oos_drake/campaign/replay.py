@@ -14,8 +14,6 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from oos_drake.campaign.runner import case_from_plan_row, load_campaign
 from oos_drake.campaign.store import atomic_write_text
 from oos_drake.multibody.replay import default_speed, recording_html
@@ -64,20 +62,6 @@ class ReplayResult:
 def replay_path(directory: str | Path, run_id: int) -> Path:
     """``DIR/replay/case_N.html``: where the replay of run ``run_id`` goes."""
     return Path(directory) / "replay" / f"case_{int(run_id)}.html"
-
-
-class _Capture:
-    """Keeps the root context of the last run of a :class:`MissionSimulation` (its logs)."""
-
-    def __init__(self, simulation):
-        self.context = None
-        self.simulation = simulation
-
-    def __call__(self, context) -> None:
-        self.context = context
-
-    def states(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.simulation.state_log(self.context)
 
 
 def _load_case(directory: Path, run_id: int):
@@ -138,30 +122,29 @@ def replay_case(
     ):
         raise ValueError(f"replay speed must be a positive number, got {speed!r}")
     spec, case = _load_case(directory, run_id)
-    capture = _Capture(_mission_simulation(spec))
+    simulation = _mission_simulation(spec)
+    contexts = []  # the run's root context (it holds the logs), given by on_start
     status, error = "ok", ""
     try:
-        capture.simulation.run(
+        simulation.run(
             dict(case.values),
             seed=case.seed,
             start=case.window.start,
             end=case.window.end,
             log=False,
-            on_start=capture,
+            on_start=contexts.append,
             perturbation_frequency_hz=case.frequency,
         )
     except MissionDiverged as exc:
         status, error = "diverged", str(exc)
-    if capture.context is None:
+    if not contexts:
         raise ValueError(f"run {run_id}: the simulation did not start ({error})")
-    times, states = capture.states()
+    times, states = simulation.state_log(contexts[-1])
     if times.size == 0:
         raise ValueError(f"run {run_id}: no logged state to replay ({error or 'empty window'})")
     if speed is None:
         speed = default_speed(case.window.end - case.window.start)
-    html, frames = recording_html(
-        capture.simulation.handles, times, states, float(speed), meshcat=meshcat
-    )
+    html, frames = recording_html(simulation.handles, times, states, float(speed), meshcat=meshcat)
     path = atomic_write_text(html, replay_path(directory, case.run_id))
     size = len(html.encode("utf-8"))
     return ReplayResult(
@@ -169,7 +152,7 @@ def replay_case(
         run_id=case.run_id,
         start=float(times[0]),
         end=float(times[-1]),
-        frame_rate=float(capture.simulation.options.log_rate),
+        frame_rate=float(simulation.options.log_rate),
         frames=frames,
         speed=float(speed),
         status=status,

@@ -113,16 +113,6 @@ def _save(fig, path: Path, rect=None) -> Path:
     return path
 
 
-def weighted_probability(weights: np.ndarray, indicator: np.ndarray) -> tuple[float, float]:
-    """Importance-sampling estimate of ``P(indicator)`` and its standard error."""
-    values = np.asarray(weights, float) * np.asarray(indicator, float)
-    n = values.size
-    if n == 0:
-        return math.nan, math.nan
-    se = float(np.std(values, ddof=1) / math.sqrt(n)) if n > 1 else math.nan
-    return float(values.mean()), se
-
-
 @dataclass(frozen=True)
 class ProbabilityEstimate:
     """An estimated probability with its confidence interval.
@@ -163,7 +153,7 @@ def probability_interval(
 
     .. math::
 
-        |\hat p - p| \le \sqrt{2 V_n \ln(2/\delta) / n} + rac{7 b \ln(2/\delta)}{3 (n - 1)}
+        |\hat p - p| \le \sqrt{2 V_n \ln(2/\delta) / n} + \frac{7 b \ln(2/\delta)}{3 (n - 1)}
 
     with ``V_n`` the sample variance of the ``X_i``. It assumes independent draws from the
     mixture; the plan draws a fixed number of runs per component (stratified), which does not
@@ -186,15 +176,16 @@ def probability_interval(
     weights = np.asarray(weights, float)
     events = np.asarray(indicator, bool)
     n = weights.size
-    p, se = weighted_probability(weights, events)
     if n == 0:
         return ProbabilityEstimate(math.nan, math.nan, math.nan, math.nan, "")
+    values = weights * events
+    p = float(values.mean())
+    se = float(np.std(values, ddof=1) / math.sqrt(n)) if n > 1 else math.nan
     if np.all(weights == 1.0):
         ci = binomtest(int(events.sum()), n).proportion_ci(confidence, method="exact")
         return ProbabilityEstimate(p, se, float(ci.low), float(ci.high), "Clopper-Pearson")
     if n < 2:
         return ProbabilityEstimate(p, se, 0.0, 1.0, "empirical Bernstein")
-    values = weights * events
     log_term = math.log(4.0 / (1.0 - confidence))  # ln(2 / delta), delta = (1 - confidence) / 2
     radius = math.sqrt(2.0 * np.var(values, ddof=1) * log_term / n)
     radius += 7.0 * weight_bound * log_term / (3.0 * (n - 1))

@@ -249,19 +249,6 @@ def _write_campaign(directory: Path, spec: CampaignSpec, plan: pd.DataFrame) -> 
     store.atomic_write_text(spec_to_toml(spec, worst_cases_name), directory / store.SPEC_FILE)
 
 
-def prepare_campaign(
-    spec_path: str | Path,
-    out: str | Path,
-    worst_cases: str | Path | None = None,
-    simulator_options: Mapping[str, Any] | None = None,
-) -> tuple[Path, CampaignSpec, pd.DataFrame]:
-    """Validate the spec, build the plan, then (only then) create the campaign directory
-    (arguments of :func:`plan_campaign`)."""
-    spec, plan = plan_campaign(spec_path, worst_cases, simulator_options)
-    _write_campaign(Path(out), spec, plan)
-    return Path(out), spec, plan
-
-
 def run_campaign(
     spec_path: str | Path,
     out: str | Path,
@@ -351,9 +338,8 @@ def rerun_case(directory: str | Path, run_id: int) -> RerunResult:
             index=columns,
         )
         comparison["difference"] = comparison["recomputed"] - comparison["recorded"]
-        same_metrics = all(
-            (np.isnan(a) and np.isnan(b)) or a == b
-            for a, b in zip(comparison["recorded"], comparison["recomputed"], strict=True)
+        same_metrics = np.array_equal(
+            comparison["recorded"], comparison["recomputed"], equal_nan=True
         )
         identical = bool(same_metrics and recorded["status"] == row["status"].iloc[0])
     changes = {}

@@ -112,6 +112,16 @@ class Parameter:
         """Table column name with the unit, e.g. ``"J_hub [kg m^2]"``."""
         return f"{self.name} [{self.unit}]"
 
+    def clip(self, value: float) -> float | None:
+        """``value`` [unit] clipped to the range, or None when it lies outside.
+
+        A value written in decimal (2.552) may miss a computed bound (2.32 * 1.1) by round-off:
+        within 1e-9 of the range's scale it counts as inside.
+        """
+        lo, hi = self.lower, self.upper
+        slack = 1e-9 * max(abs(lo), abs(hi), hi - lo)
+        return min(max(value, lo), hi) if lo - slack <= value <= hi + slack else None
+
 
 @dataclass(frozen=True)
 class MissionWindow:
@@ -277,13 +287,14 @@ def registered_simulators() -> dict[str, str]:
     return dict(_REGISTRY)
 
 
-def _resolve_factory(name: str, path: str):
-    module_name, _, attr = path.partition(":")
-    try:
-        module = importlib.import_module(module_name)
-        return getattr(module, attr)
-    except (ImportError, AttributeError) as exc:
-        raise ValueError(f"simulator {name!r}: cannot import factory {path!r}: {exc}") from exc
+def check_options(simulator: str, options: Mapping[str, Any], known: set[str]) -> None:
+    """A factory's check of its options: ``ValueError`` naming the unknown ones and ``known``."""
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise ValueError(
+            f"{simulator}: unknown option(s) {', '.join(unknown)}; known: "
+            f"{', '.join(sorted(known))}"
+        )
 
 
 #: Per-thread cache of built simulators: a simulator (a Drake context, say) is never shared by
@@ -314,7 +325,13 @@ def simulator_builds() -> int:
 
 
 def _build(recipe: SimulatorRecipe) -> Simulator:
-    factory = _resolve_factory(recipe.name, recipe.factory)
+    module_name, _, attr = recipe.factory.partition(":")
+    try:
+        factory = getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError) as exc:
+        raise ValueError(
+            f"simulator {recipe.name!r}: cannot import factory {recipe.factory!r}: {exc}"
+        ) from exc
     try:
         simulator = factory(**recipe.option_dict)
     except TypeError as exc:

@@ -44,7 +44,7 @@ from __future__ import annotations
 import math
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -64,21 +64,6 @@ SAMPLERS = ("monte-carlo", "latin-hypercube", "mu-guided")
 WINDOW_KINDS = ("mission", "event", "critical")
 KEEP_TIMESERIES = ("all", "failed", "none")
 REGION_WEIGHTINGS = ("mu_upper", "uniform")
-_TOP_KEYS = {
-    "scenario",
-    "run_timeout",
-    "name",
-    "description",
-    "n_runs",
-    "random_seed",
-    "sampler",
-    "simulator",
-    "window",
-    "dispersions",
-    "metrics",
-    "requirements",
-    "timeseries",
-}
 
 
 @dataclass(frozen=True)
@@ -203,6 +188,15 @@ class CampaignSpec:
     info: SimulatorInfo = field(compare=False, repr=False, default=None)
     #: the regions read from worst_cases (not part of the TOML)
     regions: tuple[WorstCaseRegion, ...] = field(compare=False, repr=False, default=())
+
+
+def _keys(table_class) -> set[str]:
+    """The keys of a spec table: the fields of the dataclass it becomes."""
+    return {f.name for f in fields(table_class)}
+
+
+#: Top-level keys: the fields of CampaignSpec that come from the TOML, and the scenario.
+_TOP_KEYS = (_keys(CampaignSpec) - {"info", "regions"}) | {"scenario"}
 
 
 def spec_scenario(value: Any, spec_path: str | Path) -> Path:
@@ -337,10 +331,8 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
     if isinstance(sampler_raw, str):
         sampler_raw = {"kind": sampler_raw}
     sw = f"{where}: [sampler]"
-    sampler_raw = _check_keys(
-        sw, sampler_raw, {"kind", "worst_cases", "defensive_fraction", "spread", "region_weighting"}
-    )
-    kind = sampler_raw.get("kind", "monte-carlo")
+    sampler_raw = _check_keys(sw, sampler_raw, _keys(SamplerSpec))
+    kind = sampler_raw.get("kind", SamplerSpec.kind)
     if kind not in SAMPLERS:
         raise _fail(sw, f"unknown sampler {kind!r}; use one of {', '.join(SAMPLERS)}")
     if kind != "mu-guided":
@@ -349,9 +341,9 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
             raise _fail(sw, f"{', '.join(extra)} only apply to the mu-guided sampler")
     worst_cases_path = None
     regions: tuple[WorstCaseRegion, ...] = ()
-    defensive = sampler_raw.get("defensive_fraction", 0.2)
-    spread = sampler_raw.get("spread", 0.1)
-    weighting = sampler_raw.get("region_weighting", "mu_upper")
+    defensive = sampler_raw.get("defensive_fraction", SamplerSpec.defensive_fraction)
+    spread = sampler_raw.get("spread", SamplerSpec.spread)
+    weighting = sampler_raw.get("region_weighting", SamplerSpec.region_weighting)
     if worst_cases is not None:
         worst_cases_path = Path(worst_cases).resolve()
     elif "worst_cases" in sampler_raw:
@@ -383,9 +375,7 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
 
     # window ----------------------------------------------------------------------------------
     ww = f"{where}: [window]"
-    window_raw = _check_keys(
-        ww, raw.get("window", {"kind": "mission"}), {"kind", "event", "before", "after"}
-    )
+    window_raw = _check_keys(ww, raw.get("window", {"kind": "mission"}), _keys(WindowSpec))
     window_kind = window_raw.get("kind", "mission")
     if window_kind not in WINDOW_KINDS:
         raise _fail(
@@ -459,8 +449,8 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
 
     # time series -----------------------------------------------------------------------------
     tw = f"{where}: [timeseries]"
-    ts_raw = _check_keys(tw, raw.get("timeseries", {}), {"keep", "signals"})
-    keep = ts_raw.get("keep", "all")
+    ts_raw = _check_keys(tw, raw.get("timeseries", {}), _keys(TimeseriesSpec))
+    keep = ts_raw.get("keep", TimeseriesSpec.keep)
     if keep not in KEEP_TIMESERIES:
         raise _fail(tw, f"keep = {keep!r} not in {', '.join(KEEP_TIMESERIES)}")
     signals = ts_raw.get("signals", [])

@@ -205,22 +205,6 @@ def read_run_rows(directory: Path) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True).sort_values("run_id").reset_index(drop=True)
 
 
-def load_timeseries(directory: Path, run_ids=None) -> pd.DataFrame:
-    """Retained time series of ``run_ids`` (default: all kept), stacked, with a ``run_id`` column.
-
-    Runs whose time series was not kept are skipped (``oos campaign rerun`` recomputes them).
-    """
-    folder = Path(directory) / TIMESERIES_DIR
-    if run_ids is None:
-        files = sorted(folder.glob("run_*.parquet")) if folder.is_dir() else []
-    else:
-        files = [timeseries_file(directory, int(i)) for i in run_ids]
-        files = [f for f in files if f.is_file()]
-    if not files:
-        return pd.DataFrame()
-    return pd.concat([pd.read_parquet(f) for f in files], ignore_index=True)
-
-
 def consolidate(directory: Path) -> Path:
     """Write ``runs.parquet`` from the per-run rows (atomically) and return its path."""
     table = read_run_rows(directory)

@@ -225,18 +225,14 @@ def read_worst_cases(
             if np.isnan(value):
                 continue
             parameter = by_name[name]
-            # a vertex of the uncertainty box written in physical units may miss its bound by
-            # round-off: accept (and clip) within 1e-9 of the range's scale
-            lo, hi = parameter.lower, parameter.upper
-            tol = 1e-9 * max(abs(lo), abs(hi), hi - lo)
-            if lo - tol <= value <= hi + tol:
-                value = min(max(value, lo), hi)
-            else:
+            # a vertex of the uncertainty box may miss its bound by round-off (Parameter.clip)
+            clipped = parameter.clip(value)
+            if clipped is None:
                 raise ValueError(
                     f"{where}: {column} = {value:g} outside the range of {name} "
                     f"[{parameter.lower:g}, {parameter.upper:g}]"
                 )
-            perturbation[name] = value
+            perturbation[name] = clipped
         gains = {}
         for metric, (low_column, high_column) in gain_columns.items():
             if low_column not in table.columns or high_column not in table.columns:

@@ -33,9 +33,11 @@ from oos_drake.control.interconnection import (
     DISTURBANCES,
     ERRORS,
     MEASUREMENTS,
+    PLANT_INPUTS,
+    PLANT_OUTPUTS,
     diagram_parts,
 )
-from oos_drake.control.statespace import channel_names, connect
+from oos_drake.control.statespace import connect
 from oos_drake.lfr import LFR, as_lfr, lft, ultidyn
 
 #: Name of the full 3x3 additive LTI block.
@@ -46,9 +48,6 @@ _AXES = "xyz"
 MULTIPLICATIVE_BLOCKS = tuple(f"Delta_mul_{a}{a}" for a in _AXES) + tuple(
     f"Delta_mul_{a}{b}" for a in _AXES for b in _AXES if a != b
 )
-
-PLANT_IN = channel_names("T", 3)
-PLANT_OUT = channel_names("wdot", 3)
 
 
 def rotational_channels(model: LFR) -> LFR:
@@ -110,8 +109,8 @@ def weighted_interconnection_open(spec: comp.DesignSpecification | None = None) 
     """
     spec = spec or comp.DesignSpecification()
     parts = diagram_parts(spec)
-    inputs = DISTURBANCES + PLANT_OUT + CONTROLS
-    outputs = ERRORS + PLANT_IN + MEASUREMENTS
+    inputs = DISTURBANCES + PLANT_OUTPUTS + CONTROLS
+    outputs = ERRORS + PLANT_INPUTS + MEASUREMENTS
     H = connect(parts, inputs, outputs)
     return LFR.from_ss(H.A, H.B, H.C, H.D, input_names=list(inputs), output_names=list(outputs))
 

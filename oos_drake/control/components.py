@@ -9,6 +9,7 @@ per-axis SISO model replicated on the three axes, returned as a named
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -184,6 +185,17 @@ def butterworth(order: int, cutoff_hz: float) -> tuple[np.ndarray, ...]:
     scale = np.abs(TWO_PI * cutoff_hz) ** np.arange(A.shape[0])[::-1]
     T, Ti = np.diag(scale), np.diag(1.0 / scale)
     return Ti @ A @ T, Ti @ B, C @ T, D
+
+
+@functools.lru_cache(maxsize=8)
+def filters(spec: DesignSpecification) -> tuple[tuple[np.ndarray, ...], ...]:
+    """SISO ``(A, B, C, D)`` of the star tracker, gyro, roll-off and wheels (cached per spec)."""
+    return (
+        first_order_lowpass(spec.star_tracker_cutoff_hz),
+        first_order_lowpass(spec.gyro_cutoff_hz),
+        butterworth(spec.rolloff_order, spec.rolloff_cutoff_hz),
+        second_order(spec.wheel_frequency_hz, spec.wheel_damping),
+    )
 
 
 def sample_hold(spec: DesignSpecification) -> tuple[np.ndarray, ...]:

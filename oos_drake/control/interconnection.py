@@ -77,16 +77,6 @@ class WeightedInterconnection:
         if np.any(sys.D[..., 6:, 9:] != 0):
             raise ValueError("WeightedInterconnection: the loop u_K -> y must be strictly proper")
 
-    @property
-    def nd(self) -> int:
-        """Number of disturbance inputs (9)."""
-        return 9
-
-    @property
-    def ne(self) -> int:
-        """Number of weighted errors (6)."""
-        return 6
-
     def partitions(self):
         """Return ``(A, B1, B2, C1, C2, D11, D12, D21)`` (batched), ``D22 = 0``."""
         s = self.system

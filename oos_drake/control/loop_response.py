@@ -106,10 +106,9 @@ class LoopResponse:
             self.lam = np.zeros((N, 0), dtype=complex)
             self.residues = np.zeros((N, 0, 9), dtype=complex)
             self.exact = np.zeros(N, dtype=bool)
-        self.star_tracker = _siso_modal(comp.first_order_lowpass(spec.star_tracker_cutoff_hz))
-        self.gyro = _siso_modal(comp.first_order_lowpass(spec.gyro_cutoff_hz))
-        self.wheels = _siso_modal(comp.second_order(spec.wheel_frequency_hz, spec.wheel_damping))
-        self.rolloff = _siso_modal(comp.butterworth(spec.rolloff_order, spec.rolloff_cutoff_hz))
+        self.star_tracker, self.gyro, self.rolloff, self.wheels = map(
+            _siso_modal, comp.filters(spec)
+        )
         self.hold = _siso_modal(comp.sample_hold(spec))
 
     @property

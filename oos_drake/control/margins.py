@@ -129,7 +129,8 @@ def _bisect(f, lo, hi, value_lo):
 
 
 def _channel(loop: Callable, omega: np.ndarray, l_grid: np.ndarray, i: int) -> dict:
-    """Classical margins of channel ``i`` from its grid values and the exact loop."""
+    """Classical margins of channel ``i`` (keyed by :class:`Margins` field) from its grid values
+    and the exact loop."""
 
     def l_of(w):
         return loop_at_a_time(loop(np.atleast_1d(w)))[:, i]
@@ -281,12 +282,7 @@ def margins(loop: Callable[[np.ndarray], np.ndarray], omega) -> Margins:
     j = int(np.argmax(np.asarray(res.lower)))
     mu_lower = float(np.asarray(res.lower)[j])
     return Margins(
-        gain_upper_db=np.array([c["gain_upper_db"] for c in channels]),
-        gain_upper_hz=np.array([c["gain_upper_hz"] for c in channels]),
-        gain_lower_db=np.array([c["gain_lower_db"] for c in channels]),
-        phase_deg=np.array([c["phase_deg"] for c in channels]),
-        crossover_hz=np.array([c["crossover_hz"] for c in channels]),
-        delay_s=np.array([c["delay_s"] for c in channels]),
+        **{key: np.array([c[key] for c in channels]) for key in channels[0]},
         disk=disk,
         disk_hz=disk_hz,
         multiloop_disk=1.0 / mu_upper if mu_upper > 0 else np.inf,

@@ -111,11 +111,6 @@ def _gradients(T, G12, G21, which):
     return S[rows, which], np.swapaxes(np.real(M), -1, -2)
 
 
-def peak_gradient(interconnection: WeightedInterconnection, K, index: int, omega: float):
-    """Gradient of ``sigma_max(M_index(j omega))`` w.r.t. ``K`` (3x6), at a simple peak."""
-    return peak_gradients(interconnection, K, [index], [omega])[1][0]
-
-
 @dataclass(frozen=True)
 class ActiveSet:
     """The nearly active peaks at one gain: the local model of ``gamma`` used by the bundle step.
@@ -235,7 +230,7 @@ def evaluate(
     peaks = peak_gain(M.A, M.B, M.C, M.D, focus=focus, **peak_options)
     worst = peaks.worst
     if np.isfinite(peaks.gamma[worst]):
-        grad = peak_gradient(interconnection, K, worst, float(peaks.omega[worst]))
+        grad = peak_gradients(interconnection, K, [worst], [float(peaks.omega[worst])])[1][0]
         return Evaluation(float(peaks.gamma[worst]), grad, peaks)
     k = int(np.argmax(peaks.spectral_abscissa))
     return Evaluation(np.inf, abscissa_gradient(interconnection, K, k), peaks)

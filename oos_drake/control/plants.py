@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from oos_drake.control.analysis_model import rotational_channels
 from oos_drake.control.interconnection import plant_statespace
 from oos_drake.control.statespace import BatchedStateSpace
 
@@ -244,12 +245,6 @@ def synthetic_flexible_plants(
         if uncertain
         else ()
     )
-    if not uncertain:
-        inner = build
-
-        def build(index, values):  # noqa: F811 - nominal-only variant
-            return inner(index, np.ones((index.size, 2)))
-
     return PlantArray(pd.DataFrame({"time [s]": t}), parameters, build, "synthetic")
 
 
@@ -315,10 +310,7 @@ def from_lfr(
 
     if not isinstance(model, LFR):
         raise ValueError(f"from_lfr: expected an oos_drake.lfr.LFR, got {type(model).__name__}")
-    if model.shape == (6, 6):
-        model = model[3:6, 3:6]
-    if model.shape != (3, 3):
-        raise ValueError(f"from_lfr: the plant must be 3x3 or 6x6, got {model.shape}")
+    model = rotational_channels(model)
     sizes = {np.asarray(v).shape for v in configuration_values.values()}
     if len(sizes) != 1 or len(next(iter(sizes))) != 1:
         raise ValueError("from_lfr: every configuration value must be a 1-D array of equal length")

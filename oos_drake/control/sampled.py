@@ -31,13 +31,13 @@ measure the error of the rational hold model that keeps the LFR structure.
 from __future__ import annotations
 
 import dataclasses
-import functools
 
 import numpy as np
 import scipy.linalg
 import scipy.signal
 
 from oos_drake.control import components as comp
+from oos_drake.control.statespace import BatchedStateSpace
 
 __all__ = [
     "SampledLoop",
@@ -67,7 +67,7 @@ def controller_chain(K, spec: comp.DesignSpecification) -> tuple[np.ndarray, ...
 
     ``u = F_ro K [-(SST phi); -(GYRO w)]``, ``T_rw = RW u`` (noise-free, reference zero).
     """
-    sst, gyro, rolloff, wheels = (_axes(f) for f in _filters(spec))
+    sst, gyro, rolloff, wheels = (_axes(f) for f in comp.filters(spec))
     sensors = tuple(scipy.linalg.block_diag(a, b) for a, b in zip(sst, gyro, strict=True))
     gain = (np.zeros((0, 0)), np.zeros((0, 6)), np.zeros((3, 0)), -np.asarray(K, dtype=float))
     return _series(_series(_series(sensors, gain), rolloff), wheels)
@@ -164,37 +164,23 @@ class SampledLoop:
         spec, T = self.spec, self.period
         omega = np.atleast_1d(np.asarray(omega, dtype=float))
         z = np.exp(1j * omega * T)
-        s_w = 1j * (2.0 / T) * np.tan(np.minimum(omega * T / 2.0, np.pi / 2 - 1e-9))
+        w_w = (2.0 / T) * np.tan(np.minimum(omega * T / 2.0, np.pi / 2 - 1e-9))  # s_w = j w_w
         n = self.Phi.shape[0]
         M = z[:, None, None] * np.eye(n) - self.Phi
         rhs = (self.Gamma0 + self.Gamma1 / z[:, None, None]) * z[:, None, None] ** (-self.shift)
         G = self.C @ np.linalg.solve(M, rhs)  # (F, 6, 3): T -> [phi; w]
-        sst, gyro, rolloff, wheels = _filters(spec)
+        sst, gyro, rolloff, wheels = comp.filters(spec)
         sensors = np.concatenate(
-            [np.repeat(_siso(sst, s_w)[:, None], 3, 1), np.repeat(_siso(gyro, s_w)[:, None], 3, 1)],
+            [np.repeat(_siso(sst, w_w)[:, None], 3, 1), np.repeat(_siso(gyro, w_w)[:, None], 3, 1)],
             axis=1,
         )
-        c = _siso(rolloff, s_w) * _siso(wheels, s_w)
+        c = _siso(rolloff, w_w) * _siso(wheels, w_w)
         return c[:, None, None] * ((self.K * sensors[:, None, :]) @ G)
 
 
-@functools.lru_cache(maxsize=8)
-def _filters(spec: comp.DesignSpecification) -> tuple:
-    """SISO realizations of star tracker, gyro, roll-off and wheels (one per specification)."""
-    return (
-        comp.first_order_lowpass(spec.star_tracker_cutoff_hz),
-        comp.first_order_lowpass(spec.gyro_cutoff_hz),
-        comp.butterworth(spec.rolloff_order, spec.rolloff_cutoff_hz),
-        comp.second_order(spec.wheel_frequency_hz, spec.wheel_damping),
-    )
-
-
-def _siso(siso, s) -> np.ndarray:
-    """Response of a SISO ``(A, B, C, D)`` at the points ``s``."""
-    A, B, C, D = (np.atleast_2d(np.asarray(m, dtype=float)) for m in siso)
-    n = A.shape[0]
-    X = np.linalg.solve(s[:, None, None] * np.eye(n) - A, np.broadcast_to(B, (s.size, n, 1)))
-    return (C @ X)[:, 0, 0] + D[0, 0]
+def _siso(siso, omega) -> np.ndarray:
+    """Response of a SISO ``(A, B, C, D)`` at ``j omega`` (``omega`` [rad/s])."""
+    return BatchedStateSpace(*siso, ("in",), ("out",)).freqresp(omega)[:, 0, 0]
 
 
 def sampled_loop(plant, K, spec: comp.DesignSpecification | None = None) -> SampledLoop:

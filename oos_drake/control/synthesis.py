@@ -240,10 +240,7 @@ def tune(
             )
             return values, (grads * scale).reshape(models.size, -1)
 
-        # the metric learnt along nonsmooth valleys goes stale: restart it every
-        # `restart_every` iterations until a cycle no longer improves gamma by `restart_rtol`;
-        # then (a stall at a kink: "line search failed") restart up to `kicks` times from a small
-        # deterministic perturbation of the best point and keep what improves
+        # metric cycles, then kicks (see the docstring): the metric goes stale along valleys
         x = x_best = x0
         f_best, used, history, evaluations, messages, kicks_left = None, 0, [], 0, [], kicks
         while used < max_iterations:
@@ -301,17 +298,21 @@ def _worst_case_search(plants: PlantArray, configs, K, spec, options, rng):
     """
     lower, upper = plants.bounds
     P = lower.size
-    C = len(configs)
+    configs = np.asarray(configs)
+    C = configs.size
+
+    def gamma(repeat: int, values) -> np.ndarray:
+        """Gamma of the configurations, each repeated ``repeat`` times, at ``values``."""
+        models = ModelSet(np.repeat(configs, repeat), values)
+        return gamma_over(plants, models, K, spec, workers=options.workers).gamma
+
     samples = [plants.nominal_values[None]]
     if P <= 6:
         samples.append(np.array(list(itertools.product(*zip(lower, upper, strict=True)))))
     samples.append(lower + (upper - lower) * rng.random((options.worst_case_samples, P)))
     samples = np.concatenate(samples)
     S = samples.shape[0]
-    idx = np.repeat(np.asarray(configs), S)
-    vals = np.tile(samples, (C, 1))
-    workers = options.workers
-    g = gamma_over(plants, ModelSet(idx, vals), K, spec, workers=workers).gamma.reshape(C, S)
+    g = gamma(S, np.tile(samples, (C, 1))).reshape(C, S)
     best = np.argmax(g, axis=1)
     x = samples[best]
     fx = g[np.arange(C), best]
@@ -322,18 +323,12 @@ def _worst_case_search(plants: PlantArray, configs, K, spec, options, rng):
         # central differences, batched over configurations and parameters
         plus = np.clip(x[:, None, :] + np.eye(P) * h, lower, upper)
         minus = np.clip(x[:, None, :] - np.eye(P) * h, lower, upper)
-        pts = np.concatenate([plus, minus], axis=1).reshape(-1, P)
-        gp = gamma_over(
-            plants, ModelSet(np.repeat(configs, 2 * P), pts), K, spec, workers=workers
-        ).gamma
-        gp = gp.reshape(C, 2, P)
+        gp = gamma(2 * P, np.concatenate([plus, minus], axis=1).reshape(-1, P)).reshape(C, 2, P)
         denom = (plus - minus)[:, np.arange(P), np.arange(P)]
         grad = np.where(denom > 0, (gp[:, 0] - gp[:, 1]) / np.where(denom > 0, denom, 1), 0.0)
         grad = np.where(np.isfinite(grad), grad, 0.0)
         trial = np.clip(x + step * np.sign(grad), lower, upper)
-        ft = gamma_over(
-            plants, ModelSet(np.asarray(configs), trial), K, spec, workers=workers
-        ).gamma
+        ft = gamma(1, trial)
         better = ft > fx
         x = np.where(better[:, None], trial, x)
         fx = np.where(better, ft, fx)
@@ -423,14 +418,8 @@ def synthesize(
         raise ValueError("synthesize: the start gain K0 does not stabilize every configuration")
     log(f"start gamma = {gamma_start:.6g} over {N} configurations")
     if 0 < options.working_set < N:
-        chosen = np.unique(
-            np.concatenate(
-                [
-                    np.round(np.linspace(0, N - 1, options.working_set)).astype(int),
-                    [int(np.argmax(start_peaks.gamma))],
-                ]
-            )
-        )
+        spaced = np.round(np.linspace(0, N - 1, options.working_set)).astype(int)
+        chosen = np.unique(np.append(spaced, np.argmax(start_peaks.gamma)))
     else:
         chosen = np.arange(N)
     working = ModelSet(chosen, nominal[chosen])

@@ -1,6 +1,19 @@
-"""Spec texts shared by the campaign tests."""
+"""Spec texts shared by the campaign tests, and a campaign directory made without running it."""
 
 import textwrap
+from pathlib import Path
+
+from oos_drake.campaign.runner import _write_campaign, plan_campaign
+
+
+def prepare_campaign(spec_path, out, worst_cases=None, simulator_options=None):
+    """Validate the spec, build the plan, then (only then) create the campaign directory
+    (arguments of :func:`~oos_drake.campaign.runner.plan_campaign`); returns the directory, the
+    spec and the plan."""
+    spec, plan = plan_campaign(spec_path, worst_cases, simulator_options)
+    _write_campaign(Path(out), spec, plan)
+    return Path(out), spec, plan
+
 
 #: A small, quick spec (runs of ~5 ms); tests append or replace sections.
 BASE_SPEC = textwrap.dedent(

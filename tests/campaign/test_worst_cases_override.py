@@ -3,8 +3,9 @@
 import pandas as pd
 import pytest
 
-from oos_drake.campaign.runner import prepare_campaign
 from oos_drake.campaign.spec import SPEC_DIRECTORY
+
+from .spec_texts import prepare_campaign
 
 CAMPAIGNS = SPEC_DIRECTORY
 
