@@ -347,24 +347,3 @@ def test_unmodified_copy_loads(tmp_path):
         copy.array_models["SA3_4"].participation,
         load_scenario().array_models["SA3_4"].participation,
     )
-
-
-def test_summary_lists_bodies_and_closed_loop():
-    from oos_drake.scenario.summary import scenario_summary
-
-    text = scenario_summary()
-    for word in (
-        "RH1",
-        "RH2",
-        "SA1_2",
-        "SA3_4",
-        "D1",
-        "D2",
-        "D3",
-        "closed loop",
-        "springs SM1,SM2",
-    ):
-        assert word in text
-    docked = next(line for line in text.splitlines() if line.strip().startswith("docked"))
-    assert float(docked.split("error ")[1].split()[0]) < 1e-9
-    assert len([line for line in text.splitlines() if " dC = (" in line]) == 8
