@@ -215,8 +215,8 @@ class AxisGuarantee:
 
 
 def _axis_task(task):
-    """Worker: :func:`_range_covers` of one range of neighbouring configurations of one
-    subset -> ``(its list, seconds)``."""
+    """Worker: :func:`_range_covers` of one task ``(blk, floor, slack, configurations)`` ->
+    ``(its list, seconds)``."""
     import time as _time
 
     clock = _time.perf_counter()

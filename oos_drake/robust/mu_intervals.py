@@ -177,9 +177,7 @@ class Realization:
             if A.shape[0]:
                 lam, V = np.linalg.eig(A)
                 cond = np.linalg.cond(V)
-                modal = (lam, V, np.linalg.inv(V)) if np.isfinite(cond) and cond < 1e8 else None
-                if modal is None:
-                    modal = (lam, None, None)
+                modal = (lam, V, np.linalg.inv(V)) if cond < 1e8 else (lam, None, None)
             object.__setattr__(self, "_modal", modal)
         return self.__dict__["_modal"]
 
