@@ -59,7 +59,7 @@ import scipy.linalg
 
 from oos_drake.robust.blocks import parse_blk
 from oos_drake.robust.lfr_analysis import delta_channel_response
-from oos_drake.robust.mu import UPPER_ITERATIONS, UPPER_PATIENCE, UPPER_TEMPERATURES, UPPER_TOL
+from oos_drake.robust.mu import UPPER_ITERATIONS, UPPER_TOL, _upper_bound
 from oos_drake.robust.mu_upper import LMI_ROUNDOFF, mu_upper_bound
 
 #: Eigenvalues of the Hamiltonian within this distance of the imaginary axis (relative to the
@@ -861,14 +861,7 @@ class _MuSolver:
         :func:`cover_axis`)."""
         omega = np.asarray(omega, dtype=float).reshape(-1)
         M = self.real.response(omega)
-        res = mu_upper_bound(
-            M,
-            self.structure,
-            max_iter=UPPER_ITERATIONS,
-            tol=UPPER_TOL,
-            temperatures=UPPER_TEMPERATURES,
-            patience=UPPER_PATIENCE,
-        )
+        res = _upper_bound(M, self.structure, UPPER_ITERATIONS, UPPER_TOL)  # mussv's bound
         upper, params = res.upper.copy(), res.params.copy()
         Dl, Dr, G = res.D_left.copy(), res.D_right.copy(), res.G.copy()
         redo = np.flatnonzero(upper > self.polish_above)

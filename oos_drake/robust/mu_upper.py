@@ -397,7 +397,7 @@ class _Balanced:
         tl = np.real(np.diagonal(Tl, axis1=1, axis2=2))
         tr = np.real(np.diagonal(Tr, axis1=1, axis2=2))
         self.M = tl[:, :, None] * obj.M / tr[:, None, :]
-        lin_col_par, g_row_par, g_col_par = _balance_maps(obj.s, L)
+        lin_col_par, g_row_par, g_col_par = _per_blk("balance", obj.s, lambda: _balance_maps(L))
         log_t = x_start  # the start's log-scalings (its other parameters are zero)
         self.shift = np.zeros_like(x_start)
         self.shift[:, L.log_par] = x_start[:, L.log_par]
@@ -416,14 +416,10 @@ class _Balanced:
         return x_b / self.factor + self.shift
 
 
-def _balance_maps(structure: BlockStructure, L: _Layout):
-    """For each off-diagonal ``T`` entry, the log-parameter of its column's channel; for each
-    ``G`` parameter, the log-parameters of the r-space row and c-space column of its entry
-    (``L`` is the layout of ``structure``)."""
-    return _per_blk("balance", structure, lambda: _build_balance_maps(L))
-
-
-def _build_balance_maps(L: _Layout):
+def _balance_maps(L: _Layout):
+    """For each off-diagonal ``T`` entry of the layout ``L``, the log-parameter of its column's
+    channel; for each ``G`` parameter, the log-parameters of the r-space row and c-space column
+    of its entry."""
     diag_par_r, diag_par_l = {}, {}
     ent_par = dict(zip(L.log_ent.tolist(), L.log_par.tolist(), strict=True))
     for i, j, e in zip(L.r_row, L.r_col, L.r_ent, strict=True):
