@@ -18,14 +18,11 @@ largest lower bound found on the grid, or ``--level`` (give the analysis' level,
 can be far below mu with real parameters, and then covers raise their level one by one), in
 this process, CPU time (``time.process_time``), solved points, tested points and the largest
 level of: ``alone`` (each configuration its own cover, grid scalings then solves), ``1 range``
-(each cover continued from the previous one's essential scalings, solved one by one: a task
-of the analysis, ``LOCKSTEP_RANGES = 1``), and, for ``R`` in ``--ranges`` (default 2,4,8),
-the configurations cut into ``R`` contiguous ranges, each continued, covered ``one by one``
-(range after range) and in ``lock-step`` (:func:`~oos_drake.robust.mu_intervals.lockstep`, the solves of the ranges'
-current covers batched by :func:`~oos_drake.robust.mu_intervals.solve_mu_batch`: a task of
-``axis_guarantee(ranges_per_task=R)``). Ratios are against ``1 range`` of the same run. On a
-slice this short the ranges are short too: at full size a range's cold start costs relatively
-more (docs/DESIGN.md "Session 10": lock-step did not pay there).
+(each cover continued from the previous one's essential scalings: a task of the analysis),
+and, for ``R`` in ``--ranges`` (default 2,4,8), the configurations cut into ``R`` contiguous
+ranges, each continued (range after range). Ratios are against ``1 range`` of the same run. On
+a slice this short the ranges are short too: at full size a range's cold start costs
+relatively more.
 """
 
 from __future__ import annotations
@@ -72,8 +69,7 @@ def timed(fn, *args, **kwargs):
 
 
 def mission(first, last, subset, controller, level=None, ranges=(2, 4, 8)):
-    """Covers of consecutive mission configurations, alone, continued and in lock-step (see
-    the docstring)."""
+    """Covers of consecutive mission configurations, alone and continued (see the docstring)."""
     from oos_drake.analysis.controller import scenario_controller
     from oos_drake.analysis.models import mission_closed_loop, mission_times
     from oos_drake.analysis.run import AnalysisOptions
@@ -81,13 +77,7 @@ def mission(first, last, subset, controller, level=None, ranges=(2, 4, 8)):
     from oos_drake.analysis.subsets import uncertainty_subsets
     from oos_drake.blas import limit_blas_threads
     from oos_drake.robust.blocks import parse_blk
-    from oos_drake.robust.mu_intervals import (
-        SLACK,
-        Realization,
-        lockstep,
-        solve_each,
-        solve_mu_batch,
-    )
+    from oos_drake.robust.mu_intervals import SLACK, Realization
     from oos_drake.robust.mu_lower import mu_lower_bound
     from oos_drake.robust.mu_upper import mu_upper_bound
     from oos_drake.robust.sweep import model_grid
@@ -120,12 +110,9 @@ def mission(first, last, subset, controller, level=None, ranges=(2, 4, 8)):
         edges = np.linspace(0, len(configurations), n_ranges + 1).round().astype(int)
         return [configurations[a:b] for a, b in zip(edges[:-1], edges[1:], strict=True)]
 
-    def run(name, parts, together):
+    def run(name, parts):
         clock = time.process_time()
-        if together:
-            out = lockstep([_range_covers(blk, floor, SLACK, r) for r in parts], solve_mu_batch)
-        else:
-            out = [lockstep([_range_covers(blk, floor, SLACK, r)], solve_each)[0] for r in parts]
+        out = [_range_covers(blk, floor, SLACK, r) for r in parts]
         seconds = time.process_time() - clock
         rows = [o for part in out for o in part]
         base = results.setdefault("1 range", seconds)
@@ -135,11 +122,10 @@ def mission(first, last, subset, controller, level=None, ranges=(2, 4, 8)):
         )
 
     results = {}
-    run("1 range", cut(1), False)
-    run("alone", cut(len(configurations)), False)
+    run("1 range", cut(1))
+    run("alone", cut(len(configurations)))
     for n_ranges in ranges:
-        run(f"{n_ranges} ranges, one by one", cut(n_ranges), False)
-        run(f"{n_ranges} ranges, lock-step", cut(n_ranges), True)
+        run(f"{n_ranges} ranges", cut(n_ranges))
 
 
 def main():
@@ -148,7 +134,7 @@ def main():
     parser.add_argument("--subset", default="total")
     parser.add_argument("--controller", default=None, help="controller JSON (default: baseline)")
     parser.add_argument("--level", type=float, default=None, help="level of every cover [-]")
-    parser.add_argument("--ranges", default="2,4,8", help="numbers of ranges (lock-step) to time")
+    parser.add_argument("--ranges", default="2,4,8", help="numbers of ranges to time")
     args = parser.parse_args()
     if args.mission:
         first, last = (int(x) for x in args.mission.split(":"))

@@ -157,10 +157,6 @@ def _analysis_model(sys, model: int, members):
 #: Contiguous ranges of configurations per worker and subset in :func:`axis_guarantee` (each
 #: range starts its continuation cold).
 CHUNKS_PER_WORKER = 3
-#: Ranges per task of :func:`axis_guarantee`, advanced in lock-step. 1: measured at full size
-#: (docs/DESIGN.md "Session 10"), 8 ranges per task (48 per subset) tripled the solved points
-#: (cold starts) and 3 per task (the same 6 ranges) saved nothing (small batches): no gain yet.
-LOCKSTEP_RANGES = 1
 
 
 @dataclass(frozen=True)
@@ -219,35 +215,25 @@ class AxisGuarantee:
 
 
 def _axis_task(task):
-    """Worker: the covers of a few ranges of neighbouring configurations of one subset ->
-    ``([[(level, tested points, failure, solved points), ...] per range], seconds)``.
-
-    The ranges advance in lock-step (:func:`~oos_drake.robust.mu_intervals.lockstep`): the
-    points their current covers need solved go to the optimizer together
-    (:func:`~oos_drake.robust.mu_intervals.solve_mu_batch`: an eight-lane evaluation of the
-    optimizer costs about three per-matrix ones).
-    """
+    """Worker: :func:`_range_covers` of one task ``(blk, floor, slack, configurations)`` ->
+    ``(its list, seconds)``."""
     import time as _time
 
-    from oos_drake.robust.mu_intervals import lockstep, solve_mu_batch
-
     clock = _time.perf_counter()
-    blk, floor, slack, ranges = task
-    out = lockstep([_range_covers(blk, floor, slack, r) for r in ranges], solve_mu_batch)
+    out = _range_covers(*task)
     return out, _time.perf_counter() - clock
 
 
 def _range_covers(blk, floor, slack, configurations):
-    """The covers of a range of neighbouring configurations, one after the other, as a
-    generator of solve requests (:func:`~oos_drake.robust.mu_intervals.cover_steps`) that
-    returns ``[(level, tested points, failure, solved points), ...]``.
+    """The covers of a range of neighbouring configurations, one after the other ->
+    ``[(level, tested points, failure, solved points), ...]``.
 
     Each cover tries first the scalings that covered the previous configuration (its
     :meth:`~oos_drake.robust.mu_intervals.AxisCertificate.essential` points: neighbouring
     configurations are close problems, so they usually prove the same level on nearly the same
     intervals, with no optimization), then the grid's own scalings, and only then solves.
     """
-    from oos_drake.robust.mu_intervals import Realization, cover_steps, mu_solver, scalings_at
+    from oos_drake.robust.mu_intervals import Realization, cover_axis, mu_solver, scalings_at
 
     out, prior = [], None
     for A, Bw, Cz, Dzw, seeds, grid_omega, grid_params, grid_upper in configurations:
@@ -259,7 +245,7 @@ def _range_covers(blk, floor, slack, configurations):
         try:
             # the grid's own scalings are the next candidates: no second optimization there
             # (evaluated only where the cover tries them)
-            cert = yield from cover_steps(
+            cert = cover_axis(
                 real,
                 mu_solver(
                     real,
@@ -307,9 +293,7 @@ class GuaranteeSubset:
     model_matrices: object
 
 
-def axis_guarantee(
-    pool, subsets: dict, slack=None, gap=None, ranges_per_task: int = LOCKSTEP_RANGES
-) -> dict:
+def axis_guarantee(pool, subsets: dict, slack=None, gap=None) -> dict:
     """Prove the peak of mu of every configuration of each subset on the whole frequency axis.
 
     Parameters
@@ -326,9 +310,6 @@ def axis_guarantee(
         The cost of the covers falls fast as it grows (a level close to mu over a wide band
         needs many narrow intervals); the analysis uses its target gap, so the guaranteed
         peak is within the target of the lower bound unless a configuration's mu is above it.
-    ranges_per_task : int
-        Ranges of configurations each task covers in lock-step (their solves batched; 1: each
-        task one range, its covers solved alone). The ranges are the same whatever its value.
 
     Returns
     -------
@@ -340,17 +321,13 @@ def axis_guarantee(
     leave are solved, and the grid's peaks only where their grid bound is above the level.
     The covers of all the subsets go to the workers in one map (contiguous ranges of
     configurations, a few per worker and subset, the subsets with the largest ``M`` first), so
-    that both workers stay busy to the end instead of waiting for each subset's last range. A
-    task covers ``ranges_per_task`` consecutive ranges in lock-step: within a range each cover
-    continues from the previous one, and the solves of the ranges' current covers are batched.
+    that both workers stay busy to the end instead of waiting for each subset's last range;
+    within a range each cover continues from the previous one.
     """
     from oos_drake.robust.mu_intervals import SLACK
 
     slack = SLACK if slack is None else float(slack)
     gap = slack if gap is None else max(float(gap), slack)
-    if int(ranges_per_task) < 1:
-        raise ValueError(f"axis_guarantee: ranges_per_task must be >= 1, got {ranges_per_task!r}")
-    ranges_per_task = int(ranges_per_task)
     tasks, owner, prepared = [], [], {}
     # largest M first: the costly covers start first and the cheap ones fill the end
     order = sorted(subsets, key=lambda name: -len(subsets[name].parts[0]))
@@ -369,13 +346,11 @@ def axis_guarantee(
             seeds = w[peaks[up[peaks] * (1.0 + slack) > floor]]
             configurations.append((*sub.model_matrices(int(m)), seeds, w, pts.params[mine], up))
         # contiguous ranges (continuation from one configuration to the next), a few per
-        # worker so that the costly ranges (configurations near the peak) spread over them;
-        # ``ranges_per_task`` consecutive ones per task
+        # worker so that the costly ranges (configurations near the peak) spread over them
         n_ranges = min(len(configurations), CHUNKS_PER_WORKER * pool.n_jobs)
         bounds = np.linspace(0, len(configurations), n_ranges + 1).round().astype(int)
-        ranges = [configurations[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
-        for first in range(0, n_ranges, ranges_per_task):
-            tasks.append((blk, floor, slack, ranges[first : first + ranges_per_task]))
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+            tasks.append((blk, floor, slack, configurations[a:b]))
             owner.append(name)
         prepared[name] = (models, floor)
     done = pool.map(_axis_task, tasks)
@@ -383,7 +358,7 @@ def axis_guarantee(
     for name in subsets:
         models, floor = prepared[name]
         mine = [d for d, o in zip(done, owner, strict=True) if o == name]
-        out = [o for ranges, _ in mine for chunk in ranges for o in chunk]
+        out = [o for chunk, _ in mine for o in chunk]
         pts = subsets[name].points
         levels = np.array([o[0] for o in out], dtype=float)
         failures = tuple(f"model {m}: {o[2]}" for m, o in zip(models, out, strict=True) if o[2])

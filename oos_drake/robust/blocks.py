@@ -189,16 +189,10 @@ def parse_blk(blk) -> BlockStructure:
             raise ValueError(
                 f"blk row {i}: real blocks must be repeated scalars [-r, 0], got {[int(r), int(c)]}"
             )
-        if c == 0:
-            kind = REAL if r < 0 else COMPLEX_REPEATED
-            size = abs(int(r))
-            blocks.append(Block(kind, size, size, n_rows, n_cols))
-            n_rows += size
-            n_cols += size
-        else:
-            blocks.append(Block(FULL, int(r), int(c), n_rows, n_cols))
-            n_rows += int(r)
-            n_cols += int(c)
+        kind = FULL if c else (REAL if r < 0 else COMPLEX_REPEATED)
+        rows, cols = (int(r), int(c)) if c else (abs(int(r)), abs(int(r)))
+        blocks.append(Block(kind, rows, cols, n_rows, n_cols))
+        n_rows, n_cols = n_rows + rows, n_cols + cols
     return BlockStructure(tuple(blocks), n_rows, n_cols, arr)
 
 

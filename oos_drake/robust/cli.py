@@ -78,13 +78,19 @@ def _hinfnorm(args: argparse.Namespace) -> int:
     return 0
 
 
-def _robstab(args: argparse.Namespace) -> int:
+def _load_lfr(args: argparse.Namespace):
+    """The LFR of ``args.file``, after checking that ``--out`` (if any) is a table file."""
     from oos_drake.lfr import load_lfr
-    from oos_drake.robust import robstab
 
     if args.out and Path(args.out).suffix not in (".csv", ".parquet"):
         raise ValueError(f"--out {args.out}: expected a .csv or .parquet file")
-    sys = load_lfr(args.file)
+    return load_lfr(args.file)
+
+
+def _robstab(args: argparse.Namespace) -> int:
+    from oos_drake.robust import robstab
+
+    sys = _load_lfr(args)
     res = robstab(sys, blocks=args.blocks)
     if not res.nominal_stable:
         print(f"{args.file}: the nominal model is unstable (margin 0)")
@@ -103,12 +109,9 @@ def _robstab(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from oos_drake.lfr import load_lfr
     from oos_drake.robust import robust_sweep
 
-    if args.out and Path(args.out).suffix not in (".csv", ".parquet"):
-        raise ValueError(f"--out {args.out}: expected a .csv or .parquet file")
-    sys = load_lfr(args.file)
+    sys = _load_lfr(args)
     subsets = {",".join(args.blocks): args.blocks} if args.blocks else None
     table = robust_sweep(sys, subsets=subsets, n_jobs=args.workers)
     print(f"{args.file}: {table['model'].nunique()} model(s), blocks {list(sys.occurrences)}")
@@ -129,16 +132,14 @@ def _sweep(args: argparse.Namespace) -> int:
 
 
 def _write_table(table, path: str) -> None:
-    """Write a table atomically as CSV or Parquet, chosen by the suffix of ``path``."""
+    """Write a table atomically as CSV or Parquet, chosen by the suffix of ``path`` (checked by
+    :func:`_load_lfr`)."""
     from oos_drake.campaign.store import atomic_write_parquet, atomic_write_text
 
-    suffix = Path(path).suffix
-    if suffix == ".parquet":
+    if Path(path).suffix == ".parquet":
         atomic_write_parquet(table, Path(path))
-    elif suffix == ".csv":
-        atomic_write_text(table.to_csv(index=False), Path(path))
     else:
-        raise ValueError(f"--out {path}: expected a .csv or .parquet file")
+        atomic_write_text(table.to_csv(index=False), Path(path))
 
 
 def register(subparsers) -> None:

@@ -90,10 +90,7 @@ def _as_matrices(sys):
 
 def _lfr_matrices(sys):
     """State-space matrices of an LFR without uncertain blocks (possibly batched)."""
-    for attr in ("A", "a"):
-        if hasattr(sys, attr):
-            return sys.A, sys.B, sys.C, sys.D
-    ss = sys.to_ss()
+    ss = sys if hasattr(sys, "A") else sys.to_ss()
     return ss.A, ss.B, ss.C, ss.D
 
 

@@ -57,11 +57,8 @@ class BlockMap:
             ws.append(slice(w0, w0 + wi.size))
             z0 += zi.size
             w0 += wi.size
-            idx = []
-            for r in self.blk_rows[i]:
-                idx.append(len(blk))
-                blk.append(self.blk[r])
-            rows.append(tuple(idx))
+            rows.append(tuple(range(len(blk), len(blk) + len(self.blk_rows[i]))))
+            blk.extend(self.blk[r] for r in self.blk_rows[i])
         sub = BlockMap(
             tuple(self.names[i] for i in keep),
             tuple(self.kinds[i] for i in keep),
@@ -93,11 +90,8 @@ def block_map(sys) -> BlockMap:
             rows.append((len(blk),))
             blk.append([entry.reps, 0])
         else:
-            idx = []
-            for _ in range(entry.reps):
-                idx.append(len(blk))
-                blk.append(list(spec.shape))
-            rows.append(tuple(idx))
+            rows.append(tuple(range(len(blk), len(blk) + entry.reps)))
+            blk.extend([list(spec.shape)] * entry.reps)
     if not names:
         raise ValueError("the LFR has no uncertain blocks to analyze")
     return BlockMap(
@@ -152,7 +146,6 @@ def delta_channel_response(A, Bw, Cz, Dzw, omega) -> np.ndarray:
     Bw = np.broadcast_to(Bw, batch + (n, nw)).reshape(nb, n, nw)
     Cz = np.broadcast_to(Cz, batch + (nz, n)).reshape(nb, nz, n)
     Dzw = np.broadcast_to(Dzw, batch + (nz, nw)).reshape(nb, nz, nw)
-    nb = A.shape[0]
     out = np.empty((nb, omega.size, nz, nw), dtype=complex)
     if n == 0:
         out[:] = Dzw[:, None]

@@ -117,8 +117,7 @@ CHUNK = 2048
 #: bound), an iteration cap and a per-matrix stopping tolerance. On the paper-sized benchmark
 #: the bound lands within about 0.22 % (at most 0.65 %) of the fully converged D-G bound in about
 #: 54 eigenvalue problems per matrix (the L-BFGS pairs carry over from the first stage to the
-#: second; session 2, stages 100 and 1000 with patience 4: 59, within 0.24 %, at most 0.84 %;
-#: session 1: 95).
+#: second).
 UPPER_TEMPERATURES = (30.0, 300.0)
 UPPER_ITERATIONS = 100
 UPPER_TOL = 2e-4

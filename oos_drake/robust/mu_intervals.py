@@ -43,9 +43,6 @@ interval: ``-L^2 D_r`` decreases; an interval proved at a lower level stays vali
 grows), and adds points at the edges and in the middle of every gap until the intervals cover
 the axis. The guaranteed bound is the largest level; the :class:`AxisCertificate` keeps the
 points, their scalings, levels and intervals, and :meth:`AxisCertificate.check` proves them again.
-:func:`cover_steps` is the same cover as a generator of solve requests: :func:`lockstep` advances
-several covers together (e.g. of neighbouring configurations) and :func:`solve_mu_batch` solves
-their requests in one optimizer call.
 
 The same works for the skewed-mu bound of :func:`~oos_drake.robust.wcgain`: the rows of the
 performance outputs are divided by the gain level ``gamma`` and the LMI is taken at
@@ -60,8 +57,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
+from oos_drake.robust.blocks import parse_blk
 from oos_drake.robust.lfr_analysis import delta_channel_response
-from oos_drake.robust.mu_upper import LMI_ROUNDOFF
+from oos_drake.robust.mu import UPPER_ITERATIONS, UPPER_TOL, _upper_bound
+from oos_drake.robust.mu_upper import LMI_ROUNDOFF, mu_upper_bound
 
 #: Eigenvalues of the Hamiltonian within this distance of the imaginary axis (relative to the
 #: largest eigenvalue modulus) are candidate crossings. Generous on purpose: a spurious candidate
@@ -178,9 +177,7 @@ class Realization:
             if A.shape[0]:
                 lam, V = np.linalg.eig(A)
                 cond = np.linalg.cond(V)
-                modal = (lam, V, np.linalg.inv(V)) if np.isfinite(cond) and cond < 1e8 else None
-                if modal is None:
-                    modal = (lam, None, None)
+                modal = (lam, V, np.linalg.inv(V)) if cond < 1e8 else (lam, None, None)
             object.__setattr__(self, "_modal", modal)
         return self.__dict__["_modal"]
 
@@ -603,17 +600,7 @@ def _new_points(gaps, end, known):
     return pts
 
 
-def cover_axis(real: Realization, solve, seeds, **options) -> AxisCertificate:
-    """Cover the frequency axis with intervals proved by D-G scalings.
-
-    One :func:`cover_steps` driven to its end, ``solve`` called on each of its requests (the
-    parameters are those of :func:`cover_steps`). :func:`lockstep` drives several covers at
-    once, their requests solved together.
-    """
-    return lockstep([cover_steps(real, solve, seeds, **options)], solve_each)[0]
-
-
-def cover_steps(
+def cover_axis(
     real: Realization,
     solve,
     seeds,
@@ -625,14 +612,8 @@ def cover_steps(
     progress=None,
     known=None,
     prior=None,
-):
-    """The cover of :func:`cover_axis` as a resumable computation (a generator).
-
-    It yields each set of frequencies it needs solved as a request ``(solve, omega)`` and
-    expects to be sent back ``solve(omega)`` (or the same computed together with other
-    requests, e.g. :func:`solve_mu_batch`); it returns (``StopIteration.value``, or the value
-    of ``yield from``) the :class:`AxisCertificate`. Nothing else differs from calling
-    ``solve`` itself: the same rounds, levels and points.
+) -> AxisCertificate:
+    """Cover the frequency axis with intervals proved by D-G scalings.
 
     Parameters
     ----------
@@ -673,13 +654,12 @@ def cover_steps(
 
     Returns
     -------
-    generator
-        Requests ``(solve, omega)``; returns the :class:`AxisCertificate`.
+    AxisCertificate
     """
     real.check_axis()
     end = real.nyquist
     omega = np.unique(np.clip(np.asarray(seeds, dtype=float), 0.0, end))
-    opt, lmin, scs = (yield solve, omega) if omega.size else ([], [], [])
+    opt, lmin, scs = solve(omega) if omega.size else ([], [], [])
     opt, lmin, scs = list(opt), list(lmin), list(scs)
     omega, added = list(omega), [False] * len(omega)
     level = max(float(floor), max(lmin, default=0.0))
@@ -733,7 +713,7 @@ def cover_steps(
         if new.size == 0:
             break
         rounds += 1
-        o2, l2, s2 = yield solve, new
+        o2, l2, s2 = solve(new)
         omega.extend(new.tolist())
         opt.extend(list(o2))
         lmin.extend(list(l2))
@@ -760,44 +740,6 @@ def cover_steps(
         realization=real,
         performance_rows=performance_rows,
     )
-
-
-def solve_each(requests) -> list:
-    """The requests ``(solve, omega)`` of :func:`cover_steps` solved one by one."""
-    return [solve(omega) for solve, omega in requests]
-
-
-def lockstep(steps, solve_requests) -> list:
-    """Drive several generators of requests (:func:`cover_steps`, or generators that
-    ``yield from`` it, e.g. a range of covers each continued from the previous one) in
-    lock-step: every round, the pending requests of all those not finished go to
-    ``solve_requests`` together.
-
-    Parameters
-    ----------
-    steps : iterable of generator
-        Each yields requests ``(solve, omega)``, is sent the reply, and returns its result.
-    solve_requests : callable
-        ``solve_requests([(solve, omega), ...]) -> [reply, ...]`` in the same order
-        (:func:`solve_each`, or :func:`solve_mu_batch` for the solvers of :func:`mu_solver`).
-
-    Returns
-    -------
-    list
-        The value each generator returned, in the order of ``steps``.
-    """
-    steps = list(steps)
-    results, replies = [None] * len(steps), {k: None for k in range(len(steps))}
-    while replies:
-        requests = {}
-        for k, reply in replies.items():
-            try:
-                requests[k] = steps[k].send(reply)
-            except StopIteration as stop:
-                results[k] = stop.value
-        answers = solve_requests(list(requests.values())) if requests else []
-        replies = dict(zip(requests, answers, strict=True))
-    return results
 
 
 class _Spare:
@@ -850,9 +792,6 @@ def scalings_at(real: Realization, blk, omega, params) -> tuple:
     of a sweep at the frequencies ``omega`` [rad/s]): the bound they give exactly at each
     frequency and the (conditioned) :class:`Scalings`, no optimization. For the ``known``
     points of :func:`cover_axis`."""
-    from oos_drake.robust.blocks import parse_blk
-    from oos_drake.robust.mu_upper import mu_upper_bound
-
     omega = np.asarray(omega, dtype=float)
     if omega.size == 0:
         return np.zeros(0), []
@@ -901,10 +840,7 @@ def mu_solver(
     ``starts`` : ``(omega, params)`` raw D-G parameters at frequencies [rad/s] (e.g. a grid
     sweep's ``UpperBoundResult.params``), extra warm starts only.
 
-    The solver keeps the points it solved (its warm starts). The requests of several such
-    solvers of one BLK (e.g. the covers of several configurations advanced by
-    :func:`lockstep`) are solved together by :func:`solve_mu_batch`: the same bounds (to
-    round-off), with one optimizer call per pass on all their matrices.
+    The solver keeps the points it solved (its warm starts).
     """
     return _MuSolver(real, blk, slack, polish_above, starts)
 
@@ -913,9 +849,7 @@ class _MuSolver:
     """State of one :func:`mu_solver`: the problem and the points solved so far."""
 
     def __init__(self, real, blk, slack, polish_above, starts):
-        from oos_drake.robust.blocks import parse_blk
-
-        self.real, self.blk, self.structure = real, blk, parse_blk(blk)
+        self.real, self.structure = real, parse_blk(blk)
         self.slack, self.polish_above = float(slack), float(polish_above)
         self.solved_omega, self.solved_params = [], []  # for warm starts
         if starts is not None:
@@ -923,100 +857,54 @@ class _MuSolver:
             self.solved_params.extend(list(np.asarray(starts[1])))
 
     def __call__(self, omega):
-        return solve_mu_batch([(self, omega)])[0]
+        """``(optimal, level_min, scalings)`` at the frequencies ``omega`` [rad/s] (see
+        :func:`cover_axis`)."""
+        omega = np.asarray(omega, dtype=float).reshape(-1)
+        M = self.real.response(omega)
+        res = _upper_bound(M, self.structure, UPPER_ITERATIONS, UPPER_TOL)  # mussv's bound
+        upper, params = res.upper.copy(), res.params.copy()
+        Dl, Dr, G = res.D_left.copy(), res.D_right.copy(), res.G.copy()
+        redo = np.flatnonzero(upper > self.polish_above)
+        for start in ("own", "known", "batch"):
+            # each further start only for the points still above: a point at or below
+            # ``polish_above`` proves the level already, a lower bound there changes nothing
+            redo = redo[upper[redo] > self.polish_above]
+            if start == "own":
+                rows, x0 = redo, params[redo]
+            elif start == "known":  # the nearest point solved before
+                rows = redo if self.solved_omega else redo[:0]
+                x0 = [self._nearest_start(omega[i]) for i in rows]
+            else:  # the nearest other point of the same call, after the passes above
+                rows = redo if omega.size > 1 else redo[:0]
+                dist = np.abs(np.log1p(omega[None, :]) - np.log1p(omega[rows, None]))
+                dist[np.arange(omega.size) == rows[:, None]] = np.inf
+                x0 = params[np.argmin(dist, axis=1)] if rows.size else []
+            if not rows.size:
+                continue
+            more = mu_upper_bound(M[rows], self.structure, x0=np.asarray(x0), **POLISH_OPTIONS)
+            # a point is only as good as the certificate the interval test accepts: converged
+            # scalings can be too close to singular for a strict LMI at the level
+            better = np.array(
+                [
+                    more.upper[j] < upper[i]
+                    and _proves(self.real, Scalings(more.D_left[j], more.D_right[j], more.G[j]),
+                                more.upper[j] * (1.0 + self.slack), omega[i])
+                    for j, i in enumerate(rows)
+                ],
+                dtype=bool,
+            )  # fmt: skip
+            rows = rows[better]
+            upper[rows], params[rows] = more.upper[better], more.params[better]
+            Dl[rows], Dr[rows], G[rows] = more.D_left[better], more.D_right[better], more.G[better]
+        self.solved_omega.extend(omega.tolist())
+        self.solved_params.extend(list(params))
+        scalings = [Scalings(Dl[i], Dr[i], G[i]).conditioned() for i in range(omega.size)]
+        return upper, upper * (1.0 + self.slack), scalings
 
-
-def solve_mu_batch(requests) -> list:
-    """The requests ``(solver, omega)`` of :func:`mu_solver` solvers of one BLK, together.
-
-    Each request gets what its solver alone would return, to round-off (the optimizer runs
-    every matrix of a batch on its own, but a lone matrix goes through the per-matrix
-    evaluator: results move by about 1e-12 of the bound), and every pass of the optimizer (the
-    first run, then the long runs from each kind of start) runs once on the matrices of all
-    the requests: an eight-lane evaluation of
-    :func:`~oos_drake.robust.mu_upper.mu_upper_bound` costs about three per-matrix ones.
-
-    Parameters
-    ----------
-    requests : list of tuple
-        ``(solver, omega)``: a solver of :func:`mu_solver` and frequencies [rad/s].
-
-    Returns
-    -------
-    list of tuple
-        ``(optimal, level_min, scalings)`` of each request (see :func:`cover_axis`).
-    """
-    from oos_drake.robust.mu import UPPER_ITERATIONS, UPPER_PATIENCE, UPPER_TEMPERATURES, UPPER_TOL
-    from oos_drake.robust.mu_upper import mu_upper_bound
-
-    solvers = [solver for solver, _ in requests]
-    if len({np.asarray(s.blk).tobytes() for s in solvers}) > 1:
-        raise ValueError("solve_mu_batch: the solvers of one batch must share their BLK")
-    omegas = [np.asarray(w, dtype=float).reshape(-1) for _, w in requests]
-    owner = np.repeat(np.arange(len(requests)), [w.size for w in omegas])
-    omega = np.concatenate(omegas)
-    M = np.concatenate([s.real.response(w) for s, w in zip(solvers, omegas, strict=True)])
-    structure = solvers[0].structure
-    res = mu_upper_bound(
-        M,
-        structure,
-        max_iter=UPPER_ITERATIONS,
-        tol=UPPER_TOL,
-        temperatures=UPPER_TEMPERATURES,
-        patience=UPPER_PATIENCE,
-    )
-    upper, params = res.upper.copy(), res.params.copy()
-    Dl, Dr, G = res.D_left.copy(), res.D_right.copy(), res.G.copy()
-    above = np.array([solvers[k].polish_above for k in owner])
-    slack = np.array([solvers[k].slack for k in owner])
-    redo = np.flatnonzero(upper > above)
-    for start in ("own", "known", "batch"):
-        # each further start only for the points still above: a point at or below
-        # ``polish_above`` proves the level already, a lower bound there changes nothing
-        redo = redo[upper[redo] > above[redo]]
-        if start == "own":
-            rows, x0 = redo, params[redo]
-        elif start == "known":  # the nearest point its solver solved before
-            rows = np.array([i for i in redo if solvers[owner[i]].solved_omega], dtype=int)
-            x0 = [_nearest_start(solvers[owner[i]], omega[i]) for i in rows]
-        else:  # the nearest other point of the same request, after the passes above
-            rows = np.array([i for i in redo if omegas[owner[i]].size > 1], dtype=int)
-            dist = np.abs(np.log1p(omega[None, :]) - np.log1p(omega[rows, None]))
-            other = (owner[None, :] != owner[rows, None]) | (np.arange(omega.size) == rows[:, None])
-            dist[other] = np.inf
-            x0 = params[np.argmin(dist, axis=1)] if rows.size else []
-        if not rows.size:
-            continue
-        more = mu_upper_bound(M[rows], structure, x0=np.asarray(x0), **POLISH_OPTIONS)
-        # a point is only as good as the certificate the interval test accepts: converged
-        # scalings can be too close to singular for a strict LMI at the level
-        better = np.array(
-            [
-                more.upper[j] < upper[i]
-                and _proves(solvers[owner[i]].real,
-                            Scalings(more.D_left[j], more.D_right[j], more.G[j]),
-                            more.upper[j] * (1.0 + slack[i]), omega[i])
-                for j, i in enumerate(rows)
-            ],
-            dtype=bool,
-        )  # fmt: skip
-        rows = rows[better]
-        upper[rows], params[rows] = more.upper[better], more.params[better]
-        Dl[rows], Dr[rows], G[rows] = more.D_left[better], more.D_right[better], more.G[better]
-    out = []
-    for k, solver in enumerate(solvers):
-        mine = np.flatnonzero(owner == k)
-        solver.solved_omega.extend(omega[mine].tolist())
-        solver.solved_params.extend(list(params[mine]))
-        scalings = [Scalings(Dl[i], Dr[i], G[i]).conditioned() for i in mine]
-        out.append((upper[mine], upper[mine] * (1.0 + solver.slack), scalings))
-    return out
-
-
-def _nearest_start(solver: _MuSolver, omega: float) -> np.ndarray:
-    """Parameters of the point nearest to ``omega`` (log scale) that ``solver`` solved before."""
-    known = np.asarray(solver.solved_omega, dtype=float)
-    return solver.solved_params[int(np.argmin(np.abs(np.log1p(known) - np.log1p(omega))))]
+    def _nearest_start(self, omega: float) -> np.ndarray:
+        """Parameters of the point nearest to ``omega`` (log scale) solved before."""
+        known = np.asarray(self.solved_omega, dtype=float)
+        return self.solved_params[int(np.argmin(np.abs(np.log1p(known) - np.log1p(omega))))]
 
 
 def _proves(real: Realization, sc: Scalings, beta: float, omega: float) -> bool:

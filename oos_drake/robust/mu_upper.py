@@ -203,15 +203,7 @@ def _build_layout(structure: BlockStructure) -> _Layout:
         return col, ent
 
     lrow_col, lrow_ent = padded_rows(l_row, l_col, l_ent, structure.n_cols, n_ent)
-    # diagonal blocks of T_r grouped by size, for batched small inverses
-    sizes = {}
-    for block in structure.blocks:
-        if block.repeated:
-            sizes.setdefault(block.rows, []).append(block.row_offset + np.arange(block.rows))
-        else:
-            for a in range(block.rows):
-                sizes.setdefault(1, []).append(np.array([block.row_offset + a]))
-    inv_groups = tuple((n, np.array(v)) for n, v in sorted(sizes.items()))
+    inv_groups = _size_groups(structure, "rows")  # for batched small inverses
     grow_col, grow_pos = padded_rows(
         g_row, g_col, list(range(len(g_row))), structure.n_rows, len(g_row)
     )
@@ -243,6 +235,21 @@ def _build_layout(structure: BlockStructure) -> _Layout:
         grow_pos=grow_pos,
         inv_groups=inv_groups,
     )
+
+
+def _size_groups(structure: BlockStructure, side: str) -> tuple:
+    """Diagonal blocks of ``T_r`` (``side="rows"``) or ``T_l`` (``"cols"``) grouped by size:
+    ``((size, (n_blocks, size) channel indices), ...)``."""
+    sizes = {}
+    for block in structure.blocks:
+        n = block.rows if side == "rows" else block.cols
+        offset = block.row_offset if side == "rows" else block.col_offset
+        if block.repeated:
+            sizes.setdefault(n, []).append(offset + np.arange(n))
+        else:
+            for a in range(n):
+                sizes.setdefault(1, []).append(np.array([offset + a]))
+    return tuple((n, np.array(v)) for n, v in sorted(sizes.items()))
 
 
 def _times_blockdiag(A, groups, blocks):
@@ -281,15 +288,7 @@ class _Objective:
         self.MH = np.ascontiguousarray(np.conj(np.swapaxes(M, -1, -2)))
         self.s = structure
         self.L = layout
-        # c-space (output side of M) diagonal blocks of T_l grouped by size, like inv_groups
-        sizes = {}
-        for block in structure.blocks:
-            if block.repeated:
-                sizes.setdefault(block.cols, []).append(block.col_offset + np.arange(block.cols))
-            else:
-                for a in range(block.cols):
-                    sizes.setdefault(1, []).append(np.array([block.col_offset + a]))
-        self.c_groups = tuple((n, np.array(v)) for n, v in sorted(sizes.items()))
+        self.c_groups = _size_groups(structure, "cols")
         self.packed = _per_blk(
             "packed", structure, lambda: mu_kernels.pack_layout(layout, self.c_groups)
         )
@@ -398,7 +397,7 @@ class _Balanced:
         tl = np.real(np.diagonal(Tl, axis1=1, axis2=2))
         tr = np.real(np.diagonal(Tr, axis1=1, axis2=2))
         self.M = tl[:, :, None] * obj.M / tr[:, None, :]
-        lin_col_par, g_row_par, g_col_par = _balance_maps(obj.s, L)
+        lin_col_par, g_row_par, g_col_par = _per_blk("balance", obj.s, lambda: _balance_maps(L))
         log_t = x_start  # the start's log-scalings (its other parameters are zero)
         self.shift = np.zeros_like(x_start)
         self.shift[:, L.log_par] = x_start[:, L.log_par]
@@ -417,14 +416,10 @@ class _Balanced:
         return x_b / self.factor + self.shift
 
 
-def _balance_maps(structure: BlockStructure, L: _Layout):
-    """For each off-diagonal ``T`` entry, the log-parameter of its column's channel; for each
-    ``G`` parameter, the log-parameters of the r-space row and c-space column of its entry
-    (``L`` is the layout of ``structure``)."""
-    return _per_blk("balance", structure, lambda: _build_balance_maps(L))
-
-
-def _build_balance_maps(L: _Layout):
+def _balance_maps(L: _Layout):
+    """For each off-diagonal ``T`` entry of the layout ``L``, the log-parameter of its column's
+    channel; for each ``G`` parameter, the log-parameters of the r-space row and c-space column
+    of its entry."""
     diag_par_r, diag_par_l = {}, {}
     ent_par = dict(zip(L.log_ent.tolist(), L.log_par.tolist(), strict=True))
     for i, j, e in zip(L.r_row, L.r_col, L.r_ent, strict=True):

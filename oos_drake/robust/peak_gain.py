@@ -248,23 +248,16 @@ class ModalResponse:
             idx = np.flatnonzero(self.exact)
             M, X, H[idx] = self._lu_response(idx, omega[idx])
             dH[idx] = -1j * (self.C[idx][:, None] @ np.linalg.solve(M, X))
+        if self.p > self.m:  # the smaller Gram matrix: that of the adjoint (same sigma, slope)
+            H, dH = np.conj(np.swapaxes(H, -1, -2)), np.conj(np.swapaxes(dH, -1, -2))
         Hh = np.conj(np.swapaxes(H, -1, -2))
-        if self.p <= self.m:
-            w, U = np.linalg.eigh(H @ Hh)
-            u = U[..., -1]  # left singular vector
-            sigma = np.sqrt(np.maximum(w[..., -1], 0.0))
-            # d sigma = Re(u^H dH H^H u) / sigma
-            slope = np.real(np.einsum("...i,...ij,...j->...", np.conj(u), dH @ Hh, u)) / np.maximum(
-                sigma, 1e-300
-            )
-        else:
-            w, V = np.linalg.eigh(Hh @ H)
-            v = V[..., -1]
-            sigma = np.sqrt(np.maximum(w[..., -1], 0.0))
-            dHh = np.conj(np.swapaxes(dH, -1, -2))
-            slope = np.real(np.einsum("...i,...ij,...j->...", np.conj(v), dHh @ H, v)) / np.maximum(
-                sigma, 1e-300
-            )
+        w, U = np.linalg.eigh(H @ Hh)
+        u = U[..., -1]  # left singular vector
+        sigma = np.sqrt(np.maximum(w[..., -1], 0.0))
+        # d sigma = Re(u^H dH H^H u) / sigma
+        slope = np.real(np.einsum("...i,...ij,...j->...", np.conj(u), dH @ Hh, u)) / np.maximum(
+            sigma, 1e-300
+        )
         return sigma, slope
 
     def sigma(self, omega, *, prune: bool = False) -> np.ndarray:
@@ -412,7 +405,7 @@ def peak_gain(
     C,
     D,
     *,
-    points_per_decade: int | None = None,
+    points_per_decade: int = 12,
     candidates: int = 3,
     iterations: int | None = None,
     modal: ModalResponse | None = None,
@@ -428,10 +421,9 @@ def peak_gain(
     ----------
     A, B, C, D : numpy.ndarray
         Batched state-space matrices, leading dimension N.
-    points_per_decade : int, optional
-        Density of the log part of the frequency grid (default 12; 8 with an ``evaluator``,
-        whose refinement brackets every local maximum anyway: the grid also holds the damped
-        frequency and the half-power points of every lightly damped pole).
+    points_per_decade : int
+        Density of the log part of the frequency grid (:func:`peak_search_grid`: the grid also
+        holds the damped frequency and the half-power points of every lightly damped pole).
     candidates : int
         Number of grid local maxima refined per model.
     iterations : int, optional
@@ -489,8 +481,6 @@ def peak_gain(
     unstable = abscissa >= 0
     if focus is not None and np.any(unstable):
         return PeakGain(np.where(unstable, np.inf, np.nan), np.full(N, np.nan), abscissa)
-    if points_per_decade is None:
-        points_per_decade = 12
     grid = peak_search_grid(lam, points_per_decade)
     values = sampler.sigma(grid, prune=True)
     if focus is None:

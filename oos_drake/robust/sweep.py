@@ -980,7 +980,8 @@ def mu_sweep(
     subsets : dict, optional
         Subset name -> block names (default ``{"total": all blocks}``).
     times : array_like, optional
-        Mission time [s] (or any scheduling value) of each model, stored as ``time [s]``.
+        Mission time [s] (or any scheduling value) of each model, stored as ``time [s]``
+        (default NaN).
     options : SweepOptions, optional
         The steps of the sweep (default: the analysis's grid, see :class:`SweepOptions`).
     progress : bool
@@ -1021,15 +1022,8 @@ def robust_sweep(
 
     Parameters
     ----------
-    sys : LFR
-        Uncertain closed loop, possibly a model array with batch shape ``(N,)`` (or ``()``).
-    omega : array_like, optional
-        Frequencies [rad/s]; default: :func:`frequency_grid` of all models' poles.
-    subsets : dict str -> sequence of str, optional
-        Named subsets of block names (e.g. ``{"modal": [...], "total": [...]}``); default
-        ``{"total": all blocks}``.
-    times : array_like, optional
-        Mission time [s] of each model (the ``time [s]`` column); default NaN.
+    sys, omega, subsets, times
+        As for :func:`mu_sweep` (``omega``: the common grid only, no pole points).
     n_jobs : int
         Worker processes (1: in this process).
     scheduler : str, optional

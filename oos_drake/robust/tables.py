@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Columns of every mu sweep table of the package (:func:`robust_sweep`, the analysis's
-#: ``mu_mission.parquet`` and docking sweeps, :meth:`RobStabResult.table
-#: <oos_drake.robust.robstab.RobStabResult.table>`, ``oos robust robstab --out``): ``name [unit]``
+#: Columns of every mu sweep table of the package (see the module docstring): ``name [unit]``
 #: for quantities, ``[-]`` when dimensionless; labels, indices and flags carry no unit.
 #: Frequencies are in Hz (the scenario, the figures and the campaign regions speak Hz; function
 #: arguments stay in rad/s, as in MATLAB).

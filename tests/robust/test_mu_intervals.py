@@ -18,13 +18,9 @@ from oos_drake.robust.mu_intervals import (
     Scalings,
     _gaps,
     cover_axis,
-    cover_steps,
     dg_interval,
-    lockstep,
     mu_solver,
     scalings_at,
-    solve_each,
-    solve_mu_batch,
 )
 from oos_drake.robust.mu_upper import lmi_residual
 
@@ -303,51 +299,6 @@ def test_cover_continued_from_a_neighbouring_model():
     # a far model: the prior proves (almost) nothing, the cover still closes on its own
     other = cover_axis(far, mu_solver(far, blk, polish_above=peak), [], floor=floor, prior=prior)
     assert other.covered and other.check()["intervals_hold"] and other.check()["covered"]
-
-
-def _continued_covers(reals, blk, floor, polish_above):
-    """Covers of neighbouring models one after the other, each tried first with the previous
-    one's essential scalings (the analysis' ranges), as a generator of solve requests."""
-    certs, prior = [], None
-    for real in reals:
-        solve = mu_solver(real, blk, polish_above=polish_above)
-        cert = yield from cover_steps(real, solve, [], floor=floor, prior=prior)
-        keep = cert.essential()
-        prior = (cert.omega[keep], [cert.scalings[i] for i in keep]) if keep.size else None
-        certs.append(cert)
-    return certs
-
-
-def test_lockstep_covers_equal_one_by_one_covers():
-    """Two ranges of neighbouring models covered in lock-step (their solves batched by
-    ``solve_mu_batch``) give the certificates of the same covers run one by one (``solve``
-    called alone): every cover closed, the same level to the optimizer's tolerance; every
-    frequency proved (dense LMI check on each model's own ``M``), at a level above its sampled
-    mu peak. Not bit for bit, nor the same points: the lane optimizer's result for one matrix
-    moves at round-off with the other matrices of its batch (and with how the kernels were
-    compiled: up to 6e-7 of a level measured), and a point placed at the end of an interval
-    where ``lambda_max`` is flat moves more (up to 3 % of its frequency), so that a cover may
-    solve a few more or fewer points (25 against 30 measured) to close."""
-    ranges = [[1.0, 1.01, 1.02], [2.0, 2.03]]
-    blk = delta_realization(oscillator())[1]
-    reals = [[delta_realization(oscillator(k0=k))[0] for k in r] for r in ranges]
-    dense = np.concatenate([np.linspace(0.0, 6.0, 30001), np.logspace(0.8, 4, 200)])
-    peaks = [
-        float(np.max(mussv(real.response(dense[::20]), blk).lower)) for r in reals for real in r
-    ]
-    floor = 1.01 * min(peaks)  # low: the models above it raise their level, and they differ
-    alone = [lockstep([_continued_covers(r, blk, floor, floor)], solve_each)[0] for r in reals]
-    together = lockstep([_continued_covers(r, blk, floor, floor) for r in reals], solve_mu_batch)
-    flat = [
-        (a, b) for ra, rb in zip(alone, together, strict=True) for a, b in zip(ra, rb, strict=True)
-    ]
-    assert len(flat) == 5
-    assert len({float(a.upper) for a, _ in flat}) > 1  # not one common level: a real test
-    for (a, b), peak, real in zip(flat, peaks, [x for r in reals for x in r], strict=True):
-        assert a.covered and b.covered
-        np.testing.assert_allclose(b.upper, a.upper, rtol=1e-5)
-        assert peak <= b.upper
-        assert_every_frequency_proved(real, b, dense)
 
 
 def with_hidden_modes(real, seed=0):
