@@ -27,7 +27,7 @@ from oos_drake.control.plants import PlantArray, UncertainParameter, from_lfr
 from oos_drake.control.report import write_synthesis
 from oos_drake.control.statespace import BatchedStateSpace, connect
 from oos_drake.control.synthesis import SynthesisOptions, SynthesisResult, synthesize
-from oos_drake.robust.peak_gain import PeakGain, hinfnorm_hamiltonian, peak_gain
+from oos_drake.robust.peak_gain import PeakGain, peak_gain
 
 __all__ = [
     "BatchedStateSpace",
@@ -44,7 +44,6 @@ __all__ = [
     "close_loop",
     "connect",
     "from_lfr",
-    "hinfnorm_hamiltonian",
     "inertia_from_plant",
     "peak_gain",
     "synthesize",

@@ -20,7 +20,7 @@ grid), and ``workers`` threads can share them (LAPACK runs without the GIL).
 
 :func:`certify_peaks` certifies results with the Hamiltonian test of
 Boyd-Balakrishnan-Bruinsma-Steinbuch (no imaginary eigenvalue above the reported gain), all
-models together; :func:`hinfnorm_hamiltonian` is its one-model form.
+models together (:func:`oos_drake.robust.hinf.hinfnorm`, the one H-infinity norm, runs it).
 """
 
 from __future__ import annotations
@@ -548,47 +548,6 @@ def _refine_peaks(
     peak_s = np.where(np.isfinite(np.take_along_axis(score, top, axis=1)), peak_s, np.nan)
     best = np.nanargmax(np.where(np.isnan(peak_s), -np.inf, peak_s), axis=1)
     return peak_w[np.arange(N), best], peak_w, peak_s
-
-
-def hinfnorm_hamiltonian(A, B, C, D, *, rtol: float = 1e-7, max_iterations: int = 30, start=None):
-    """H-infinity norm of one stable model by the Hamiltonian (BBBS) iteration.
-
-    One model of :func:`certify_peaks`, started from ``start`` or the :func:`peak_gain`
-    estimate.
-
-    Parameters
-    ----------
-    A, B, C, D : numpy.ndarray
-        One model (2-D matrices).
-    rtol : float
-        Relative accuracy of the returned norm.
-    max_iterations : int
-        Largest number of level-set steps.
-    start : (float, float), optional
-        A lower bound and its frequency ``(gamma, omega)`` (default: :func:`peak_gain`).
-
-    Returns
-    -------
-    tuple of float
-        ``(gamma, omega_peak)`` [-, rad/s].
-    """
-    A, B, C, D = (np.asarray(M, dtype=float) for M in (A, B, C, D))
-    if np.linalg.eigvals(A).real.max(initial=-np.inf) >= 0:
-        return np.inf, np.nan
-    if start is None:
-        first = peak_gain(A, B, C, D)
-        start = (float(first.gamma[0]), float(first.omega[0]))
-    gamma, omega, _ = certify_peaks(
-        A[None],
-        B[None],
-        C[None],
-        D[None],
-        np.array([float(start[0])]),
-        np.array([float(start[1])]),
-        rtol=rtol,
-        max_iterations=max_iterations,
-    )
-    return float(gamma[0]), float(omega[0])
 
 
 def certify_peaks(A, B, C, D, gamma, omega, *, rtol: float = 1e-7, max_iterations: int = 30):
