@@ -192,58 +192,20 @@ def run_pipeline(args: argparse.Namespace) -> int:
     run_stage(
         "validate", out / "validate", keys["validate"], lambda d: _validate(d, scenario), timings
     )
-    run_stage(
-        "controller",
-        out / "controller",
-        keys["controller"],
-        lambda d: _oos("synth", "--out", d, *workers, *quick, *on_scenario),
-        timings,
-    )
     controller = out / "controller" / "controller.json"
-
-    run_stage(
-        "analysis",
-        out / "analysis",
-        keys["analysis"],
-        lambda d: _oos(
-            "analyze",
-            "--controller",
-            controller,
-            "--out",
-            d,
-            *workers,
-            *quick,
-            *grid_only,
-            *on_scenario,
-        ),
-        timings,
-    )
     analyzed = ["--analysis", out / "analysis", "--controller", controller]
+    commands = {  # in order: each stage reads the folders of those before it
+        "controller": ["synth", *workers, *quick],
+        "analysis": ["analyze", "--controller", controller, *workers, *quick, *grid_only],
+        "confirm": ["confirm", *analyzed, *workers],
+        "margins": ["margins", *analyzed, "--configurations", MARGIN_CONFIGURATIONS, "--quiet"],
+    }
+    for name, argv in commands.items():
 
-    run_stage(
-        "confirm",
-        out / "confirm",
-        keys["confirm"],
-        lambda d: _oos("confirm", *analyzed, "--out", d, *workers, *on_scenario),
-        timings,
-    )
+        def work(folder, argv=argv):
+            _oos(*argv, "--out", folder, *on_scenario)
 
-    run_stage(
-        "margins",
-        out / "margins",
-        keys["margins"],
-        lambda d: _oos(
-            "margins",
-            *analyzed,
-            "--configurations",
-            MARGIN_CONFIGURATIONS,
-            "--out",
-            d,
-            "--quiet",
-            *on_scenario,
-        ),
-        timings,
-    )
+        run_stage(name, out / name, keys[name], work, timings)
 
     campaign = out / f"campaign-{keys['campaign'][:10]}"
     campaign_start = time.perf_counter()
