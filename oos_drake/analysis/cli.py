@@ -336,12 +336,10 @@ def run_confirm(args) -> int:
 
 def run_study_command(args) -> int:
     """``oos study``: one table and one figure of the margin against a swept scenario value."""
-    from dataclasses import replace
-
     from oos_drake.analysis.study import StudyOptions, Sweep, run_study
 
     sweep = Sweep.parse(args.vary)
-    analysis = replace(
+    analysis = dataclasses.replace(
         StudyOptions().analysis,
         configurations=args.configurations,
         docking_points=args.docking_points,

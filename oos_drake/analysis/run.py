@@ -295,12 +295,6 @@ def guaranteed_table(study: str, result, label: str, values) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
-def _moment_time(name, scenario=None) -> float:
-    from oos_drake.scenario.timeline import mission_timeline
-
-    return float(mission_timeline(scenario).moments[name].time)
-
-
 def _moment_label(times, scenario=None):
     from oos_drake.scenario.timeline import mission_timeline
 
@@ -587,8 +581,9 @@ def run_analysis(
         from oos_drake.analysis.models import mission_plants
         from oos_drake.analysis.open_loop import uncertainty_effects
         from oos_drake.control.analysis_model import uncertain_plant
+        from oos_drake.scenario.timeline import mission_timeline
 
-        t_moment = _moment_time("2", scenario)
+        t_moment = float(mission_timeline(scenario).moments["2"].time)
         plant = mission_plants([t_moment], scenario, source=options.plant).model(0)
         p_hat = uncertain_plant(plant, controller.spec)
         effects = uncertainty_effects(
