@@ -46,14 +46,14 @@ def main() -> None:
     parser.add_argument("--subsets", default="total", help="comma-separated uncertainty subsets")
     args = parser.parse_args()
 
-    from oos_drake.analysis.cli import _controller
+    from oos_drake.analysis.controller import scenario_controller
     from oos_drake.analysis.models import mission_closed_loop, mission_times
     from oos_drake.analysis.stability import SweepOptions, certified_sweep, mu_sweep
     from oos_drake.analysis.subsets import uncertainty_subsets
     from oos_drake.blas import limit_blas_threads
 
     limit_blas_threads(1)
-    controller = _controller(args.controller)
+    controller = scenario_controller(args.controller)
     times = mission_times(330)[args.first : args.first + args.models]
     arr = mission_closed_loop(controller, times).system
     named = uncertainty_subsets(arr.uncertainty)

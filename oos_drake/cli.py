@@ -7,7 +7,7 @@ printed as one line and give exit status 2.
 
 One name per option across commands: ``--out`` (where results go), ``--workers`` (parallel
 worker processes or threads), ``--scheduler`` (where they run: local processes or Dask,
-:func:`add_scheduler_argument`), ``--quiet`` (no progress bars), ``--f-min``/``--f-max`` (frequency
+:func:`add_parallel_arguments`), ``--quiet`` (no progress bars), ``--f-min``/``--f-max`` (frequency
 range [Hz]), ``--scenario`` (the scenario data file: :func:`add_scenario_argument`). Older
 spellings (``--jobs``, ``--no-progress``, ``--fmin``, ``--fmax``) are hidden aliases that raise
 a ``DeprecationWarning`` (:func:`add_deprecated_alias`).
@@ -105,10 +105,13 @@ def loop_specification(spec, args):
     return dataclasses.replace(spec, sampled=bool(args.sampled), computation_delay_s=delay)
 
 
-def add_scheduler_argument(parser: argparse.ArgumentParser) -> None:
-    """Add ``--scheduler`` (one name and help text for every command with parallel work):
-    ``processes`` (default), ``dask``/``local`` or a Dask scheduler address; the value goes
-    to :func:`oos_drake.processes.make_executor`."""
+def add_parallel_arguments(
+    parser: argparse.ArgumentParser, *, workers: int = 2, help: str = "worker processes"
+) -> None:
+    """Add ``--workers N`` and ``--scheduler`` (one name and help text for every command with
+    parallel work): ``processes`` (default), ``dask``/``local`` or a Dask scheduler address; the
+    values go to :func:`oos_drake.processes.make_executor`. ``workers``: the default of
+    ``--workers``; ``help``: its help text (what runs in parallel)."""
     from oos_drake.processes import SCHEDULER_HELP, check_scheduler
 
     def scheduler(value: str) -> str:
@@ -117,6 +120,7 @@ def add_scheduler_argument(parser: argparse.ArgumentParser) -> None:
         except ValueError as exc:  # argparse: usage line, this message, exit status 2
             raise argparse.ArgumentTypeError(str(exc)) from None
 
+    parser.add_argument("--workers", type=int, default=workers, help=help)
     parser.add_argument(
         "--scheduler", default=None, type=scheduler, metavar="SCHEDULER", help=SCHEDULER_HELP
     )

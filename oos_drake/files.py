@@ -1,14 +1,17 @@
-"""Result files written whole or not at all.
+"""Result files and folders written whole or not at all.
 
 Every result file of the package goes through :func:`atomic_write_bytes`: the content is written
 to a temporary file in the target's folder, flushed to disk, given the mode a new file gets
 under the current umask, and renamed over the target, so that a crash or an error half-way
-leaves the previous file (or none), never a truncated one.
+leaves the previous file (or none), never a truncated one. Result folders (``oos analyze``,
+``oos margins``, ``oos confirm``, ``oos study``, the stages of ``oos run``) go through
+:func:`atomic_folder` likewise.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -53,3 +56,39 @@ def atomic_write_bytes(path: Path, write) -> Path:
         Path(temporary).unlink(missing_ok=True)
         raise
     return path
+
+
+def atomic_folder(path, work, *, marker: str | None = None, what: str = "a result"):
+    """Run ``work(tmp)`` in a new sibling folder ``tmp`` that replaces ``path`` only when it
+    returns: a failed or interrupted run leaves the previous folder (or none), never a
+    half-written one.
+
+    Parameters
+    ----------
+    path : path-like
+        The result folder.
+    work : callable
+        ``work(tmp)`` writes the results into the (created, empty) folder ``tmp``.
+    marker : str, optional
+        File that marks a previous result: an existing non-empty ``path`` without it is refused
+        (``what`` names the result in the error). None: any ``path`` is replaced.
+
+    Returns
+    -------
+    object
+        What ``work`` returns.
+    """
+    path = Path(path).resolve()
+    if marker and path.exists() and any(path.iterdir()) and not (path / marker).is_file():
+        raise ValueError(f"--out {path} exists and holds something other than {what}")
+    tmp = path.with_name(f".{path.name}.tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        tmp.mkdir(parents=True)
+        result = work(tmp)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    shutil.rmtree(path, ignore_errors=True)
+    tmp.rename(path)
+    return result

@@ -25,7 +25,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from oos_drake import __version__
-from oos_drake.cli import add_scenario_argument, add_scheduler_argument
+from oos_drake.cli import add_parallel_arguments, add_scenario_argument
+from oos_drake.files import atomic_folder
 from oos_drake.resources import package_path
 
 PACKAGE_ROOT = package_path("oos_drake")
@@ -118,15 +119,13 @@ def run_stage(
         return False
     print(f"[oos run] {name} -> {folder}")
     start = time.perf_counter()
-    tmp = folder.with_name(folder.name + ".tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    work(tmp)
-    (tmp / STAMP).write_text(
-        json.dumps({"key": key, "stage": name, "seconds": time.perf_counter() - start}) + "\n"
-    )
-    shutil.rmtree(folder, ignore_errors=True)
-    tmp.rename(folder)
+
+    def stamped(tmp: Path) -> None:
+        work(tmp)
+        stamp = {"key": key, "stage": name, "seconds": time.perf_counter() - start}
+        (tmp / STAMP).write_text(json.dumps(stamp) + "\n")
+
+    atomic_folder(folder, stamped)
     timings[name] = time.perf_counter() - start
     print(f"[oos run] {name}: done in {timings[name]:.1f} s")
     return True
@@ -193,58 +192,20 @@ def run_pipeline(args: argparse.Namespace) -> int:
     run_stage(
         "validate", out / "validate", keys["validate"], lambda d: _validate(d, scenario), timings
     )
-    run_stage(
-        "controller",
-        out / "controller",
-        keys["controller"],
-        lambda d: _oos("synth", "--out", d, *workers, *quick, *on_scenario),
-        timings,
-    )
     controller = out / "controller" / "controller.json"
-
-    run_stage(
-        "analysis",
-        out / "analysis",
-        keys["analysis"],
-        lambda d: _oos(
-            "analyze",
-            "--controller",
-            controller,
-            "--out",
-            d,
-            *workers,
-            *quick,
-            *grid_only,
-            *on_scenario,
-        ),
-        timings,
-    )
     analyzed = ["--analysis", out / "analysis", "--controller", controller]
+    commands = {  # in order: each stage reads the folders of those before it
+        "controller": ["synth", *workers, *quick],
+        "analysis": ["analyze", "--controller", controller, *workers, *quick, *grid_only],
+        "confirm": ["confirm", *analyzed, *workers],
+        "margins": ["margins", *analyzed, "--configurations", MARGIN_CONFIGURATIONS, "--quiet"],
+    }
+    for name, argv in commands.items():
 
-    run_stage(
-        "confirm",
-        out / "confirm",
-        keys["confirm"],
-        lambda d: _oos("confirm", *analyzed, "--out", d, *workers, *on_scenario),
-        timings,
-    )
+        def work(folder, argv=argv):
+            _oos(*argv, "--out", folder, *on_scenario)
 
-    run_stage(
-        "margins",
-        out / "margins",
-        keys["margins"],
-        lambda d: _oos(
-            "margins",
-            *analyzed,
-            "--configurations",
-            MARGIN_CONFIGURATIONS,
-            "--out",
-            d,
-            "--quiet",
-            *on_scenario,
-        ),
-        timings,
-    )
+        run_stage(name, out / name, keys[name], work, timings)
 
     campaign = out / f"campaign-{keys['campaign'][:10]}"
     campaign_start = time.perf_counter()
@@ -334,13 +295,10 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--campaign", default=str(DEFAULT_CAMPAIGN), help="campaign spec (default: paper.toml)"
     )
-    parser.add_argument(
-        "--workers",
-        type=int,
-        default=2,
+    add_parallel_arguments(
+        parser,
         help="worker processes of the synthesis, the analysis, the confirmation and the campaign",
     )
-    add_scheduler_argument(parser)
     parser.add_argument(
         "--quick", action="store_true", help="40 configurations instead of the paper's grids"
     )

@@ -70,6 +70,11 @@ def exit_with_parent(parent_pid: int, period: float = PARENT_POLL_S) -> None:
 
 def _start_worker(parent_pid: int, initializer: Callable | None, initargs: tuple) -> None:
     exit_with_parent(parent_pid)
+    _setup_worker(initializer, initargs)
+
+
+def _setup_worker(initializer: Callable | None, initargs: tuple) -> None:
+    """One BLAS thread, then ``initializer`` (every worker: process pool and Dask)."""
     limit_blas_threads(1)
     if initializer is not None:
         initializer(*initargs)
@@ -266,12 +271,6 @@ class PoolExecutor(_LocalPoolExecutor):
         self.shutdown()
 
 
-def _dask_worker_setup(initializer: Callable | None, initargs: tuple) -> None:
-    limit_blas_threads(1)
-    if initializer is not None:
-        initializer(*initargs)
-
-
 class DaskExecutor(SerialExecutor):
     """Dask distributed: a local cluster, or a running scheduler.
 
@@ -357,13 +356,13 @@ class DaskExecutor(SerialExecutor):
 
 
 def _worker_setup_plugin(initializer: Callable | None, initargs: tuple):
-    """A Dask worker plugin running :func:`_dask_worker_setup` in every worker that joins (Dask
+    """A Dask worker plugin running :func:`_setup_worker` in every worker that joins (Dask
     refuses duck-typed plugins, and is imported only here: it is optional)."""
     from distributed.diagnostics.plugin import WorkerPlugin
 
     class WorkerSetup(WorkerPlugin):
         def setup(self, worker) -> None:
-            _dask_worker_setup(initializer, initargs)
+            _setup_worker(initializer, initargs)
 
     return WorkerSetup()
 

@@ -251,9 +251,9 @@ def test_control_and_robust_cli_and_the_oos_parser_do_not_load_pydrake():
 # ---------------------------------------------------------------- D12: scheduled, not analyzed
 @pytest.fixture(scope="module")
 def controller():
-    from oos_drake.analysis.cli import _controller
+    from oos_drake.analysis.controller import scenario_controller
 
-    return _controller(None)
+    return scenario_controller(None)
 
 
 def _remaining(system) -> set[str]:

@@ -15,8 +15,7 @@ import numpy as np
 from oos_drake.blas import limit_blas_threads
 
 limit_blas_threads(1)
-from oos_drake.analysis.cli import _controller
-from oos_drake.analysis.controller import load_controller
+from oos_drake.analysis.controller import load_controller, scenario_controller
 from oos_drake.analysis.stability import SweepOptions, certified_sweep
 from oos_drake.analysis.subsets import uncertainty_subsets
 from oos_drake.control.analysis_model import close_loop
@@ -28,7 +27,7 @@ from oos_drake.scenario.timeline import Configuration, mission_timeline
 
 T_CHECK = 300.0  # [s] after the first docking: the arm holds the target
 omega = 2 * np.pi * np.geomspace(0.05, 5.0, 40)
-ctl = _controller(None) if sys.argv[1] == "baseline" else load_controller(sys.argv[1])
+ctl = scenario_controller(None) if sys.argv[1] == "baseline" else load_controller(sys.argv[1])
 scenario = load_scenario()
 model = build_mission_model()
 nominal = mission_timeline().configuration(T_CHECK)

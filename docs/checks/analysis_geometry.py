@@ -10,8 +10,7 @@ import numpy as np
 from oos_drake.blas import limit_blas_threads
 
 limit_blas_threads(1)
-from oos_drake.analysis.cli import _controller
-from oos_drake.analysis.controller import load_controller
+from oos_drake.analysis.controller import load_controller, scenario_controller
 from oos_drake.analysis.stability import SweepOptions, certified_sweep
 from oos_drake.analysis.subsets import uncertainty_subsets
 from oos_drake.control.analysis_model import close_loop
@@ -28,7 +27,7 @@ for label, angle, ctl in [
     ("as modeled (target arrays theta3,4 = 0), synthesized K", 0.0, synth),
     ("target arrays turned 45 deg about their mount axis", np.pi / 4, synth),
     ("target arrays turned 90 deg about their mount axis", np.pi / 2, synth),
-    ("as modeled, BASELINE PD", 0.0, _controller(None)),
+    ("as modeled, BASELINE PD", 0.0, scenario_controller(None)),
 ]:
     values = mission_values(times)
     values["tau_theta3"] = np.full(times.size, angle_to_tau(angle))

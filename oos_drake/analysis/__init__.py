@@ -3,9 +3,8 @@
 Modules, in the order of the data flow:
 
 ``controller``     the controller JSON of ``oos synth`` (or the labeled baseline)
-``loop``           the uncertain closed loop ``d -> e`` with ``Delta_tot = diag(Delta_real,
-                   Delta_add, Delta_mul)`` around the scenario LFR
-``models``         closed-loop model arrays: mission (M_330) and docking phases 7 / 8
+``models``         closed-loop model arrays (:func:`oos_drake.control.analysis_model.close_loop`):
+                   mission (M_330) and docking phases 7 / 8
 ``subsets``        the uncertainty subsets (total, real, modal, mechanical, additive,
                    multiplicative) and the physical units of the blocks
 ``workers``        bounds at arbitrary (model, frequency) points in worker processes
@@ -19,4 +18,7 @@ Modules, in the order of the data flow:
 ``time_check``     linear time-domain simulation of the worst cases against the requirements
 ``worst_cases``    the ``worst_cases.parquet`` of the mu-guided campaign
 ``figures``        PNG figures; ``run`` the whole analysis; ``cli`` ``oos analyze``
+``confirm``        ``oos confirm``: the worst cases on the nonlinear Drake twin (``oscillation``:
+                   decay rate and frequency of its runs); ``margins``: ``oos margins``
+``study``          ``oos study``: the margin against one swept scenario value
 """

@@ -8,44 +8,16 @@ import json
 import math
 from pathlib import Path
 
+from oos_drake.analysis.controller import scenario_controller
 from oos_drake.analysis.stability import SweepOptions
 from oos_drake.cli import (
     add_deprecated_alias,
     add_loop_arguments,
+    add_parallel_arguments,
     add_scenario_argument,
-    add_scheduler_argument,
     loop_specification,
 )
-
-
-def _controller(path, scenario=None):
-    """:func:`oos_drake.analysis.controller.scenario_controller` (the name tests know)."""
-    from oos_drake.analysis.controller import scenario_controller
-
-    return scenario_controller(path, scenario)
-
-
-def _write_atomically(out, work, marker: str = "summary.json", what: str = "an analysis"):
-    """Run ``work(tmp)`` in a sibling temporary folder that replaces ``out`` only when it
-    succeeds: a failed or interrupted analysis leaves no half-written result folder. An
-    existing ``out`` is replaced only if it holds a previous result (its ``marker`` file, ``what``
-    names it in the error)."""
-    import shutil
-
-    out = Path(out).resolve()
-    if out.exists() and any(out.iterdir()) and not (out / marker).is_file():
-        raise ValueError(f"--out {out} exists and holds something other than {what}")
-    tmp = out.with_name(f".{out.name}.tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
-    try:
-        result = work(tmp)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    if out.exists():
-        shutil.rmtree(out)
-    tmp.rename(out)
-    return result
+from oos_drake.files import atomic_folder
 
 
 def _read_summary(analysis) -> dict:
@@ -62,7 +34,7 @@ def run_analyze(args) -> int:
     from oos_drake.scenario.data import load_scenario
 
     scenario = load_scenario(args.scenario)
-    controller = _controller(args.controller, scenario)
+    controller = scenario_controller(args.controller, scenario)
     controller = dataclasses.replace(controller, spec=loop_specification(controller.spec, args))
     if controller.label == "baseline":
         print(
@@ -95,8 +67,11 @@ def run_analyze(args) -> int:
         progress=not args.quiet,
         plant=args.plant,
     )
-    summary = _write_atomically(
-        args.out, lambda tmp: run_analysis(controller, tmp, options, scenario=scenario)
+    summary = atomic_folder(
+        args.out,
+        lambda tmp: run_analysis(controller, tmp, options, scenario=scenario),
+        marker="summary.json",
+        what="an analysis",
     )
     m = summary["mission"]
     print(f"scenario: {scenario.name} ({scenario.source})")
@@ -173,7 +148,7 @@ def run_margins(args) -> int:
         recorded = _read_summary(args.analysis).get("scenario")
         scenario_file = _analysis_scenario(recorded, args.analysis, args.scenario)
     scenario = load_scenario(scenario_file)
-    controller = _controller(args.controller, scenario)
+    controller = scenario_controller(args.controller, scenario)
     if args.delay is not None:
         if args.delay < 0:
             raise ValueError(f"--delay must be >= 0 s, got {args.delay}")
@@ -185,23 +160,17 @@ def run_margins(args) -> int:
     start = time.perf_counter()
 
     def work(tmp):
-        tmp.mkdir(parents=True)
         table = mission_margins(controller, times, scenario, progress=not args.quiet)
         table.to_parquet(tmp / "margins.parquet", index=False)
         margins_figure(table, tmp / "margins.png", controller.spec.flight_software_rate_hz)
-        worst = {}
-        for loop in LOOPS:
-            part = table[table["loop"] == loop]
-            worst[loop] = {
-                column: float(part[column].min())
-                for column in (
-                    "gain margin upper [dB]",
-                    "phase margin [deg]",
-                    "delay margin [s]",
-                    "disk margin [-]",
-                    "multiloop disk margin [-]",
-                )
-            }
+        columns = [
+            "gain margin upper [dB]",
+            "phase margin [deg]",
+            "delay margin [s]",
+            "disk margin [-]",
+            "multiloop disk margin [-]",
+        ]
+        worst = {loop: table.loc[table["loop"] == loop, columns].min().to_dict() for loop in LOOPS}
         record = {
             "scenario": str(scenario.source),
             "controller": {"label": controller.label, "source": controller.source},
@@ -221,7 +190,7 @@ def run_margins(args) -> int:
         (tmp / "summary.json").write_text(json.dumps(record, indent=2))
         return table, record
 
-    table, record = _write_atomically(args.out, work)
+    table, record = atomic_folder(args.out, work, marker="summary.json", what="an analysis")
     for loop, values in record["worst"].items():
         print(
             f"{loop:>14s}: worst over the mission: GM {values['gain margin upper [dB]']:.3g} dB, "
@@ -294,7 +263,7 @@ def _confirm_controller(args):
             raise ValueError(
                 f"--analysis {args.analysis}: its controller {path} is gone; pass --controller"
             )
-    controller = _controller(path, load_scenario(scenario))
+    controller = scenario_controller(path, load_scenario(scenario))
     K = np.asarray(recorded.get("K", controller.K), dtype=float)
     if K.shape != controller.K.shape or not np.allclose(K, controller.K, rtol=1e-9, atol=0):
         raise ValueError(
@@ -322,7 +291,6 @@ def run_confirm(args) -> int:
     start = time.perf_counter()
 
     def work(tmp):
-        tmp.mkdir(parents=True)
         table, histories = confirm_peaks(
             peaks,
             controller,
@@ -344,7 +312,7 @@ def run_confirm(args) -> int:
                 confirmation_figure(part, row, tmp / name)
         return table
 
-    table = _write_atomically(out, work, marker=CONFIRMATION_FILE, what="a confirmation")
+    table = atomic_folder(out, work, marker=CONFIRMATION_FILE, what="a confirmation")
     print(f"scenario: {scenario}")
     print(f"controller: {controller.label} ({controller.source})")
     print(
@@ -368,12 +336,10 @@ def run_confirm(args) -> int:
 
 def run_study_command(args) -> int:
     """``oos study``: one table and one figure of the margin against a swept scenario value."""
-    from dataclasses import replace
-
     from oos_drake.analysis.study import StudyOptions, Sweep, run_study
 
     sweep = Sweep.parse(args.vary)
-    analysis = replace(
+    analysis = dataclasses.replace(
         StudyOptions().analysis,
         configurations=args.configurations,
         docking_points=args.docking_points,
@@ -387,8 +353,11 @@ def run_study_command(args) -> int:
         workers=args.workers,
         scheduler=args.scheduler,
     )
-    table = _write_atomically(
-        args.out, lambda tmp: run_study(args.scenario, sweep, tmp, options, not args.quiet)
+    table = atomic_folder(
+        args.out,
+        lambda tmp: run_study(args.scenario, sweep, tmp, options, not args.quiet),
+        marker="summary.json",
+        what="an analysis",
     )
     summary = json.loads((Path(args.out) / "summary.json").read_text())
     columns = [
@@ -446,8 +415,7 @@ def _register_study(subparsers) -> None:
     )
     parser.add_argument("--docking", default="7,8", help="docking phases (comma-separated)")
     parser.add_argument("--docking-points", type=int, default=40, help="stiffness values")
-    parser.add_argument("--workers", type=int, default=2, help="values analyzed in parallel")
-    add_scheduler_argument(parser)
+    add_parallel_arguments(parser, help="values analyzed in parallel")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run_study_command)
 
@@ -532,8 +500,7 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--no-sensitivity", action="store_true", help="skip the sensitivity table")
     parser.add_argument("--no-time-check", action="store_true", help="skip the time-domain check")
-    parser.add_argument("--workers", type=int, default=2, help="worker processes")
-    add_scheduler_argument(parser)
+    add_parallel_arguments(parser)
     parser.add_argument(
         "--plant",
         choices=("lfr", "drake"),
@@ -614,7 +581,6 @@ def register(subparsers) -> None:
         "--out", default=None, help="output directory (default: ANALYSIS/../confirm)"
     )
     add_scenario_argument(confirm)
-    confirm.add_argument("--workers", type=int, default=2, help="worker processes")
-    add_scheduler_argument(confirm)
+    add_parallel_arguments(confirm)
     confirm.add_argument("--quiet", action="store_true", help="no progress bars")
     confirm.set_defaults(func=run_confirm)

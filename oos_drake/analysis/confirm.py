@@ -865,20 +865,16 @@ def confirm_peaks(
     from oos_drake.processes import make_executor
 
     tasks = [(peak, controller, options) for peak in peaks]
-    # every peak simulates; how many runs one needs is known only after its linear predictions
-    order = range(len(tasks))
-    results = {}
     with make_executor(max(1, min(workers, len(tasks))), scheduler, method="spawn") as executor:
-        futures = {executor.submit(_confirm_task, tasks[i]): i for i in order}
+        futures = [executor.submit(_confirm_task, task) for task in tasks]
         for future in tqdm(
             executor.as_completed(futures), total=len(futures), desc="confirm", disable=quiet
         ):
-            results[futures[future]] = future.result()
-    rows = [results[i][0] for i in range(len(tasks))]
-    histories = [results[i][1] for i in range(len(tasks)) if not results[i][1].empty]
-    table = pd.DataFrame(rows)
-    history = pd.concat(histories, ignore_index=True) if histories else pd.DataFrame()
-    return table, history
+            future.result()  # a failed peak stops the confirmation as soon as it fails
+        results = [future.result() for future in futures]
+    histories = [history for _, history in results if not history.empty]
+    table = pd.DataFrame([row for row, _ in results])
+    return table, pd.concat(histories, ignore_index=True) if histories else pd.DataFrame()
 
 
 def confirmation_figure(

@@ -54,22 +54,25 @@ class Destabilizer:
     residual: float
 
 
-def _expand(structure, real_values, complex_blocks=None):
-    """Perturbation matrix from one value per real block and matrices for the complex ones."""
+def _expand(structure, real_values):
+    """Perturbation matrix from one value per real block (the complex blocks at zero)."""
     delta = np.zeros((structure.n_rows, structure.n_cols), dtype=complex)
-    k = 0
-    c = 0
-    for block in structure.blocks:
-        if block.kind == REAL:
-            idx = np.arange(block.rows)
-            delta[block.row_offset + idx, block.col_offset + idx] = real_values[k]
-            k += 1
-        elif complex_blocks is not None:
-            delta[block.r_slice, block.c_slice] = complex_blocks[c]
-            c += 1
-        else:
-            c += 1
+    for block, value in zip(_real_blocks(structure), real_values, strict=True):
+        idx = np.arange(block.rows)
+        delta[block.row_offset + idx, block.col_offset + idx] = value
     return delta
+
+
+def _real_blocks(structure) -> list:
+    return [b for b in structure.blocks if b.kind == REAL]
+
+
+def _sign_vertices(n: int, max_vertices: int, rng: np.random.Generator | None = None):
+    """Every sign vector of length ``n`` (``(2**n, n)``) if there are at most ``max_vertices``,
+    else ``max_vertices`` random ones (``rng``, default seed 0)."""
+    if 2**n <= max_vertices:
+        return np.array(list(itertools.product([-1.0, 1.0], repeat=n)))
+    return (rng or np.random.default_rng(0)).choice([-1.0, 1.0], size=(max_vertices, n))
 
 
 def _closed_A(A, Bw, Cz, Dzw, delta):
@@ -97,16 +100,12 @@ def ill_posed_perturbation(Dzw, blk, *, max_vertices: int = 1024) -> Destabilize
     """
     structure = parse_blk(blk)
     Dzw = np.asarray(Dzw)
-    n_real = sum(1 for b in structure.blocks if b.kind == REAL)
+    n_real = len(_real_blocks(structure))
     none = Destabilizer(0.0, float("nan"), np.zeros((structure.n_rows, structure.n_cols)), np.nan)
     if n_real == 0 or Dzw.size == 0:
         return none
-    if 2**n_real <= max_vertices:
-        vertices = np.array(list(itertools.product([-1.0, 1.0], repeat=n_real)))
-    else:
-        vertices = np.random.default_rng(0).choice([-1.0, 1.0], size=(max_vertices, n_real))
     best, best_lambda = None, 0.0
-    for d in vertices:
+    for d in _sign_vertices(n_real, max_vertices):
         lam = np.linalg.eigvals(Dzw @ _expand(structure, d))
         real = lam[(np.abs(lam.imag) <= 1e-9 * max(1.0, np.abs(lam).max())) & (lam.real > 0)]
         if real.size and real.real.max() > best_lambda:
@@ -142,16 +141,11 @@ def real_vertex_search(
         Crossing frequency [rad/s].
     """
     structure = parse_blk(blk)
-    n_real = sum(1 for b in structure.blocks if b.kind == REAL)
+    n_real = len(_real_blocks(structure))
     if n_real == 0:
         return np.inf, np.zeros(0), np.nan
-    if 2**n_real <= max_vertices:
-        vertices = np.array(list(itertools.product([-1.0, 1.0], repeat=n_real)))
-    else:
-        rng = rng or np.random.default_rng(0)
-        vertices = rng.choice([-1.0, 1.0], size=(max_vertices, n_real))
     best = (np.inf, np.zeros(n_real), np.nan)
-    for d in vertices:
+    for d in _sign_vertices(n_real, max_vertices, rng):
         hi = min(alpha_max, best[0])
         a_hi, _ = _abscissa(A, Bw, Cz, Dzw, _expand(structure, hi * d))
         if a_hi < 0:
@@ -341,7 +335,7 @@ def destabilizing_perturbation(
     best = Destabilizer(
         0.0, float("nan"), np.zeros((structure.n_rows, structure.n_cols), complex), float("nan")
     )
-    signs = np.zeros(sum(1 for b in structure.blocks if b.kind == REAL))
+    signs = np.zeros(len(_real_blocks(structure)))
     alpha_r = np.inf
     if has_real:
         alpha_r, signs, w_r = real_vertex_search(A, Bw, Cz, Dzw, blk, alpha_max=alpha_max)

@@ -295,12 +295,6 @@ def guaranteed_table(study: str, result, label: str, values) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
-def _moment_time(name, scenario=None) -> float:
-    from oos_drake.scenario.timeline import mission_timeline
-
-    return float(mission_timeline(scenario).moments[name].time)
-
-
 def _moment_label(times, scenario=None):
     from oos_drake.scenario.timeline import mission_timeline
 
@@ -364,6 +358,11 @@ def run_analysis(
     clock = _time.perf_counter()
     t_start = clock
 
+    def save(table: pd.DataFrame, name: str) -> None:
+        """``table`` as ``<name>.parquet``, listed in the summary's files as ``name``."""
+        paths[name] = out / f"{name}.parquet"
+        table.to_parquet(paths[name], index=False)
+
     def lap(name):
         nonlocal clock
         now = _time.perf_counter()
@@ -414,8 +413,7 @@ def run_analysis(
 
     result = study(mission.system, subsets, times, "mu mission")
     sweep = result.table
-    sweep.to_parquet(out / "mu_mission.parquet", index=False)
-    paths["mu_mission"] = out / "mu_mission.parquet"
+    save(sweep, "mu_mission")
     lap("mu sweep mission (grid + certified peaks)")
     timings["mu mission detail"] = {k: round(v, 2) for k, v in result.timings.items()}
     label = _moment_label(times, scenario)
@@ -432,8 +430,7 @@ def run_analysis(
         tot = {"total": uncertainty_subsets(arr.system.uncertainty)["total"]}
         dres = study(arr.system, tot, stiffness, f"mu docking {phase}")
         dsweep = dres.table.rename(columns={"time [s]": "stiffness [N/m or N m/rad]"})
-        dsweep.to_parquet(out / f"docking_{phase}.parquet", index=False)
-        paths[f"docking_{phase}"] = out / f"docking_{phase}.parquet"
+        save(dsweep, f"docking_{phase}")
         dp, dpert, dc = _certify(
             arr,
             dres,
@@ -465,16 +462,12 @@ def run_analysis(
         timings[f"docking {phase} detail"] = {k: round(v, 2) for k, v in dres.timings.items()}
         lap(f"docking phase {phase}")
     all_peaks = pd.concat([peaks] + docking_tables, ignore_index=True)
-    all_peaks.to_parquet(out / "stability_peaks.parquet", index=False)
-    paths["stability_peaks"] = out / "stability_peaks.parquet"
+    save(all_peaks, "stability_peaks")
     guaranteed_rows = [t for t in guaranteed_rows if not t.empty]
     if guaranteed_rows:
-        table = pd.concat(guaranteed_rows, ignore_index=True)
-        table.to_parquet(out / "stability_guaranteed.parquet", index=False)
-        paths["stability_guaranteed"] = out / "stability_guaranteed.parquet"
+        save(pd.concat(guaranteed_rows, ignore_index=True), "stability_guaranteed")
     all_pert = pd.concat([perturbations] + docking_perturbations, ignore_index=True)
-    all_pert.to_parquet(out / "worst_perturbations.parquet", index=False)
-    paths["worst_perturbations"] = out / "worst_perturbations.parquet"
+    save(all_pert, "worst_perturbations")
     study_certs = {"mission": certs}
     study_certs.update({f"docking-{ph}": {"total": c} for ph, (_, c) in docking_certs.items()})
     paths["peak_perturbations"] = _write_perturbations(out / "peak_perturbations.npz", study_certs)
@@ -502,8 +495,7 @@ def run_analysis(
         scheduler=options.sweep.scheduler,
         progress=options.progress,
     )
-    perf.to_parquet(out / "performance.parquet", index=False)
-    paths["performance"] = out / "performance.parquet"
+    save(perf, "performance")
     lap("worst-case performance")
     # ------------------------------------------------------------------ worst cases file
     regions = []
@@ -536,8 +528,7 @@ def run_analysis(
         sens = mu_sensitivity(
             mission.system, crit_model, w_s, iterations=options.sensitivity_iterations
         )
-        sens.to_parquet(out / "sensitivity.parquet", index=False)
-        paths["sensitivity"] = out / "sensitivity.parquet"
+        save(sens, "sensitivity")
         lap("sensitivity")
     # ------------------------------------------------------------------ time-domain check
     tsum = pd.DataFrame()
@@ -580,20 +571,19 @@ def run_analysis(
             rows.append(row)
             signals.append(sig)
         tsum = pd.DataFrame(rows)
-        tsum.to_parquet(out / "time_check.parquet", index=False)
+        save(tsum, "time_check")
         sig_all = pd.concat(signals, ignore_index=True)
         sig_all.to_parquet(out / "time_signals.parquet", index=False)
-        paths["time_check"] = out / "time_check.parquet"
-        figures.time_check_figure(sig_all, tsum, out / "time_check.png")
-        paths["time_check_png"] = out / "time_check.png"
+        paths["time_check_png"] = figures.time_check_figure(sig_all, tsum, out / "time_check.png")
         lap("time-domain check")
     # ------------------------------------------------------------------ open-loop effects
     if options.open_loop_samples > 0:
         from oos_drake.analysis.models import mission_plants
         from oos_drake.analysis.open_loop import uncertainty_effects
         from oos_drake.control.analysis_model import uncertain_plant
+        from oos_drake.scenario.timeline import mission_timeline
 
-        t_moment = _moment_time("2", scenario)
+        t_moment = float(mission_timeline(scenario).moments["2"].time)
         plant = mission_plants([t_moment], scenario, source=options.plant).model(0)
         p_hat = uncertain_plant(plant, controller.spec)
         effects = uncertainty_effects(
@@ -603,8 +593,7 @@ def run_analysis(
             samples=options.open_loop_samples,
             rng=np.random.default_rng(0),
         )
-        effects.to_parquet(out / "open_loop_effects.parquet", index=False)
-        paths["open_loop_effects"] = out / "open_loop_effects.parquet"
+        save(effects, "open_loop_effects")
         paths["open_loop_png"] = figures.open_loop_figure(
             effects,
             f"T_ext,G1{{1}} -> wdot{{1}} at moment 2 (t = {t_moment:g} s): samples of "
@@ -676,10 +665,7 @@ def run_analysis(
         },
         "time_check": tsum.to_dict(orient="records"),
         "paper": PAPER,
-        "options": {
-            k: (asdict(v) if hasattr(v, "__dataclass_fields__") else v)
-            for k, v in options.__dict__.items()
-        },
+        "options": asdict(options),
         "timings_s": timings,
         "files": {k: Path(v).name for k, v in paths.items()},  # relative to the output folder
     }

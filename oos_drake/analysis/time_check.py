@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-import scipy.linalg
+import scipy.signal
 
 from oos_drake.lfr import LFR, lft, usubs
 
@@ -108,11 +108,7 @@ def simulate(closed: LFR, frequency_hz: float, *, duration: float = 600.0, dt: f
     t = np.arange(0.0, duration + dt / 2, dt)
     d = np.zeros((t.size, B.shape[1]))
     d[:, :3] = 1.0 + np.sin(2 * np.pi * frequency_hz * t)[:, None]
-    # exact ZOH: [[A, B], [0, 0]] exponential
-    big = np.zeros((n + B.shape[1], n + B.shape[1]))
-    big[:n, :n], big[:n, n:] = A * dt, B * dt
-    E = scipy.linalg.expm(big)
-    Ad, Bd = E[:n, :n], E[:n, n:]
+    Ad, Bd, *_ = scipy.signal.cont2discrete((A, B, C, D), dt, method="zoh")  # exact ZOH
     x = np.zeros(n)
     e = np.empty((t.size, C.shape[0]))
     for k in range(t.size):

@@ -10,7 +10,7 @@ core over batches of small matrices.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -143,10 +143,6 @@ def point_bounds(task: PointTask) -> PointBounds:
     return PointBounds(upper, params, lower, best, best_delta)
 
 
-def _run_chunk(task: PointTask) -> PointBounds:
-    return point_bounds(task)
-
-
 class ModelPool:
     """Workers holding one model array; evaluates :class:`PointTask` lists.
 
@@ -216,26 +212,18 @@ class ModelPool:
             return PointBounds(np.zeros(0), None, np.zeros(0), -1, None)
         k = 1 if self.serial else max(1, min(self.n_jobs, n // min_chunk))
         if k == 1:
-            return self.map(_run_chunk, [task])[0]
+            return self.map(point_bounds, [task])[0]
         # split by model (one eigen-decomposition per model and chunk), balanced in points
         order = np.argsort(task.models, kind="stable")
         parts = np.array_split(order, k)
+        x0 = task.x0
         tasks = [
-            PointTask(
-                task.models[p],
-                task.omega[p],
-                None if task.x0 is None else task.x0[p],
-                task.zrows,
-                task.wcols,
-                task.blk,
-                task.iterations,
-                task.temperatures,
-                task.lower_restarts,
-                task.lower_iterations,
+            replace(
+                task, models=task.models[p], omega=task.omega[p], x0=None if x0 is None else x0[p]
             )
             for p in parts
         ]
-        results = self.map(_run_chunk, tasks)
+        results = self.map(point_bounds, tasks)
         upper = np.full(n, np.nan)
         lower = np.zeros(n)
         params = None

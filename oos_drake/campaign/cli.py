@@ -20,17 +20,15 @@ from pathlib import Path
 
 import pandas as pd
 
-from oos_drake.cli import add_deprecated_alias, add_scheduler_argument, run_command
+from oos_drake.cli import add_deprecated_alias, add_parallel_arguments, run_command
 
 
 def _add_executor_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--workers",
-        type=int,
-        default=os.cpu_count() or 1,
+    add_parallel_arguments(
+        parser,
+        workers=os.cpu_count() or 1,
         help="worker processes (default: CPU count; 1 runs in this process)",
     )
-    add_scheduler_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_deprecated_alias(parser, "--no-progress", "--quiet", flag=True)
 

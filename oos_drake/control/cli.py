@@ -14,8 +14,8 @@ import numpy as np
 
 from oos_drake.cli import (
     add_loop_arguments,
+    add_parallel_arguments,
     add_scenario_argument,
-    add_scheduler_argument,
     loop_specification,
 )
 from oos_drake.control.baseline import baseline_for
@@ -136,13 +136,11 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of restarts and samples")
     add_scenario_argument(parser)
-    parser.add_argument(
-        "--workers",
-        type=int,
-        default=min(2, os.cpu_count() or 1),
+    add_parallel_arguments(
+        parser,
+        workers=min(2, os.cpu_count() or 1),
         help="worker processes of the independent optimizer runs (start point and random "
         "restarts), and threads of the per-model eigendecompositions of a single run",
     )
-    add_scheduler_argument(parser)
     add_loop_arguments(parser)
     parser.set_defaults(func=run_synth)

@@ -3,9 +3,9 @@
 import control
 import numpy as np
 import pytest
+from peak_oracle import certify_peak  # tests/analysis is on sys.path (rootdir imports)
 
 from oos_drake.analysis.destabilizing import destabilizing_perturbation
-from oos_drake.analysis.stability import certify_peak
 from oos_drake.lfr import feedback, ultidyn, ureal, usubs
 
 

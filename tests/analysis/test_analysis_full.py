@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from oos_drake.analysis.cli import _controller
+from oos_drake.analysis.controller import scenario_controller
 from oos_drake.analysis.run import AnalysisOptions, run_analysis
 from oos_drake.analysis.tightening import TightenOptions
 
@@ -21,7 +21,7 @@ def test_full_analysis_of_the_baseline_controller(tmp_path):
     from oos_drake.analysis.models import mission_closed_loop, mission_times
     from oos_drake.lfr import usubs
 
-    controller = _controller(None)
+    controller = scenario_controller(None)
     # no wall-clock budget: what stops the resolution must not depend on the machine's load
     # (the work budgets, deterministic, stay the defaults)
     options = AnalysisOptions(

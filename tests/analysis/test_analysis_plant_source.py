@@ -19,9 +19,9 @@ OMEGA = 2 * np.pi * np.geomspace(0.005, 5.0, 60)
 
 @pytest.fixture(scope="module")
 def controller():
-    from oos_drake.analysis.cli import _controller
+    from oos_drake.analysis.controller import scenario_controller
 
-    return _controller(None)  # the baseline PD
+    return scenario_controller(None)  # the baseline PD
 
 
 def _compare(drake, titop, rng):
