@@ -106,29 +106,12 @@ def pose_error(X_actual: Pose, X_desired: Pose) -> np.ndarray:
     The rotation part is the axis-angle vector of the relative rotation, written in the
     desired frame (its norm is the rotation angle between the two frames).
     """
+    from scipy.spatial.transform import Rotation
+
     dp = X_actual.p - X_desired.p
     R_rel = np.swapaxes(X_desired.R, -1, -2) @ X_actual.R
-    cos_angle = (np.trace(R_rel, axis1=-2, axis2=-1) - 1.0) / 2.0
-    vee = 0.5 * np.stack(
-        [
-            R_rel[..., 2, 1] - R_rel[..., 1, 2],
-            R_rel[..., 0, 2] - R_rel[..., 2, 0],
-            R_rel[..., 1, 0] - R_rel[..., 0, 1],
-        ],
-        axis=-1,
-    )
-    sin_angle = np.linalg.norm(vee, axis=-1)
-    angle = np.arctan2(sin_angle, cos_angle)  # accurate for small angles, unlike arccos
-    scale = np.where(sin_angle > 1e-300, angle / np.maximum(sin_angle, 1e-300), 1.0)
-    rotation = vee * scale[..., None]
-    # near a half turn vee vanishes: take the axis from R_rel + I = 2 n n^T
-    half_turn = (cos_angle < 0) & (sin_angle < 1e-6)
-    if np.any(half_turn):
-        S = (R_rel[half_turn] + np.eye(3)) / 2.0
-        column = np.argmax(np.diagonal(S, axis1=-2, axis2=-1), axis=-1)
-        n = np.take_along_axis(S, column[:, None, None], axis=-1)[..., 0]
-        n /= np.linalg.norm(n, axis=-1, keepdims=True)
-        rotation[half_turn] = n * angle[half_turn][..., None]
+    rotation = Rotation.from_matrix(R_rel.reshape(-1, 3, 3)).as_rotvec()
+    rotation = rotation.reshape(R_rel.shape[:-2] + (3,))
     return np.concatenate([dp, rotation], axis=-1)
 
 
