@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 
 from oos_drake.resources import package_path
-from oos_drake.titop.spatial import rigid_spatial_inertia
+from oos_drake.titop.spatial import residual_mass, rigid_spatial_inertia
 
 __all__ = [
     "DEFAULT_SCENARIO_PATH",
@@ -215,8 +215,7 @@ class FlexibleArrayModel:
     @property
     def residual_mass(self) -> np.ndarray:
         """``D_P0 = D_P - L^T L`` (rows of L = modes): residual mass at P in R_SA (6x6)."""
-        L = self.participation
-        return self.rigid_spatial_inertia - L.T @ L
+        return residual_mass(self.rigid_spatial_inertia, self.participation.T)
 
 
 @dataclass(frozen=True, eq=False)
