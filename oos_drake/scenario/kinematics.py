@@ -456,19 +456,16 @@ def first_docking_ik(scenario: Scenario | None = None, alpha0=None) -> IKSolutio
 # ----------------------------------------------------------------------------------------------
 def _rigid_bodies(scenario: Scenario, target_mass=None, target_inertia=None):
     """(name, mass, CoM in body frame, inertia at CoM in body frame) of every rigid body."""
-    for name in ("RH1", "RH2"):
-        hub = scenario.hubs[name]
-        if name == "RH2":
-            mass = hub.mass if target_mass is None else float(target_mass)
-            inertia = hub.inertia if target_inertia is None else np.asarray(target_inertia, float)
-            if not mass > 0 or inertia.shape != (3, 3):
-                raise ValueError(
-                    f"RH2: target_mass must be > 0 and target_inertia 3x3, got {mass:g}, "
-                    f"shape {inertia.shape}"
-                )
-            yield name, mass, np.zeros(3), inertia
-        else:
-            yield name, hub.mass, np.zeros(3), hub.inertia
+    chaser, target = scenario.hubs["RH1"], scenario.hubs["RH2"]
+    yield "RH1", chaser.mass, np.zeros(3), chaser.inertia
+    mass = target.mass if target_mass is None else float(target_mass)
+    inertia = target.inertia if target_inertia is None else np.asarray(target_inertia, float)
+    if not mass > 0 or inertia.shape != (3, 3):
+        raise ValueError(
+            f"RH2: target_mass must be > 0 and target_inertia 3x3, got {mass:g}, "
+            f"shape {inertia.shape}"
+        )
+    yield "RH2", mass, np.zeros(3), inertia
     for link in scenario.arm.links:
         yield link.name, link.mass, link.p_J_G, link.inertia
     for name, mount in scenario.arrays.items():
