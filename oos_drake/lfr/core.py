@@ -651,15 +651,13 @@ def _merge_blocks(systems: Sequence[LFR]):
             counts[name] = counts.get(name, 0) + entry.reps
     names = sorted(specs)
     merged = tuple(BlockEntry(specs[name], counts[name]) for name in names)
-    # offsets of each block in the merged z/w vectors
-    z_start, w_start, z0, w0 = {}, {}, 0, 0
+    # next free z row / w column of each block in the merged vectors
+    used_z, used_w, z0, w0 = {}, {}, 0, 0
     for entry in merged:
-        z_start[entry.spec.name], w_start[entry.spec.name] = z0, w0
+        used_z[entry.spec.name], used_w[entry.spec.name] = z0, w0
         z0 += entry.nz
         w0 += entry.nw
     z_maps, w_maps = [], []
-    used_z = dict(z_start)
-    used_w = dict(w_start)
     for sys in systems:
         zmap, wmap = [], []
         for entry in sys.block_entries:

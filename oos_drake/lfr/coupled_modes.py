@@ -372,7 +372,7 @@ def _split_coupling(A, h):
     S1, S2, S3 = (np.flatnonzero(np.arange(m) // 2 % 3 == k) for k in range(3))
     S23 = np.concatenate([S2, S3])
     A1 = A[:, S1[:, None], S23[None, :]]
-    Qf, Rf = _orth(A1 @ _range_probes(S23.size, RANK_LIMIT + 2))
+    Qf, Rf = np.linalg.qr(A1 @ _range_probes(S23.size, RANK_LIMIT + 2))
     diag = np.abs(np.diagonal(Rf, axis1=1, axis2=2))
     top = np.max(diag, axis=1, keepdims=True)
     r = int(np.max(np.sum(diag > RANK_RTOL * top, axis=1), initial=0))
@@ -399,15 +399,10 @@ def _sq_norm(X):
     return np.einsum("gij,gij->g", X, X)
 
 
-def _orth(Z):
-    """Thin QR ``Z = Q R`` of ``(g, k, c)``, ``k >= c`` (batched LAPACK)."""
-    return np.linalg.qr(Z)
-
-
 def _lstsq_right(Y, Zt):
     """Least-squares ``X`` with ``X Z^T = Y`` for ``Z^T (g, r, k)`` of full row rank
     (``Z = Q R``, ``X = Y Q R^{-T}``; non-finite where ``Z`` is rank deficient)."""
-    Qz, Rz = _orth(np.swapaxes(Zt, 1, 2))
+    Qz, Rz = np.linalg.qr(np.swapaxes(Zt, 1, 2))  # thin QR, batched
     T = Y @ Qz  # X R^T = T, R upper triangular: back substitution over the columns
     r = Rz.shape[1]
     X = np.empty_like(T)

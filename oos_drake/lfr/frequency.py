@@ -365,30 +365,18 @@ def _tail_response(M, n, core, tail, powers, s):
     nb = M.shape[0]
     ny, nu = M.shape[1] - n, M.shape[2] - n
     A11 = M[:, core[:, None], core[None, :]]
-    A21 = M[:, tail[:, None], core[None, :]]
-    A22 = M[:, tail[:, None], tail[None, :]]
-    B1, B2 = M[:, core, n:], M[:, tail, n:]
-    C1, C2 = M[:, n:, core], M[:, n:, tail]
-    # C2 (sI - A22)^-1 = sum_p s^-(p+1) E_p,  E_p = C2 A22^p  (A22 nilpotent)
-    E = [C2]
-    for _ in range(1, powers):
-        E.append(E[-1] @ A22)
-    tail_C = [Ep @ A21 for Ep in E]
+    B1, C1 = M[:, core, n:], M[:, n:, core]
+    # C2 (sI - A22)^-1 = sum_p s^-(p+1) C2 A22^p  (A22 nilpotent)
+    tail_C, tail_B = tail_terms(M, M[:, tail[:, None], core[None, :]], tail, n, powers)
     with np.errstate(all="ignore"):
         if core.size:
-            core_M = np.concatenate(
-                [
-                    np.concatenate([A11, B1], axis=2),
-                    np.concatenate([C1, np.zeros((nb, ny, nu), dtype=M.dtype)], axis=2),
-                ],
-                axis=1,
-            )
+            core_M = np.block([[A11, B1], [C1, np.zeros((nb, ny, nu), dtype=M.dtype)]])
             out = _chunk_response(core_M, core.size, s, tail_C)  # C1 X1 + sum s^-(p+1) C_p X1
         else:
             out = np.zeros((nb, s.size, ny, nu), dtype=complex)
         out += M[:, None, n:, n:]
-        for p, Ep in enumerate(E):
-            out += (Ep @ B2)[:, None] * (s ** -(p + 1))[None, :, None, None]
+        for p, KB in enumerate(tail_B):
+            out += KB[:, None] * (s ** -(p + 1))[None, :, None, None]
     return out
 
 
@@ -502,13 +490,7 @@ def _chunk_response_tail(M, n, s, tail_C, safe_ratio: float = 1e6):
     rest = np.flatnonzero(~fast)
     if rest.size:
         C_aug = np.concatenate([C[rest]] + [Cp[rest] for Cp in tail_C], axis=1)
-        M_aug = np.concatenate(
-            [
-                np.concatenate([A[rest], B[rest]], axis=2),
-                np.concatenate([C_aug, np.zeros((rest.size, C_aug.shape[1], nu))], axis=2),
-            ],
-            axis=1,
-        )
+        M_aug = np.block([[A[rest], B[rest]], [C_aug, np.zeros((rest.size, C_aug.shape[1], nu))]])
         aug = _chunk_response(M_aug, n, s)
         out = aug[:, :, :ny, :] + M[rest, None, n:, n:]
         for p in range(q):

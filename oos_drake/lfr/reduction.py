@@ -25,15 +25,12 @@ from oos_drake.lfr.core import LFR, BlockEntry, join_quarters, quarters
 
 def _groups(sys: LFR):
     """Per group: (eta rows, xi cols, reducible, entry) with the states as group 0."""
-    n = sys.nstates
+    n, slices = sys.nstates, sys.channel_slices()
     groups = [(np.arange(n), np.arange(n), True, None)]
-    z0, w0 = n, n
     for entry in sys.block_entries:
-        rows = np.arange(z0, z0 + entry.nz)
-        cols = np.arange(w0, w0 + entry.nw)
+        z, w = slices[entry.spec.name]
+        rows, cols = n + np.arange(z.start, z.stop), n + np.arange(w.start, w.stop)
         groups.append((rows, cols, entry.spec.kind != "ultidyn", entry))
-        z0 += entry.nz
-        w0 += entry.nw
     return groups
 
 

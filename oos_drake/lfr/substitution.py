@@ -30,16 +30,8 @@ def nominal(sys: LFR) -> LFR:
     """The nominal model of ``sys``: every block at ``delta = 0`` (an LFR without blocks)."""
     if sys.is_certain:
         return sys
-    n, nz, nw = sys.nstates, sys.nz, sys.nw
-    rows = np.concatenate([np.arange(n), n + nz + np.arange(sys.noutputs)])
-    cols = np.concatenate([np.arange(n), n + nw + np.arange(sys.ninputs)])
-    return LFR(
-        sys.M[..., rows[:, None], cols[None, :]],
-        n,
-        (),
-        input_names=sys.input_names,
-        output_names=sys.output_names,
-    )
+    _, _, rows, cols = _split(sys, sys.uncertainty)
+    return sys._replace(sys.M[..., rows[:, None], cols[None, :]], blocks=())
 
 
 def _ureal_table(sys: LFR):
@@ -57,21 +49,26 @@ def _ureal_table(sys: LFR):
     return table
 
 
+def _known(sys: LFR, names, caller: str) -> dict:
+    """``sys.uncertainty``, once every one of ``names`` is checked to be among its blocks."""
+    specs = sys.uncertainty
+    for name in names:
+        if name not in specs:
+            known = ", ".join(specs) or "none"
+            raise ValueError(f"{caller}: unknown block name {name!r} (blocks: {known})")
+    return specs
+
+
 def _normalized_values(sys: LFR, values: Mapping, normalized: bool):
     if not isinstance(values, Mapping):
         raise ValueError(
             f"usubs: values must be a mapping name -> value, got {type(values).__name__}"
         )
-    specs = sys.uncertainty
+    specs = _known(sys, values, "usubs")
     out = {}
     fast = []
     for name, value in values.items():
-        if name not in specs:
-            known = ", ".join(specs) or "none"
-            raise ValueError(f"usubs: unknown block name {name!r} (blocks: {known})")
         spec = specs[name]
-        if _is_system(value):
-            raise ValueError(f"usubs: block {name!r}: a system value needs an ultidyn block")
         if normalized:
             out[name] = spec.check_normalized(value)
         elif spec.kind == "ureal":
@@ -174,10 +171,8 @@ def _substitute_systems(sys: LFR, systems: Mapping, normalized: bool) -> LFR:
     from oos_drake.lfr.core import append_systems, as_lfr
     from oos_drake.lfr.interconnect import lft
 
-    specs = sys.uncertainty
+    specs = _known(sys, systems, "usubs")
     for name in systems:
-        if name not in specs:
-            raise ValueError(f"usubs: unknown block name {name!r} (blocks: {', '.join(specs)})")
         if specs[name].kind != "ultidyn":
             raise ValueError(
                 f"usubs: block {name!r} is a {specs[name].kind}; only ultidyn blocks "
@@ -221,19 +216,23 @@ def close_blocks(sys: LFR, deltas: Mapping, *, workers: int = 1) -> LFR:
 
 def _split(sys: LFR, names):
     """Indices (into M's rows / cols) of the z / w channels of ``names`` and of everything else."""
-    n, nz, nw = sys.nstates, sys.nz, sys.nw
     slices = sys.channel_slices()
-    z_sub, w_sub = [], []
-    for name in names:
-        zs, ws = slices[name]
-        z_sub.append(n + np.arange(zs.start, zs.stop))
-        w_sub.append(n + np.arange(ws.start, ws.stop))
-    z_sub = np.concatenate(z_sub)
-    w_sub = np.concatenate(w_sub)
+    z_all, w_all = sys.nstates + np.arange(sys.nz), sys.nstates + np.arange(sys.nw)
+    z_sub = np.concatenate([z_all[slices[k][0]] for k in names] + [z_all[:0]])  # [] if no names
+    w_sub = np.concatenate([w_all[slices[k][1]] for k in names] + [w_all[:0]])
     rows_keep = np.setdiff1d(np.arange(sys.M.shape[-2]), z_sub)
     cols_keep = np.setdiff1d(np.arange(sys.M.shape[-1]), w_sub)
-    del nz, nw
     return z_sub, w_sub, rows_keep, cols_keep
+
+
+def _partitions(M, z_sub, w_sub, rows_keep, cols_keep) -> dict:
+    """``M_ss, M_sk, M_ks, M_kk``: substituted (s) and kept (k) rows / columns of ``M``."""
+    return {
+        "Mss": M[..., z_sub[:, None], w_sub[None, :]],
+        "Msk": M[..., z_sub[:, None], cols_keep[None, :]],
+        "Mks": M[..., rows_keep[:, None], w_sub[None, :]],
+        "Mkk": M[..., rows_keep[:, None], cols_keep[None, :]],
+    }
 
 
 def _schedule(pattern: np.ndarray):
@@ -243,34 +242,20 @@ def _schedule(pattern: np.ndarray):
     the level) of each strongly connected component with more than one node; those need a small
     solve, the other nodes only a division.
     """
-    size = pattern.shape[0]
     graph = sp.csr_matrix(pattern.astype(bool))
     ncomp, labels = connected_components(graph, directed=True, connection="strong")
-    # condensation DAG: comp(i) depends on comp(j) if pattern[i, j]
+    # condensation DAG: comp(i) depends on comp(j) if pattern[i, j]; a component's depth is the
+    # longest dependency path below it (relaxed until it settles: at most ncomp passes)
     rows, cols = np.nonzero(pattern)
-    comp_edges = {
-        (labels[i], labels[j]) for i, j in zip(rows, cols, strict=True) if labels[i] != labels[j]
-    }
-    deps = [[] for _ in range(ncomp)]
-    for a, b in comp_edges:
-        deps[a].append(b)
-    depth = np.full(ncomp, -1)
-
-    def visit(c):
-        stack = [(c, False)]
-        while stack:
-            node, done = stack.pop()
-            if done:
-                depth[node] = 1 + max((depth[d] for d in deps[node]), default=-1)
-                continue
-            if depth[node] >= 0:
-                continue
-            stack.append((node, True))
-            stack.extend((d, False) for d in deps[node] if depth[d] < 0)
-
-    for c in range(ncomp):
-        if depth[c] < 0:
-            visit(c)
+    a, b = labels[rows], labels[cols]
+    a, b = a[a != b], b[a != b]
+    depth = np.zeros(ncomp, dtype=int)
+    for _ in range(ncomp):
+        deeper = depth.copy()
+        np.maximum.at(deeper, a, depth[b] + 1)
+        if np.array_equal(deeper, depth):
+            break
+        depth = deeper
     node_depth = depth[labels]
     levels = []
     for lev in range(int(node_depth.max(initial=-1)) + 1):
@@ -278,7 +263,6 @@ def _schedule(pattern: np.ndarray):
         comp = labels[idx]
         groups = [np.flatnonzero(comp == c) for c in np.unique(comp)]
         levels.append((idx, [g for g in groups if g.size > 1]))
-    del size
     return levels
 
 
@@ -304,15 +288,8 @@ def _scalar_plan(sys: LFR, names):
             multi[grp] = True
         bounds.append((start, stop, coupled, np.flatnonzero(~multi), groups))
         start = stop
-    zp, wp = z_sub[perm], w_sub[perm]
-    plan = {
-        "perm": perm,
-        "bounds": bounds,
-        "Mss": M[..., zp[:, None], wp[None, :]],
-        "Msk": M[..., zp[:, None], cols_keep[None, :]],
-        "Mks": M[..., rows_keep[:, None], wp[None, :]],
-        "Mkk": M[..., rows_keep[:, None], cols_keep[None, :]],
-    }
+    plan = {"perm": perm, "bounds": bounds}
+    plan.update(_partitions(M, z_sub[perm], w_sub[perm], rows_keep, cols_keep))
     if M.ndim == 2:
         plan["cols_used"] = np.flatnonzero(np.any(plan["Msk"] != 0, axis=0))
         plan["rows_used"] = np.flatnonzero(np.any(plan["Mks"] != 0, axis=1))
@@ -353,9 +330,7 @@ def _close_scalar(sys: LFR, deltas: Mapping, workers: int = 1) -> LFR:
     else:
         new_M = _close_scalar_general(plan, d, batch, names)
     remaining = tuple(e for e in sys.block_entries if e.spec.name not in deltas)
-    return LFR(
-        new_M, sys.nstates, remaining, input_names=sys.input_names, output_names=sys.output_names
-    )
+    return sys._replace(new_M, blocks=remaining)
 
 
 def _broadcast(batch, shape, name):
@@ -578,11 +553,7 @@ def _close_full(sys: LFR, deltas: Mapping) -> LFR:
             Delta[..., w0 : w0 + p, z0 : z0 + q] = value
             w0 += p
             z0 += q
-    M = sys.M
-    Mss = M[..., z_sub[:, None], w_sub[None, :]]
-    Msk = M[..., z_sub[:, None], cols_keep[None, :]]
-    Mks = M[..., rows_keep[:, None], w_sub[None, :]]
-    Mkk = M[..., rows_keep[:, None], cols_keep[None, :]]
+    Mss, Msk, Mks, Mkk = _partitions(sys.M, z_sub, w_sub, rows_keep, cols_keep).values()
     loop = np.eye(w_sub.size) - Delta @ Mss
     try:
         W = np.linalg.solve(loop, Delta @ Msk)
@@ -592,9 +563,7 @@ def _close_full(sys: LFR, deltas: Mapping) -> LFR:
         ) from None
     new_M = np.broadcast_to(Mkk, batch + Mkk.shape[-2:]) + Mks @ W
     remaining = tuple(e for e in sys.block_entries if e.spec.name not in deltas)
-    return LFR(
-        new_M, sys.nstates, remaining, input_names=sys.input_names, output_names=sys.output_names
-    )
+    return sys._replace(new_M, blocks=remaining)
 
 
 def usample(sys: LFR, n: int, rng, *, names=None):
@@ -633,9 +602,7 @@ def usample(sys: LFR, n: int, rng, *, names=None):
         raise ValueError(f"usample: number of samples must be >= 1, got {n}")
     specs = sys.uncertainty
     names = list(specs) if names is None else list(names)
-    for name in names:
-        if name not in specs:
-            raise ValueError(f"usample: unknown block name {name!r} (blocks: {', '.join(specs)})")
+    _known(sys, names, "usample")
     values = {name: specs[name].sample(rng, n) for name in names}
     table = pd.DataFrame({k: (list(v) if v.ndim > 1 else v) for k, v in values.items()})
     table.index.name = "sample"
@@ -667,22 +634,10 @@ def lftdata(sys: LFR, names=None):
     from oos_drake.lfr.blocks import UComplex, ULTIDyn, UReal
     from oos_drake.lfr.core import BlockEntry, append_systems
 
-    specs = sys.uncertainty
-    names = sorted(specs) if names is None else sorted(names)
-    for name in names:
-        if name not in specs:
-            raise ValueError(f"lftdata: unknown block name {name!r} (blocks: {', '.join(specs)})")
+    names = sorted(sys.uncertainty if names is None else names)
+    _known(sys, names, "lftdata")
     n = sys.nstates
-    z_sub, w_sub, rows_keep, cols_keep = (
-        _split(sys, names)
-        if names
-        else (
-            np.zeros(0, int),
-            np.zeros(0, int),
-            np.arange(sys.M.shape[-2]),
-            np.arange(sys.M.shape[-1]),
-        )
-    )
+    z_sub, w_sub, rows_keep, cols_keep = _split(sys, names)
     n_int_r = n + sys.nz - z_sub.size
     n_int_c = n + sys.nw - w_sub.size
     rows = np.concatenate([rows_keep[:n_int_r], z_sub, rows_keep[n_int_r:]])

@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 
 from oos_drake.resources import package_path
-from oos_drake.titop.spatial import rigid_spatial_inertia
+from oos_drake.titop.spatial import residual_mass, rigid_spatial_inertia
 
 __all__ = [
     "DEFAULT_SCENARIO_PATH",
@@ -215,8 +215,7 @@ class FlexibleArrayModel:
     @property
     def residual_mass(self) -> np.ndarray:
         """``D_P0 = D_P - L^T L`` (rows of L = modes): residual mass at P in R_SA (6x6)."""
-        L = self.participation
-        return self.rigid_spatial_inertia - L.T @ L
+        return residual_mass(self.rigid_spatial_inertia, self.participation.T)
 
 
 @dataclass(frozen=True, eq=False)
@@ -377,15 +376,16 @@ class Waypoints:
 
     def at(self, label: str) -> np.ndarray:
         """Values of the (first) waypoint called ``label``."""
-        if label not in self.labels:
-            raise ValueError(f"no waypoint labelled '{label}' (have {list(self.labels)})")
-        return self.values[self.labels.index(label)]
+        return self.values[self._index(label)]
 
     def time_of(self, label: str) -> float:
         """Time [s] of the (first) waypoint called ``label``."""
+        return float(self.times[self._index(label)])
+
+    def _index(self, label: str) -> int:
         if label not in self.labels:
             raise ValueError(f"no waypoint labelled '{label}' (have {list(self.labels)})")
-        return float(self.times[self.labels.index(label)])
+        return self.labels.index(label)
 
 
 @dataclass(frozen=True)
@@ -614,9 +614,6 @@ class _Table:
         self.raw = raw
         self.body = body
         self.used: set[str] = set()
-
-    def has(self, key: str) -> bool:
-        return key in self.raw
 
     def get(self, key: str, default: Any = ...) -> Any:
         self.used.add(key)
@@ -909,10 +906,8 @@ def _read_waypoints(raw: Any, body: str, key: str, width: int, t0: float, t1: fl
     t = _Table(raw, body)
     times = t.array("times", (None,))
     values = t.array(key, (times.shape[0], width))
-    labels = t.get("labels", None)
+    labels = t.get("labels", [""] * times.shape[0])
     t.close()
-    if labels is None:
-        labels = [""] * times.shape[0]
     if not isinstance(labels, list) or not all(isinstance(label, str) for label in labels):
         raise ScenarioError(body, "labels must be a list of strings")
     if len(labels) != times.shape[0]:

@@ -132,11 +132,8 @@ def docking_sweeps_data(timeline, frequencies_hz, stiffness=None):
         ("b", "8", "SM2", spring_damper_values("SM1", *rigid)),
         ("c", "8", "SM1", spring_damper_values("SM2", *rigid)),
     )
-    models = {}
     for panel, phase, swept, fixed_springs in panels:
-        if phase not in models:
-            models[phase] = build_docking_model(phase, scenario)
-        model = models[phase]
+        model = build_docking_model(phase, scenario)  # cached per phase and scenario
         config = timeline.docking_phases[phase].configuration
         values = {
             k: np.full(n, float(v))

@@ -106,29 +106,12 @@ def pose_error(X_actual: Pose, X_desired: Pose) -> np.ndarray:
     The rotation part is the axis-angle vector of the relative rotation, written in the
     desired frame (its norm is the rotation angle between the two frames).
     """
+    from scipy.spatial.transform import Rotation
+
     dp = X_actual.p - X_desired.p
     R_rel = np.swapaxes(X_desired.R, -1, -2) @ X_actual.R
-    cos_angle = (np.trace(R_rel, axis1=-2, axis2=-1) - 1.0) / 2.0
-    vee = 0.5 * np.stack(
-        [
-            R_rel[..., 2, 1] - R_rel[..., 1, 2],
-            R_rel[..., 0, 2] - R_rel[..., 2, 0],
-            R_rel[..., 1, 0] - R_rel[..., 0, 1],
-        ],
-        axis=-1,
-    )
-    sin_angle = np.linalg.norm(vee, axis=-1)
-    angle = np.arctan2(sin_angle, cos_angle)  # accurate for small angles, unlike arccos
-    scale = np.where(sin_angle > 1e-300, angle / np.maximum(sin_angle, 1e-300), 1.0)
-    rotation = vee * scale[..., None]
-    # near a half turn vee vanishes: take the axis from R_rel + I = 2 n n^T
-    half_turn = (cos_angle < 0) & (sin_angle < 1e-6)
-    if np.any(half_turn):
-        S = (R_rel[half_turn] + np.eye(3)) / 2.0
-        column = np.argmax(np.diagonal(S, axis1=-2, axis2=-1), axis=-1)
-        n = np.take_along_axis(S, column[:, None, None], axis=-1)[..., 0]
-        n /= np.linalg.norm(n, axis=-1, keepdims=True)
-        rotation[half_turn] = n * angle[half_turn][..., None]
+    rotation = Rotation.from_matrix(R_rel.reshape(-1, 3, 3)).as_rotvec()
+    rotation = rotation.reshape(R_rel.shape[:-2] + (3,))
     return np.concatenate([dp, rotation], axis=-1)
 
 
@@ -473,19 +456,16 @@ def first_docking_ik(scenario: Scenario | None = None, alpha0=None) -> IKSolutio
 # ----------------------------------------------------------------------------------------------
 def _rigid_bodies(scenario: Scenario, target_mass=None, target_inertia=None):
     """(name, mass, CoM in body frame, inertia at CoM in body frame) of every rigid body."""
-    for name in ("RH1", "RH2"):
-        hub = scenario.hubs[name]
-        if name == "RH2":
-            mass = hub.mass if target_mass is None else float(target_mass)
-            inertia = hub.inertia if target_inertia is None else np.asarray(target_inertia, float)
-            if not mass > 0 or inertia.shape != (3, 3):
-                raise ValueError(
-                    f"RH2: target_mass must be > 0 and target_inertia 3x3, got {mass:g}, "
-                    f"shape {inertia.shape}"
-                )
-            yield name, mass, np.zeros(3), inertia
-        else:
-            yield name, hub.mass, np.zeros(3), hub.inertia
+    chaser, target = scenario.hubs["RH1"], scenario.hubs["RH2"]
+    yield "RH1", chaser.mass, np.zeros(3), chaser.inertia
+    mass = target.mass if target_mass is None else float(target_mass)
+    inertia = target.inertia if target_inertia is None else np.asarray(target_inertia, float)
+    if not mass > 0 or inertia.shape != (3, 3):
+        raise ValueError(
+            f"RH2: target_mass must be > 0 and target_inertia 3x3, got {mass:g}, "
+            f"shape {inertia.shape}"
+        )
+    yield "RH2", mass, np.zeros(3), inertia
     for link in scenario.arm.links:
         yield link.name, link.mass, link.p_J_G, link.inertia
     for name, mount in scenario.arrays.items():

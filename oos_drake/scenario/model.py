@@ -32,9 +32,9 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping
-from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from oos_drake.lfr import LFR
 from oos_drake.scenario.data import default_scenario
@@ -63,7 +63,6 @@ __all__ = [
     "ARRAY_NAMES",
     "PAPER_OCCURRENCES",
     "DELTA_GROUPS",
-    "MissionValues",
     "build_mission_model",
     "build_docking_model",
     "physical_blocks",
@@ -413,15 +412,13 @@ def _default_docking_model(phase: str, scenario) -> LFR:
 
 def _docking_model(phase: str, scenario, spring_dampers) -> LFR:
     active = ("SM1",) if phase == "7" else ("SM1", "SM2")
-    docking = scenario.docking
-    params = {}
-    for sm in active:
-        given = (spring_dampers or {}).get(sm)
-        if given is None:
-            blocks = _spring_damper_blocks(sm, docking)
-        else:
-            blocks = dict(given)
-        params[sm] = blocks
+    given = spring_dampers or {}
+    params = {
+        sm: _spring_damper_blocks(sm, scenario.docking)
+        if given.get(sm) is None
+        else dict(given[sm])
+        for sm in active
+    }
     rh2 = scenario.hubs["RH2"]
     mounts = scenario.arrays
     ports = scenario.ports
@@ -460,9 +457,7 @@ def _spring_damper_between(blocks: Mapping, dcm_c_sm) -> LFR:
     """
     t = frame_change_matrix(dcm_c_sm)  # SM frame -> C frame
     inner = spring_damper(blocks["k_shear"], blocks["k_tors"], blocks["d_shear"], blocks["d_tors"])
-    into_sm = np.block([[t.T, np.zeros((6, 6))], [np.zeros((6, 6)), np.eye(6)]])
-    out_of_sm = np.block([[t, np.zeros((6, 6))], [np.zeros((6, 6)), np.eye(6)]])
-    return out_of_sm @ inner @ into_sm
+    return block_diag(t, np.eye(6)) @ inner @ block_diag(t.T, np.eye(6))
 
 
 def attitude_model(model: LFR) -> LFR:
@@ -478,35 +473,13 @@ def attitude_model(model: LFR) -> LFR:
     LFR
         6 inputs, 3 outputs ``phi`` [rad], 6 more states (``1/s^2 I3``).
     """
-    a_matrix = np.block([[np.zeros((3, 3)), np.eye(3)], [np.zeros((3, 3)), np.zeros((3, 3))]])
-    b_matrix = np.vstack([np.zeros((3, 3)), np.eye(3)])
-    c_matrix = np.hstack([np.eye(3), np.zeros((3, 3))])
-    integrator = LFR.from_ss(a_matrix, b_matrix, c_matrix, np.zeros((3, 3)))
+    # x = [phi; omega]: A = [[0, I3], [0, 0]], B = [0; I3], C = [I3, 0]
+    integrator = LFR.from_ss(np.eye(6, k=3), np.eye(6, 3, k=-3), np.eye(3, 6), np.zeros((3, 3)))
     result = integrator @ model[3:6, :]
     return result.with_names(inputs=model.input_names, outputs=["phi_x", "phi_y", "phi_z"])
 
 
 # ---------------------------------------------------------------------------------- substitution
-@dataclass(frozen=True)
-class MissionValues:
-    """Physical values of the scheduled blocks for ``N`` configurations.
-
-    Attributes
-    ----------
-    alpha : (N, 6) ndarray
-        Arm joint angles [rad].
-    theta : (N, 4) ndarray
-        Array tilt angles [rad].
-    delta_C1, delta_C2 : (N,) ndarray
-        Connection switches [-].
-    """
-
-    alpha: np.ndarray
-    theta: np.ndarray
-    delta_C1: np.ndarray
-    delta_C2: np.ndarray
-
-
 def configuration_values(alpha, theta, delta_C1, delta_C2) -> dict[str, np.ndarray]:
     """Block values ``tau_alpha<i> = tan(alpha_i/4)``, ``tau_theta<k>``, ``delta_C1``, ``delta_C2``.
 

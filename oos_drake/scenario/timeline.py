@@ -26,7 +26,7 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from types import MappingProxyType
 
 import numpy as np
@@ -224,13 +224,7 @@ class Configuration:
         """The ``index``-th configuration of a batch."""
         if not self.is_batch:
             raise TypeError("a single Configuration cannot be indexed")
-        return Configuration(
-            time=self.time[index],
-            alpha=self.alpha[index],
-            theta=self.theta[index],
-            delta_C1=self.delta_C1[index],
-            delta_C2=self.delta_C2[index],
-        )
+        return Configuration(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
 
     @property
     def tau_alpha(self) -> np.ndarray:

@@ -30,6 +30,7 @@ import numpy as np
 
 from oos_drake.lfr import LFR, append, as_lfr, feedback
 from oos_drake.titop.kinematics import repeat
+from oos_drake.titop.spatial import residual_mass
 
 __all__ = ["effective_mass_model", "flexible_appendage", "check_appendage_data"]
 
@@ -71,7 +72,7 @@ def check_appendage_data(rigid_inertia_P, participation, frequencies, damping, n
     damping = np.broadcast_to(np.asarray(damping, dtype=float), (n_modes,)).copy()
     if not np.all(damping >= 0):
         raise ValueError(f"{name}: damping ratios must be >= 0, got {damping}")
-    residual = d_P - participation @ participation.T
+    residual = residual_mass(d_P, participation)
     min_eig = np.min(np.linalg.eigvalsh(0.5 * (residual + residual.T)))
     if min_eig < -1e-9 * max(1.0, np.max(np.abs(d_P))):
         raise ValueError(
@@ -99,9 +100,7 @@ def effective_mass_model(s, rigid_inertia_P, participation, frequencies, damping
         rigid_inertia_P, participation, frequencies, damping
     )
     s = np.asarray(s, dtype=complex)
-    result = np.broadcast_to(d_P - participation @ participation.T, s.shape + (6, 6)).astype(
-        complex
-    )
+    result = np.broadcast_to(residual_mass(d_P, participation), s.shape + (6, 6)).astype(complex)
     for i in range(w.size):
         li = participation[:, i]
         if np.all(np.isinf(s)):
@@ -175,7 +174,7 @@ def flexible_appendage(
             raise ValueError(f"{name}: uncertain mode index {index} out of range 0..{w.size - 1}")
         if not isinstance(block, LFR) or block.shape != (1, 1):
             raise ValueError(f"{name}: uncertain frequency of mode {index} must be a 1x1 LFR")
-    residual = d_P - participation @ participation.T
+    residual = residual_mass(d_P, participation)
 
     known = [i for i in range(w.size) if i not in uncertain_frequencies]
     n = len(known)

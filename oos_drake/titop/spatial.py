@@ -28,7 +28,6 @@ __all__ = [
     "rotation_matrix",
     "rigid_spatial_inertia",
     "residual_mass",
-    "effective_mass",
     "angle_to_tau",
     "tau_to_angle",
     "rank2_factors",
@@ -216,17 +215,6 @@ def rigid_spatial_inertia(mass, inertia_G, p_PG=(0.0, 0.0, 0.0)) -> np.ndarray:
     return out
 
 
-def effective_mass(participation) -> np.ndarray:
-    """Return ``L L^T`` (6x6) for participation factors ``L`` (6 x N, columns = modes)."""
-    participation = np.asarray(participation, dtype=float)
-    if participation.ndim != 2 or participation.shape[0] != 6:
-        raise ValueError(
-            "effective_mass: participation must be 6 x N (columns = modes), "
-            f"got {participation.shape}"
-        )
-    return participation @ participation.T
-
-
 def residual_mass(rigid_inertia_P, participation) -> np.ndarray:
     """Residual (cantilevered) mass ``D_P0 = D_P - L L^T`` (6x6).
 
@@ -238,4 +226,5 @@ def residual_mass(rigid_inertia_P, participation) -> np.ndarray:
         Modal participation factors ``L = [l_1 ... l_N]`` at ``P`` (columns = modes)
         [sqrt(kg), sqrt(kg) m].
     """
-    return np.asarray(rigid_inertia_P, dtype=float) - effective_mass(participation)
+    participation = np.asarray(participation, dtype=float)
+    return np.asarray(rigid_inertia_P, dtype=float) - participation @ participation.T
