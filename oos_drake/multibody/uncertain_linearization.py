@@ -95,32 +95,19 @@ _BUSHING_KINDS = ("force_stiffness", "torque_stiffness", "force_damping", "torqu
 BUSHING_QUANTITIES = tuple(
     f"{kind}{axis}" for kind in _BUSHING_KINDS for axis in ("", "_x", "_y", "_z")
 )
-_UNITS = {
-    "mass": "kg",
-    "Ixx": "kg m^2",
-    "Iyy": "kg m^2",
-    "Izz": "kg m^2",
-    "stiffness": "N m/rad",
-    "damping": "N m s/rad",
-    "frequency": "rad/s",
-    "force_stiffness": "N/m",
-    "torque_stiffness": "N m/rad",
-    "force_damping": "N s/m",
-    "torque_damping": "N m s/rad",
-}
-#: Drake quantity -> the block's ``quantity`` (:data:`oos_drake.lfr.blocks.QUANTITIES`).
-_BLOCK_QUANTITIES = {
-    "mass": "mass",
-    "Ixx": "inertia",
-    "Iyy": "inertia",
-    "Izz": "inertia",
-    "stiffness": "stiffness",
-    "damping": "damping",
-    "frequency": "modal frequency",
-    "force_stiffness": "stiffness",
-    "torque_stiffness": "stiffness",
-    "force_damping": "damping",
-    "torque_damping": "damping",
+#: Drake quantity -> (its unit, the block's ``quantity``: :data:`oos_drake.lfr.blocks.QUANTITIES`).
+_QUANTITIES = {
+    "mass": ("kg", "mass"),
+    "Ixx": ("kg m^2", "inertia"),
+    "Iyy": ("kg m^2", "inertia"),
+    "Izz": ("kg m^2", "inertia"),
+    "stiffness": ("N m/rad", "stiffness"),
+    "damping": ("N m s/rad", "damping"),
+    "frequency": ("rad/s", "modal frequency"),
+    "force_stiffness": ("N/m", "stiffness"),
+    "torque_stiffness": ("N m/rad", "stiffness"),
+    "force_damping": ("N s/m", "damping"),
+    "torque_damping": ("N m s/rad", "damping"),
 }
 
 
@@ -164,16 +151,12 @@ class PhysicalParameter:
                 f"parameter {self.name!r}: unknown quantity {self.quantity!r}; known: {known}"
             )
         _ = self.spec  # validates name and range (one-line ValueError)
-        positive = self.quantity != "damping" and "damping" not in self.quantity
-        if positive and self.lower <= 0:
+        positive = "damping" not in self.quantity
+        if self.lower < 0 or (positive and self.lower == 0):
+            sign = "non-positive" if positive else "negative"
             raise ValueError(
                 f"parameter {self.name!r}: range [{self.lower:g}, {self.upper:g}] makes the "
-                f"{self.quantity} of {self.element!r} non-positive"
-            )
-        if not positive and self.lower < 0:
-            raise ValueError(
-                f"parameter {self.name!r}: range [{self.lower:g}, {self.upper:g}] makes the "
-                f"{self.quantity} of {self.element!r} negative"
+                f"{self.quantity} of {self.element!r} {sign}"
             )
 
     @property
@@ -181,7 +164,7 @@ class PhysicalParameter:
         """The ``ureal`` block spec (MATLAB normalization) with its unit and block quantity."""
         return UReal(
             self.name, self.nominal, self.lower, self.upper,
-            unit=self.unit, quantity=_BLOCK_QUANTITIES[self._base_quantity],
+            unit=self.unit, quantity=_QUANTITIES[self._base_quantity][1],
         )  # fmt: skip
 
     @property
@@ -191,7 +174,7 @@ class PhysicalParameter:
     @property
     def unit(self) -> str:
         """Physical unit of the quantity."""
-        return _UNITS[self._base_quantity]
+        return _QUANTITIES[self._base_quantity][0]
 
     @property
     def kind(self) -> str:
