@@ -47,12 +47,6 @@ __all__ = [
 ]
 
 
-def _axes(siso) -> tuple[np.ndarray, ...]:
-    """Block-diagonal replication of a SISO ``(A, B, C, D)`` on three axes."""
-    eye = np.eye(3)
-    return tuple(np.kron(eye, np.atleast_2d(np.asarray(m, dtype=float))) for m in siso)
-
-
 def _series(first, second) -> tuple[np.ndarray, ...]:
     """``second after first`` for state-space tuples ``(A, B, C, D)``."""
     A1, B1, C1, D1 = first
@@ -67,7 +61,7 @@ def controller_chain(K, spec: comp.DesignSpecification) -> tuple[np.ndarray, ...
 
     ``u = F_ro K [-(SST phi); -(GYRO w)]``, ``T_rw = RW u`` (noise-free, reference zero).
     """
-    sst, gyro, rolloff, wheels = (_axes(f) for f in comp.filters(spec))
+    sst, gyro, rolloff, wheels = (comp.per_axis(f) for f in comp.filters(spec))
     sensors = tuple(scipy.linalg.block_diag(a, b) for a, b in zip(sst, gyro, strict=True))
     gain = (np.zeros((0, 0)), np.zeros((0, 6)), np.zeros((3, 0)), -np.asarray(K, dtype=float))
     return _series(_series(_series(sensors, gain), rolloff), wheels)
