@@ -19,6 +19,7 @@ import pandas as pd
 from oos_drake.control.analysis_model import rotational_channels
 from oos_drake.control.interconnection import plant_statespace
 from oos_drake.control.statespace import BatchedStateSpace
+from oos_drake.lfr import LFR, usubs
 from oos_drake.titop.spatial import rotation_matrix
 
 
@@ -257,8 +258,6 @@ def lfr_statespace(model, values: dict):
     tuple of numpy.ndarray
         ``(A, B, C, D)`` with leading dimension K.
     """
-    from oos_drake.lfr import usubs
-
     sizes = {np.asarray(v).shape for v in values.values()}
     if values:
         model = usubs(model, values)
@@ -299,8 +298,6 @@ def from_lfr(
         with their physical nominal values and ranges. The plants at given parameter values
         are the LFR with those values substituted (:func:`lfr_statespace`).
     """
-    from oos_drake.lfr import LFR, usubs
-
     if not isinstance(model, LFR):
         raise ValueError(f"from_lfr: expected an oos_drake.lfr.LFR, got {type(model).__name__}")
     model = rotational_channels(model)
