@@ -37,6 +37,7 @@ import scipy.linalg
 import scipy.signal
 
 from oos_drake.control import components as comp
+from oos_drake.control.interconnection import plant_statespace, weighted_interconnection
 from oos_drake.control.statespace import BatchedStateSpace
 
 __all__ = [
@@ -229,8 +230,6 @@ def continuous_poles(plant, K, spec: comp.DesignSpecification | None = None) -> 
     holds the poles of ``W_n,ext`` (``-b/a``), which are not poles of the feedback loop; they
     are removed so the comparison with :meth:`SampledLoop.poles` is one to one.
     """
-    from oos_drake.control.interconnection import plant_statespace, weighted_interconnection
-
     spec = spec or comp.DesignSpecification()
     A, B, C, D = _matrices(plant)
     closed = weighted_interconnection(plant_statespace(A, B, C, D), spec).close(K)

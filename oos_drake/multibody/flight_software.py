@@ -67,6 +67,8 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from oos_drake.control import components as comp
+from oos_drake.control.sampled import plant_with_integrators
+from oos_drake.robust.interpolant import lti_interpolant
 
 __all__ = [
     "DiscreteBlock",
@@ -332,8 +334,6 @@ def perturbation_block(
         Input ``T_rw`` [N m] (3), outputs ``[dT [N m]; dphi [rad]; dw [rad/s]]`` (9), for
         :meth:`FlightSoftware.set_dynamic_perturbation`.
     """
-    from oos_drake.robust.interpolant import lti_interpolant
-
     T = design.period
     zero = np.zeros((3, 3), dtype=complex)
     mul = zero if delta_mul is None else np.asarray(delta_mul, dtype=complex)
@@ -351,8 +351,6 @@ def perturbation_block(
     if delta_add is None:
         Ad, Bd, Cd = np.zeros((0, 0)), np.zeros((0, 3)), np.zeros((6, 0))
     else:
-        from oos_drake.control.sampled import plant_with_integrators
-
         a = lti_interpolant(design.W_add * add, omega)
         Ac, Bc, Cc = plant_with_integrators(a.A, a.B, a.C, a.D)  # outputs [dphi; dw]
         Ad, Bd, Cd, _, _ = scipy.signal.cont2discrete(
