@@ -239,9 +239,13 @@ def sample_hold(spec: DesignSpecification) -> tuple[np.ndarray, ...]:
     return tuple(np.atleast_2d(np.asarray(m, dtype=float)) for m in (ss.A, ss.B, ss.C, ss.D))
 
 
+def per_axis(siso) -> tuple[np.ndarray, ...]:
+    """Block-diagonal replication ``kron(I3, M)`` of a SISO ``(A, B, C, D)`` on three axes."""
+    return tuple(np.kron(np.eye(3), np.atleast_2d(np.asarray(m, dtype=float))) for m in siso)
+
+
 def _axes(siso, name_in: str, name_out: str) -> BatchedStateSpace:
-    single = BatchedStateSpace(*siso, ("in",), ("out",))
-    return single.replicate(3, channel_names(name_in, 3), channel_names(name_out, 3))
+    return BatchedStateSpace(*per_axis(siso), channel_names(name_in, 3), channel_names(name_out, 3))
 
 
 def star_tracker(spec: DesignSpecification, name_in="phi", name_out="phi_sst"):

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from oos_drake.control import components as comp
+from oos_drake.control.loop_response import LoopResponse
 from oos_drake.control.statespace import BatchedStateSpace, channel_names, connect, sum_block
 
 DISTURBANCES = channel_names("d_ext", 3) + channel_names("n_sst", 3) + channel_names("n_gyro", 3)
@@ -64,8 +65,6 @@ class WeightedInterconnection:
         Closed-loop responses from the plant's modal form (computed once, reused for every
         gain); ``None`` for a single model or when the plant is unknown.
         """
-        from oos_drake.control.loop_response import LoopResponse
-
         if self.plant is None or self.plant.A.ndim != 3:
             return None
         return LoopResponse(self.plant, self.spec)

@@ -19,6 +19,8 @@ import pandas as pd
 from oos_drake.control.analysis_model import rotational_channels
 from oos_drake.control.interconnection import plant_statespace
 from oos_drake.control.statespace import BatchedStateSpace
+from oos_drake.lfr import LFR, usubs
+from oos_drake.titop.spatial import rotation_matrix
 
 
 @dataclass(frozen=True)
@@ -212,19 +214,11 @@ def synthetic_flexible_plants(
     L_dirs /= np.linalg.norm(L_dirs, axis=0)
     mode_hz = np.geomspace(1.2, 6.0, modes)
 
-    def rotation_z(a):
-        c, s = np.cos(a), np.sin(a)
-        R = np.zeros(a.shape + (3, 3))
-        R[..., 0, 0] = R[..., 1, 1] = c
-        R[..., 0, 1], R[..., 1, 0] = -s, s
-        R[..., 2, 2] = 1.0
-        return R
-
     def build(index, values):
         values = np.asarray(values, dtype=float)
         freq_scale = values[:, 0] if values.shape[1] else np.ones(index.size)
         inertia_scale = values[:, 1] if values.shape[1] else np.ones(index.size)
-        R = rotation_z(angles[index])
+        R = rotation_matrix((0.0, 0.0, 1.0), angles[index])
         carried = docked[index, None, None] * (1.0 - 0.6 * phase[index, None, None])
         J_tot = base + carried * inertia_scale[:, None, None] * (R @ target @ np.swapaxes(R, 1, 2))
         weights = np.sqrt(
@@ -264,8 +258,6 @@ def lfr_statespace(model, values: dict):
     tuple of numpy.ndarray
         ``(A, B, C, D)`` with leading dimension K.
     """
-    from oos_drake.lfr import usubs
-
     sizes = {np.asarray(v).shape for v in values.values()}
     if values:
         model = usubs(model, values)
@@ -306,8 +298,6 @@ def from_lfr(
         with their physical nominal values and ranges. The plants at given parameter values
         are the LFR with those values substituted (:func:`lfr_statespace`).
     """
-    from oos_drake.lfr import LFR, usubs
-
     if not isinstance(model, LFR):
         raise ValueError(f"from_lfr: expected an oos_drake.lfr.LFR, got {type(model).__name__}")
     model = rotational_channels(model)
@@ -316,10 +306,8 @@ def from_lfr(
         raise ValueError("from_lfr: every configuration value must be a 1-D array of equal length")
     N = next(iter(sizes))[0]
     scheduled = usubs(model, configuration_values)
-    if scheduled.batch_shape != (N,):
-        scheduled = (
-            scheduled.model(np.zeros(N, dtype=int)) if not scheduled.batch_shape else scheduled
-        )
+    if not scheduled.batch_shape:
+        scheduled = scheduled.model(np.zeros(N, dtype=int))
     blocks = scheduled.blocks
     kinds = set(blocks["kind"]) - {"ureal"}
     if kinds:

@@ -108,8 +108,8 @@ def write_synthesis(
     record = controller_record(result, plants, options)
     if scenario is not None:
         record["scenario"] = _json_ready(scenario)
-    paths["controller"] = out / "controller.json"
-    paths["controller"].write_text(json.dumps(record, indent=2))
+    text = json.dumps(record, indent=2).encode()
+    paths["controller"] = atomic_write_bytes(out / "controller.json", lambda s: s.write(text))
     M = closed_loop_array(result, plants)
     table = result.models
     arrays = {
@@ -140,12 +140,12 @@ def write_synthesis(
         },
         matrices="ABCD",
     )
-    paths["parquet"] = out / "models.parquet"
-    table.to_parquet(paths["parquet"], index=False)
-    paths["csv"] = out / "models.csv"
-    table.to_csv(paths["csv"], index=False)
-    paths["runs"] = out / "runs.csv"
-    result.runs.to_csv(paths["runs"], index=False)
-    paths["worst_cases"] = out / "worst_cases.csv"
-    result.worst_cases.to_csv(paths["worst_cases"], index=False)
+    tables = {
+        "parquet": ("models.parquet", table.to_parquet),
+        "csv": ("models.csv", table.to_csv),
+        "runs": ("runs.csv", result.runs.to_csv),
+        "worst_cases": ("worst_cases.csv", result.worst_cases.to_csv),
+    }
+    for key, (name, write) in tables.items():
+        paths[key] = atomic_write_bytes(out / name, lambda s, write=write: write(s, index=False))
     return paths

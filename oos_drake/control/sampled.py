@@ -37,6 +37,7 @@ import scipy.linalg
 import scipy.signal
 
 from oos_drake.control import components as comp
+from oos_drake.control.interconnection import plant_statespace, weighted_interconnection
 from oos_drake.control.statespace import BatchedStateSpace
 
 __all__ = [
@@ -45,12 +46,6 @@ __all__ = [
     "sampled_loop",
     "spectral_abscissa",
 ]
-
-
-def _axes(siso) -> tuple[np.ndarray, ...]:
-    """Block-diagonal replication of a SISO ``(A, B, C, D)`` on three axes."""
-    eye = np.eye(3)
-    return tuple(np.kron(eye, np.atleast_2d(np.asarray(m, dtype=float))) for m in siso)
 
 
 def _series(first, second) -> tuple[np.ndarray, ...]:
@@ -67,7 +62,7 @@ def controller_chain(K, spec: comp.DesignSpecification) -> tuple[np.ndarray, ...
 
     ``u = F_ro K [-(SST phi); -(GYRO w)]``, ``T_rw = RW u`` (noise-free, reference zero).
     """
-    sst, gyro, rolloff, wheels = (_axes(f) for f in comp.filters(spec))
+    sst, gyro, rolloff, wheels = (comp.per_axis(f) for f in comp.filters(spec))
     sensors = tuple(scipy.linalg.block_diag(a, b) for a, b in zip(sst, gyro, strict=True))
     gain = (np.zeros((0, 0)), np.zeros((0, 6)), np.zeros((3, 0)), -np.asarray(K, dtype=float))
     return _series(_series(_series(sensors, gain), rolloff), wheels)
@@ -235,8 +230,6 @@ def continuous_poles(plant, K, spec: comp.DesignSpecification | None = None) -> 
     holds the poles of ``W_n,ext`` (``-b/a``), which are not poles of the feedback loop; they
     are removed so the comparison with :meth:`SampledLoop.poles` is one to one.
     """
-    from oos_drake.control.interconnection import plant_statespace, weighted_interconnection
-
     spec = spec or comp.DesignSpecification()
     A, B, C, D = _matrices(plant)
     closed = weighted_interconnection(plant_statespace(A, B, C, D), spec).close(K)

@@ -102,17 +102,6 @@ class BatchedStateSpace:
             outputs,
         )
 
-    def replicate(self, copies: int, inputs, outputs) -> BatchedStateSpace:
-        """Return ``copies`` independent copies of this model, stacked block-diagonally.
-
-        Used for per-axis sensors and actuators (``kron(I3, G)`` channel by channel).
-        """
-        eye = np.eye(copies)
-        kron = lambda M: np.kron(eye, M)  # noqa: E731
-        return BatchedStateSpace(
-            kron(self.A), kron(self.B), kron(self.C), kron(self.D), inputs, outputs
-        )
-
     def take(self, index) -> BatchedStateSpace:
         """Return the models ``index`` of the first batch dimension (int, slice or array)."""
         return BatchedStateSpace(

@@ -22,6 +22,7 @@ import control
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from oos_drake.lfr import usubs
 from oos_drake.multibody.linearization import structural_prune
 from oos_drake.multibody.operating_point import (
     OperatingPoint,
@@ -29,7 +30,12 @@ from oos_drake.multibody.operating_point import (
     linearize_at,
     operating_point,
 )
+from oos_drake.multibody.scenario_plant import cached_scenario_diagram
+from oos_drake.multibody.scenario_sdf import SDF_DIRECTORY
 from oos_drake.robust.lfr_analysis import frequency_grid
+from oos_drake.scenario.data import default_scenario
+from oos_drake.scenario.model import build_docking_model, build_mission_model, configuration_values
+from oos_drake.scenario.timeline import mission_timeline
 from oos_drake.titop.parameters import spring_damper_values
 
 __all__ = [
@@ -198,11 +204,7 @@ def validation_cases(
     stiffness : iterable of float, optional
         Stiffness values [N/m = N m/rad] (default: the scenario's sweep, 0.1 .. 1e5).
     """
-    from oos_drake.scenario.data import load_scenario
-    from oos_drake.scenario.model import configuration_values
-    from oos_drake.scenario.timeline import mission_timeline
-
-    scenario = load_scenario() if scenario is None else scenario
+    scenario = default_scenario(scenario)
     timeline = mission_timeline(scenario)
     docking = scenario.docking
     sweep = docking.stiffness_sweep if stiffness is None else np.asarray(list(stiffness), float)
@@ -246,8 +248,6 @@ def validation_cases(
 
 
 def _titop_builders(scenario) -> dict[str, Callable[[], object]]:
-    from oos_drake.scenario.model import build_docking_model, build_mission_model
-
     return {
         "mission": lambda: build_mission_model(scenario),
         "7": lambda: build_docking_model("7", scenario),
@@ -257,8 +257,6 @@ def _titop_builders(scenario) -> dict[str, Callable[[], object]]:
 
 def titop_state_space(model, values: Mapping[str, float]) -> control.StateSpace:
     """Substitute ``values`` (physical) into a TITOP LFR, others nominal; return its state space."""
-    from oos_drake.lfr import usubs
-
     present = {name: value for name, value in values.items() if name in model.uncertainty}
     return usubs(model, present).nominal.to_ss()
 
@@ -290,13 +288,8 @@ def run_validation(
     progress : callable, optional
         Called with each :class:`CaseResult` as soon as it is computed.
     """
-    from oos_drake.multibody.scenario_plant import cached_scenario_diagram
-    from oos_drake.multibody.scenario_sdf import SDF_DIRECTORY
-    from oos_drake.scenario.data import load_scenario
-
     sdf_directory = str(SDF_DIRECTORY if sdf_directory is None else sdf_directory)
-
-    scenario = load_scenario() if scenario is None else scenario
+    scenario = default_scenario(scenario)
     cases = validation_cases(scenario) if cases is None else cases
     omega = VALIDATION_OMEGA if omega is None else omega
     builders = _titop_builders(scenario)

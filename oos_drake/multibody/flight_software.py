@@ -67,6 +67,8 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from oos_drake.control import components as comp
+from oos_drake.control.sampled import plant_with_integrators
+from oos_drake.robust.interpolant import lti_interpolant
 
 __all__ = [
     "DiscreteBlock",
@@ -126,12 +128,6 @@ def discretize(A, B, C, D, period: float) -> DiscreteBlock:
     return DiscreteBlock(Ad, Bd, Cd, Dd)
 
 
-def _per_axis(A, B, C, D) -> tuple[np.ndarray, ...]:
-    """Block-diagonal replication of a SISO realization on three axes."""
-    eye = np.eye(3)
-    return tuple(np.kron(eye, np.atleast_2d(np.asarray(m, dtype=float))) for m in (A, B, C, D))
-
-
 def allpass(frequency_hz: float) -> tuple[np.ndarray, ...]:
     """``(A, B, C, D)`` of the unit all-pass ``a(s) = (p - s)/(p + s)``, ``p = 2 pi f`` [rad/s].
 
@@ -169,7 +165,7 @@ def allpass_block(frequency_hz: float, period: float) -> DiscreteBlock:
         zero = np.zeros((3, 3))
         return DiscreteBlock(zero, zero, zero, np.eye(3))
     warped_hz = np.tan(np.pi * f * period) / (np.pi * period)
-    return discretize(*_per_axis(*allpass(warped_hz)), period)
+    return discretize(*comp.per_axis(allpass(warped_hz)), period)
 
 
 @dataclass(frozen=True, eq=False)
@@ -249,27 +245,18 @@ class FlightSoftwareDesign:
             raise ValueError(f"flight software: torque_limit must be > 0 N m, got {torque_limit}")
         spec = spec or comp.DesignSpecification()
         T = 1.0 / float(control_rate)
-        a, b = spec.disturbance_denominator
-        gains = np.asarray(spec.disturbance_gains, dtype=float)
-        disturbance = discretize(
-            -(b / a) * np.eye(3), np.eye(3), np.diag(gains / a), np.zeros((3, 3)), T
-        )
+        W_ext = comp.disturbance_weight(spec)
         W_mul = np.full((3, 3), spec.multiplicative_off_diagonal)
         np.fill_diagonal(W_mul, spec.multiplicative_diagonal)
+        sst, gyro, rolloff, wheels = (discretize(*comp.per_axis(f), T) for f in comp.filters(spec))
         return cls(
             period=T,
             K=K,
-            star_tracker=discretize(
-                *_per_axis(*comp.first_order_lowpass(spec.star_tracker_cutoff_hz)), T
-            ),
-            gyro=discretize(*_per_axis(*comp.first_order_lowpass(spec.gyro_cutoff_hz)), T),
-            rolloff=discretize(
-                *_per_axis(*comp.butterworth(spec.rolloff_order, spec.rolloff_cutoff_hz)), T
-            ),
-            wheels=discretize(
-                *_per_axis(*comp.second_order(spec.wheel_frequency_hz, spec.wheel_damping)), T
-            ),
-            disturbance=disturbance,
+            star_tracker=sst,
+            gyro=gyro,
+            rolloff=rolloff,
+            wheels=wheels,
+            disturbance=discretize(W_ext.A, W_ext.B, W_ext.C, W_ext.D, T),
             noise_star_tracker=float(spec.noise_star_tracker),
             noise_gyro=float(spec.noise_gyro),
             torque_limit=float(torque_limit),
@@ -347,8 +334,6 @@ def perturbation_block(
         Input ``T_rw`` [N m] (3), outputs ``[dT [N m]; dphi [rad]; dw [rad/s]]`` (9), for
         :meth:`FlightSoftware.set_dynamic_perturbation`.
     """
-    from oos_drake.robust.interpolant import lti_interpolant
-
     T = design.period
     zero = np.zeros((3, 3), dtype=complex)
     mul = zero if delta_mul is None else np.asarray(delta_mul, dtype=complex)
@@ -366,8 +351,6 @@ def perturbation_block(
     if delta_add is None:
         Ad, Bd, Cd = np.zeros((0, 0)), np.zeros((0, 3)), np.zeros((6, 0))
     else:
-        from oos_drake.control.sampled import plant_with_integrators
-
         a = lti_interpolant(design.W_add * add, omega)
         Ac, Bc, Cc = plant_with_integrators(a.A, a.B, a.C, a.D)  # outputs [dphi; dw]
         Ad, Bd, Cd, _, _ = scipy.signal.cont2discrete(

@@ -171,7 +171,7 @@ class MissionOptions:
     check_interval: float = 50.0
 
     def __post_init__(self):
-        for name in (
+        positive = [
             "control_rate",
             "log_rate",
             "torque_limit",
@@ -182,7 +182,10 @@ class MissionOptions:
             "accuracy",
             "divergence_limit",
             "check_interval",
-        ):
+        ]
+        if self.max_step is not None:
+            positive.append("max_step")
+        for name in positive:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
                 raise ValueError(f"mission option {name} must be a positive number, got {value!r}")
@@ -198,14 +201,6 @@ class MissionOptions:
             )
         if int(self.ramp_steps) < 1:
             raise ValueError(f"mission option ramp_steps must be >= 1, got {self.ramp_steps}")
-        if self.max_step is not None and not (
-            isinstance(self.max_step, int | float)
-            and np.isfinite(self.max_step)
-            and self.max_step > 0
-        ):
-            raise ValueError(
-                f"mission option max_step must be a positive number, got {self.max_step!r}"
-            )
         if self.error_control not in (None, True, False):
             raise ValueError(
                 f"mission option error_control must be true, false or unset, got "
@@ -361,10 +356,10 @@ def _add_plant(builder: DiagramBuilder, sdf_directory: Path):
         target_joint=target_joint,
         arm_joints=arm_joints,
         drive_joints=drive_joints,
-        mode_joints=mode_joints,
-        mode_springs=mode_springs,
-        bushings=bushings,
-        frames=frames,
+        mode_joints=MappingProxyType(mode_joints),
+        mode_springs=MappingProxyType(mode_springs),
+        bushings=MappingProxyType(bushings),
+        frames=MappingProxyType(frames),
         target_body=target,
     )
 
@@ -449,8 +444,7 @@ def make_mission_diagram(
     builder.Connect(plant.get_state_output_port(), joint_state_gain.get_input_port())
     builder.Connect(reference.get_output_port(), joint_ref_gain.get_input_port())
 
-    configuration = mission.configuration(float(scenario.mission.first_docking_time))
-    J_ref = effective_inertia(rigid_spatial_inertia_at_G1(scenario, configuration))
+    J_ref = effective_inertia(rigid_spatial_inertia_at_G1(scenario, grasp))
     design = FlightSoftwareDesign.create(
         K,
         options.control_rate,
@@ -458,15 +452,14 @@ def make_mission_diagram(
         torque_limit=options.torque_limit,
         J_ref=J_ref,
     )
-    hub = parts["hub_joint"]
     fsw = builder.AddNamedSystem(
         "flight_software",
         FlightSoftware(
             design,
             nq,
             nv,
-            hub.position_start(),
-            hub.velocity_start(),
+            parts["hub_joint"].position_start(),
+            parts["hub_joint"].velocity_start(),
             perturbation_states=perturbation_states,
         ),
     )
@@ -486,21 +479,12 @@ def make_mission_diagram(
     diagram.set_name("oos_mission")
     return MissionDiagram(
         diagram=diagram,
-        plant=plant,
         flight_software=fsw,
         options=options,
         scenario=scenario,
         timeline=timeline,
         K=K,
-        hub_joint=hub,
-        target_joint=parts["target_joint"],
-        arm_joints=parts["arm_joints"],
-        drive_joints=parts["drive_joints"],
-        mode_joints=MappingProxyType(parts["mode_joints"]),
-        mode_springs=MappingProxyType(parts["mode_springs"]),
-        bushings=MappingProxyType(parts["bushings"]),
-        frames=MappingProxyType(parts["frames"]),
-        target_body=parts["target_body"],
         state_logger=state_logger,
         torque_logger=torque_logger,
+        **parts,
     )

@@ -24,13 +24,23 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from oos_drake.lfr import LFR
+import numpy as np
+
+from oos_drake.control.plants import UncertainParameter
+from oos_drake.lfr import LFR, usubs
+from oos_drake.lfr.core import BlockEntry
 from oos_drake.multibody.appendage_sdf import MODE_JOINT
-from oos_drake.multibody.operating_point import OperatingPoint, set_operating_point
+from oos_drake.multibody.operating_point import (
+    OperatingPoint,
+    operating_point,
+    set_operating_point,
+)
 from oos_drake.multibody.scenario_plant import cached_scenario_diagram
-from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL
+from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL, SDF_DIRECTORY
 from oos_drake.multibody.uncertain_linearization import PhysicalParameter, ulinearize
-from oos_drake.scenario.data import default_scenario
+from oos_drake.scenario.data import default_scenario, load_scenario
+from oos_drake.scenario.timeline import mission_timeline
+from oos_drake.titop.parameters import inertia_names, mass_name, mode_frequency_name
 
 __all__ = [
     "SPRING_QUANTITIES",
@@ -66,11 +76,6 @@ def uncertain_parameters(scenario=None):
     -------
     tuple of oos_drake.control.plants.UncertainParameter
     """
-    import numpy as np
-
-    from oos_drake.control.plants import UncertainParameter
-    from oos_drake.titop.parameters import inertia_names, mass_name, mode_frequency_name
-
     scenario = default_scenario(scenario)
     parameters = []
 
@@ -153,8 +158,6 @@ def twin_lfr(point: OperatingPoint, parameters, *, sdf_directory=None, **options
     Parameters that do not act at this configuration (the target's while it floats free) are
     dropped (zero repetitions). ``options`` go to :func:`ulinearize`.
     """
-    from oos_drake.multibody.scenario_sdf import SDF_DIRECTORY
-
     directory = str(SDF_DIRECTORY if sdf_directory is None else sdf_directory)
     handles = cached_scenario_diagram(point.connection, directory)
     context = handles.diagram.CreateDefaultContext()
@@ -180,10 +183,6 @@ def stack_models(models) -> LFR:
     (zero rows and columns) and missing states as decoupled states at :data:`PADDING_POLE`
     (no input, no output): each model's input-output map is unchanged for every ``Delta``.
     """
-    import numpy as np
-
-    from oos_drake.lfr.core import BlockEntry
-
     models = list(models)
     if not models:
         raise ValueError("stack_models: no models")
@@ -223,9 +222,6 @@ def stack_models(models) -> LFR:
 
 def _twin_lfr_at(scenario, time: float) -> LFR:
     """The twin's LFR at mission ``time`` [s] of ``scenario``."""
-    from oos_drake.multibody.operating_point import operating_point
-    from oos_drake.scenario.timeline import mission_timeline
-
     point = operating_point(mission_timeline(scenario).configuration(float(time)))
     return twin_lfr(point, mission_parameters(scenario))
 
@@ -233,8 +229,6 @@ def _twin_lfr_at(scenario, time: float) -> LFR:
 def _twin_lfr_task(source: str, overrides: tuple, time: float) -> LFR:
     """:func:`_twin_lfr_at` as an executor task: a ``Scenario`` does not pickle, its file and
     overrides do (loading is cached per process)."""
-    from oos_drake.scenario.data import load_scenario
-
     return _twin_lfr_at(load_scenario(source, dict(overrides)), time)
 
 
@@ -254,8 +248,6 @@ def twin_mission_plants(times, scenario=None, *, progress=None, executor=None) -
         here. Same LFRs either way (each extraction starts from a fresh context, with its own
         seeded checks).
     """
-    import numpy as np
-
     scenario = default_scenario(scenario)
     times = np.atleast_1d(np.asarray(times, dtype=float))
     if executor is None:
@@ -289,12 +281,6 @@ def twin_docking_plants(phase: str, stiffness, damping: float, scenario=None) ->
     damping : float
         Damping of the swept spring-damper [N s/m = N m s/rad].
     """
-    import numpy as np
-
-    from oos_drake.lfr import usubs
-    from oos_drake.multibody.operating_point import operating_point
-    from oos_drake.scenario.timeline import mission_timeline
-
     scenario = default_scenario(scenario)
     stiffness = np.atleast_1d(np.asarray(stiffness, dtype=float))
     if not np.all(np.isfinite(stiffness)) or np.any(stiffness <= 0):

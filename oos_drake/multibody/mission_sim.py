@@ -50,7 +50,7 @@ from pydrake.math import RollPitchYaw
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 
 from oos_drake.lfr.blocks import RANGE_RTOL
-from oos_drake.multibody.flight_software import NOISE_CHANNELS
+from oos_drake.multibody.flight_software import LOG_SIGNALS, NOISE_CHANNELS
 from oos_drake.multibody.mission import ARRAYS, MissionDiagram, MissionOptions, make_mission_diagram
 from oos_drake.multibody.plant_parts import set_central_inertia, set_mode_frequency
 from oos_drake.multibody.scenario_plant import set_bushing
@@ -139,21 +139,18 @@ def mission_parameters(scenario) -> tuple[MissionParameter, ...]:
                 name, block.unit, block.nominal, lower, upper, block.quantity, description
             )
         )
+
+    def centred(name, unit, bound, quantity, description):
+        """A parameter of nominal 0 and range ``[-bound, bound]``."""
+        return MissionParameter(name, unit, 0.0, -bound, bound, quantity, description)
+
     for prefix, unit, bound, what in (
         ("phi0", "rad", 0.05, "attitude error"),
         ("w0", "rad/s", 0.01, "body rate error"),
     ):
         params += [
-            MissionParameter(
-                f"{prefix}_{axis}",
-                unit,
-                0.0,
-                -bound,
-                bound,
-                "initial condition",
-                f"initial hub {what} ({axis})",
-            )
-            for axis in AXES
+            centred(f"{prefix}_{a}", unit, bound, "initial condition", f"initial hub {what} ({a})")
+            for a in AXES
         ]
     params.append(
         MissionParameter(
@@ -167,11 +164,9 @@ def mission_parameters(scenario) -> tuple[MissionParameter, ...]:
         )
     )
     params += [
-        MissionParameter(
+        centred(
             f"Delta_mul_{row}{col}",
             "-",
-            0.0,
-            -1.0,
             1.0,
             "multiplicative dynamics",
             f"entry {row}{col} of the multiplicative actuator all-pass perturbation",
@@ -179,17 +174,8 @@ def mission_parameters(scenario) -> tuple[MissionParameter, ...]:
         for row in AXES
         for col in AXES
     ]
-    params.append(
-        MissionParameter(
-            "Delta_add",
-            "-",
-            0.0,
-            -1.0,
-            1.0,
-            "additive dynamics",
-            "scale of the additive plant all-pass perturbation",
-        )
-    )
+    description = "scale of the additive plant all-pass perturbation"
+    params.append(centred("Delta_add", "-", 1.0, "additive dynamics", description))
     return tuple(params)
 
 
@@ -660,10 +646,8 @@ class MissionSimulation:
         return np.array(log.sample_times()), np.array(log.data())
 
     def _logs(self, context):
-        h = self.handles
-        state_log = h.state_logger.FindLog(context)
-        torque_log = h.torque_logger.FindLog(context)
-        return state_log.sample_times(), state_log.data(), torque_log.data()
+        times, states = self.state_log(context)
+        return times, states, self.handles.torque_logger.FindLog(context).data()
 
     def _tracking_error(self, context) -> float:
         h = self.handles
@@ -690,7 +674,7 @@ class MissionSimulation:
         for i, a in enumerate(AXES):
             columns[f"phi_{a} [rad]"] = rpy[i]
             columns[f"w_{a} [rad/s]"] = w_B[i]
-        for j, prefix in enumerate(("u", "T_rw", "T", "T_dist")):
+        for j, prefix in enumerate(LOG_SIGNALS):
             for i, a in enumerate(AXES):
                 columns[f"{prefix}_{a} [N m]"] = torques[3 * j + i]
         root = h.diagram.CreateDefaultContext()

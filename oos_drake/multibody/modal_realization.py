@@ -130,27 +130,9 @@ class ModalRealization:
     residual_inertia: np.ndarray
 
     @property
-    def D_P0(self) -> np.ndarray:
-        """Residual (cantilevered) mass ``D_P - L L^T`` (``M_P(inf)``)."""
-        L = np.array([mode.participation for mode in self.modes]).reshape(-1, 6)
-        return self.D_P - L.T @ L
-
-    @property
     def residual_is_physical(self) -> bool:
         """True if ``residual_inertia`` is a valid rigid-body spatial inertia."""
         return is_physical_spatial_inertia(self.residual_inertia)
-
-    def mass_matrix(self) -> np.ndarray:
-        """Linearized mass matrix in coordinates ``(x_P, q_1..q_N)`` (6+N square)."""
-        n = len(self.modes)
-        out = np.zeros((6 + n, 6 + n))
-        out[:6, :6] = self.D_P
-        for i, mode in enumerate(self.modes):
-            column = mode.spatial_inertia @ mode.twist
-            out[:6, 6 + i] = column
-            out[6 + i, :6] = column
-            out[6 + i, 6 + i] = mode.twist @ column
-        return out
 
 
 def is_physical_spatial_inertia(inertia: np.ndarray, tol: float = 1e-12) -> bool:

@@ -29,6 +29,7 @@ from oos_drake.multibody.scenario_plant import (
     connection_for,
     set_spring_damper,
 )
+from oos_drake.scenario.timeline import mission_timeline
 
 __all__ = [
     "OperatingPoint",
@@ -196,8 +197,6 @@ def linearize_time(time: float, scenario=None) -> control.StateSpace:
 
     Returns the 12-output model of :func:`linearize_at`.
     """
-    from oos_drake.scenario.timeline import mission_timeline
-
     configuration = mission_timeline(scenario).configuration(float(time))
     return linearize_at(operating_point(configuration, label=f"t={float(time):g} s"))
 
@@ -213,8 +212,6 @@ def linearize_named(name: str, spring_dampers=None, scenario=None) -> control.St
         For docking phases: ``{"SM1": (k, d), ...}`` [N/m = N m/rad, N s/m = N m s/rad];
         default: the phase's spring-dampers at the scenario's rigid stiffness and damping.
     """
-    from oos_drake.scenario.timeline import mission_timeline
-
     timeline = mission_timeline(scenario)
     if name not in timeline.named:
         raise ValueError(f"unknown configuration {name!r}; known: {sorted(timeline.named)}")

@@ -21,6 +21,7 @@ committed files are stale.
 from __future__ import annotations
 
 import re
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +39,7 @@ from oos_drake.multibody.sdf_writer import (
     to_sdf_text,
 )
 from oos_drake.resources import package_path
+from oos_drake.scenario.data import default_scenario
 
 __all__ = [
     "SDF_DIRECTORY",
@@ -213,10 +215,7 @@ def generate_sdf_texts(scenario=None) -> dict[str, str]:
     scenario : oos_drake.scenario.data.Scenario, optional
         Default: ``load_scenario()`` (the paper's data file).
     """
-    if scenario is None:
-        from oos_drake.scenario.data import load_scenario
-
-        scenario = load_scenario()
+    scenario = default_scenario(scenario)
     texts = {}
     for hub_name in scenario.hubs:
         texts[f"hub_{hub_name}.sdf"] = to_sdf_text(_hub_model(scenario, hub_name))
@@ -284,8 +283,6 @@ def scenario_sdf_directory(scenario) -> tuple[Path, object]:
     keeper : tempfile.TemporaryDirectory or None
         Keep it alive as long as the folder is used (None: the package's folder).
     """
-    import tempfile
-
     if not stale_sdf_files(SDF_DIRECTORY, scenario):
         return Path(SDF_DIRECTORY), None
     keeper = tempfile.TemporaryDirectory(prefix="oos-sdf-")

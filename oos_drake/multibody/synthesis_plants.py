@@ -67,6 +67,8 @@ from oos_drake.multibody.plant_parts import (
 from oos_drake.multibody.scenario_plant import ScenarioDiagram, cached_scenario_diagram
 from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL
 from oos_drake.scenario.data import default_scenario
+from oos_drake.scenario.timeline import mission_timeline
+from oos_drake.titop.parameters import inertia_names, mass_name, mode_frequency_name
 
 __all__ = [
     "PADDING_POLE",
@@ -97,8 +99,6 @@ def apply_physical_values(
     ValueError
         Unknown parameter name, or a non-finite or non-positive value.
     """
-    from oos_drake.titop.parameters import inertia_names, mass_name, mode_frequency_name
-
     scenario = default_scenario(scenario)
     plant = handles.plant
     plant_context = plant.GetMyMutableContextFromRoot(context)
@@ -212,8 +212,6 @@ class DrakePlantSource:
         *,
         progress: Callable | None = None,
     ):
-        from oos_drake.scenario.timeline import mission_timeline
-
         self.scenario = default_scenario(scenario)
         self.times = np.asarray(times, dtype=float).ravel()
         if self.times.size == 0 or not np.all(np.isfinite(self.times)):

@@ -62,9 +62,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydrake.multibody.tree import BodyIndex
+from pydrake.multibody.math import SpatialForce
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import ExternallyAppliedSpatialForce, MultibodyPlant
+from pydrake.multibody.tree import BodyIndex, LinearBushingRollPitchYaw
+from pydrake.systems.framework import PortDataType
+from pydrake.systems.primitives import FirstOrderTaylorApproximation
+from scipy.linalg import block_diag
 
-from oos_drake.lfr import LFR
+from oos_drake.lfr import LFR, usubs
 from oos_drake.lfr.blocks import UReal, make_ureal_spec
 from oos_drake.lfr.core import BlockEntry
 from oos_drake.multibody.linearization import structural_keep
@@ -95,32 +101,19 @@ _BUSHING_KINDS = ("force_stiffness", "torque_stiffness", "force_damping", "torqu
 BUSHING_QUANTITIES = tuple(
     f"{kind}{axis}" for kind in _BUSHING_KINDS for axis in ("", "_x", "_y", "_z")
 )
-_UNITS = {
-    "mass": "kg",
-    "Ixx": "kg m^2",
-    "Iyy": "kg m^2",
-    "Izz": "kg m^2",
-    "stiffness": "N m/rad",
-    "damping": "N m s/rad",
-    "frequency": "rad/s",
-    "force_stiffness": "N/m",
-    "torque_stiffness": "N m/rad",
-    "force_damping": "N s/m",
-    "torque_damping": "N m s/rad",
-}
-#: Drake quantity -> the block's ``quantity`` (:data:`oos_drake.lfr.blocks.QUANTITIES`).
-_BLOCK_QUANTITIES = {
-    "mass": "mass",
-    "Ixx": "inertia",
-    "Iyy": "inertia",
-    "Izz": "inertia",
-    "stiffness": "stiffness",
-    "damping": "damping",
-    "frequency": "modal frequency",
-    "force_stiffness": "stiffness",
-    "torque_stiffness": "stiffness",
-    "force_damping": "damping",
-    "torque_damping": "damping",
+#: Drake quantity -> (its unit, the block's ``quantity``: :data:`oos_drake.lfr.blocks.QUANTITIES`).
+_QUANTITIES = {
+    "mass": ("kg", "mass"),
+    "Ixx": ("kg m^2", "inertia"),
+    "Iyy": ("kg m^2", "inertia"),
+    "Izz": ("kg m^2", "inertia"),
+    "stiffness": ("N m/rad", "stiffness"),
+    "damping": ("N m s/rad", "damping"),
+    "frequency": ("rad/s", "modal frequency"),
+    "force_stiffness": ("N/m", "stiffness"),
+    "torque_stiffness": ("N m/rad", "stiffness"),
+    "force_damping": ("N s/m", "damping"),
+    "torque_damping": ("N m s/rad", "damping"),
 }
 
 
@@ -164,16 +157,12 @@ class PhysicalParameter:
                 f"parameter {self.name!r}: unknown quantity {self.quantity!r}; known: {known}"
             )
         _ = self.spec  # validates name and range (one-line ValueError)
-        positive = self.quantity != "damping" and "damping" not in self.quantity
-        if positive and self.lower <= 0:
+        positive = "damping" not in self.quantity
+        if self.lower < 0 or (positive and self.lower == 0):
+            sign = "non-positive" if positive else "negative"
             raise ValueError(
                 f"parameter {self.name!r}: range [{self.lower:g}, {self.upper:g}] makes the "
-                f"{self.quantity} of {self.element!r} non-positive"
-            )
-        if not positive and self.lower < 0:
-            raise ValueError(
-                f"parameter {self.name!r}: range [{self.lower:g}, {self.upper:g}] makes the "
-                f"{self.quantity} of {self.element!r} negative"
+                f"{self.quantity} of {self.element!r} {sign}"
             )
 
     @property
@@ -181,7 +170,7 @@ class PhysicalParameter:
         """The ``ureal`` block spec (MATLAB normalization) with its unit and block quantity."""
         return UReal(
             self.name, self.nominal, self.lower, self.upper,
-            unit=self.unit, quantity=_BLOCK_QUANTITIES[self._base_quantity],
+            unit=self.unit, quantity=_QUANTITIES[self._base_quantity][1],
         )  # fmt: skip
 
     @property
@@ -191,7 +180,7 @@ class PhysicalParameter:
     @property
     def unit(self) -> str:
         """Physical unit of the quantity."""
-        return _UNITS[self._base_quantity]
+        return _QUANTITIES[self._base_quantity][0]
 
     @property
     def kind(self) -> str:
@@ -273,8 +262,6 @@ class _Binding:
     """A parameter bound to its Drake element, with the base context's values it scales."""
 
     def __init__(self, parameter: PhysicalParameter, plant, plant_context):
-        from pydrake.multibody.tree import LinearBushingRollPitchYaw
-
         self.parameter = parameter
         self.plant = plant
         self.position_row = None  # diagram state index of a free joint's angle (_problem)
@@ -391,8 +378,6 @@ def _port(system, text: str, direction: str):
         owner = system.get_name() or type(system).__name__
         raise ValueError(f"no {direction} port {name!r} on {owner!r}; ports: {names}")
     port = get(name)
-    from pydrake.systems.framework import PortDataType
-
     if port.get_data_type() != PortDataType.kVectorValued:
         raise ValueError(f"{direction} port {name!r} is not vector-valued")
     rows = np.arange(port.size())
@@ -409,8 +394,6 @@ def _port(system, text: str, direction: str):
 
 
 def _find_plant(system):
-    from pydrake.multibody.plant import MultibodyPlant
-
     if isinstance(system, MultibodyPlant):
         return system
     plants = [s for s in system.GetSystems() if isinstance(s, MultibodyPlant)]
@@ -450,8 +433,6 @@ class _Problem:
 
     def linearize(self, values) -> dict:
         """Drake's Taylor linearization and mass matrix at physical ``values`` (one per binding)."""
-        from pydrake.systems.primitives import FirstOrderTaylorApproximation
-
         context, plant_context = self.context_at(values)
         B, C, D = [], [], []
         A = None
@@ -490,9 +471,6 @@ class _Problem:
         ``applied_spatial_force`` input) change the generalized accelerations ``v'`` and,
         through them only, the outputs: ``dy = C_d dv'`` for every probe, exact (linear).
         """
-        from pydrake.multibody.math import SpatialForce
-        from pydrake.multibody.plant import ExternallyAppliedSpatialForce
-
         context, plant_context = self.context_at(self.nominal)
         plant = self.plant
         force_port = plant.get_applied_spatial_force_input_port()
@@ -514,9 +492,7 @@ class _Problem:
         dY, dV = [], []
         for index in range(1, plant.num_bodies()):  # body 0 is the world
             body = plant.get_body(BodyIndex(index))
-            for k in range(6):
-                wrench = np.zeros(6)
-                wrench[k] = 1.0  # [torque; force] at the body origin, world axes
+            for wrench in np.eye(6):  # [torque; force] at the body origin, world axes
                 applied = ExternallyAppliedSpatialForce()
                 applied.body_index = body.index()
                 applied.p_BoBq_B = np.zeros(3)
@@ -691,8 +667,6 @@ def _assemble(problem, R0, coefficients, h, scale, n, nu, ny, rtol, names):
         gains.append(np.full(U.shape[1], math.sqrt(g)))
         betas.append(np.full(U.shape[1], spec.beta))
         entries.append(BlockEntry(spec, U.shape[1]))
-    from scipy.linalg import block_diag
-
     width = R0.shape[1]
     U = np.hstack([np.zeros((R0.shape[0], 0)), *Us])
     V = np.hstack([np.zeros((width, 0)), *Vs])
@@ -1094,8 +1068,6 @@ def _extract(problem, options: ExtractionOptions, rng=None) -> LFR:
 def _check(problem, lfr, linearize, h, count, tolerance, rng, modal):
     """Compare the LFR with Drake's linearization at random points (inside and outside), in
     the LFR's states (``modal``: the scaled angles)."""
-    from oos_drake.lfr import usubs
-
     specs = [b.parameter for b in problem.bindings]
     for k in range(count):
         spread = 1.0 if k % 2 == 0 else 2.0  # half the points up to half a range outside
@@ -1135,9 +1107,6 @@ def sdf_plant(path):
     ValueError
         Missing file or a file Drake's parser refuses (first line of its message).
     """
-    from pydrake.multibody.parsing import Parser
-    from pydrake.multibody.plant import MultibodyPlant
-
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{path}: no such model file")
