@@ -260,19 +260,57 @@ class Scalings:
     G: np.ndarray
 
     def conditioned(self, floor: float = CONDITION_FLOOR) -> Scalings:
-        """``D_l + e I`` and ``D_r + e I`` with ``e = floor * lambda_max(D_r)``.
+        """Each diagonal block ``D_b`` of ``D_l`` and ``D_r`` replaced by ``D_b + e_b I``,
+        ``e_b = floor * lambda_max(D_b)``.
 
-        Adding the same multiple of the identity to both keeps the block structure (equal
-        scalars of full blocks, equal blocks of repeated scalars). The optimal scalings of a
-        real ``M`` (``omega = 0``) or a bound reached by unbounded scalings can have condition
-        numbers of 1e16, where the sign of ``Phi`` is round-off; after this the LMI is
-        evaluated reliably and, with the slack of the level, still holds (the change of
-        ``Phi`` is ``e (||M||^2 - beta^2)``, far below ``slack * beta^2``; :func:`dg_interval`
-        checks it anyway).
+        The blocks are the connected components of the scalings' sparsity pattern (a repeated
+        scalar's full ``D_b``, equal on both sides; a full block's scalar, one entry at a time),
+        so the structure is kept. The optimal scalings of a real ``M`` (``omega = 0``) or a
+        bound reached by unbounded scalings can make a block ``D_b`` singular to 1e16, where the
+        sign of ``Phi`` is round-off; after this each block is conditioned to ``1 / floor``.
+
+        The floor is relative to each block, not to the largest scaling of all: the ratio of
+        different blocks' scalings carries the channel scaling of the LFR (an ``M`` with entries
+        of 1e4 in the row of a badly scaled channel and 1e-6 in its column has optimal scalings
+        1e-12 apart), and a common ``e`` would add ``e ||M||^2`` to ``Phi``, more than the slack
+        of the level (the RCT two-mass example: no interval at all). Per block, the change of
+        ``Phi`` is at most ``floor`` times its own terms in the scaled form (:class:`_Multiplier`)
+        and stays far below ``slack * beta^2``; :func:`dg_interval` checks it anyway.
         """
-        Dl, Dr = np.asarray(self.D_left), np.asarray(self.D_right)
-        e = floor * float(np.max(np.linalg.eigvalsh(0.5 * (Dr + np.conj(Dr.T)))))
-        return Scalings(Dl + e * np.eye(Dl.shape[0]), Dr + e * np.eye(Dr.shape[0]), self.G)
+        return Scalings(
+            _floor_blocks(self.D_left, floor), _floor_blocks(self.D_right, floor), self.G
+        )
+
+
+def _diagonal_blocks(D: np.ndarray) -> list:
+    """Index arrays of the diagonal blocks of a block-diagonal ``D`` (connected components of
+    its nonzero pattern)."""
+    from scipy.sparse.csgraph import connected_components
+
+    pattern = np.abs(np.asarray(D)) > 0
+    count, label = connected_components(pattern, directed=False)
+    return [np.flatnonzero(label == k) for k in range(count)]
+
+
+def _floor_blocks(D: np.ndarray, floor: float) -> np.ndarray:
+    """``D`` with ``floor * lambda_max(D_b) I`` added to each diagonal block ``D_b``."""
+    D = 0.5 * (np.asarray(D) + np.conj(np.asarray(D).T))
+    out = D.astype(np.result_type(D, float), copy=True)
+    for idx in _diagonal_blocks(D):
+        block = D[np.ix_(idx, idx)]
+        top = float(np.max(np.linalg.eigvalsh(block))) if idx.size > 1 else float(block[0, 0].real)
+        out[idx, idx] += floor * max(top, 0.0)
+    return out
+
+
+def _block_conditions(D: np.ndarray) -> tuple:
+    """``(smallest, largest)`` eigenvalue of the worst-conditioned diagonal block of ``D``."""
+    worst = (1.0, 1.0)
+    for idx in _diagonal_blocks(D):
+        ev = np.linalg.eigvalsh(np.asarray(D)[np.ix_(idx, idx)])
+        if ev[0] * worst[1] < worst[0] * ev[-1]:  # ev[0] / ev[-1] < worst ratio
+            worst = (float(ev[0]), float(ev[-1]))
+    return worst
 
 
 class _Multiplier:
@@ -399,11 +437,11 @@ def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: floa
         If the LMI does not hold strictly at ``omega0``, or ``Phi(inf)`` is singular.
     """
     for name, Dx in (("D_left", scalings.D_left), ("D_right", scalings.D_right)):
-        ev = np.linalg.eigvalsh(0.5 * (Dx + np.conj(np.asarray(Dx).T)))
-        if not ev[0] > 0.1 * CONDITION_FLOOR * ev[-1]:
+        low, high = _block_conditions(0.5 * (Dx + np.conj(np.asarray(Dx).T)))
+        if not low > 0.1 * CONDITION_FLOOR * high:
             raise ValueError(
-                f"dg_interval: {name} is not positive definite to round-off (eigenvalues "
-                f"{ev[0]:.3g} .. {ev[-1]:.3g}); use Scalings.conditioned()"
+                f"dg_interval: a block of {name} is not positive definite to round-off "
+                f"(eigenvalues {low:.3g} .. {high:.3g}); use Scalings.conditioned()"
             )
     mult = _Multiplier(real, scalings, beta)
     nu0 = float(real.to_nu(omega0))
