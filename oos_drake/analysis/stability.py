@@ -261,7 +261,7 @@ def _range_covers(blk, floor, slack, configurations):
             continue
         keep = cert.essential()
         prior = (cert.omega[keep], [cert.scalings[i] for i in keep]) if keep.size else None
-        failure = "" if cert.covered else "cover did not close"
+        failure = cert.reason
         out.append((float(cert.upper), int(cert.omega.size), failure, int(cert.added.sum())))
     return out
 

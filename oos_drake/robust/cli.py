@@ -96,10 +96,7 @@ def _robstab(args: argparse.Namespace) -> int:
         print(f"{args.file}: the nominal model is unstable (margin 0)")
         return 0
     print(f"{args.file}: {sys.nstates} states, blocks {list(sys.occurrences.items())}")
-    print(
-        f"stability margin in [{res.lower:.6g}, {res.upper:.6g}] (normalized units; > 1: robustly "
-        f"stable), critical frequency {res.critical_frequency:.6g} rad/s"
-    )
+    print(res.summary())
     for name, value in res.worst_case.items():
         print(f"  destabilizing {name} = {value}")
     if args.out:
@@ -119,12 +116,16 @@ def _sweep(args: argparse.Namespace) -> int:
         lower=("mu lower [-]", "max"),
         upper=("mu upper [-]", "max"),
         guaranteed=("mu upper guaranteed [-]", "first"),
+        covered=("covered", "first"),
+        reason=("reason", "first"),
     )
     for (subset, model), row in peaks.iterrows():
-        print(
-            f"  {subset} [{model}]: peak mu in [{row.lower:.6g}, {row.upper:.6g}] on the grid, "
+        axis = (
             f"<= {row.guaranteed:.6g} on the whole frequency axis"
+            if row.covered
+            else f"not proved on the whole frequency axis: {row.reason}"
         )
+        print(f"  {subset} [{model}]: peak mu in [{row.lower:.6g}, {row.upper:.6g}] on the grid, {axis}")
     if args.out:
         _write_table(table, args.out)
         print(f"mu bounds per model and frequency written to {args.out}")

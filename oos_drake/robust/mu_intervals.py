@@ -131,22 +131,31 @@ class Realization:
         """End of the frequency axis [rad/s]: ``inf`` or ``pi / sample_time``."""
         return np.inf if self.sample_time is None else np.pi / self.sample_time
 
-    def check_axis(self) -> None:
-        """Raise ``ValueError`` if ``M`` has a pole on the imaginary axis (unit circle)."""
+    def axis_poles(self) -> np.ndarray:
+        """Frequencies [rad/s] in ``[0, nyquist]`` of the poles of ``M`` within round-off
+        (1e-10 relative) of the imaginary axis (unit circle), sorted: ``M`` is unbounded there
+        and no interval of :func:`dg_interval` reaches them."""
         if not self.A.size:
-            return
+            return np.zeros(0)
         lam = np.linalg.eigvals(self.A)
         if self.sample_time is None:
             dist = np.abs(lam.real)
+            scale = max(1.0, float(np.max(np.abs(lam))))
+            omega = np.abs(lam.imag)
         else:
             dist = np.abs(np.abs(lam) - 1.0)
-        scale = max(1.0, float(np.max(np.abs(lam)))) if self.sample_time is None else 1.0
-        bad = dist <= 1e-10 * scale
-        if np.any(bad):
+            scale = 1.0
+            omega = np.abs(np.angle(lam)) / self.sample_time
+        return np.unique(omega[dist <= 1e-10 * scale])
+
+    def check_axis(self) -> None:
+        """Raise ``ValueError`` if ``M`` has a pole on the imaginary axis (unit circle)."""
+        poles = self.axis_poles()
+        if poles.size:
             where = "imaginary axis" if self.sample_time is None else "unit circle"
             raise ValueError(
-                f"the model has a pole on the {where} ({lam[bad][0]:.6g}): M is unbounded "
-                "there, no frequency-axis certificate exists"
+                f"the model has a pole on the {where} at omega = {poles[0]:.6g} rad/s: M is "
+                "unbounded there, no frequency-axis certificate exists"
             )
 
     def continuous(self) -> tuple:
@@ -510,7 +519,8 @@ class AxisCertificate:
     Attributes
     ----------
     upper : float
-        Guaranteed bound on ``[0, nyquist]`` (``inf`` if the cover did not close).
+        Guaranteed bound on ``[0, nyquist]`` (``inf`` if the cover did not close; then
+        :attr:`upper_on_cover` holds on the proved intervals).
     omega : numpy.ndarray
         ``(K,)`` frequencies [rad/s] where scalings were computed, sorted.
     optimal : numpy.ndarray
@@ -533,6 +543,11 @@ class AxisCertificate:
     performance_rows : int
         0 for a mu bound; else the number of trailing outputs of ``M`` divided by the level
         (skewed mu of a worst-case gain, LMI at ``beta = 1``).
+    reason : str
+        Why the cover did not close (which frequencies, and what stopped it); empty when
+        ``covered``.
+    gaps : tuple
+        ``(lo, hi)`` [rad/s] pieces of ``[0, nyquist]`` left unproved (empty when ``covered``).
     """
 
     upper: float
@@ -546,11 +561,26 @@ class AxisCertificate:
     covered: bool
     realization: Realization = field(repr=False, default=None)
     performance_rows: int = 0
+    reason: str = ""
+    gaps: tuple = ()
 
     @property
     def nyquist(self) -> float:
         """End of the frequency axis [rad/s]."""
         return self.realization.nyquist
+
+    @property
+    def upper_on_cover(self) -> float:
+        """Largest level of the proved intervals: the bound on their union (the whole axis when
+        ``covered``; else everywhere but :attr:`gaps`); 0 without any interval."""
+        proved = np.isfinite(self.interval[:, 0]) if self.interval.size else np.zeros(0, bool)
+        return float(np.max(self.level[proved])) if np.any(proved) else 0.0
+
+    def summary(self) -> str:
+        """One line: the bound and where it holds (and why not everywhere)."""
+        if self.covered:
+            return f"<= {self.upper:.6g} on the whole axis ({self.omega.size} points)"
+        return f"<= {self.upper_on_cover:.6g} except on the gaps; {self.reason}"
 
     def essential(self) -> np.ndarray:
         """Indices of a smallest subset of the points whose intervals still cover the axis
@@ -693,9 +723,13 @@ def cover_axis(
     Returns
     -------
     AxisCertificate
+        ``covered`` False with a ``reason`` (and the ``gaps``) when the intervals do not close:
+        a pole of ``M`` on the axis (never closed: ``M`` is unbounded there), a level that is
+        infinite (mu unbounded at a frequency: ``I - M Delta`` singular for every size), or
+        ``max_rounds`` rounds of added points without a proof of the level in a gap.
     """
-    real.check_axis()
     end = real.nyquist
+    stuck = real.axis_poles()  # M unbounded there: the gaps around them never close
     omega = np.unique(np.clip(np.asarray(seeds, dtype=float), 0.0, end))
     opt, lmin, scs = solve(omega) if omega.size else ([], [], [])
     opt, lmin, scs = list(opt), list(lmin), list(scs)
@@ -722,6 +756,9 @@ def cover_axis(
         gaps = _gaps(np.array([proved[i][1] for i in range(len(omega))]).reshape(-1, 2), end)
         if not gaps:
             covered = True
+            break
+        gaps = [(a, b) for a, b in gaps if not np.any((stuck >= a) & (stuck <= b))]
+        if not gaps:  # only the gaps around poles on the axis are left
             break
         take = spare.take(gaps, level / (1.0 + slack))
         if take:  # known scalings first: an interval test, no optimization
@@ -765,6 +802,7 @@ def cover_axis(
     order = [i for i in np.argsort(omega, kind="stable") if i in proved]
     spans = np.array([proved[i][1] for i in order]).reshape(-1, 2)
     levels = np.array([proved[i][0] for i in order], dtype=float)
+    left = () if covered else tuple((float(a), float(b)) for a, b in _gaps(spans, end))
     return AxisCertificate(
         upper=float(np.max(levels)) if covered else np.inf,
         omega=np.asarray(omega)[order],
@@ -777,6 +815,29 @@ def cover_axis(
         covered=covered,
         realization=real,
         performance_rows=performance_rows,
+        reason="" if covered else _why_open(left, stuck, level, rounds, real),
+        gaps=left,
+    )
+
+
+def _why_open(gaps, stuck, level, rounds, real) -> str:
+    """The ``reason`` of a cover that did not close (one line)."""
+    where = ", ".join(f"[{a:.6g}, {b:.6g}]" for a, b in gaps[:4]) + (" ..." if len(gaps) > 4 else "")
+    if stuck.size:
+        axis = "imaginary axis" if real.sample_time is None else "unit circle"
+        poles = ", ".join(f"{w:.6g}" for w in stuck[:4])
+        return (
+            f"not proved on {where} rad/s: M has a pole on the {axis} at omega = {poles} "
+            "rad/s (M unbounded there: the loop is not stable at nominal)"
+        )
+    if not np.isfinite(level):
+        return (
+            f"not proved on {where} rad/s: no finite level there (the bound is infinite: "
+            "I - M Delta singular for every size, or an ill-posed LFR)"
+        )
+    return (
+        f"not proved on {where} rad/s at level {level:.6g}: {rounds} rounds of added points "
+        "found no scalings that prove it there"
     )
 
 

@@ -43,7 +43,8 @@ class RobStabResult:
     ----------
     lower : float
         Guaranteed margin (``1 / peak mu_upper``; ``inf`` if mu = 0): on the whole frequency
-        axis when ``guarantee`` is set, else on the analyzed frequencies only.
+        axis when ``covered``; else on the analyzed frequencies and the proved intervals of
+        ``guarantee`` only (``reason`` says where the proof is missing and why).
     upper : float
         Margin of the destabilizing perturbation ``worst_case`` (``1 / peak mu_lower``).
     critical_frequency : float
@@ -63,6 +64,12 @@ class RobStabResult:
         The intervals that prove ``mu <= 1 / lower`` on ``[0, inf)`` (``guaranteed=True``):
         which points were solved (``added`` where the cover added them), at which level, on
         which interval; ``guarantee.check()`` proves it again.
+    covered : bool
+        True when ``lower`` holds on the whole frequency axis (the cover closed); False with
+        ``guaranteed=False`` or when it did not close.
+    reason : str
+        Why ``lower`` is not proved on the whole axis (empty when ``covered``): not requested,
+        or the frequencies the cover could not prove and why.
     """
 
     lower: float
@@ -75,6 +82,25 @@ class RobStabResult:
     mu_upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
     mu_lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
     guarantee: AxisCertificate | None = None
+    covered: bool = False
+    reason: str = ""
+
+    def summary(self) -> str:
+        """The bounds, the critical frequency and where the lower bound holds, one line."""
+        if not self.nominal_stable:
+            return "nominal closed loop unstable: stability margin 0"
+        where = (
+            "proved on the whole frequency axis"
+            if self.covered
+            else f"NOT proved on the whole frequency axis ({self.reason})"
+        )
+        return (
+            f"stability margin in [{self.lower:.6g}, {self.upper:.6g}] (normalized units), "
+            f"critical frequency {self.critical_frequency:.6g} rad/s; lower bound {where}"
+        )
+
+    def __str__(self) -> str:
+        return self.summary()
 
     def table(self, subset: str = "total", time: float = float("nan")):
         """The analyzed frequencies as a mu sweep table (:func:`~.tables.sweep_table`).
@@ -101,6 +127,8 @@ class RobStabResult:
             lower=self.mu_lower,
             guaranteed=None if self.guarantee is None else self.guarantee.upper,
             guarantee_points=None if self.guarantee is None else self.guarantee.omega.size,
+            covered=self.covered,
+            reason=self.reason,
         )
 
 
@@ -146,9 +174,9 @@ def robstab(
     Raises
     ------
     ValueError
-        If ``sys`` is a model array, has no uncertain blocks, or names unknown blocks; with
-        ``guaranteed=True``, if the nominal model has a pole within round-off of the
-        imaginary axis (no frequency-axis certificate exists).
+        If ``sys`` is a model array, has no uncertain blocks, or names unknown blocks. (A
+        nominal pole within round-off of the imaginary axis is no error: the cover stays open
+        there, ``covered`` is False and ``reason`` names the frequency.)
 
     Examples
     --------
@@ -172,7 +200,8 @@ def robstab(
         Bw, Cz, Dzw = Bw[:, wcols], Cz[zrows, :], Dzw[np.ix_(zrows, wcols)]
     poles = np.linalg.eigvals(A) if A.size else np.zeros(0)
     if np.any(poles.real >= 0):
-        return RobStabResult(0.0, 0.0, float("nan"), {}, {}, nominal_stable=False)
+        # margin 0, exactly: nothing left to prove
+        return RobStabResult(0.0, 0.0, float("nan"), {}, {}, nominal_stable=False, covered=True)
     if omega is None:
         omega = np.concatenate([[0.0], frequency_grid(A, points_per_decade=points_per_decade)])
     omega = np.asarray(omega, dtype=float)
@@ -206,7 +235,14 @@ def robstab(
         raise ValueError(f"robstab: {err}") from None
     omega, up, lo = pts.omega, pts.upper, pts.lower
     guarantee = pts.guarantees.get(0)
-    peak_up = guarantee.upper if guaranteed else float(up.max())
+    covered = guarantee is not None and guarantee.covered
+    if covered:
+        peak_up, reason = guarantee.upper, ""
+    elif guarantee is not None:  # never a silent margin of 0: the proved part, and why not all
+        peak_up = max(float(up.max()), guarantee.upper_on_cover)
+        reason = f"whole-axis cover open: {guarantee.reason}"
+    else:
+        peak_up, reason = float(up.max()), "guaranteed=False: analyzed frequencies only"
     peak_lo, wc, delta = pts.best[0]
     lower = 1.0 / peak_up if peak_up > 0 else float("inf")
     upper = 1.0 / peak_lo if peak_lo > 0 else float("inf")
@@ -217,4 +253,6 @@ def robstab(
         worst_norm = normalized_worst_case(bmap, structure, delta)
     else:
         wc = float("nan")
-    return RobStabResult(lower, upper, wc, worst, worst_norm, True, omega, up, lo, guarantee)
+    return RobStabResult(
+        lower, upper, wc, worst, worst_norm, True, omega, up, lo, guarantee, covered, reason
+    )

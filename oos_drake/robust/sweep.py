@@ -926,6 +926,8 @@ def sweep_table_of(points: dict, times):
         tightened=np.concatenate([p.tightened for p in pts]),
         guaranteed=per_model(lambda c: float(c.upper)) if guaranteed else None,
         guarantee_points=per_model(lambda c: int(c.omega.size)) if guaranteed else None,
+        covered=per_model(lambda c: bool(c.covered)) if guaranteed else True,
+        reason=per_model(lambda c: c.reason) if guaranteed else "",
     )
 
 
@@ -1053,7 +1055,8 @@ def robust_sweep(
         frequency axis (:func:`~oos_drake.robust.mu_intervals.cover_axis`, started from the
         peaks of the analyzed points): columns ``mu upper guaranteed [-]`` (the same value on
         every row of the model and subset; ``inf`` if the cover did not close) and
-        ``guarantee_points`` (frequencies solved for the proof). The per-frequency columns stay
+        ``guarantee points`` (frequencies solved for the proof), ``covered`` and ``reason``
+        (why the proof does not cover the whole axis, where it does not). The per-frequency columns stay
         pointwise bounds.
     slack : float, optional
         Relative slack of the guaranteed bound (default

@@ -25,9 +25,10 @@ SWEEP_COLUMNS = [
     "refined",
     "tightened",
 ]
-#: Extra columns when the peak over the whole frequency axis is proved (``guaranteed=True``):
-#: the same value on every row of a model and subset, and the frequencies solved for the proof.
-GUARANTEE_COLUMNS = ["mu upper guaranteed [-]", "guarantee_points"]
+#: Extra columns when the peak over the whole frequency axis is proved (``guaranteed=True``),
+#: the same values on every row of a model and subset: the bound (``inf`` where the cover did not
+#: close), the frequencies solved for the proof, whether the cover closed and, if not, why.
+GUARANTEE_COLUMNS = ["mu upper guaranteed [-]", "guarantee points", "covered", "reason"]
 #: Names used by tables written before the ``name [unit]`` convention -> current names: the
 #: sweep tables, ``stability_peaks.parquet`` and ``worst_cases.parquet`` of older result folders
 #: (:func:`upgrade_columns` renames them when such a folder is read).
@@ -39,6 +40,7 @@ LEGACY_COLUMNS = {
     "mu_upper_guaranteed": "mu upper guaranteed [-]",
     "mu_upper_at_critical": "mu upper at critical [-]",
     "mu_upper_grid": "mu upper grid [-]",
+    "guarantee_points": "guarantee points",
 }
 
 
@@ -82,6 +84,8 @@ def sweep_table(
     tightened=True,
     guaranteed=None,
     guarantee_points=None,
+    covered=True,
+    reason="",
 ):
     """The mu sweep table (:data:`SWEEP_COLUMNS`) from per-point arrays, sorted.
 
@@ -103,6 +107,10 @@ def sweep_table(
         Peak of mu proved on the whole frequency axis [-] (adds :data:`GUARANTEE_COLUMNS`).
     guarantee_points : int or array_like, optional
         Frequencies solved for that proof.
+    covered : bool or array_like of bool
+        The proof covers the whole axis (with ``guaranteed``).
+    reason : str or array_like of str
+        Why not, where ``covered`` is False (empty otherwise).
 
     Returns
     -------
@@ -129,7 +137,9 @@ def sweep_table(
     }
     if guaranteed is not None:
         data["mu upper guaranteed [-]"] = full(guaranteed, float)
-        data["guarantee_points"] = full(0 if guarantee_points is None else guarantee_points, int)
+        data["guarantee points"] = full(0 if guarantee_points is None else guarantee_points, int)
+        data["covered"] = full(covered, bool)
+        data["reason"] = full(reason, object)
     table = pd.DataFrame(data)
     return table.sort_values(
         ["subset", "model", "frequency [Hz]"], ignore_index=True, kind="stable"

@@ -82,6 +82,10 @@ class WcGainResult:
     guarantee : AxisCertificate or None
         With ``guaranteed=True``: the intervals that prove ``upper`` on ``[0, inf)`` (levels of
         the gain; ``check()`` proves them again).
+    covered : bool
+        True when ``upper`` holds on the whole frequency axis (the cover closed).
+    reason : str
+        Why ``upper`` is not proved on the whole axis (empty when ``covered``).
     """
 
     lower: float
@@ -94,6 +98,23 @@ class WcGainResult:
     gain_lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
     gain_upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
     guarantee: AxisCertificate | None = None
+    covered: bool = False
+    reason: str = ""
+
+    def summary(self) -> str:
+        """The bounds, the critical frequency and where the upper bound holds, one line."""
+        where = (
+            "proved on the whole frequency axis"
+            if self.covered
+            else f"NOT proved on the whole frequency axis ({self.reason})"
+        )
+        return (
+            f"worst-case gain in [{self.lower:.6g}, {self.upper:.6g}], critical frequency "
+            f"{self.critical_frequency:.6g} rad/s; upper bound {where}"
+        )
+
+    def __str__(self) -> str:
+        return self.summary()
 
 
 def _closed_gain(M11, M12, M21, M22, delta):
@@ -253,7 +274,9 @@ def wcgain(
     C = np.concatenate([Cz, Cy], axis=0)
     D = np.block([[Dzw, Dzu], [Dyw, Dyu]])
     if A.size and np.any(np.linalg.eigvals(A).real >= 0):
-        return WcGainResult(float("inf"), float("inf"), float("nan"), {}, {}, float("inf"))
+        return WcGainResult(
+            float("inf"), float("inf"), float("nan"), {}, {}, float("inf"), covered=True
+        )
     if omega is None:
         omega = np.concatenate([[0.0], frequency_grid(A, points_per_decade=points_per_decade)])
     omega = np.unique(np.asarray(omega, dtype=float))
@@ -275,6 +298,7 @@ def wcgain(
     best_lower, critical = float(lo[k]), float(omega[k])
     guarantee, searched = None, None
     upper = float(up.max())
+    covered, reason = False, "guaranteed=False: analyzed frequencies only"
     if guaranteed:
         found = _parameter_search(sys, bmap)
         if found is not None and found[0] > best_lower:
@@ -296,9 +320,15 @@ def wcgain(
                 slack=slack,
                 performance_rows=ny,
             )
-            upper = guarantee.upper
+            covered = guarantee.covered
+            if covered:
+                upper, reason = guarantee.upper, ""
+            else:  # the proved part and the grid, and why not the whole axis
+                upper = max(upper, guarantee.upper_on_cover)
+                reason = f"whole-axis cover open: {guarantee.reason}"
         else:
-            upper = np.inf
+            upper, covered = np.inf, True
+            reason = ""
     worst_norm = normalized_worst_case(bmap, structure, dl[k]) if searched is None else searched
     return WcGainResult(
         best_lower,
@@ -311,6 +341,8 @@ def wcgain(
         lo,
         up,
         guarantee,
+        covered,
+        reason,
     )
 
 

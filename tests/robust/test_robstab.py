@@ -135,8 +135,11 @@ def test_robust_sweep_table_and_consistency_with_robstab():
         "refined",
         "tightened",
         "mu upper guaranteed [-]",
-        "guarantee_points",
+        "guarantee points",
+        "covered",
+        "reason",
     ]
+    assert df["covered"].all() and (df["reason"] == "").all()
     assert set(df.model) == {0, 1, 2}
     # the guaranteed peak over the whole axis: stable for k g < 60, so mu = 10 / (60 / g - 40)
     exact = 10.0 / (60.0 / np.array([0.9, 1.0, 1.1]) - 40.0)
