@@ -125,7 +125,8 @@ def _sweep(args: argparse.Namespace) -> int:
             if row.covered
             else f"not proved on the whole frequency axis: {row.reason}"
         )
-        print(f"  {subset} [{model}]: peak mu in [{row.lower:.6g}, {row.upper:.6g}] on the grid, {axis}")
+        grid = f"peak mu in [{row.lower:.6g}, {row.upper:.6g}] on the grid"
+        print(f"  {subset} [{model}]: {grid}, {axis}")
     if args.out:
         _write_table(table, args.out)
         print(f"mu bounds per model and frequency written to {args.out}")

@@ -822,7 +822,8 @@ def cover_axis(
 
 def _why_open(gaps, stuck, level, rounds, real) -> str:
     """The ``reason`` of a cover that did not close (one line)."""
-    where = ", ".join(f"[{a:.6g}, {b:.6g}]" for a, b in gaps[:4]) + (" ..." if len(gaps) > 4 else "")
+    where = ", ".join(f"[{a:.6g}, {b:.6g}]" for a, b in gaps[:4])
+    where += " ..." if len(gaps) > 4 else ""
     if stuck.size:
         axis = "imaginary axis" if real.sample_time is None else "unit circle"
         poles = ", ".join(f"{w:.6g}" for w in stuck[:4])

@@ -1056,7 +1056,8 @@ def robust_sweep(
         peaks of the analyzed points): columns ``mu upper guaranteed [-]`` (the same value on
         every row of the model and subset; ``inf`` if the cover did not close) and
         ``guarantee points`` (frequencies solved for the proof), ``covered`` and ``reason``
-        (why the proof does not cover the whole axis, where it does not). The per-frequency columns stay
+        (why the proof does not cover the whole axis, where it does not). The per-frequency
+        columns stay
         pointwise bounds.
     slack : float, optional
         Relative slack of the guaranteed bound (default

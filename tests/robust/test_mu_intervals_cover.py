@@ -1,0 +1,166 @@
+"""Covers that close, and covers that cannot and say why (issue 29, item 1).
+
+The two-mass loop (fixture ``two_mass``, ``conftest.py``) is the Robust Control Toolbox's own
+``robstab`` example, whose cover did not close before the scalings were conditioned block by
+block.
+
+Every check is independent of the Hamiltonian interval test: the LMI's largest eigenvalue
+sampled densely (``lmi_residual`` on ``M(j omega)`` computed directly), certified mu lower
+bounds at the same frequencies, and a brute-force search of the parameter box for a closed-loop
+pole on the imaginary axis.
+"""
+
+import control
+import numpy as np
+import pytest
+
+from oos_drake.lfr import feedback, ureal
+from oos_drake.robust import mussv, robstab
+from oos_drake.robust.mu_intervals import (
+    CONDITION_FLOOR,
+    SLACK,
+    Realization,
+    Scalings,
+    cover_axis,
+    dg_interval,
+    mu_solver,
+)
+from oos_drake.robust.mu_upper import lmi_residual
+
+
+def dense_frequencies(cert, per_decade=150):
+    """A log grid over 1e-3 .. 1e6 rad/s plus points just inside both ends of every interval
+    (where a wrong end would show first)."""
+    grid = [np.geomspace(1e-3, 1e6, 9 * per_decade), [0.0]]
+    for lo, hi in cert.interval[np.isfinite(cert.interval[:, 0])]:
+        for end in (lo, hi):
+            if np.isfinite(end) and end > 0:
+                grid.append(end * (1 + np.array([-1e-6, -1e-9, 1e-9, 1e-6])))
+    return np.unique(np.concatenate(grid))
+
+
+def proving_interval(cert, omega):
+    """Index of a point whose proved interval contains ``omega`` (-1 if none)."""
+    lo, hi = cert.interval[:, 0], cert.interval[:, 1]
+    inside = np.flatnonzero((lo <= omega) & (omega <= hi))
+    return int(inside[0]) if inside.size else -1
+
+
+def assert_lmi_holds_where_claimed(real, cert, omega):
+    """At every frequency of ``omega`` inside the cover, the LMI of the interval that claims it
+    holds (largest eigenvalue <= 0, sampled, no Hamiltonian); returns the frequencies outside."""
+    outside = []
+    for w in omega:
+        i = proving_interval(cert, w)
+        if i < 0:
+            outside.append(w)
+            continue
+        sc = cert.scalings[i]
+        value = lmi_residual(real.response([w])[0], cert.level[i], sc.D_left, sc.D_right, sc.G)
+        assert value <= 0.0, (w, cert.omega[i], cert.level[i], value)
+    return np.array(outside)
+
+
+def test_two_mass_cover_closes_and_holds_between_its_points(two_mass):
+    T, real, blk, res = two_mass
+    cert = res.guarantee
+    assert res.covered and cert.covered and res.reason == "" and cert.reason == ""
+    assert cert.gaps == ()
+    assert res.lower == pytest.approx(1 / cert.upper)
+    # the margin is no longer a silent 0: about the published [2.8834, 2.8864]
+    assert 2.8834 / (1 + 2 * SLACK) <= res.lower <= 2.8864
+    omega = dense_frequencies(cert)
+    assert assert_lmi_holds_where_claimed(real, cert, omega).size == 0
+    # certified lower bounds of mu never exceed the guaranteed level anywhere
+    lower = mussv(real.response(omega), blk).lower
+    assert np.all(lower <= cert.upper), omega[np.argmax(lower)]
+    again = cert.check()
+    assert again["intervals_hold"] and again["covered"]
+
+
+def test_two_mass_guarantee_against_vertex_brute_force(two_mass):
+    """No vertex direction of the box destabilizes the loop below the guaranteed margin, and
+    the smallest that does is within 1 % above it (every block real: the crossing is real)."""
+    _, real, _, res = two_mass
+    A, B, C, D = real.A, real.B, real.C, real.D
+    n = D.shape[0]
+
+    def unstable(signs, alpha):
+        Dl = np.diag(alpha * signs)
+        Acl = A + B @ Dl @ np.linalg.solve(np.eye(n) - D @ Dl, C)
+        return np.max(np.linalg.eigvals(Acl).real) > 0
+
+    smallest = np.inf
+    for signs in np.array(np.meshgrid(*[[-1.0, 1.0]] * n)).reshape(n, -1).T:
+        alphas = np.linspace(0.0, 6.0, 601)[1:]
+        bad = [a for a in alphas if unstable(signs, a)]
+        if not bad:
+            continue
+        lo, hi = bad[0] - 0.01, bad[0]
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if unstable(signs, mid) else (mid, hi)
+        smallest = min(smallest, hi)
+    assert res.lower <= smallest
+    assert smallest <= 1.01 * res.lower
+
+
+def test_per_block_conditioning_keeps_the_proof(two_mass):
+    """The root cause: at 403 rad/s the optimal scalings of the two-mass ``M`` (entries 1e4 in
+    the row of a badly scaled channel) are 1e-11 apart between blocks; conditioning them block
+    by block keeps the LMI strict at 1.005 times the bound, a common floor of 1e-10 of the
+    largest does not."""
+    _, real, blk, _ = two_mass
+    w = 403.0
+    res = mussv(real.response([w]), blk)
+    raw = Scalings(res.D_left[0], res.D_right[0], res.G[0])
+    beta = (1 + SLACK) * float(res.upper[0])
+    lo, hi = dg_interval(real, raw.conditioned(), beta, w)
+    assert lo < w < hi
+    e = CONDITION_FLOOR * np.max(np.linalg.eigvalsh(raw.D_right))
+    common = Scalings(
+        raw.D_left + e * np.eye(3), raw.D_right + e * np.eye(3), raw.G
+    )  # the former conditioning
+    M = real.response([w])[0]
+    assert lmi_residual(M, beta, common.D_left, common.D_right, common.G) > 0
+    cond = raw.conditioned()
+    for D in (cond.D_left, cond.D_right):  # each block conditioned, the structure kept
+        assert np.allclose(D, np.diag(np.diag(D)))
+        assert np.all(np.diag(D).real >= CONDITION_FLOOR * np.diag(raw.D_right).real)
+
+
+def test_cover_that_cannot_close_says_where_and_why():
+    """A lightly damped mode and an undamped one at 2 rad/s: ``M`` is unbounded at 2 rad/s. The
+    cover proves the rest of the axis, leaves a gap around 2 rad/s and names it."""
+    A = np.zeros((4, 4))
+    A[:2, :2] = [[-0.5, 3.0], [-3.0, -0.5]]
+    A[2:, 2:] = [[0.0, 2.0], [-2.0, 0.0]]
+    real = Realization(A, [[0.0], [1.0], [0.0], [1.0]], [[1.0, 0.0, 0.1, 0.0]], [[0.0]])
+    cert = cover_axis(real, mu_solver(real, [[1, 1]]), [0.0, 3.0], floor=0.5)
+    assert not cert.covered and cert.upper == np.inf
+    assert "pole on the imaginary axis at omega = 2 rad/s" in cert.reason
+    assert len(cert.gaps) == 1 and cert.gaps[0][0] < 2.0 < cert.gaps[0][1]
+    assert "NOT" not in cert.summary() and "except on the gaps" in cert.summary()
+    # the guarantee kept on the rest holds there (sampled LMI, no Hamiltonian)
+    omega = dense_frequencies(cert, per_decade=100)
+    outside = assert_lmi_holds_where_claimed(real, cert, omega)
+    a, b = cert.gaps[0]
+    assert np.all((outside >= a) & (outside <= b))
+    # |M(j omega)| (one complex scalar: mu = |M|) is below the level outside the gap
+    gain = np.abs(real.response(omega)[:, 0, 0])
+    keep = (omega < a) | (omega > b)
+    assert np.all(gain[keep] <= cert.upper_on_cover)
+    assert cert.check()["intervals_hold"]
+
+
+def test_robstab_says_when_its_bound_is_not_proved_everywhere():
+    k = ureal("k", 40.0, plusminus=10.0)
+    loop = feedback(k * control.tf(1, [1, 6, 11, 6]), 1)  # stable for -6 < k < 60
+    sampled = robstab(loop, guaranteed=False)
+    assert not sampled.covered and "guaranteed=False" in sampled.reason
+    assert "NOT proved" in str(sampled)
+    proved = robstab(loop)
+    assert proved.covered and proved.reason == "" and "proved on the whole" in str(proved)
+    assert proved.lower <= 2.0 <= proved.upper * (1 + 1e-9)  # k = 40 + 10 delta: 60 at delta 2
+    table = proved.table()
+    assert table["covered"].all() and (table["reason"] == "").all()
