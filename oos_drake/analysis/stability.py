@@ -204,6 +204,17 @@ class AxisGuarantee:
     solved: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
 
     @property
+    def covered(self) -> bool:
+        """True when every configuration's cover closed (``mu_upper`` holds on the whole axis)."""
+        return not self.failures
+
+    @property
+    def reason(self) -> str:
+        """Why not (the configurations whose cover stayed open, one per line); empty when
+        ``covered``."""
+        return "\n".join(self.failures)
+
+    @property
     def raised(self) -> int:
         """Configurations whose cover needed a level above ``floor``."""
         return int(np.sum(self.levels > self.floor * (1 + 1e-12)))

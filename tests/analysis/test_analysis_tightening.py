@@ -102,6 +102,7 @@ def test_certified_sweep_brackets_the_closed_form_peak():
     mu_axis = np.abs(10 * gains[:, None] * G / (1 + 40 * gains[:, None] * G)).max(axis=1)
     guarantee = res.guarantees["k"]
     assert not guarantee.failures
+    assert guarantee.covered and guarantee.reason == ""
     assert np.all(guarantee.levels >= mu_axis)
     assert mu_axis.max() <= guarantee.mu_upper <= 1.02 * mu_axis.max()
     assert "guarantee" in res.timings
