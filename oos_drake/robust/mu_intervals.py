@@ -43,6 +43,16 @@ interval: ``-L^2 D_r`` decreases; an interval proved at a lower level stays vali
 grows), and adds points at the edges and in the middle of every gap until the intervals cover
 the axis. The guaranteed bound is the largest level; the :class:`AxisCertificate` keeps the
 points, their scalings, levels and intervals, and :meth:`AxisCertificate.check` proves them again.
+A cover that cannot close says so: poles of ``M`` on the axis (``M`` unbounded: the gap around
+them is never filled), an infinite level, or ``max_rounds`` rounds without a proof in a gap (with
+what stopped the points there, e.g. a ``Phi(inf)`` too ill-conditioned for the Hamiltonian
+test) end with ``covered`` False, the unproved ``gaps``, a one-line ``reason`` and the bound
+:attr:`AxisCertificate.upper_on_cover` that holds everywhere else.
+
+The scalings of each point are conditioned block by block and, across blocks, with the largest
+spread of :data:`SPREAD_FLOORS` that still proves the level at the point
+(:func:`proving_scalings`): the optimal scalings of an LFR with badly scaled channels are far
+apart between blocks, and bringing them closer than the slack allows leaves no interval at all.
 
 The same works for the skewed-mu bound of :func:`~oos_drake.robust.wcgain`: the rows of the
 performance outputs are divided by the gain level ``gamma`` and the LMI is taken at
@@ -72,8 +82,14 @@ AXIS_TOLERANCE = 1e-6
 STRICT = LMI_ROUNDOFF
 #: Default relative slack above the optimal bound at each point (intervals of non-zero width).
 SLACK = 0.005
-#: Smallest eigenvalue of the D scalings relative to the largest (see :meth:`Scalings.conditioned`).
+#: Smallest eigenvalue of each diagonal block of the D scalings relative to the block's largest
+#: (see :meth:`Scalings.conditioned`).
 CONDITION_FLOOR = 1e-10
+#: Smallest scaling relative to the largest of all blocks, tried in turn until the conditioned
+#: scalings prove the level at their frequency (:func:`proving_scalings`): the first keeps the
+#: scaled realization of :class:`_Multiplier` accurate; the next ones are needed by LFRs whose
+#: channels are badly scaled (optimal scalings 1e-12 apart between blocks).
+SPREAD_FLOORS = (1e-10, 1e-12, 1e-14, 0.0)
 
 
 @dataclass(frozen=True)
@@ -268,9 +284,11 @@ class Scalings:
     D_right: np.ndarray
     G: np.ndarray
 
-    def conditioned(self, floor: float = CONDITION_FLOOR) -> Scalings:
+    def conditioned(
+        self, floor: float = CONDITION_FLOOR, spread: float = SPREAD_FLOORS[0]
+    ) -> Scalings:
         """Each diagonal block ``D_b`` of ``D_l`` and ``D_r`` replaced by ``D_b + e_b I``,
-        ``e_b = floor * lambda_max(D_b)``.
+        ``e_b = max(floor * lambda_max(D_b), spread * lambda_max(D_r))``.
 
         The blocks are the connected components of the scalings' sparsity pattern (a repeated
         scalar's full ``D_b``, equal on both sides; a full block's scalar, one entry at a time),
@@ -278,16 +296,22 @@ class Scalings:
         bound reached by unbounded scalings can make a block ``D_b`` singular to 1e16, where the
         sign of ``Phi`` is round-off; after this each block is conditioned to ``1 / floor``.
 
-        The floor is relative to each block, not to the largest scaling of all: the ratio of
-        different blocks' scalings carries the channel scaling of the LFR (an ``M`` with entries
-        of 1e4 in the row of a badly scaled channel and 1e-6 in its column has optimal scalings
-        1e-12 apart), and a common ``e`` would add ``e ||M||^2`` to ``Phi``, more than the slack
-        of the level (the RCT two-mass example: no interval at all). Per block, the change of
-        ``Phi`` is at most ``floor`` times its own terms in the scaled form (:class:`_Multiplier`)
-        and stays far below ``slack * beta^2``; :func:`dg_interval` checks it anyway.
+        ``floor`` is relative to each block: the change of ``Phi`` is at most ``floor`` times
+        its own terms in the scaled form (:class:`_Multiplier`). ``spread`` bounds the ratio of
+        different blocks' scalings, which carries the channel scaling of the LFR (an ``M`` with
+        entries of 1e4 in the row of a badly scaled channel and 1e-6 in its column has optimal
+        scalings 1e-12 apart): it adds ``e ||M||^2`` to ``Phi``, which can exceed the slack of
+        the level (the RCT two-mass example, ``spread = 1e-10``: no interval at all), so
+        :func:`proving_scalings` lowers it until the scalings prove the level; a smaller
+        ``spread`` costs accuracy of the scaled realization, and :func:`dg_interval` checks the
+        sign at the point anyway.
         """
+        top = float(np.max(np.linalg.eigvalsh(0.5 * (self.D_right + np.conj(self.D_right.T)))))
+        least = spread * max(top, 0.0)
         return Scalings(
-            _floor_blocks(self.D_left, floor), _floor_blocks(self.D_right, floor), self.G
+            _floor_blocks(self.D_left, floor, least),
+            _floor_blocks(self.D_right, floor, least),
+            self.G,
         )
 
 
@@ -301,14 +325,15 @@ def _diagonal_blocks(D: np.ndarray) -> list:
     return [np.flatnonzero(label == k) for k in range(count)]
 
 
-def _floor_blocks(D: np.ndarray, floor: float) -> np.ndarray:
-    """``D`` with ``floor * lambda_max(D_b) I`` added to each diagonal block ``D_b``."""
+def _floor_blocks(D: np.ndarray, floor: float, least: float = 0.0) -> np.ndarray:
+    """``D`` with ``max(floor * lambda_max(D_b), least) I`` added to each diagonal block
+    ``D_b``."""
     D = 0.5 * (np.asarray(D) + np.conj(np.asarray(D).T))
     out = D.astype(np.result_type(D, float), copy=True)
     for idx in _diagonal_blocks(D):
         block = D[np.ix_(idx, idx)]
         top = float(np.max(np.linalg.eigvalsh(block))) if idx.size > 1 else float(block[0, 0].real)
-        out[idx, idx] += floor * max(top, 0.0)
+        out[idx, idx] += max(floor * max(top, 0.0), least)
     return out
 
 
@@ -400,7 +425,10 @@ class _Multiplier:
         R = 0.5 * (R + np.conj(R.T))
         ev = np.linalg.eigvalsh(R)
         if np.min(np.abs(ev)) <= 1e-12 * max(np.max(np.abs(ev)), self.ref):
-            raise ValueError("Phi(inf) is singular at this level: no Hamiltonian test")
+            raise ValueError(
+                "Phi(inf) is singular or ill-conditioned (above 1e12) at this level: "
+                "no Hamiltonian test"
+            )
         Q = CH @ P11 @ C
         S = CH @ (P11 @ D + P12)
         RiSH = np.linalg.solve(R, np.conj(S.T))
@@ -446,8 +474,10 @@ def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: floa
         If the LMI does not hold strictly at ``omega0``, or ``Phi(inf)`` is singular.
     """
     for name, Dx in (("D_left", scalings.D_left), ("D_right", scalings.D_right)):
-        low, high = _block_conditions(0.5 * (Dx + np.conj(np.asarray(Dx).T)))
-        if not low > 0.1 * CONDITION_FLOOR * high:
+        Dx = 0.5 * (Dx + np.conj(np.asarray(Dx).T))
+        low, high = _block_conditions(Dx)
+        ev = np.linalg.eigvalsh(Dx)
+        if not (low > 0.1 * CONDITION_FLOOR * high and ev[0] > 0.1 * SPREAD_FLOORS[-1] * ev[-1]):
             raise ValueError(
                 f"dg_interval: a block of {name} is not positive definite to round-off "
                 f"(eigenvalues {low:.3g} .. {high:.3g}); use Scalings.conditioned()"
@@ -803,6 +833,14 @@ def cover_axis(
     spans = np.array([proved[i][1] for i in order]).reshape(-1, 2)
     levels = np.array([proved[i][0] for i in order], dtype=float)
     left = () if covered else tuple((float(a), float(b)) for a, b in _gaps(spans, end))
+    why = set()  # what stopped the points inside the gaps (dg_interval's errors, once each)
+    for w, sc in zip(omega, scs, strict=True):
+        if not covered and sc is not None and any(a <= w <= b for a, b in left):
+            r, beta = _level_problem(real, performance_rows, level)
+            try:
+                dg_interval(r, sc, beta, w)
+            except ValueError as err:
+                why.add(str(err).replace("dg_interval: ", "").split(" at omega")[0])
     return AxisCertificate(
         upper=float(np.max(levels)) if covered else np.inf,
         omega=np.asarray(omega)[order],
@@ -815,12 +853,12 @@ def cover_axis(
         covered=covered,
         realization=real,
         performance_rows=performance_rows,
-        reason="" if covered else _why_open(left, stuck, level, rounds, real),
+        reason="" if covered else _why_open(left, stuck, level, rounds, real, why),
         gaps=left,
     )
 
 
-def _why_open(gaps, stuck, level, rounds, real) -> str:
+def _why_open(gaps, stuck, level, rounds, real, why=()) -> str:
     """The ``reason`` of a cover that did not close (one line)."""
     where = ", ".join(f"[{a:.6g}, {b:.6g}]" for a, b in gaps[:4])
     where += " ..." if len(gaps) > 4 else ""
@@ -836,9 +874,10 @@ def _why_open(gaps, stuck, level, rounds, real) -> str:
             f"not proved on {where} rad/s: no finite level there (the bound is infinite: "
             "I - M Delta singular for every size, or an ill-posed LFR)"
         )
+    detail = f" ({'; '.join(sorted(why))})" if why else ""
     return (
         f"not proved on {where} rad/s at level {level:.6g}: {rounds} rounds of added points "
-        "found no scalings that prove it there"
+        f"found no scalings that prove it there{detail}"
     )
 
 
@@ -897,7 +936,10 @@ def scalings_at(real: Realization, blk, omega, params) -> tuple:
         return np.zeros(0), []
     res = mu_upper_bound(real.response(omega), parse_blk(blk), max_iter=0, x0=np.asarray(params))
     scalings = [
-        Scalings(res.D_left[i], res.D_right[i], res.G[i]).conditioned() for i in range(omega.size)
+        proving_scalings(
+            real, Scalings(res.D_left[i], res.D_right[i], res.G[i]), res.upper[i] * (1 + SLACK), w
+        )
+        for i, w in enumerate(omega)
     ]
     return res.upper, scalings
 
@@ -998,7 +1040,12 @@ class _MuSolver:
             Dl[rows], Dr[rows], G[rows] = more.D_left[better], more.D_right[better], more.G[better]
         self.solved_omega.extend(omega.tolist())
         self.solved_params.extend(list(params))
-        scalings = [Scalings(Dl[i], Dr[i], G[i]).conditioned() for i in range(omega.size)]
+        scalings = [
+            proving_scalings(
+                self.real, Scalings(Dl[i], Dr[i], G[i]), upper[i] * (1 + self.slack), w
+            )
+            for i, w in enumerate(omega)
+        ]
         return upper, upper * (1.0 + self.slack), scalings
 
     def _nearest_start(self, omega: float) -> np.ndarray:
@@ -1009,8 +1056,33 @@ class _MuSolver:
 
 def _proves(real: Realization, sc: Scalings, beta: float, omega: float) -> bool:
     """True if the conditioned scalings prove ``mu <= beta`` strictly at ``omega`` [rad/s]."""
-    try:
-        mult = _Multiplier(real, sc.conditioned(), beta)
-    except np.linalg.LinAlgError:
+    return _proves_as_is(real, proving_scalings(real, sc, beta, omega), beta, omega)
+
+
+def _proves_as_is(real: Realization, sc: Scalings, beta: float, omega: float) -> bool:
+    """True if the scalings, as they are, prove ``mu <= beta`` strictly at ``omega``."""
+    if not np.isfinite(beta):
         return False
-    return bool(mult.max_eig([float(real.to_nu(omega))])[0] < -STRICT)
+    try:
+        mult = _Multiplier(real, sc, beta)
+        if not mult.max_eig([float(real.to_nu(omega))])[0] < -STRICT:
+            return False
+        mult.crossings()  # the Hamiltonian test needs Phi(inf) nonsingular
+    except (np.linalg.LinAlgError, ValueError):
+        return False
+    return True
+
+
+def proving_scalings(real: Realization, sc: Scalings, beta: float, omega: float) -> Scalings:
+    """``sc`` conditioned (:meth:`Scalings.conditioned`) with the first ``spread`` of
+    :data:`SPREAD_FLOORS` whose scalings prove ``mu <= beta`` strictly at ``omega`` [rad/s] on
+    ``real`` (with ``performance_rows`` already divided out: see :func:`_level_problem`); the
+    first one if none does (the cover then proves no interval there and bisects).
+    """
+    first = None
+    for spread in SPREAD_FLOORS:
+        out = sc.conditioned(spread=spread)
+        if _proves_as_is(real, out, beta, omega):
+            return out
+        first = out if first is None else first
+    return first

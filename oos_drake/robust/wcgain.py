@@ -45,6 +45,7 @@ from oos_drake.robust.mu_intervals import (
     Realization,
     Scalings,
     cover_axis,
+    proving_scalings,
 )
 from oos_drake.robust.mu_lower import mu_lower_bound
 from oos_drake.robust.mu_upper import mu_upper_bound
@@ -377,7 +378,12 @@ def _gain_solver(real, nz, nw, blk, slack, tol, iterations, polish_above):
             res = mu_upper_bound(Mg, s_aug, **POLISH_OPTIONS)
             ok = res.upper < 1.0 - 1e-9
             for j in np.flatnonzero(ok):
-                scalings[todo[j]] = Scalings(res.D_left[j], res.D_right[j], res.G[j]).conditioned()
+                i = todo[j]
+                raw = Scalings(res.D_left[j], res.D_right[j], res.G[j])
+                rows = slice(nz, real.D.shape[0])
+                scalings[i] = proving_scalings(
+                    real.scale_rows(rows, 1.0 / level[i]), raw, 1.0, omega[i]
+                )
             level[todo[~ok]] *= 1.0 + slack
             todo = todo[~ok]
         level[todo] = np.inf

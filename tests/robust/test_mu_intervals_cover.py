@@ -17,13 +17,14 @@ import pytest
 from oos_drake.lfr import feedback, ureal
 from oos_drake.robust import mussv, robstab
 from oos_drake.robust.mu_intervals import (
-    CONDITION_FLOOR,
     SLACK,
+    SPREAD_FLOORS,
     Realization,
     Scalings,
     cover_axis,
     dg_interval,
     mu_solver,
+    proving_scalings,
 )
 from oos_drake.robust.mu_upper import lmi_residual
 
@@ -105,28 +106,27 @@ def test_two_mass_guarantee_against_vertex_brute_force(two_mass):
     assert smallest <= 1.01 * res.lower
 
 
-def test_per_block_conditioning_keeps_the_proof(two_mass):
+def test_conditioning_keeps_the_proof(two_mass):
     """The root cause: at 403 rad/s the optimal scalings of the two-mass ``M`` (entries 1e4 in
-    the row of a badly scaled channel) are 1e-11 apart between blocks; conditioning them block
-    by block keeps the LMI strict at 1.005 times the bound, a common floor of 1e-10 of the
-    largest does not."""
+    the row of a badly scaled channel) are 1e-11 apart between blocks; a common floor of 1e-10
+    of the largest (the former conditioning) breaks the LMI at 1.005 times the bound, the
+    scalings :func:`proving_scalings` conditions keep it and prove an interval around it."""
     _, real, blk, _ = two_mass
     w = 403.0
-    res = mussv(real.response([w]), blk)
+    M = real.response([w])
+    res = mussv(M, blk)
     raw = Scalings(res.D_left[0], res.D_right[0], res.G[0])
     beta = (1 + SLACK) * float(res.upper[0])
-    lo, hi = dg_interval(real, raw.conditioned(), beta, w)
+    assert lmi_residual(M[0], beta, raw.D_left, raw.D_right, raw.G) < 0  # mussv's own proof
+    common = raw.conditioned(spread=SPREAD_FLOORS[0])
+    assert lmi_residual(M[0], beta, common.D_left, common.D_right, common.G) > 0
+    kept = proving_scalings(real, raw, beta, w)
+    assert lmi_residual(M[0], beta, kept.D_left, kept.D_right, kept.G) < 0
+    lo, hi = dg_interval(real, kept, beta, w)
     assert lo < w < hi
-    e = CONDITION_FLOOR * np.max(np.linalg.eigvalsh(raw.D_right))
-    common = Scalings(
-        raw.D_left + e * np.eye(3), raw.D_right + e * np.eye(3), raw.G
-    )  # the former conditioning
-    M = real.response([w])[0]
-    assert lmi_residual(M, beta, common.D_left, common.D_right, common.G) > 0
-    cond = raw.conditioned()
-    for D in (cond.D_left, cond.D_right):  # each block conditioned, the structure kept
-        assert np.allclose(D, np.diag(np.diag(D)))
-        assert np.all(np.diag(D).real >= CONDITION_FLOOR * np.diag(raw.D_right).real)
+    for D, D0 in ((kept.D_left, raw.D_left), (kept.D_right, raw.D_right)):
+        assert np.allclose(D, np.diag(np.diag(D)))  # the structure kept (scalar blocks)
+        assert np.all(np.diag(D).real >= np.diag(D0).real)
 
 
 def test_cover_that_cannot_close_says_where_and_why():
