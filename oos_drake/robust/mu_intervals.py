@@ -316,13 +316,16 @@ class Scalings:
 
 
 def _diagonal_blocks(D: np.ndarray) -> list:
-    """Index arrays of the diagonal blocks of a block-diagonal ``D`` (connected components of
-    its nonzero pattern)."""
-    from scipy.sparse.csgraph import connected_components
-
+    """Index ranges of the diagonal blocks of a block-diagonal ``D`` (the scalings of a block
+    structure: contiguous blocks): a block ends at ``i`` when no nonzero entry of the rows up to
+    ``i`` lies right of column ``i``."""
     pattern = np.abs(np.asarray(D)) > 0
-    count, label = connected_components(pattern, directed=False)
-    return [np.flatnonzero(label == k) for k in range(count)]
+    n = pattern.shape[0]
+    cols = np.arange(n)
+    reach = np.where(pattern.any(axis=1), np.max(np.where(pattern, cols, -1), axis=1), cols)
+    ends = np.flatnonzero(np.maximum.accumulate(np.maximum(reach, cols)) == cols)
+    starts = np.r_[0, ends[:-1] + 1]
+    return [np.arange(a, b + 1) for a, b in zip(starts, ends, strict=True)]
 
 
 def _floor_blocks(D: np.ndarray, floor: float, least: float = 0.0) -> np.ndarray:
@@ -330,6 +333,10 @@ def _floor_blocks(D: np.ndarray, floor: float, least: float = 0.0) -> np.ndarray
     ``D_b``."""
     D = 0.5 * (np.asarray(D) + np.conj(np.asarray(D).T))
     out = D.astype(np.result_type(D, float), copy=True)
+    diagonal = np.diagonal(D).real
+    if not np.any(D - np.diag(np.diagonal(D))):  # scalar blocks only: one entry each
+        out[np.diag_indices_from(out)] += np.maximum(floor * np.maximum(diagonal, 0.0), least)
+        return out
     for idx in _diagonal_blocks(D):
         block = D[np.ix_(idx, idx)]
         top = float(np.max(np.linalg.eigvalsh(block))) if idx.size > 1 else float(block[0, 0].real)
@@ -1059,15 +1066,19 @@ def _proves(real: Realization, sc: Scalings, beta: float, omega: float) -> bool:
     return _proves_as_is(real, proving_scalings(real, sc, beta, omega), beta, omega)
 
 
-def _proves_as_is(real: Realization, sc: Scalings, beta: float, omega: float) -> bool:
-    """True if the scalings, as they are, prove ``mu <= beta`` strictly at ``omega``."""
+def _proves_as_is(
+    real: Realization, sc: Scalings, beta: float, omega: float, hamiltonian: bool = False
+) -> bool:
+    """True if the scalings, as they are, prove ``mu <= beta`` strictly at ``omega`` (and, with
+    ``hamiltonian``, have a ``Phi(inf)`` the Hamiltonian test of :func:`dg_interval` accepts)."""
     if not np.isfinite(beta):
         return False
     try:
         mult = _Multiplier(real, sc, beta)
         if not mult.max_eig([float(real.to_nu(omega))])[0] < -STRICT:
             return False
-        mult.crossings()  # the Hamiltonian test needs Phi(inf) nonsingular
+        if hamiltonian:
+            mult.crossings()
     except (np.linalg.LinAlgError, ValueError):
         return False
     return True
@@ -1079,10 +1090,11 @@ def proving_scalings(real: Realization, sc: Scalings, beta: float, omega: float)
     ``real`` (with ``performance_rows`` already divided out: see :func:`_level_problem`); the
     first one if none does (the cover then proves no interval there and bisects).
     """
-    first = None
-    for spread in SPREAD_FLOORS:
+    first = sc.conditioned(spread=SPREAD_FLOORS[0])
+    if _proves_as_is(real, first, beta, omega):  # the usual case: one evaluation of Phi
+        return first
+    for spread in SPREAD_FLOORS[1:]:  # rarer: also check that the Hamiltonian test can run
         out = sc.conditioned(spread=spread)
-        if _proves_as_is(real, out, beta, omega):
+        if _proves_as_is(real, out, beta, omega, hamiltonian=True):
             return out
-        first = out if first is None else first
     return first
