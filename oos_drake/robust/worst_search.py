@@ -40,6 +40,7 @@ import scipy.linalg
 from scipy.optimize import minimize
 
 from oos_drake.robust.blocks import REAL, BlockStructure
+from oos_drake.robust.lfr_analysis import delta_channel_response
 from oos_drake.robust.mu_lower import CERTIFICATE_RTOL, certificate_residual
 
 #: Largest number of vertices checked one by one (``2^12``); beyond, random vertices.
@@ -83,8 +84,6 @@ class Destabilizing:
         -------
         bool
         """
-        from oos_drake.robust.lfr_analysis import delta_channel_response
-
         d = np.asarray(self.delta, dtype=complex)
         if d.shape != (structure.n_rows, structure.n_cols) or not np.all(np.isfinite(d)):
             return False
@@ -121,7 +120,9 @@ def closed_loop(A, Bw, Cz, Dzw, delta):
     ok = np.linalg.cond(X) < 1e12
     out = np.full((delta.shape[0],) + A.shape, np.nan, dtype=np.result_type(A, delta))
     if np.any(ok):
-        out[ok] = A + Bw @ delta[ok] @ np.linalg.solve(X[ok], np.broadcast_to(Cz, X[ok].shape[:1] + Cz.shape))
+        out[ok] = A + Bw @ delta[ok] @ np.linalg.solve(
+            X[ok], np.broadcast_to(Cz, X[ok].shape[:1] + Cz.shape)
+        )
     return out
 
 
@@ -169,6 +170,26 @@ class _RealLoop:
         dl = (q[self.rows] * p[self.cols]) / (np.conj(u) @ v)
         grad = np.bincount(self.owner, weights=dl.real, minlength=self.k)
         return float(lam[i].real), grad
+
+    def smallest_crossing(self, directions, level, steps=48):
+        """The direction whose ray reaches the axis first, and that scale.
+
+        Bisection on a common level: the directions unstable at the level stay candidates
+        (each then has a crossing at or below it). Returns ``(index, scale)`` or
+        ``(None, inf)`` when every ray is stable at ``level``.
+        """
+        alive = np.flatnonzero(self.abscissa(level * directions) >= 0)
+        if alive.size == 0:
+            return None, np.inf
+        lo, hi = 0.0, float(level)
+        for _ in range(steps):
+            mid = 0.5 * (lo + hi)
+            bad = self.abscissa(mid * directions[alive]) >= 0
+            if np.any(bad):
+                hi, alive = mid, alive[bad]
+            else:
+                lo = mid
+        return int(alive[0]), hi
 
     def crossing(self, x, t_hi):
         """Scale ``t`` in ``(0, t_hi]`` where the rays ``t x`` reach the axis (first unstable
@@ -267,35 +288,35 @@ def real_destabilizing(
     if start is not None and np.abs(start).max() > 0:
         s = np.asarray(start, dtype=float)
         sources.insert(0, ("start", (s / np.abs(s).max())[None]))
-    best_t, best_x, best_src = np.inf, None, ""
-    level = float(scale) * (1.0 + 1e-9)
-    ranked = []
-    for name, dirs in sources:
-        t = loop.crossing(dirs, np.full(dirs.shape[0], level))
-        finite = np.isfinite(t)
-        ranked.extend((float(t[i]), dirs[i] * t[i], name) for i in np.flatnonzero(finite))
-        if np.any(finite) and t[finite].min() < best_t:
-            i = int(np.argmin(np.where(finite, t, np.inf)))
-            best_t, best_x, best_src = float(t[i]), dirs[i] * t[i], name
-    if best_x is None:
+    dirs = np.vstack([d for _, d in sources])
+    labels = np.concatenate([[name] * len(d) for name, d in sources])
+    i, best_t = loop.smallest_crossing(dirs, float(scale) * (1.0 + 1e-9))
+    if i is None:
         return None
+    best_x, best_src = dirs[i] * best_t, str(labels[i])
+    # runners-up (most unstable just above the best level), then the edges next to them
+    alpha = loop.abscissa(1.03 * best_t * dirs)
+    top = [j for j in np.argsort(-alpha)[:local_starts] if alpha[j] >= 0]
+    ranked = [(best_t, best_x, best_src)]
+    t = loop.crossing(dirs[top], np.full(len(top), 1.03 * best_t))
+    ranked += [
+        (float(t[m]), dirs[j] * t[m], str(labels[j]))
+        for m, j in enumerate(top)
+        if np.isfinite(t[m])
+    ]
     ranked.sort(key=lambda item: item[0])
-    # edges next to the best vertices: each coordinate moved along its edge
     edge_points = []
-    for t, x, name in ranked[: max(local_starts, 1)]:
+    for _, x, _ in ranked[:local_starts]:
         d = x / np.abs(x).max()
         for j in range(k):
             for value in np.linspace(-1.0, 1.0, 9)[1:-1]:
                 e = d.copy()
                 e[j] = value
                 edge_points.append(e)
-    if edge_points:
-        edge_points = np.array(edge_points)
-        t = loop.crossing(edge_points, np.full(len(edge_points), best_t))
-        for i in np.flatnonzero(np.isfinite(t)):
-            ranked.append((float(t[i]), edge_points[i] * t[i], "edge"))
-        ranked.sort(key=lambda item: item[0])
-        best_t, best_x, best_src = ranked[0]
+    j, t_edge = loop.smallest_crossing(np.array(edge_points), best_t * (1 - 1e-12))
+    if j is not None:
+        ranked.insert(0, (t_edge, edge_points[j] * t_edge, "edge"))
+    best_t, best_x, best_src = ranked[0]
     for t0, x0, name in ranked[:local_starts]:
         t_loc, x_loc = _local_search(loop, x0, t0, rounds)
         if t_loc < best_t * (1 - 1e-12):
@@ -334,8 +355,6 @@ def _local_search(loop, x0, s0, rounds):
 def _certify_real(loop, x, source):
     """The exact crossing near the closed-loop pole of ``x`` on the axis: the eigenvalue of
     ``M11(j omega) X`` made real by a secant search in ``omega``; None if not certified."""
-    from oos_drake.robust.lfr_analysis import delta_channel_response
-
     D = loop.delta(x[None])[0]
     Acl = closed_loop(loop.A, loop.Bw, loop.Cz, loop.Dzw, D[None])[0]
     lam = np.linalg.eigvals(Acl)
@@ -428,7 +447,7 @@ def complex_phase_search(
         u, v = vl[:, i], vr[:, i]
         # d lambda / d theta_m = u^* M (j E_m D) v / (u^* v)
         w = np.conj(u) @ M  # (r,)
-        dv = (D @ v)  # (r,)
+        dv = D @ v  # (r,)
         dl = 1j * w[rows] * dv[rows] / (np.conj(u) @ v)
         dlam = np.bincount(owner, weights=dl.real, minlength=k) + 1j * np.bincount(
             owner, weights=dl.imag, minlength=k
@@ -505,8 +524,6 @@ def improve_destabilizing(
     Destabilizing or None
         Only when certified and strictly better than ``lower``.
     """
-    from oos_drake.robust.lfr_analysis import delta_channel_response
-
     rng = np.random.default_rng(0) if rng is None else rng
     kinds = {b.kind for b in structure.blocks}
     found = None
