@@ -147,7 +147,7 @@ class _RealLoop:
         return d
 
     def abscissa(self, x):
-        """Spectral abscissa [rad/s] of the closed loop at each row of ``x`` (``inf`` if ill-posed)."""
+        """Spectral abscissa [rad/s] of the closed loop at each row of ``x`` (inf: ill-posed)."""
         Acl = closed_loop(self.A, self.Bw, self.Cz, self.Dzw, self.delta(x))
         bad = ~np.all(np.isfinite(Acl), axis=(1, 2))
         out = np.full(Acl.shape[0], np.inf)
@@ -317,7 +317,7 @@ def real_destabilizing(
     if j is not None:
         ranked.insert(0, (t_edge, edge_points[j] * t_edge, "edge"))
     best_t, best_x, best_src = ranked[0]
-    for t0, x0, name in ranked[:local_starts]:
+    for t0, x0, _ in ranked[:local_starts]:
         t_loc, x_loc = _local_search(loop, x0, t0, rounds)
         if t_loc < best_t * (1 - 1e-12):
             best_t, best_x, best_src = t_loc, x_loc, "local"

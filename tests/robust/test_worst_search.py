@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from oos_drake.lfr import LFR, feedback, ureal, usubs
+from oos_drake.lfr import feedback, ureal, usubs
 from oos_drake.robust import mussv, robstab
 from oos_drake.robust.blocks import parse_blk
 from oos_drake.robust.worst_search import complex_phase_search, real_destabilizing
