@@ -690,6 +690,11 @@ def _named_perturbation(sub, delta: np.ndarray, omega: float) -> tuple[dict, dic
     return worst, normalized
 
 
+#: Effort of the analysis's box search (:func:`_with_box_search`): the configurations' models
+#: are large, the peak's lower bound already good; a light search keeps the analysis' cost.
+BOX_SEARCH_EFFORT = dict(random_directions=32, local_starts=1, rounds=4, max_vertices=256)
+
+
 def _with_box_search(cert, model_parts, name, times):
     """A better lower bound of a real-parameter subset's peak from the box searches.
 
@@ -725,7 +730,7 @@ def _with_box_search(cert, model_parts, name, times):
     if A.size and np.max(np.linalg.eigvals(A).real) >= 0:
         return cert
     scale = 1.0 / cert.mu_lower if cert.mu_lower > 0 else 4.0 / cert.mu_upper
-    found = real_destabilizing(A, Bw, Cz, Dzw, structure, scale=scale)
+    found = real_destabilizing(A, Bw, Cz, Dzw, structure, scale=scale, **BOX_SEARCH_EFFORT)
     if found is None or found.mu_lower <= cert.mu_lower * (1 + 1e-12):
         return cert
     worst, normalized = _named_perturbation(sub, found.delta, found.omega)

@@ -246,6 +246,7 @@ def real_destabilizing(
     random_directions: int = 200,
     local_starts: int = 3,
     rounds: int = 12,
+    max_vertices: int = MAX_VERTICES,
     rng: np.random.Generator | None = None,
 ) -> Destabilizing | None:
     """Smallest destabilizing box of real parameters: vertex, edge, ray and local searches.
@@ -267,6 +268,8 @@ def real_destabilizing(
         Best points from which the local search runs.
     rounds : int
         Rounds of each local search (maximize the abscissa on the box, bisect back).
+    max_vertices : int
+        All vertices up to this many (``2^k``), else this many random vertices.
     rng : numpy.random.Generator, optional
         Random directions (default: seeded).
 
@@ -283,7 +286,7 @@ def real_destabilizing(
     k = loop.k
     if scale is None:
         scale = float(np.abs(start).max()) if start is not None else 10.0
-    vertices, randoms = _box_directions(k, rng, random_directions)
+    vertices, randoms = _box_directions(k, rng, random_directions, max_vertices)
     sources = [("vertex", vertices), ("random", randoms)]
     if start is not None and np.abs(start).max() > 0:
         s = np.asarray(start, dtype=float)
@@ -295,9 +298,9 @@ def real_destabilizing(
         return None
     best_x, best_src = dirs[i] * best_t, str(labels[i])
     # runners-up (most unstable just above the best level), then the edges next to them
-    alpha = loop.abscissa(1.03 * best_t * dirs)
-    top = [j for j in np.argsort(-alpha)[:local_starts] if alpha[j] >= 0]
     ranked = [(best_t, best_x, best_src)]
+    alpha = loop.abscissa(1.03 * best_t * dirs) if local_starts > 1 else np.zeros(0)
+    top = [j for j in np.argsort(-alpha)[: local_starts - 1] if alpha[j] >= 0]
     t = loop.crossing(dirs[top], np.full(len(top), 1.03 * best_t))
     ranked += [
         (float(t[m]), dirs[j] * t[m], str(labels[j]))
