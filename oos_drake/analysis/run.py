@@ -4,8 +4,11 @@ Files written in ``out_dir`` (Parquet tables are tidy, units in column names):
 
 ``mu_mission.parquet``          mu bounds: subset x configuration x frequency (Fig. muanalysis)
 ``stability_peaks.parquet``     certified peak per subset: time, frequency, bounds, gap, margin; the
-                                peak upper bound proved on the whole frequency axis for each
-                                analyzed configuration (``mu upper guaranteed [-]`` ...)
+                                peak's interval is ``[mu lower [-], mu upper [-]]``: the best
+                                certified lower bound found (grid, refinement, searches) and the
+                                whole-axis guaranteed bound (``mu upper scope``: "whole axis";
+                                with --grid-only the analyzed points' bound, "analyzed points");
+                                the grid's largest upper bound is ``mu upper grid [-]``
 ``stability_guaranteed.parquet`` per study, subset and analyzed configuration: the peak of mu
                                 proved on the whole frequency axis beside the largest lower and
                                 upper bounds on the analyzed frequencies (not with ``--grid-only``)
