@@ -41,7 +41,7 @@ from scipy.optimize import minimize
 
 from oos_drake.robust.blocks import REAL, BlockStructure
 from oos_drake.robust.lfr_analysis import delta_channel_response
-from oos_drake.robust.mu_lower import CERTIFICATE_RTOL, certificate_residual
+from oos_drake.robust.mu_lower import CERTIFICATE_RTOL, certificate_residual, mu_lower_bound
 
 #: Largest number of vertices checked one by one (``2^12``); beyond, random vertices.
 MAX_VERTICES = 4096
@@ -497,6 +497,7 @@ def improve_destabilizing(
     mu_upper: np.ndarray,
     *,
     frequencies: int = 4,
+    restarts: int = 64,
     rng: np.random.Generator | None = None,
 ) -> Destabilizing | None:
     """A destabilizing perturbation better than the power iteration's, if the searches find one.
@@ -504,8 +505,9 @@ def improve_destabilizing(
     Real structures: :func:`real_destabilizing` from ``delta``'s direction (whole box, all
     frequencies at once through the closed-loop poles). Repeated complex scalar structures:
     :func:`complex_phase_search` at the ``frequencies`` largest upper bounds and at the
-    frequency of ``delta``. Other structures (mixed, full blocks): None (the power iteration
-    stands).
+    frequency of ``delta``. Other structures (mixed, full blocks): the power iteration of
+    :func:`~oos_drake.robust.mu_lower.mu_lower_bound` from ``restarts`` random starts (longer
+    runs) at those frequencies.
 
     Parameters
     ----------
@@ -519,7 +521,9 @@ def improve_destabilizing(
     omega, mu_upper : numpy.ndarray
         Analyzed frequencies [rad/s] and the upper bounds of mu there (where to search).
     frequencies : int
-        Frequencies searched for complex structures.
+        Frequencies searched for complex and mixed structures.
+    restarts : int
+        Random starts of the power iteration for mixed structures.
     rng : numpy.random.Generator, optional
 
     Returns
@@ -550,6 +554,17 @@ def improve_destabilizing(
             value, d, res = complex_phase_search(Mw, structure, start=delta, rng=rng)
             if value > 0 and res <= CERTIFICATE_RTOL and (found is None or value > found.mu_lower):
                 found = Destabilizing(value, float(w), d, res, "phases")
+    else:  # mixed or full blocks: the power iteration from many more starts
+        order = np.argsort(-np.asarray(mu_upper))[:frequencies]
+        where = list(np.asarray(omega)[order])
+        M = delta_channel_response(A, Bw, Cz, Dzw, where)
+        res = mu_lower_bound(M, structure, restarts=restarts, iters=200, polish_starts=8, rng=rng)
+        j = int(np.argmax(res.lower))
+        if res.lower[j] > 0 and res.residual[j] <= CERTIFICATE_RTOL:
+            found = Destabilizing(
+                float(res.lower[j]), float(where[j]), res.delta[j], float(res.residual[j]),
+                "restarts",
+            )  # fmt: skip
     if found is None or found.mu_lower <= lower * (1 + 1e-12):
         return None
     return found

@@ -275,3 +275,32 @@ def test_worst_gain_check_refuses_what_is_not_attained():
     assert not outside.check(A, B, C, D, nz, nw, structure)
     elsewhere = Worst(found.gain, 0.3 * found.omega, found.x, "x", 0)
     assert not elsewhere.check(A, B, C, D, nz, nw, structure)
+
+
+def test_robstab_mixed_structure_against_brute_force():
+    """``k G (1 + 0.4 D)`` in unit feedback, ``k`` real, ``D`` a scalar ``ultidyn``: at each
+    frequency and ``k = 1 + 0.5 x`` the singular ``D`` solves a linear equation, so the
+    smallest destabilizing size is ``min max(|x|, |delta(x, omega)|)`` on a dense grid."""
+    from oos_drake.lfr import ultidyn
+    from oos_drake.robust.lfr_analysis import block_map, delta_channel_response
+
+    k = ureal("k", 1.0, plusminus=0.5)
+    loop = feedback(k * control.tf(1, [0.5, 1.2, 1.4, 1]) * (1 + 0.4 * ultidyn("D", (1, 1))), 1)
+    res = robstab(loop, guaranteed=False)
+    A, Bw, Cz, Dzw = (np.asarray(m) for m in (loop.A, loop.Bw, loop.Cz, loop.Dzw))
+    omega = np.concatenate([[0.0], np.geomspace(0.1, 10.0, 2001)])
+    M = delta_channel_response(A, Bw, Cz, Dzw, omega)
+    ik = list(block_map(loop).names).index("k")
+    iD = 1 - ik
+    x = np.linspace(-0.3, 0.3, 2001)[:, None]
+    m11, m12, m21, m22 = (M[None, :, i, j] for i, j in ((ik, ik), (ik, iD), (iD, ik), (iD, iD)))
+    d = (1 - m11 * x) / (m22 * (1 - m11 * x) + m12 * m21 * x)
+    brute = float(np.maximum(np.abs(x), np.abs(d)).min())
+    assert res.upper <= brute * (1 + 5e-3)
+    # certified: the perturbation at the critical frequency makes I - M delta singular
+    Mc = delta_channel_response(A, Bw, Cz, Dzw, [res.critical_frequency])[0]
+    delta = np.zeros((2, 2), complex)
+    delta[ik, ik] = res.worst_case_normalized["k"]
+    delta[iD, iD] = np.asarray(res.worst_case_normalized["D"]).ravel()[0]
+    assert np.linalg.svd(np.eye(2) - Mc @ delta, compute_uv=False)[-1] < 1e-7
+    np.testing.assert_allclose(np.abs(delta).max(), res.upper, rtol=1e-9)
