@@ -205,7 +205,6 @@ class _RealLoop:
         idx = np.flatnonzero(unstable)
         if idx.size == 0:
             return out
-        lo = np.zeros(idx.size)
         hi = t_hi[idx].copy()
         for frac in np.linspace(0.1, 0.9, 9):  # the first crossing, not any crossing
             t = frac * t_hi[idx]
