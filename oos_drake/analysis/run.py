@@ -4,8 +4,11 @@ Files written in ``out_dir`` (Parquet tables are tidy, units in column names):
 
 ``mu_mission.parquet``          mu bounds: subset x configuration x frequency (Fig. muanalysis)
 ``stability_peaks.parquet``     certified peak per subset: time, frequency, bounds, gap, margin; the
-                                peak upper bound proved on the whole frequency axis for each
-                                analyzed configuration (``mu upper guaranteed [-]`` ...)
+                                peak's interval is ``[mu lower [-], mu upper [-]]``: the best
+                                certified lower bound found (grid, refinement, searches) and the
+                                whole-axis guaranteed bound (``mu upper scope``: "whole axis";
+                                with --grid-only the analyzed points' bound, "analyzed points");
+                                the grid's largest upper bound is ``mu upper grid [-]``
 ``stability_guaranteed.parquet`` per study, subset and analyzed configuration: the peak of mu
                                 proved on the whole frequency axis beside the largest lower and
                                 upper bounds on the analyzed frequencies (not with ``--grid-only``)
@@ -170,7 +173,8 @@ def _certify(array, study, subsets, *, configuration_label):
     for name, cert in study.certificates.items():
         report = study.reports[name]
         model = cert.model
-        upper, lower = cert.mu_upper, cert.mu_lower
+        lower, upper_grid = cert.mu_lower, cert.mu_upper
+        upper, upper_scope = peak_upper(cert, study.guarantees.get(name))
         rows.append(
             {
                 "study": array.study,
@@ -180,9 +184,10 @@ def _certify(array, study, subsets, *, configuration_label):
                 "frequency [Hz]": cert.frequency,
                 "mu lower [-]": lower,
                 "mu upper [-]": upper,
+                "mu upper scope": upper_scope,
                 "mu upper at critical [-]": cert.mu_upper_critical,
-                "mu upper grid [-]": upper,
-                "gap [%]": 100.0 * cert.gap,
+                "mu upper grid [-]": upper_grid,
+                "gap [%]": 100.0 * (upper - lower) / upper if upper > 0 else 0.0,
                 "gap_at_critical [%]": 100.0 * cert.gap_critical,
                 "margin [-]": 1.0 / upper if upper > 0 else np.inf,
                 "peak_model": cert.peak_model,
@@ -230,6 +235,31 @@ def _certify(array, study, subsets, *, configuration_label):
                 }
             )
     return pd.DataFrame(rows), pd.DataFrame(perturbation_rows), certificates
+
+
+def peak_upper(cert, guarantee) -> tuple[float, str]:
+    """The upper end of a peak's interval and what it covers.
+
+    The whole-axis guaranteed bound when the subset has one (every analyzed configuration,
+    every frequency in ``[0, inf)``), else the largest upper bound on the analyzed points.
+    Never below the certified lower bound (both are certificates; round-off only).
+
+    Parameters
+    ----------
+    cert : PeakCertificate
+        The subset's certified peak (``mu_lower``: the best lower bound of the grid, the
+        refinements and the searches; ``mu_upper``: the largest upper bound of the grid).
+    guarantee : AxisGuarantee or None
+        The subset's whole-axis guarantee.
+
+    Returns
+    -------
+    (float, str)
+        The bound [-] and its scope (``"whole axis"`` or ``"analyzed points"``).
+    """
+    if guarantee is not None and np.isfinite(guarantee.mu_upper):
+        return max(float(guarantee.mu_upper), float(cert.mu_lower)), "whole axis"
+    return max(float(cert.mu_upper), float(cert.mu_lower)), "analyzed points"
 
 
 def _write_perturbations(path: Path, study_certs: dict) -> Path:
@@ -452,6 +482,7 @@ def run_analysis(
             "frequency [Hz]": float(row["frequency [Hz]"]),
             "mu_lower": float(row["mu lower [-]"]),
             "mu_upper": float(row["mu upper [-]"]),
+            "mu_upper_scope": str(row["mu upper scope"]),
             "peak_stiffness": float(row["peak stiffness [N/m or N m/rad]"]),
             "peak_frequency [Hz]": float(row["peak_frequency [Hz]"]),
             "spikes_left": int(row["spikes_left"]),
@@ -640,7 +671,9 @@ def run_analysis(
             "grid_frequencies": int(omega.size),
             "nominal_stable_models": int((abscissa < 0).sum()),
             "mu_peak_upper": float(tot["mu upper [-]"]),
-            "mu_peak_upper_refined": float(tot["mu upper [-]"]),
+            "mu_peak_upper_scope": str(tot["mu upper scope"]),
+            "mu_peak_upper_grid": float(tot["mu upper grid [-]"]),
+            "mu_peak_upper_refined": float(tot["mu upper grid [-]"]),
             "mu_peak_lower": float(tot["mu lower [-]"]),
             "mu_upper_at_critical": float(tot["mu upper at critical [-]"]),
             "gap_percent": float(tot["gap [%]"]),

@@ -38,7 +38,7 @@ from oos_drake.analysis.tightening import (
     resolve_spikes,
 )
 from oos_drake.analysis.workers import ModelPool, PointTask
-from oos_drake.robust.blocks import parse_blk
+from oos_drake.robust.blocks import REAL, parse_blk
 from oos_drake.robust.lfr_analysis import block_map, subset_parts, worst_case_values
 from oos_drake.robust.sweep import (
     SweepOptions,
@@ -554,6 +554,7 @@ def certified_sweep(
                 times,
                 critical_iterations,
             )
+            certificates[name] = _with_box_search(certificates[name], model_parts, name, times)
             bar.update(1)
         bar.close()
         timings["tighten+certify"] = _time.perf_counter() - clock
@@ -700,6 +701,63 @@ def _named_perturbation(sub, delta: np.ndarray, omega: float) -> tuple[dict, dic
     return worst, normalized
 
 
+#: Effort of the analysis's box search (:func:`_with_box_search`): the configurations' models
+#: are large, the peak's lower bound already good; a light search keeps the analysis' cost.
+BOX_SEARCH_EFFORT = dict(random_directions=32, local_starts=1, rounds=4, max_vertices=256)
+
+
+def _with_box_search(cert, model_parts, name, times):
+    """A better lower bound of a real-parameter subset's peak from the box searches.
+
+    For subsets of ``ureal`` blocks only, the vertices, edges, random directions and a local
+    search of the parameter box (:func:`~oos_drake.robust.worst_search.real_destabilizing`)
+    at the critical configuration; a certified perturbation smaller than the peak's replaces
+    it (``source = "box search"``).
+
+    Parameters
+    ----------
+    cert : PeakCertificate
+    model_parts : callable
+        ``(model, subset name) -> (A, Bw, Cz, Dzw, blk, block map, reduced)``.
+    name : str
+        The subset.
+    times : numpy.ndarray
+        Scheduling value of each configuration.
+
+    Returns
+    -------
+    PeakCertificate
+    """
+    import dataclasses
+
+    from oos_drake.robust.worst_search import real_destabilizing
+
+    if cert.model < 0 or (cert.mu_lower <= 0 and cert.mu_upper <= 0):
+        return cert
+    A, Bw, Cz, Dzw, blk, sub, _ = model_parts(cert.model, name)
+    structure = parse_blk(blk)
+    if any(b.kind != REAL for b in structure.blocks):
+        return cert
+    if A.size and np.max(np.linalg.eigvals(A).real) >= 0:
+        return cert
+    scale = 1.0 / cert.mu_lower if cert.mu_lower > 0 else 4.0 / cert.mu_upper
+    found = real_destabilizing(A, Bw, Cz, Dzw, structure, scale=scale, **BOX_SEARCH_EFFORT)
+    if found is None or found.mu_lower <= cert.mu_lower * (1 + 1e-12):
+        return cert
+    worst, normalized = _named_perturbation(sub, found.delta, found.omega)
+    return dataclasses.replace(
+        cert,
+        frequency=float(found.omega / (2 * np.pi)),
+        mu_lower=float(found.mu_lower),
+        mu_upper=max(cert.mu_upper, found.mu_lower),
+        mu_upper_critical=max(cert.mu_upper, found.mu_lower),  # the peak's bound holds there
+        delta=found.delta,
+        worst_case=worst,
+        worst_case_normalized=normalized,
+        source="box search",
+    )
+
+
 def _with_infinite_frequency(cert, Dzw, part, sub, times, iterations: int):
     """Add the point ``omega = inf`` (the loop's well-posedness) to a certified peak.
 
@@ -781,7 +839,8 @@ class PeakCertificate:
         Its scheduling value and frequency [Hz].
     source : str
         Where the lower bound comes from: ``"grid"`` (power iteration), ``"search"`` (direct
-        search of a pole crossing) or ``"well-posedness"`` (a perturbation making the loop
+        search of a pole crossing), ``"box search"`` (vertices, edges and a local search of a
+        real parameter box) or ``"well-posedness"`` (a perturbation making the loop
         ill-posed: ``frequency`` is then ``inf``).
     spikes_left : int
         Analyzed points whose upper bound still exceeds ``(1 + target gap) mu_lower``.

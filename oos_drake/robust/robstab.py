@@ -10,7 +10,10 @@ stable for the whole modeled uncertainty. The bounds:
   cover ``[0, inf)``; ``guarantee`` holds them); with ``guaranteed=False`` over the (refined)
   frequency grid only,
 * ``upper = 1 / max mu_lower``: a perturbation of that size, returned in ``worst_case`` (named,
-  physical values), puts a closed-loop pole on the imaginary axis at ``critical_frequency``.
+  physical values), puts a closed-loop pole on the imaginary axis at ``critical_frequency``;
+  the mu sweep's power iteration is improved by the searches of
+  :mod:`oos_drake.robust.worst_search` (box vertices, edges and a local search for real
+  parameters, a phase search for complex scalar blocks).
 
 Frequencies are chosen from the system's poles (log grid, dense clusters around lightly damped
 poles, ``omega = 0``) and refined around the peaks of both bounds; the bounds come from the
@@ -33,6 +36,7 @@ from oos_drake.robust.lfr_analysis import (
 from oos_drake.robust.mu_intervals import SLACK, AxisCertificate
 from oos_drake.robust.sweep import SweepOptions, sweep_models
 from oos_drake.robust.tables import sweep_table
+from oos_drake.robust.worst_search import improve_destabilizing
 
 
 @dataclass(frozen=True)
@@ -70,6 +74,10 @@ class RobStabResult:
     reason : str
         Why ``lower`` is not proved on the whole axis (empty when ``covered``): not requested,
         or the frequencies the cover could not prove and why.
+    worst_case_source : str
+        Which search found ``worst_case``: ``"power iteration"`` (the mu sweep), or
+        :func:`~oos_drake.robust.worst_search.improve_destabilizing`'s ``"vertex"``, ``"edge"``,
+        ``"random"``, ``"start"``, ``"local"``, ``"phases"``.
     """
 
     lower: float
@@ -84,6 +92,7 @@ class RobStabResult:
     guarantee: AxisCertificate | None = None
     covered: bool = False
     reason: str = ""
+    worst_case_source: str = "power iteration"
 
     def summary(self) -> str:
         """The bounds, the critical frequency and where the lower bound holds, one line."""
@@ -244,15 +253,21 @@ def robstab(
     else:
         peak_up, reason = float(up.max()), "guaranteed=False: analyzed frequencies only"
     peak_lo, wc, delta = pts.best[0]
+    structure = parse_blk(bmap.blk)
+    # searches beyond the power iteration (vertices, edges, local search; phases)
+    better = improve_destabilizing(A, Bw, Cz, Dzw, structure, peak_lo, delta, omega, up)
+    source = "power iteration"
+    if better is not None:
+        peak_lo, wc, delta, source = better.mu_lower, better.omega, better.delta, better.source
     lower = 1.0 / peak_up if peak_up > 0 else float("inf")
     upper = 1.0 / peak_lo if peak_lo > 0 else float("inf")
     worst, worst_norm = {}, {}
     if peak_lo > 0:
-        structure = parse_blk(bmap.blk)
         worst = worst_case_values(bmap, structure, delta, wc)
         worst_norm = normalized_worst_case(bmap, structure, delta)
     else:
         wc = float("nan")
     return RobStabResult(
-        lower, upper, wc, worst, worst_norm, True, omega, up, lo, guarantee, covered, reason
+        lower, upper, wc, worst, worst_norm, True, omega, up, lo, guarantee, covered, reason,
+        source,
     )
