@@ -1,20 +1,18 @@
 """Campaign report: summary tables (Parquet + printed pandas) and figures (PNG).
 
-Estimates use the run weights (1 for Monte Carlo and Latin hypercube; the likelihood ratios of the
-mu-guided sampler), so failure probabilities are unbiased for the spec's dispersions:
-
-.. math::
-
-    \\hat P_{fail} = \\frac{1}{N} \\sum_i w_i\\, 1[\\text{run } i \\text{ fails}],
-    \\qquad \\mathrm{se} = \\sqrt{\\mathrm{var}(w_i 1[\\cdot]) / N}
-
-A run fails when it did not finish (``failed``/``diverged``) or violates a requirement.
+Probabilities of violation are estimated for the spec's dispersions by
+:func:`probability_estimate` (:mod:`.estimators`: exact Clopper-Pearson for Monte Carlo runs, a
+betting interval for importance-weighted runs of the mu-guided sampler whose effective sample
+size reaches half the runs, else the runs drawn from the dispersions alone). A run fails when it
+did not finish (``failed``/``diverged``) or violates a requirement. The report states, per
+requirement, "N runs, k violations: P <= p at 95 %", whether that decides against the spec's
+``[estimation] target`` and how many more runs without violation would show ``P <= target``.
 
 Files written in ``DIR/report/``:
 
 - ``summary.parquet``: per metric: runs, weighted mean, min, quantiles, max, requirement,
-  violations, estimated violation probability, its standard error and a 95 % confidence
-  interval that holds with zero violations too (:func:`probability_interval`);
+  violations, estimated violation probability, its standard error, the confidence interval and its
+  method, the one-sided upper bound, the decision against the target and the runs still needed;
 - ``status.parquet``: runs per status; ``worst_runs.parquet``: the worst runs by requirement
   margin; ``regions.parquet`` (mu-guided): runs, failures and estimate per proposal region,
   with the analysis' worst-case performance gains of the region beside the worst metric of the
@@ -41,7 +39,7 @@ linear worst-case gain is therefore a flag to investigate, not a contradiction b
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import matplotlib
@@ -52,7 +50,7 @@ import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from oos_drake.campaign import store  # noqa: E402
+from oos_drake.campaign import estimators, store  # noqa: E402
 from oos_drake.campaign.distributions import Fixed  # noqa: E402
 from oos_drake.campaign.executors import execute_case  # noqa: E402
 from oos_drake.campaign.runner import (  # noqa: E402
@@ -113,98 +111,38 @@ def _save(fig, path: Path, rect=None) -> Path:
     return path
 
 
-@dataclass(frozen=True)
-class ProbabilityEstimate:
-    """An estimated probability with its confidence interval.
+def probability_estimate(spec, runs: pd.DataFrame, events: np.ndarray) -> estimators.Interval:
+    """P(event) under the spec's dispersions with the estimator the runs allow.
 
-    Attributes
-    ----------
-    p : float
-        Estimate [-].
-    se : float
-        Standard error [-].
-    low, high : float
-        Confidence interval [-].
-    method : str
-        ``"Clopper-Pearson"`` (exact binomial, unweighted runs) or ``"empirical Bernstein"``
-        (importance-weighted runs).
-    """
-
-    p: float
-    se: float
-    low: float
-    high: float
-    method: str
-
-
-def probability_interval(
-    weights: np.ndarray, indicator: np.ndarray, *, weight_bound: float, confidence: float = 0.95
-) -> ProbabilityEstimate:
-    r"""``P(indicator)`` with a confidence interval that holds with zero events too.
-
-    Unweighted runs (all weights 1): the exact binomial (Clopper-Pearson) interval, as
-    ``scipy.stats.binomtest(k, n).proportion_ci(method="exact")``: zero failures in ``n`` runs give
-    ``[0, 1 - (alpha/2)^(1/n)]``, not ``p = 0 +- 0``.
-
-    Importance-weighted runs (mu-guided): ``X_i = w_i 1[event]`` lies in ``[0, b]`` with ``b =
-    weight_bound`` (the defensive mixture bounds every weight by ``1 / defensive_fraction``), so the
-    empirical Bernstein bound of Maurer and Pontil (2009, theorem 4) applies on each side with
-    ``delta = (1 - confidence) / 2``:
-
-    .. math::
-
-        |\hat p - p| \le \sqrt{2 V_n \ln(2/\delta) / n} + \frac{7 b \ln(2/\delta)}{3 (n - 1)}
-
-    with ``V_n`` the sample variance of the ``X_i``. It assumes independent draws from the
-    mixture; the plan draws a fixed number of runs per component (stratified), which does not
-    increase the variance. Distribution-free, hence wide for small ``n``: it is a guarantee,
-    not an approximation.
+    - plain Monte Carlo (and Latin hypercube, whose variance is at most ``N/(N-1)`` times Monte
+      Carlo's, Owen 1997): exact Clopper-Pearson (:func:`.estimators.monte_carlo`);
+    - mu-guided (defensive mixture): importance sampling with the betting interval
+      (:func:`.estimators.importance_sampling`) when the effective sample size is at least
+      :data:`.estimators.MIN_ESS_FRACTION` of the runs; otherwise the runs drawn from the
+      dispersions alone (the defensive component: a plain Monte Carlo sample), Clopper-Pearson.
 
     Parameters
     ----------
-    weights : array_like
-        Run weights (likelihood ratios) [-].
-    indicator : array_like of bool
-        The event per run (a failure, a violated requirement).
-    weight_bound : float
-        Upper bound of every possible weight [-] (1 for plain Monte Carlo).
-    confidence : float
-        Confidence level of the interval [-].
+    spec : CampaignSpec
+        The campaign's spec (sampler, ``[estimation]`` confidence).
+    runs : pandas.DataFrame
+        The runs (``weight``, ``region`` columns), in run order.
+    events : array_like of bool
+        Per run: the event (violation, failure).
     """
-    from scipy.stats import binomtest
-
-    weights = np.asarray(weights, float)
-    events = np.asarray(indicator, bool)
-    n = weights.size
-    if n == 0:
-        return ProbabilityEstimate(math.nan, math.nan, math.nan, math.nan, "")
-    values = weights * events
-    p = float(values.mean())
-    se = float(np.std(values, ddof=1) / math.sqrt(n)) if n > 1 else math.nan
-    if np.all(weights == 1.0):
-        ci = binomtest(int(events.sum()), n).proportion_ci(confidence, method="exact")
-        return ProbabilityEstimate(p, se, float(ci.low), float(ci.high), "Clopper-Pearson")
-    if n < 2:
-        return ProbabilityEstimate(p, se, 0.0, 1.0, "empirical Bernstein")
-    log_term = math.log(4.0 / (1.0 - confidence))  # ln(2 / delta), delta = (1 - confidence) / 2
-    radius = math.sqrt(2.0 * np.var(values, ddof=1) * log_term / n)
-    radius += 7.0 * weight_bound * log_term / (3.0 * (n - 1))
-    return ProbabilityEstimate(
-        p, se, max(0.0, p - radius), min(1.0, p + radius), "empirical Bernstein"
-    )
-
-
-def weight_bound(spec) -> float:
-    """Largest possible run weight of the spec's sampler [-]: 1, or ``1 / defensive_fraction``."""
-    if spec.sampler.kind == "mu-guided":
-        return 1.0 / spec.sampler.defensive_fraction
-    return 1.0
-
-
-def effective_sample_size(weights: np.ndarray) -> float:
-    """Kish's effective sample size ``(sum w)^2 / sum w^2`` of importance weights [runs]."""
-    weights = np.asarray(weights, float)
-    return float(weights.sum() ** 2 / np.sum(weights**2)) if weights.size else 0.0
+    confidence = spec.estimation.confidence
+    events = np.asarray(events, bool)
+    if spec.sampler.kind != "mu-guided":
+        return estimators.monte_carlo(events, confidence)
+    order = np.argsort(runs["run_id"].to_numpy(), kind="stable")  # the order drawn
+    weights = runs["weight"].to_numpy(float)[order]
+    if estimators.effective_sample_size(weights) >= estimators.MIN_ESS_FRACTION * len(weights):
+        return estimators.importance_sampling(
+            events[order], weights, 1.0 / spec.sampler.defensive_fraction, confidence
+        )
+    defensive = runs["region"].to_numpy() == NOMINAL_COMPONENT
+    interval = estimators.monte_carlo(events[defensive], confidence)
+    return replace(interval, method="Clopper-Pearson on the defensive draws (ESS < 50 %)")
 
 
 def weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
@@ -276,7 +214,9 @@ def _summary_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
         }
         if requirement is not None:
             violated = ~runs[requirement.column].to_numpy(bool)
-            row.update({"violations": int(violated.sum()), **_estimate(spec, weights, violated)})
+            row.update(
+                {"violations": int(violated.sum()), **_estimate(spec, runs, weights, violated)}
+            )
         rows.append(row)
     failed = ~runs["pass"].to_numpy(bool)
     rows.append(
@@ -285,22 +225,47 @@ def _summary_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
             "runs": len(runs),
             "requirement": "all",
             "violations": int(failed.sum()),
-            **_estimate(spec, weights, failed),
+            **_estimate(spec, runs, weights, failed),
         }
     )
     return pd.DataFrame(rows)
 
 
-def _estimate(spec, weights, events) -> dict:
+def _estimate(spec, runs, weights, events) -> dict:
     """The summary columns of one estimated probability."""
-    est = probability_interval(weights, events, weight_bound=weight_bound(spec))
+    est = probability_estimate(spec, runs, events)
+    target = spec.estimation.target
+    values = weights * np.asarray(events, bool)
+    n = len(values)
     return {
-        "P(violation)": est.p,
-        "se": est.se,
+        "P(violation)": est.estimate,
+        "se": float(np.std(values, ddof=1) / math.sqrt(n)) if n > 1 else math.nan,
         "P 95 % low": est.low,
         "P 95 % high": est.high,
         "interval": est.method,
+        "P 95 % upper (one-sided)": est.upper,
+        "decision": est.decides(target),
+        "more runs to show P <= target": estimators.runs_to_decide(
+            est.violations, est.runs, target, est.confidence
+        ),
     }
+
+
+def probability_sentences(spec, runs: pd.DataFrame) -> str:
+    """Per requirement (and for any failure): ``"N runs, k violations: P <= p at 95 %"``, the
+    decision against the spec's target and the runs without violation that would show it."""
+    target = spec.estimation.target
+    lines = [f"probability of violation (target P <= {target:g}):"]
+    events = [(r.label, ~runs[r.column].to_numpy(bool)) for r in spec.requirements]
+    events.append(("any requirement or run failure", ~runs["pass"].to_numpy(bool)))
+    for label, violated in events:
+        est = probability_estimate(spec, runs, violated)
+        more = estimators.runs_to_decide(est.violations, est.runs, target, est.confidence)
+        line = f"  {label}: {est.sentence()}; {est.decides(target)}"
+        if more:
+            line += f"; {more} more runs without violation would show P <= {target:g}"
+        lines.append(line)
+    return "\n".join(lines)
 
 
 def _gain_metrics(spec) -> list[str]:
@@ -533,11 +498,9 @@ def _plot_distributions(spec, runs: pd.DataFrame, path: Path) -> Path:
             for bound in (requirement.max, requirement.min):
                 if bound is not None:
                     ax.axvline(bound, color="tab:red", linestyle="--", label="requirement")
-            est = probability_interval(
-                weights, ~runs[requirement.column].to_numpy(bool), weight_bound=weight_bound(spec)
-            )
+            est = probability_estimate(spec, runs, ~runs[requirement.column].to_numpy(bool))
             title += (
-                f"\nP(violation) = {est.p:.2g}, 95 % [{est.low:.2g}, {est.high:.2g}]"
+                f"\nP(violation) = {est.estimate:.2g}, 95 % [{est.low:.2g}, {est.high:.2g}]"
                 f"\n({est.method})"
             )
         ax.set_xlabel(column)
@@ -708,12 +671,13 @@ def write_report(
             f"campaign {spec.name}: {len(runs)}/{len(plan)} runs finished, sampler "
             f"{spec.sampler.kind}",
             summary.to_string(index=False),
+            probability_sentences(spec, runs),
             status.to_string(index=False),
         ]
         if "regions" in tables:
             parts.append("runs per region:\n" + tables["regions"].to_string(index=False))
             weights = runs["weight"].to_numpy()
-            ess = effective_sample_size(weights)
+            ess = estimators.effective_sample_size(weights)
             guided = runs["region"].to_numpy() >= 0
             guided_share = weights[guided].sum() / weights.sum()
             parts.append(

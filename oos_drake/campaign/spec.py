@@ -35,6 +35,13 @@ seed and a mission window, and states the requirements each run is checked again
     keep = "all"                             # "all" | "failed" | "none"
     signals = ["theta_hub", "torque_command"]
 
+    [estimation]                             # optional
+    target = 0.01                            # show P(violation) <= 1 %
+    confidence = 0.95
+    until_decided = true                     # add batches until the intervals decide
+    max_runs = 2000                          # ... or this many runs are spent
+    batch = 100
+
 Errors are one-line ``ValueError`` s naming the file and the key. :func:`load_spec` builds the
 simulator once (in the calling process) to check parameter names, ranges, metrics and events.
 """
@@ -157,6 +164,24 @@ class TimeseriesSpec:
 
 
 @dataclass(frozen=True)
+class EstimationSpec:
+    """What the probability estimates must show (``[estimation]``)."""
+
+    #: probability of violation to demonstrate: the report says whether the upper bound is below
+    #: it and how many runs without violation would show it [-]
+    target: float = 0.01
+    #: confidence level of every interval [-]
+    confidence: float = 0.95
+    #: keep adding batches of runs until every requirement's interval decides against the target
+    #: (upper bound below it, or lower bound above it) or max_runs are spent
+    until_decided: bool = False
+    #: budget of runs when until_decided (default: n_runs, i.e. no extension)
+    max_runs: int | None = None
+    #: runs per added batch when until_decided (default: n_runs)
+    batch: int | None = None
+
+
+@dataclass(frozen=True)
 class CampaignSpec:
     """A validated campaign spec (see the module docstring for the TOML form)."""
 
@@ -184,6 +209,8 @@ class CampaignSpec:
     timeseries: TimeseriesSpec
     #: wall-clock limit of one run [s] (None: no limit); an overdue run is stopped, "failed"
     run_timeout: float | None = None
+    #: probability target, confidence and run-until-decided budget
+    estimation: EstimationSpec = EstimationSpec()
     #: simulator declarations gathered at load time (not part of the TOML)
     info: SimulatorInfo = field(compare=False, repr=False, default=None)
     #: the regions read from worst_cases (not part of the TOML)
@@ -447,6 +474,29 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
             Requirement(metric, values.get("max"), values.get("min"), info.metric_units[metric])
         )
 
+    # estimation ------------------------------------------------------------------------------
+    ew = f"{where}: [estimation]"
+    est_raw = _check_keys(ew, raw.get("estimation", {}), _keys(EstimationSpec))
+    target = finite_number(ew, "target", est_raw.get("target", EstimationSpec.target))
+    confidence = finite_number(
+        ew, "confidence", est_raw.get("confidence", EstimationSpec.confidence)
+    )
+    for key, value in (("target", target), ("confidence", confidence)):
+        if not 0 < value < 1:
+            raise _fail(ew, f"{key} = {value:g} must be in (0, 1)")
+    until_decided = est_raw.get("until_decided", False)
+    if not isinstance(until_decided, bool):
+        raise _fail(ew, f"until_decided = {until_decided!r} must be true or false")
+    counts = {}
+    for key in ("max_runs", "batch"):
+        value = est_raw.get(key, n_runs)
+        if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+            raise _fail(ew, f"{key} = {value!r} must be a positive integer")
+        counts[key] = value
+    if counts["max_runs"] < n_runs:
+        raise _fail(ew, f"max_runs = {counts['max_runs']} is below n_runs = {n_runs}")
+    estimation = EstimationSpec(target, confidence, until_decided, **counts)
+
     # time series -----------------------------------------------------------------------------
     tw = f"{where}: [timeseries]"
     ts_raw = _check_keys(tw, raw.get("timeseries", {}), _keys(TimeseriesSpec))
@@ -473,6 +523,7 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
         requirements=tuple(requirements),
         timeseries=TimeseriesSpec(keep, tuple(signals)),
         run_timeout=run_timeout,
+        estimation=estimation,
         info=info,
         regions=regions,
     )
@@ -520,6 +571,7 @@ def spec_to_toml(spec: CampaignSpec, worst_cases_name: str | None = None) -> str
             for r in spec.requirements
         },
         "timeseries": {"keep": spec.timeseries.keep, "signals": list(spec.timeseries.signals)},
+        "estimation": {k: v for k, v in vars(spec.estimation).items() if v is not None},
     }
     header = "# Resolved campaign spec written by oos campaign run (every default filled in).\n"
     return header + tomli_w.dumps(document)
