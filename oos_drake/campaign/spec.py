@@ -57,9 +57,15 @@ from typing import Any
 
 import tomli_w
 
-from oos_drake.campaign.distributions import Distribution, finite_number, parse_distribution
+from oos_drake.campaign.distributions import (
+    Distribution,
+    Uniform,
+    finite_number,
+    parse_distribution,
+)
 from oos_drake.campaign.simulator import (
     MissionWindow,
+    Parameter,
     SimulatorInfo,
     SimulatorRecipe,
     describe_simulator,
@@ -240,6 +246,84 @@ def spec_scenario(value: Any, spec_path: str | Path) -> Path:
         raise _fail(f"spec {spec_path}", f"scenario = {value!r} must be a file name")
     relative = Path(spec_path).parent / value
     return relative.resolve() if relative.is_file() else scenario_path(value)
+
+
+#: Keys of a dispersion that accept a law contradicting the scenario's declared uncertainty.
+OVERRIDE_KEYS = ("widen", "override")
+
+
+def _matches(law: Distribution, parameter: Parameter) -> str:
+    """How a law's support compares with the declared uncertainty: "same", "wider" or "other"."""
+    declared_low, declared_high = parameter.uncertainty
+    low, high = law.support
+    tolerance = 1e-6 * max(abs(declared_low), abs(declared_high), declared_high - declared_low)
+    if abs(low - declared_low) <= tolerance and abs(high - declared_high) <= tolerance:
+        return "same"
+    if low <= declared_low + tolerance and high >= declared_high - tolerance:
+        return "wider"
+    return "other"
+
+
+def declared_dispersion(where: str, table: Any, parameter: Parameter) -> Distribution:
+    """A spec's dispersion of ``parameter``, checked against the uncertainty the scenario declares.
+
+    For a parameter the scenario declares uncertain (:attr:`Parameter.uncertainty`), a law
+    without ``low``/``high`` (uniform, log-uniform, normal) spans the declared range: the spec
+    overrides the shape only. A law over the same range is accepted; a wider one needs
+    ``widen = true``; any other (narrower, shifted, fixed, choice) needs ``override = true``.
+
+    Raises
+    ------
+    ValueError
+        One line naming the parameter: a law contradicting the declared range without the
+        key that says so, an override key on a parameter the scenario does not declare
+        uncertain, or any error of :func:`parse_distribution`.
+    """
+    if not isinstance(table, Mapping):
+        return parse_distribution(where, table, parameter)
+    table = dict(table)
+    flags = {}
+    for key in OVERRIDE_KEYS:
+        if key in table:
+            flags[key] = table.pop(key)
+            if not isinstance(flags[key], bool):
+                raise ValueError(f"{where}: {key} = {flags[key]!r} must be true or false")
+    if parameter.uncertainty is None:
+        if flags:
+            raise ValueError(
+                f"{where}: {', '.join(flags)} only apply to a parameter the scenario declares "
+                "uncertain; this one has no declared uncertainty"
+            )
+        return parse_distribution(where, table, parameter)
+    declared_low, declared_high = parameter.uncertainty
+    if table.get("distribution") in ("uniform", "log-uniform", "normal"):
+        table.setdefault("low", declared_low)
+        table.setdefault("high", declared_high)
+    law = parse_distribution(where, table, parameter)
+    match = _matches(law, parameter)
+    unit = parameter.unit
+    declared = f"the scenario's uncertainty [{declared_low:.7g}, {declared_high:.7g}] {unit}"
+    low, high = law.support
+    if match == "wider" and not (flags.get("widen") or flags.get("override")):
+        raise ValueError(
+            f"{where}: [{low:.7g}, {high:.7g}] {unit} is wider than {declared}: say widen = true, "
+            "or drop low/high to use the scenario's range"
+        )
+    if match == "other" and not flags.get("override"):
+        raise ValueError(
+            f"{where}: [{low:.7g}, {high:.7g}] {unit} contradicts {declared}: drop low/high "
+            "to use the scenario's range, or say override = true"
+        )
+    return law
+
+
+def _dispersion_entry(spec: CampaignSpec, name: str) -> dict[str, Any]:
+    """A dispersion's TOML table, with ``override = true`` where it departs from the scenario."""
+    entry = spec.dispersions[name].to_dict()
+    parameter = spec.info.by_name[name]
+    if parameter.uncertainty is not None and _matches(spec.dispersions[name], parameter) != "same":
+        entry["override"] = True
+    return entry
 
 
 def _fail(where: str, message: str) -> ValueError:
@@ -439,11 +523,13 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
                 f"{where}: dispersions.{parameter_name}",
                 f"unknown parameter; known: {', '.join(parameters)}",
             )
-    dispersions = {
-        p.name: parse_distribution(f"{where}: dispersions.{p.name}", dispersions_raw[p.name], p)
-        for p in info.parameters
-        if p.name in dispersions_raw
-    }
+    dispersions = {}
+    for p in info.parameters:
+        if p.name in dispersions_raw:
+            entry = dispersions_raw[p.name]
+            dispersions[p.name] = declared_dispersion(f"{where}: dispersions.{p.name}", entry, p)
+        elif p.uncertainty is not None:  # the scenario's uncertainty, declared once
+            dispersions[p.name] = Uniform(*p.uncertainty)
     if kind == "mu-guided":
         guided = {n for r in regions for n in r.perturbation}
         if not guided & set(dispersions):
@@ -565,7 +651,7 @@ def spec_to_toml(spec: CampaignSpec, worst_cases_name: str | None = None) -> str
         "sampler": sampler,
         "simulator": {"name": spec.simulator.name, "options": spec.simulator.option_dict},
         "window": window,
-        "dispersions": {name: d.to_dict() for name, d in spec.dispersions.items()},
+        "dispersions": {name: _dispersion_entry(spec, name) for name in spec.dispersions},
         "requirements": {
             r.metric: {k: getattr(r, k) for k in ("max", "min") if getattr(r, k) is not None}
             for r in spec.requirements

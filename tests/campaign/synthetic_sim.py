@@ -63,3 +63,29 @@ class SyntheticSimulator:
 
 def make_simulator(**options) -> SyntheticSimulator:
     return SyntheticSimulator(**options)
+
+
+#: The "scenario" of :class:`DeclaredSimulator`: nominal first-mode frequency [rad/s] and its
+#: declared uncertainty [%].
+W1_NOMINAL, W1_PERCENT = 8.0, 20.0
+
+
+class DeclaredSimulator(SyntheticSimulator):
+    """The synthetic simulator with a parameter ``w1`` the scenario declares uncertain
+    (``W1_NOMINAL +- W1_PERCENT``), inside a wider domain of validity."""
+
+    def parameters(self):
+        r = W1_PERCENT / 100
+        w1 = Parameter(
+            "w1",
+            "rad/s",
+            W1_NOMINAL,
+            1.0,
+            20.0,
+            uncertainty=(W1_NOMINAL * (1 - r), W1_NOMINAL * (1 + r)),
+        )
+        return (*super().parameters(), w1)
+
+
+def make_declared_simulator(**options) -> DeclaredSimulator:
+    return DeclaredSimulator(**options)
