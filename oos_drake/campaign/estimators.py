@@ -45,10 +45,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+import pandas as pd
 import scipy.stats
+
+from oos_drake.campaign.samplers import NOMINAL_COMPONENT
 
 #: Default confidence level of every interval [-].
 CONFIDENCE = 0.95
@@ -374,3 +377,48 @@ def proportional_allocation(weights: Sequence[float], runs: int) -> np.ndarray:
     remainder = runs - counts.sum()
     counts[np.argsort(-(share - counts), kind="stable")[:remainder]] += 1
     return counts
+
+
+def campaign_estimate(spec, runs: pd.DataFrame, events: np.ndarray) -> Interval:
+    """P(event) under the spec's dispersions with the estimator the runs allow.
+
+    - plain Monte Carlo (and Latin hypercube, whose variance is at most ``N/(N-1)`` times Monte
+      Carlo's, Owen 1997): exact Clopper-Pearson (:func:`monte_carlo`);
+    - mu-guided (defensive mixture): importance sampling with the betting interval
+      (:func:`importance_sampling`) when the effective sample size is at least
+      :data:`MIN_ESS_FRACTION` of the runs; otherwise the runs drawn from the
+      dispersions alone (the defensive component: a plain Monte Carlo sample), Clopper-Pearson.
+
+    Parameters
+    ----------
+    spec : CampaignSpec
+        The campaign's spec (sampler, ``[estimation]`` confidence).
+    runs : pandas.DataFrame
+        The runs (``weight``, ``region`` columns), in run order.
+    events : array_like of bool
+        Per run: the event (violation, failure).
+    """
+    confidence = spec.estimation.confidence
+    events = np.asarray(events, bool)
+    if spec.sampler.kind != "mu-guided":
+        return monte_carlo(events, confidence)
+    order = np.argsort(runs["run_id"].to_numpy(), kind="stable")  # the order drawn
+    weights = runs["weight"].to_numpy(float)[order]
+    if effective_sample_size(weights) >= MIN_ESS_FRACTION * len(weights):
+        return importance_sampling(
+            events[order], weights, 1.0 / spec.sampler.defensive_fraction, confidence
+        )
+    defensive = runs["region"].to_numpy() == NOMINAL_COMPONENT
+    interval = monte_carlo(events[defensive], confidence)
+    return replace(interval, method="Clopper-Pearson on the defensive draws (ESS < 50 %)")
+
+
+def undecided_requirements(spec, runs: pd.DataFrame) -> list[str]:
+    """Labels of the spec's requirements whose interval does not yet decide against
+    ``[estimation] target`` (upper bound above it and lower bound below it)."""
+    out = []
+    for requirement in spec.requirements:
+        interval = campaign_estimate(spec, runs, ~runs[requirement.column].to_numpy(bool))
+        if interval.decides(spec.estimation.target) == "undecided":
+            out.append(requirement.label)
+    return out

@@ -1,8 +1,8 @@
 """Campaign report: summary tables (Parquet + printed pandas) and figures (PNG).
 
 Probabilities of violation are estimated for the spec's dispersions by
-:func:`probability_estimate` (:mod:`.estimators`: exact Clopper-Pearson for Monte Carlo runs, a
-betting interval for importance-weighted runs of the mu-guided sampler whose effective sample
+:func:`.estimators.campaign_estimate` (exact Clopper-Pearson for Monte Carlo runs, a betting
+interval for importance-weighted runs of the mu-guided sampler whose effective sample
 size reaches half the runs, else the runs drawn from the dispersions alone). A run fails when it
 did not finish (``failed``/``diverged``) or violates a requirement. The report states, per
 requirement, "N runs, k violations: P <= p at 95 %", whether that decides against the spec's
@@ -39,7 +39,7 @@ linear worst-case gain is therefore a flag to investigate, not a contradiction b
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
@@ -109,40 +109,6 @@ def _save(fig, path: Path, rect=None) -> Path:
     store.atomic_write_bytes(path, lambda stream: fig.savefig(stream, format="png", dpi=110))
     plt.close(fig)
     return path
-
-
-def probability_estimate(spec, runs: pd.DataFrame, events: np.ndarray) -> estimators.Interval:
-    """P(event) under the spec's dispersions with the estimator the runs allow.
-
-    - plain Monte Carlo (and Latin hypercube, whose variance is at most ``N/(N-1)`` times Monte
-      Carlo's, Owen 1997): exact Clopper-Pearson (:func:`.estimators.monte_carlo`);
-    - mu-guided (defensive mixture): importance sampling with the betting interval
-      (:func:`.estimators.importance_sampling`) when the effective sample size is at least
-      :data:`.estimators.MIN_ESS_FRACTION` of the runs; otherwise the runs drawn from the
-      dispersions alone (the defensive component: a plain Monte Carlo sample), Clopper-Pearson.
-
-    Parameters
-    ----------
-    spec : CampaignSpec
-        The campaign's spec (sampler, ``[estimation]`` confidence).
-    runs : pandas.DataFrame
-        The runs (``weight``, ``region`` columns), in run order.
-    events : array_like of bool
-        Per run: the event (violation, failure).
-    """
-    confidence = spec.estimation.confidence
-    events = np.asarray(events, bool)
-    if spec.sampler.kind != "mu-guided":
-        return estimators.monte_carlo(events, confidence)
-    order = np.argsort(runs["run_id"].to_numpy(), kind="stable")  # the order drawn
-    weights = runs["weight"].to_numpy(float)[order]
-    if estimators.effective_sample_size(weights) >= estimators.MIN_ESS_FRACTION * len(weights):
-        return estimators.importance_sampling(
-            events[order], weights, 1.0 / spec.sampler.defensive_fraction, confidence
-        )
-    defensive = runs["region"].to_numpy() == NOMINAL_COMPONENT
-    interval = estimators.monte_carlo(events[defensive], confidence)
-    return replace(interval, method="Clopper-Pearson on the defensive draws (ESS < 50 %)")
 
 
 def weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
@@ -233,7 +199,7 @@ def _summary_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
 
 def _estimate(spec, runs, weights, events) -> dict:
     """The summary columns of one estimated probability."""
-    est = probability_estimate(spec, runs, events)
+    est = estimators.campaign_estimate(spec, runs, events)
     target = spec.estimation.target
     values = weights * np.asarray(events, bool)
     n = len(values)
@@ -259,7 +225,7 @@ def probability_sentences(spec, runs: pd.DataFrame) -> str:
     events = [(r.label, ~runs[r.column].to_numpy(bool)) for r in spec.requirements]
     events.append(("any requirement or run failure", ~runs["pass"].to_numpy(bool)))
     for label, violated in events:
-        est = probability_estimate(spec, runs, violated)
+        est = estimators.campaign_estimate(spec, runs, violated)
         more = estimators.runs_to_decide(est.violations, est.runs, target, est.confidence)
         line = f"  {label}: {est.sentence()}; {est.decides(target)}"
         if more:
@@ -498,7 +464,7 @@ def _plot_distributions(spec, runs: pd.DataFrame, path: Path) -> Path:
             for bound in (requirement.max, requirement.min):
                 if bound is not None:
                     ax.axvline(bound, color="tab:red", linestyle="--", label="requirement")
-            est = probability_estimate(spec, runs, ~runs[requirement.column].to_numpy(bool))
+            est = estimators.campaign_estimate(spec, runs, ~runs[requirement.column].to_numpy(bool))
             title += (
                 f"\nP(violation) = {est.estimate:.2g}, 95 % [{est.low:.2g}, {est.high:.2g}]"
                 f"\n({est.method})"

@@ -24,6 +24,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from oos_drake.campaign import store
+from oos_drake.campaign.estimators import undecided_requirements
 from oos_drake.campaign.executors import RunResult, execute_case, make_executor
 from oos_drake.campaign.samplers import FREQUENCY_COLUMN, make_plan, region_counts
 from oos_drake.campaign.simulator import MissionWindow, RunCase, SimulatorRecipe
@@ -186,6 +187,22 @@ def _execute(
             executor.close()
     store.consolidate(directory)
     runs = store.load_runs(directory)
+    if spec.estimation.until_decided and len(runs) == len(plan):
+        undecided = undecided_requirements(spec, runs)
+        room = spec.estimation.max_runs - len(plan)
+        if undecided and room > 0:
+            # add a batch, plan it on disk first (a resume then runs it), and continue
+            count = min(spec.estimation.batch, room)
+            batch = make_plan(spec, count, first_run_id=len(plan))
+            plan = pd.concat([plan, batch], ignore_index=True)
+            store.atomic_write_parquet(plan, directory / store.PLAN_FILE)
+            print(
+                f"{len(runs)} runs: undecided for {'; '.join(undecided)} against P <= "
+                f"{spec.estimation.target:g}: {count} more runs planned",
+                file=sys.stderr,
+            )
+            summary = _execute(directory, spec, plan, workers, scheduler, progress)
+            return replace(summary, executed=summary.executed + executed, skipped=len(finished))
     return CampaignSummary(
         directory=directory,
         n_runs=len(plan),

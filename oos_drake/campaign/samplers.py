@@ -57,9 +57,21 @@ NOMINAL_COMPONENT = -1
 FREQUENCY_COLUMN = "frequency [Hz]"
 
 
-def run_seeds(random_seed: int, n_runs: int) -> tuple[np.ndarray, np.random.Generator]:
-    """Per-run integer seeds (63-bit) and the sampler's generator, from one root seed."""
-    children = np.random.SeedSequence(random_seed).spawn(n_runs + 1)
+def run_seeds(
+    random_seed: int, n_runs: int, first_run_id: int = 0
+) -> tuple[np.ndarray, np.random.Generator]:
+    """Per-run integer seeds (63-bit) and the sampler's generator, from one root seed.
+
+    ``first_run_id > 0``: a batch added to a campaign (run until decided) draws from the
+    sequence with spawn key ``(first_run_id, 1)``, disjoint from the first batch's children
+    ``(k,)`` and from every other added batch.
+    """
+    root = (
+        np.random.SeedSequence(random_seed)
+        if first_run_id == 0
+        else np.random.SeedSequence(random_seed, spawn_key=(first_run_id, 1))
+    )
+    children = root.spawn(n_runs + 1)
     seeds = np.array(
         [int(c.generate_state(1, np.uint64)[0] >> np.uint64(1)) for c in children[:n_runs]],
         dtype=np.int64,
@@ -180,8 +192,11 @@ class MuGuidedProposal:
         return 1.0 / mixture
 
 
-def make_plan(spec) -> pd.DataFrame:
+def make_plan(spec, n_runs: int | None = None, first_run_id: int = 0) -> pd.DataFrame:
     """The campaign plan of a validated :class:`~oos_drake.campaign.spec.CampaignSpec`.
+
+    ``n_runs`` runs (default: the spec's) numbered from ``first_run_id``: a batch added to a
+    campaign that runs until its intervals decide draws its own seeds (:func:`run_seeds`).
 
     Returns
     -------
@@ -197,8 +212,8 @@ def make_plan(spec) -> pd.DataFrame:
         A run with a nonzero LTI perturbation and no frequency (no ``worst_cases`` file).
     """
     info = spec.info
-    n = spec.n_runs
-    seeds, rng = run_seeds(spec.random_seed, n)
+    n = spec.n_runs if n_runs is None else n_runs
+    seeds, rng = run_seeds(spec.random_seed, n, first_run_id)
     if spec.sampler.kind == "mu-guided":
         proposal = MuGuidedProposal(
             spec.dispersions,
@@ -238,7 +253,7 @@ def make_plan(spec) -> pd.DataFrame:
 
     table = pd.DataFrame(
         {
-            "run_id": np.arange(n, dtype=np.int64),
+            "run_id": np.arange(first_run_id, first_run_id + n, dtype=np.int64),
             "seed": seeds,
             "region": region.astype(np.int64),
             "weight": weight.astype(float),
