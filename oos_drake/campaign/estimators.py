@@ -44,14 +44,13 @@ it carries.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
 import scipy.stats
 
-from oos_drake.campaign.samplers import NOMINAL_COMPONENT
+from oos_drake.campaign.samplers import NOMINAL_COMPONENT, phase_weights
 
 #: Default confidence level of every interval [-].
 CONFIDENCE = 0.95
@@ -370,18 +369,10 @@ def runs_to_decide(
     return high - runs
 
 
-def proportional_allocation(weights: Sequence[float], runs: int) -> np.ndarray:
-    """Runs per stratum ``n_h`` within one of ``W_h * runs`` (largest remainders), sum ``runs``."""
-    share = np.asarray(weights, float) * runs
-    counts = np.floor(share).astype(int)
-    remainder = runs - counts.sum()
-    counts[np.argsort(-(share - counts), kind="stable")[:remainder]] += 1
-    return counts
-
-
 def campaign_estimate(spec, runs: pd.DataFrame, events: np.ndarray) -> Interval:
     """P(event) under the spec's dispersions with the estimator the runs allow.
 
+    - phase-stratified: :func:`stratified` over the mission phases, weighted by their durations;
     - plain Monte Carlo (and Latin hypercube, whose variance is at most ``N/(N-1)`` times Monte
       Carlo's, Owen 1997): exact Clopper-Pearson (:func:`monte_carlo`);
     - mu-guided (defensive mixture): importance sampling with the betting interval
@@ -400,6 +391,8 @@ def campaign_estimate(spec, runs: pd.DataFrame, events: np.ndarray) -> Interval:
     """
     confidence = spec.estimation.confidence
     events = np.asarray(events, bool)
+    if spec.sampler.kind == "phase-stratified":
+        return stratified(events, runs["window"].to_numpy(), phase_weights(spec.info), confidence)
     if spec.sampler.kind != "mu-guided":
         return monte_carlo(events, confidence)
     order = np.argsort(runs["run_id"].to_numpy(), kind="stable")  # the order drawn

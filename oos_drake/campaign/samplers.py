@@ -1,6 +1,10 @@
 """Samplers: turn a spec into the campaign plan (every run's values, seed, weight and window).
 
 - ``monte-carlo``: i.i.d. draws from the dispersions (weight 1).
+- ``phase-stratified``: the whole mission cut at its events into phases (:func:`mission_phases`),
+  runs shared between them in proportion to their durations (:func:`proportional_allocation`),
+  each run simulating its phase from dispersed initial conditions, values i.i.d. (weight 1); the
+  report estimates with the stratified estimator (:func:`.estimators.stratified`).
 - ``latin-hypercube``: each marginal stratified in ``n_runs`` equal-probability bins (one point
   per bin, bins shuffled independently per parameter), mapped through the inverse CDFs (weight 1).
 - ``mu-guided``: importance sampling around the analysis' worst cases. The proposal is the
@@ -48,7 +52,7 @@ from oos_drake.campaign.distributions import (
     TruncatedNormal,
     Uniform,
 )
-from oos_drake.campaign.simulator import ParameterKind
+from oos_drake.campaign.simulator import MissionWindow, ParameterKind
 from oos_drake.campaign.worst_cases import WorstCaseRegion
 
 #: Region id recorded for runs drawn from the nominal (defensive) component.
@@ -224,8 +228,9 @@ def make_plan(spec, n_runs: int | None = None, first_run_id: int = 0) -> pd.Data
         )
         values, region = proposal.sample(n, rng)
         weight = proposal.weights(values)
-    else:
-        u = uniform_variates(spec.sampler.kind, n, len(spec.dispersions), rng)
+    else:  # phase-stratified: i.i.d. values, the phase fixes the window
+        kind = "monte-carlo" if spec.sampler.kind == "phase-stratified" else spec.sampler.kind
+        u = uniform_variates(kind, n, len(spec.dispersions), rng)
         values = sample_dispersions(spec.dispersions, u)
         region = np.full(n, NOMINAL_COMPONENT)
         weight = np.ones(n)
@@ -240,6 +245,11 @@ def make_plan(spec, n_runs: int | None = None, first_run_id: int = 0) -> pd.Data
         window_region = np.where(region == NOMINAL_COMPONENT, drawn, region)
         windows = [spec.window.resolve(info, by_id[int(r)].time) for r in window_region]
         labels = [f"region:{int(r)}" for r in window_region]
+    elif spec.sampler.kind == "phase-stratified":
+        phases = mission_phases(info)
+        counts = proportional_allocation([(w.end - w.start) / info.duration for w in phases], n)
+        windows = [w for w, count in zip(phases, counts, strict=True) for _ in range(count)]
+        labels = [w.label for w in windows]
     else:
         windows = [spec.window.resolve(info)] * n
         labels = [w.label for w in windows]
@@ -282,6 +292,32 @@ def make_plan(spec, n_runs: int | None = None, first_run_id: int = 0) -> pd.Data
             "[sampler] or --worst-cases FILE; runs use their region's critical frequency)"
         )
     return table
+
+
+def proportional_allocation(weights: Sequence[float], runs: int) -> np.ndarray:
+    """Runs per stratum ``n_h`` within one of ``W_h * runs`` (largest remainders), sum ``runs``."""
+    share = np.asarray(weights, float) * runs
+    counts = np.floor(share).astype(int)
+    remainder = runs - counts.sum()
+    counts[np.argsort(-(share - counts), kind="stable")[:remainder]] += 1
+    return counts
+
+
+def mission_phases(info) -> tuple[MissionWindow, ...]:
+    """The mission cut at its events: ``[0, e_1], [e_1, e_2], ..., [e_k, duration]`` [s],
+    labelled ``"phase:start-capture"``, ``"phase:capture-docking"``, ... (empty ones dropped)."""
+    events = sorted((t, name) for name, t in info.events.items() if 0 < t < info.duration)
+    marks = [(0.0, "start"), *events, (info.duration, "end")]
+    return tuple(
+        MissionWindow(t0, t1, f"phase:{a}-{b}")
+        for (t0, a), (t1, b) in zip(marks[:-1], marks[1:], strict=True)
+        if t1 > t0
+    )
+
+
+def phase_weights(info) -> dict[str, float]:
+    """Phase label -> its share of the mission's duration [-] (the strata weights)."""
+    return {w.label: (w.end - w.start) / info.duration for w in mission_phases(info)}
 
 
 def region_counts(plan: pd.DataFrame, regions: Sequence[WorstCaseRegion]) -> pd.DataFrame:

@@ -73,7 +73,7 @@ from oos_drake.campaign.simulator import (
 from oos_drake.campaign.worst_cases import WorstCaseRegion, read_worst_cases
 from oos_drake.resources import package_path
 
-SAMPLERS = ("monte-carlo", "latin-hypercube", "mu-guided")
+SAMPLERS = ("monte-carlo", "latin-hypercube", "phase-stratified", "mu-guided")
 WINDOW_KINDS = ("mission", "event", "critical")
 KEEP_TIMESERIES = ("all", "failed", "none")
 REGION_WEIGHTINGS = ("mu_upper", "uniform")
@@ -83,7 +83,8 @@ REGION_WEIGHTINGS = ("mu_upper", "uniform")
 class SamplerSpec:
     """How the dispersed values are drawn."""
 
-    #: "monte-carlo" (i.i.d.), "latin-hypercube" (stratified marginals) or "mu-guided"
+    #: "monte-carlo" (i.i.d.), "latin-hypercube" (stratified marginals), "phase-stratified" (the
+    #: whole mission's phases, runs in proportion to their durations) or "mu-guided"
     kind: str = "monte-carlo"
     #: path of the analysis' worst_cases.parquet (relative paths: to the spec file); required
     #: by mu-guided (its regions); for every sampler it gives the frequencies that realize LTI
@@ -512,6 +513,8 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
             if event is not None:
                 raise _fail(ww, 'event does not apply to kind = "critical"')
         window = WindowSpec(window_kind, event, before, after)
+    if kind == "phase-stratified" and window.kind != "mission":
+        raise _fail(ww, "the phase-stratified sampler simulates every phase: no [window]")
 
     # dispersions -----------------------------------------------------------------------------
     dispersions_raw = raw.get("dispersions", {})

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from oos_drake.campaign import estimators
+from oos_drake.campaign import estimators, samplers
 
 P_TRUE = 0.02
 CAMPAIGNS = 200
@@ -59,7 +59,7 @@ def test_stratified_coverage(allocation):
     rates = np.array([0.01, 0.02, 0.045])
     assert shares @ rates == pytest.approx(P_TRUE)
     counts = (
-        estimators.proportional_allocation(shares, RUNS)
+        samplers.proportional_allocation(shares, RUNS)
         if allocation == "proportional"
         else np.full(3, RUNS // 3)
     )
