@@ -50,7 +50,7 @@ import numpy as np
 import pandas as pd
 import scipy.stats
 
-from oos_drake.campaign.samplers import NOMINAL_COMPONENT, phase_weights
+from oos_drake.campaign.samplers import DEFENSIVE_COLUMN, NOMINAL_COMPONENT, phase_weights
 
 #: Default confidence level of every interval [-].
 CONFIDENCE = 0.95
@@ -398,9 +398,9 @@ def campaign_estimate(spec, runs: pd.DataFrame, events: np.ndarray) -> Interval:
     order = np.argsort(runs["run_id"].to_numpy(), kind="stable")  # the order drawn
     weights = runs["weight"].to_numpy(float)[order]
     if effective_sample_size(weights) >= MIN_ESS_FRACTION * len(weights):
-        return importance_sampling(
-            events[order], weights, 1.0 / spec.sampler.defensive_fraction, confidence
-        )
+        # the plan's mixture may hold more defensive draws than the spec asked (its ESS target)
+        defensive = runs.get(DEFENSIVE_COLUMN, pd.Series([spec.sampler.defensive_fraction]))
+        return importance_sampling(events[order], weights, 1.0 / defensive.min(), confidence)
     defensive = runs["region"].to_numpy() == NOMINAL_COMPONENT
     interval = monte_carlo(events[defensive], confidence)
     return replace(interval, method="Clopper-Pearson on the defensive draws (ESS < 50 %)")

@@ -13,6 +13,8 @@ Files written in ``DIR/report/``:
 - ``summary.parquet``: per metric: runs, weighted mean, min, quantiles, max, requirement,
   violations, estimated violation probability, its standard error, the confidence interval and its
   method, the one-sided upper bound, the decision against the target and the runs still needed;
+- ``violations.parquet``: every violation with its requirement, mission phase and the time of
+  the first violation (from the retained time series);
 - ``status.parquet``: runs per status; ``worst_runs.parquet``: the worst runs by requirement
   margin; ``regions.parquet`` (mu-guided): runs, failures and estimate per proposal region,
   with the analysis' worst-case performance gains of the region beside the worst metric of the
@@ -58,7 +60,7 @@ from oos_drake.campaign.runner import (  # noqa: E402
     load_campaign,
     metric_column,
 )
-from oos_drake.campaign.samplers import NOMINAL_COMPONENT  # noqa: E402
+from oos_drake.campaign.samplers import NOMINAL_COMPONENT, mission_phases  # noqa: E402
 
 #: File of ``oos confirm`` and the folder where ``oos run`` writes it (a sibling of the campaign).
 CONFIRMATION_FILE = "confirmation.parquet"
@@ -232,6 +234,71 @@ def probability_sentences(spec, runs: pd.DataFrame) -> str:
             line += f"; {more} more runs without violation would show P <= {target:g}"
         lines.append(line)
     return "\n".join(lines)
+
+
+def violations_table(directory: Path, spec, runs: pd.DataFrame) -> pd.DataFrame:
+    """Every violation: run, requirement, mission phase and time of the first violation.
+
+    The time is the first logged instant at which the signal a metric bounds (the simulator's
+    ``metric_signals``) leaves the requirement's max bound in one of the requirement's phases,
+    read from the run's retained time series; without one it is NaN and the phase column lists
+    the phases the run's window overlaps. A run that did not finish is listed once, with its
+    status.
+    """
+    phases = mission_phases(spec.info)
+    rows = []
+    for _, run in runs.iterrows():
+        start, end = float(run["window_start [s]"]), float(run["window_end [s]"])
+        overlapped = "+".join(
+            w.label.removeprefix("phase:") for w in phases if start < w.end and end > w.start
+        )
+        base = {"run_id": int(run["run_id"]), "window": run["window"], "status": run["status"]}
+        if run["status"] != "ok":
+            rows.append(base | {"requirement": "run finished", "phase": overlapped})
+            continue
+        series = None
+        for requirement in spec.requirements:
+            if bool(run[requirement.column]):
+                continue
+            time, phase = math.nan, overlapped
+            signal = spec.info.metric_signals.get(requirement.metric)
+            path = store.timeseries_file(directory, int(run["run_id"]))
+            if signal and requirement.max is not None and path.is_file():
+                series = pd.read_parquet(path) if series is None else series
+                column = f"{signal} [{spec.info.signal_units[signal]}]"
+                if column in series.columns:
+                    t = series["time [s]"].to_numpy(float)
+                    inside = np.ones(t.size, bool)
+                    if requirement.phases:
+                        inside = np.zeros(t.size, bool)
+                        for a, b in requirement.spans:
+                            inside |= (t >= a) & (t <= b)
+                    beyond = np.flatnonzero(
+                        inside & (np.abs(series[column].to_numpy()) > requirement.max)
+                    )
+                    if beyond.size:
+                        time = float(t[beyond[0]])
+                        phase = next(
+                            w.label.removeprefix("phase:")
+                            for w in phases
+                            if w.start <= time <= w.end
+                        )
+            rows.append(
+                base
+                | {
+                    "requirement": requirement.label,
+                    "phase": phase,
+                    "first violation time [s]": time,
+                    metric_column(spec, requirement.metric): float(
+                        run[metric_column(spec, requirement.metric)]
+                    ),
+                }
+            )
+    columns = ["run_id", "requirement", "phase", "first violation time [s]", "window", "status"]
+    table = pd.DataFrame(rows)
+    if table.empty:
+        return pd.DataFrame(columns=columns)
+    return table[columns + [c for c in table.columns if c not in columns]]
 
 
 def _gain_metrics(spec) -> list[str]:
@@ -611,7 +678,13 @@ def write_report(
     summary = _summary_table(spec, runs)
     status = runs["status"].value_counts().rename_axis("status").reset_index(name="runs")
     worst_table = _worst_runs(spec, runs, worst)
-    tables = {"summary": summary, "status": status, "worst_runs": worst_table}
+    violations = violations_table(directory, spec, runs)
+    tables = {
+        "summary": summary,
+        "status": status,
+        "worst_runs": worst_table,
+        "violations": violations,
+    }
     if spec.sampler.kind == "mu-guided":
         tables["regions"] = _regions_table(spec, runs)
     if confirmation is not None:
@@ -640,6 +713,15 @@ def write_report(
             probability_sentences(spec, runs),
             status.to_string(index=False),
         ]
+        if not violations.empty:
+            shown = violations.head(20)
+            more = f" (first 20 of {len(violations)}; all in violations.parquet)"
+            parts.append(
+                "violations by phase:\n"
+                + violations.groupby("phase").size().rename("violations").to_string()
+                + f"\nviolations{more if len(violations) > 20 else ''}:\n"
+                + shown.to_string(index=False)
+            )
         if "regions" in tables:
             parts.append("runs per region:\n" + tables["regions"].to_string(index=False))
             weights = runs["weight"].to_numpy()

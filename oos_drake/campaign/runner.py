@@ -52,10 +52,11 @@ def result_row(spec: CampaignSpec, plan_row: pd.Series, result: RunResult) -> pd
     passes = []
     for metric in spec.metrics:
         record[metric_column(spec, metric)] = float(result.metrics.get(metric, math.nan))
+    start, end = float(plan_row["window_start [s]"]), float(plan_row["window_end [s]"])
     for requirement in spec.requirements:
-        ok = result.status == "ok" and requirement.passes(
-            float(result.metrics.get(requirement.metric, math.nan))
-        )
+        value = float(result.metrics.get(requirement.metric, math.nan))
+        applies = requirement.applies(start, end)
+        ok = result.status == "ok" and (not applies or requirement.passes(value))
         record[requirement.column] = ok
         passes.append(ok)
     record["pass"] = result.status == "ok" and all(passes)

@@ -59,6 +59,47 @@ from oos_drake.campaign.worst_cases import WorstCaseRegion
 NOMINAL_COMPONENT = -1
 #: Plan column: frequency [Hz] at which a run's LTI perturbations are realized.
 FREQUENCY_COLUMN = "frequency [Hz]"
+#: Plan column: the defensive fraction of the mu-guided mixture the run was drawn from [-].
+DEFENSIVE_COLUMN = "defensive fraction [-]"
+#: The guided share ``1 - defensive_fraction`` shrinks by this factor per step (ESS target).
+_GUIDED_SHRINK = 1.5
+#: Largest defensive fraction tried before the plan is refused [-].
+_DEFENSIVE_MAX = 0.999
+
+
+def _guided_draws(spec, n: int, rng: np.random.Generator):
+    """Draws of the mu-guided mixture whose weights reach the spec's effective sample size.
+
+    The share of the guided components ``1 - defensive_fraction`` shrinks by
+    :data:`_GUIDED_SHRINK` from the spec's value until the weights' effective sample size is at
+    least ``min_ess_fraction * n`` (more draws from the dispersions: weights closer to 1, bound
+    ``1 / defensive_fraction`` lower). Every attempt restarts from the same generator state, so
+    the plan is a function of the spec (the plain draw when the spec's mixture suffices).
+    Returns values, component per run, weights and the defensive fraction used.
+    """
+    state = rng.bit_generator.state
+    defensive = spec.sampler.defensive_fraction
+    while True:
+        rng.bit_generator.state = state
+        proposal = MuGuidedProposal(
+            spec.dispersions,
+            spec.regions,
+            defensive,
+            spec.sampler.spread,
+            spec.sampler.region_weighting,
+        )
+        values, region = proposal.sample(n, rng)
+        weight = proposal.weights(values)
+        ess = weight.sum() ** 2 / np.sum(weight**2)
+        if ess >= spec.sampler.min_ess_fraction * n:
+            return values, region, weight, defensive
+        if defensive >= _DEFENSIVE_MAX:
+            raise ValueError(
+                f"campaign {spec.name}: [sampler] effective sample size {ess:.1f} of {n} runs "
+                f"stays below min_ess_fraction = {spec.sampler.min_ess_fraction} up to "
+                f"defensive_fraction {defensive:.3g}: lower min_ess_fraction"
+            )
+        defensive = min(1.0 - (1.0 - defensive) / _GUIDED_SHRINK, _DEFENSIVE_MAX)
 
 
 def run_seeds(
@@ -218,16 +259,9 @@ def make_plan(spec, n_runs: int | None = None, first_run_id: int = 0) -> pd.Data
     info = spec.info
     n = spec.n_runs if n_runs is None else n_runs
     seeds, rng = run_seeds(spec.random_seed, n, first_run_id)
+    defensive = 1.0  # every run drawn from the dispersions
     if spec.sampler.kind == "mu-guided":
-        proposal = MuGuidedProposal(
-            spec.dispersions,
-            spec.regions,
-            spec.sampler.defensive_fraction,
-            spec.sampler.spread,
-            spec.sampler.region_weighting,
-        )
-        values, region = proposal.sample(n, rng)
-        weight = proposal.weights(values)
+        values, region, weight, defensive = _guided_draws(spec, n, rng)
     else:  # phase-stratified: i.i.d. values, the phase fixes the window
         kind = "monte-carlo" if spec.sampler.kind == "phase-stratified" else spec.sampler.kind
         u = uniform_variates(kind, n, len(spec.dispersions), rng)
@@ -271,6 +305,7 @@ def make_plan(spec, n_runs: int | None = None, first_run_id: int = 0) -> pd.Data
             "window_start [s]": [w.start for w in windows],
             "window_end [s]": [w.end for w in windows],
             FREQUENCY_COLUMN: frequency,
+            DEFENSIVE_COLUMN: defensive,
         }
     )
     for parameter in info.parameters:

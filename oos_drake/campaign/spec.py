@@ -28,7 +28,7 @@ seed and a mission window, and states the requirements each run is checked again
     J_hub = { distribution = "uniform", low = 300.0, high = 700.0 }
 
     [requirements]
-    ape = { max = 0.0079 }                   # [rad]
+    ape = { max = 0.0079, phases = ["capture-end"] }   # [rad], only after the capture
     peak_torque = { max = 2.0 }              # [N m]
 
     [timeseries]
@@ -63,6 +63,7 @@ from oos_drake.campaign.distributions import (
     finite_number,
     parse_distribution,
 )
+from oos_drake.campaign.samplers import mission_phases
 from oos_drake.campaign.simulator import (
     MissionWindow,
     Parameter,
@@ -96,6 +97,11 @@ class SamplerSpec:
     spread: float = 0.1
     #: mu-guided: how runs are shared between regions: "mu_upper" (proportional) or "uniform"
     region_weighting: str = "mu_upper"
+    #: mu-guided: smallest effective sample size of the plan's weights, as a share of the runs;
+    #: the plan raises the defensive fraction (guided share / 1.5 per step) until it holds, so
+    #: the importance-sampling estimate stays usable (0: no check; the report then rests on the
+    #: defensive draws)
+    min_ess_fraction: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -137,12 +143,23 @@ class Requirement:
     min: float | None = None
     #: unit of the metric (filled from the simulator)
     unit: str = ""
+    #: mission phases during which the requirement applies (names of
+    #: :func:`~oos_drake.campaign.samplers.mission_phases` without "phase:", e.g.
+    #: "start-capture"); empty: the whole mission
+    phases: tuple[str, ...] = ()
+    #: the phases' time spans [s] (filled from the simulator's events, not part of the TOML)
+    spans: tuple[tuple[float, float], ...] = field(default=(), compare=False, repr=False)
 
     def passes(self, value: float) -> bool:
         """True when ``value`` is finite and within the bounds."""
         if not math.isfinite(value):
             return False
         return (self.max is None or value <= self.max) and (self.min is None or value >= self.min)
+
+    def applies(self, start: float, end: float) -> bool:
+        """Whether a run simulating ``[start, end]`` [s] is checked: its window overlaps one of
+        the requirement's phases (always, without phases)."""
+        return not self.phases or any(start < b and end > a for a, b in self.spans)
 
     @property
     def label(self) -> str:
@@ -483,7 +500,13 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
         spread = _positive_float(sw, "spread", spread)
         if weighting not in REGION_WEIGHTINGS:
             raise _fail(sw, f"region_weighting {weighting!r} not in {', '.join(REGION_WEIGHTINGS)}")
-    sampler = SamplerSpec(kind, worst_cases_path, float(defensive), float(spread), weighting)
+    min_ess = sampler_raw.get("min_ess_fraction", SamplerSpec.min_ess_fraction)
+    min_ess = _positive_float(sw, "min_ess_fraction", min_ess, allow_zero=True)
+    if not min_ess < 1:
+        raise _fail(sw, f"min_ess_fraction = {min_ess} must be in [0, 1)")
+    sampler = SamplerSpec(
+        kind, worst_cases_path, float(defensive), float(spread), weighting, float(min_ess)
+    )
 
     # window ----------------------------------------------------------------------------------
     ww = f"{where}: [window]"
@@ -553,14 +576,29 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
         rw = f"{where}: requirements.{metric}"
         if metric not in metrics:
             raise _fail(rw, f"not one of the recorded metrics {', '.join(metrics)}")
-        bounds = _check_keys(rw, bounds, {"max", "min"})
+        bounds = dict(_check_keys(rw, bounds, {"max", "min", "phases"}))
+        phases = bounds.pop("phases", [])
         if not bounds:
             raise _fail(rw, "give max and/or min")
+        known = {w.label.removeprefix("phase:"): w for w in mission_phases(info)}
+        if not isinstance(phases, list) or not all(isinstance(p, str) for p in phases):
+            raise _fail(rw, "phases must be a list of phase names")
+        for phase in phases:
+            if phase not in known:
+                raise _fail(rw, f"unknown phase {phase!r}; known: {', '.join(known)}")
+        spans = tuple((known[p].start, known[p].end) for p in phases)
         values = {key: finite_number(rw, key, value) for key, value in bounds.items()}
         if "max" in values and "min" in values and values["min"] > values["max"]:
             raise _fail(rw, f"min {values['min']} exceeds max {values['max']}")
         requirements.append(
-            Requirement(metric, values.get("max"), values.get("min"), info.metric_units[metric])
+            Requirement(
+                metric,
+                values.get("max"),
+                values.get("min"),
+                info.metric_units[metric],
+                tuple(phases),
+                spans,
+            )
         )
 
     # estimation ------------------------------------------------------------------------------
@@ -644,6 +682,7 @@ def spec_to_toml(spec: CampaignSpec, worst_cases_name: str | None = None) -> str
             "defensive_fraction": spec.sampler.defensive_fraction,
             "spread": spec.sampler.spread,
             "region_weighting": spec.sampler.region_weighting,
+            "min_ess_fraction": spec.sampler.min_ess_fraction,
         }
     window: dict[str, Any] = {"kind": spec.window.kind}
     if spec.window.kind != "mission":
@@ -657,6 +696,7 @@ def spec_to_toml(spec: CampaignSpec, worst_cases_name: str | None = None) -> str
         "dispersions": {name: _dispersion_entry(spec, name) for name in spec.dispersions},
         "requirements": {
             r.metric: {k: getattr(r, k) for k in ("max", "min") if getattr(r, k) is not None}
+            | ({"phases": list(r.phases)} if r.phases else {})
             for r in spec.requirements
         },
         "timeseries": {"keep": spec.timeseries.keep, "signals": list(spec.timeseries.signals)},
