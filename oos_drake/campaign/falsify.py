@@ -168,7 +168,8 @@ def starting_points(spec: CampaignSpec, box: SearchBox) -> np.ndarray:
                 x[j] = region.perturbation[name]
         points.append(box.to_unit(x))
     points.append(box.to_unit(nominal))
-    return np.unique(np.array(points), axis=0)
+    _, first = np.unique(np.array(points), axis=0, return_index=True)
+    return np.array(points)[np.sort(first)]  # duplicates dropped, order kept
 
 
 def population_size(dimension: int) -> int:

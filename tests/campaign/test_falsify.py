@@ -101,3 +101,32 @@ def test_cli_refuses_bad_input_and_writes_nothing(write_spec, tmp_path, capsys):
     other = write_spec(_spec().replace("random_seed = 11", "random_seed = 12"), name="other")
     assert main(["campaign", "falsify", str(other), "--out", str(out), "--budget", "16"]) == 2
     assert "another falsification" in capsys.readouterr().err
+
+
+def test_search_starts_from_the_analysis_worst_cases(write_spec, tmp_path):
+    from oos_drake.campaign.falsify import population_size
+    from oos_drake.campaign.simulator import SimulatorRecipe, build_simulator
+    from oos_drake.campaign.worst_cases import WorstCaseRegion, write_worst_cases
+
+    simulator = build_simulator(
+        SimulatorRecipe.create("tests.campaign.synthetic_sim:make_simulator", {})
+    )
+    a, b = synthetic_sim.WORST
+    regions = (
+        WorstCaseRegion(0, "capture", 10.0, 0.2, 1.5, 1.4, "a,b,d", {"a": a, "b": b, "d": 1.0}),
+        WorstCaseRegion(1, "capture", 10.0, 0.2, 1.1, 1.0, "a", {"a": 0.2}),
+    )
+    path = write_worst_cases(regions, simulator.parameters(), tmp_path / "wc.parquet")
+    size = population_size(3)
+    result = falsify(
+        write_spec(_spec()), tmp_path / "f", budget=size, worst_cases=path, progress=False
+    )
+    # one generation only: its first points are the worst cases (largest mu first)
+    table = result.table
+    assert len(table) == size
+    first = table.iloc[0]
+    assert (first["a [-]"], first["b [-]"], first["d [-]"]) == pytest.approx((a, b, 1.0))
+    assert first[RATIO_COLUMN] == pytest.approx(synthetic_sim.PEAK / REQUIREMENT, rel=1e-12)
+    second = table.iloc[1]
+    assert second["a [-]"] == pytest.approx(0.2) and second["b [-]"] == pytest.approx(0.5)
+    assert int(result.best["point_id"]) == 0
