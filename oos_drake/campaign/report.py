@@ -229,8 +229,9 @@ def probability_sentences(spec, runs: pd.DataFrame) -> str:
     for label, violated in events:
         est = estimators.campaign_estimate(spec, runs, violated)
         more = estimators.runs_to_decide(est.violations, est.runs, target, est.confidence)
-        line = f"  {label}: {est.sentence()}; {est.decides(target)}"
-        if more:
+        decision = est.decides(target)
+        line = f"  {label}: {est.sentence()}; {decision}"
+        if more and decision == "undecided":
             line += f"; {more} more runs without violation would show P <= {target:g}"
         lines.append(line)
     return "\n".join(lines)
