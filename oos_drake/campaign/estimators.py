@@ -261,48 +261,65 @@ def _plug_in_bets(x: np.ndarray, log_term: float) -> np.ndarray:
 
 
 def betting_interval(
-    x: np.ndarray, bound: float, confidence: float = CONFIDENCE, grid: int = 1500
+    x: np.ndarray, bound: float, confidence: float = CONFIDENCE, grid: int = 120
 ) -> tuple[float, float, float]:
     """Betting confidence interval of the mean of i.i.d. samples ``x`` in ``[0, bound]``.
 
     Returns the two-sided ``(low, high)`` at ``confidence`` (hedged capital, both bets) and the
     one-sided upper bound at ``confidence`` (the downward bet alone, all of ``alpha`` on that
-    side). The candidate means are a grid, fine near 0; each edge is widened to the next grid
-    point outside the kept set, so the grid only makes the interval more conservative.
+    side). The candidate means are a logarithmic grid of ``grid`` points (fine near 0, where
+    violation probabilities live), refined by ``grid`` points between each edge and its
+    neighbour outside; each edge is then the first refined point outside the kept set, so the
+    grid only makes the interval more conservative.
     """
     x = np.asarray(x, float) / bound
     n = x.size
     if n == 0:
         return 0.0, 1.0, 1.0
     alpha = 1.0 - confidence
-    m = np.unique(
-        np.concatenate(
-            [np.geomspace(1e-7, 1.0 - 1e-7, grid), np.linspace(1e-7, 1 - 1e-7, grid // 4)]
-        )
-    )
-    diff = x[None, :] - m[:, None]  # (g, n)
-    two_sided = _plug_in_bets(x, math.log(2.0 / alpha))[None, :]
-    up = np.minimum(two_sided, _TRUNCATION / m[:, None])
-    down = np.minimum(two_sided, _TRUNCATION / (1.0 - m[:, None]))
-    capital = 0.5 * np.exp(np.sum(np.log1p(up * diff), axis=1)) + 0.5 * np.exp(
-        np.sum(np.log1p(-down * diff), axis=1)
-    )
-    kept = capital < 1.0 / alpha
-    one_sided = np.minimum(
-        _plug_in_bets(x, math.log(1.0 / alpha))[None, :], _TRUNCATION / (1.0 - m[:, None])
-    )
-    kept_upper = np.sum(np.log1p(-one_sided * diff), axis=1) < math.log(1.0 / alpha)
+    two_sided_bets = _plug_in_bets(x, math.log(2.0 / alpha))
+    one_sided_bets = _plug_in_bets(x, math.log(1.0 / alpha))
 
-    def edges(mask: np.ndarray) -> tuple[float, float]:
-        if not mask.any():  # cannot happen for the true mean with probability > alpha
+    def kept_two_sided(m: np.ndarray) -> np.ndarray:
+        diff = x[None, :] - m[:, None]  # (g, n)
+        up = np.minimum(two_sided_bets[None, :], _TRUNCATION / m[:, None])
+        down = np.minimum(two_sided_bets[None, :], _TRUNCATION / (1.0 - m[:, None]))
+        capital = 0.5 * np.exp(np.sum(np.log1p(up * diff), axis=1)) + 0.5 * np.exp(
+            np.sum(np.log1p(-down * diff), axis=1)
+        )
+        return capital < 1.0 / alpha
+
+    def kept_one_sided(m: np.ndarray) -> np.ndarray:
+        down = np.minimum(one_sided_bets[None, :], _TRUNCATION / (1.0 - m[:, None]))
+        log_capital = np.sum(np.log1p(-down * (x[None, :] - m[:, None])), axis=1)
+        return log_capital < math.log(1.0 / alpha)
+
+    def edges(kept) -> tuple[float, float]:
+        m = np.concatenate([[0.0], np.geomspace(1e-7, 1.0 - 1e-7, grid), [1.0]])
+        mask = np.concatenate([[False], kept(m[1:-1]), [False]])
+        if not mask.any():  # the true mean is rejected with probability <= alpha
             return 0.0, 1.0
         inside = np.flatnonzero(mask)
-        low = m[inside[0] - 1] if inside[0] > 0 else 0.0
-        high = m[inside[-1] + 1] if inside[-1] < m.size - 1 else 1.0
+        first, last = inside[0], inside[-1]
+        # refine between the last rejected and the first kept point on each side
+        fine_low = np.linspace(m[first - 1], m[first], grid + 2)[1:-1]
+        fine_high = np.linspace(m[last], m[last + 1], grid + 2)[1:-1]
+        low_kept = kept(np.clip(fine_low, 1e-12, 1 - 1e-12)) if first > 1 else np.ones(1, bool)
+        high_kept = kept(np.clip(fine_high, 1e-12, 1 - 1e-12)) if last < grid else None
+        low = (
+            m[first - 1]
+            if first <= 1
+            else np.concatenate([[m[first - 1]], fine_low])[np.argmax(low_kept)]
+        )
+        if high_kept is None:
+            high = 1.0
+        else:
+            outside = np.flatnonzero(~high_kept)
+            high = fine_high[outside[0]] if outside.size else m[last + 1]
         return float(low), float(high)
 
-    low, high = edges(kept)
-    upper = edges(kept_upper)[1]
+    low, high = edges(kept_two_sided)
+    upper = edges(kept_one_sided)[1]
     return low * bound, min(high * bound, 1.0), min(upper * bound, 1.0)
 
 

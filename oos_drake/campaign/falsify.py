@@ -22,9 +22,10 @@ the window is the spec's (for a ``critical`` window: the window and frequency of
 peak region, the largest ``mu_upper``).
 
 Optimizer: scipy's differential evolution (``best1bin``, deferred updating: one generation is one
-batch of runs on the campaign's executor, process pool or Dask). Its first generation holds the
-analysis' worst cases (the regions' perturbations, other parameters at their nominal values, all
-clipped to the box) and the nominal point, filled up by a Latin hypercube.
+batch of runs on the campaign's executor, process pool or Dask) over the unit cube of the box
+widened by :data:`EDGE_MARGIN` and clipped back (faces and vertices are reachable). Its first
+generation holds the analysis' worst cases (the regions' perturbations, other parameters at their
+nominal values, all clipped to the box) and the nominal point, filled up by a Latin hypercube.
 
 Resume: every evaluated point is written atomically as soon as its run finishes
 (``points/point_NNNNNN.parquet``). The search is deterministic given its seed and the values it
@@ -55,6 +56,10 @@ from oos_drake.campaign.spec import CampaignSpec, load_spec, spec_to_toml
 
 #: Requirement ratio given to a run that diverged or failed (the optimizer's objective) [-].
 FAILED_RATIO = 1.0e3
+#: The optimizer searches the unit cube widened by this margin on each side and the points are
+#: clipped back to the box: worst cases often lie on the box's faces and vertices, which
+#: differential evolution (re-drawing out-of-bounds trials at random) would otherwise rarely reach.
+EDGE_MARGIN = 0.1
 #: Files of a falsification folder.
 SPEC_FILE = "spec.toml"
 SETTINGS_FILE = "falsify.json"
@@ -425,7 +430,7 @@ def falsify(
     try:
         differential_evolution(
             lambda u: 0.0,  # never called: the batch map evaluates
-            bounds=[(0.0, 1.0)] * len(box.names),
+            bounds=[(-EDGE_MARGIN, 1.0 + EDGE_MARGIN)] * len(box.names),
             init=starts,
             maxiter=max(1, math.ceil(budget / size)),
             popsize=size,

@@ -36,35 +36,35 @@ def _spec(max_runs: int) -> str:
         ape = {{ max = 1.0 }}              # never violated
 
         [estimation]
-        target = 0.05
+        target = 0.1
         until_decided = true
-        batch = 15
+        batch = 10
         max_runs = {max_runs}
         """
     )
 
 
 def test_runs_until_the_bound_decides(write_spec, tmp_path):
-    # no violation: the one-sided 95 % bound 1 - 0.05^(1/N) <= 0.05 from N = 59 runs on;
-    # batches of 15 after the first 20 runs reach it at 65
-    needed = math.ceil(math.log(0.05) / math.log(0.95))
-    expected = 20 + 15 * math.ceil((needed - 20) / 15)
+    # no violation: the one-sided 95 % bound 1 - 0.05^(1/N) <= 0.1 from N = 29 runs on;
+    # batches of 10 after the first 20 runs reach it at 30
+    needed = math.ceil(math.log(0.05) / math.log(0.9))
+    expected = 20 + 10 * math.ceil((needed - 20) / 10)
     summary = run_campaign(write_spec(_spec(500)), tmp_path / "c", workers=1, progress=False)
-    assert summary.n_runs == summary.executed == expected == 65
+    assert summary.n_runs == summary.executed == expected == 30
     runs = pd.read_parquet(tmp_path / "c" / "runs.parquet")
     plan = pd.read_parquet(tmp_path / "c" / "plan.parquet")
     assert len(runs) == len(plan) == expected
     assert plan["seed"].is_unique and sorted(plan["run_id"]) == list(range(expected))
     report = write_report(tmp_path / "c", worst=1)
     assert f"{expected} runs, 0 violations: P <= " in report.text
-    assert "P <= 0.05; " in report.text or report.text.count("P <= 0.05") >= 1
+    assert "(Clopper-Pearson); P <= 0.1" in report.text
     # nothing left to do: a resume runs nothing
     again = resume_campaign(tmp_path / "c", workers=1, progress=False)
     assert (again.executed, again.n_runs) == (0, expected)
 
 
 def test_stops_at_the_budget(write_spec, tmp_path):
-    summary = run_campaign(write_spec(_spec(40)), tmp_path / "c", workers=1, progress=False)
-    assert summary.n_runs == 40  # 20 + 15 + 5: the budget, still undecided
+    summary = run_campaign(write_spec(_spec(25)), tmp_path / "c", workers=1, progress=False)
+    assert summary.n_runs == 25  # 20 + 5: the budget, still undecided
     report = write_report(tmp_path / "c", worst=1)
-    assert "40 runs, 0 violations" in report.text and "undecided" in report.text
+    assert "25 runs, 0 violations" in report.text and "undecided" in report.text
