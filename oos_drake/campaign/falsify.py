@@ -65,6 +65,7 @@ SPEC_FILE = "spec.toml"
 SETTINGS_FILE = "falsify.json"
 POINTS_DIR = "points"
 TABLE_FILE = "falsification.parquet"
+COMPARISON_FILE = "comparison.parquet"
 RATIO_COLUMN = "requirement ratio [-]"
 
 
@@ -198,6 +199,10 @@ class FalsificationResult:
         Points run by this call.
     reused : int
         Points taken from an earlier (interrupted) call.
+    comparison : pandas.DataFrame
+        Per max-requirement metric: the worst ratio metric / requirement the search found beside
+        the analysis' worst-case gain bounds (largest over the regions; NaN without gains), both
+        normalized by the requirement (``comparison.parquet``).
     """
 
     directory: Path
@@ -205,16 +210,27 @@ class FalsificationResult:
     best: pd.Series
     evaluated: int
     reused: int
+    comparison: pd.DataFrame
 
     def sentence(self) -> str:
         """One line: the worst run found and its parameters."""
         best = self.best
         verdict = "VIOLATES" if best[RATIO_COLUMN] > 1 else "meets"
-        return (
+        lines = [
             f"falsification: {len(self.table)} runs; worst requirement ratio "
             f"{best[RATIO_COLUMN]:.4g} (point {int(best['point_id'])}, {best['status']}): "
             f"{verdict} the requirements"
-        )
+        ]
+        for _, row in self.comparison.iterrows():
+            line = f"  {row['metric']}: worst found {row['worst found / requirement [-]']:.4g}"
+            if np.isfinite(row["wcgain upper [-]"]):
+                line += (
+                    f" of the requirement; the analysis' worst-case gain lies in "
+                    f"[{row['wcgain lower [-]']:.4g}, {row['wcgain upper [-]']:.4g}] "
+                    f"(region {int(row['region'])})"
+                )
+            lines.append(line)
+        return "\n".join(lines)
 
 
 class _BudgetSpent(Exception):
@@ -450,4 +466,32 @@ def falsify(
     table = table[table["point_id"] < budget].reset_index(drop=True)
     store.atomic_write_parquet(table, directory / TABLE_FILE)
     best = table.loc[table[RATIO_COLUMN].idxmax()]
-    return FalsificationResult(directory, table, best, evaluator.evaluated, evaluator.reused)
+    comparison = linear_comparison(spec, table)
+    store.atomic_write_parquet(comparison, directory / COMPARISON_FILE)
+    return FalsificationResult(
+        directory, table, best, evaluator.evaluated, evaluator.reused, comparison
+    )
+
+
+def linear_comparison(spec: CampaignSpec, table: pd.DataFrame) -> pd.DataFrame:
+    """Per max-requirement metric: worst metric / requirement among the finished points, and
+    the largest worst-case gain bounds of the analysis' regions for it (NaN without gains)."""
+    rows = []
+    ok = table["status"] == "ok"
+    for requirement in spec.requirements:
+        if requirement.max is None or requirement.max <= 0:
+            continue
+        ratio = table.loc[ok, metric_column(spec, requirement.metric)] / requirement.max
+        with_gain = [r for r in spec.regions if requirement.metric in r.gains]
+        region = max(with_gain, key=lambda r: r.gains[requirement.metric][1], default=None)
+        low, high = region.gains[requirement.metric] if region else (math.nan, math.nan)
+        rows.append(
+            {
+                "metric": requirement.metric,
+                "worst found / requirement [-]": float(ratio.max()) if len(ratio) else math.nan,
+                "wcgain lower [-]": float(low),
+                "wcgain upper [-]": float(high),
+                "region": region.region if region else -1,
+            }
+        )
+    return pd.DataFrame(rows)

@@ -108,12 +108,16 @@ def test_search_starts_from_the_analysis_worst_cases(write_spec, tmp_path):
     from oos_drake.campaign.simulator import SimulatorRecipe, build_simulator
     from oos_drake.campaign.worst_cases import WorstCaseRegion, write_worst_cases
 
+    gains = {"ape": (1.1, 1.3)}  # the analysis' bounds on ape / requirement (made up)
+
     simulator = build_simulator(
         SimulatorRecipe.create("tests.campaign.synthetic_sim:make_simulator", {})
     )
     a, b = synthetic_sim.WORST
     regions = (
-        WorstCaseRegion(0, "capture", 10.0, 0.2, 1.5, 1.4, "a,b,d", {"a": a, "b": b, "d": 1.0}),
+        WorstCaseRegion(
+            0, "capture", 10.0, 0.2, 1.5, 1.4, "a,b,d", {"a": a, "b": b, "d": 1.0}, gains
+        ),
         WorstCaseRegion(1, "capture", 10.0, 0.2, 1.1, 1.0, "a", {"a": 0.2}),
     )
     path = write_worst_cases(regions, simulator.parameters(), tmp_path / "wc.parquet")
@@ -130,3 +134,7 @@ def test_search_starts_from_the_analysis_worst_cases(write_spec, tmp_path):
     second = table.iloc[1]
     assert second["a [-]"] == pytest.approx(0.2) and second["b [-]"] == pytest.approx(0.5)
     assert int(result.best["point_id"]) == 0
+    row = result.comparison.iloc[0]
+    assert (row["wcgain lower [-]"], row["wcgain upper [-]"], row["region"]) == (1.1, 1.3, 0)
+    assert row["worst found / requirement [-]"] == pytest.approx(1.2, rel=1e-12)
+    assert "the analysis' worst-case gain lies in [1.1, 1.3] (region 0)" in result.sentence()
