@@ -258,16 +258,6 @@ class _Evaluator:
             file=sys.stderr,
             dynamic_ncols=True,
         )
-        lti = [
-            n
-            for n in box.names
-            if spec.info.by_name[n].kind == ParameterKind.LTI and math.isnan(self.frequency)
-        ]
-        if lti:
-            raise ValueError(
-                f"falsify {spec.name}: LTI perturbations ({', '.join(lti)}) need the analysis' "
-                "worst_cases.parquet for their frequency (--worst-cases FILE)"
-            )
 
     def __call__(self, _function, population) -> list[float]:
         population = np.atleast_2d(np.asarray(list(population), float))
@@ -428,6 +418,13 @@ def falsify(
     if not any(r.max is not None and r.max > 0 for r in spec.requirements):
         raise ValueError(f"spec {spec.name}: falsification needs a requirement with a max bound")
     box = SearchBox.of_spec(spec)
+    _, frequency = _window_and_frequency(spec)
+    lti = [n for n in box.names if spec.info.by_name[n].kind == ParameterKind.LTI]
+    if lti and math.isnan(frequency):
+        raise ValueError(
+            f"falsify {spec.name}: LTI perturbations ({', '.join(lti)}) need the analysis' "
+            "worst_cases.parquet for their frequency (--worst-cases FILE)"
+        )
     size = population_size(len(box.names))
     seeds, _ = run_seeds(spec.random_seed, 1)
     settings = {"seed": spec.random_seed, "population": size, "budget": budget}

@@ -8,7 +8,7 @@ import pytest
 
 from oos_drake.campaign.report import write_report
 from oos_drake.campaign.runner import run_campaign
-from oos_drake.campaign.spec import load_spec
+from oos_drake.campaign.spec import load_spec, parse_spec, spec_to_toml
 
 from .spec_texts import BASE_SPEC
 
@@ -28,7 +28,9 @@ def _spec(phases: str) -> str:
 
 
 def test_requirement_applies_only_in_its_phases(write_spec, tmp_path):
-    spec = load_spec(write_spec(_spec('["capture-end"]')))
+    path = write_spec(_spec('["capture-end"]'))
+    spec = load_spec(path)
+    assert parse_spec(spec_to_toml(spec), source=path) == spec  # the resolved copy keeps phases
     ((start, end),) = spec.requirements[0].spans
     assert start == spec.info.events["capture"] and end == spec.info.duration
     run_campaign(
