@@ -94,12 +94,25 @@ def test_cli_refuses_bad_input_and_writes_nothing(write_spec, tmp_path, capsys):
     assert main(["campaign", "falsify", str(no_requirement), "--out", str(out)]) == 2
     assert "max bound" in capsys.readouterr().err and not out.exists()
     assert (
-        main(["campaign", "falsify", str(spec), "--out", str(out), "--budget", "16", "--quiet"])
+        main(
+            [
+                "campaign",
+                "falsify",
+                str(spec),
+                "--out",
+                str(out),
+                "--budget",
+                "9",
+                "--quiet",
+                "--workers",
+                "1",
+            ]
+        )
         == 0
     )
     assert "worst requirement ratio" in capsys.readouterr().out
     other = write_spec(_spec().replace("random_seed = 11", "random_seed = 12"), name="other")
-    assert main(["campaign", "falsify", str(other), "--out", str(out), "--budget", "16"]) == 2
+    assert main(["campaign", "falsify", str(other), "--out", str(out), "--budget", "9"]) == 2
     assert "another falsification" in capsys.readouterr().err
 
 
