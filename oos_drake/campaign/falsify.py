@@ -332,6 +332,8 @@ def _read_points(directory: Path) -> dict[int, dict]:
     """Recorded points: id -> unit coordinates and ratio (unreadable leftovers are redone)."""
     folder = Path(directory) / POINTS_DIR
     out = {}
+    for leftover in folder.glob(".point_*.tmp") if folder.is_dir() else ():
+        leftover.unlink()  # a write interrupted by a kill: its point is run again
     for path in sorted(folder.glob("point_*.parquet")) if folder.is_dir() else ():
         try:
             row = pd.read_parquet(path).iloc[0]

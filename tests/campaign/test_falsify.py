@@ -73,8 +73,12 @@ def test_resume_after_interruption_loses_no_run(write_spec, tmp_path):
         falsify(spec, out, budget=40, progress=False)
     assert marker.exists()
     assert len(list((out / "points").glob("point_*.parquet"))) == 23
+    # what a kill -9 leaves: a torn temporary and a truncated point file; both are redone
+    (out / "points" / ".point_000023.parquet.abc.tmp").write_bytes(b"torn")
+    (out / "points" / "point_000022.parquet").write_bytes(b"PAR1 truncated")
     resumed = falsify(spec, out, budget=40, progress=False)
-    assert (resumed.reused, resumed.evaluated) == (23, 17)
+    assert (resumed.reused, resumed.evaluated) == (22, 18)
+    assert not list((out / "points").glob("*.tmp"))
     # the same search as one that never stopped
     clean = falsify(
         write_spec(_spec(), name="clean"), tmp_path / "clean", budget=40, progress=False
