@@ -109,6 +109,17 @@ class Interval:
             f"P <= {self.upper:.3g} at {100 * self.confidence:g} % ({self.method})"
         )
 
+    def runs_to_decide(self, target: float) -> int:
+        """More runs, all without violation, that would show ``P <= target`` (exact binomial
+        bound, :func:`runs_to_decide`). For a weighted (importance-sampling) estimate the runs
+        are counted as their plain Monte Carlo equivalent: ``effective_runs`` runs with
+        ``ceil(estimate * effective_runs)`` violations."""
+        if self.method.startswith("betting"):
+            runs = max(1, int(round(self.effective_runs)))
+            violations = min(runs, math.ceil(self.estimate * self.effective_runs - 1e-9))
+            return runs_to_decide(violations, runs, target, self.confidence)
+        return runs_to_decide(self.violations, self.runs, target, self.confidence)
+
     def decides(self, target: float) -> str:
         """``"P <= target"`` when the upper bound is below the target, ``"P > target"`` when the
         lower bound is above it, else ``"undecided"``."""

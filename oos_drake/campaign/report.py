@@ -213,9 +213,7 @@ def _estimate(spec, runs, weights, events) -> dict:
         "interval": est.method,
         "P 95 % upper (one-sided)": est.upper,
         "decision": est.decides(target),
-        "more runs to show P <= target": estimators.runs_to_decide(
-            est.violations, est.runs, target, est.confidence
-        ),
+        "more runs to show P <= target": est.runs_to_decide(target),
     }
 
 
@@ -228,7 +226,7 @@ def probability_sentences(spec, runs: pd.DataFrame) -> str:
     events.append(("any requirement or run failure", ~runs["pass"].to_numpy(bool)))
     for label, violated in events:
         est = estimators.campaign_estimate(spec, runs, violated)
-        more = estimators.runs_to_decide(est.violations, est.runs, target, est.confidence)
+        more = est.runs_to_decide(target)
         decision = est.decides(target)
         line = f"  {label}: {est.sentence()}; {decision}"
         if more and decision == "undecided":

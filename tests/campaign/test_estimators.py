@@ -116,3 +116,13 @@ def test_importance_sampling_refuses_unbounded_weights():
 def test_stratified_refuses_empty_stratum():
     with pytest.raises(ValueError, match="stratum 'b'"):
         estimators.stratified(np.zeros(4, bool), np.array(["a"] * 4), {"a": 0.5, "b": 0.5})
+
+
+def test_weighted_runs_to_decide_counts_the_monte_carlo_equivalent():
+    weighted = estimators.Interval(
+        0.02, 0.0, 0.1, 0.08, 200, 60, 0.95, "betting (Waudby-Smith-Ramdas)", 100.0
+    )
+    # 100 effective runs with 2 effective violations, not 200 runs with 60 (mostly tiny weights)
+    assert weighted.runs_to_decide(0.01) == estimators.runs_to_decide(2, 100, 0.01)
+    plain = estimators.monte_carlo(np.r_[np.ones(2, bool), np.zeros(98, bool)])
+    assert plain.runs_to_decide(0.01) == estimators.runs_to_decide(2, 100, 0.01)
