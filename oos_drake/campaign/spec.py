@@ -42,6 +42,17 @@ seed and a mission window, and states the requirements each run is checked again
     max_runs = 2000                          # ... or this many runs are spent
     batch = 100
 
+Uncertainty is declared once, by the scenario: every simulator parameter with a declared
+uncertainty (:attr:`~oos_drake.campaign.simulator.Parameter.uncertainty`: an uncertain block's
+``nominal +- percent``, a normalized LTI block's ``[-1, 1]``) is dispersed uniformly over it
+without a line in ``[dispersions]``. A line there only overrides: a shape over the same range
+(``{ distribution = "normal", mean = ..., std = ... }``: ``low``/``high`` default to the declared
+range), a wider range (``widen = true``) or anything else (``override = true``); a range that
+contradicts the scenario without saying so is refused, naming the parameter. Samplers:
+``monte-carlo``, ``latin-hypercube``, ``phase-stratified`` (the whole mission, runs per phase in
+proportion to its duration) and ``mu-guided``; ``[requirements]`` may name the mission phases
+they apply to (``phases = ["capture-end"]``), and ``[estimation]`` sets the probability target.
+
 Errors are one-line ``ValueError`` s naming the file and the key. :func:`load_spec` builds the
 simulator once (in the calling process) to check parameter names, ranges, metrics and events.
 """
