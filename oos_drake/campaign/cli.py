@@ -142,6 +142,7 @@ def _falsify(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         worst_cases=args.worst_cases,
         progress=not args.quiet,
+        simulator_options=_parse_options(args.simulator_option),
     )
     print(result.sentence())
     if result.reused:
@@ -244,6 +245,12 @@ def register(subparsers) -> None:
         default=None,
         metavar="PARQUET",
         help="the analysis' worst_cases.parquet: its worst cases start the search",
+    )
+    falsify.add_argument(
+        "--simulator-option",
+        action="append",
+        metavar="KEY=VALUE",
+        help="override a simulator option of the spec (repeatable; VALUE may be JSON)",
     )
     _add_executor_options(falsify)
     falsify.set_defaults(func=_falsify)

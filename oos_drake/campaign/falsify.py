@@ -39,8 +39,10 @@ from __future__ import annotations
 import json
 import math
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -49,10 +51,10 @@ from tqdm import tqdm
 from oos_drake.campaign import store
 from oos_drake.campaign.distributions import Choice, Fixed, LogUniform, TruncatedNormal
 from oos_drake.campaign.executors import make_executor
-from oos_drake.campaign.runner import metric_column
+from oos_drake.campaign.runner import metric_column, resolve_spec
 from oos_drake.campaign.samplers import run_seeds
 from oos_drake.campaign.simulator import ParameterKind, RunCase
-from oos_drake.campaign.spec import CampaignSpec, load_spec, spec_to_toml
+from oos_drake.campaign.spec import CampaignSpec, spec_to_toml
 
 #: Requirement ratio given to a run that diverged or failed (the optimizer's objective) [-].
 FAILED_RATIO = 1.0e3
@@ -387,6 +389,7 @@ def falsify(
     scheduler: str | None = None,
     worst_cases: str | Path | None = None,
     progress: bool = True,
+    simulator_options: Mapping[str, Any] | None = None,
 ) -> FalsificationResult:
     """Search the spec's dispersion box for the largest requirement ratio (module docstring).
 
@@ -404,6 +407,8 @@ def falsify(
         The analysis' ``worst_cases.parquet``: its regions start the search.
     progress : bool
         Show a progress bar.
+    simulator_options : dict, optional
+        Update the spec's simulator options (``--simulator-option``, e.g. a ``controller``).
 
     Raises
     ------
@@ -414,9 +419,7 @@ def falsify(
 
     if budget < 1:
         raise ValueError(f"--budget {budget}: need at least 1 run")
-    if worst_cases is not None and not Path(worst_cases).is_file():
-        raise ValueError(f"--worst-cases {worst_cases}: file not found")
-    spec = load_spec(spec_path, worst_cases=worst_cases)
+    spec = resolve_spec(spec_path, worst_cases, simulator_options)
     if not any(r.max is not None and r.max > 0 for r in spec.requirements):
         raise ValueError(f"spec {spec.name}: falsification needs a requirement with a max bound")
     box = SearchBox.of_spec(spec)

@@ -238,6 +238,16 @@ def plan_campaign(
     ``simulator_options`` update the spec's simulator options (e.g. a synthesized
     ``controller``). The modified spec is validated again.
     """
+    spec = resolve_spec(spec_path, worst_cases, simulator_options)
+    return spec, make_plan(spec)
+
+
+def resolve_spec(
+    spec_path: str | Path,
+    worst_cases: str | Path | None = None,
+    simulator_options: Mapping[str, Any] | None = None,
+) -> CampaignSpec:
+    """The spec with ``--worst-cases`` and ``--simulator-option`` applied, validated again."""
     if worst_cases is not None:
         worst_cases = Path(worst_cases).resolve()
         if not worst_cases.is_file():
@@ -248,7 +258,7 @@ def plan_campaign(
         spec = replace(spec, simulator=SimulatorRecipe.create(spec.simulator.name, options))
         toml = spec_to_toml(spec, str(worst_cases) if worst_cases is not None else None)
         spec = parse_spec(toml, source=Path(spec_path))
-    return spec, make_plan(spec)
+    return spec
 
 
 def _write_campaign(directory: Path, spec: CampaignSpec, plan: pd.DataFrame) -> None:
