@@ -2,7 +2,11 @@
 
 Flow: ``spec`` (validated TOML) -> ``samplers`` (plan: values, seeds, weights, windows) ->
 ``executors`` (in-process, process pool, Dask) running a ``simulator`` per worker -> ``store``
-(crash-safe per-run Parquet files, ``runs.parquet``) -> ``report`` (tables, figures).
+(crash-safe per-run Parquet files, ``runs.parquet``) -> ``estimators`` (P(violation) with
+intervals that hold: Clopper-Pearson, stratified by phase, defensive importance sampling) ->
+``report`` (tables, figures). Falsification (``falsify``: an optimizer over the dispersion box
+looking for the worst nonlinear run) uses the same simulators and executors but keeps its runs
+apart from the estimation runs.
 
 Plugging in a simulator (e.g. the Drake mission): implement the :class:`Simulator` protocol,
 expose a factory ``make_simulator(**options)``, and register it::

@@ -1,4 +1,4 @@
-"""``oos campaign run|resume|rerun|report``: Monte Carlo campaigns from the command line.
+"""``oos campaign run|resume|rerun|report|replay|falsify``: campaigns from the command line.
 
 Examples::
 
@@ -8,6 +8,7 @@ Examples::
     oos campaign rerun out/demo --case 17         # recompute run 17, compare with the record
     oos campaign report out/demo                  # figures + tables in out/demo/report
     oos campaign replay out/demo --case 17        # 3D replay in out/demo/replay/case_17.html
+    oos campaign falsify demo --budget 200        # search the worst case (out/falsify/demo)
 """
 
 from __future__ import annotations
@@ -126,6 +127,32 @@ def _report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _falsify(args: argparse.Namespace) -> int:
+    from oos_drake.campaign.falsify import falsify
+    from oos_drake.campaign.spec import load_spec
+
+    out = args.out
+    if out is None:
+        out = Path("out") / "falsify" / load_spec(args.spec, worst_cases=args.worst_cases).name
+    result = falsify(
+        args.spec,
+        out,
+        budget=args.budget,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        worst_cases=args.worst_cases,
+        progress=not args.quiet,
+        simulator_options=_parse_options(args.simulator_option),
+    )
+    print(result.sentence())
+    if result.reused:
+        print(f"resumed: {result.reused} points taken from the folder, {result.evaluated} run now")
+    with pd.option_context("display.width", 160, "display.float_format", "{:.6g}".format):
+        print(result.best.drop(labels=["unit coordinates", "error"]).to_string())
+    print(f"every evaluated point: {Path(result.directory) / 'falsification.parquet'}")
+    return 0
+
+
 def _replay(args: argparse.Namespace) -> int:
     from oos_drake.campaign.replay import replay_case
 
@@ -198,6 +225,35 @@ def register(subparsers) -> None:
         "nonlinear twin against mu (default: <campaign>/../confirm when it exists)",
     )
     report.set_defaults(func=_report)
+
+    falsify = commands.add_parser(
+        "falsify",
+        help="search the dispersion box for the worst nonlinear run (not an estimation)",
+    )
+    falsify.add_argument("spec", help="campaign spec (TOML file) or the name of a shipped spec")
+    falsify.add_argument(
+        "--out",
+        default=None,
+        help="folder of the search (default: out/falsify/<name>); the folder of the same search "
+        "is resumed",
+    )
+    falsify.add_argument(
+        "--budget", type=int, default=200, help="largest number of runs (default 200)"
+    )
+    falsify.add_argument(
+        "--worst-cases",
+        default=None,
+        metavar="PARQUET",
+        help="the analysis' worst_cases.parquet: its worst cases start the search",
+    )
+    falsify.add_argument(
+        "--simulator-option",
+        action="append",
+        metavar="KEY=VALUE",
+        help="override a simulator option of the spec (repeatable; VALUE may be JSON)",
+    )
+    _add_executor_options(falsify)
+    falsify.set_defaults(func=_falsify)
 
     replay = commands.add_parser(
         "replay", help="self-contained HTML 3D replay of one run (Drake mission, Meshcat)"

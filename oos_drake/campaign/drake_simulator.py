@@ -31,12 +31,45 @@ from oos_drake.campaign.simulator import (
     check_options,
 )
 
-__all__ = ["DrakeMissionSimulator", "make_simulator", "FACTORY_PATH"]
+__all__ = ["DrakeMissionSimulator", "campaign_parameters", "make_simulator", "FACTORY_PATH"]
 
 #: Import path of the factory (usable as ``[simulator] name`` in a spec).
 FACTORY_PATH = "oos_drake.campaign.drake_simulator:make_simulator"
 
 _METRIC_SIGNALS = {"ape": "phi_y", "peak_torque": "u_y", "peak_applied_torque": "T_y"}
+
+
+def campaign_parameters(mission_parameters) -> tuple[Parameter, ...]:
+    """The mission's parameters as campaign parameters, with the uncertainty the scenario declares.
+
+    The uncertain blocks of the scenario (masses, inertias, modal frequencies: kind
+    ``real_block``) declare their range (``nominal +- percent``) and the normalized LTI blocks
+    ``Delta_*`` their unit ball ``[-1, 1]``: these are the campaign's default dispersions. Docking
+    coefficients, initial errors and the noise seed declare none (their ranges are the model's
+    domain, not an uncertainty): a spec disperses them explicitly.
+
+    Parameters
+    ----------
+    mission_parameters : sequence of MissionParameter
+        :func:`oos_drake.multibody.mission_sim.mission_parameters` of the scenario.
+    """
+    out = []
+    for p in mission_parameters:
+        kind = ParameterKind.of_quantity(p.quantity)
+        declared = kind in (ParameterKind.REAL_BLOCK, ParameterKind.LTI)
+        out.append(
+            Parameter(
+                p.name,
+                p.unit,
+                p.nominal,
+                p.lower,
+                p.upper,
+                kind,
+                p.description,
+                uncertainty=(p.lower, p.upper) if declared else None,
+            )
+        )
+    return tuple(out)
 
 
 class DrakeMissionSimulator:
@@ -70,18 +103,7 @@ class DrakeMissionSimulator:
         sdf, self._sdf = scenario_sdf_directory(data)  # the folder lives with the simulator
         handles = make_mission_diagram(MissionOptions(**options), scenario=data, sdf_directory=sdf)
         self.simulation = MissionSimulation(handles=handles)
-        self._parameters = tuple(
-            Parameter(
-                p.name,
-                p.unit,
-                p.nominal,
-                p.lower,
-                p.upper,
-                ParameterKind.of_quantity(p.quantity),
-                p.description,
-            )
-            for p in self.simulation.parameters
-        )
+        self._parameters = campaign_parameters(self.simulation.parameters)
 
     def parameters(self) -> tuple[Parameter, ...]:
         """Dispersible parameters (uncertain blocks, dockings, initial errors, seed, LTI)."""

@@ -1,20 +1,20 @@
 """Campaign report: summary tables (Parquet + printed pandas) and figures (PNG).
 
-Estimates use the run weights (1 for Monte Carlo and Latin hypercube; the likelihood ratios of the
-mu-guided sampler), so failure probabilities are unbiased for the spec's dispersions:
-
-.. math::
-
-    \\hat P_{fail} = \\frac{1}{N} \\sum_i w_i\\, 1[\\text{run } i \\text{ fails}],
-    \\qquad \\mathrm{se} = \\sqrt{\\mathrm{var}(w_i 1[\\cdot]) / N}
-
-A run fails when it did not finish (``failed``/``diverged``) or violates a requirement.
+Probabilities of violation are estimated for the spec's dispersions by
+:func:`.estimators.campaign_estimate` (exact Clopper-Pearson for Monte Carlo runs, a betting
+interval for importance-weighted runs of the mu-guided sampler whose effective sample
+size reaches half the runs, else the runs drawn from the dispersions alone). A run fails when it
+did not finish (``failed``/``diverged``) or violates a requirement. The report states, per
+requirement, "N runs, k violations: P <= p at 95 %", whether that decides against the spec's
+``[estimation] target`` and how many more runs without violation would show ``P <= target``.
 
 Files written in ``DIR/report/``:
 
 - ``summary.parquet``: per metric: runs, weighted mean, min, quantiles, max, requirement,
-  violations, estimated violation probability, its standard error and a 95 % confidence
-  interval that holds with zero violations too (:func:`probability_interval`);
+  violations, estimated violation probability, its standard error, the confidence interval and its
+  method, the one-sided upper bound, the decision against the target and the runs still needed;
+- ``violations.parquet``: every violation with its requirement, mission phase and the time of
+  the first violation (from the retained time series);
 - ``status.parquet``: runs per status; ``worst_runs.parquet``: the worst runs by requirement
   margin; ``regions.parquet`` (mu-guided): runs, failures and estimate per proposal region,
   with the analysis' worst-case performance gains of the region beside the worst metric of the
@@ -52,7 +52,7 @@ import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from oos_drake.campaign import store  # noqa: E402
+from oos_drake.campaign import estimators, store  # noqa: E402
 from oos_drake.campaign.distributions import Fixed  # noqa: E402
 from oos_drake.campaign.executors import execute_case  # noqa: E402
 from oos_drake.campaign.runner import (  # noqa: E402
@@ -60,7 +60,7 @@ from oos_drake.campaign.runner import (  # noqa: E402
     load_campaign,
     metric_column,
 )
-from oos_drake.campaign.samplers import NOMINAL_COMPONENT  # noqa: E402
+from oos_drake.campaign.samplers import NOMINAL_COMPONENT, mission_phases  # noqa: E402
 
 #: File of ``oos confirm`` and the folder where ``oos run`` writes it (a sibling of the campaign).
 CONFIRMATION_FILE = "confirmation.parquet"
@@ -111,100 +111,6 @@ def _save(fig, path: Path, rect=None) -> Path:
     store.atomic_write_bytes(path, lambda stream: fig.savefig(stream, format="png", dpi=110))
     plt.close(fig)
     return path
-
-
-@dataclass(frozen=True)
-class ProbabilityEstimate:
-    """An estimated probability with its confidence interval.
-
-    Attributes
-    ----------
-    p : float
-        Estimate [-].
-    se : float
-        Standard error [-].
-    low, high : float
-        Confidence interval [-].
-    method : str
-        ``"Clopper-Pearson"`` (exact binomial, unweighted runs) or ``"empirical Bernstein"``
-        (importance-weighted runs).
-    """
-
-    p: float
-    se: float
-    low: float
-    high: float
-    method: str
-
-
-def probability_interval(
-    weights: np.ndarray, indicator: np.ndarray, *, weight_bound: float, confidence: float = 0.95
-) -> ProbabilityEstimate:
-    r"""``P(indicator)`` with a confidence interval that holds with zero events too.
-
-    Unweighted runs (all weights 1): the exact binomial (Clopper-Pearson) interval, as
-    ``scipy.stats.binomtest(k, n).proportion_ci(method="exact")``: zero failures in ``n`` runs give
-    ``[0, 1 - (alpha/2)^(1/n)]``, not ``p = 0 +- 0``.
-
-    Importance-weighted runs (mu-guided): ``X_i = w_i 1[event]`` lies in ``[0, b]`` with ``b =
-    weight_bound`` (the defensive mixture bounds every weight by ``1 / defensive_fraction``), so the
-    empirical Bernstein bound of Maurer and Pontil (2009, theorem 4) applies on each side with
-    ``delta = (1 - confidence) / 2``:
-
-    .. math::
-
-        |\hat p - p| \le \sqrt{2 V_n \ln(2/\delta) / n} + \frac{7 b \ln(2/\delta)}{3 (n - 1)}
-
-    with ``V_n`` the sample variance of the ``X_i``. It assumes independent draws from the
-    mixture; the plan draws a fixed number of runs per component (stratified), which does not
-    increase the variance. Distribution-free, hence wide for small ``n``: it is a guarantee,
-    not an approximation.
-
-    Parameters
-    ----------
-    weights : array_like
-        Run weights (likelihood ratios) [-].
-    indicator : array_like of bool
-        The event per run (a failure, a violated requirement).
-    weight_bound : float
-        Upper bound of every possible weight [-] (1 for plain Monte Carlo).
-    confidence : float
-        Confidence level of the interval [-].
-    """
-    from scipy.stats import binomtest
-
-    weights = np.asarray(weights, float)
-    events = np.asarray(indicator, bool)
-    n = weights.size
-    if n == 0:
-        return ProbabilityEstimate(math.nan, math.nan, math.nan, math.nan, "")
-    values = weights * events
-    p = float(values.mean())
-    se = float(np.std(values, ddof=1) / math.sqrt(n)) if n > 1 else math.nan
-    if np.all(weights == 1.0):
-        ci = binomtest(int(events.sum()), n).proportion_ci(confidence, method="exact")
-        return ProbabilityEstimate(p, se, float(ci.low), float(ci.high), "Clopper-Pearson")
-    if n < 2:
-        return ProbabilityEstimate(p, se, 0.0, 1.0, "empirical Bernstein")
-    log_term = math.log(4.0 / (1.0 - confidence))  # ln(2 / delta), delta = (1 - confidence) / 2
-    radius = math.sqrt(2.0 * np.var(values, ddof=1) * log_term / n)
-    radius += 7.0 * weight_bound * log_term / (3.0 * (n - 1))
-    return ProbabilityEstimate(
-        p, se, max(0.0, p - radius), min(1.0, p + radius), "empirical Bernstein"
-    )
-
-
-def weight_bound(spec) -> float:
-    """Largest possible run weight of the spec's sampler [-]: 1, or ``1 / defensive_fraction``."""
-    if spec.sampler.kind == "mu-guided":
-        return 1.0 / spec.sampler.defensive_fraction
-    return 1.0
-
-
-def effective_sample_size(weights: np.ndarray) -> float:
-    """Kish's effective sample size ``(sum w)^2 / sum w^2`` of importance weights [runs]."""
-    weights = np.asarray(weights, float)
-    return float(weights.sum() ** 2 / np.sum(weights**2)) if weights.size else 0.0
 
 
 def weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
@@ -276,7 +182,9 @@ def _summary_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
         }
         if requirement is not None:
             violated = ~runs[requirement.column].to_numpy(bool)
-            row.update({"violations": int(violated.sum()), **_estimate(spec, weights, violated)})
+            row.update(
+                {"violations": int(violated.sum()), **_estimate(spec, runs, weights, violated)}
+            )
         rows.append(row)
     failed = ~runs["pass"].to_numpy(bool)
     rows.append(
@@ -285,22 +193,111 @@ def _summary_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
             "runs": len(runs),
             "requirement": "all",
             "violations": int(failed.sum()),
-            **_estimate(spec, weights, failed),
+            **_estimate(spec, runs, weights, failed),
         }
     )
     return pd.DataFrame(rows)
 
 
-def _estimate(spec, weights, events) -> dict:
+def _estimate(spec, runs, weights, events) -> dict:
     """The summary columns of one estimated probability."""
-    est = probability_interval(weights, events, weight_bound=weight_bound(spec))
+    est = estimators.campaign_estimate(spec, runs, events)
+    target = spec.estimation.target
+    values = weights * np.asarray(events, bool)
+    n = len(values)
     return {
-        "P(violation)": est.p,
-        "se": est.se,
+        "P(violation)": est.estimate,
+        "se": float(np.std(values, ddof=1) / math.sqrt(n)) if n > 1 else math.nan,
         "P 95 % low": est.low,
         "P 95 % high": est.high,
         "interval": est.method,
+        "P 95 % upper (one-sided)": est.upper,
+        "decision": est.decides(target),
+        "more runs to show P <= target": est.runs_to_decide(target),
     }
+
+
+def probability_sentences(spec, runs: pd.DataFrame) -> str:
+    """Per requirement (and for any failure): ``"N runs, k violations: P <= p at 95 %"``, the
+    decision against the spec's target and the runs without violation that would show it."""
+    target = spec.estimation.target
+    lines = [f"probability of violation (target P <= {target:g}):"]
+    events = [(r.label, ~runs[r.column].to_numpy(bool)) for r in spec.requirements]
+    events.append(("any requirement or run failure", ~runs["pass"].to_numpy(bool)))
+    for label, violated in events:
+        est = estimators.campaign_estimate(spec, runs, violated)
+        more = est.runs_to_decide(target)
+        decision = est.decides(target)
+        line = f"  {label}: {est.sentence()}; {decision}"
+        if more and decision == "undecided":
+            line += f"; {more} more runs without violation would show P <= {target:g}"
+        lines.append(line)
+    return "\n".join(lines)
+
+
+def violations_table(directory: Path, spec, runs: pd.DataFrame) -> pd.DataFrame:
+    """Every violation: run, requirement, mission phase and time of the first violation.
+
+    The time is the first logged instant at which the signal a metric bounds (the simulator's
+    ``metric_signals``) leaves the requirement's max bound in one of the requirement's phases,
+    read from the run's retained time series; without one it is NaN and the phase column lists
+    the phases the run's window overlaps. A run that did not finish is listed once, with its
+    status.
+    """
+    phases = mission_phases(spec.info)
+    rows = []
+    for _, run in runs.iterrows():
+        start, end = float(run["window_start [s]"]), float(run["window_end [s]"])
+        overlapped = "+".join(
+            w.label.removeprefix("phase:") for w in phases if start < w.end and end > w.start
+        )
+        base = {"run_id": int(run["run_id"]), "window": run["window"], "status": run["status"]}
+        if run["status"] != "ok":
+            rows.append(base | {"requirement": "run finished", "phase": overlapped})
+            continue
+        series = None
+        for requirement in spec.requirements:
+            if bool(run[requirement.column]):
+                continue
+            time, phase = math.nan, overlapped
+            signal = spec.info.metric_signals.get(requirement.metric)
+            path = store.timeseries_file(directory, int(run["run_id"]))
+            if signal and requirement.max is not None and path.is_file():
+                series = pd.read_parquet(path) if series is None else series
+                column = f"{signal} [{spec.info.signal_units[signal]}]"
+                if column in series.columns:
+                    t = series["time [s]"].to_numpy(float)
+                    inside = np.ones(t.size, bool)
+                    if requirement.phases:
+                        inside = np.zeros(t.size, bool)
+                        for a, b in requirement.spans:
+                            inside |= (t >= a) & (t <= b)
+                    beyond = np.flatnonzero(
+                        inside & (np.abs(series[column].to_numpy()) > requirement.max)
+                    )
+                    if beyond.size:
+                        time = float(t[beyond[0]])
+                        phase = next(
+                            w.label.removeprefix("phase:")
+                            for w in phases
+                            if w.start <= time <= w.end
+                        )
+            rows.append(
+                base
+                | {
+                    "requirement": requirement.label,
+                    "phase": phase,
+                    "first violation time [s]": time,
+                    metric_column(spec, requirement.metric): float(
+                        run[metric_column(spec, requirement.metric)]
+                    ),
+                }
+            )
+    columns = ["run_id", "requirement", "phase", "first violation time [s]", "window", "status"]
+    table = pd.DataFrame(rows)
+    if table.empty:
+        return pd.DataFrame(columns=columns)
+    return table[columns + [c for c in table.columns if c not in columns]]
 
 
 def _gain_metrics(spec) -> list[str]:
@@ -533,11 +530,9 @@ def _plot_distributions(spec, runs: pd.DataFrame, path: Path) -> Path:
             for bound in (requirement.max, requirement.min):
                 if bound is not None:
                     ax.axvline(bound, color="tab:red", linestyle="--", label="requirement")
-            est = probability_interval(
-                weights, ~runs[requirement.column].to_numpy(bool), weight_bound=weight_bound(spec)
-            )
+            est = estimators.campaign_estimate(spec, runs, ~runs[requirement.column].to_numpy(bool))
             title += (
-                f"\nP(violation) = {est.p:.2g}, 95 % [{est.low:.2g}, {est.high:.2g}]"
+                f"\nP(violation) = {est.estimate:.2g}, 95 % [{est.low:.2g}, {est.high:.2g}]"
                 f"\n({est.method})"
             )
         ax.set_xlabel(column)
@@ -682,7 +677,13 @@ def write_report(
     summary = _summary_table(spec, runs)
     status = runs["status"].value_counts().rename_axis("status").reset_index(name="runs")
     worst_table = _worst_runs(spec, runs, worst)
-    tables = {"summary": summary, "status": status, "worst_runs": worst_table}
+    violations = violations_table(directory, spec, runs)
+    tables = {
+        "summary": summary,
+        "status": status,
+        "worst_runs": worst_table,
+        "violations": violations,
+    }
     if spec.sampler.kind == "mu-guided":
         tables["regions"] = _regions_table(spec, runs)
     if confirmation is not None:
@@ -708,12 +709,22 @@ def write_report(
             f"campaign {spec.name}: {len(runs)}/{len(plan)} runs finished, sampler "
             f"{spec.sampler.kind}",
             summary.to_string(index=False),
+            probability_sentences(spec, runs),
             status.to_string(index=False),
         ]
+        if not violations.empty:
+            shown = violations.head(20)
+            more = f" (first 20 of {len(violations)}; all in violations.parquet)"
+            parts.append(
+                "violations by phase:\n"
+                + violations.groupby("phase").size().rename("violations").to_string()
+                + f"\nviolations{more if len(violations) > 20 else ''}:\n"
+                + shown.to_string(index=False)
+            )
         if "regions" in tables:
             parts.append("runs per region:\n" + tables["regions"].to_string(index=False))
             weights = runs["weight"].to_numpy()
-            ess = effective_sample_size(weights)
+            ess = estimators.effective_sample_size(weights)
             guided = runs["region"].to_numpy() >= 0
             guided_share = weights[guided].sum() / weights.sum()
             parts.append(

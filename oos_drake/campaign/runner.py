@@ -24,6 +24,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from oos_drake.campaign import store
+from oos_drake.campaign.estimators import undecided_requirements
 from oos_drake.campaign.executors import RunResult, execute_case, make_executor
 from oos_drake.campaign.samplers import FREQUENCY_COLUMN, make_plan, region_counts
 from oos_drake.campaign.simulator import MissionWindow, RunCase, SimulatorRecipe
@@ -51,10 +52,11 @@ def result_row(spec: CampaignSpec, plan_row: pd.Series, result: RunResult) -> pd
     passes = []
     for metric in spec.metrics:
         record[metric_column(spec, metric)] = float(result.metrics.get(metric, math.nan))
+    start, end = float(plan_row["window_start [s]"]), float(plan_row["window_end [s]"])
     for requirement in spec.requirements:
-        ok = result.status == "ok" and requirement.passes(
-            float(result.metrics.get(requirement.metric, math.nan))
-        )
+        value = float(result.metrics.get(requirement.metric, math.nan))
+        applies = requirement.applies(start, end)
+        ok = result.status == "ok" and (not applies or requirement.passes(value))
         record[requirement.column] = ok
         passes.append(ok)
     record["pass"] = result.status == "ok" and all(passes)
@@ -186,6 +188,22 @@ def _execute(
             executor.close()
     store.consolidate(directory)
     runs = store.load_runs(directory)
+    if spec.estimation.until_decided and len(runs) == len(plan):
+        undecided = undecided_requirements(spec, runs)
+        room = spec.estimation.max_runs - len(plan)
+        if undecided and room > 0:
+            # add a batch, plan it on disk first (a resume then runs it), and continue
+            count = min(spec.estimation.batch, room)
+            batch = make_plan(spec, count, first_run_id=len(plan))
+            plan = pd.concat([plan, batch], ignore_index=True)
+            store.atomic_write_parquet(plan, directory / store.PLAN_FILE)
+            print(
+                f"{len(runs)} runs: undecided for {'; '.join(undecided)} against P <= "
+                f"{spec.estimation.target:g}: {count} more runs planned",
+                file=sys.stderr,
+            )
+            summary = _execute(directory, spec, plan, workers, scheduler, progress)
+            return replace(summary, executed=summary.executed + executed, skipped=len(finished))
     return CampaignSummary(
         directory=directory,
         n_runs=len(plan),
@@ -220,6 +238,16 @@ def plan_campaign(
     ``simulator_options`` update the spec's simulator options (e.g. a synthesized
     ``controller``). The modified spec is validated again.
     """
+    spec = resolve_spec(spec_path, worst_cases, simulator_options)
+    return spec, make_plan(spec)
+
+
+def resolve_spec(
+    spec_path: str | Path,
+    worst_cases: str | Path | None = None,
+    simulator_options: Mapping[str, Any] | None = None,
+) -> CampaignSpec:
+    """The spec with ``--worst-cases`` and ``--simulator-option`` applied, validated again."""
     if worst_cases is not None:
         worst_cases = Path(worst_cases).resolve()
         if not worst_cases.is_file():
@@ -230,7 +258,7 @@ def plan_campaign(
         spec = replace(spec, simulator=SimulatorRecipe.create(spec.simulator.name, options))
         toml = spec_to_toml(spec, str(worst_cases) if worst_cases is not None else None)
         spec = parse_spec(toml, source=Path(spec_path))
-    return spec, make_plan(spec)
+    return spec
 
 
 def _write_campaign(directory: Path, spec: CampaignSpec, plan: pd.DataFrame) -> None:

@@ -1,6 +1,10 @@
 """Samplers: turn a spec into the campaign plan (every run's values, seed, weight and window).
 
 - ``monte-carlo``: i.i.d. draws from the dispersions (weight 1).
+- ``phase-stratified``: the whole mission cut at its events into phases (:func:`mission_phases`),
+  runs shared between them in proportion to their durations (:func:`proportional_allocation`),
+  each run simulating its phase from dispersed initial conditions, values i.i.d. (weight 1); the
+  report estimates with the stratified estimator (:func:`.estimators.stratified`).
 - ``latin-hypercube``: each marginal stratified in ``n_runs`` equal-probability bins (one point
   per bin, bins shuffled independently per parameter), mapped through the inverse CDFs (weight 1).
 - ``mu-guided``: importance sampling around the analysis' worst cases. The proposal is the
@@ -48,18 +52,71 @@ from oos_drake.campaign.distributions import (
     TruncatedNormal,
     Uniform,
 )
-from oos_drake.campaign.simulator import ParameterKind
+from oos_drake.campaign.simulator import MissionWindow, ParameterKind
 from oos_drake.campaign.worst_cases import WorstCaseRegion
 
 #: Region id recorded for runs drawn from the nominal (defensive) component.
 NOMINAL_COMPONENT = -1
 #: Plan column: frequency [Hz] at which a run's LTI perturbations are realized.
 FREQUENCY_COLUMN = "frequency [Hz]"
+#: Plan column: the defensive fraction of the mu-guided mixture the run was drawn from [-].
+DEFENSIVE_COLUMN = "defensive fraction [-]"
+#: The guided share ``1 - defensive_fraction`` shrinks by this factor per step (ESS target).
+_GUIDED_SHRINK = 1.5
+#: Largest defensive fraction tried before the plan is refused [-].
+_DEFENSIVE_MAX = 0.999
 
 
-def run_seeds(random_seed: int, n_runs: int) -> tuple[np.ndarray, np.random.Generator]:
-    """Per-run integer seeds (63-bit) and the sampler's generator, from one root seed."""
-    children = np.random.SeedSequence(random_seed).spawn(n_runs + 1)
+def _guided_draws(spec, n: int, rng: np.random.Generator):
+    """Draws of the mu-guided mixture whose weights reach the spec's effective sample size.
+
+    The share of the guided components ``1 - defensive_fraction`` shrinks by
+    :data:`_GUIDED_SHRINK` from the spec's value until the weights' effective sample size is at
+    least ``min_ess_fraction * n`` (more draws from the dispersions: weights closer to 1, bound
+    ``1 / defensive_fraction`` lower). Every attempt restarts from the same generator state, so
+    the plan is a function of the spec (the plain draw when the spec's mixture suffices).
+    Returns values, component per run, weights and the defensive fraction used.
+    """
+    state = rng.bit_generator.state
+    defensive = spec.sampler.defensive_fraction
+    while True:
+        rng.bit_generator.state = state
+        proposal = MuGuidedProposal(
+            spec.dispersions,
+            spec.regions,
+            defensive,
+            spec.sampler.spread,
+            spec.sampler.region_weighting,
+        )
+        values, region = proposal.sample(n, rng)
+        weight = proposal.weights(values)
+        ess = weight.sum() ** 2 / np.sum(weight**2)
+        if ess >= spec.sampler.min_ess_fraction * n:
+            return values, region, weight, defensive
+        if defensive >= _DEFENSIVE_MAX:
+            raise ValueError(
+                f"campaign {spec.name}: [sampler] effective sample size {ess:.1f} of {n} runs "
+                f"stays below min_ess_fraction = {spec.sampler.min_ess_fraction} up to "
+                f"defensive_fraction {defensive:.3g}: lower min_ess_fraction"
+            )
+        defensive = min(1.0 - (1.0 - defensive) / _GUIDED_SHRINK, _DEFENSIVE_MAX)
+
+
+def run_seeds(
+    random_seed: int, n_runs: int, first_run_id: int = 0
+) -> tuple[np.ndarray, np.random.Generator]:
+    """Per-run integer seeds (63-bit) and the sampler's generator, from one root seed.
+
+    ``first_run_id > 0``: a batch added to a campaign (run until decided) draws from the
+    sequence with spawn key ``(first_run_id, 1)``, disjoint from the first batch's children
+    ``(k,)`` and from every other added batch.
+    """
+    root = (
+        np.random.SeedSequence(random_seed)
+        if first_run_id == 0
+        else np.random.SeedSequence(random_seed, spawn_key=(first_run_id, 1))
+    )
+    children = root.spawn(n_runs + 1)
     seeds = np.array(
         [int(c.generate_state(1, np.uint64)[0] >> np.uint64(1)) for c in children[:n_runs]],
         dtype=np.int64,
@@ -180,8 +237,11 @@ class MuGuidedProposal:
         return 1.0 / mixture
 
 
-def make_plan(spec) -> pd.DataFrame:
+def make_plan(spec, n_runs: int | None = None, first_run_id: int = 0) -> pd.DataFrame:
     """The campaign plan of a validated :class:`~oos_drake.campaign.spec.CampaignSpec`.
+
+    ``n_runs`` runs (default: the spec's) numbered from ``first_run_id``: a batch added to a
+    campaign that runs until its intervals decide draws its own seeds (:func:`run_seeds`).
 
     Returns
     -------
@@ -197,20 +257,14 @@ def make_plan(spec) -> pd.DataFrame:
         A run with a nonzero LTI perturbation and no frequency (no ``worst_cases`` file).
     """
     info = spec.info
-    n = spec.n_runs
-    seeds, rng = run_seeds(spec.random_seed, n)
+    n = spec.n_runs if n_runs is None else n_runs
+    seeds, rng = run_seeds(spec.random_seed, n, first_run_id)
+    defensive = 1.0  # every run drawn from the dispersions
     if spec.sampler.kind == "mu-guided":
-        proposal = MuGuidedProposal(
-            spec.dispersions,
-            spec.regions,
-            spec.sampler.defensive_fraction,
-            spec.sampler.spread,
-            spec.sampler.region_weighting,
-        )
-        values, region = proposal.sample(n, rng)
-        weight = proposal.weights(values)
-    else:
-        u = uniform_variates(spec.sampler.kind, n, len(spec.dispersions), rng)
+        values, region, weight, defensive = _guided_draws(spec, n, rng)
+    else:  # phase-stratified: i.i.d. values, the phase fixes the window
+        kind = "monte-carlo" if spec.sampler.kind == "phase-stratified" else spec.sampler.kind
+        u = uniform_variates(kind, n, len(spec.dispersions), rng)
         values = sample_dispersions(spec.dispersions, u)
         region = np.full(n, NOMINAL_COMPONENT)
         weight = np.ones(n)
@@ -225,6 +279,11 @@ def make_plan(spec) -> pd.DataFrame:
         window_region = np.where(region == NOMINAL_COMPONENT, drawn, region)
         windows = [spec.window.resolve(info, by_id[int(r)].time) for r in window_region]
         labels = [f"region:{int(r)}" for r in window_region]
+    elif spec.sampler.kind == "phase-stratified":
+        phases = mission_phases(info)
+        counts = proportional_allocation([(w.end - w.start) / info.duration for w in phases], n)
+        windows = [w for w, count in zip(phases, counts, strict=True) for _ in range(count)]
+        labels = [w.label for w in windows]
     else:
         windows = [spec.window.resolve(info)] * n
         labels = [w.label for w in windows]
@@ -238,7 +297,7 @@ def make_plan(spec) -> pd.DataFrame:
 
     table = pd.DataFrame(
         {
-            "run_id": np.arange(n, dtype=np.int64),
+            "run_id": np.arange(first_run_id, first_run_id + n, dtype=np.int64),
             "seed": seeds,
             "region": region.astype(np.int64),
             "weight": weight.astype(float),
@@ -246,6 +305,7 @@ def make_plan(spec) -> pd.DataFrame:
             "window_start [s]": [w.start for w in windows],
             "window_end [s]": [w.end for w in windows],
             FREQUENCY_COLUMN: frequency,
+            DEFENSIVE_COLUMN: defensive,
         }
     )
     for parameter in info.parameters:
@@ -267,6 +327,32 @@ def make_plan(spec) -> pd.DataFrame:
             "[sampler] or --worst-cases FILE; runs use their region's critical frequency)"
         )
     return table
+
+
+def proportional_allocation(weights: Sequence[float], runs: int) -> np.ndarray:
+    """Runs per stratum ``n_h`` within one of ``W_h * runs`` (largest remainders), sum ``runs``."""
+    share = np.asarray(weights, float) * runs
+    counts = np.floor(share).astype(int)
+    remainder = runs - counts.sum()
+    counts[np.argsort(-(share - counts), kind="stable")[:remainder]] += 1
+    return counts
+
+
+def mission_phases(info) -> tuple[MissionWindow, ...]:
+    """The mission cut at its events: ``[0, e_1], [e_1, e_2], ..., [e_k, duration]`` [s],
+    labelled ``"phase:start-capture"``, ``"phase:capture-docking"``, ... (empty ones dropped)."""
+    events = sorted((t, name) for name, t in info.events.items() if 0 < t < info.duration)
+    marks = [(0.0, "start"), *events, (info.duration, "end")]
+    return tuple(
+        MissionWindow(t0, t1, f"phase:{a}-{b}")
+        for (t0, a), (t1, b) in zip(marks[:-1], marks[1:], strict=True)
+        if t1 > t0
+    )
+
+
+def phase_weights(info) -> dict[str, float]:
+    """Phase label -> its share of the mission's duration [-] (the strata weights)."""
+    return {w.label: (w.end - w.start) / info.duration for w in mission_phases(info)}
 
 
 def region_counts(plan: pd.DataFrame, regions: Sequence[WorstCaseRegion]) -> pd.DataFrame:

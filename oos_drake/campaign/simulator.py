@@ -90,6 +90,11 @@ class Parameter:
         What the parameter is (real block, stiffness, initial condition, seed, LTI).
     description : str
         One line for tables and ``--help``.
+    uncertainty : tuple of float, optional
+        The range the scenario declares uncertain (``nominal +- percent``, a normalized LTI
+        block's ``[-1, 1]``) [unit]; None when the scenario declares none. It is the campaign's
+        default dispersion (uniform over it): a spec only overrides its shape, widens it
+        (``widen = true``) or replaces it (``override = true``).
     """
 
     name: str
@@ -99,6 +104,7 @@ class Parameter:
     upper: float
     kind: ParameterKind = ParameterKind.REAL_BLOCK
     description: str = ""
+    uncertainty: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if not (self.lower <= self.nominal <= self.upper):
@@ -106,6 +112,13 @@ class Parameter:
                 f"parameter {self.name!r}: nominal {self.nominal} outside its range "
                 f"[{self.lower}, {self.upper}]"
             )
+        if self.uncertainty is not None:
+            low, high = self.uncertainty
+            if not (self.lower <= low < high <= self.upper):
+                raise ValueError(
+                    f"parameter {self.name!r}: declared uncertainty [{low}, {high}] outside its "
+                    f"range [{self.lower}, {self.upper}]"
+                )
 
     @property
     def column(self) -> str:

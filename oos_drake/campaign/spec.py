@@ -28,12 +28,30 @@ seed and a mission window, and states the requirements each run is checked again
     J_hub = { distribution = "uniform", low = 300.0, high = 700.0 }
 
     [requirements]
-    ape = { max = 0.0079 }                   # [rad]
+    ape = { max = 0.0079, phases = ["capture-end"] }   # [rad], only after the capture
     peak_torque = { max = 2.0 }              # [N m]
 
     [timeseries]
     keep = "all"                             # "all" | "failed" | "none"
     signals = ["theta_hub", "torque_command"]
+
+    [estimation]                             # optional
+    target = 0.01                            # show P(violation) <= 1 %
+    confidence = 0.95
+    until_decided = true                     # add batches until the intervals decide
+    max_runs = 2000                          # ... or this many runs are spent
+    batch = 100
+
+Uncertainty is declared once, by the scenario: every simulator parameter with a declared
+uncertainty (:attr:`~oos_drake.campaign.simulator.Parameter.uncertainty`: an uncertain block's
+``nominal +- percent``, a normalized LTI block's ``[-1, 1]``) is dispersed uniformly over it
+without a line in ``[dispersions]``. A line there only overrides: a shape over the same range
+(``{ distribution = "normal", mean = ..., std = ... }``: ``low``/``high`` default to the declared
+range), a wider range (``widen = true``) or anything else (``override = true``); a range that
+contradicts the scenario without saying so is refused, naming the parameter. Samplers:
+``monte-carlo``, ``latin-hypercube``, ``phase-stratified`` (the whole mission, runs per phase in
+proportion to its duration) and ``mu-guided``; ``[requirements]`` may name the mission phases
+they apply to (``phases = ["capture-end"]``), and ``[estimation]`` sets the probability target.
 
 Errors are one-line ``ValueError`` s naming the file and the key. :func:`load_spec` builds the
 simulator once (in the calling process) to check parameter names, ranges, metrics and events.
@@ -50,9 +68,16 @@ from typing import Any
 
 import tomli_w
 
-from oos_drake.campaign.distributions import Distribution, finite_number, parse_distribution
+from oos_drake.campaign.distributions import (
+    Distribution,
+    Uniform,
+    finite_number,
+    parse_distribution,
+)
+from oos_drake.campaign.samplers import mission_phases
 from oos_drake.campaign.simulator import (
     MissionWindow,
+    Parameter,
     SimulatorInfo,
     SimulatorRecipe,
     describe_simulator,
@@ -60,7 +85,7 @@ from oos_drake.campaign.simulator import (
 from oos_drake.campaign.worst_cases import WorstCaseRegion, read_worst_cases
 from oos_drake.resources import package_path
 
-SAMPLERS = ("monte-carlo", "latin-hypercube", "mu-guided")
+SAMPLERS = ("monte-carlo", "latin-hypercube", "phase-stratified", "mu-guided")
 WINDOW_KINDS = ("mission", "event", "critical")
 KEEP_TIMESERIES = ("all", "failed", "none")
 REGION_WEIGHTINGS = ("mu_upper", "uniform")
@@ -70,7 +95,8 @@ REGION_WEIGHTINGS = ("mu_upper", "uniform")
 class SamplerSpec:
     """How the dispersed values are drawn."""
 
-    #: "monte-carlo" (i.i.d.), "latin-hypercube" (stratified marginals) or "mu-guided"
+    #: "monte-carlo" (i.i.d.), "latin-hypercube" (stratified marginals), "phase-stratified" (the
+    #: whole mission's phases, runs in proportion to their durations) or "mu-guided"
     kind: str = "monte-carlo"
     #: path of the analysis' worst_cases.parquet (relative paths: to the spec file); required
     #: by mu-guided (its regions); for every sampler it gives the frequencies that realize LTI
@@ -82,6 +108,11 @@ class SamplerSpec:
     spread: float = 0.1
     #: mu-guided: how runs are shared between regions: "mu_upper" (proportional) or "uniform"
     region_weighting: str = "mu_upper"
+    #: mu-guided: smallest effective sample size of the plan's weights, as a share of the runs;
+    #: the plan raises the defensive fraction (guided share / 1.5 per step) until it holds, so
+    #: the importance-sampling estimate stays usable (0: no check; the report then rests on the
+    #: defensive draws)
+    min_ess_fraction: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -123,12 +154,23 @@ class Requirement:
     min: float | None = None
     #: unit of the metric (filled from the simulator)
     unit: str = ""
+    #: mission phases during which the requirement applies (names of
+    #: :func:`~oos_drake.campaign.samplers.mission_phases` without "phase:", e.g.
+    #: "start-capture"); empty: the whole mission
+    phases: tuple[str, ...] = ()
+    #: the phases' time spans [s] (filled from the simulator's events, not part of the TOML)
+    spans: tuple[tuple[float, float], ...] = field(default=(), compare=False, repr=False)
 
     def passes(self, value: float) -> bool:
         """True when ``value`` is finite and within the bounds."""
         if not math.isfinite(value):
             return False
         return (self.max is None or value <= self.max) and (self.min is None or value >= self.min)
+
+    def applies(self, start: float, end: float) -> bool:
+        """Whether a run simulating ``[start, end]`` [s] is checked: its window overlaps one of
+        the requirement's phases (always, without phases)."""
+        return not self.phases or any(start < b and end > a for a, b in self.spans)
 
     @property
     def label(self) -> str:
@@ -154,6 +196,24 @@ class TimeseriesSpec:
     keep: str = "all"
     #: signal names to keep (empty: every signal the simulator logs)
     signals: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class EstimationSpec:
+    """What the probability estimates must show (``[estimation]``)."""
+
+    #: probability of violation to demonstrate: the report says whether the upper bound is below
+    #: it and how many runs without violation would show it [-]
+    target: float = 0.01
+    #: confidence level of every interval [-]
+    confidence: float = 0.95
+    #: keep adding batches of runs until every requirement's interval decides against the target
+    #: (upper bound below it, or lower bound above it) or max_runs are spent
+    until_decided: bool = False
+    #: budget of runs when until_decided (default: n_runs, i.e. no extension)
+    max_runs: int | None = None
+    #: runs per added batch when until_decided (default: n_runs)
+    batch: int | None = None
 
 
 @dataclass(frozen=True)
@@ -184,6 +244,8 @@ class CampaignSpec:
     timeseries: TimeseriesSpec
     #: wall-clock limit of one run [s] (None: no limit); an overdue run is stopped, "failed"
     run_timeout: float | None = None
+    #: probability target, confidence and run-until-decided budget
+    estimation: EstimationSpec = EstimationSpec()
     #: simulator declarations gathered at load time (not part of the TOML)
     info: SimulatorInfo = field(compare=False, repr=False, default=None)
     #: the regions read from worst_cases (not part of the TOML)
@@ -213,6 +275,84 @@ def spec_scenario(value: Any, spec_path: str | Path) -> Path:
         raise _fail(f"spec {spec_path}", f"scenario = {value!r} must be a file name")
     relative = Path(spec_path).parent / value
     return relative.resolve() if relative.is_file() else scenario_path(value)
+
+
+#: Keys of a dispersion that accept a law contradicting the scenario's declared uncertainty.
+OVERRIDE_KEYS = ("widen", "override")
+
+
+def _matches(law: Distribution, parameter: Parameter) -> str:
+    """How a law's support compares with the declared uncertainty: "same", "wider" or "other"."""
+    declared_low, declared_high = parameter.uncertainty
+    low, high = law.support
+    tolerance = 1e-6 * max(abs(declared_low), abs(declared_high), declared_high - declared_low)
+    if abs(low - declared_low) <= tolerance and abs(high - declared_high) <= tolerance:
+        return "same"
+    if low <= declared_low + tolerance and high >= declared_high - tolerance:
+        return "wider"
+    return "other"
+
+
+def declared_dispersion(where: str, table: Any, parameter: Parameter) -> Distribution:
+    """A spec's dispersion of ``parameter``, checked against the uncertainty the scenario declares.
+
+    For a parameter the scenario declares uncertain (:attr:`Parameter.uncertainty`), a law
+    without ``low``/``high`` (uniform, log-uniform, normal) spans the declared range: the spec
+    overrides the shape only. A law over the same range is accepted; a wider one needs
+    ``widen = true``; any other (narrower, shifted, fixed, choice) needs ``override = true``.
+
+    Raises
+    ------
+    ValueError
+        One line naming the parameter: a law contradicting the declared range without the
+        key that says so, an override key on a parameter the scenario does not declare
+        uncertain, or any error of :func:`parse_distribution`.
+    """
+    if not isinstance(table, Mapping):
+        return parse_distribution(where, table, parameter)
+    table = dict(table)
+    flags = {}
+    for key in OVERRIDE_KEYS:
+        if key in table:
+            flags[key] = table.pop(key)
+            if not isinstance(flags[key], bool):
+                raise ValueError(f"{where}: {key} = {flags[key]!r} must be true or false")
+    if parameter.uncertainty is None:
+        if flags:
+            raise ValueError(
+                f"{where}: {', '.join(flags)} only apply to a parameter the scenario declares "
+                "uncertain; this one has no declared uncertainty"
+            )
+        return parse_distribution(where, table, parameter)
+    declared_low, declared_high = parameter.uncertainty
+    if table.get("distribution") in ("uniform", "log-uniform", "normal"):
+        table.setdefault("low", declared_low)
+        table.setdefault("high", declared_high)
+    law = parse_distribution(where, table, parameter)
+    match = _matches(law, parameter)
+    unit = parameter.unit
+    declared = f"the scenario's uncertainty [{declared_low:.7g}, {declared_high:.7g}] {unit}"
+    low, high = law.support
+    if match == "wider" and not (flags.get("widen") or flags.get("override")):
+        raise ValueError(
+            f"{where}: [{low:.7g}, {high:.7g}] {unit} is wider than {declared}: say widen = true, "
+            "or drop low/high to use the scenario's range"
+        )
+    if match == "other" and not flags.get("override"):
+        raise ValueError(
+            f"{where}: [{low:.7g}, {high:.7g}] {unit} contradicts {declared}: drop low/high "
+            "to use the scenario's range, or say override = true"
+        )
+    return law
+
+
+def _dispersion_entry(spec: CampaignSpec, name: str) -> dict[str, Any]:
+    """A dispersion's TOML table, with ``override = true`` where it departs from the scenario."""
+    entry = spec.dispersions[name].to_dict()
+    parameter = spec.info.by_name[name]
+    if parameter.uncertainty is not None and _matches(spec.dispersions[name], parameter) != "same":
+        entry["override"] = True
+    return entry
 
 
 def _fail(where: str, message: str) -> ValueError:
@@ -371,7 +511,13 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
         spread = _positive_float(sw, "spread", spread)
         if weighting not in REGION_WEIGHTINGS:
             raise _fail(sw, f"region_weighting {weighting!r} not in {', '.join(REGION_WEIGHTINGS)}")
-    sampler = SamplerSpec(kind, worst_cases_path, float(defensive), float(spread), weighting)
+    min_ess = sampler_raw.get("min_ess_fraction", SamplerSpec.min_ess_fraction)
+    min_ess = _positive_float(sw, "min_ess_fraction", min_ess, allow_zero=True)
+    if not min_ess < 1:
+        raise _fail(sw, f"min_ess_fraction = {min_ess} must be in [0, 1)")
+    sampler = SamplerSpec(
+        kind, worst_cases_path, float(defensive), float(spread), weighting, float(min_ess)
+    )
 
     # window ----------------------------------------------------------------------------------
     ww = f"{where}: [window]"
@@ -401,6 +547,8 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
             if event is not None:
                 raise _fail(ww, 'event does not apply to kind = "critical"')
         window = WindowSpec(window_kind, event, before, after)
+    if kind == "phase-stratified" and window.kind != "mission":
+        raise _fail(ww, "the phase-stratified sampler simulates every phase: no [window]")
 
     # dispersions -----------------------------------------------------------------------------
     dispersions_raw = raw.get("dispersions", {})
@@ -412,11 +560,13 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
                 f"{where}: dispersions.{parameter_name}",
                 f"unknown parameter; known: {', '.join(parameters)}",
             )
-    dispersions = {
-        p.name: parse_distribution(f"{where}: dispersions.{p.name}", dispersions_raw[p.name], p)
-        for p in info.parameters
-        if p.name in dispersions_raw
-    }
+    dispersions = {}
+    for p in info.parameters:
+        if p.name in dispersions_raw:
+            entry = dispersions_raw[p.name]
+            dispersions[p.name] = declared_dispersion(f"{where}: dispersions.{p.name}", entry, p)
+        elif p.uncertainty is not None:  # the scenario's uncertainty, declared once
+            dispersions[p.name] = Uniform(*p.uncertainty)
     if kind == "mu-guided":
         guided = {n for r in regions for n in r.perturbation}
         if not guided & set(dispersions):
@@ -437,15 +587,53 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
         rw = f"{where}: requirements.{metric}"
         if metric not in metrics:
             raise _fail(rw, f"not one of the recorded metrics {', '.join(metrics)}")
-        bounds = _check_keys(rw, bounds, {"max", "min"})
+        bounds = dict(_check_keys(rw, bounds, {"max", "min", "phases"}))
+        phases = bounds.pop("phases", [])
         if not bounds:
             raise _fail(rw, "give max and/or min")
+        known = {w.label.removeprefix("phase:"): w for w in mission_phases(info)}
+        if not isinstance(phases, list) or not all(isinstance(p, str) for p in phases):
+            raise _fail(rw, "phases must be a list of phase names")
+        for phase in phases:
+            if phase not in known:
+                raise _fail(rw, f"unknown phase {phase!r}; known: {', '.join(known)}")
+        spans = tuple((known[p].start, known[p].end) for p in phases)
         values = {key: finite_number(rw, key, value) for key, value in bounds.items()}
         if "max" in values and "min" in values and values["min"] > values["max"]:
             raise _fail(rw, f"min {values['min']} exceeds max {values['max']}")
         requirements.append(
-            Requirement(metric, values.get("max"), values.get("min"), info.metric_units[metric])
+            Requirement(
+                metric,
+                values.get("max"),
+                values.get("min"),
+                info.metric_units[metric],
+                tuple(phases),
+                spans,
+            )
         )
+
+    # estimation ------------------------------------------------------------------------------
+    ew = f"{where}: [estimation]"
+    est_raw = _check_keys(ew, raw.get("estimation", {}), _keys(EstimationSpec))
+    target = finite_number(ew, "target", est_raw.get("target", EstimationSpec.target))
+    confidence = finite_number(
+        ew, "confidence", est_raw.get("confidence", EstimationSpec.confidence)
+    )
+    for key, value in (("target", target), ("confidence", confidence)):
+        if not 0 < value < 1:
+            raise _fail(ew, f"{key} = {value:g} must be in (0, 1)")
+    until_decided = est_raw.get("until_decided", False)
+    if not isinstance(until_decided, bool):
+        raise _fail(ew, f"until_decided = {until_decided!r} must be true or false")
+    counts = {}
+    for key in ("max_runs", "batch"):
+        value = est_raw.get(key, n_runs)
+        if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+            raise _fail(ew, f"{key} = {value!r} must be a positive integer")
+        counts[key] = value
+    if counts["max_runs"] < n_runs:
+        raise _fail(ew, f"max_runs = {counts['max_runs']} is below n_runs = {n_runs}")
+    estimation = EstimationSpec(target, confidence, until_decided, **counts)
 
     # time series -----------------------------------------------------------------------------
     tw = f"{where}: [timeseries]"
@@ -473,6 +661,7 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
         requirements=tuple(requirements),
         timeseries=TimeseriesSpec(keep, tuple(signals)),
         run_timeout=run_timeout,
+        estimation=estimation,
         info=info,
         regions=regions,
     )
@@ -504,6 +693,7 @@ def spec_to_toml(spec: CampaignSpec, worst_cases_name: str | None = None) -> str
             "defensive_fraction": spec.sampler.defensive_fraction,
             "spread": spec.sampler.spread,
             "region_weighting": spec.sampler.region_weighting,
+            "min_ess_fraction": spec.sampler.min_ess_fraction,
         }
     window: dict[str, Any] = {"kind": spec.window.kind}
     if spec.window.kind != "mission":
@@ -514,12 +704,14 @@ def spec_to_toml(spec: CampaignSpec, worst_cases_name: str | None = None) -> str
         "sampler": sampler,
         "simulator": {"name": spec.simulator.name, "options": spec.simulator.option_dict},
         "window": window,
-        "dispersions": {name: d.to_dict() for name, d in spec.dispersions.items()},
+        "dispersions": {name: _dispersion_entry(spec, name) for name in spec.dispersions},
         "requirements": {
             r.metric: {k: getattr(r, k) for k in ("max", "min") if getattr(r, k) is not None}
+            | ({"phases": list(r.phases)} if r.phases else {})
             for r in spec.requirements
         },
         "timeseries": {"keep": spec.timeseries.keep, "signals": list(spec.timeseries.signals)},
+        "estimation": {k: v for k, v in vars(spec.estimation).items() if v is not None},
     }
     header = "# Resolved campaign spec written by oos campaign run (every default filled in).\n"
     return header + tomli_w.dumps(document)

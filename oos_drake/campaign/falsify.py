@@ -1,0 +1,499 @@
+r"""Falsification: search the dispersion box for the nonlinear run that comes closest to (or
+beyond) a requirement.
+
+Estimation runs (``oos campaign run``) draw from the dispersions to estimate probabilities;
+falsification runs (``oos campaign falsify``) are chosen by an optimizer to find worst cases.
+The two are kept apart: a falsification writes its own folder and its own table
+(``falsification.parquet``), never a campaign's ``runs.parquet``.
+
+The search maximizes the requirement ratio of a run,
+
+.. math::
+
+    r(x) = \max_j \frac{m_j(x)}{\bar m_j}
+
+over the max-requirements ``m_j <= \bar m_j`` of the spec (``r > 1``: violated; a run that
+diverges or fails counts as :data:`FAILED_RATIO`), over the box of every dispersed parameter:
+uniform and log-uniform laws span their support (log-uniform in log coordinates), a normal law
+``mean +- 3 std`` within its support, a choice law its values (snapped to the nearest). Initial
+conditions and disturbance parameters are searched when the spec disperses them. Every run uses
+the same seed (common random numbers: the search compares parameters, not noise realizations);
+the window is the spec's (for a ``critical`` window: the window and frequency of the analysis'
+peak region, the largest ``mu_upper``).
+
+Optimizer: scipy's differential evolution (``best1bin``, deferred updating: one generation is one
+batch of runs on the campaign's executor, process pool or Dask) over the unit cube of the box
+widened by :data:`EDGE_MARGIN` and clipped back (faces and vertices are reachable). Its first
+generation holds the analysis' worst cases (the regions' perturbations, other parameters at their
+nominal values, all clipped to the box) and the nominal point, filled up by a Latin hypercube.
+
+Resume: every evaluated point is written atomically as soon as its run finishes
+(``points/point_NNNNNN.parquet``). The search is deterministic given its seed and the values it
+sees, so a resumed search replays the optimizer, takes the recorded values of the points already
+run (checking that each is the same point) and runs only the new ones: no finished run is lost, and
+a larger ``--budget`` continues the same search.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from tqdm import tqdm
+
+from oos_drake.campaign import store
+from oos_drake.campaign.distributions import Choice, Fixed, LogUniform, TruncatedNormal
+from oos_drake.campaign.executors import make_executor
+from oos_drake.campaign.runner import metric_column, resolve_spec
+from oos_drake.campaign.samplers import run_seeds
+from oos_drake.campaign.simulator import ParameterKind, RunCase
+from oos_drake.campaign.spec import CampaignSpec, spec_to_toml
+
+#: Requirement ratio given to a run that diverged or failed (the optimizer's objective) [-].
+FAILED_RATIO = 1.0e3
+#: The optimizer searches the unit cube widened by this margin on each side and the points are
+#: clipped back to the box: worst cases often lie on the box's faces and vertices, which
+#: differential evolution (re-drawing out-of-bounds trials at random) would otherwise rarely reach.
+EDGE_MARGIN = 0.1
+#: Files of a falsification folder.
+SPEC_FILE = "spec.toml"
+SETTINGS_FILE = "falsify.json"
+POINTS_DIR = "points"
+TABLE_FILE = "falsification.parquet"
+COMPARISON_FILE = "comparison.parquet"
+RATIO_COLUMN = "requirement ratio [-]"
+
+
+@dataclass(frozen=True)
+class SearchBox:
+    """The searched parameters and their bounds.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Searched parameter names (the spec's dispersed, non-fixed parameters).
+    low, high : numpy.ndarray
+        Bounds [unit of each parameter].
+    log : numpy.ndarray of bool
+        Searched in log coordinates (log-uniform laws).
+    choices : tuple
+        Per parameter: the allowed values of a choice law, else None.
+    """
+
+    names: tuple[str, ...]
+    low: np.ndarray
+    high: np.ndarray
+    log: np.ndarray
+    choices: tuple
+
+    @classmethod
+    def of_spec(cls, spec: CampaignSpec) -> SearchBox:
+        """The box of the spec's dispersions (see the module docstring)."""
+        names, low, high, log, choices = [], [], [], [], []
+        for name, law in spec.dispersions.items():
+            if isinstance(law, Fixed):
+                continue
+            lo, hi = law.support
+            if isinstance(law, TruncatedNormal):
+                lo, hi = max(lo, law.mean - 3 * law.std), min(hi, law.mean + 3 * law.std)
+            if not hi > lo:
+                continue
+            names.append(name)
+            low.append(lo)
+            high.append(hi)
+            log.append(isinstance(law, LogUniform))
+            choices.append(np.array(law.values, float) if isinstance(law, Choice) else None)
+        if not names:
+            raise ValueError(f"spec {spec.name}: no dispersed parameter to search")
+        return cls(tuple(names), np.array(low), np.array(high), np.array(log), tuple(choices))
+
+    @property
+    def _log_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of the log-searched parameters (1 and e elsewhere: no division by 0)."""
+        return np.where(self.log, self.low, 1.0), np.where(self.log, self.high, math.e)
+
+    def to_physical(self, u: np.ndarray) -> np.ndarray:
+        """Unit-cube coordinates ``u`` -> physical values (choices snapped)."""
+        u = np.clip(np.asarray(u, float), 0.0, 1.0)
+        linear = self.low + u * (self.high - self.low)
+        low, high = self._log_bounds
+        logarithmic = np.exp(np.log(low) + u * np.log(high / low))
+        x = np.where(self.log, logarithmic, linear)
+        for j, values in enumerate(self.choices):
+            if values is not None:
+                x[..., j] = values[np.argmin(np.abs(values - x[..., j, None]), axis=-1)]
+        return x
+
+    def to_unit(self, x: np.ndarray) -> np.ndarray:
+        """Physical values -> unit-cube coordinates (clipped to the box)."""
+        x = np.clip(np.asarray(x, float), self.low, self.high)
+        linear = (x - self.low) / (self.high - self.low)
+        low, high = self._log_bounds
+        logarithmic = np.log(np.where(self.log, x, 1.0) / low) / np.log(high / low)
+        return np.where(self.log, logarithmic, linear)
+
+
+def requirement_ratio(spec: CampaignSpec, status: str, metrics: dict) -> float:
+    """``max_j metric_j / bound_j`` over the max-requirements; :data:`FAILED_RATIO` for a run
+    that did not finish."""
+    if status != "ok":
+        return FAILED_RATIO
+    ratios = [
+        float(metrics[r.metric]) / r.max
+        for r in spec.requirements
+        if r.max is not None and r.max > 0
+    ]
+    return max(ratios)
+
+
+def _window_and_frequency(spec: CampaignSpec):
+    """The window every search run simulates and the frequency of its LTI perturbations."""
+    frequency = math.nan
+    peak = max(spec.regions, key=lambda r: r.mu_upper) if spec.regions else None
+    if peak is not None:
+        frequency = peak.frequency
+    if spec.window.kind == "critical":
+        return spec.window.resolve(spec.info, peak.time), frequency
+    return spec.window.resolve(spec.info), frequency
+
+
+def starting_points(spec: CampaignSpec, box: SearchBox) -> np.ndarray:
+    """Unit-cube points of the analysis' worst cases (regions by decreasing ``mu_upper``) and the
+    nominal point; parameters a region does not give stay at their nominal values."""
+    nominal = np.array([spec.info.by_name[n].nominal for n in box.names])
+    points = []
+    for region in sorted(spec.regions, key=lambda r: -r.mu_upper):
+        x = nominal.copy()
+        for j, name in enumerate(box.names):
+            if name in region.perturbation:
+                x[j] = region.perturbation[name]
+        points.append(box.to_unit(x))
+    points.append(box.to_unit(nominal))
+    _, first = np.unique(np.array(points), axis=0, return_index=True)
+    return np.array(points)[np.sort(first)]  # duplicates dropped, order kept
+
+
+def population_size(dimension: int) -> int:
+    """Points per generation: ``3 d`` within [8, 30]."""
+    return int(min(max(3 * dimension, 8), 30))
+
+
+@dataclass(frozen=True)
+class FalsificationResult:
+    """What a falsification found.
+
+    Attributes
+    ----------
+    directory : Path
+        Its folder.
+    table : pandas.DataFrame
+        Every evaluated point (``falsification.parquet``).
+    best : pandas.Series
+        The row of the largest requirement ratio.
+    evaluated : int
+        Points run by this call.
+    reused : int
+        Points taken from an earlier (interrupted) call.
+    comparison : pandas.DataFrame
+        Per max-requirement metric: the worst ratio metric / requirement the search found beside
+        the analysis' worst-case gain bounds (largest over the regions; NaN without gains), both
+        normalized by the requirement (``comparison.parquet``).
+    """
+
+    directory: Path
+    table: pd.DataFrame
+    best: pd.Series
+    evaluated: int
+    reused: int
+    comparison: pd.DataFrame
+
+    def sentence(self) -> str:
+        """One line: the worst run found and its parameters."""
+        best = self.best
+        verdict = "VIOLATES" if best[RATIO_COLUMN] > 1 else "meets"
+        lines = [
+            f"falsification: {len(self.table)} runs; worst requirement ratio "
+            f"{best[RATIO_COLUMN]:.4g} (point {int(best['point_id'])}, {best['status']}): "
+            f"{verdict} the requirements"
+        ]
+        for _, row in self.comparison.iterrows():
+            line = f"  {row['metric']}: worst found {row['worst found / requirement [-]']:.4g}"
+            if np.isfinite(row["wcgain upper [-]"]):
+                line += (
+                    f" of the requirement; the analysis' worst-case gain lies in "
+                    f"[{row['wcgain lower [-]']:.4g}, {row['wcgain upper [-]']:.4g}] "
+                    f"(region {int(row['region'])})"
+                )
+            lines.append(line)
+        return "\n".join(lines)
+
+
+class _BudgetSpent(Exception):
+    """The run budget is used up (stops the optimizer)."""
+
+
+class _Evaluator:
+    """The optimizer's batch map: replays recorded points, runs the new ones on the executor."""
+
+    def __init__(self, directory, spec, box, budget, executor, progress, seed):
+        self.directory, self.spec, self.box, self.budget = directory, spec, box, budget
+        self.executor = executor
+        self.window, self.frequency = _window_and_frequency(spec)
+        self.seed = seed
+        self.recorded = _read_points(directory)
+        self.next_id = 0
+        self.generation = 0
+        self.evaluated = 0
+        self.reused = 0
+        self.bar = tqdm(
+            total=budget,
+            unit="run",
+            desc=f"falsify {spec.name}",
+            disable=not progress,
+            file=sys.stderr,
+            dynamic_ncols=True,
+        )
+
+    def __call__(self, _function, population) -> list[float]:
+        population = np.atleast_2d(np.asarray(list(population), float))
+        ids = np.arange(self.next_id, self.next_id + len(population))
+        self.next_id += len(population)
+        ratios = np.full(len(population), np.nan)
+        new = []
+        for i, (point_id, u) in enumerate(zip(ids, population, strict=True)):
+            row = self.recorded.get(int(point_id))
+            if row is not None:
+                if not np.allclose(row["u"], u, rtol=0, atol=1e-12):
+                    raise ValueError(
+                        f"{self.directory}: point {point_id} differs from the recorded one: the "
+                        "folder holds another search (other spec, seed or worst cases)"
+                    )
+                ratios[i] = row["ratio"]
+                self.reused += 1
+                self.bar.update(1)
+            elif point_id < self.budget:
+                new.append((i, int(point_id), u))
+        cases = {}
+        for i, point_id, u in new:
+            values = {p.name: float(p.nominal) for p in self.spec.info.parameters}
+            for name, law in self.spec.dispersions.items():
+                if isinstance(law, Fixed):
+                    values[name] = float(law.value)
+            values.update(zip(self.box.names, self.box.to_physical(u).tolist(), strict=True))
+            cases[point_id] = (
+                i,
+                u,
+                RunCase(point_id, self.seed, values, self.window, self.frequency),
+            )
+        if cases:
+            for result in self.executor.run(self.spec.simulator, [c[2] for c in cases.values()]):
+                i, u, case = cases[result.run_id]
+                ratio = requirement_ratio(self.spec, result.status, result.metrics)
+                self._record(case, u, result, ratio)
+                ratios[i] = ratio
+                self.evaluated += 1
+                self.bar.update(1)
+                if result.status != "ok":
+                    self.bar.write(f"point {result.run_id}: {result.status}: {result.error}")
+        self.generation += 1
+        if np.isnan(ratios).any():  # points beyond the budget were not run
+            raise _BudgetSpent
+        return (-ratios).tolist()
+
+    def _record(self, case, u, result, ratio) -> None:
+        spec = self.spec
+        record = {
+            "point_id": np.int64(case.run_id),
+            "generation": np.int64(self.generation),
+            "seed": np.int64(case.seed),
+            "window_start [s]": case.window.start,
+            "window_end [s]": case.window.end,
+            "frequency [Hz]": case.frequency,
+        }
+        for parameter in spec.info.parameters:
+            record[parameter.column] = float(case.values[parameter.name])
+        for metric in spec.metrics:
+            record[metric_column(spec, metric)] = float(result.metrics.get(metric, math.nan))
+        record[RATIO_COLUMN] = ratio
+        record["status"] = result.status
+        record["error"] = result.error
+        record["wall_time [s]"] = float(result.wall_time)
+        record["unit coordinates"] = json.dumps([float(v) for v in u])
+        path = Path(self.directory) / POINTS_DIR / f"point_{case.run_id:06d}.parquet"
+        store.atomic_write_parquet(pd.DataFrame([record]), path)
+
+
+def _read_points(directory: Path) -> dict[int, dict]:
+    """Recorded points: id -> unit coordinates and ratio (unreadable leftovers are redone)."""
+    folder = Path(directory) / POINTS_DIR
+    out = {}
+    for leftover in folder.glob(".point_*.tmp") if folder.is_dir() else ():
+        leftover.unlink()  # a write interrupted by a kill: its point is run again
+    for path in sorted(folder.glob("point_*.parquet")) if folder.is_dir() else ():
+        try:
+            row = pd.read_parquet(path).iloc[0]
+        except Exception:  # noqa: BLE001 - a torn file from a kill: the point is run again
+            path.unlink()
+            continue
+        out[int(row["point_id"])] = {
+            "u": np.array(json.loads(row["unit coordinates"])),
+            "ratio": float(row[RATIO_COLUMN]),
+        }
+    return out
+
+
+def read_table(directory: str | Path) -> pd.DataFrame:
+    """Every evaluated point of a falsification folder, by ``point_id``."""
+    folder = Path(directory) / POINTS_DIR
+    paths = sorted(folder.glob("point_*.parquet")) if folder.is_dir() else []
+    if not paths:
+        return pd.DataFrame()
+    table = pd.concat([pd.read_parquet(p) for p in paths], ignore_index=True)
+    return table.sort_values("point_id").reset_index(drop=True)
+
+
+def _prepare_directory(directory: Path, spec: CampaignSpec, settings: dict) -> None:
+    """Create the folder, or check that it holds this same search (then it is resumed)."""
+    text = spec_to_toml(spec, str(spec.sampler.worst_cases) if spec.sampler.worst_cases else None)
+    spec_path, settings_path = directory / SPEC_FILE, directory / SETTINGS_FILE
+    if spec_path.is_file():
+        same = spec_path.read_text() == text and settings_path.is_file()
+        old = json.loads(settings_path.read_text()) if same else {}
+        if not same or {k: v for k, v in old.items() if k != "budget"} != {
+            k: v for k, v in settings.items() if k != "budget"
+        }:
+            raise ValueError(
+                f"--out {directory} holds another falsification (other spec or settings); "
+                "choose another --out"
+            )
+        return
+    if directory.exists() and any(directory.iterdir()):
+        raise ValueError(f"--out {directory} exists and is not empty")
+    directory.mkdir(parents=True, exist_ok=True)
+    store.atomic_write_text(json.dumps(settings, indent=2) + "\n", settings_path)
+    store.atomic_write_text(text, spec_path)
+
+
+def falsify(
+    spec_path: str | Path,
+    out: str | Path,
+    budget: int = 200,
+    workers: int = 1,
+    scheduler: str | None = None,
+    worst_cases: str | Path | None = None,
+    progress: bool = True,
+    simulator_options: Mapping[str, Any] | None = None,
+) -> FalsificationResult:
+    """Search the spec's dispersion box for the largest requirement ratio (module docstring).
+
+    Parameters
+    ----------
+    spec_path : path
+        Campaign spec (or the name of a shipped one).
+    out : path
+        Folder of the search; an existing folder of the same search is resumed.
+    budget : int
+        Largest number of runs (including those of an earlier, interrupted call).
+    workers, scheduler
+        Executor of the runs (as ``oos campaign run``).
+    worst_cases : path, optional
+        The analysis' ``worst_cases.parquet``: its regions start the search.
+    progress : bool
+        Show a progress bar.
+    simulator_options : dict, optional
+        Update the spec's simulator options (``--simulator-option``, e.g. a ``controller``).
+
+    Raises
+    ------
+    ValueError
+        Bad spec, no max-requirement, a folder holding another search, a budget < 1.
+    """
+    from scipy.optimize import differential_evolution
+
+    if budget < 1:
+        raise ValueError(f"--budget {budget}: need at least 1 run")
+    spec = resolve_spec(spec_path, worst_cases, simulator_options)
+    if not any(r.max is not None and r.max > 0 for r in spec.requirements):
+        raise ValueError(f"spec {spec.name}: falsification needs a requirement with a max bound")
+    box = SearchBox.of_spec(spec)
+    _, frequency = _window_and_frequency(spec)
+    lti = [n for n in box.names if spec.info.by_name[n].kind == ParameterKind.LTI]
+    if lti and math.isnan(frequency):
+        raise ValueError(
+            f"falsify {spec.name}: LTI perturbations ({', '.join(lti)}) need the analysis' "
+            "worst_cases.parquet for their frequency (--worst-cases FILE)"
+        )
+    size = population_size(len(box.names))
+    seeds, _ = run_seeds(spec.random_seed, 1)
+    settings = {"seed": spec.random_seed, "population": size, "budget": budget}
+    directory = Path(out)
+    _prepare_directory(directory, spec, settings)
+
+    starts = starting_points(spec, box)[:size]
+    rng = np.random.default_rng(np.random.SeedSequence([spec.random_seed, 0xFA15]))
+    fill = size - len(starts)
+    if fill > 0:
+        from scipy.stats import qmc
+
+        starts = np.vstack([starts, qmc.LatinHypercube(len(box.names), rng=rng).random(fill)])
+    executor = make_executor(workers, scheduler, spec.run_timeout)
+    evaluator = _Evaluator(directory, spec, box, budget, executor, progress, int(seeds[0]))
+    try:
+        differential_evolution(
+            lambda u: 0.0,  # never called: the batch map evaluates
+            bounds=[(-EDGE_MARGIN, 1.0 + EDGE_MARGIN)] * len(box.names),
+            init=starts,
+            maxiter=max(1, math.ceil(budget / size)),
+            popsize=size,
+            tol=0.0,
+            atol=0.0,
+            polish=False,
+            updating="deferred",
+            workers=evaluator,
+            rng=rng,
+        )
+    except _BudgetSpent:
+        pass
+    finally:
+        evaluator.bar.close()
+        executor.close()
+    table = read_table(directory)
+    table = table[table["point_id"] < budget].reset_index(drop=True)
+    store.atomic_write_parquet(table, directory / TABLE_FILE)
+    best = table.loc[table[RATIO_COLUMN].idxmax()]
+    comparison = linear_comparison(spec, table)
+    store.atomic_write_parquet(comparison, directory / COMPARISON_FILE)
+    return FalsificationResult(
+        directory, table, best, evaluator.evaluated, evaluator.reused, comparison
+    )
+
+
+def linear_comparison(spec: CampaignSpec, table: pd.DataFrame) -> pd.DataFrame:
+    """Per max-requirement metric: worst metric / requirement among the finished points, and
+    the largest worst-case gain bounds of the analysis' regions for it (NaN without gains)."""
+    rows = []
+    ok = table["status"] == "ok"
+    for requirement in spec.requirements:
+        if requirement.max is None or requirement.max <= 0:
+            continue
+        ratio = table.loc[ok, metric_column(spec, requirement.metric)] / requirement.max
+        with_gain = [r for r in spec.regions if requirement.metric in r.gains]
+        region = max(with_gain, key=lambda r: r.gains[requirement.metric][1], default=None)
+        low, high = region.gains[requirement.metric] if region else (math.nan, math.nan)
+        rows.append(
+            {
+                "metric": requirement.metric,
+                "worst found / requirement [-]": float(ratio.max()) if len(ratio) else math.nan,
+                "wcgain lower [-]": float(low),
+                "wcgain upper [-]": float(high),
+                "region": region.region if region else -1,
+            }
+        )
+    return pd.DataFrame(rows)

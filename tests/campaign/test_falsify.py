@@ -1,0 +1,157 @@
+"""Falsification: finds the known worst case of a synthetic simulator; resumes after a crash."""
+
+from __future__ import annotations
+
+import textwrap
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from oos_drake.campaign.cli import main
+from oos_drake.campaign.falsify import RATIO_COLUMN, TABLE_FILE, falsify
+
+from . import synthetic_sim
+
+REQUIREMENT = 0.01  # [rad]
+
+
+def _spec(options: str = "{}") -> str:
+    return textwrap.dedent(
+        f"""
+        name = "synthetic"
+        n_runs = 10
+        random_seed = 11
+        metrics = ["ape"]
+
+        [simulator]
+        name = "tests.campaign.synthetic_sim:make_simulator"
+        options = {options}
+
+        [window]
+        kind = "event"
+        event = "capture"
+        before = 5.0
+        after = 20.0
+
+        [dispersions]
+        a = {{ distribution = "uniform", low = 0.0, high = 1.0 }}
+        b = {{ distribution = "uniform", low = 0.0, high = 1.0 }}
+        d = {{ distribution = "normal", mean = 0.5, std = 0.2 }}
+
+        [requirements]
+        ape = {{ max = {REQUIREMENT} }}
+        """
+    )
+
+
+def test_finds_the_known_worst_case(write_spec, tmp_path):
+    result = falsify(write_spec(_spec()), tmp_path / "f", budget=120, progress=False)
+    known = synthetic_sim.PEAK / REQUIREMENT  # d at its box edge mean + 3 std = 1.1 -> clipped to 1
+    best = result.best
+    print(result.sentence(), best[["a [-]", "b [-]", "d [-]"]].to_dict())
+    assert best[RATIO_COLUMN] == pytest.approx(known, rel=0.01)
+    assert best[RATIO_COLUMN] <= known + 1e-12  # never above the true maximum
+    assert abs(best["a [-]"] - synthetic_sim.WORST[0]) < 0.05
+    assert abs(best["b [-]"] - synthetic_sim.WORST[1]) < 0.05
+    assert best["d [-]"] > 0.95
+    table = pd.read_parquet(tmp_path / "f" / TABLE_FILE)
+    assert len(table) == 120 and table["point_id"].tolist() == list(range(120))
+    # every evaluated point is recorded with its own metric: recompute it independently
+    expected = [
+        synthetic_sim.bump(a, b, d) for a, b, d in table[["a [-]", "b [-]", "d [-]"]].values
+    ]
+    np.testing.assert_allclose(table["ape [rad]"], expected, rtol=1e-12)
+    assert "VIOLATES" in result.sentence()
+
+
+def test_resume_after_interruption_loses_no_run(write_spec, tmp_path):
+    marker = tmp_path / "interrupted"
+    spec = write_spec(_spec(f'{{ interrupt_at = 23, marker = "{marker}" }}'), name="crashing")
+    out = tmp_path / "resumed"
+    with pytest.raises(KeyboardInterrupt):
+        falsify(spec, out, budget=40, progress=False)
+    assert marker.exists()
+    assert len(list((out / "points").glob("point_*.parquet"))) == 23
+    # what a kill -9 leaves: a torn temporary and a truncated point file; both are redone
+    (out / "points" / ".point_000023.parquet.abc.tmp").write_bytes(b"torn")
+    (out / "points" / "point_000022.parquet").write_bytes(b"PAR1 truncated")
+    resumed = falsify(spec, out, budget=40, progress=False)
+    assert (resumed.reused, resumed.evaluated) == (22, 18)
+    assert not list((out / "points").glob("*.tmp"))
+    # the same search as one that never stopped
+    clean = falsify(
+        write_spec(_spec(), name="clean"), tmp_path / "clean", budget=40, progress=False
+    )
+    np.testing.assert_array_equal(resumed.table[RATIO_COLUMN], clean.table[RATIO_COLUMN])
+    # a larger budget continues the same search: the 40 runs are reused
+    more = falsify(spec, out, budget=60, progress=False)
+    assert (more.reused, more.evaluated, len(more.table)) == (40, 20, 60)
+
+
+def test_cli_refuses_bad_input_and_writes_nothing(write_spec, tmp_path, capsys):
+    spec = write_spec(_spec())
+    out = tmp_path / "nothing"
+    assert main(["campaign", "falsify", str(spec), "--out", str(out), "--budget", "0"]) == 2
+    assert "--budget 0" in capsys.readouterr().err and not out.exists()
+    no_requirement = write_spec(_spec().split("[requirements]")[0], name="noreq")
+    assert main(["campaign", "falsify", str(no_requirement), "--out", str(out)]) == 2
+    assert "max bound" in capsys.readouterr().err and not out.exists()
+    assert (
+        main(
+            [
+                "campaign",
+                "falsify",
+                str(spec),
+                "--out",
+                str(out),
+                "--budget",
+                "9",
+                "--quiet",
+                "--workers",
+                "1",
+            ]
+        )
+        == 0
+    )
+    assert "worst requirement ratio" in capsys.readouterr().out
+    other = write_spec(_spec().replace("random_seed = 11", "random_seed = 12"), name="other")
+    assert main(["campaign", "falsify", str(other), "--out", str(out), "--budget", "9"]) == 2
+    assert "another falsification" in capsys.readouterr().err
+
+
+def test_search_starts_from_the_analysis_worst_cases(write_spec, tmp_path):
+    from oos_drake.campaign.falsify import population_size
+    from oos_drake.campaign.simulator import SimulatorRecipe, build_simulator
+    from oos_drake.campaign.worst_cases import WorstCaseRegion, write_worst_cases
+
+    gains = {"ape": (1.1, 1.3)}  # the analysis' bounds on ape / requirement (made up)
+
+    simulator = build_simulator(
+        SimulatorRecipe.create("tests.campaign.synthetic_sim:make_simulator", {})
+    )
+    a, b = synthetic_sim.WORST
+    regions = (
+        WorstCaseRegion(
+            0, "capture", 10.0, 0.2, 1.5, 1.4, "a,b,d", {"a": a, "b": b, "d": 1.0}, gains
+        ),
+        WorstCaseRegion(1, "capture", 10.0, 0.2, 1.1, 1.0, "a", {"a": 0.2}),
+    )
+    path = write_worst_cases(regions, simulator.parameters(), tmp_path / "wc.parquet")
+    size = population_size(3)
+    result = falsify(
+        write_spec(_spec()), tmp_path / "f", budget=size, worst_cases=path, progress=False
+    )
+    # one generation only: its first points are the worst cases (largest mu first)
+    table = result.table
+    assert len(table) == size
+    first = table.iloc[0]
+    assert (first["a [-]"], first["b [-]"], first["d [-]"]) == pytest.approx((a, b, 1.0))
+    assert first[RATIO_COLUMN] == pytest.approx(synthetic_sim.PEAK / REQUIREMENT, rel=1e-12)
+    second = table.iloc[1]
+    assert second["a [-]"] == pytest.approx(0.2) and second["b [-]"] == pytest.approx(0.5)
+    assert int(result.best["point_id"]) == 0
+    row = result.comparison.iloc[0]
+    assert (row["wcgain lower [-]"], row["wcgain upper [-]"], row["region"]) == (1.1, 1.3, 0)
+    assert row["worst found / requirement [-]"] == pytest.approx(1.2, rel=1e-12)
+    assert "the analysis' worst-case gain lies in [1.1, 1.3] (region 0)" in result.sentence()
