@@ -1,0 +1,701 @@
+"""The spacecraft as a tree of bodies: scenario schema version 2, loaded into frozen dataclasses.
+
+A tree file names its bodies, each with a parent and the joint that attaches it, a ``[control]``
+section naming the attitude-controlled body, and optional ports::
+
+    schema_version = 2
+    name = "flexible_satellite"
+
+    [control]
+    controlled_body = "HUB"           # the root: a rigid body, free-floating
+
+    [[bodies]]
+    name = "HUB"
+    kind = "rigid"
+    mass = 300.0                      # [kg]
+    inertia = [[...], [...], [...]]   # [kg m^2] at the centre of mass G, body axes
+    p_B_G = [0.0, 0.0, 0.0]           # [m] body frame origin B -> G (default 0)
+
+    [[bodies]]
+    name = "SA1"
+    kind = "flexible"                 # cantilevered modal appendage, body frame at its port P
+    parent = "HUB"
+    joint = { type = "revolute", p_parent_joint = [0.0, 0.6, 0.0], axis = [0.0, 1.0, 0.0] }
+    mass = 25.0
+    p_P_S = [0.0, 1.9, 0.0]
+    inertia = [[...]]                 # at S, appendage axes
+    frequencies_hz = [0.8, 2.6, 4.1]
+    damping_ratios = [0.005, 0.005, 0.005]
+    participation = [[...6...], [...6...], [...6...]]   # ROW i = mode i, [Tx Ty Tz Rx Ry Rz]
+    uncertainty = { w1 = { percent = 20.0 } }
+
+    [ports.DOCK]
+    body = "HUB"
+    p_B_D = [0.0, 0.0, -0.9]
+
+Body kinds
+----------
+``rigid``
+    mass, inertia at the centre of mass ``G`` (body axes), ``p_B_G``; optional
+    ``mass_uncertainty_percent`` and ``inertia_uncertainty_percent`` (Jxx, Jyy, Jzz). A chain of
+    rigid bodies on revolute joints is an arm.
+``flexible``
+    a cantilevered appendage given by its modal data at its attachment port ``P`` (its body frame
+    origin): mass, ``p_P_S``, inertia at ``S``, ``frequencies_hz``, ``damping_ratios`` and the
+    participation rows; any mode uncertain through ``uncertainty.w<i>`` (``percent`` or
+    ``range_hz``). A flexible body is a leaf (no child body, no port).
+
+Joints
+------
+The root (the controlled body) has none: it floats. Every other body has
+``joint = {type, p_parent_joint, R_parent_joint, axis, angle, lower, upper}``:
+
+- ``p_parent_joint`` [m], ``R_parent_joint`` [-]: pose of the joint frame ``J`` in the parent's
+  body frame (``v_parent = R_parent_joint v_J``); the child's body frame is ``J`` turned by
+  ``angle`` about ``axis`` (in ``J``), i.e. ``R_parent_child = R_parent_joint R(axis, angle)``;
+- ``type = "fixed"`` (no axis, angle 0) or ``"revolute"`` (motion-driven: the LFR's scheduled
+  block ``tau_<body> = tan(angle/4)``; ``angle`` [rad] is the operating angle of the file,
+  ``lower``/``upper`` [rad] optional limits within [-pi, pi]).
+
+Conventions and errors are those of :mod:`oos_drake.scenario.data` (SI units, ``p_A_B`` the
+vector A -> B in A's frame, one-line :class:`~oos_drake.scenario.data.ScenarioError` naming the
+body and the field, unknown keys rejected). The tree is checked for duplicate names, missing or
+misspelt parents, cycles, ports on bodies that do not exist, a controlled body that does not exist
+or is not the root, and appendages whose residual mass ``D_P - L^T L`` is not positive definite.
+
+Examples
+--------
+>>> from oos_drake.scenario.tree import load_tree
+>>> tree = load_tree("flexible_satellite")
+>>> [body.name for body in tree.bodies]
+['HUB', 'SA1', 'SA2']
+>>> tree.children("HUB")
+('SA1', 'SA2')
+"""
+
+from __future__ import annotations
+
+import difflib
+import functools
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from oos_drake.resources import package_path
+from oos_drake.scenario.data import (
+    ScenarioError,
+    _check_inertia,
+    _check_percent,
+    _check_positive,
+    _check_rotation,
+    _check_unit,
+    _Table,
+)
+from oos_drake.titop.parameters import check_name
+from oos_drake.titop.spatial import rigid_spatial_inertia, rotation_matrix
+
+__all__ = [
+    "TREE_SCHEMA_VERSION",
+    "TREE_DIRECTORY",
+    "BODY_KINDS",
+    "JOINT_TYPES",
+    "Joint",
+    "RigidBodyData",
+    "FlexibleBodyData",
+    "ModeUncertainty",
+    "TreePort",
+    "TreeControl",
+    "SpacecraftTree",
+    "load_tree",
+    "parse_tree",
+    "tree_path",
+    "shipped_trees",
+]
+
+TREE_SCHEMA_VERSION = 2
+#: Shipped tree scenarios (``oos_drake/scenario/data/trees/<name>.toml``).
+TREE_DIRECTORY = package_path("oos_drake.scenario", "data", "trees")
+BODY_KINDS = ("rigid", "flexible")
+JOINT_TYPES = ("fixed", "revolute")
+#: Relative margin below which ``D_P - L^T L`` counts as singular (its smallest eigenvalue over
+#: the largest entry of ``D_P``): the Drake twin's mass matrix inherits that conditioning.
+RESIDUAL_MASS_RTOL = 1e-9
+
+
+# ----------------------------------------------------------------------------------------------
+# dataclasses
+# ----------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class Joint:
+    """How a body hangs on its parent.
+
+    Attributes
+    ----------
+    type : str
+        ``"fixed"`` or ``"revolute"`` (motion-driven at a linearization point).
+    p_parent_joint : (3,) ndarray
+        Parent body frame origin -> joint frame origin ``J``, in the parent's frame [m].
+    R_parent_joint : (3, 3) ndarray
+        Joint frame axes in the parent's frame (``v_parent = R_parent_joint v_J``) [-].
+    axis : (3,) ndarray
+        Unit rotation axis in the joint frame [-] (zeros for a fixed joint).
+    angle : float
+        Operating angle of the file [rad] (0 for a fixed joint).
+    lower, upper : float
+        Joint limits [rad], within [-pi, pi] (the LFR's ``tau = tan(angle/4)`` covers that range).
+    """
+
+    type: str
+    p_parent_joint: np.ndarray
+    R_parent_joint: np.ndarray
+    axis: np.ndarray
+    angle: float
+    lower: float
+    upper: float
+
+    def R_parent_child(self, angle: float | None = None) -> np.ndarray:
+        """Child body axes in the parent's frame at ``angle`` [rad] (default: the file's)."""
+        angle = self.angle if angle is None else float(angle)
+        if self.type == "fixed":
+            return np.array(self.R_parent_joint)
+        return self.R_parent_joint @ rotation_matrix(self.axis, angle)
+
+
+@dataclass(frozen=True, eq=False)
+class RigidBodyData:
+    """A rigid body (hub, boom, arm link).
+
+    Attributes
+    ----------
+    name : str
+        Body name (block names ``m_<name>``, ``Jxx_<name>``, ``tau_<name>``).
+    parent : str
+        Parent body ("" for the root).
+    joint : Joint or None
+        Joint to the parent (None for the root).
+    mass : float
+        Nominal mass [kg].
+    inertia : (3, 3) ndarray
+        Inertia at the centre of mass ``G``, body axes [kg m^2].
+    p_B_G : (3,) ndarray
+        Body frame origin ``B`` -> ``G`` in body axes [m].
+    mass_uncertainty_percent : float
+        Relative half-range of the mass [%] (0: known).
+    inertia_uncertainty_percent : (3,) ndarray
+        Relative half-ranges of Jxx, Jyy, Jzz [%].
+    description : str
+        Free text.
+    """
+
+    name: str
+    parent: str
+    joint: Joint | None
+    mass: float
+    inertia: np.ndarray
+    p_B_G: np.ndarray
+    mass_uncertainty_percent: float
+    inertia_uncertainty_percent: np.ndarray
+    description: str = ""
+
+    kind = "rigid"
+
+
+@dataclass(frozen=True, eq=False)
+class ModeUncertainty:
+    """Range of one uncertain mode frequency.
+
+    Attributes
+    ----------
+    mode : int
+        Mode number, 1-based (block ``w<mode>_<body>``).
+    percent : float or None
+        Relative half-range [%] (``w = w0 (1 + percent/100 delta)``).
+    range_hz : (float, float) or None
+        Absolute range [Hz], containing the nominal strictly.
+    """
+
+    mode: int
+    percent: float | None
+    range_hz: tuple[float, float] | None
+
+
+@dataclass(frozen=True, eq=False)
+class FlexibleBodyData:
+    """A cantilevered flexible appendage; its body frame ``R_SA`` has its origin at the port ``P``.
+
+    Attributes
+    ----------
+    name, parent, joint, description
+        As for :class:`RigidBodyData`.
+    mass : float
+        Appendage mass [kg].
+    p_P_S : (3,) ndarray
+        ``P`` -> centre of mass ``S`` in ``R_SA`` [m].
+    inertia : (3, 3) ndarray
+        Inertia at ``S`` in ``R_SA`` [kg m^2].
+    frequencies_hz : (n,) ndarray
+        Cantilevered mode frequencies [Hz].
+    damping_ratios : (n,) ndarray
+        Modal damping ratios [-].
+    participation : (n, 6) ndarray
+        Participation factors at ``P`` in ``R_SA``, ROW i = mode i, columns
+        ``[Tx Ty Tz Rx Ry Rz]`` [sqrt(kg), sqrt(kg) m].
+    uncertainty : tuple of ModeUncertainty
+        Uncertain mode frequencies (any number, any modes).
+    """
+
+    name: str
+    parent: str
+    joint: Joint
+    mass: float
+    p_P_S: np.ndarray
+    inertia: np.ndarray
+    frequencies_hz: np.ndarray
+    damping_ratios: np.ndarray
+    participation: np.ndarray
+    uncertainty: tuple[ModeUncertainty, ...]
+    description: str = ""
+
+    kind = "flexible"
+
+    @property
+    def omega(self) -> np.ndarray:
+        """Mode frequencies [rad/s]."""
+        return 2.0 * np.pi * self.frequencies_hz
+
+    @property
+    def rigid_spatial_inertia(self) -> np.ndarray:
+        """``D_P`` (6x6) at ``P`` in ``R_SA`` [kg, kg m, kg m^2]."""
+        return rigid_spatial_inertia(self.mass, self.inertia, self.p_P_S)
+
+    @property
+    def residual_mass(self) -> np.ndarray:
+        """``D_P0 = D_P - L^T L`` (participation rows = modes) [kg, kg m, kg m^2]."""
+        return self.rigid_spatial_inertia - self.participation.T @ self.participation
+
+
+@dataclass(frozen=True, eq=False)
+class TreePort:
+    """A port (grasp point, docking port) fixed in a body.
+
+    Attributes
+    ----------
+    name : str
+        Port name.
+    body : str
+        Body it belongs to.
+    p_B_D : (3,) ndarray
+        Body frame origin -> port ``D`` in body axes [m].
+    R_B_D : (3, 3) ndarray
+        Port axes in body axes [-].
+    """
+
+    name: str
+    body: str
+    p_B_D: np.ndarray
+    R_B_D: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class TreeControl:
+    """What the attitude control acts on.
+
+    Attributes
+    ----------
+    controlled_body : str
+        The attitude-controlled body (the tree's root, rigid): sensors measure its attitude and
+        rate, actuators apply their torque to it; the models' input is the external wrench at its
+        centre of mass and their output its acceleration twist there, in its axes.
+    """
+
+    controlled_body: str
+
+
+@dataclass(frozen=True, eq=False)
+class SpacecraftTree:
+    """A spacecraft as a tree of bodies (schema version 2).
+
+    Attributes
+    ----------
+    name : str
+        Scenario name.
+    description : str
+        Free text.
+    bodies : tuple of RigidBodyData or FlexibleBodyData
+        Every body, parents before children (the root first).
+    ports : Mapping[str, TreePort]
+        Ports by name.
+    control : TreeControl
+        The attitude-controlled body.
+    source : Path or None
+        File the tree was read from.
+    """
+
+    name: str
+    description: str
+    bodies: tuple
+    ports: Mapping[str, TreePort]
+    control: TreeControl
+    source: Path | None = None
+
+    @property
+    def root(self) -> str:
+        """Name of the root body (the controlled body)."""
+        return self.bodies[0].name
+
+    def body(self, name: str):
+        """The body named ``name`` (``KeyError`` naming the known bodies otherwise)."""
+        for body in self.bodies:
+            if body.name == name:
+                return body
+        raise KeyError(f"no body {name!r} (bodies: {', '.join(b.name for b in self.bodies)})")
+
+    def children(self, name: str) -> tuple[str, ...]:
+        """Names of the bodies whose parent is ``name``, in file order."""
+        return tuple(b.name for b in self.bodies if b.parent == name)
+
+    @property
+    def revolute_bodies(self) -> tuple[str, ...]:
+        """Bodies on revolute joints (their angles are the scheduled blocks ``tau_<body>``)."""
+        return tuple(
+            b.name for b in self.bodies if b.joint is not None and b.joint.type == "revolute"
+        )
+
+    def operating_angles(self) -> dict[str, float]:
+        """The file's joint angles [rad] by body, for the revolute joints."""
+        return {name: float(self.body(name).joint.angle) for name in self.revolute_bodies}
+
+
+# ----------------------------------------------------------------------------------------------
+# readers
+# ----------------------------------------------------------------------------------------------
+def _read_joint(body: str, raw: Any) -> Joint:
+    t = _Table(raw, f"{body}.joint")
+    kind = t.text("type")
+    if kind not in JOINT_TYPES:
+        raise ScenarioError(f"{body}.joint", f"type must be one of {JOINT_TYPES}, got {kind!r}")
+    p = t.array("p_parent_joint", (3,), [0.0, 0.0, 0.0])
+    R = t.array("R_parent_joint", (3, 3), np.eye(3).tolist())
+    _check_rotation(f"{body}.joint", "R_parent_joint", R)
+    if kind == "fixed":
+        axis = np.zeros(3)
+        angle, lower, upper = 0.0, 0.0, 0.0
+    else:
+        axis = t.array("axis", (3,))
+        _check_unit(f"{body}.joint", "axis", axis)
+        lower = t.number("lower", -math.pi)
+        upper = t.number("upper", math.pi)
+        angle = t.number("angle", 0.0)
+        if not -math.pi <= lower < upper <= math.pi:
+            raise ScenarioError(
+                f"{body}.joint",
+                f"limits must satisfy -pi <= lower < upper <= pi, got [{lower:g}, {upper:g}]",
+            )
+        if not lower <= angle <= upper:
+            raise ScenarioError(
+                f"{body}.joint", f"angle {angle:g} rad out of its limits [{lower:g}, {upper:g}]"
+            )
+    t.close()
+    axis.setflags(write=False)
+    return Joint(kind, p, R, axis, angle, lower, upper)
+
+
+def _read_rigid(t: _Table, name: str, parent: str, joint) -> RigidBodyData:
+    body = RigidBodyData(
+        name=name,
+        parent=parent,
+        joint=joint,
+        mass=t.number("mass"),
+        inertia=t.array("inertia", (3, 3)),
+        p_B_G=t.array("p_B_G", (3,), [0.0, 0.0, 0.0]),
+        mass_uncertainty_percent=t.number("mass_uncertainty_percent", 0.0),
+        inertia_uncertainty_percent=t.array("inertia_uncertainty_percent", (3,), [0.0] * 3),
+        description=t.text("description", ""),
+    )
+    t.close()
+    _check_positive(name, "mass", body.mass)
+    _check_inertia(name, "inertia", body.inertia)
+    _check_percent(name, "mass_uncertainty_percent", body.mass_uncertainty_percent, 100.0)
+    _check_percent(name, "inertia_uncertainty_percent", body.inertia_uncertainty_percent, 100.0)
+    return body
+
+
+def _read_mode_uncertainty(name: str, raw: Any, frequencies_hz: np.ndarray):
+    if not isinstance(raw, dict):
+        raise ScenarioError(f"{name}.uncertainty", "expected a table like { w1 = { percent = 20 } }")
+    modes = []
+    for key, entry in raw.items():
+        where = f"{name}.uncertainty.{key}"
+        if not (key.startswith("w") and key[1:].isdigit()):
+            raise ScenarioError(where, "keys are mode frequencies w1, w2, ... (1-based)")
+        mode = int(key[1:])
+        if not 1 <= mode <= frequencies_hz.size:
+            raise ScenarioError(
+                where, f"mode {mode} does not exist ({frequencies_hz.size} modes in frequencies_hz)"
+            )
+        t = _Table(entry, where)
+        percent = t.number("percent", None) if "percent" in entry else None
+        range_hz = None
+        if "range_hz" in entry:
+            low, high = (float(v) for v in t.array("range_hz", (2,)))
+            nominal = float(frequencies_hz[mode - 1])
+            if not 0 < low < nominal < high:
+                raise ScenarioError(
+                    where, f"range_hz [{low:g}, {high:g}] must contain the nominal {nominal:g} Hz "
+                    "strictly and be > 0"
+                )  # fmt: skip
+            range_hz = (low, high)
+        t.close()
+        if (percent is None) == (range_hz is None):
+            raise ScenarioError(where, "give exactly one of percent or range_hz")
+        if percent is not None:
+            _check_percent(where, "percent", percent, 100.0)
+            _check_positive(where, "percent", percent)
+        modes.append(ModeUncertainty(mode, percent, range_hz))
+    return tuple(sorted(modes, key=lambda m: m.mode))
+
+
+def _read_flexible(t: _Table, name: str, parent: str, joint) -> FlexibleBodyData:
+    frequencies = t.array("frequencies_hz", (None,))
+    n = frequencies.size
+    body = FlexibleBodyData(
+        name=name,
+        parent=parent,
+        joint=joint,
+        mass=t.number("mass"),
+        p_P_S=t.array("p_P_S", (3,)),
+        inertia=t.array("inertia", (3, 3)),
+        frequencies_hz=frequencies,
+        damping_ratios=t.array("damping_ratios", (n,)),
+        participation=t.array("participation", (n, 6)),
+        uncertainty=_read_mode_uncertainty(name, t.get("uncertainty", {}), frequencies),
+        description=t.text("description", ""),
+    )
+    t.close()
+    _check_positive(name, "mass", body.mass)
+    _check_inertia(name, "inertia", body.inertia)
+    if n == 0:
+        raise ScenarioError(name, "frequencies_hz: a flexible body needs at least one mode")
+    if not np.all(frequencies > 0):
+        raise ScenarioError(name, f"frequencies_hz must be > 0, got {frequencies.min():g}")
+    if not np.all(body.damping_ratios >= 0):
+        raise ScenarioError(name, f"damping_ratios must be >= 0, got {body.damping_ratios.min():g}")
+    D_P = body.rigid_spatial_inertia
+    min_eig = float(np.linalg.eigvalsh(0.5 * (body.residual_mass + body.residual_mass.T)).min())
+    if min_eig <= RESIDUAL_MASS_RTOL * float(np.abs(D_P).max()):
+        raise ScenarioError(
+            name,
+            f"participation: residual mass D_P - L^T L is not positive definite (min eigenvalue "
+            f"{min_eig:.4g}); the modes carry more inertia than the appendage (rows = modes?)",
+        )
+    return body
+
+
+def _read_body(raw: Any, index: int, known_name: str | None = None):
+    label = known_name or (raw.get("name") if isinstance(raw, dict) else None) or f"bodies[{index}]"
+    t = _Table(raw, str(label))
+    name = known_name if known_name is not None else t.text("name")
+    try:
+        check_name(name, "body name")
+    except ValueError:
+        raise ScenarioError(str(label), f"name {name!r} must be letters, digits, underscores")
+    kind = t.text("kind")
+    if kind not in BODY_KINDS:
+        raise ScenarioError(name, f"kind must be one of {BODY_KINDS}, got {kind!r}")
+    parent = t.text("parent", "")
+    joint = None
+    if parent:
+        joint = _read_joint(name, t.get("joint"))
+    elif "joint" in t.raw:
+        raise ScenarioError(name, "joint given without a parent (the root floats)")
+    if kind == "rigid":
+        return _read_rigid(t, name, parent, joint)
+    if not parent:
+        raise ScenarioError(name, "parent: a flexible appendage must hang on a body")
+    return _read_flexible(t, name, parent, joint)
+
+
+def _read_bodies(raw: Any) -> list:
+    if isinstance(raw, list):
+        return [_read_body(entry, i) for i, entry in enumerate(raw)]
+    if isinstance(raw, dict):
+        return [_read_body(entry, i, name) for i, (name, entry) in enumerate(raw.items())]
+    raise ScenarioError("bodies", "expected [[bodies]] entries or [bodies.NAME] tables")
+
+
+def _ordered(bodies: list) -> tuple:
+    """Check the topology (names, parents, one root, no cycle); return parents before children."""
+    by_name: dict[str, Any] = {}
+    for body in bodies:
+        if body.name in by_name:
+            raise ScenarioError(body.name, "name: two bodies have this name")
+        by_name[body.name] = body
+    for body in bodies:
+        if body.parent and body.parent not in by_name:
+            close = difflib.get_close_matches(body.parent, list(by_name))
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            raise ScenarioError(body.name, f"parent '{body.parent}' is not a body{hint}")
+        if body.parent == body.name:
+            raise ScenarioError(body.name, "parent: a body cannot be its own parent")
+    for body in bodies:  # cycles: walk up from every body
+        seen = [body.name]
+        current = body
+        while current.parent:
+            current = by_name[current.parent]
+            if current.name in seen:
+                loop = " -> ".join(seen[seen.index(current.name) :] + [current.name])
+                raise ScenarioError(body.name, f"parent: the tree has a cycle ({loop})")
+            seen.append(current.name)
+    roots = [b.name for b in bodies if not b.parent]
+    if len(roots) != 1:
+        raise ScenarioError(
+            roots[1] if len(roots) > 1 else "bodies",
+            f"parent: the tree needs exactly one root (free-floating body), got {roots}",
+        )
+    for body in bodies:
+        parent = by_name.get(body.parent)
+        if parent is not None and parent.kind == "flexible":
+            raise ScenarioError(
+                body.name, f"parent '{body.parent}' is a flexible appendage (appendages are leaves)"
+            )
+    order, frontier = [], roots
+    while frontier:
+        order += frontier
+        frontier = [b.name for b in bodies if b.parent in frontier]
+    return tuple(by_name[name] for name in order)
+
+
+def _read_ports(raw: Any, bodies: Mapping[str, Any]) -> dict[str, TreePort]:
+    if not isinstance(raw, dict):
+        raise ScenarioError("ports", "expected [ports.NAME] tables")
+    ports = {}
+    for name, entry in raw.items():
+        where = f"ports.{name}"
+        t = _Table(entry, where)
+        body = t.text("body")
+        if body not in bodies:
+            close = difflib.get_close_matches(body, list(bodies))
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            raise ScenarioError(where, f"body '{body}' is not a body{hint}")
+        port = TreePort(
+            name=name,
+            body=body,
+            p_B_D=t.array("p_B_D", (3,), [0.0, 0.0, 0.0]),
+            R_B_D=t.array("R_B_D", (3, 3), np.eye(3).tolist()),
+        )
+        t.close()
+        _check_rotation(where, "R_B_D", port.R_B_D)
+        if bodies[body].kind == "flexible":
+            raise ScenarioError(where, f"body '{body}' is a flexible appendage (no ports on it)")
+        ports[name] = port
+    return ports
+
+
+def _read_control(raw: Any, bodies: Mapping[str, Any], root: str) -> TreeControl:
+    t = _Table(raw, "control")
+    controlled = t.text("controlled_body")
+    t.close()
+    if controlled not in bodies:
+        close = difflib.get_close_matches(controlled, list(bodies))
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        raise ScenarioError("control", f"controlled_body '{controlled}' is not a body{hint}")
+    if controlled != root:
+        raise ScenarioError(
+            "control",
+            f"controlled_body '{controlled}' must be the tree's root '{root}' (the free-floating "
+            "body whose attitude is controlled)",
+        )
+    return TreeControl(controlled)
+
+
+def parse_tree(document: Mapping[str, Any], source: Path | None = None) -> SpacecraftTree:
+    """Validate a parsed TOML document of schema version 2 into a :class:`SpacecraftTree`.
+
+    Raises
+    ------
+    ScenarioError
+        One line naming the body (or section) and the field.
+    """
+    where = source.name if source is not None else "tree"
+    top = _Table(dict(document), where, "document")
+    version = top.number("schema_version")
+    if version != TREE_SCHEMA_VERSION:
+        hint = " (a version 1 file is read by oos_drake.scenario.data.load_scenario)"
+        raise ScenarioError(
+            where, f"schema_version must be {TREE_SCHEMA_VERSION}, got {version:g}" + hint
+        )
+    name = top.text("name")
+    description = top.text("description", "")
+    bodies = _ordered(_read_bodies(top.get("bodies")))
+    by_name = {b.name: b for b in bodies}
+    ports = _read_ports(top.get("ports", {}), by_name)
+    control = _read_control(top.get("control"), by_name, bodies[0].name)
+    top.close()
+    return SpacecraftTree(
+        name=name,
+        description=description,
+        bodies=bodies,
+        ports=MappingProxyType(ports),
+        control=control,
+        source=source,
+    )
+
+
+def shipped_trees() -> list[str]:
+    """Names of the shipped tree scenarios (``flexible_satellite``, ``geo_satellite``)."""
+    return sorted(p.stem for p in Path(TREE_DIRECTORY).glob("*.toml"))
+
+
+def tree_path(name: str | Path) -> Path:
+    """The file of a path or of the bare name of a shipped tree scenario."""
+    path = Path(name)
+    if not path.is_file() and path.parent == Path():
+        shipped = Path(TREE_DIRECTORY) / path.with_suffix(".toml").name
+        path = shipped if shipped.is_file() else path
+    if not path.is_file():
+        raise ValueError(
+            f"tree scenario {name}: file not found (shipped: {', '.join(shipped_trees())})"
+        )
+    return path.resolve()
+
+
+@functools.lru_cache(maxsize=16)
+def _load_cached(path: str, mtime_ns: int, size: int) -> SpacecraftTree:
+    source = Path(path)
+    try:
+        with source.open("rb") as stream:
+            document = tomllib.load(stream)
+    except tomllib.TOMLDecodeError as error:
+        raise ScenarioError(source.name, f"invalid TOML ({error})") from None
+    return parse_tree(document, source)
+
+
+def load_tree(path: str | Path) -> SpacecraftTree:
+    """Load and validate a tree scenario file (schema version 2).
+
+    Parameters
+    ----------
+    path : str or Path
+        TOML file, or the name of a shipped tree (``"flexible_satellite"``, ``"geo_satellite"``).
+
+    Returns
+    -------
+    SpacecraftTree
+        Frozen, validated (cached per file version).
+
+    Raises
+    ------
+    ScenarioError
+        Invalid data (one line naming the body and the field).
+    ValueError
+        No such file.
+    """
+    source = tree_path(path)
+    stat = source.stat()
+    return _load_cached(str(source), stat.st_mtime_ns, stat.st_size)
