@@ -39,6 +39,12 @@ Body kinds
     mass, inertia at the centre of mass ``G`` (body axes), ``p_B_G``; optional
     ``mass_uncertainty_percent`` and ``inertia_uncertainty_percent`` (Jxx, Jyy, Jzz). A chain of
     rigid bodies on revolute joints is an arm.
+``arm``
+    a chain of any number of revolute links: ``parent`` and ``[[bodies.links]]``, each link a
+    rigid body (``name``, ``mass``, ``inertia``, ``p_B_G``, ...) with its revolute ``joint`` (the
+    first link's joint pose is in the arm's parent frame, every other one in the previous link's);
+    optional ``tip = {name, p_B_D, R_B_D}`` declares a port on the last link. The links become
+    ordinary rigid bodies of the tree.
 ``flexible``
     a cantilevered appendage given by its modal data at its attachment port ``P`` (its body frame
     origin): mass, ``p_P_S``, inertia at ``S``, ``frequencies_hz``, ``damping_ratios`` and the
@@ -122,6 +128,8 @@ TREE_SCHEMA_VERSION = 2
 #: Shipped tree scenarios (``oos_drake/scenario/data/trees/<name>.toml``).
 TREE_DIRECTORY = package_path("oos_drake.scenario", "data", "trees")
 BODY_KINDS = ("rigid", "flexible")
+#: Entries of ``[[bodies]]`` that expand into several bodies (an arm: a chain of revolute links).
+CHAIN_KINDS = ("arm",)
 JOINT_TYPES = ("fixed", "revolute")
 #: Relative margin below which ``D_P - L^T L`` counts as singular (its smallest eigenvalue over
 #: the largest entry of ``D_P``): the Drake twin's mass matrix inherits that conditioning.
@@ -507,7 +515,7 @@ def _read_body(raw: Any, index: int, known_name: str | None = None):
         raise ScenarioError(str(label), f"name {name!r} must be letters, digits, underscores")
     kind = t.text("kind")
     if kind not in BODY_KINDS:
-        raise ScenarioError(name, f"kind must be one of {BODY_KINDS}, got {kind!r}")
+        raise ScenarioError(name, f"kind must be one of {BODY_KINDS + CHAIN_KINDS}, got {kind!r}")
     parent = t.text("parent", "")
     joint = None
     if parent:
@@ -521,12 +529,64 @@ def _read_body(raw: Any, index: int, known_name: str | None = None):
     return _read_flexible(t, name, parent, joint)
 
 
-def _read_bodies(raw: Any) -> list:
+def _expand_arm(raw: dict, name: str) -> tuple[list[tuple[str, dict]], dict]:
+    """An ``arm`` entry -> its links as rigid-body entries (each on its revolute joint, parent the
+    previous link) and its tip port (``{port name: table}``, empty without ``tip``)."""
+    t = _Table(raw, name)
+    t.text("kind")
+    parent = t.text("parent")
+    links = t.get("links")
+    tip = t.get("tip", None)
+    t.get("description", "")
+    t.close()
+    if not isinstance(links, list) or not links:
+        raise ScenarioError(name, "links: an arm needs a non-empty list of [[bodies.links]]")
+    entries = []
+    for k, link in enumerate(links):
+        where = f"{name}.links[{k}]"
+        if not isinstance(link, dict):
+            raise ScenarioError(where, "expected a table")
+        link_name = link.get("name", where)
+        joint = link.get("joint")
+        if not isinstance(joint, dict) or joint.get("type") != "revolute":
+            raise ScenarioError(str(link_name), "joint: every arm link needs a revolute joint")
+        if "kind" in link or "parent" in link:
+            raise ScenarioError(str(link_name), "kind and parent of an arm link are implied")
+        entries.append((str(link_name), {**link, "kind": "rigid", "parent": parent}))
+        parent = str(link_name)
+    ports = {}
+    if tip is not None:
+        t = _Table(tip, f"{name}.tip")
+        port = t.text("name")
+        ports[port] = {"body": parent, **{k: v for k, v in tip.items() if k != "name"}}
+        t.used.update(tip)
+        t.close()
+    return entries, ports
+
+
+def _read_bodies(raw: Any) -> tuple[list, dict]:
+    """Bodies from ``[[bodies]]`` entries or ``[bodies.NAME]`` tables (``arm`` entries expanded
+    into their links); returns the bodies and the arms' tip ports."""
     if isinstance(raw, list):
-        return [_read_body(entry, i) for i, entry in enumerate(raw)]
-    if isinstance(raw, dict):
-        return [_read_body(entry, i, name) for i, (name, entry) in enumerate(raw.items())]
-    raise ScenarioError("bodies", "expected [[bodies]] entries or [bodies.NAME] tables")
+        named = [(entry.get("name") if isinstance(entry, dict) else None, entry) for entry in raw]
+        from_table = False
+    elif isinstance(raw, dict):
+        named = list(raw.items())
+        from_table = True
+    else:
+        raise ScenarioError("bodies", "expected [[bodies]] entries or [bodies.NAME] tables")
+    bodies, ports = [], {}
+    for index, (name, entry) in enumerate(named):
+        if isinstance(entry, dict) and entry.get("kind") == "arm":
+            arm_name = str(name if name is not None else f"bodies[{index}]")
+            if not from_table:
+                entry = {k: v for k, v in entry.items() if k != "name"}
+            links, tip = _expand_arm(entry, arm_name)
+            bodies += [_read_body(link, index) for _, link in links]
+            ports.update(tip)
+        else:
+            bodies.append(_read_body(entry, index, name if from_table else None))
+    return bodies, ports
 
 
 def _ordered(bodies: list) -> tuple:
@@ -632,9 +692,16 @@ def parse_tree(document: Mapping[str, Any], source: Path | None = None) -> Space
         )
     name = top.text("name")
     description = top.text("description", "")
-    bodies = _ordered(_read_bodies(top.get("bodies")))
+    bodies, tip_ports = _read_bodies(top.get("bodies"))
+    bodies = _ordered(bodies)
     by_name = {b.name: b for b in bodies}
-    ports = _read_ports(top.get("ports", {}), by_name)
+    raw_ports = top.get("ports", {})
+    if not isinstance(raw_ports, dict):
+        raise ScenarioError("ports", "expected [ports.NAME] tables")
+    for port in tip_ports:
+        if port in raw_ports:
+            raise ScenarioError(f"ports.{port}", "name: also the tip port of an arm")
+    ports = _read_ports({**raw_ports, **tip_ports}, by_name)
     control = _read_control(top.get("control"), by_name, bodies[0].name)
     top.close()
     return SpacecraftTree(
