@@ -118,6 +118,8 @@ __all__ = [
     "TreePort",
     "TreeControl",
     "SpacecraftTree",
+    "body_poses",
+    "port_pose",
     "load_tree",
     "parse_tree",
     "tree_path",
@@ -378,6 +380,56 @@ class SpacecraftTree:
     def operating_angles(self) -> dict[str, float]:
         """The file's joint angles [rad] by body, for the revolute joints."""
         return {name: float(self.body(name).joint.angle) for name in self.revolute_bodies}
+
+
+# ----------------------------------------------------------------------------------------------
+# kinematics of the tree
+# ----------------------------------------------------------------------------------------------
+def body_poses(
+    tree: SpacecraftTree, angles: Mapping[str, float] | None = None
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Pose of every body frame relative to the root's centre-of-mass frame (forward kinematics).
+
+    Parameters
+    ----------
+    tree : SpacecraftTree
+        The tree.
+    angles : Mapping[str, float], optional
+        Revolute joint angles [rad] by body; the file's operating angles for the others.
+
+    Returns
+    -------
+    dict
+        Body name -> ``(R_G_B, p_G_B)``: body axes in the root's axes [-] and the root's centre of
+        mass ``G`` -> body frame origin in the root's axes [m]. For a flexible body the frame is
+        its attachment frame (origin ``P``), undeformed.
+    """
+    chosen = tree.operating_angles()
+    for name, value in (angles or {}).items():
+        if name not in chosen:
+            raise ValueError(f"{name}: not a body on a revolute joint ({sorted(chosen)})")
+        chosen[name] = float(value)
+    poses: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for body in tree.bodies:
+        if body.joint is None:
+            poses[body.name] = (np.eye(3), -np.asarray(body.p_B_G, dtype=float))
+            continue
+        R_parent, p_parent = poses[body.parent]
+        R_body = R_parent @ body.joint.R_parent_child(chosen.get(body.name, 0.0))
+        poses[body.name] = (R_body, p_parent + R_parent @ np.asarray(body.joint.p_parent_joint))
+    return poses
+
+
+def port_pose(
+    tree: SpacecraftTree, port: str, angles: Mapping[str, float] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(R_G_D, p_G_D)`` of port ``port`` in the root's centre-of-mass frame (see
+    :func:`body_poses`) [-, m]."""
+    if port not in tree.ports:
+        raise KeyError(f"no port {port!r} (ports: {', '.join(tree.ports)})")
+    spec = tree.ports[port]
+    R_body, p_body = body_poses(tree, angles)[spec.body]
+    return R_body @ spec.R_B_D, p_body + R_body @ spec.p_B_D
 
 
 # ----------------------------------------------------------------------------------------------

@@ -29,7 +29,7 @@ import numpy as np
 
 from oos_drake.lfr import LFR, ureal
 from oos_drake.scenario.model import _hub_parameters
-from oos_drake.scenario.tree import SpacecraftTree
+from oos_drake.scenario.tree import SpacecraftTree, body_poses
 from oos_drake.titop import (
     Component,
     angle_parameter,
@@ -221,24 +221,15 @@ def rigid_inertia_at_root(tree: SpacecraftTree, angles: dict[str, float] | None 
     """
     from oos_drake.titop.spatial import kinematic_matrix, rigid_spatial_inertia
 
-    chosen = tree.operating_angles()
-    chosen.update(angles or {})
-    poses = {}  # body -> (R_root_body, p_Groot_Bo): body frame origin in root axes
+    poses = body_poses(tree, angles)
     total = np.zeros((6, 6))
     for body in tree.bodies:
-        if body.joint is None:
-            poses[body.name] = (np.eye(3), -np.asarray(body.p_B_G, dtype=float))
-        else:
-            R_p, p_p = poses[body.parent]
-            R_c = R_p @ body.joint.R_parent_child(chosen.get(body.name, 0.0))
-            poses[body.name] = (R_c, p_p + R_p @ np.asarray(body.joint.p_parent_joint))
         R, p = poses[body.name]
         if body.kind == "rigid":
             d_local = rigid_spatial_inertia(body.mass, body.inertia, body.p_B_G)
         else:
             d_local = body.rigid_spatial_inertia
-        T = np.zeros((6, 6))
-        T[:3, :3] = T[3:, 3:] = R
+        T = np.kron(np.eye(2), R)
         d_rootaxes = T @ d_local @ T.T  # at the body origin, root axes
         tau = kinematic_matrix(-p)  # tau_{Bo G}: xdd_Bo = tau xdd_G for a rigid motion
         total += tau.T @ d_rootaxes @ tau

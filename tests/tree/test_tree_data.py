@@ -11,7 +11,7 @@ from oos_drake.scenario.tree import load_tree, parse_tree, shipped_trees
 
 
 def test_shipped_trees_load():
-    assert shipped_trees() == ["flexible_satellite", "geo_satellite"]
+    assert shipped_trees() == ["flexible_satellite", "geo_satellite", "servicer_7dof"]
     flexible = load_tree("flexible_satellite")
     assert [b.name for b in flexible.bodies] == ["HUB", "SA1", "SA2"]
     assert flexible.children("HUB") == ("SA1", "SA2") and flexible.control.controlled_body == "HUB"

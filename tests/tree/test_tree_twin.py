@@ -26,6 +26,7 @@ def _trees():
         "flexible_satellite": load_tree("flexible_satellite"),
         "geo_satellite": load_tree("geo_satellite"),
         "boom": parse_tree(boom_document()),
+        "servicer_7dof": load_tree("servicer_7dof"),
     }
 
 
@@ -34,7 +35,7 @@ def twins():
     return {name: (tree, build_tree_diagram(tree)) for name, tree in _trees().items()}
 
 
-@pytest.mark.parametrize("name", ["flexible_satellite", "geo_satellite", "boom"])
+@pytest.mark.parametrize("name", ["flexible_satellite", "geo_satellite", "boom", "servicer_7dof"])
 def test_titop_matches_drake_at_file_angles(twins, name):
     tree, handles = twins[name]
     result = check_tree(tree, handles=handles)
@@ -44,7 +45,7 @@ def test_titop_matches_drake_at_file_angles(twins, name):
     assert result.n_states[0] == result.n_states[1] <= 2 * n_modes
 
 
-@pytest.mark.parametrize("name", ["flexible_satellite", "geo_satellite", "boom"])
+@pytest.mark.parametrize("name", ["flexible_satellite", "geo_satellite", "boom", "servicer_7dof"])
 def test_titop_matches_drake_at_other_angles(twins, name):
     tree, handles = twins[name]
     angles = {b: (-2.4, 1.3, 3.0)[k % 3] for k, b in enumerate(tree.revolute_bodies)}
