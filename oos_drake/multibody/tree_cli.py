@@ -52,7 +52,8 @@ def main(argv: list[str] | None = None) -> int:
         unknown = sorted(set(angles) - set(tree.revolute_bodies))
         if unknown:
             raise ScenarioError(
-                unknown[0], f"--angle: not a body on a revolute joint ({list(tree.revolute_bodies)})"
+                unknown[0],
+                f"--angle: not a body on a revolute joint ({list(tree.revolute_bodies)})",
             )
     except (ScenarioError, ValueError) as error:
         print(f"error: {error}", file=sys.stderr)

@@ -87,7 +87,9 @@ class TreeDiagram:
     sdf_directory: Path | None = None
 
 
-def build_tree_diagram(tree: SpacecraftTree, sdf_directory: str | Path | None = None) -> TreeDiagram:
+def build_tree_diagram(
+    tree: SpacecraftTree, sdf_directory: str | Path | None = None
+) -> TreeDiagram:
     """Build the Drake twin of ``tree``.
 
     Parameters

@@ -98,7 +98,9 @@ def _assembly_model(tree: SpacecraftTree) -> Model:
             parent = by_name[body.parent]
             p_link_J = np.asarray(body.joint.p_parent_joint) - _link_origin(tree, parent)
             frames.append(
-                Frame(f"{name}_J", parent.name, pose_from_matrix(body.joint.R_parent_joint, p_link_J))
+                Frame(
+                    f"{name}_J", parent.name, pose_from_matrix(body.joint.R_parent_joint, p_link_J)
+                )
             )
         if body.kind == "rigid":
             pose = Pose() if body.joint is None else Pose(relative_to=f"{name}_J")

@@ -488,7 +488,9 @@ def _read_rigid(t: _Table, name: str, parent: str, joint) -> RigidBodyData:
 
 def _read_mode_uncertainty(name: str, raw: Any, frequencies_hz: np.ndarray):
     if not isinstance(raw, dict):
-        raise ScenarioError(f"{name}.uncertainty", "expected a table like { w1 = { percent = 20 } }")
+        raise ScenarioError(
+            f"{name}.uncertainty", "expected a table like { w1 = { percent = 20 } }"
+        )
     modes = []
     for key, entry in raw.items():
         where = f"{name}.uncertainty.{key}"
@@ -564,7 +566,8 @@ def _read_body(raw: Any, index: int, known_name: str | None = None):
     try:
         check_name(name, "body name")
     except ValueError:
-        raise ScenarioError(str(label), f"name {name!r} must be letters, digits, underscores")
+        detail = f"name {name!r} must be letters, digits, underscores"
+        raise ScenarioError(str(label), detail) from None
     kind = t.text("kind")
     if kind not in BODY_KINDS:
         raise ScenarioError(name, f"kind must be one of {BODY_KINDS + CHAIN_KINDS}, got {kind!r}")

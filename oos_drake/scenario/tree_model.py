@@ -25,6 +25,8 @@ revolute joint, 16 occurrences). Substitute the joints' angles with :func:`tree_
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from oos_drake.lfr import LFR, ureal
@@ -162,7 +164,7 @@ def build_tree_model(tree: SpacecraftTree, *, rotational: bool = False) -> LFR:
         6x6 (or 3x3) with inputs ``Fx_<root> .. Tz_<root>`` and outputs
         ``ax_<root> .. wdot_z_<root>``; ``2 sum(n_modes)`` states; blocks named from the bodies
         (module docstring). Revolute joints are scheduled blocks ``tau_<body>`` (nominal: angle 0);
-        substitute :func:`tree_values` for the file's angles.
+        substitute :func:`tree_values` for the file's angles. Cached per tree object.
 
     Examples
     --------
@@ -175,12 +177,18 @@ def build_tree_model(tree: SpacecraftTree, *, rotational: bool = False) -> LFR:
     >>> usubs(model, tree_values(tree)).nominal.shape
     (6, 6)
     """
+    model = _tree_model(tree)
+    return model[3:6, 3:6] if rotational else model
+
+
+@functools.lru_cache(maxsize=8)
+def _tree_model(tree: SpacecraftTree) -> LFR:
+    """One assembly per tree object (trees and LFRs are immutable)."""
     root = tree.root
     model = assemble(_components(tree), inputs=[f"W_ext_{root}"], outputs=[f"xdd_G_{root}"])
-    model = model.with_names(
+    return model.with_names(
         inputs=[f"{n}_{root}" for n in _INPUTS], outputs=[f"{n}_{root}" for n in _OUTPUTS]
     )
-    return model[3:6, 3:6] if rotational else model
 
 
 def tree_values(tree: SpacecraftTree, angles: dict[str, float] | None = None) -> dict:

@@ -1,4 +1,4 @@
-"""Tree command line: bad input -> one line naming body and field, exit status 2, nothing written."""
+"""Tree command line: bad input -> one line naming body and field, exit 2, nothing written."""
 
 from __future__ import annotations
 

@@ -47,7 +47,9 @@ def test_forward_kinematics_tree_equals_drake(servicer):
         np.testing.assert_allclose(R_drake, R_tree, atol=1e-13)
         np.testing.assert_allclose(p_drake, p_tree, atol=1e-13)
     # stretched arm at zero angles: base 0.75 m along x_HUB, then 1.081 m of links + 0.126 tip
-    np.testing.assert_allclose(port_pose(tree, "GRASP")[1], [0.75 + 1.221 + 0.126, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(
+        port_pose(tree, "GRASP")[1], [0.75 + 1.221 + 0.126, 0, 0], atol=1e-12
+    )
 
 
 def test_inverse_kinematics_reaches_reachable_poses(servicer):
@@ -68,5 +70,7 @@ def test_inverse_kinematics_reaches_reachable_poses(servicer):
 def test_out_of_reach_names_port_and_residual(servicer):
     tree, handles = servicer
     R_target, _ = port_pose(tree, "GRASP")
-    with pytest.raises(ScenarioError, match=r"^ports\.GRASP: inverse kinematics misses the pose by"):
+    with pytest.raises(
+        ScenarioError, match=r"^ports\.GRASP: inverse kinematics misses the pose by"
+    ):
         solve_port_pose(handles, "GRASP", R_target, [4.0, 0.0, 0.0], restarts=2)

@@ -40,7 +40,11 @@ def test_hub_with_one_fixed_appendage_is_closed_form():
     document = shipped_document("flexible_satellite")
     hub, array = document["bodies"][:2]
     R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # quarter turn about z
-    array["joint"] = {"type": "fixed", "p_parent_joint": [0.3, 0.9, 0.8], "R_parent_joint": R.tolist()}
+    array["joint"] = {
+        "type": "fixed",
+        "p_parent_joint": [0.3, 0.9, 0.8],
+        "R_parent_joint": R.tolist(),
+    }
     document["bodies"] = [hub, array]
     tree = parse_tree(document)
     body = tree.body("SA1")
@@ -50,7 +54,9 @@ def test_hub_with_one_fixed_appendage_is_closed_form():
     )
     p_GP = np.array([0.3, 0.9, 0.8]) - np.array([0.0, 0.0, 0.8])
     tau = np.eye(6)
-    tau[:3, 3:] = -np.array([[0, -p_GP[2], p_GP[1]], [p_GP[2], 0, -p_GP[0]], [-p_GP[1], p_GP[0], 0]])
+    tau[:3, 3:] = -np.array(
+        [[0, -p_GP[2], p_GP[1]], [p_GP[2], 0, -p_GP[0]], [-p_GP[1], p_GP[0], 0]]
+    )
     T = np.kron(np.eye(2), R.T)  # hub axes -> array axes
     D_G = np.diag([300.0] * 3 + [0.0] * 3)
     D_G[3:, 3:] = np.array([[180.0, 2.0, -1.0], [2.0, 150.0, 1.5], [-1.0, 1.5, 210.0]])
