@@ -741,7 +741,12 @@ def parse_tree(document: Mapping[str, Any], source: Path | None = None) -> Space
     top = _Table(dict(document), where, "document")
     version = top.number("schema_version")
     if version != TREE_SCHEMA_VERSION:
-        hint = " (a version 1 file is read by oos_drake.scenario.data.load_scenario)"
+        hint = (
+            " (convert a version 1 file with: python -m oos_drake.multibody.tree_cli convert FILE"
+            " OUT.toml)"
+            if version == 1
+            else ""
+        )
         raise ScenarioError(
             where, f"schema_version must be {TREE_SCHEMA_VERSION}, got {version:g}" + hint
         )
