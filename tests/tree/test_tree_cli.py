@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 import tomli_w
 from tree_documents import boom_document
 
@@ -32,7 +33,9 @@ def test_cycle_exits_2(tmp_path, capsys):
     assert capsys.readouterr().err.startswith("error: HUB: parent: the tree has a cycle")
 
 
+@pytest.mark.drake
 def test_sdf_written_for_a_valid_tree(tmp_path):
+    pytest.importorskip("pydrake")
     out = tmp_path / "sdf"
     assert main(["sdf", str(_write(tmp_path, boom_document())), str(out)]) == 0
     assert sorted(p.name for p in out.iterdir()) == [

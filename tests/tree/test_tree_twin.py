@@ -74,3 +74,29 @@ def test_sdf_folder_round_trip(tmp_path):
     )
     result = check_tree(tree, handles=build_tree_diagram(tree, tmp_path))
     assert result.passed, result
+
+
+def test_uncertain_blocks_reach_the_right_bodies():
+    """TITOP with w2_REFL_E, w1_SA_N, m_HUB substituted = the twin of a file with those values."""
+    from tree_documents import shipped_document
+
+    from oos_drake.lfr import usubs
+    from oos_drake.multibody.cross_check import VALIDATION_OMEGA, compare_systems
+    from oos_drake.scenario.tree_model import build_tree_model, tree_values
+
+    tree = load_tree("geo_satellite")
+    document = shipped_document("geo_satellite")
+    bodies = {b["name"]: b for b in document["bodies"]}
+    bodies["REFL_E"]["frequencies_hz"][1] = 1.7
+    bodies["SA_N"]["frequencies_hz"][0] = 0.1
+    bodies["HUB"]["mass"] = 2300.0
+    changed = parse_tree(document)
+    values = tree_values(tree) | {
+        "w2_REFL_E": 2 * np.pi * 1.7,
+        "w1_SA_N": 2 * np.pi * 0.1,
+        "m_HUB": 2300.0,
+    }
+    titop = usubs(build_tree_model(tree), values).nominal.to_ss()
+    drake = linearize_tree(build_tree_diagram(changed))
+    result = compare_systems("perturbed", drake, titop, VALIDATION_OMEGA)
+    assert result.max_relative_error <= TOLERANCE and result.passed, result
