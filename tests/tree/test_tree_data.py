@@ -149,3 +149,32 @@ def test_table_form_of_bodies():
     document["bodies"] = {b.pop("name"): b for b in document["bodies"]}
     tree = parse_tree(document)
     assert [b.name for b in tree.bodies] == [b.name for b in load_tree("geo_satellite").bodies]
+
+
+def test_arm_expands_into_its_links():
+    tree = load_tree("servicer_7dof")
+    links = [f"A{i}" for i in range(1, 8)]
+    assert [tree.body(n).parent for n in links] == ["HUB"] + links[:-1]
+    assert all(tree.body(n).joint.type == "revolute" for n in links)
+    assert tree.ports["GRASP"].body == "A7"
+    np.testing.assert_array_equal(tree.ports["GRASP"].p_B_D, [0.0, 0.0, 0.126])
+
+
+@pytest.mark.parametrize(
+    ("edit", "pattern"),
+    [
+        (lambda arm: arm["links"][2]["joint"].update(type="fixed"),
+         r"^A3: joint: every arm link needs a revolute joint$"),
+        (lambda arm: arm["links"][4].update(parent="HUB"),
+         r"^A5: kind and parent of an arm link are implied$"),
+        (lambda arm: arm.update(links=[]),
+         r"^ARM: links: an arm needs a non-empty list"),
+        (lambda arm: arm["links"][6]["joint"].update(lower=-4.0),
+         r"^A7\.joint: limits must satisfy -pi <= lower < upper <= pi"),
+    ],
+)  # fmt: skip
+def test_bad_arm(edit, pattern):
+    document = shipped_document("servicer_7dof")
+    edit(next(b for b in document["bodies"] if b["name"] == "ARM"))
+    with pytest.raises(ScenarioError, match=pattern):
+        parse_tree(document)
