@@ -129,7 +129,8 @@ class Joint:
     """A revolute or fixed SDF joint; ``axis`` is expressed in the joint frame.
 
     ``actuated=False`` writes a zero effort limit (no Drake ``JointActuator``): used for the
-    mode hinges, which are structural, not driven.
+    mode hinges, which are structural, not driven. ``limits`` are the position limits
+    ``(lower, upper)`` [rad] (None: unlimited, written as +-1e16).
     """
 
     name: str
@@ -141,6 +142,7 @@ class Joint:
     damping: float = 0.0
     spring_stiffness: float = 0.0
     actuated: bool = True
+    limits: tuple[float, float] | None = None
 
     def element(self) -> ET.Element:
         element = ET.Element("joint", name=self.name, type=self.kind)
@@ -151,8 +153,9 @@ class Joint:
             axis = ET.SubElement(element, "axis")
             ET.SubElement(axis, "xyz").text = " ".join(_num(v) for v in self.axis)
             limit = ET.SubElement(axis, "limit")
-            ET.SubElement(limit, "lower").text = "-1e16"
-            ET.SubElement(limit, "upper").text = "1e16"
+            lower, upper = ("-1e16", "1e16") if self.limits is None else map(_num, self.limits)
+            ET.SubElement(limit, "lower").text = lower
+            ET.SubElement(limit, "upper").text = upper
             if not self.actuated:
                 # Drake's parser adds a JointActuator unless the effort limit is zero
                 ET.SubElement(limit, "effort").text = "0"

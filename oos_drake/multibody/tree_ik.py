@@ -80,8 +80,7 @@ def port_pose_drake(
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(R_G_D, p_G_D)`` of ``port`` by Drake's forward kinematics, root at its operating pose
     (its centre-of-mass frame is the world frame) [-, m]."""
-    chosen = handles.tree.operating_angles()
-    chosen.update(angles or {})
+    chosen = handles.tree.joint_angles(angles)
     plant = handles.plant
     context = plant.CreateDefaultContext()
     plant.SetPositions(context, _operating_positions(handles, chosen))
@@ -144,8 +143,7 @@ def solve_port_pose(
     R_target = np.asarray(R_target, dtype=float)
     p_target = np.asarray(p_target, dtype=float)
     plant = handles.plant
-    angles = tree.operating_angles()
-    angles.update(initial or {})
+    angles = tree.joint_angles(initial)
     q_operating = _operating_positions(handles, angles)
     free = {name: handles.revolute_joints[name].position_start() for name in chain}
     frame = _port_frame(handles, port)
@@ -172,7 +170,11 @@ def solve_port_pose(
         )
         prog.SetInitialGuess(q, guess)
         result = Solve(prog)
-        solution = {name: float(result.GetSolution(q)[index]) for name, index in free.items()}
+        values = result.GetSolution(q)
+        # bounds hold to the solver's feasibility tolerance: clip onto the limits
+        solution = {
+            name: float(np.clip(values[index], *limits[name])) for name, index in free.items()
+        }
         R, p = port_pose_drake(handles, port, {**angles, **solution})
         position_error, orientation_error = _errors(R, p, R_target, p_target)
         candidate = IkSolution(port, solution, position_error, orientation_error)

@@ -163,11 +163,7 @@ def linearize_tree(
         states structurally pruned (the root's rigid-body coordinates and the locked joints'
         coordinates removed): the minimal realization up to numerical cancellation.
     """
-    chosen = handles.tree.operating_angles()
-    for name, value in (angles or {}).items():
-        if name not in chosen:
-            raise ValueError(f"{name}: not a body on a revolute joint ({sorted(chosen)})")
-        chosen[name] = float(value)
+    chosen = handles.tree.joint_angles(angles)
     plant = handles.plant
     context = handles.diagram.CreateDefaultContext()
     plant_context = plant.GetMyMutableContextFromRoot(context)

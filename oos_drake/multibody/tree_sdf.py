@@ -13,8 +13,9 @@ Link frames: the root's link frame is its centre of mass ``G`` (hub axes), so th
 floating joint and hub outputs are at ``G`` as in the TITOP model; every other rigid link's frame
 is its body frame (origin at its joint), with the centre of mass at ``p_B_G``. An appendage's
 ``root`` link frame is its attachment frame ``R_SA`` (origin ``P``). Joint frames coincide with
-the child's frame at angle 0; revolute axes are expressed in it. Not in SDF (added by
-:mod:`oos_drake.multibody.tree_plant`): the modal residual bodies and the root's floating joint.
+the child's frame at angle 0; revolute axes are expressed in it; limits are the file's. Not in
+SDF (added by :mod:`oos_drake.multibody.tree_plant`): the modal residual bodies and the root's
+floating joint.
 """
 
 from __future__ import annotations
@@ -125,6 +126,7 @@ def _assembly_model(tree: SpacecraftTree) -> Model:
                     body.parent,
                     child,
                     axis=tuple(float(v) for v in body.joint.axis) if revolute else None,
+                    limits=(body.joint.lower, body.joint.upper) if revolute else None,
                 )
             )
     for port in tree.ports.values():

@@ -381,6 +381,28 @@ class SpacecraftTree:
         """The file's joint angles [rad] by body, for the revolute joints."""
         return {name: float(self.body(name).joint.angle) for name in self.revolute_bodies}
 
+    def joint_angles(self, angles: Mapping[str, float] | None = None) -> dict[str, float]:
+        """Angles [rad] of every revolute joint: ``angles`` over the file's operating angles.
+
+        Raises
+        ------
+        ValueError
+            A body not on a revolute joint, or an angle outside its joint's limits.
+        """
+        chosen = self.operating_angles()
+        for name, value in (angles or {}).items():
+            if name not in chosen:
+                raise ValueError(f"{name}: not a body on a revolute joint ({sorted(chosen)})")
+            joint = self.body(name).joint
+            value = float(value)
+            if not joint.lower <= value <= joint.upper:
+                raise ValueError(
+                    f"{name}.joint: angle {value:g} rad out of its limits "
+                    f"[{joint.lower:g}, {joint.upper:g}]"
+                )
+            chosen[name] = value
+        return chosen
+
 
 # ----------------------------------------------------------------------------------------------
 # kinematics of the tree
@@ -404,11 +426,7 @@ def body_poses(
         mass ``G`` -> body frame origin in the root's axes [m]. For a flexible body the frame is
         its attachment frame (origin ``P``), undeformed.
     """
-    chosen = tree.operating_angles()
-    for name, value in (angles or {}).items():
-        if name not in chosen:
-            raise ValueError(f"{name}: not a body on a revolute joint ({sorted(chosen)})")
-        chosen[name] = float(value)
+    chosen = tree.joint_angles(angles)
     poses: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for body in tree.bodies:
         if body.joint is None:

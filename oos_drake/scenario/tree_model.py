@@ -206,11 +206,7 @@ def tree_values(tree: SpacecraftTree, angles: dict[str, float] | None = None) ->
     dict
         Block name -> value, for :func:`oos_drake.lfr.usubs`.
     """
-    chosen = tree.operating_angles()
-    for name, value in (angles or {}).items():
-        if name not in chosen:
-            raise ValueError(f"{name}: not a body on a revolute joint ({sorted(chosen)})")
-        chosen[name] = float(value)
+    chosen = tree.joint_angles(angles)
     return {angle_block_name(name): float(angle_to_tau(a)) for name, a in chosen.items()}
 
 

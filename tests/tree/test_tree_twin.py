@@ -48,7 +48,10 @@ def test_titop_matches_drake_at_file_angles(twins, name):
 @pytest.mark.parametrize("name", ["flexible_satellite", "geo_satellite", "boom", "servicer_7dof"])
 def test_titop_matches_drake_at_other_angles(twins, name):
     tree, handles = twins[name]
-    angles = {b: (-2.4, 1.3, 3.0)[k % 3] for k, b in enumerate(tree.revolute_bodies)}
+    angles = {}
+    for k, name in enumerate(tree.revolute_bodies):  # 80 %, 45 %, 97 % of the joint's range
+        fraction, joint = (-0.8, 0.45, 0.97)[k % 3], tree.body(name).joint
+        angles[name] = fraction * (joint.upper if fraction > 0 else -joint.lower)
     result = check_tree(tree, angles, handles=handles)
     assert result.max_relative_error <= TOLERANCE and result.passed, result
 
@@ -100,3 +103,16 @@ def test_uncertain_blocks_reach_the_right_bodies():
     drake = linearize_tree(build_tree_diagram(changed))
     result = compare_systems("perturbed", drake, titop, VALIDATION_OMEGA)
     assert result.max_relative_error <= TOLERANCE and result.passed, result
+
+
+def test_joint_limits_reach_the_twin():
+    tree = load_tree("servicer_7dof")
+    handles = build_tree_diagram(tree)
+    joint = handles.revolute_joints["A2"]
+    assert (joint.position_lower_limits()[0], joint.position_upper_limits()[0]) == (-2.09, 2.09)
+
+
+def test_angles_outside_the_limits_are_refused(twins):
+    tree, handles = twins["servicer_7dof"]
+    with pytest.raises(ValueError, match=r"^A2\.joint: angle 2\.5 rad out of its limits"):
+        linearize_tree(handles, {"A2": 2.5})
