@@ -16,7 +16,7 @@ from oos_drake.multibody.tree_ik import (  # noqa: E402
 )
 from oos_drake.multibody.tree_plant import build_tree_diagram  # noqa: E402
 from oos_drake.scenario.data import ScenarioError  # noqa: E402
-from oos_drake.scenario.tree import load_tree, port_pose  # noqa: E402
+from oos_drake.scenario.tree import load_tree, parse_tree, port_pose  # noqa: E402
 
 ARM = tuple(f"A{i}" for i in range(1, 8))
 
@@ -74,3 +74,20 @@ def test_out_of_reach_names_port_and_residual(servicer):
         ScenarioError, match=r"^ports\.GRASP: inverse kinematics misses the pose by"
     ):
         solve_port_pose(handles, "GRASP", R_target, [4.0, 0.0, 0.0], restarts=2)
+
+
+def test_ik_on_the_paper_ur5_reaches_the_grasp_waypoint():
+    """The converted paper chaser: IK of J7 to the paper's grasp pose, checked with the paper's
+    own forward kinematics."""
+    from oos_drake.scenario.data import load_scenario
+    from oos_drake.scenario.kinematics import arm_tip_pose, waypoint_tip_pose
+    from oos_drake.scenario.tree_migration import tree_document_from_v1
+
+    paper = load_scenario("paper")
+    tree = parse_tree(tree_document_from_v1(paper)[0])
+    target = waypoint_tip_pose(paper, "grasp")
+    solution = solve_port_pose(build_tree_diagram(tree), "J7", target.R, target.p)
+    alpha = np.array([solution.angles[f"L{i}"] for i in range(1, 7)])
+    reached = arm_tip_pose(paper, alpha)
+    np.testing.assert_allclose(reached.p, target.p, atol=1e-6)
+    np.testing.assert_allclose(reached.R, target.R, atol=1e-6)

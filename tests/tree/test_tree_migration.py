@@ -44,3 +44,20 @@ def test_version_1_file_names_the_command(tmp_path):
     path.write_text(DEFAULT_SCENARIO_PATH.read_text())
     with pytest.raises(ScenarioError, match=r"tree_cli convert FILE OUT\.toml\)$"):
         load_tree(path)
+
+
+def test_paper_chaser_tree_kinematics_equal_the_papers():
+    """Tree forward kinematics of the converted arm tip J7 = the paper's own ``arm_tip_pose``."""
+    from oos_drake.scenario.data import load_scenario
+    from oos_drake.scenario.kinematics import arm_tip_pose
+    from oos_drake.scenario.tree import port_pose
+
+    paper = load_scenario("paper")
+    tree = parse_tree(tree_document_from_v1(paper)[0])
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        alpha = rng.uniform(-3, 3, 6)
+        R, p = port_pose(tree, "J7", {f"L{i + 1}": alpha[i] for i in range(6)})
+        expected = arm_tip_pose(paper, alpha)
+        np.testing.assert_allclose(R, expected.R, atol=1e-13)
+        np.testing.assert_allclose(p, expected.p, atol=1e-13)
