@@ -96,12 +96,12 @@ import numpy as np
 from oos_drake.resources import package_path
 from oos_drake.scenario.data import (
     ScenarioError,
-    _check_inertia,
-    _check_percent,
-    _check_positive,
-    _check_rotation,
-    _check_unit,
-    _Table,
+    Table,
+    check_inertia,
+    check_percent,
+    check_positive,
+    check_rotation,
+    check_unit,
 )
 from oos_drake.titop.parameters import check_name
 from oos_drake.titop.spatial import rigid_spatial_inertia, rotation_matrix
@@ -454,19 +454,19 @@ def port_pose(
 # readers
 # ----------------------------------------------------------------------------------------------
 def _read_joint(body: str, raw: Any) -> Joint:
-    t = _Table(raw, f"{body}.joint")
+    t = Table(raw, f"{body}.joint")
     kind = t.text("type")
     if kind not in JOINT_TYPES:
         raise ScenarioError(f"{body}.joint", f"type must be one of {JOINT_TYPES}, got {kind!r}")
     p = t.array("p_parent_joint", (3,), [0.0, 0.0, 0.0])
     R = t.array("R_parent_joint", (3, 3), np.eye(3).tolist())
-    _check_rotation(f"{body}.joint", "R_parent_joint", R)
+    check_rotation(f"{body}.joint", "R_parent_joint", R)
     if kind == "fixed":
         axis = np.zeros(3)
         angle, lower, upper = 0.0, 0.0, 0.0
     else:
         axis = t.array("axis", (3,))
-        _check_unit(f"{body}.joint", "axis", axis)
+        check_unit(f"{body}.joint", "axis", axis)
         lower = t.number("lower", -math.pi)
         upper = t.number("upper", math.pi)
         angle = t.number("angle", 0.0)
@@ -484,7 +484,7 @@ def _read_joint(body: str, raw: Any) -> Joint:
     return Joint(kind, p, R, axis, angle, lower, upper)
 
 
-def _read_rigid(t: _Table, name: str, parent: str, joint) -> RigidBodyData:
+def _read_rigid(t: Table, name: str, parent: str, joint) -> RigidBodyData:
     body = RigidBodyData(
         name=name,
         parent=parent,
@@ -497,10 +497,10 @@ def _read_rigid(t: _Table, name: str, parent: str, joint) -> RigidBodyData:
         description=t.text("description", ""),
     )
     t.close()
-    _check_positive(name, "mass", body.mass)
-    _check_inertia(name, "inertia", body.inertia)
-    _check_percent(name, "mass_uncertainty_percent", body.mass_uncertainty_percent, 100.0)
-    _check_percent(name, "inertia_uncertainty_percent", body.inertia_uncertainty_percent, 100.0)
+    check_positive(name, "mass", body.mass)
+    check_inertia(name, "inertia", body.inertia)
+    check_percent(name, "mass_uncertainty_percent", body.mass_uncertainty_percent, 100.0)
+    check_percent(name, "inertia_uncertainty_percent", body.inertia_uncertainty_percent, 100.0)
     return body
 
 
@@ -519,7 +519,7 @@ def _read_mode_uncertainty(name: str, raw: Any, frequencies_hz: np.ndarray):
             raise ScenarioError(
                 where, f"mode {mode} does not exist ({frequencies_hz.size} modes in frequencies_hz)"
             )
-        t = _Table(entry, where)
+        t = Table(entry, where)
         percent = t.number("percent", None) if "percent" in entry else None
         range_hz = None
         if "range_hz" in entry:
@@ -535,13 +535,13 @@ def _read_mode_uncertainty(name: str, raw: Any, frequencies_hz: np.ndarray):
         if (percent is None) == (range_hz is None):
             raise ScenarioError(where, "give exactly one of percent or range_hz")
         if percent is not None:
-            _check_percent(where, "percent", percent, 100.0)
-            _check_positive(where, "percent", percent)
+            check_percent(where, "percent", percent, 100.0)
+            check_positive(where, "percent", percent)
         modes.append(ModeUncertainty(mode, percent, range_hz))
     return tuple(sorted(modes, key=lambda m: m.mode))
 
 
-def _read_flexible(t: _Table, name: str, parent: str, joint) -> FlexibleBodyData:
+def _read_flexible(t: Table, name: str, parent: str, joint) -> FlexibleBodyData:
     frequencies = t.array("frequencies_hz", (None,))
     n = frequencies.size
     body = FlexibleBodyData(
@@ -558,8 +558,8 @@ def _read_flexible(t: _Table, name: str, parent: str, joint) -> FlexibleBodyData
         description=t.text("description", ""),
     )
     t.close()
-    _check_positive(name, "mass", body.mass)
-    _check_inertia(name, "inertia", body.inertia)
+    check_positive(name, "mass", body.mass)
+    check_inertia(name, "inertia", body.inertia)
     if n == 0:
         raise ScenarioError(name, "frequencies_hz: a flexible body needs at least one mode")
     if not np.all(frequencies > 0):
@@ -579,7 +579,7 @@ def _read_flexible(t: _Table, name: str, parent: str, joint) -> FlexibleBodyData
 
 def _read_body(raw: Any, index: int, known_name: str | None = None):
     label = known_name or (raw.get("name") if isinstance(raw, dict) else None) or f"bodies[{index}]"
-    t = _Table(raw, str(label))
+    t = Table(raw, str(label))
     name = known_name if known_name is not None else t.text("name")
     try:
         check_name(name, "body name")
@@ -605,7 +605,7 @@ def _read_body(raw: Any, index: int, known_name: str | None = None):
 def _expand_arm(raw: dict, name: str) -> tuple[list[tuple[str, dict]], dict]:
     """An ``arm`` entry -> its links as rigid-body entries (each on its revolute joint, parent the
     previous link) and its tip port (``{port name: table}``, empty without ``tip``)."""
-    t = _Table(raw, name)
+    t = Table(raw, name)
     t.text("kind")
     parent = t.text("parent")
     links = t.get("links")
@@ -629,7 +629,7 @@ def _expand_arm(raw: dict, name: str) -> tuple[list[tuple[str, dict]], dict]:
         parent = str(link_name)
     ports = {}
     if tip is not None:
-        t = _Table(tip, f"{name}.tip")
+        t = Table(tip, f"{name}.tip")
         port = t.text("name")
         ports[port] = {"body": parent, **{k: v for k, v in tip.items() if k != "name"}}
         t.used.update(tip)
@@ -710,7 +710,7 @@ def _read_ports(raw: Any, bodies: Mapping[str, Any]) -> dict[str, TreePort]:
     ports = {}
     for name, entry in raw.items():
         where = f"ports.{name}"
-        t = _Table(entry, where)
+        t = Table(entry, where)
         body = t.text("body")
         if body not in bodies:
             close = difflib.get_close_matches(body, list(bodies))
@@ -723,7 +723,7 @@ def _read_ports(raw: Any, bodies: Mapping[str, Any]) -> dict[str, TreePort]:
             R_B_D=t.array("R_B_D", (3, 3), np.eye(3).tolist()),
         )
         t.close()
-        _check_rotation(where, "R_B_D", port.R_B_D)
+        check_rotation(where, "R_B_D", port.R_B_D)
         if bodies[body].kind == "flexible":
             raise ScenarioError(where, f"body '{body}' is a flexible appendage (no ports on it)")
         ports[name] = port
@@ -731,7 +731,7 @@ def _read_ports(raw: Any, bodies: Mapping[str, Any]) -> dict[str, TreePort]:
 
 
 def _read_control(raw: Any, bodies: Mapping[str, Any], root: str) -> TreeControl:
-    t = _Table(raw, "control")
+    t = Table(raw, "control")
     controlled = t.text("controlled_body")
     t.close()
     if controlled not in bodies:
@@ -756,7 +756,7 @@ def parse_tree(document: Mapping[str, Any], source: Path | None = None) -> Space
         One line naming the body (or section) and the field.
     """
     where = source.name if source is not None else "tree"
-    top = _Table(dict(document), where, "document")
+    top = Table(dict(document), where, "document")
     version = top.number("schema_version")
     if version != TREE_SCHEMA_VERSION:
         hint = (

@@ -30,7 +30,7 @@ import functools
 import numpy as np
 
 from oos_drake.lfr import LFR, ureal
-from oos_drake.scenario.model import _hub_parameters
+from oos_drake.scenario.model import hub_parameters
 from oos_drake.scenario.tree import SpacecraftTree, body_poses
 from oos_drake.titop import (
     Component,
@@ -113,7 +113,7 @@ def _components(tree: SpacecraftTree) -> list[Component]:
             ports_GP = [offset + np.asarray(c.joint.p_parent_joint) for c in children]
             child_in = [f"W_J{c.name}_{name}" for c in children]
             child_out = [f"xdd_J{c.name}_{name}" for c in children]
-            mass, inertia = _hub_parameters(body)
+            mass, inertia = hub_parameters(body)
             if name == root:
                 system = rigid_body_inverse(mass, inertia, ports_GP, body=name)
                 inputs = [f"W_ext_{name}"] + child_in
