@@ -82,6 +82,7 @@ __all__ = [
     "check_rotation",
     "check_unit",
     "load_scenario",
+    "read_control",
     "scenario_path",
     "scenario_record",
     "shipped_scenarios",
@@ -1060,9 +1061,25 @@ def _read_mission(raw: Any) -> Mission:
     )
 
 
-def _read_control(raw: Any) -> ControlRequirements:
-    """``[control]``: every number checked with its unit; errors name ``control.<field>``."""
-    top = Table(raw, "control")
+def read_control(raw: Any) -> ControlRequirements:
+    """Read a ``[control]`` section (schema 1 and 2): every number checked with its unit.
+
+    Parameters
+    ----------
+    raw : dict or Table
+        The section's TOML table. A :class:`Table` whose caller already read its own keys
+        (schema 2's ``controlled_body``) is closed here with those keys allowed.
+
+    Returns
+    -------
+    ControlRequirements
+
+    Raises
+    ------
+    ScenarioError
+        One line naming ``control.<field>``.
+    """
+    top = raw if isinstance(raw, Table) else Table(raw, "control")
 
     def positive(table: Table, key: str, unit: str, *, upper: float = math.inf) -> float:
         value = table.number(key)
@@ -1157,7 +1174,7 @@ def _parse(document: dict[str, Any], source: Path) -> Scenario:
     ports = {n: _read_port(n, raw) for n, raw in sorted(_named(top, "ports", _PORT_NAMES).items())}
     docking = _read_docking(top.get("docking"))
     mission = _read_mission(top.get("mission"))
-    control = _read_control(top.get("control"))
+    control = read_control(top.get("control"))
     top.close()
     scenario = Scenario(
         name=name,

@@ -8,6 +8,9 @@ section naming the attitude-controlled body, and optional ports::
 
     [control]
     controlled_body = "HUB"           # the root: a rigid body, free-floating
+    pointing_requirement = 0.005      # [rad] and every other field of schema 1's [control]
+    ...                               # (torque_limit, flight_software_rate_hz, [control.sensors],
+                                      #  [control.actuators], [control.rolloff], [control.weights])
 
     [[bodies]]
     name = "HUB"
@@ -95,6 +98,7 @@ import numpy as np
 
 from oos_drake.resources import package_path
 from oos_drake.scenario.data import (
+    ControlRequirements,
     ScenarioError,
     Table,
     check_inertia,
@@ -102,6 +106,7 @@ from oos_drake.scenario.data import (
     check_positive,
     check_rotation,
     check_unit,
+    read_control,
 )
 from oos_drake.titop.parameters import check_name
 from oos_drake.titop.spatial import rigid_spatial_inertia, rotation_matrix
@@ -322,9 +327,14 @@ class TreeControl:
         The attitude-controlled body (the tree's root, rigid): sensors measure its attitude and
         rate, actuators apply their torque to it; the models' input is the external wrench at its
         centre of mass and their output its acceleration twist there, in its axes.
+    requirements : ControlRequirements
+        Pointing requirement [rad], torque bound [N m], flight-software rate [Hz], sensors,
+        actuators, roll-off and weights: the rest of ``[control]``, read by
+        :func:`oos_drake.scenario.data.read_control` exactly as in a schema-1 file.
     """
 
     controlled_body: str
+    requirements: ControlRequirements
 
 
 @dataclass(frozen=True, eq=False)
@@ -733,7 +743,6 @@ def _read_ports(raw: Any, bodies: Mapping[str, Any]) -> dict[str, TreePort]:
 def _read_control(raw: Any, bodies: Mapping[str, Any], root: str) -> TreeControl:
     t = Table(raw, "control")
     controlled = t.text("controlled_body")
-    t.close()
     if controlled not in bodies:
         close = difflib.get_close_matches(controlled, list(bodies))
         hint = f" (did you mean '{close[0]}'?)" if close else ""
@@ -744,7 +753,7 @@ def _read_control(raw: Any, bodies: Mapping[str, Any], root: str) -> TreeControl
             f"controlled_body '{controlled}' must be the tree's root '{root}' (the free-floating "
             "body whose attitude is controlled)",
         )
-    return TreeControl(controlled)
+    return TreeControl(controlled, read_control(t))
 
 
 def parse_tree(document: Mapping[str, Any], source: Path | None = None) -> SpacecraftTree:

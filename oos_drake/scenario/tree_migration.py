@@ -4,8 +4,9 @@ What a tree holds today is the chaser: the hub ``RH1``, its arrays ``SA1``, ``SA
 drives, first-mode uncertainty kept as ``uncertainty.w1``), the arm base ``L0`` (fixed at ``J0``)
 and links ``L1``..``L6`` (revolute joints ``alpha_1..6``, limits [-pi, pi]), the chaser's port
 ``D1`` and the arm tip ``J7`` as a port of ``L6``. The target (``RH2``, ``SA3``, ``SA4``, ports
-``D2``, ``D3``), the docking spring-dampers, the mission timeline and the control requirements have
-no place in schema 2 yet: :func:`tree_document_from_v1` lists them in ``dropped``.
+``D2``, ``D3``), the docking spring-dampers and the mission timeline have no place in schema 2
+yet: :func:`tree_document_from_v1` lists them in ``dropped``. The ``[control]`` section is copied
+field by field (it is read by the same reader in both schemas).
 
 Block names change with the bodies: ``tau_theta1`` -> ``tau_SA1``, ``tau_alpha<i>`` ->
 ``tau_L<i>``; ``w1_SA1``, ``w1_SA2`` and the hub's ``m_RH1``, ``J.._RH1`` keep theirs.
@@ -30,12 +31,38 @@ V1_DROPPED = (
     "ports.D3",
     "docking",
     "mission",
-    "control",
 )
 
 
 def _list(array) -> list:
     return np.asarray(array, dtype=float).tolist()
+
+
+def _control_table(scenario: Scenario, controlled_body: str) -> dict:
+    """``[control]`` of a tree: the controlled body and the schema-1 requirements, as written in
+    a schema-1 file (the inverse of :func:`oos_drake.scenario.data.read_control`)."""
+    c = scenario.control
+    return {
+        "controlled_body": controlled_body,
+        "pointing_requirement": c.pointing_requirement,
+        "torque_limit": c.torque_limit,
+        "flight_software_rate_hz": c.flight_software_rate_hz,
+        "sensors": {
+            "star_tracker_cutoff_hz": c.star_tracker_cutoff_hz,
+            "gyro_cutoff_hz": c.gyro_cutoff_hz,
+            "star_tracker_noise": c.star_tracker_noise,
+            "gyro_noise": c.gyro_noise,
+        },
+        "actuators": {"wheel_frequency_hz": c.wheel_frequency_hz, "wheel_damping": c.wheel_damping},
+        "rolloff": {"order": c.rolloff_order, "cutoff_hz": c.rolloff_cutoff_hz},
+        "weights": {
+            "disturbance_gains": list(c.disturbance_gains),
+            "disturbance_denominator": list(c.disturbance_denominator),
+            "additive_weight_db": c.additive_weight_db,
+            "multiplicative_diagonal": c.multiplicative_diagonal,
+            "multiplicative_off_diagonal": c.multiplicative_off_diagonal,
+        },
+    }
 
 
 def tree_document_from_v1(scenario: Scenario | str | Path) -> tuple[dict, tuple[str, ...]]:
@@ -130,7 +157,7 @@ def tree_document_from_v1(scenario: Scenario | str | Path) -> tuple[dict, tuple[
         "schema_version": 2,
         "name": f"{scenario.name}_chaser",
         "description": f"chaser of scenario '{scenario.name}' (converted from schema 1)",
-        "control": {"controlled_body": chaser},
+        "control": _control_table(scenario, chaser),
         "bodies": bodies,
         "ports": ports,
     }

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import tomllib
+
 import numpy as np
 import pytest
 from tree_documents import boom_document, shipped_document
 
-from oos_drake.scenario.data import ScenarioError
+from oos_drake.scenario.data import DEFAULT_SCENARIO_PATH, ScenarioError, load_scenario
 from oos_drake.scenario.tree import load_tree, parse_tree, shipped_trees
 
 
@@ -23,6 +25,20 @@ def test_shipped_trees_load():
     assert [m.mode for m in reflector.uncertainty] == [1, 2, 3]
     assert reflector.uncertainty[1].range_hz == (1.3, 1.8)
     assert geo.operating_angles() == {"SA_N": 0.5, "SA_S": -0.5}
+
+
+def test_control_section_is_schema_1s():
+    """A tree's ``[control]`` minus ``controlled_body`` is a schema-1 ``[control]``: the tree
+    whose section is the paper's carries the paper's requirements, field for field."""
+    with open(DEFAULT_SCENARIO_PATH, "rb") as stream:
+        paper_control = tomllib.load(stream)["control"]
+    document = shipped_document("flexible_satellite")
+    document["control"] = {"controlled_body": "HUB", **paper_control}
+    tree = parse_tree(document)
+    assert tree.control.requirements == load_scenario("paper").control
+    assert load_tree("flexible_satellite").control.requirements == load_scenario("paper").control
+    geo = load_tree("geo_satellite").control.requirements
+    assert (geo.flight_software_rate_hz, geo.pointing_requirement) == (8.0, 0.0017)
 
 
 def test_residual_mass_by_hand():
@@ -124,6 +140,18 @@ BAD_INPUTS = {
     "appendage with a child": (
         lambda d: _bodies(d)["SKEWED"].update(parent="PANEL"),
         r"^SKEWED: parent 'PANEL' is a flexible appendage",
+    ),
+    "control field missing": (
+        lambda d: d["control"].pop("torque_limit"),
+        r"^control: missing key 'torque_limit'$",
+    ),
+    "control field bad": (
+        lambda d: d["control"]["rolloff"].update(cutoff_hz=6.0),
+        r"^control\.rolloff\.cutoff_hz: 6 Hz must be below the flight software's Nyquist",
+    ),
+    "control unknown key": (
+        lambda d: d["control"].update(pointing=1.0),
+        r"^control: unknown key 'pointing' \(allowed: actuators, controlled_body, ",
     ),
     "schema version 1": (
         lambda d: d.update(schema_version=1),

@@ -7,7 +7,7 @@ import pytest
 
 from oos_drake.lfr import usubs
 from oos_drake.multibody.tree_cli import main
-from oos_drake.scenario.data import ScenarioError
+from oos_drake.scenario.data import ScenarioError, load_scenario
 from oos_drake.scenario.model import build_mission_model, configuration_values
 from oos_drake.scenario.tree import load_tree, parse_tree
 from oos_drake.scenario.tree_migration import tree_document_from_v1
@@ -35,6 +35,7 @@ def test_convert_command_writes_a_loadable_tree(tmp_path, capsys):
     assert "not converted (no place in schema 2 yet): hubs.RH2" in capsys.readouterr().out
     tree = load_tree(out)
     assert tree.root == "RH1" and tree.ports["J7"].body == "L6"
+    assert tree.control.requirements == load_scenario("paper").control
 
 
 def test_version_1_file_names_the_command(tmp_path):
