@@ -12,53 +12,31 @@ reach raises a one-line error with the residual.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 
 import numpy as np
 from pydrake.math import RotationMatrix
 from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.solvers import Solve
 
-from oos_drake.multibody.tree_plant import TreeDiagram
+from oos_drake.multibody.tree_plant import TreeDiagram, build_tree_diagram
 from oos_drake.multibody.tree_sdf import TREE_ASSEMBLY_MODEL
 from oos_drake.scenario.data import ScenarioError
+from oos_drake.scenario.tree_mission import IkSolution, Timeline, TipWaypoint, build_timeline
 
-__all__ = ["IkSolution", "chain_to_port", "solve_port_pose", "port_pose_drake"]
-
-
-@dataclass(frozen=True)
-class IkSolution:
-    """Joint angles that place a port, with the residual they leave.
-
-    Attributes
-    ----------
-    port : str
-        The port placed.
-    angles : Mapping[str, float]
-        Angle [rad] of every revolute joint of the chain, by body.
-    position_error : float
-        Distance from the port to its target [m].
-    orientation_error : float
-        Angle of the rotation from the port's axes to the target's [rad].
-    """
-
-    port: str
-    angles: Mapping[str, float]
-    position_error: float
-    orientation_error: float
+__all__ = [
+    "IkSolution",
+    "chain_to_port",
+    "solve_port_pose",
+    "port_pose_drake",
+    "mission_timeline",
+]
 
 
 def chain_to_port(tree, port: str) -> tuple[str, ...]:
     """Bodies on revolute joints between the root and ``port``'s body, root side first."""
     if port not in tree.ports:
         raise ScenarioError(f"ports.{port}", f"no such port (ports: {', '.join(tree.ports)})")
-    path = []
-    body = tree.body(tree.ports[port].body)
-    while body.joint is not None:
-        if body.joint.type == "revolute":
-            path.append(body.name)
-        body = tree.body(body.parent)
-    return tuple(reversed(path))
+    return tree.revolute_chain(tree.ports[port].body)
 
 
 def _port_frame(handles: TreeDiagram, port: str):
@@ -189,3 +167,40 @@ def solve_port_pose(
         f"inverse kinematics misses the pose by {best.position_error:.3g} m and "
         f"{best.orientation_error:.3g} rad after {restarts + 1} guesses (out of reach?)",
     )
+
+
+def mission_timeline(
+    tree, handles: TreeDiagram | None = None, *, tolerance: float = 1e-6
+) -> Timeline:
+    """The timeline of ``tree``'s mission, its tip-pose waypoints solved on its Drake twin.
+
+    Each tip waypoint is solved once, by :func:`solve_port_pose` from the angles the previous
+    phases left (so consecutive waypoints stay on one branch of the arm's solutions).
+
+    Parameters
+    ----------
+    tree : SpacecraftTree
+        The tree (with or without ``[mission]``).
+    handles : TreeDiagram, optional
+        Its twin (default: built from ``tree`` when a tip waypoint needs it).
+    tolerance : float
+        Largest accepted position [m] and orientation [rad] residual of a tip waypoint.
+
+    Raises
+    ------
+    ScenarioError
+        ``mission.<phase>.tip: inverse kinematics misses the pose by ... m and ... rad ...``.
+    """
+    if tree.mission is None or not tree.mission.has_tip_waypoints:
+        return build_timeline(tree)
+    handles = build_tree_diagram(tree) if handles is None else handles
+
+    def solve(phase: str, tip: TipWaypoint, angles) -> IkSolution:
+        try:
+            return solve_port_pose(
+                handles, tip.port, tip.R_G_D, tip.p_G_D, initial=angles, tolerance=tolerance
+            )
+        except ScenarioError as error:
+            raise ScenarioError(f"mission.{phase}.tip", error.detail) from None
+
+    return build_timeline(tree, solve)

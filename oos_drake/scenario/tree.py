@@ -36,6 +36,12 @@ section naming the attitude-controlled body, and optional ports::
     body = "HUB"
     p_B_D = [0.0, 0.0, -0.9]
 
+    [mission]                         # optional: phases and waypoints, see tree_mission
+    [[mission.phases]]
+    name = "array_slew"
+    duration = 400.0                  # [s]
+    joints = { SA1 = 1.5 }            # [rad] at the phase end
+
 Body kinds
 ----------
 ``rigid``
@@ -84,6 +90,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import functools
 import math
@@ -108,6 +115,7 @@ from oos_drake.scenario.data import (
     check_unit,
     read_control,
 )
+from oos_drake.scenario.tree_mission import TreeMission, read_mission
 from oos_drake.titop.parameters import check_name
 from oos_drake.titop.spatial import rigid_spatial_inertia, rotation_matrix
 
@@ -352,7 +360,10 @@ class SpacecraftTree:
     ports : Mapping[str, TreePort]
         Ports by name.
     control : TreeControl
-        The attitude-controlled body.
+        The attitude-controlled body and the control requirements.
+    mission : TreeMission or None
+        Phases and waypoints (:mod:`oos_drake.scenario.tree_mission`); None without
+        ``[mission]``.
     source : Path or None
         File the tree was read from.
     """
@@ -362,6 +373,7 @@ class SpacecraftTree:
     bodies: tuple
     ports: Mapping[str, TreePort]
     control: TreeControl
+    mission: TreeMission | None = None
     source: Path | None = None
 
     @property
@@ -386,6 +398,17 @@ class SpacecraftTree:
         return tuple(
             b.name for b in self.bodies if b.joint is not None and b.joint.type == "revolute"
         )
+
+    def revolute_chain(self, name: str) -> tuple[str, ...]:
+        """Bodies on revolute joints between the root and body ``name`` (included), root side
+        first: the joints that move ``name``."""
+        path = []
+        body = self.body(name)
+        while body.joint is not None:
+            if body.joint.type == "revolute":
+                path.append(body.name)
+            body = self.body(body.parent)
+        return tuple(reversed(path))
 
     def operating_angles(self) -> dict[str, float]:
         """The file's joint angles [rad] by body, for the revolute joints."""
@@ -790,8 +813,9 @@ def parse_tree(document: Mapping[str, Any], source: Path | None = None) -> Space
             raise ScenarioError(f"ports.{port}", "name: also the tip port of an arm")
     ports = _read_ports({**raw_ports, **tip_ports}, by_name)
     control = _read_control(top.get("control"), by_name, bodies[0].name)
+    raw_mission = top.get("mission", None)
     top.close()
-    return SpacecraftTree(
+    tree = SpacecraftTree(
         name=name,
         description=description,
         bodies=bodies,
@@ -799,6 +823,9 @@ def parse_tree(document: Mapping[str, Any], source: Path | None = None) -> Space
         control=control,
         source=source,
     )
+    if raw_mission is None:
+        return tree
+    return dataclasses.replace(tree, mission=read_mission(raw_mission, tree))
 
 
 def shipped_trees() -> list[str]:

@@ -71,6 +71,7 @@ def boom_document() -> dict:
     )
     skewed.pop("uncertainty")
     document["name"] = "boom_tree"
+    document.pop("mission")  # the satellite's mission drives SA1/SA2, which this tree lacks
     document["bodies"] = [hub, boom, panel, skewed]
     document["ports"]["TIP"] = {"body": "BOOM", "p_B_D": [0.0, 0.0, 1.3]}
     return document
