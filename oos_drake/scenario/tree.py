@@ -792,8 +792,7 @@ def parse_tree(document: Mapping[str, Any], source: Path | None = None) -> Space
     version = top.number("schema_version")
     if version != TREE_SCHEMA_VERSION:
         hint = (
-            " (convert a version 1 file with: python -m oos_drake.multibody.tree_cli convert FILE"
-            " OUT.toml)"
+            " (convert a version 1 file with: oos tree convert FILE OUT.toml)"
             if version == 1
             else ""
         )

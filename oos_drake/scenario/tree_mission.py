@@ -68,6 +68,7 @@ if TYPE_CHECKING:  # annotations only: the tree module imports this one
 
 __all__ = [
     "INTERPOLATIONS",
+    "ANALYSIS_INSTANTS",
     "TipWaypoint",
     "MissionPhase",
     "TreeMission",
@@ -80,6 +81,9 @@ __all__ = [
 
 #: Interpolation of the joint angles between two waypoints (see the module docstring).
 INTERPOLATIONS = ("smooth", "linear")
+#: Evenly spaced instants of :meth:`Timeline.configurations` by default (the phase boundaries
+#: are added): the configurations that ``oos validate`` checks.
+ANALYSIS_INSTANTS = 5
 
 
 @dataclass(frozen=True, eq=False)
@@ -258,7 +262,7 @@ class Timeline:
         # (1 - h) q0 + h q1: exactly the waypoint at either end of the phase
         return dict(zip(self.joint_names, ((1.0 - h) * q0 + h * q1).tolist(), strict=True))
 
-    def configurations(self, n: int) -> tuple[Configuration, ...]:
+    def configurations(self, n: int = ANALYSIS_INSTANTS) -> tuple[Configuration, ...]:
         """Configurations for the analysis: ``n`` instants evenly spaced over the mission and
         every phase boundary (merged, in time order; so at least ``n`` unless the mission is a
         single instant).
@@ -266,7 +270,8 @@ class Timeline:
         Parameters
         ----------
         n : int
-            Number of evenly spaced instants (>= 1; 1 gives ``t = 0`` and the boundaries).
+            Number of evenly spaced instants (>= 1; 1 gives ``t = 0`` and the boundaries;
+            default :data:`ANALYSIS_INSTANTS`).
         """
         if n < 1:
             raise ValueError(f"configurations: n must be >= 1, got {n}")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from oos_drake.cli import main
 from oos_drake.lfr import usubs
-from oos_drake.multibody.tree_cli import main
 from oos_drake.scenario.data import ScenarioError, load_scenario
 from oos_drake.scenario.model import build_mission_model, configuration_values
 from oos_drake.scenario.tree import load_tree, parse_tree
@@ -31,7 +31,7 @@ def test_paper_chaser_tree_equals_paper_model_with_target_free():
 
 def test_convert_command_writes_a_loadable_tree(tmp_path, capsys):
     out = tmp_path / "paper_tree.toml"
-    assert main(["convert", "paper", str(out)]) == 0
+    assert main(["tree", "convert", "paper", str(out)]) == 0
     assert "not converted (no place in schema 2 yet): hubs.RH2" in capsys.readouterr().out
     tree = load_tree(out)
     assert tree.root == "RH1" and tree.ports["J7"].body == "L6"
@@ -43,7 +43,9 @@ def test_version_1_file_names_the_command(tmp_path):
 
     path = tmp_path / "paper.toml"
     path.write_text(DEFAULT_SCENARIO_PATH.read_text())
-    with pytest.raises(ScenarioError, match=r"tree_cli convert FILE OUT\.toml\)$"):
+    with pytest.raises(
+        ScenarioError, match=r"\(convert a version 1 file with: oos tree convert FILE OUT\.toml\)$"
+    ):
         load_tree(path)
 
 
