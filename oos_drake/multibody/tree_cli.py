@@ -72,8 +72,13 @@ def validate_tree(args: argparse.Namespace) -> int:
     tree = load_tree(args.scenario)  # invalid data: ScenarioError -> exit status 2
     from oos_drake.multibody.cross_check import format_table
     from oos_drake.multibody.tree_ik import mission_timeline
-    from oos_drake.multibody.tree_plant import build_tree_diagram, check_tree
+    from oos_drake.multibody.tree_plant import (
+        build_captured_diagram,
+        build_tree_diagram,
+        check_tree,
+    )
     from oos_drake.robust.lfr_analysis import frequency_grid
+    from oos_drake.scenario.tree import captured_tree
 
     start = time.perf_counter()
     handles = build_tree_diagram(tree)
@@ -94,19 +99,28 @@ def validate_tree(args: argparse.Namespace) -> int:
             f"tip waypoint {phase}: port {solution.port} reached within "
             f"{solution.position_error:.2e} m, {solution.orientation_error:.2e} rad"
         )
+    models = {None: (tree, handles)}  # captured ports -> (model tree, twin)
     results, seen = [], {}
     for configuration in configurations:
-        key = tuple(configuration.angles.values())
+        captured = configuration.captured
+        if captured not in models:  # the target welded: the captured tree and its twin
+            models[captured] = (
+                captured_tree(tree, *captured),
+                build_captured_diagram(tree, *captured),
+            )
+        model_tree, model_handles = models[captured]
+        key = (captured, tuple(configuration.angles.values()))
         if key not in seen:  # a joint held through a phase repeats a configuration
             seen[key] = check_tree(
-                tree,
+                model_tree,
                 dict(configuration.angles),
-                handles=handles,
+                handles=model_handles,
                 omega=omega,
                 response_tolerance=args.tolerance,
                 root_tolerance=args.root_tolerance,
             )
         label = f"t={configuration.time:g} s {configuration.phase}"
+        label += f" [{'+'.join(captured)}]" if captured else ""
         results.append(dataclasses.replace(seen[key], label=label))
     print(format_table(results))
     failed = [r.label for r in results if not r.passed]

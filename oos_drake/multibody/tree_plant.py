@@ -45,12 +45,13 @@ from oos_drake.multibody.tree_sdf import (
     joint_name,
     write_tree_sdf,
 )
-from oos_drake.scenario.tree import SpacecraftTree
+from oos_drake.scenario.tree import SpacecraftTree, captured_tree
 from oos_drake.scenario.tree_model import build_tree_model, tree_values
 
 __all__ = [
     "TreeDiagram",
     "build_tree_diagram",
+    "build_captured_diagram",
     "linearize_tree",
     "check_tree",
 ]
@@ -110,38 +111,97 @@ def build_tree_diagram(
             write_tree_sdf(tree, folder)
             handles = build_tree_diagram(tree, folder)
         return handles
-    sdf_directory = Path(sdf_directory)
+    return _build(tree, Path(sdf_directory))
+
+
+def _parse_tree_sdf(plant, tree: SpacecraftTree, sdf_directory: Path, prefix: str = ""):
+    """Parse one tree's SDF folder into ``plant`` (model names under ``prefix::`` if given);
+    add the modal residual bodies of its appendages; return its assembly model instance."""
     assembly = sdf_directory / TREE_ASSEMBLY_FILE
     validate_sdf_tree(assembly, required_frames=tuple(tree.ports))
-    builder = DiagramBuilder()
-    plant = builder.AddNamedSystem("plant", MultibodyPlant(time_step=0.0))
-    plant.mutable_gravity_field().set_gravity_vector(np.zeros(3))
-    parser = Parser(plant)
+    parser = Parser(plant, model_name_prefix=prefix)
     parser.package_map().Add(TREE_SDF_PACKAGE, str(sdf_directory))
     parser.AddModels(str(assembly))
-    top = plant.GetModelInstanceByName(TREE_ASSEMBLY_MODEL)
+    scope = f"{prefix}::" if prefix else ""
+    top = plant.GetModelInstanceByName(f"{scope}{TREE_ASSEMBLY_MODEL}")
     for body in tree.bodies:
         if body.kind == "flexible":
             add_modal_residual(
-                plant, plant.GetModelInstanceByName(f"{TREE_ASSEMBLY_MODEL}::{body.name}")
+                plant,
+                plant.GetModelInstanceByName(f"{scope}{TREE_ASSEMBLY_MODEL}::{body.name}"),
             )
+    return top
+
+
+def _build(
+    tree: SpacecraftTree,
+    sdf_directory: Path,
+    *,
+    target: SpacecraftTree | None = None,
+    target_directory: Path | None = None,
+    weld: tuple[str, str] | None = None,
+    model_tree: SpacecraftTree | None = None,
+) -> TreeDiagram:
+    builder = DiagramBuilder()
+    plant = builder.AddNamedSystem("plant", MultibodyPlant(time_step=0.0))
+    plant.mutable_gravity_field().set_gravity_vector(np.zeros(3))
+    top = _parse_tree_sdf(plant, tree, sdf_directory)
+    if target is not None:
+        # the target: its own model (its SDF folder), welded port to port (Drake's WeldFrames)
+        target_top = _parse_tree_sdf(plant, target, target_directory, prefix=target.name)
+        port, target_port = weld
+        plant.WeldFrames(
+            plant.GetFrameByName(port, top), plant.GetFrameByName(target_port, target_top)
+        )
     root = plant.GetBodyByName(tree.root, top)
     hub_joint = add_floating_joint(plant, root, RigidTransform(), name=f"{tree.root}_floating")
     plant.Finalize()
     ports = add_hub_io(builder, plant, hub_joint)
     diagram = builder.Build()
-    diagram.set_name(f"tree_{tree.name}")
+    model_tree = tree if model_tree is None else model_tree
+    diagram.set_name(f"tree_{model_tree.name}")
     # a joint belongs to its child's model instance (nested for appendages); names are unique
-    revolute = {name: plant.GetJointByName(joint_name(name)) for name in tree.revolute_bodies}
+    revolute = {name: plant.GetJointByName(joint_name(name)) for name in model_tree.revolute_bodies}
     return TreeDiagram(
         diagram=diagram,
         plant=plant,
-        tree=tree,
+        tree=model_tree,
         ports=ports,
         hub_joint=hub_joint,
         revolute_joints=MappingProxyType(revolute),
         sdf_directory=sdf_directory,
     )
+
+
+def build_captured_diagram(tree: SpacecraftTree, port: str, target_port: str) -> TreeDiagram:
+    """The Drake twin of ``tree`` with a target captured: the tree's SDF and the target's own
+    SDF (each generated from its file data) parsed as two models, the ports welded by Drake
+    (``WeldFrames``, ports coinciding, axes aligned).
+
+    The handles' ``tree`` is :func:`oos_drake.scenario.tree.captured_tree` (for the joint
+    names); the weld pose itself is Drake's, computed from the two SDF frames, not from it.
+
+    Parameters
+    ----------
+    tree : SpacecraftTree
+        The tree with its ``targets``.
+    port, target_port : str
+        Port of the tree and port of a target welded together.
+    """
+    model_tree = captured_tree(tree, port, target_port)  # KeyError on unknown ports
+    target = next(t for t in tree.targets.values() if target_port in t.ports)
+    with tempfile.TemporaryDirectory(prefix="oos-tree-sdf-") as folder:
+        chaser_directory, target_directory = Path(folder) / "tree", Path(folder) / "target"
+        write_tree_sdf(tree, chaser_directory)
+        write_tree_sdf(target, target_directory)
+        return _build(
+            tree,
+            chaser_directory,
+            target=target,
+            target_directory=target_directory,
+            weld=(port, target_port),
+            model_tree=model_tree,
+        )
 
 
 def linearize_tree(

@@ -133,6 +133,7 @@ __all__ = [
     "SpacecraftTree",
     "body_poses",
     "port_pose",
+    "captured_tree",
     "load_tree",
     "parse_tree",
     "tree_path",
@@ -364,6 +365,9 @@ class SpacecraftTree:
     mission : TreeMission or None
         Phases and waypoints (:mod:`oos_drake.scenario.tree_mission`); None without
         ``[mission]``.
+    targets : Mapping[str, SpacecraftTree]
+        Free bodies (``free = true`` roots) with their subtrees and ports, by root name (their
+        ``control`` is None): not part of the models until captured (:func:`captured_tree`).
     source : Path or None
         File the tree was read from.
     """
@@ -372,8 +376,11 @@ class SpacecraftTree:
     description: str
     bodies: tuple
     ports: Mapping[str, TreePort]
-    control: TreeControl
+    control: TreeControl | None
     mission: TreeMission | None = None
+    targets: Mapping[str, SpacecraftTree] = dataclasses.field(
+        default_factory=lambda: MappingProxyType({})
+    )
     source: Path | None = None
 
     @property
@@ -670,9 +677,9 @@ def _expand_arm(raw: dict, name: str) -> tuple[list[tuple[str, dict]], dict]:
     return entries, ports
 
 
-def _read_bodies(raw: Any) -> tuple[list, dict]:
+def _read_bodies(raw: Any) -> tuple[list, dict, set]:
     """Bodies from ``[[bodies]]`` entries or ``[bodies.NAME]`` tables (``arm`` entries expanded
-    into their links); returns the bodies and the arms' tip ports."""
+    into their links); returns the bodies, the arms' tip ports and the free roots (targets)."""
     if isinstance(raw, list):
         named = [(entry.get("name") if isinstance(entry, dict) else None, entry) for entry in raw]
         from_table = False
@@ -681,8 +688,16 @@ def _read_bodies(raw: Any) -> tuple[list, dict]:
         from_table = True
     else:
         raise ScenarioError("bodies", "expected [[bodies]] entries or [bodies.NAME] tables")
-    bodies, ports = [], {}
+    bodies, ports, free = [], {}, set()
     for index, (name, entry) in enumerate(named):
+        if isinstance(entry, dict) and "free" in entry:
+            label = str(name if name is not None else entry.get("name", f"bodies[{index}]"))
+            if entry["free"] is not True or "parent" in entry or entry.get("kind") != "rigid":
+                raise ScenarioError(
+                    label, "free: only 'free = true' on a rigid body without parent (a target)"
+                )
+            entry = {k: v for k, v in entry.items() if k != "free"}
+            free.add(label)
         if isinstance(entry, dict) and entry.get("kind") == "arm":
             arm_name = str(name if name is not None else f"bodies[{index}]")
             if not from_table:
@@ -692,11 +707,12 @@ def _read_bodies(raw: Any) -> tuple[list, dict]:
             ports.update(tip)
         else:
             bodies.append(_read_body(entry, index, name if from_table else None))
-    return bodies, ports
+    return bodies, ports, free
 
 
-def _ordered(bodies: list) -> tuple:
-    """Check the topology (names, parents, one root, no cycle); return parents before children."""
+def _ordered(bodies: list, free: set[str] = frozenset()) -> tuple:
+    """Check the topology (names, parents, one root besides the free ones, no cycle); return
+    parents before children, the controlled tree first, then each free body's subtree."""
     by_name: dict[str, Any] = {}
     for body in bodies:
         if body.name in by_name:
@@ -718,22 +734,26 @@ def _ordered(bodies: list) -> tuple:
                 loop = " -> ".join(seen[seen.index(current.name) :] + [current.name])
                 raise ScenarioError(body.name, f"parent: the tree has a cycle ({loop})")
             seen.append(current.name)
-    roots = [b.name for b in bodies if not b.parent]
+    roots = [b.name for b in bodies if not b.parent and b.name not in free]
     if len(roots) != 1:
         raise ScenarioError(
             roots[1] if len(roots) > 1 else "bodies",
-            f"parent: the tree needs exactly one root (free-floating body), got {roots}",
+            f"parent: the tree needs exactly one root (free-floating body), got {roots} "
+            "(a target: free = true)",
         )
+    roots += [b.name for b in bodies if b.name in free]
     for body in bodies:
         parent = by_name.get(body.parent)
         if parent is not None and parent.kind == "flexible":
             raise ScenarioError(
                 body.name, f"parent '{body.parent}' is a flexible appendage (appendages are leaves)"
             )
-    order, frontier = [], roots
-    while frontier:
-        order += frontier
-        frontier = [b.name for b in bodies if b.parent in frontier]
+    order = []
+    for root in roots:
+        frontier = [root]
+        while frontier:
+            order += frontier
+            frontier = [b.name for b in bodies if b.parent in frontier]
     return tuple(by_name[name] for name in order)
 
 
@@ -779,6 +799,61 @@ def _read_control(raw: Any, bodies: Mapping[str, Any], root: str) -> TreeControl
     return TreeControl(controlled, read_control(t))
 
 
+def _components(bodies: tuple) -> dict[str, tuple]:
+    """Bodies grouped by root (``_ordered`` order: the controlled tree first)."""
+    by_name = {b.name: b for b in bodies}
+    groups: dict[str, list] = {}
+    for body in bodies:
+        root = body
+        while root.parent:
+            root = by_name[root.parent]
+        groups.setdefault(root.name, []).append(body)
+    return {root: tuple(members) for root, members in groups.items()}
+
+
+def captured_tree(tree: SpacecraftTree, port: str, target_port: str) -> SpacecraftTree:
+    r"""The tree with a target welded to it: ports ``port`` (of ``tree``) and ``target_port``
+    (of one of ``tree.targets``) coincide, axes aligned (a rigid capture).
+
+    The target's root becomes a child of ``port``'s body on a fixed joint at
+
+    .. math::
+
+        R_{BT} = R_{B D} R_{T D'}^T, \qquad p_{BT} = p_{B D} - R_{BT}\, p_{T D'}
+
+    (``B`` the chaser body, ``T`` the target root's body frame, ``D``/``D'`` the two ports);
+    its bodies and ports join the tree, the mission is dropped.
+
+    Raises
+    ------
+    KeyError
+        ``port`` not a port of ``tree``, or ``target_port`` not a port of a target.
+    """
+    if port not in tree.ports:
+        raise KeyError(f"no port {port!r} (ports: {', '.join(tree.ports)})")
+    owner = [t for t in tree.targets.values() if target_port in t.ports]
+    if not owner:
+        known = [p for t in tree.targets.values() for p in t.ports]
+        raise KeyError(f"no target port {target_port!r} (target ports: {', '.join(known)})")
+    target = owner[0]
+    chaser_port, weld_port = tree.ports[port], target.ports[target_port]
+    R_BT = chaser_port.R_B_D @ weld_port.R_B_D.T
+    p_BT = chaser_port.p_B_D - R_BT @ weld_port.p_B_D
+    R_BT.setflags(write=False)
+    p_BT.setflags(write=False)
+    joint = Joint("fixed", p_BT, R_BT, np.zeros(3), 0.0, 0.0, 0.0)
+    root = dataclasses.replace(target.bodies[0], parent=chaser_port.body, joint=joint)
+    others = {k: v for k, v in tree.targets.items() if k != target.name}
+    return dataclasses.replace(
+        tree,
+        name=f"{tree.name}+{target.name}",
+        bodies=tree.bodies + (root,) + target.bodies[1:],
+        ports=MappingProxyType({**tree.ports, **target.ports}),
+        targets=MappingProxyType(others),
+        mission=None,
+    )
+
+
 def parse_tree(document: Mapping[str, Any], source: Path | None = None) -> SpacecraftTree:
     """Validate a parsed TOML document of schema version 2 into a :class:`SpacecraftTree`.
 
@@ -801,8 +876,8 @@ def parse_tree(document: Mapping[str, Any], source: Path | None = None) -> Space
         )
     name = top.text("name")
     description = top.text("description", "")
-    bodies, tip_ports = _read_bodies(top.get("bodies"))
-    bodies = _ordered(bodies)
+    bodies, tip_ports, free = _read_bodies(top.get("bodies"))
+    bodies = _ordered(bodies, free)
     by_name = {b.name: b for b in bodies}
     raw_ports = top.get("ports", {})
     if not isinstance(raw_ports, dict):
@@ -814,12 +889,28 @@ def parse_tree(document: Mapping[str, Any], source: Path | None = None) -> Space
     control = _read_control(top.get("control"), by_name, bodies[0].name)
     raw_mission = top.get("mission", None)
     top.close()
+    components = _components(bodies)
+    targets = {
+        root: SpacecraftTree(
+            name=root,
+            description=by_name[root].description,
+            bodies=members,
+            ports=MappingProxyType({k: p for k, p in ports.items() if p.body in members_names}),
+            control=None,
+            source=source,
+        )
+        for root, members in list(components.items())[1:]
+        for members_names in [{b.name for b in members}]
+    }
+    main = components[bodies[0].name]
+    main_names = {b.name for b in main}
     tree = SpacecraftTree(
         name=name,
         description=description,
-        bodies=bodies,
-        ports=MappingProxyType(ports),
+        bodies=main,
+        ports=MappingProxyType({k: p for k, p in ports.items() if p.body in main_names}),
         control=control,
+        targets=MappingProxyType(targets),
         source=source,
     )
     if raw_mission is None:

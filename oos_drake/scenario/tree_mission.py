@@ -34,6 +34,10 @@ revolute joint)::
   is built (:func:`oos_drake.multibody.tree_ik.mission_timeline`, Drake), starting from the
   previous waypoint; a pose out of reach is an error that gives the residual. A phase cannot
   also name a joint of that chain in ``joints``.
+- ``captured = [PORT, TARGET_PORT]``: through the whole phase a target (a ``free = true`` body
+  of the file) is welded to the tree, the two ports coinciding with aligned axes
+  (:func:`oos_drake.scenario.tree.captured_tree`); without it the target is free and not in
+  the models.
 - Between waypoints the angles are interpolated per phase: ``"smooth"`` (default) is the cubic
   ``q = q0 + (3 s^2 - 2 s^3) (q1 - q0)``, ``s = (t - t0) / (t1 - t0)``, so every joint starts and
   ends each phase at rest; ``"linear"`` is ``q0 + s (q1 - q0)`` (constant rate in a phase). Both
@@ -123,12 +127,16 @@ class MissionPhase:
         Joint angles [rad] at the phase end, by body on a revolute joint.
     tip : TipWaypoint or None
         A port pose at the phase end (joints of its chain by inverse kinematics).
+    captured : tuple of (str, str) or None
+        ``(port of the tree, port of a target)`` welded through the whole phase (a rigid
+        capture), or None: the target is free.
     """
 
     name: str
     duration: float
     joints: Mapping[str, float]
     tip: TipWaypoint | None
+    captured: tuple[str, str] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,11 +200,14 @@ class Configuration:
         first phase).
     angles : Mapping[str, float]
         Angle [rad] of every revolute joint, by body.
+    captured : tuple of (str, str) or None
+        Ports welded in this phase (see :attr:`MissionPhase.captured`).
     """
 
     time: float
     phase: str
     angles: Mapping[str, float]
+    captured: tuple[str, str] | None = None
 
 
 #: ``(phase name, tip waypoint, joint angles before the phase end) -> IkSolution``.
@@ -222,6 +233,8 @@ class Timeline:
     tip_solutions : Mapping[str, IkSolution]
         Inverse-kinematics solution of each phase with a tip waypoint, by phase name (with the
         residual left).
+    captures : tuple
+        Per phase, the welded ports ``(port, target port)`` or None.
     """
 
     joint_names: tuple[str, ...]
@@ -230,6 +243,7 @@ class Timeline:
     phase_names: tuple[str, ...]
     interpolation: str
     tip_solutions: Mapping[str, IkSolution]
+    captures: tuple = ()
 
     @property
     def duration(self) -> float:
@@ -279,9 +293,16 @@ class Timeline:
         times = np.sort(times)
         keep = np.r_[True, np.diff(times) > 1e-9 * max(self.duration, 1.0)]
         return tuple(
-            Configuration(float(t), self.phase_at(t), MappingProxyType(self.angles(t)))
+            Configuration(
+                float(t), self.phase_at(t), MappingProxyType(self.angles(t)), self.captured_at(t)
+            )
             for t in times[keep]
         )
+
+    def captured_at(self, time: float) -> tuple[str, str] | None:
+        """Ports welded at ``time`` [s] (those of the phase at that time), or None."""
+        index = self._phase_index(float(time))
+        return self.captures[index] if index >= 0 and self.captures else None
 
 
 # ----------------------------------------------------------------------------------------------
@@ -300,6 +321,20 @@ def _read_tip(raw: Any, where: str, tree: SpacecraftTree) -> TipWaypoint:
     if not chain:
         raise ScenarioError(where, f"port '{port}': no revolute joint between the root and it")
     return TipWaypoint(port, R, p, chain)
+
+
+def _read_captured(raw: Any, where: str, tree: SpacecraftTree) -> tuple[str, str]:
+    if not (isinstance(raw, list) and len(raw) == 2 and all(isinstance(p, str) for p in raw)):
+        raise ScenarioError(where, f"expected [PORT, TARGET_PORT], got {raw!r}")
+    port, target_port = raw
+    if port not in tree.ports:
+        raise ScenarioError(where, f"'{port}' is not a port of the tree ({', '.join(tree.ports)})")
+    known = [p for target in tree.targets.values() for p in target.ports]
+    if target_port not in known:
+        raise ScenarioError(
+            where, f"'{target_port}' is not a port of a target ({', '.join(known) or 'none'})"
+        )
+    return (port, target_port)
 
 
 def _read_phase(raw: Any, index: int, tree: SpacecraftTree) -> MissionPhase:
@@ -330,6 +365,12 @@ def _read_phase(raw: Any, index: int, tree: SpacecraftTree) -> MissionPhase:
         joints[body] = angle
     tip = _read_tip(t.get("tip"), f"{where}.tip", tree) if "tip" in t.raw else None
     t.get("tip", None)
+    captured = (
+        _read_captured(t.get("captured"), f"{where}.captured", tree)
+        if "captured" in t.raw
+        else None
+    )
+    t.get("captured", None)
     t.get("description", "")
     t.close()
     if tip is not None:
@@ -340,7 +381,7 @@ def _read_phase(raw: Any, index: int, tree: SpacecraftTree) -> MissionPhase:
                 f"{both[0]} is moved by the tip waypoint of port '{tip.port}' "
                 "(give one or the other)",
             )
-    return MissionPhase(name, duration, MappingProxyType(joints), tip)
+    return MissionPhase(name, duration, MappingProxyType(joints), tip, captured)
 
 
 def read_mission(raw: Any, tree: SpacecraftTree) -> TreeMission:
@@ -429,4 +470,5 @@ def build_timeline(tree: SpacecraftTree, solve_tip: TipSolver | None = None) -> 
         phase_names=tuple(phase.name for phase in phases),
         interpolation="linear" if mission is None else mission.interpolation,
         tip_solutions=MappingProxyType(solutions),
+        captures=tuple(phase.captured for phase in phases),
     )
