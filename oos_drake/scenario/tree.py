@@ -72,6 +72,12 @@ The root (the controlled body) has none: it floats. Every other body has
   block ``tau_<body> = tan(angle/4)``; ``angle`` [rad] is the operating angle of the file,
   ``lower``/``upper`` [rad] optional limits within [-pi, pi]).
 
+Free bodies
+-----------
+A rigid root with ``free = true`` is a target: a second free body with its own subtree and
+ports, kept apart in :attr:`SpacecraftTree.targets` (in no model while free); a mission phase
+``captured = [PORT, TARGET_PORT]`` welds it to the tree (:func:`captured_tree`).
+
 Conventions and errors are those of :mod:`oos_drake.scenario.data` (SI units, ``p_A_B`` the
 vector A -> B in A's frame, one-line :class:`~oos_drake.scenario.data.ScenarioError` naming the
 body and the field, unknown keys rejected). The tree is checked for duplicate names, missing or
