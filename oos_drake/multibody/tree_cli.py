@@ -74,11 +74,12 @@ def validate_tree(args: argparse.Namespace) -> int:
     from oos_drake.multibody.tree_ik import mission_timeline
     from oos_drake.multibody.tree_plant import (
         build_captured_diagram,
+        build_docked_diagram,
         build_tree_diagram,
         check_tree,
     )
     from oos_drake.robust.lfr_analysis import frequency_grid
-    from oos_drake.scenario.tree import captured_tree
+    from oos_drake.scenario.tree import captured_tree, docked_tree
 
     start = time.perf_counter()
     handles = build_tree_diagram(tree)
@@ -99,17 +100,25 @@ def validate_tree(args: argparse.Namespace) -> int:
             f"tip waypoint {phase}: port {solution.port} reached within "
             f"{solution.position_error:.2e} m, {solution.orientation_error:.2e} rad"
         )
-    models = {None: (tree, handles)}  # captured ports -> (model tree, twin)
+    models = {None: (tree, handles)}  # connection -> (model tree, twin)
     results, seen = [], {}
     for configuration in configurations:
-        captured = configuration.captured
-        if captured not in models:  # the target welded: the captured tree and its twin
-            models[captured] = (
+        captured, docked = configuration.captured, configuration.docked
+        angles = tuple(configuration.angles.values())
+        # the target welded (one twin per capture) or on its spring-damper (one per rest pose)
+        connection = captured if docked is None else (docked, angles)
+        if connection not in models and docked is None:
+            models[connection] = (
                 captured_tree(tree, *captured),
                 build_captured_diagram(tree, *captured),
             )
-        model_tree, model_handles = models[captured]
-        key = (captured, tuple(configuration.angles.values()))
+        elif connection not in models:
+            models[connection] = (
+                docked_tree(tree, docked),
+                build_docked_diagram(tree, docked, configuration.angles),
+            )
+        model_tree, model_handles = models[connection]
+        key = (connection, angles)
         if key not in seen:  # a joint held through a phase repeats a configuration
             seen[key] = check_tree(
                 model_tree,
@@ -120,7 +129,10 @@ def validate_tree(args: argparse.Namespace) -> int:
                 root_tolerance=args.root_tolerance,
             )
         label = f"t={configuration.time:g} s {configuration.phase}"
-        label += f" [{'+'.join(captured)}]" if captured else ""
+        if captured:
+            label += f" [{'+'.join(captured)}]"
+        if docked:
+            label += f" [{'~'.join(docked.connection)}]"
         results.append(dataclasses.replace(seen[key], label=label))
     print(format_table(results))
     failed = [r.label for r in results if not r.passed]

@@ -26,6 +26,7 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import LinearBushingRollPitchYaw
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from oos_drake.lfr import usubs
@@ -45,13 +46,14 @@ from oos_drake.multibody.tree_sdf import (
     joint_name,
     write_tree_sdf,
 )
-from oos_drake.scenario.tree import SpacecraftTree, captured_tree
+from oos_drake.scenario.tree import SpacecraftTree, captured_tree, docked_tree
 from oos_drake.scenario.tree_model import build_tree_model, tree_values
 
 __all__ = [
     "TreeDiagram",
     "build_tree_diagram",
     "build_captured_diagram",
+    "build_docked_diagram",
     "linearize_tree",
     "check_tree",
 ]
@@ -140,6 +142,8 @@ def _build(
     target: SpacecraftTree | None = None,
     target_directory: Path | None = None,
     weld: tuple[str, str] | None = None,
+    docking=None,
+    X_W_target: RigidTransform | None = None,
     model_tree: SpacecraftTree | None = None,
 ) -> TreeDiagram:
     builder = DiagramBuilder()
@@ -147,12 +151,29 @@ def _build(
     plant.mutable_gravity_field().set_gravity_vector(np.zeros(3))
     top = _parse_tree_sdf(plant, tree, sdf_directory)
     if target is not None:
-        # the target: its own model (its SDF folder), welded port to port (Drake's WeldFrames)
+        # the target: its own model (its SDF folder)
         target_top = _parse_tree_sdf(plant, target, target_directory, prefix=target.name)
-        port, target_port = weld
-        plant.WeldFrames(
-            plant.GetFrameByName(port, top), plant.GetFrameByName(target_port, target_top)
-        )
+        if docking is None:  # welded port to port (Drake's WeldFrames)
+            port, target_port = weld
+            plant.WeldFrames(
+                plant.GetFrameByName(port, top), plant.GetFrameByName(target_port, target_top)
+            )
+        else:  # free, held by a bushing between the ports, at rest at X_W_target
+            add_floating_joint(
+                plant,
+                plant.GetBodyByName(target.root, target_top),
+                X_W_target,
+                name=f"{target.root}_floating",
+            )
+            k = [docking.k_shear] * 3, [docking.k_tors] * 3
+            d = [docking.d_shear] * 3, [docking.d_tors] * 3
+            plant.AddForceElement(
+                LinearBushingRollPitchYaw(
+                    plant.GetFrameByName(docking.port, top),
+                    plant.GetFrameByName(docking.target_port, target_top),
+                    k[1], d[1], k[0], d[0],
+                )
+            )  # fmt: skip
     root = plant.GetBodyByName(tree.root, top)
     hub_joint = add_floating_joint(plant, root, RigidTransform(), name=f"{tree.root}_floating")
     plant.Finalize()
@@ -202,6 +223,48 @@ def build_captured_diagram(tree: SpacecraftTree, port: str, target_port: str) ->
             weld=(port, target_port),
             model_tree=model_tree,
         )
+
+
+def build_docked_diagram(
+    tree: SpacecraftTree, docking, angles: Mapping[str, float] | None = None
+) -> TreeDiagram:
+    """The Drake twin of ``tree`` with a target held by a spring-damper: the tree's SDF and the
+    target's own SDF parsed as two models, the target on its own floating joint, a
+    ``LinearBushingRollPitchYaw`` between the two port frames (stiffness and damping of
+    ``docking``, nominal).
+
+    The target's rest pose (ports coinciding, axes aligned, at the joint ``angles`` [rad]) is
+    found by Drake's forward kinematics of the tree's twin and of the target's; the handles'
+    ``tree`` is :func:`oos_drake.scenario.tree.docked_tree` (for the joint names).
+    """
+    model_tree = docked_tree(tree, docking)  # KeyError on unknown ports
+    target = next(t for t in tree.targets.values() if docking.target_port in t.ports)
+    chosen = tree.joint_angles(angles)
+    X_W_D = _port_pose_in_world(build_tree_diagram(tree), docking.port, chosen)
+    X_T_D = _port_pose_in_world(build_tree_diagram(target), docking.target_port, {})
+    with tempfile.TemporaryDirectory(prefix="oos-tree-sdf-") as folder:
+        chaser_directory, target_directory = Path(folder) / "tree", Path(folder) / "target"
+        write_tree_sdf(tree, chaser_directory)
+        write_tree_sdf(target, target_directory)
+        return _build(
+            tree,
+            chaser_directory,
+            target=target,
+            target_directory=target_directory,
+            docking=docking,
+            X_W_target=X_W_D @ X_T_D.inverse(),
+            model_tree=model_tree,
+        )
+
+
+def _port_pose_in_world(handles: TreeDiagram, port: str, angles) -> RigidTransform:
+    """Pose of a port frame in the world (the root's centre-of-mass frame at rest), Drake FK."""
+    plant = handles.plant
+    context = plant.CreateDefaultContext()
+    for name, joint in handles.revolute_joints.items():
+        joint.set_angle(context, float(angles[name]))
+    frame = plant.GetFrameByName(port, plant.GetModelInstanceByName(TREE_ASSEMBLY_MODEL))
+    return frame.CalcPoseInWorld(context)
 
 
 def linearize_tree(

@@ -67,6 +67,7 @@ __all__ = [
     "build_docking_model",
     "physical_blocks",
     "hub_parameters",
+    "spring_damper_between",
     "attitude_model",
     "configuration_values",
     "mission_values",
@@ -446,14 +447,14 @@ def _docking_model(phase: str, scenario, spring_dampers) -> LFR:
     if with_d1:
         springs.append(("SM2", "D3_RH2", "D1_RH1", dcm_rh2_rh1))
     for name, c, p, dcm in springs:
-        blocks = _spring_damper_between(params[name], dcm)
+        blocks = spring_damper_between(params[name], dcm)
         components.append(
             Component(name, blocks, inputs=(f"xdd_{c}", f"xdd_{p}"), outputs=(f"W_{c}", f"W_{p}"))
         )
     return _assemble_at_G1(components)
 
 
-def _spring_damper_between(blocks: Mapping, dcm_c_sm) -> LFR:
+def spring_damper_between(blocks: Mapping, dcm_c_sm) -> LFR:
     """Spring-damper whose C side is expressed in another frame: ``v_C = dcm_c_sm v_SM``.
 
     Inputs ``[xdd_C (C frame); xdd_P (SM frame)]``, outputs ``[W_C (C frame); W_P (SM frame)]``.

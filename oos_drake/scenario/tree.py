@@ -140,6 +140,7 @@ __all__ = [
     "body_poses",
     "port_pose",
     "captured_tree",
+    "docked_tree",
     "load_tree",
     "parse_tree",
     "tree_path",
@@ -179,6 +180,9 @@ class Joint:
         Operating angle of the file [rad] (0 for a fixed joint).
     lower, upper : float
         Joint limits [rad], within [-pi, pi] (the LFR's ``tau = tan(angle/4)`` covers that range).
+    docking : Docking or None
+        Only for ``type = "bushing"`` (made by :func:`docked_tree`, not read from files): the
+        spring-damper holding the child.
     """
 
     type: str
@@ -188,11 +192,12 @@ class Joint:
     angle: float
     lower: float
     upper: float
+    docking: Any = None
 
     def R_parent_child(self, angle: float | None = None) -> np.ndarray:
         """Child body axes in the parent's frame at ``angle`` [rad] (default: the file's)."""
         angle = self.angle if angle is None else float(angle)
-        if self.type == "fixed":
+        if self.type != "revolute":
             return np.array(self.R_parent_joint)
         return self.R_parent_joint @ rotation_matrix(self.axis, angle)
 
@@ -817,24 +822,7 @@ def _components(bodies: tuple) -> dict[str, tuple]:
     return {root: tuple(members) for root, members in groups.items()}
 
 
-def captured_tree(tree: SpacecraftTree, port: str, target_port: str) -> SpacecraftTree:
-    r"""The tree with a target welded to it: ports ``port`` (of ``tree``) and ``target_port``
-    (of one of ``tree.targets``) coincide, axes aligned (a rigid capture).
-
-    The target's root becomes a child of ``port``'s body on a fixed joint at
-
-    .. math::
-
-        R_{BT} = R_{B D} R_{T D'}^T, \qquad p_{BT} = p_{B D} - R_{BT}\, p_{T D'}
-
-    (``B`` the chaser body, ``T`` the target root's body frame, ``D``/``D'`` the two ports);
-    its bodies and ports join the tree, the mission is dropped.
-
-    Raises
-    ------
-    KeyError
-        ``port`` not a port of ``tree``, or ``target_port`` not a port of a target.
-    """
+def _attach_target(tree: SpacecraftTree, port: str, target_port: str, docking=None):
     if port not in tree.ports:
         raise KeyError(f"no port {port!r} (ports: {', '.join(tree.ports)})")
     owner = [t for t in tree.targets.values() if target_port in t.ports]
@@ -847,7 +835,8 @@ def captured_tree(tree: SpacecraftTree, port: str, target_port: str) -> Spacecra
     p_BT = chaser_port.p_B_D - R_BT @ weld_port.p_B_D
     R_BT.setflags(write=False)
     p_BT.setflags(write=False)
-    joint = Joint("fixed", p_BT, R_BT, np.zeros(3), 0.0, 0.0, 0.0)
+    kind = "fixed" if docking is None else "bushing"
+    joint = Joint(kind, p_BT, R_BT, np.zeros(3), 0.0, 0.0, 0.0, docking)
     root = dataclasses.replace(target.bodies[0], parent=chaser_port.body, joint=joint)
     others = {k: v for k, v in tree.targets.items() if k != target.name}
     return dataclasses.replace(
@@ -858,6 +847,38 @@ def captured_tree(tree: SpacecraftTree, port: str, target_port: str) -> Spacecra
         targets=MappingProxyType(others),
         mission=None,
     )
+
+
+def captured_tree(tree: SpacecraftTree, port: str, target_port: str) -> SpacecraftTree:
+    """The tree with a target welded to it: ports ``port`` (of ``tree``) and ``target_port``
+    (of one of ``tree.targets``) coincide, axes aligned (a rigid capture).
+
+    The target's root becomes a child of ``port``'s body on a fixed joint at
+
+    .. math::
+
+        R_{BT} = R_{B D} R_{T D'}^T, \\qquad p_{BT} = p_{B D} - R_{BT}\\, p_{T D'}
+
+    (``B`` the chaser body, ``T`` the target root's body frame, ``D``/``D'`` the two ports);
+    its bodies and ports join the tree, the mission is dropped.
+
+    Raises
+    ------
+    KeyError
+        ``port`` not a port of ``tree``, or ``target_port`` not a port of a target.
+    """
+    return _attach_target(tree, port, target_port)
+
+
+def docked_tree(tree: SpacecraftTree, docking) -> SpacecraftTree:
+    """The tree with a target held by a spring-damper between two ports
+    (:class:`oos_drake.scenario.tree_mission.Docking`), at rest where the ports coincide.
+
+    As :func:`captured_tree`, but the target's root hangs on a ``"bushing"`` joint carrying
+    ``docking``: the TITOP model keeps the target as a free rigid body (inverse model) and
+    connects the two ports through the spring-damper.
+    """
+    return _attach_target(tree, docking.port, docking.target_port, docking)
 
 
 def parse_tree(document: Mapping[str, Any], source: Path | None = None) -> SpacecraftTree:

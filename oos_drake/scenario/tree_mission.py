@@ -38,6 +38,12 @@ revolute joint)::
   of the file) is welded to the tree, the two ports coinciding with aligned axes
   (:func:`oos_drake.scenario.tree.captured_tree`); without it the target is free and not in
   the models.
+- ``docked = { ports = [PORT, TARGET_PORT], k_shear = ..., k_tors = ..., d_shear = ...,
+  d_tors = ..., stiffness_percent = ..., damping_percent = ... }``: through the phase a target is
+  held by a 6-DOF spring-damper between the two ports (at rest where they coincide, axes
+  aligned; stiffness [N/m, N m/rad], damping [N s/m, N m s/rad], uncertain by the percentages:
+  blocks ``k_shear_<PORT>``, ``k_tors_<PORT>``, ``d_shear_<PORT>``, ``d_tors_<PORT>``);
+  :func:`oos_drake.scenario.tree.docked_tree`.
 - Between waypoints the angles are interpolated per phase: ``"smooth"`` (default) is the cubic
   ``q = q0 + (3 s^2 - 2 s^3) (q1 - q0)``, ``s = (t - t0) / (t1 - t0)``, so every joint starts and
   ends each phase at rest; ``"linear"`` is ``q0 + s (q1 - q0)`` (constant rate in a phase). Both
@@ -65,7 +71,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from oos_drake.scenario.data import ScenarioError, Table, check_positive, check_rotation
+from oos_drake.scenario.data import (
+    ScenarioError,
+    Table,
+    check_percent,
+    check_positive,
+    check_rotation,
+)
 
 if TYPE_CHECKING:  # annotations only: the tree module imports this one
     from oos_drake.scenario.tree import SpacecraftTree
@@ -74,6 +86,7 @@ __all__ = [
     "INTERPOLATIONS",
     "ANALYSIS_INSTANTS",
     "TipWaypoint",
+    "Docking",
     "MissionPhase",
     "TreeMission",
     "IkSolution",
@@ -114,6 +127,41 @@ class TipWaypoint:
 
 
 @dataclass(frozen=True, eq=False)
+class Docking:
+    """A target held by a spring-damper between two ports (a docking interface).
+
+    Attributes
+    ----------
+    port, target_port : str
+        Port of the tree and port of a target; at rest they coincide, axes aligned.
+    k_shear : float
+        Translational stiffness [N/m] (block ``k_shear_<port>``).
+    k_tors : float
+        Rotational stiffness [N m/rad] (``k_tors_<port>``).
+    d_shear : float
+        Translational damping [N s/m] (``d_shear_<port>``).
+    d_tors : float
+        Rotational damping [N m s/rad] (``d_tors_<port>``).
+    stiffness_percent, damping_percent : float
+        Relative half-ranges of the stiffness and damping blocks [%] (0: known).
+    """
+
+    port: str
+    target_port: str
+    k_shear: float
+    k_tors: float
+    d_shear: float
+    d_tors: float
+    stiffness_percent: float = 0.0
+    damping_percent: float = 0.0
+
+    @property
+    def connection(self) -> tuple[str, str]:
+        """``(port, target port)``."""
+        return (self.port, self.target_port)
+
+
+@dataclass(frozen=True, eq=False)
 class MissionPhase:
     """One phase of the mission.
 
@@ -130,6 +178,8 @@ class MissionPhase:
     captured : tuple of (str, str) or None
         ``(port of the tree, port of a target)`` welded through the whole phase (a rigid
         capture), or None: the target is free.
+    docked : Docking or None
+        A target held by a spring-damper through the whole phase.
     """
 
     name: str
@@ -137,6 +187,7 @@ class MissionPhase:
     joints: Mapping[str, float]
     tip: TipWaypoint | None
     captured: tuple[str, str] | None = None
+    docked: Docking | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -202,12 +253,15 @@ class Configuration:
         Angle [rad] of every revolute joint, by body.
     captured : tuple of (str, str) or None
         Ports welded in this phase (see :attr:`MissionPhase.captured`).
+    docked : Docking or None
+        Spring-damper holding a target in this phase (see :attr:`MissionPhase.docked`).
     """
 
     time: float
     phase: str
     angles: Mapping[str, float]
     captured: tuple[str, str] | None = None
+    docked: Docking | None = None
 
 
 #: ``(phase name, tip waypoint, joint angles before the phase end) -> IkSolution``.
@@ -235,6 +289,8 @@ class Timeline:
         residual left).
     captures : tuple
         Per phase, the welded ports ``(port, target port)`` or None.
+    dockings : tuple
+        Per phase, the :class:`Docking` holding a target, or None.
     """
 
     joint_names: tuple[str, ...]
@@ -244,6 +300,7 @@ class Timeline:
     interpolation: str
     tip_solutions: Mapping[str, IkSolution]
     captures: tuple = ()
+    dockings: tuple = ()
 
     @property
     def duration(self) -> float:
@@ -294,10 +351,19 @@ class Timeline:
         keep = np.r_[True, np.diff(times) > 1e-9 * max(self.duration, 1.0)]
         return tuple(
             Configuration(
-                float(t), self.phase_at(t), MappingProxyType(self.angles(t)), self.captured_at(t)
+                float(t),
+                self.phase_at(t),
+                MappingProxyType(self.angles(t)),
+                self.captured_at(t),
+                self.docked_at(t),
             )
             for t in times[keep]
         )
+
+    def docked_at(self, time: float) -> Docking | None:
+        """Docking interface at ``time`` [s] (that of the phase at that time), or None."""
+        index = self._phase_index(float(time))
+        return self.dockings[index] if index >= 0 and self.dockings else None
 
     def captured_at(self, time: float) -> tuple[str, str] | None:
         """Ports welded at ``time`` [s] (those of the phase at that time), or None."""
@@ -337,6 +403,25 @@ def _read_captured(raw: Any, where: str, tree: SpacecraftTree) -> tuple[str, str
     return (port, target_port)
 
 
+def _read_docked(raw: Any, where: str, tree: SpacecraftTree) -> Docking:
+    t = Table(raw, where)
+    ports = t.get("ports")
+    port, target_port = _read_captured(ports, f"{where}.ports", tree)
+    target = next(x for x in tree.targets.values() if target_port in x.ports)
+    if target.ports[target_port].body != target.root:
+        raise ScenarioError(
+            f"{where}.ports", f"'{target_port}' must be on the target's root body '{target.root}'"
+        )
+    values = {key: t.number(key) for key in ("k_shear", "k_tors", "d_shear", "d_tors")}
+    percents = {key: t.number(key, 0.0) for key in ("stiffness_percent", "damping_percent")}
+    t.close()
+    for key, value in values.items():
+        check_positive(where, key, value)
+    for key, value in percents.items():
+        check_percent(where, key, value, 100.0)
+    return Docking(port, target_port, **values, **percents)
+
+
 def _read_phase(raw: Any, index: int, tree: SpacecraftTree) -> MissionPhase:
     label = raw.get("name") if isinstance(raw, dict) else None
     where = f"mission.{label or f'phases[{index}]'}"
@@ -371,6 +456,9 @@ def _read_phase(raw: Any, index: int, tree: SpacecraftTree) -> MissionPhase:
         else None
     )
     t.get("captured", None)
+    docked = None
+    if "docked" in t.raw:
+        docked = _read_docked(t.get("docked"), f"{where}.docked", tree)
     t.get("description", "")
     t.close()
     if tip is not None:
@@ -381,7 +469,9 @@ def _read_phase(raw: Any, index: int, tree: SpacecraftTree) -> MissionPhase:
                 f"{both[0]} is moved by the tip waypoint of port '{tip.port}' "
                 "(give one or the other)",
             )
-    return MissionPhase(name, duration, MappingProxyType(joints), tip, captured)
+    if captured is not None and docked is not None:
+        raise ScenarioError(where, "captured and docked: give one connection per phase")
+    return MissionPhase(name, duration, MappingProxyType(joints), tip, captured, docked)
 
 
 def read_mission(raw: Any, tree: SpacecraftTree) -> TreeMission:
@@ -471,4 +561,5 @@ def build_timeline(tree: SpacecraftTree, solve_tip: TipSolver | None = None) -> 
         interpolation="linear" if mission is None else mission.interpolation,
         tip_solutions=MappingProxyType(solutions),
         captures=tuple(phase.captured for phase in phases),
+        dockings=tuple(phase.docked for phase in phases),
     )

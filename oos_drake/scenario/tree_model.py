@@ -30,7 +30,7 @@ import functools
 import numpy as np
 
 from oos_drake.lfr import LFR, ureal
-from oos_drake.scenario.model import hub_parameters
+from oos_drake.scenario.model import hub_parameters, spring_damper_between
 from oos_drake.scenario.tree import SpacecraftTree, body_poses
 from oos_drake.titop import (
     Component,
@@ -102,6 +102,37 @@ def _connection(child) -> LFR:
     )
 
 
+def _joint_point(tree: SpacecraftTree, child) -> np.ndarray:
+    """Parent body frame origin -> the point where ``child`` is connected, parent axes [m]:
+    the joint origin, or for a spring-damper the parent's port where it acts."""
+    joint = child.joint
+    if joint.type == "bushing":
+        return np.asarray(tree.ports[joint.docking.port].p_B_D, dtype=float)
+    return np.asarray(joint.p_parent_joint, dtype=float)
+
+
+def _docking_blocks(docking) -> dict:
+    """Stiffness [N/m, N m/rad] and damping [N s/m, N m s/rad] of a docking spring-damper:
+    ureal blocks ``k_shear_<port>``, ... over their declared ranges, numbers when known."""
+    blocks = {}
+    for key, percent in (
+        ("k_shear", docking.stiffness_percent),
+        ("k_tors", docking.stiffness_percent),
+        ("d_shear", docking.damping_percent),
+        ("d_tors", docking.damping_percent),
+    ):
+        nominal = float(getattr(docking, key))
+        unit = {"k_shear": "N/m", "k_tors": "N m/rad", "d_shear": "N s/m", "d_tors": "N m s/rad"}
+        quantity = "stiffness" if key.startswith("k") else "damping"
+        blocks[key] = (
+            relative_parameter(f"{key}_{docking.port}", nominal, percent, unit=unit[key],
+                               quantity=quantity)
+            if percent > 0
+            else nominal
+        )  # fmt: skip
+    return blocks
+
+
 def _components(tree: SpacecraftTree) -> list[Component]:
     components = []
     root = tree.root
@@ -110,7 +141,7 @@ def _components(tree: SpacecraftTree) -> list[Component]:
         children = [tree.body(c) for c in tree.children(name)]
         if body.kind == "rigid":
             offset = _origin_offset(body)
-            ports_GP = [offset + np.asarray(c.joint.p_parent_joint) for c in children]
+            ports_GP = [offset + _joint_point(tree, c) for c in children]
             child_in = [f"W_J{c.name}_{name}" for c in children]
             child_out = [f"xdd_J{c.name}_{name}" for c in children]
             mass, inertia = hub_parameters(body)
@@ -118,6 +149,15 @@ def _components(tree: SpacecraftTree) -> list[Component]:
                 system = rigid_body_inverse(mass, inertia, ports_GP, body=name)
                 inputs = [f"W_ext_{name}"] + child_in
                 outputs = [f"xdd_G_{name}"] + child_out
+            elif body.joint.type == "bushing":
+                # a free body held by a spring-damper: inverse model, no external wrench, its
+                # first port at the target port where the spring-damper acts
+                port = tree.ports[body.joint.docking.target_port]
+                p_G_port = offset + np.asarray(port.p_B_D, dtype=float)
+                system = rigid_body_inverse(mass, inertia, [p_G_port] + ports_GP, body=name)
+                system = system[6:, 6:]
+                inputs = [f"W_J{name}_{name}"] + child_in
+                outputs = [f"xdd_J{name}_{name}"] + child_out
             else:
                 system = rigid_body_direct(mass, inertia, ports_GP, offset, body=name)
                 inputs = child_in + [f"xdd_J{name}_{name}"]
@@ -135,7 +175,18 @@ def _components(tree: SpacecraftTree) -> list[Component]:
             components.append(
                 Component(name, system, (f"xdd_J{name}_{name}",), (f"W_J{name}_{name}",))
             )
-        if body.joint is not None:
+        if body.joint is not None and body.joint.type == "bushing":
+            # C = the target at its port (its axes), P = the parent at its port (parent axes)
+            blocks = _docking_blocks(body.joint.docking)
+            components.append(
+                Component(
+                    f"joint_{name}",
+                    spring_damper_between(blocks, np.asarray(body.joint.R_parent_joint).T),
+                    inputs=(f"xdd_J{name}_{name}", f"xdd_J{name}_{body.parent}"),
+                    outputs=(f"W_J{name}_{name}", f"W_J{name}_{body.parent}"),
+                )
+            )
+        elif body.joint is not None:
             parent = body.parent
             components.append(
                 Component(
