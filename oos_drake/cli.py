@@ -26,6 +26,7 @@ from oos_drake import __version__
 COMMAND_MODULES = (
     "oos_drake.scenario.cli",
     "oos_drake.multibody.cli",
+    "oos_drake.multibody.tree_cli",
     "oos_drake.control.cli",
     "oos_drake.robust.cli",
     "oos_drake.analysis.cli",

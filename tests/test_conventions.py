@@ -37,7 +37,7 @@ def _sources():
 # ---------------------------------------------------------------- D3: the oos parser
 COMMANDS = {
     "run", "model", "sdf", "validate", "synth", "analyze", "confirm", "robust", "campaign",
-    "ulinearize", "margins", "study",
+    "ulinearize", "margins", "study", "tree",
 }  # fmt: skip
 #: Every command line that runs something (README's `oos` table).
 RUNNABLE = {
@@ -57,6 +57,9 @@ RUNNABLE = {
     "robust robstab",
     "robust sweep",
     "ulinearize",
+    "tree check",
+    "tree sdf",
+    "tree convert",
     "campaign run",
     "campaign resume",
     "campaign rerun",

@@ -29,6 +29,10 @@ def _select(cases, group: str):
 
 
 def _validate(args: argparse.Namespace) -> int:
+    from oos_drake.multibody.tree_cli import is_tree_scenario, validate_tree
+
+    if is_tree_scenario(args.scenario):  # schema 2: the tree's own twin on its timeline
+        return validate_tree(args)
     import numpy as np
 
     from oos_drake.multibody.cross_check import format_table, run_validation, validation_cases

@@ -74,8 +74,15 @@ __all__ = [
     "RigidHub",
     "Scenario",
     "ScenarioError",
+    "Table",
     "Waypoints",
+    "check_inertia",
+    "check_percent",
+    "check_positive",
+    "check_rotation",
+    "check_unit",
     "load_scenario",
+    "read_control",
     "scenario_path",
     "scenario_record",
     "shipped_scenarios",
@@ -605,7 +612,7 @@ class Scenario:
 # ----------------------------------------------------------------------------------------------
 # strict TOML reading helpers
 # ----------------------------------------------------------------------------------------------
-class _Table:
+class Table:
     """A TOML table read key by key; ``close()`` rejects the keys nobody asked for."""
 
     def __init__(self, raw: Any, body: str, what: str = "table"):
@@ -661,8 +668,8 @@ class _Table:
         array.setflags(write=False)
         return array
 
-    def sub(self, key: str, body: str | None = None) -> _Table:
-        return _Table(self.get(key), body or f"{self.body}.{key}")
+    def sub(self, key: str, body: str | None = None) -> Table:
+        return Table(self.get(key), body or f"{self.body}.{key}")
 
     def close(self) -> None:
         unknown = sorted(set(self.raw) - self.used)
@@ -674,7 +681,8 @@ class _Table:
 # ----------------------------------------------------------------------------------------------
 # physical checks
 # ----------------------------------------------------------------------------------------------
-def _check_positive(body: str, quantity: str, value: float) -> None:
+def check_positive(body: str, quantity: str, value: float) -> None:
+    """Refuse ``value`` <= 0 (:class:`ScenarioError` naming ``body`` and ``quantity``)."""
     if not value > 0:
         raise ScenarioError(body, f"{quantity} must be > 0, got {value:g}")
 
@@ -684,7 +692,8 @@ def _check_nonnegative(body: str, quantity: str, value: float) -> None:
         raise ScenarioError(body, f"{quantity} must be >= 0, got {value:g}")
 
 
-def _check_percent(body: str, quantity: str, value: np.ndarray | float, upper: float) -> None:
+def check_percent(body: str, quantity: str, value: np.ndarray | float, upper: float) -> None:
+    """Refuse a relative half-range [%] outside ``[0, upper)`` (scalar or array)."""
     values = np.atleast_1d(value)
     if np.any(values < 0):
         raise ScenarioError(body, f"{quantity} must be >= 0 %, got {values.min():g} %")
@@ -692,7 +701,9 @@ def _check_percent(body: str, quantity: str, value: np.ndarray | float, upper: f
         raise ScenarioError(body, f"{quantity} must be < {upper:g} %, got {values.max():g} %")
 
 
-def _check_inertia(body: str, quantity: str, inertia: np.ndarray) -> None:
+def check_inertia(body: str, quantity: str, inertia: np.ndarray) -> None:
+    """Refuse an inertia matrix [kg m^2] that is not symmetric, positive definite and
+    physical (principal moments satisfy the triangle inequality)."""
     scale = max(float(np.max(np.abs(inertia))), 1e-300)
     asymmetry = float(np.max(np.abs(inertia - inertia.T)))
     if asymmetry > 1e-12 * scale:
@@ -711,7 +722,8 @@ def _check_inertia(body: str, quantity: str, inertia: np.ndarray) -> None:
         )
 
 
-def _check_rotation(body: str, quantity: str, R: np.ndarray) -> None:
+def check_rotation(body: str, quantity: str, R: np.ndarray) -> None:
+    """Refuse a 3x3 matrix [-] that is not a proper rotation (orthonormal, det = +1)."""
     error = float(np.max(np.abs(R.T @ R - np.eye(3))))
     if error > _ORTHO_TOL:
         raise ScenarioError(body, f"{quantity} not orthonormal (max |R^T R - I| = {error:.3g})")
@@ -720,7 +732,8 @@ def _check_rotation(body: str, quantity: str, R: np.ndarray) -> None:
         raise ScenarioError(body, f"{quantity} is a reflection (det = {det:.6g}), not a rotation")
 
 
-def _check_unit(body: str, quantity: str, axis: np.ndarray) -> None:
+def check_unit(body: str, quantity: str, axis: np.ndarray) -> None:
+    """Refuse an axis [-] whose norm is not 1."""
     norm = float(np.linalg.norm(axis))
     if abs(norm - 1.0) > _ORTHO_TOL:
         raise ScenarioError(body, f"{quantity} must be a unit vector, got norm {norm:.6g}")
@@ -737,7 +750,7 @@ def _check_angles(body: str, quantity: str, values: np.ndarray) -> None:
 # section readers
 # ----------------------------------------------------------------------------------------------
 def _read_hub(name: str, raw: Any) -> RigidHub:
-    t = _Table(raw, name)
+    t = Table(raw, name)
     hub = RigidHub(
         name=name,
         description=t.text("description", ""),
@@ -747,10 +760,10 @@ def _read_hub(name: str, raw: Any) -> RigidHub:
         inertia_uncertainty_percent=t.array("inertia_uncertainty_percent", (3,), [0.0, 0.0, 0.0]),
     )
     t.close()
-    _check_positive(name, "mass", hub.mass)
-    _check_inertia(name, "inertia", hub.inertia)
-    _check_percent(name, "mass uncertainty", hub.mass_uncertainty_percent, 100.0)
-    _check_percent(name, "inertia uncertainty", hub.inertia_uncertainty_percent, 100.0)
+    check_positive(name, "mass", hub.mass)
+    check_inertia(name, "inertia", hub.inertia)
+    check_percent(name, "mass uncertainty", hub.mass_uncertainty_percent, 100.0)
+    check_percent(name, "inertia uncertainty", hub.inertia_uncertainty_percent, 100.0)
     # every corner of the uncertain diagonal must stay a physical inertia
     ranges = hub.inertia_diagonal_ranges
     for corner in itertools.product((0, 1), repeat=3):
@@ -759,12 +772,12 @@ def _read_hub(name: str, raw: Any) -> RigidHub:
         inertia = hub.inertia.copy()
         inertia[np.diag_indices(3)] = [ranges[i, corner[i]] for i in range(3)]
         signs = ", ".join("+" if c else "-" for c in corner)
-        _check_inertia(name, f"inertia at uncertainty corner ({signs})", inertia)
+        check_inertia(name, f"inertia at uncertainty corner ({signs})", inertia)
     return hub
 
 
 def _read_array_model(name: str, raw: Any) -> FlexibleArrayModel:
-    t = _Table(raw, name)
+    t = Table(raw, name)
     frequencies = t.array("frequencies_hz", (None,))
     n = frequencies.shape[0]
     model = FlexibleArrayModel(
@@ -779,8 +792,8 @@ def _read_array_model(name: str, raw: Any) -> FlexibleArrayModel:
         participation=t.array("participation", (None, None)),
     )
     t.close()
-    _check_positive(name, "mass", model.mass)
-    _check_inertia(name, "inertia at S", model.inertia)
+    check_positive(name, "mass", model.mass)
+    check_inertia(name, "inertia at S", model.inertia)
     if n == 0:
         raise ScenarioError(name, "frequencies_hz must list at least one mode")
     if np.any(frequencies <= 0):
@@ -790,7 +803,7 @@ def _read_array_model(name: str, raw: Any) -> FlexibleArrayModel:
             name, f"damping_ratios has {model.damping_ratios.shape[0]} entries for {n} modes"
         )
     _check_nonnegative(name, "damping ratio", model.damping_ratios.min())
-    _check_percent(
+    check_percent(
         name, "first-mode frequency uncertainty", model.first_mode_uncertainty_percent, 100.0
     )
     if model.participation.shape != (n, 6):
@@ -808,7 +821,7 @@ def _read_array_model(name: str, raw: Any) -> FlexibleArrayModel:
 
 
 def _read_array(name: str, raw: Any, models: Mapping[str, FlexibleArrayModel]) -> ArrayMount:
-    t = _Table(raw, name)
+    t = Table(raw, name)
     model_name = t.text("model")
     parent = t.text("parent")
     mount = dict(
@@ -821,13 +834,13 @@ def _read_array(name: str, raw: Any, models: Mapping[str, FlexibleArrayModel]) -
         raise ScenarioError(name, f"unknown array model '{model_name}' (have {sorted(models)})")
     if parent not in _HUB_NAMES:
         raise ScenarioError(name, f"parent must be one of {_HUB_NAMES}, got '{parent}'")
-    _check_rotation(name, "R_G_P0", mount["R_G_P0"])
-    _check_unit(name, "tilt axis", mount["axis"])
+    check_rotation(name, "R_G_P0", mount["R_G_P0"])
+    check_unit(name, "tilt axis", mount["axis"])
     return ArrayMount(name=name, model=models[model_name], parent=parent, **mount)
 
 
 def _read_arm(raw: Any) -> Arm:
-    t = _Table(raw, "arm")
+    t = Table(raw, "arm")
     parent = t.text("parent")
     p_G_J0 = t.array("p_G_J0", (3,))
     R_G_L0 = t.array("R_G_L0", (3, 3))
@@ -835,13 +848,13 @@ def _read_arm(raw: Any) -> Arm:
     t.close()
     if parent != "RH1":
         raise ScenarioError("arm", f"parent must be 'RH1', got '{parent}'")
-    _check_rotation("arm", "R_G_L0", R_G_L0)
+    check_rotation("arm", "R_G_L0", R_G_L0)
     if not isinstance(raw_links, list) or len(raw_links) != len(_LINK_NAMES):
         count = len(raw_links) if isinstance(raw_links, list) else "no"
         raise ScenarioError("arm", f"needs {len(_LINK_NAMES)} links L0..L6, got {count}")
     links = []
     for index, (expected, raw_link) in enumerate(zip(_LINK_NAMES, raw_links, strict=True)):
-        lt = _Table(raw_link, f"arm link #{index}")
+        lt = Table(raw_link, f"arm link #{index}")
         name = lt.text("name")
         body = f"arm link {name}"
         lt.body = body
@@ -858,17 +871,17 @@ def _read_arm(raw: Any) -> Arm:
             joint_axis=lt.array("joint_axis", (3,)) if index > 0 else None,
         )
         lt.close()
-        _check_positive(body, "mass", link.mass)
-        _check_inertia(body, "inertia", link.inertia)
+        check_positive(body, "mass", link.mass)
+        check_inertia(body, "inertia", link.inertia)
         if link.joint_axis is not None:
-            _check_unit(body, "joint axis", link.joint_axis)
+            check_unit(body, "joint axis", link.joint_axis)
         links.append(link)
     return Arm(parent=parent, p_G_J0=p_G_J0, R_G_L0=R_G_L0, links=tuple(links))
 
 
 def _read_port(name: str, raw: Any) -> Port:
     body = f"port {name}"
-    t = _Table(raw, body)
+    t = Table(raw, body)
     port = Port(
         name=name,
         description=t.text("description", ""),
@@ -880,12 +893,12 @@ def _read_port(name: str, raw: Any) -> Port:
     expected = "RH1" if name == "D1" else "RH2"
     if port.body != expected:
         raise ScenarioError(body, f"must be on '{expected}', got '{port.body}'")
-    _check_rotation(body, "R_G_D", port.R_G_D)
+    check_rotation(body, "R_G_D", port.R_G_D)
     return port
 
 
 def _read_docking(raw: Any) -> DockingSettings:
-    t = _Table(raw, "docking")
+    t = Table(raw, "docking")
     settings = DockingSettings(
         stiffness_sweep=t.array("stiffness_sweep", (None,)),
         damping=t.number("damping"),
@@ -898,12 +911,12 @@ def _read_docking(raw: Any) -> DockingSettings:
         raise ScenarioError("docking", "stiffness_sweep must be positive and increasing")
     _check_nonnegative("docking", "damping", settings.damping)
     _check_nonnegative("docking", "rigid_damping", settings.rigid_damping)
-    _check_positive("docking", "rigid_stiffness", settings.rigid_stiffness)
+    check_positive("docking", "rigid_stiffness", settings.rigid_stiffness)
     return settings
 
 
 def _read_waypoints(raw: Any, body: str, key: str, width: int, t0: float, t1: float) -> Waypoints:
-    t = _Table(raw, body)
+    t = Table(raw, body)
     times = t.array("times", (None,))
     values = t.array(key, (times.shape[0], width))
     labels = t.get("labels", [""] * times.shape[0])
@@ -927,7 +940,7 @@ def _read_waypoints(raw: Any, body: str, key: str, width: int, t0: float, t1: fl
 
 
 def _read_mission(raw: Any) -> Mission:
-    t = _Table(raw, "mission")
+    t = Table(raw, "mission")
     t_start = t.number("t_start")
     t_end = t.number("t_end")
     first = t.number("first_docking_time")
@@ -960,7 +973,7 @@ def _read_mission(raw: Any) -> Mission:
             )
     states = []
     for index, raw_state in enumerate(t.get("connection_states")):
-        st = _Table(raw_state, f"mission.connection_states[{index}]")
+        st = Table(raw_state, f"mission.connection_states[{index}]")
         state = ConnectionState(
             start=st.number("start"),
             end=st.number("end"),
@@ -1002,7 +1015,7 @@ def _read_mission(raw: Any) -> Mission:
         )
     moments = []
     for index, raw_moment in enumerate(t.get("moments")):
-        mt = _Table(raw_moment, f"mission.moments[{index}]")
+        mt = Table(raw_moment, f"mission.moments[{index}]")
         moment = MomentSpec(
             name=mt.text("name"), time=mt.number("time"), description=mt.text("description", "")
         )
@@ -1014,7 +1027,7 @@ def _read_mission(raw: Any) -> Mission:
         raise ScenarioError("mission", "moments must be named '1' .. '6' in order")
     phases = []
     for index, raw_phase in enumerate(t.get("docking_phases")):
-        pt = _Table(raw_phase, f"mission.docking_phases[{index}]")
+        pt = Table(raw_phase, f"mission.docking_phases[{index}]")
         phase = DockingPhaseSpec(
             name=pt.text("name"),
             time=pt.number("time"),
@@ -1048,11 +1061,27 @@ def _read_mission(raw: Any) -> Mission:
     )
 
 
-def _read_control(raw: Any) -> ControlRequirements:
-    """``[control]``: every number checked with its unit; errors name ``control.<field>``."""
-    top = _Table(raw, "control")
+def read_control(raw: Any) -> ControlRequirements:
+    """Read a ``[control]`` section (schema 1 and 2): every number checked with its unit.
 
-    def positive(table: _Table, key: str, unit: str, *, upper: float = math.inf) -> float:
+    Parameters
+    ----------
+    raw : dict or Table
+        The section's TOML table. A :class:`Table` whose caller already read its own keys
+        (schema 2's ``controlled_body``) is closed here with those keys allowed.
+
+    Returns
+    -------
+    ControlRequirements
+
+    Raises
+    ------
+    ScenarioError
+        One line naming ``control.<field>``.
+    """
+    top = raw if isinstance(raw, Table) else Table(raw, "control")
+
+    def positive(table: Table, key: str, unit: str, *, upper: float = math.inf) -> float:
         value = table.number(key)
         if not 0 < value < upper:
             bound = "" if upper == math.inf else f" and < {upper:g} {unit}"
@@ -1061,7 +1090,7 @@ def _read_control(raw: Any) -> ControlRequirements:
             )
         return value
 
-    def positive_list(table: _Table, key: str, size: int, unit: str) -> tuple[float, ...]:
+    def positive_list(table: Table, key: str, size: int, unit: str) -> tuple[float, ...]:
         values = table.array(key, (size,))
         if not np.all(values > 0):
             raise ScenarioError(
@@ -1109,7 +1138,7 @@ def _read_control(raw: Any) -> ControlRequirements:
     return control
 
 
-def _named(table: _Table, key: str, names: tuple[str, ...]) -> dict[str, Any]:
+def _named(table: Table, key: str, names: tuple[str, ...]) -> dict[str, Any]:
     raw = table.get(key)
     if not isinstance(raw, dict):
         raise ScenarioError(key, "expected a table")
@@ -1122,7 +1151,7 @@ def _named(table: _Table, key: str, names: tuple[str, ...]) -> dict[str, Any]:
 
 
 def _parse(document: dict[str, Any], source: Path) -> Scenario:
-    top = _Table(document, source.name, "document")
+    top = Table(document, source.name, "document")
     version = top.number("schema_version")
     if version != 1:
         raise ScenarioError(source.name, f"schema_version must be 1, got {version:g}")
@@ -1145,7 +1174,7 @@ def _parse(document: dict[str, Any], source: Path) -> Scenario:
     ports = {n: _read_port(n, raw) for n, raw in sorted(_named(top, "ports", _PORT_NAMES).items())}
     docking = _read_docking(top.get("docking"))
     mission = _read_mission(top.get("mission"))
-    control = _read_control(top.get("control"))
+    control = read_control(top.get("control"))
     top.close()
     scenario = Scenario(
         name=name,

@@ -66,6 +66,8 @@ __all__ = [
     "build_mission_model",
     "build_docking_model",
     "physical_blocks",
+    "hub_parameters",
+    "spring_damper_between",
     "attitude_model",
     "configuration_values",
     "mission_values",
@@ -129,8 +131,10 @@ DELTA_GROUPS: dict[str, str] = {
 
 
 # ------------------------------------------------------------------------------------------ blocks
-def _hub_parameters(hub):
-    """Mass and inertia of a hub: ureal blocks when its data declare uncertainty."""
+def hub_parameters(hub):
+    """Mass [kg] and inertia at G [kg m^2] of a rigid body (``RigidHub`` or a tree's
+    ``RigidBodyData``): ureal blocks ``m_<name>``, ``Jxx_<name>``, ... when its data declare
+    uncertainty, plain numbers otherwise."""
     mass_percent = float(hub.mass_uncertainty_percent)
     inertia_percent = np.asarray(hub.inertia_uncertainty_percent, dtype=float)
     mass = uncertain_mass(hub.name, hub.mass, mass_percent if mass_percent > 0 else None)
@@ -178,7 +182,7 @@ def physical_blocks(scenario=None) -> dict:
         Block name -> block spec (:class:`~oos_drake.lfr.blocks.UReal`), sorted by name.
     """
     scenario = default_scenario(scenario)
-    parts = [p for hub in scenario.hubs.values() for p in _hub_parameters(hub)]
+    parts = [p for hub in scenario.hubs.values() for p in hub_parameters(hub)]
     parts += [_first_mode_parameter(mount) for mount in scenario.arrays.values()]
     for name in ("SM1", "SM2"):
         parts += list(_spring_damper_blocks(name, scenario.docking).values())
@@ -289,7 +293,7 @@ def _chaser_components(scenario, with_d1: bool) -> list[Component]:
         rh1_ports.append(scenario.ports["D1"].p_G_D)
         rh1_in.append("W_D1_RH1")
         rh1_out.append("xdd_D1_RH1")
-    mass1, inertia1 = _hub_parameters(scenario.hubs["RH1"])
+    mass1, inertia1 = hub_parameters(scenario.hubs["RH1"])
     components = [
         Component(
             "RH1", rigid_body_inverse(mass1, inertia1, rh1_ports, body="RH1"), rh1_in, rh1_out
@@ -347,7 +351,7 @@ def _mission_model(scenario) -> LFR:
     components = _chaser_components(scenario, with_d1=True)
     delta_c1 = connection_parameter("delta_C1")
     delta_c2 = connection_parameter("delta_C2")
-    mass2, inertia2 = _hub_parameters(rh2)
+    mass2, inertia2 = hub_parameters(rh2)
     components.append(
         Component(
             "RH2",
@@ -432,7 +436,7 @@ def _docking_model(phase: str, scenario, spring_dampers) -> LFR:
         rh2_ports.append(ports["D3"].p_G_D)
         rh2_in.append("W_D3_RH2")
         rh2_out.append("xdd_D3_RH2")
-    mass2, inertia2 = _hub_parameters(rh2)
+    mass2, inertia2 = hub_parameters(rh2)
     rh2_model = rigid_body_inverse(mass2, inertia2, rh2_ports, body="RH2")[6:, 6:]  # no W_ext
     components.append(Component("RH2", rh2_model, rh2_in, rh2_out))
     components += [_array_component(mounts[m], "RH2") for m in on_rh2]
@@ -443,14 +447,14 @@ def _docking_model(phase: str, scenario, spring_dampers) -> LFR:
     if with_d1:
         springs.append(("SM2", "D3_RH2", "D1_RH1", dcm_rh2_rh1))
     for name, c, p, dcm in springs:
-        blocks = _spring_damper_between(params[name], dcm)
+        blocks = spring_damper_between(params[name], dcm)
         components.append(
             Component(name, blocks, inputs=(f"xdd_{c}", f"xdd_{p}"), outputs=(f"W_{c}", f"W_{p}"))
         )
     return _assemble_at_G1(components)
 
 
-def _spring_damper_between(blocks: Mapping, dcm_c_sm) -> LFR:
+def spring_damper_between(blocks: Mapping, dcm_c_sm) -> LFR:
     """Spring-damper whose C side is expressed in another frame: ``v_C = dcm_c_sm v_SM``.
 
     Inputs ``[xdd_C (C frame); xdd_P (SM frame)]``, outputs ``[W_C (C frame); W_P (SM frame)]``.

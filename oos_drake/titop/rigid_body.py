@@ -224,8 +224,8 @@ def rigid_body_direct(
     copy_rows[:6, n_pass:] = np.eye(6)
     for k, t in enumerate(taus):
         copy_rows[6 + 6 * k : 12 + 6 * k, n_pass:] = t
-    gather = np.hstack(([np.eye(6)] if external else []) + [t.T for t in taus])
     if n_pass:
+        gather = np.hstack(([np.eye(6)] if external else []) + [t.T for t in taus])
         net_row = hstack([as_lfr(gather), -1.0 * d_G])
     else:
         net_row = -1.0 * d_G

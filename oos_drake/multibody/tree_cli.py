@@ -1,0 +1,205 @@
+"""``oos tree ...`` and ``oos validate`` of a spacecraft tree (scenario schema version 2).
+
+Usage::
+
+    oos tree check FILE_OR_NAME [--angle BODY=RAD ...]   # TITOP vs Drake at one configuration
+    oos tree sdf FILE_OR_NAME DIRECTORY                  # write the tree's SDF files
+    oos tree convert V1_FILE_OR_NAME OUT.toml            # schema-1 scenario -> schema-2 tree
+    oos validate --scenario FILE_OR_NAME                 # every configuration of its timeline
+
+``check`` loads the tree, builds its TITOP LFR and its Drake twin (SDF generated from the same
+file into a temporary folder) and prints the comparison (max relative response error, pole and
+zero errors); exit status 0 when it passes, 1 when it does not. ``sdf`` writes the tree's SDF
+files. ``convert`` writes the schema-2 tree of a schema-1 scenario's chaser
+(:func:`oos_drake.scenario.tree_migration.tree_document_from_v1`) and names what it left out.
+``oos validate`` on a schema-2 file (:func:`validate_tree`) checks the TITOP LFR against the
+tree's own twin on every configuration of the mission timeline
+(:meth:`oos_drake.scenario.tree_mission.Timeline.configurations`). Invalid data: one line
+``oos <command>: error: <body>: <field> ...`` on stderr, exit status 2, nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+import tomllib
+from pathlib import Path
+
+from oos_drake.scenario.data import ScenarioError
+from oos_drake.scenario.tree import TREE_SCHEMA_VERSION, load_tree, tree_path
+
+__all__ = ["register", "is_tree_scenario", "validate_tree"]
+
+
+def _angles(items: list[str]) -> dict[str, float]:
+    angles = {}
+    for item in items:
+        name, _, value = item.partition("=")
+        try:
+            angles[name] = float(value)
+        except ValueError:
+            raise ScenarioError(name or item, f"--angle needs BODY=RAD, got {item!r}") from None
+    return angles
+
+
+def is_tree_scenario(scenario: str | Path | None) -> bool:
+    """Whether ``--scenario`` names a schema-2 tree (a shipped tree's name, or a TOML file whose
+    ``schema_version`` is 2); None (the paper's) and schema-1 files are not."""
+    if scenario is None:
+        return False
+    try:
+        path = tree_path(scenario)
+    except ValueError:
+        return False
+    try:
+        with path.open("rb") as stream:
+            return tomllib.load(stream).get("schema_version") == TREE_SCHEMA_VERSION
+    except (OSError, tomllib.TOMLDecodeError):
+        return False  # the schema-1 loader reports it
+
+
+def validate_tree(args: argparse.Namespace) -> int:
+    """``oos validate`` of a tree: TITOP LFR vs the tree's own Drake twin (generated from the
+    file) on every configuration of its mission timeline; exit status 1 if one fails.
+
+    Uses ``args.scenario``, ``args.frequencies``, ``args.f_min``, ``args.f_max`` [Hz],
+    ``args.tolerance`` and ``args.root_tolerance``; the twin is always the tree's own
+    (``--sdf-dir`` and ``--cases`` are for schema-1 scenarios).
+    """
+    import numpy as np
+
+    tree = load_tree(args.scenario)  # invalid data: ScenarioError -> exit status 2
+    from oos_drake.multibody.cross_check import format_table
+    from oos_drake.multibody.tree_ik import mission_timeline
+    from oos_drake.multibody.tree_plant import (
+        build_captured_diagram,
+        build_docked_diagram,
+        build_tree_diagram,
+        check_tree,
+    )
+    from oos_drake.robust.lfr_analysis import frequency_grid
+    from oos_drake.scenario.tree import captured_tree, docked_tree
+
+    start = time.perf_counter()
+    handles = build_tree_diagram(tree)
+    timeline = mission_timeline(tree, handles)  # out of reach: ScenarioError -> exit status 2
+    configurations = timeline.configurations()
+    omega = frequency_grid(
+        omega_range=(2 * np.pi * args.f_min, 2 * np.pi * args.f_max), points=args.frequencies
+    )
+    print(
+        f"{tree.name}: Drake twin of the tree vs TITOP LFR, 6x6 [F; T]@G -> [a; wdot]@G of "
+        f"{tree.root}, {len(configurations)} configurations of the timeline "
+        f"({timeline.duration:g} s), {args.frequencies} frequencies {args.f_min:g}-"
+        f"{args.f_max:g} Hz; pass: response error <= {args.tolerance:g}, poles/zeros <= "
+        f"{args.root_tolerance:g}"
+    )
+    for phase, solution in timeline.tip_solutions.items():
+        print(
+            f"tip waypoint {phase}: port {solution.port} reached within "
+            f"{solution.position_error:.2e} m, {solution.orientation_error:.2e} rad"
+        )
+    models = {None: (tree, handles)}  # connection -> (model tree, twin)
+    results, seen = [], {}
+    for configuration in configurations:
+        captured, docked = configuration.captured, configuration.docked
+        angles = tuple(configuration.angles.values())
+        # the target welded (one twin per capture) or on its spring-damper (one per rest pose)
+        connection = captured if docked is None else (docked, angles)
+        if connection not in models and docked is None:
+            models[connection] = (
+                captured_tree(tree, *captured),
+                build_captured_diagram(tree, *captured),
+            )
+        elif connection not in models:
+            models[connection] = (
+                docked_tree(tree, docked),
+                build_docked_diagram(tree, docked, configuration.angles),
+            )
+        model_tree, model_handles = models[connection]
+        key = (connection, angles)
+        if key not in seen:  # a joint held through a phase repeats a configuration
+            seen[key] = check_tree(
+                model_tree,
+                dict(configuration.angles),
+                handles=model_handles,
+                omega=omega,
+                response_tolerance=args.tolerance,
+                root_tolerance=args.root_tolerance,
+            )
+        label = f"t={configuration.time:g} s {configuration.phase}"
+        if captured:
+            label += f" [{'+'.join(captured)}]"
+        if docked:
+            label += f" [{'~'.join(docked.connection)}]"
+        results.append(dataclasses.replace(seen[key], label=label))
+    print(format_table(results))
+    failed = [r.label for r in results if not r.passed]
+    elapsed = time.perf_counter() - start
+    if failed:
+        print(
+            f"FAILED: {len(failed)} of {len(results)} configurations ({', '.join(failed)}); "
+            f"{elapsed:.1f} s"
+        )
+        return 1
+    print(f"all {len(results)} configurations pass ({elapsed:.1f} s)")
+    return 0
+
+
+def _convert(args: argparse.Namespace) -> int:
+    import tomli_w
+
+    from oos_drake.scenario.tree import parse_tree
+    from oos_drake.scenario.tree_migration import tree_document_from_v1
+
+    document, dropped = tree_document_from_v1(args.scenario)
+    parse_tree(document)  # what is written must load
+    Path(args.output).write_text(tomli_w.dumps(document))
+    print(f"wrote {args.output}; not converted (no place in schema 2 yet): {', '.join(dropped)}")
+    return 0
+
+
+def _sdf(args: argparse.Namespace) -> int:
+    tree = load_tree(args.tree)
+    from oos_drake.multibody.tree_sdf import write_tree_sdf  # Drake only past validation
+
+    for path in write_tree_sdf(tree, args.directory):
+        print(path)
+    return 0
+
+
+def _check(args: argparse.Namespace) -> int:
+    tree = load_tree(args.tree)
+    angles = _angles(args.angle)
+    tree.joint_angles(angles)  # known bodies, within their limits
+    from oos_drake.multibody.cross_check import format_table
+    from oos_drake.multibody.tree_plant import check_tree
+
+    result = check_tree(tree, angles, response_tolerance=args.tolerance)
+    print(format_table([result]))
+    return 0 if result.passed else 1
+
+
+def register(subparsers) -> None:
+    """Add ``tree check|sdf|convert`` to the ``oos`` command line."""
+    tree = subparsers.add_parser(
+        "tree",
+        help="spacecraft trees (scenario schema 2): check, sdf, convert",
+        description="Commands on a scenario file of schema version 2 (the spacecraft as a tree "
+        "of bodies). `oos validate --scenario TREE` checks every configuration of its timeline.",
+    )
+    commands = tree.add_subparsers(dest="tree_command", metavar="ACTION", required=True)
+    check = commands.add_parser("check", help="TITOP LFR vs Drake twin of a tree at one angle set")
+    check.add_argument("tree", help="tree scenario file or shipped name")
+    check.add_argument("--angle", action="append", default=[], help="BODY=RAD joint angle")
+    check.add_argument("--tolerance", type=float, default=1e-6, help="max relative error")
+    check.set_defaults(func=_check)
+    sdf = commands.add_parser("sdf", help="write the SDF files of a tree scenario")
+    sdf.add_argument("tree", help="tree scenario file or shipped name")
+    sdf.add_argument("directory", help="output folder")
+    sdf.set_defaults(func=_sdf)
+    convert = commands.add_parser("convert", help="schema-1 scenario -> schema-2 tree (chaser)")
+    convert.add_argument("scenario", help="schema-1 scenario file or shipped name")
+    convert.add_argument("output", help="tree file to write (.toml)")
+    convert.set_defaults(func=_convert)

@@ -1,0 +1,291 @@
+"""The TITOP LFR of any spacecraft tree (:mod:`oos_drake.scenario.tree`).
+
+:func:`build_tree_model` assembles, with :func:`oos_drake.titop.assemble`,
+
+- the controlled (root) body as a multi-port rigid body, inverse model, with the external wrench
+  at its centre of mass ``G`` and one port per child joint;
+- every other rigid body as a rigid body with its inverted port at its joint (direct model), one
+  more port per child joint;
+- every flexible appendage as the one-port ``-M_P(s)`` at its attachment point;
+- every joint as a connection at the joint point: ``fixed_connection(R_parent_child^T)`` or the
+  motion-driven ``revolute_connection(tau_<body>, axis, R_parent_joint^T)``,
+
+into the direct-dynamics model of the controlled body
+
+.. math::
+
+    \\ddot x_G = F_u(M(s), \\Delta)\\, W_{ext, G}
+
+from the wrench ``[F; T]`` at ``G`` [N, N m] to the acceleration twist ``[a; wdot]`` at ``G``
+[m/s^2, rad/s^2], both in the controlled body's axes. Uncertain and scheduled blocks are named
+from the bodies: ``w<i>_<appendage>`` (mode frequency [rad/s], 2 occurrences), ``m_<body>`` (3),
+``Jxx_<body>``, ``Jyy_<body>``, ``Jzz_<body>`` (1 each), ``tau_<body>`` (``tan(angle/4)`` of a
+revolute joint, 16 occurrences). Substitute the joints' angles with :func:`tree_values`.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from oos_drake.lfr import LFR, ureal
+from oos_drake.scenario.model import hub_parameters, spring_damper_between
+from oos_drake.scenario.tree import SpacecraftTree, body_poses
+from oos_drake.titop import (
+    Component,
+    angle_parameter,
+    assemble,
+    fixed_connection,
+    flexible_appendage,
+    revolute_connection,
+    rigid_body_direct,
+    rigid_body_inverse,
+)
+from oos_drake.titop.parameters import mode_frequency_name, relative_parameter
+from oos_drake.titop.spatial import angle_to_tau
+
+__all__ = [
+    "angle_block_name",
+    "build_tree_model",
+    "tree_values",
+    "tree_blocks",
+    "mode_frequency_blocks",
+    "rigid_inertia_at_root",
+]
+
+_INPUTS = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
+_OUTPUTS = ("ax", "ay", "az", "wdot_x", "wdot_y", "wdot_z")
+
+
+def angle_block_name(body: str) -> str:
+    """Name of the scheduled block of the revolute joint of ``body``: ``tau_<body>``."""
+    return f"tau_{body}"
+
+
+def mode_frequency_blocks(appendage) -> dict[int, LFR]:
+    """Uncertain mode frequencies of a flexible body: ``{mode index (0-based): ureal [rad/s]}``."""
+    blocks = {}
+    for entry in appendage.uncertainty:
+        nominal = float(appendage.omega[entry.mode - 1])
+        name = mode_frequency_name(appendage.name, entry.mode)
+        if entry.percent is not None:
+            block = relative_parameter(
+                name, nominal, entry.percent, unit="rad/s", quantity="modal frequency"
+            )
+        else:
+            low, high = entry.range_hz
+            block = ureal(
+                name,
+                nominal,
+                range=(2.0 * np.pi * low, 2.0 * np.pi * high),
+                unit="rad/s",
+                quantity="modal frequency",
+            )
+        blocks[entry.mode - 1] = block
+    return blocks
+
+
+def _origin_offset(body) -> np.ndarray:
+    """``G -> B``: from a rigid body's centre of mass to its body frame origin [m]."""
+    return -np.asarray(body.p_B_G, dtype=float)
+
+
+def _connection(child) -> LFR:
+    joint = child.joint
+    if joint.type == "fixed":
+        return fixed_connection(np.asarray(joint.R_parent_joint).T)
+    return revolute_connection(
+        angle_parameter(angle_block_name(child.name)),
+        joint.axis,
+        dcm_fixed=np.asarray(joint.R_parent_joint).T,
+    )
+
+
+def _joint_point(tree: SpacecraftTree, child) -> np.ndarray:
+    """Parent body frame origin -> the point where ``child`` is connected, parent axes [m]:
+    the joint origin, or for a spring-damper the parent's port where it acts."""
+    joint = child.joint
+    if joint.type == "bushing":
+        return np.asarray(tree.ports[joint.docking.port].p_B_D, dtype=float)
+    return np.asarray(joint.p_parent_joint, dtype=float)
+
+
+def _docking_blocks(docking) -> dict:
+    """Stiffness [N/m, N m/rad] and damping [N s/m, N m s/rad] of a docking spring-damper:
+    ureal blocks ``k_shear_<port>``, ... over their declared ranges, numbers when known."""
+    blocks = {}
+    for key, percent in (
+        ("k_shear", docking.stiffness_percent),
+        ("k_tors", docking.stiffness_percent),
+        ("d_shear", docking.damping_percent),
+        ("d_tors", docking.damping_percent),
+    ):
+        nominal = float(getattr(docking, key))
+        unit = {"k_shear": "N/m", "k_tors": "N m/rad", "d_shear": "N s/m", "d_tors": "N m s/rad"}
+        quantity = "stiffness" if key.startswith("k") else "damping"
+        blocks[key] = (
+            relative_parameter(f"{key}_{docking.port}", nominal, percent, unit=unit[key],
+                               quantity=quantity)
+            if percent > 0
+            else nominal
+        )  # fmt: skip
+    return blocks
+
+
+def _components(tree: SpacecraftTree) -> list[Component]:
+    components = []
+    root = tree.root
+    for body in tree.bodies:
+        name = body.name
+        children = [tree.body(c) for c in tree.children(name)]
+        if body.kind == "rigid":
+            offset = _origin_offset(body)
+            ports_GP = [offset + _joint_point(tree, c) for c in children]
+            child_in = [f"W_J{c.name}_{name}" for c in children]
+            child_out = [f"xdd_J{c.name}_{name}" for c in children]
+            mass, inertia = hub_parameters(body)
+            if name == root:
+                system = rigid_body_inverse(mass, inertia, ports_GP, body=name)
+                inputs = [f"W_ext_{name}"] + child_in
+                outputs = [f"xdd_G_{name}"] + child_out
+            elif body.joint.type == "bushing":
+                # a free body held by a spring-damper: inverse model, no external wrench, its
+                # first port at the target port where the spring-damper acts
+                port = tree.ports[body.joint.docking.target_port]
+                p_G_port = offset + np.asarray(port.p_B_D, dtype=float)
+                system = rigid_body_inverse(mass, inertia, [p_G_port] + ports_GP, body=name)
+                system = system[6:, 6:]
+                inputs = [f"W_J{name}_{name}"] + child_in
+                outputs = [f"xdd_J{name}_{name}"] + child_out
+            else:
+                system = rigid_body_direct(mass, inertia, ports_GP, offset, body=name)
+                inputs = child_in + [f"xdd_J{name}_{name}"]
+                outputs = child_out + [f"W_J{name}_{name}"]
+            components.append(Component(name, system, inputs, outputs))
+        else:
+            system = flexible_appendage(
+                body.rigid_spatial_inertia,
+                np.asarray(body.participation).T,  # data: one row per mode
+                body.omega,
+                body.damping_ratios,
+                uncertain_frequencies=mode_frequency_blocks(body),
+                name=name,
+            )
+            components.append(
+                Component(name, system, (f"xdd_J{name}_{name}",), (f"W_J{name}_{name}",))
+            )
+        if body.joint is not None and body.joint.type == "bushing":
+            # C = the target at its port (its axes), P = the parent at its port (parent axes)
+            blocks = _docking_blocks(body.joint.docking)
+            components.append(
+                Component(
+                    f"joint_{name}",
+                    spring_damper_between(blocks, np.asarray(body.joint.R_parent_joint).T),
+                    inputs=(f"xdd_J{name}_{name}", f"xdd_J{name}_{body.parent}"),
+                    outputs=(f"W_J{name}_{name}", f"W_J{name}_{body.parent}"),
+                )
+            )
+        elif body.joint is not None:
+            parent = body.parent
+            components.append(
+                Component(
+                    f"joint_{name}",
+                    _connection(body),
+                    inputs=(f"xdd_J{name}_{parent}", f"W_J{name}_{name}"),
+                    outputs=(f"xdd_J{name}_{name}", f"W_J{name}_{parent}"),
+                )
+            )
+    return components
+
+
+def build_tree_model(tree: SpacecraftTree, *, rotational: bool = False) -> LFR:
+    """Direct-dynamics LFR of the controlled body of ``tree`` with its appendages' modes.
+
+    Parameters
+    ----------
+    tree : SpacecraftTree
+        Validated tree (:func:`oos_drake.scenario.tree.load_tree`).
+    rotational : bool
+        Return only the 3x3 rotational part ``T -> wdot`` [N m -> rad/s^2].
+
+    Returns
+    -------
+    LFR
+        6x6 (or 3x3) with inputs ``Fx_<root> .. Tz_<root>`` and outputs
+        ``ax_<root> .. wdot_z_<root>``; ``2 sum(n_modes)`` states; blocks named from the bodies
+        (module docstring). Revolute joints are scheduled blocks ``tau_<body>`` (nominal: angle 0);
+        substitute :func:`tree_values` for the file's angles. Cached per tree object.
+
+    Examples
+    --------
+    >>> from oos_drake.lfr import usubs
+    >>> from oos_drake.scenario.tree import load_tree
+    >>> tree = load_tree("geo_satellite")
+    >>> model = build_tree_model(tree)
+    >>> sorted(n for n in model.uncertainty if n.startswith("w"))[:3]
+    ['w1_REFL_E', 'w1_REFL_W', 'w1_SA_N']
+    >>> usubs(model, tree_values(tree)).nominal.shape
+    (6, 6)
+    """
+    model = _tree_model(tree)
+    return model[3:6, 3:6] if rotational else model
+
+
+@functools.lru_cache(maxsize=8)
+def _tree_model(tree: SpacecraftTree) -> LFR:
+    """One assembly per tree object (trees and LFRs are immutable)."""
+    root = tree.root
+    model = assemble(_components(tree), inputs=[f"W_ext_{root}"], outputs=[f"xdd_G_{root}"])
+    return model.with_names(
+        inputs=[f"{n}_{root}" for n in _INPUTS], outputs=[f"{n}_{root}" for n in _OUTPUTS]
+    )
+
+
+def tree_values(tree: SpacecraftTree, angles: dict[str, float] | None = None) -> dict:
+    """Values of the scheduled blocks ``tau_<body> = tan(angle/4)``.
+
+    Parameters
+    ----------
+    tree : SpacecraftTree
+        The tree.
+    angles : dict {body: angle [rad]}, optional
+        Joint angles overriding the file's operating angles.
+
+    Returns
+    -------
+    dict
+        Block name -> value, for :func:`oos_drake.lfr.usubs`.
+    """
+    chosen = tree.joint_angles(angles)
+    return {angle_block_name(name): float(angle_to_tau(a)) for name, a in chosen.items()}
+
+
+def tree_blocks(tree: SpacecraftTree) -> dict:
+    """The tree's uncertain physical blocks (masses, inertias, mode frequencies) by name."""
+    model = build_tree_model(tree)
+    scheduled = {angle_block_name(n) for n in tree.revolute_bodies}
+    return {n: b for n, b in sorted(model.uncertainty.items()) if n not in scheduled}
+
+
+def rigid_inertia_at_root(tree: SpacecraftTree, angles: dict[str, float] | None = None):
+    """Rigid spatial inertia (6x6) of the whole tree at the root's centre of mass, root axes.
+
+    A closed form independent of the LFR algebra (every body frozen, flexible ones at their rigid
+    ``D_P``): the LFR's static gain is its inverse.
+    """
+    from oos_drake.titop.spatial import kinematic_matrix, rigid_spatial_inertia
+
+    poses = body_poses(tree, angles)
+    total = np.zeros((6, 6))
+    for body in tree.bodies:
+        R, p = poses[body.name]
+        if body.kind == "rigid":
+            d_local = rigid_spatial_inertia(body.mass, body.inertia, body.p_B_G)
+        else:
+            d_local = body.rigid_spatial_inertia
+        T = np.kron(np.eye(2), R)
+        d_rootaxes = T @ d_local @ T.T  # at the body origin, root axes
+        tau = kinematic_matrix(-p)  # tau_{Bo G}: xdd_Bo = tau xdd_G for a rigid motion
+        total += tau.T @ d_rootaxes @ tau
+    return total
