@@ -530,6 +530,8 @@ def improve_destabilizing(
     Destabilizing or None
         Only when certified and strictly better than ``lower``.
     """
+    if np.shape(A)[0] == 0:  # a static LFR has no pole to move: nothing beyond the sweep
+        return None
     rng = np.random.default_rng(0) if rng is None else rng
     kinds = {b.kind for b in structure.blocks}
     found = None
