@@ -52,7 +52,7 @@ def test_drake_lfr_equals_titop_lfr(titop, index):
     case = cases(scenario)[index]
     springs = {k: v for k, v in case.values.items() if k.split("_")[0] in ("k", "d")}
     declared = mission_parameters(scenario) + spring_damper_parameters(springs)
-    drake = twin_lfr(case.point, declared)
+    drake = twin_lfr(scenario, case.point, declared)
     configuration = {k: v for k, v in case.values.items() if k not in springs}
     reference = usubs(models[case.model], configuration)
     # repetitions: the TITOP counts (delta_m I3, one per inertia moment, w I2 per array,
