@@ -24,6 +24,7 @@ import hashlib
 import json
 import re
 import tempfile
+import weakref
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -282,6 +283,9 @@ def _stale(directory: Path, texts: Mapping[str, str]) -> list[str]:
 #: SDF folders generated in this process, by the SHA-256 of their texts (one folder per
 #: distinct scenario twin, kept until the process ends: the diagram caches key on the folder).
 _GENERATED: dict[str, tempfile.TemporaryDirectory] = {}
+#: ``scenario_sdf_directory`` per scenario object (generating and comparing the texts takes
+#: ~0.1 s; a scenario is immutable, so its answer is too).
+_BY_SCENARIO: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def scenario_sdf_directory(scenario) -> tuple[Path, object]:
@@ -305,13 +309,19 @@ def scenario_sdf_directory(scenario) -> tuple[Path, object]:
         The generated folder's owner (None: the package's folder); the folder lives as long as
         the process.
     """
+    known = _BY_SCENARIO.get(scenario)
+    if known is not None:
+        return known
     texts = generate_sdf_texts(scenario)
     if not _stale(Path(SDF_DIRECTORY), texts):
-        return Path(SDF_DIRECTORY), None
-    key = hashlib.sha256(json.dumps(texts, sort_keys=True).encode()).hexdigest()
-    keeper = _GENERATED.get(key)
-    if keeper is None:
-        keeper = tempfile.TemporaryDirectory(prefix="oos-sdf-")
-        _write_texts(Path(keeper.name), texts)
-        _GENERATED[key] = keeper
-    return Path(keeper.name), keeper
+        found = Path(SDF_DIRECTORY), None
+    else:
+        key = hashlib.sha256(json.dumps(texts, sort_keys=True).encode()).hexdigest()
+        keeper = _GENERATED.get(key)
+        if keeper is None:
+            keeper = tempfile.TemporaryDirectory(prefix="oos-sdf-")
+            _write_texts(Path(keeper.name), texts)
+            _GENERATED[key] = keeper
+        found = Path(keeper.name), keeper
+    _BY_SCENARIO[scenario] = found
+    return found
