@@ -7,6 +7,7 @@ scenario's flight-software rate.
 
 import math
 
+import numpy as np
 import pytest
 
 from oos_drake.analysis.confirm import CONFIRM_LOG_RATE_HZ, ConfirmOptions, confirm_mission_options
@@ -84,3 +85,28 @@ def test_mission_diagram_logs_at_a_divisor_of_a_7_hz_flight_software(paper_scena
     handles = make_mission_diagram(scenario=scenario)
     assert handles.options.control_rate == 7.0 and handles.options.log_rate == 1.0
     assert handles.flight_software.design.period == pytest.approx(1 / 7.0, rel=1e-12)
+
+
+@pytest.mark.drake
+def test_confirmation_twin_runs_the_users_5_hz_scenario():
+    """What stopped ``oos run`` on a 5 Hz scenario: the confirmation's twin (its options, its
+    own SDF files, the 5 Hz flight software) built and run on a frozen window; the log is
+    sampled every flight-software period (0.2 s)."""
+    from pathlib import Path
+
+    from oos_drake.multibody.mission import make_mission_diagram
+    from oos_drake.multibody.mission_sim import MissionSimulation
+    from oos_drake.scenario.timeline import mission_timeline
+
+    scenario = load_scenario(Path(__file__).parents[1] / "data" / "user_chaser.toml")
+    assert scenario.control.flight_software_rate_hz == 5.0
+    options = confirm_mission_options(scenario, ConfirmOptions())
+    handles = make_mission_diagram(
+        options, scenario=scenario, timeline=mission_timeline(scenario).frozen(400.0)
+    )
+    assert handles.flight_software.design.period == pytest.approx(0.2, rel=1e-12)
+    result = MissionSimulation(handles).run({}, seed=1, start=400.0, end=404.0)
+    times = result.timeseries["time [s]"].to_numpy()
+    np.testing.assert_allclose(np.diff(times), 0.2, rtol=1e-9)
+    assert times[0] == pytest.approx(400.0) and times[-1] == pytest.approx(404.0)
+    assert np.all(np.isfinite(result.timeseries[[f"phi_{a} [rad]" for a in "xyz"]].to_numpy()))
