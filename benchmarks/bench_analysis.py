@@ -53,9 +53,12 @@ def main() -> None:
     from oos_drake.blas import limit_blas_threads
 
     limit_blas_threads(1)
-    controller = scenario_controller(args.controller)
-    times = mission_times(330)[args.first : args.first + args.models]
-    arr = mission_closed_loop(controller, times).system
+    from oos_drake.scenario.data import load_scenario
+
+    scenario = load_scenario("paper")
+    controller = scenario_controller(args.controller, scenario)
+    times = mission_times(330, scenario)[args.first : args.first + args.models]
+    arr = mission_closed_loop(controller, times, scenario).system
     named = uncertainty_subsets(arr.uncertainty)
     total = {k: named[k] for k in args.subsets.split(",") if k}
     omega = 2 * np.pi * np.geomspace(0.005, 5.0, 37)

@@ -83,8 +83,11 @@ def mission(first, last, subset, controller, level=None, ranges=(2, 4, 8)):
     from oos_drake.robust.sweep import model_grid
 
     limit_blas_threads(1)
-    times = mission_times(330)[first:last]
-    system = mission_closed_loop(scenario_controller(controller), times).system
+    from oos_drake.scenario.data import load_scenario
+
+    scenario = load_scenario("paper")
+    times = mission_times(330, scenario)[first:last]
+    system = mission_closed_loop(scenario_controller(controller, scenario), times, scenario).system
     members = uncertainty_subsets(system.uncertainty)[subset]
     grid = AnalysisOptions().grid()
     problems, lower = [], 0.0

@@ -42,8 +42,15 @@ import numpy as np
 import pandas as pd
 
 from oos_drake.blas import limit_blas_threads
-from oos_drake.multibody.mission import MissionOptions
+from oos_drake.multibody.mission import MissionOptions, make_mission_diagram
 from oos_drake.multibody.mission_sim import MissionSimulation
+from oos_drake.scenario.data import load_scenario
+
+
+def _simulation(options: MissionOptions) -> MissionSimulation:
+    """The paper's mission with ``options``."""
+    return MissionSimulation(make_mission_diagram(options, scenario=load_scenario("paper")))
+
 
 # bench_campaign (part 4) is a sibling script; its pool workers import it by name
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -166,7 +173,7 @@ def integrators(start: float = 100.0, end: float = 102.0) -> list[dict]:
     """Radau3 against RK3 on the same window."""
     rows = []
     for name in ("radau3", "runge_kutta3"):
-        simulation = MissionSimulation(MissionOptions(integrator=name))
+        simulation = _simulation(MissionOptions(integrator=name))
         result = simulation.run({}, seed=1, start=start, end=end, log=False)
         mode = "fixed steps" if simulation.options.fixed_step else "error control"
         rows.append(_row(f"window {start:g}-{end:g} s, {name}, {mode}", end - start, result))
@@ -192,7 +199,7 @@ def accuracy_study(windows=((400.0, 440.0), (250.0, 275.0), (870.0, 900.0))) -> 
     for start, end in windows:
 
         def attitude(start=start, end=end, **options):
-            simulation = MissionSimulation(MissionOptions(log_rate=10.0, **options))
+            simulation = _simulation(MissionOptions(log_rate=10.0, **options))
             result = simulation.run({}, seed=1, start=start, end=end)
             phi = result.timeseries[[f"phi_{a} [rad]" for a in "xyz"]].to_numpy()
             return result, phi
@@ -223,7 +230,7 @@ def window_start_study(events=(("capture", 255.0), ("pull-in", 600.0)), leads=(2
     Prints, per event and lead time, the APE over ``[t, t + 60]`` s from both runs, the largest
     attitude difference and the hub rate the whole-mission run has at the window start.
     """
-    simulation = MissionSimulation(MissionOptions())
+    simulation = _simulation(MissionOptions())
     axes = "xyz"
 
     def run(start: float, end: float) -> pd.DataFrame:
@@ -280,7 +287,7 @@ def main() -> None:
     if not args.only_parallel:
         rows = []
         if not args.skip_full or args.profile:
-            simulation = MissionSimulation(MissionOptions())
+            simulation = _simulation(MissionOptions())
             row, result = full_mission(simulation)
             rows.append(row)
         rows += integrators()

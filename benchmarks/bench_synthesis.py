@@ -69,7 +69,9 @@ def main(argv=None):
     args = parser.parse_args(argv)
 
     w, c = time.perf_counter(), time.process_time()
-    plants = make_plants(args.plant, args.models)
+    from oos_drake.scenario.data import load_scenario
+
+    plants = make_plants(args.plant, args.models, load_scenario("paper"))
     build_wall, build_cpu = time.perf_counter() - w, time.process_time() - c
     K0 = baseline_for(plants)
     nominal = plants.nominal()

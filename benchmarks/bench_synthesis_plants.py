@@ -35,8 +35,11 @@ def main(argv=None) -> int:
     from oos_drake.multibody.synthesis_plants import DrakePlantSource, _pad, rotational_plant
 
     n = 9  # the array: free target, arm-held, docked, tilted arrays among them
-    source = DrakePlantSource(mission_times(n))
-    drake, titop = source.plant_array(), scenario_plants(n)
+    from oos_drake.scenario.data import load_scenario
+
+    scenario = load_scenario("paper")
+    source = DrakePlantSource(mission_times(n, scenario), scenario)
+    drake, titop = source.plant_array(), scenario_plants(n, scenario)
     configs = np.linspace(0, n - 1, args.configurations).round().astype(int)
     lower, upper = drake.bounds
     rng = np.random.default_rng(0)
@@ -48,7 +51,7 @@ def main(argv=None) -> int:
     wall = time.perf_counter()
     relinearized = [
         _pad(
-            *rotational_plant(source.configurations[i], dict(zip(names, v, strict=True))),
+            *rotational_plant(source.configurations[i], scenario, dict(zip(names, v, strict=True))),
             source.order,
         )
         for i, v in zip(index, flat, strict=True)

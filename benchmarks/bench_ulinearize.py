@@ -42,7 +42,7 @@ def main():
         springs = {k: v for k, v in case.values.items() if k.split("_")[0] in ("k", "d")}
         declared = mission_parameters(scenario) + spring_damper_parameters(springs)
         wall = time.perf_counter()
-        drake = twin_lfr(case.point, declared)
+        drake = twin_lfr(scenario, case.point, declared)
         drake_s = time.perf_counter() - wall
         wall = time.perf_counter()
         configuration = {k: v for k, v in case.values.items() if k not in springs}

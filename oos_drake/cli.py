@@ -77,8 +77,8 @@ def add_loop_arguments(parser) -> None:
     parser.add_argument(
         "--sampled",
         action="store_true",
-        help="model the flight software's sample-and-hold (rate: DesignSpecification."
-        "flight_software_rate_hz, 10 Hz) as a rational approximation inside the loop "
+        help="model the flight software's sample-and-hold (rate: the scenario's [control] "
+        "flight_software_rate_hz) as a rational approximation inside the loop "
         "(default: the continuous loop)",
     )
     parser.add_argument(

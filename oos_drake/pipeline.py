@@ -256,26 +256,16 @@ def run_pipeline(args: argparse.Namespace) -> int:
 
 
 def _validate(folder: Path, scenario: Path) -> None:
-    """``oos validate`` with its table saved next to the other results.
-
-    The Drake twin is parsed from SDF files: the package's (generated from the paper's scenario)
-    when they match ``scenario``, otherwise files generated from ``scenario`` into
-    ``folder/sdf`` (``oos sdf generate``), so the twin always follows the scenario file.
-    """
+    """``oos validate`` with its table saved next to the other results (the Drake twin is the
+    scenario's own: :func:`oos_drake.multibody.scenario_sdf.scenario_sdf_directory`)."""
     import contextlib
     import io
 
     from oos_drake.cli import main
-    from oos_drake.multibody.scenario_sdf import SDF_DIRECTORY, stale_sdf_files
-    from oos_drake.scenario.data import load_scenario
 
-    sdf = SDF_DIRECTORY
-    if stale_sdf_files(SDF_DIRECTORY, load_scenario(scenario)):
-        sdf = folder / "sdf"
-        _oos("sdf", "generate", "--scenario", scenario, "--out", sdf)
     buffer = io.StringIO()
     with contextlib.redirect_stdout(buffer):
-        status = main(["validate", "--scenario", str(scenario), "--sdf-dir", str(sdf)])
+        status = main(["validate", "--scenario", str(scenario)])
     (folder / "validate.txt").write_text(buffer.getvalue())
     print(buffer.getvalue())
     if status:

@@ -41,3 +41,12 @@ try:
         hypothesis.settings.load_profile("ci")
 except ImportError:  # pragma: no cover
     pass
+
+
+@pytest.fixture(scope="session")
+def paper_scenario():
+    """The paper's scenario (``oos_drake/scenario/data/paper.toml``), passed explicitly: library
+    functions take the scenario as a required argument (issue 34 item 3)."""
+    from oos_drake.scenario.data import load_scenario
+
+    return load_scenario("paper")

@@ -253,23 +253,23 @@ def test_control_and_robust_cli_and_the_oos_parser_do_not_load_pydrake():
 
 # ---------------------------------------------------------------- D12: scheduled, not analyzed
 @pytest.fixture(scope="module")
-def controller():
+def controller(paper_scenario):
     from oos_drake.analysis.controller import scenario_controller
 
-    return scenario_controller(None)
+    return scenario_controller(None, paper_scenario)
 
 
 def _remaining(system) -> set[str]:
     return set(system.uncertainty)
 
 
-def test_mission_closed_loop_keeps_no_scheduled_block(controller):
+def test_mission_closed_loop_keeps_no_scheduled_block(controller, paper_scenario):
     from oos_drake.analysis.models import mission_closed_loop
     from oos_drake.scenario.model import build_mission_model
 
-    open_loop = set(build_mission_model().uncertainty)
+    open_loop = set(build_mission_model(paper_scenario).uncertainty)
     assert {n for n in open_loop if SCHEDULED.match(n)}  # the model does schedule them
-    loop = mission_closed_loop(controller, [0.0, 700.0])
+    loop = mission_closed_loop(controller, [0.0, 700.0], paper_scenario)
     names = _remaining(loop.system)
     assert loop.system.batch_shape == (2,)
     assert not {n for n in names if SCHEDULED.match(n)}
@@ -278,13 +278,13 @@ def test_mission_closed_loop_keeps_no_scheduled_block(controller):
 
 
 @pytest.mark.parametrize("phase", ["7", "8"])
-def test_docking_closed_loops_keep_no_scheduled_or_swept_block(controller, phase):
+def test_docking_closed_loops_keep_no_scheduled_or_swept_block(controller, phase, paper_scenario):
     from oos_drake.analysis.models import docking_closed_loop
     from oos_drake.scenario.model import build_docking_model
 
-    open_loop = set(build_docking_model(phase).uncertainty)
+    open_loop = set(build_docking_model(phase, paper_scenario).uncertainty)
     assert {n for n in open_loop if SCHEDULED.match(n)}
-    loop = docking_closed_loop(controller, phase, [1.0, 1e3])
+    loop = docking_closed_loop(controller, phase, [1.0, 1e3], scenario=paper_scenario)
     names = _remaining(loop.system)
     assert loop.system.batch_shape == (2,)
     assert not {n for n in names if SCHEDULED.match(n)}
@@ -316,7 +316,7 @@ def test_readme_snippet_substitutes_the_schedule_and_keeps_delta_real(capsys):
     assert array.occurrences == {n: model.occurrences[n] for n in DELTA_REAL}
     # one model of the vectorized call is the model substituted alone at its time
     for k in (0, 217, 329):
-        alone = usubs(model, mission_values(times[k : k + 1])).model(0)
+        alone = usubs(model, mission_values(times[k : k + 1], namespace["scenario"])).model(0)
         np.testing.assert_allclose(array.model(k).M, alone.M, rtol=1e-12, atol=1e-12)
 
 

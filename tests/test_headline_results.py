@@ -37,10 +37,13 @@ from oos_drake.analysis.controller import load_controller
 from oos_drake.analysis.models import docking_closed_loop, mission_closed_loop
 from oos_drake.cli import main
 from oos_drake.lfr import usubs
+from oos_drake.scenario.data import load_scenario
 
 pytestmark = pytest.mark.slow
 
 TARGET_GAP = 0.03
+#: ``make run``'s scenario (``oos run`` without ``--scenario``).
+PAPER = load_scenario("paper")
 
 
 @pytest.fixture(scope="module")
@@ -95,10 +98,10 @@ def _interpolant(value: np.ndarray, omega: float) -> control.StateSpace:
 
 def _model(controller, row: pd.Series):
     if row["study"] == "mission":
-        return mission_closed_loop(controller, [row["time [s]"]]).system.model(0)
+        return mission_closed_loop(controller, [row["time [s]"]], PAPER).system.model(0)
     phase = row["study"].removeprefix("docking-")
     stiffness = row["stiffness [N/m or N m/rad]"]
-    return docking_closed_loop(controller, phase, [stiffness]).system.model(0)
+    return docking_closed_loop(controller, phase, [stiffness], scenario=PAPER).system.model(0)
 
 
 def _peaks(default_run):
@@ -238,7 +241,7 @@ def test_target_array_modes_alone_reach_only_the_static_limit(default_run):
 
     controller = load_controller(default_run / "controller" / "controller.json")
     times = np.linspace(256.0, 860.0, 8)
-    system = mission_closed_loop(controller, times).system
+    system = mission_closed_loop(controller, times, PAPER).system
     ranges = {
         name: spec.range for name, spec in system.uncertainty.items() if name.startswith("w1_SA")
     }

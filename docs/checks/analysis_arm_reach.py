@@ -27,10 +27,14 @@ from oos_drake.scenario.timeline import Configuration, mission_timeline
 
 T_CHECK = 300.0  # [s] after the first docking: the arm holds the target
 omega = 2 * np.pi * np.geomspace(0.05, 5.0, 40)
-ctl = scenario_controller(None) if sys.argv[1] == "baseline" else load_controller(sys.argv[1])
-scenario = load_scenario()
-model = build_mission_model()
-nominal = mission_timeline().configuration(T_CHECK)
+scenario = load_scenario("paper")
+ctl = (
+    scenario_controller(None, scenario)
+    if sys.argv[1] == "baseline"
+    else load_controller(sys.argv[1])
+)
+model = build_mission_model(scenario)
+nominal = mission_timeline(scenario).configuration(T_CHECK)
 poses_deg = {
     "as modeled (t = 300 s)": np.degrees(nominal.alpha),
     "stretched arm (0,-90,0,0,90,0)": [0, -90, 0, 0, 90, 0],

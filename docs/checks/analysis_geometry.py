@@ -15,21 +15,23 @@ from oos_drake.analysis.stability import SweepOptions, certified_sweep
 from oos_drake.analysis.subsets import uncertainty_subsets
 from oos_drake.control.analysis_model import close_loop
 from oos_drake.lfr import usubs
+from oos_drake.scenario.data import load_scenario
 from oos_drake.scenario.model import build_mission_model, mission_values
 from oos_drake.titop.spatial import angle_to_tau
 
 times = np.linspace(256.0, 300.0, 12)
 omega = 2 * np.pi * np.geomspace(0.05, 5.0, 25)
-model = build_mission_model()
+scenario = load_scenario("paper")
+model = build_mission_model(scenario)
 cases = []
 synth = load_controller(sys.argv[1])
 for label, angle, ctl in [
     ("as modeled (target arrays theta3,4 = 0), synthesized K", 0.0, synth),
     ("target arrays turned 45 deg about their mount axis", np.pi / 4, synth),
     ("target arrays turned 90 deg about their mount axis", np.pi / 2, synth),
-    ("as modeled, BASELINE PD", 0.0, scenario_controller(None)),
+    ("as modeled, BASELINE PD", 0.0, scenario_controller(None, scenario)),
 ]:
-    values = mission_values(times)
+    values = mission_values(times, scenario)
     values["tau_theta3"] = np.full(times.size, angle_to_tau(angle))
     values["tau_theta4"] = np.full(times.size, angle_to_tau(-angle))
     plant = usubs(model, values)

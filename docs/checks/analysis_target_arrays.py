@@ -13,15 +13,17 @@ from oos_drake.analysis.controller import load_controller
 from oos_drake.analysis.stability import SweepOptions, certified_sweep
 from oos_drake.control.analysis_model import close_loop
 from oos_drake.lfr import usubs
+from oos_drake.scenario.data import load_scenario
 from oos_drake.scenario.model import build_mission_model, mission_values
 from oos_drake.titop.spatial import angle_to_tau
 
 times = np.linspace(256.0, 860.0, 8)
 omega = 2 * np.pi * np.geomspace(0.05, 5.0, 25)
 ctl = load_controller(sys.argv[1])
-model = build_mission_model()
+scenario = load_scenario("paper")
+model = build_mission_model(scenario)
 for angle in (0.0, np.pi / 2):
-    values = mission_values(times)
+    values = mission_values(times, scenario)
     values["tau_theta3"] = np.full(times.size, angle_to_tau(angle))
     values["tau_theta4"] = np.full(times.size, angle_to_tau(-angle))
     sysm = close_loop(usubs(model, values), ctl.K, ctl.spec)

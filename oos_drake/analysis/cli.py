@@ -270,7 +270,7 @@ def _analysis_scenario(record, analysis, given) -> str | None:
 
 
 def _confirm_controller(args):
-    """``(controller, scenario file)`` of an analysis: the controller of ``--controller``, else
+    """``(controller, scenario)`` of an analysis: the controller of ``--controller``, else
     the one the analysis recorded (its gains must be the analysis', ``summary.json``), and the
     scenario the analysis ran on (:func:`_analysis_scenario`)."""
     import numpy as np
@@ -287,7 +287,8 @@ def _confirm_controller(args):
             raise ValueError(
                 f"--analysis {args.analysis}: its controller {path} is gone; pass --controller"
             )
-    controller = scenario_controller(path, load_scenario(scenario))
+    scenario = load_scenario(scenario)
+    controller = scenario_controller(path, scenario)
     K = np.asarray(recorded.get("K", controller.K), dtype=float)
     if K.shape != controller.K.shape or not np.allclose(K, controller.K, rtol=1e-9, atol=0):
         raise ValueError(
@@ -318,7 +319,8 @@ def run_confirm(args) -> int:
         table, histories = confirm_peaks(
             peaks,
             controller,
-            ConfirmOptions(scenario=scenario),
+            scenario,
+            ConfirmOptions(),
             workers=args.workers,
             scheduler=args.scheduler,
             quiet=args.quiet,
@@ -337,7 +339,7 @@ def run_confirm(args) -> int:
         return table
 
     table = atomic_folder(out, work, marker=CONFIRMATION_FILE, what="a confirmation")
-    print(f"scenario: {scenario}")
+    print(f"scenario: {scenario.name} ({scenario.source})")
     print(f"controller: {controller.label} ({controller.source})")
     print(
         f"{'study':>10s} {'subset':>14s} {'f crit':>8s} {'a cont':>7s} {'a samp':>7s} "

@@ -88,6 +88,10 @@ HISTORIES_FILE = "confirmation_histories.parquet"
 #: Agreement asked of a confirmation: boundary and frequency within 3 % (issue 17).
 AGREEMENT = 0.03
 AXES = ("x", "y", "z")
+#: Wanted logging rate of a confirmation run [Hz]: the rate used is the fastest one at most
+#: this that divides the scenario's flight-software rate (``multibody.mission.logging_rate``:
+#: 10 Hz at the paper's 10 Hz, 5 Hz at 5 Hz, 10 Hz at 100 Hz).
+CONFIRM_LOG_RATE_HZ = 10.0
 #: Growth rate below which a linear loop counts as stable [1/s]: the plants' structurally
 #: marginal rigid-body modes (translations of the free system, not seen by the attitude loop)
 #: come out of the eigenvalue solver at +-1e-6; a time constant of 1e5 s is no instability
@@ -119,9 +123,6 @@ class ConfirmOptions:
         Half-width of the first bracket around the sampled-data prediction [-] (relative).
     alpha_limit : float
         Largest ``alpha`` searched [-].
-    scenario : str, optional
-        Scenario file of the analysis (None: the paper's); the twin, its flight software and
-        the linear models are built from it.
     """
 
     duration: float = 45.0
@@ -131,7 +132,6 @@ class ConfirmOptions:
     max_step: float = 0.05
     bracket: float = 0.03
     alpha_limit: float = 4.0
-    scenario: str | None = None
 
     def __post_init__(self):
         for name in ("duration", "settle", "initial_attitude", "rtol", "max_step", "bracket"):
@@ -467,6 +467,26 @@ def _mission_window(sim, t_peak: float, duration: float) -> float:
     return start
 
 
+def confirm_mission_options(scenario, options: ConfirmOptions):
+    """The twin's mission options of a confirmation run: the scenario's flight software (rate
+    and torque bound), ``options.max_step``, logging at the fastest rate at most
+    :data:`CONFIRM_LOG_RATE_HZ` that divides the flight-software rate (any rate works).
+
+    Returns
+    -------
+    oos_drake.multibody.mission.MissionOptions
+    """
+    from oos_drake.multibody.mission import MissionOptions, logging_rate
+
+    control_rate = scenario.control.flight_software_rate_hz
+    return MissionOptions(
+        log_rate=logging_rate(control_rate, CONFIRM_LOG_RATE_HZ),
+        max_step=options.max_step,
+        control_rate=control_rate,
+        torque_limit=scenario.control.torque_limit,
+    )
+
+
 class _Twin:
     """One frozen Drake mission (built once per peak) and runs along the peak's ray.
 
@@ -488,17 +508,12 @@ class _Twin:
         design,
     ):
         from oos_drake.multibody.flight_software import perturbation_block
-        from oos_drake.multibody.mission import MissionOptions, make_mission_diagram
+        from oos_drake.multibody.mission import make_mission_diagram
         from oos_drake.multibody.mission_sim import MissionSimulation
         from oos_drake.multibody.scenario_sdf import scenario_sdf_directory
         from oos_drake.scenario.timeline import mission_timeline
 
-        mission_options = MissionOptions(
-            log_rate=10.0,
-            max_step=options.max_step,
-            control_rate=scenario.control.flight_software_rate_hz,
-            torque_limit=scenario.control.torque_limit,
-        )
+        mission_options = confirm_mission_options(scenario, options)
         self.peak, self.specs = peak, specs
         self.direction = {n: v for n, v in peak.perturbation.items() if specs[n].kind == "ureal"}
         self.complex = complex_values(peak)
@@ -645,8 +660,17 @@ def _target_body(scenario) -> BodyInertia:
     return BodyInertia(("Jxx_RH2", "Jyy_RH2", "Jzz_RH2"), np.asarray(hub.inertia, dtype=float))
 
 
-def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
+def confirm_peak(peak: Peak, controller, scenario, options: ConfirmOptions):
     """Linear predictions, physical limit and nonlinear boundary of one peak.
+
+    Parameters
+    ----------
+    peak : Peak
+    controller : Controller
+    scenario : Scenario
+        The analysis' scenario: the twin, its flight software and the linear models are built
+        from it.
+    options : ConfirmOptions
 
     Returns
     -------
@@ -660,9 +684,7 @@ def confirm_peak(peak: Peak, controller, options: ConfirmOptions):
         FlightSoftwareDesign,
         perturbation_block,
     )
-    from oos_drake.scenario.data import load_scenario
 
-    scenario = load_scenario(options.scenario)
     closed, plant_hat = _peak_models(peak, controller, scenario)
     specs = closed.uncertainty
     direction = {n: v for n, v in peak.perturbation.items() if specs[n].kind == "ureal"}
@@ -846,9 +868,10 @@ def _confirm_task(args):
 
 
 def confirm_peaks(
-    peaks, controller, options: ConfirmOptions, *, workers=1, scheduler=None, quiet=False
+    peaks, controller, scenario, options: ConfirmOptions, *, workers=1, scheduler=None, quiet=False
 ):
-    """:func:`confirm_peak` for every peak on ``workers`` processes.
+    """:func:`confirm_peak` for every peak on ``workers`` processes (the scenario is sent to
+    them as itself: it pickles).
 
     ``scheduler``: where they run (:func:`oos_drake.processes.make_executor`; the local pool's
     workers are spawned, not forked: Drake's threads do not survive a fork).
@@ -864,7 +887,7 @@ def confirm_peaks(
 
     from oos_drake.processes import make_executor
 
-    tasks = [(peak, controller, options) for peak in peaks]
+    tasks = [(peak, controller, scenario, options) for peak in peaks]
     with make_executor(max(1, min(workers, len(tasks))), scheduler, method="spawn") as executor:
         futures = [executor.submit(_confirm_task, task) for task in tasks]
         for future in tqdm(

@@ -134,20 +134,17 @@ def baseline_controller(plant_rotational, spec: DesignSpecification | None = Non
     )
 
 
-def scenario_controller(path, scenario=None) -> Controller:
+def scenario_controller(path, scenario) -> Controller:
     """The controller to analyze on ``scenario``, with the scenario's ``[control]`` design data.
 
     ``path``: a ``controller.json`` of ``oos synth``, or None for the BASELINE PD tuned on the
-    scenario at its first docking; ``scenario``: a loaded scenario (default: the paper's).
+    scenario at its first docking; ``scenario``: a loaded scenario.
     The sensors, actuators and weights of the analysis are the scenario's (they belong to the
     spacecraft and its requirements); a controller tuned with other design data is analyzed
     with the scenario's, and a warning says so.
     """
     import dataclasses
 
-    from oos_drake.scenario.data import load_scenario
-
-    scenario = scenario or load_scenario()
     spec = DesignSpecification.from_requirements(scenario.control)
     if path:
         controller = load_controller(path)

@@ -75,7 +75,7 @@ def _rows(result, time_s: float, loop: str) -> list[dict]:
     return rows
 
 
-def nominal_plants(times, scenario=None):
+def nominal_plants(times, scenario):
     """Nominal rotational plants ``T -> wdot`` at mission ``times`` [s] (a BatchedStateSpace)."""
     from oos_drake.analysis.models import mission_plants
     from oos_drake.control.analysis_model import rotational_channels
@@ -88,7 +88,7 @@ def nominal_plants(times, scenario=None):
 
 
 def mission_margins(
-    controller: Controller, times, scenario=None, *, progress: bool = False
+    controller: Controller, times, scenario, *, progress: bool = False
 ) -> pd.DataFrame:
     """Margins of the three loops (:data:`LOOPS`) at each mission time.
 
@@ -99,7 +99,7 @@ def mission_margins(
         ``computation_delay_s`` define the sampled loops; its ``sampled`` flag is ignored).
     times : array_like
         Mission times [s].
-    scenario : Scenario, optional
+    scenario : Scenario
     progress : bool
         tqdm progress bar.
 
@@ -137,7 +137,7 @@ def mission_margins(
 
 
 def ray_boundaries(
-    controller: Controller, perturbations: dict, scenario=None, *, scale_max: float = 6.0
+    controller: Controller, perturbations: dict, scenario, *, scale_max: float = 6.0
 ) -> pd.DataFrame:
     """Stability boundary along rays of real-parameter perturbations, three loops compared.
 
@@ -163,10 +163,8 @@ def ray_boundaries(
     """
     from oos_drake.control.analysis_model import rotational_channels
     from oos_drake.lfr import usubs
-    from oos_drake.scenario.data import default_scenario
     from oos_drake.scenario.model import build_mission_model, mission_values
 
-    scenario = default_scenario(scenario)
     model = build_mission_model(scenario)
     spec_c = dataclasses.replace(controller.spec, sampled=False)
     spec_s = dataclasses.replace(controller.spec, sampled=True)
@@ -203,7 +201,7 @@ def ray_boundaries(
     return pd.DataFrame(rows)
 
 
-def analysis_rays(analysis_dir, scenario=None) -> dict:
+def analysis_rays(analysis_dir, scenario) -> dict:
     """Rays of the mission's worst real-parameter perturbations of an ``oos analyze`` folder.
 
     Reads its certified peaks (:func:`~oos_drake.analysis.confirm.read_peaks`: normalized

@@ -17,7 +17,6 @@ from oos_drake.analysis.controller import Controller
 from oos_drake.control.analysis_model import close_loop
 from oos_drake.control.plants import mission_times  # noqa: F401  (the synthesis's mission grid)
 from oos_drake.lfr import LFR, usubs
-from oos_drake.scenario.data import default_scenario
 
 
 @dataclass(frozen=True)
@@ -51,7 +50,7 @@ def _check_source(source: str) -> None:
 PLANT_SOURCES = ("lfr", "drake")
 
 
-def mission_plants(times, scenario=None, *, source: str = "lfr", executor=None) -> LFR:
+def mission_plants(times, scenario, *, source: str = "lfr", executor=None) -> LFR:
     """The uncertain 6x6 plants ``[F; T] at G1 -> [a; wdot]`` at mission ``times`` [s].
 
     A model array ``(N,)`` whose blocks are ``Delta_real``: the TITOP LFR with the configuration
@@ -62,7 +61,6 @@ def mission_plants(times, scenario=None, *, source: str = "lfr", executor=None) 
     from oos_drake.scenario.model import build_mission_model, mission_values
 
     _check_source(source)
-    scenario = default_scenario(scenario)
     times = np.atleast_1d(np.asarray(times, dtype=float))
     if source == "drake":
         from oos_drake.multibody.mission_lfr import twin_mission_plants
@@ -72,7 +70,7 @@ def mission_plants(times, scenario=None, *, source: str = "lfr", executor=None) 
 
 
 def mission_closed_loop(
-    controller: Controller, times, scenario=None, *, source: str = "lfr", executor=None
+    controller: Controller, times, scenario, *, source: str = "lfr", executor=None
 ) -> ModelArray:
     """``M_hat_N``: the uncertain closed loop at mission ``times`` [s] (plants of
     :func:`mission_plants` from ``source``, extracted on ``executor``)."""
@@ -82,18 +80,18 @@ def mission_closed_loop(
     return ModelArray(system, times, "time [s]", "mission")
 
 
-def phase_configuration(phase: str, scenario=None):
+def phase_configuration(phase: str, scenario):
     """Named configuration of docking phase ``"7"`` or ``"8"`` (timeline)."""
     from oos_drake.scenario.timeline import mission_timeline
 
-    phases = mission_timeline(default_scenario(scenario)).docking_phases
+    phases = mission_timeline(scenario).docking_phases
     if str(phase) not in phases:
         raise ValueError(f"docking phase must be one of {sorted(phases)}, got {phase!r}")
     return phases[str(phase)]
 
 
 def docking_closed_loop(
-    controller: Controller, phase: str, stiffness, *, damping=None, scenario=None, source="lfr"
+    controller: Controller, phase: str, stiffness, *, scenario, damping=None, source="lfr"
 ) -> ModelArray:
     """Uncertain closed loop of docking phase 7 or 8 for each swept stiffness (plants of
     :func:`docking_plant`, same parameters)."""
@@ -103,7 +101,7 @@ def docking_closed_loop(
     return ModelArray(system, stiffness, "stiffness [N/m or N m/rad]", f"docking-{phase}")
 
 
-def docking_springs(phase: str, stiffness, *, damping=None, scenario=None) -> dict:
+def docking_springs(phase: str, stiffness, *, scenario, damping=None) -> dict:
     """Spring-dampers of docking phase ``"7"`` or ``"8"`` as the docking study sets them.
 
     Returns
@@ -113,7 +111,6 @@ def docking_springs(phase: str, stiffness, *, damping=None, scenario=None) -> di
         at ``stiffness`` [N/m = N m/rad, shear and torsion alike] and ``damping`` [N s/m =
         N m s/rad] (default: scenario), and in phase 8 SM1 at the scenario's rigid values.
     """
-    scenario = default_scenario(scenario)
     settings = scenario.docking
     damping = float(settings.damping if damping is None else damping)
     springs = {"SM1" if str(phase) == "7" else "SM2": (stiffness, damping)}
@@ -122,7 +119,7 @@ def docking_springs(phase: str, stiffness, *, damping=None, scenario=None) -> di
     return springs
 
 
-def docking_plant(phase: str, stiffness, *, damping=None, scenario=None, source="lfr") -> LFR:
+def docking_plant(phase: str, stiffness, *, scenario, damping=None, source="lfr") -> LFR:
     """Uncertain plant (``Delta_real`` blocks) of docking phase 7 or 8 for each swept stiffness.
 
     Phase 7: SM1 (arm tip J7 / target port D2) has stiffness ``k`` (shear [N/m] and torsion
@@ -136,7 +133,7 @@ def docking_plant(phase: str, stiffness, *, damping=None, scenario=None, source=
         Swept stiffness values (paper: 300 values, 0.1 .. 1e5, log spaced).
     damping : float, optional
         Damping of the swept spring-damper [N s/m, N m s/rad] (default: scenario, paper 100).
-    scenario : Scenario, optional
+    scenario : Scenario
     source : {"lfr", "drake"}
         TITOP LFR, or the Drake twin's LFR (one ``ulinearize`` per phase, the stiffness
         substituted: :func:`oos_drake.multibody.mission_lfr.twin_docking_plants`).
@@ -144,7 +141,6 @@ def docking_plant(phase: str, stiffness, *, damping=None, scenario=None, source=
     from oos_drake.scenario.model import build_docking_model, configuration_values
 
     _check_source(source)
-    scenario = default_scenario(scenario)
     phase = str(phase)
     stiffness = np.atleast_1d(np.asarray(stiffness, dtype=float))
     if np.any(stiffness < 0) or not np.all(np.isfinite(stiffness)):

@@ -325,7 +325,7 @@ def guaranteed_table(study: str, result, label: str, values) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
-def _moment_label(times, scenario=None):
+def _moment_label(times, scenario):
     from oos_drake.scenario.timeline import mission_timeline
 
     try:
@@ -348,7 +348,8 @@ def run_analysis(
     controller: Controller,
     out_dir,
     options: AnalysisOptions | None = None,
-    scenario=None,
+    *,
+    scenario,
     log=print,
 ) -> dict:
     """Run the worst-case analysis and write every table and figure in ``out_dir``.
@@ -360,8 +361,8 @@ def run_analysis(
     out_dir : str or Path
         Output directory (created).
     options : AnalysisOptions, optional
-    scenario : Scenario, optional
-        Default: the paper's.
+    scenario : Scenario
+        The analyzed scenario (its models, timeline and record in ``summary.json``).
     log : callable
         Progress messages.
 
@@ -650,10 +651,10 @@ def run_analysis(
     tot = peaks[peaks["subset"] == "total"].iloc[0]
     ep = perf[perf["channel"] == "e_p"]
     ep_peak = ep.loc[ep["gain_upper [-]"].idxmax()]
-    from oos_drake.scenario.data import load_scenario, scenario_record
+    from oos_drake.scenario.data import scenario_record
 
     summary = {
-        "scenario": scenario_record(scenario or load_scenario()),
+        "scenario": scenario_record(scenario),
         "controller": {
             "label": controller.label,
             "source": controller.source,

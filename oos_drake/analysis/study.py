@@ -224,7 +224,7 @@ def _synthesize(scenario, options: StudyOptions, folder: Path) -> tuple[float, s
         options=options.synthesis,
     )
     paths = write_synthesis(
-        folder, result, plants, options.synthesis, scenario=scenario_record(scenario)
+        folder, result, plants, options.synthesis, scenario_record=scenario_record(scenario)
     )
     return float(result.gamma), str(paths["controller"])
 

@@ -33,7 +33,7 @@ from oos_drake.processes import make_executor
 __all__ = ["baseline_for", "drake_plants", "make_plants", "mission_times", "scenario_plants"]
 
 
-def drake_plants(configurations: int, scenario=None) -> PlantArray:
+def drake_plants(configurations: int, scenario) -> PlantArray:
     """The same model array from the Drake twin (imports pydrake lazily): nominal
     linearizations, and LFRs extracted per configuration for the worst-case search."""
     try:
@@ -43,7 +43,7 @@ def drake_plants(configurations: int, scenario=None) -> PlantArray:
     return drake_plant_array(mission_times(configurations, scenario), scenario)
 
 
-def make_plants(kind: str, configurations: int, scenario=None) -> PlantArray:
+def make_plants(kind: str, configurations: int, scenario) -> PlantArray:
     """Plant array for ``--plant`` (``lfr``, ``drake`` or ``synthetic``) of ``scenario``."""
     if kind == "lfr":
         return scenario_plants(configurations, scenario)
@@ -83,7 +83,8 @@ def run_synth(args) -> int:
         result = synthesize(
             plants, K0, spec=spec, options=options, progress=print, executor=executor
         )
-    paths = write_synthesis(args.out, result, plants, options, scenario=scenario_record(scenario))
+    record = scenario_record(scenario)
+    paths = write_synthesis(args.out, result, plants, options, scenario_record=record)
     print(f"scenario: {scenario.name} ({scenario.source})")
     active = result.models[result.models["active"]]
     print(

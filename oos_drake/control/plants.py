@@ -330,7 +330,7 @@ def from_lfr(
     return PlantArray(configurations, parameters, build, source)
 
 
-def scenario_plants(configurations: int, scenario=None) -> PlantArray:
+def scenario_plants(configurations: int, scenario) -> PlantArray:
     """The scenario's model array: its LFR substituted at equally spaced mission times."""
     from oos_drake.scenario.model import build_mission_model, mission_values
 
@@ -341,11 +341,10 @@ def scenario_plants(configurations: int, scenario=None) -> PlantArray:
     )
 
 
-def mission_times(configurations: int, scenario=None) -> np.ndarray:
-    """The synthesis configurations: ``configurations`` equally spaced mission times [s]."""
-    from oos_drake.scenario.data import load_scenario
-
+def mission_times(configurations: int, scenario) -> np.ndarray:
+    """The synthesis configurations: ``configurations`` equally spaced mission times [s] of
+    ``scenario``'s mission."""
     if configurations < 1:
         raise ValueError(f"--configurations must be >= 1, got {configurations}")
-    mission = (scenario or load_scenario()).mission
+    mission = scenario.mission
     return np.linspace(mission.t_start, mission.t_end, configurations)

@@ -95,19 +95,19 @@ def write_synthesis(
     plants: PlantArray,
     options: SynthesisOptions | None = None,
     *,
-    scenario: dict | None = None,
+    scenario_record: dict | None = None,
 ) -> dict[str, Path]:
     """Write every synthesis output in ``out_dir`` (created); return name -> path.
 
-    ``scenario`` (:func:`oos_drake.scenario.data.scenario_record`) is recorded in
+    ``scenario_record`` (:func:`oos_drake.scenario.data.scenario_record`) is recorded in
     ``controller.json`` as ``"scenario"``.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {}
     record = controller_record(result, plants, options)
-    if scenario is not None:
-        record["scenario"] = _json_ready(scenario)
+    if scenario_record is not None:
+        record["scenario"] = _json_ready(scenario_record)
     text = json.dumps(record, indent=2).encode()
     paths["controller"] = atomic_write_bytes(out / "controller.json", lambda s: s.write(text))
     M = closed_loop_array(result, plants)

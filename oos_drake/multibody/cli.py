@@ -3,6 +3,7 @@
 Examples::
 
     oos validate                      # moments 1-6, phase 7 and 8 sweeps; exit 1 on failure
+    oos validate --scenario FILE      # FILE's TITOP LFR against FILE's own Drake twin
     oos validate --cases moments      # only the six moments
     oos sdf generate                  # rewrite sdf/ from scenario/data/paper.toml
     oos sdf check                     # exit 1 if the committed SDF files are stale
@@ -142,7 +143,13 @@ def register(subparsers) -> None:
         "--root-tolerance", type=float, default=1e-4, help="max relative pole/zero mismatch"
     )
     add_scenario_argument(validate)
-    validate.add_argument("--sdf-dir", type=Path, default=SDF_DIRECTORY, help="SDF directory")
+    validate.add_argument(
+        "--sdf-dir",
+        type=Path,
+        default=None,
+        help="SDF directory of the Drake twin (default: the scenario's own twin: the package's "
+        "SDF files when they match the scenario, else files generated from it)",
+    )
     validate.set_defaults(func=_validate)
 
     ulin = subparsers.add_parser(

@@ -31,9 +31,8 @@ from oos_drake.multibody.operating_point import (
     operating_point,
 )
 from oos_drake.multibody.scenario_plant import cached_scenario_diagram
-from oos_drake.multibody.scenario_sdf import SDF_DIRECTORY
+from oos_drake.multibody.scenario_sdf import scenario_sdf_directory
 from oos_drake.robust.lfr_analysis import frequency_grid
-from oos_drake.scenario.data import default_scenario
 from oos_drake.scenario.model import build_docking_model, build_mission_model, configuration_values
 from oos_drake.scenario.timeline import mission_timeline
 from oos_drake.titop.parameters import spring_damper_values
@@ -192,19 +191,15 @@ class ValidationCase:
     values: Mapping[str, float]
 
 
-def validation_cases(
-    scenario=None, stiffness: Iterable[float] | None = None
-) -> list[ValidationCase]:
+def validation_cases(scenario, stiffness: Iterable[float] | None = None) -> list[ValidationCase]:
     """The six moments, phase 7 over the stiffness sweep, phase 8 (both sweeps).
 
     Parameters
     ----------
-    scenario : Scenario, optional
-        Default: the paper's.
+    scenario : Scenario
     stiffness : iterable of float, optional
         Stiffness values [N/m = N m/rad] (default: the scenario's sweep, 0.1 .. 1e5).
     """
-    scenario = default_scenario(scenario)
     timeline = mission_timeline(scenario)
     docking = scenario.docking
     sweep = docking.stiffness_sweep if stiffness is None else np.asarray(list(stiffness), float)
@@ -262,7 +257,7 @@ def titop_state_space(model, values: Mapping[str, float]) -> control.StateSpace:
 
 
 def run_validation(
-    scenario=None,
+    scenario,
     *,
     cases: list[ValidationCase] | None = None,
     omega: np.ndarray | None = None,
@@ -275,8 +270,8 @@ def run_validation(
 
     Parameters
     ----------
-    scenario : Scenario, optional
-        Default: the paper's.
+    scenario : Scenario
+        The data of both models: the TITOP LFR and the Drake twin.
     cases : list of ValidationCase, optional
         Default: :func:`validation_cases` (27 cases).
     omega : ndarray, optional
@@ -284,12 +279,15 @@ def run_validation(
     response_tolerance, root_tolerance : float
         Pass thresholds (relative).
     sdf_directory : str or Path, optional
-        SDF files of the twin (default: ``sdf/``).
+        SDF files of the twin (default: the scenario's own twin,
+        :func:`~oos_drake.multibody.scenario_sdf.scenario_sdf_directory`: the package's
+        ``sdf/`` when it matches the scenario, else files generated from it).
     progress : callable, optional
         Called with each :class:`CaseResult` as soon as it is computed.
     """
-    sdf_directory = str(SDF_DIRECTORY if sdf_directory is None else sdf_directory)
-    scenario = default_scenario(scenario)
+    if sdf_directory is None:
+        sdf_directory, _ = scenario_sdf_directory(scenario)
+    sdf_directory = str(sdf_directory)
     cases = validation_cases(scenario) if cases is None else cases
     omega = VALIDATION_OMEGA if omega is None else omega
     builders = _titop_builders(scenario)

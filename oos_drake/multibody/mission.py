@@ -36,7 +36,9 @@ instance (the field is zero in orbit) so its element costs nothing.
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -71,8 +73,8 @@ from oos_drake.multibody.scenario_plant import (
     add_scenario_plant,
     prescribed_joints,
 )
-from oos_drake.multibody.scenario_sdf import SDF_DIRECTORY
-from oos_drake.scenario.data import Scenario, load_scenario
+from oos_drake.multibody.scenario_sdf import scenario_sdf_directory
+from oos_drake.scenario.data import Scenario
 from oos_drake.scenario.kinematics import rigid_spatial_inertia_at_G1
 from oos_drake.scenario.timeline import MissionTimeline, QuinticTrajectory, mission_timeline
 
@@ -83,9 +85,38 @@ __all__ = [
     "MissionOptions",
     "controller_gain",
     "effective_inertia",
+    "logging_rate",
     "make_mission_diagram",
     "quintic_piecewise_polynomial",
 ]
+
+
+def logging_rate(control_rate: float, wanted: float) -> float:
+    """The fastest logging rate [Hz] at most ``wanted`` that divides ``control_rate``.
+
+    .. math:: f_{log} = f_c / \\lceil f_c / f_{wanted} \\rceil
+
+    (``control_rate`` itself when ``wanted >= control_rate``): every logged sample falls on a
+    flight-software instant, for any flight-software rate.
+
+    Parameters
+    ----------
+    control_rate : float
+        Flight-software rate [Hz], > 0.
+    wanted : float
+        Desired logging rate [Hz], > 0.
+
+    Examples
+    --------
+    >>> logging_rate(10.0, 10.0), logging_rate(5.0, 10.0), logging_rate(7.0, 2.0)
+    (10.0, 5.0, 1.75)
+    """
+    control_rate, wanted = float(control_rate), float(wanted)
+    for name, value in (("control_rate", control_rate), ("wanted", wanted)):
+        if not (np.isfinite(value) and value > 0):
+            raise ValueError(f"logging_rate: {name} must be > 0 Hz, got {value}")
+    return control_rate / max(1, math.ceil(control_rate / wanted - 1e-9))
+
 
 #: Drake integrators (``ResetIntegratorFromFlags`` names) that are stable on the stiff mission.
 IMPLICIT_INTEGRATORS = frozenset({"radau1", "radau3", "implicit_euler", "velocity_implicit_euler"})
@@ -97,11 +128,14 @@ class MissionOptions:
 
     Attributes
     ----------
-    control_rate : float
-        Flight-software sample rate [Hz] (default: ``DesignSpecification.flight_software_rate_hz``,
-        the one place the rate is set; the analysis' ``--sampled`` loop reads it there too).
-    log_rate : float
-        Logging rate of the time series [Hz] (must divide ``control_rate``).
+    control_rate : float or None
+        Flight-software sample rate [Hz]; ``None`` (default): the scenario's
+        ``[control] flight_software_rate_hz`` (set by :meth:`resolved`, which
+        :func:`make_mission_diagram` calls).
+    log_rate : float or None
+        Logging rate of the time series [Hz] (must divide ``control_rate``: the loggers sample
+        the held torque at control instants); ``None`` (default): about 1 Hz, the fastest rate
+        <= 1 Hz that divides ``control_rate`` (:func:`logging_rate`).
     controller : str or None
         Path of a synthesis ``controller.json`` (gains ``K_p``, ``K_d``); ``None``: the paper's
         baseline tuned on the coupled inertia at the first docking.
@@ -152,8 +186,8 @@ class MissionOptions:
         Simulated time between divergence checks [s].
     """
 
-    control_rate: float = DesignSpecification.flight_software_rate_hz
-    log_rate: float = 1.0
+    control_rate: float | None = None
+    log_rate: float | None = None
     controller: str | None = None
     torque_limit: float = 2.0
     joint_bandwidth: float = 200.0
@@ -172,8 +206,9 @@ class MissionOptions:
 
     def __post_init__(self):
         positive = [
-            "control_rate",
-            "log_rate",
+            name for name in ("control_rate", "log_rate") if getattr(self, name) is not None
+        ]
+        positive += [
             "torque_limit",
             "joint_bandwidth",
             "joint_damping_ratio",
@@ -189,12 +224,14 @@ class MissionOptions:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
                 raise ValueError(f"mission option {name} must be a positive number, got {value!r}")
-        ratio = self.control_rate / self.log_rate
-        if abs(ratio - round(ratio)) > 1e-9:
-            raise ValueError(
-                f"mission option log_rate {self.log_rate} Hz must divide control_rate "
-                f"{self.control_rate} Hz"
-            )
+        if self.control_rate is not None and self.log_rate is not None:
+            ratio = self.control_rate / self.log_rate
+            if abs(ratio - round(ratio)) > 1e-9:
+                raise ValueError(
+                    f"mission option log_rate {self.log_rate} Hz must divide control_rate "
+                    f"{self.control_rate} Hz (e.g. log_rate = "
+                    f"{logging_rate(self.control_rate, self.log_rate):g})"
+                )
         if not (isinstance(self.ramp_substeps, int) and self.ramp_substeps >= 1):
             raise ValueError(
                 f"mission option ramp_substeps must be an integer >= 1, got {self.ramp_substeps!r}"
@@ -206,6 +243,17 @@ class MissionOptions:
                 f"mission option error_control must be true, false or unset, got "
                 f"{self.error_control!r}"
             )
+
+    def resolved(self, scenario: Scenario) -> MissionOptions:
+        """These options with the rates set: ``control_rate`` from the scenario's flight
+        software when unset, ``log_rate`` the fastest rate <= 1 Hz that divides it when unset."""
+        control_rate = (
+            scenario.control.flight_software_rate_hz
+            if self.control_rate is None
+            else self.control_rate
+        )
+        log_rate = logging_rate(control_rate, 1.0) if self.log_rate is None else self.log_rate
+        return dataclasses.replace(self, control_rate=float(control_rate), log_rate=log_rate)
 
     @property
     def step(self) -> float:
@@ -299,14 +347,17 @@ def effective_inertia(D_G1: np.ndarray) -> np.ndarray:
     return D[3:, 3:] - D[3:, :3] @ np.linalg.solve(D[:3, :3], D[:3, 3:])
 
 
-def controller_gain(path: str | Path | None, scenario: Scenario | None = None) -> np.ndarray:
+def controller_gain(path: str | Path | None, scenario: Scenario) -> np.ndarray:
     """Controller gain ``[K_p, K_d]`` (3x6) from a synthesis ``controller.json`` or the baseline.
 
     Parameters
     ----------
     path : str, Path or None
         ``controller.json`` written by ``oos synth``; ``None``: the paper's baseline
-        (``omega = 2 pi 0.01 rad/s``, ``xi = 1``) on the rigid coupled inertia at t = 255 s.
+        (``omega = 2 pi 0.01 rad/s``, ``xi = 1``) on the scenario's rigid coupled inertia at
+        the first docking.
+    scenario : Scenario
+        The scenario of the baseline (unused with a file).
 
     Raises
     ------
@@ -314,7 +365,6 @@ def controller_gain(path: str | Path | None, scenario: Scenario | None = None) -
         Missing file or gains of the wrong shape.
     """
     if path is None:
-        scenario = scenario or load_scenario()
         timeline = mission_timeline(scenario)
         configuration = timeline.configuration(float(scenario.mission.first_docking_time))
         J = effective_inertia(rigid_spatial_inertia_at_G1(scenario, configuration))
@@ -367,9 +417,9 @@ def _add_plant(builder: DiagramBuilder, sdf_directory: Path):
 def make_mission_diagram(
     options: MissionOptions | None = None,
     *,
-    scenario: Scenario | None = None,
+    scenario: Scenario,
     K=None,
-    sdf_directory: str | Path = SDF_DIRECTORY,
+    sdf_directory: str | Path | None = None,
     timeline: MissionTimeline | None = None,
     perturbation_states: int = 0,
 ) -> MissionDiagram:
@@ -378,13 +428,15 @@ def make_mission_diagram(
     Parameters
     ----------
     options : MissionOptions, optional
-        Rates, controller file, joint PD, integrator settings (default: ``MissionOptions()``).
-    scenario : Scenario, optional
-        Scenario data (trajectories, inertias); default the paper's.
+        Rates, controller file, joint PD, integrator settings (default: ``MissionOptions()``;
+        unset rates come from the scenario: :meth:`MissionOptions.resolved`).
+    scenario : Scenario
+        Scenario data (trajectories, inertias, flight software).
     K : array_like, shape (3, 6), optional
         Controller gain overriding ``options.controller``.
-    sdf_directory : str or Path
-        Directory of ``oos_scenario.sdf``.
+    sdf_directory : str or Path, optional
+        Directory of ``oos_scenario.sdf`` (default: the scenario's own twin,
+        :func:`~oos_drake.multibody.scenario_sdf.scenario_sdf_directory`).
     timeline : MissionTimeline, optional
         Trajectories the arm and array drives follow (default: the scenario's mission;
         ``mission_timeline(scenario).frozen(t)`` holds them at time ``t``). The joint PDs and
@@ -397,8 +449,9 @@ def make_mission_diagram(
     -------
     MissionDiagram
     """
-    options = options or MissionOptions()
-    scenario = scenario or load_scenario()
+    options = (options or MissionOptions()).resolved(scenario)
+    if sdf_directory is None:
+        sdf_directory, _ = scenario_sdf_directory(scenario)
     mission = mission_timeline(scenario)
     timeline = mission if timeline is None else timeline
     K = controller_gain(options.controller, scenario) if K is None else np.asarray(K, float)

@@ -35,10 +35,9 @@ from oos_drake.multibody.operating_point import (
     operating_point,
     set_operating_point,
 )
-from oos_drake.multibody.scenario_plant import cached_scenario_diagram
-from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL, SDF_DIRECTORY
+from oos_drake.multibody.scenario_plant import twin_diagram
+from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL
 from oos_drake.multibody.uncertain_linearization import PhysicalParameter, ulinearize
-from oos_drake.scenario.data import default_scenario, load_scenario
 from oos_drake.scenario.timeline import mission_timeline
 from oos_drake.titop.parameters import inertia_names, mass_name, mode_frequency_name
 
@@ -60,7 +59,7 @@ SPRING_QUANTITIES = {
 _BUSHING_FRAMES = {"SM1": "J7/D2", "SM2": "D1/D3"}
 
 
-def uncertain_parameters(scenario=None):
+def uncertain_parameters(scenario):
     """The real uncertain parameters ``Delta_real`` of the scenario, sorted by name.
 
     Same names, nominal values and ranges as the blocks the mission LFR keeps after the
@@ -69,14 +68,12 @@ def uncertain_parameters(scenario=None):
 
     Parameters
     ----------
-    scenario : Scenario, optional
-        Default: the paper's (``oos_drake.scenario.load_scenario()``).
+    scenario : Scenario
 
     Returns
     -------
     tuple of oos_drake.control.plants.UncertainParameter
     """
-    scenario = default_scenario(scenario)
     parameters = []
 
     def add(name, nominal, percent):
@@ -102,9 +99,8 @@ def uncertain_parameters(scenario=None):
     return tuple(sorted(parameters, key=lambda p: p.name))
 
 
-def mission_parameters(scenario=None) -> tuple[PhysicalParameter, ...]:
+def mission_parameters(scenario) -> tuple[PhysicalParameter, ...]:
     """The scenario's real uncertain parameters as Drake declarations (TITOP names and ranges)."""
-    scenario = default_scenario(scenario)
     hubs = {hub.name for hub in scenario.hubs.values()}
     arrays = {mount.name for mount in scenario.arrays.values()}
     declared = []
@@ -152,14 +148,14 @@ def spring_damper_parameters(
     return tuple(declared)
 
 
-def twin_lfr(point: OperatingPoint, parameters, *, sdf_directory=None, **options) -> LFR:
-    """``ulinearize`` the twin at ``point``: ``[F; T]`` at G1 -> ``[a_G1; wdot]`` (6x6).
+def twin_lfr(scenario, point: OperatingPoint, parameters, **options) -> LFR:
+    """``ulinearize`` the twin of ``scenario`` at ``point``: ``[F; T]`` at G1 -> ``[a_G1; wdot]``
+    (6x6).
 
     Parameters that do not act at this configuration (the target's while it floats free) are
     dropped (zero repetitions). ``options`` go to :func:`ulinearize`.
     """
-    directory = str(SDF_DIRECTORY if sdf_directory is None else sdf_directory)
-    handles = cached_scenario_diagram(point.connection, directory)
+    handles = twin_diagram(scenario, point.connection)
     context = handles.diagram.CreateDefaultContext()
     set_operating_point(handles, context, point)
     options.setdefault("unused", "drop")
@@ -223,38 +219,32 @@ def stack_models(models) -> LFR:
 def _twin_lfr_at(scenario, time: float) -> LFR:
     """The twin's LFR at mission ``time`` [s] of ``scenario``."""
     point = operating_point(mission_timeline(scenario).configuration(float(time)))
-    return twin_lfr(point, mission_parameters(scenario))
+    return twin_lfr(scenario, point, mission_parameters(scenario))
 
 
-def _twin_lfr_task(source: str, overrides: tuple, time: float) -> LFR:
-    """:func:`_twin_lfr_at` as an executor task: a ``Scenario`` does not pickle, its file and
-    overrides do (loading is cached per process)."""
-    return _twin_lfr_at(load_scenario(source, dict(overrides)), time)
-
-
-def twin_mission_plants(times, scenario=None, *, progress=None, executor=None) -> LFR:
+def twin_mission_plants(times, scenario, *, progress=None, executor=None) -> LFR:
     """The twin's uncertain 6x6 plants at mission ``times`` [s] (model array, TITOP blocks).
 
     Parameters
     ----------
     times : array_like
         Mission times [s] (rigid connections from the timeline's switches).
+    scenario : Scenario
+        Its TITOP block names and ranges, its twin (sent to the workers as itself: it pickles).
     progress : callable, optional
         ``progress(done, total)``.
     executor : optional
         Where the extractions run, one task per time (:func:`oos_drake.processes.make_executor`;
-        a process pool must spawn its workers: Drake's threads do not survive a fork; the
-        workers load the scenario from its file and overrides); ``None``: one after the other
+        a process pool must spawn its workers: Drake's threads do not survive a fork; each
+        worker builds the scenario's twin once); ``None``: one after the other
         here. Same LFRs either way (each extraction starts from a fresh context, with its own
         seeded checks).
     """
-    scenario = default_scenario(scenario)
     times = np.atleast_1d(np.asarray(times, dtype=float))
     if executor is None:
         jobs = (_twin_lfr_at(scenario, t) for t in times)
     else:
-        source = (str(scenario.source), scenario.overrides)
-        futures = [executor.submit(_twin_lfr_task, *source, float(t)) for t in times]
+        futures = [executor.submit(_twin_lfr_at, scenario, float(t)) for t in times]
         jobs = (future.result() for future in futures)
     models = []
     for model in jobs:
@@ -264,7 +254,7 @@ def twin_mission_plants(times, scenario=None, *, progress=None, executor=None) -
     return stack_models(models)
 
 
-def twin_docking_plants(phase: str, stiffness, damping: float, scenario=None) -> LFR:
+def twin_docking_plants(phase: str, stiffness, damping: float, scenario) -> LFR:
     """The twin's uncertain plants of docking phase 7 or 8 over swept ``stiffness`` values.
 
     One extraction per phase: the swept spring-damper's shear and torsion stiffness are
@@ -280,8 +270,8 @@ def twin_docking_plants(phase: str, stiffness, damping: float, scenario=None) ->
         Swept stiffness [N/m = N m/rad], > 0.
     damping : float
         Damping of the swept spring-damper [N s/m = N m s/rad].
+    scenario : Scenario
     """
-    scenario = default_scenario(scenario)
     stiffness = np.atleast_1d(np.asarray(stiffness, dtype=float))
     if not np.all(np.isfinite(stiffness)) or np.any(stiffness <= 0):
         raise ValueError("twin_docking_plants: stiffness values must be finite and > 0")
@@ -304,5 +294,5 @@ def twin_docking_plants(phase: str, stiffness, damping: float, scenario=None) ->
                           nominal, 0.5 * low, 2.0 * high)
         for prefix in ("k_shear", "k_tors")
     )  # fmt: skip
-    lfr = twin_lfr(point, declared)
+    lfr = twin_lfr(scenario, point, declared)
     return usubs(lfr, {f"k_shear_{swept}": stiffness, f"k_tors_{swept}": stiffness})

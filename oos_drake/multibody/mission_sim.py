@@ -1,8 +1,9 @@
 """Run one closed-loop mission simulation: dispersed values in, metrics and time series out.
 
-:class:`MissionSimulation` builds the mission diagram once (:func:`make_mission_diagram`) and
-runs any window of the mission from a fresh context: the run is a pure function of
-``(values, seed, window)``, so a rerun reproduces its metrics exactly.
+:class:`MissionSimulation` runs on a mission diagram built once
+(:func:`~oos_drake.multibody.mission.make_mission_diagram`) and runs any window of the mission
+from a fresh context: the run is a pure function of ``(values, seed, window)``, so a rerun
+reproduces its metrics exactly.
 
 Mission events (paper data, ``oos_drake/scenario/data/paper.toml``):
 
@@ -51,7 +52,7 @@ from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 
 from oos_drake.lfr.blocks import RANGE_RTOL
 from oos_drake.multibody.flight_software import LOG_SIGNALS, NOISE_CHANNELS
-from oos_drake.multibody.mission import ARRAYS, MissionDiagram, MissionOptions, make_mission_diagram
+from oos_drake.multibody.mission import ARRAYS, MissionDiagram
 from oos_drake.multibody.plant_parts import set_central_inertia, set_mode_frequency
 from oos_drake.multibody.scenario_plant import set_bushing
 from oos_drake.scenario.model import physical_blocks
@@ -318,16 +319,13 @@ class MissionSimulation:
 
     Parameters
     ----------
-    options : MissionOptions
-        Diagram and simulation options.
-    handles : MissionDiagram, optional
-        An already built diagram (default: build one from ``options``).
+    handles : MissionDiagram
+        The diagram (:func:`~oos_drake.multibody.mission.make_mission_diagram`: its scenario,
+        its options).
     """
 
-    def __init__(
-        self, options: MissionOptions | None = None, handles: MissionDiagram | None = None
-    ):
-        self.handles = handles or make_mission_diagram(options or MissionOptions())
+    def __init__(self, handles: MissionDiagram):
+        self.handles = handles
         self.options = self.handles.options
         scenario = self.handles.scenario
         self.parameters = mission_parameters(scenario)

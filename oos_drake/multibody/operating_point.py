@@ -25,9 +25,9 @@ import numpy as np
 from oos_drake.multibody.linearization import linearize_hub, structural_prune
 from oos_drake.multibody.scenario_plant import (
     ScenarioDiagram,
-    cached_scenario_diagram,
     connection_for,
     set_spring_damper,
+    twin_diagram,
 )
 from oos_drake.scenario.timeline import mission_timeline
 
@@ -145,7 +145,7 @@ def _locked_state_indices(handles: ScenarioDiagram) -> np.ndarray:
 
 
 def linearize_at(
-    point: OperatingPoint, handles: ScenarioDiagram | None = None, context=None
+    point: OperatingPoint, handles: ScenarioDiagram, context=None
 ) -> control.StateSpace:
     """Linearize the twin at ``point``: wrench at G1 -> ``[a; wdot; w; rpy]`` in ``R_RH1``.
 
@@ -153,8 +153,9 @@ def linearize_at(
     ----------
     point : OperatingPoint
         Where to linearize.
-    handles : ScenarioDiagram, optional
-        Diagram to use (default: the per-process cached one for ``point.connection``).
+    handles : ScenarioDiagram
+        The twin with ``point.connection``
+        (:func:`~oos_drake.multibody.scenario_plant.twin_diagram`).
     context : Context, optional
         Root context to reuse (default: a new one).
 
@@ -165,8 +166,6 @@ def linearize_at(
         [rad/s^2], ``w*`` [rad/s], ``roll pitch yaw`` [rad]. Rows 0:6 are the 6x6
         acceleration response.
     """
-    if handles is None:
-        handles = cached_scenario_diagram(point.connection)
     if context is None:
         context = handles.diagram.CreateDefaultContext()
     set_operating_point(handles, context, point)
@@ -192,16 +191,18 @@ def acceleration_response(system: control.StateSpace, prune: bool = True) -> con
     return structural_prune(system[0:6, :]) if prune else system[0:6, :]
 
 
-def linearize_time(time: float, scenario=None) -> control.StateSpace:
-    """Linearize the twin at mission time ``time`` [s] (rigid connections from the timeline).
+def linearize_time(time: float, scenario) -> control.StateSpace:
+    """Linearize the twin of ``scenario`` at mission time ``time`` [s] (rigid connections from
+    the timeline).
 
     Returns the 12-output model of :func:`linearize_at`.
     """
     configuration = mission_timeline(scenario).configuration(float(time))
-    return linearize_at(operating_point(configuration, label=f"t={float(time):g} s"))
+    point = operating_point(configuration, label=f"t={float(time):g} s")
+    return linearize_at(point, twin_diagram(scenario, point.connection))
 
 
-def linearize_named(name: str, spring_dampers=None, scenario=None) -> control.StateSpace:
+def linearize_named(name: str, scenario, spring_dampers=None) -> control.StateSpace:
     """Linearize at a named configuration: moments ``"1".."6"``, docking phases ``"7"``, ``"8"``.
 
     Parameters
@@ -221,4 +222,5 @@ def linearize_named(name: str, spring_dampers=None, scenario=None) -> control.St
         spring_dampers = {
             sm: (docking.rigid_stiffness, docking.rigid_damping) for sm in named.spring_dampers
         }
-    return linearize_at(operating_point(named.configuration, spring_dampers, label=name))
+    point = operating_point(named.configuration, spring_dampers, label=name)
+    return linearize_at(point, twin_diagram(scenario, point.connection))

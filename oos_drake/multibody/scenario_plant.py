@@ -57,6 +57,7 @@ from oos_drake.multibody.scenario_sdf import (
     SDF_PACKAGE,
     arm_joint_name,
     drive_joint_name,
+    scenario_sdf_directory,
 )
 from oos_drake.multibody.sdf_validation import validate_sdf_tree
 
@@ -71,6 +72,7 @@ __all__ = [
     "prescribed_joints",
     "set_bushing",
     "set_spring_damper",
+    "twin_diagram",
 ]
 
 CONNECTIONS = ("free", "arm", "hub", "spring_damper")
@@ -297,6 +299,19 @@ def cached_scenario_diagram(
 ) -> ScenarioDiagram:
     """One :func:`build_scenario_diagram` per connection kind and process (contexts are cheap)."""
     return build_scenario_diagram(connection, sdf_directory=sdf_directory)
+
+
+def twin_diagram(scenario, connection: str) -> ScenarioDiagram:
+    """The Drake twin of ``scenario`` with ``connection`` (cached per process): parsed from the
+    scenario's own SDF files (:func:`~oos_drake.multibody.scenario_sdf.scenario_sdf_directory`).
+
+    Parameters
+    ----------
+    scenario : oos_drake.scenario.data.Scenario
+    connection : {"free", "arm", "hub", "spring_damper"}
+    """
+    directory, _ = scenario_sdf_directory(scenario)
+    return cached_scenario_diagram(connection, str(directory))
 
 
 def set_spring_damper(

@@ -20,8 +20,12 @@ committed files are stale.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import re
 import tempfile
+import weakref
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -39,7 +43,6 @@ from oos_drake.multibody.sdf_writer import (
     to_sdf_text,
 )
 from oos_drake.resources import package_path
-from oos_drake.scenario.data import default_scenario
 
 __all__ = [
     "SDF_DIRECTORY",
@@ -49,6 +52,7 @@ __all__ = [
     "generate_sdf_texts",
     "write_sdf",
     "stale_sdf_files",
+    "scenario_sdf_directory",
     "drive_joint_name",
     "arm_joint_name",
 ]
@@ -207,15 +211,13 @@ def _assembly_model(scenario, array_files: dict[str, str]) -> Model:
     )
 
 
-def generate_sdf_texts(scenario=None) -> dict[str, str]:
+def generate_sdf_texts(scenario) -> dict[str, str]:
     """Return ``{file name: SDF text}`` for every scenario SDF file.
 
     Parameters
     ----------
-    scenario : oos_drake.scenario.data.Scenario, optional
-        Default: ``load_scenario()`` (the paper's data file).
+    scenario : oos_drake.scenario.data.Scenario
     """
-    scenario = default_scenario(scenario)
     texts = {}
     for hub_name in scenario.hubs:
         texts[f"hub_{hub_name}.sdf"] = to_sdf_text(_hub_model(scenario, hub_name))
@@ -228,12 +230,15 @@ def generate_sdf_texts(scenario=None) -> dict[str, str]:
     return texts
 
 
-def write_sdf(directory: str | Path = SDF_DIRECTORY, scenario=None) -> list[Path]:
-    """Write the scenario SDF files into ``directory``; return the paths written."""
-    directory = Path(directory)
+def write_sdf(directory: str | Path, scenario) -> list[Path]:
+    """Write the SDF files of ``scenario`` into ``directory``; return the paths written."""
+    return _write_texts(Path(directory), generate_sdf_texts(scenario))
+
+
+def _write_texts(directory: Path, texts: Mapping[str, str]) -> list[Path]:
     directory.mkdir(parents=True, exist_ok=True)
     paths = []
-    for name, text in generate_sdf_texts(scenario).items():
+    for name, text in texts.items():
         path = directory / name
         path.write_text(text)
         paths.append(path)
@@ -260,31 +265,63 @@ def same_sdf_text(committed: str, generated: str, rtol: float = SDF_RTOL) -> boo
     return bool(np.all(np.abs(a - b) <= rtol * np.abs(b) + SDF_ATOL))
 
 
-def stale_sdf_files(directory: str | Path = SDF_DIRECTORY, scenario=None) -> list[str]:
-    """Names of files in ``directory`` that are missing or differ from the generated text
-    (numbers compared to :data:`SDF_RTOL`: see :func:`same_sdf_text`)."""
-    directory = Path(directory)
+def stale_sdf_files(directory: str | Path, scenario) -> list[str]:
+    """Names of files in ``directory`` that are missing or differ from the SDF text generated
+    from ``scenario`` (numbers compared to :data:`SDF_RTOL`: see :func:`same_sdf_text`)."""
+    return _stale(Path(directory), generate_sdf_texts(scenario))
+
+
+def _stale(directory: Path, texts: Mapping[str, str]) -> list[str]:
     stale = []
-    for name, text in generate_sdf_texts(scenario).items():
+    for name, text in texts.items():
         path = directory / name
         if not path.is_file() or not same_sdf_text(path.read_text(), text):
             stale.append(name)
     return stale
 
 
+#: SDF folders generated in this process, by the SHA-256 of their texts (one folder per
+#: distinct scenario twin, kept until the process ends: the diagram caches key on the folder).
+_GENERATED: dict[str, tempfile.TemporaryDirectory] = {}
+#: ``scenario_sdf_directory`` per scenario object (generating and comparing the texts takes
+#: ~0.1 s; a scenario is immutable, so its answer is too).
+_BY_SCENARIO: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
 def scenario_sdf_directory(scenario) -> tuple[Path, object]:
-    """The SDF folder of a loaded ``scenario``: the package's when its files match the scenario,
-    else a temporary folder the files are generated into.
+    """The SDF folder of the Drake twin of ``scenario``: the package's when its files match
+    the scenario, else a temporary folder the files are generated into.
+
+    The one place where a twin is chosen for a scenario (``oos validate``, the analysis and
+    synthesis on the twin, ``oos confirm``, the campaign's simulator). A generated folder is
+    reused for the same texts within the process (the diagram caches key on the folder), so a
+    worker that receives the same scenario for every task writes its files once.
+
+    Parameters
+    ----------
+    scenario : oos_drake.scenario.data.Scenario
 
     Returns
     -------
     directory : Path
         Folder holding ``oos_scenario.sdf`` for the scenario.
     keeper : tempfile.TemporaryDirectory or None
-        Keep it alive as long as the folder is used (None: the package's folder).
+        The generated folder's owner (None: the package's folder); the folder lives as long as
+        the process.
     """
-    if not stale_sdf_files(SDF_DIRECTORY, scenario):
-        return Path(SDF_DIRECTORY), None
-    keeper = tempfile.TemporaryDirectory(prefix="oos-sdf-")
-    write_sdf(keeper.name, scenario)
-    return Path(keeper.name), keeper
+    known = _BY_SCENARIO.get(scenario)
+    if known is not None:
+        return known
+    texts = generate_sdf_texts(scenario)
+    if not _stale(Path(SDF_DIRECTORY), texts):
+        found = Path(SDF_DIRECTORY), None
+    else:
+        key = hashlib.sha256(json.dumps(texts, sort_keys=True).encode()).hexdigest()
+        keeper = _GENERATED.get(key)
+        if keeper is None:
+            keeper = tempfile.TemporaryDirectory(prefix="oos-sdf-")
+            _write_texts(Path(keeper.name), texts)
+            _GENERATED[key] = keeper
+        found = Path(keeper.name), keeper
+    _BY_SCENARIO[scenario] = found
+    return found

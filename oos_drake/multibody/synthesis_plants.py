@@ -64,9 +64,8 @@ from oos_drake.multibody.plant_parts import (
     set_central_inertia,
     set_mode_frequency,
 )
-from oos_drake.multibody.scenario_plant import ScenarioDiagram, cached_scenario_diagram
+from oos_drake.multibody.scenario_plant import ScenarioDiagram, twin_diagram
 from oos_drake.multibody.scenario_sdf import ASSEMBLY_MODEL
-from oos_drake.scenario.data import default_scenario
 from oos_drake.scenario.timeline import mission_timeline
 from oos_drake.titop.parameters import inertia_names, mass_name, mode_frequency_name
 
@@ -80,7 +79,7 @@ __all__ = [
 
 
 def apply_physical_values(
-    handles: ScenarioDiagram, context, values: Mapping[str, float], scenario=None
+    handles: ScenarioDiagram, context, values: Mapping[str, float], scenario
 ) -> None:
     """Write real-parameter values into a root ``context`` of ``handles.diagram`` (no rebuild).
 
@@ -93,13 +92,14 @@ def apply_physical_values(
     values : Mapping[str, float]
         Physical values by block name: ``m_RH2`` [kg], ``Jxx_RH2``/``Jyy_RH2``/``Jzz_RH2``
         [kg m^2] (diagonal of the inertia at G2 in ``R_RH2``), ``w1_SA<k>`` [rad/s].
+    scenario : Scenario
+        The twin's scenario (its hubs' and arrays' names and nominal frequencies).
 
     Raises
     ------
     ValueError
         Unknown parameter name, or a non-finite or non-positive value.
     """
-    scenario = default_scenario(scenario)
     plant = handles.plant
     plant_context = plant.GetMyMutableContextFromRoot(context)
     hub_names = {}
@@ -138,14 +138,17 @@ def apply_physical_values(
 
 
 def rotational_plant(
-    configuration, values: Mapping[str, float] | None = None, scenario=None
+    configuration, scenario, values: Mapping[str, float] | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Linearize the twin at one configuration: pruned ``T_ext,G1 -> wdot`` (3x3).
+    """Linearize the twin of ``scenario`` at one configuration: pruned ``T_ext,G1 -> wdot``
+    (3x3).
 
     Parameters
     ----------
     configuration : oos_drake.scenario.timeline.Configuration
         One (non-batch) configuration; rigid connections from its switches.
+    scenario : Scenario
+        The twin's scenario (:func:`~oos_drake.multibody.scenario_plant.twin_diagram`).
     values : Mapping[str, float], optional
         Physical values of real parameters (see :func:`apply_physical_values`); others nominal.
 
@@ -155,7 +158,7 @@ def rotational_plant(
         ``(A, B, C, D)``: inputs ``Tx, Ty, Tz`` [N m], outputs ``wdot_x..z`` [rad/s^2].
     """
     point = operating_point(configuration)
-    handles = cached_scenario_diagram(point.connection)
+    handles = twin_diagram(scenario, point.connection)
     context = handles.diagram.CreateDefaultContext()
     if values:
         apply_physical_values(handles, context, values, scenario)
@@ -188,8 +191,9 @@ class DrakePlantSource:
     ----------
     times : array_like, shape (N,)
         Mission times [s] of the configurations.
-    scenario : Scenario, optional
-        Default: the paper's (must match the SDF files under ``sdf/``).
+    scenario : Scenario
+        The plants' scenario (its own twin:
+        :func:`~oos_drake.multibody.scenario_plant.twin_diagram`).
     progress : callable, optional
         ``progress(done, total)`` during the nominal linearizations.
 
@@ -208,11 +212,11 @@ class DrakePlantSource:
     def __init__(
         self,
         times: Sequence[float],
-        scenario=None,
+        scenario,
         *,
         progress: Callable | None = None,
     ):
-        self.scenario = default_scenario(scenario)
+        self.scenario = scenario
         self.times = np.asarray(times, dtype=float).ravel()
         if self.times.size == 0 or not np.all(np.isfinite(self.times)):
             raise ValueError(f"DrakePlantSource: times must be finite and non-empty, got {times}")
@@ -227,7 +231,7 @@ class DrakePlantSource:
         wall = time.perf_counter()
         raw = []
         for i, configuration in enumerate(self.configurations):
-            raw.append(rotational_plant(configuration, scenario=self.scenario))
+            raw.append(rotational_plant(configuration, self.scenario))
             if progress is not None:
                 progress(i + 1, self.times.size)
         self.linearizations = len(raw)
@@ -247,7 +251,7 @@ class DrakePlantSource:
         if index not in self._lfrs:
             wall = time.perf_counter()
             point = operating_point(self.configurations[index])
-            self._lfrs[index] = twin_lfr(point, self.declared)[3:6, 3:6]
+            self._lfrs[index] = twin_lfr(self.scenario, point, self.declared)[3:6, 3:6]
             self.extractions += 1
             self.extraction_time_s += time.perf_counter() - wall
         return self._lfrs[index]
@@ -299,6 +303,6 @@ class DrakePlantSource:
         )
 
 
-def drake_plant_array(times, scenario=None, *, progress=None) -> PlantArray:
+def drake_plant_array(times, scenario, *, progress=None) -> PlantArray:
     """Plant array of the Drake twin at mission ``times`` [s] (see :class:`DrakePlantSource`)."""
     return DrakePlantSource(times, scenario, progress=progress).plant_array()

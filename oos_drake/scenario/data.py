@@ -593,6 +593,12 @@ class Scenario:
         File the scenario was loaded from.
     overrides : tuple of (str, float)
         Values set over the file's (``load_scenario(path, overrides)``: parameter studies).
+
+    Notes
+    -----
+    A scenario pickles as itself (its validated data, not its file: a worker process receives
+    exactly the caller's scenario even if the file changed since); the copy is as read-only as
+    the original.
     """
 
     name: str
@@ -607,6 +613,40 @@ class Scenario:
     control: ControlRequirements
     source: Path
     overrides: tuple[tuple[str, float], ...] = ()
+
+    def __reduce__(self):
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        for name in _MAPPING_FIELDS:
+            fields[name] = dict(fields[name])
+        return _unpickle_scenario, (fields,)
+
+
+#: Fields of :class:`Scenario` that are read-only mappings (``MappingProxyType`` does not pickle).
+_MAPPING_FIELDS = ("hubs", "array_models", "arrays", "ports")
+
+
+def _unpickle_scenario(fields: dict[str, Any]) -> Scenario:
+    for name in _MAPPING_FIELDS:
+        fields[name] = MappingProxyType(fields[name])
+    scenario = Scenario(**fields)
+    _freeze_arrays(scenario)
+    return scenario
+
+
+def _freeze_arrays(value: Any) -> None:
+    """Make every ``numpy`` array reachable from ``value`` read-only (an unpickled array is
+    writeable)."""
+    if isinstance(value, np.ndarray):
+        value.setflags(write=False)
+    elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+        for f in dataclasses.fields(value):
+            _freeze_arrays(getattr(value, f.name))
+    elif isinstance(value, Mapping):
+        for item in value.values():
+            _freeze_arrays(item)
+    elif isinstance(value, tuple | list):
+        for item in value:
+            _freeze_arrays(item)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1337,8 +1377,3 @@ def load_scenario(
     stat = source.stat()
     key = tuple((str(k), v) for k, v in (overrides or {}).items())
     return _load_cached(str(source), stat.st_mtime_ns, stat.st_size, key)
-
-
-def default_scenario(scenario: Scenario | None = None) -> Scenario:
-    """``scenario``, or the paper's (:func:`load_scenario`) when it is None."""
-    return load_scenario() if scenario is None else scenario

@@ -211,7 +211,7 @@ def _write(frame: pd.DataFrame, path: Path) -> Path:
 
 def make_figures(
     out_dir,
-    scenario=None,
+    scenario,
     *,
     n_times: int = 330,
     n_frequencies: int = 500,
@@ -225,8 +225,7 @@ def make_figures(
     ----------
     out_dir : path
         Output folder (created).
-    scenario : Scenario, optional
-        Default: the paper's.
+    scenario : Scenario
     n_times, n_frequencies : int
         Mission grid (paper: 330 equally spaced times) and frequency grid (0.01 .. 100 Hz, log).
     n_samples : int

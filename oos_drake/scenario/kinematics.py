@@ -36,7 +36,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from oos_drake.scenario.data import Scenario, load_scenario
+from oos_drake.scenario.data import Scenario
 from oos_drake.scenario.timeline import Configuration
 from oos_drake.titop.spatial import rigid_spatial_inertia, rotation_matrix
 
@@ -421,32 +421,30 @@ def waypoint_tip_pose(scenario: Scenario, label: str) -> Pose:
     return grasp
 
 
-def waypoint_ik(scenario: Scenario | None = None, label: str = "docked", alpha0=None) -> IKSolution:
+def waypoint_ik(scenario: Scenario, label: str = "docked", alpha0=None) -> IKSolution:
     """Solve the inverse kinematics of a labelled arm waypoint (see ``IK_WAYPOINTS``).
 
     Parameters
     ----------
-    scenario : Scenario, optional
-        Default: the paper's.
+    scenario : Scenario
     label : str
         ``"pre-grasp"``, ``"grasp"``, ``"docked"`` (closes the loop J7 = D2, D3 = D1) or
         ``"retreat"``.
     alpha0 : array_like, optional
         Initial guess (default: the stored waypoint with that label).
     """
-    scenario = load_scenario() if scenario is None else scenario
     X_desired = waypoint_tip_pose(scenario, label)
     if alpha0 is None:
         alpha0 = scenario.mission.arm_waypoints.at(label)
     return solve_arm_ik(scenario, X_desired, alpha0)
 
 
-def second_docking_ik(scenario: Scenario | None = None, alpha0=None) -> IKSolution:
+def second_docking_ik(scenario: Scenario, alpha0=None) -> IKSolution:
     """Arm angles closing the loop at the second docking: J7 frame = D2 frame while D3 = D1."""
     return waypoint_ik(scenario, "docked", alpha0)
 
 
-def first_docking_ik(scenario: Scenario | None = None, alpha0=None) -> IKSolution:
+def first_docking_ik(scenario: Scenario, alpha0=None) -> IKSolution:
     """Arm angles grasping D2 with the target at its first-docking (standoff) pose."""
     return waypoint_ik(scenario, "grasp", alpha0)
 

@@ -37,7 +37,6 @@ import numpy as np
 from scipy.linalg import block_diag
 
 from oos_drake.lfr import LFR
-from oos_drake.scenario.data import default_scenario
 from oos_drake.titop import (
     Component,
     angle_parameter,
@@ -169,7 +168,7 @@ def _spring_damper_blocks(name: str, docking) -> dict:
     )
 
 
-def physical_blocks(scenario=None) -> dict:
+def physical_blocks(scenario) -> dict:
     """The scenario's uncertain physical parameters as the models create them.
 
     Hub masses and inertias, first array mode frequencies and the docking spring-dampers' default
@@ -181,7 +180,6 @@ def physical_blocks(scenario=None) -> dict:
     dict
         Block name -> block spec (:class:`~oos_drake.lfr.blocks.UReal`), sorted by name.
     """
-    scenario = default_scenario(scenario)
     parts = [p for hub in scenario.hubs.values() for p in hub_parameters(hub)]
     parts += [_first_mode_parameter(mount) for mount in scenario.arrays.values()]
     for name in ("SM1", "SM2"):
@@ -312,15 +310,15 @@ def _assemble_at_G1(components: list[Component]) -> LFR:
     return model.with_names(inputs=[f"{n}_G1" for n in names], outputs=[f"{n}_G1" for n in outs])
 
 
-def build_mission_model(scenario=None) -> LFR:
+def build_mission_model(scenario) -> LFR:
     """Full mission LFR: external wrench at G1 (6) -> acceleration twist of RH1 at G1 (6).
 
     Cached per scenario object (LFRs are immutable).
 
     Parameters
     ----------
-    scenario : oos_drake.scenario.data.Scenario, optional
-        Validated scenario (default: the paper's).
+    scenario : oos_drake.scenario.data.Scenario
+        Validated scenario.
 
     Returns
     -------
@@ -332,14 +330,16 @@ def build_mission_model(scenario=None) -> LFR:
     --------
     >>> import numpy as np
     >>> from oos_drake.lfr import usubs
-    >>> model = build_mission_model()
+    >>> from oos_drake.scenario.data import load_scenario
+    >>> scenario = load_scenario("paper")
+    >>> model = build_mission_model(scenario)
     >>> model.occurrences["tau_alpha1"], model.occurrences["delta_C1"]
     (16, 16)
-    >>> models = usubs(model, mission_values(np.linspace(0.0, 1500.0, 330))).nominal
+    >>> models = usubs(model, mission_values(np.linspace(0.0, 1500.0, 330), scenario)).nominal
     >>> models.freqresp(2 * np.pi * np.logspace(-2, 2, 500)).shape
     (330, 500, 6, 6)
     """
-    return _mission_model(default_scenario(scenario))
+    return _mission_model(scenario)
 
 
 @functools.lru_cache(maxsize=4)
@@ -379,7 +379,7 @@ def _mission_model(scenario) -> LFR:
     return _assemble_at_G1(components)
 
 
-def build_docking_model(phase: str, scenario=None, *, spring_dampers=None) -> LFR:
+def build_docking_model(phase: str, scenario, *, spring_dampers=None) -> LFR:
     """Docking-phase LFR with spring-dampers (paper Fig. compact_lft_springmass).
 
     Parameters
@@ -387,8 +387,7 @@ def build_docking_model(phase: str, scenario=None, *, spring_dampers=None) -> LF
     phase : {"7", "8"}
         ``"7"``: the arm tip J7 docks to D2 through SM1 (SM2 open, RH2 not at D1);
         ``"8"``: D3 docks to D1 through SM2 while the arm holds D2 through SM1 (closed loop).
-    scenario : Scenario, optional
-        Default: the paper's.
+    scenario : Scenario
     spring_dampers : dict, optional
         ``{"SM1": {"k_shear": LFR|float, ...}, ...}``; default: ureal blocks
         ``k_shear_SMk``, ``k_tors_SMk``, ``d_shear_SMk``, ``d_tors_SMk`` (see
@@ -403,7 +402,6 @@ def build_docking_model(phase: str, scenario=None, *, spring_dampers=None) -> LF
     phase = str(phase)
     if phase not in ("7", "8"):
         raise ValueError(f"build_docking_model: phase must be '7' or '8', got {phase!r}")
-    scenario = default_scenario(scenario)
     if spring_dampers is None:
         return _default_docking_model(phase, scenario)
     return _docking_model(phase, scenario, spring_dampers)
@@ -521,15 +519,14 @@ def configuration_values(alpha, theta, delta_C1, delta_C2) -> dict[str, np.ndarr
     return values
 
 
-def mission_values(times, scenario=None) -> dict[str, np.ndarray]:
+def mission_values(times, scenario) -> dict[str, np.ndarray]:
     """Scheduled block values at mission times (arm, arrays and switches from the timeline).
 
     Parameters
     ----------
     times : float or array_like (N,)
         Mission times [s].
-    scenario : Scenario, optional
-        Default: the paper's.
+    scenario : Scenario
 
     Returns
     -------
@@ -538,7 +535,7 @@ def mission_values(times, scenario=None) -> dict[str, np.ndarray]:
     """
     from oos_drake.scenario.timeline import mission_timeline
 
-    timeline = mission_timeline(default_scenario(scenario))
+    timeline = mission_timeline(scenario)
     config = timeline.configuration(np.atleast_1d(np.asarray(times, dtype=float)))
     return configuration_values(config.alpha, config.theta, config.delta_C1, config.delta_C2)
 

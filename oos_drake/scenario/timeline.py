@@ -31,7 +31,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from oos_drake.scenario.data import Scenario, Waypoints, load_scenario
+from oos_drake.scenario.data import Scenario, Waypoints
 
 __all__ = [
     "ALPHA_PARAMETERS",
@@ -430,19 +430,18 @@ class MissionTimeline:
         return MappingProxyType({**self.moments, **self.docking_phases})
 
 
-def mission_timeline(scenario: Scenario | None = None) -> MissionTimeline:
-    """Build the mission timeline of a scenario (default: the paper's).
+def mission_timeline(scenario: Scenario) -> MissionTimeline:
+    """Build the mission timeline of a scenario.
 
     Parameters
     ----------
-    scenario : Scenario, optional
-        Loaded scenario; default ``load_scenario()``.
+    scenario : Scenario
+        Loaded scenario (:func:`~oos_drake.scenario.data.load_scenario`).
 
     Returns
     -------
     MissionTimeline
     """
-    scenario = load_scenario() if scenario is None else scenario
     mission = scenario.mission
     return MissionTimeline(
         scenario=scenario,

@@ -17,11 +17,11 @@ from oos_drake.analysis.tightening import TightenOptions
 
 
 @pytest.mark.slow
-def test_full_analysis_of_the_baseline_controller(tmp_path):
+def test_full_analysis_of_the_baseline_controller(tmp_path, paper_scenario):
     from oos_drake.analysis.models import mission_closed_loop, mission_times
     from oos_drake.lfr import usubs
 
-    controller = scenario_controller(None)
+    controller = scenario_controller(None, paper_scenario)
     # no wall-clock budget: what stops the resolution must not depend on the machine's load
     # (the work budgets, deterministic, stay the defaults)
     options = AnalysisOptions(
@@ -30,7 +30,9 @@ def test_full_analysis_of_the_baseline_controller(tmp_path):
         spike_budget=float("inf"),
         tighten=TightenOptions(time_budget=float("inf")),
     )
-    summary = run_analysis(controller, tmp_path, options, log=lambda *_: None)
+    summary = run_analysis(
+        controller, tmp_path, options, scenario=paper_scenario, log=lambda *_: None
+    )
     m = summary["mission"]
     assert m["configurations"] == 330 and m["nominal_stable_models"] == 330
     assert 0 < m["mu_peak_lower"] <= m["mu_peak_upper"]
@@ -62,7 +64,8 @@ def test_full_analysis_of_the_baseline_controller(tmp_path):
     worst = worst[(worst["study"] == "mission") & (worst["subset"] == "real")]
     assert set(worst["kind"]) == {"ureal"}
     values = dict(zip(worst["block"], worst["normalized_real [-]"], strict=True))
-    one = mission_closed_loop(controller, mission_times(330)[[int(real["model"])]]).system
+    times = mission_times(330, paper_scenario)[[int(real["model"])]]
+    one = mission_closed_loop(controller, times, paper_scenario).system
     poles = np.linalg.eigvals(np.asarray(usubs(one.model(0), values, normalized=True).A))
     w0 = 2 * np.pi * real["frequency [Hz]"]
     assert np.min(np.abs(poles - 1j * w0)) < 1e-3 * max(w0, 1.0)

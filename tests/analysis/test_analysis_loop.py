@@ -86,9 +86,10 @@ def test_subsets_follow_the_blocks_quantities_not_their_names():
     # the mission blocks keep their subsets when renamed
     from dataclasses import replace
 
+    from oos_drake.scenario.data import load_scenario
     from oos_drake.scenario.model import physical_blocks
 
-    blocks = physical_blocks()
+    blocks = physical_blocks(load_scenario("paper"))
     renamed = {f"p{i}": replace(b, name=f"p{i}") for i, b in enumerate(blocks.values())}
     original = uncertainty_subsets(blocks)
     again = uncertainty_subsets(renamed)

@@ -13,7 +13,9 @@ from oos_drake.analysis.models import (  # noqa: E402
 )
 from oos_drake.analysis.subsets import uncertainty_subsets  # noqa: E402
 from oos_drake.lfr import usubs  # noqa: E402
+from oos_drake.scenario.data import load_scenario  # noqa: E402
 
+PAPER = load_scenario("paper")
 OMEGA = 2 * np.pi * np.geomspace(0.005, 5.0, 60)
 
 
@@ -21,7 +23,7 @@ OMEGA = 2 * np.pi * np.geomspace(0.005, 5.0, 60)
 def controller():
     from oos_drake.analysis.controller import scenario_controller
 
-    return scenario_controller(None)  # the baseline PD
+    return scenario_controller(None, PAPER)  # the baseline PD
 
 
 def _compare(drake, titop, rng):
@@ -47,9 +49,9 @@ def _compare(drake, titop, rng):
 
 def test_mission_loops_from_drake_equal_the_titop_loops(controller):
     rng = np.random.default_rng(1)
-    times = mission_times(4)  # free target, arm-held, docked, tilted arrays
-    drake = mission_closed_loop(controller, times, source="drake")
-    titop = mission_closed_loop(controller, times)
+    times = mission_times(4, PAPER)  # free target, arm-held, docked, tilted arrays
+    drake = mission_closed_loop(controller, times, PAPER, source="drake")
+    titop = mission_closed_loop(controller, times, PAPER)
     _compare(drake, titop, rng)
 
 
@@ -57,14 +59,14 @@ def test_mission_loops_from_drake_equal_the_titop_loops(controller):
 def test_docking_loops_from_drake_equal_the_titop_loops(controller, phase):
     rng = np.random.default_rng(2)
     stiffness = np.geomspace(0.1, 1e5, 4)
-    drake = docking_closed_loop(controller, phase, stiffness, source="drake")
-    titop = docking_closed_loop(controller, phase, stiffness)
+    drake = docking_closed_loop(controller, phase, stiffness, scenario=PAPER, source="drake")
+    titop = docking_closed_loop(controller, phase, stiffness, scenario=PAPER)
     _compare(drake, titop, rng)
 
 
 def test_unknown_plant_source_is_refused(controller):
     with pytest.raises(ValueError, match="plant source must be one of"):
-        mission_closed_loop(controller, [0.0], source="simulink")
+        mission_closed_loop(controller, [0.0], PAPER, source="simulink")
 
 
 def test_drake_and_titop_realizations_give_the_same_mu_upper_bound(controller):
@@ -78,11 +80,11 @@ def test_drake_and_titop_realizations_give_the_same_mu_upper_bound(controller):
     from oos_drake.analysis.subsets import uncertainty_subsets
     from oos_drake.robust.mu_intervals import Realization, mu_solver
 
-    times = mission_times(4)[2:]  # docked, tilted arrays (where the mission's peak is)
+    times = mission_times(4, PAPER)[2:]  # docked, tilted arrays (where the mission's peak is)
     omega = 2 * np.pi * np.linspace(0.78, 0.86, 5)  # around the critical 0.82 Hz
     peaks = {}
     for source in ("drake", "lfr"):
-        loop = mission_closed_loop(controller, times, source=source).system
+        loop = mission_closed_loop(controller, times, PAPER, source=source).system
         members = uncertainty_subsets(loop.uncertainty)["total"]
         for model in range(len(times)):
             A, Bw, Cz, Dzw, blk, _, _ = _analysis_model(loop, model, members)
@@ -109,11 +111,11 @@ def test_grid_bounds_on_the_drake_loops_are_as_tight_as_on_the_titop_loops(contr
     )
     from oos_drake.robust.sweep import SweepOptions, _converge_model, model_grid
 
-    times = mission_times(4)[3:]  # tilted arrays (the mission's peak)
+    times = mission_times(4, PAPER)[3:]  # tilted arrays (the mission's peak)
     omega = AnalysisOptions().grid()
     bounds = {}
     for source in ("drake", "lfr"):
-        loop = mission_closed_loop(controller, times, source=source).system
+        loop = mission_closed_loop(controller, times, PAPER, source=source).system
         A, Bw, Cz, Dzw = model_matrices(loop)
         zr, wc, blk = subset_parts(loop, uncertainty_subsets(loop.uncertainty))["total"]
         for model in range(len(times)):

@@ -12,6 +12,9 @@ from oos_drake.analysis.run import AnalysisOptions, run_analysis
 from oos_drake.analysis.stability import SweepOptions
 from oos_drake.analysis.tightening import TightenOptions
 from oos_drake.control.analysis_model import rotational_channels
+from oos_drake.scenario.data import load_scenario
+
+PAPER = load_scenario("paper")
 
 FAST = AnalysisOptions(
     configurations=3,
@@ -42,14 +45,15 @@ FAST = AnalysisOptions(
 
 
 @pytest.fixture(scope="module")
-def analysis(tmp_path_factory):
+def analysis(tmp_path_factory, paper_scenario):
     from oos_drake.lfr import usubs
     from oos_drake.scenario.model import build_mission_model, mission_values
 
-    plant = usubs(build_mission_model(), mission_values([255.0])).model(0)
+    model = build_mission_model(paper_scenario)
+    plant = usubs(model, mission_values([255.0], paper_scenario)).model(0)
     controller = baseline_controller(rotational_channels(plant).nominal)
     out = tmp_path_factory.mktemp("analysis")
-    summary = run_analysis(controller, out, FAST, log=lambda *_: None)
+    summary = run_analysis(controller, out, FAST, scenario=paper_scenario, log=lambda *_: None)
     return out, summary, controller
 
 
@@ -141,7 +145,7 @@ def test_worst_cases_file_reads_back_with_the_campaign_schema(analysis):
     from oos_drake.campaign.worst_cases import read_worst_cases
 
     _, _, controller = analysis
-    params = block_parameters(mission_closed_loop(controller, [0.0]).system)
+    params = block_parameters(mission_closed_loop(controller, [0.0], PAPER).system)
     regions = read_worst_cases(out / "worst_cases.parquet", params)
     assert {r.subset.split(",")[0] for r in regions}
     table = pd.read_parquet(out / "worst_cases.parquet")
@@ -215,8 +219,8 @@ def test_worst_perturbation_destabilizes_at_the_reported_frequency(analysis):
     out, _, controller = analysis
     peaks = pd.read_parquet(out / "stability_peaks.parquet")
     total = peaks[(peaks["study"] == "mission") & (peaks["subset"] == "total")].iloc[0]
-    times = mission_times(FAST.configurations)
-    arr = mission_closed_loop(controller, times).system
+    times = mission_times(FAST.configurations, PAPER)
+    arr = mission_closed_loop(controller, times, PAPER).system
     members = uncertainty_subsets(arr.uncertainty)["total"]
     cert = certify_peak(
         arr,

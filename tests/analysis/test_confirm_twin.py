@@ -229,7 +229,7 @@ def test_a_worst_case_is_confirmed_on_the_nonlinear_twin(setup):
     """Six to eight 45 s runs of the frozen mission: 77 s measured on the shared, loaded
     development machine (load average 15), the heavier part of it the runs."""
     controller, _, peak = setup
-    row, histories = confirm_peak(peak, controller, ConfirmOptions())
+    row, histories = confirm_peak(peak, controller, load_scenario("paper"), ConfirmOptions())
     _assert_confirmed(row, histories)
 
 
@@ -277,16 +277,17 @@ def test_a_complex_block_worst_case_is_confirmed_on_the_nonlinear_twin(setup):
             omega = crossing
     scaled = {n: alpha * v for n, v in direction.items()}
     peak = Peak("mission", "total", TIME, np.nan, omega, 1 / alpha, 1 / alpha, scaled)
-    row, histories = confirm_peak(peak, controller, ConfirmOptions())
+    row, histories = confirm_peak(peak, controller, load_scenario("paper"), ConfirmOptions())
     assert row["nonlinear runs"] >= 3
     _assert_confirmed(row, histories)
 
 
-def test_confirmation_windows_hold_one_connection_state():
+def test_confirmation_windows_hold_one_connection_state(paper_scenario):
     from oos_drake.analysis.confirm import _mission_window
+    from oos_drake.multibody.mission import make_mission_diagram
     from oos_drake.multibody.mission_sim import MissionSimulation
 
-    sim = MissionSimulation()
+    sim = MissionSimulation(make_mission_diagram(scenario=paper_scenario))
     ramps = sim.schedule(sim.resolve(None)).ramp_intervals()
     for t in np.linspace(0.0, sim.duration, 61):
         start = _mission_window(sim, t, 45.0)

@@ -19,6 +19,9 @@ pytest.importorskip("pydrake")
 
 from oos_drake.cli import main  # noqa: E402
 from oos_drake.control.cli import baseline_for, make_plants  # noqa: E402
+from oos_drake.scenario.data import load_scenario  # noqa: E402
+
+PAPER = load_scenario("paper")
 from oos_drake.control.interconnection import weighted_interconnection  # noqa: E402
 from oos_drake.control.synthesis import (  # noqa: E402
     ModelSet,
@@ -43,7 +46,7 @@ def gain_difference(K1, K2):
 def compare_sources(configurations, options):
     results, plants = {}, {}
     for kind in ("lfr", "drake"):
-        plants[kind] = make_plants(kind, configurations)
+        plants[kind] = make_plants(kind, configurations, PAPER)
         results[kind] = synthesize(plants[kind], baseline_for(plants[kind]), options=options)
     return plants, results
 
@@ -69,7 +72,7 @@ def check_same_controller(plants, results, gamma_rtol, gain_tol):
 def test_the_optimizer_takes_the_same_steps_on_both_sources():
     # from the same start the nonsmooth BFGS makes the same steps on both arrays until a
     # discrete decision (line search, active set) flips on round-off: ~20 iterations here
-    plants = {kind: make_plants(kind, 3) for kind in ("lfr", "drake")}
+    plants = {kind: make_plants(kind, 3, PAPER) for kind in ("lfr", "drake")}
     K0 = baseline_for(plants["lfr"])
     np.testing.assert_allclose(baseline_for(plants["drake"]), K0, rtol=1e-9)
     runs = {

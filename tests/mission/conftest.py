@@ -6,17 +6,19 @@ pytest.importorskip("pydrake")
 
 
 @pytest.fixture(scope="session")
-def mission():
-    """The default :class:`MissionSimulation` (baseline controller, 10 Hz, 1 Hz logging)."""
+def mission(paper_scenario):
+    """The paper's :class:`MissionSimulation` (baseline controller, 10 Hz, 1 Hz logging)."""
+    from oos_drake.multibody.mission import make_mission_diagram
     from oos_drake.multibody.mission_sim import MissionSimulation
 
-    return MissionSimulation()
+    return MissionSimulation(make_mission_diagram(scenario=paper_scenario))
 
 
 @pytest.fixture(scope="session")
-def mission_10hz_log():
+def mission_10hz_log(paper_scenario):
     """A :class:`MissionSimulation` logging at the control rate (default integrator settings)."""
-    from oos_drake.multibody.mission import MissionOptions
+    from oos_drake.multibody.mission import MissionOptions, make_mission_diagram
     from oos_drake.multibody.mission_sim import MissionSimulation
 
-    return MissionSimulation(MissionOptions(log_rate=10.0))
+    options = MissionOptions(log_rate=10.0)
+    return MissionSimulation(make_mission_diagram(options, scenario=paper_scenario))

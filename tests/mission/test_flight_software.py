@@ -102,8 +102,8 @@ def test_design_rejects_bad_inputs():
         MissionOptions(accuracy=-1.0)
 
 
-def test_quintic_polynomial_equals_the_timeline_trajectory():
-    timeline = mission_timeline()
+def test_quintic_polynomial_equals_the_timeline_trajectory(paper_scenario):
+    timeline = mission_timeline(paper_scenario)
     pp = quintic_piecewise_polynomial(timeline.arm)
     times = np.linspace(0.0, 1500.0, 301)
     values = np.stack([pp.value(t).ravel() for t in times])
@@ -112,8 +112,8 @@ def test_quintic_polynomial_equals_the_timeline_trajectory():
     np.testing.assert_allclose(rates, timeline.arm(times, 1), atol=1e-12)
 
 
-def test_baseline_gain_from_the_coupled_inertia(tmp_path):
-    K = controller_gain(None)
+def test_baseline_gain_from_the_coupled_inertia(tmp_path, paper_scenario):
+    K = controller_gain(None, paper_scenario)
     omega = 2 * np.pi * 0.01
     Kp, Kd = K[:, :3], K[:, 3:]
     np.testing.assert_allclose(Kd, 2 * omega * Kp / omega**2, rtol=1e-12)
@@ -130,10 +130,10 @@ def test_baseline_gain_from_the_coupled_inertia(tmp_path):
         ' "K_d": {"value": [[2,0,0],[0,2,0],[0,0,2]]}}}'
     )
     np.testing.assert_allclose(
-        controller_gain(tmp_path / "c.json"), np.hstack([np.eye(3), 2 * np.eye(3)])
+        controller_gain(tmp_path / "c.json", paper_scenario), np.hstack([np.eye(3), 2 * np.eye(3)])
     )
     with pytest.raises(ValueError, match="not found"):
-        controller_gain(tmp_path / "missing.json")
+        controller_gain(tmp_path / "missing.json", paper_scenario)
 
 
 def test_merged_stages_equal_the_block_by_block_chain():

@@ -22,6 +22,7 @@ pytest.importorskip("pydrake")
 from oos_drake.control.components import DesignSpecification  # noqa: E402
 from oos_drake.control.interconnection import plant_statespace, weighted_interconnection  # noqa: E402
 from oos_drake.multibody.operating_point import linearize_at, operating_point  # noqa: E402
+from oos_drake.multibody.scenario_plant import twin_diagram  # noqa: E402
 
 
 def attitude_responses(mission, d0, start=1050.0, end=1100.0):
@@ -33,9 +34,8 @@ def attitude_responses(mission, d0, start=1050.0, end=1100.0):
     ts = result.timeseries
     t = ts["time [s]"].to_numpy() - start
     phi = ts[[f"phi_{a} [rad]" for a in "xyz"]].to_numpy()
-    linear = linearize_at(
-        operating_point(mission.handles.timeline.configuration(0.5 * (start + end)))
-    )
+    point = operating_point(mission.handles.timeline.configuration(0.5 * (start + end)))
+    linear = linearize_at(point, twin_diagram(mission.handles.scenario, point.connection))
     P = linear[3:6, 3:6]  # torque -> wdot
     M = weighted_interconnection(plant_statespace(P.A, P.B, P.C, P.D)).close(mission.handles.K)
     grid = np.linspace(0.0, end - start, 5001)
@@ -58,17 +58,18 @@ def test_small_motion_response_matches_the_linearized_closed_loop(mission_10hz_l
     assert np.all(per_axis < 0.05), per_axis
 
 
-def test_default_integration_matches_a_converged_reference_while_the_arm_moves():
+def test_default_integration_matches_a_converged_reference_while_the_arm_moves(paper_scenario):
     """Fixed 0.1 s Radau3 steps with a 1e-7 Newton tolerance against 12.5 ms steps at 1e-9,
     on the arm moving the captured target (the window where session 1's error-controlled
     1e-5 setting was 7 % off)."""
-    from oos_drake.multibody.mission import MissionOptions
+    from oos_drake.multibody.mission import MissionOptions, make_mission_diagram
     from oos_drake.multibody.mission_sim import MissionSimulation
 
     columns = [f"phi_{a} [rad]" for a in "xyz"]
 
     def attitude(**options):
-        simulation = MissionSimulation(MissionOptions(log_rate=10.0, **options))
+        options = MissionOptions(log_rate=10.0, **options)
+        simulation = MissionSimulation(make_mission_diagram(options, scenario=paper_scenario))
         result = simulation.run({}, seed=1, start=400.0, end=420.0)
         return result.timeseries[columns].to_numpy()
 

@@ -52,7 +52,7 @@ def test_drake_lfr_equals_titop_lfr(titop, index):
     case = cases(scenario)[index]
     springs = {k: v for k, v in case.values.items() if k.split("_")[0] in ("k", "d")}
     declared = mission_parameters(scenario) + spring_damper_parameters(springs)
-    drake = twin_lfr(case.point, declared)
+    drake = twin_lfr(scenario, case.point, declared)
     configuration = {k: v for k, v in case.values.items() if k not in springs}
     reference = usubs(models[case.model], configuration)
     # repetitions: the TITOP counts (delta_m I3, one per inertia moment, w I2 per array,
@@ -87,14 +87,19 @@ def test_spring_parameter_names_are_the_titop_blocks(titop):
             assert f"{prefix}_{spring}" in models["8"].uncertainty
 
 
-def test_extractions_on_spawned_workers_equal_the_serial_ones():
+@pytest.mark.parametrize("name", ["paper", "user_chaser"])
+def test_extractions_on_spawned_workers_equal_the_serial_ones(name):
     """``twin_mission_plants`` on an executor (2 spawned workers, one task per time) gives the
-    serial model array entry for entry: the LFRs do not depend on where they were extracted."""
+    serial model array entry for entry: the LFRs do not depend on where they were extracted.
+    The workers receive the scenario itself (pickled), also one that is not a shipped file."""
+    from pathlib import Path
+
     from oos_drake.control.plants import mission_times
     from oos_drake.multibody.mission_lfr import twin_mission_plants
     from oos_drake.processes import make_executor
 
-    scenario = load_scenario()
+    data = Path(__file__).parents[1] / "data"
+    scenario = load_scenario(name if name == "paper" else data / f"{name}.toml")
     times = mission_times(3, scenario)
     done = []
     with make_executor(2, method="spawn") as executor:

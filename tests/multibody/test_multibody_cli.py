@@ -2,6 +2,7 @@
 
 import argparse
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -63,3 +64,33 @@ def test_bad_sdf_gives_one_line_error_and_status_2(tmp_path, capsys):
     assert status == 2
     assert len(err.splitlines()) == 1
     assert "hub_RH2.sdf: port frame 'D2' missing" in err
+
+
+#: A scenario written as a user would: the paper's file with another chaser (hub RH1 260 kg and
+#: larger inertias, arrays' first mode 0.85 Hz, pointing 0.006 rad, flight software at 5 Hz).
+USER_SCENARIO = Path(__file__).parents[1] / "data" / "user_chaser.toml"
+
+
+@pytest.mark.drake
+def test_validate_checks_the_scenarios_own_twin(capsys):
+    """Issue 30: ``oos validate --scenario FILE`` compared FILE's TITOP LFR with the paper's twin
+    (errors 0.2-1.5 on every configuration); FILE's own twin matches it to round-off."""
+    status = main(
+        ["validate", "--scenario", str(USER_SCENARIO), "--cases", "moments", "--frequencies", "60"]
+    )
+    out = capsys.readouterr().out
+    assert status == 0, out
+    assert out.count("PASS") == 6 and "FAIL" not in out
+    errors = [float(line.split()[2]) for line in out.splitlines() if line.startswith("moment")]
+    assert len(errors) == 6 and max(errors) <= 1e-6
+
+
+@pytest.mark.drake
+def test_validate_against_the_papers_twin_fails_for_another_chaser(capsys):
+    """The check above can fail: FILE's LFR against the package's (paper's) SDF files."""
+    from oos_drake.multibody.scenario_sdf import SDF_DIRECTORY
+
+    argv = ["validate", "--scenario", str(USER_SCENARIO), "--cases", "moments"]
+    status = main([*argv, "--frequencies", "20", "--sdf-dir", str(SDF_DIRECTORY)])
+    assert status == 1
+    assert "FAILED: 6 of 6" in capsys.readouterr().out

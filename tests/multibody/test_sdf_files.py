@@ -151,3 +151,22 @@ def test_only_arm_and_drive_joints_are_actuated():
     names = sorted(plant.get_joint_actuator(i).name() for i in plant.GetJointActuatorIndices())
     expected = sorted([f"alpha_{i}" for i in range(1, 7)] + [f"theta_SA{k}" for k in range(1, 5)])
     assert names == expected
+
+
+def test_each_scenario_gets_its_own_twin(tmp_path):
+    """``scenario_sdf_directory``: the package's files for the paper; files generated from the
+    scenario otherwise (one folder per distinct twin, shared by equal copies of a scenario)."""
+    import pickle
+    from pathlib import Path
+
+    from oos_drake.multibody.scenario_sdf import scenario_sdf_directory
+
+    assert scenario_sdf_directory(SCENARIO) == (SDF_DIRECTORY, None)
+    user = load_scenario(Path(__file__).parents[1] / "data" / "user_chaser.toml")
+    directory, keeper = scenario_sdf_directory(user)
+    assert keeper is not None and directory != SDF_DIRECTORY
+    assert stale_sdf_files(directory, user) == []
+    assert "hub_RH1.sdf" in stale_sdf_files(SDF_DIRECTORY, user)  # another chaser hub
+    assert scenario_sdf_directory(pickle.loads(pickle.dumps(user)))[0] == directory
+    heavier = load_scenario(user.source, {"hubs.RH1.mass": 300.0})
+    assert scenario_sdf_directory(heavier)[0] not in (directory, SDF_DIRECTORY)

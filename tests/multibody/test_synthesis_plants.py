@@ -21,7 +21,7 @@ from oos_drake.control.interconnection import (  # noqa: E402
 )
 from oos_drake.control.synthesis import SynthesisOptions, _worst_case_search, tune  # noqa: E402
 from oos_drake.multibody.mission_lfr import uncertain_parameters  # noqa: E402
-from oos_drake.multibody.scenario_plant import cached_scenario_diagram  # noqa: E402
+from oos_drake.multibody.scenario_plant import twin_diagram  # noqa: E402
 from oos_drake.multibody.synthesis_plants import (  # noqa: E402
     PADDING_POLE,
     DrakePlantSource,
@@ -36,9 +36,9 @@ OMEGA = np.logspace(-3, 3, 400)  # rad/s
 
 
 @pytest.fixture(scope="module")
-def sources():
-    times = mission_times(CONFIGURATIONS)
-    return DrakePlantSource(times), scenario_plants(CONFIGURATIONS)
+def sources(paper_scenario):
+    times = mission_times(CONFIGURATIONS, paper_scenario)
+    return DrakePlantSource(times, paper_scenario), scenario_plants(CONFIGURATIONS, paper_scenario)
 
 
 def relative_error(a, b):
@@ -95,8 +95,8 @@ def test_free_target_models_are_padded_with_decoupled_states(sources):
     assert not np.any(A[np.ix_(rest, padded)]) and not np.any(A[np.ix_(padded, rest)])
 
 
-def test_each_configuration_is_extracted_once_and_nothing_is_relinearized():
-    drake = DrakePlantSource(mission_times(3))
+def test_each_configuration_is_extracted_once_and_nothing_is_relinearized(paper_scenario):
+    drake = DrakePlantSource(mission_times(3, paper_scenario), paper_scenario)
     plants = drake.plant_array()
     lower, upper = plants.bounds
     plants.evaluate([1, 1], np.vstack([lower, upper]))
@@ -127,7 +127,12 @@ def test_extracted_plants_equal_the_twin_relinearized_with_the_values(sources):
     values = np.vstack([upper, lower, lower + (upper - lower) * rng.random(lower.size)])
     names = [p.name for p in plants.parameters]
     reference = [
-        _pad(*rotational_plant(drake.configurations[i], dict(zip(names, v, strict=True))), 48)
+        _pad(
+            *rotational_plant(
+                drake.configurations[i], drake.scenario, dict(zip(names, v, strict=True))
+            ),
+            48,
+        )
         for i, v in zip(index, values, strict=True)
     ]
     A, B, C, D = (np.stack([m[k] for m in reference]) for k in range(4))
@@ -163,7 +168,9 @@ def test_worst_case_search_equals_the_titop_path_and_drake_relinearized(sources)
     theirs = lfr.evaluate(configs, values)
     for k, c in enumerate(configs):
         reference = _pad(
-            *rotational_plant(drake.configurations[c], dict(zip(names, values[k], strict=True))),
+            *rotational_plant(
+                drake.configurations[c], drake.scenario, dict(zip(names, values[k], strict=True))
+            ),
             drake.order,
         )
         loops = {
@@ -193,17 +200,17 @@ def test_worst_case_search_equals_the_titop_path_and_drake_relinearized(sources)
     assert np.max(found["drake"][1] / nominal_norms) > 1.001  # measured 1.002
 
 
-def test_unknown_parameter_is_a_clear_error():
-    handles = cached_scenario_diagram("hub")
+def test_unknown_parameter_is_a_clear_error(paper_scenario):
+    handles = twin_diagram(paper_scenario, "hub")
     context = handles.diagram.CreateDefaultContext()
     with pytest.raises(ValueError, match="w7_SA1"):
-        apply_physical_values(handles, context, {"w7_SA1": 3.0})
+        apply_physical_values(handles, context, {"w7_SA1": 3.0}, paper_scenario)
     with pytest.raises(ValueError, match="m_RH2"):
-        apply_physical_values(handles, context, {"m_RH2": -1.0})
+        apply_physical_values(handles, context, {"m_RH2": -1.0}, paper_scenario)
 
 
-def test_scenario_parameters_are_the_papers_delta_real():
-    names = [p.name for p in uncertain_parameters()]
+def test_scenario_parameters_are_the_papers_delta_real(paper_scenario):
+    names = [p.name for p in uncertain_parameters(paper_scenario)]
     assert names == sorted(
         ["m_RH2", "Jxx_RH2", "Jyy_RH2", "Jzz_RH2", "w1_SA1", "w1_SA2", "w1_SA3", "w1_SA4"]
     )

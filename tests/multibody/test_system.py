@@ -24,6 +24,7 @@ from oos_drake.multibody.operating_point import (  # noqa: E402
 from oos_drake.multibody.scenario_plant import (  # noqa: E402
     build_scenario_diagram,
     set_spring_damper,
+    twin_diagram,
 )
 from oos_drake.scenario.data import load_scenario  # noqa: E402
 from oos_drake.scenario.kinematics import rigid_spatial_inertia_at_G1  # noqa: E402
@@ -34,7 +35,7 @@ from oos_drake.scenario.model import (  # noqa: E402
 )
 from oos_drake.scenario.timeline import mission_timeline  # noqa: E402
 
-SCENARIO = load_scenario()
+SCENARIO = load_scenario("paper")
 TIMELINE = mission_timeline(SCENARIO)
 OMEGA = VALIDATION_OMEGA  # 400 frequencies, 0.01 .. 100 Hz
 
@@ -63,7 +64,8 @@ def _dc_gain(system):
 @pytest.mark.parametrize("name", ["1", "2", "3", "4", "5", "6"])
 def test_six_moments_match_titop(mission_model, name):
     configuration = TIMELINE.moments[name].configuration
-    drake = acceleration_response(linearize_at(operating_point(configuration)))
+    point = operating_point(configuration)
+    drake = acceleration_response(linearize_at(point, twin_diagram(SCENARIO, point.connection)))
     result = compare_systems(
         f"moment {name}", drake, _titop_at(mission_model, configuration), OMEGA
     )
@@ -76,7 +78,7 @@ def test_six_moments_match_titop(mission_model, name):
 def test_low_frequency_gain_is_inverse_rigid_inertia_from_kinematics(name):
     """Independent of TITOP: G(0) = D_G1^-1 with D_G1 summed from the forward kinematics."""
     configuration = TIMELINE.moments[name].configuration
-    drake = acceleration_response(linearize_named(name))
+    drake = acceleration_response(linearize_named(name, SCENARIO))
     expected = np.linalg.inv(rigid_spatial_inertia_at_G1(SCENARIO, configuration))
     np.testing.assert_allclose(
         _dc_gain(drake), expected, rtol=1e-7, atol=1e-9 * np.abs(expected).max()
@@ -86,7 +88,7 @@ def test_low_frequency_gain_is_inverse_rigid_inertia_from_kinematics(name):
 def test_random_mission_times_match_titop(mission_model):
     rng = np.random.default_rng(2024)
     for time in rng.uniform(SCENARIO.mission.t_start, SCENARIO.mission.t_end, 3):
-        drake = acceleration_response(linearize_time(time))
+        drake = acceleration_response(linearize_time(time, SCENARIO))
         titop = _titop_at(mission_model, TIMELINE.configuration(time))
         result = compare_systems(f"t={time:.1f}", drake, titop, OMEGA[::4])
         assert result.passed, result
@@ -145,7 +147,7 @@ def test_bushing_parameters_change_in_the_context_without_rebuild():
 
 
 def test_rate_and_attitude_outputs_integrate_the_angular_acceleration():
-    system = linearize_named("3")
+    system = linearize_named("3", SCENARIO)
     for w in (0.3, 5.0, 40.0):
         s = 1j * w
         response = system(s)
@@ -182,9 +184,9 @@ def test_bad_operating_point_requests_are_refused():
     with pytest.raises(ValueError, match="needs one configuration"):
         operating_point(TIMELINE.sample(3))
     with pytest.raises(ValueError, match="unknown configuration '9'"):
-        linearize_named("9")
+        linearize_named("9", SCENARIO)
     with pytest.raises(ValueError, match="outside the mission"):
-        linearize_time(-5.0)
+        linearize_time(-5.0, SCENARIO)
     handles = build_scenario_diagram("hub")
     point = operating_point(TIMELINE.moments["2"].configuration)  # arm-clamped configuration
     with pytest.raises(ValueError, match="needs a 'arm' diagram"):

@@ -34,9 +34,10 @@ def spec_with(**overrides) -> DesignSpecification:
 
 
 @pytest.fixture(scope="module")
-def plant():
+def plant(paper_scenario):
     """Nominal rotational plant of the paper at t = 400 s (arm holding the target)."""
-    model = usubs(build_mission_model(), mission_values([400.0])).model(0)
+    model = usubs(build_mission_model(paper_scenario), mission_values([400.0], paper_scenario))
+    model = model.model(0)
     return model.nominal
 
 
@@ -61,13 +62,15 @@ def test_paper_control_section_is_the_default_specification_field_by_field():
 
 
 def test_paper_control_section_matches_the_mission_defaults():
-    """Torque bound and software rate of the Drake mission (its option defaults)."""
+    """Torque bound and software rate of the Drake mission (its option defaults; the rate is
+    the scenario's)."""
     pytest.importorskip("pydrake")
     from oos_drake.multibody.mission import MissionOptions
 
-    control = load_scenario().control
+    scenario = load_scenario()
+    control = scenario.control
     assert MissionOptions().torque_limit == control.torque_limit
-    assert MissionOptions().control_rate == control.flight_software_rate_hz
+    assert MissionOptions().resolved(scenario).control_rate == control.flight_software_rate_hz
 
 
 def test_shipped_names_resolve():

@@ -28,8 +28,8 @@ def main(argv):
 
 
 @pytest.fixture(scope="module")
-def timeline():
-    return mission_timeline()
+def timeline(paper_scenario):
+    return mission_timeline(paper_scenario)
 
 
 @pytest.fixture(scope="module")

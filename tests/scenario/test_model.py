@@ -18,8 +18,8 @@ from oos_drake.scenario.timeline import Configuration, mission_timeline
 
 
 @pytest.fixture(scope="module")
-def timeline():
-    return mission_timeline()
+def timeline(paper_scenario):
+    return mission_timeline(paper_scenario)
 
 
 @pytest.fixture(scope="module")
@@ -161,24 +161,24 @@ def test_docking_phase_8_closed_loop_is_rigid_at_low_frequency(timeline):
     np.testing.assert_allclose(low @ reference, np.eye(6), atol=1e-6)
 
 
-def test_docking_phase_name_is_checked():
+def test_docking_phase_name_is_checked(paper_scenario):
     with pytest.raises(ValueError, match="phase must be '7' or '8'"):
-        build_docking_model("9")
+        build_docking_model("9", paper_scenario)
 
 
-def test_paper_delta_table_sizes(model):
+def test_paper_delta_table_sizes(model, paper_scenario):
     from oos_drake.scenario.model import paper_delta_table
 
     table = paper_delta_table(model).set_index("sub_block")["size"]
     assert table["Delta_RA"] == 96 and table["Delta_RH2"] == 14 and table["Delta_P"] == 206
     with pytest.raises(ValueError, match="occurrences .* differ"):
-        paper_delta_table(build_docking_model("7"))
+        paper_delta_table(build_docking_model("7", paper_scenario))
 
 
-def test_well_posed_and_stable_over_the_mission_and_the_parameter_box(model):
+def test_well_posed_and_stable_over_the_mission_and_the_parameter_box(model, paper_scenario):
     from oos_drake.lfr import usample
 
-    along = usubs(model, mission_values(np.linspace(0.0, 1500.0, 61))).nominal
+    along = usubs(model, mission_values(np.linspace(0.0, 1500.0, 61), paper_scenario)).nominal
     n = along.nstates
     assert np.linalg.eigvals(along.M[..., :n, :n]).real.max() < 0
     # every block (switches included) drawn in its range: the loops stay well posed, modes damped
@@ -187,7 +187,7 @@ def test_well_posed_and_stable_over_the_mission_and_the_parameter_box(model):
     assert np.all(np.isfinite(box.freqresp(np.array([0.0, 4.0]))))
 
 
-def test_every_block_of_the_mission_and_docking_models_has_a_unit_and_quantity():
+def test_every_block_of_the_mission_and_docking_models_has_a_unit_and_quantity(paper_scenario):
     """Units and quantities are set where the blocks are created (TITOP / scenario helpers)."""
     from oos_drake.lfr.blocks import QUANTITIES
     from oos_drake.scenario.model import build_docking_model, build_mission_model, physical_blocks
@@ -204,14 +204,15 @@ def test_every_block_of_the_mission_and_docking_models_has_a_unit_and_quantity()
         "d_shear_SM2": ("N s/m", "damping"),
         "d_tors_SM1": ("N m s/rad", "damping"),
     }
-    blocks = {**build_mission_model().uncertainty, **build_docking_model("8").uncertainty}
+    mission = build_mission_model(paper_scenario).uncertainty
+    blocks = {**mission, **build_docking_model("8", paper_scenario).uncertainty}
     for block in blocks.values():
         assert block.unit and block.quantity in QUANTITIES, block.describe()
     for name, facts in expected.items():
         assert (blocks[name].unit, blocks[name].quantity) == facts, name
     # physical_blocks: the same specs as the models, scheduled blocks left out
-    physical = physical_blocks()
+    physical = physical_blocks(paper_scenario)
     assert set(physical) == {n for n, b in blocks.items() if b.quantity not in ("angle", "switch")}
     for name, block in physical.items():
-        if name in build_mission_model().uncertainty:
-            assert block == build_mission_model().uncertainty[name]
+        if name in mission:
+            assert block == mission[name]

@@ -18,8 +18,8 @@ from oos_drake.scenario.timeline import (
 
 
 @pytest.fixture(scope="module")
-def timeline():
-    return mission_timeline()
+def timeline(paper_scenario):
+    return mission_timeline(paper_scenario)
 
 
 def test_quintic_hits_waypoints_with_zero_rate_and_acceleration(timeline):
