@@ -65,6 +65,7 @@ RUNNABLE = {
     "campaign rerun",
     "campaign report",
     "campaign replay",
+    "campaign falsify",
 }
 
 
