@@ -58,6 +58,16 @@ def atomic_write_bytes(path: Path, write) -> Path:
     return path
 
 
+def atomic_write_parquet(table, path: Path) -> Path:
+    """Write the :class:`pandas.DataFrame` ``table`` to ``path`` as Parquet, atomically."""
+    return atomic_write_bytes(path, lambda stream: table.to_parquet(stream, index=False))
+
+
+def atomic_write_text(text: str, path: Path) -> Path:
+    """Write ``text`` (UTF-8) to ``path``, atomically."""
+    return atomic_write_bytes(path, lambda stream: stream.write(text.encode("utf-8")))
+
+
 def atomic_folder(path, work, *, marker: str | None = None, what: str = "a result"):
     """Run ``work(tmp)`` in a new sibling folder ``tmp`` that replaces ``path`` only when it
     returns: a failed or interrupted run leaves the previous folder (or none), never a

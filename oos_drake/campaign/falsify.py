@@ -48,13 +48,13 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from oos_drake.campaign import store
 from oos_drake.campaign.distributions import Choice, Fixed, LogUniform, TruncatedNormal
 from oos_drake.campaign.executors import make_executor
 from oos_drake.campaign.runner import metric_column, resolve_spec
 from oos_drake.campaign.samplers import run_seeds
 from oos_drake.campaign.simulator import ParameterKind, RunCase
 from oos_drake.campaign.spec import CampaignSpec, spec_to_toml
+from oos_drake.files import atomic_write_parquet, atomic_write_text
 
 #: Requirement ratio given to a run that diverged or failed (the optimizer's objective) [-].
 FAILED_RATIO = 1.0e3
@@ -327,7 +327,7 @@ class _Evaluator:
         record["wall_time [s]"] = float(result.wall_time)
         record["unit coordinates"] = json.dumps([float(v) for v in u])
         path = Path(self.directory) / POINTS_DIR / f"point_{case.run_id:06d}.parquet"
-        store.atomic_write_parquet(pd.DataFrame([record]), path)
+        atomic_write_parquet(pd.DataFrame([record]), path)
 
 
 def _read_points(directory: Path) -> dict[int, dict]:
@@ -377,8 +377,8 @@ def _prepare_directory(directory: Path, spec: CampaignSpec, settings: dict) -> N
     if directory.exists() and any(directory.iterdir()):
         raise ValueError(f"--out {directory} exists and is not empty")
     directory.mkdir(parents=True, exist_ok=True)
-    store.atomic_write_text(json.dumps(settings, indent=2) + "\n", settings_path)
-    store.atomic_write_text(text, spec_path)
+    atomic_write_text(json.dumps(settings, indent=2) + "\n", settings_path)
+    atomic_write_text(text, spec_path)
 
 
 def falsify(
@@ -466,10 +466,10 @@ def falsify(
         executor.close()
     table = read_table(directory)
     table = table[table["point_id"] < budget].reset_index(drop=True)
-    store.atomic_write_parquet(table, directory / TABLE_FILE)
+    atomic_write_parquet(table, directory / TABLE_FILE)
     best = table.loc[table[RATIO_COLUMN].idxmax()]
     comparison = linear_comparison(spec, table)
-    store.atomic_write_parquet(comparison, directory / COMPARISON_FILE)
+    atomic_write_parquet(comparison, directory / COMPARISON_FILE)
     return FalsificationResult(
         directory, table, best, evaluator.evaluated, evaluator.reused, comparison
     )

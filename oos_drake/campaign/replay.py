@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from oos_drake.campaign.runner import case_from_plan_row, load_campaign
-from oos_drake.campaign.store import atomic_write_text
+from oos_drake.files import atomic_write_text
 from oos_drake.multibody.replay import default_speed, recording_html
 
 __all__ = ["ReplayResult", "replay_case", "replay_path"]

@@ -61,6 +61,7 @@ from oos_drake.campaign.runner import (  # noqa: E402
     metric_column,
 )
 from oos_drake.campaign.samplers import NOMINAL_COMPONENT, mission_phases  # noqa: E402
+from oos_drake.files import atomic_write_bytes, atomic_write_parquet
 
 #: File of ``oos confirm`` and the folder where ``oos run`` writes it (a sibling of the campaign).
 CONFIRMATION_FILE = "confirmation.parquet"
@@ -108,7 +109,7 @@ def _save(fig, path: Path, rect=None) -> Path:
     """Lay out ``fig`` (``tight_layout``, in ``rect`` if given), save it as PNG atomically
     (temp file + rename), close it and return ``path``."""
     fig.tight_layout(rect=rect)
-    store.atomic_write_bytes(path, lambda stream: fig.savefig(stream, format="png", dpi=110))
+    atomic_write_bytes(path, lambda stream: fig.savefig(stream, format="png", dpi=110))
     plt.close(fig)
     return path
 
@@ -689,7 +690,7 @@ def write_report(
     if confirmation is not None:
         tables["confirmation"] = confirmation
     for name, table in tables.items():
-        store.atomic_write_parquet(table, out / f"{name}.parquet")
+        atomic_write_parquet(table, out / f"{name}.parquet")
 
     figures = [
         _plot_distributions(spec, runs, out / "metric_distributions.png"),

@@ -29,6 +29,7 @@ from oos_drake.campaign.executors import RunResult, execute_case, make_executor
 from oos_drake.campaign.samplers import FREQUENCY_COLUMN, make_plan, region_counts
 from oos_drake.campaign.simulator import MissionWindow, RunCase, SimulatorRecipe
 from oos_drake.campaign.spec import CampaignSpec, load_spec, parse_spec, spec_to_toml
+from oos_drake.files import atomic_write_bytes, atomic_write_parquet, atomic_write_text
 
 
 def metric_column(spec: CampaignSpec, metric: str) -> str:
@@ -95,8 +96,8 @@ def record_result(
     row = result_row(spec, plan_row, result)
     series = _keep_timeseries(spec, row, result)
     if series is not None:
-        store.atomic_write_parquet(series, store.timeseries_file(directory, result.run_id))
-    store.atomic_write_parquet(row, store.run_file(directory, result.run_id))
+        atomic_write_parquet(series, store.timeseries_file(directory, result.run_id))
+    atomic_write_parquet(row, store.run_file(directory, result.run_id))
     return row
 
 
@@ -196,7 +197,7 @@ def _execute(
             count = min(spec.estimation.batch, room)
             batch = make_plan(spec, count, first_run_id=len(plan))
             plan = pd.concat([plan, batch], ignore_index=True)
-            store.atomic_write_parquet(plan, directory / store.PLAN_FILE)
+            atomic_write_parquet(plan, directory / store.PLAN_FILE)
             print(
                 f"{len(runs)} runs: undecided for {'; '.join(undecided)} against P <= "
                 f"{spec.estimation.target:g}: {count} more runs planned",
@@ -269,12 +270,12 @@ def _write_campaign(directory: Path, spec: CampaignSpec, plan: pd.DataFrame) -> 
     if spec.sampler.worst_cases is not None:
         worst_cases_name = store.WORST_CASES_FILE
         source = Path(spec.sampler.worst_cases).read_bytes()
-        store.atomic_write_bytes(directory / worst_cases_name, lambda stream: stream.write(source))
-    store.atomic_write_text(
+        atomic_write_bytes(directory / worst_cases_name, lambda stream: stream.write(source))
+    atomic_write_text(
         json.dumps(store.environment(), indent=2) + "\n", directory / store.ENVIRONMENT_FILE
     )
-    store.atomic_write_parquet(plan, directory / store.PLAN_FILE)
-    store.atomic_write_text(spec_to_toml(spec, worst_cases_name), directory / store.SPEC_FILE)
+    atomic_write_parquet(plan, directory / store.PLAN_FILE)
+    atomic_write_text(spec_to_toml(spec, worst_cases_name), directory / store.SPEC_FILE)
 
 
 def run_campaign(

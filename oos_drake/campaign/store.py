@@ -36,7 +36,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from oos_drake.files import FILE_MODE, atomic_write_bytes
+from oos_drake.files import FILE_MODE, atomic_write_parquet
 
 SPEC_FILE = "spec.toml"
 PLAN_FILE = "plan.parquet"
@@ -48,11 +48,6 @@ TIMESERIES_DIR = "timeseries"
 REPORT_DIR = "report"
 LOCK_FILE = ".lock"
 QUARANTINE_DIR = "quarantine"
-
-
-def atomic_write_parquet(table: pd.DataFrame, path: Path) -> Path:
-    """Write ``table`` to ``path`` as Parquet, atomically."""
-    return atomic_write_bytes(path, lambda stream: table.to_parquet(stream, index=False))
 
 
 def read_table(path: Path, columns, label: str, *, legacy: bool = False) -> pd.DataFrame:
@@ -81,11 +76,6 @@ def read_table(path: Path, columns, label: str, *, legacy: bool = False) -> pd.D
     if missing:
         raise ValueError(f"{label}: missing column(s) {', '.join(missing)}")
     return table
-
-
-def atomic_write_text(text: str, path: Path) -> Path:
-    """Write ``text`` (UTF-8) to ``path``, atomically."""
-    return atomic_write_bytes(path, lambda stream: stream.write(text.encode("utf-8")))
 
 
 def environment() -> dict[str, str]:

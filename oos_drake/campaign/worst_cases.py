@@ -119,7 +119,7 @@ def write_worst_cases(
     regions: Sequence[WorstCaseRegion], parameters: Sequence[Parameter], path: str | Path
 ) -> Path:
     """Write regions to ``path`` in the schema above (atomically: temp file + rename)."""
-    from oos_drake.campaign.store import atomic_write_parquet
+    from oos_drake.files import atomic_write_parquet
 
     by_name = {p.name: p for p in parameters}
     names = sorted({n for r in regions for n in r.perturbation})

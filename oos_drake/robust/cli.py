@@ -136,7 +136,7 @@ def _sweep(args: argparse.Namespace) -> int:
 def _write_table(table, path: str) -> None:
     """Write a table atomically as CSV or Parquet, chosen by the suffix of ``path`` (checked by
     :func:`_load_lfr`)."""
-    from oos_drake.campaign.store import atomic_write_parquet, atomic_write_text
+    from oos_drake.files import atomic_write_parquet, atomic_write_text
 
     if Path(path).suffix == ".parquet":
         atomic_write_parquet(table, Path(path))
