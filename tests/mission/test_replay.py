@@ -39,7 +39,7 @@ SPEC = textwrap.dedent(
     after = {AFTER}
 
     [dispersions]
-    m_RH2 = {{ distribution = "uniform", low = 22.5, high = 27.4 }}
+    m_RH2 = {{ distribution = "uniform" }}  # the scenario's declared range
     phi0_x = {{ distribution = "normal", mean = 0.0, std = 2.0e-3 }}
     phi0_y = {{ distribution = "normal", mean = 0.0, std = 2.0e-3 }}
     w0_z = {{ distribution = "normal", mean = 0.0, std = 2.0e-4 }}
