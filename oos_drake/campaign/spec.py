@@ -78,6 +78,7 @@ from oos_drake.campaign.samplers import mission_phases
 from oos_drake.campaign.simulator import (
     MissionWindow,
     Parameter,
+    ParameterKind,
     SimulatorInfo,
     SimulatorRecipe,
     describe_simulator,
@@ -565,7 +566,9 @@ def parse_spec(text: str, source: Path, worst_cases: str | Path | None = None) -
         if p.name in dispersions_raw:
             entry = dispersions_raw[p.name]
             dispersions[p.name] = declared_dispersion(f"{where}: dispersions.{p.name}", entry, p)
-        elif p.uncertainty is not None:  # the scenario's uncertainty, declared once
+        elif p.uncertainty is not None and (p.kind != ParameterKind.LTI or regions):
+            # the scenario's uncertainty, declared once (an LTI block needs the critical
+            # frequency of a worst-case region to be realized: dispersed only with regions)
             dispersions[p.name] = Uniform(*p.uncertainty)
     if kind == "mu-guided":
         guided = {n for r in regions for n in r.perturbation}

@@ -116,8 +116,10 @@ def test_shipped_specs_disperse_the_scenario_ranges(name):
     for block, (low, high) in expected.items():
         assert spec.dispersions[block] == Uniform(*spec.dispersions[block].support)
         np.testing.assert_allclose(spec.dispersions[block].support, (low, high), rtol=1e-9)
+    # the LTI blocks need a worst-case region's critical frequency to be realized: without the
+    # analysis' file they stay nominal (and a spec that names one is refused by the sampler)
     for axis in ("xx", "xy", "zz"):
-        assert spec.dispersions[f"Delta_mul_{axis}"] == Uniform(-1.0, 1.0)
+        assert f"Delta_mul_{axis}" not in spec.dispersions
 
 
 def _expected_ranges(data) -> dict:
