@@ -93,7 +93,16 @@ def stage_keys(
         source_key("campaign"),
         Path(campaign_spec).read_bytes(),
     )
+    # the report reads every stage; the campaign's own results are added by report_key
+    keys["report"] = _digest(*keys.values(), source_key("report"))
     return keys
+
+
+def report_key(key: str, campaign: Path) -> str:
+    """The report stage's key: ``key`` (its inputs' keys) and the campaign report's tables
+    (the campaign resumes instead of being stamped, so its results are hashed)."""
+    tables = sorted((campaign / "report").glob("*.parquet"))
+    return _digest(key, *(f"{f.name}:{f.read_bytes().hex()}" for f in tables))
 
 
 def _stage_done(folder: Path, key: str) -> bool:
@@ -229,11 +238,25 @@ def run_pipeline(args: argparse.Namespace) -> int:
         )
     _oos("campaign", "report", campaign)
     timings["campaign + report"] = time.perf_counter() - campaign_start
-    total = time.perf_counter() - start
-    (out / "timings.json").write_text(
-        json.dumps({"scenario": str(scenario), "stages_s": timings, "total_s": total}, indent=1)
-        + "\n"
+
+    def write_timings():
+        total = time.perf_counter() - start
+        (out / "timings.json").write_text(
+            json.dumps({"scenario": str(scenario), "stages_s": timings, "total_s": total}, indent=1)
+            + "\n"
+        )
+        return total
+
+    write_timings()  # the report shows the wall times of the stages before it
+    run_stage(
+        "report",
+        out / "report",
+        report_key(keys["report"], campaign),
+        lambda d: _report(d, out, campaign),
+        timings,
     )
+    report = _publish_report(out)
+    total = write_timings()
 
     print("\n[oos run] wall time per stage:")
     for name, seconds in timings.items():
@@ -250,9 +273,37 @@ def run_pipeline(args: argparse.Namespace) -> int:
         ("gain/phase/delay/disk margins", out / "margins" / "margins.png"),
         ("campaign results", campaign / "runs.parquet"),
         ("campaign report", campaign / "report"),
+        ("report (one page)", out / "report.html"),
     ):
         print(f"  {label:28s} {path}")
+    print()
+    _print_headlines(out, campaign, report)
     return 0
+
+
+def _report(folder: Path, out: Path, campaign: Path) -> None:
+    """The report stage: ``folder/report.html`` over the results in ``out`` (published as
+    ``out/report.html``: its links are relative to ``out``)."""
+    from oos_drake.report import REPORT_FILE, write_report
+
+    write_report(out, campaign, folder / REPORT_FILE, report_dir=out)
+
+
+def _publish_report(out: Path) -> Path:
+    """Copy the report stage's page to ``out/report.html`` (atomically); its path."""
+    from oos_drake.files import atomic_write_bytes
+    from oos_drake.report import REPORT_FILE
+
+    page = (out / "report" / REPORT_FILE).read_bytes()
+    return atomic_write_bytes(out / REPORT_FILE, lambda stream: stream.write(page))
+
+
+def _print_headlines(out: Path, campaign: Path, report: Path) -> None:
+    """The ten headline numbers of the run and the report's path."""
+    from oos_drake.report import headline_numbers, load_run
+    from oos_drake.report.cli import print_headlines
+
+    print_headlines(headline_numbers(load_run(out, campaign)), report)
 
 
 def _validate(folder: Path, scenario: Path) -> None:

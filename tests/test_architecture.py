@@ -9,7 +9,10 @@
 Layer order (low to high) and why:
 
 ``base`` (``oos_drake`` itself, ``blas``, ``resources``) < ``processes`` < ``lfr`` < ``titop`` <
-``scenario`` < ``robust`` < ``control`` < ``multibody`` < ``campaign`` < ``analysis`` < ``report`` < ``cli``.
+``scenario`` < ``robust`` < ``control`` < ``multibody`` < ``campaign`` < ``analysis`` < ``report``
+< ``cli``.
+
+- ``report``: reads the results folder every stage wrote (the top floor below the commands).
 
 - ``robust`` below ``control``: the synthesis may reuse the mu and H-infinity machinery; the
   robustness analysis never needs a controller design.

@@ -4,8 +4,8 @@
 :func:`write_report` writes it (atomically) as ``OUT/report.html``. The figures are the PNG files
 the stages wrote, embedded as base64 ``data:`` URIs; the page carries a Content-Security-Policy
 that forbids any load from the network (a figure that is not embedded would not show, and a
-browser says so on its console), and no script. A stage that did not run, or a table that is not
-there, is shown as "not run" rather than failing the report.
+browser says so on its console); the page has no script. A stage that did not run, or a table
+that is not there, is shown as "not run" rather than failing the report.
 
 Every number is shown with its unit: table columns carry it in their name (``name [unit]``,
 the package's convention) and single numbers after the value (``[-]`` when dimensionless).
@@ -66,8 +66,10 @@ REQUIREMENT_UNITS = {
 #: Packages whose versions the report lists.
 VERSIONED_PACKAGES = ("oos_drake", "numpy", "scipy", "pandas", "pyarrow", "drake", "control")
 
+#: Content-Security-Policy of the page: nothing from the network; figures as data URIs; inline
+#: style and scripts only (the page has none, a test's probe adds one).
 _CSP = (
-    "default-src 'none'; img-src data:; style-src 'unsafe-inline'; "
+    "default-src 'none'; img-src data:; style-src 'unsafe-inline'; script-src 'unsafe-inline'; "
     "base-uri 'none'; form-action 'none'"
 )
 
@@ -253,7 +255,7 @@ def _bodies_table(scenario) -> pd.DataFrame:
             "Jxx [kg m^2]": math.nan,
             "Jyy [kg m^2]": math.nan,
             "Jzz [kg m^2]": math.nan,
-            "mass uncertainty [%]": 0.0,
+            "mass uncertainty [%]": math.nan,
             "first mode [Hz]": math.nan,
         }
     )
@@ -332,8 +334,12 @@ def controller_section(results: RunResults, numbers: list[Headline]) -> str:
         return not_run("controller stage (controller/controller.json)")
     control = record.get("controller", {})
     rolloff = control.get("rolloff", {})
-    badges = [badge("H-infinity performance (pointing and torque weights): gamma < 1",
-                    record.get("requirement_met"))]
+    badges = [
+        badge(
+            "H-infinity performance (pointing and torque weights): gamma < 1",
+            record.get("requirement_met"),
+        )
+    ]
     by_key = {h.key: h for h in numbers}
     mu_total = by_key.get("mu_total")
     badges.append(
@@ -392,7 +398,9 @@ def _physical_column(results: RunResults) -> pd.Series | None:
         return None
     alpha = 1.0 / table["mu lower [-]"].astype(float)
     physical = alpha <= table["alpha physical max [-]"].astype(float)
-    return pd.Series(physical.to_numpy(), index=pd.MultiIndex.from_frame(table[["study", "subset"]]))
+    return pd.Series(
+        physical.to_numpy(), index=pd.MultiIndex.from_frame(table[["study", "subset"]])
+    )
 
 
 def analysis_section(results: RunResults) -> str:
@@ -558,9 +566,7 @@ def campaign_section(results: RunResults) -> str:
     parts.append("<h3>Worst runs</h3>")
     worst = results.worst_runs
     parts.append(
-        table_html(
-            worst.head(10) if worst is not None else None, what="report/worst_runs.parquet"
-        )
+        table_html(worst.head(10) if worst is not None else None, what="report/worst_runs.parquet")
     )
     parts.append("<h3>Regions of the mu-guided sampler</h3>")
     parts.append(table_html(results.regions, what="report/regions.parquet"))
@@ -609,7 +615,9 @@ def provenance_section(results: RunResults) -> str:
     rows.append(("scenario SHA-256 (recorded by the analysis)", f"<code>{_e(recorded)}</code>"))
     rows.append(("scenario SHA-256 (file now)", f"<code>{_e(current)}</code>"))
     if recorded and current:
-        rows.append(("file unchanged since the analysis", badge("same SHA-256", recorded == current)))
+        rows.append(
+            ("file unchanged since the analysis", badge("same SHA-256", recorded == current))
+        )
     versions = _versions(results)
     campaign = results.campaign_environment or {}
     table = pd.DataFrame(
@@ -711,7 +719,7 @@ def render_report(results: RunResults, report_dir: str | Path | None = None) -> 
     )
     now = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     return (
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
         f'<meta http-equiv="Content-Security-Policy" content="{_CSP}">'
         '<meta name="viewport" content="width=device-width, initial-scale=1">'
         f"<title>oos run report: {_e(scenario)}</title><style>{_STYLE}</style></head><body>"
@@ -722,7 +730,11 @@ def render_report(results: RunResults, report_dir: str | Path | None = None) -> 
 
 
 def write_report(
-    out: str | Path, campaign: str | Path | None = None, path: str | Path | None = None
+    out: str | Path,
+    campaign: str | Path | None = None,
+    path: str | Path | None = None,
+    *,
+    report_dir: str | Path | None = None,
 ) -> Path:
     """Read the results folder ``out`` and write its report (atomically).
 
@@ -734,6 +746,9 @@ def write_report(
         Its campaign folder (default: the newest ``campaign-*``).
     path : path-like, optional
         Where to write the page (default: ``out/report.html``).
+    report_dir : path-like, optional
+        Folder the page will be opened from, when it is copied there after (its links to the
+        replays are relative to it; default: the folder of ``path``).
 
     Returns
     -------
@@ -744,5 +759,5 @@ def write_report(
 
     results = load_run(out, campaign)
     path = Path(path) if path is not None else Path(out) / REPORT_FILE
-    text = render_report(results, path.parent).encode("utf-8")
+    text = render_report(results, report_dir or path.parent).encode("utf-8")
     return atomic_write_bytes(path, lambda stream: stream.write(text))

@@ -303,6 +303,7 @@ def headline_numbers(results: RunResults) -> list[Headline]:
             if column not in margins.columns or not margins[column].notna().any():
                 continue
             row = margins.loc[margins[column].idxmin()]
+            time_s = float(row.get("time [s]", math.nan))
             numbers.append(
                 Headline(
                     key,
@@ -310,7 +311,7 @@ def headline_numbers(results: RunResults) -> list[Headline]:
                     float(row[column]),
                     unit,
                     f"margins/margins.parquet: min of {column}",
-                    f"{row.get('loop', '?')} loop, t = {float(row.get('time [s]', math.nan)):.4g} s",
+                    f"{row.get('loop', '?')} loop, t = {time_s:.4g} s",
                 )
             )
     summary = results.campaign_summary
