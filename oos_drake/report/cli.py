@@ -20,7 +20,7 @@ def print_headlines(numbers, report_path=None, write=print) -> None:
     write("[oos run] headline numbers:")
     for h in numbers:
         where = f"  ({h.where})" if h.where else ""
-        write(f"  {h.label:62s} {format_number(h.value, h.unit):>14s}{where}")
+        write(f"  {h.label:70s} {format_number(h.value, h.unit):>12s}{where}")
     if report_path is not None:
         write(f"[oos run] report: {report_path}")
 

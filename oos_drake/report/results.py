@@ -32,6 +32,17 @@ import pandas as pd
 STAGES = ("model", "validate", "controller", "analysis", "confirm", "margins")
 #: Subsets of the analysis, in the order of its figures (``oos_drake.analysis.subsets``).
 SUBSETS = ("total", "real", "modal", "mechanical", "additive", "multiplicative")
+#: Figures shown first (file stems), in this order: the headline figure of each stage.
+FIGURE_ORDER = (
+    "mu_mission",
+    "mu_docking",
+    "performance",
+    "time_check",
+    "margins",
+    "regions_performance",
+    "metric_distributions",
+    "worst_runs",
+)
 #: Row of the campaign summary that counts a run as failed for any reason.
 ANY_FAILURE = "any (requirement or run failure)"
 #: Margin columns of ``margins.parquet`` whose mission-wide minimum is a headline: column ->
@@ -125,9 +136,12 @@ class RunResults:
     replays: tuple[Path, ...]
 
     def figures(self, folder: str | Path) -> list[Path]:
-        """The PNG figures of a stage folder (relative to :attr:`out`, or absolute), sorted."""
+        """The PNG figures of a stage folder (relative to :attr:`out`, or absolute): those of
+        :data:`FIGURE_ORDER` first, in its order, then the others by name."""
         path = Path(folder) if Path(folder).is_absolute() else self.out / folder
-        return sorted(path.glob("*.png")) if path.is_dir() else []
+        found = sorted(path.glob("*.png")) if path.is_dir() else []
+        rank = {name: i for i, name in enumerate(FIGURE_ORDER)}
+        return sorted(found, key=lambda p: (rank.get(p.stem, len(rank)), p.name))
 
     @property
     def scenario_file(self) -> Path | None:
