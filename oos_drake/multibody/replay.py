@@ -101,7 +101,7 @@ def frame_camera(
     fov_deg: float = CAMERA_FOV_DEG,
     framing: float = CAMERA_FRAMING,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Camera position and target that frame a set of spheres.
+    r"""Camera position and target that frame a set of spheres.
 
     The target is the centre of the spheres' bounding box; the camera looks at it from
     ``direction``, at the distance where the bounding sphere of all spheres (about the target)
