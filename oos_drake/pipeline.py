@@ -193,7 +193,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
         out / "model",
         keys["model"],
         lambda d: (
-            _oos("model", "info", *on_scenario),
+            _oos("model", "info", "--out", d, *on_scenario),
             _oos("model", "figures", "--out", d, *on_scenario),
         ),
         timings,

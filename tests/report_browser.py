@@ -26,6 +26,8 @@ import pytest
 CHROMIUM = "/usr/bin/chromium"
 #: Width of the browser window [px].
 WIDTH = 1400
+#: Tallest full-page screenshot taken [px].
+MAX_HEIGHT = 30000
 
 PROBE = """<script>
 (function () {
@@ -154,7 +156,9 @@ def section_screenshots(
 
     offsets = {s["id"]: s["top"] for s in sections}
     bottom = max(offsets[n] for n in names) + height
-    full = screenshot(page, work / "full.png", work, height=min(bottom, 30000))
+    if bottom > MAX_HEIGHT:
+        raise ValueError(f"sections end at {bottom} px, beyond {MAX_HEIGHT} px")
+    full = screenshot(page, work / "full.png", work, height=bottom)
     shots = {}
     with Image.open(full) as image:
         for section, name in names.items():

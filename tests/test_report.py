@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from report_browser import probe, section_screenshots
+from PIL import Image
+from report_browser import probe, screenshot, section_screenshots
 
 from oos_drake.report import headline_numbers, load_run, write_report
 from oos_drake.scenario.data import scenario_path
@@ -36,6 +37,19 @@ def results_folder(tmp_path) -> Path:
     out = tmp_path / "out"
     scenario = scenario_path(None)
     record = {"name": "paper", "file": str(scenario), "sha256": "0" * 64, "overrides": {}}
+    (out / "model").mkdir(parents=True)
+    pd.DataFrame(
+        {
+            "block": ["m_RH2", "w1_SA1"],
+            "kind": ["ureal", "ureal"],
+            "quantity": ["mass", "modal frequency"],
+            "unit": ["kg", "rad/s"],
+            "nominal [unit]": [24.96, 8.07],
+            "lower [unit]": [22.46, 6.46],
+            "upper [unit]": [27.46, 9.69],
+            "occurrences": [3, 2],
+        }
+    ).to_parquet(out / "model" / "blocks.parquet")
     (out / "controller").mkdir(parents=True)
     controller = {
         "controller": {
@@ -192,14 +206,17 @@ def check_page(page: Path, out: Path, work: Path, shots: Path | None = None) -> 
 def test_report_of_a_synthetic_folder_in_chromium(results_folder, tmp_path):
     page = write_report(results_folder)
     assert page == results_folder / "report.html"
-    seen = check_page(page, results_folder, tmp_path / "browser", tmp_path / "shots")
+    seen = check_page(page, results_folder, tmp_path / "browser")
+    shot = screenshot(page, tmp_path / "top.png", tmp_path / "browser")
+    with Image.open(shot) as image:  # a page was drawn, not a blank window
+        assert image.size == (1400, 1400) and len(image.getcolors(1 << 16) or range(99)) > 20
     assert len(seen["headlines"]) == 10
     assert len(seen["images"]) == 3  # the PNG files of the folder
     sections = {s["id"]: s["notRun"] for s in seen["sections"]}
     for section in ("headlines", "controller", "analysis", "validation", "replays"):
         assert sections[section] == 0, section
-    assert (tmp_path / "shots" / "analysis.png").stat().st_size > 0
     text = page.read_text()
+    assert "<td>modal frequency</td><td>rad/s</td>" in text  # the block table, with units
     assert 'href="campaign-0123456789/replay/case_3.html"' in text
     assert "http://" not in text and "https://" not in text
 

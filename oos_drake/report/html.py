@@ -63,6 +63,8 @@ REQUIREMENT_UNITS = {
     "multiplicative_diagonal": "-",
     "multiplicative_off_diagonal": "-",
 }
+#: Widest figure shown at half the page's width [px].
+NARROW_FIGURE = 1000
 #: Packages whose versions the report lists.
 VERSIONED_PACKAGES = ("oos_drake", "numpy", "scipy", "pandas", "pyarrow", "drake", "control")
 
@@ -97,8 +99,11 @@ td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: now
 .fail { background: #fde2e1; color: #8e1b14; border: 1px solid #ee8d86; }
 .na { background: #eceff1; color: #55606b; border: 1px solid #c5cbd1; }
 .notrun { color: #8a5a00; background: #fff4d6; padding: 6px 10px; border-radius: 4px; }
-figure { margin: 10px 0 18px 0; }
-figure img { max-width: 100%; border: 1px solid #d5dbe3; background: white; }
+.figures { display: flex; flex-wrap: wrap; gap: 12px; align-items: flex-start; }
+figure { margin: 6px 0 12px 0; max-width: 100%; }
+figure.narrow { max-width: calc(50% - 8px); }
+figure .frame { max-height: 950px; overflow: auto; border: 1px solid #d5dbe3; }
+figure img { max-width: 100%; display: block; background: white; }
 figcaption { font-size: 13px; color: #55606b; }
 pre { background: #f3f5f8; padding: 10px; font-size: 12px; overflow-x: auto; }
 table.headlines td, table.headlines th { font-size: 14px; padding: 5px 10px; }
@@ -159,19 +164,34 @@ def rows_html(rows: list[tuple[str, str]]) -> str:
     return f"<table>{body}</table>"
 
 
+def _png_width(content: bytes) -> int:
+    """Width of a PNG [px] (its IHDR chunk; 0 when ``content`` is not a PNG)."""
+    if content[:8] != b"\x89PNG\r\n\x1a\n" or len(content) < 24:
+        return 0
+    return int.from_bytes(content[16:20], "big")
+
+
 def figure_html(path: Path, caption: str = "") -> str:
-    """``path`` (a PNG) embedded as a base64 data URI, with a caption."""
-    data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
+    """``path`` (a PNG) embedded as a base64 data URI, with a caption; a narrow figure (at most
+    :data:`NARROW_FIGURE` pixels wide) takes half the width, so two go side by side."""
+    content = Path(path).read_bytes()
+    data = base64.b64encode(content).decode("ascii")
     caption = caption or Path(path).name
+    narrow = 0 < _png_width(content) <= NARROW_FIGURE
+    opening = '<figure class="narrow">' if narrow else "<figure>"
     return (
-        f'<figure><img alt="{_e(Path(path).name)}" src="data:image/png;base64,{data}">'
+        f'{opening}<div class="frame"><img alt="{_e(Path(path).name)}" '
+        f'src="data:image/png;base64,{data}"></div>'
         f"<figcaption>{_e(caption)}</figcaption></figure>"
     )
 
 
 def figures_html(paths: list[Path], what: str) -> str:
-    """Every figure of ``paths``, or the "not run" placeholder."""
-    return "".join(figure_html(p) for p in paths) if paths else not_run(what)
+    """Every figure of ``paths`` (side by side where they fit; a very tall one scrolls in its
+    frame), or the "not run" placeholder."""
+    if not paths:
+        return not_run(what)
+    return '<div class="figures">' + "".join(figure_html(p) for p in paths) + "</div>"
 
 
 def _value(value, unit: str) -> str:
@@ -297,10 +317,13 @@ def scenario_section(results: RunResults) -> str:
         table_html(_bodies_table(scenario)),
         "<h3>Uncertain parameters (mission LFR blocks)</h3>",
     ]
-    try:
-        parts.append(table_html(_parameters_table(scenario)))
-    except Exception as error:  # noqa: BLE001 - the report must not fail on a model error
-        parts.append(not_run(f"mission LFR could not be built ({error})"))
+    if results.blocks is not None:
+        parts.append(table_html(results.blocks))
+    else:  # an older results folder: build the LFR (seconds)
+        try:
+            parts.append(table_html(_parameters_table(scenario)))
+        except Exception as error:  # noqa: BLE001 - the report must not fail on a model error
+            parts.append(not_run(f"mission LFR could not be built ({error})"))
     control = scenario.control
     rows = []
     for name, unit in REQUIREMENT_UNITS.items():
@@ -563,10 +586,27 @@ def campaign_section(results: RunResults) -> str:
     )
     parts.append("<h3>Runs per status</h3>")
     parts.append(table_html(results.campaign_status, what="report/status.parquet"))
-    parts.append("<h3>Worst runs</h3>")
+    parts.append("<h3>Worst runs (their dispersed values: report/worst_runs.parquet)</h3>")
     worst = results.worst_runs
+    metrics = []
+    if results.campaign_summary is not None and "metric" in results.campaign_summary:
+        metrics = [m for m in results.campaign_summary["metric"] if m != ANY_FAILURE]
     parts.append(
-        table_html(worst.head(10) if worst is not None else None, what="report/worst_runs.parquet")
+        table_html(
+            worst.head(10) if worst is not None else None,
+            [
+                "run_id",
+                "requirement ratio [-]",
+                "region",
+                "weight",
+                "window_start [s]",
+                "window_end [s]",
+                "frequency [Hz]",
+                *metrics,
+                "status",
+            ],
+            what="report/worst_runs.parquet",
+        )
     )
     parts.append("<h3>Regions of the mu-guided sampler</h3>")
     parts.append(table_html(results.regions, what="report/regions.parquet"))

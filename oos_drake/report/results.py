@@ -9,6 +9,7 @@ Folder layout read (``OUT`` = ``oos run --out``)::
     OUT/timings.json                 wall time of each stage of the last ``oos run``
     OUT/<stage>/stage.json           the stage's key and the wall time of its computation [s]
     OUT/model/*.png                  model figures
+    OUT/model/blocks.parquet         the mission LFR's uncertain blocks (unit, nominal, range)
     OUT/validate/validate.txt        Drake-vs-TITOP validation table (text)
     OUT/controller/controller.json   gains, gamma, requirement met, design specification
     OUT/analysis/summary.json        scenario record (file, SHA-256), key numbers
@@ -110,6 +111,8 @@ class RunResults:
         The campaign report's ``summary``, ``worst_runs``, ``regions`` and ``status`` tables.
     campaign_environment : dict or None
         ``environment.json`` of the campaign (versions of the packages that ran it).
+    blocks : pandas.DataFrame or None
+        ``model/blocks.parquet``: the mission LFR's uncertain blocks (unit, nominal, range).
     validation : str or None
         ``validate/validate.txt``.
     replays : tuple of pathlib.Path
@@ -132,6 +135,7 @@ class RunResults:
     regions: pd.DataFrame | None
     campaign_status: pd.DataFrame | None
     campaign_environment: dict | None
+    blocks: pd.DataFrame | None
     validation: str | None
     replays: tuple[Path, ...]
 
@@ -227,6 +231,7 @@ def load_run(out: str | Path, campaign: str | Path | None = None) -> RunResults:
         regions=_parquet(report / "regions.parquet") if report else None,
         campaign_status=_parquet(report / "status.parquet") if report else None,
         campaign_environment=_json(campaign / "environment.json") if campaign else None,
+        blocks=_parquet(out / "model" / "blocks.parquet"),
         validation=validation.read_text(encoding="utf-8") if validation.is_file() else None,
         replays=tuple(replays),
     )
