@@ -264,3 +264,17 @@ def test_oos_report_command_prints_the_headlines(results_folder, capsys):
     assert "7.25 dB" in printed  # worst gain margin
     assert main(["report", str(results_folder / "nowhere")]) == 2  # one-line error
     assert (results_folder / "report.html").is_file()
+
+
+def test_report_stage_key_follows_the_campaign_tables(results_folder):
+    """The campaign resumes instead of being stamped: its report tables are in the report
+    stage's key, so a campaign that gained runs gets a new report."""
+    from oos_drake.pipeline import report_key
+
+    (campaign,) = results_folder.glob("campaign-*")
+    before = report_key("inputs", campaign)
+    assert report_key("inputs", campaign) == before
+    assert report_key("other inputs", campaign) != before
+    path = campaign / "report" / "summary.parquet"
+    pd.read_parquet(path).assign(runs=[201, 201]).to_parquet(path)
+    assert report_key("inputs", campaign) != before
