@@ -30,6 +30,7 @@ import pandas as pd
 from oos_drake.files import atomic_write_bytes
 from oos_drake.report.results import (
     ANY_FAILURE,
+    STAGES,
     Headline,
     RunResults,
     format_number,
@@ -695,8 +696,6 @@ def provenance_section(results: RunResults) -> str:
 
 
 def _stage_order(name: str) -> tuple[int, str]:
-    from oos_drake.report.results import STAGES
-
     return (STAGES.index(name) if name in STAGES else len(STAGES), name)
 
 
