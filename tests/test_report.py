@@ -278,3 +278,14 @@ def test_report_stage_key_follows_the_campaign_tables(results_folder):
     path = campaign / "report" / "summary.parquet"
     pd.read_parquet(path).assign(runs=[201, 201]).to_parquet(path)
     assert report_key("inputs", campaign) != before
+
+
+def test_missing_browser_is_a_skip_that_ci_turns_into_a_failure(monkeypatch):
+    """Without chromium the browser tests skip with a reason that ``conftest.py`` turns into a
+    failure when ``CI`` is set ("not installed")."""
+    import report_browser
+
+    monkeypatch.setattr(report_browser.shutil, "which", lambda name: None)
+    monkeypatch.setattr(report_browser, "CHROMIUM", "/nonexistent/chromium")
+    with pytest.raises(pytest.skip.Exception, match="not installed"):
+        report_browser.chromium()
