@@ -237,6 +237,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
             f"controller={controller.resolve()}",
         )
     _oos("campaign", "report", campaign)
+    _replay_worst_run(campaign)
     timings["campaign + report"] = time.perf_counter() - campaign_start
 
     def write_timings():
@@ -279,6 +280,25 @@ def run_pipeline(args: argparse.Namespace) -> int:
     print()
     _print_headlines(out, campaign, report)
     return 0
+
+
+def _replay_worst_run(campaign: Path) -> Path | None:
+    """The 3-D replay of the campaign's worst run (``replay/case_N.html``, for the report),
+    unless it is there already; a campaign whose simulator has no 3-D model gets none (the
+    command says why)."""
+    import pandas as pd
+
+    from oos_drake.campaign.replay import replay_path
+    from oos_drake.cli import main
+
+    worst = campaign / "report" / "worst_runs.parquet"
+    table = pd.read_parquet(worst) if worst.is_file() else pd.DataFrame()
+    if table.empty or "run_id" not in table:
+        return None
+    path = replay_path(campaign, int(table["run_id"].iloc[0]))
+    if not path.is_file() and main(["campaign", "replay", str(campaign), "--case", path.stem[5:]]):
+        return None
+    return path
 
 
 def _report(folder: Path, out: Path, campaign: Path) -> None:
