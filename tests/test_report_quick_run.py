@@ -4,6 +4,7 @@ run's Parquet and JSON results, and the same numbers printed at the end of ``oos
 
 from __future__ import annotations
 
+import pandas as pd
 import pytest
 from test_report import check_page, expected_headlines
 
@@ -29,5 +30,9 @@ def test_report_of_a_quick_run_in_chromium(quick_run, tmp_path):
     units = {"gain_margin": "dB", "phase_margin": "deg"}
     for key, value in expected_headlines(out).items():
         assert format_number(value, units.get(key, "-")) in printed, key
+    # the worst run's 3-D replay is made by oos run and linked from the report
+    worst = pd.read_parquet(campaign / "report" / "worst_runs.parquet")["run_id"].iloc[0]
+    replay = f"{campaign.name}/replay/case_{int(worst)}.html"
+    assert (out / replay).is_file() and f'href="{replay}"' in page.read_text()
     for name in ("top.png", "analysis.png", "campaign.png"):
         assert (tmp_path / "shots" / name).stat().st_size > 10_000, name
