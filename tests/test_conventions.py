@@ -37,7 +37,7 @@ def _sources():
 # ---------------------------------------------------------------- D3: the oos parser
 COMMANDS = {
     "run", "model", "sdf", "validate", "synth", "analyze", "confirm", "robust", "campaign",
-    "ulinearize", "margins", "study",
+    "ulinearize", "margins", "study", "report",
 }  # fmt: skip
 #: Every command line that runs something (README's `oos` table).
 RUNNABLE = {
@@ -62,6 +62,7 @@ RUNNABLE = {
     "campaign rerun",
     "campaign report",
     "campaign replay",
+    "report",
 }
 
 
