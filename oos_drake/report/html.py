@@ -736,9 +736,14 @@ def render_report(results: RunResults, report_dir: str | Path | None = None) -> 
     str
     """
     report_dir = Path(report_dir) if report_dir is not None else results.out
-    numbers = headline_numbers(results)
+    try:
+        numbers = headline_numbers(results)
+        headlines = headlines_html(numbers)
+    except Exception as error:  # noqa: BLE001 - a changed table must not lose the report
+        numbers = []
+        headlines = not_run(f"headline numbers: {type(error).__name__}: {error}")
     bodies = {
-        "headlines": headlines_html(numbers),
+        "headlines": headlines,
         "scenario": _guarded(scenario_section, results),
         "controller": _guarded(controller_section, results, numbers),
         "analysis": _guarded(analysis_section, results),

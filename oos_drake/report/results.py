@@ -244,6 +244,11 @@ def _finite(value) -> bool:
         return False
 
 
+def _count(value) -> str:
+    """A count as an integer ("?" when it is missing)."""
+    return str(int(value)) if _finite(value) else "?"
+
+
 def guaranteed_mu(peaks: pd.DataFrame, subset: str, study: str = "mission") -> tuple[float, str]:
     """The peak upper bound of mu of one subset and which bound it is.
 
@@ -345,7 +350,7 @@ def headline_numbers(results: RunResults) -> list[Headline]:
                     float(row["P 95 % high"]),
                     "-",
                     f"{results.campaign.name}/report/summary.parquet: P 95 % high ({ANY_FAILURE})",
-                    f"{int(row['violations'])} of {int(row['runs'])} runs fail",
+                    f"{_count(row.get('violations'))} of {_count(row.get('runs'))} runs fail",
                 )
             )
     return numbers
