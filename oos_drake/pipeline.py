@@ -323,7 +323,12 @@ def _print_headlines(out: Path, campaign: Path, report: Path) -> None:
     from oos_drake.report import headline_numbers, load_run
     from oos_drake.report.cli import print_headlines
 
-    print_headlines(headline_numbers(load_run(out, campaign)), report)
+    try:
+        numbers = headline_numbers(load_run(out, campaign))
+    except Exception as error:  # noqa: BLE001 - the results are written; only the summary fails
+        print(f"[oos run] headline numbers not available ({type(error).__name__}: {error})")
+        numbers = []
+    print_headlines(numbers, report)
 
 
 def _validate(folder: Path, scenario: Path) -> None:
