@@ -32,6 +32,7 @@ COMMAND_MODULES = (
     "oos_drake.analysis.cli",
     "oos_drake.campaign.cli",
     "oos_drake.pipeline",
+    "oos_drake.report.cli",
 )
 
 

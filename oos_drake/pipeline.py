@@ -93,7 +93,16 @@ def stage_keys(
         source_key("campaign"),
         Path(campaign_spec).read_bytes(),
     )
+    # the report reads every stage; the campaign's own results are added by report_key
+    keys["report"] = _digest(*keys.values(), source_key("report"))
     return keys
+
+
+def report_key(key: str, campaign: Path) -> str:
+    """The report stage's key: ``key`` (its inputs' keys) and the campaign report's tables
+    (the campaign resumes instead of being stamped, so its results are hashed)."""
+    tables = sorted((campaign / "report").glob("*.parquet"))
+    return _digest(key, *(f"{f.name}:{f.read_bytes().hex()}" for f in tables))
 
 
 def _stage_done(folder: Path, key: str) -> bool:
@@ -184,7 +193,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
         out / "model",
         keys["model"],
         lambda d: (
-            _oos("model", "info", *on_scenario),
+            _oos("model", "info", "--out", d, *on_scenario),
             _oos("model", "figures", "--out", d, *on_scenario),
         ),
         timings,
@@ -228,12 +237,27 @@ def run_pipeline(args: argparse.Namespace) -> int:
             f"controller={controller.resolve()}",
         )
     _oos("campaign", "report", campaign)
+    _replay_worst_run(campaign)
     timings["campaign + report"] = time.perf_counter() - campaign_start
-    total = time.perf_counter() - start
-    (out / "timings.json").write_text(
-        json.dumps({"scenario": str(scenario), "stages_s": timings, "total_s": total}, indent=1)
-        + "\n"
+
+    def write_timings():
+        total = time.perf_counter() - start
+        (out / "timings.json").write_text(
+            json.dumps({"scenario": str(scenario), "stages_s": timings, "total_s": total}, indent=1)
+            + "\n"
+        )
+        return total
+
+    write_timings()  # the report shows the wall times of the stages before it
+    run_stage(
+        "report",
+        out / "report",
+        report_key(keys["report"], campaign),
+        lambda d: _report(d, out, campaign),
+        timings,
     )
+    report = _publish_report(out)
+    total = write_timings()
 
     print("\n[oos run] wall time per stage:")
     for name, seconds in timings.items():
@@ -250,9 +274,61 @@ def run_pipeline(args: argparse.Namespace) -> int:
         ("gain/phase/delay/disk margins", out / "margins" / "margins.png"),
         ("campaign results", campaign / "runs.parquet"),
         ("campaign report", campaign / "report"),
+        ("report (one page)", out / "report.html"),
     ):
         print(f"  {label:28s} {path}")
+    print()
+    _print_headlines(out, campaign, report)
     return 0
+
+
+def _replay_worst_run(campaign: Path) -> Path | None:
+    """The 3-D replay of the campaign's worst run (``replay/case_N.html``, for the report),
+    unless it is there already; a campaign whose simulator has no 3-D model gets none (the
+    command says why)."""
+    import pandas as pd
+
+    from oos_drake.campaign.replay import replay_path
+    from oos_drake.cli import main
+
+    worst = campaign / "report" / "worst_runs.parquet"
+    table = pd.read_parquet(worst) if worst.is_file() else pd.DataFrame()
+    if table.empty or "run_id" not in table:
+        return None
+    path = replay_path(campaign, int(table["run_id"].iloc[0]))
+    if not path.is_file() and main(["campaign", "replay", str(campaign), "--case", path.stem[5:]]):
+        return None
+    return path
+
+
+def _report(folder: Path, out: Path, campaign: Path) -> None:
+    """The report stage: ``folder/report.html`` over the results in ``out`` (published as
+    ``out/report.html``: its links are relative to ``out``)."""
+    from oos_drake.report import REPORT_FILE, write_report
+
+    write_report(out, campaign, folder / REPORT_FILE, report_dir=out)
+
+
+def _publish_report(out: Path) -> Path:
+    """Copy the report stage's page to ``out/report.html`` (atomically); its path."""
+    from oos_drake.files import atomic_write_bytes
+    from oos_drake.report import REPORT_FILE
+
+    page = (out / "report" / REPORT_FILE).read_bytes()
+    return atomic_write_bytes(out / REPORT_FILE, lambda stream: stream.write(page))
+
+
+def _print_headlines(out: Path, campaign: Path, report: Path) -> None:
+    """The ten headline numbers of the run and the report's path."""
+    from oos_drake.report import headline_numbers, load_run
+    from oos_drake.report.cli import print_headlines
+
+    try:
+        numbers = headline_numbers(load_run(out, campaign))
+    except Exception as error:  # noqa: BLE001 - the results are written; only the summary fails
+        print(f"[oos run] headline numbers not available ({type(error).__name__}: {error})")
+        numbers = []
+    print_headlines(numbers, report)
 
 
 def _validate(folder: Path, scenario: Path) -> None:

@@ -1,6 +1,9 @@
 """Shared pytest configuration: ``slow`` tests run only with ``--runslow`` or OOS_RUN_SLOW=1."""
 
 import os
+import subprocess
+import sys
+from types import SimpleNamespace
 
 import pytest
 
@@ -29,6 +32,23 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip_slow)
+
+
+@pytest.fixture(scope="session")
+def quick_run(tmp_path_factory):
+    """One ``oos run --quick`` from the command line, shared by the slow tests that read its
+    results (CI time is tight: the run takes minutes).
+
+    Returns
+    -------
+    types.SimpleNamespace
+        ``out`` (the results folder), ``command`` (the argv) and ``result`` (the finished
+        :class:`subprocess.CompletedProcess`, stdout and stderr captured).
+    """
+    out = tmp_path_factory.mktemp("quick-run") / "out"
+    command = [sys.executable, "-m", "oos_drake.cli", "run", "--out", str(out), "--quick"]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=3000)
+    return SimpleNamespace(out=out, command=command, result=result)
 
 
 # Property tests draw new examples on every developer run; CI replays a fixed set (derandomized)

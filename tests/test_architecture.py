@@ -9,7 +9,10 @@
 Layer order (low to high) and why:
 
 ``base`` (``oos_drake`` itself, ``blas``, ``resources``) < ``processes`` < ``lfr`` < ``titop`` <
-``scenario`` < ``robust`` < ``control`` < ``multibody`` < ``campaign`` < ``analysis`` < ``cli``.
+``scenario`` < ``robust`` < ``control`` < ``multibody`` < ``campaign`` < ``analysis`` < ``report``
+< ``cli``.
+
+- ``report``: reads the results folder every stage wrote (the top floor below the commands).
 
 - ``robust`` below ``control``: the synthesis may reuse the mu and H-infinity machinery; the
   robustness analysis never needs a controller design.
@@ -46,6 +49,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("oos_drake.multibody",),
     ("oos_drake.campaign",),
     ("oos_drake.analysis",),
+    ("oos_drake.report",),
     ("oos_drake.cli", "oos_drake.pipeline", "oos_drake.__main__"),
 )
 

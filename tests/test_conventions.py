@@ -37,7 +37,7 @@ def _sources():
 # ---------------------------------------------------------------- D3: the oos parser
 COMMANDS = {
     "run", "model", "sdf", "validate", "synth", "analyze", "confirm", "robust", "campaign",
-    "ulinearize", "margins", "study", "tree",
+    "ulinearize", "margins", "study", "tree", "report",
 }  # fmt: skip
 #: Every command line that runs something (README's `oos` table).
 RUNNABLE = {
@@ -66,6 +66,7 @@ RUNNABLE = {
     "campaign report",
     "campaign replay",
     "campaign falsify",
+    "report",
 }
 
 

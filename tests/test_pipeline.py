@@ -66,13 +66,12 @@ def test_missing_campaign_spec_is_one_line_and_writes_nothing(tmp_path):
 
 
 @pytest.mark.slow
-def test_oos_run_quick_end_to_end_then_everything_up_to_date(tmp_path):
+def test_oos_run_quick_end_to_end_then_everything_up_to_date(quick_run):
     """``make run ARGS=--quick`` from the command line: every stage, the printed map of results
     and ``timings.json``; a second call recomputes nothing and the campaign resumes with no run
-    left to do."""
-    out = tmp_path / "out"
-    command = [sys.executable, "-m", "oos_drake.cli", "run", "--out", str(out), "--quick"]
-    first = subprocess.run(command, capture_output=True, text=True, timeout=3000)
+    left to do. (The run is the session's ``quick_run``, whose folder the report's browser
+    test reads too.)"""
+    out, command, first = quick_run.out, quick_run.command, quick_run.result
     assert first.returncode == 0, first.stderr[-3000:]
     timings = json.loads((out / "timings.json").read_text())
     assert set(timings["stages_s"]) == {
@@ -83,9 +82,10 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(tmp_path):
         "confirm",
         "margins",
         "campaign + report",
+        "report",
     }
     assert all(v is not None and v > 0 for v in timings["stages_s"].values())
-    for stage in ("model", "validate", "controller", "analysis", "confirm", "margins"):
+    for stage in ("model", "validate", "controller", "analysis", "confirm", "margins", "report"):
         assert (out / stage / STAMP).is_file(), stage
     confirmation = pd.read_parquet(out / "confirm" / "confirmation.parquet")
     assert set(confirmation["study"]) == set(
@@ -108,6 +108,7 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(tmp_path):
         "campaign results",
     ):
         assert label in first.stdout
+    assert f"report: {out / 'report.html'}" in first.stdout
 
     second = subprocess.run(command, capture_output=True, text=True, timeout=3000)
     assert second.returncode == 0, second.stderr[-3000:]

@@ -33,6 +33,12 @@ def stubbed(monkeypatch):
 
     monkeypatch.setattr(pipeline, "_oos", fake_oos)
     monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: calls.append(["validate"]))
+
+    def fake_report(folder, out, campaign):
+        calls.append(["report"])
+        (folder / "report.html").write_text("<html></html>")
+
+    monkeypatch.setattr(pipeline, "_report", fake_report)
     return calls
 
 
@@ -55,7 +61,8 @@ def test_scenario_edits_recompute_exactly_the_dependent_stages(tmp_path, stubbed
     campaign = _campaign_for(tmp_path, scenario)
     out = tmp_path / "out"
     _run(out, scenario, campaign)
-    assert _ran(out) == ["analysis", "confirm", "controller", "margins", "model", "validate"]
+    everything = ["analysis", "confirm", "controller", "margins", "model", "report", "validate"]
+    assert _ran(out) == everything
     synth = next(c for c in stubbed if c[0] == "synth")
     assert synth[-2:] == ["--scenario", str(scenario.resolve())]
     confirm = next(c for c in stubbed if c[0] == "confirm")
@@ -72,12 +79,12 @@ def test_scenario_edits_recompute_exactly_the_dependent_stages(tmp_path, stubbed
         PAPER.replace("pointing_requirement = 0.0079", "pointing_requirement = 0.005")
     )
     _run(out, scenario, campaign)  # requirements: controller and after, not the model
-    assert _ran(out) == ["analysis", "confirm", "controller", "margins"]
+    assert _ran(out) == ["analysis", "confirm", "controller", "margins", "report"]
 
     edited = PAPER.replace("pointing_requirement = 0.0079", "pointing_requirement = 0.005")
     scenario.write_text(edited.replace("mass = 24.96 ", "mass = 30.0 "))
     _run(out, scenario, campaign)  # physical data: everything
-    assert _ran(out) == ["analysis", "confirm", "controller", "margins", "model", "validate"]
+    assert _ran(out) == everything
     assert len(list(out.glob("campaign-*"))) == 3  # a new campaign folder per campaign key
 
 
@@ -93,6 +100,7 @@ def test_stage_keys_by_scenario_part(tmp_path):
         "confirm",
         "margins",
         "campaign",
+        "report",
     ]
     assert pipeline.stage_keys(first, CAMPAIGN, quick=True)["model"] == a["model"]
 

@@ -45,19 +45,17 @@ def _guaranteed_line(axes, value, suffix):
 def mu_mission_figure(sweep: pd.DataFrame, common_hz, peaks: pd.DataFrame, path) -> Path:
     """(a) surface of the total-set upper bound over time x frequency; (b) side views."""
     plt = pyplot()
-    fig = plt.figure(figsize=(15, 5.2))
+    fig = plt.figure(figsize=(17, 5.8))
+    # the 3-D panel gets the most room: its labels need it
+    layout = fig.add_gridspec(1, 3, width_ratios=(1.45, 1.0, 1.0), wspace=0.28)
     total = sweep[(sweep["subset"] == "total") & ~sweep["refined"]]
     total = total[np.isin(total["frequency [Hz]"].to_numpy(), common_hz)]
     grid = total.pivot_table(index="time [s]", columns="frequency [Hz]", values="mu upper [-]")
-    ax = fig.add_subplot(1, 3, 1, projection="3d")
-    T, F = np.meshgrid(grid.index.to_numpy(), np.log10(grid.columns.to_numpy()), indexing="ij")
-    ax.plot_surface(T, F, grid.to_numpy(), cmap="viridis", linewidth=0, antialiased=True)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("log10 frequency [Hz]")
-    ax.set_zlabel("mu upper bound [-]")
-    ax.set_title("(a) mu upper bound, Delta_tot")
-    ax2 = fig.add_subplot(1, 3, 2)
-    ax3 = fig.add_subplot(1, 3, 3)
+    # (computed_zorder off: the peak's marker is drawn over the surface, not hidden behind it)
+    ax = fig.add_subplot(layout[0], projection="3d", computed_zorder=False)
+    _mu_surface(fig, ax, grid, peaks)
+    ax2 = fig.add_subplot(layout[1])
+    ax3 = fig.add_subplot(layout[2])
     for name in _ordered(sweep["subset"].unique()):
         part = sweep[sweep["subset"] == name]
         by_f = part.groupby("frequency [Hz]")["mu upper [-]"].max()
@@ -81,7 +79,52 @@ def mu_mission_figure(sweep: pd.DataFrame, common_hz, peaks: pd.DataFrame, path)
         a.grid(True, which="both", alpha=0.3)
         a.axhline(1.0, color="r", ls="--", lw=0.8)
     ax2.legend(fontsize=8)
-    return save_figure(fig, path)
+    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.12, top=0.9)
+    return save_figure(fig, path, tight=False)
+
+
+def _mu_surface(fig, ax, grid: pd.DataFrame, peaks: pd.DataFrame) -> None:
+    """The surface of mu's upper bound over time [s] x frequency [Hz] (log axis labelled in Hz),
+    seen from the low-time, high-frequency corner so that the ridge stands in front of the
+    low-frequency plateau, with a colour bar and the certified peak of the total set marked."""
+    import matplotlib.ticker as ticker
+
+    times = grid.index.to_numpy(dtype=float)
+    log_f = np.log10(grid.columns.to_numpy(dtype=float))
+    T, F = np.meshgrid(times, log_f, indexing="ij")
+    values = grid.to_numpy(dtype=float)
+    surface = ax.plot_surface(
+        T, F, values, cmap="viridis", linewidth=0, antialiased=True, rstride=1, cstride=1
+    )
+    decades = np.arange(np.floor(log_f.min()), np.ceil(log_f.max()) + 1)
+    ax.yaxis.set_major_locator(ticker.FixedLocator(decades))
+    ax.yaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{10**v:g}"))
+    ax.set_ylim(log_f.min(), log_f.max())
+    ax.set_xlabel("time [s]", labelpad=8)
+    ax.set_ylabel("frequency [Hz] (log scale)", labelpad=8)
+    ax.set_zlabel("")  # the colour bar says what the height is
+    ax.view_init(elev=24, azim=-52)
+    ax.set_box_aspect((1.5, 1.2, 0.75))
+    ax.tick_params(labelsize=8, pad=1)
+    total = peaks[peaks["subset"] == "total"] if "subset" in peaks else peaks.iloc[:0]
+    if len(total) and {"time [s]", "frequency [Hz]", "mu lower [-]"} <= set(total.columns):
+        row = total.iloc[0]
+        mu_peak = float(row.get("mu upper [-]", row["mu lower [-]"]))
+        ax.scatter(
+            [row["time [s]"]],
+            [np.log10(row["frequency [Hz]"])],
+            [mu_peak],
+            color="red",
+            s=40,
+            depthshade=False,
+            zorder=10,
+            label=f"certified peak: mu <= {mu_peak:.3g} at t = {row['time [s]']:.0f} s, "
+            f"f = {row['frequency [Hz]']:.3g} Hz",
+        )
+        ax.legend(loc="upper left", fontsize=8, bbox_to_anchor=(0.0, 1.0))
+    bar = fig.colorbar(surface, ax=ax, shrink=0.6, pad=0.13, fraction=0.04)
+    bar.set_label("mu upper bound, Delta_tot [-]")
+    ax.set_title("(a) mu upper bound over the mission, Delta_tot")
 
 
 def performance_figure(table: pd.DataFrame, path) -> Path:

@@ -350,11 +350,14 @@ def _regions_table(spec, runs: pd.DataFrame) -> pd.DataFrame:
 
 
 def _region_label(row: pd.Series) -> str:
-    """Y label of a region on three short lines: id and time, frequency and mu, failures."""
+    """Y label of a region on three short lines, every number with its unit: id and time,
+    frequency and mu, the runs drawn around it and how many failed."""
+    runs = int(row["runs"])
+    drawn = f"{int(row['failures'])} of {runs} runs fail" if runs else "no run drawn here"
     return (
-        f"region {int(row['region'])}: t = {row['time [s]']:.0f} s\n"
-        f"f = {row['frequency [Hz]']:.3g} Hz, mu <= {row['mu upper [-]']:.3g}\n"
-        f"{int(row['failures'])}/{int(row['runs'])} runs fail"
+        f"region {int(row['region'])}  (t = {row['time [s]']:.0f} s)\n"
+        f"f = {row['frequency [Hz]']:.3g} Hz, mu <= {row['mu upper [-]']:.3g} [-]\n"
+        f"{drawn}"
     )
 
 
@@ -369,7 +372,7 @@ def _plot_regions(spec, regions: pd.DataFrame, path: Path) -> Path | None:
     fig, axes = plt.subplots(
         1,
         len(metrics),
-        figsize=(4.6 * len(metrics) + 2.0, 1.6 + 0.8 * len(guided)),
+        figsize=(4.6 * len(metrics) + 2.8, 2.4 + 0.95 * len(guided)),
         sharey=True,
         squeeze=False,
     )
@@ -387,18 +390,27 @@ def _plot_regions(spec, regions: pd.DataFrame, path: Path) -> Path | None:
             label="nonlinear runs: worst metric / requirement",
         )
         ax.axvline(1.0, color="tab:red", ls="--", lw=1, label="requirement")
+        # the values at the bar ends: the bars of one region are read without a ruler
+        for row_y, value in zip(y + 0.2, high, strict=True):
+            if np.isfinite(value):
+                ax.text(value, row_y, f" {value:.2f}", va="center", fontsize=7, color="dimgray")
+        for row_y, value in zip(y - 0.2, nonlinear, strict=True):
+            if np.isfinite(value):
+                ax.text(value, row_y, f" {value:.2f}", va="center", fontsize=7, color="tab:orange")
+        ax.set_xlim(0.0, 1.12 * max(1.0, np.nanmax(np.r_[high, nonlinear, 0.0])))
         ax.set_xlabel(f"{metric} / requirement [-]")
         ax.set_title(metric, fontsize=10)
         ax.grid(alpha=0.3, axis="x")
-    axes[0, 0].set_yticks(y, [_region_label(r) for _, r in guided.iterrows()], fontsize=8)
-    handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=4)
+    labels = [_region_label(r) for _, r in guided.iterrows()]
+    axes[0, 0].set_yticks(y, labels, fontsize=9, linespacing=1.3)
+    handles, names = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, names, fontsize=8, loc="upper center", ncol=4, bbox_to_anchor=(0.5, 0.915))
     fig.suptitle(
         "Worst-case performance per region: analysis (H-infinity gain over the region's\n"
         "subset, an energy ratio) against the nonlinear runs drawn around it (peak in the window)",
         fontsize=10,
     )
-    return _save(fig, path, rect=(0, 0.08, 1, 1))
+    return _save(fig, path, rect=(0, 0, 1, 0.89))
 
 
 def find_confirmation(directory: Path, confirm: str | Path | None = None) -> Path | None:

@@ -21,16 +21,17 @@ Each body is a Meshcat path whose world pose is set at every logged sample of th
 of the simulation's state logger (``log_rate`` of the campaign's simulator options), so the
 recording holds ``duration x log_rate + 1`` frames (inclusive ends) played at ``speed`` times
 real time (default: the window within a minute, see :func:`default_speed`). The camera starts
-looking at the midpoint of the two hubs; Meshcat's floor grid is laid 3 m below it as a reference
-for the hubs' drift. The arrays are drawn rigid: their modal bodies are fictitious (the modal
-coordinates are in the campaign's time series).
+framed on the spacecraft (:func:`frame_camera`: the centre of the drawn shapes at the first
+frame, from far enough that every shape is in view and no farther); Meshcat's floor grid is laid
+3 m below that centre as a reference for the hubs' drift. The arrays are drawn rigid: their
+modal bodies are fictitious (the modal coordinates are in the campaign's time series).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["default_speed", "equivalent_box", "record", "recording_html"]
+__all__ = ["default_speed", "equivalent_box", "frame_camera", "record", "recording_html"]
 
 #: Meshcat root path of the replay's objects.
 ROOT = "/oos"
@@ -38,8 +39,12 @@ ROOT = "/oos"
 LINK_RADIUS = 0.05
 #: Radius of the docking-frame spheres [m].
 PORT_RADIUS = 0.04
-#: Initial camera position relative to the midpoint of the two hubs [m] (world frame).
-CAMERA_OFFSET = (7.0, -9.0, 5.0)
+#: Direction from the spacecraft's centre to the initial camera (world frame, any length).
+CAMERA_DIRECTION = (7.0, -9.0, 5.0)
+#: Vertical field of view of Meshcat's default camera [deg].
+CAMERA_FOV_DEG = 75.0
+#: Room around the spacecraft in the initial view [-] (1: its bounding sphere touches the edges).
+CAMERA_FRAMING = 1.15
 #: Height of Meshcat's floor grid relative to that midpoint [m].
 GRID_DEPTH = -3.0
 #: Playback speeds tried by :func:`default_speed` [-].
@@ -87,6 +92,65 @@ def equivalent_box(mass: float, inertia: np.ndarray) -> tuple[np.ndarray, np.nda
     total = moments.sum()
     squares = 6.0 * (total - 2.0 * moments) / mass
     return np.sqrt(np.maximum(squares, MIN_SIDE**2)), axes
+
+
+def frame_camera(
+    centres: np.ndarray,
+    radii: np.ndarray,
+    direction=CAMERA_DIRECTION,
+    fov_deg: float = CAMERA_FOV_DEG,
+    framing: float = CAMERA_FRAMING,
+) -> tuple[np.ndarray, np.ndarray]:
+    r"""Camera position and target that frame a set of spheres.
+
+    The target is the centre of the spheres' bounding box; the camera looks at it from
+    ``direction``, at the distance where the bounding sphere of all spheres (about the target)
+    fills the narrower field of view divided by ``framing``:
+
+    .. math::
+
+        d = \frac{\text{framing}\; R}{\sin(\text{fov} / 2)},
+        \qquad R = \max_i (\lVert c_i - t \rVert + r_i)
+
+    Parameters
+    ----------
+    centres : ndarray, shape (n, 3)
+        Centres of the shapes in the world frame [m].
+    radii : ndarray, shape (n,)
+        Radius of a sphere around each shape [m].
+    direction : array_like, shape (3,)
+        From the target towards the camera (world frame; normalized here).
+    fov_deg : float
+        Field of view [deg] (Meshcat's default camera: 75 deg vertically).
+    framing : float
+        Room around the spacecraft [-] (>= 1).
+
+    Returns
+    -------
+    camera, target : ndarray, shape (3,)
+        Camera position and the point it looks at, world frame [m].
+    """
+    centres = np.atleast_2d(np.asarray(centres, dtype=float))
+    radii = np.asarray(radii, dtype=float).reshape(-1)
+    target = 0.5 * (centres.min(axis=0) + centres.max(axis=0))
+    radius = float(np.max(np.linalg.norm(centres - target, axis=1) + radii))
+    unit = np.asarray(direction, dtype=float)
+    unit = unit / np.linalg.norm(unit)
+    distance = framing * radius / np.sin(np.radians(fov_deg) / 2.0)
+    return target + distance * unit, target
+
+
+def _shape_radius(shape) -> float:
+    """Radius of a sphere around a drawn shape (box, cylinder, sphere) [m]."""
+    from pydrake.geometry import Box, Cylinder, Sphere
+
+    if isinstance(shape, Box):
+        return 0.5 * float(np.linalg.norm([shape.width(), shape.depth(), shape.height()]))
+    if isinstance(shape, Cylinder):
+        return float(np.hypot(shape.radius(), 0.5 * shape.length()))
+    if isinstance(shape, Sphere):
+        return float(shape.radius())
+    return 0.0
 
 
 def _visuals(handles):
@@ -190,11 +254,14 @@ def record(meshcat, handles, times: np.ndarray, states: np.ndarray, speed: float
         meshcat.SetTransform(path, X_BS)
     context = plant.CreateDefaultContext()
     plant.SetPositions(context, states[:nq, 0])
-    centre = 0.5 * (
-        plant.EvalBodyPoseInWorld(context, handles.hub_joint.child_body()).translation()
-        + plant.EvalBodyPoseInWorld(context, handles.target_body).translation()
-    )
-    meshcat.SetCameraPose(centre + np.array(CAMERA_OFFSET), centre)
+    # frame the camera on the shapes as drawn at the first frame
+    centres = [
+        (plant.EvalBodyPoseInWorld(context, bodies[path.rsplit("/", 1)[0]]) @ X_BS).translation()
+        for path, _, X_BS, _ in shapes
+    ]
+    radii = [_shape_radius(shape) for _, shape, _, _ in shapes]
+    camera, centre = frame_camera(np.array(centres), np.array(radii))
+    meshcat.SetCameraPose(camera, centre)
     # the default floor grid would cut through the hub: lay it below the spacecraft
     meshcat.SetTransform("/Grid", RigidTransform(centre + np.array([0.0, 0.0, GRID_DEPTH])))
     meshcat.DeleteRecording()

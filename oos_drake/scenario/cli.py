@@ -37,6 +37,13 @@ def _info(args: argparse.Namespace) -> int:
     print(f"{title}; {model.nstates} states, {model.nz} Delta channels (built in {elapsed:.2f} s)")
     columns = ["name", "group", "kind", "nominal", "range", "occurrences", "paper_occurrences"]
     print(table[[c for c in columns if c in table.columns]].to_string(index=False))
+    if args.out is not None:
+        from pathlib import Path
+
+        path = Path(args.out) / "blocks.parquet"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        _blocks_table(table).to_parquet(path, index=False)
+        print(f"block table: {path}")
     if args.phase == "mission":
         from oos_drake.scenario.model import paper_delta_table
 
@@ -51,6 +58,28 @@ def _info(args: argparse.Namespace) -> int:
         )
         return 0 if matches else 1
     return 0
+
+
+def _blocks_table(table):
+    """The block table as stored: one row per block, its unit and range in columns."""
+    import pandas as pd
+
+    low, high = zip(
+        *(r if r is not None else (float("nan"),) * 2 for r in table["range"]), strict=True
+    )
+    return pd.DataFrame(
+        {
+            "block": table["name"],
+            "kind": table["kind"],
+            "quantity": table["quantity"],
+            "unit": [u or "-" for u in table["unit"]],
+            "nominal [unit]": table["nominal"].astype(float),
+            "lower [unit]": low,
+            "upper [unit]": high,
+            "occurrences": table["occurrences"],
+            "group": table["group"],
+        }
+    )
 
 
 def _figures(args: argparse.Namespace) -> int:
@@ -84,6 +113,9 @@ def register(subparsers) -> None:
         choices=("mission", "7", "8"),
         default="mission",
         help="mission model (default) or a docking-phase model",
+    )
+    info.add_argument(
+        "--out", default=None, help="also write the block table as OUT/blocks.parquet"
     )
     add_scenario_argument(info)
     info.set_defaults(func=_info)

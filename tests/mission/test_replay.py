@@ -232,6 +232,33 @@ def test_equivalent_box_has_the_body_inertia():
         equivalent_box(0.0, I)
 
 
+def test_camera_frames_every_shape_and_no_farther():
+    """Every sphere is inside the view cone, and the bounding sphere touches the cone scaled
+    by the framing: the camera is as close as the framing allows (an independent check of the
+    geometry: angles from the camera, not the formula)."""
+    from oos_drake.multibody.replay import CAMERA_FOV_DEG, CAMERA_FRAMING, frame_camera
+
+    rng = np.random.default_rng(3)
+    centres = rng.uniform(-2.0, 2.0, (7, 3)) + np.array([40.0, -5.0, 12.0])  # far from 0
+    radii = rng.uniform(0.1, 1.0, 7)
+    camera, target = frame_camera(centres, radii)
+    np.testing.assert_allclose(target, 0.5 * (centres.min(0) + centres.max(0)), rtol=1e-12)
+    axis = (target - camera) / np.linalg.norm(target - camera)
+    half = np.radians(CAMERA_FOV_DEG) / 2
+    # angular radius of each sphere's far edge from the view axis, seen from the camera
+    offsets = centres - camera
+    along = offsets @ axis
+    across = np.linalg.norm(offsets - np.outer(along, axis), axis=1)
+    distance = np.linalg.norm(offsets, axis=1)
+    edge = np.arctan2(across, along) + np.arcsin(radii / distance)
+    assert np.all(edge < half)
+    # the bounding sphere about the target fills the cone shrunk by the framing
+    bound = np.max(np.linalg.norm(centres - target, axis=1) + radii)
+    np.testing.assert_allclose(
+        np.arcsin(CAMERA_FRAMING * bound / np.linalg.norm(target - camera)), half, rtol=1e-12
+    )
+
+
 def Rotation_about_z(angle: float) -> np.ndarray:  # noqa: N802 - reads like the math
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

@@ -1,0 +1,291 @@
+"""The HTML report of an ``oos run`` folder, opened in headless Chromium.
+
+Fast: a small synthetic results folder made here (every table the report reads, with numbers
+chosen so that the headline of each is known), and an empty one (every section "not run").
+The headline numbers the page shows are compared with the tables read here with pandas and
+json, not with anything the report module computed.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from PIL import Image
+from report_browser import probe, screenshot, section_screenshots
+
+from oos_drake.report import headline_numbers, load_run, write_report
+from oos_drake.scenario.data import scenario_path
+
+SUBSETS = ("total", "real", "modal", "mechanical", "additive", "multiplicative")
+
+
+def _png(path: Path, width: int = 60, height: int = 40) -> None:
+    from PIL import Image
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.new("RGB", (width, height), (30, 90, 160)).save(path)
+
+
+@pytest.fixture
+def results_folder(tmp_path) -> Path:
+    """A results folder with every table the report reads (small, made-up numbers)."""
+    out = tmp_path / "out"
+    scenario = scenario_path(None)
+    record = {"name": "paper", "file": str(scenario), "sha256": "0" * 64, "overrides": {}}
+    (out / "model").mkdir(parents=True)
+    pd.DataFrame(
+        {
+            "block": ["m_RH2", "w1_SA1"],
+            "kind": ["ureal", "ureal"],
+            "quantity": ["mass", "modal frequency"],
+            "unit": ["kg", "rad/s"],
+            "nominal [unit]": [24.96, 8.07],
+            "lower [unit]": [22.46, 6.46],
+            "upper [unit]": [27.46, 9.69],
+            "occurrences": [3, 2],
+        }
+    ).to_parquet(out / "model" / "blocks.parquet")
+    (out / "controller").mkdir(parents=True)
+    controller = {
+        "controller": {
+            "structure": "u_K = K y",
+            "K_p": {"value": np.eye(3).tolist(), "unit": "N m/rad"},
+            "K_d": {"value": (2 * np.eye(3)).tolist(), "unit": "N m s/rad"},
+            "rolloff": {"type": "butterworth", "order": 4, "cutoff_hz": 0.7},
+        },
+        "gamma": 0.8123456,
+        "gamma_baseline": 11.0,
+        "requirement_met": True,
+        "scenario": record,
+    }
+    (out / "controller" / "controller.json").write_text(json.dumps(controller))
+    analysis = out / "analysis"
+    analysis.mkdir()
+    (analysis / "summary.json").write_text(json.dumps({"scenario": record}))
+    rng = np.random.default_rng(7)
+    rows = []
+    for i, subset in enumerate(SUBSETS):
+        lower = 0.3 + 0.05 * i
+        rows.append(
+            {
+                "study": "mission",
+                "subset": subset,
+                "time [s]": 100.0 + 10 * i,
+                "frequency [Hz]": 0.5 + 0.01 * i,
+                "mu lower [-]": lower,
+                "mu upper [-]": lower * 1.01,
+                "mu upper guaranteed [-]": lower * 1.02 + 1e-6 * rng.random(),
+                "gap [%]": 1.0,
+                "configuration": f"mission t={100 + 10 * i}s",
+                "margin [-]": 1 / (lower * 1.01),
+            }
+        )
+    rows.append(dict(rows[0], study="docking-7", **{"mu upper guaranteed [-]": 1.5}))
+    pd.DataFrame(rows).to_parquet(analysis / "stability_peaks.parquet")
+    pd.DataFrame(
+        {
+            "study": ["mission", "mission"],
+            "subset": ["total", "total"],
+            "block": ["m_RH2", "w1_SA1"],
+            "kind": ["ureal", "ureal"],
+            "unit": ["kg", "rad/s"],
+            "destabilizing_value [unit]": [30.1, 5.2],
+            "in_set_value [unit]": [27.0, 6.5],
+            "normalized_norm [-]": [1.2, 1.1],
+        }
+    ).to_parquet(analysis / "worst_perturbations.parquet")
+    _png(analysis / "mu_mission.png")
+    (out / "confirm").mkdir()
+    pd.DataFrame(
+        {
+            "study": ["mission"],
+            "subset": ["total"],
+            "mu lower [-]": [0.3],
+            "mu upper [-]": [0.303],
+            "alpha physical max [-]": [2.0],
+            "alpha nonlinear [-]": [3.4],
+            "status": ["confirmed"],
+        }
+    ).to_parquet(out / "confirm" / "confirmation.parquet")
+    (out / "margins").mkdir()
+    margins = pd.DataFrame(
+        {
+            "time [s]": np.tile([0.0, 500.0, 1000.0], 2),
+            "loop": ["continuous"] * 3 + ["sampled"] * 3,
+            "gain margin upper [dB]": [9.0, 8.5, 10.0, 7.25, 8.0, 9.5],
+            "phase margin [deg]": [40.0, 35.5, 42.0, 33.0, 31.75, 38.0],
+            "delay margin [s]": [0.5, 0.4, 0.6, 0.3, 0.2, 0.5],
+            "disk margin [-]": [0.6, 0.5, 0.7, 0.4, 0.45, 0.5],
+        }
+    )
+    margins.to_parquet(out / "margins" / "margins.parquet")
+    _png(out / "margins" / "margins.png")
+    campaign = out / "campaign-0123456789"
+    (campaign / "report").mkdir(parents=True)
+    pd.DataFrame({"run_id": [0, 1]}).to_parquet(campaign / "plan.parquet")
+    pd.DataFrame(
+        {
+            "metric": ["ape_max [rad]", "any (requirement or run failure)"],
+            "requirement": ["<= 0.0079", "all"],
+            "runs": [200, 200],
+            "violations": [0, 1],
+            "P(violation)": [0.0, 0.005],
+            "P 95 % low": [0.0, 0.000127],
+            "P 95 % high": [0.01815, 0.02755],
+            "interval": ["clopper-pearson", "clopper-pearson"],
+        }
+    ).to_parquet(campaign / "report" / "summary.parquet")
+    _png(campaign / "report" / "regions_performance.png", 80, 50)
+    (campaign / "replay").mkdir()
+    (campaign / "replay" / "case_3.html").write_text("<html></html>")
+    (out / "validate").mkdir()
+    (out / "validate" / "validate.txt").write_text("Drake vs TITOP: max relative error 1e-9 [-]\n")
+    (out / "timings.json").write_text(
+        json.dumps({"scenario": str(scenario), "stages_s": {"model": 1.5}, "total_s": 2.0})
+    )
+    return out
+
+
+def expected_headlines(out: Path) -> dict[str, float]:
+    """The headline numbers read from the results' files with pandas and json (independently
+    of the report module): gamma, the mission's guaranteed mu per subset, the worst gain and
+    phase margins, the campaign's 95 % upper bound of P(a run fails)."""
+    expected = {}
+    controller = json.loads((out / "controller" / "controller.json").read_text())
+    expected["gamma"] = controller["gamma"]
+    peaks = pd.read_parquet(out / "analysis" / "stability_peaks.parquet")
+    mission = peaks[peaks["study"] == "mission"].set_index("subset")
+    column = "mu upper guaranteed [-]" if "mu upper guaranteed [-]" in mission else "mu upper [-]"
+    for subset, value in mission[column].items():
+        expected[f"mu_{subset}"] = float(value)
+    margins = pd.read_parquet(out / "margins" / "margins.parquet")
+    expected["gain_margin"] = float(margins["gain margin upper [dB]"].min())
+    expected["phase_margin"] = float(margins["phase margin [deg]"].min())
+    (campaign,) = [p for p in out.glob("campaign-*") if (p / "plan.parquet").is_file()]
+    summary = pd.read_parquet(campaign / "report" / "summary.parquet").set_index("metric")
+    expected["p_fail_bound"] = float(summary.loc["any (requirement or run failure)", "P 95 % high"])
+    return expected
+
+
+def check_page(page: Path, out: Path, work: Path, shots: Path | None = None) -> dict:
+    """Open ``page`` in Chromium and check it: no error of any kind, every image decoded, the
+    headline numbers equal to the results' tables (value and text shown, with its unit)."""
+    seen = probe(page, work)
+    assert seen["errors"] == [], seen["errors"]
+    assert seen["console_log"] == [], seen["console_log"]
+    assert all(name.startswith("data:") for name in seen["resources"]), seen["resources"]
+    assert seen["images"], "no figure in the report"
+    broken = [i["alt"] for i in seen["images"] if not (i["complete"] and i["width"] > 0)]
+    assert broken == [], f"images that did not load: {broken}"
+    expected = expected_headlines(out)
+    shown = {h["key"]: h for h in seen["headlines"]}
+    assert set(shown) == set(expected)
+    units = {"gain_margin": "dB", "phase_margin": "deg"}
+    for key, value in expected.items():
+        np.testing.assert_allclose(float(shown[key]["value"]), value, rtol=1e-12, err_msg=key)
+        text = shown[key]["text"]
+        number = float(re.match(r"\s*([-+0-9.eE]+)", text).group(1))
+        np.testing.assert_allclose(number, value, rtol=5e-4, err_msg=f"{key}: {text}")
+        assert text.strip().endswith(units.get(key, "[-]")), f"{key}: no unit in {text!r}"
+    if shots is not None:
+        section_screenshots(
+            page,
+            seen["sections"],
+            {"headlines": "top.png", "analysis": "analysis.png", "campaign": "campaign.png"},
+            shots,
+            work,
+        )
+    return seen
+
+
+def test_report_of_a_synthetic_folder_in_chromium(results_folder, tmp_path):
+    page = write_report(results_folder)
+    assert page == results_folder / "report.html"
+    seen = check_page(page, results_folder, tmp_path / "browser")
+    shot = screenshot(page, tmp_path / "top.png", tmp_path / "browser")
+    with Image.open(shot) as image:  # a page was drawn, not a blank window
+        assert image.size == (1400, 1400) and len(image.getcolors(1 << 16) or range(99)) > 20
+    assert len(seen["headlines"]) == 10
+    assert len(seen["images"]) == 3  # the PNG files of the folder
+    sections = {s["id"]: s["notRun"] for s in seen["sections"]}
+    for section in ("headlines", "controller", "analysis", "validation", "replays"):
+        assert sections[section] == 0, section
+    text = page.read_text()
+    assert "<td>modal frequency</td><td>rad/s</td>" in text  # the block table, with units
+    assert 'href="campaign-0123456789/replay/case_3.html"' in text
+    assert "http://" not in text and "https://" not in text
+
+
+def test_the_browser_check_sees_a_broken_figure(results_folder, tmp_path):
+    """The check can fail: a figure whose bytes are not an image has no natural width."""
+    (results_folder / "analysis" / "broken.png").write_bytes(b"not a png")
+    page = write_report(results_folder)
+    with pytest.raises(AssertionError, match="broken.png"):
+        check_page(page, results_folder, tmp_path / "browser")
+
+
+def test_missing_stages_render_as_not_run(tmp_path):
+    """An empty results folder: every section says "not run", nothing crashes."""
+    out = tmp_path / "empty"
+    out.mkdir()
+    assert headline_numbers(load_run(out)) == []
+    page = write_report(out)
+    text = page.read_text()
+    assert text.count('class="notrun"') >= 8
+    assert "data-headline" not in text
+
+
+def test_broken_table_renders_as_not_run(results_folder):
+    """A table another stage changed (a column gone) costs its section, not the report."""
+    path = results_folder / "confirm" / "confirmation.parquet"
+    pd.read_parquet(path).drop(columns=["alpha physical max [-]"]).to_parquet(path)
+    (results_folder / "margins" / "margins.parquet").write_bytes(b"not parquet")
+    results = load_run(results_folder)
+    assert results.margins is None
+    keys = [h.key for h in headline_numbers(results)]
+    assert "gain_margin" not in keys and "gamma" in keys
+    text = write_report(results_folder).read_text()
+    assert "not run: margins stage" in text
+    assert "not checked (confirm not run)" in text
+
+
+def test_oos_report_command_prints_the_headlines(results_folder, capsys):
+    from oos_drake.cli import main
+
+    assert main(["report", str(results_folder)]) == 0
+    printed = capsys.readouterr().out
+    assert f"report: {results_folder / 'report.html'}" in printed
+    assert "0.8123 [-]" in printed  # gamma
+    assert "7.25 dB" in printed  # worst gain margin
+    assert main(["report", str(results_folder / "nowhere")]) == 2  # one-line error
+    assert (results_folder / "report.html").is_file()
+
+
+def test_report_stage_key_follows_the_campaign_tables(results_folder):
+    """The campaign resumes instead of being stamped: its report tables are in the report
+    stage's key, so a campaign that gained runs gets a new report."""
+    from oos_drake.pipeline import report_key
+
+    (campaign,) = results_folder.glob("campaign-*")
+    before = report_key("inputs", campaign)
+    assert report_key("inputs", campaign) == before
+    assert report_key("other inputs", campaign) != before
+    path = campaign / "report" / "summary.parquet"
+    pd.read_parquet(path).assign(runs=[201, 201]).to_parquet(path)
+    assert report_key("inputs", campaign) != before
+
+
+def test_missing_browser_is_a_skip_that_ci_turns_into_a_failure(monkeypatch):
+    """Without chromium the browser tests skip with a reason that ``conftest.py`` turns into a
+    failure when ``CI`` is set ("not installed")."""
+    import report_browser
+
+    monkeypatch.setattr(report_browser.shutil, "which", lambda name: None)
+    monkeypatch.setattr(report_browser, "CHROMIUM", "/nonexistent/chromium")
+    with pytest.raises(pytest.skip.Exception, match="not installed"):
+        report_browser.chromium()
