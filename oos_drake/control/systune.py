@@ -754,6 +754,9 @@ class _Objective:
     """``max_t (a_t * term_t + b_t)`` over terms, in scaled variables ``xi = x / scale``
     (the interface of :func:`minimize_bundle_bfgs`)."""
 
+    #: Largest number of pieces in the local model (as :func:`active_set`'s cap).
+    max_pieces = 24
+
     def __init__(self, problem: _Problem, terms, affine, scale, eps, floor=None):
         self.problem, self.terms, self.affine = problem, terms, affine
         self.scale, self.eps, self.floor = scale, eps, floor
@@ -788,7 +791,7 @@ class _Objective:
         pieces = tuple(np.concatenate(c) for c in zip(*pieces, strict=True))
         f = values.max()
         keep = np.flatnonzero(values >= f - self.eps * max(abs(f), 1e-3))
-        keep = keep[np.argsort(-values[keep], kind="stable")]
+        keep = keep[np.argsort(-values[keep], kind="stable")][: self.max_pieces]
         gx = self.problem.structure.chain(x, grads[keep]) * self.scale
         return float(f), values[keep], gx, tuple(c[keep] for c in pieces)
 
