@@ -86,8 +86,13 @@ class SystuneOptions:
         ``rho / c`` of phase 2 (see the module docstring) [-].
     hard_margin : float
         Phase 1 stops at ``G <= 1 - hard_margin`` [-].
+    min_decay : float
+        A closed loop counts as stable when every pole has ``Re s < -min_decay`` [1/s]
+        (MATLAB's ``MinDecay``; keeps nearly marginal loops, e.g. an integral gain going to
+        zero, out of the feasible set).
     stability_floor : float
-        Phase 0 drives the spectral abscissa below ``-stability_floor`` [1/s].
+        Phase 0 drives the spectral abscissa below ``-stability_floor`` [1/s]
+        (``> min_decay``).
     feasibility_tolerance : float
         A hard goal counts as met when its exact value is ``<= 1 + feasibility_tolerance``.
     """
@@ -100,6 +105,7 @@ class SystuneOptions:
     active_tolerance: float = 0.1
     penalty: float = 20.0
     hard_margin: float = 0.01
+    min_decay: float = 1e-7
     stability_floor: float = 1e-4
     feasibility_tolerance: float = 1e-6
 
@@ -371,8 +377,8 @@ class _PoleTerm:
     """Closed-loop pole goal (``Poles``) or, with ``goal=None``, the spectral abscissa
     ``max Re s`` [1/s] (stabilization)."""
 
-    def __init__(self, loop: _Loop, goal: Poles | None):
-        self.loop, self.goal = loop, goal
+    def __init__(self, loop: _Loop, goal: Poles | None, min_decay: float = 0.0):
+        self.loop, self.goal, self.min_decay = loop, goal, min_decay
 
     def _value(self, s):
         """Value per pole and its partial derivatives w.r.t. ``Re s`` and ``Im s``."""
@@ -437,12 +443,14 @@ class _PoleTerm:
         return self._value(s)[0].max(axis=-1), np.full(s.shape[0], np.nan)
 
     def stable(self, K) -> np.ndarray:
-        """Per model: every closed-loop pole strictly stable."""
+        """Per model: every closed-loop pole decays faster than ``min_decay`` [1/s]
+        (``|z| < exp(-min_decay T_s)`` for a discrete loop)."""
         A, _, B2, _, C2, *_ = self.loop.partitions()
         lam = np.linalg.eigvals(A + B2 @ K @ C2)
-        if self.loop.sampling_time == 0:
-            return np.max(lam.real, axis=-1) < 0
-        return np.max(np.abs(lam), axis=-1) < 1
+        ts = self.loop.sampling_time
+        if ts == 0:
+            return np.max(lam.real, axis=-1) < -self.min_decay
+        return np.max(np.abs(lam), axis=-1) < np.exp(-self.min_decay * ts)
 
 
 # --------------------------------------------------------------------------- problem assembly
@@ -570,7 +578,7 @@ class _Structure:
 class _Problem:
     """Signals, blocks and generalized plants of one systune call."""
 
-    def __init__(self, plants, blocks):
+    def __init__(self, plants, blocks, min_decay: float = 0.0):
         blocks = list(blocks) if isinstance(blocks, Sequence) else [blocks]
         self.tunables = [b for b in blocks if isinstance(b, _Tunable)]
         self.fixed = [b for b in blocks if isinstance(b, FixedBlock)]
@@ -615,7 +623,7 @@ class _Problem:
         # controller-side channel names: [x_k; y] -> [xdot_k; u] per block
         self.states = [tuple(f"{t.name}.x[{i}]" for i in range(t.nstates)) for t in self.tunables]
         self.loop = self.loops((), ())
-        self.stability = _PoleTerm(self.loop, None)
+        self.stability = _PoleTerm(self.loop, None, min_decay)
 
     def resolve(self, names, label: str) -> list[str]:
         out = []
@@ -766,8 +774,11 @@ class _Objective:
 
     def __call__(self, xi):
         x = self.x(xi)
-        K = self.problem.structure.K(x)
+        with np.errstate(over="ignore", invalid="ignore"):
+            K = self.problem.structure.K(x)
         nx = x.size
+        if not np.all(np.isfinite(K)):  # a trial step overflowed a log-parameter
+            return np.inf, np.array([np.inf]), np.zeros((1, nx)), _empty_pieces(1)
         need_stable = any(not isinstance(t, _PoleTerm) or t.goal is not None for t in self.terms)
         if need_stable and not np.all(self.problem.stability.stable(K)):
             return np.inf, np.array([np.inf]), np.zeros((1, nx)), _empty_pieces(1)
@@ -904,7 +915,7 @@ def systune(plants, controller, goals, *, options: SystuneOptions | None = None)
     goals = list(goals)
     if not goals:
         raise ValueError("systune: no goal given")
-    problem = _Problem(plants, controller)
+    problem = _Problem(plants, controller, options.min_decay)
     terms, owners = [], []
     for g, goal in enumerate(goals):
         if not hasattr(goal, "kind"):
