@@ -322,3 +322,61 @@ def test_infeasible_design_is_reported_as_such():
     poles = result.goal("Poles")
     assert not poles.met and result.hard > 1
     assert poles.details["max_frequency_rad_s"] >= 0.2 - 1e-9
+
+
+# ------------------------------------------------------------------ today's static-gain synthesis
+
+
+def _static_gain_problem(configurations, modes):
+    from oos_drake.control.baseline import baseline_gains, inertia_from_plant
+    from oos_drake.control.interconnection import weighted_interconnection
+    from oos_drake.control.plants import synthetic_flexible_plants
+
+    plants = synthetic_flexible_plants(configurations, modes=modes, uncertain=False)
+    K0 = baseline_gains(inertia_from_plant(plants.evaluate([1]))[0])
+    N, P = plants.size, len(plants.parameters)
+    nominal = np.broadcast_to(plants.nominal_values, (N, P))
+    return plants, K0, weighted_interconnection(plants.evaluate(np.arange(N), nominal)).system
+
+
+def _systune_static(system, K, max_iterations):
+    from oos_drake.control.interconnection import (
+        CONTROLS,
+        DISTURBANCES,
+        ERRORS,
+        MEASUREMENTS,
+    )
+
+    return systune(
+        system,
+        TunableGain("K", MEASUREMENTS, CONTROLS, initial=K),
+        [WeightedGain(DISTURBANCES, ERRORS)],
+        options=SystuneOptions(max_iterations=max_iterations),
+    )
+
+
+def test_static_gain_problem_is_today_synthesis_problem():
+    from oos_drake.control.synthesis import SynthesisOptions, synthesize
+
+    plants, K0, system = _static_gain_problem(2, 1)
+    options = SynthesisOptions(restarts=0, max_iterations=8, worst_case_rounds=0, working_set=0)
+    reference = synthesize(plants, K0, options=options)
+    # systune's weighted gain of the synthesis' gain, no iteration: the same gamma
+    at_reference = _systune_static(system, reference.K, 0)
+    assert at_reference.soft == pytest.approx(reference.gamma, rel=1e-9)
+    np.testing.assert_allclose(
+        at_reference.goals[0].per_model, reference.models["gamma [-]"], rtol=1e-9
+    )
+    # and systune does not lose what the synthesis reached (warm start)
+    assert _systune_static(system, reference.K, 10).soft <= reference.gamma * (1 + 1e-12)
+
+
+@pytest.mark.slow
+def test_static_gain_synthesis_reproduced_at_convergence():
+    from oos_drake.control.synthesis import SynthesisOptions, synthesize
+
+    plants, K0, system = _static_gain_problem(2, 1)
+    options = SynthesisOptions(restarts=0, max_iterations=300, worst_case_rounds=0, working_set=0)
+    reference = synthesize(plants, K0, options=options)
+    tuned = _systune_static(system, K0, 300)
+    assert tuned.soft == pytest.approx(reference.gamma, rel=1e-3)
