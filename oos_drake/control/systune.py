@@ -58,6 +58,7 @@ from oos_drake.control.nonsmooth_bfgs import minimize_bundle_bfgs
 from oos_drake.control.objective import active_set, peak_gradients
 from oos_drake.control.statespace import BatchedStateSpace, connect, sum_block
 from oos_drake.control.tunable import FixedBlock, _Tunable
+from oos_drake.lfr import LFR
 from oos_drake.robust.peak_gain import peak_gain
 
 __all__ = ["SystuneOptions", "GoalValue", "TuningResult", "systune"]
@@ -458,8 +459,6 @@ class _PoleTerm:
 
 def _as_batched(plant, sampling_time: float) -> list[BatchedStateSpace]:
     """The plants as model arrays of equal order, discretized (ZOH) for a discrete controller."""
-    from oos_drake.lfr import LFR
-
     if isinstance(plant, LFR):
         if not plant.is_certain:
             names = ", ".join(plant.occurrences)
@@ -467,9 +466,7 @@ def _as_batched(plant, sampling_time: float) -> list[BatchedStateSpace]:
         if None in (plant.input_names or (None,)) or None in (plant.output_names or (None,)):
             raise ValueError("systune: the LFR plant needs input and output names")
         A = plant.A if plant.batch_shape else plant.A[None]
-        B, C, D = (
-            (M if plant.batch_shape else M[None]) for M in (plant.Bu, plant.Cy, plant.Dyu)
-        )
+        B, C, D = ((M if plant.batch_shape else M[None]) for M in (plant.Bu, plant.Cy, plant.Dyu))
         A, B, C, D = (M.reshape((-1,) + M.shape[-2:]) for M in (A, B, C, D))
         plant = BatchedStateSpace(A, B, C, D, tuple(plant.input_names), tuple(plant.output_names))
     if isinstance(plant, BatchedStateSpace):
@@ -536,9 +533,7 @@ class _Structure:
         sizes = [t.nparameters for t in tunables]
         self.slices = [slice(a, a + s) for a, s in zip(np.cumsum([0, *sizes]), sizes, strict=False)]
         self.nx = int(sum(sizes))
-        self.shapes = [
-            (t.nstates + len(t.outputs), t.nstates + len(t.inputs)) for t in tunables
-        ]
+        self.shapes = [(t.nstates + len(t.outputs), t.nstates + len(t.inputs)) for t in tunables]
         self.shape = tuple(int(sum(s[k] for s in self.shapes)) for k in (0, 1))
 
     def initial(self) -> np.ndarray:
@@ -597,9 +592,15 @@ class _Problem:
         if len(rates) > 1:
             raise ValueError(f"systune: tunable blocks at different rates {sorted(rates)} s")
         self.sampling_time = rates.pop() if rates else 0.0
-        self.groups = _as_batched(plants, self.sampling_time)
+        groups = _as_batched(plants, self.sampling_time)
+        if len(groups) > 1:
+            orders = sorted(g.A.shape[-1] for g in groups)
+            raise ValueError(
+                f"systune: plants of different orders {orders} are not supported (the models "
+                "are batched); reduce or pad them to one order"
+            )
+        self.plant = plant = groups[0]
         self.structure = _Structure(self.tunables)
-        plant = self.groups[0]
         self.fixed_systems = []
         for b in self.fixed:
             A, B, C, D = b.realization(self.sampling_time)
@@ -638,21 +639,10 @@ class _Problem:
         return out
 
     def loops(self, inputs, outputs, half: bool = False) -> _Loop:
-        """Generalized plants (one per plant group, concatenated along the model axis) from the
-        signals ``inputs`` (injected where produced) to ``outputs``; ``half`` subtracts
-        ``I/2`` from ``D11`` (``S - I/2`` of a loop opening)."""
-        parts = []
-        for plant in self.groups:
-            parts.append(self._generalized(plant, inputs, outputs, half))
-        if len(parts) == 1:
-            return parts[0]
-        if len({p.A.shape[-1] for p in parts}) > 1:
-            return _StackedLoops(parts)
-        return _Loop(
-            *(np.concatenate([getattr(p, f) for p in parts]) for f in
-              ("A", "B1", "B2", "C1", "C2", "D11", "D12", "D21")),
-            self.sampling_time,
-        )
+        """Generalized plant (batched over the models) from the signals ``inputs`` (injected
+        where produced) to ``outputs``; ``half`` subtracts ``I/2`` from ``D11`` (``S - I/2``
+        of a loop opening)."""
+        return self._generalized(self.plant, inputs, outputs, half)
 
     def _generalized(self, plant, inputs, outputs, half) -> _Loop:
         inject = [s for s in inputs if s in self.produced]
@@ -667,8 +657,12 @@ class _Problem:
                 n = len(names)
                 parts.append(
                     BatchedStateSpace(
-                        np.zeros((n, n)), np.eye(n), np.eye(n), np.zeros((n, n)),
-                        tuple(s + "'" for s in names), names,
+                        np.zeros((n, n)),
+                        np.eye(n),
+                        np.eye(n),
+                        np.zeros((n, n)),
+                        tuple(s + "'" for s in names),
+                        names,
                     )
                 )
         parts += [sum_block((s,), [(s + "~",), ("d:" + s,)], [1.0, 1.0]) for s in inject]
@@ -695,8 +689,15 @@ class _Problem:
         if half:
             D11 = D11 - 0.5 * np.eye(q)
         return _Loop(
-            A, B[..., :k], B[..., -nu:], C[..., :q, :], C[..., q:, :], D11,
-            D[..., :q, -nu:], D[..., q:, :k], self.sampling_time,
+            A,
+            B[..., :k],
+            B[..., -nu:],
+            C[..., :q, :],
+            C[..., q:, :],
+            D11,
+            D[..., :q, -nu:],
+            D[..., q:, :k],
+            self.sampling_time,
         )
 
     def terms(self, goal, index: int):
@@ -707,14 +708,14 @@ class _Problem:
             loop = self.loops(inputs, outputs)
             left = _weight(goal.left_weight, len(outputs), goal.label, "left_weight")
             right = _weight(goal.right_weight, len(inputs), goal.label, "right_weight")
-            return [(_HinfTerm(_weighted(loop, left, right)), index, "")]
+            return [(_HinfTerm(loop.weighted(left, right)), index, "")]
         if isinstance(goal, Margins):
             channels = self.resolve(goal.loop_opening, goal.label)
             loop = self.loops(channels, channels, half=True)
             if goal.multiloop or len(channels) == 1:
                 return [(_HinfTerm(loop, goal.alpha), index, ",".join(channels))]
             return [
-                (_HinfTerm(_select(loop, [i], [i]), goal.alpha), index, c)
+                (_HinfTerm(loop.select([i], [i]), goal.alpha), index, c)
                 for i, c in enumerate(channels)
             ]
         if isinstance(goal, Poles):
@@ -724,24 +725,6 @@ class _Problem:
             outputs = self.resolve(goal.outputs, goal.label)
             return [(_H2Term(self.loops(inputs, outputs), goal.max_std), index, "")]
         raise ValueError(f"systune: unknown goal type {type(goal).__name__}")
-
-
-class _StackedLoops:
-    """Plant groups of different orders: not supported by the batched kernels."""
-
-    def __init__(self, parts):
-        raise ValueError(
-            "systune: plants of different orders are not supported yet; pad or reduce them "
-            "to one order"
-        )
-
-
-def _weighted(loop, left, right):
-    return loop.weighted(left, right)
-
-
-def _select(loop, rows, cols):
-    return loop.select(rows, cols)
 
 
 def _weight(w, size: int, label: str, which: str) -> np.ndarray:
@@ -795,8 +778,15 @@ class _Objective:
         if self.floor is not None:
             values.append(np.array([self.floor]))
             grads.append(np.zeros((1,) + K.shape))
-            pieces.append((np.array([-1]), np.zeros(1, int), np.zeros(1), np.zeros(1, int),
-                           np.zeros(1, complex)))
+            pieces.append(
+                (
+                    np.array([-1]),
+                    np.zeros(1, int),
+                    np.zeros(1),
+                    np.zeros(1, int),
+                    np.zeros(1, complex),
+                )
+            )
         values = np.concatenate(values)
         grads = np.concatenate(grads)
         pieces = tuple(np.concatenate(c) for c in zip(*pieces, strict=True))
@@ -829,8 +819,13 @@ class _Objective:
 
 
 def _empty_pieces(k):
-    return (np.full(k, -1), np.zeros(k, int), np.full(k, np.nan), np.zeros(k, int),
-            np.zeros(k, complex))
+    return (
+        np.full(k, -1),
+        np.zeros(k, int),
+        np.full(k, np.nan),
+        np.zeros(k, int),
+        np.zeros(k, complex),
+    )
 
 
 def _minimize(objective: _Objective, xi, options: SystuneOptions):
@@ -935,7 +930,9 @@ def systune(plants, controller, goals, *, options: SystuneOptions | None = None)
         linear = scale != 1.0
         z = rng.normal(size=x0.size)
         trial = np.where(
-            linear & (x0 != 0), x0 * np.exp(options.restart_spread * z), x0 + options.restart_spread * z * scale
+            linear & (x0 != 0),
+            x0 * np.exp(options.restart_spread * z),
+            x0 + options.restart_spread * z * scale,
         )
         starts.append(trial)
     eps = options.active_tolerance
@@ -946,8 +943,14 @@ def systune(plants, controller, goals, *, options: SystuneOptions | None = None)
         # phase 0: stabilize
         K = structure.K(xi * scale)
         if not np.all(problem.stability.stable(K)):
-            obj = _Objective(problem, [problem.stability], [(1.0, 0.0)], scale, eps,
-                             floor=-options.stability_floor)
+            obj = _Objective(
+                problem,
+                [problem.stability],
+                [(1.0, 0.0)],
+                scale,
+                eps,
+                floor=-options.stability_floor,
+            )
             xi, _, it, message = _minimize(obj, xi, options)
             iterations += it
         stable = bool(np.all(problem.stability.stable(structure.K(xi * scale))))
@@ -955,8 +958,14 @@ def systune(plants, controller, goals, *, options: SystuneOptions | None = None)
         if stable:
             # phase 1: hard goals down to 1 - hard_margin
             if hard:
-                obj = _Objective(problem, [terms[i] for i in hard], [(1.0, 0.0)] * len(hard),
-                                 scale, eps, floor=1.0 - options.hard_margin)
+                obj = _Objective(
+                    problem,
+                    [terms[i] for i in hard],
+                    [(1.0, 0.0)] * len(hard),
+                    scale,
+                    eps,
+                    floor=1.0 - options.hard_margin,
+                )
                 G = obj.value(xi)
                 if G > 1.0:
                     xi, G, it, message = _minimize(obj, xi, options)
@@ -966,8 +975,9 @@ def systune(plants, controller, goals, *, options: SystuneOptions | None = None)
             # phase 2: soft goals, hard ones kept <= 1
             if soft and G <= 1.0:
                 for _ in range(4):
-                    F0 = _Objective(problem, [terms[i] for i in soft], [(1.0, 0.0)] * len(soft),
-                                    scale, eps).value(xi)
+                    F0 = _Objective(
+                        problem, [terms[i] for i in soft], [(1.0, 0.0)] * len(soft), scale, eps
+                    ).value(xi)
                     rho = options.penalty * max(F0, 1e-12)
                     obj = _Objective(
                         problem,
@@ -978,15 +988,20 @@ def systune(plants, controller, goals, *, options: SystuneOptions | None = None)
                     )
                     xi, _, it, message = _minimize(obj, xi, options)
                     iterations += it
-                    F1 = _Objective(problem, [terms[i] for i in soft], [(1.0, 0.0)] * len(soft),
-                                    scale, eps).value(xi)
+                    F1 = _Objective(
+                        problem, [terms[i] for i in soft], [(1.0, 0.0)] * len(soft), scale, eps
+                    ).value(xi)
                     if not hard or F1 >= F0 * (1 - 1e-4):
                         break
         x = xi * scale
         F, G = _soft_hard(problem, terms, soft, hard, structure.K(x))
-        runs.append(dict(start=r, soft=F, hard=G, stable=stable, iterations=iterations,
-                         message=message))
-        key = (not (G <= 1.0 + options.feasibility_tolerance), F if G <= 1 + options.feasibility_tolerance else G)
+        runs.append(
+            dict(start=r, soft=F, hard=G, stable=stable, iterations=iterations, message=message)
+        )
+        key = (
+            not (G <= 1.0 + options.feasibility_tolerance),
+            F if G <= 1 + options.feasibility_tolerance else G,
+        )
         if stable and (best is None or key < best[0]):
             best = (key, x)
     if best is None:
@@ -1018,16 +1033,30 @@ def _check_reachable(problem, goals, terms, owners, hard, K) -> None:
         n = A.shape[-1]
         # controller-independent iff the exogenous channels never meet the controller:
         # no path exo input -> y (observability of B1 through C2) or u -> exo output
-        reach_in = np.concatenate(
-            [np.abs(D21).max(axis=(-2, -1), keepdims=False)[..., None]]
-            + [np.abs(C2 @ np.linalg.matrix_power(A, k) @ B1).max(axis=(-2, -1))[..., None]
-               for k in range(min(n, 12))], axis=-1
-        ) if n else np.abs(D21).max(axis=(-2, -1))[..., None]
-        reach_out = np.concatenate(
-            [np.abs(D12).max(axis=(-2, -1))[..., None]]
-            + [np.abs(C1 @ np.linalg.matrix_power(A, k) @ B2).max(axis=(-2, -1))[..., None]
-               for k in range(min(n, 12))], axis=-1
-        ) if n else np.abs(D12).max(axis=(-2, -1))[..., None]
+        reach_in = (
+            np.concatenate(
+                [np.abs(D21).max(axis=(-2, -1), keepdims=False)[..., None]]
+                + [
+                    np.abs(C2 @ np.linalg.matrix_power(A, k) @ B1).max(axis=(-2, -1))[..., None]
+                    for k in range(min(n, 12))
+                ],
+                axis=-1,
+            )
+            if n
+            else np.abs(D21).max(axis=(-2, -1))[..., None]
+        )
+        reach_out = (
+            np.concatenate(
+                [np.abs(D12).max(axis=(-2, -1))[..., None]]
+                + [
+                    np.abs(C1 @ np.linalg.matrix_power(A, k) @ B2).max(axis=(-2, -1))[..., None]
+                    for k in range(min(n, 12))
+                ],
+                axis=-1,
+            )
+            if n
+            else np.abs(D12).max(axis=(-2, -1))[..., None]
+        )
         if np.all(reach_in == 0) or np.all(reach_out == 0):
             M = loop.close(K)
             peaks = peak_gain(M.A, M.B, M.C, M.D)
@@ -1053,11 +1082,19 @@ def _controller(problem: _Problem, x) -> control.StateSpace:
         parts.append(BatchedStateSpace(A, B, C, D, f.inputs, f.outputs))
     produced = {s for p in parts for s in p.outputs}
     inputs = [s for s in dict.fromkeys(s for p in parts for s in p.inputs) if s not in produced]
-    plant_inputs = set(problem.groups[0].inputs)
+    plant_inputs = set(problem.plant.inputs)
     outputs = [s for p in parts for s in p.outputs if s in plant_inputs]
     sys = connect(parts, inputs, outputs)
-    return control.ss(sys.A, sys.B, sys.C, sys.D, problem.sampling_time,
-                      inputs=inputs, outputs=outputs, name="controller")
+    return control.ss(
+        sys.A,
+        sys.B,
+        sys.C,
+        sys.D,
+        problem.sampling_time,
+        inputs=inputs,
+        outputs=outputs,
+        name="controller",
+    )
 
 
 def _result(problem, goals, terms, owners, x, options, runs, stable) -> TuningResult:
@@ -1074,13 +1111,15 @@ def _result(problem, goals, terms, owners, x, options, runs, stable) -> TuningRe
         elif isinstance(goal, Margins):
             disk = 2.0 / (2.0 * per_model.max() / goal.alpha) if per_model.max() > 0 else np.inf
             gm, pm = disk_gain_phase(disk)
-            details.update(disk_margin=float(disk), gain_margin_db=float(gm),
-                           phase_margin_deg=float(pm))
+            details.update(
+                disk_margin=float(disk), gain_margin_db=float(gm), phase_margin_deg=float(pm)
+            )
         elif isinstance(goal, Poles):
             _, _, _, s, *_ = terms[mine[0]]._all(K)
             r = np.maximum(np.abs(s), 1e-300)
-            details.update(min_damping=float(np.min(-s.real / r)),
-                           max_frequency_rad_s=float(np.max(np.abs(s))))
+            details.update(
+                min_damping=float(np.min(-s.real / r)), max_frequency_rad_s=float(np.max(np.abs(s)))
+            )
         elif isinstance(goal, Variance):
             details["h2_norm"] = float(per_model.max() * goal.max_std)
         values.append(GoalValue(goal.label, goal.kind, float(per_model.max()), per_model, details))

@@ -120,7 +120,13 @@ class _Tunable:
         """The block at ``x`` as a python-control model with named channels."""
         A, B, C, D = (np.real(M) for M in self.realize(np.asarray(x, dtype=float)))
         return control.ss(
-            A, B, C, D, self.sampling_time, inputs=list(self.inputs), outputs=list(self.outputs),
+            A,
+            B,
+            C,
+            D,
+            self.sampling_time,
+            inputs=list(self.inputs),
+            outputs=list(self.outputs),
             name=self.name,
         )
 
@@ -406,8 +412,12 @@ class TunableSS(_Tunable):
             rows.append(np.array([[-np.exp(a1), c], [-c, -np.exp(a2)]]))
         if n % 2:
             rows.append(np.array([[-np.exp(x[3 * (n // 2)])]]))
-        return _block_diagonal([(R, np.zeros((R.shape[0], 0)), np.zeros((0, R.shape[0])),
-                                 np.zeros((0, 0))) for R in rows])[0]
+        return _block_diagonal(
+            [
+                (R, np.zeros((R.shape[0], 0)), np.zeros((0, R.shape[0])), np.zeros((0, 0)))
+                for R in rows
+            ]
+        )[0]
 
     def realize(self, x):
         x = np.asarray(x)

@@ -8,11 +8,11 @@ balanced disk margin's closed form ``1 / max |S - 1/2|`` on a dense grid, pole d
 four parameters, written with polynomial transfer functions (no state space at all).
 """
 
+import control
 import numpy as np
 import pytest
 from slycot import ab13bd, ab13dd
 
-import control
 from oos_drake.control.goals import Margins, Poles, Variance, WeightedGain, disk_alpha
 from oos_drake.control.margins import disk_gain_phase
 from oos_drake.control.systune import SystuneOptions, systune
@@ -71,7 +71,10 @@ OMEGA = np.logspace(-4, 3, 20000)
 @pytest.fixture(scope="module")
 def soft_result():
     return systune(
-        PLANTS, pid(), [WeightedGain("d", "y")], options=SystuneOptions(restarts=1, seed=3, max_iterations=100)
+        PLANTS,
+        pid(),
+        [WeightedGain("d", "y")],
+        options=SystuneOptions(restarts=1, seed=3, max_iterations=100),
     )
 
 
@@ -240,8 +243,12 @@ def test_gain_behind_fixed_rolloff():
     # a lag 1/(s + 1)^2 with an output disturbance; the gain v = G e drives u through F
     lag = control.ss(control.tf([1.0], [1.0, 2.0, 1.0]))
     plant = control.ss(
-        lag.A, np.hstack([lag.B, np.zeros((2, 1))]), np.vstack([lag.C, -lag.C]),
-        [[0.0, 1.0], [0.0, -1.0]], inputs=["u", "d"], outputs=["y", "e"],
+        lag.A,
+        np.hstack([lag.B, np.zeros((2, 1))]),
+        np.vstack([lag.C, -lag.C]),
+        [[0.0, 1.0], [0.0, -1.0]],
+        inputs=["u", "d"],
+        outputs=["y", "e"],
     )
     rolloff = FixedBlock("F", control.tf([4.0], [1.0, 4.0]), inputs=["v"], outputs=["u"])
     gain = TunableGain("G", ["e"], ["v"], initial=[[0.5]])
@@ -307,15 +314,16 @@ def test_unreachable_hard_goals_are_refused():
     # the disturbance filter is outside the loop: d -> filter state cannot be changed
     plant = two_mass(1.0)
     with pytest.raises(ValueError, match="hard goal 'tiny' cannot be met: it does not depend"):
-        systune([plant], pid(), [WeightedGain("d", "d", left_weight=2.0, kind="hard",
-                                               name="tiny")])
+        systune([plant], pid(), [WeightedGain("d", "d", left_weight=2.0, kind="hard", name="tiny")])
 
 
 def test_infeasible_design_is_reported_as_such():
     # the disturbance filter pole (0.2 rad/s) is fixed: no controller brings every pole below
     # 0.1 rad/s
     result = systune(
-        PLANTS, pid(), [WeightedGain("d", "y"), Poles(max_frequency=0.1, kind="hard")],
+        PLANTS,
+        pid(),
+        [WeightedGain("d", "y"), Poles(max_frequency=0.1, kind="hard")],
         options=SystuneOptions(max_iterations=20),
     )
     assert result.status == "infeasible"
