@@ -8,6 +8,8 @@ balanced disk margin's closed form ``1 / max |S - 1/2|`` on a dense grid, pole d
 four parameters, written with polynomial transfer functions (no state space at all).
 """
 
+import itertools
+
 import control
 import numpy as np
 import pytest
@@ -157,8 +159,13 @@ def test_tuned_pid_beats_the_brute_force_grid(soft_result, grid):
     brute = _exact_hinf(best)
     assert soft_result.status == "ok"
     assert soft_result.soft <= brute * (1 + 1e-6)
-    # and it is a genuine minimum: no grid point is better
+    # and it is a genuine minimum: no grid point is better, nor any of the 80 neighbours at
+    # +-2 % of each parameter (exact norms)
     assert soft_result.soft <= np.min(hinf) * (1 + 1e-6)
+    tuned = soft_result.parameters["C"]
+    x = np.array([tuned[key][0] for key in ("kp", "ki", "kd", "tf")])
+    neighbours = itertools.product((0.98, 1.0, 1.02), repeat=4)
+    assert min(_exact_hinf(x * np.array(f)) for f in neighbours) >= soft_result.soft * (1 - 1e-9)
 
 
 def test_constrained_pid_beats_the_feasible_grid(constrained_result, grid):
@@ -388,3 +395,39 @@ def test_static_gain_synthesis_reproduced_at_convergence():
     reference = synthesize(plants, K0, options=options)
     tuned = _systune_static(system, K0, 300)
     assert tuned.soft == pytest.approx(reference.gamma, rel=1e-3)
+
+
+def test_multiloop_and_loop_at_a_time_margins_on_a_coupled_plant():
+    # y = G u + d, G = (sI - A)^-1 B coupled 2x2; e = -y; u = K e with a 2x2 gain
+    A, B = np.diag([-1.0, -2.0]), np.array([[1.0, 0.6], [0.4, 1.0]])
+    plant = control.ss(
+        A,
+        np.hstack([B, np.zeros((2, 2))]),
+        np.vstack([np.eye(2), -np.eye(2)]),
+        np.block([[np.zeros((2, 2)), np.eye(2)], [np.zeros((2, 2)), -np.eye(2)]]),
+        inputs=["u[0]", "u[1]", "d[0]", "d[1]"],
+        outputs=["y[0]", "y[1]", "e[0]", "e[1]"],
+    )
+    goals = [
+        WeightedGain("d", "y"),
+        Margins("u", 6.0, 45.0, multiloop=True, kind="hard", name="multiloop"),
+        Margins("u", 8.0, 50.0, kind="hard", name="loop at a time"),
+    ]
+    gain = TunableGain("K", ["e[0]", "e[1]"], ["u[0]", "u[1]"], initial=np.eye(2))
+    result = systune([plant], gain, goals, options=SystuneOptions(max_iterations=40))
+    assert result.status == "ok"
+    K = result.parameters["K"]["D"]
+    w = np.logspace(-3, 3, 4000)
+    G = np.linalg.solve(1j * w[:, None, None] * np.eye(2) - A, np.broadcast_to(B, (w.size, 2, 2)))
+    S = np.linalg.inv(np.eye(2) + K @ G)  # sensitivity at u, L = K G
+    multiloop = disk_alpha(6.0, 45.0) * np.linalg.norm(S - np.eye(2) / 2, 2, axis=(1, 2)).max()
+    assert result.goal("multiloop").value == pytest.approx(multiloop, rel=1e-4)
+    assert multiloop <= 1 + 1e-6
+    # loop at a time: channel i sees S_ii with the other loop closed
+    each = np.abs(np.diagonal(S, axis1=1, axis2=2) - 0.5).max(axis=0)
+    assert result.goal("loop at a time").value == pytest.approx(
+        disk_alpha(8.0, 50.0) * each.max(), rel=1e-4
+    )
+    assert result.goal("loop at a time").details["disk_margin"] == pytest.approx(
+        1 / each.max(), rel=1e-4
+    )
