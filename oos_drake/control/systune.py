@@ -36,7 +36,8 @@ Algorithm (Apkarian-Noll nonsmooth descent, the package's optimizer):
    from the feasible ``x_0``: every point with ``Phi <= c`` has ``G <= 1``, so the descent
    stays feasible and, at the end, ``G <= 1 - (c - F)/rho``; the phase is repeated with
    ``c`` updated until ``F`` stops decreasing (the tightening vanishes). Each phase is BFGS-SQP
-   on the nearly active pieces (:func:`~oos_drake.control.nonsmooth_bfgs.minimize_bundle_bfgs`),
+   on the nearly active pieces (:func:`~oos_drake.control.nonsmooth_bfgs.minimize_bundle_cycles`:
+   metric cycles and kicks, the static-gain synthesis' driver),
    unstable trial points rejected.
 4. The best run (feasible first, then lowest ``F``; else lowest ``G``) is re-evaluated
    exactly (certified H-infinity norms, all models) and reported per goal.
@@ -54,7 +55,7 @@ import scipy.linalg
 
 from oos_drake.control.goals import Margins, Poles, Variance, WeightedGain
 from oos_drake.control.margins import disk_gain_phase
-from oos_drake.control.nonsmooth_bfgs import minimize_bundle_bfgs
+from oos_drake.control.nonsmooth_bfgs import minimize_bundle_cycles
 from oos_drake.control.objective import active_set, peak_gradients
 from oos_drake.control.statespace import BatchedStateSpace, connect, sum_block
 from oos_drake.control.tunable import FixedBlock, _Tunable
@@ -80,7 +81,8 @@ class SystuneOptions:
     max_iterations : int
         BFGS-SQP iterations per phase and start.
     metric_cycle : int
-        The BFGS metric is reset every ``metric_cycle`` iterations while a cycle improves.
+        The BFGS metric is reset every ``metric_cycle`` iterations while a cycle improves,
+        then two kicks (:func:`~oos_drake.control.nonsmooth_bfgs.minimize_bundle_cycles`).
     active_tolerance : float
         Pieces within this fraction of the maximum enter the local model [-].
     penalty : float
@@ -829,24 +831,15 @@ def _empty_pieces(k):
 
 
 def _minimize(objective: _Objective, xi, options: SystuneOptions):
-    """Metric cycles of :func:`minimize_bundle_bfgs` (the metric goes stale along valleys)."""
-    f_best, used, message = objective.value(xi), 0, "no iteration"
-    while used < options.max_iterations:
-        res = minimize_bundle_bfgs(
-            objective,
-            xi,
-            regrad=objective.regrad,
-            max_iterations=min(options.metric_cycle, options.max_iterations - used),
-            rtol=1e-7,
-        )
-        used += max(res.iterations, 1)
-        message = res.message
-        improved = res.f < f_best - 1e-5 * max(abs(f_best), 1e-12)
-        if res.f <= f_best:
-            xi, f_best = res.x, res.f
-        if not improved:
-            break
-    return xi, f_best, used, message
+    """:func:`minimize_bundle_cycles` (metric cycles and kicks, as the static-gain synthesis)."""
+    res = minimize_bundle_cycles(
+        objective,
+        xi,
+        regrad=objective.regrad,
+        max_iterations=options.max_iterations,
+        restart_every=options.metric_cycle,
+    )
+    return res.x, res.f, res.iterations, res.message
 
 
 # --------------------------------------------------------------------------- entry point
