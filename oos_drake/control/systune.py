@@ -559,14 +559,17 @@ class _Structure:
             r, c = r + p, c + m
         return out
 
+    @property
+    def linear(self) -> np.ndarray:
+        """Gain-like parameters (each block's ``linear_parameters``)."""
+        return np.concatenate([t.linear_parameters for t in self.tunables])
+
     def scale(self, x0) -> np.ndarray:
-        """Per-parameter scale of the optimization variables."""
+        """Per-parameter scale of the optimization variables: a gain's own magnitude (its
+        block's mean when it starts near zero), ``1`` for logarithms and pole coordinates."""
         out = np.ones(self.nx)
         for t, sl in zip(self.tunables, self.slices, strict=True):
-            x = np.abs(x0[sl])
-            linear = np.array(
-                [not re.match(r"(log_|a1\[|a2\[|a\[|b\[)", n) for n in t.parameter_names]
-            )
+            x, linear = np.abs(x0[sl]), t.linear_parameters
             typical = np.mean(x[linear & (x > 0)]) if np.any(linear & (x > 0)) else 1.0
             out[sl] = np.where(linear, np.where(x > 1e-3 * typical, x, typical), 1.0)
         return out
@@ -919,91 +922,65 @@ def systune(plants, controller, goals, *, options: SystuneOptions | None = None)
     _check_reachable(problem, goals, terms, owners, hard, structure.K(x0))
     rng = np.random.default_rng(options.seed)
     starts = [x0]
+    linear = structure.linear
     for _ in range(options.restarts):
-        linear = scale != 1.0
-        z = rng.normal(size=x0.size)
-        trial = np.where(
-            linear & (x0 != 0),
-            x0 * np.exp(options.restart_spread * z),
-            x0 + options.restart_spread * z * scale,
-        )
-        starts.append(trial)
-    eps = options.active_tolerance
+        z = options.restart_spread * rng.normal(size=x0.size)
+        starts.append(np.where(linear & (x0 != 0), x0 * np.exp(z), x0 + z * scale))
     runs, best = [], None
     for r, start in enumerate(starts):
-        xi = start / scale
-        iterations, message = 0, ""
-        # phase 0: stabilize
-        K = structure.K(xi * scale)
-        if not np.all(problem.stability.stable(K)):
-            obj = _Objective(
-                problem,
-                [problem.stability],
-                [(1.0, 0.0)],
-                scale,
-                eps,
-                floor=-options.stability_floor,
-            )
-            xi, _, it, message = _minimize(obj, xi, options)
-            iterations += it
-        stable = bool(np.all(problem.stability.stable(structure.K(xi * scale))))
-        F = G = np.inf
-        if stable:
-            # phase 1: hard goals down to 1 - hard_margin
-            if hard:
-                obj = _Objective(
-                    problem,
-                    [terms[i] for i in hard],
-                    [(1.0, 0.0)] * len(hard),
-                    scale,
-                    eps,
-                    floor=1.0 - options.hard_margin,
-                )
-                G = obj.value(xi)
-                if G > 1.0:
-                    xi, G, it, message = _minimize(obj, xi, options)
-                    iterations += it
-            else:
-                G = 0.0
-            # phase 2: soft goals, hard ones kept <= 1
-            if soft and G <= 1.0:
-                for _ in range(4):
-                    F0 = _Objective(
-                        problem, [terms[i] for i in soft], [(1.0, 0.0)] * len(soft), scale, eps
-                    ).value(xi)
-                    rho = options.penalty * max(F0, 1e-12)
-                    obj = _Objective(
-                        problem,
-                        [terms[i] for i in soft + hard],
-                        [(1.0, 0.0)] * len(soft) + [(rho, F0 - rho)] * len(hard),
-                        scale,
-                        eps,
-                    )
-                    xi, _, it, message = _minimize(obj, xi, options)
-                    iterations += it
-                    F1 = _Objective(
-                        problem, [terms[i] for i in soft], [(1.0, 0.0)] * len(soft), scale, eps
-                    ).value(xi)
-                    if not hard or F1 >= F0 * (1 - 1e-4):
-                        break
-        x = xi * scale
+        x, stable, iterations, message = _run(problem, terms, soft, hard, start, scale, options)
         F, G = _soft_hard(problem, terms, soft, hard, structure.K(x))
         runs.append(
             dict(start=r, soft=F, hard=G, stable=stable, iterations=iterations, message=message)
         )
-        key = (
-            not (G <= 1.0 + options.feasibility_tolerance),
-            F if G <= 1 + options.feasibility_tolerance else G,
-        )
+        feasible = G <= 1.0 + options.feasibility_tolerance
+        key = (not feasible, F if feasible else G)  # feasible first, then the lowest F
         if stable and (best is None or key < best[0]):
             best = (key, x)
-    if best is None:
-        x = starts[0]
-        status_stable = False
-    else:
-        x = best[1]
-        status_stable = True
-    return _result(problem, goals, terms, owners, x, options, runs, status_stable)
+    x = starts[0] if best is None else best[1]
+    return _result(problem, goals, terms, owners, x, options, runs, best is not None)
+
+
+def _run(problem: _Problem, terms, soft, hard, start, scale, options: SystuneOptions):
+    """Phases 0-2 (module docstring) from ``start``: ``(x, stable, iterations, message)``."""
+    eps, structure = options.active_tolerance, problem.structure
+
+    def objective(indices, affine, floor=None):
+        return _Objective(problem, [terms[i] for i in indices], affine, scale, eps, floor)
+
+    xi = start / scale
+    iterations, message = 0, "no iteration"
+    # phase 0: stabilize
+    if not np.all(problem.stability.stable(structure.K(xi * scale))):
+        obj = _Objective(
+            problem, [problem.stability], [(1.0, 0.0)], scale, eps, -options.stability_floor
+        )
+        xi, _, it, message = _minimize(obj, xi, options)
+        iterations += it
+    if not np.all(problem.stability.stable(structure.K(xi * scale))):
+        return xi * scale, False, iterations, message
+    # phase 1: hard goals down to 1 - hard_margin
+    G = 0.0
+    if hard:
+        obj = objective(hard, [(1.0, 0.0)] * len(hard), floor=1.0 - options.hard_margin)
+        G = obj.value(xi)
+        if G > 1.0:
+            xi, G, it, message = _minimize(obj, xi, options)
+            iterations += it
+    # phase 2: soft goals, the hard ones kept <= 1 (c updated until F stalls)
+    if soft and G <= 1.0:
+        soft_only = objective(soft, [(1.0, 0.0)] * len(soft))
+        F0 = soft_only.value(xi)
+        for _ in range(4):
+            rho = options.penalty * max(F0, 1e-12)
+            obj = objective(soft + hard, [(1.0, 0.0)] * len(soft) + [(rho, F0 - rho)] * len(hard))
+            xi, _, it, message = _minimize(obj, xi, options)
+            iterations += it
+            F1 = soft_only.value(xi)
+            if not hard or F1 >= F0 * (1 - 1e-4):
+                break
+            F0 = F1
+    return xi * scale, True, iterations, message
 
 
 def _soft_hard(problem, terms, soft, hard, K):

@@ -100,6 +100,14 @@ class _Tunable:
     def nparameters(self) -> int:
         return len(self.parameter_names)
 
+    @property
+    def linear_parameters(self) -> np.ndarray:
+        """Which parameters are gains (scaled by their magnitude, perturbed multiplicatively
+        at restarts) rather than logarithms or pole coordinates (unit scale, additive)."""
+        return np.array(
+            [not n.startswith(("log_", "a1[", "a2[", "a[", "b[")) for n in self.parameter_names]
+        )
+
     def matrix(self, x) -> np.ndarray:
         """``[[A, B], [C, D]]`` at ``x`` (complex ``x`` allowed)."""
         A, B, C, D = self.realize(x)
