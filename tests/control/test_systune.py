@@ -431,3 +431,15 @@ def test_multiloop_and_loop_at_a_time_margins_on_a_coupled_plant():
     assert result.goal("loop at a time").details["disk_margin"] == pytest.approx(
         1 / each.max(), rel=1e-4
     )
+
+
+def test_lfr_model_array_is_the_list_of_plants():
+    from oos_drake.lfr import LFR
+
+    stacked = [np.stack([getattr(P, m) for P in PLANTS]) for m in "ABCD"]
+    array = LFR.from_ss(*stacked, input_names=["u", "d"], output_names=["y", "e"])
+    options = SystuneOptions(max_iterations=15)
+    from_array = systune(array, pid(), [WeightedGain("d", "y")], options=options)
+    from_list = systune(PLANTS, pid(), [WeightedGain("d", "y")], options=options)
+    np.testing.assert_allclose(from_array.x, from_list.x, rtol=1e-12)
+    np.testing.assert_allclose(from_array.goals[0].per_model, from_list.goals[0].per_model)
