@@ -728,7 +728,14 @@ class _Problem:
         if isinstance(goal, Variance):
             inputs = self.resolve(goal.inputs, goal.label)
             outputs = self.resolve(goal.outputs, goal.label)
-            return [(_H2Term(self.loops(inputs, outputs), goal.max_std), index, "")]
+            loop = self.loops(inputs, outputs)
+            feedthrough = np.any(loop.D11 != 0) or (np.any(loop.D12 != 0) and np.any(loop.D21 != 0))
+            if self.sampling_time == 0 and feedthrough:
+                raise ValueError(
+                    f"goal {goal.label!r}: the closed loop has a direct feedthrough from the "
+                    "noise to the outputs (infinite H2 norm in continuous time)"
+                )
+            return [(_H2Term(loop, goal.max_std), index, "")]
         raise ValueError(f"systune: unknown goal type {type(goal).__name__}")
 
 

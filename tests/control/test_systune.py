@@ -313,6 +313,11 @@ def test_goal_naming_a_missing_signal_is_refused():
         systune(PLANTS, TunablePID("C", "err", "u"), [WeightedGain("d", "y")])
 
 
+def test_variance_with_direct_feedthrough_is_refused():
+    with pytest.raises(ValueError, match="'Variance\\(d->d\\)': the closed loop has a direct"):
+        systune(PLANTS, pid(), [Variance("d", "d")])
+
+
 def test_unreachable_hard_goals_are_refused():
     with pytest.raises(ValueError, match="'Margins\\(u\\)' cannot be met"):
         Margins("u", gain_margin_db=6.0, phase_margin_deg=100.0)
