@@ -105,7 +105,7 @@ def _run_tuning(args, scenario, spec, plants, K0) -> int:
     """``oos synth`` with the ``[control]`` goals (:func:`tune_to_requirements`); exit status
     0 (``ok``) or 1 (``infeasible``: written, with the best values reached)."""
     from oos_drake.control.report import tuning_record, write_tuning
-    from oos_drake.control.requirements import tuning_specification, tune_to_requirements
+    from oos_drake.control.requirements import tune_to_requirements, tuning_specification
     from oos_drake.control.systune import SystuneOptions
     from oos_drake.scenario.data import scenario_record
 
@@ -128,7 +128,10 @@ def _run_tuning(args, scenario, spec, plants, K0) -> int:
     )
     for goal in result.goals:
         details = ", ".join(f"{k} = {v:.4g}" for k, v in goal.details.items())
-        print(f"  {goal.kind} {goal.name}: {goal.value:.6g} ({'met' if goal.met else 'NOT met'}; {details})")
+        print(
+            f"  {goal.kind} {goal.name}: {goal.value:.6g} "
+            f"({'met' if goal.met else 'NOT met'}; {details})"
+        )
     if requirements.structure == "static":
         K = np.asarray(result.parameters["K"]["D"])
         print(f"K_p [N m/rad] =\n{np.array2string(K[:, :3], precision=5)}")

@@ -65,8 +65,13 @@ def controller_record(result: SynthesisResult, plants: PlantArray, options=None)
             "structure": "static",
             "status": "ok",
             "goals": [
-                {"name": "weighted gain d->e", "kind": "soft", "value": result.gamma,
-                 "met": bool(result.gamma < 1.0), "details": {"hinf_norm": result.gamma}}
+                {
+                    "name": "weighted gain d->e",
+                    "kind": "soft",
+                    "value": result.gamma,
+                    "met": bool(result.gamma < 1.0),
+                    "details": {"hinf_norm": result.gamma},
+                }
             ],
             "gamma": result.gamma,
             "gamma_baseline": result.gamma_start,

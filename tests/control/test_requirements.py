@@ -25,7 +25,8 @@ def _scenario_with(tmp_path, lines):
 
     keys = {line.split("=")[0].strip() for line in lines} & {"structure", "loop_opening"}
     text = "\n".join(
-        line for line in load().source.read_text().splitlines()
+        line
+        for line in load().source.read_text().splitlines()
         if line.split("=")[0].strip() not in keys
     )
     anchor = "[control.sensors]"
@@ -70,9 +71,7 @@ def test_tuned_static_gain_meets_margins_by_stability_margins():
     K0 = baseline_gains(inertia_from_plant(plants.evaluate([1]))[0])
     requirements = _requirements(gain_margin_db=6.0, phase_margin_deg=30.0)
     spec = DesignSpecification()
-    result = tune_to_requirements(
-        plants, K0, spec, requirements, SystuneOptions(max_iterations=30)
-    )
+    result = tune_to_requirements(plants, K0, spec, requirements, SystuneOptions(max_iterations=30))
     if result.status != "ok":
         assert result.hard > 1
         return
@@ -89,7 +88,9 @@ def test_tuned_static_gain_meets_margins_by_stability_margins():
             # u_K = K y (positive feedback through P); open `channel`, the others closed
             L_full = control.ss([], [], [], K) * P
             others = np.diag([0.0 if c == channel else 1.0 for c in range(3)])
-            seen = control.feedback(L_full, control.ss([], [], [], others), sign=1)[channel, channel]
+            seen = control.feedback(L_full, control.ss([], [], [], others), sign=1)[
+                channel, channel
+            ]
             gm, pm, *_ = control.stability_margins(-seen)
             assert 20 * np.log10(gm) >= 6.0 - 1e-3
             assert pm >= 30.0 - 1e-3
