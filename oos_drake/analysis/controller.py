@@ -33,6 +33,8 @@ class Controller:
         File the gains come from, or a description of how they were computed.
     gamma : float
         Synthesis performance level stored in the JSON (NaN for the baseline).
+    status : str
+        ``"ok"``, or ``"infeasible"``: tuned to ``[control]`` hard goals it does NOT meet.
     """
 
     K: np.ndarray
@@ -40,6 +42,7 @@ class Controller:
     label: str
     source: str
     gamma: float = float("nan")
+    status: str = "ok"
 
     def __post_init__(self):
         K = np.array(self.K, dtype=float)
@@ -84,6 +87,12 @@ def load_controller(path) -> Controller:
         record = json.loads(path.read_text())
     except json.JSONDecodeError as exc:
         raise ValueError(f"controller file {path}: not JSON ({exc})") from exc
+    structure = record.get("structure", "static")
+    if structure != "static":
+        raise ValueError(
+            f"controller file {path}: structure {structure!r} is not supported by this stage "
+            "(only the static gain 'static' runs downstream)"
+        )
     try:
         gains = record["controller"]
         K_p = np.asarray(gains["K_p"]["value"], dtype=float)
@@ -97,7 +106,10 @@ def load_controller(path) -> Controller:
     gamma = record.get("gamma")
     gamma = float(gamma) if isinstance(gamma, (int, float)) else float("nan")
     spec = _spec_from_record(record.get("design_specification"))
-    return Controller(np.hstack([K_p, K_d]), spec, "synthesized", str(path), gamma)
+    status = record.get("status", "ok")
+    if status not in ("ok", "infeasible"):
+        raise ValueError(f"controller file {path}: status must be ok or infeasible, got {status!r}")
+    return Controller(np.hstack([K_p, K_d]), spec, "synthesized", str(path), gamma, status)
 
 
 def baseline_controller(plant_rotational, spec: DesignSpecification | None = None) -> Controller:
@@ -148,6 +160,11 @@ def scenario_controller(path, scenario) -> Controller:
     spec = DesignSpecification.from_requirements(scenario.control)
     if path:
         controller = load_controller(path)
+        if controller.status != "ok":
+            print(
+                f"WARNING: {controller.source} has status {controller.status!r}: the hard goals "
+                "it was tuned for are NOT met"
+            )
         if controller.spec != spec:
             changed = sorted(
                 k for k, v in spec.to_dict().items() if controller.spec.to_dict()[k] != v

@@ -77,6 +77,8 @@ def run_synth(args) -> int:
         workers=args.workers,
     )
     K0 = baseline_for(plants, scenario.mission.first_docking_time)
+    if scenario.control.has_tuning_goals or scenario.control.structure != "static":
+        return _run_tuning(args, scenario, spec, plants, K0)
     # the restarts run as executor tasks; spawned workers when this process holds Drake threads
     method = "spawn" if args.plant == "drake" else None
     with make_executor(args.workers, args.scheduler, method=method) as executor:
@@ -97,6 +99,52 @@ def run_synth(args) -> int:
     print(f"K_d [N m s/rad] =\n{np.array2string(result.K[:, 3:], precision=5)}")
     for name, path in paths.items():
         print(f"  {name}: {path}")
+    return 0
+
+
+def _run_tuning(args, scenario, spec, plants, K0) -> int:
+    """``oos synth`` with the ``[control]`` goals (:func:`tune_to_requirements`); exit status
+    0 (``ok``) or 1 (``infeasible``: written, with the best values reached)."""
+    from oos_drake.control.report import tuning_record, write_tuning
+    from oos_drake.control.requirements import tune_to_requirements, tuning_specification
+    from oos_drake.control.systune import SystuneOptions
+    from oos_drake.scenario.data import scenario_record
+
+    requirements = scenario.control
+    options = SystuneOptions(
+        restarts=args.restarts, max_iterations=args.max_iterations, seed=args.seed
+    )
+    start = time.perf_counter()
+    result = tune_to_requirements(plants, K0, spec, requirements, options)
+    elapsed = time.perf_counter() - start
+    record = tuning_record(
+        result, requirements, K0, plants, tuning_specification(spec, requirements), options
+    )
+    record["wall_time_s"] = elapsed
+    paths = write_tuning(args.out, record, scenario=scenario_record(scenario))
+    print(f"scenario: {scenario.name} ({scenario.source})")
+    print(
+        f"structure {requirements.structure}: status {result.status}, "
+        f"{plants.size} configurations, {elapsed:.1f} s"
+    )
+    for goal in result.goals:
+        details = ", ".join(f"{k} = {v:.4g}" for k, v in goal.details.items())
+        print(
+            f"  {goal.kind} {goal.name}: {goal.value:.6g} "
+            f"({'met' if goal.met else 'NOT met'}; {details})"
+        )
+    if requirements.structure == "static":
+        K = np.asarray(result.parameters["K"]["D"])
+        print(f"K_p [N m/rad] =\n{np.array2string(K[:, :3], precision=5)}")
+        print(f"K_d [N m s/rad] =\n{np.array2string(K[:, 3:], precision=5)}")
+    for name, path in paths.items():
+        print(f"  {name}: {path}")
+    if result.status != "ok":
+        print(
+            "INFEASIBLE: the hard goals are NOT all met; controller.json holds the best values "
+            "reached with status 'infeasible'"
+        )
+        return 1
     return 0
 
 

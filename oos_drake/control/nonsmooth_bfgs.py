@@ -288,3 +288,76 @@ def minimize_bundle_bfgs(
             message = f"stalled (< {stall_rtol:g} relative decrease in {stall_window} iterations)"
             break
     return BfgsResult(x, float(f), iterations, evaluations, tuple(history), message)
+
+
+def minimize_bundle_cycles(
+    fun: Callable,
+    x0,
+    *,
+    regrad: Callable | None = None,
+    max_iterations: int = 150,
+    restart_every: int = 50,
+    restart_rtol: float = 1e-4,
+    kicks: int = 2,
+    kick: float = 0.05,
+) -> BfgsResult:
+    """:func:`minimize_bundle_bfgs` in metric cycles, then kicks (escapes stalls at kinks).
+
+    ``max_iterations`` is the total budget; the BFGS metric is reset every ``restart_every``
+    iterations until a cycle improves ``f`` by less than ``restart_rtol`` (relative): the metric
+    goes stale along valleys. Then up to ``kicks`` cycles restart from the best point perturbed
+    by ``kick`` (relative to its mean magnitude, Gaussian, seeded by the iteration count:
+    deterministic; a kick to ``f = inf`` is discarded) and the best point is kept.
+
+    Parameters
+    ----------
+    fun, regrad : callable
+        As for :func:`minimize_bundle_bfgs`.
+    x0 : array_like
+        Starting point (finite ``f``).
+
+    Returns
+    -------
+    BfgsResult
+        ``iterations`` counts every cycle's; ``message`` the number of cycles and the last
+        one's reason.
+    """
+    x = x_best = np.asarray(x0, dtype=float)
+    f_best, used, history, evaluations, messages, kicks_left = None, 0, [], 0, [], kicks
+    while used < max_iterations:
+        res = minimize_bundle_bfgs(
+            fun,
+            x,
+            regrad=regrad,
+            max_iterations=min(restart_every, max_iterations - used),
+        )
+        used += res.iterations
+        evaluations += res.evaluations
+        messages.append(res.message)
+        improved = f_best is None or res.f < f_best * (1.0 - restart_rtol)
+        if f_best is None or res.f < f_best:
+            history.extend(res.history if not history else (res.f,))
+            x_best, f_best = res.x, res.f
+        if improved and res.iterations > 0:
+            x = x_best
+            continue
+        x = None
+        while kicks_left > 0 and x is None:
+            kicks_left -= 1
+            rng = np.random.default_rng([used, kicks_left])
+            trial = x_best + kick * np.abs(x_best).mean() * rng.normal(size=x_best.shape)
+            evaluations += 1
+            if np.isfinite(fun(trial)[0]):  # else it destabilized a loop
+                x = trial
+        if x is None:
+            break
+    if not history:  # no budget: the start point
+        return BfgsResult(x_best, float(fun(x_best)[0]), 0, 1, (), "no iteration")
+    return BfgsResult(
+        x_best,
+        history[-1],
+        used,
+        evaluations,
+        tuple(history),
+        f"{len(messages)} metric cycle(s); last: {messages[-1]}",
+    )

@@ -56,7 +56,9 @@ def loop_sigma(interconnection: WeightedInterconnection, K):
 
 
 @with_single_threaded_blas
-def peak_gradients(interconnection: WeightedInterconnection, K, index, omega, which=None):
+def peak_gradients(
+    interconnection: WeightedInterconnection, K, index, omega, which=None, *, points=None
+):
     """Values and gradients of ``sigma_max(M_i(j w))`` w.r.t. ``K`` at given (model, frequency).
 
     Parameters
@@ -71,6 +73,11 @@ def peak_gradients(interconnection: WeightedInterconnection, K, index, omega, wh
     which : array_like of int, shape (k,), optional
         Which singular value (0 = largest, default); the others give the extra pieces of a
         multiple largest singular value.
+    points : callable, optional
+        ``omega -> p``: the complex points where the transfer ``C (p I - A)^-1 B + D`` is
+        evaluated (default ``p = j omega``; for a discrete-time loop whose peaks were found on
+        its bilinear image, ``p = (1 + j omega) / (1 - j omega)``, i.e. ``z``). Forces the LU
+        path.
 
     Returns
     -------
@@ -84,7 +91,7 @@ def peak_gradients(interconnection: WeightedInterconnection, K, index, omega, wh
     K = np.asarray(K, dtype=float)
     which = np.zeros(index.size, dtype=int) if which is None else np.asarray(which, dtype=int)
     loop = interconnection.loop
-    if loop is not None:
+    if loop is not None and points is None:
         T, G12, G21 = loop.gain_sensitivity(K, omega, index)
         return _gradients(T, G12, G21, which)
     A, B1, B2, C1, C2, D11, D12, D21 = (M[index] for M in interconnection.partitions())
@@ -94,7 +101,8 @@ def peak_gradients(interconnection: WeightedInterconnection, K, index, omega, wh
     D_cl = D11 + D12 @ K @ D21
     n = A.shape[-1]
     rhs = np.concatenate([B_cl, B2], axis=-1).astype(complex)
-    X = np.linalg.solve(1j * omega[:, None, None] * np.eye(n) - A_cl, rhs)
+    p = 1j * omega if points is None else points(omega)
+    X = np.linalg.solve(p[:, None, None] * np.eye(n) - A_cl, rhs)
     nd = B1.shape[-1]
     T = C_cl @ X[..., :nd] + D_cl
     G12 = C_cl @ X[..., nd:] + D12
@@ -145,10 +153,12 @@ def active_set(
     max_peaks: int = 24,
     focus: float = 0.2,
     workers: int = 1,
+    points=None,
 ) -> ActiveSet:
     """Evaluate ``gamma(K)`` and collect every local peak within ``eps`` (relative) of it.
 
-    ``workers``: threads of the eigendecompositions (see :func:`peak_gain`).
+    ``workers``: threads of the eigendecompositions (see :func:`peak_gain`); ``points``: see
+    :func:`peak_gradients` (the peaks are searched on ``interconnection.close(K)``).
     """
     M = interconnection.close(K)
     peaks = peak_gain(
@@ -184,12 +194,17 @@ def active_set(
     models, omegas = models[keep], omegas[keep]
     # second singular values close to the first: a multiple sigma_max is nonsmooth even at a
     # fixed frequency, its subdifferential is spanned by the pieces of each singular pair
-    second, _ = peak_gradients(interconnection, K, models, omegas, np.ones(models.size, int))
-    multiple = second >= (1.0 - eps) * gamma
+    if min(M.B.shape[-1], M.C.shape[-2]) > 1:
+        second, _ = peak_gradients(
+            interconnection, K, models, omegas, np.ones(models.size, int), points=points
+        )
+        multiple = second >= (1.0 - eps) * gamma
+    else:  # one singular value only
+        multiple = np.zeros(models.size, dtype=bool)
     models = np.concatenate([models, models[multiple]])
     omegas = np.concatenate([omegas, omegas[multiple]])
     which = np.concatenate([np.zeros(keep.sum(), int), np.ones(int(multiple.sum()), int)])
-    values, grads = peak_gradients(interconnection, K, models, omegas, which)
+    values, grads = peak_gradients(interconnection, K, models, omegas, which, points=points)
     values[0] = gamma
     # configurations often share a peak (e.g. the DC disturbance rejection does not depend on
     # the inertia): keep one copy of each (value, gradient) so the cap keeps distinct pieces

@@ -62,6 +62,17 @@ def controller_record(result: SynthesisResult, plants: PlantArray, options=None)
                     "cutoff_hz": result.spec.rolloff_cutoff_hz,
                 },
             },
+            "structure": "static",
+            "status": "ok",
+            "goals": [
+                {
+                    "name": "weighted gain d->e",
+                    "kind": "soft",
+                    "value": result.gamma,
+                    "met": bool(result.gamma < 1.0),
+                    "details": {"hinf_norm": result.gamma},
+                }
+            ],
             "gamma": result.gamma,
             "gamma_baseline": result.gamma_start,
             "requirement_met": bool(result.gamma < 1.0),
@@ -149,3 +160,88 @@ def write_synthesis(
     for key, (name, write) in tables.items():
         paths[key] = atomic_write_bytes(out / name, lambda s, write=write: write(s, index=False))
     return paths
+
+
+def tuning_record(result, requirements, K0, plants: PlantArray, spec, options=None) -> dict:
+    """JSON-ready description of a controller tuned to the ``[control]`` requirements.
+
+    Parameters
+    ----------
+    result : oos_drake.control.systune.TuningResult
+    requirements : oos_drake.scenario.data.ControlRequirements
+    K0 : numpy.ndarray, shape (3, 6)
+        Baseline (start) gain [N m/rad, N m s/rad].
+    plants : PlantArray
+    spec : DesignSpecification
+        The specification the goals were evaluated with (``sampled`` when ``rate_hz`` given).
+    options : SystuneOptions, optional
+
+    ``status`` is the tuning result's: ``"infeasible"`` means a hard goal is NOT met and the
+    values recorded are the best reached.
+    """
+    controller = {
+        "structure": requirements.structure,
+        "parameters": {
+            block: {name: np.asarray(value) for name, value in values.items()}
+            for block, values in result.parameters.items()
+        },
+        "rolloff": {
+            "type": "butterworth",
+            "order": spec.rolloff_order,
+            "cutoff_hz": spec.rolloff_cutoff_hz,
+        },
+    }
+    if requirements.structure == "static":
+        K = np.asarray(result.parameters["K"]["D"], dtype=float)
+        controller.update(
+            K_p={"value": K[:, :3], "unit": "N m/rad"},
+            K_d={"value": K[:, 3:], "unit": "N m s/rad"},
+            K_p_baseline={"value": K0[:, :3], "unit": "N m/rad"},
+            K_d_baseline={"value": K0[:, 3:], "unit": "N m s/rad"},
+        )
+    weighted = result.goals[0]
+    return _json_ready(
+        {
+            "controller": controller,
+            "structure": requirements.structure,
+            "status": result.status,
+            "goals": [
+                {
+                    "name": g.name,
+                    "kind": g.kind,
+                    "value": g.value,
+                    "met": g.met,
+                    "details": dict(g.details),
+                    "per_model": g.per_model,
+                }
+                for g in result.goals
+            ],
+            "requirements": {
+                "gain_margin_db": requirements.gain_margin_db,
+                "phase_margin_deg": requirements.phase_margin_deg,
+                "loop_opening": requirements.loop_opening,
+                "min_damping": requirements.min_damping,
+                "order": requirements.order,
+                "rate_hz": requirements.rate_hz,
+                "loop": "sampled (rational hold model)" if spec.sampled else "continuous",
+            },
+            "gamma": weighted.value,
+            "requirement_met": bool(weighted.value < 1.0 and result.status == "ok"),
+            "runs": list(result.runs),
+            "configurations": plants.configurations.to_dict(orient="list"),
+            "model_source": plants.source,
+            "model_sha256": plants.fingerprint(),
+            "design_specification": spec.to_dict(),
+            "options": asdict(options) if options is not None else None,
+        }
+    )
+
+
+def write_tuning(out_dir, record: dict, *, scenario: dict | None = None) -> dict[str, Path]:
+    """Write ``controller.json`` of :func:`tuning_record` in ``out_dir``; return name -> path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if scenario is not None:
+        record = {**record, "scenario": _json_ready(scenario)}
+    text = json.dumps(record, indent=2).encode()
+    return {"controller": atomic_write_bytes(out / "controller.json", lambda s: s.write(text))}

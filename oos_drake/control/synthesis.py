@@ -43,7 +43,7 @@ import pandas as pd
 from oos_drake.blas import with_single_threaded_blas
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.interconnection import WeightedInterconnection, weighted_interconnection
-from oos_drake.control.nonsmooth_bfgs import BfgsResult, minimize_bundle_bfgs, minimize_nonsmooth
+from oos_drake.control.nonsmooth_bfgs import minimize_bundle_cycles, minimize_nonsmooth
 from oos_drake.control.objective import active_set, evaluate, loop_sigma, peak_gradients
 from oos_drake.control.plants import PlantArray
 from oos_drake.robust.peak_gain import peak_gain
@@ -240,44 +240,15 @@ def tune(
             )
             return values, (grads * scale).reshape(models.size, -1)
 
-        # metric cycles, then kicks (see the docstring): the metric goes stale along valleys
-        x = x_best = x0
-        f_best, used, history, evaluations, messages, kicks_left = None, 0, [], 0, [], kicks
-        while used < max_iterations:
-            res = minimize_bundle_bfgs(
-                fun_active,
-                x,
-                regrad=regrad,
-                max_iterations=min(restart_every, max_iterations - used),
-            )
-            used += res.iterations
-            evaluations += res.evaluations
-            messages.append(res.message)
-            improved = f_best is None or res.f < f_best * (1.0 - restart_rtol)
-            if f_best is None or res.f < f_best:
-                history.extend(res.history if not history else (res.f,))
-                x_best, f_best = res.x, res.f
-            if improved and res.iterations > 0:
-                x = x_best
-                continue
-            x = None
-            while kicks_left > 0 and x is None:
-                kicks_left -= 1
-                rng = np.random.default_rng([used, kicks_left])
-                trial = x_best + kick * np.abs(x_best).mean() * rng.normal(size=x_best.shape)
-                evaluations += 1
-                if np.isfinite(fun_active(trial)[0]):  # else it destabilized a loop
-                    x = trial
-            if x is None:
-                break
-        x = x_best
-        res = BfgsResult(
-            x,
-            history[-1],
-            used,
-            evaluations,
-            tuple(history),
-            f"{len(messages)} metric cycle(s); last: {messages[-1]}",
+        res = minimize_bundle_cycles(
+            fun_active,
+            x0,
+            regrad=regrad,
+            max_iterations=max_iterations,
+            restart_every=restart_every,
+            restart_rtol=restart_rtol,
+            kicks=kicks,
+            kick=kick,
         )
     elif method == "bfgs":
 

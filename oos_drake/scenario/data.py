@@ -545,6 +545,23 @@ class ControlRequirements:
         ``W_add`` of ``Delta_add`` [dB].
     multiplicative_diagonal, multiplicative_off_diagonal : float
         ``W_mul`` on the diagonal and off-diagonal scalars of ``Delta_mul`` [-].
+    gain_margin_db, phase_margin_deg : float or None
+        Required loop-at-a-time gain [dB] and phase [deg] margins at ``loop_opening`` (hard
+        goals of ``oos synth``; both or neither; None: no margin goal).
+    loop_opening : str
+        Where the margins are measured: ``"wheel_input"`` (the actuator command, default) or
+        ``"measurements"`` (the six sensor channels).
+    min_damping : float or None
+        Minimum damping ratio of every closed-loop pole [-] (a hard goal; None: none).
+    structure : str
+        Controller structure tuned by ``oos synth``: ``"static"`` (the 3x6 gain
+        ``[K_p K_d]``), ``"pid"`` (per axis, derivative filter) or ``"state-space"``.
+    order : int or None
+        Roll-off order of the PID (optional) or state order of the state-space controller
+        (required) [-]; not allowed for ``"static"``.
+    rate_hz : float or None
+        Controller rate [Hz]: when given (it must be ``flight_software_rate_hz``) the margins
+        are required on the sampled-data loop; None: on the continuous loop.
     """
 
     pointing_requirement: float
@@ -563,6 +580,19 @@ class ControlRequirements:
     additive_weight_db: float
     multiplicative_diagonal: float
     multiplicative_off_diagonal: float
+    gain_margin_db: float | None = None
+    phase_margin_deg: float | None = None
+    loop_opening: str = "wheel_input"
+    min_damping: float | None = None
+    structure: str = "static"
+    order: int | None = None
+    rate_hz: float | None = None
+
+    @property
+    def has_tuning_goals(self) -> bool:
+        """Whether ``[control]`` asks for margins or damping (hard goals beyond the weighted
+        H-infinity criterion)."""
+        return self.gain_margin_db is not None or self.min_damping is not None
 
 
 @dataclass(frozen=True, eq=False)
@@ -1155,6 +1185,7 @@ def read_control(raw: Any) -> ControlRequirements:
             f"({rate / 2:g} Hz)",
         )
     additive_db = weights.number("additive_weight_db")
+    tuning = _read_tuning(top, rate)
     control = ControlRequirements(
         pointing_requirement=positive(top, "pointing_requirement", "rad"),
         torque_limit=positive(top, "torque_limit", "N m"),
@@ -1172,10 +1203,72 @@ def read_control(raw: Any) -> ControlRequirements:
         additive_weight_db=additive_db,
         multiplicative_diagonal=positive(weights, "multiplicative_diagonal", "-"),
         multiplicative_off_diagonal=positive(weights, "multiplicative_off_diagonal", "-"),
+        **tuning,
     )
     for table in (sensors, actuators, rolloff, weights, top):
         table.close()
     return control
+
+
+CONTROLLER_STRUCTURES = ("static", "pid", "state-space")
+LOOP_OPENINGS = ("wheel_input", "measurements")
+
+
+def _read_tuning(top: Table, flight_software_rate_hz: float) -> dict[str, Any]:
+    """The tuning goals and controller structure of ``[control]`` (all optional)."""
+
+    def optional(key: str, low: float, high: float, unit: str, closed: bool = False):
+        if key not in top.raw:
+            top.used.add(key)
+            return None
+        value = top.number(key)
+        if not (low <= value if closed else low < value) or not value < high:
+            interval = f"{'[' if closed else '('}{low:g}, {high:g})"
+            raise ScenarioError(
+                f"control.{key}", f"must be in {interval} {unit}, got {value:g} {unit}"
+            )
+        return value
+
+    def choice(key: str, allowed: tuple[str, ...], default: str) -> str:
+        value = top.text(key, default)
+        if value not in allowed:
+            raise ScenarioError(
+                f"control.{key}", f"must be one of {', '.join(allowed)}, got {value!r}"
+            )
+        return value
+
+    gain_margin = optional("gain_margin_db", 0.0, 40.0, "dB")
+    phase_margin = optional("phase_margin_deg", 0.0, 180.0, "deg", closed=True)
+    if (gain_margin is None) != (phase_margin is None):
+        missing = "phase_margin_deg" if phase_margin is None else "gain_margin_db"
+        raise ScenarioError(f"control.{missing}", "missing (margins need both)")
+    structure = choice("structure", CONTROLLER_STRUCTURES, "static")
+    order = None
+    if "order" in top.raw:
+        value = top.number("order")
+        if value != int(value) or value < 1:
+            raise ScenarioError("control.order", f"must be an integer >= 1, got {value:g}")
+        if structure == "static":
+            raise ScenarioError("control.order", "not allowed with structure = 'static'")
+        order = int(value)
+    top.used.add("order")
+    if structure == "state-space" and order is None:
+        raise ScenarioError("control.order", "missing (structure 'state-space' needs an order)")
+    rate = optional("rate_hz", 0.0, math.inf, "Hz")
+    if rate is not None and rate != flight_software_rate_hz:
+        raise ScenarioError(
+            "control.rate_hz",
+            f"{rate:g} Hz must be the flight software rate ({flight_software_rate_hz:g} Hz)",
+        )
+    return dict(
+        gain_margin_db=gain_margin,
+        phase_margin_deg=phase_margin,
+        loop_opening=choice("loop_opening", LOOP_OPENINGS, "wheel_input"),
+        min_damping=optional("min_damping", 0.0, 1.0, "-", closed=True),
+        structure=structure,
+        order=order,
+        rate_hz=rate,
+    )
 
 
 def _named(table: Table, key: str, names: tuple[str, ...]) -> dict[str, Any]:

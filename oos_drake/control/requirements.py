@@ -1,0 +1,144 @@
+"""The ``[control]`` requirements as :func:`~oos_drake.control.systune.systune` goals.
+
+``oos synth`` tunes the attitude controller with :func:`tune_to_requirements` when the
+scenario's ``[control]`` asks for margins or a minimum damping
+(``ControlRequirements.has_tuning_goals``):
+
+- soft goal: today's weighted H-infinity criterion ``||F_l(P_tot, C)||_inf`` from ``d`` to
+  ``e`` (:mod:`oos_drake.control.interconnection`, the value ``gamma`` of the synthesis);
+- hard goals: :class:`~oos_drake.control.goals.Margins` (loop at a time, at
+  ``loop_opening``) and :class:`~oos_drake.control.goals.Poles` (``min_damping``);
+
+over the mission configurations at the nominal values of the real parameters (the worst-case
+search of :func:`~oos_drake.control.synthesis.synthesize` is not run on this path). When
+``rate_hz`` is given, the loop of every goal carries the flight software's sample-and-hold
+(``DesignSpecification.sampled``, the rational hold model of ``oos synth --sampled``,
+:func:`~oos_drake.control.components.sample_hold`); the exact sampled-data margins are measured
+by ``oos margins`` (:mod:`oos_drake.control.sampled`).
+
+Structures (``[control] structure``): ``"static"`` -- the 3x6 gain ``u_K = [K_p K_d] y``
+started at the baseline; ``"pid"`` -- a PID per axis on the attitude error ``y_att`` with a
+derivative filter and an optional roll-off of ``order``; ``"state-space"`` -- a stable
+``order``-state controller ``y -> u_K`` (:class:`~oos_drake.control.tunable.TunableSS`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from oos_drake.control.components import DesignSpecification
+from oos_drake.control.goals import Margins, Poles, WeightedGain
+from oos_drake.control.interconnection import (
+    CONTROLS,
+    DISTURBANCES,
+    ERRORS,
+    MEASUREMENTS,
+    weighted_interconnection,
+)
+from oos_drake.control.systune import SystuneOptions, TuningResult, systune
+from oos_drake.control.tunable import TunableGain, TunablePID, TunableSS
+
+__all__ = ["WEIGHTED_GAIN", "requirement_goals", "requirement_controller", "tune_to_requirements"]
+
+WEIGHTED_GAIN = "weighted gain d->e"
+LOOP_OPENING_SIGNALS = {"wheel_input": CONTROLS, "measurements": MEASUREMENTS}
+
+
+def tuning_specification(spec: DesignSpecification, requirements) -> DesignSpecification:
+    """``spec`` with the sample-and-hold in the loop when ``requirements.rate_hz`` is given."""
+    if requirements.rate_hz is None:
+        return spec
+    return dataclasses.replace(spec, sampled=True)
+
+
+def requirement_goals(requirements) -> list:
+    """Soft weighted gain and the hard goals that ``requirements`` (``[control]``) states.
+
+    Parameters
+    ----------
+    requirements : oos_drake.scenario.data.ControlRequirements
+        ``gain_margin_db`` [dB], ``phase_margin_deg`` [deg], ``loop_opening``,
+        ``min_damping`` [-].
+    """
+    goals = [WeightedGain(DISTURBANCES, ERRORS, kind="soft", name=WEIGHTED_GAIN)]
+    if requirements.gain_margin_db is not None:
+        goals.append(
+            Margins(
+                LOOP_OPENING_SIGNALS[requirements.loop_opening],
+                requirements.gain_margin_db,
+                requirements.phase_margin_deg,
+                kind="hard",
+                name=f"margins at {requirements.loop_opening}",
+            )
+        )
+    if requirements.min_damping is not None:
+        goals.append(Poles(requirements.min_damping, kind="hard", name="closed-loop damping"))
+    return goals
+
+
+def requirement_controller(requirements, K0):
+    """The tunable block of ``requirements.structure``, started from the baseline gain.
+
+    Parameters
+    ----------
+    requirements : oos_drake.scenario.data.ControlRequirements
+    K0 : array_like, shape (3, 6)
+        Baseline ``[K_p, K_d]`` [N m/rad, N m s/rad] (start of the static gain; its diagonals
+        start the PID's ``kp`` and ``kd``).
+    """
+    K0 = np.asarray(K0, dtype=float)
+    if requirements.structure == "static":
+        return TunableGain("K", MEASUREMENTS, CONTROLS, initial=K0)
+    if requirements.structure == "pid":
+        kp, kd = np.diag(K0[:, :3]), np.diag(K0[:, 3:])
+        return TunablePID(
+            "C",
+            MEASUREMENTS[:3],
+            CONTROLS,
+            terms="PID",
+            kp=kp,
+            ki=0.01 * kp,
+            kd=kd,
+            tf=0.1,
+            rolloff_order=requirements.order or 0,
+            rolloff_frequency=2 * np.pi * 2.0,
+        )
+    if requirements.structure == "state-space":
+        return TunableSS("C", MEASUREMENTS, CONTROLS, order=requirements.order)
+    raise ValueError(f"control.structure: unknown structure {requirements.structure!r}")
+
+
+def tune_to_requirements(
+    plants, K0, spec: DesignSpecification, requirements, options: SystuneOptions
+) -> TuningResult:
+    """Tune ``requirements.structure`` against :func:`requirement_goals` over ``plants``.
+
+    Parameters
+    ----------
+    plants : oos_drake.control.plants.PlantArray
+        Mission configurations (evaluated at the nominal parameter values).
+    K0 : array_like, shape (3, 6)
+        Baseline gain [N m/rad, N m s/rad].
+    spec : DesignSpecification
+        Weights and components (:func:`tuning_specification` adds the hold when
+        ``requirements.rate_hz`` is given).
+    requirements : oos_drake.scenario.data.ControlRequirements
+    options : SystuneOptions
+
+    Returns
+    -------
+    TuningResult
+        ``status`` ``"infeasible"`` when a hard goal is not met (best values reached).
+    """
+    spec = tuning_specification(spec, requirements)
+    N, P = plants.size, len(plants.parameters)
+    nominal = np.broadcast_to(plants.nominal_values, (N, P))
+    system = weighted_interconnection(plants.evaluate(np.arange(N), nominal), spec).system
+    return systune(
+        system,
+        requirement_controller(requirements, K0),
+        requirement_goals(requirements),
+        options=options,
+    )
