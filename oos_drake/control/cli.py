@@ -121,7 +121,7 @@ def _run_tuning(args, scenario, spec, plants, K0) -> int:
         result, requirements, K0, plants, tuning_specification(spec, requirements), options
     )
     record["wall_time_s"] = elapsed
-    paths = write_tuning(args.out, record, scenario=scenario_record(scenario))
+    paths = write_tuning(args.out, record, scenario_record=scenario_record(scenario))
     print(f"scenario: {scenario.name} ({scenario.source})")
     print(
         f"structure {requirements.structure}: status {result.status}, "

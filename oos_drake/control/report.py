@@ -237,11 +237,17 @@ def tuning_record(result, requirements, K0, plants: PlantArray, spec, options=No
     )
 
 
-def write_tuning(out_dir, record: dict, *, scenario: dict | None = None) -> dict[str, Path]:
-    """Write ``controller.json`` of :func:`tuning_record` in ``out_dir``; return name -> path."""
+def write_tuning(
+    out_dir, record: dict, *, scenario_record: dict | None = None
+) -> dict[str, Path]:
+    """Write ``controller.json`` of :func:`tuning_record` in ``out_dir``; return name -> path.
+
+    ``scenario_record`` (:func:`oos_drake.scenario.data.scenario_record`) is recorded as
+    ``"scenario"``, as in :func:`write_synthesis`.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    if scenario is not None:
-        record = {**record, "scenario": _json_ready(scenario)}
+    if scenario_record is not None:
+        record = {**record, "scenario": _json_ready(scenario_record)}
     text = json.dumps(record, indent=2).encode()
     return {"controller": atomic_write_bytes(out / "controller.json", lambda s: s.write(text))}

@@ -26,8 +26,9 @@ the layout of the structure (:data:`LaneLayout`), the optimizer's options
 (:data:`ARMIJO`, ...) are defined here once.
 
 An eight-lane evaluation costs the same whatever the number of busy lanes (about three
-per-matrix evaluations inside the optimizer, four in isolation). With at most ``LaneOptions.per_matrix_lanes`` busy lanes (a lone matrix, a small
-batch, the tail of a batch) the optimizer evaluates them one by one instead, with the
+per-matrix evaluations inside the optimizer, four in isolation). With at most
+``LaneOptions.per_matrix_lanes`` busy lanes (a lone matrix, a small batch, the tail of a
+batch) the optimizer evaluates them one by one instead, with the
 per-matrix kernel :func:`mu_kernels.dg_objective` (the same function; LAPACK's eigen-solvers):
 one optimizer, its state machine, line search and stopping rules unchanged, two evaluators.
 

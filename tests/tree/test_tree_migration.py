@@ -20,7 +20,8 @@ def test_paper_chaser_tree_equals_paper_model_with_target_free():
     rng = np.random.default_rng(11)
     alpha, theta = rng.uniform(-3, 3, 6), np.r_[rng.uniform(-3, 3, 2), 0.0, 0.0]
     values = configuration_values(alpha, theta, 0.0, 0.0)
-    paper = usubs(build_mission_model(load_scenario("paper")), {k: float(v) for k, v in values.items()}).nominal
+    blocks = {k: float(v) for k, v in values.items()}
+    paper = usubs(build_mission_model(load_scenario("paper")), blocks).nominal
     angles = {f"L{i + 1}": alpha[i] for i in range(6)} | {"SA1": theta[0], "SA2": theta[1]}
     converted = usubs(build_tree_model(tree), tree_values(tree, angles)).nominal
     omega = 2 * np.pi * np.logspace(-2, 2, 400)  # [rad/s]
