@@ -31,8 +31,8 @@ import time
 import numpy as np
 from slycot import ab13dd
 
+from oos_drake.app.synth import baseline_for, make_plants
 from oos_drake.blas import single_threaded_blas
-from oos_drake.control.cli import baseline_for, make_plants
 from oos_drake.control.interconnection import weighted_interconnection
 from oos_drake.control.loop_response import LoopResponse, LoopSigma
 from oos_drake.control.synthesis import SynthesisOptions, synthesize

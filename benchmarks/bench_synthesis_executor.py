@@ -22,7 +22,7 @@ import time
 import numpy as np
 from bench_analysis import _cpu  # CPU of this process and its finished workers
 
-from oos_drake.control.cli import baseline_for, make_plants
+from oos_drake.app.synth import baseline_for, make_plants
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.synthesis import SynthesisOptions, synthesize
 from oos_drake.processes import SCHEDULER_HELP, make_executor

@@ -30,7 +30,7 @@ def main(argv=None) -> int:
     parser.add_argument("--points", type=int, default=40, help="parameter points per configuration")
     args = parser.parse_args(argv)
 
-    from oos_drake.control.cli import mission_times, scenario_plants
+    from oos_drake.app.synth import mission_times, scenario_plants
     from oos_drake.control.interconnection import plant_statespace
     from oos_drake.multibody.synthesis_plants import DrakePlantSource, _pad, rotational_plant
 

@@ -60,7 +60,7 @@ def box_brute_force(loop, t_max, rng, random_points=1000):
 
 
 def _loops():
-    from oos_drake.cli import main
+    from oos_drake.app.main import main
     from oos_drake.lfr import LFR, feedback, load_lfr
 
     out = Path("/tmp") / "bench_worst_cases"

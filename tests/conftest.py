@@ -46,7 +46,7 @@ def quick_run(tmp_path_factory):
         :class:`subprocess.CompletedProcess`, stdout and stderr captured).
     """
     out = tmp_path_factory.mktemp("quick-run") / "out"
-    command = [sys.executable, "-m", "oos_drake.cli", "run", "--out", str(out), "--quick"]
+    command = [sys.executable, "-m", "oos_drake.app.main", "run", "--out", str(out), "--quick"]
     result = subprocess.run(command, capture_output=True, text=True, timeout=3000)
     return SimpleNamespace(out=out, command=command, result=result)
 

@@ -10,7 +10,7 @@ Layer order (low to high) and why:
 
 ``base`` (``oos_drake`` itself, ``blas``, ``resources``) < ``processes`` < ``lfr`` < ``titop`` <
 ``scenario`` < ``robust`` < ``control`` < ``multibody`` < ``campaign`` < ``analysis`` < ``report``
-< ``cli``.
+< ``app``.
 
 - ``report``: reads the results folder every stage wrote (the top floor below the commands).
 
@@ -19,9 +19,9 @@ Layer order (low to high) and why:
 - ``campaign`` below ``analysis``: the campaign is the generic Monte Carlo machinery (spec,
   samplers, runner, executors, tables, the ``worst_cases.parquet`` schema); the mission analysis
   writes its critical regions in that schema and may run its work on the campaign's executors.
-- ``cli``: ``oos_drake.cli``, ``oos_drake.pipeline`` and every ``oos_drake.<pkg>.cli`` module: the
-  command line sits on top of everything, so a package's command module may use any layer
-  (``control.cli`` builds Drake plants for ``oos synth --plant drake``).
+- ``app``: ``oos_drake.app`` (the ``oos`` command modules and the ``oos run`` pipeline): the
+  command line sits on top of everything, so a command module may use any layer
+  (``app.synth`` builds Drake plants for ``oos synth --plant drake``).
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("oos_drake.campaign",),
     ("oos_drake.analysis",),
     ("oos_drake.report",),
-    ("oos_drake.cli", "oos_drake.pipeline", "oos_drake.__main__"),
+    ("oos_drake.app",),
 )
 
 
@@ -72,7 +72,7 @@ def test_core_package_does_not_import_pydrake(package):
 
 def test_cli_help_lists_commands():
     result = subprocess.run(
-        [sys.executable, "-m", "oos_drake.cli", "--help"],
+        [sys.executable, "-m", "oos_drake.app.main", "--help"],
         capture_output=True,
         text=True,
         check=True,
@@ -137,17 +137,15 @@ def _module_path(module: str, package_dir: Path) -> Path | None:
 
 
 def unit_of(module: str) -> str:
-    """The layered unit a module belongs to: its package, or the ``cli`` layer's own modules."""
+    """The layered unit a module belongs to: its package, or a top-level module."""
     parts = module.split(".")
-    if parts[-1] == "cli" or len(parts) == 1:
+    if len(parts) == 1:
         return module
     return ".".join(parts[:2])
 
 
 def layer_of(module: str, layers=LAYERS) -> int:
-    """Index of the layer of ``module`` in ``layers`` (``<pkg>.cli`` modules: the top layer)."""
-    if module.split(".")[-1] == "cli":
-        return len(layers) - 1
+    """Index of the layer of ``module`` in ``layers``."""
     unit = unit_of(module)
     for index, members in enumerate(layers):
         if unit in members:
@@ -180,7 +178,7 @@ def layer_violations(package_dir: Path, layers=LAYERS) -> list[str]:
 
 
 def package_cycles(package_dir: Path) -> list[list[str]]:
-    """Cycles of the unit graph (a unit: a package, or a top-level or ``cli`` module)."""
+    """Cycles of the unit graph (a unit: a package, or a top-level module)."""
     graph = {
         unit: sorted({unit_of(t) for _, t, _ in edges} - {unit})
         for unit, edges in import_graph(package_dir).items()
@@ -240,7 +238,8 @@ def test_checker_sees_lazy_relative_and_dynamic_upward_imports(tmp_path):
             "lfr/third.py": "import importlib\nimportlib.import_module('oos_drake.analysis.run')\n",
             "robust/__init__.py": "",
             "robust/mu.py": "from oos_drake.lfr import core\n",
-            "robust/cli.py": "from oos_drake.analysis import run\n",
+            "app/__init__.py": "",
+            "app/robust.py": "from oos_drake.analysis import run\n",
             "campaign/__init__.py": "",
             "campaign/store.py": "",
             "analysis/__init__.py": "",

@@ -9,7 +9,7 @@ import sys
 import pytest
 
 from oos_drake import __version__
-from oos_drake.cli import build_parser
+from oos_drake.app.main import build_parser
 
 #: Spellings replaced by one name across commands (old -> new); the old ones stay hidden aliases.
 RENAMED = {
@@ -90,7 +90,7 @@ def test_new_spelling_defaults_are_kept_when_the_alias_is_absent():
 
 def test_version():
     result = subprocess.run(
-        [sys.executable, "-m", "oos_drake.cli", "--version"],
+        [sys.executable, "-m", "oos_drake.app.main", "--version"],
         capture_output=True,
         text=True,
         check=True,

@@ -87,7 +87,7 @@ def _walk(parser, path=()):
 
 
 def test_oos_help_lists_every_command():
-    from oos_drake.cli import build_parser
+    from oos_drake.app.main import build_parser
 
     parser = build_parser()
     assert set(_subparsers(parser).choices) == COMMANDS
@@ -97,7 +97,7 @@ def test_oos_help_lists_every_command():
 
 
 def test_every_runnable_command_sets_func():
-    from oos_drake.cli import build_parser
+    from oos_drake.app.main import build_parser
 
     leaves = [(path, p) for path, p, action in _walk(build_parser()) if action is None]
     assert {" ".join(path) for path, _ in leaves} == RUNNABLE
@@ -107,7 +107,7 @@ def test_every_runnable_command_sets_func():
 
 
 def test_every_command_with_actions_sets_func_or_requires_an_action():
-    from oos_drake.cli import build_parser
+    from oos_drake.app.main import build_parser
 
     for path, parser, action in _walk(build_parser()):
         if path and action is not None:
@@ -241,9 +241,9 @@ def test_only_multibody_imports_pydrake():
 def test_control_and_robust_cli_and_the_oos_parser_do_not_load_pydrake():
     code = (
         "import sys\n"
-        "import oos_drake.control.cli, oos_drake.robust.cli\n"
+        "import oos_drake.app.synth, oos_drake.app.robust\n"
         "first = 'pydrake' in sys.modules\n"
-        "from oos_drake.cli import build_parser\n"
+        "from oos_drake.app.main import build_parser\n"
         "build_parser().format_help()\n"
         "print(first, 'pydrake' in sys.modules)\n"
     )

@@ -101,7 +101,7 @@ def test_dask_missing_is_a_one_line_error(monkeypatch):
 
 
 def test_cli_rejects_a_bad_scheduler_with_status_2(tmp_path, capsys):
-    from oos_drake.cli import main
+    from oos_drake.app.main import main
 
     for command in (
         ["analyze"],
@@ -119,7 +119,7 @@ def test_cli_rejects_a_bad_scheduler_with_status_2(tmp_path, capsys):
 
 def test_synth_rejects_zero_workers_with_status_2(tmp_path, capsys):
     """Before any model is built: one line naming the option."""
-    from oos_drake.cli import main
+    from oos_drake.app.main import main
 
     status = main(["synth", "--plant", "synthetic", "--out", str(tmp_path / "a"), "--workers", "0"])
     err = capsys.readouterr().err.strip().splitlines()

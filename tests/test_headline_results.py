@@ -35,7 +35,7 @@ from slycot import ab13dd
 
 from oos_drake.analysis.controller import load_controller
 from oos_drake.analysis.models import docking_closed_loop, mission_closed_loop
-from oos_drake.cli import main
+from oos_drake.app.main import main
 from oos_drake.lfr import usubs
 from oos_drake.scenario.data import load_scenario
 

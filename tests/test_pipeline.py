@@ -7,7 +7,7 @@ import sys
 import pandas as pd
 import pytest
 
-from oos_drake.pipeline import STAMP, run_stage, source_key
+from oos_drake.app.pipeline import STAMP, run_stage, source_key
 
 
 def _writer(text, calls):
@@ -56,7 +56,8 @@ def test_source_key_depends_on_the_packages():
 def test_missing_campaign_spec_is_one_line_and_writes_nothing(tmp_path):
     out = tmp_path / "out"
     result = subprocess.run(
-        [sys.executable, "-m", "oos_drake.cli", "run", "--out", str(out), "--campaign", "no.toml"],
+        [sys.executable, "-m", "oos_drake.app.main", "run", "--out", str(out)]
+        + ["--campaign", "no.toml"],
         capture_output=True,
         text=True,
     )
@@ -121,8 +122,8 @@ def test_oos_run_passes_the_scheduler_to_the_stages_with_parallel_work(tmp_path,
     """``oos run --scheduler dask --workers 3``: the stages that run on the executors
     (synthesis, analysis, confirmation, campaign) get both, the report runs as without them
     (stages replaced by a recorder)."""
-    import oos_drake.pipeline as pipeline
-    from oos_drake.cli import build_parser
+    import oos_drake.app.pipeline as pipeline
+    from oos_drake.app.main import build_parser
 
     calls = []
     monkeypatch.setattr(pipeline, "_oos", lambda *argv: calls.append([str(a) for a in argv]))
@@ -142,8 +143,8 @@ def test_oos_run_proves_the_whole_axis_unless_grid_only(tmp_path, monkeypatch):
     """``oos run`` analyzes with the whole-axis guarantee (``oos analyze``'s default);
     ``oos run --grid-only`` passes ``--grid-only`` to the analysis stage only, and the analysis
     key (and so the stages after it) changes with it (stages replaced by a recorder)."""
-    import oos_drake.pipeline as pipeline
-    from oos_drake.cli import build_parser
+    import oos_drake.app.pipeline as pipeline
+    from oos_drake.app.main import build_parser
 
     analyze = []
     for i, extra in enumerate(([], ["--grid-only"])):

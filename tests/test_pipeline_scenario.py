@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from oos_drake import pipeline
+from oos_drake.app import pipeline
 from oos_drake.scenario.data import DEFAULT_SCENARIO_PATH
 
 PAPER = DEFAULT_SCENARIO_PATH.read_text()

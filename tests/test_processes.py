@@ -141,7 +141,7 @@ def test_kill_9_of_oos_analyze_leaves_no_worker(tmp_path):
     command = [
         sys.executable,
         "-m",
-        "oos_drake.cli",
+        "oos_drake.app.main",
         "analyze",
         "--out",
         str(tmp_path / "analysis"),

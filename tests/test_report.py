@@ -255,7 +255,7 @@ def test_broken_table_renders_as_not_run(results_folder):
 
 
 def test_oos_report_command_prints_the_headlines(results_folder, capsys):
-    from oos_drake.cli import main
+    from oos_drake.app.main import main
 
     assert main(["report", str(results_folder)]) == 0
     printed = capsys.readouterr().out
@@ -269,7 +269,7 @@ def test_oos_report_command_prints_the_headlines(results_folder, capsys):
 def test_report_stage_key_follows_the_campaign_tables(results_folder):
     """The campaign resumes instead of being stamped: its report tables are in the report
     stage's key, so a campaign that gained runs gets a new report."""
-    from oos_drake.pipeline import report_key
+    from oos_drake.app.pipeline import report_key
 
     (campaign,) = results_folder.glob("campaign-*")
     before = report_key("inputs", campaign)

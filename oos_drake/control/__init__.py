@@ -18,7 +18,7 @@ main entry points:
   (:class:`WeightedGain`, :class:`Margins`, :class:`Poles`, :class:`Variance`) over a plant array.
 
 This package never imports pydrake (``oos synth --plant drake`` imports
-:mod:`oos_drake.multibody.synthesis_plants` lazily from :mod:`oos_drake.control.cli`).
+:mod:`oos_drake.multibody.synthesis_plants` lazily from :mod:`oos_drake.app.synth`).
 """
 
 from oos_drake.control.analysis_model import close_loop, uncertain_plant

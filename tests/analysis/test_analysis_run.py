@@ -253,7 +253,7 @@ def test_worst_perturbation_destabilizes_at_the_reported_frequency(analysis):
 def test_bad_analyze_options_exit_2_and_write_nothing(tmp_path, capsys, option, culprit):
     """Checked before any work (a bad docking phase used to fail after the mission sweep,
     leaving mu_mission.parquet behind)."""
-    from oos_drake.cli import main
+    from oos_drake.app.main import main
 
     out = tmp_path / "analysis"
     assert main(["analyze", "--out", str(out), *option]) == 2
@@ -263,7 +263,7 @@ def test_bad_analyze_options_exit_2_and_write_nothing(tmp_path, capsys, option, 
 
 
 def test_analyze_refuses_an_out_folder_that_is_not_an_analysis(tmp_path, capsys):
-    from oos_drake.cli import main
+    from oos_drake.app.main import main
 
     (tmp_path / "precious.txt").write_text("keep me")
     assert main(["analyze", "--out", str(tmp_path), "--configurations", "2"]) == 2

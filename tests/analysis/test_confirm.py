@@ -13,7 +13,7 @@ from oos_drake.analysis.confirm import (
     read_peaks,
 )
 from oos_drake.analysis.oscillation import dominant_oscillation
-from oos_drake.cli import main
+from oos_drake.app.main import main
 from oos_drake.scenario.data import load_scenario
 from oos_drake.scenario.model import physical_blocks
 
@@ -132,7 +132,7 @@ def test_read_peaks_refuses_a_peak_without_its_perturbation(tmp_path):
 
 
 def test_confirm_runs_on_the_scenario_the_analysis_recorded(tmp_path):
-    from oos_drake.analysis.cli import _analysis_scenario
+    from oos_drake.app.analyze import _analysis_scenario
     from oos_drake.scenario.data import scenario_path, scenario_record
 
     paper, heavy = scenario_path("paper"), scenario_path("heavy_target")

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 
 from oos_drake.analysis.margins import LOOPS
-from oos_drake.cli import build_parser, main
+from oos_drake.app.main import build_parser, main
 
 
 def _options(parser, path):

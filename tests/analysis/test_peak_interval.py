@@ -8,10 +8,10 @@ the whole-axis guarantee, the peak table and the printed summary.
 import control
 import numpy as np
 
-from oos_drake.analysis.cli import peak_lines
 from oos_drake.analysis.models import ModelArray
 from oos_drake.analysis.run import _certify
 from oos_drake.analysis.stability import SweepOptions, certified_sweep
+from oos_drake.app.analyze import peak_lines
 from oos_drake.lfr import feedback, ureal, usubs
 
 GAINS = np.array([0.8, 1.0, 1.2, 1.4])

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from oos_drake.analysis.study import StudyOptions, Sweep, field_unit, margin_crossing, run_study
-from oos_drake.cli import main
+from oos_drake.app.main import main
 
 
 def test_sweep_parse_and_units():

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from oos_drake.campaign.cli import main
+from oos_drake.app.campaign import main
 from oos_drake.campaign.distributions import TruncatedNormal, Uniform
 from oos_drake.campaign.spec import load_spec, parse_spec, spec_to_toml
 

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from oos_drake.campaign.cli import main
+from oos_drake.app.campaign import main
 from oos_drake.campaign.falsify import RATIO_COLUMN, TABLE_FILE, falsify
 
 from . import synthetic_sim

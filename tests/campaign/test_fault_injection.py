@@ -79,7 +79,7 @@ def test_a_truncated_run_file_is_quarantined_and_redone_by_resume(write_spec, tm
 
 
 def _cli(*args) -> list[str]:
-    return [sys.executable, "-m", "oos_drake.campaign.cli", "campaign", *map(str, args)]
+    return [sys.executable, "-m", "oos_drake.app.campaign", "campaign", *map(str, args)]
 
 
 @pytest.fixture

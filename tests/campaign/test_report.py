@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from oos_drake.campaign.cli import main as cli_main
+from oos_drake.app.campaign import main as cli_main
 from oos_drake.campaign.report import weighted_quantile, write_report
 from oos_drake.campaign.runner import run_campaign
 from oos_drake.campaign.spec import SPEC_DIRECTORY

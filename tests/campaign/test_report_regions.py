@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from oos_drake.app.campaign import main as cli_main
 from oos_drake.campaign import store
-from oos_drake.campaign.cli import main as cli_main
 from oos_drake.campaign.executors import RunResult
 from oos_drake.campaign.report import (
     CONFIRMATION_COLUMNS,

@@ -33,7 +33,7 @@ METRICS = ["ape [rad]", "peak_torque [N m]"]
 
 
 def _oos(*args, **kwargs):
-    return [sys.executable, "-m", "oos_drake.campaign.cli", "campaign", *map(str, args)]
+    return [sys.executable, "-m", "oos_drake.app.campaign", "campaign", *map(str, args)]
 
 
 def test_diverging_run_is_recorded_and_the_campaign_goes_on(write_spec, tmp_path):

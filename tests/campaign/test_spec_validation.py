@@ -153,7 +153,7 @@ def test_cli_bad_spec_writes_nothing(write_spec, tmp_path):
         [
             sys.executable,
             "-m",
-            "oos_drake.campaign.cli",
+            "oos_drake.app.campaign",
             "campaign",
             "run",
             str(path),

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import scipy.io
 
-from oos_drake.cli import main
+from oos_drake.app.main import main
 
 
 def test_synth_writes_every_output(tmp_path):

@@ -17,8 +17,8 @@ import pytest
 
 pytest.importorskip("pydrake")
 
-from oos_drake.cli import main  # noqa: E402
-from oos_drake.control.cli import baseline_for, make_plants  # noqa: E402
+from oos_drake.app.main import main  # noqa: E402
+from oos_drake.app.synth import baseline_for, make_plants  # noqa: E402
 from oos_drake.scenario.data import load_scenario  # noqa: E402
 
 PAPER = load_scenario("paper")

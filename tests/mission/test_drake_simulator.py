@@ -138,7 +138,7 @@ def test_paper_campaign_specs_load_and_plan(name, synthetic_worst_cases, tmp_pat
 def test_paper_campaigns_without_worst_cases_are_refused(name, tmp_path, capsys):
     """Through the CLI: exit 2, one line naming the missing worst_cases.parquet, nothing written
     (no stand-in regions, no stand-in frequency)."""
-    from oos_drake.campaign.cli import main
+    from oos_drake.app.campaign import main
 
     out = tmp_path / "out"
     assert main(["campaign", "run", name, "--out", str(out), "--quiet"]) == 2

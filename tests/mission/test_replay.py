@@ -174,7 +174,7 @@ def test_playback_speed_scales_the_frame_rate_not_the_frames(campaign):
 
 
 def test_bad_case_or_directory_is_rejected_and_writes_nothing(campaign, tmp_path):
-    from oos_drake.campaign.cli import main
+    from oos_drake.app.campaign import main
     from oos_drake.campaign.replay import replay_case, replay_path
 
     with pytest.raises(ValueError, match=r"--case 7: no such run"):

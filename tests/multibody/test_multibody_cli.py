@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from oos_drake.multibody.cli import register
+from oos_drake.app.multibody import register
 
 
 def main(argv):

@@ -13,8 +13,8 @@ import pytest
 pytestmark = pytest.mark.drake
 pytest.importorskip("pydrake")
 
+from oos_drake.app.synth import mission_times, scenario_plants  # noqa: E402
 from oos_drake.control.baseline import baseline_gains, inertia_from_plant  # noqa: E402
-from oos_drake.control.cli import mission_times, scenario_plants  # noqa: E402
 from oos_drake.control.interconnection import (  # noqa: E402
     plant_statespace,
     weighted_interconnection,

@@ -328,7 +328,7 @@ def test_non_polynomial_dependence_is_refused_naming_the_parameter():
 
 # ----------------------------------------------------------------------------- command line
 def _cli(args):
-    from oos_drake.cli import main
+    from oos_drake.app.main import main
 
     return main(["ulinearize", str(SDF), *args])
 
@@ -396,7 +396,7 @@ def test_cli_bad_input_exit_2_and_nothing_written(tmp_path, capsys, edit, port, 
 
 
 def test_oos_robust_robstab_reads_a_stored_closed_loop(extracted, tmp_path, capsys):
-    from oos_drake.cli import main
+    from oos_drake.app.main import main
     from oos_drake.robust import robstab
 
     K = LFR.from_ss(-np.eye(3) / 0.3, np.hstack([np.eye(3) * 200, np.eye(3) * 300]) / 0.3,

@@ -25,7 +25,7 @@ KP, KD, TAU = 4000.0, 4000.0, 0.15  # PD [N m/rad, N m s/rad] behind a lag [s]
 
 @pytest.fixture(scope="module")
 def loop(tmp_path_factory):
-    from oos_drake.cli import main
+    from oos_drake.app.main import main
 
     out = tmp_path_factory.mktemp("ulinearize")
     args = ["ulinearize", str(SDF), "--parameters", str(DATA / "sprung_hub_parameters.toml")]

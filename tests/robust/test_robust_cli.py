@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.io import savemat
 
-from oos_drake.cli import main
+from oos_drake.app.main import main
 
 
 def test_mussv_from_mat_file(tmp_path, capsys):

@@ -19,7 +19,7 @@ from oos_drake.scenario.timeline import mission_timeline
 
 def main(argv):
     """Run ``oos <argv>`` with only this package's commands registered."""
-    from oos_drake.scenario.cli import register
+    from oos_drake.app.scenario import register
 
     parser = argparse.ArgumentParser(prog="oos")
     register(parser.add_subparsers(dest="command"))

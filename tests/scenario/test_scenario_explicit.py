@@ -1,8 +1,9 @@
 """The scenario is explicit (issue 34 item 3): no library function defaults to the paper's.
 
-The paper's scenario is chosen once, where ``--scenario`` is parsed (the ``cli`` modules and
-``pipeline.py``); everywhere below, the scenario (or an object built from it) is a required
-argument, and a scenario crosses process boundaries as itself (it pickles).
+The paper's scenario is chosen once, where ``--scenario`` is parsed (the application floor
+``oos_drake/app/``: the command modules and the pipeline); everywhere below, the scenario (or
+an object built from it) is a required argument, and a scenario crosses process boundaries as
+itself (it pickles).
 """
 
 import ast
@@ -16,8 +17,8 @@ import oos_drake
 from oos_drake.scenario.data import Scenario, load_scenario
 
 PACKAGE = Path(oos_drake.__file__).parent
-#: The application layer: where the paper's default may be chosen.
-APPLICATION = {"cli.py", "pipeline.py"}
+#: The application floor: where the paper's default may be chosen.
+APPLICATION = PACKAGE / "app"
 #: Documented exceptions, ``(file, function) -> why``. A campaign spec is user input: a spec
 #: without a ``scenario`` key runs the paper's (its simulator factory receives the file name).
 EXCEPTIONS = {
@@ -77,7 +78,7 @@ def test_the_scan_catches_a_default_scenario():
 def test_no_library_function_defaults_to_the_papers_scenario():
     found = []
     for path in sorted(PACKAGE.rglob("*.py")):
-        if path.name in APPLICATION:
+        if APPLICATION in path.parents:
             continue
         found += [
             f for f in scenario_defaults(path.read_text(), str(path)) if not _allowed(path, f)

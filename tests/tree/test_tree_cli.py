@@ -9,7 +9,7 @@ import pytest
 import tomli_w
 from tree_documents import boom_document, shipped_document
 
-from oos_drake.cli import main
+from oos_drake.app.main import main
 
 
 def _write(tmp_path, document):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from oos_drake.cli import main
+from oos_drake.app.main import main
 from oos_drake.lfr import usubs
 from oos_drake.scenario.data import ScenarioError, load_scenario
 from oos_drake.scenario.model import build_mission_model, configuration_values

@@ -1,7 +1,7 @@
 """The ``oos`` command line.
 
-Each subpackage that offers commands has a ``cli`` module with ``register(subparsers)``; this
-module only collects them, so that a capability adds its commands without touching this file.
+Each command module of :mod:`oos_drake.app` has ``register(subparsers)``; this module only
+collects them, so that a capability adds its commands without touching this file.
 Errors that a user can fix (bad data, bad spec, unknown names) are ``ValueError``s: they are
 printed as one line and give exit status 2.
 
@@ -22,17 +22,17 @@ import warnings
 
 from oos_drake import __version__
 
-#: Subpackage modules whose ``register(subparsers)`` adds commands, in ``--help`` order.
+#: Command modules whose ``register(subparsers)`` adds commands, in ``--help`` order.
 COMMAND_MODULES = (
-    "oos_drake.scenario.cli",
-    "oos_drake.multibody.cli",
-    "oos_drake.multibody.tree_cli",
-    "oos_drake.control.cli",
-    "oos_drake.robust.cli",
-    "oos_drake.analysis.cli",
-    "oos_drake.campaign.cli",
-    "oos_drake.pipeline",
-    "oos_drake.report.cli",
+    "oos_drake.app.scenario",
+    "oos_drake.app.multibody",
+    "oos_drake.app.tree",
+    "oos_drake.app.synth",
+    "oos_drake.app.robust",
+    "oos_drake.app.analyze",
+    "oos_drake.app.campaign",
+    "oos_drake.app.pipeline",
+    "oos_drake.app.report",
 )
 
 

@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-from oos_drake.cli import add_scenario_argument
+from oos_drake.app.main import add_scenario_argument
 
 CASE_GROUPS = ("all", "moments", "phase7", "phase8")
 
@@ -30,7 +30,7 @@ def _select(cases, group: str):
 
 
 def _validate(args: argparse.Namespace) -> int:
-    from oos_drake.multibody.tree_cli import is_tree_scenario, validate_tree
+    from oos_drake.app.tree import is_tree_scenario, validate_tree
 
     if is_tree_scenario(args.scenario):  # schema 2: the tree's own twin on its timeline
         return validate_tree(args)

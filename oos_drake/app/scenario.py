@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from oos_drake.cli import add_scenario_argument
+from oos_drake.app.main import add_scenario_argument
 
 
 def _info(args: argparse.Namespace) -> int:

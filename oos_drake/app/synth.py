@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from oos_drake.cli import (
+from oos_drake.app.main import (
     add_loop_arguments,
     add_parallel_arguments,
     add_scenario_argument,

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from oos_drake.cli import add_deprecated_alias, add_parallel_arguments, run_command
+from oos_drake.app.main import add_deprecated_alias, add_parallel_arguments, run_command
 
 
 def _add_executor_options(parser: argparse.ArgumentParser) -> None:
@@ -271,7 +271,7 @@ def register(subparsers) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m oos_drake.campaign.cli campaign ...``: the campaign commands alone.
+    """``python -m oos_drake.app.campaign campaign ...``: the campaign commands alone.
 
     Same behaviour as ``oos campaign ...`` (a user-fixable error prints one line and returns 2),
     without importing the other subpackages' commands.

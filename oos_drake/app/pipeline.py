@@ -25,7 +25,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from oos_drake import __version__
-from oos_drake.cli import add_parallel_arguments, add_scenario_argument
+from oos_drake.app.main import add_parallel_arguments, add_scenario_argument
 from oos_drake.files import atomic_folder
 from oos_drake.resources import package_path
 
@@ -142,7 +142,7 @@ def run_stage(
 
 def _oos(*argv: str) -> None:
     """Run one ``oos`` command in this process; a non-zero status stops the pipeline."""
-    from oos_drake.cli import main
+    from oos_drake.app.main import main
 
     status = main([str(a) for a in argv])
     if status:
@@ -288,8 +288,8 @@ def _replay_worst_run(campaign: Path) -> Path | None:
     command says why)."""
     import pandas as pd
 
+    from oos_drake.app.main import main
     from oos_drake.campaign.replay import replay_path
-    from oos_drake.cli import main
 
     worst = campaign / "report" / "worst_runs.parquet"
     table = pd.read_parquet(worst) if worst.is_file() else pd.DataFrame()
@@ -320,8 +320,8 @@ def _publish_report(out: Path) -> Path:
 
 def _print_headlines(out: Path, campaign: Path, report: Path) -> None:
     """The ten headline numbers of the run and the report's path."""
+    from oos_drake.app.report import print_headlines
     from oos_drake.report import headline_numbers, load_run
-    from oos_drake.report.cli import print_headlines
 
     try:
         numbers = headline_numbers(load_run(out, campaign))
@@ -337,7 +337,7 @@ def _validate(folder: Path, scenario: Path) -> None:
     import contextlib
     import io
 
-    from oos_drake.cli import main
+    from oos_drake.app.main import main
 
     buffer = io.StringIO()
     with contextlib.redirect_stdout(buffer):

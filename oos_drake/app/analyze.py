@@ -9,7 +9,7 @@ from pathlib import Path
 
 from oos_drake.analysis.controller import scenario_controller
 from oos_drake.analysis.stability import SweepOptions
-from oos_drake.cli import (
+from oos_drake.app.main import (
     add_deprecated_alias,
     add_loop_arguments,
     add_parallel_arguments,
