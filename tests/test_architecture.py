@@ -60,8 +60,7 @@ def test_core_package_does_not_import_pydrake(package):
         "import importlib, pkgutil, sys\n"
         f"pkg = importlib.import_module('{package}')\n"
         "for info in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + '.'):\n"
-        "    if not info.name.endswith('.cli'):\n"
-        "        importlib.import_module(info.name)\n"
+        "    importlib.import_module(info.name)\n"
         "print('pydrake' in sys.modules)\n"
     )
     result = subprocess.run(
@@ -212,6 +211,18 @@ def test_imports_only_point_down():
     assert not bad, "imports against the layer order:\n" + "\n".join(bad)
 
 
+def test_the_library_imports_nothing_from_the_application_floor():
+    """``oos_drake.app`` is the top floor: no module outside it imports it (lazily or not)."""
+    bad = [
+        f"{source} (line {line}) imports {target}"
+        for edges in import_graph(PACKAGE_DIR).values()
+        for source, target, line in edges
+        if unit_of(target) == "oos_drake.app" and unit_of(source) != "oos_drake.app"
+    ]
+    assert LAYERS[-1] == ("oos_drake.app",)
+    assert not bad, "library modules import the application floor:\n" + "\n".join(bad)
+
+
 def test_no_import_cycle_between_packages():
     cycles = package_cycles(PACKAGE_DIR)
     assert not cycles, "import cycles:\n" + "\n".join(" -> ".join(c) for c in cycles)
@@ -236,6 +247,7 @@ def test_checker_sees_lazy_relative_and_dynamic_upward_imports(tmp_path):
             "lfr/core.py": "def f():\n    from oos_drake.robust import mu\n",
             "lfr/other.py": "from ..campaign import store\n",
             "lfr/third.py": "import importlib\nimportlib.import_module('oos_drake.analysis.run')\n",
+            "lfr/fourth.py": "def main():\n    from oos_drake.app.robust import register\n",
             "robust/__init__.py": "",
             "robust/mu.py": "from oos_drake.lfr import core\n",
             "app/__init__.py": "",
@@ -247,8 +259,9 @@ def test_checker_sees_lazy_relative_and_dynamic_upward_imports(tmp_path):
         },
     )
     bad = layer_violations(package_dir)
-    assert len(bad) == 3, bad
+    assert len(bad) == 4, bad
     assert any("oos_drake.lfr.core" in b and "oos_drake.robust.mu" in b for b in bad)
     assert any("oos_drake.lfr.other" in b and "oos_drake.campaign.store" in b for b in bad)
     assert any("oos_drake.lfr.third" in b and "oos_drake.analysis.run" in b for b in bad)
+    assert any("oos_drake.lfr.fourth" in b and "oos_drake.app.robust" in b for b in bad)
     assert package_cycles(package_dir) == [["oos_drake.lfr", "oos_drake.robust", "oos_drake.lfr"]]

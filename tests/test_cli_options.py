@@ -110,3 +110,18 @@ def test_analyze_proves_the_whole_axis_unless_grid_only():
     from oos_drake.analysis.run import AnalysisOptions
 
     assert AnalysisOptions().guarantee is True
+
+
+def test_shared_options_come_from_the_argument_helper():
+    """``--quiet`` and ``--scenario`` have one help text on every command (both are added by
+    :mod:`oos_drake.app.args`), and no command spells an output folder other than ``--out``."""
+    from oos_drake.app.args import SCENARIO_HELP
+
+    helps: dict[str, set[str]] = {"--quiet": set(), "--scenario": set()}
+    for path, parser in _commands(build_parser()):
+        for action in parser._actions:
+            for option in set(action.option_strings) & set(helps):
+                helps[option].add(action.help)
+        assert not {"--output-dir", "--outdir", "--out-dir"} & _visible_options(parser), path
+    assert helps["--quiet"] == {"no progress bars"}
+    assert helps["--scenario"] == {SCENARIO_HELP}

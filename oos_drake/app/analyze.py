@@ -9,10 +9,13 @@ from pathlib import Path
 
 from oos_drake.analysis.controller import scenario_controller
 from oos_drake.analysis.stability import SweepOptions
-from oos_drake.app.main import (
+from oos_drake.app.args import (
     add_deprecated_alias,
+    add_frequency_range,
     add_loop_arguments,
+    add_out_argument,
     add_parallel_arguments,
+    add_quiet_argument,
     add_scenario_argument,
     loop_specification,
 )
@@ -420,7 +423,7 @@ def _register_study(subparsers) -> None:
     )
     add_scenario_argument(parser)
     parser.add_argument("--vary", required=True, metavar="PATH=start:stop:n", help="swept value")
-    parser.add_argument("--out", required=True, help="output directory")
+    add_out_argument(parser)
     parser.add_argument(
         "--controller",
         default=None,
@@ -442,7 +445,7 @@ def _register_study(subparsers) -> None:
     parser.add_argument("--docking", default="7,8", help="docking phases (comma-separated)")
     parser.add_argument("--docking-points", type=int, default=40, help="stiffness values")
     add_parallel_arguments(parser, help="values analyzed in parallel")
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_quiet_argument(parser)
     parser.set_defaults(func=run_study_command)
 
 
@@ -453,7 +456,7 @@ def _common_arguments(parser, *, configurations: int) -> None:
         default=None,
         help="controller JSON from `oos synth` (default: the BASELINE PD)",
     )
-    parser.add_argument("--out", required=True, help="output directory")
+    add_out_argument(parser)
     parser.add_argument(
         "--configurations",
         type=int,
@@ -474,8 +477,7 @@ def register(subparsers) -> None:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     _common_arguments(parser, configurations=330)
-    parser.add_argument("--f-min", type=float, default=0.005, help="lowest grid frequency [Hz]")
-    parser.add_argument("--f-max", type=float, default=5.0, help="highest grid frequency [Hz]")
+    add_frequency_range(parser, 0.005, 5.0)
     parser.add_argument(
         "--points-per-decade",
         type=int,
@@ -552,7 +554,7 @@ def register(subparsers) -> None:
     )
     parser.set_defaults(guarantee=True)
     add_loop_arguments(parser)
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_quiet_argument(parser)
     add_scenario_argument(parser)
     add_deprecated_alias(parser, "--fmin", "--f-min", type=float)
     add_deprecated_alias(parser, "--fmax", "--f-max", type=float)
@@ -585,7 +587,7 @@ def register(subparsers) -> None:
         "worst real-parameter perturbations",
     )
     add_scenario_argument(parser)
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_quiet_argument(parser)
     parser.set_defaults(func=run_margins)
 
     confirm = subparsers.add_parser(
@@ -603,10 +605,10 @@ def register(subparsers) -> None:
         default=None,
         help="controller JSON (default: the one the analysis recorded in summary.json)",
     )
-    confirm.add_argument(
-        "--out", default=None, help="output directory (default: ANALYSIS/../confirm)"
+    add_out_argument(
+        confirm, required=False, help="output directory (default: ANALYSIS/../confirm)"
     )
     add_scenario_argument(confirm)
     add_parallel_arguments(confirm)
-    confirm.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_quiet_argument(confirm)
     confirm.set_defaults(func=run_confirm)

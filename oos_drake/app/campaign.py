@@ -21,7 +21,12 @@ from pathlib import Path
 
 import pandas as pd
 
-from oos_drake.app.main import add_deprecated_alias, add_parallel_arguments, run_command
+from oos_drake.app.args import (
+    add_out_argument,
+    add_parallel_arguments,
+    add_quiet_argument,
+    run_command,
+)
 
 
 def _add_executor_options(parser: argparse.ArgumentParser) -> None:
@@ -30,8 +35,7 @@ def _add_executor_options(parser: argparse.ArgumentParser) -> None:
         workers=os.cpu_count() or 1,
         help="worker processes (default: CPU count; 1 runs in this process)",
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    add_deprecated_alias(parser, "--no-progress", "--quiet", flag=True)
+    add_quiet_argument(parser, old=True)
 
 
 def _print_summary(summary) -> None:
@@ -184,9 +188,9 @@ def register(subparsers) -> None:
         help="campaign spec (TOML file), or the name of a shipped spec: demo, demo_mu, paper, "
         "paper_mc",
     )
-    run.add_argument(
-        "--out",
-        default=None,
+    add_out_argument(
+        run,
+        required=False,
         help="campaign directory (default: out/campaigns/<name>); must not exist",
     )
     run.add_argument(
@@ -231,9 +235,9 @@ def register(subparsers) -> None:
         help="search the dispersion box for the worst nonlinear run (not an estimation)",
     )
     falsify.add_argument("spec", help="campaign spec (TOML file) or the name of a shipped spec")
-    falsify.add_argument(
-        "--out",
-        default=None,
+    add_out_argument(
+        falsify,
+        required=False,
         help="folder of the search (default: out/falsify/<name>); the folder of the same search "
         "is resumed",
     )

@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-from oos_drake.app.main import add_scenario_argument
+from oos_drake.app.args import add_frequency_range, add_out_argument, add_scenario_argument
 
 CASE_GROUPS = ("all", "moments", "phase7", "phase8")
 
@@ -134,8 +134,7 @@ def register(subparsers) -> None:
     )
     validate.add_argument("--cases", choices=CASE_GROUPS, default="all")
     validate.add_argument("--frequencies", type=int, default=400, help="number of frequencies")
-    validate.add_argument("--f-min", type=float, default=0.01, help="lowest frequency [Hz]")
-    validate.add_argument("--f-max", type=float, default=100.0, help="highest frequency [Hz]")
+    add_frequency_range(validate, 0.01, 100.0, what="frequency")
     validate.add_argument(
         "--tolerance", type=float, default=1e-6, help="max relative frequency-response error"
     )
@@ -172,7 +171,7 @@ def register(subparsers) -> None:
     ulin.add_argument(
         "--output", action="append", required=True, help="output port (same syntax as --input)"
     )
-    ulin.add_argument("--out", type=Path, required=True, help="output directory")
+    add_out_argument(ulin, type=Path)
     ulin.add_argument("--name", default="lfr", help="file stem (default: lfr)")
     ulin.set_defaults(func=_ulinearize)
 
@@ -183,6 +182,8 @@ def register(subparsers) -> None:
         ("check", _sdf_check, "exit 1 if the SDF files differ from the scenario data file"),
     ):
         command = sdf_commands.add_parser(name, help=text)
-        command.add_argument("--out", type=Path, default=SDF_DIRECTORY, help="SDF directory")
+        add_out_argument(
+            command, required=False, default=SDF_DIRECTORY, type=Path, help="SDF directory"
+        )
         add_scenario_argument(command)
         command.set_defaults(func=func)

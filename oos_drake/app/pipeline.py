@@ -25,7 +25,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from oos_drake import __version__
-from oos_drake.app.main import add_parallel_arguments, add_scenario_argument
+from oos_drake.app.args import add_parallel_arguments, add_scenario_argument
 from oos_drake.files import atomic_folder
 from oos_drake.resources import package_path
 

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from oos_drake.app.args import add_out_argument
+
 
 def _load(path: str, names) -> dict:
     p = Path(path)
@@ -155,7 +157,7 @@ def register(subparsers) -> None:
     commands = robust.add_subparsers(dest="robust_command", metavar="ACTION", required=True)
     mu = commands.add_parser("mussv", help="mu upper/lower bounds of M for the structure blk")
     mu.add_argument("file", help=".npz or .mat file with variables M and blk")
-    mu.add_argument("--out", default=None, help=".npz file for bounds, delta and scalings")
+    add_out_argument(mu, required=False, help=".npz file for bounds, delta and scalings")
     mu.set_defaults(func=_mussv)
     hinf = commands.add_parser("hinfnorm", help="H-infinity norm of (A, B, C, D)")
     hinf.add_argument("file", help=".npz or .mat file with variables A, B, C, D")
@@ -163,9 +165,9 @@ def register(subparsers) -> None:
     stab = commands.add_parser("robstab", help="robust stability margin of a stored LFR")
     stab.add_argument("file", help=".npz or .mat LFR file (oos_drake.lfr.load_lfr)")
     stab.add_argument("--blocks", nargs="+", default=None, help="analyze only these blocks")
-    stab.add_argument(
-        "--out",
-        default=None,
+    add_out_argument(
+        stab,
+        required=False,
         help=".csv or .parquet file for the mu bounds per frequency (the mu sweep table)",
     )
     stab.set_defaults(func=_robstab)
@@ -175,5 +177,5 @@ def register(subparsers) -> None:
     sweep.add_argument("file", help=".npz or .mat LFR file, possibly a model array")
     sweep.add_argument("--blocks", nargs="+", default=None, help="analyze only these blocks")
     sweep.add_argument("--workers", type=int, default=1, help="worker processes")
-    sweep.add_argument("--out", default=None, help=".csv or .parquet file for the mu sweep table")
+    add_out_argument(sweep, required=False, help=".csv or .parquet file for the mu sweep table")
     sweep.set_defaults(func=_sweep)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from oos_drake.app.main import add_scenario_argument
+from oos_drake.app.args import add_out_argument, add_scenario_argument
 
 
 def _info(args: argparse.Namespace) -> int:
@@ -114,14 +114,12 @@ def register(subparsers) -> None:
         default="mission",
         help="mission model (default) or a docking-phase model",
     )
-    info.add_argument(
-        "--out", default=None, help="also write the block table as OUT/blocks.parquet"
-    )
+    add_out_argument(info, required=False, help="also write the block table as OUT/blocks.parquet")
     add_scenario_argument(info)
     info.set_defaults(func=_info)
 
     figures = commands.add_parser("figures", help="paper section-2 figures (PNG) and their data")
-    figures.add_argument("--out", required=True, help="output folder")
+    add_out_argument(figures)
     figures.add_argument("--times", type=int, default=330, help="mission grid size (default 330)")
     figures.add_argument(
         "--frequencies",

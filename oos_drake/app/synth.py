@@ -12,8 +12,9 @@ import time
 
 import numpy as np
 
-from oos_drake.app.main import (
+from oos_drake.app.args import (
     add_loop_arguments,
+    add_out_argument,
     add_parallel_arguments,
     add_scenario_argument,
     loop_specification,
@@ -158,7 +159,7 @@ def register(subparsers) -> None:
         "uncertainty, and writes controller.json, closed_loop.npz/.mat and models.parquet/.csv.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument("--out", required=True, help="output directory")
+    add_out_argument(parser)
     parser.add_argument(
         "--plant",
         default="lfr",
