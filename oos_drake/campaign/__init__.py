@@ -14,8 +14,8 @@ expose a factory ``make_simulator(**options)``, and register it::
     register_simulator("drake-mission", "oos_drake.campaign.drake_simulator:make_simulator")
 
 (or name the factory path directly in the spec: ``[simulator] name = "pkg.module:factory"``),
-and call :func:`check_simulator` on it in its tests (declarations, metrics, time-series columns,
-reproducibility for a given seed).
+and check it in its tests with ``tests/campaign/simulator_contract.py:check_simulator``
+(declarations, metrics, time-series columns, reproducibility for a given seed).
 Dispersions are keyed by the parameter (uncertain block) names the simulator declares, so a
 misspelled or absent block is an error before any run, not a silently ignored dispersion.
 """
@@ -30,9 +30,7 @@ from oos_drake.campaign.simulator import (
     Simulator,
     SimulatorRecipe,
     build_simulator,
-    check_simulator,
     register_simulator,
-    registered_simulators,
 )
 
 __all__ = [
@@ -45,7 +43,5 @@ __all__ = [
     "Simulator",
     "SimulatorRecipe",
     "build_simulator",
-    "check_simulator",
     "register_simulator",
-    "registered_simulators",
 ]

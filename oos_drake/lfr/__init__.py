@@ -17,7 +17,8 @@ model and named uncertain blocks (see ``docs/DESIGN.md``). Quick tour::
 
 Modules: :mod:`~oos_drake.lfr.blocks` (block specs and normalization),
 :mod:`~oos_drake.lfr.core` (the LFR object, append/close primitives, operators),
-:mod:`~oos_drake.lfr.interconnect` (feedback, lft, stacking, connect),
+:mod:`~oos_drake.lfr.interconnect` (feedback, lft, stacking, inversion; the one named-signal
+``connect`` is :func:`oos_drake.control.statespace.connect`),
 :mod:`~oos_drake.lfr.substitution` (usubs, usample, nominal),
 :mod:`~oos_drake.lfr.frequency` (batched frequency response),
 :mod:`~oos_drake.lfr.reduction` (structured minimal-occurrence reduction),
@@ -29,12 +30,10 @@ from oos_drake.lfr.core import LFR, BlockEntry, as_lfr
 from oos_drake.lfr.frequency import freqresp
 from oos_drake.lfr.interconnect import (
     append,
-    connect,
     feedback,
     hstack,
     inv,
     lft,
-    sumblk,
     vstack,
 )
 from oos_drake.lfr.matfile import load_lfr
@@ -50,7 +49,6 @@ __all__ = [
     "append",
     "as_lfr",
     "close_blocks",
-    "connect",
     "feedback",
     "freqresp",
     "hstack",
@@ -59,7 +57,6 @@ __all__ = [
     "lftdata",
     "load_lfr",
     "nominal",
-    "sumblk",
     "ucomplex",
     "ultidyn",
     "ureal",

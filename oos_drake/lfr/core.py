@@ -390,7 +390,7 @@ class LFR:
         )
 
     def with_names(self, *, inputs=None, outputs=None) -> LFR:
-        """Copy with input and/or output signal names (used by :func:`~oos_drake.lfr.connect`).
+        """Copy with input and/or output signal names.
 
         A single string ``"u"`` for a ``k``-channel port expands to ``u[0], ..., u[k-1]``.
         """

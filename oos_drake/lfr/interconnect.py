@@ -1,4 +1,4 @@
-"""Interconnections of LFRs: feedback, Redheffer star product, stacking, inversion, connect.
+"""Interconnections of LFRs: feedback, Redheffer star product, stacking, inversion.
 
 Every function accepts LFRs, ``control.StateSpace``/``TransferFunction``, arrays and scalars as
 operands and returns a new :class:`~oos_drake.lfr.core.LFR`; blocks with the same name merge.
@@ -8,7 +8,6 @@ All of them are an append of the operands followed by one static interconnection
 
 from __future__ import annotations
 
-import re
 from collections.abc import Sequence
 
 import numpy as np
@@ -155,118 +154,3 @@ def _concatenate(systems: Sequence, *, horizontal: bool) -> LFR:
 def inv(sys) -> LFR:
     """Inverse of a square LFR with invertible feedthrough (``ValueError`` otherwise)."""
     return inverse(as_lfr(sys))
-
-
-def sumblk(expression: str, width: int = 1) -> LFR:
-    """Summing junction with named signals, e.g. ``sumblk("e = r - y")`` (MATLAB ``sumblk``).
-
-    Parameters
-    ----------
-    expression : str
-        ``"out = [+-]in1 [+-] in2 ..."``.
-    width : int
-        Vector width; names then expand to ``name[0], ..., name[width-1]``.
-    """
-    match = re.fullmatch(r"\s*([\w.\[\]]+)\s*=\s*(.+)", expression)
-    if not match:
-        raise ValueError(f"sumblk: cannot parse {expression!r} (expected 'out = a + b - c')")
-    output, rhs = match.group(1), match.group(2).replace(" ", "")
-    terms = re.findall(r"([+-]?)([\w.\[\]]+)", rhs)
-    if not terms or "".join(s + t for s, t in terms) != rhs.lstrip("+"):
-        if "".join(s + t for s, t in terms) != rhs:
-            raise ValueError(f"sumblk: cannot parse right-hand side {rhs!r}")
-    signs = [-1.0 if s == "-" else 1.0 for s, _ in terms]
-    names = [t for _, t in terms]
-    D = np.hstack([sign * np.eye(width) for sign in signs])
-
-    def expand(name):
-        return [name] if width == 1 else [f"{name}[{k}]" for k in range(width)]
-
-    in_names = [n for name in names for n in expand(name)]
-    return LFR.from_matrix(D, input_names=in_names, output_names=expand(output))
-
-
-def _expand_signal(name: str, available: Sequence[str]) -> list[str]:
-    if name in available:
-        return [name]
-    vector = [f"{name}[{k}]" for k in range(len(available))]
-    found = [v for v in vector if v in available]
-    return found
-
-
-def connect(systems: Sequence, inputs: Sequence[str], outputs: Sequence[str]) -> LFR:
-    """Interconnect named systems MATLAB-style.
-
-    Each system needs ``input_names`` and ``output_names`` (see :meth:`LFR.with_names` and
-    :func:`sumblk`). A signal ``X`` is the sum of every block output named ``X`` plus, if
-    ``X`` is in
-    ``inputs``, the external input ``X``. Every block input named ``X`` receives signal ``X``; every
-    external output named ``X`` reads it. A vector name ``u`` stands for ``u[0], u[1], ...``.
-
-    Parameters
-    ----------
-    systems : sequence of LFR
-        Blocks with named inputs and outputs.
-    inputs, outputs : sequence of str
-        External input and output signal names, in order.
-
-    Raises
-    ------
-    ValueError
-        When a block input has no source, an external name is unknown, or the loop is ill-posed.
-    """
-    systems = [as_lfr(s) for s in systems]
-    for k, sys in enumerate(systems):
-        if sys.input_names is None and sys.ninputs or sys.output_names is None and sys.noutputs:
-            raise ValueError(
-                f"connect: system {k} ({sys!r}) has unnamed inputs or outputs; "
-                "use .with_names(inputs=..., outputs=...)"
-            )
-        names = (sys.input_names or ()) + (sys.output_names or ())
-        if None in names:
-            raise ValueError(f"connect: system {k} has partly unnamed inputs or outputs")
-    if isinstance(inputs, str):
-        inputs = [inputs]
-    if isinstance(outputs, str):
-        outputs = [outputs]
-    G = append_systems(systems)
-    in_names = list(G.input_names or ())
-    out_names = list(G.output_names or ())
-    signals = set(in_names) | set(out_names)
-    ext_in = []
-    for name in inputs:
-        found = _expand_signal(name, sorted(signals))
-        if not found:
-            raise ValueError(f"connect: external input {name!r} is not a signal of any system")
-        ext_in.extend(found)
-    ext_out = []
-    for name in outputs:
-        found = _expand_signal(name, sorted(signals | set(ext_in)))
-        if not found:
-            raise ValueError(f"connect: external output {name!r} is not a signal of any system")
-        ext_out.extend(found)
-    sources = set(out_names) | set(ext_in)
-    for name in in_names:
-        if name not in sources:
-            raise ValueError(
-                f"connect: block input {name!r} is driven by no block output and is "
-                "not an external input"
-            )
-    out_arr = np.array(out_names, dtype=object)
-    in_arr = np.array(in_names, dtype=object)
-    K = (
-        (in_arr[:, None] == out_arr[None, :]).astype(float)
-        if in_names and out_names
-        else np.zeros((len(in_names), len(out_names)))
-    )
-    E = np.array([[1.0 if a == b else 0.0 for b in ext_in] for a in in_names]).reshape(
-        len(in_names), len(ext_in)
-    )
-    F = np.array([[1.0 if a == b else 0.0 for b in out_names] for a in ext_out]).reshape(
-        len(ext_out), len(out_names)
-    )
-    H = np.array([[1.0 if a == b else 0.0 for b in ext_in] for a in ext_out]).reshape(
-        len(ext_out), len(ext_in)
-    )
-    # an external output reading a signal that is also fed back must see the closed loop value
-    return close_static(G, K, E, F, H, input_names=ext_in, output_names=ext_out)

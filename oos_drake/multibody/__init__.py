@@ -9,7 +9,7 @@
   the SDF files + modal residuals, floating joints, welds or docking bushings (Context
   parameters).
 - :mod:`~oos_drake.multibody.operating_point`: place the twin at a configuration and
-  linearize it (``linearize_at``, ``linearize_time``, ``linearize_named``) into a
+  linearize it (``linearize_at``) into a
   ``control.StateSpace`` from the wrench at G1 to ``[a; wdot; w; rpy]``.
 - :mod:`~oos_drake.multibody.cross_check`: Drake vs TITOP (``oos validate``).
 - :mod:`~oos_drake.multibody.uncertain_linearization`: ``ulinearize(system, context, parameters,

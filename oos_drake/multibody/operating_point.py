@@ -27,9 +27,7 @@ from oos_drake.multibody.scenario_plant import (
     ScenarioDiagram,
     connection_for,
     set_spring_damper,
-    twin_diagram,
 )
-from oos_drake.scenario.timeline import mission_timeline
 
 __all__ = [
     "OperatingPoint",
@@ -37,8 +35,6 @@ __all__ = [
     "set_operating_point",
     "linearize_at",
     "acceleration_response",
-    "linearize_time",
-    "linearize_named",
 ]
 
 
@@ -189,38 +185,3 @@ def acceleration_response(system: control.StateSpace, prune: bool = True) -> con
     then the minimal realization (48 states with rigid connections, 60 with spring-dampers).
     """
     return structural_prune(system[0:6, :]) if prune else system[0:6, :]
-
-
-def linearize_time(time: float, scenario) -> control.StateSpace:
-    """Linearize the twin of ``scenario`` at mission time ``time`` [s] (rigid connections from
-    the timeline).
-
-    Returns the 12-output model of :func:`linearize_at`.
-    """
-    configuration = mission_timeline(scenario).configuration(float(time))
-    point = operating_point(configuration, label=f"t={float(time):g} s")
-    return linearize_at(point, twin_diagram(scenario, point.connection))
-
-
-def linearize_named(name: str, scenario, spring_dampers=None) -> control.StateSpace:
-    """Linearize at a named configuration: moments ``"1".."6"``, docking phases ``"7"``, ``"8"``.
-
-    Parameters
-    ----------
-    name : str
-        Moment or docking phase name.
-    spring_dampers : Mapping[str, (float, float)], optional
-        For docking phases: ``{"SM1": (k, d), ...}`` [N/m = N m/rad, N s/m = N m s/rad];
-        default: the phase's spring-dampers at the scenario's rigid stiffness and damping.
-    """
-    timeline = mission_timeline(scenario)
-    if name not in timeline.named:
-        raise ValueError(f"unknown configuration {name!r}; known: {sorted(timeline.named)}")
-    named = timeline.named[name]
-    if named.spring_dampers and spring_dampers is None:
-        docking = timeline.scenario.docking
-        spring_dampers = {
-            sm: (docking.rigid_stiffness, docking.rigid_damping) for sm in named.spring_dampers
-        }
-    point = operating_point(named.configuration, spring_dampers, label=name)
-    return linearize_at(point, twin_diagram(scenario, point.connection))

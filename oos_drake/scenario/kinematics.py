@@ -8,9 +8,9 @@ This module is the independent geometric reference of the scenario:
   ``delta_C1 = 1``, sits on the hub (D3 frame = D1 frame) when ``delta_C2 = 1``, and when
   decoupled it is drawn at its first-docking pose (its free approach is not modelled).
 - :func:`solve_arm_ik` solves the arm inverse kinematics (scipy least squares) for a desired
-  arm-tip pose; :func:`second_docking_ik` closes the kinematic loop of the second docking
-  (J7 = D2 while D3 = D1), :func:`first_docking_ik` grasps the target at its standoff pose and
-  :func:`waypoint_ik` solves any labelled IK waypoint of the mission (pre-grasp, retreat, ...).
+  arm-tip pose; :func:`waypoint_ik` solves any labelled IK waypoint of the mission (``"docked"``
+  closes the kinematic loop of the second docking, J7 = D2 while D3 = D1; ``"grasp"`` grasps
+  the target at its standoff pose; pre-grasp, retreat, ...).
 - :func:`rigid_spatial_inertia_at_G1` sums the rigid spatial inertias of the connected bodies
   at G1 in R_RH1 (arrays with their full rigid ``D_P``): the low-frequency reference of the
   TITOP model, since its hub acceleration response tends to ``D_G1^-1`` at low frequency.
@@ -47,12 +47,10 @@ __all__ = [
     "Pose",
     "SystemPoses",
     "arm_tip_pose",
-    "first_docking_ik",
     "first_docking_target_pose",
     "forward_kinematics",
     "pose_error",
     "rigid_spatial_inertia_at_G1",
-    "second_docking_ik",
     "solve_arm_ik",
     "waypoint_ik",
     "waypoint_tip_pose",
@@ -437,16 +435,6 @@ def waypoint_ik(scenario: Scenario, label: str = "docked", alpha0=None) -> IKSol
     if alpha0 is None:
         alpha0 = scenario.mission.arm_waypoints.at(label)
     return solve_arm_ik(scenario, X_desired, alpha0)
-
-
-def second_docking_ik(scenario: Scenario, alpha0=None) -> IKSolution:
-    """Arm angles closing the loop at the second docking: J7 frame = D2 frame while D3 = D1."""
-    return waypoint_ik(scenario, "docked", alpha0)
-
-
-def first_docking_ik(scenario: Scenario, alpha0=None) -> IKSolution:
-    """Arm angles grasping D2 with the target at its first-docking (standoff) pose."""
-    return waypoint_ik(scenario, "grasp", alpha0)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -42,9 +42,7 @@ __all__ = [
     "MissionTimeline",
     "NamedConfiguration",
     "QuinticTrajectory",
-    "angle_from_tau",
     "mission_timeline",
-    "tau_from_angle",
 ]
 
 #: Names of the scheduled LFR parameters (physical value = tau = tan(angle/4)).
@@ -53,44 +51,6 @@ THETA_PARAMETERS = tuple(f"tau_theta{i}" for i in range(1, 5))
 CONNECTION_PARAMETERS = ("delta_C1", "delta_C2")
 
 _ANGLE_TOL = 1e-12
-
-
-def tau_from_angle(angle):
-    """Scheduling parameter ``tau = tan(angle / 4)`` of a rotation angle.
-
-    Parameters
-    ----------
-    angle : float or array_like
-        Angle(s) [rad] in [-pi, pi].
-
-    Returns
-    -------
-    float or ndarray
-        tau in [-1, 1] (same shape as ``angle``).
-
-    Raises
-    ------
-    ValueError
-        An angle lies outside [-pi, pi].
-    """
-    angle = np.asarray(angle, dtype=float)
-    bad = ~(np.abs(angle) <= np.pi + _ANGLE_TOL)
-    if np.any(bad):
-        raise ValueError(
-            f"angle {angle[bad].flat[0]:.6g} rad outside [-pi, pi] for tau = tan(angle/4)"
-        )
-    tau = np.tan(np.clip(angle, -np.pi, np.pi) / 4.0)
-    return float(tau) if tau.ndim == 0 else tau
-
-
-def angle_from_tau(tau):
-    """Inverse of :func:`tau_from_angle`: ``angle = 4 arctan(tau)`` [rad], tau in [-1, 1]."""
-    tau = np.asarray(tau, dtype=float)
-    bad = ~(np.abs(tau) <= 1.0 + _ANGLE_TOL)
-    if np.any(bad):
-        raise ValueError(f"tau {tau[bad].flat[0]:.6g} outside [-1, 1]")
-    angle = 4.0 * np.arctan(tau)
-    return float(angle) if angle.ndim == 0 else angle
 
 
 @dataclass(frozen=True, eq=False)

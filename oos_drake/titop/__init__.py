@@ -18,14 +18,13 @@ assembly     connect blocks by named port signals into one LFR
 inversion    partial inversion of channels (invio): inverse model -> direct model at a port
 """
 
-from oos_drake.titop.appendage import effective_mass_model, flexible_appendage
+from oos_drake.titop.appendage import flexible_appendage
 from oos_drake.titop.assembly import Component, assemble
 from oos_drake.titop.connection import (
     fixed_connection,
     revolute_connection,
     spring_damper,
     spring_damper_parameters,
-    switched_connection,
 )
 from oos_drake.titop.inversion import invert_channels
 from oos_drake.titop.kinematics import frame_change, kinematic_model, repeat
@@ -45,7 +44,6 @@ __all__ = [
     "angle_parameter",
     "assemble",
     "connection_parameter",
-    "effective_mass_model",
     "fixed_connection",
     "flexible_appendage",
     "frame_change",
@@ -63,7 +61,6 @@ __all__ = [
     "spatial_inertia_lfr",
     "spring_damper",
     "spring_damper_parameters",
-    "switched_connection",
     "uncertain_inertia",
     "uncertain_mass",
 ]

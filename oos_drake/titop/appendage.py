@@ -32,7 +32,7 @@ from oos_drake.lfr import LFR, append, as_lfr, feedback
 from oos_drake.titop.kinematics import repeat
 from oos_drake.titop.spatial import residual_mass
 
-__all__ = ["effective_mass_model", "flexible_appendage", "check_appendage_data"]
+__all__ = ["flexible_appendage", "check_appendage_data"]
 
 
 def check_appendage_data(rigid_inertia_P, participation, frequencies, damping, name="appendage"):
@@ -80,34 +80,6 @@ def check_appendage_data(rigid_inertia_P, participation, frequencies, damping, n
             f"(min eigenvalue {min_eig:.4g}); are the participation factors one column per mode?"
         )
     return d_P, participation, frequencies, damping
-
-
-def effective_mass_model(s, rigid_inertia_P, participation, frequencies, damping) -> np.ndarray:
-    """Evaluate ``M_P(s)`` by its closed form (numeric reference).
-
-    Parameters
-    ----------
-    s : complex or array_like
-        Laplace variable(s) [rad/s]; ``np.inf`` gives ``D_P0``.
-    rigid_inertia_P, participation, frequencies, damping
-        As in :func:`check_appendage_data` (participation: 6 x N, columns = modes).
-
-    Returns
-    -------
-    numpy.ndarray, shape (..., 6, 6)
-    """
-    d_P, participation, w, xi = check_appendage_data(
-        rigid_inertia_P, participation, frequencies, damping
-    )
-    s = np.asarray(s, dtype=complex)
-    result = np.broadcast_to(residual_mass(d_P, participation), s.shape + (6, 6)).astype(complex)
-    for i in range(w.size):
-        li = participation[:, i]
-        if np.all(np.isinf(s)):
-            continue
-        gain = (2 * xi[i] * w[i] * s + w[i] ** 2) / (s**2 + 2 * xi[i] * w[i] * s + w[i] ** 2)
-        result = result + gain[..., None, None] * np.outer(li, li)
-    return result
 
 
 def _mode_plant(li: np.ndarray, xi: float) -> LFR:

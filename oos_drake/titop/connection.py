@@ -27,7 +27,6 @@ from oos_drake.titop.spatial import frame_change_matrix
 __all__ = [
     "fixed_connection",
     "revolute_connection",
-    "switched_connection",
     "spring_damper",
     "spring_damper_parameters",
 ]
@@ -70,20 +69,6 @@ def revolute_connection(tau: LFR, axis, dcm_fixed=None) -> LFR:
     forward = rotation_frame_change(tau, axis) @ t0
     backward = t0.T @ rotation_frame_change(tau, axis, transpose=True)
     return append(forward, backward)
-
-
-def switched_connection(delta: LFR, dcm_child_parent=None) -> LFR:
-    """Connection switch: both directions multiplied by ``delta_C`` (``delta_C I12``).
-
-    Parameters
-    ----------
-    delta : LFR (1x1)
-        Switch block (``connection_parameter("delta_C1")``): 0 open, 1 connected.
-    dcm_child_parent : array_like (3, 3), optional
-        Constant frame change across the connection.
-    """
-    base = fixed_connection(np.eye(3) if dcm_child_parent is None else dcm_child_parent)
-    return repeat(delta, 12) @ base
 
 
 def spring_damper_parameters(

@@ -18,6 +18,8 @@ from oos_drake.campaign.simulator import (
     build_simulator,
 )
 
+from .simulator_contract import check_simulator
+
 
 def _nominal(sim, **changes):
     values = {p.name: p.nominal for p in sim.parameters()}
@@ -128,14 +130,12 @@ def test_zero_order_hold_model_matches_ode_integration():
 
 
 def test_cheap_simulator_passes_the_protocol_check():
-    from oos_drake.campaign.simulator import check_simulator
-
     output = check_simulator(FlexibleAttitudeSimulator(control_rate=5.0))
     assert output.metrics["ape"] > 0
 
 
 def test_protocol_check_catches_a_non_reproducible_simulator():
-    from oos_drake.campaign.simulator import RunOutput, check_simulator
+    from oos_drake.campaign.simulator import RunOutput
 
     class Drifting(FlexibleAttitudeSimulator):
         calls = [0]

@@ -1,4 +1,4 @@
-"""connect (MATLAB semantics), structured reduction, .mat export."""
+"""Structured reduction, .mat export."""
 
 import control
 import numpy as np
@@ -9,66 +9,15 @@ from lfr_helpers import assert_response_close, control_response, random_ss
 from oos_drake.lfr import (
     LFR,
     append,
-    as_lfr,
-    connect,
     feedback,
     inv,
     lft,
-    sumblk,
     ultidyn,
     ureal,
     usubs,
 )
 
 OMEGA = np.array([0.1, 0.8, 3.0, 20.0])
-
-
-def test_connect_feedback_loop_matches_feedback():
-    rng = np.random.default_rng(0)
-    P = random_ss(rng, 3, 1, 1)
-    k = ureal("k", 2.0, percent=25)
-    plant = as_lfr(P).with_names(inputs="u", outputs="y")
-    ctrl = (k * control.tf([1, 1], [1, 5])).with_names(inputs="e", outputs="u")
-    err = sumblk("e = r - y")
-    closed = connect([plant, ctrl, err], inputs=["r"], outputs=["y", "u"])
-    assert closed.input_names == ("r",) and closed.output_names == ("y", "u")
-    C = control.tf([1, 1], [1, 5])
-    for kv in (1.5, 2.4):
-        direct = control.feedback(P * kv * C, 1)
-        resp = usubs(closed, {"k": kv}).freqresp(OMEGA)
-        assert_response_close(resp[..., :1, :], control_response(direct, OMEGA))
-        sens_u = control.feedback(kv * C, P)
-        assert_response_close(resp[..., 1:, :], control_response(sens_u, OMEGA))
-
-
-def test_connect_output_feeds_every_input_of_that_name_and_vector_names():
-    g1 = LFR.from_matrix(np.array([[2.0]]), input_names=["a"], output_names=["b"])
-    g2 = LFR.from_matrix(np.array([[3.0]]), input_names=["b"], output_names=["c"])
-    g3 = LFR.from_matrix(np.array([[5.0]]), input_names=["b"], output_names=["d"])
-    out = connect([g1, g2, g3], inputs=["a"], outputs=["c", "d", "b"])
-    np.testing.assert_allclose(out.M, [[6.0], [10.0], [2.0]])
-    # an external input named like an internal signal is injected there (MATLAB connect)
-    inj = connect([g1, g2], inputs=["a", "b"], outputs=["c"])
-    np.testing.assert_allclose(inj.M, [[6.0, 3.0]])
-    vec = LFR.from_matrix(np.diag([1.0, 2.0]), input_names="v", output_names="w")
-    assert vec.input_names == ("v[0]", "v[1]")
-    out = connect([vec], inputs=["v"], outputs=["w"])
-    np.testing.assert_allclose(out.M, np.diag([1.0, 2.0]))
-
-
-def test_connect_errors():
-    g = LFR.from_matrix(np.array([[2.0]]), input_names=["a"], output_names=["b"])
-    h = LFR.from_matrix(np.array([[2.0]]), input_names=["x"], output_names=["y"])
-    with pytest.raises(ValueError, match="external input 'zz'"):
-        connect([g], inputs=["zz"], outputs=["b"])
-    with pytest.raises(ValueError, match="external output 'zz'"):
-        connect([g], inputs=["a"], outputs=["zz"])
-    with pytest.raises(ValueError, match="block input 'x' is driven by no block output"):
-        connect([g, h], inputs=["a"], outputs=["b"])
-    with pytest.raises(ValueError, match="unnamed"):
-        connect([as_lfr(1.0)], inputs=["a"], outputs=["b"])
-    with pytest.raises(ValueError, match="cannot parse"):
-        sumblk("e r - y")
 
 
 def test_reduce_removes_redundant_occurrences_and_states():

@@ -16,8 +16,6 @@ from oos_drake.multibody.cross_check import (  # noqa: E402
 from oos_drake.multibody.operating_point import (  # noqa: E402
     acceleration_response,
     linearize_at,
-    linearize_named,
-    linearize_time,
     operating_point,
     set_operating_point,
 )
@@ -56,6 +54,12 @@ def _titop_at(model, configuration, extra=None):
     return titop_state_space(model, values)
 
 
+def _linearize(configuration, label=""):
+    """The twin linearized at one configuration (rigid connections), via the public path."""
+    point = operating_point(configuration, label=label)
+    return linearize_at(point, twin_diagram(SCENARIO, point.connection))
+
+
 def _dc_gain(system):
     """Exact G(0) = D - C A^-1 B of a minimal acceleration model (no pole at 0)."""
     return system.D - system.C @ np.linalg.solve(system.A, system.B)
@@ -78,7 +82,7 @@ def test_six_moments_match_titop(mission_model, name):
 def test_low_frequency_gain_is_inverse_rigid_inertia_from_kinematics(name):
     """Independent of TITOP: G(0) = D_G1^-1 with D_G1 summed from the forward kinematics."""
     configuration = TIMELINE.moments[name].configuration
-    drake = acceleration_response(linearize_named(name, SCENARIO))
+    drake = acceleration_response(_linearize(configuration, name))
     expected = np.linalg.inv(rigid_spatial_inertia_at_G1(SCENARIO, configuration))
     np.testing.assert_allclose(
         _dc_gain(drake), expected, rtol=1e-7, atol=1e-9 * np.abs(expected).max()
@@ -88,7 +92,7 @@ def test_low_frequency_gain_is_inverse_rigid_inertia_from_kinematics(name):
 def test_random_mission_times_match_titop(mission_model):
     rng = np.random.default_rng(2024)
     for time in rng.uniform(SCENARIO.mission.t_start, SCENARIO.mission.t_end, 3):
-        drake = acceleration_response(linearize_time(time, SCENARIO))
+        drake = acceleration_response(_linearize(TIMELINE.configuration(time)))
         titop = _titop_at(mission_model, TIMELINE.configuration(time))
         result = compare_systems(f"t={time:.1f}", drake, titop, OMEGA[::4])
         assert result.passed, result
@@ -147,7 +151,7 @@ def test_bushing_parameters_change_in_the_context_without_rebuild():
 
 
 def test_rate_and_attitude_outputs_integrate_the_angular_acceleration():
-    system = linearize_named("3", SCENARIO)
+    system = _linearize(TIMELINE.moments["3"].configuration, "3")
     for w in (0.3, 5.0, 40.0):
         s = 1j * w
         response = system(s)
@@ -183,10 +187,8 @@ def test_mixed_connection_is_refused():
 def test_bad_operating_point_requests_are_refused():
     with pytest.raises(ValueError, match="needs one configuration"):
         operating_point(TIMELINE.sample(3))
-    with pytest.raises(ValueError, match="unknown configuration '9'"):
-        linearize_named("9", SCENARIO)
     with pytest.raises(ValueError, match="outside the mission"):
-        linearize_time(-5.0, SCENARIO)
+        TIMELINE.configuration(-5.0)
     handles = build_scenario_diagram("hub")
     point = operating_point(TIMELINE.moments["2"].configuration)  # arm-clamped configuration
     with pytest.raises(ValueError, match="needs a 'arm' diagram"):

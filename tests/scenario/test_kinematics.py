@@ -12,12 +12,11 @@ from oos_drake.scenario.kinematics import (
     IK_WAYPOINTS,
     Pose,
     arm_tip_pose,
-    first_docking_ik,
     forward_kinematics,
     pose_error,
     rigid_spatial_inertia_at_G1,
-    second_docking_ik,
     solve_arm_ik,
+    waypoint_ik,
     waypoint_tip_pose,
 )
 from oos_drake.scenario.timeline import Configuration, mission_timeline
@@ -203,8 +202,8 @@ def test_arm_stays_clear_of_target_and_hub(scenario, timeline):
 
 
 def test_docking_ik_solver_reproduces_stored_waypoints(scenario):
-    for solve, time in ((second_docking_ik, 880.0), (first_docking_ik, 255.0)):
-        solution = solve(scenario, alpha0=_stored(scenario, time) + 0.05)
+    for label, time in (("docked", 880.0), ("grasp", 255.0)):
+        solution = waypoint_ik(scenario, label, alpha0=_stored(scenario, time) + 0.05)
         assert solution.residual < 1e-10
         np.testing.assert_allclose(solution.alpha, _stored(scenario, time), atol=1e-8)
     # the stored second-docking branch: planar arm, elbow away from the target

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from oos_drake.lfr import usubs
-from oos_drake.scenario.kinematics import rigid_spatial_inertia_at_G1, second_docking_ik
+from oos_drake.scenario.kinematics import rigid_spatial_inertia_at_G1, waypoint_ik
 from oos_drake.scenario.model import (
     PAPER_OCCURRENCES,
     attitude_model,
@@ -148,7 +148,7 @@ def test_docking_phase_7_stiff_spring_is_the_rigid_grasp(timeline):
 
 def test_docking_phase_8_closed_loop_is_rigid_at_low_frequency(timeline):
     model8 = build_docking_model("8", timeline.scenario)
-    alpha = second_docking_ik(timeline.scenario).alpha  # closes J7 = D2 while D3 = D1
+    alpha = waypoint_ik(timeline.scenario, "docked").alpha  # closes J7 = D2 while D3 = D1
     config = Configuration.from_angles(
         alpha, delta_C1=0.0, delta_C2=1.0, time=timeline.scenario.mission.second_docking_time
     )

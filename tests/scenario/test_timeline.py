@@ -11,9 +11,7 @@ from oos_drake.scenario.timeline import (
     THETA_PARAMETERS,
     Configuration,
     QuinticTrajectory,
-    angle_from_tau,
     mission_timeline,
-    tau_from_angle,
 )
 
 
@@ -128,18 +126,6 @@ def test_named_configurations(timeline):
     waypoints = timeline.scenario.mission.arm_waypoints
     np.testing.assert_array_equal(named["8"].configuration.alpha, waypoints.at("docked"))
     np.testing.assert_array_equal(named["7"].configuration.alpha, waypoints.at("grasp"))
-
-
-def test_tau_helpers():
-    angles = np.linspace(-np.pi, np.pi, 101)
-    tau = tau_from_angle(angles)
-    np.testing.assert_allclose(tau[[0, 50, -1]], [-1.0, 0.0, 1.0], atol=1e-15)
-    np.testing.assert_allclose(angle_from_tau(tau), angles, atol=1e-14)
-    assert tau_from_angle(np.pi / 2) == pytest.approx(np.tan(np.pi / 8))
-    with pytest.raises(ValueError, match="angle 3.2 rad outside"):
-        tau_from_angle([0.0, 3.2])
-    with pytest.raises(ValueError, match="tau -1.5 outside"):
-        angle_from_tau(-1.5)
 
 
 def test_out_of_range_inputs(timeline):

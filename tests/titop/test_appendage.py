@@ -2,10 +2,11 @@
 
 import numpy as np
 import pytest
+from appendage_oracle import effective_mass_model  # tests/ is on sys.path
 
 from oos_drake.lfr import ureal, usubs
 from oos_drake.scenario.data import load_scenario
-from oos_drake.titop import effective_mass_model, flexible_appendage
+from oos_drake.titop import flexible_appendage
 from oos_drake.titop.appendage import check_appendage_data
 from oos_drake.titop.spatial import rigid_spatial_inertia
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from appendage_oracle import effective_mass_model  # tests/ is on sys.path
 from tree_documents import boom_document, shipped_document
 
 from oos_drake.lfr import usubs
@@ -14,7 +15,6 @@ from oos_drake.scenario.tree_model import (
     tree_blocks,
     tree_values,
 )
-from oos_drake.titop.appendage import effective_mass_model
 
 
 def _dc_gain(system):
