@@ -39,7 +39,7 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1] / "oos_drake"
 
 #: Layers from the bottom; a module may import its own package and lower layers only.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("oos_drake", "oos_drake.blas", "oos_drake.files", "oos_drake.resources"),
+    ("oos_drake", "oos_drake.blas", "oos_drake.columns", "oos_drake.files", "oos_drake.resources"),
     ("oos_drake.processes",),
     ("oos_drake.lfr",),
     ("oos_drake.titop",),

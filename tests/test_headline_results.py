@@ -274,7 +274,7 @@ def test_the_worst_cases_drive_a_chaser_array_mode_below_its_range(default_run):
     worst = pd.read_parquet(default_run / "analysis" / "worst_perturbations.parquet")
     for study in ("mission", "docking-7", "docking-8"):
         rows = worst[(worst["study"] == study) & (worst["subset"] == "total")]
-        real = rows[rows["kind"] == "ureal"].set_index("block")["normalized_real [-]"]
+        real = rows[rows["kind"] == "ureal"].set_index("block")["normalized real [-]"]
         size = 1.0 / peaks.loc[(study, "total"), "mu lower [-]"]
         moved = real[np.abs(real) > 1e-9 * size]  # a vertex of the scaled box (or untouched)
         np.testing.assert_allclose(np.abs(moved), size, rtol=1e-6)

@@ -227,11 +227,11 @@ def _certify(array, study, subsets, *, configuration_label):
                     "block": bname,
                     "kind": kind,
                     "unit": specs[bname].unit,
-                    "normalized_norm [-]": float(np.linalg.norm(arr, ord=2)),
-                    "normalized_real [-]": float(arr[0, 0].real),
-                    "normalized_imag [-]": float(arr[0, 0].imag),
-                    "destabilizing_value [unit]": destab,
-                    "in_set_value [unit]": phys_unit.get(bname, np.nan),
+                    "normalized norm [-]": float(np.linalg.norm(arr, ord=2)),
+                    "normalized real [-]": float(arr[0, 0].real),
+                    "normalized imag [-]": float(arr[0, 0].imag),
+                    "destabilizing value [unit]": destab,
+                    "in set value [unit]": phys_unit.get(bname, np.nan),
                 }
             )
     return pd.DataFrame(rows), pd.DataFrame(perturbation_rows), certificates
@@ -576,7 +576,7 @@ def run_analysis(
             (perf["channel"] == "e_p") & (perf["subset"] == "total") & (perf["model"] == crit_model)
         ]
         if len(pk):
-            j = int(np.argmax(pk["gain_lower [-]"].to_numpy()))
+            j = int(np.argmax(pk["gain lower [-]"].to_numpy()))
             wj = 2 * np.pi * float(pk["frequency [Hz]"].iloc[j])
             k_model = int(np.flatnonzero(models == crit_model)[0])
             dl = perf_deltas[("e_p", "total")][k_model, j]
@@ -650,7 +650,7 @@ def run_analysis(
     timings["total"] = round(_time.perf_counter() - t_start, 2)
     tot = peaks[peaks["subset"] == "total"].iloc[0]
     ep = perf[perf["channel"] == "e_p"]
-    ep_peak = ep.loc[ep["gain_upper [-]"].idxmax()]
+    ep_peak = ep.loc[ep["gain upper [-]"].idxmax()]
     from oos_drake.scenario.data import scenario_record
 
     summary = {
@@ -691,10 +691,10 @@ def run_analysis(
         "subsets": peaks.drop(columns=["study"]).to_dict(orient="records"),
         "docking": docking_peaks,
         "performance": {
-            "e_p_peak_gain_upper": float(ep_peak["gain_upper [-]"]),
+            "e_p_peak_gain_upper": float(ep_peak["gain upper [-]"]),
             "e_p_peak_frequency_hz": float(ep_peak["frequency [Hz]"]),
             "e_u_peak_gain_upper": float(
-                perf.loc[perf["channel"] == "e_u", "gain_upper [-]"].max()
+                perf.loc[perf["channel"] == "e_u", "gain upper [-]"].max()
             ),
         },
         "time_check": tsum.to_dict(orient="records"),

@@ -391,10 +391,10 @@ def run_study_command(args) -> int:
     summary = json.loads((Path(args.out) / "summary.json").read_text())
     columns = [
         sweep.column,
-        "mu_upper [-]",
-        "mu_lower [-]",
-        "margin_lower [-]",
-        "margin_upper [-]",
+        "mu upper [-]",
+        "mu lower [-]",
+        "margin lower [-]",
+        "margin upper [-]",
         "worst study",
         "pointing worst gain upper [-]",
     ]

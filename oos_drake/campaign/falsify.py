@@ -313,8 +313,8 @@ class _Evaluator:
             "point_id": np.int64(case.run_id),
             "generation": np.int64(self.generation),
             "seed": np.int64(case.seed),
-            "window_start [s]": case.window.start,
-            "window_end [s]": case.window.end,
+            "window start [s]": case.window.start,
+            "window end [s]": case.window.end,
             "frequency [Hz]": case.frequency,
         }
         for parameter in spec.info.parameters:
@@ -324,7 +324,7 @@ class _Evaluator:
         record[RATIO_COLUMN] = ratio
         record["status"] = result.status
         record["error"] = result.error
-        record["wall_time [s]"] = float(result.wall_time)
+        record["wall time [s]"] = float(result.wall_time)
         record["unit coordinates"] = json.dumps([float(v) for v in u])
         path = Path(self.directory) / POINTS_DIR / f"point_{case.run_id:06d}.parquet"
         atomic_write_parquet(pd.DataFrame([record]), path)

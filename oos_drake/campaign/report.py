@@ -248,7 +248,7 @@ def violations_table(directory: Path, spec, runs: pd.DataFrame) -> pd.DataFrame:
     phases = mission_phases(spec.info)
     rows = []
     for _, run in runs.iterrows():
-        start, end = float(run["window_start [s]"]), float(run["window_end [s]"])
+        start, end = float(run["window start [s]"]), float(run["window end [s]"])
         overlapped = "+".join(
             w.label.removeprefix("phase:") for w in phases if start < w.end and end > w.start
         )

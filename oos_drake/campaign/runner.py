@@ -41,7 +41,7 @@ def case_from_plan_row(spec: CampaignSpec, row: pd.Series) -> RunCase:
     """The :class:`RunCase` of one plan row (all values physical)."""
     values = {p.name: float(row[p.column]) for p in spec.info.parameters}
     window = MissionWindow(
-        float(row["window_start [s]"]), float(row["window_end [s]"]), str(row["window"])
+        float(row["window start [s]"]), float(row["window end [s]"]), str(row["window"])
     )
     frequency = float(row.get(FREQUENCY_COLUMN, math.nan))
     return RunCase(int(row["run_id"]), int(row["seed"]), values, window, frequency)
@@ -53,7 +53,7 @@ def result_row(spec: CampaignSpec, plan_row: pd.Series, result: RunResult) -> pd
     passes = []
     for metric in spec.metrics:
         record[metric_column(spec, metric)] = float(result.metrics.get(metric, math.nan))
-    start, end = float(plan_row["window_start [s]"]), float(plan_row["window_end [s]"])
+    start, end = float(plan_row["window start [s]"]), float(plan_row["window end [s]"])
     for requirement in spec.requirements:
         value = float(result.metrics.get(requirement.metric, math.nan))
         applies = requirement.applies(start, end)
@@ -63,8 +63,8 @@ def result_row(spec: CampaignSpec, plan_row: pd.Series, result: RunResult) -> pd
     record["pass"] = result.status == "ok" and all(passes)
     record["status"] = result.status
     record["error"] = result.error
-    record["wall_time [s]"] = float(result.wall_time)
-    record["cpu_time [s]"] = float(result.cpu_time)
+    record["wall time [s]"] = float(result.wall_time)
+    record["cpu time [s]"] = float(result.cpu_time)
     record["worker"] = result.worker
     table = pd.DataFrame([record])
     for column in ("run_id", "seed", "region"):

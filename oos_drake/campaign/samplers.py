@@ -247,7 +247,7 @@ def make_plan(spec, n_runs: int | None = None, first_run_id: int = 0) -> pd.Data
     -------
     pandas.DataFrame
         One row per run: ``run_id``, ``seed``, ``region`` (-1: nominal draw), ``weight``,
-        ``window``, ``window_start [s]``, ``window_end [s]``, ``frequency [Hz]`` (see the module
+        ``window``, ``window start [s]``, ``window end [s]``, ``frequency [Hz]`` (see the module
         docstring) and one ``"name [unit]"`` column per simulator parameter (dispersed value, or
         the nominal value).
 
@@ -302,8 +302,8 @@ def make_plan(spec, n_runs: int | None = None, first_run_id: int = 0) -> pd.Data
             "region": region.astype(np.int64),
             "weight": weight.astype(float),
             "window": labels,
-            "window_start [s]": [w.start for w in windows],
-            "window_end [s]": [w.end for w in windows],
+            "window start [s]": [w.start for w in windows],
+            "window end [s]": [w.end for w in windows],
             FREQUENCY_COLUMN: frequency,
             DEFENSIVE_COLUMN: defensive,
         }

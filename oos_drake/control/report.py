@@ -77,7 +77,7 @@ def controller_record(result: SynthesisResult, plants: PlantArray, options=None)
             "gamma_baseline": result.gamma_start,
             "requirement_met": bool(result.gamma < 1.0),
             "active_models": active[
-                ["config", *result.parameter_names, "gamma [-]", "peak frequency [rad/s]"]
+                ["config", *result.parameter_names, "gamma [-]", "peak frequency [Hz]"]
             ].to_dict(orient="records"),
             "configurations": plants.configurations.to_dict(orient="list"),
             "uncertain_parameters": [asdict(p) for p in plants.parameters],
@@ -132,7 +132,7 @@ def write_synthesis(
         "config": table["config"].to_numpy(),
         "parameter_values": table[list(result.parameter_names)].to_numpy(dtype=float),
         "gamma": table["gamma [-]"].to_numpy(),
-        "omega_peak_rad_s": table["peak frequency [rad/s]"].to_numpy(),
+        "omega_peak_rad_s": 2 * np.pi * table["peak frequency [Hz]"].to_numpy(),
     }
     names = {
         "inputs": np.array(DISTURBANCES),

@@ -141,7 +141,7 @@ class SynthesisResult:
     models : pandas.DataFrame
         One row per model of the final set: ``config``, configuration columns (``time [s]``),
         parameter columns (physical values, named by parameter), ``gamma [-]``,
-        ``peak frequency [rad/s]``, ``spectral abscissa [1/s]``, ``worst_case`` (added by the
+        ``peak frequency [Hz]``, ``spectral abscissa [1/s]``, ``worst_case`` (added by the
         uncertainty search), ``active`` (within 1e-3 of gamma).
     runs : pandas.DataFrame
         One row per BFGS run: round, restart, gamma start/end, iterations, evaluations, message.
@@ -469,7 +469,7 @@ def synthesize(
     for column in plants.configurations.columns:
         table[column] = plants.configurations[column].to_numpy()[models.config_index]
     table["gamma [-]"] = final.gamma
-    table["peak frequency [rad/s]"] = final.omega
+    table["peak frequency [Hz]"] = final.omega / (2 * np.pi)
     table["spectral abscissa [1/s]"] = final.spectral_abscissa
     table["worst_case"] = added
     table["active"] = final.gamma >= gamma * (1.0 - 1e-3)

@@ -63,7 +63,7 @@ def test_full_analysis_of_the_baseline_controller(tmp_path, paper_scenario):
     worst = pd.read_parquet(tmp_path / "worst_perturbations.parquet")
     worst = worst[(worst["study"] == "mission") & (worst["subset"] == "real")]
     assert set(worst["kind"]) == {"ureal"}
-    values = dict(zip(worst["block"], worst["normalized_real [-]"], strict=True))
+    values = dict(zip(worst["block"], worst["normalized real [-]"], strict=True))
     times = mission_times(330, paper_scenario)[[int(real["model"])]]
     one = mission_closed_loop(controller, times, paper_scenario).system
     poles = np.linalg.eigvals(np.asarray(usubs(one.model(0), values, normalized=True).A))

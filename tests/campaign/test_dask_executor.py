@@ -45,6 +45,6 @@ def test_campaign_on_a_dask_scheduler_address(write_spec, tmp_path):
     dask = pd.read_parquet(tmp_path / "dask" / "runs.parquet")
     inline = pd.read_parquet(tmp_path / "inline" / "runs.parquet")
     pd.testing.assert_frame_equal(
-        dask.drop(columns=["wall_time [s]", "cpu_time [s]", "worker"]),
-        inline.drop(columns=["wall_time [s]", "cpu_time [s]", "worker"]),
+        dask.drop(columns=["wall time [s]", "cpu time [s]", "worker"]),
+        inline.drop(columns=["wall time [s]", "cpu time [s]", "worker"]),
     )

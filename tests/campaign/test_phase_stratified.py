@@ -38,7 +38,7 @@ def test_phase_stratified_campaign(write_spec, tmp_path):
     # synthetic mission: 100 s, capture at 10 s -> phases of 10 % and 90 % of the duration
     counts = runs["window"].value_counts().to_dict()
     assert counts == {"phase:start-capture": 3, "phase:capture-end": 27}
-    spans = runs.groupby("window")[["window_start [s]", "window_end [s]"]].first()
+    spans = runs.groupby("window")[["window start [s]", "window end [s]"]].first()
     assert spans.loc["phase:start-capture"].tolist() == [0.0, 10.0]
     assert spans.loc["phase:capture-end"].tolist() == [10.0, 100.0]
     spec, _ = load_campaign(tmp_path / "c")

@@ -167,7 +167,7 @@ def test_kill_9_then_resume_loses_and_repeats_nothing(write_spec, tmp_path, work
     uninterrupted = pd.read_parquet(reference / "runs.parquet")
     assert resumed["run_id"].tolist() == list(range(n_runs))  # each run exactly once
     # bit for bit: every column but the timing and worker ones
-    machine = ["wall_time [s]", "cpu_time [s]", "worker"]
+    machine = ["wall time [s]", "cpu time [s]", "worker"]
     pd.testing.assert_frame_equal(
         resumed.drop(columns=machine), uninterrupted.drop(columns=machine), check_exact=True
     )
@@ -181,8 +181,8 @@ def test_process_pool_matches_in_process_results(write_spec, tmp_path):
     pool = pd.read_parquet(tmp_path / "pool" / "runs.parquet")
     inline = pd.read_parquet(tmp_path / "inline" / "runs.parquet")
     pd.testing.assert_frame_equal(
-        pool.drop(columns=["wall_time [s]", "cpu_time [s]", "worker"]),
-        inline.drop(columns=["wall_time [s]", "cpu_time [s]", "worker"]),
+        pool.drop(columns=["wall time [s]", "cpu time [s]", "worker"]),
+        inline.drop(columns=["wall time [s]", "cpu time [s]", "worker"]),
     )
     here = f"{socket.gethostname()}:{os.getpid()}"
     assert set(inline["worker"]) == {here}

@@ -146,7 +146,7 @@ def test_plan_columns_and_nominal_values(write_spec):
     assert (plan["J_target [kg m^2]"] == 300.0).all()
     assert plan["J_hub [kg m^2]"].between(400, 600).all()
     # window around the capture event at 100 s
-    assert (plan["window_start [s]"] == 95.0).all() and (plan["window_end [s]"] == 140.0).all()
+    assert (plan["window start [s]"] == 95.0).all() and (plan["window end [s]"] == 140.0).all()
     # same seed, same plan
     assert make_plan(spec).equals(plan)
 

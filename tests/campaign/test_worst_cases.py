@@ -134,8 +134,8 @@ def test_critical_window_centres_runs_on_region_times(write_spec, tmp_path):
     starts = {0: 95.0, 4: 115.0}
     for _, row in plan.iterrows():
         region = int(row["window"].removeprefix("region:"))
-        assert row["window_start [s]"] == starts[region]
-        assert row["window_end [s]"] == starts[region] + 45.0
+        assert row["window start [s]"] == starts[region]
+        assert row["window end [s]"] == starts[region] + 45.0
         if row["region"] != -1:
             assert region == row["region"]
 

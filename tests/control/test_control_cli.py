@@ -35,7 +35,7 @@ def test_synth_writes_every_output(tmp_path):
     assert len(record["model_sha256"]) == 64
     assert record["gamma"] <= record["gamma_baseline"]
     table = pd.read_parquet(out / "models.parquet")
-    assert len(table) == 3 and {"gamma [-]", "peak frequency [rad/s]", "time [s]"} <= set(
+    assert len(table) == 3 and {"gamma [-]", "peak frequency [Hz]", "time [s]"} <= set(
         table.columns
     )
     assert np.isclose(table["gamma [-]"].max(), record["gamma"], rtol=1e-12)

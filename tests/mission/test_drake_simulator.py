@@ -119,7 +119,7 @@ def test_paper_campaign_specs_load_and_plan(name, synthetic_worst_cases, tmp_pat
 
     spec, plan = plan_campaign(CAMPAIGNS / name, synthetic_worst_cases)
     assert len(plan) == spec.n_runs
-    width = plan["window_end [s]"] - plan["window_start [s]"]
+    width = plan["window end [s]"] - plan["window start [s]"]
     np.testing.assert_allclose(width, 80.0)
     if spec.sampler.kind == "mu-guided":
         assert len(spec.regions) == 3
