@@ -94,9 +94,9 @@ def results_folder(tmp_path) -> Path:
             "block": ["m_RH2", "w1_SA1"],
             "kind": ["ureal", "ureal"],
             "unit": ["kg", "rad/s"],
-            "destabilizing_value [unit]": [30.1, 5.2],
-            "in_set_value [unit]": [27.0, 6.5],
-            "normalized_norm [-]": [1.2, 1.1],
+            "destabilizing value [unit]": [30.1, 5.2],
+            "in set value [unit]": [27.0, 6.5],
+            "normalized norm [-]": [1.2, 1.1],
         }
     ).to_parquet(analysis / "worst_perturbations.parquet")
     _png(analysis / "mu_mission.png")

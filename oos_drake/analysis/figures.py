@@ -134,10 +134,10 @@ def performance_figure(table: pd.DataFrame, path) -> Path:
     titles = {"e_p": "(a) d -> e_p (APE / requirement)", "e_u": "(b) d -> e_u (torque / 2 N m)"}
     for ax, channel in zip(axes, ["e_p", "e_u"], strict=True):
         part = table[table["channel"] == channel]
-        nominal = part.groupby("frequency [Hz]")["gain_nominal [-]"].max()
+        nominal = part.groupby("frequency [Hz]")["gain nominal [-]"].max()
         ax.loglog(nominal.index, nominal.to_numpy(), "k--", lw=1.5, label="nominal")
         for name in _ordered(part["subset"].unique()):
-            g = part[part["subset"] == name].groupby("frequency [Hz]")["gain_upper [-]"].max()
+            g = part[part["subset"] == name].groupby("frequency [Hz]")["gain upper [-]"].max()
             ax.loglog(g.index, g.to_numpy(), lw=1.2, label=name)
         ax.axhline(1.0, color="r", ls=":", lw=0.8, label="requirement")
         ax.set_xlabel("frequency [Hz]")
@@ -204,10 +204,10 @@ def time_check_figure(signals: pd.DataFrame, summary: pd.DataFrame, path) -> Pat
         axes[1].plot(t, u, lw=1.0, label=case)
     if len(summary):
         axes[0].axhline(
-            summary["ape_requirement [rad]"].iloc[0], color="r", ls="--", label="APE requirement"
+            summary["ape requirement [rad]"].iloc[0], color="r", ls="--", label="APE requirement"
         )
         axes[1].axhline(
-            summary["torque_requirement [N m]"].iloc[0], color="r", ls="--", label="torque bound"
+            summary["torque requirement [N m]"].iloc[0], color="r", ls="--", label="torque bound"
         )
     axes[0].set_ylabel("max_axis |phi| [rad]")
     axes[1].set_ylabel("max_axis |u| [N m]")

@@ -30,9 +30,9 @@ PERFORMANCE_COLUMNS = [
     "model",
     "time [s]",
     "frequency [Hz]",
-    "gain_nominal [-]",
-    "gain_lower [-]",
-    "gain_upper [-]",
+    "gain nominal [-]",
+    "gain lower [-]",
+    "gain upper [-]",
 ]
 
 
@@ -144,9 +144,9 @@ def worst_case_gains(
                         "model": int(m),
                         "time [s]": times[m],
                         "frequency [Hz]": hz,
-                        "gain_nominal [-]": nom[j],
-                        "gain_lower [-]": lo[j],
-                        "gain_upper [-]": up[j],
+                        "gain nominal [-]": nom[j],
+                        "gain lower [-]": lo[j],
+                        "gain upper [-]": up[j],
                     }
                 )
             )
@@ -167,7 +167,7 @@ def peak_gains(table: pd.DataFrame, subset: str, model: int) -> dict:
         chosen = rows[rows["channel"] == channel]
         if len(chosen):
             out[metric] = (
-                float(chosen["gain_lower [-]"].max()),
-                float(chosen["gain_upper [-]"].max()),
+                float(chosen["gain lower [-]"].max()),
+                float(chosen["gain upper [-]"].max()),
             )
     return out

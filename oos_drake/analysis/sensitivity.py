@@ -3,8 +3,8 @@ r"""Which uncertain parameter moves the worst-case mu most (paper Fig. unc_sensi
 At the critical configuration, for every block ``b`` of ``Delta_tot``, on the frequencies where
 the peak lives:
 
-* ``mu_upper_alone``: mu with only ``b`` uncertain (what ``b`` can do by itself);
-* ``mu_upper_without``: mu with ``b`` held nominal (``drop [%]``: how much of the peak is due
+* ``mu upper alone [-]``: mu with only ``b`` uncertain (what ``b`` can do by itself);
+* ``mu upper without [-]``: mu with ``b`` held nominal (``drop [%]``: how much of the peak is due
   to ``b``);
 * ``sensitivity [-]``: the mu-sensitivity ``(d mu / mu) / (d r_b / r_b)``, the relative change
   of the peak when the size ``r_b`` of ``b``'s uncertainty grows by 10 % (its Delta channels
@@ -25,9 +25,9 @@ SENSITIVITY_COLUMNS = [
     "block",
     "group",
     "unit",
-    "mu_upper_total [-]",
-    "mu_upper_alone [-]",
-    "mu_upper_without [-]",
+    "mu upper total [-]",
+    "mu upper alone [-]",
+    "mu upper without [-]",
     "drop [%]",
     "sensitivity [-]",
     "frequency [Hz]",
@@ -92,9 +92,9 @@ def mu_sensitivity(
                 "block": name,
                 "group": block_group(one.uncertainty[name]),
                 "unit": one.uncertainty[name].unit,
-                "mu_upper_total [-]": peak,
-                "mu_upper_alone [-]": float(alone.max()),
-                "mu_upper_without [-]": float(without.max()),
+                "mu upper total [-]": peak,
+                "mu upper alone [-]": float(alone.max()),
+                "mu upper without [-]": float(without.max()),
                 "drop [%]": 100.0 * (peak - float(without.max())) / peak if peak > 0 else 0.0,
                 "sensitivity [-]": ((float(grown.max()) - peak) / peak / step) if peak > 0 else 0.0,
                 "frequency [Hz]": float(omega[int(np.argmax(alone))] / (2 * np.pi)),

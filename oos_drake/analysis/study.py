@@ -182,13 +182,13 @@ def _run_point(scenario_file: str, path: str, value: float, options: StudyOption
     worst = max(upper, key=upper.get)
     mission = summary["mission"]
     row = {
-        "mu_upper [-]": upper[worst],
-        "mu_lower [-]": max(lower.values()),
-        "margin_lower [-]": 1.0 / upper[worst],
-        "margin_upper [-]": 1.0 / max(lower.values()),
+        "mu upper [-]": upper[worst],
+        "mu lower [-]": max(lower.values()),
+        "margin lower [-]": 1.0 / upper[worst],
+        "margin upper [-]": 1.0 / max(lower.values()),
         "worst study": worst,
-        "mission mu_upper [-]": upper["mission"],
-        "mission mu_lower [-]": lower["mission"],
+        "mission mu upper [-]": upper["mission"],
+        "mission mu lower [-]": lower["mission"],
         "mission peak time [s]": mission["peak_time_s"],
         "mission peak frequency [Hz]": mission["peak_frequency_hz"],
         "nominal stable models [-]": mission["nominal_stable_models"],
@@ -199,7 +199,7 @@ def _run_point(scenario_file: str, path: str, value: float, options: StudyOption
     }
     for name in studies:
         if name != "mission":
-            row[f"{name} mu_upper [-]"] = upper[name]
+            row[f"{name} mu upper [-]"] = upper[name]
     return row
 
 
@@ -304,7 +304,7 @@ def margin_crossing(table: pd.DataFrame, column: str) -> dict:
     """
     x = table[column].to_numpy(dtype=float)
     result = {}
-    for key, name in (("certified", "margin_lower [-]"), ("attained", "margin_upper [-]")):
+    for key, name in (("certified", "margin lower [-]"), ("attained", "margin upper [-]")):
         y = table[name].to_numpy(dtype=float) - 1.0
         result[key] = None
         for k in range(len(x) - 1):
@@ -325,13 +325,13 @@ def study_figure(table: pd.DataFrame, sweep: Sweep, path) -> Path:
     fig, ax = plt.subplots(figsize=(7, 4.2))
     ax.fill_between(
         x,
-        table["margin_lower [-]"],
-        table["margin_upper [-]"],
+        table["margin lower [-]"],
+        table["margin upper [-]"],
         alpha=0.25,
         label="margin between its bounds",
     )
-    ax.plot(x, table["margin_lower [-]"], "o-", label="certified lower bound 1/mu_upper")
-    ax.plot(x, table["margin_upper [-]"], "s--", label="attained upper bound 1/mu_lower")
+    ax.plot(x, table["margin lower [-]"], "o-", label="certified lower bound 1/mu_upper")
+    ax.plot(x, table["margin upper [-]"], "s--", label="attained upper bound 1/mu_lower")
     ax.axhline(1.0, color="k", lw=0.8, label="margin 1 (uncertainty set just covered)")
     ax.set_xlabel(sweep.column)
     ax.set_ylabel("robust stability margin 1/mu [-]")

@@ -26,10 +26,10 @@ TIME_COLUMNS = [
     "time [s]",
     "scale [-]",
     "frequency [Hz]",
-    "ape_max [rad]",
-    "ape_requirement [rad]",
-    "torque_max [N m]",
-    "torque_requirement [N m]",
+    "ape max [rad]",
+    "ape requirement [rad]",
+    "torque max [N m]",
+    "torque requirement [N m]",
     "stable",
 ]
 
@@ -147,10 +147,10 @@ def check_case(
         "time [s]": float(time),
         "scale [-]": float(scale),
         "frequency [Hz]": float(f_hz),
-        "ape_max [rad]": float(np.nanmax(np.abs(phi))) if np.isfinite(phi).any() else np.inf,
-        "ape_requirement [rad]": spec.pointing_requirement,
-        "torque_max [N m]": float(np.nanmax(np.abs(u))) if np.isfinite(u).any() else np.inf,
-        "torque_requirement [N m]": 1.0 / spec.control_weight,
+        "ape max [rad]": float(np.nanmax(np.abs(phi))) if np.isfinite(phi).any() else np.inf,
+        "ape requirement [rad]": spec.pointing_requirement,
+        "torque max [N m]": float(np.nanmax(np.abs(u))) if np.isfinite(u).any() else np.inf,
+        "torque requirement [N m]": 1.0 / spec.control_weight,
         "stable": stable,
     }
     signals = pd.DataFrame(

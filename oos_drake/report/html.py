@@ -486,9 +486,9 @@ def analysis_section(results: RunResults) -> str:
                     "block",
                     "kind",
                     "unit",
-                    "destabilizing_value [unit]",
-                    "in_set_value [unit]",
-                    "normalized_norm [-]",
+                    "destabilizing value [unit]",
+                    "in set value [unit]",
+                    "normalized norm [-]",
                     "physical body",
                 ],
             )

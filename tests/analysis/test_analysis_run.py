@@ -163,7 +163,7 @@ def test_worst_cases_file_reads_back_with_the_campaign_schema(analysis):
             ]
             assert len(rows) > 0
             assert 0 < low <= high * (1 + 1e-9)
-            assert high >= rows["gain_nominal [-]"].max() * (1 - 1e-6)
+            assert high >= rows["gain nominal [-]"].max() * (1 - 1e-6)
 
 
 def test_peak_bounds_meet(analysis):
@@ -182,7 +182,7 @@ def test_peak_bounds_meet(analysis):
         assert row["mu upper at critical [-]"] <= row["mu upper [-]"] * (1 + 1e-9)
         up, lo = row["mu upper [-]"], row["mu lower [-]"]
         np.testing.assert_allclose(row["gap [%]"], 100 * (up - lo) / up, rtol=1e-9, atol=1e-9)
-        if row["spikes_left"] == 0 and lo > 0:
+        if row["spikes left"] == 0 and lo > 0:
             assert row["gap [%]"] <= target * (1 + 1e-6) + 1e-9, (row["study"], row["subset"])
         if row["subset"] in ("additive", "multiplicative"):
             assert row["gap [%]"] < 5.0, (row["study"], row["subset"], row["gap [%]"])
@@ -204,7 +204,7 @@ def test_time_check_nominal_is_stable(analysis):
     out, _, _ = analysis
     t = pd.read_parquet(out / "time_check.parquet")
     assert bool(t.loc[t["case"] == "nominal", "stable"].iloc[0])
-    assert np.all(t["torque_requirement [N m]"] == 2.0)
+    assert np.all(t["torque requirement [N m]"] == 2.0)
 
 
 def test_worst_perturbation_destabilizes_at_the_reported_frequency(analysis):

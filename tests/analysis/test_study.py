@@ -50,8 +50,8 @@ def test_margin_crossing_interpolates_linearly():
     table = pd.DataFrame(
         {
             "x [kg]": [0.0, 10.0, 20.0],
-            "margin_lower [-]": [2.0, 1.5, 0.5],  # crosses 1 at 15
-            "margin_upper [-]": [3.0, 2.0, 1.5],  # never crosses
+            "margin lower [-]": [2.0, 1.5, 0.5],  # crosses 1 at 15
+            "margin upper [-]": [3.0, 2.0, 1.5],  # never crosses
         }
     )
     assert margin_crossing(table, "x [kg]") == {"certified": 15.0, "attained": None}
@@ -82,9 +82,9 @@ def test_tiny_mass_study_reaches_the_model(tmp_path):
     pd.testing.assert_frame_equal(saved, table)
     assert (tmp_path / "study" / "study.png").stat().st_size > 0
     assert list(table["hubs.RH2.mass [kg]"]) == [25.0, 400.0]
-    np.testing.assert_allclose(table["margin_lower [-]"], 1 / table["mu_upper [-]"], rtol=1e-12)
-    np.testing.assert_allclose(table["margin_upper [-]"], 1 / table["mu_lower [-]"], rtol=1e-12)
-    assert np.all(table["mu_lower [-]"] <= table["mu_upper [-]"] * (1 + 1e-9))
+    np.testing.assert_allclose(table["margin lower [-]"], 1 / table["mu upper [-]"], rtol=1e-12)
+    np.testing.assert_allclose(table["margin upper [-]"], 1 / table["mu lower [-]"], rtol=1e-12)
+    assert np.all(table["mu lower [-]"] <= table["mu upper [-]"] * (1 + 1e-9))
     for i, mass in enumerate(sweep.values):
         # the swept mass reached the analyzed model: its worst-case target mass lies in +-10 %
         point = tmp_path / "study" / "points" / str(i) / "analysis"
