@@ -193,7 +193,7 @@ def test_every_certified_upper_bound_is_proved_by_scalings_at_its_peak(default_r
         }
         sub = usubs(one, others, normalized=True) if others else one
         A, Bw, Cz, Dzw = (np.asarray(x) for x in (sub.A, sub.Bw, sub.Cz, sub.Dzw))
-        omega = 2 * np.pi * row["peak_frequency [Hz]"]
+        omega = 2 * np.pi * row["peak frequency [Hz]"]
         if np.isinf(omega):  # the well-posedness point: M(inf) = Dzw
             M = Dzw.astype(complex)
         else:
@@ -218,16 +218,16 @@ def test_every_guaranteed_peak_is_above_the_lower_bounds_and_within_the_target(d
         mine = per_model[
             (per_model["study"] == row["study"]) & (per_model["subset"] == row["subset"])
         ]
-        assert row["guarantee_failures"] == 0 and np.all(
+        assert row["guarantee failures"] == 0 and np.all(
             np.isfinite(mine["mu upper guaranteed [-]"])
         )
         assert np.all(mine["mu upper guaranteed [-]"] >= mine["mu lower on grid [-]"]), key
         guaranteed = row["mu upper guaranteed [-]"]
         assert guaranteed == mine["mu upper guaranteed [-]"].max(), key
         assert guaranteed >= row["mu lower [-]"], key
-        assert row["gap_guaranteed [%]"] <= 100 * TARGET_GAP + 1e-9, (
+        assert row["gap guaranteed [%]"] <= 100 * TARGET_GAP + 1e-9, (
             key,
-            row["gap_guaranteed [%]"],
+            row["gap guaranteed [%]"],
         )
 
 

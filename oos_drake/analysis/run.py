@@ -91,7 +91,7 @@ class AnalysisOptions:
         Wall-clock budget of the spike resolution of the whole analysis [s] (all studies and
         subsets; each subset also keeps ``tighten.time_budget``). With the grid sweeps, it
         bounds the run time whatever the controller; where it cuts the resolution short, the
-        peaks table says so (``budget_exhausted``, ``spike_stop``).
+        peaks table says so (``budget exhausted``, ``spike stop``).
     sensitivity : bool
         Compute the sensitivity table.
     sensitivity_iterations : int
@@ -188,21 +188,21 @@ def _certify(array, study, subsets, *, configuration_label):
                 "mu upper at critical [-]": cert.mu_upper_critical,
                 "mu upper grid [-]": upper_grid,
                 "gap [%]": 100.0 * (upper - lower) / upper if upper > 0 else 0.0,
-                "gap_at_critical [%]": 100.0 * cert.gap_critical,
+                "gap at critical [%]": 100.0 * cert.gap_critical,
                 "margin [-]": 1.0 / upper if upper > 0 else np.inf,
-                "peak_model": cert.peak_model,
+                "peak model": cert.peak_model,
                 f"peak {array.label}": float(array.values[cert.peak_model]),
-                "peak_frequency [Hz]": cert.peak_frequency,
-                "lower_source": cert.source,
-                "spike_rounds": report.rounds,
-                "spikes_left": cert.spikes_left,
-                "spikes_converged": report.converged,
-                "refinement_points": report.points_added,
-                "searched_models": len(report.searched_models),
-                "spike_stop": report.stop,
-                "budget_exhausted": bool(report.budget_exhausted),
-                "spike_time [s]": round(report.seconds, 2),
-                "spike_work [point-iterations]": float(report.work),
+                "peak frequency [Hz]": cert.peak_frequency,
+                "lower source": cert.source,
+                "spike rounds": report.rounds,
+                "spikes left": cert.spikes_left,
+                "spikes converged": report.converged,
+                "refinement points": report.points_added,
+                "searched models": len(report.searched_models),
+                "spike stop": report.stop,
+                "budget exhausted": bool(report.budget_exhausted),
+                "spike time [s]": round(report.seconds, 2),
+                "spike work [point-iterations]": float(report.work),
                 "configuration": configuration_label(model),
                 **_guarantee_columns(study.guarantees.get(name), lower, len(array.values)),
             }
@@ -286,15 +286,15 @@ def _guarantee_columns(guarantee, lower, n_configurations) -> dict:
     up = guarantee.mu_upper
     return {
         "mu upper guaranteed [-]": up,
-        "gap_guaranteed [%]": 100.0 * (up - lower) / up if up > 0 else 0.0,
-        "margin_guaranteed [-]": 1.0 / up if up > 0 else np.inf,
-        "guarantee_slack [%]": 100.0 * guarantee.slack,
-        "guarantee_points": int(guarantee.points.sum()),
-        "guarantee_solved_points": int(guarantee.solved.sum()),
-        "guarantee_raised_configurations": guarantee.raised,
-        "guarantee_failures": len(guarantee.failures),
-        "guarantee_time [s]": round(guarantee.seconds, 2),
-        "guarantee_scope": (
+        "gap guaranteed [%]": 100.0 * (up - lower) / up if up > 0 else 0.0,
+        "margin guaranteed [-]": 1.0 / up if up > 0 else np.inf,
+        "guarantee slack [%]": 100.0 * guarantee.slack,
+        "guarantee points": int(guarantee.points.sum()),
+        "guarantee solved points": int(guarantee.solved.sum()),
+        "guarantee raised configurations": guarantee.raised,
+        "guarantee failures": len(guarantee.failures),
+        "guarantee time [s]": round(guarantee.seconds, 2),
+        "guarantee scope": (
             f"every frequency in [0, inf) at each of the {n_configurations} analyzed "
             "configurations; configurations between them are sampled, not covered"
         ),
@@ -485,10 +485,10 @@ def run_analysis(
             "mu_upper": float(row["mu upper [-]"]),
             "mu_upper_scope": str(row["mu upper scope"]),
             "peak_stiffness": float(row["peak stiffness [N/m or N m/rad]"]),
-            "peak_frequency [Hz]": float(row["peak_frequency [Hz]"]),
-            "spikes_left": int(row["spikes_left"]),
-            "spike_stop": str(row["spike_stop"]),
-            "budget_exhausted": bool(row["budget_exhausted"]),
+            "peak frequency [Hz]": float(row["peak frequency [Hz]"]),
+            "spikes left": int(row["spikes left"]),
+            "spike stop": str(row["spike stop"]),
+            "budget exhausted": bool(row["budget exhausted"]),
             "mu_upper_guaranteed": float(row.get("mu upper guaranteed [-]", np.nan)),
         }
         timings[f"docking {phase} detail"] = {k: round(v, 2) for k, v in dres.timings.items()}
@@ -678,15 +678,15 @@ def run_analysis(
             "mu_peak_lower": float(tot["mu lower [-]"]),
             "mu_upper_at_critical": float(tot["mu upper at critical [-]"]),
             "gap_percent": float(tot["gap [%]"]),
-            "gap_at_critical_percent": float(tot["gap_at_critical [%]"]),
+            "gap_at_critical_percent": float(tot["gap at critical [%]"]),
             "peak_time_s": float(tot["time [s]"]),
             "peak_frequency_hz": float(tot["frequency [Hz]"]),
             "upper_peak_time_s": float(tot["peak time [s]"]),
-            "upper_peak_frequency_hz": float(tot["peak_frequency [Hz]"]),
+            "upper_peak_frequency_hz": float(tot["peak frequency [Hz]"]),
             "stability_margin": float(tot["margin [-]"]),
-            "spikes_left": int(tot["spikes_left"]),
-            "spike_stop": str(tot["spike_stop"]),
-            "budget_exhausted": bool(tot["budget_exhausted"]),
+            "spikes_left": int(tot["spikes left"]),
+            "spike_stop": str(tot["spike stop"]),
+            "budget_exhausted": bool(tot["budget exhausted"]),
         },
         "subsets": peaks.drop(columns=["study"]).to_dict(orient="records"),
         "docking": docking_peaks,

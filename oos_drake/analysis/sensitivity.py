@@ -3,8 +3,8 @@ r"""Which uncertain parameter moves the worst-case mu most (paper Fig. unc_sensi
 At the critical configuration, for every block ``b`` of ``Delta_tot``, on the frequencies where
 the peak lives:
 
-* ``mu_upper_alone``: mu with only ``b`` uncertain (what ``b`` can do by itself);
-* ``mu_upper_without``: mu with ``b`` held nominal (``drop [%]``: how much of the peak is due
+* ``mu upper alone [-]``: mu with only ``b`` uncertain (what ``b`` can do by itself);
+* ``mu upper without [-]``: mu with ``b`` held nominal (``drop [%]``: how much of the peak is due
   to ``b``);
 * ``sensitivity [-]``: the mu-sensitivity ``(d mu / mu) / (d r_b / r_b)``, the relative change
   of the peak when the size ``r_b`` of ``b``'s uncertainty grows by 10 % (its Delta channels

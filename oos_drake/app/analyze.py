@@ -148,10 +148,10 @@ def _peak_line(lower, upper, scope, grid_upper, peak: dict, where: str) -> str:
     bound of ``scope`` (the whole-axis guarantee, or the analyzed points with --grid-only);
     the grid's largest upper bound is shown beside it, never as the peak's."""
     axis = f"(upper: {scope}; largest on the grid {grid_upper:.4g}) "
-    exhausted = ", BUDGET EXHAUSTED" if peak["budget_exhausted"] else ""
+    exhausted = ", BUDGET EXHAUSTED" if peak["budget exhausted"] else ""
     return (
         f"mu in [{lower:.4g}, {upper:.4g}] {axis}(gap {peak['gap [%]']:.2g} %) at {where}; "
-        f"spikes left {peak['spikes_left']} ({peak['spike_stop']}{exhausted})"
+        f"spikes left {peak['spikes left']} ({peak['spike stop']}{exhausted})"
     )
 
 

@@ -47,11 +47,11 @@ def test_full_analysis_of_the_baseline_controller(tmp_path, paper_scenario):
         assert row["gap [%]"] < 5.0, (key, row["gap [%]"])
         # no time or work budget cut the resolution short: spikes may only be left where the
         # D-G bound is converged (its own conservatism) once the direct searches were made
-        assert row["spike_stop"] in ("target met", "converged", "search budget"), key
-        if row["spike_stop"] == "target met":
-            assert row["spikes_left"] == 0 and row["gap [%]"] <= 3.0 + 1e-9, key
+        assert row["spike stop"] in ("target met", "converged", "search budget"), key
+        if row["spike stop"] == "target met":
+            assert row["spikes left"] == 0 and row["gap [%]"] <= 3.0 + 1e-9, key
         else:
-            assert row["spikes_converged"] > 0, key
+            assert row["spikes converged"] > 0, key
     sweep = pd.read_parquet(tmp_path / "mu_mission.parquet")
     for _, row in peaks[peaks["study"] == "mission"].iterrows():
         sub = sweep[sweep["subset"] == row["subset"]]

@@ -182,7 +182,7 @@ def test_peak_bounds_meet(analysis):
         assert row["mu upper at critical [-]"] <= row["mu upper [-]"] * (1 + 1e-9)
         up, lo = row["mu upper [-]"], row["mu lower [-]"]
         np.testing.assert_allclose(row["gap [%]"], 100 * (up - lo) / up, rtol=1e-9, atol=1e-9)
-        if row["spikes_left"] == 0 and lo > 0:
+        if row["spikes left"] == 0 and lo > 0:
             assert row["gap [%]"] <= target * (1 + 1e-6) + 1e-9, (row["study"], row["subset"])
         if row["subset"] in ("additive", "multiplicative"):
             assert row["gap [%]"] < 5.0, (row["study"], row["subset"], row["gap [%]"])

@@ -61,7 +61,7 @@ def test_peak_interval_is_best_lower_and_guaranteed_upper():
             "peak_time_s": row["gain [-]"],
             "peak_frequency_hz": row["frequency [Hz]"],
             "upper_peak_time_s": row["peak gain [-]"],
-            "upper_peak_frequency_hz": row["peak_frequency [Hz]"],
+            "upper_peak_frequency_hz": row["peak frequency [Hz]"],
             "stability_margin": row["margin [-]"],
         },
         "subsets": [{**record, "time [s]": record["gain [-]"]}],

@@ -17,6 +17,21 @@ from oos_drake.robust.tables import (
 
 def test_every_column_follows_the_name_unit_convention():
     labels = {"subset", "model", "refined", "tightened", "guarantee points", "covered", "reason"}
+    labels |= {  # the analysis tables' labels and counts (stability_peaks.parquet)
+        "peak model",
+        "lower source",
+        "spike rounds",
+        "spikes left",
+        "spikes converged",
+        "refinement points",
+        "searched models",
+        "spike stop",
+        "budget exhausted",
+        "guarantee solved points",
+        "guarantee raised configurations",
+        "guarantee failures",
+        "guarantee scope",
+    }
     unit = re.compile(r"^[a-z][a-z ]*[a-z] \[[^\[\]]+\]$")
     for col in SWEEP_COLUMNS + GUARANTEE_COLUMNS:
         assert col in labels or unit.match(col), col
