@@ -102,7 +102,7 @@ def _declared(document):
         if body.get("mass_uncertainty_percent", 0.0) > 0:
             p = body["mass_uncertainty_percent"] / 100
             declared[f"m_{body['name']}"] = (body["mass"] * (1 - p), body["mass"] * (1 + p))
-        for axis, percent in zip("xyz", body.get("inertia_uncertainty_percent", [])):
+        for axis, percent in zip("xyz", body.get("inertia_uncertainty_percent", []), strict=False):
             if percent > 0:
                 value = body["inertia"]["xyz".index(axis)]["xyz".index(axis)]
                 p = percent / 100
