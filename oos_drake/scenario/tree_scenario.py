@@ -212,8 +212,9 @@ class TreeScenario:
             if timeline.captured_at(t) is not None or timeline.docked_at(t) is not None:
                 raise ValueError(
                     f"scenario {self.name}: mission phase {timeline.phase_at(t)!r} "
-                    f"(t = {t:g} s) holds a target: the analysis of captured or docked "
-                    "configurations of a tree is not available yet (oos validate checks them)"
+                    f"(t = {t:g} s) holds a target: the model arrays of the synthesis and "
+                    "the analysis over captured or docked phases of a tree are not available "
+                    "yet (oos validate checks them)"
                 )
         angles = [timeline.angles(t) for t in times]
         return {
