@@ -203,7 +203,6 @@ class TreeScenario:
         ValueError
             A time in a phase that captures or docks a target (one line, naming the phase).
         """
-        from oos_drake.scenario.tree_model import angle_block_name
         from oos_drake.titop.spatial import angle_to_tau
 
         times = np.atleast_1d(np.asarray(times, dtype=float))
@@ -218,7 +217,7 @@ class TreeScenario:
                 )
         angles = [timeline.angles(t) for t in times]
         return {
-            angle_block_name(body): np.array([float(angle_to_tau(a[body])) for a in angles])
+            self.tree.angle_block(body): np.array([float(angle_to_tau(a[body])) for a in angles])
             for body in timeline.joint_names
         }
 

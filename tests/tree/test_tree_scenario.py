@@ -172,19 +172,19 @@ def test_analysis_docking_default_is_the_scenarios_phases(flexible):
 @pytest.mark.slow
 def test_oos_run_on_a_tree_end_to_end(tmp_path, monkeypatch, capsys):
     """``oos run --scenario flexible_satellite --quick`` at reduced sizes (each stage's
-    options appended: synthesis on 6 configurations, analysis on 6 with a coarse grid)."""
+    options appended: synthesis and analysis on 4 configurations, a coarse grid)."""
     import oos_drake.pipeline as pipeline
     from oos_drake.analysis.controller import scenario_controller
     from oos_drake.analysis.models import mission_closed_loop
     from oos_drake.cli import build_parser
 
     smaller = {
-        "synth": ["--configurations", "6", "--restarts", "0", "--max-iterations", "40",
+        "synth": ["--configurations", "4", "--restarts", "0", "--max-iterations", "25",
                   "--worst-case-rounds", "1"],
-        "analyze": ["--configurations", "6", "--points-per-decade", "4", "--no-sensitivity",
-                    "--no-time-check", "--performance-models", "2", "--performance-points", "8",
-                    "--spike-budget", "20"],
-        "margins": ["--configurations", "3"],
+        "analyze": ["--configurations", "4", "--points-per-decade", "3", "--no-sensitivity",
+                    "--no-time-check", "--performance-models", "1", "--performance-points", "5",
+                    "--spike-budget", "5", "--iterations", "20"],
+        "margins": ["--configurations", "2"],
     }  # fmt: skip
     real = pipeline._oos
     monkeypatch.setattr(pipeline, "_oos", lambda *argv: real(*argv, *smaller.get(argv[0], [])))
@@ -225,7 +225,7 @@ def test_oos_run_on_a_tree_end_to_end(tmp_path, monkeypatch, capsys):
     # configuration, nominal and at the corners of the declared frequency ranges
     scenario = load_scenario("flexible_satellite")
     controller = scenario_controller(out / "controller" / "controller.json", scenario)
-    times = np.linspace(0.0, scenario.mission.t_end, 6)
+    times = np.linspace(0.0, scenario.mission.t_end, 4)
     closed = mission_closed_loop(controller, times, scenario).system
     from oos_drake.lfr import usubs
 
