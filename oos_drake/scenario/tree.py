@@ -70,7 +70,9 @@ The root (the controlled body) has none: it floats. Every other body has
   ``angle`` about ``axis`` (in ``J``), i.e. ``R_parent_child = R_parent_joint R(axis, angle)``;
 - ``type = "fixed"`` (no axis, angle 0) or ``"revolute"`` (motion-driven: the LFR's scheduled
   block ``tau_<body> = tan(angle/4)``; ``angle`` [rad] is the operating angle of the file,
-  ``lower``/``upper`` [rad] optional limits within [-pi, pi]).
+  ``lower``/``upper`` [rad] optional limits within [-pi, pi]; ``block`` optional: another name
+  for that block, unique in the tree, e.g. a schema-1 file's ``tau_theta1`` kept by
+  ``oos tree convert``).
 
 Free bodies
 -----------
