@@ -193,8 +193,8 @@ def run_pipeline(args: argparse.Namespace) -> int:
     print(f"[oos run] scenario: {scenario}")
     for name, why in skipped.items():
         print(f"[oos run] {name}: SKIPPED for this scenario: {why}")
-        if name == "confirm":  # no stale confirmation of another scenario in the report
-            shutil.rmtree(out / name, ignore_errors=True)
+        if name in ("controller", "analysis", "confirm", "margins"):
+            shutil.rmtree(out / name, ignore_errors=True)  # no stale results in the report
 
     def model(folder):
         _oos("model", "info", "--out", folder, *on_scenario)

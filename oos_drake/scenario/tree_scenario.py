@@ -333,15 +333,31 @@ def unsupported_stages(scenario_file: str | Path) -> dict[str, str]:
     dict
         ``{}`` for a schema-1 file; for a schema-2 tree: ``"model figures"`` (the paper's
         section-2 figures), ``"confirm"`` (the Drake mission twin with its flight software is
-        the paper's topology) and ``"campaign"`` (no campaign simulator models a tree).
+        the paper's topology) and ``"campaign"`` (no campaign simulator models a tree); and
+        ``"controller"``, ``"analysis"``, ``"margins"`` when its mission captures or docks a
+        target (``servicer_7dof``).
     """
     import tomllib
 
     with Path(scenario_file).open("rb") as stream:
-        version = tomllib.load(stream).get("schema_version")
-    if version != 2:
+        document = tomllib.load(stream)
+    if document.get("schema_version") != 2:
         return {}
+    phases = document.get("mission", {}).get("phases", [])
+    held = [
+        str(p.get("name"))
+        for p in (phases if isinstance(phases, list) else [])
+        if isinstance(p, dict) and ("captured" in p or "docked" in p)
+    ]
+    model_arrays = {}
+    if held:  # the stages on the model arrays over the mission
+        why = (
+            f"mission phases {', '.join(held)} hold a target: the model arrays over captured "
+            "or docked phases of a tree are not available yet (the validate stage checks them)"
+        )
+        model_arrays = {name: why for name in ("controller", "analysis", "margins")}
     return {
+        **model_arrays,
         "model figures": "the paper's section-2 figures (moments, docking sweeps, arm) need "
         "its topology; a tree has its block table only",
         "confirm": "the Drake mission twin with the flight software (multibody/mission.py) is "
