@@ -59,7 +59,7 @@ def run_analyze(args) -> int:
         sweep=sweep,
         tighten=tighten,
         spike_budget=args.spike_budget,
-        docking_phases=tuple(p for p in args.docking.split(",") if p),
+        docking_phases=_docking_phases(args.docking, scenario),
         docking_points=args.docking_points,
         performance_models=args.performance_models,
         performance_points=args.performance_points,
@@ -90,6 +90,13 @@ def run_analyze(args) -> int:
         print(line)
     print(f"total time {summary['timings_s']['total']:.1f} s; outputs in {args.out}")
     return 0
+
+
+def _docking_phases(value: str | None, scenario) -> tuple[str, ...]:
+    """``--docking``'s phases; None: every docking phase of the scenario (none for a tree)."""
+    if value is None:
+        return tuple(str(p.name) for p in scenario.mission.docking_phases)
+    return tuple(p for p in value.split(",") if p)
 
 
 def peak_lines(summary: dict) -> list[str]:
@@ -512,7 +519,12 @@ def register(subparsers) -> None:
         help="wall-clock budget of the spike resolution of the whole analysis [s] (each subset "
         "also stops after 90 s); where it is spent, the peaks table says so",
     )
-    parser.add_argument("--docking", default="7,8", help="docking phases (comma-separated)")
+    parser.add_argument(
+        "--docking",
+        default=None,
+        help="docking phases (comma-separated; default: the scenario's, the paper's 7,8; "
+        "none for a schema-2 tree)",
+    )
     parser.add_argument("--docking-points", type=int, default=300, help="stiffness values")
     parser.add_argument(
         "--performance-models",

@@ -98,10 +98,11 @@ def stage_keys(
     return keys
 
 
-def report_key(key: str, campaign: Path) -> str:
+def report_key(key: str, campaign: Path | None) -> str:
     """The report stage's key: ``key`` (its inputs' keys) and the campaign report's tables
-    (the campaign resumes instead of being stamped, so its results are hashed)."""
-    tables = sorted((campaign / "report").glob("*.parquet"))
+    (the campaign resumes instead of being stamped, so its results are hashed; None: no
+    campaign)."""
+    tables = sorted((campaign / "report").glob("*.parquet")) if campaign is not None else []
     return _digest(key, *(f"{f.name}:{f.read_bytes().hex()}" for f in tables))
 
 
@@ -168,12 +169,15 @@ def _check_campaign_scenario(campaign_spec: Path, scenario: Path) -> None:
 def run_pipeline(args: argparse.Namespace) -> int:
     """Run every stage of the main job into ``args.out``; returns the exit status."""
     from oos_drake.scenario.data import scenario_path
+    from oos_drake.scenario.tree_scenario import unsupported_stages
 
     campaign_spec = Path(args.campaign)
     if not campaign_spec.is_file():
         raise ValueError(f"campaign spec {campaign_spec}: file not found")
     scenario = scenario_path(args.scenario)
-    _check_campaign_scenario(campaign_spec, scenario)
+    skipped = unsupported_stages(scenario)  # a schema-2 tree: said, never silent
+    if "campaign" not in skipped:
+        _check_campaign_scenario(campaign_spec, scenario)
     # (a namespace made by a caller before --grid-only existed proves the whole axis)
     grid_only = ["--grid-only"] if getattr(args, "grid_only", False) else []
     keys = stage_keys(scenario, campaign_spec, args.quick, grid_only=bool(grid_only))
@@ -187,17 +191,17 @@ def run_pipeline(args: argparse.Namespace) -> int:
     scheduler = ["--scheduler", args.scheduler] if getattr(args, "scheduler", None) else []
     workers = ["--workers", args.workers, *scheduler]
     print(f"[oos run] scenario: {scenario}")
+    for name, why in skipped.items():
+        print(f"[oos run] {name}: SKIPPED for this scenario: {why}")
+        if name in ("controller", "analysis", "confirm", "margins"):
+            shutil.rmtree(out / name, ignore_errors=True)  # no stale results in the report
 
-    run_stage(
-        "model",
-        out / "model",
-        keys["model"],
-        lambda d: (
-            _oos("model", "info", "--out", d, *on_scenario),
-            _oos("model", "figures", "--out", d, *on_scenario),
-        ),
-        timings,
-    )
+    def model(folder):
+        _oos("model", "info", "--out", folder, *on_scenario)
+        if "model figures" not in skipped:
+            _oos("model", "figures", "--out", folder, *on_scenario)
+
+    run_stage("model", out / "model", keys["model"], model, timings)
     run_stage(
         "validate", out / "validate", keys["validate"], lambda d: _validate(d, scenario), timings
     )
@@ -210,6 +214,8 @@ def run_pipeline(args: argparse.Namespace) -> int:
         "margins": ["margins", *analyzed, "--configurations", MARGIN_CONFIGURATIONS, "--quiet"],
     }
     for name, argv in commands.items():
+        if name in skipped:
+            continue
 
         def work(folder, argv=argv):
             _oos(*argv, "--out", folder, *on_scenario)
@@ -218,7 +224,9 @@ def run_pipeline(args: argparse.Namespace) -> int:
 
     campaign = out / f"campaign-{keys['campaign'][:10]}"
     campaign_start = time.perf_counter()
-    if (campaign / "spec.toml").is_file():
+    if "campaign" in skipped:
+        campaign = None
+    elif (campaign / "spec.toml").is_file():
         print(f"[oos run] campaign: resuming {campaign}")
         _oos("campaign", "resume", campaign, *workers)
     else:
@@ -236,14 +244,23 @@ def run_pipeline(args: argparse.Namespace) -> int:
             "--simulator-option",
             f"controller={controller.resolve()}",
         )
-    _oos("campaign", "report", campaign)
-    _replay_worst_run(campaign)
-    timings["campaign + report"] = time.perf_counter() - campaign_start
+    if campaign is not None:
+        _oos("campaign", "report", campaign)
+        _replay_worst_run(campaign)
+        timings["campaign + report"] = time.perf_counter() - campaign_start
 
     def write_timings():
         total = time.perf_counter() - start
         (out / "timings.json").write_text(
-            json.dumps({"scenario": str(scenario), "stages_s": timings, "total_s": total}, indent=1)
+            json.dumps(
+                {
+                    "scenario": str(scenario),
+                    "stages_s": timings,
+                    "total_s": total,
+                    "skipped": skipped,
+                },
+                indent=1,
+            )
             + "\n"
         )
         return total
@@ -263,6 +280,8 @@ def run_pipeline(args: argparse.Namespace) -> int:
     for name, seconds in timings.items():
         shown = "skipped (up to date)" if seconds is None else f"{seconds:8.1f} s"
         print(f"  {name:28s} {shown}")
+    for name, why in skipped.items():
+        print(f"  {name:28s} SKIPPED: {why}")
     print(f"  {'total':28s} {total:8.1f} s")
     print("\n[oos run] finished. Where to look:")
     for label, path in (
@@ -272,11 +291,11 @@ def run_pipeline(args: argparse.Namespace) -> int:
         ("robust analysis", out / "analysis"),
         ("worst cases on the Drake twin", out / "confirm" / "confirmation.parquet"),
         ("gain/phase/delay/disk margins", out / "margins" / "margins.png"),
-        ("campaign results", campaign / "runs.parquet"),
-        ("campaign report", campaign / "report"),
+        ("campaign results", campaign / "runs.parquet" if campaign else None),
+        ("campaign report", campaign / "report" if campaign else None),
         ("report (one page)", out / "report.html"),
     ):
-        print(f"  {label:28s} {path}")
+        print(f"  {label:28s} {path if path is not None and path.exists() else 'not run'}")
     print()
     _print_headlines(out, campaign, report)
     return 0

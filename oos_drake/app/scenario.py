@@ -44,6 +44,11 @@ def _info(args: argparse.Namespace) -> int:
         path.parent.mkdir(parents=True, exist_ok=True)
         _blocks_table(table).to_parquet(path, index=False)
         print(f"block table: {path}")
+    from oos_drake.scenario.tree_scenario import is_tree
+
+    if args.phase == "mission" and is_tree(scenario):  # the blocks are named from its bodies
+        print(f"schema-2 tree {scenario.name}: blocks named from its bodies (docs/TREE.md)")
+        return 0
     if args.phase == "mission":
         from oos_drake.scenario.model import paper_delta_table
 
@@ -85,11 +90,18 @@ def _blocks_table(table):
 def _figures(args: argparse.Namespace) -> int:
     from oos_drake.scenario.data import load_scenario
     from oos_drake.scenario.figures import make_figures
+    from oos_drake.scenario.tree_scenario import NotForTrees, is_tree
 
+    scenario = load_scenario(args.scenario)
+    if is_tree(scenario):
+        raise NotForTrees(
+            f"scenario {scenario.name} is a schema-2 tree: the section-2 figures are the "
+            "paper's topology (moments, docking sweeps, arm); not available for trees yet"
+        )
     start = time.perf_counter()
     files = make_figures(
         args.out,
-        load_scenario(args.scenario),
+        scenario,
         n_times=args.times,
         n_frequencies=args.frequencies,
         n_samples=args.samples,

@@ -235,6 +235,10 @@ def _load_scenario(results: RunResults):
 
 
 def _bodies_table(scenario) -> pd.DataFrame:
+    from oos_drake.scenario.tree_scenario import is_tree
+
+    if is_tree(scenario):
+        return scenario.bodies_table()
     rows = []
     for hub in scenario.hubs.values():
         jxx, jyy, jzz = (float(x) for x in hub.inertia.diagonal())

@@ -51,12 +51,15 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from oos_drake.resources import package_path
 from oos_drake.titop.spatial import residual_mass, rigid_spatial_inertia
+
+if TYPE_CHECKING:  # annotations only: tree_scenario imports this module
+    from oos_drake.scenario.tree_scenario import TreeScenario
 
 __all__ = [
     "DEFAULT_SCENARIO_PATH",
@@ -1395,6 +1398,14 @@ def _load_cached(
             document = tomllib.load(stream)
     except tomllib.TOMLDecodeError as error:
         raise ScenarioError(source.name, f"invalid TOML ({error})") from None
+    if document.get("schema_version") == 2:  # a spacecraft tree: the stages' adapter
+        from oos_drake.scenario.tree_scenario import tree_scenario
+
+        if overrides:
+            raise ScenarioError(
+                source.name, f"overrides {dict(overrides)}: not available for a schema-2 tree"
+            )
+        return tree_scenario(document, source)
     for key, value in overrides:
         _set_value(document, key, value)
     scenario = _parse(document, source)
@@ -1414,8 +1425,10 @@ def scenario_record(scenario: Scenario) -> dict[str, Any]:
 
 
 def shipped_scenarios() -> list[str]:
-    """Names of the scenario files shipped with the package (``paper``, ``heavy_target``)."""
-    return sorted(p.stem for p in SCENARIO_DIRECTORY.glob("*.toml"))
+    """Names of the scenario files shipped with the package: ``paper``, ``heavy_target`` and
+    the schema-2 trees of ``data/trees`` (``flexible_satellite``, ...)."""
+    names = [p.stem for p in SCENARIO_DIRECTORY.glob("*.toml")]
+    return sorted(names + [p.stem for p in (SCENARIO_DIRECTORY / "trees").glob("*.toml")])
 
 
 def scenario_path(name: str | Path | None = None) -> Path:
@@ -1430,8 +1443,11 @@ def scenario_path(name: str | Path | None = None) -> Path:
         return DEFAULT_SCENARIO_PATH.resolve()
     path = Path(name)
     if not path.is_file() and path.parent == Path():
-        shipped = SCENARIO_DIRECTORY / path.with_suffix(".toml").name
-        path = shipped if shipped.is_file() else path
+        file = path.with_suffix(".toml").name
+        for folder in (SCENARIO_DIRECTORY, SCENARIO_DIRECTORY / "trees"):
+            if (folder / file).is_file():
+                path = folder / file
+                break
     if not path.is_file():
         raise ValueError(
             f"scenario {name}: file not found (shipped scenarios: {', '.join(shipped_scenarios())})"
@@ -1441,7 +1457,7 @@ def scenario_path(name: str | Path | None = None) -> Path:
 
 def load_scenario(
     path: str | Path | None = None, overrides: Mapping[str, float] | None = None
-) -> Scenario:
+) -> Scenario | TreeScenario:
     """Load and validate a scenario data file.
 
     Parameters
@@ -1456,8 +1472,11 @@ def load_scenario(
 
     Returns
     -------
-    Scenario
+    Scenario or TreeScenario
         Frozen, validated data (cached per file version: loading twice returns the same object).
+        A ``schema_version = 2`` file (a spacecraft tree) gives a
+        :class:`~oos_drake.scenario.tree_scenario.TreeScenario`, which the pipeline's stages
+        read like a ``Scenario``.
 
     Raises
     ------

@@ -317,8 +317,9 @@ def build_mission_model(scenario) -> LFR:
 
     Parameters
     ----------
-    scenario : oos_drake.scenario.data.Scenario
-        Validated scenario.
+    scenario : oos_drake.scenario.data.Scenario or TreeScenario
+        Validated scenario; a schema-2 tree gives its own plant
+        (:meth:`~oos_drake.scenario.tree_scenario.TreeScenario.mission_model`).
 
     Returns
     -------
@@ -339,6 +340,10 @@ def build_mission_model(scenario) -> LFR:
     >>> models.freqresp(2 * np.pi * np.logspace(-2, 2, 500)).shape
     (330, 500, 6, 6)
     """
+    from oos_drake.scenario.tree_scenario import is_tree
+
+    if is_tree(scenario):
+        return scenario.mission_model()
     return _mission_model(scenario)
 
 
@@ -526,7 +531,9 @@ def mission_values(times, scenario) -> dict[str, np.ndarray]:
     ----------
     times : float or array_like (N,)
         Mission times [s].
-    scenario : Scenario
+    scenario : Scenario or TreeScenario
+        (a tree: the ``tau_<body>`` of its timeline's joint angles,
+        :meth:`~oos_drake.scenario.tree_scenario.TreeScenario.mission_values`)
 
     Returns
     -------
@@ -534,6 +541,10 @@ def mission_values(times, scenario) -> dict[str, np.ndarray]:
         Block name -> (N,) physical values, for ``usubs(model, mission_values(times))``.
     """
     from oos_drake.scenario.timeline import mission_timeline
+    from oos_drake.scenario.tree_scenario import is_tree
+
+    if is_tree(scenario):
+        return scenario.mission_values(times)
 
     timeline = mission_timeline(scenario)
     config = timeline.configuration(np.atleast_1d(np.asarray(times, dtype=float)))

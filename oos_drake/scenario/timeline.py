@@ -401,7 +401,13 @@ def mission_timeline(scenario: Scenario) -> MissionTimeline:
     Returns
     -------
     MissionTimeline
+        (a schema-2 tree: its phase boundaries as numbered ``moments``,
+        :meth:`~oos_drake.scenario.tree_scenario.TreeScenario.named_instants`)
     """
+    from oos_drake.scenario.tree_scenario import is_tree
+
+    if is_tree(scenario):
+        return scenario.named_instants()
     mission = scenario.mission
     return MissionTimeline(
         scenario=scenario,

@@ -70,7 +70,9 @@ The root (the controlled body) has none: it floats. Every other body has
   ``angle`` about ``axis`` (in ``J``), i.e. ``R_parent_child = R_parent_joint R(axis, angle)``;
 - ``type = "fixed"`` (no axis, angle 0) or ``"revolute"`` (motion-driven: the LFR's scheduled
   block ``tau_<body> = tan(angle/4)``; ``angle`` [rad] is the operating angle of the file,
-  ``lower``/``upper`` [rad] optional limits within [-pi, pi]).
+  ``lower``/``upper`` [rad] optional limits within [-pi, pi]; ``block`` optional: another name
+  for that block, unique in the tree, e.g. a schema-1 file's ``tau_theta1`` kept by
+  ``oos tree convert``).
 
 Free bodies
 -----------
@@ -183,6 +185,9 @@ class Joint:
     docking : Docking or None
         Only for ``type = "bushing"`` (made by :func:`docked_tree`, not read from files): the
         spring-damper holding the child.
+    block : str
+        Name of the scheduled block of a revolute joint in the models (``joint.block`` in the
+        file, e.g. ``"tau_theta1"`` to keep a schema-1 scenario's name; "": ``tau_<body>``).
     """
 
     type: str
@@ -193,6 +198,7 @@ class Joint:
     lower: float
     upper: float
     docking: Any = None
+    block: str = ""
 
     def R_parent_child(self, angle: float | None = None) -> np.ndarray:
         """Child body axes in the parent's frame at ``angle`` [rad] (default: the file's)."""
@@ -428,6 +434,11 @@ class SpacecraftTree:
             body = self.body(body.parent)
         return tuple(reversed(path))
 
+    def angle_block(self, name: str) -> str:
+        """Name of the scheduled block of body ``name``'s revolute joint: its ``joint.block``,
+        else ``tau_<name>``."""
+        return self.body(name).joint.block or f"tau_{name}"
+
     def operating_angles(self) -> dict[str, float]:
         """The file's joint angles [rad] by body, for the revolute joints."""
         return {name: float(self.body(name).joint.angle) for name in self.revolute_bodies}
@@ -512,10 +523,14 @@ def _read_joint(body: str, raw: Any) -> Joint:
     p = t.array("p_parent_joint", (3,), [0.0, 0.0, 0.0])
     R = t.array("R_parent_joint", (3, 3), np.eye(3).tolist())
     check_rotation(f"{body}.joint", "R_parent_joint", R)
+    block = ""
     if kind == "fixed":
         axis = np.zeros(3)
         angle, lower, upper = 0.0, 0.0, 0.0
     else:
+        block = t.text("block", "")
+        if block and not block.isidentifier():
+            raise ScenarioError(f"{body}.joint", f"block {block!r}: not a valid block name")
         axis = t.array("axis", (3,))
         check_unit(f"{body}.joint", "axis", axis)
         lower = t.number("lower", -math.pi)
@@ -532,7 +547,7 @@ def _read_joint(body: str, raw: Any) -> Joint:
             )
     t.close()
     axis.setflags(write=False)
-    return Joint(kind, p, R, axis, angle, lower, upper)
+    return Joint(kind, p, R, axis, angle, lower, upper, block=block)
 
 
 def _read_rigid(t: Table, name: str, parent: str, joint) -> RigidBodyData:
@@ -881,6 +896,21 @@ def docked_tree(tree: SpacecraftTree, docking) -> SpacecraftTree:
     return _attach_target(tree, docking.port, docking.target_port, docking)
 
 
+def _check_block_names(bodies: tuple) -> None:
+    """Every revolute joint's scheduled block has its own name (``joint.block`` or
+    ``tau_<body>``)."""
+    seen: dict[str, str] = {}
+    for body in bodies:
+        if body.joint is None or body.joint.type != "revolute":
+            continue
+        block = body.joint.block or f"tau_{body.name}"
+        if block in seen:
+            raise ScenarioError(
+                f"{body.name}.joint", f"block {block!r}: also the block of {seen[block]}'s joint"
+            )
+        seen[block] = body.name
+
+
 def parse_tree(document: Mapping[str, Any], source: Path | None = None) -> SpacecraftTree:
     """Validate a parsed TOML document of schema version 2 into a :class:`SpacecraftTree`.
 
@@ -916,6 +946,7 @@ def parse_tree(document: Mapping[str, Any], source: Path | None = None) -> Space
     control = _read_control(top.get("control"), by_name, bodies[0].name)
     raw_mission = top.get("mission", None)
     top.close()
+    _check_block_names(bodies)
     components = _components(bodies)
     targets = {
         root: SpacecraftTree(

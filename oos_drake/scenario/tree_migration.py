@@ -8,8 +8,10 @@ and links ``L1``..``L6`` (revolute joints ``alpha_1..6``, limits [-pi, pi]), the
 yet: :func:`tree_document_from_v1` lists them in ``dropped``. The ``[control]`` section is copied
 field by field (it is read by the same reader in both schemas).
 
-Block names change with the bodies: ``tau_theta1`` -> ``tau_SA1``, ``tau_alpha<i>`` ->
-``tau_L<i>``; ``w1_SA1``, ``w1_SA2`` and the hub's ``m_RH1``, ``J.._RH1`` keep theirs.
+Block names are schema 1's: each revolute joint names its block (``joint.block``:
+``tau_theta1``, ``tau_theta2`` for the array drives, ``tau_alpha<i>`` for the links ``L<i>``,
+instead of the tree's default ``tau_<body>``); ``w1_SA1``, ``w1_SA2`` and the hub's ``m_RH1``,
+``J.._RH1`` are the same in both schemas.
 """
 
 from __future__ import annotations
@@ -111,6 +113,7 @@ def tree_document_from_v1(scenario: Scenario | str | Path) -> tuple[dict, tuple[
                 "p_parent_joint": _list(mount.p_G_P),
                 "R_parent_joint": _list(mount.R_G_P0),
                 "axis": _list(mount.axis),
+                "block": f"tau_theta{name[-1]}",  # schema 1's block name, kept
             },
             "mass": float(model.mass),
             "p_P_S": _list(model.p_P_S),
@@ -144,6 +147,7 @@ def tree_document_from_v1(scenario: Scenario | str | Path) -> tuple[dict, tuple[
                 "type": "revolute",
                 "p_parent_joint": _list(previous.p_J_Jnext),
                 "axis": _list(link.joint_axis),
+                "block": f"tau_alpha{link.name[1:]}",  # schema 1's block name, kept
             }
         bodies.append(entry)
         previous = link

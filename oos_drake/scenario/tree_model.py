@@ -59,7 +59,8 @@ _OUTPUTS = ("ax", "ay", "az", "wdot_x", "wdot_y", "wdot_z")
 
 
 def angle_block_name(body: str) -> str:
-    """Name of the scheduled block of the revolute joint of ``body``: ``tau_<body>``."""
+    """Default name of the scheduled block of the revolute joint of ``body``: ``tau_<body>``
+    (a file may name it: ``joint.block``, :meth:`SpacecraftTree.angle_block`)."""
     return f"tau_{body}"
 
 
@@ -96,7 +97,7 @@ def _connection(child) -> LFR:
     if joint.type == "fixed":
         return fixed_connection(np.asarray(joint.R_parent_joint).T)
     return revolute_connection(
-        angle_parameter(angle_block_name(child.name)),
+        angle_parameter(child.joint.block or angle_block_name(child.name)),
         joint.axis,
         dcm_fixed=np.asarray(joint.R_parent_joint).T,
     )
@@ -258,13 +259,13 @@ def tree_values(tree: SpacecraftTree, angles: dict[str, float] | None = None) ->
         Block name -> value, for :func:`oos_drake.lfr.usubs`.
     """
     chosen = tree.joint_angles(angles)
-    return {angle_block_name(name): float(angle_to_tau(a)) for name, a in chosen.items()}
+    return {tree.angle_block(name): float(angle_to_tau(a)) for name, a in chosen.items()}
 
 
 def tree_blocks(tree: SpacecraftTree) -> dict:
     """The tree's uncertain physical blocks (masses, inertias, mode frequencies) by name."""
     model = build_tree_model(tree)
-    scheduled = {angle_block_name(n) for n in tree.revolute_bodies}
+    scheduled = {tree.angle_block(n) for n in tree.revolute_bodies}
     return {n: b for n, b in sorted(model.uncertainty.items()) if n not in scheduled}
 
 

@@ -76,7 +76,11 @@ def test_paper_control_section_matches_the_mission_defaults():
 def test_shipped_names_resolve():
     assert scenario_path("paper") == DEFAULT_SCENARIO_PATH.resolve()
     assert load_scenario("heavy_target").name == "heavy_target"
-    with pytest.raises(ValueError, match="shipped scenarios: heavy_target, paper"):
+    with pytest.raises(
+        ValueError,
+        match="shipped scenarios: flexible_satellite, geo_satellite, heavy_target, paper, "
+        "servicer_7dof",
+    ):
         scenario_path("no_such_scenario")
 
 

@@ -65,3 +65,45 @@ def test_paper_chaser_tree_kinematics_equal_the_papers():
         expected = arm_tip_pose(paper, alpha)
         np.testing.assert_allclose(R, expected.R, atol=1e-13)
         np.testing.assert_allclose(p, expected.p, atol=1e-13)
+
+
+def test_converted_paper_chaser_keeps_the_papers_block_names():
+    """``joint.block``: the converted chaser's scheduled blocks are the paper's ``tau_theta1``,
+    ``tau_theta2``, ``tau_alpha1..6`` with the paper's occurrences, so the paper's own
+    configuration values substitute into it unchanged."""
+    from oos_drake.scenario.model import PAPER_OCCURRENCES
+
+    tree = parse_tree(tree_document_from_v1("paper")[0])
+    model = build_tree_model(tree)
+    names = [f"tau_theta{k}" for k in (1, 2)] + [f"tau_alpha{i}" for i in range(1, 7)]
+    assert sorted(n for n in model.uncertainty if n.startswith("tau_")) == sorted(names)
+    for name in names + ["w1_SA1", "w1_SA2"]:
+        assert model.occurrences[name] == PAPER_OCCURRENCES[name], name
+    rng = np.random.default_rng(3)
+    alpha, theta = rng.uniform(-3, 3, 6), np.r_[rng.uniform(-3, 3, 2), 0.0, 0.0]
+    values = {k: float(v) for k, v in configuration_values(alpha, theta, 0.0, 0.0).items()}
+    paper = usubs(build_mission_model(load_scenario("paper")), values).nominal
+    converted = usubs(model, {k: v for k, v in values.items() if k in names}).nominal
+    omega = 2 * np.pi * np.logspace(-2, 2, 200)  # [rad/s]
+    a, b = converted.freqresp(omega), paper.freqresp(omega)
+    assert np.abs(a - b).max() <= 1e-10 * np.abs(b).max()
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda b: b[1]["joint"].update(block="tau_theta1") or b[2]["joint"].update(
+            block="tau_theta1"), r"^SA2\.joint: block 'tau_theta1': also the block of SA1's"),
+        (lambda b: b[1]["joint"].update(block="tau SA"), r"^SA1\.joint: block 'tau SA': not a"),
+        (lambda b: b[1]["joint"].update(block="tau_L2"),
+         r"^L2\.joint: block 'tau_L2': also the block of SA1's joint"),
+    ],
+)  # fmt: skip
+def test_bad_block_names_are_one_line(edit, message):
+    document = tree_document_from_v1("paper")[0]
+    for body in document["bodies"]:  # default names tau_<body> for the links
+        if body["name"].startswith("L") and "block" in body["joint"]:
+            del body["joint"]["block"]
+    edit(document["bodies"])
+    with pytest.raises(ScenarioError, match=message):
+        parse_tree(document)

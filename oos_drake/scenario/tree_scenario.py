@@ -1,0 +1,367 @@
+"""A schema-2 tree as the scenario of ``oos synth``, ``oos analyze``, ``oos margins``, ``oos run``.
+
+The stages of the pipeline read a scenario through a few entry points only:
+
+- its uncertain plant and the values of its scheduled blocks along the mission:
+  :func:`oos_drake.scenario.model.build_mission_model` and
+  :func:`~oos_drake.scenario.model.mission_values` (both dispatch to
+  :meth:`TreeScenario.mission_model` and :meth:`TreeScenario.mission_values` for a tree);
+- the mission interval ``scenario.mission.t_start``, ``t_end`` (the analysis and synthesis
+  grids ``linspace(t_start, t_end, N)``), ``scenario.mission.first_docking_time`` (where the
+  baseline PD is tuned) and ``scenario.mission.docking_phases`` (the docking studies);
+- the named instants of :func:`oos_drake.scenario.timeline.mission_timeline` (``moments``, for
+  labels and the open-loop figure);
+- ``scenario.control`` (schema 1's ``[control]``, read by the same reader), ``name``,
+  ``description``, ``source``, ``overrides`` (:func:`oos_drake.scenario.data.scenario_record`).
+
+:class:`TreeScenario` provides exactly those over a :class:`~oos_drake.scenario.tree.SpacecraftTree`
+and its :class:`~oos_drake.scenario.tree_mission.Timeline`:
+``load_scenario`` returns one for a ``schema_version = 2`` file. So every stage runs on a tree
+unchanged: the plant is :func:`~oos_drake.scenario.tree_model.build_tree_model` (its blocks
+``w<i>_<body>``, ``m_<body>``, ``J.._<body>``: the analysis subsets follow from each block's
+quantity), the scheduled blocks ``tau_<body> = tan(angle / 4)`` of the timeline's joint angles.
+
+What a tree does not provide (yet) is refused by name: the schema-1 data of the paper's
+topology (``hubs``, ``arrays``, ``arm``, ``ports``, ``docking``, ...: the Drake mission twin
+of the confirmation and the campaign's Drake simulator read them) raise :class:`NotForTrees`,
+a ``ValueError`` with a one-line message; and a mission whose phases capture or dock a target
+(the model changes shape with the phase) is refused by :meth:`TreeScenario.mission_values`.
+
+Examples
+--------
+>>> from oos_drake.scenario.data import load_scenario
+>>> scenario = load_scenario("flexible_satellite")
+>>> scenario.mission.t_end
+1600.0
+>>> sorted(scenario.mission_values([0.0, 800.0]))
+['tau_SA1', 'tau_SA2']
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from oos_drake.scenario.data import ControlRequirements, ScenarioError
+from oos_drake.scenario.tree import SpacecraftTree, parse_tree
+from oos_drake.scenario.tree_mission import Timeline
+
+__all__ = [
+    "NotForTrees",
+    "TreeMissionSpan",
+    "TreeMoment",
+    "TreeScenario",
+    "is_tree",
+    "tree_scenario",
+]
+
+#: Schema-1 fields of :class:`~oos_drake.scenario.data.Scenario` a tree has no counterpart for.
+SCHEMA1_ONLY = ("hubs", "array_models", "arrays", "arm", "ports", "docking")
+
+
+class NotForTrees(AttributeError, ValueError):
+    """A command or stage needs schema-1 data (the paper's topology) a tree does not have.
+
+    A ``ValueError`` (the ``oos`` commands print it as one line, exit status 2) and an
+    ``AttributeError`` (``hasattr(scenario, "arm")`` is False for a tree)."""
+
+
+@dataclass(frozen=True)
+class TreeMissionSpan:
+    """What the stages read of a mission (schema 1's ``scenario.mission``), for a tree.
+
+    Attributes
+    ----------
+    t_start, t_end : float
+        Mission interval [s]: ``0`` and the timeline's duration.
+    first_docking_time : float
+        Where the baseline PD is tuned [s] (schema 1: the first docking): the start of the
+        first phase that captures or docks a target, else ``0``.
+    docking_phases : tuple
+        The docking studies of ``oos analyze`` (none for a tree yet).
+    """
+
+    t_start: float
+    t_end: float
+    first_docking_time: float
+    docking_phases: tuple = ()
+
+
+@dataclass(frozen=True)
+class TreeMoment:
+    """A named instant of a tree's mission (the paper's "moments"): a phase boundary.
+
+    Attributes
+    ----------
+    name : str
+        ``"1"`` (the start), ``"2"`` (the end of the first phase), ...
+    description : str
+        ``"start"`` or ``"end of <phase>"``.
+    time : float
+        Mission time [s].
+    """
+
+    name: str
+    description: str
+    time: float
+
+
+@dataclass(frozen=True)
+class TreeMoments:
+    """:func:`oos_drake.scenario.timeline.mission_timeline` of a tree: its named instants.
+
+    Attributes
+    ----------
+    moments : Mapping[str, TreeMoment]
+        Phase boundaries ``"1"`` .. ``"K+1"``.
+    docking_phases : Mapping
+        Empty (no docking studies on a tree yet).
+    """
+
+    moments: Mapping[str, TreeMoment]
+    docking_phases: Mapping = field(default_factory=lambda: MappingProxyType({}))
+
+
+@dataclass(frozen=True, eq=False)
+class TreeScenario:
+    """A schema-2 tree with its timeline, as the pipeline's stages read a scenario.
+
+    Attributes
+    ----------
+    tree : SpacecraftTree
+        The validated tree.
+    timeline : Timeline
+        Its mission's timeline (tip waypoints solved on the Drake twin when it has some).
+    mission : TreeMissionSpan
+        The mission interval.
+    source : Path
+        The file.
+    overrides : tuple
+        Always empty (parameter studies of a tree are not supported).
+    """
+
+    tree: SpacecraftTree
+    timeline: Timeline
+    mission: TreeMissionSpan
+    source: Path
+    overrides: tuple = ()
+
+    @property
+    def name(self) -> str:
+        """Scenario name."""
+        return self.tree.name
+
+    @property
+    def description(self) -> str:
+        """Free text."""
+        return self.tree.description
+
+    @property
+    def control(self) -> ControlRequirements:
+        """The ``[control]`` requirements and design data (schema 1's reader)."""
+        return self.tree.control.requirements
+
+    @property
+    def controlled_body(self) -> str:
+        """The attitude-controlled body (the root)."""
+        return self.tree.control.controlled_body
+
+    def __getattr__(self, name: str) -> Any:
+        if name in SCHEMA1_ONLY:
+            raise NotForTrees(
+                f"scenario {self.tree.name} ({self.source.name}) is a schema-2 tree: this "
+                f"command needs the paper's topology (schema-1 `{name}`), not available for "
+                "trees yet"
+            )
+        raise AttributeError(f"{type(self).__name__!s} has no attribute {name!r}")
+
+    def __reduce__(self):
+        # a worker receives the same file's tree (checked by its hash), not a pickled copy of
+        # the read-only mappings
+        digest = hashlib.sha256(self.source.read_bytes()).hexdigest()
+        return _unpickle, (str(self.source), digest)
+
+    def mission_model(self):
+        """The uncertain plant ``[F; T]_G -> [a; wdot]_G`` of the controlled body
+        (:func:`~oos_drake.scenario.tree_model.build_tree_model`; scheduled blocks
+        ``tau_<body>``)."""
+        from oos_drake.scenario.tree_model import build_tree_model
+
+        return build_tree_model(self.tree)
+
+    def mission_values(self, times) -> dict[str, np.ndarray]:
+        """Scheduled block values ``tau_<body> = tan(angle / 4)`` at mission ``times`` [s].
+
+        Raises
+        ------
+        ValueError
+            A time in a phase that captures or docks a target (one line, naming the phase).
+        """
+        from oos_drake.titop.spatial import angle_to_tau
+
+        times = np.atleast_1d(np.asarray(times, dtype=float))
+        timeline = self.timeline
+        for t in times:
+            if timeline.captured_at(t) is not None or timeline.docked_at(t) is not None:
+                raise ValueError(
+                    f"scenario {self.name}: mission phase {timeline.phase_at(t)!r} "
+                    f"(t = {t:g} s) holds a target: the model arrays of the synthesis and "
+                    "the analysis over captured or docked phases of a tree are not available "
+                    "yet (oos validate checks them)"
+                )
+        angles = [timeline.angles(t) for t in times]
+        return {
+            self.tree.angle_block(body): np.array([float(angle_to_tau(a[body])) for a in angles])
+            for body in timeline.joint_names
+        }
+
+    def bodies_table(self):
+        """One row per body of the tree (and of each target): ``body``, ``kind``,
+        ``description``, ``mass [kg]``, ``Jxx [kg m^2]`` .. ``Jzz [kg m^2]`` (rigid: at the
+        centre of mass; flexible: at S), ``mass uncertainty [%]``, ``first mode [Hz]``."""
+        import pandas as pd
+
+        rows = []
+        trees = [self.tree, *self.tree.targets.values()]
+        for tree in trees:
+            for body in tree.bodies:
+                jxx, jyy, jzz = (float(x) for x in np.diagonal(body.inertia))
+                flexible = body.kind == "flexible"
+                on = f" on {body.parent}" if body.parent else (
+                    " (free target)" if tree is not self.tree else " (controlled body)"
+                )  # fmt: skip
+                rows.append(
+                    {
+                        "body": body.name,
+                        "kind": (
+                            f"flexible ({len(body.frequencies_hz)} modes){on}"
+                            if flexible
+                            else f"rigid{on}"
+                        ),
+                        "description": body.description,
+                        "mass [kg]": float(body.mass),
+                        "Jxx [kg m^2]": jxx,
+                        "Jyy [kg m^2]": jyy,
+                        "Jzz [kg m^2]": jzz,
+                        "mass uncertainty [%]": (
+                            np.nan if flexible else float(body.mass_uncertainty_percent)
+                        ),
+                        "first mode [Hz]": float(body.frequencies_hz[0]) if flexible else np.nan,
+                    }
+                )
+        return pd.DataFrame(rows)
+
+    def named_instants(self) -> TreeMoments:
+        """The phase boundaries as numbered moments (``"1"``: the start)."""
+        timeline = self.timeline
+        moments = {"1": TreeMoment("1", "start", 0.0)}
+        for k, (phase, end) in enumerate(
+            zip(timeline.phase_names, timeline.boundaries[1:], strict=True), start=2
+        ):
+            moments[str(k)] = TreeMoment(str(k), f"end of {phase}", float(end))
+        return TreeMoments(MappingProxyType(moments))
+
+
+def _unpickle(path: str, digest: str) -> TreeScenario:
+    from oos_drake.scenario.data import load_scenario
+
+    if hashlib.sha256(Path(path).read_bytes()).hexdigest() != digest:
+        raise ValueError(f"scenario {path}: the file changed while it was in use")
+    return load_scenario(path)
+
+
+def is_tree(scenario: Any) -> bool:
+    """Whether a loaded scenario is a schema-2 tree (:class:`TreeScenario`)."""
+    return isinstance(scenario, TreeScenario)
+
+
+def tree_scenario(document: Mapping[str, Any], source: Path) -> TreeScenario:
+    """A :class:`TreeScenario` from a parsed schema-2 document (``load_scenario``'s route).
+
+    The timeline's tip-pose waypoints, if any, are solved on the tree's Drake twin
+    (:func:`oos_drake.multibody.tree_ik.mission_timeline`).
+
+    Raises
+    ------
+    ScenarioError
+        Invalid tree (one line naming the body and the field), or a tip waypoint out of reach.
+    """
+    tree = parse_tree(document, source)
+    if tree.mission is not None and tree.mission.has_tip_waypoints:
+        from oos_drake.multibody.tree_ik import mission_timeline
+
+        timeline = mission_timeline(tree)
+    else:
+        from oos_drake.scenario.tree_mission import build_timeline
+
+        timeline = build_timeline(tree)
+    first_hold = next(
+        (
+            float(t0)
+            for t0, captured, docked in zip(
+                timeline.boundaries[:-1],
+                timeline.captures or (None,) * len(timeline.phase_names),
+                timeline.dockings or (None,) * len(timeline.phase_names),
+                strict=True,
+            )
+            if captured is not None or docked is not None
+        ),
+        0.0,
+    )
+    span = TreeMissionSpan(0.0, timeline.duration, first_hold)
+    if tree.control is None:  # parse_tree requires [control]; defensive for the type checker
+        raise ScenarioError(source.name, "[control] is required")
+    return TreeScenario(tree, timeline, span, Path(source))
+
+
+def unsupported_stages(scenario_file: str | Path) -> dict[str, str]:
+    """The parts of ``oos run`` a scenario file cannot run yet, each with its one-line reason.
+
+    Parameters
+    ----------
+    scenario_file : path-like
+        A scenario file (schema 1 or 2).
+
+    Returns
+    -------
+    dict
+        ``{}`` for a schema-1 file; for a schema-2 tree: ``"model figures"`` (the paper's
+        section-2 figures), ``"confirm"`` (the Drake mission twin with its flight software is
+        the paper's topology) and ``"campaign"`` (no campaign simulator models a tree); and
+        ``"controller"``, ``"analysis"``, ``"margins"`` when its mission captures or docks a
+        target (``servicer_7dof``).
+    """
+    import tomllib
+
+    with Path(scenario_file).open("rb") as stream:
+        document = tomllib.load(stream)
+    if document.get("schema_version") != 2:
+        return {}
+    phases = document.get("mission", {}).get("phases", [])
+    held = [
+        str(p.get("name"))
+        for p in (phases if isinstance(phases, list) else [])
+        if isinstance(p, dict) and ("captured" in p or "docked" in p)
+    ]
+    model_arrays = {}
+    if held:  # the stages on the model arrays over the mission
+        why = (
+            f"mission phases {', '.join(held)} hold a target: the model arrays over captured "
+            "or docked phases of a tree are not available yet (the validate stage checks them)"
+        )
+        model_arrays = {name: why for name in ("controller", "analysis", "margins")}
+    return {
+        **model_arrays,
+        "model figures": "the paper's section-2 figures (moments, docking sweeps, arm) need "
+        "its topology; a tree has its block table only",
+        "confirm": "the Drake mission twin with the flight software (multibody/mission.py) is "
+        "the paper's topology; a tree's twin is checked by the validate stage",
+        "campaign": "no campaign simulator models a schema-2 tree yet (the Drake mission "
+        "simulator is the paper's topology)",
+    }
