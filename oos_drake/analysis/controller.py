@@ -127,6 +127,30 @@ def load_controller(path) -> Controller:
     return Controller(system, spec, "synthesized", str(path), gamma, status, structure)
 
 
+def recorded_controller(record: dict, default: ControllerSystem) -> ControllerSystem:
+    """The controller an analysis recorded (``summary.json``'s ``controller``).
+
+    ``record["state_space"]`` (:meth:`ControllerSystem.record`), else the static gain
+    ``record["K"]`` (summaries written before dynamic controllers), else ``default``.
+
+    Raises
+    ------
+    ValueError
+        A malformed record.
+    """
+    ss = record.get("state_space")
+    if isinstance(ss, dict):
+        return ControllerSystem.from_named(
+            *(np.asarray(ss[k], dtype=float) for k in "ABCD"),
+            ss["inputs"],
+            ss["outputs"],
+            float(ss.get("sampling_time_s", 0.0) or 0.0),
+        )
+    if "K" in record:
+        return ControllerSystem.static(record["K"])
+    return default
+
+
 def baseline_controller(plant_rotational, spec: DesignSpecification | None = None) -> Controller:
     """The paper's baseline PD (section 3.1) tuned on the inertia of a plant ``T -> wdot``.
 

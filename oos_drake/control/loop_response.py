@@ -153,7 +153,7 @@ class LoopResponse:
         t["gyro"] = _siso_response(self.gyro, s)
         t["ro"] = _siso_response(self.rolloff, s)
         t["c"] = c = _siso_response(self.wheels, s) * _siso_response(self.hold, s) * t["ro"]
-        Kp, Kd = K[:, :3], K[:, 3:]
+        Kp, Kd = K[..., :3], K[..., 3:]
         t["Kg"] = Kg = (
             Kp * (t["sst"] / s**2)[..., None, None] + Kd * (t["gyro"] / s)[..., None, None]
         )
