@@ -500,7 +500,7 @@ class _Twin:
     def __init__(
         self,
         peak: Peak,
-        K: np.ndarray,
+        K,
         options: ConfirmOptions,
         scenario,
         near_hz: float,
@@ -650,7 +650,7 @@ def _peak_models(peak: Peak, controller, scenario):
         phase = peak.study.removeprefix("docking-")
         plant = docking_plant(phase, [peak.stiffness], scenario=scenario).model(0)
     return (
-        close_loop(plant, controller.K, controller.spec),
+        close_loop(plant, controller.system, controller.spec),
         uncertain_plant(plant, controller.spec),
     )
 
@@ -721,7 +721,7 @@ def confirm_peak(peak: Peak, controller, scenario, options: ConfirmOptions):
     if dataclasses.replace(controller.spec, sampled=False) != twin_spec:
         notes.append("the controller's design specification is not the twin's (scenario) one")
     design = FlightSoftwareDesign.create(
-        controller.K,
+        controller.system,
         scenario.control.flight_software_rate_hz,
         spec=twin_spec,
         torque_limit=scenario.control.torque_limit,
@@ -798,7 +798,7 @@ def confirm_peak(peak: Peak, controller, scenario, options: ConfirmOptions):
     if peak.has_complex and nyquist:
         row["status"] = "linear only: complex blocks beyond the flight software's Nyquist frequency"
     else:
-        twin = _Twin(peak, controller.K, options, scenario, f_s, specs, design)
+        twin = _Twin(peak, controller.system, options, scenario, f_s, specs, design)
         top = min(alpha_phys * (1 - 1e-3), options.alpha_limit)
         guess = alpha_s if np.isfinite(alpha_s) else 1.0
         if guess >= top:

@@ -1,29 +1,39 @@
 """The controller under analysis: the JSON written by ``oos synth``, or the labeled baseline.
 
-The analysis closes the loop with the static 3x6 gain ``K = [K_p, K_d]`` (``u_K = K y``,
-``y = [-(SST phi + n); -(GYRO w + n)]``, then the roll-off ``F_ro``) and the design
-specification (weights, sensors, actuators) stored with it.
+The analysis closes the loop with the controller ``u_K = C(s) y``
+(``y = [-(SST phi + n); -(GYRO w + n)]``, then the roll-off ``F_ro``) and the design
+specification (weights, sensors, actuators) stored with it. Every structure ``oos synth``
+tunes is read here, in one place, into one type
+(:class:`~oos_drake.control.interconnection.ControllerSystem`): the static 3x6 gain
+``K = [K_p, K_d]`` of the paper (a controller without states), a PID per axis, a fixed-order
+state space, continuous or discrete at the flight software's rate.
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from oos_drake.control.components import DesignSpecification
+from oos_drake.control.interconnection import (
+    STRUCTURES,
+    ControllerSystem,
+    as_controller,
+    read_controller,
+)
 
 
 @dataclass(frozen=True)
 class Controller:
-    """A static attitude controller and the design data it was tuned with.
+    """An attitude controller and the design data it was tuned with.
 
     Attributes
     ----------
-    K : numpy.ndarray, shape (3, 6)
-        ``[K_p, K_d]``: ``K_p`` [N m/rad], ``K_d`` [N m s/rad].
+    system : ControllerSystem
+        The controller ``y -> u_K`` (a 3x6 gain ``[K_p, K_d]`` given here becomes the static
+        controller).
     spec : DesignSpecification
         Sensors, actuators, roll-off and weights (paper values unless the JSON says otherwise).
     label : str
@@ -35,23 +45,48 @@ class Controller:
         Synthesis performance level stored in the JSON (NaN for the baseline).
     status : str
         ``"ok"``, or ``"infeasible"``: tuned to ``[control]`` hard goals it does NOT meet.
+    structure : str
+        ``"static"``, ``"pid"`` or ``"state-space"`` (:data:`STRUCTURES`).
     """
 
-    K: np.ndarray
+    system: ControllerSystem
     spec: DesignSpecification
     label: str
     source: str
     gamma: float = float("nan")
     status: str = "ok"
+    structure: str = "static"
 
     def __post_init__(self):
-        K = np.array(self.K, dtype=float)
-        if K.shape != (3, 6) or not np.all(np.isfinite(K)):
+        try:
+            system = as_controller(self.system)
+        except ValueError as exc:
+            raise ValueError(f"controller {self.source}: {exc}") from exc
+        object.__setattr__(self, "system", system)
+        if self.structure not in STRUCTURES:
             raise ValueError(
-                f"controller {self.source}: K must be a finite 3x6 gain, got shape {K.shape}"
+                f"controller {self.source}: unknown structure {self.structure!r} "
+                f"(one of {', '.join(STRUCTURES)})"
             )
-        K.setflags(write=False)
-        object.__setattr__(self, "K", K)
+
+    @property
+    def K(self) -> np.ndarray:
+        """The static gain ``[K_p, K_d]`` (3x6) [N m/rad, N m s/rad].
+
+        Raises
+        ------
+        ValueError
+            A dynamic controller (it has no static gain: use :attr:`system`).
+        """
+        try:
+            return self.system.K
+        except ValueError as exc:
+            raise ValueError(f"controller {self.source} ({self.structure}): {exc}") from exc
+
+    @property
+    def is_static(self) -> bool:
+        """Whether the controller is the static gain ``[K_p, K_d]``."""
+        return self.system.is_static
 
 
 def _spec_from_record(record: dict | None) -> DesignSpecification:
@@ -78,38 +113,42 @@ def load_controller(path) -> Controller:
     ValueError
         Missing file or gains (the message names the file and the field).
     """
+    record, system = read_controller(path)
     path = Path(path)
     if path.is_dir():
         path = path / "controller.json"
-    if not path.is_file():
-        raise ValueError(f"controller file {path} not found")
-    try:
-        record = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"controller file {path}: not JSON ({exc})") from exc
     structure = record.get("structure", "static")
-    if structure != "static":
-        raise ValueError(
-            f"controller file {path}: structure {structure!r} is not supported by this stage "
-            "(only the static gain 'static' runs downstream)"
-        )
-    try:
-        gains = record["controller"]
-        K_p = np.asarray(gains["K_p"]["value"], dtype=float)
-        K_d = np.asarray(gains["K_d"]["value"], dtype=float)
-    except (KeyError, TypeError) as exc:
-        raise ValueError(f"controller file {path}: missing field controller.K_p/K_d.value") from exc
-    if K_p.shape != (3, 3) or K_d.shape != (3, 3):
-        raise ValueError(
-            f"controller file {path}: K_p and K_d must be 3x3, got {K_p.shape} and {K_d.shape}"
-        )
     gamma = record.get("gamma")
     gamma = float(gamma) if isinstance(gamma, (int, float)) else float("nan")
     spec = _spec_from_record(record.get("design_specification"))
     status = record.get("status", "ok")
     if status not in ("ok", "infeasible"):
         raise ValueError(f"controller file {path}: status must be ok or infeasible, got {status!r}")
-    return Controller(np.hstack([K_p, K_d]), spec, "synthesized", str(path), gamma, status)
+    return Controller(system, spec, "synthesized", str(path), gamma, status, structure)
+
+
+def recorded_controller(record: dict, default: ControllerSystem) -> ControllerSystem:
+    """The controller an analysis recorded (``summary.json``'s ``controller``).
+
+    ``record["state_space"]`` (:meth:`ControllerSystem.record`), else the static gain
+    ``record["K"]`` (summaries written before dynamic controllers), else ``default``.
+
+    Raises
+    ------
+    ValueError
+        A malformed record.
+    """
+    ss = record.get("state_space")
+    if isinstance(ss, dict):
+        return ControllerSystem.from_named(
+            *(np.asarray(ss[k], dtype=float) for k in "ABCD"),
+            ss["inputs"],
+            ss["outputs"],
+            float(ss.get("sampling_time_s", 0.0) or 0.0),
+        )
+    if "K" in record:
+        return ControllerSystem.static(record["K"])
+    return default
 
 
 def baseline_controller(plant_rotational, spec: DesignSpecification | None = None) -> Controller:
@@ -138,7 +177,7 @@ def baseline_controller(plant_rotational, spec: DesignSpecification | None = Non
     J = inertia_from_plant(sys)
     K = baseline_gains(J, OMEGA_ATT, XI_ATT)
     return Controller(
-        K,
+        ControllerSystem.static(K),
         spec or DesignSpecification(),
         "baseline",
         f"baseline PD (omega_att = 0.01 Hz, xi_att = 1) tuned at t = "

@@ -5,13 +5,17 @@ broken at the reaction wheels' input (:mod:`oos_drake.control.margins`):
 
 - ``continuous``: the paper's continuous loop;
 - ``sampled``: the EXACT sampled-data loop of the flight software
-  (:func:`oos_drake.control.sampled.sampled_loop`: zero-order-hold plant, Tustin controller,
-  responses at ``z = e^{j omega T}`` up to the Nyquist frequency);
+  (:func:`oos_drake.control.sampled.sampled_loop`: zero-order-hold plant, Tustin sensors and
+  filters, the controller at the flight software's rate -- a dynamic one discretized exactly,
+  zero-order hold, or as tuned when discrete -- responses at ``z = e^{j omega T}`` up to the
+  Nyquist frequency);
 - ``sampled model``: the continuous loop with the rational hold model that ``--sampled`` puts
   in the mu analysis (:func:`oos_drake.control.components.sample_hold`): its distance to
   ``sampled`` is the model's error.
 
-The study also measures, along rays of the analysis' worst real-parameter perturbations, where
+Any controller structure runs (the static gain ``[K_p, K_d]``, a PID, a state space:
+:class:`~oos_drake.analysis.controller.Controller`); the continuous loops use its continuous
+form. The study also measures, along rays of the analysis' worst real-parameter perturbations, where
 the exact sampled loop and the two continuous models lose stability (:func:`ray_boundaries`).
 """
 
@@ -95,7 +99,7 @@ def mission_margins(
     Parameters
     ----------
     controller : Controller
-        Gain and design specification (its ``flight_software_rate_hz`` and
+        Controller and design specification (its ``flight_software_rate_hz`` and
         ``computation_delay_s`` define the sampled loops; its ``sampled`` flag is ignored).
     times : array_like
         Mission times [s].
@@ -117,6 +121,7 @@ def mission_margins(
         "sampled model": dataclasses.replace(controller.spec, sampled=True),
     }
     responses = {name: LoopResponse(plants, spec) for name, spec in specs.items()}
+    system = controller.system
     nyquist_hz = controller.spec.flight_software_rate_hz / 2
     rows = []
     for k in tqdm(range(times.size), disable=not progress, desc="margins", unit="config"):
@@ -124,11 +129,11 @@ def mission_margins(
         for name, response in responses.items():
 
             def loop(w, response=response, k=k):
-                return response.loop_gain(controller.K, np.atleast_1d(w)[None, :], [k])[0]
+                return response.loop_gain(system, np.atleast_1d(w)[None, :], [k])[0]
 
             rows += _rows(margins(loop, _grid(F_MAX_HZ, poles)), times[k], name)
         exact = sampled_loop(
-            (plants.A[k], plants.B[k], plants.C[k], plants.D[k]), controller.K, controller.spec
+            (plants.A[k], plants.B[k], plants.C[k], plants.D[k]), system, controller.spec
         )
         grid = _grid(nyquist_hz, poles)
         grid[-1] = 2 * np.pi * nyquist_hz
@@ -168,10 +173,11 @@ def ray_boundaries(
     model = build_mission_model(scenario)
     spec_c = dataclasses.replace(controller.spec, sampled=False)
     spec_s = dataclasses.replace(controller.spec, sampled=True)
+    system = controller.system
     pole_sets = {
-        "continuous": lambda p: continuous_poles(p, controller.K, spec_c),
-        "sampled model": lambda p: continuous_poles(p, controller.K, spec_s),
-        "sampled": lambda p: sampled_loop(p, controller.K, controller.spec).poles(),
+        "continuous": lambda p: continuous_poles(p, system, spec_c),
+        "sampled model": lambda p: continuous_poles(p, system, spec_s),
+        "sampled": lambda p: sampled_loop(p, system, controller.spec).poles(),
     }
     rows = []
     for name, (time_s, values) in perturbations.items():

@@ -76,7 +76,7 @@ def mission_closed_loop(
     :func:`mission_plants` from ``source``, extracted on ``executor``)."""
     times = np.atleast_1d(np.asarray(times, dtype=float))
     plant = mission_plants(times, scenario, source=source, executor=executor)
-    system = close_loop(plant, controller.K, controller.spec)
+    system = close_loop(plant, controller.system, controller.spec)
     return ModelArray(system, times, "time [s]", "mission")
 
 
@@ -97,7 +97,7 @@ def docking_closed_loop(
     :func:`docking_plant`, same parameters)."""
     stiffness = np.atleast_1d(np.asarray(stiffness, dtype=float))
     plant = docking_plant(phase, stiffness, damping=damping, scenario=scenario, source=source)
-    system = close_loop(plant, controller.K, controller.spec)
+    system = close_loop(plant, controller.system, controller.spec)
     return ModelArray(system, stiffness, "stiffness [N/m or N m/rad]", f"docking-{phase}")
 
 

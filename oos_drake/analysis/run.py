@@ -659,7 +659,9 @@ def run_analysis(
             "label": controller.label,
             "source": controller.source,
             "gamma": controller.gamma,
-            "K": controller.K.tolist(),
+            "structure": controller.structure,
+            **({"K": controller.K.tolist()} if controller.is_static else {}),
+            "state_space": controller.system.record(),
         },
         "loop": {
             "sampled": controller.spec.sampled,

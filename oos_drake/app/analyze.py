@@ -7,7 +7,7 @@ import dataclasses
 import json
 from pathlib import Path
 
-from oos_drake.analysis.controller import scenario_controller
+from oos_drake.analysis.controller import recorded_controller, scenario_controller
 from oos_drake.analysis.stability import SweepOptions
 from oos_drake.app.args import (
     add_deprecated_alias,
@@ -283,8 +283,6 @@ def _confirm_controller(args):
     """``(controller, scenario)`` of an analysis: the controller of ``--controller``, else
     the one the analysis recorded (its gains must be the analysis', ``summary.json``), and the
     scenario the analysis ran on (:func:`_analysis_scenario`)."""
-    import numpy as np
-
     from oos_drake.scenario.data import load_scenario
 
     summary = _read_summary(args.analysis)
@@ -299,8 +297,7 @@ def _confirm_controller(args):
             )
     scenario = load_scenario(scenario)
     controller = scenario_controller(path, scenario)
-    K = np.asarray(recorded.get("K", controller.K), dtype=float)
-    if K.shape != controller.K.shape or not np.allclose(K, controller.K, rtol=1e-9, atol=0):
+    if not controller.system.equals(recorded_controller(recorded, controller.system)):
         raise ValueError(
             f"--controller {path}: its gains differ from those the analysis {args.analysis} used"
         )

@@ -14,7 +14,9 @@ with ``Delta_add`` a full 3x3 ``ultidyn`` (``W_add = -75 dB``: it covers unknown
 [(rad/s^2)/(N m)]) and ``Delta_mul`` nine scalar ``ultidyn`` blocks (diagonal ``W_mul_L = 4e-2``,
 off-diagonal ``W_mul_R = 4e-3``: actuator gain, phase and misalignment). The weighted
 interconnection (sensors, reaction wheels, roll-off, weights) of :mod:`oos_drake.control` is
-closed with the static gain ``K`` and with ``\hat P`` by two star products, giving the LFR
+closed with the controller (the static gain ``K``, or a dynamic
+:class:`~oos_drake.control.interconnection.ControllerSystem`, its states then states of the
+LFR) and with ``\hat P`` by two star products, giving the LFR
 
 .. math:: \hat{\mathscr M}_{unc} = F_u(\mathscr M, \Delta_{tot}) : d = [d_{ext}; n_{sst}; n_{gyro}]
           \to e = [e_p; e_u],
@@ -35,6 +37,7 @@ from oos_drake.control.interconnection import (
     MEASUREMENTS,
     PLANT_INPUTS,
     PLANT_OUTPUTS,
+    as_controller,
     diagram_parts,
 )
 from oos_drake.control.statespace import connect
@@ -130,8 +133,10 @@ def close_loop(
     plant : LFR
         Scenario model (6x6) or its rotational channels (3x3) with the configuration already
         substituted (the remaining blocks are ``Delta_real``); a model array is allowed.
-    K : array_like, shape (3, 6)
-        ``[K_p, K_d]`` [N m/rad, N m s/rad].
+    K : array_like, shape (3, 6), or ControllerSystem
+        ``[K_p, K_d]`` [N m/rad, N m s/rad], or a linear controller ``y -> u_K`` (a discrete
+        one by its continuous form, :meth:`~oos_drake.control.interconnection.
+        ControllerSystem.continuous`).
     spec : DesignSpecification, optional
         Weights and components (paper values by default).
     additive, multiplicative : bool
@@ -142,12 +147,17 @@ def close_loop(
     LFR
         Inputs ``d_ext[0..2], n_sst[0..2], n_gyro[0..2]``, outputs ``e_p[0..2], e_u[0..2]``.
     """
-    K = np.asarray(K, dtype=float)
-    if K.shape != (3, 6):
-        raise ValueError(f"close_loop: K must be 3x6, got shape {K.shape}")
+    try:
+        controller = as_controller(K).continuous()
+    except ValueError as exc:
+        raise ValueError(f"close_loop: {exc}") from exc
     spec = spec or comp.DesignSpecification()
     H = weighted_interconnection_open(spec)
-    HK = lft(H, as_lfr(K), 6, 3)  # y -> K -> u_K: [d; wdot] -> [e; T]
+    if controller.is_static:
+        C = as_lfr(controller.D)
+    else:
+        C = LFR.from_ss(controller.A, controller.B, controller.C, controller.D)
+    HK = lft(H, C, 6, 3)  # y -> C -> u_K: [d; wdot] -> [e; T]
     P_hat = uncertain_plant(plant, spec, additive=additive, multiplicative=multiplicative)
     closed = lft(HK, P_hat, 3, 3)  # T -> P_hat -> wdot
     return closed.with_names(inputs=list(DISTURBANCES), outputs=list(ERRORS))

@@ -17,7 +17,10 @@ model when ``spec.sampled``), ``w_i`` (disturbance weights) and the plant ``P(s)
     M(s) = \\begin{bmatrix} Q\\,W_{ext} / (W_p s^2) & rw\\,ro\\,Q N / (W_p s^2) \\\\
                             -W_u\\,ro\\,K_g Q\\,W_{ext} & W_u\\,ro\\,S N \\end{bmatrix}
 
-(``e_p = phi / W_p``, ``phi = P T / s^2``, ``e_u = W_u u``). Only ``P(s)`` depends on the model: its
+(``e_p = phi / W_p``, ``phi = P T / s^2``, ``e_u = W_u u``). A dynamic controller
+(:class:`~oos_drake.control.interconnection.ControllerSystem`) enters the same formula with
+``[K_p, K_d]`` replaced by its response ``C(j omega)`` (3x6) at each frequency (a discrete one
+by its continuous form). Only ``P(s)`` depends on the model: its
 modal form (one 48-state eigendecomposition per plant, independent of ``K``) gives it at any
 frequency with one small product, so a gamma evaluation needs only the closed-loop **eigenvalues**
 (stability, frequency grid), not the closed-loop eigenvectors. The formula has no cancellation at
@@ -71,7 +74,7 @@ def _siso_response(modal, s):
 
 
 class LoopResponse:
-    """Closed-loop responses ``d -> e`` of a plant array for any static gain, by frequency.
+    """Closed-loop responses ``d -> e`` of a plant array for any controller, by frequency.
 
     Parameters
     ----------
@@ -134,18 +137,23 @@ class LoopResponse:
         return H
 
     def _terms(self, K, omega, index):
-        """The scalar and 3x3 pieces of the module formula at ``omega`` (any shape)."""
+        """The scalar and 3x3 pieces of the module formula at ``omega`` (any shape); ``K`` a
+        3x6 gain or a ``ControllerSystem`` (its response ``C(s)``, ``omega.shape + (3, 6)``)."""
+        from oos_drake.control.interconnection import ControllerSystem
+
         spec = self.spec
-        K = np.asarray(K, dtype=float)
         omega = np.maximum(np.asarray(omega, dtype=float), OMEGA_MIN)
         s = 1j * omega
+        if isinstance(K, ControllerSystem):
+            K = K.D if K.is_static else K.continuous().response(s)
+        K = np.asarray(K)
         t = {"s": s, "K": K}
         t["P"] = P = self.plant_response(omega, index)
         t["sst"] = _siso_response(self.star_tracker, s)
         t["gyro"] = _siso_response(self.gyro, s)
         t["ro"] = _siso_response(self.rolloff, s)
         t["c"] = c = _siso_response(self.wheels, s) * _siso_response(self.hold, s) * t["ro"]
-        Kp, Kd = K[:, :3], K[:, 3:]
+        Kp, Kd = K[..., :3], K[..., 3:]
         t["Kg"] = Kg = (
             Kp * (t["sst"] / s**2)[..., None, None] + Kd * (t["gyro"] / s)[..., None, None]
         )
@@ -153,18 +161,20 @@ class LoopResponse:
         t["Q"] = P @ S
         a, b = spec.disturbance_denominator
         t["w_ext"] = np.asarray(spec.disturbance_gains, dtype=float) / (a * s[..., None] + b)
-        t["N"] = -np.hstack([spec.noise_star_tracker * Kp, spec.noise_gyro * Kd])  # (3, 6)
+        t["N"] = -np.concatenate(
+            [spec.noise_star_tracker * Kp, spec.noise_gyro * Kd], axis=-1
+        )  # (..., 3, 6)
         t["to_e_p"] = 1.0 / (spec.pointing_requirement * s**2)
         t["u_gain"] = spec.control_weight * t["ro"]
         return t
 
     def response(self, K, omega, index=None) -> np.ndarray:
-        """Closed-loop ``M_i(j omega)`` (N, F, 6, 9) with the static gain ``K`` (3x6).
+        """Closed-loop ``M_i(j omega)`` (N, F, 6, 9) with the controller ``K``.
 
         Parameters
         ----------
-        K : array_like, shape (3, 6)
-            ``[K_p, K_d]`` [N m/rad, N m s/rad].
+        K : array_like, shape (3, 6), or ControllerSystem
+            ``[K_p, K_d]`` [N m/rad, N m s/rad], or a linear controller ``y -> u_K``.
         omega : array_like, shape (N, F)
             Frequencies [rad/s]; values below :data:`OMEGA_MIN` are evaluated at it.
         index : array_like of int, optional
@@ -187,7 +197,7 @@ class LoopResponse:
 
         Parameters
         ----------
-        K : array_like, shape (3, 6)
+        K : array_like, shape (3, 6), or ControllerSystem
         omega : array_like, shape (N, F)
             Frequencies [rad/s].
         index : array_like of int, optional

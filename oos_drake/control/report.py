@@ -191,6 +191,16 @@ def tuning_record(result, requirements, K0, plants: PlantArray, spec, options=No
             "cutoff_hz": spec.rolloff_cutoff_hz,
         },
     }
+    sys = result.controller  # the whole controller, read by oos_drake.analysis.controller
+    controller["state_space"] = {
+        "A": sys.A,
+        "B": sys.B,
+        "C": sys.C,
+        "D": sys.D,
+        "inputs": list(sys.input_labels),
+        "outputs": list(sys.output_labels),
+        "sampling_time_s": float(result.sampling_time),
+    }
     if requirements.structure == "static":
         K = np.asarray(result.parameters["K"]["D"], dtype=float)
         controller.update(

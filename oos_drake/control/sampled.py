@@ -16,9 +16,11 @@ parameter values that loop is exactly a discrete-time linear system:
       \Phi = e^{AT},\ \Gamma_0 = \int_0^{T-\tau_f} e^{As} ds\, B,\
       \Gamma_1 = e^{A(T-\tau_f)} \int_0^{\tau_f} e^{As} ds\, B;
 
-- the controller chain ``[phi; w] -> T_rw`` discretized with the bilinear transform (a cascade
-  of Tustin blocks is the Tustin transform of the cascade, so this is the flight software's
-  block-by-block discretization).
+- the controller chain ``[phi; w] -> T_rw``: the sensors, the roll-off and the wheels
+  discretized with the bilinear transform as the flight software does, block by block, and the
+  controller ``y -> u_K`` between them at the flight software's rate
+  (:meth:`~oos_drake.control.interconnection.ControllerSystem.discretize`: the static gain as
+  it is, a continuous dynamic controller by its zero-order hold, a discrete one as tuned).
 
 Its closed-loop eigenvalues ``z`` decide stability (``|z| < 1``); ``log(z) / T`` are the
 equivalent continuous poles that :func:`continuous_poles` (the continuous loop, or the rational
@@ -37,12 +39,18 @@ import scipy.linalg
 import scipy.signal
 
 from oos_drake.control import components as comp
-from oos_drake.control.interconnection import plant_statespace, weighted_interconnection
+from oos_drake.control.interconnection import (
+    ControllerSystem,
+    as_controller,
+    plant_statespace,
+    weighted_interconnection,
+)
 from oos_drake.control.statespace import BatchedStateSpace
 
 __all__ = [
     "SampledLoop",
     "continuous_poles",
+    "discrete_controller_chain",
     "sampled_loop",
     "spectral_abscissa",
 ]
@@ -60,12 +68,47 @@ def _series(first, second) -> tuple[np.ndarray, ...]:
 def controller_chain(K, spec: comp.DesignSpecification) -> tuple[np.ndarray, ...]:
     """Continuous ``(A, B, C, D)`` of ``[phi; w] (6) -> T_rw (3)``: sensors, K, roll-off, wheels.
 
-    ``u = F_ro K [-(SST phi); -(GYRO w)]``, ``T_rw = RW u`` (noise-free, reference zero).
+    ``u = F_ro C(s) [-(SST phi); -(GYRO w)]``, ``T_rw = RW u`` (noise-free, reference zero);
+    ``K`` a 3x6 gain or a ``ControllerSystem`` (a discrete one by its continuous form).
     """
+    sensors, (rolloff, wheels) = _chain_parts(spec)
+    gain = _negated(as_controller(K).continuous())
+    return _series(_series(_series(sensors, gain), rolloff), wheels)
+
+
+def _chain_parts(spec: comp.DesignSpecification):
+    """Continuous sensors ``[phi; w] -> [phi_sst; w_gyro]`` and per-axis ``(F_ro, RW)``."""
     sst, gyro, rolloff, wheels = (comp.per_axis(f) for f in comp.filters(spec))
     sensors = tuple(scipy.linalg.block_diag(a, b) for a, b in zip(sst, gyro, strict=True))
-    gain = (np.zeros((0, 0)), np.zeros((0, 6)), np.zeros((3, 0)), -np.asarray(K, dtype=float))
-    return _series(_series(_series(sensors, gain), rolloff), wheels)
+    return sensors, (rolloff, wheels)
+
+
+def _negated(controller: ControllerSystem) -> tuple[np.ndarray, ...]:
+    """``(A, B, C, D)`` of ``[phi_sst; w_gyro] -> u_K`` (``y`` is minus the sensor outputs)."""
+    return controller.A, controller.B, -controller.C, -controller.D
+
+
+def discrete_controller_chain(K, spec: comp.DesignSpecification) -> tuple[np.ndarray, ...]:
+    """Discrete ``(A, B, C, D)`` of ``[phi; w] -> T_rw`` as the flight software runs it.
+
+    The sensors, the roll-off and the wheels by the bilinear transform at
+    ``T = 1 / spec.flight_software_rate_hz``, the controller ``y -> u_K`` at ``T`` between them
+    (:meth:`ControllerSystem.discretize`). For a static gain this equals the bilinear transform
+    of :func:`controller_chain` (a cascade of Tustin blocks is the Tustin transform of the
+    cascade).
+    """
+    T = 1.0 / spec.flight_software_rate_hz
+    sensors, (rolloff, wheels) = _chain_parts(spec)
+    controller = as_controller(K).discretize(T)
+
+    def tustin(block):
+        if np.size(block[0]) == 0:
+            return block
+        return scipy.signal.cont2discrete(block, T, method="bilinear")[:4]
+
+    return _series(
+        _series(tustin(sensors), _negated(controller)), tustin(_series(rolloff, wheels))
+    )
 
 
 def plant_with_integrators(A, B, C, D) -> tuple[np.ndarray, ...]:
@@ -103,9 +146,10 @@ class SampledLoop:
     shift : int
         Whole samples ``m`` of the computation delay.
     controller : tuple of ndarray
-        Tustin ``(A, B, C, D)`` of the controller chain ``[phi; w] -> T_rw``.
-    K : ndarray, shape (3, 6)
-        The gain [N m/rad, N m s/rad].
+        Discrete ``(A, B, C, D)`` of the controller chain ``[phi; w] -> T_rw``
+        (:func:`discrete_controller_chain`).
+    K : ControllerSystem
+        The controller ``y -> u_K`` at the period ``T`` (the static gain: no states).
     spec : DesignSpecification
     """
 
@@ -116,7 +160,7 @@ class SampledLoop:
     C: np.ndarray
     shift: int
     controller: tuple
-    K: np.ndarray
+    K: ControllerSystem
     spec: comp.DesignSpecification
 
     def closed_loop(self) -> np.ndarray:
@@ -153,8 +197,8 @@ class SampledLoop:
         """Loop ``L(e^{j omega T})`` (F, 3, 3) broken at the wheel input ``u`` (``u = -L u``).
 
         The Tustin blocks are evaluated at ``s_w = j (2/T) tan(omega T / 2)`` (exact for the
-        bilinear transform); the plant by one solve per frequency. ``omega`` [rad/s] in
-        ``(0, pi / T]``.
+        bilinear transform), the discrete controller at ``z``; the plant by one solve per
+        frequency. ``omega`` [rad/s] in ``(0, pi / T]``.
         """
         spec, T = self.spec, self.period
         omega = np.atleast_1d(np.asarray(omega, dtype=float))
@@ -170,7 +214,8 @@ class SampledLoop:
             axis=1,
         )
         c = _siso(rolloff, w_w) * _siso(wheels, w_w)
-        return c[:, None, None] * ((self.K * sensors[:, None, :]) @ G)
+        gain = self.K.D if self.K.is_static else self.K.response(z)
+        return c[:, None, None] * ((gain * sensors[:, None, :]) @ G)
 
 
 def _siso(siso, omega) -> np.ndarray:
@@ -185,18 +230,20 @@ def sampled_loop(plant, K, spec: comp.DesignSpecification | None = None) -> Samp
     ----------
     plant : tuple ``(A, B, C, D)`` or an object with ``A, B, C, D`` attributes
         Certain plant ``T [N m] -> wdot [rad/s^2]`` (an LFR without blocks works).
-    K : array_like, shape (3, 6)
-        ``[K_p, K_d]`` [N m/rad, N m s/rad].
+    K : array_like, shape (3, 6), or ControllerSystem
+        ``[K_p, K_d]`` [N m/rad, N m s/rad], or a linear controller ``y -> u_K`` (continuous:
+        run as its zero-order hold at the flight software's rate; discrete: at that rate).
     spec : DesignSpecification, optional
         Components, ``flight_software_rate_hz`` and ``computation_delay_s`` (``sampled`` is
         not read: this is the exact loop whatever the continuous model).
     """
     spec = spec or comp.DesignSpecification()
     A, B, C, D = _matrices(plant)
-    K = np.asarray(K, dtype=float)
-    if K.shape != (3, 6):
-        raise ValueError(f"sampled_loop: K must be 3x6, got shape {K.shape}")
     T = 1.0 / spec.flight_software_rate_hz
+    try:
+        controller = as_controller(K).discretize(T)
+    except ValueError as exc:
+        raise ValueError(f"sampled_loop: {exc}") from exc
     Aa, Ba, Ca = plant_with_integrators(A, B, C, D)
     shift = int(np.floor(spec.computation_delay_s / T + 1e-12))
     frac = max(spec.computation_delay_s - shift * T, 0.0)
@@ -204,8 +251,8 @@ def sampled_loop(plant, K, spec: comp.DesignSpecification | None = None) -> Samp
     _, early = _hold_integral(Aa, Ba, frac)
     Phi = E_late @ scipy.linalg.expm(Aa * frac)
     Gamma1 = E_late @ early
-    Ac, Bc, Cc, Dc, _ = scipy.signal.cont2discrete(controller_chain(K, spec), T, method="bilinear")
-    return SampledLoop(T, Phi, Gamma0, Gamma1, Ca, shift, (Ac, Bc, Cc, Dc), K, spec)
+    chain = discrete_controller_chain(controller, spec)
+    return SampledLoop(T, Phi, Gamma0, Gamma1, Ca, shift, chain, controller, spec)
 
 
 def _matrices(plant) -> tuple[np.ndarray, ...]:
@@ -232,7 +279,7 @@ def continuous_poles(plant, K, spec: comp.DesignSpecification | None = None) -> 
     """
     spec = spec or comp.DesignSpecification()
     A, B, C, D = _matrices(plant)
-    closed = weighted_interconnection(plant_statespace(A, B, C, D), spec).close(K)
+    closed = weighted_interconnection(plant_statespace(A, B, C, D), spec).close(as_controller(K))
     poles = np.linalg.eigvals(closed.A)
     a, b = spec.disturbance_denominator
     drop = np.argsort(np.abs(poles + b / a))[:3]

@@ -14,7 +14,7 @@ At each sample ``t_k`` the update reads the plant state and computes, for the th
 
     y_{att} = -(\\mathrm{SST}\\,\\phi + W_{n,sst}\\,n_{sst}), \\quad
     y_{rate} = -(\\mathrm{GYRO}\\,\\omega + W_{n,gyro}\\,n_{gyro}), \\quad
-    u_K = K \\begin{bmatrix} y_{att} \\\\ y_{rate} \\end{bmatrix}, \\quad
+    u_K = C(z) \\begin{bmatrix} y_{att} \\\\ y_{rate} \\end{bmatrix}, \\quad
     u = F_{ro}\\, u_K,
 
     T_{rw} = \\mathrm{RW}\\, \\mathrm{sat}_{T_{max}}(u), \\quad
@@ -40,9 +40,15 @@ infinite frequency is real (the scalar's sign covers ``-1``).
 
 Each linear block is discretized with the bilinear (Tustin) transform at the control rate, so a
 block with a bandwidth above the sample rate (gyro, wheels at 200 Hz) reduces to its DC gain with
-no artificial one-sample delay. The blocks before the torque saturation and those after it are
-merged into two linear stages (their matrices are obtained once by probing the block-by-block
-reference chain with unit vectors), so an update costs two small matrix products.
+no artificial one-sample delay. The controller ``C(z)`` (``y -> u_K``) is the static gain
+``K = [K_p, K_d]`` of the paper or any linear controller
+(:class:`~oos_drake.control.interconnection.ControllerSystem`: a PID, a fixed-order state
+space): a continuous one is discretized exactly for the sampled measurement it reads, held
+over the period (zero-order hold), a discrete one runs as tuned (at this rate); its state is
+part of the discrete state, kept from one sample to the next. The blocks before the torque
+saturation and those after it are merged into two linear stages (their matrices are obtained
+once by probing the block-by-block reference chain with unit vectors), so an update costs two
+small matrix products.
 
 A run may also carry a *dynamic perturbation* (:func:`perturbation_block`,
 :meth:`FlightSoftware.set_dynamic_perturbation`, states declared with the system): a discrete
@@ -67,6 +73,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from oos_drake.control import components as comp
+from oos_drake.control.interconnection import ControllerSystem, as_controller
 from oos_drake.control.sampled import plant_with_integrators
 from oos_drake.robust.interpolant import lti_interpolant
 
@@ -176,8 +183,9 @@ class FlightSoftwareDesign:
     ----------
     period : float
         Sample period [s].
-    K : ndarray, shape (3, 6)
-        Static gain ``[K_p, K_d]`` [N m/rad, N m s/rad].
+    controller : DiscreteBlock
+        The controller ``y (6) -> u_K (3)`` at the period (no states for the static gain
+        ``[K_p, K_d]`` [N m/rad, N m s/rad]).
     star_tracker, gyro, rolloff, wheels, disturbance : DiscreteBlock
         SST, GYRO, F_ro, RW and W_n,ext (the all-pass of the LTI perturbations is set per run:
         :func:`allpass_block`).
@@ -196,7 +204,7 @@ class FlightSoftwareDesign:
     """
 
     period: float
-    K: np.ndarray
+    controller: DiscreteBlock
     star_tracker: DiscreteBlock
     gyro: DiscreteBlock
     rolloff: DiscreteBlock
@@ -223,8 +231,9 @@ class FlightSoftwareDesign:
 
         Parameters
         ----------
-        K : array_like, shape (3, 6)
-            Controller gain ``[K_p, K_d]``.
+        K : array_like, shape (3, 6), or ControllerSystem
+            Controller gain ``[K_p, K_d]``, or a linear controller ``y -> u_K`` (continuous:
+            discretized with a zero-order hold at ``control_rate``; discrete: at that rate).
         control_rate : float
             Sample rate of the flight software [Hz].
         spec : DesignSpecification, optional
@@ -234,13 +243,18 @@ class FlightSoftwareDesign:
         J_ref : array_like, shape (3, 3), optional
             Inertia for the additive perturbation [kg m^2] (default identity).
         """
-        K = np.asarray(K, dtype=float)
-        if K.shape != (3, 6) or not np.all(np.isfinite(K)):
-            raise ValueError(
-                f"flight software: controller gain K must be a finite 3x6, got {K.shape}"
-            )
+        if not isinstance(K, ControllerSystem):
+            K = np.asarray(K, dtype=float)
+            if K.shape != (3, 6) or not np.all(np.isfinite(K)):
+                raise ValueError(
+                    f"flight software: controller gain K must be a finite 3x6, got {K.shape}"
+                )
         if not (np.isfinite(control_rate) and control_rate > 0):
             raise ValueError(f"flight software: control_rate must be > 0 Hz, got {control_rate}")
+        try:
+            controller = as_controller(K).discretize(1.0 / float(control_rate))
+        except ValueError as exc:
+            raise ValueError(f"flight software: {exc}") from exc
         if not torque_limit > 0:
             raise ValueError(f"flight software: torque_limit must be > 0 N m, got {torque_limit}")
         spec = spec or comp.DesignSpecification()
@@ -251,7 +265,7 @@ class FlightSoftwareDesign:
         sst, gyro, rolloff, wheels = (discretize(*comp.per_axis(f), T) for f in comp.filters(spec))
         return cls(
             period=T,
-            K=K,
+            controller=DiscreteBlock(controller.A, controller.B, controller.C, controller.D),
             star_tracker=sst,
             gyro=gyro,
             rolloff=rolloff,
@@ -265,11 +279,29 @@ class FlightSoftwareDesign:
             J_ref=np.eye(3) if J_ref is None else np.asarray(J_ref, dtype=float),
         )
 
+    @property
+    def K(self) -> np.ndarray:
+        """The static gain ``[K_p, K_d]`` (3x6) of a controller without states.
+
+        Raises
+        ------
+        ValueError
+            A dynamic controller.
+        """
+        if self.controller.nstates:
+            raise ValueError(
+                f"flight software: a dynamic controller ({self.controller.nstates} states) has "
+                "no static gain K"
+            )
+        return self.controller.D
+
     def slices(self) -> dict[str, slice]:
-        """Block name -> slice of the discrete state (filters, held outputs, metrics, counter)."""
+        """Block name -> slice of the discrete state (filters, controller, held outputs,
+        metrics, counter)."""
         sizes = {
             "star_tracker": self.star_tracker.nstates,
             "gyro": self.gyro.nstates,
+            "controller": self.controller.nstates,
             "rolloff": self.rolloff.nstates,
             "wheels": self.wheels.nstates,
             "disturbance": self.disturbance.nstates,
@@ -446,7 +478,8 @@ class FlightSoftware(LeafSystem):
         self.DeclareVectorOutputPort(
             "log", 3 * len(LOG_SIGNALS), self._calc_log, prerequisites_of_calc=ticket
         )
-        self._Kp, self._Kd = design.K[:, :3], design.K[:, 3:]
+        controller = design.controller
+        self._Kp, self._Kd = controller.D[:, :3], controller.D[:, 3:]
         self._J_Wadd = design.J_ref * design.W_add
         self._build_stages()
 
@@ -580,18 +613,22 @@ class FlightSoftware(LeafSystem):
 
     # -- the two linear stages ------------------------------------------------------------------
     def _stage1_reference(self, x1, z1):
-        """Sensors, gain and roll-off, block by block: ``z1 = [phi; w_B; n_sst; n_gyro]``,
-        ``x1 = [SST; GYRO; F_ro]`` -> ``(x1+, u)``."""
+        """Sensors, controller and roll-off, block by block: ``z1 = [phi; w_B; n_sst;
+        n_gyro]``, ``x1 = [SST; GYRO; C; F_ro]`` -> ``(x1+, u)``."""
         d, s = self._design, self._stage1_slices
         rpy, w_B, n_sst, n_gyro = z1[0:3], z1[3:6], z1[6:9], z1[9:12]
         out = np.empty_like(x1)
-        sst, gyro, ro = d.star_tracker, d.gyro, d.rolloff
+        sst, gyro, ro, c = d.star_tracker, d.gyro, d.rolloff, d.controller
         out[s[0]], phi_sst = sst.step(x1[s[0]], rpy)
         out[s[1]], w_gyro = gyro.step(x1[s[1]], w_B)
         y_att = -(phi_sst + d.noise_star_tracker * n_sst)
         y_rate = -(w_gyro + d.noise_gyro * n_gyro)
-        u_K = self._Kp @ y_att + self._Kd @ y_rate
-        out[s[2]], u = ro.step(x1[s[2]], u_K)
+        u_K = self._Kp @ y_att + self._Kd @ y_rate  # the feedthrough D = [K_p, K_d]
+        if c.nstates:
+            xc = x1[s[2]]
+            out[s[2]] = c.A @ xc + c.B @ np.concatenate([y_att, y_rate])
+            u_K = u_K + c.C @ xc
+        out[s[3]], u = ro.step(x1[s[3]], u_K)
         return out, u
 
     def _stage2_reference(self, x2, z2, ap: DiscreteBlock):
@@ -620,7 +657,12 @@ class FlightSoftware(LeafSystem):
 
     def _build_stages(self) -> None:
         d, s = self._design, self._slices
-        sizes1 = (d.star_tracker.nstates, d.gyro.nstates, d.rolloff.nstates)
+        sizes1 = (
+            d.star_tracker.nstates,
+            d.gyro.nstates,
+            d.controller.nstates,
+            d.rolloff.nstates,
+        )
         self._stage1_slices = _consecutive(sizes1)
         sizes2 = (d.wheels.nstates, d.disturbance.nstates, 3, 3)
         self._stage2_slices = _consecutive(sizes2)

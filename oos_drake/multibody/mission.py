@@ -37,7 +37,6 @@ instance (the field is zero in orbit) so its element costs nothing.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -65,6 +64,7 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from oos_drake.control.baseline import baseline_gains
 from oos_drake.control.components import DesignSpecification
+from oos_drake.control.interconnection import ControllerSystem, as_controller, read_controller
 from oos_drake.multibody.flight_software import FlightSoftware, FlightSoftwareDesign
 from oos_drake.multibody.plant_parts import add_floating_joint, force_elements, modal_hinges
 from oos_drake.multibody.scenario_plant import (
@@ -85,6 +85,7 @@ __all__ = [
     "MissionOptions",
     "controller_gain",
     "effective_inertia",
+    "mission_controller",
     "logging_rate",
     "make_mission_diagram",
     "quintic_piecewise_polynomial",
@@ -137,7 +138,8 @@ class MissionOptions:
         the held torque at control instants); ``None`` (default): about 1 Hz, the fastest rate
         <= 1 Hz that divides ``control_rate`` (:func:`logging_rate`).
     controller : str or None
-        Path of a synthesis ``controller.json`` (gains ``K_p``, ``K_d``); ``None``: the paper's
+        Path of a synthesis ``controller.json`` (any structure: the static gains ``K_p``,
+        ``K_d``, a PID, a state space; :func:`mission_controller`); ``None``: the paper's
         baseline tuned on the coupled inertia at the first docking.
     torque_limit : float
         Reaction-wheel torque limit [N m].
@@ -281,8 +283,8 @@ class MissionDiagram:
     options : MissionOptions
     scenario : Scenario
     timeline : MissionTimeline
-    K : ndarray, shape (3, 6)
-        Controller gain in use.
+    controller : ControllerSystem
+        Controller in use (``y -> u_K``; the static gain ``[K_p, K_d]`` has no states).
     hub_joint, target_joint : RpyFloatingJoint
     arm_joints, drive_joints : tuple of RevoluteJoint
     mode_joints : Mapping[str, tuple of RevoluteJoint]
@@ -303,7 +305,7 @@ class MissionDiagram:
     options: MissionOptions
     scenario: Scenario
     timeline: MissionTimeline
-    K: np.ndarray
+    controller: ControllerSystem
     hub_joint: object
     target_joint: object
     arm_joints: tuple
@@ -315,6 +317,11 @@ class MissionDiagram:
     target_body: object = None
     state_logger: object = None
     torque_logger: object = None
+
+    @property
+    def K(self) -> np.ndarray:
+        """The static gain ``[K_p, K_d]`` (3x6) in use (ValueError for a dynamic controller)."""
+        return self.controller.K
 
 
 def quintic_piecewise_polynomial(trajectory: QuinticTrajectory) -> PiecewisePolynomial:
@@ -347,13 +354,14 @@ def effective_inertia(D_G1: np.ndarray) -> np.ndarray:
     return D[3:, 3:] - D[3:, :3] @ np.linalg.solve(D[:3, :3], D[:3, 3:])
 
 
-def controller_gain(path: str | Path | None, scenario: Scenario) -> np.ndarray:
-    """Controller gain ``[K_p, K_d]`` (3x6) from a synthesis ``controller.json`` or the baseline.
+def mission_controller(path: str | Path | None, scenario: Scenario) -> ControllerSystem:
+    """The controller of the mission: a synthesis ``controller.json`` or the baseline gain.
 
     Parameters
     ----------
     path : str, Path or None
-        ``controller.json`` written by ``oos synth``; ``None``: the paper's baseline
+        ``controller.json`` written by ``oos synth`` (any structure, read by
+        :func:`oos_drake.control.interconnection.read_controller`); ``None``: the paper's baseline
         (``omega = 2 pi 0.01 rad/s``, ``xi = 1``) on the scenario's rigid coupled inertia at
         the first docking.
     scenario : Scenario
@@ -362,26 +370,32 @@ def controller_gain(path: str | Path | None, scenario: Scenario) -> np.ndarray:
     Raises
     ------
     ValueError
-        Missing file or gains of the wrong shape.
+        Missing file or malformed controller (the message names the file and the field).
     """
     if path is None:
         timeline = mission_timeline(scenario)
         configuration = timeline.configuration(float(scenario.mission.first_docking_time))
         J = effective_inertia(rigid_spatial_inertia_at_G1(scenario, configuration))
-        return baseline_gains(0.5 * (J + J.T))
+        return ControllerSystem.static(baseline_gains(0.5 * (J + J.T)))
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"controller file {path} not found")
-    record = json.loads(path.read_text())
+    return read_controller(path)[1]
+
+
+def controller_gain(path: str | Path | None, scenario: Scenario) -> np.ndarray:
+    """Static gain ``[K_p, K_d]`` (3x6) of :func:`mission_controller` (a static controller).
+
+    Raises
+    ------
+    ValueError
+        As :func:`mission_controller`, or a dynamic controller (it has no static gain).
+    """
+    system = mission_controller(path, scenario)
     try:
-        K_p = np.asarray(record["controller"]["K_p"]["value"], dtype=float)
-        K_d = np.asarray(record["controller"]["K_d"]["value"], dtype=float)
-    except (KeyError, TypeError) as exc:
-        raise ValueError(f"controller file {path}: no controller.K_p/K_d values ({exc})") from exc
-    K = np.hstack([K_p, K_d])
-    if K.shape != (3, 6):
-        raise ValueError(f"controller file {path}: K must be 3x6, got {K.shape}")
-    return K
+        return system.K
+    except ValueError as exc:
+        raise ValueError(f"controller file {path}: {exc}") from exc
 
 
 def _add_plant(builder: DiagramBuilder, sdf_directory: Path):
@@ -432,8 +446,9 @@ def make_mission_diagram(
         unset rates come from the scenario: :meth:`MissionOptions.resolved`).
     scenario : Scenario
         Scenario data (trajectories, inertias, flight software).
-    K : array_like, shape (3, 6), optional
-        Controller gain overriding ``options.controller``.
+    K : array_like, shape (3, 6), or ControllerSystem, optional
+        Controller (gain ``[K_p, K_d]`` or a linear controller ``y -> u_K``) overriding
+        ``options.controller``.
     sdf_directory : str or Path, optional
         Directory of ``oos_scenario.sdf`` (default: the scenario's own twin,
         :func:`~oos_drake.multibody.scenario_sdf.scenario_sdf_directory`).
@@ -454,7 +469,9 @@ def make_mission_diagram(
         sdf_directory, _ = scenario_sdf_directory(scenario)
     mission = mission_timeline(scenario)
     timeline = mission if timeline is None else timeline
-    K = controller_gain(options.controller, scenario) if K is None else np.asarray(K, float)
+    controller = (
+        mission_controller(options.controller, scenario) if K is None else as_controller(K)
+    )
     builder = DiagramBuilder()
     parts = _add_plant(builder, Path(sdf_directory))
     plant = parts["plant"]
@@ -499,7 +516,7 @@ def make_mission_diagram(
 
     J_ref = effective_inertia(rigid_spatial_inertia_at_G1(scenario, grasp))
     design = FlightSoftwareDesign.create(
-        K,
+        controller,
         options.control_rate,
         spec=DesignSpecification.from_requirements(scenario.control),
         torque_limit=options.torque_limit,
@@ -536,7 +553,7 @@ def make_mission_diagram(
         options=options,
         scenario=scenario,
         timeline=timeline,
-        K=K,
+        controller=controller,
         state_logger=state_logger,
         torque_logger=torque_logger,
         **parts,
