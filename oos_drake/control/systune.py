@@ -55,7 +55,7 @@ import scipy.linalg
 
 from oos_drake.control.goals import Margins, Poles, Variance, WeightedGain
 from oos_drake.control.margins import disk_gain_phase
-from oos_drake.control.nonsmooth_bfgs import minimize_bundle_cycles
+from oos_drake.control.nonsmooth_bfgs import QP_SOLVERS, minimize_bundle_cycles
 from oos_drake.control.objective import active_set, peak_gradients
 from oos_drake.control.statespace import BatchedStateSpace, connect, sum_block
 from oos_drake.control.tunable import FixedBlock, _Tunable
@@ -98,6 +98,8 @@ class SystuneOptions:
         (``> min_decay``).
     feasibility_tolerance : float
         A hard goal counts as met when its exact value is ``<= 1 + feasibility_tolerance``.
+    qp : str
+        Solver of the bundle step's dual QP (see ``SynthesisOptions.qp``).
     """
 
     restarts: int = 0
@@ -111,6 +113,7 @@ class SystuneOptions:
     min_decay: float = 1e-7
     stability_floor: float = 1e-4
     feasibility_tolerance: float = 1e-6
+    qp: str = "active-set"
 
 
 @dataclass(frozen=True)
@@ -848,6 +851,7 @@ def _minimize(objective: _Objective, xi, options: SystuneOptions):
         regrad=objective.regrad,
         max_iterations=options.max_iterations,
         restart_every=options.metric_cycle,
+        qp=QP_SOLVERS[options.qp],
     )
     return res.x, res.f, res.iterations, res.message
 
@@ -910,6 +914,8 @@ def systune(plants, controller, goals, *, options: SystuneOptions | None = None)
     True
     """
     options = options or SystuneOptions()
+    if options.qp not in QP_SOLVERS:
+        raise ValueError(f"systune: qp must be one of {sorted(QP_SOLVERS)}, got {options.qp!r}")
     goals = list(goals)
     if not goals:
         raise ValueError("systune: no goal given")
