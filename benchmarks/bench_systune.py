@@ -1,6 +1,18 @@
-"""Benchmark: systune vs today's static-gain synthesis on the same problem.
+"""Benchmark: systune vs today's static-gain synthesis on the same problem; the bundle QP solvers.
 
-Run ``python benchmarks/bench_systune.py [--configurations 2] [--modes 1] [--iterations 300]``.
+Run ``python benchmarks/bench_systune.py [--configurations 2] [--modes 1] [--iterations 300]``,
+or ``python benchmarks/bench_systune.py --scenario [--configurations 200] [--margins]``.
+
+``--scenario``: ``oos synth``'s two designs of the paper's scenario, each run twice in the same
+process, with the earlier sessions' bundle QP solver (SciPy SLSQP, ``qp="slsqp"``: the
+baseline) and with the exact active-set solver (``qp="active-set"``, the default): the
+default synthesis (:func:`~oos_drake.control.synthesis.synthesize`, ``oos synth``'s options,
+``--workers`` processes), and with ``--margins`` the margins design
+(:func:`~oos_drake.control.requirements.tune_to_requirements`: soft weighted gain, hard
+>= 6 dB and >= 30 deg at the wheel input on the 10 Hz sampled loop). Prints wall and CPU
+times, the ratio new / baseline and gamma of each with their difference.
+
+Default mode:
 
 Both tune the static 3x6 gain ``[K_p K_d]`` of the paper's weighted interconnection
 (:mod:`oos_drake.control.interconnection`) around synthetic flexible plants at nominal
@@ -42,12 +54,81 @@ def _timed(function):
     return out, time.perf_counter() - wall, time.process_time() - cpu
 
 
+def scenario(args) -> None:
+    """``--scenario``: baseline (SLSQP) and active-set QP on ``oos synth``'s designs."""
+    import dataclasses
+
+    from oos_drake.control.cli import baseline_for, scenario_plants
+    from oos_drake.control.components import DesignSpecification
+    from oos_drake.control.requirements import tune_to_requirements
+    from oos_drake.processes import make_executor
+    from oos_drake.scenario.data import load_scenario
+
+    paper = load_scenario("paper")
+    plants = scenario_plants(args.configurations, paper)
+    K0 = baseline_for(plants, paper.mission.first_docking_time)
+    spec = DesignSpecification.from_requirements(paper.control)
+    rows = []
+    for qp in ("slsqp", "active-set"):
+        options = SynthesisOptions(workers=args.workers, qp=qp)
+
+        def run(options=options):
+            with make_executor(args.workers) as executor:
+                return synthesize(plants, K0, spec=spec, options=options, executor=executor)
+
+        result, wall, cpu = _timed(run)
+        rows.append(("static gain", qp, wall, cpu, result.gamma, ""))
+    if args.margins:
+        requirements = dataclasses.replace(
+            paper.control, rate_hz=10.0, gain_margin_db=6.0, phase_margin_deg=30.0
+        )
+        for qp in ("slsqp", "active-set"):
+            options = SystuneOptions(restarts=2, max_iterations=150, qp=qp)
+            with single_threaded_blas():
+                result, wall, cpu = _timed(
+                    lambda options=options: tune_to_requirements(
+                        plants, K0, spec, requirements, options
+                    )
+                )
+            margins = result.goals[1].details
+            rows.append(
+                (
+                    "margins hard",
+                    qp,
+                    wall,
+                    cpu,
+                    result.soft,
+                    f"{result.status}, GM {margins['gain_margin_db']:.3f} dB, "
+                    f"PM {margins['phase_margin_deg']:.3f} deg",
+                )
+            )
+    print(f"{plants.size} configurations of the paper's scenario, {args.workers} worker(s)")
+    print(f"{'design':14s} {'qp':11s} {'wall [s]':>9s} {'cpu [s]':>9s} {'gamma':>12s}")
+    for design, qp, wall, cpu, gamma, note in rows:
+        print(f"{design:14s} {qp:11s} {wall:9.1f} {cpu:9.1f} {gamma:12.8f} {note}")
+    for base, new in zip(rows[::2], rows[1::2], strict=True):
+        difference = new[4] - base[4]
+        print(
+            f"{base[0]}: active-set / slsqp wall {new[2] / base[2]:.2f}, "
+            f"cpu {new[3] / base[3]:.2f}; gamma difference {difference:+.2e} "
+            f"(relative {difference / base[4]:+.2e})"
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--configurations", type=int, default=2)
+    parser.add_argument("--configurations", type=int, default=None)
     parser.add_argument("--modes", type=int, default=1)
     parser.add_argument("--iterations", type=int, default=300)
+    parser.add_argument("--scenario", action="store_true", help="oos synth's designs, QP solvers")
+    parser.add_argument("--margins", action="store_true", help="with --scenario: margins design")
+    parser.add_argument("--workers", type=int, default=2, help="with --scenario: processes")
     args = parser.parse_args()
+    if args.scenario:
+        args.configurations = args.configurations or 200
+        scenario(args)
+        return
+    args.configurations = args.configurations or 2
     plants = synthetic_flexible_plants(args.configurations, modes=args.modes, uncertain=False)
     K0 = baseline_gains(inertia_from_plant(plants.evaluate([1]))[0])
     N, P = plants.size, len(plants.parameters)

@@ -204,9 +204,9 @@ def scenario_controller(path, scenario) -> Controller:
                 f"WARNING: {controller.source} has status {controller.status!r}: the hard goals "
                 "it was tuned for are NOT met"
             )
-        if controller.spec != spec:
+        if controller.spec.design_data() != spec.design_data():
             changed = sorted(
-                k for k, v in spec.to_dict().items() if controller.spec.to_dict()[k] != v
+                k for k, v in spec.design_data().items() if controller.spec.to_dict()[k] != v
             )
             print(
                 f"WARNING: {controller.source} was tuned with other design data "

@@ -113,7 +113,10 @@ def _run_tuning(args, scenario, spec, plants, K0) -> int:
 
     requirements = scenario.control
     options = SystuneOptions(
-        restarts=args.restarts, max_iterations=args.max_iterations, seed=args.seed
+        restarts=args.restarts,
+        max_iterations=args.max_iterations,
+        seed=args.seed,
+        workers=args.workers,
     )
     start = time.perf_counter()
     result = tune_to_requirements(plants, K0, spec, requirements, options)

@@ -160,6 +160,14 @@ class DesignSpecification:
         """Return the specification as a JSON-ready dict."""
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
 
+    def design_data(self) -> dict:
+        """:meth:`to_dict` without the loop model (``sampled``, ``computation_delay_s``,
+        ``hold_order``: how the synthesis modelled the flight software, set by ``oos synth
+        --sampled``/``--delay`` or ``[control] rate_hz``): the sensors, actuators, weights and
+        rate that belong to the spacecraft and its requirements."""
+        loop_model = ("sampled", "computation_delay_s", "hold_order")
+        return {k: v for k, v in self.to_dict().items() if k not in loop_model}
+
 
 def first_order_lowpass(cutoff_hz: float) -> tuple[np.ndarray, ...]:
     """Return ``(A, B, C, D)`` of ``1 / (s / w_c + 1)``, ``w_c = 2 pi cutoff_hz`` [rad/s]."""

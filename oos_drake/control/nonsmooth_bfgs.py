@@ -142,8 +142,61 @@ def minimize_nonsmooth(
     return BfgsResult(x, float(f), it, evaluations, tuple(history), message)
 
 
-def _simplex_qp(Q, c):
-    """``min_{lam in simplex} 1/2 lam^T Q lam - c^T lam`` (small dense QP, SLSQP)."""
+def simplex_qp(Q, c):
+    """``min_{lam in simplex} 1/2 lam^T Q lam - c^T lam`` (small dense QP, ``Q`` PSD).
+
+    Primal active-set method: from the best vertex, solve the equality-constrained problem
+    on the support (KKT system, least squares when ``Q`` is singular), step back to the first
+    bound that a negative weight crosses, else add the index whose multiplier is most
+    negative; exact (to rounding) in at most a few times ``k`` iterations. Falls back to
+    :func:`simplex_qp_slsqp` on a singular inconsistent KKT system (degenerate support).
+    The primal step ``d = -H G^T lam`` of the bundle method is unique even when ``lam`` is not.
+    """
+    k = c.size
+    if k == 1:
+        return np.ones(1)
+    tol = 1e-12 * max(np.abs(Q).max(), np.abs(c).max(), 1e-300)
+    i0 = int(np.argmin(0.5 * np.diag(Q) - c))
+    lam = np.zeros(k)
+    lam[i0] = 1.0
+    support = [i0]
+    for _ in range(20 * k + 50):
+        s = np.array(support)
+        m = s.size
+        kkt = np.zeros((m + 1, m + 1))
+        kkt[:m, :m] = Q[np.ix_(s, s)]
+        kkt[:m, m] = kkt[m, :m] = 1.0
+        rhs = np.append(c[s], 1.0)
+        sol = np.linalg.lstsq(kkt, rhs, rcond=None)[0]
+        if not np.allclose(kkt @ sol, rhs, rtol=0.0, atol=1e-9 * (1.0 + np.abs(rhs).max())):
+            break
+        target = sol[:m]
+        if np.all(target >= 0):
+            lam = np.zeros(k)
+            lam[s] = target
+            grad = Q @ lam - c
+            violation = grad - grad[s].mean()  # multipliers of lam_j >= 0 off the support
+            violation[s] = np.inf
+            j = int(np.argmin(violation))
+            if violation[j] >= -tol:
+                return lam
+            support.append(j)
+            continue
+        p = target - lam[s]
+        ratios = np.full(m, np.inf)
+        ratios[p < 0] = lam[s][p < 0] / -p[p < 0]
+        b = int(np.argmin(ratios))
+        lam[s] = lam[s] + ratios[b] * p
+        lam[s[b]] = 0.0
+        support = [i for i in support if lam[i] > 0]
+        if not support:
+            break
+    return simplex_qp_slsqp(Q, c)
+
+
+def simplex_qp_slsqp(Q, c):
+    """:func:`simplex_qp` by SciPy's SLSQP (the solver of the earlier sessions: the baseline
+    of ``benchmarks/bench_synthesis.py``, and the fallback of the active-set method)."""
     from scipy.optimize import minimize
 
     k = c.size
@@ -165,6 +218,10 @@ def _simplex_qp(Q, c):
     return lam / lam.sum()
 
 
+#: The bundle step's QP solvers by name (``SynthesisOptions.qp``, ``SystuneOptions.qp``).
+QP_SOLVERS = {"active-set": simplex_qp, "slsqp": simplex_qp_slsqp}
+
+
 def minimize_bundle_bfgs(
     fun: Callable,
     x0,
@@ -178,6 +235,7 @@ def minimize_bundle_bfgs(
     stall_rtol: float = 1e-5,
     max_enrich: int = 3,
     merge: Callable | None = None,
+    qp: Callable = simplex_qp,
 ) -> BfgsResult:
     """Minimize a max of smooth functions from its nearly active pieces (BFGS-SQP step).
 
@@ -205,6 +263,8 @@ def minimize_bundle_bfgs(
         times per iteration) before backtracking, as bundle methods do.
     merge : callable, optional
         ``(pieces, more_pieces) -> pieces`` (default: concatenate tuples of arrays).
+    qp : callable
+        ``(Q, c) -> lam``, the solver of the step's dual (:func:`simplex_qp`).
     stall_window, stall_rtol : int, float
         Also stop when ``f`` decreased by less than ``stall_rtol`` (relative) over the last
         ``stall_window`` iterations.
@@ -228,7 +288,7 @@ def minimize_bundle_bfgs(
     fresh = True
 
     def step(H, f, vals, grads):
-        lam = _simplex_qp(grads @ H @ grads.T, vals - f)
+        lam = qp(grads @ H @ grads.T, vals - f)
         d = -H @ (lam @ grads)
         model = np.max(vals + grads @ d)
         return d, lam, f - model
@@ -300,6 +360,7 @@ def minimize_bundle_cycles(
     restart_rtol: float = 1e-4,
     kicks: int = 2,
     kick: float = 0.05,
+    qp: Callable = simplex_qp,
 ) -> BfgsResult:
     """:func:`minimize_bundle_bfgs` in metric cycles, then kicks (escapes stalls at kinks).
 
@@ -311,7 +372,7 @@ def minimize_bundle_cycles(
 
     Parameters
     ----------
-    fun, regrad : callable
+    fun, regrad, qp : callable
         As for :func:`minimize_bundle_bfgs`.
     x0 : array_like
         Starting point (finite ``f``).
@@ -330,6 +391,7 @@ def minimize_bundle_cycles(
             x,
             regrad=regrad,
             max_iterations=min(restart_every, max_iterations - used),
+            qp=qp,
         )
         used += res.iterations
         evaluations += res.evaluations

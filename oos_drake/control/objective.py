@@ -23,7 +23,7 @@ import numpy as np
 from oos_drake.blas import with_single_threaded_blas
 from oos_drake.control.interconnection import WeightedInterconnection
 from oos_drake.control.loop_response import LoopSigma
-from oos_drake.robust.peak_gain import PeakGain, peak_gain
+from oos_drake.robust.peak_gain import ModalResponse, PeakGain, peak_gain
 
 
 @dataclass(frozen=True)
@@ -154,11 +154,14 @@ def active_set(
     focus: float = 0.2,
     workers: int = 1,
     points=None,
+    eigen=None,
 ) -> ActiveSet:
     """Evaluate ``gamma(K)`` and collect every local peak within ``eps`` (relative) of it.
 
     ``workers``: threads of the eigendecompositions (see :func:`peak_gain`); ``points``: see
-    :func:`peak_gradients` (the peaks are searched on ``interconnection.close(K)``).
+    :func:`peak_gradients` (the peaks are searched on ``interconnection.close(K)``);
+    ``eigen``: ``(lambda, V, V^-1)`` of the closed loop's ``A`` when already computed (see
+    :class:`~oos_drake.robust.peak_gain.ModalResponse`).
     """
     M = interconnection.close(K)
     peaks = peak_gain(
@@ -169,6 +172,7 @@ def active_set(
         focus=max(focus, eps),
         workers=workers,
         evaluator=loop_sigma(interconnection, K),
+        modal=None if eigen is None else ModalResponse(M.A, M.B, M.C, M.D, eigen=eigen),
     )
     worst = peaks.worst
     if not np.isfinite(peaks.gamma[worst]):

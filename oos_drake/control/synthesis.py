@@ -43,7 +43,11 @@ import pandas as pd
 from oos_drake.blas import with_single_threaded_blas
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.interconnection import WeightedInterconnection, weighted_interconnection
-from oos_drake.control.nonsmooth_bfgs import minimize_bundle_cycles, minimize_nonsmooth
+from oos_drake.control.nonsmooth_bfgs import (
+    QP_SOLVERS,
+    minimize_bundle_cycles,
+    minimize_nonsmooth,
+)
 from oos_drake.control.objective import active_set, evaluate, loop_sigma, peak_gradients
 from oos_drake.control.plants import PlantArray
 from oos_drake.robust.peak_gain import peak_gain
@@ -90,6 +94,10 @@ class SynthesisOptions:
         Threads for the per-model eigendecompositions of every gamma evaluation (2 on the
         paper's 2-core target machine); the runs that :func:`synthesize` gives its executor
         share them (``workers // executor.workers`` each, at least one).
+    qp : str
+        Solver of the bundle step's dual QP (:data:`~oos_drake.control.nonsmooth_bfgs.
+        QP_SOLVERS`): ``"active-set"`` (exact) or ``"slsqp"`` (the earlier sessions' solver,
+        kept as the baseline of ``benchmarks/bench_synthesis.py``).
     """
 
     restarts: int = 2
@@ -107,6 +115,7 @@ class SynthesisOptions:
     rtol_add: float = 1e-3
     max_rounds: int = 12
     workers: int = 1
+    qp: str = "active-set"
 
 
 @dataclass(frozen=True)
@@ -206,6 +215,7 @@ def tune(
     workers: int = 1,
     kicks: int = 2,
     kick: float = 0.05,
+    qp: str = "active-set",
 ):
     """Minimize ``gamma(K)`` over one interconnection array from ``K0``.
 
@@ -217,7 +227,8 @@ def tune(
 
     ``method="bundle"`` (default): BFGS-SQP steps on the nearly active peaks
     (:func:`minimize_bundle_bfgs`); ``"bfgs"``: plain nonsmooth BFGS with one subgradient
-    (:func:`minimize_nonsmooth`). ``workers``: threads of the eigendecompositions.
+    (:func:`minimize_nonsmooth`). ``workers``: threads of the eigendecompositions; ``qp``:
+    the bundle step's QP solver (see :class:`SynthesisOptions`).
     Returns ``(K, gamma, BfgsResult)``.
     """
     K0 = np.asarray(K0, dtype=float)
@@ -249,6 +260,7 @@ def tune(
             restart_rtol=restart_rtol,
             kicks=kicks,
             kick=kick,
+            qp=QP_SOLVERS[qp],
         )
     elif method == "bfgs":
 
@@ -321,6 +333,7 @@ def _tune_start(interconnection: WeightedInterconnection, K_start, scale, option
         scale=scale,
         method=options.method,
         workers=threads,
+        qp=options.qp,
     )
     return g0, tuned
 
@@ -378,6 +391,8 @@ def synthesize(
     K0 = np.asarray(K0, dtype=float)
     if K0.shape != (3, 6):
         raise ValueError(f"synthesize: start gain K0 must be 3x6, got {K0.shape}")
+    if options.qp not in QP_SOLVERS:
+        raise ValueError(f"synthesize: qp must be one of {sorted(QP_SOLVERS)}, got {options.qp!r}")
     N = plants.size
     P = len(plants.parameters)
     nominal = np.broadcast_to(plants.nominal_values, (N, P)).copy()

@@ -55,12 +55,12 @@ import scipy.linalg
 
 from oos_drake.control.goals import Margins, Poles, Variance, WeightedGain
 from oos_drake.control.margins import disk_gain_phase
-from oos_drake.control.nonsmooth_bfgs import minimize_bundle_cycles
+from oos_drake.control.nonsmooth_bfgs import QP_SOLVERS, minimize_bundle_cycles
 from oos_drake.control.objective import active_set, peak_gradients
 from oos_drake.control.statespace import BatchedStateSpace, connect, sum_block
 from oos_drake.control.tunable import FixedBlock, _Tunable
 from oos_drake.lfr import LFR
-from oos_drake.robust.peak_gain import peak_gain
+from oos_drake.robust.peak_gain import ModalResponse, eigendecompose, peak_gain
 
 __all__ = ["SystuneOptions", "GoalValue", "TuningResult", "systune"]
 
@@ -98,6 +98,15 @@ class SystuneOptions:
         (``> min_decay``).
     feasibility_tolerance : float
         A hard goal counts as met when its exact value is ``<= 1 + feasibility_tolerance``.
+    qp : str
+        Solver of the bundle step's dual QP (see ``SynthesisOptions.qp``).
+    shared_modes : bool
+        Decompose the closed-loop ``A`` once per evaluation for every goal and the stability
+        test (continuous loops: the goals' generalized plants share it). ``False``: each goal
+        decomposes its own (the earlier sessions' path, the baseline of
+        ``benchmarks/bench_systune.py``; same values).
+    workers : int
+        Threads of that eigendecomposition (LAPACK without the GIL; 2 on the 2-core target).
     """
 
     restarts: int = 0
@@ -111,6 +120,9 @@ class SystuneOptions:
     min_decay: float = 1e-7
     stability_floor: float = 1e-4
     feasibility_tolerance: float = 1e-6
+    qp: str = "active-set"
+    shared_modes: bool = True
+    workers: int = 1
 
 
 @dataclass(frozen=True)
@@ -297,15 +309,53 @@ def _poles_s(A_cl, sampling_time):
 # --------------------------------------------------------------------------- goal terms
 
 
-class _HinfTerm:
-    """``scale * ||F_l(P, K)||_inf`` over the models of one loop."""
+class _ClosedModes:
+    """The eigendecomposition ``(lambda, V, V^-1)`` of the closed-loop ``A`` of the goals'
+    loops at the last ``K`` asked (every goal's generalized plant has the same ``A, B2, C2``:
+    the plants, fixed blocks and controller states; the goals differ in their exogenous
+    channels): one decomposition per evaluation, shared by the goals and the stability test."""
 
-    def __init__(self, loop: _Loop, scale: float = 1.0):
+    def __init__(self, loop: _Loop, workers: int = 1):
+        self.loop, self.workers = loop, workers
+        self._key, self._value = None, None
+
+    def shares(self, loop: _Loop) -> bool:
+        """Whether ``loop`` has this ``A, B2, C2`` (continuous loops only)."""
+        mine = self.loop
+        return (
+            loop.sampling_time == 0
+            and mine.sampling_time == 0
+            and all(
+                np.array_equal(a, b)
+                for a, b in ((loop.A, mine.A), (loop.B2, mine.B2), (loop.C2, mine.C2))
+            )
+        )
+
+    def __call__(self, K):
+        """``(lambda, V, V^-1)`` at ``K``, or None when ``V`` is singular."""
+        key = np.asarray(K, dtype=float).tobytes()
+        if key != self._key:
+            A_cl = self.loop.closed(K).A  # the same expression as every term's closed loop
+            try:
+                value = eigendecompose(A_cl, self.workers)
+            except np.linalg.LinAlgError:  # defective: each term decomposes its own
+                value = None
+            self._key, self._value = key, value
+        return self._value
+
+
+class _HinfTerm:
+    """``scale * ||F_l(P, K)||_inf`` over the models of one loop (``modes``: the shared
+    closed-loop eigendecomposition when the loop has its ``A``)."""
+
+    def __init__(self, loop: _Loop, scale: float = 1.0, modes: _ClosedModes | None = None):
         self.loop, self.scale = loop, float(scale)
         self.points = None if loop.sampling_time == 0 else loop.points
+        self.modes = modes if modes is not None and modes.shares(loop) else None
 
     def pieces(self, K, eps):
-        a = active_set(self.loop, K, eps=eps, points=self.points)
+        eigen = None if self.modes is None else self.modes(K)
+        a = active_set(self.loop, K, eps=eps, points=self.points, eigen=eigen)
         if not np.isfinite(a.gamma):
             return None
         which = a.which if a.which is not None else np.zeros(a.values.size, int)
@@ -318,7 +368,9 @@ class _HinfTerm:
     def exact(self, K):
         """``(scale * norm per model, peak frequency per model [rad/s])``, certified."""
         M = self.loop.close(K)
-        peaks = peak_gain(M.A, M.B, M.C, M.D, certify=True)
+        eigen = None if self.modes is None else self.modes(K)
+        modal = None if eigen is None else ModalResponse(M.A, M.B, M.C, M.D, eigen=eigen)
+        peaks = peak_gain(M.A, M.B, M.C, M.D, certify=True, modal=modal)
         return self.scale * peaks.gamma, self.loop.physical_frequency(peaks.omega)
 
 
@@ -445,11 +497,16 @@ class _PoleTerm:
         _, _, _, s, *_ = self._all(K)
         return self._value(s)[0].max(axis=-1), np.full(s.shape[0], np.nan)
 
-    def stable(self, K) -> np.ndarray:
+    def stable(self, K, modes: _ClosedModes | None = None) -> np.ndarray:
         """Per model: every closed-loop pole decays faster than ``min_decay`` [1/s]
-        (``|z| < exp(-min_decay T_s)`` for a discrete loop)."""
-        A, _, B2, _, C2, *_ = self.loop.partitions()
-        lam = np.linalg.eigvals(A + B2 @ K @ C2)
+        (``|z| < exp(-min_decay T_s)`` for a discrete loop); ``modes``: the shared
+        eigendecomposition of this loop, when the goals use it."""
+        eigen = None if modes is None else modes(K)
+        if eigen is not None:
+            lam = eigen[0]
+        else:
+            A, _, B2, _, C2, *_ = self.loop.partitions()
+            lam = np.linalg.eigvals(A + B2 @ K @ C2)
         ts = self.loop.sampling_time
         if ts == 0:
             return np.max(lam.real, axis=-1) < -self.min_decay
@@ -578,7 +635,7 @@ class _Structure:
 class _Problem:
     """Signals, blocks and generalized plants of one systune call."""
 
-    def __init__(self, plants, blocks, min_decay: float = 0.0):
+    def __init__(self, plants, blocks, min_decay: float = 0.0, shared_modes=True, workers=1):
         blocks = list(blocks) if isinstance(blocks, Sequence) else [blocks]
         self.tunables = [b for b in blocks if isinstance(b, _Tunable)]
         self.fixed = [b for b in blocks if isinstance(b, FixedBlock)]
@@ -630,6 +687,12 @@ class _Problem:
         self.states = [tuple(f"{t.name}.x[{i}]" for i in range(t.nstates)) for t in self.tunables]
         self.loop = self.loops((), ())
         self.stability = _PoleTerm(self.loop, None, min_decay)
+        continuous = self.sampling_time == 0
+        self.modes = _ClosedModes(self.loop, workers) if continuous and shared_modes else None
+
+    def stable(self, K) -> np.ndarray:
+        """Per model: the closed loop at ``K`` is stable (see :meth:`_PoleTerm.stable`)."""
+        return self.stability.stable(K, self.modes)
 
     def resolve(self, names, label: str) -> list[str]:
         out = []
@@ -713,14 +776,14 @@ class _Problem:
             loop = self.loops(inputs, outputs)
             left = _weight(goal.left_weight, len(outputs), goal.label, "left_weight")
             right = _weight(goal.right_weight, len(inputs), goal.label, "right_weight")
-            return [(_HinfTerm(loop.weighted(left, right)), index, "")]
+            return [(_HinfTerm(loop.weighted(left, right), modes=self.modes), index, "")]
         if isinstance(goal, Margins):
             channels = self.resolve(goal.loop_opening, goal.label)
             loop = self.loops(channels, channels, half=True)
             if goal.multiloop or len(channels) == 1:
-                return [(_HinfTerm(loop, goal.alpha), index, ",".join(channels))]
+                return [(_HinfTerm(loop, goal.alpha, self.modes), index, ",".join(channels))]
             return [
-                (_HinfTerm(loop.select([i], [i]), goal.alpha), index, c)
+                (_HinfTerm(loop.select([i], [i]), goal.alpha, self.modes), index, c)
                 for i, c in enumerate(channels)
             ]
         if isinstance(goal, Poles):
@@ -775,7 +838,7 @@ class _Objective:
         if not np.all(np.isfinite(K)):  # a trial step overflowed a log-parameter
             return np.inf, np.array([np.inf]), np.zeros((1, nx)), _empty_pieces(1)
         need_stable = any(not isinstance(t, _PoleTerm) or t.goal is not None for t in self.terms)
-        if need_stable and not np.all(self.problem.stability.stable(K)):
+        if need_stable and not np.all(self.problem.stable(K)):
             return np.inf, np.array([np.inf]), np.zeros((1, nx)), _empty_pieces(1)
         values, grads, pieces = [], [], []
         for j, (term, (a, b)) in enumerate(zip(self.terms, self.affine, strict=True)):
@@ -848,6 +911,7 @@ def _minimize(objective: _Objective, xi, options: SystuneOptions):
         regrad=objective.regrad,
         max_iterations=options.max_iterations,
         restart_every=options.metric_cycle,
+        qp=QP_SOLVERS[options.qp],
     )
     return res.x, res.f, res.iterations, res.message
 
@@ -910,10 +974,12 @@ def systune(plants, controller, goals, *, options: SystuneOptions | None = None)
     True
     """
     options = options or SystuneOptions()
+    if options.qp not in QP_SOLVERS:
+        raise ValueError(f"systune: qp must be one of {sorted(QP_SOLVERS)}, got {options.qp!r}")
     goals = list(goals)
     if not goals:
         raise ValueError("systune: no goal given")
-    problem = _Problem(plants, controller, options.min_decay)
+    problem = _Problem(plants, controller, options.min_decay, options.shared_modes, options.workers)
     terms, owners = [], []
     for g, goal in enumerate(goals):
         if not hasattr(goal, "kind"):
@@ -958,13 +1024,13 @@ def _run(problem: _Problem, terms, soft, hard, start, scale, options: SystuneOpt
     xi = start / scale
     iterations, message = 0, "no iteration"
     # phase 0: stabilize
-    if not np.all(problem.stability.stable(structure.K(xi * scale))):
+    if not np.all(problem.stable(structure.K(xi * scale))):
         obj = _Objective(
             problem, [problem.stability], [(1.0, 0.0)], scale, eps, -options.stability_floor
         )
         xi, _, it, message = _minimize(obj, xi, options)
         iterations += it
-    if not np.all(problem.stability.stable(structure.K(xi * scale))):
+    if not np.all(problem.stable(structure.K(xi * scale))):
         return xi * scale, False, iterations, message
     # phase 1: hard goals down to 1 - hard_margin
     G = 0.0
@@ -992,7 +1058,7 @@ def _run(problem: _Problem, terms, soft, hard, start, scale, options: SystuneOpt
 
 def _soft_hard(problem, terms, soft, hard, K):
     """Exact ``(F, G)`` (certified norms, all models)."""
-    if not np.all(problem.stability.stable(K)):
+    if not np.all(problem.stable(K)):
         return np.inf, np.inf
     F = max((float(np.max(terms[i].exact(K)[0])) for i in soft), default=0.0)
     G = max((float(np.max(terms[i].exact(K)[0])) for i in hard), default=0.0)

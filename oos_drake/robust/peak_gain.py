@@ -151,7 +151,7 @@ def _eig_and_inverse(A):
     return lam, V, np.linalg.inv(V)
 
 
-def _eigendecompose(A, workers: int = 1):
+def eigendecompose(A, workers: int = 1):
     """``(lambda, V, V^-1)`` of a stack of matrices, in ``workers`` threads over model chunks."""
     parts = _over_chunks(_eig_and_inverse, A, workers)
     return tuple(np.concatenate([part[k] for part in parts]) for k in range(3))
@@ -175,14 +175,17 @@ class ModalResponse:
     A, B, C, D : numpy.ndarray
         Batched matrices (leading dimension N).
     workers : int
-        Threads for the eigendecompositions (see :func:`_eigendecompose`).
+        Threads for the eigendecompositions (see :func:`eigendecompose`).
+    eigen : tuple of numpy.ndarray, optional
+        ``(lambda, V, V^-1)`` of ``A`` when already computed (:func:`eigendecompose`; models
+        that share ``A`` and differ in ``B, C, D``).
     """
 
-    def __init__(self, A, B, C, D, workers: int = 1):
+    def __init__(self, A, B, C, D, workers: int = 1, eigen=None):
         self.A, self.B, self.C, self.D = (np.asarray(M, dtype=float) for M in (A, B, C, D))
         N, n = self.A.shape[0], self.A.shape[-1]
         self.p, self.m = self.D.shape[-2:]
-        self.lam, V, Vinv = _eigendecompose(self.A, workers)
+        self.lam, V, Vinv = eigendecompose(self.A, workers) if eigen is None else eigen
         cond = np.linalg.norm(V, 1, axis=(-2, -1)) * np.linalg.norm(Vinv, 1, axis=(-2, -1))
         self.exact = ~np.isfinite(cond) | (cond > MODAL_CONDITION_LIMIT)
         CV = self.C @ V

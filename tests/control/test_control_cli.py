@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pandas as pd
+import pytest
 import scipy.io
 
 from oos_drake.app.main import main
@@ -48,3 +49,65 @@ def test_synth_writes_every_output(tmp_path):
         np.testing.assert_allclose(mat["A"][:, :, k], npz["A"][k])
         np.testing.assert_allclose(mat["D"][:, :, k], npz["D"][k])
     assert pd.read_csv(out / "models.csv").shape[0] == 3
+
+
+# ------------------------------------------------------------------ [control] goals: bad input
+
+
+def _scenario_with(tmp_path, lines):
+    """The paper's scenario file with ``lines`` in ``[control]`` (its ``structure`` and
+    ``loop_opening`` replaced; the other tuning keys are comments there)."""
+    from oos_drake.scenario.data import load_scenario
+
+    keys = {line.split("=")[0].strip() for line in lines} & {"structure", "loop_opening"}
+    text = "\n".join(
+        line
+        for line in load_scenario().source.read_text().splitlines()
+        if line.split("=")[0].strip() not in keys
+    )
+    anchor = "[control.sensors]"
+    path = tmp_path / "scenario.toml"
+    path.write_text(text.replace(anchor, "\n".join(lines) + "\n\n" + anchor, 1))
+    return path
+
+
+def _synth(tmp_path, scenario, *extra):
+    out = tmp_path / "out"
+    argv = ["synth", "--plant", "synthetic", "--configurations", "2", "--restarts", "0"]
+    argv += ["--worst-case-rounds", "0", "--scenario", str(scenario), "--out", str(out), *extra]
+    return main(argv), out
+
+
+@pytest.mark.parametrize(
+    "lines, culprit",
+    [
+        (['structure = "lqg"'], "control.structure"),
+        (['structure = "pid"', "order = 0"], "control.order"),
+        (['structure = "state-space"', "order = -1"], "control.order"),
+        (
+            ['loop_opening = "hub"', "gain_margin_db = 6.0", "phase_margin_deg = 30.0"],
+            "control.loop_opening",
+        ),
+    ],
+)
+def test_bad_control_goals_exit_2_with_one_line(tmp_path, capsys, lines, culprit):
+    status, out = _synth(tmp_path, _scenario_with(tmp_path, lines))
+    err = capsys.readouterr().err.strip()
+    assert status == 2
+    assert len(err.splitlines()) == 1 and culprit in err and err.startswith("oos synth: error:")
+    assert not out.exists()  # nothing written
+
+
+def test_unmeetable_hard_goals_are_written_infeasible(tmp_path, capsys):
+    # a closed-loop damping of 0.95 for every pole: the plant's flexible modes and the fixed
+    # filters (wheels: 0.7) are out of reach, so the hard goal stays above 1
+    scenario = _scenario_with(tmp_path, ["min_damping = 0.95"])
+    status, out = _synth(tmp_path, scenario, "--max-iterations", "3")
+    printed = capsys.readouterr().out
+    assert status == 1 and "INFEASIBLE" in printed
+    record = json.loads((out / "controller.json").read_text())
+    assert record["status"] == "infeasible" and record["requirement_met"] is False
+    damping = next(g for g in record["goals"] if g["kind"] == "hard")
+    assert damping["value"] > 1 and damping["met"] is False
+    # the recorded value is the damping of the recorded controller's closed loops, not a target
+    assert damping["details"]["min_damping"] < 0.95

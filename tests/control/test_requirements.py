@@ -94,3 +94,34 @@ def test_tuned_static_gain_meets_margins_by_stability_margins():
             gm, pm, *_ = control.stability_margins(-seen)
             assert 20 * np.log10(gm) >= 6.0 - 1e-3
             assert pm >= 30.0 - 1e-3
+
+
+@pytest.mark.parametrize(
+    "changes, warned",
+    [
+        (dict(sampled=True), None),  # the margins design's loop model: not design data
+        (dict(sampled=True, computation_delay_s=0.05, hold_order=3), None),
+        (dict(star_tracker_cutoff_hz=4.0), "star_tracker_cutoff_hz"),
+    ],
+)
+def test_loop_model_is_not_other_design_data(tmp_path, capsys, changes, warned):
+    import json
+
+    from oos_drake.analysis.controller import scenario_controller
+
+    scenario = load_scenario()
+    spec = dataclasses.replace(DesignSpecification.from_requirements(scenario.control), **changes)
+    K = np.arange(1.0, 19.0).reshape(3, 6)
+    record = {
+        "controller": {"K_p": {"value": K[:, :3].tolist()}, "K_d": {"value": K[:, 3:].tolist()}},
+        "design_specification": spec.to_dict(),
+        "status": "ok",
+    }
+    (tmp_path / "controller.json").write_text(json.dumps(record))
+    controller = scenario_controller(tmp_path, scenario)
+    printed = capsys.readouterr().out
+    np.testing.assert_array_equal(controller.K, K)
+    if warned is None:
+        assert "WARNING" not in printed
+    else:
+        assert "other design data" in printed and warned in printed and "sampled" not in printed
