@@ -327,6 +327,13 @@ def run_confirm(args) -> int:
         )
         table.to_parquet(tmp / CONFIRMATION_FILE)
         histories.to_parquet(tmp / HISTORIES_FILE)
+        from oos_drake.analysis.performance_twin import (
+            PERFORMANCE_CONFIRMATION_FILE,
+            confirm_performance,
+        )
+
+        performance = confirm_performance(args.analysis, controller, scenario, quiet=True)
+        performance.to_parquet(tmp / PERFORMANCE_CONFIRMATION_FILE)
         for _, row in table.iterrows():
             if histories.empty:
                 continue
@@ -356,6 +363,9 @@ def run_confirm(args) -> int:
         for note in str(r["notes"]).split("; "):
             if "ABOVE" in note:  # a crossing the analysis missed: say it where it is read
                 print(f"WARNING {r['study']} {r['subset']}: {note}")
+    from oos_drake.analysis.performance_twin import print_performance_confirmation
+
+    print_performance_confirmation(out)
     print(f"confirmation in {time.perf_counter() - start:.1f} s; outputs in {out}")
     return 0
 

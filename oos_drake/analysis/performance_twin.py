@@ -496,3 +496,16 @@ def summary_line(row) -> str:
         f"{row['gain linear sampled [-]']:6.3f}  twin {row['gain twin [-]']:6.3f}  (peak ratio "
         f"{row['peak ratio twin [-]']:.3f})  {row['status']}"
     )
+
+
+def print_performance_confirmation(folder) -> None:
+    """Print the performance confirmation of an ``oos confirm`` folder (nothing without one)."""
+    from pathlib import Path
+
+    path = Path(folder) / PERFORMANCE_CONFIRMATION_FILE
+    if not path.is_file():
+        return
+    table = pd.read_parquet(path)
+    print("worst-case gains on the twin (gain > 1: requirement violated):")
+    for _, row in table.iterrows():
+        print("  " + summary_line(row))
