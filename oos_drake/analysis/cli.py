@@ -604,7 +604,10 @@ def register(subparsers) -> None:
         description="For each certified mu peak: the stability boundary along the worst "
         "perturbation's ray (scaled by alpha) for the continuous and the sampled-data linear "
         "loops, the physical limit of the parameters, and the nonlinear boundary on the frozen "
-        "Drake mission by bisection; writes confirmation.parquet, time histories and figures.",
+        "Drake mission by bisection; writes confirmation.parquet, time histories and figures. "
+        "For each worst-case gain (performance.parquet): the twin driven by the worst input "
+        "with the worst perturbation against the linear and sampled-data gains "
+        "(performance_confirmation.parquet).",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     confirm.add_argument("--analysis", required=True, help="folder written by `oos analyze`")

@@ -602,8 +602,8 @@ class _Twin:
             Log times since the window start [s].
         phi : ndarray, shape (n, 3)
             Hub roll-pitch-yaw attitude [rad].
-        T_rw : ndarray, shape (n, 3)
-            Wheel torque [N m] (the flight software's log).
+        T_rw, u : ndarray, shape (n, 3)
+            Wheel torque and torque command [N m] (the flight software's log).
 
         Raises
         ------
@@ -617,7 +617,7 @@ class _Twin:
             raise MissionDiverged(f"the forced run at alpha = {alpha:g} diverged")
         times, states, torques = self.sim.logs(context)
         phi = states[self.hub_q : self.hub_q + 3].T
-        return times - self.start, phi, torques[3:6].T
+        return times - self.start, phi, torques[3:6].T, torques[0:3].T
 
     def run(self, alpha: float):
         """``(growing, Oscillation or None, history DataFrame)`` of one run at ``alpha``:

@@ -228,7 +228,7 @@ def linear_twin_gain(
 
 # -- the sampled-data loop of the twin ---------------------------------------------------------
 def _loop_step(plant_d, software, dynamic):
-    """The sampled loop as one linear map ``(X, d) -> (X+, [phi; T_rw])`` (matrices), ``X =
+    """The sampled loop as one linear map ``(X, d) -> (X+, [phi; u])`` (matrices), ``X =
     [x_plant; x1; x2; xp]``, ``d`` the unit noise table row ``[n_sst; n_gyro; d_ext]``."""
     Ad, Bd, Cg = plant_d
     n1, n2 = software._n1, software._n2
@@ -251,7 +251,7 @@ def _loop_step(plant_d, software, dynamic):
             T = T + dynamic.C[:3] @ xp + dynamic.D[:3] @ T_rw
             xp = dynamic.A @ xp + dynamic.B @ T_rw
         X1 = np.concatenate([Ad @ xg + Bd @ T, out1[:n1], out2[:n2], xp])
-        return X1, np.concatenate([(Cg @ xg)[:3], T_rw])
+        return X1, np.concatenate([(Cg @ xg)[:3], out1[n1:]])
 
     cols = [step(e, np.zeros(9)) for e in np.eye(nx)]
     A = np.column_stack([c[0] for c in cols])
@@ -268,7 +268,7 @@ def sampled_gain(plant_hat, values, software, dynamic, v, omega: float, requirem
     ``plant_hat``: the uncertain plant ``T -> wdot`` with ``values`` (normalized, complex blocks
     as interpolants) substituted, discretized with a zero-order hold at the flight software's
     period; ``dynamic``: the flight software's realization of ``Delta_mul`` (None without);
-    ``requirement_rows``: ``(rows of [phi; T_rw], scale)`` of the channel (``e_p``: phi over
+    ``requirement_rows``: ``(rows of [phi; u], scale)`` of the channel (``e_p``: phi over
     the APE requirement; ``e_u``: the command, see :func:`_channel_output`). The input is
     ``d_k = Re(v e^{j omega k dt})``: the steady-state phasor at the samples is ``H(e^{j omega
     dt}) v``.
@@ -290,9 +290,8 @@ def sampled_gain(plant_hat, values, software, dynamic, v, omega: float, requirem
 
 
 def _channel_output(channel: str, spec) -> tuple[list, float]:
-    """Rows of ``[phi; T_rw]`` of the sampled loop and the scale giving the channel [-]: ``e_p =
-    phi / W_p``; ``e_u = W_u u`` (the wheels' torque ``T_rw``, the command behind the wheel
-    dynamics, at the sample)."""
+    """Rows of ``[phi; u]`` of the sampled loop and the scale giving the channel [-]: ``e_p =
+    phi / W_p``; ``e_u = W_u u`` (``u`` the torque command at the sample)."""
     if channel == "e_p":
         return [0, 1, 2], 1.0 / spec.pointing_requirement
     return [3, 4, 5], spec.control_weight
@@ -409,7 +408,7 @@ def confirm_gain_case(case: GainCase, controller, scenario, subsets, options=Non
 def _drake_twin_gain(worst, controller, scenario, options, design, dynamic, v, settle, specs, out):
     """The Drake twin's gain and peak ratio for the sinusoidal worst input (a partial row).
 
-    ``out``: ``(rows of [phi; T_rw], scale)`` of the channel (:func:`_channel_output`).
+    ``out``: ``(rows of [phi; u], scale)`` of the channel (:func:`_channel_output`).
     """
     import dataclasses
 
@@ -432,7 +431,7 @@ def _drake_twin_gain(worst, controller, scenario, options, design, dynamic, v, s
     table = np.zeros((k.size, 9))
     table[:, _TABLE_COLUMNS] = np.real(np.outer(np.exp(1j * omega * k * period), v))
     try:
-        times, phi, T_rw = twin.forced_run(1.0, table)
+        times, phi, T_rw, u = twin.forced_run(1.0, table)
     except MissionDiverged as exc:
         return {"status": f"twin diverged: {exc}", "simulated [s]": duration}
     fit = (times >= n_settle * cycle - 1e-9) & np.all(np.isfinite(phi), axis=1)
@@ -444,8 +443,9 @@ def _drake_twin_gain(worst, controller, scenario, options, design, dynamic, v, s
             z * np.eye(dynamic.A.shape[0]) - dynamic.A, dynamic.B @ Trw
         )
     rows, scale = out
-    gain = np.linalg.norm(np.concatenate([Phi, Trw])[rows]) * scale
-    signal = np.concatenate([phi[fit], T_rw[fit]], axis=1)[:, rows]
+    U = phasor(times[fit], u[fit], omega)
+    gain = np.linalg.norm(np.concatenate([Phi, U])[rows]) * scale
+    signal = np.concatenate([phi[fit], u[fit]], axis=1)[:, rows]
     centred = signal - signal.mean(axis=0)
     return {
         "gain twin [-]": float(gain / np.linalg.norm(v)),
