@@ -560,20 +560,15 @@ class _Twin:
         scaled = {k: alpha * v for k, v in self.complex.items()}
         return perturbation_block(design, self.peak.omega, **scaled)
 
-    def run(self, alpha: float):
-        """``(growing, Oscillation or None, history DataFrame)`` of one run at ``alpha``:
-        ``growing`` when the run diverged, the dominant oscillation grows or, without any
-        oscillation, the attitude's peak over the last quarter of the window exceeds that of
-        the second."""
-        from oos_drake.analysis.oscillation import dominant_oscillation
+    def _simulate(self, alpha: float, noise_table: np.ndarray, phi0: float):
+        """One run at ``alpha`` with the unit noise table ``noise_table`` (``(n, 9)``) and the
+        initial attitude error ``phi0`` [rad] on each axis: ``(diverged, root context)``."""
         from oos_drake.multibody.mission_sim import MissionDiverged
 
         o = self.options
-        phi0 = o.initial_attitude
         values = ray_values(self.specs, self.direction, alpha)
         run_values = values | {f"phi0_{a}": phi0 for a in AXES}
         holder = {}
-        diverged = False
         fsw = self.sim.handles.flight_software
         block = self.realization(alpha)
 
@@ -588,14 +583,52 @@ class _Twin:
                 self.start,
                 self.start + o.duration,
                 log=False,
-                noise_table=np.zeros((1, 9)),
+                noise_table=noise_table,
                 on_start=on_start,
                 within_ranges=False,
                 bushings=self.bushings,
             )
         except MissionDiverged:
-            diverged = True
-        times, states = self.sim.state_log(holder["context"])
+            return True, holder["context"]
+        return False, holder["context"]
+
+    def forced_run(self, alpha: float, noise_table: np.ndarray):
+        """A run at ``alpha`` from rest driven by ``noise_table`` (``(n, 9)`` unit
+        ``[n_sst; n_gyro; d_ext]`` per flight-software sample, the window's first sample first).
+
+        Returns
+        -------
+        times : ndarray, shape (n,)
+            Log times since the window start [s].
+        phi : ndarray, shape (n, 3)
+            Hub roll-pitch-yaw attitude [rad].
+        T_rw, u : ndarray, shape (n, 3)
+            Wheel torque and torque command [N m] (the flight software's log).
+
+        Raises
+        ------
+        MissionDiverged
+            The run diverged.
+        """
+        from oos_drake.multibody.mission_sim import MissionDiverged
+
+        diverged, context = self._simulate(alpha, noise_table, 0.0)
+        if diverged:
+            raise MissionDiverged(f"the forced run at alpha = {alpha:g} diverged")
+        times, states, torques = self.sim.logs(context)
+        phi = states[self.hub_q : self.hub_q + 3].T
+        return times - self.start, phi, torques[3:6].T, torques[0:3].T
+
+    def run(self, alpha: float):
+        """``(growing, Oscillation or None, history DataFrame)`` of one run at ``alpha``:
+        ``growing`` when the run diverged, the dominant oscillation grows or, without any
+        oscillation, the attitude's peak over the last quarter of the window exceeds that of
+        the second."""
+        from oos_drake.analysis.oscillation import dominant_oscillation
+
+        o = self.options
+        diverged, context = self._simulate(alpha, np.zeros((1, 9)), o.initial_attitude)
+        times, states = self.sim.state_log(context)
         phi = states[self.hub_q : self.hub_q + 3].T
         history = pd.DataFrame(
             {"time [s]": times - self.start}

@@ -53,6 +53,27 @@ def _channel_task(task):
     )
 
 
+def channel_matrices(sys, models, rows, blocks) -> tuple:
+    """``(A, B, C, D, nz, nw, blk)`` of one channel and uncertainty subset of ``sys`` at
+    ``models``: the subset's Delta channels and the channel's ``rows`` of ``e`` from ``d`` (the
+    other blocks nominal), as the skewed-mu bisection takes them."""
+    names = ("A", "Bw", "Bu", "Cz", "Cy", "Dzw", "Dzu", "Dyw", "Dyu")
+    models = np.atleast_1d(np.asarray(models, dtype=int))
+    A, Bw, Bu, Cz, Cy, Dzw, Dzu, Dyw, Dyu = (x[models] for x in model_matrices(sys, names))
+    zr, wc, blk = subset_parts(sys, {"subset": list(blocks)})["subset"]
+    rows = list(rows)
+    B = np.concatenate([Bw[:, :, wc], Bu], axis=2)
+    C = np.concatenate([Cz[:, zr, :], Cy[:, rows, :]], axis=1)
+    D = np.concatenate(
+        [
+            np.concatenate([Dzw[:, zr][:, :, wc], Dzu[:, zr, :]], axis=2),
+            np.concatenate([Dyw[:, rows][:, :, wc], Dyu[:, rows, :]], axis=2),
+        ],
+        axis=1,
+    )
+    return (A, B, C, D, zr.size, wc.size, blk)
+
+
 def worst_case_gains(
     sys,
     models,
@@ -104,23 +125,12 @@ def worst_case_gains(
     omega = np.unique(np.asarray(omega, dtype=float))
     n_all = sys.batch_shape[0] if sys.batch_shape else 1
     times = np.full(n_all, np.nan) if times is None else np.asarray(times, dtype=float)
-    names = ("A", "Bw", "Bu", "Cz", "Cy", "Dzw", "Dzu", "Dyw", "Dyu")
-    A, Bw, Bu, Cz, Cy, Dzw, Dzu, Dyw, Dyu = (x[models] for x in model_matrices(sys, names))
-    parts = subset_parts(sys, subsets)
     tasks, keys = [], []
     for channel, rows in CHANNELS.items():
-        rows = list(rows)
-        for name, (zr, wc, blk) in parts.items():
-            B = np.concatenate([Bw[:, :, wc], Bu], axis=2)
-            C = np.concatenate([Cz[:, zr, :], Cy[:, rows, :]], axis=1)
-            D = np.concatenate(
-                [
-                    np.concatenate([Dzw[:, zr][:, :, wc], Dzu[:, zr, :]], axis=2),
-                    np.concatenate([Dyw[:, rows][:, :, wc], Dyu[:, rows, :]], axis=2),
-                ],
-                axis=1,
+        for name, blocks in subsets.items():
+            tasks.append(
+                channel_matrices(sys, models, rows, blocks) + (omega, tol, upper_iterations)
             )
-            tasks.append((A, B, C, D, zr.size, wc.size, blk, omega, tol, upper_iterations))
             keys.append((channel, name))
     bar = tqdm(total=len(tasks), desc="worst-case gains", unit="task", disable=not progress)
     results = []

@@ -334,6 +334,13 @@ def run_confirm(args) -> int:
         )
         table.to_parquet(tmp / CONFIRMATION_FILE)
         histories.to_parquet(tmp / HISTORIES_FILE)
+        from oos_drake.analysis.performance_twin import (
+            PERFORMANCE_CONFIRMATION_FILE,
+            confirm_performance,
+        )
+
+        performance = confirm_performance(args.analysis, controller, scenario, quiet=True)
+        performance.to_parquet(tmp / PERFORMANCE_CONFIRMATION_FILE)
         for _, row in table.iterrows():
             if histories.empty:
                 continue
@@ -363,6 +370,9 @@ def run_confirm(args) -> int:
         for note in str(r["notes"]).split("; "):
             if "ABOVE" in note:  # a crossing the analysis missed: say it where it is read
                 print(f"WARNING {r['study']} {r['subset']}: {note}")
+    from oos_drake.analysis.performance_twin import print_performance_confirmation
+
+    print_performance_confirmation(out)
     print(f"confirmation in {time.perf_counter() - start:.1f} s; outputs in {out}")
     return 0
 
@@ -605,7 +615,10 @@ def register(subparsers) -> None:
         description="For each certified mu peak: the stability boundary along the worst "
         "perturbation's ray (scaled by alpha) for the continuous and the sampled-data linear "
         "loops, the physical limit of the parameters, and the nonlinear boundary on the frozen "
-        "Drake mission by bisection; writes confirmation.parquet, time histories and figures.",
+        "Drake mission by bisection; writes confirmation.parquet, time histories and figures. "
+        "For each worst-case gain (performance.parquet): the twin driven by the worst input "
+        "with the worst perturbation against the linear and sampled-data gains "
+        "(performance_confirmation.parquet).",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     confirm.add_argument("--analysis", required=True, help="folder written by `oos analyze`")

@@ -643,13 +643,15 @@ class MissionSimulation:
         log = self.handles.state_logger.FindLog(context)
         return np.array(log.sample_times()), np.array(log.data())
 
-    def _logs(self, context):
+    def logs(self, context):
+        """``(times, states, torques)``: :meth:`state_log` and the flight software's torque log
+        (``(12, n)``: ``u``, ``T_rw``, ``T``, ``T_dist`` [N m], 3 axes each)."""
         times, states = self.state_log(context)
         return times, states, self.handles.torque_logger.FindLog(context).data()
 
     def _tracking_error(self, context) -> float:
         h = self.handles
-        times, x, _ = self._logs(context)
+        times, x, _ = self.logs(context)
         if times.size == 0:
             return math.nan
         q_arm = np.stack([x[j.position_start()] for j in h.arm_joints], axis=1)
@@ -659,7 +661,7 @@ class MissionSimulation:
     def _timeseries(self, context, schedule: _Schedule) -> pd.DataFrame:
         h = self.handles
         plant = h.plant
-        times, x, torques = self._logs(context)
+        times, x, torques = self.logs(context)
         nq = plant.num_positions()
         qs, vs = h.hub_joint.position_start(), nq + h.hub_joint.velocity_start()
         columns = {"time [s]": times}

@@ -1,0 +1,511 @@
+r"""Worst-case performance confirmed on the twin (``oos confirm``, its performance table).
+
+For each worst-case gain of the analysis (``performance.parquet``: per channel ``e_p`` / ``e_u``
+and uncertainty subset, the row of largest certified lower bound) this module
+
+1. recomputes the worst perturbation at that configuration and frequency (the same skewed-mu
+   bisection as :func:`oos_drake.analysis.performance.worst_case_gains`, on one model and one
+   frequency) and the **worst input**: the right singular vector ``v`` (unit 2-norm, complex,
+   over the nine normalized disturbances ``d = [d_ext; n_sst; n_gyro]``) of the perturbed loop's
+   channel at the critical frequency ``omega``;
+2. simulates the **linear twin**: the perturbed LFR closed loop (complex blocks realized by
+   stable interpolants, :func:`perturbed_loop`)
+   driven by ``d(t) = Re(v e^{j omega t})`` in scipy until steady state; the phasor of the
+   channel's output fitted over the last periods gives the gain the analysis predicts (its
+   lower bound, :func:`linear_twin_gain`);
+3. predicts the **sampled-data** gain: the exact zero-order-hold loop with the twin's flight
+   software (Tustin filters, ``d`` sampled at the flight-software rate as the twin takes it) at
+   ``z = e^{j omega dt}`` (:func:`sampled_gain`);
+4. runs the **Drake twin** (the nonlinear mission, arm and arrays frozen at the configuration,
+   the real parameters at their worst values, the complex blocks as the flight software's
+   dynamic perturbation) with the sampled sinusoid ``d_k = Re(v e^{j omega k dt})`` as the
+   per-sample unit disturbance and noise table (the flight software scales it with
+   ``W_n,ext``, ``W_n,sst``, ``W_n,gyro`` as it scales the random ones), long enough for the
+   slowest closed-loop mode to settle; the phasor of the hub attitude (plus the attitude the
+   realized ``Delta_add`` adds to the measurement) over the last periods, divided by the
+   requirement, is the twin's gain. The table also gives the twin's peak requirement ratio
+   ``max_t max_axis |phi| / APE requirement`` over the same periods (the campaign's metric for
+   that input).
+
+A gain ``> 1`` is a requirement violation: a unit disturbance (2-norm over the channels) makes
+the pointing error (2-norm over the axes) exceed the APE requirement.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+import scipy.signal
+
+__all__ = [
+    "GainCase",
+    "PERFORMANCE_CONFIRMATION_FILE",
+    "confirm_gain_case",
+    "confirm_performance",
+    "linear_twin_gain",
+    "perturbed_loop",
+    "phasor",
+    "sampled_gain",
+    "worst_gain_cases",
+]
+
+PERFORMANCE_CONFIRMATION_FILE = "performance_confirmation.parquet"
+#: Periods of the critical oscillation the phasors are fitted over [-].
+FIT_PERIODS = 4
+#: Longest settling time simulated before the fit [s].
+MAX_SETTLE = 500.0
+#: Settling time in time constants of the slowest closed-loop mode [-].
+SETTLE_TIME_CONSTANTS = 7.0
+#: Rows of the table (and the printed summary).
+PERFORMANCE_CONFIRMATION_COLUMNS = [
+    "channel",
+    "subset",
+    "time [s]",
+    "frequency [Hz]",
+    "gain nominal [-]",
+    "gain lower [-]",
+    "gain upper [-]",
+    "gain of the perturbation [-]",
+    "gain linear twin [-]",
+    "gain linear sampled [-]",
+    "gain twin [-]",
+    "peak ratio twin [-]",
+    "settle [s]",
+    "simulated [s]",
+    "status",
+]
+#: LFR disturbance order ``[d_ext; n_sst; n_gyro]`` -> the flight software's noise-table column.
+_TABLE_COLUMNS = np.r_[6:9, 0:6]
+
+
+@dataclass(frozen=True)
+class GainCase:
+    """One worst-case gain of the analysis (a row of ``performance.parquet``).
+
+    Attributes
+    ----------
+    channel, subset : str
+        ``"e_p"`` / ``"e_u"`` and the uncertainty subset.
+    time : float
+        Mission time of the configuration [s].
+    omega : float
+        Critical frequency [rad/s].
+    nominal, lower, upper : float
+        Nominal gain and the bounds of the worst-case gain there [-].
+    """
+
+    channel: str
+    subset: str
+    time: float
+    omega: float
+    nominal: float
+    lower: float
+    upper: float
+
+
+def worst_gain_cases(table: pd.DataFrame, channels=("e_p", "e_u")) -> list[GainCase]:
+    """Per ``(channel, subset)`` the row of largest finite lower bound of ``performance.parquet``
+    (an infinite one is a loop the perturbation destabilizes: a stability case, confirmed by
+    the stability confirmation)."""
+    cases = []
+    for (channel, subset), rows in table.groupby(["channel", "subset"], sort=False):
+        if channel not in channels:
+            continue
+        finite = rows[np.isfinite(rows["gain_lower [-]"])]
+        if finite.empty:
+            continue
+        r = finite.loc[finite["gain_lower [-]"].idxmax()]
+        cases.append(
+            GainCase(
+                str(channel),
+                str(subset),
+                float(r["time [s]"]),
+                2 * np.pi * float(r["frequency [Hz]"]),
+                float(r["gain_nominal [-]"]),
+                float(r["gain_lower [-]"]),
+                float(r["gain_upper [-]"]),
+            )
+        )
+    return cases
+
+
+# -- the worst perturbation and input ----------------------------------------------------------
+def worst_perturbation(closed, case: GainCase, blocks) -> tuple[dict, float]:
+    """Normalized worst perturbation of ``case`` on one closed loop ``d -> e`` (``blocks``: the
+    subset's block names) and the gain it reaches [-] (the skewed-mu lower bound)."""
+    from oos_drake.analysis.performance import CHANNELS, _channel_task, channel_matrices
+    from oos_drake.robust.blocks import parse_blk
+    from oos_drake.robust.lfr_analysis import block_map, normalized_worst_case
+
+    sub, _, _ = block_map(closed).subset(list(blocks))
+    (A, B, C, D, nz, nw, blk) = channel_matrices(closed, [0], CHANNELS[case.channel], blocks)
+    lo, _, _, delta = _channel_task((A, B, C, D, nz, nw, blk, np.array([case.omega]), 0.02, 40))
+    return normalized_worst_case(sub, parse_blk(sub.blk), delta[0, 0]), float(lo[0, 0])
+
+
+def channel_direction(loop, rows, omega: float) -> tuple[float, np.ndarray]:
+    """Largest singular value of the certain loop's ``rows`` at ``omega`` and its right singular
+    vector (the worst input direction, unit 2-norm, phase of its largest entry zero)."""
+    n = loop.nstates
+    M = np.real(np.asarray(loop.M))
+    A, B, C, D = M[:n, :n], M[:n, n:], M[n:, :n], M[n:, n:]
+    G = C[list(rows)] @ np.linalg.solve(1j * omega * np.eye(n) - A, B) + D[list(rows)]
+    _, s, Vh = np.linalg.svd(G)
+    v = Vh[0].conj()
+    v = v * np.exp(-1j * np.angle(v[np.argmax(np.abs(v))]))
+    return float(s[0]), v
+
+
+def perturbed_loop(sys, normalized: dict, omega: float):
+    """Certain loop ``F_u(M, Delta)`` with the normalized block values ``normalized`` (complex
+    blocks realized by their stable interpolants at ``omega``,
+    :func:`oos_drake.analysis.confirm.substitution`; blocks not given nominal)."""
+    from oos_drake.analysis.confirm import Peak, substitution
+    from oos_drake.lfr import usubs
+
+    peak = Peak("", "", math.nan, math.nan, omega, 1.0, 1.0, normalized)
+    return usubs(sys, substitution(peak, sys.uncertainty, 1.0), normalized=True)
+
+
+def phasor(t, y, omega: float) -> np.ndarray:
+    """Complex amplitudes ``Y`` of ``y(t) ~ c + Re(Y e^{j omega t})`` (least squares, per column).
+
+    Parameters
+    ----------
+    t : array_like, shape (n,)
+        Times [s] (a whole number of periods is best).
+    y : array_like, shape (n,) or (n, m)
+    omega : float
+        Frequency [rad/s].
+    """
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(y, dtype=float)
+    basis = np.column_stack([np.ones_like(t), np.cos(omega * t), -np.sin(omega * t)])
+    coef, *_ = np.linalg.lstsq(basis, y, rcond=None)
+    return coef[1] + 1j * coef[2]
+
+
+def settle_time(loop, omega: float) -> float:
+    """Simulated time before the fit [s]: :data:`SETTLE_TIME_CONSTANTS` time constants of the
+    slowest decaying mode of ``loop`` (modes slower than 1e-4 1/s are the structurally marginal
+    rigid-body ones the channel does not see), at least two periods, at most
+    :data:`MAX_SETTLE`."""
+    n = loop.nstates
+    rates = -np.linalg.eigvals(np.real(np.asarray(loop.M))[:n, :n]).real if n else np.array([])
+    rates = rates[rates > 1e-4]
+    slowest = SETTLE_TIME_CONSTANTS / rates.min() if rates.size else 0.0
+    return float(min(max(slowest, 2 * 2 * np.pi / omega), MAX_SETTLE))
+
+
+def linear_twin_gain(
+    loop, v, omega: float, rows, *, settle: float | None = None, steps_per_period: int = 400
+) -> float:
+    """Gain of the linear twin: ``loop`` (a certain LFR ``d -> e``) simulated in scipy.
+
+    The input ``d(t) = Re(v e^{j omega t})`` (piecewise linear between ``steps_per_period``
+    points per period, :func:`scipy.signal.lsim`) runs for ``settle`` [s] (default
+    :func:`settle_time`) and :data:`FIT_PERIODS` periods; the gain is the 2-norm of the phasor
+    of ``e[rows]`` over those periods divided by ``||v||``.
+    """
+    v = np.asarray(v, dtype=complex)
+    period = 2 * np.pi / omega
+    settle = settle_time(loop, omega) if settle is None else settle
+    n_settle = math.ceil(settle / period)
+    dt = period / steps_per_period
+    t = np.arange(0, (n_settle + FIT_PERIODS) * steps_per_period + 1) * dt
+    d = np.real(np.outer(np.exp(1j * omega * t), v))
+    n = loop.nstates
+    M = np.real(np.asarray(loop.M))
+    A, B, C, D = M[:n, :n], M[:n, n:], M[n:, :n], M[n:, n:]
+    rows = list(rows)
+    _, e, _ = scipy.signal.lsim((A, B, C[rows], D[rows]), d, t)
+    fit = t >= n_settle * period - 1e-9
+    return float(np.linalg.norm(phasor(t[fit], e[fit], omega)) / np.linalg.norm(v))
+
+
+# -- the sampled-data loop of the twin ---------------------------------------------------------
+def _loop_step(plant_d, software, dynamic):
+    """The sampled loop as one linear map ``(X, d) -> (X+, [phi; u])`` (matrices), ``X =
+    [x_plant; x1; x2; xp]``, ``d`` the unit noise table row ``[n_sst; n_gyro; d_ext]``."""
+    Ad, Bd, Cg = plant_d
+    n1, n2 = software._n1, software._n2
+    M1 = software._M1
+    M2 = software._output_stage(np.concatenate([[0.0], np.zeros(9), [math.nan]]))
+    np_ = dynamic.A.shape[0] if dynamic is not None else 0
+    ng = Ad.shape[0]
+    nx = ng + n1 + n2 + np_
+
+    def step(X, d):
+        xg, x1, x2 = X[:ng], X[ng : ng + n1], X[ng + n1 : ng + n1 + n2]
+        xp = X[ng + n1 + n2 :]
+        measured = Cg @ xg
+        if np_:
+            measured = measured + dynamic.C[3:] @ xp
+        out1 = M1 @ np.concatenate([x1, measured, d[0:6]])
+        out2 = M2 @ np.concatenate([x2, out1[n1:], d[6:9]])
+        T_rw, T = out2[n2 : n2 + 3], out2[n2 + 12 :]
+        if np_:
+            T = T + dynamic.C[:3] @ xp + dynamic.D[:3] @ T_rw
+            xp = dynamic.A @ xp + dynamic.B @ T_rw
+        X1 = np.concatenate([Ad @ xg + Bd @ T, out1[:n1], out2[:n2], xp])
+        return X1, np.concatenate([(Cg @ xg)[:3], out1[n1:]])
+
+    cols = [step(e, np.zeros(9)) for e in np.eye(nx)]
+    A = np.column_stack([c[0] for c in cols])
+    C = np.column_stack([c[1] for c in cols])
+    ins = [step(np.zeros(nx), e) for e in np.eye(9)]
+    B = np.column_stack([c[0] for c in ins])
+    D = np.column_stack([c[1] for c in ins])
+    return A, B, C, D
+
+
+def sampled_gain(plant_hat, values, software, dynamic, v, omega: float, requirement_rows):
+    """Gain of the sampled-data loop at ``omega`` for the input direction ``v`` (LFR order).
+
+    ``plant_hat``: the uncertain plant ``T -> wdot`` with ``values`` (normalized, complex blocks
+    as interpolants) substituted, discretized with a zero-order hold at the flight software's
+    period; ``dynamic``: the flight software's realization of ``Delta_mul`` (None without);
+    ``requirement_rows``: ``(rows of [phi; u], scale)`` of the channel (``e_p``: phi over
+    the APE requirement; ``e_u``: the command, see :func:`_channel_output`). The input is
+    ``d_k = Re(v e^{j omega k dt})``: the steady-state phasor at the samples is ``H(e^{j omega
+    dt}) v``.
+    """
+    from oos_drake.control.sampled import plant_with_integrators
+    from oos_drake.lfr import usubs
+
+    period = software.design.period
+    P = usubs(plant_hat, values, normalized=True).to_ss()
+    Ag, Bg, Cg = plant_with_integrators(P.A, P.B, P.C, P.D)
+    Ad, Bd, *_ = scipy.signal.cont2discrete((Ag, Bg, Cg, np.zeros((6, 3))), period, method="zoh")
+    A, B, C, D = _loop_step((Ad, Bd, Cg), software, dynamic)
+    z = np.exp(1j * omega * period)
+    V = np.zeros(9, dtype=complex)
+    V[_TABLE_COLUMNS] = v
+    rows, scale = requirement_rows
+    H = C[rows] @ np.linalg.solve(z * np.eye(A.shape[0]) - A, B) + D[rows]
+    return float(np.linalg.norm(H @ V) * scale / np.linalg.norm(v))
+
+
+def _channel_output(channel: str, spec) -> tuple[list, float]:
+    """Rows of ``[phi; u]`` of the sampled loop and the scale giving the channel [-]: ``e_p =
+    phi / W_p``; ``e_u = W_u u`` (``u`` the torque command at the sample)."""
+    if channel == "e_p":
+        return [0, 1, 2], 1.0 / spec.pointing_requirement
+    return [3, 4, 5], spec.control_weight
+
+
+# -- one case ------------------------------------------------------------------------------------
+def confirm_gain_case(case: GainCase, controller, scenario, subsets, options=None):
+    """Linear, sampled-data and Drake-twin gains of one worst case (a table row).
+
+    Parameters
+    ----------
+    case : GainCase
+    controller : Controller
+    scenario : Scenario
+    subsets : dict
+        Subset name -> block names (those of the analysis).
+    options : ConfirmOptions, optional
+        ``max_step`` of the twin's integrator.
+
+    Returns
+    -------
+    dict
+        A row of :data:`PERFORMANCE_CONFIRMATION_COLUMNS`.
+    """
+    from oos_drake.analysis.confirm import (
+        ConfirmOptions,
+        Peak,
+        _peak_models,
+        complex_values,
+        substitution,
+    )
+    from oos_drake.analysis.performance import CHANNELS
+    from oos_drake.control.components import DesignSpecification
+    from oos_drake.multibody.flight_software import (
+        FlightSoftware,
+        FlightSoftwareDesign,
+        perturbation_block,
+    )
+
+    options = options or ConfirmOptions()
+    peak = Peak("mission", case.subset, case.time, math.nan, case.omega, 1.0, 1.0)
+    closed, plant_hat = _peak_models(peak, controller, scenario)
+    normalized, gain_found = worst_perturbation(closed, case, subsets[case.subset])
+    rows = CHANNELS[case.channel]
+    loop = perturbed_loop(closed, normalized, case.omega)
+    gain_p, v = channel_direction(loop, rows, case.omega)
+    settle = settle_time(loop, case.omega)
+    row = {
+        "channel": case.channel,
+        "subset": case.subset,
+        "time [s]": case.time,
+        "frequency [Hz]": case.omega / (2 * np.pi),
+        "gain nominal [-]": case.nominal,
+        "gain lower [-]": case.lower,
+        "gain upper [-]": case.upper,
+        "gain of the perturbation [-]": gain_p,
+        "gain linear twin [-]": linear_twin_gain(loop, v, case.omega, rows, settle=settle),
+        "gain linear sampled [-]": math.nan,
+        "gain twin [-]": math.nan,
+        "peak ratio twin [-]": math.nan,
+        "settle [s]": settle,
+        "simulated [s]": math.nan,
+        "status": "",
+    }
+    spec = DesignSpecification.from_requirements(scenario.control)
+    design = FlightSoftwareDesign.create(
+        controller.K,
+        scenario.control.flight_software_rate_hz,
+        spec=spec,
+        torque_limit=scenario.control.torque_limit,
+    )
+    if case.omega * design.period >= np.pi:
+        row["status"] = "linear only: critical frequency beyond the flight software's Nyquist"
+        return row
+    worst = Peak("mission", case.subset, case.time, math.nan, case.omega, 1.0, 1.0, normalized)
+    blocks = complex_values(worst)
+    dynamic = perturbation_block(design, case.omega, **blocks) if blocks else None
+    mul = blocks.get("delta_mul")
+    mul_block = perturbation_block(design, case.omega, delta_mul=mul) if mul is not None else None
+    software = FlightSoftware(design, 6, 6, 0, 0)
+    values = substitution(worst, plant_hat.uncertainty, 1.0)
+    if mul_block is not None:
+        from oos_drake.control.analysis_model import MULTIPLICATIVE_BLOCKS
+
+        for name in MULTIPLICATIVE_BLOCKS:
+            values[name] = np.zeros((1, 1))
+    out_rows = _channel_output(case.channel, spec)
+    row["gain linear sampled [-]"] = sampled_gain(
+        plant_hat, values, software, mul_block, v, case.omega, out_rows
+    )
+    twin = _drake_twin_gain(
+        worst,
+        controller,
+        scenario,
+        options,
+        design,
+        dynamic,
+        v,
+        settle,
+        closed.uncertainty,
+        out_rows,
+    )
+    row.update(twin)
+    g = row["gain twin [-]"]
+    verdict = "violated" if g > 1 else "met"
+    row["status"] = (
+        f"twin {verdict} ({g:.3g}); sampled-data prediction {row['gain linear sampled [-]']:.3g}"
+        if np.isfinite(g)
+        else row.get("status") or "twin run failed"
+    )
+    return row
+
+
+def _drake_twin_gain(worst, controller, scenario, options, design, dynamic, v, settle, specs, out):
+    """The Drake twin's gain and peak ratio for the sinusoidal worst input (a partial row).
+
+    ``out``: ``(rows of [phi; u], scale)`` of the channel (:func:`_channel_output`).
+    """
+    import dataclasses
+
+    from oos_drake.analysis.confirm import _Twin
+    from oos_drake.multibody.mission_sim import MissionDiverged
+
+    omega = worst.omega
+    period = design.period
+    cycle = 2 * np.pi / omega
+    n_settle = math.ceil(settle / cycle)
+    duration = (n_settle + FIT_PERIODS) * cycle
+    twin_options = dataclasses.replace(
+        options, duration=duration, settle=n_settle * cycle, initial_attitude=1e-12
+    )
+    try:
+        twin = _Twin(worst, controller.K, twin_options, scenario, math.nan, specs, design)
+    except ValueError as exc:  # no window without a docking event that long
+        return {"status": f"no twin run: {exc}", "simulated [s]": duration}
+    k = np.arange(int(math.ceil(duration / period)) + 2)
+    table = np.zeros((k.size, 9))
+    table[:, _TABLE_COLUMNS] = np.real(np.outer(np.exp(1j * omega * k * period), v))
+    try:
+        times, phi, T_rw, u = twin.forced_run(1.0, table)
+    except MissionDiverged as exc:
+        return {"status": f"twin diverged: {exc}", "simulated [s]": duration}
+    fit = (times >= n_settle * cycle - 1e-9) & np.all(np.isfinite(phi), axis=1)
+    Phi = phasor(times[fit], phi[fit], omega)
+    Trw = phasor(times[fit], T_rw[fit], omega)
+    if dynamic is not None:  # the attitude the realized Delta_add adds to the measurement
+        z = np.exp(1j * omega * period)
+        Phi = Phi + dynamic.C[3:6] @ np.linalg.solve(
+            z * np.eye(dynamic.A.shape[0]) - dynamic.A, dynamic.B @ Trw
+        )
+    rows, scale = out
+    U = phasor(times[fit], u[fit], omega)
+    gain = np.linalg.norm(np.concatenate([Phi, U])[rows]) * scale
+    signal = np.concatenate([phi[fit], u[fit]], axis=1)[:, rows]
+    centred = signal - signal.mean(axis=0)
+    return {
+        "gain twin [-]": float(gain / np.linalg.norm(v)),
+        "peak ratio twin [-]": float(np.abs(centred).max() * scale),
+        "simulated [s]": duration,
+    }
+
+
+def confirm_performance(analysis, controller, scenario, options=None, *, quiet=False):
+    """:func:`confirm_gain_case` for every worst-case gain of an ``oos analyze`` folder.
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``performance_confirmation.parquet`` (:data:`PERFORMANCE_CONFIRMATION_COLUMNS`; empty
+        when the folder has no ``performance.parquet``).
+    """
+    from pathlib import Path
+
+    from oos_drake.analysis.subsets import uncertainty_subsets
+
+    path = Path(analysis) / "performance.parquet"
+    if not path.is_file():
+        return pd.DataFrame(columns=PERFORMANCE_CONFIRMATION_COLUMNS)
+    cases = worst_gain_cases(pd.read_parquet(path))
+    rows = []
+    subsets = None
+    for case in cases:
+        if subsets is None:
+            from oos_drake.analysis.confirm import Peak, _peak_models
+
+            closed, _ = _peak_models(
+                Peak("mission", "", case.time, math.nan, case.omega, 1.0, 1.0), controller, scenario
+            )
+            subsets = uncertainty_subsets(closed.uncertainty)
+        rows.append(confirm_gain_case(case, controller, scenario, subsets, options))
+        if not quiet:
+            print(summary_line(rows[-1]))
+    return pd.DataFrame(rows, columns=PERFORMANCE_CONFIRMATION_COLUMNS)
+
+
+def summary_line(row) -> str:
+    """One printed line of a row."""
+    return (
+        f"{row['channel']:>4s} {row['subset']:>14s} t={row['time [s]']:7.1f} s "
+        f"f={row['frequency [Hz]']:8.4g} Hz  lower {row['gain lower [-]']:6.3f}  upper "
+        f"{row['gain upper [-]']:6.3f}  linear twin {row['gain linear twin [-]']:6.3f}  sampled "
+        f"{row['gain linear sampled [-]']:6.3f}  twin {row['gain twin [-]']:6.3f}  (peak ratio "
+        f"{row['peak ratio twin [-]']:.3f})  {row['status']}"
+    )
+
+
+def print_performance_confirmation(folder) -> None:
+    """Print the performance confirmation of an ``oos confirm`` folder (nothing without one)."""
+    from pathlib import Path
+
+    path = Path(folder) / PERFORMANCE_CONFIRMATION_FILE
+    if not path.is_file():
+        return
+    table = pd.read_parquet(path)
+    print("worst-case gains on the twin (gain > 1: requirement violated):")
+    for _, row in table.iterrows():
+        print("  " + summary_line(row))
