@@ -125,3 +125,12 @@ def test_shared_options_come_from_the_argument_helper():
         assert not {"--output-dir", "--outdir", "--out-dir"} & _visible_options(parser), path
     assert helps["--quiet"] == {"no progress bars"}
     assert helps["--scenario"] == {SCENARIO_HELP}
+
+
+def test_report_page_goes_to_out_and_output_is_a_hidden_alias():
+    commands = dict(_commands(build_parser()))
+    shown = _visible_options(commands[("report",)])
+    assert "--out" in shown and "--output" not in shown
+    with pytest.warns(DeprecationWarning, match="--output is deprecated, use --out"):
+        args = build_parser().parse_args(["report", "OUT", "--output", "page.html"])
+    assert args.out == "page.html"

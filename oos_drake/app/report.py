@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from oos_drake.app.args import add_deprecated_alias, add_out_argument
+
 
 def print_headlines(numbers, report_path=None, write=print) -> None:
     """Print the headline numbers (one a line, with unit and where) and the report's path.
@@ -29,7 +31,7 @@ def _report(args: argparse.Namespace) -> int:
     from oos_drake.report.html import write_report
     from oos_drake.report.results import headline_numbers, load_run
 
-    path = write_report(args.directory, args.campaign, args.output)
+    path = write_report(args.directory, args.campaign, args.out)
     print_headlines(headline_numbers(load_run(args.directory, args.campaign)), path)
     return 0
 
@@ -45,7 +47,8 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--campaign", default=None, help="campaign folder (default: the newest OUT_DIR/campaign-*)"
     )
-    parser.add_argument(
-        "--output", default=None, help="where to write the page (default: OUT_DIR/report.html)"
+    add_out_argument(
+        parser, required=False, help="where to write the page (default: OUT_DIR/report.html)"
     )
+    add_deprecated_alias(parser, "--output", "--out")
     parser.set_defaults(func=_report)
