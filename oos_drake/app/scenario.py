@@ -34,6 +34,13 @@ def _info(args: argparse.Namespace) -> int:
         title = f"docking phase {args.phase} LFR: W_ext,G1 (6) -> xdd_G1 (6)"
     elapsed = time.perf_counter() - start
     table = delta_block_table(model)
+    from oos_drake.scenario.tree_scenario import is_tree
+
+    if is_tree(scenario):  # its blocks are named from its bodies: the paper's groups do not apply
+        root = scenario.controlled_body
+        title = f"mission LFR: [F; T] at G of {root} (6) -> [a; wdot] at G of {root} (6)"
+        table["group"] = ""
+        table = table.drop(columns="paper_occurrences")
     print(f"{title}; {model.nstates} states, {model.nz} Delta channels (built in {elapsed:.2f} s)")
     columns = ["name", "group", "kind", "nominal", "range", "occurrences", "paper_occurrences"]
     print(table[[c for c in columns if c in table.columns]].to_string(index=False))
@@ -44,8 +51,6 @@ def _info(args: argparse.Namespace) -> int:
         path.parent.mkdir(parents=True, exist_ok=True)
         _blocks_table(table).to_parquet(path, index=False)
         print(f"block table: {path}")
-    from oos_drake.scenario.tree_scenario import is_tree
-
     if args.phase == "mission" and is_tree(scenario):  # the blocks are named from its bodies
         print(f"schema-2 tree {scenario.name}: blocks named from its bodies (docs/TREE.md)")
         return 0
