@@ -15,8 +15,9 @@ in numpy (the tests' oracles) in the same run, the first-call compile time of th
 (fresh processes, excluded from the per-matrix times), eigen-decompositions per matrix, the
 speed-up over cvxpy and the relative difference of the values (same run), the upper/lower gap
 and the certificate checks, and the per-matrix time of the upper bound on small batches (1, 2, 4
-and 8 matrices: lone calls, warm-started points); ``--frontier`` adds the time vs accuracy of the
-upper bound for several iteration budgets.
+and 8 matrices: lone calls, warm-started points), then issue 29's reference case (Gaussian 26 x 26
+matrices, batched and single calls, with the compiled D-G optimizer's share of the CPU time);
+``--frontier`` adds the time vs accuracy of the upper bound for several iteration budgets.
 
 Run: ``.venv/bin/python benchmarks/bench_mussv.py [--matrices 200] [--lmi 3] [--frontier]``
 
@@ -142,6 +143,52 @@ def compile_times() -> tuple[float, float]:
             )
             out.append(float(res.stdout.strip().splitlines()[-1]))
     return out[0], out[1]
+
+
+def gaussian_split(reps: int, n: int = 64) -> None:
+    """Issue 29 item 6's reference case: Gaussian 26 x 26 complex matrices with the paper's
+    structure, one thread; CPU per matrix of ``mussv`` batched and in single-matrix calls,
+    and the share of the compiled D-G optimizer (``mu_lanes.dg_minimize_lanes``) in each (the
+    rest is the Python around it: balancing, certification, the lower bound's wrappers)."""
+    from bench_robust_sweep import PAPER_BLK
+
+    import oos_drake.robust.mu_lanes as mu_lanes
+    from oos_drake.robust import mussv
+
+    rng = np.random.default_rng(0)
+    M = (rng.standard_normal((n, 26, 26)) + 1j * rng.standard_normal((n, 26, 26))) / 5
+    kernel = mu_lanes.dg_minimize_lanes
+    spent = [0.0]
+
+    def timed_kernel(*a):
+        t0 = time.process_time()
+        kernel(*a)
+        spent[0] += time.process_time() - t0
+
+    mussv(M[:8], PAPER_BLK)
+    mussv(M[:1], PAPER_BLK)
+    rows = {}
+    mu_lanes.dg_minimize_lanes = timed_kernel  # mu_upper calls it through the module
+    try:
+        for name, run in (
+            ("batched", lambda: mussv(M, PAPER_BLK)),
+            ("single call", lambda: [mussv(M[k], PAPER_BLK) for k in range(n)]),
+        ):
+            best = None
+            for _ in range(reps):
+                spent[0] = 0.0
+                t0 = time.process_time()
+                run()
+                total = (time.process_time() - t0) / n
+                if best is None or total < best[0]:
+                    best = (total, spent[0] / n)
+            rows[name] = best
+    finally:
+        mu_lanes.dg_minimize_lanes = kernel
+    print("Gaussian 26 x 26, paper structure, 1 thread (issue 29: <= 1 ms batched, <= 3 ms single)")
+    print(f"{'CPU per matrix [ms]':44}{'total':>10}{'D-G kernel':>12}{'rest':>10}")
+    for name, (total, k) in rows.items():
+        print(f"{'  mussv, ' + name:44}{total * 1e3:10.2f}{k * 1e3:12.2f}{(total - k) * 1e3:10.2f}")
 
 
 def main(argv=None):
@@ -362,6 +409,7 @@ def main(argv=None):
         f"{np.nanmax(chk['singularity']):.1e}, {np.nanmax(chk_c['singularity']):.1e}; "
         f"max | ||delta|| lower - 1 | {np.nanmax(np.abs(chk['delta_norm_error'])):.1e}"
     )
+    gaussian_split(reps)
     if args.frontier:
         ref = mu_upper_bound(
             M, s, max_iter=600, tol=1e-12, temperatures=(30.0, 300.0, 3000.0, 30000.0)
