@@ -23,7 +23,10 @@ Algorithm (Apkarian-Noll nonsmooth descent, the package's optimizer):
    discrete loop's peaks are searched on its bilinear image, an exact frequency map), poles
    (eigenvalue perturbation from left/right eigenvectors) and H2 norms (adjoint Lyapunov
    equations); ``dK/dx`` comes from complex-step differentiation of the realization. No
-   finite differences anywhere.
+   finite differences anywhere. Every goal's generalized plant has the same ``A, B2, C2``
+   (plants, fixed blocks, controller states; the goals differ in their exogenous channels),
+   so the closed-loop eigendecomposition is computed once per evaluation and shared by the
+   goals' peak searches and the stability test (``SystuneOptions.shared_modes``).
 3. **Phases** from each start (the given values and ``restarts`` seeded log-normal
    perturbations): (0) if a closed loop is unstable, minimize the spectral abscissa (of
    ``s = ln(z)/T_s`` for discrete loops) below ``-stability_floor``; (1) if a hard goal
