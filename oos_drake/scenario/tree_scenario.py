@@ -136,8 +136,10 @@ class TreeScenario:
     ----------
     tree : SpacecraftTree
         The validated tree.
-    timeline : Timeline
-        Its mission's timeline (tip waypoints solved on the Drake twin when it has some).
+    timeline : Timeline or None
+        Its mission's timeline; None when the mission has tip-pose waypoints (their inverse
+        kinematics is the Drake twin's, a layer above the scenario's: ``oos validate`` solves
+        them; the model arrays of such a tree are not available yet).
     mission : TreeMissionSpan
         The mission interval.
     source : Path
@@ -147,7 +149,7 @@ class TreeScenario:
     """
 
     tree: SpacecraftTree
-    timeline: Timeline
+    timeline: Timeline | None
     mission: TreeMissionSpan
     source: Path
     overrides: tuple = ()
@@ -207,6 +209,13 @@ class TreeScenario:
 
         times = np.atleast_1d(np.asarray(times, dtype=float))
         timeline = self.timeline
+        if timeline is None:
+            tips = [p.name for p in self.tree.mission.phases if p.tip is not None]
+            raise ValueError(
+                f"scenario {self.name}: mission phases {', '.join(tips)} place a port by "
+                "inverse kinematics (the Drake twin's): the model arrays of a tree with "
+                "tip-pose waypoints are not available yet (oos validate solves them)"
+            )
         for t in times:
             if timeline.captured_at(t) is not None or timeline.docked_at(t) is not None:
                 raise ValueError(
@@ -259,11 +268,11 @@ class TreeScenario:
 
     def named_instants(self) -> TreeMoments:
         """The phase boundaries as numbered moments (``"1"``: the start)."""
-        timeline = self.timeline
+        phases = () if self.tree.mission is None else self.tree.mission.phases
+        ends = np.cumsum([p.duration for p in phases])
         moments = {"1": TreeMoment("1", "start", 0.0)}
-        for k, (phase, end) in enumerate(
-            zip(timeline.phase_names, timeline.boundaries[1:], strict=True), start=2
-        ):
+        names = [p.name for p in phases]
+        for k, (phase, end) in enumerate(zip(names, ends, strict=True), start=2):
             moments[str(k)] = TreeMoment(str(k), f"end of {phase}", float(end))
         return TreeMoments(MappingProxyType(moments))
 
@@ -284,37 +293,29 @@ def is_tree(scenario: Any) -> bool:
 def tree_scenario(document: Mapping[str, Any], source: Path) -> TreeScenario:
     """A :class:`TreeScenario` from a parsed schema-2 document (``load_scenario``'s route).
 
-    The timeline's tip-pose waypoints, if any, are solved on the tree's Drake twin
-    (:func:`oos_drake.multibody.tree_ik.mission_timeline`).
+    A mission with tip-pose waypoints gets no timeline (their inverse kinematics is the Drake
+    twin's, :func:`oos_drake.multibody.tree_ik.mission_timeline`, a layer above this one).
 
     Raises
     ------
     ScenarioError
-        Invalid tree (one line naming the body and the field), or a tip waypoint out of reach.
+        Invalid tree (one line naming the body and the field).
     """
+    from oos_drake.scenario.tree_mission import build_timeline
+
     tree = parse_tree(document, source)
-    if tree.mission is not None and tree.mission.has_tip_waypoints:
-        from oos_drake.multibody.tree_ik import mission_timeline
-
-        timeline = mission_timeline(tree)
-    else:
-        from oos_drake.scenario.tree_mission import build_timeline
-
-        timeline = build_timeline(tree)
+    phases = () if tree.mission is None else tree.mission.phases
+    timeline = None if any(p.tip is not None for p in phases) else build_timeline(tree)
+    starts = np.concatenate([[0.0], np.cumsum([p.duration for p in phases])])
     first_hold = next(
         (
             float(t0)
-            for t0, captured, docked in zip(
-                timeline.boundaries[:-1],
-                timeline.captures or (None,) * len(timeline.phase_names),
-                timeline.dockings or (None,) * len(timeline.phase_names),
-                strict=True,
-            )
-            if captured is not None or docked is not None
+            for t0, p in zip(starts[:-1], phases, strict=True)
+            if p.captured is not None or p.docked is not None
         ),
         0.0,
     )
-    span = TreeMissionSpan(0.0, timeline.duration, first_hold)
+    span = TreeMissionSpan(0.0, float(starts[-1]), first_hold)
     if tree.control is None:  # parse_tree requires [control]; defensive for the type checker
         raise ScenarioError(source.name, "[control] is required")
     return TreeScenario(tree, timeline, span, Path(source))
@@ -335,7 +336,7 @@ def unsupported_stages(scenario_file: str | Path) -> dict[str, str]:
         section-2 figures), ``"confirm"`` (the Drake mission twin with its flight software is
         the paper's topology) and ``"campaign"`` (no campaign simulator models a tree); and
         ``"controller"``, ``"analysis"``, ``"margins"`` when its mission captures or docks a
-        target (``servicer_7dof``).
+        target or has tip-pose waypoints (``servicer_7dof``).
     """
     import tomllib
 
@@ -344,18 +345,24 @@ def unsupported_stages(scenario_file: str | Path) -> dict[str, str]:
     if document.get("schema_version") != 2:
         return {}
     phases = document.get("mission", {}).get("phases", [])
-    held = [
-        str(p.get("name"))
-        for p in (phases if isinstance(phases, list) else [])
-        if isinstance(p, dict) and ("captured" in p or "docked" in p)
-    ]
-    model_arrays = {}
-    if held:  # the stages on the model arrays over the mission
-        why = (
+    phases = [p for p in (phases if isinstance(phases, list) else []) if isinstance(p, dict)]
+    held = [str(p.get("name")) for p in phases if "captured" in p or "docked" in p]
+    tips = [str(p.get("name")) for p in phases if "tip" in p]
+    why = []
+    if held:
+        why.append(
             f"mission phases {', '.join(held)} hold a target: the model arrays over captured "
-            "or docked phases of a tree are not available yet (the validate stage checks them)"
+            "or docked phases of a tree are not available yet"
         )
-        model_arrays = {name: why for name in ("controller", "analysis", "margins")}
+    if tips:
+        why.append(
+            f"mission phases {', '.join(tips)} place a port by inverse kinematics: the model "
+            "arrays of a tree with tip-pose waypoints are not available yet"
+        )
+    model_arrays = {}
+    if why:  # the stages on the model arrays over the mission
+        reason = "; ".join(why) + " (the validate stage checks every configuration)"
+        model_arrays = {name: reason for name in ("controller", "analysis", "margins")}
     return {
         **model_arrays,
         "model figures": "the paper's section-2 figures (moments, docking sweeps, arm) need "
