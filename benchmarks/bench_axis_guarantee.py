@@ -22,7 +22,7 @@ level of: ``alone`` (each configuration its own cover, grid scalings then solves
 and, for ``R`` in ``--ranges`` (default 2,4,8), the configurations cut into ``R`` contiguous
 ranges, each continued (range after range). Ratios are against ``1 range, reference`` of the
 same run: the same as ``1 range`` with every solved point above the floor polished
-(``mu_solver(polish_to_level=False)``, the solver before it polished only above the level
+(``mu_solver(lazy_polish=False)``, the solver before it polished only above the level
 already reached). On
 a slice this short the ranges are short too: at full size a range's cold start costs
 relatively more.
@@ -116,9 +116,9 @@ def mission(first, last, subset, controller, level=None, ranges=(2, 4, 8)):
         edges = np.linspace(0, len(configurations), n_ranges + 1).round().astype(int)
         return [configurations[a:b] for a, b in zip(edges[:-1], edges[1:], strict=True)]
 
-    def run(name, parts, polish_to_level=True):
+    def run(name, parts, lazy_polish=True):
         clock = time.process_time()
-        out = [_range_covers(blk, floor, SLACK, r, polish_to_level) for r in parts]
+        out = [_range_covers(blk, floor, SLACK, r, lazy_polish) for r in parts]
         seconds = time.process_time() - clock
         rows = [o for part in out for o in part]
         base = results.setdefault("1 range, reference", seconds)
@@ -128,9 +128,9 @@ def mission(first, last, subset, controller, level=None, ranges=(2, 4, 8)):
         )
 
     results = {}
-    # the reference: every point above the floor polished (mu_solver(polish_to_level=False),
+    # the reference: every point above the floor polished (mu_solver(lazy_polish=False),
     # the code before the solver polished to the level reached); then the default
-    run("1 range, reference", cut(1), polish_to_level=False)
+    run("1 range, reference", cut(1), lazy_polish=False)
     run("1 range", cut(1))
     run("alone", cut(len(configurations)))
     for n_ranges in ranges:

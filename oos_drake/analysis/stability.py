@@ -230,11 +230,11 @@ def _axis_task(task):
     return out, _time.perf_counter() - clock
 
 
-def _range_covers(blk, floor, slack, configurations, polish_to_level=True):
+def _range_covers(blk, floor, slack, configurations, lazy_polish=True):
     """The covers of a range of neighbouring configurations, one after the other ->
     ``[(level, tested points, failure, solved points), ...]``.
 
-    ``polish_to_level``: see :func:`~oos_drake.robust.mu_intervals.mu_solver` (False: the cost
+    ``lazy_polish``: see :func:`~oos_drake.robust.mu_intervals.mu_solver` (False: the cost
     reference of ``benchmarks/bench_axis_guarantee.py``).
 
     Each cover tries first the scalings that covered the previous configuration (its
@@ -262,7 +262,7 @@ def _range_covers(blk, floor, slack, configurations, polish_to_level=True):
                     slack=slack,
                     polish_above=floor / (1 + slack),
                     starts=(grid_omega, grid_params),
-                    polish_to_level=polish_to_level,
+                    lazy_polish=lazy_polish,
                 ),
                 seeds,
                 floor=floor,

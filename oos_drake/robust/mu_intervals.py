@@ -1001,6 +1001,10 @@ def _interval_at(real, performance_rows, sc, level, omega0):
 POLISH_OPTIONS = dict(
     max_iter=2000, tol=1e-9, patience=5, temperatures=(30.0, 300.0, 3000.0, 30000.0)
 )
+#: The short first polish run of :func:`mu_solver` with ``lazy_polish`` (about a seventh of
+#: the cost of :data:`POLISH_OPTIONS` on the paper's covers): enough for most points to drop
+#: below the level; the others continue with the long run.
+QUICK_POLISH_OPTIONS = dict(max_iter=150, tol=1e-6, patience=3, temperatures=(30.0, 300.0, 3000.0))
 
 
 def mu_solver(
@@ -1010,7 +1014,7 @@ def mu_solver(
     slack: float = SLACK,
     polish_above: float = 0.0,
     starts=None,
-    polish_to_level: bool = True,
+    lazy_polish: bool = True,
 ):
     """The ``solve`` of :func:`cover_axis` for ``mu(M(j omega))`` (D-G bound of ``mussv``).
 
@@ -1025,27 +1029,29 @@ def mu_solver(
     ``starts`` : ``(omega, params)`` raw D-G parameters at frequencies [rad/s] (e.g. a grid
     sweep's ``UpperBoundResult.params``), extra warm starts only.
 
-    ``polish_to_level`` (default): the threshold is also the level already reached, over
+    ``lazy_polish`` (default): the threshold is also the level already reached, over
     ``1 + slack``: the largest ``level_min`` this solver returned so far and, within a call,
     that of its highest point, polished first. A point at or below that threshold cannot raise
     the cover's level (its ``level_min`` is at most the level), and its scalings are tested at
     the level like any other's: polishing it would only make its interval wider, at the price
-    of a long optimizer run. False: the fixed ``polish_above`` only (the cost reference of
-    ``benchmarks/bench_axis_guarantee.py``).
+    of a long optimizer run. And the first polish run of each point is a short one
+    (:data:`QUICK_POLISH_OPTIONS`): only the points still above the threshold after it get the
+    long run, from where it stopped. False: the fixed ``polish_above`` and long runs only (the
+    cost reference of ``benchmarks/bench_axis_guarantee.py``).
 
     The solver keeps the points it solved (its warm starts).
     """
-    return _MuSolver(real, blk, slack, polish_above, starts, polish_to_level)
+    return _MuSolver(real, blk, slack, polish_above, starts, lazy_polish)
 
 
 class _MuSolver:
     """State of one :func:`mu_solver`: the problem and the points solved so far."""
 
-    def __init__(self, real, blk, slack, polish_above, starts, polish_to_level=True):
+    def __init__(self, real, blk, slack, polish_above, starts, lazy_polish=True):
         self.real, self.structure = real, parse_blk(blk)
         self.slack, self.polish_above = float(slack), float(polish_above)
-        self.polish_to_level = bool(polish_to_level)
-        self.reached = 0.0  # largest level_min returned so far (polish_to_level)
+        self.lazy_polish = bool(lazy_polish)
+        self.reached = 0.0  # largest level_min returned so far (lazy_polish)
         self.solved_omega, self.solved_params = [], []  # for warm starts
         if starts is not None:
             self.solved_omega.extend(np.asarray(starts[0], dtype=float).tolist())
@@ -1061,7 +1067,7 @@ class _MuSolver:
         Dl, Dr, G = res.D_left.copy(), res.D_right.copy(), res.G.copy()
         state = (M, omega, upper, params, Dl, Dr, G)
         above = self.polish_above
-        if self.polish_to_level:
+        if self.lazy_polish:
             above = max(above, self.reached / (1.0 + self.slack))
             redo = np.flatnonzero(upper > above)
             if redo.size > 1:  # the highest point first: a level the rest need not beat
@@ -1094,6 +1100,10 @@ class _MuSolver:
             redo = redo[upper[redo] > above]
             if start == "own":
                 rows, x0 = redo, params[redo]
+                if self.lazy_polish and rows.size:  # a short run first, the long one if needed
+                    self._keep_better(state, rows, x0, QUICK_POLISH_OPTIONS)
+                    rows = rows[upper[rows] > above]
+                    x0 = params[rows]
             elif start == "known":  # the nearest point solved before
                 rows = redo if self.solved_omega else redo[:0]
                 x0 = [self._nearest_start(omega[i]) for i in rows]
@@ -1102,23 +1112,28 @@ class _MuSolver:
                 dist = np.abs(np.log1p(omega[None, :]) - np.log1p(omega[rows, None]))
                 dist[np.arange(omega.size) == rows[:, None]] = np.inf
                 x0 = params[np.argmin(dist, axis=1)] if rows.size else []
-            if not rows.size:
-                continue
-            more = mu_upper_bound(M[rows], self.structure, x0=np.asarray(x0), **POLISH_OPTIONS)
-            # a point is only as good as the certificate the interval test accepts: converged
-            # scalings can be too close to singular for a strict LMI at the level
-            better = np.array(
-                [
-                    more.upper[j] < upper[i]
-                    and _proves(self.real, Scalings(more.D_left[j], more.D_right[j], more.G[j]),
-                                more.upper[j] * (1.0 + self.slack), omega[i])
-                    for j, i in enumerate(rows)
-                ],
-                dtype=bool,
-            )  # fmt: skip
-            rows = rows[better]
-            upper[rows], params[rows] = more.upper[better], more.params[better]
-            Dl[rows], Dr[rows], G[rows] = more.D_left[better], more.D_right[better], more.G[better]
+            if rows.size:
+                self._keep_better(state, rows, x0, POLISH_OPTIONS)
+
+    def _keep_better(self, state, rows, x0, options):
+        """One optimizer run (``options``) of the rows ``rows`` from ``x0``; each keeps its
+        result where it is lower and proves its own level (``state`` updated in place)."""
+        M, omega, upper, params, Dl, Dr, G = state
+        more = mu_upper_bound(M[rows], self.structure, x0=np.asarray(x0), **options)
+        # a point is only as good as the certificate the interval test accepts: converged
+        # scalings can be too close to singular for a strict LMI at the level
+        better = np.array(
+            [
+                more.upper[j] < upper[i]
+                and _proves(self.real, Scalings(more.D_left[j], more.D_right[j], more.G[j]),
+                            more.upper[j] * (1.0 + self.slack), omega[i])
+                for j, i in enumerate(rows)
+            ],
+            dtype=bool,
+        )  # fmt: skip
+        rows = rows[better]
+        upper[rows], params[rows] = more.upper[better], more.params[better]
+        Dl[rows], Dr[rows], G[rows] = more.D_left[better], more.D_right[better], more.G[better]
 
     def _nearest_start(self, omega: float) -> np.ndarray:
         """Parameters of the point nearest to ``omega`` (log scale) solved before."""

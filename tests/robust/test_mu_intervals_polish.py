@@ -1,4 +1,4 @@
-"""The cover's solver polishes only points that could raise the level (``polish_to_level``).
+"""The cover's solver polishes only points that could raise the level (``lazy_polish``).
 
 A point whose bound is at or below the level already reached is not polished: its scalings are
 tested at the level like any other's. These tests try to break that shortcut where it acts the
@@ -62,7 +62,7 @@ def covers(two_mass):
                     blk,
                     slack=SLACK,
                     polish_above=floor / (1 + SLACK),
-                    polish_to_level=shortcut,
+                    lazy_polish=shortcut,
                 )
                 certs[shortcut] = cover_axis(real, solve, seeds, floor=floor, slack=SLACK)
             finally:
