@@ -5,15 +5,16 @@ or ``python benchmarks/bench_systune.py --scenario [--configurations 200] [--mar
 [--iterations 150] [--restarts 2] [--workers 2]``.
 
 ``--scenario``: ``oos synth``'s two designs of the paper's scenario, each run twice in the same
-process, with the earlier sessions' bundle QP solver (SciPy SLSQP, ``qp="slsqp"``: the
-baseline) and with the exact active-set solver (``qp="active-set"``, the default): the
-default synthesis (:func:`~oos_drake.control.synthesis.synthesize`, ``oos synth``'s options,
-``--workers`` processes; CPU time includes the workers'), and with ``--margins`` the margins
-design (:func:`~oos_drake.control.requirements.tune_to_requirements`: soft weighted gain, hard
->= 6 dB and >= 30 deg at the wheel input on the 10 Hz sampled loop; the baseline also
-decomposes each goal's closed loop on its own, ``shared_modes=False``, one thread). Prints
-wall and CPU times, the ratio new / baseline and gamma of each with their difference (wall
-times mean little on a loaded machine: compare CPU).
+process. The default synthesis (:func:`~oos_drake.control.synthesis.synthesize`, ``oos
+synth``'s options, ``--workers`` processes; CPU time includes the workers') with the bundle QP
+solvers ``qp="slsqp"`` (the default, SciPy's SLSQP) and ``qp="active-set"`` (exact). With
+``--margins`` the margins design (:func:`~oos_drake.control.requirements.tune_to_requirements`:
+soft weighted gain, hard >= 6 dB and >= 30 deg at the wheel input on the 10 Hz sampled loop),
+first as in the earlier sessions (each goal decomposes its own closed loop,
+``shared_modes=False``, one thread: the baseline), then with one shared decomposition per
+evaluation in ``--workers`` threads (the default). Prints wall and CPU times, the ratio of the
+second row to the first and gamma of each with their difference (wall times mean little on a
+loaded machine: compare CPU).
 
 Default mode:
 
@@ -94,12 +95,11 @@ def scenario(args) -> None:
         requirements = dataclasses.replace(
             paper.control, rate_hz=10.0, gain_margin_db=6.0, phase_margin_deg=30.0
         )
-        for qp in ("slsqp", "active-set"):
-            baseline = qp == "slsqp"  # and each goal decomposes its own closed loop
+        for baseline in (True, False):
+            qp = "baseline" if baseline else "shared"
             options = SystuneOptions(
                 restarts=args.restarts,
                 max_iterations=args.iterations,
-                qp=qp,
                 shared_modes=not baseline,
                 workers=1 if baseline else args.workers,
             )
@@ -122,13 +122,13 @@ def scenario(args) -> None:
                 )
             )
     print(f"{plants.size} configurations of the paper's scenario, {args.workers} worker(s)")
-    print(f"{'design':14s} {'qp':11s} {'wall [s]':>9s} {'cpu [s]':>9s} {'gamma':>12s}")
+    print(f"{'design':14s} {'path':11s} {'wall [s]':>9s} {'cpu [s]':>9s} {'gamma':>12s}")
     for design, qp, wall, cpu, gamma, note in rows:
         print(f"{design:14s} {qp:11s} {wall:9.1f} {cpu:9.1f} {gamma:12.8f} {note}")
     for base, new in zip(rows[::2], rows[1::2], strict=True):
         difference = new[4] - base[4]
         print(
-            f"{base[0]}: active-set / slsqp wall {new[2] / base[2]:.2f}, "
+            f"{base[0]}: {new[1]} / {base[1]} wall {new[2] / base[2]:.2f}, "
             f"cpu {new[3] / base[3]:.2f}; gamma difference {difference:+.2e} "
             f"(relative {difference / base[4]:+.2e})"
         )

@@ -195,8 +195,8 @@ def simplex_qp(Q, c):
 
 
 def simplex_qp_slsqp(Q, c):
-    """:func:`simplex_qp` by SciPy's SLSQP (the solver of the earlier sessions: the baseline
-    of ``benchmarks/bench_synthesis.py``, and the fallback of the active-set method)."""
+    """:func:`simplex_qp` by SciPy's SLSQP (the default of the bundle method: the published
+    results; and the fallback of the active-set method)."""
     from scipy.optimize import minimize
 
     k = c.size
@@ -235,7 +235,7 @@ def minimize_bundle_bfgs(
     stall_rtol: float = 1e-5,
     max_enrich: int = 3,
     merge: Callable | None = None,
-    qp: Callable = simplex_qp,
+    qp: Callable = simplex_qp_slsqp,
 ) -> BfgsResult:
     """Minimize a max of smooth functions from its nearly active pieces (BFGS-SQP step).
 
@@ -264,7 +264,8 @@ def minimize_bundle_bfgs(
     merge : callable, optional
         ``(pieces, more_pieces) -> pieces`` (default: concatenate tuples of arrays).
     qp : callable
-        ``(Q, c) -> lam``, the solver of the step's dual (:func:`simplex_qp`).
+        ``(Q, c) -> lam``, the solver of the step's dual (default :func:`simplex_qp_slsqp`;
+        :func:`simplex_qp` is exact).
     stall_window, stall_rtol : int, float
         Also stop when ``f`` decreased by less than ``stall_rtol`` (relative) over the last
         ``stall_window`` iterations.
@@ -360,7 +361,7 @@ def minimize_bundle_cycles(
     restart_rtol: float = 1e-4,
     kicks: int = 2,
     kick: float = 0.05,
-    qp: Callable = simplex_qp,
+    qp: Callable = simplex_qp_slsqp,
 ) -> BfgsResult:
     """:func:`minimize_bundle_bfgs` in metric cycles, then kicks (escapes stalls at kinks).
 

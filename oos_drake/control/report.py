@@ -247,9 +247,7 @@ def tuning_record(result, requirements, K0, plants: PlantArray, spec, options=No
     )
 
 
-def write_tuning(
-    out_dir, record: dict, *, scenario_record: dict | None = None
-) -> dict[str, Path]:
+def write_tuning(out_dir, record: dict, *, scenario_record: dict | None = None) -> dict[str, Path]:
     """Write ``controller.json`` of :func:`tuning_record` in ``out_dir``; return name -> path.
 
     ``scenario_record`` (:func:`oos_drake.scenario.data.scenario_record`) is recorded as

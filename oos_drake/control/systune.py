@@ -102,7 +102,8 @@ class SystuneOptions:
     feasibility_tolerance : float
         A hard goal counts as met when its exact value is ``<= 1 + feasibility_tolerance``.
     qp : str
-        Solver of the bundle step's dual QP (see ``SynthesisOptions.qp``).
+        Solver of the bundle step's dual QP: ``"slsqp"`` (default) or ``"active-set"`` (see
+        ``SynthesisOptions.qp``).
     shared_modes : bool
         Decompose the closed-loop ``A`` once per evaluation for every goal and the stability
         test (continuous loops: the goals' generalized plants share it). ``False``: each goal
@@ -123,7 +124,7 @@ class SystuneOptions:
     min_decay: float = 1e-7
     stability_floor: float = 1e-4
     feasibility_tolerance: float = 1e-6
-    qp: str = "active-set"
+    qp: str = "slsqp"
     shared_modes: bool = True
     workers: int = 1
 
