@@ -454,8 +454,19 @@ def _drake_twin_gain(worst, controller, scenario, options, design, dynamic, v, s
     }
 
 
-def confirm_performance(analysis, controller, scenario, options=None, *, quiet=False):
-    """:func:`confirm_gain_case` for every worst-case gain of an ``oos analyze`` folder.
+def _gain_task(args):
+    from oos_drake.blas import limit_blas_threads
+
+    limit_blas_threads(1)
+    return confirm_gain_case(*args)
+
+
+def confirm_performance(
+    analysis, controller, scenario, options=None, *, workers=1, scheduler=None, quiet=False
+):
+    """:func:`confirm_gain_case` for every worst-case gain of an ``oos analyze`` folder, on
+    ``workers`` processes (``scheduler``: :func:`oos_drake.processes.make_executor`; spawned
+    workers, as :func:`oos_drake.analysis.confirm.confirm_peaks`).
 
     Returns
     -------
@@ -465,25 +476,24 @@ def confirm_performance(analysis, controller, scenario, options=None, *, quiet=F
     """
     from pathlib import Path
 
+    from oos_drake.analysis.confirm import Peak, _peak_models
     from oos_drake.analysis.subsets import uncertainty_subsets
+    from oos_drake.processes import make_executor
 
     path = Path(analysis) / "performance.parquet"
-    if not path.is_file():
+    cases = worst_gain_cases(pd.read_parquet(path)) if path.is_file() else []
+    if not cases:
         return pd.DataFrame(columns=PERFORMANCE_CONFIRMATION_COLUMNS)
-    cases = worst_gain_cases(pd.read_parquet(path))
-    rows = []
-    subsets = None
-    for case in cases:
-        if subsets is None:
-            from oos_drake.analysis.confirm import Peak, _peak_models
-
-            closed, _ = _peak_models(
-                Peak("mission", "", case.time, math.nan, case.omega, 1.0, 1.0), controller, scenario
-            )
-            subsets = uncertainty_subsets(closed.uncertainty)
-        rows.append(confirm_gain_case(case, controller, scenario, subsets, options))
-        if not quiet:
-            print(summary_line(rows[-1]))
+    first = Peak("mission", "", cases[0].time, math.nan, cases[0].omega, 1.0, 1.0)
+    closed, _ = _peak_models(first, controller, scenario)
+    subsets = uncertainty_subsets(closed.uncertainty)
+    tasks = [(case, controller, scenario, subsets, options) for case in cases]
+    with make_executor(max(1, min(workers, len(tasks))), scheduler, method="spawn") as executor:
+        futures = [executor.submit(_gain_task, task) for task in tasks]
+        rows = [future.result() for future in futures]
+    if not quiet:
+        for row in rows:
+            print(summary_line(row))
     return pd.DataFrame(rows, columns=PERFORMANCE_CONFIRMATION_COLUMNS)
 
 

@@ -339,7 +339,14 @@ def run_confirm(args) -> int:
             confirm_performance,
         )
 
-        performance = confirm_performance(args.analysis, controller, scenario, quiet=True)
+        performance = confirm_performance(
+            args.analysis,
+            controller,
+            scenario,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            quiet=True,
+        )
         performance.to_parquet(tmp / PERFORMANCE_CONFIRMATION_FILE)
         for _, row in table.iterrows():
             if histories.empty:
