@@ -69,7 +69,8 @@ def scenario(args) -> None:
     """``--scenario``: baseline (SLSQP) and active-set QP on ``oos synth``'s designs."""
     import dataclasses
 
-    from oos_drake.control.cli import baseline_for, scenario_plants
+    from oos_drake.control.baseline import baseline_for
+    from oos_drake.control.plants import scenario_plants
     from oos_drake.control.components import DesignSpecification
     from oos_drake.control.requirements import tune_to_requirements
     from oos_drake.processes import make_executor

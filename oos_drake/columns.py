@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["IDENTIFIERS", "RENAMED", "column_problem", "quantity_key"]
+__all__ = ["CONVERTED", "IDENTIFIERS", "RENAMED", "column_problem", "quantity_key"]
 
 #: Metric and signal names of the shipped simulators (identifiers: they appear in campaign
 #: specs and requirements, so they keep their underscores inside column names).
@@ -49,9 +49,9 @@ RENAMED = {
     "ape_requirement [rad]": "ape requirement [rad]",
     "torque_max [N m]": "torque max [N m]",
     "torque_requirement [N m]": "torque requirement [N m]",
-    "gain_lower [-]": "gain lower [-]",
-    "gain_nominal [-]": "gain nominal [-]",
-    "gain_upper [-]": "gain upper [-]",
+    "gain lower [-]": "gain lower [-]",
+    "gain nominal [-]": "gain nominal [-]",
+    "gain upper [-]": "gain upper [-]",
     "mu_upper_alone [-]": "mu upper alone [-]",
     "mu_upper_total [-]": "mu upper total [-]",
     "mu_upper_without [-]": "mu upper without [-]",
@@ -67,7 +67,31 @@ RENAMED = {
     "destabilizing_value [unit]": "destabilizing value [unit]",
     "in_set_value [unit]": "in set value [unit]",
     "peak frequency [rad/s]": "peak frequency [Hz]",  # values converted, not only renamed
+    "gap_at_critical [%]": "gap at critical [%]",
+    "peak_model": "peak model",
+    "peak_frequency [Hz]": "peak frequency [Hz]",
+    "lower_source": "lower source",
+    "spike_rounds": "spike rounds",
+    "spikes_left": "spikes left",
+    "spikes_converged": "spikes converged",
+    "refinement_points": "refinement points",
+    "searched_models": "searched models",
+    "spike_stop": "spike stop",
+    "budget_exhausted": "budget exhausted",
+    "spike_time [s]": "spike time [s]",
+    "spike_work [point-iterations]": "spike work [point-iterations]",
+    "gap_guaranteed [%]": "gap guaranteed [%]",
+    "margin_guaranteed [-]": "margin guaranteed [-]",
+    "guarantee_slack [%]": "guarantee slack [%]",
+    "guarantee_solved_points": "guarantee solved points",
+    "guarantee_raised_configurations": "guarantee raised configurations",
+    "guarantee_failures": "guarantee failures",
+    "guarantee_time [s]": "guarantee time [s]",
+    "guarantee_scope": "guarantee scope",
 }
+
+#: Old names in :data:`RENAMED` whose values changed unit too: a reader must not only rename them.
+CONVERTED = frozenset({"peak frequency [rad/s]"})
 
 _WITH_UNIT = re.compile(r"(?P<name>[^\[\]]+?) \[(?P<unit>[^\[\]]+)\]")
 #: Words that name a frequency: their column is in Hz.

@@ -25,19 +25,6 @@ _SHAPED = re.compile(r"[^\[\]\n|]+ \[[^\[\]\n]+\]")
 _TEXT_CALLS = {"set_xlabel", "set_ylabel", "set_title", "text", "annotate", "print", "warn", "log",
                "ValueError", "RuntimeError", "KeyError", "add_argument", "add_parser"}  # fmt: skip
 _TEXT_KEYWORDS = {"help", "xlabel", "ylabel", "label", "title", "desc", "description"}
-#: Columns of analysis/run.py's stability-peak table that helper "rb" renames in its branch
-#: (``gap_at_critical [%]`` -> ``gap at critical [%]``, ...). Each must still be in the source:
-#: once the rename is merged, this test fails until the name leaves this set.
-PENDING = {
-    "gap_at_critical [%]",
-    "gap_guaranteed [%]",
-    "guarantee_slack [%]",
-    "guarantee_time [s]",
-    "margin_guaranteed [-]",
-    "peak_frequency [Hz]",
-    "spike_time [s]",
-    "spike_work [point-iterations]",
-}
 
 
 #: ``name [unit]`` strings that are no table column, and why.
@@ -132,15 +119,14 @@ def test_every_library_column_follows_the_convention():
     bad = [
         f"{column_problem(c)} at {', '.join(where[:3])}"
         for c, where in sorted(columns.items())
-        if c not in PENDING | set(NOT_COLUMNS) and column_problem(c) is not None
+        if c not in NOT_COLUMNS and column_problem(c) is not None
     ]
     assert not bad, "column names against the table convention:\n" + "\n".join(bad)
-    assert PENDING <= set(columns), f"renamed already, drop from PENDING: {PENDING - set(columns)}"
 
 
 def test_one_spelling_per_quantity():
     spellings = defaultdict(set)
-    for column in set(library_columns()) - PENDING:
+    for column in library_columns():
         spellings[quantity_key(column)].add(column)
     twice = {k: sorted(v) for k, v in spellings.items() if len(v) > 1}
     assert not twice, f"one quantity spelled several ways: {twice}"

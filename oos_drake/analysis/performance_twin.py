@@ -114,19 +114,19 @@ def worst_gain_cases(table: pd.DataFrame, channels=("e_p", "e_u")) -> list[GainC
     for (channel, subset), rows in table.groupby(["channel", "subset"], sort=False):
         if channel not in channels:
             continue
-        finite = rows[np.isfinite(rows["gain_lower [-]"])]
+        finite = rows[np.isfinite(rows["gain lower [-]"])]
         if finite.empty:
             continue
-        r = finite.loc[finite["gain_lower [-]"].idxmax()]
+        r = finite.loc[finite["gain lower [-]"].idxmax()]
         cases.append(
             GainCase(
                 str(channel),
                 str(subset),
                 float(r["time [s]"]),
                 2 * np.pi * float(r["frequency [Hz]"]),
-                float(r["gain_nominal [-]"]),
-                float(r["gain_lower [-]"]),
-                float(r["gain_upper [-]"]),
+                float(r["gain nominal [-]"]),
+                float(r["gain lower [-]"]),
+                float(r["gain upper [-]"]),
             )
         )
     return cases

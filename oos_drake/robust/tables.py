@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from oos_drake.columns import CONVERTED, RENAMED
+
 #: Columns of every mu sweep table of the package (see the module docstring): ``name [unit]``
 #: for quantities, ``[-]`` when dimensionless; labels, indices and flags carry no unit.
 #: Frequencies are in Hz (the scenario, the figures and the campaign regions speak Hz; function
@@ -33,7 +35,7 @@ GUARANTEE_COLUMNS = ["mu upper guaranteed [-]", "guarantee points", "covered", "
 #: spaces, never underscores) -> current names: the sweep tables, the analysis' tables
 #: (``stability_peaks.parquet`` and its siblings) and ``worst_cases.parquet`` of older result
 #: folders (:func:`upgrade_columns` renames them when such a folder is read).
-LEGACY_COLUMNS = {
+_SWEEP_LEGACY = {
     "time": "time [s]",
     "frequency": "frequency [Hz]",
     "mu_upper": "mu upper [-]",
@@ -42,48 +44,12 @@ LEGACY_COLUMNS = {
     "mu_upper_at_critical": "mu upper at critical [-]",
     "mu_upper_grid": "mu upper grid [-]",
     "guarantee_points": "guarantee points",
-    # stability_peaks.parquet, worst_perturbations.parquet, performance.parquet,
-    # sensitivity.parquet, time_check.parquet and study.parquet before they shared the convention
-    "gap_at_critical [%]": "gap at critical [%]",
-    "peak_model": "peak model",
-    "peak_frequency [Hz]": "peak frequency [Hz]",
-    "lower_source": "lower source",
-    "spike_rounds": "spike rounds",
-    "spikes_left": "spikes left",
-    "spikes_converged": "spikes converged",
-    "refinement_points": "refinement points",
-    "searched_models": "searched models",
-    "spike_stop": "spike stop",
-    "budget_exhausted": "budget exhausted",
-    "spike_time [s]": "spike time [s]",
-    "spike_work [point-iterations]": "spike work [point-iterations]",
-    "gap_guaranteed [%]": "gap guaranteed [%]",
-    "margin_guaranteed [-]": "margin guaranteed [-]",
-    "guarantee_slack [%]": "guarantee slack [%]",
-    "guarantee_solved_points": "guarantee solved points",
-    "guarantee_raised_configurations": "guarantee raised configurations",
-    "guarantee_failures": "guarantee failures",
-    "guarantee_time [s]": "guarantee time [s]",
-    "guarantee_scope": "guarantee scope",
-    "normalized_norm [-]": "normalized norm [-]",
-    "normalized_real [-]": "normalized real [-]",
-    "normalized_imag [-]": "normalized imag [-]",
-    "destabilizing_value [unit]": "destabilizing value [unit]",
-    "in_set_value [unit]": "in set value [unit]",
-    "gain_nominal [-]": "gain nominal [-]",
-    "gain_lower [-]": "gain lower [-]",
-    "gain_upper [-]": "gain upper [-]",
-    "mu_upper_total [-]": "mu upper total [-]",
-    "mu_upper_alone [-]": "mu upper alone [-]",
-    "mu_upper_without [-]": "mu upper without [-]",
-    "ape_max [rad]": "ape max [rad]",
-    "ape_requirement [rad]": "ape requirement [rad]",
-    "torque_max [N m]": "torque max [N m]",
-    "torque_requirement [N m]": "torque requirement [N m]",
-    "mu_upper [-]": "mu upper [-]",
-    "mu_lower [-]": "mu lower [-]",
-    "margin_lower [-]": "margin lower [-]",
-    "margin_upper [-]": "margin upper [-]",
+}
+#: Every old name -> current name: the sweep's and :data:`oos_drake.columns.RENAMED` (the
+#: analysis' and the campaign's tables), pure renames only.
+LEGACY_COLUMNS = {
+    **_SWEEP_LEGACY,
+    **{old: new for old, new in RENAMED.items() if old not in CONVERTED},
 }
 
 

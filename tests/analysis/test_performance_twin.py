@@ -73,9 +73,9 @@ def test_worst_gain_cases_take_the_largest_finite_lower_bound():
             "model": [0, 0, 1, 0],
             "time [s]": [10.0, 10.0, 20.0, 10.0],
             "frequency [Hz]": [0.1, 0.2, 0.3, 0.1],
-            "gain_nominal [-]": [0.5, 0.6, 0.7, 0.1],
-            "gain_lower [-]": [0.9, np.inf, 1.2, 0.2],
-            "gain_upper [-]": [1.0, np.inf, 1.3, 0.3],
+            "gain nominal [-]": [0.5, 0.6, 0.7, 0.1],
+            "gain lower [-]": [0.9, np.inf, 1.2, 0.2],
+            "gain upper [-]": [1.0, np.inf, 1.3, 0.3],
         }
     )
     cases = worst_gain_cases(table)

@@ -140,7 +140,7 @@ def test_analysis_subsets_follow_the_trees_blocks(geo):
 
 
 def test_what_a_tree_lacks_is_one_line_naming_it(flexible, tmp_path, capsys):
-    from oos_drake.cli import main
+    from oos_drake.app.main import main
     from oos_drake.scenario.tree_scenario import unsupported_stages
 
     with pytest.raises(ValueError, match=r"schema-2 tree.*schema-1 `arm`"):
@@ -174,7 +174,7 @@ def test_what_a_tree_lacks_is_one_line_naming_it(flexible, tmp_path, capsys):
 
 
 def test_analysis_docking_default_is_the_scenarios_phases(flexible):
-    from oos_drake.analysis.cli import _docking_phases
+    from oos_drake.app.analyze import _docking_phases
 
     assert _docking_phases(None, load_scenario("paper")) == ("7", "8")
     assert _docking_phases(None, flexible) == ()
@@ -185,10 +185,10 @@ def test_analysis_docking_default_is_the_scenarios_phases(flexible):
 def test_oos_run_on_a_tree_end_to_end(tmp_path, monkeypatch, capsys):
     """``oos run --scenario flexible_satellite --quick`` at reduced sizes (each stage's
     options appended: synthesis and analysis on 4 configurations, a coarse grid)."""
-    import oos_drake.pipeline as pipeline
+    import oos_drake.app.pipeline as pipeline
     from oos_drake.analysis.controller import scenario_controller
     from oos_drake.analysis.models import mission_closed_loop
-    from oos_drake.cli import build_parser
+    from oos_drake.app.main import build_parser
 
     smaller = {
         "synth": ["--configurations", "4", "--restarts", "0", "--max-iterations", "25",
