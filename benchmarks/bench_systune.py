@@ -70,8 +70,8 @@ def scenario(args) -> None:
     import dataclasses
 
     from oos_drake.control.baseline import baseline_for
-    from oos_drake.control.plants import scenario_plants
     from oos_drake.control.components import DesignSpecification
+    from oos_drake.control.plants import scenario_plants
     from oos_drake.control.requirements import tune_to_requirements
     from oos_drake.processes import make_executor
     from oos_drake.scenario.data import load_scenario
