@@ -162,10 +162,19 @@ def channel_direction(loop, rows, omega: float) -> tuple[float, np.ndarray]:
 def perturbed_loop(sys, normalized: dict, omega: float):
     """Certain loop ``F_u(M, Delta)`` with the normalized block values ``normalized`` (complex
     blocks realized by their stable interpolants at ``omega``,
-    :func:`oos_drake.analysis.confirm.substitution`; blocks not given nominal)."""
+    :func:`oos_drake.analysis.confirm.substitution`; blocks not given nominal). The one way the
+    analysis closes a loop on a worst perturbation (the time check and the performance
+    confirmation); an unknown block name is a ``ValueError``."""
     from oos_drake.analysis.confirm import Peak, substitution
     from oos_drake.lfr import usubs
 
+    unknown = sorted(set(normalized) - set(sys.uncertainty))
+    if unknown:
+        raise ValueError(f"perturbed_loop: unknown block(s) {unknown}")
+    kinds = {name: spec.kind for name, spec in sys.uncertainty.items()}
+    normalized = {
+        k: float(np.real(v)) if kinds[k] == "ureal" else v for k, v in normalized.items()
+    }
     peak = Peak("", "", math.nan, math.nan, omega, 1.0, 1.0, normalized)
     return usubs(sys, substitution(peak, sys.uncertainty, 1.0), normalized=True)
 

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import scipy.signal
 
-from oos_drake.lfr import LFR, lft, usubs
+from oos_drake.lfr import LFR
 
 #: Columns of the time-domain summary.
 TIME_COLUMNS = [
@@ -32,64 +32,6 @@ TIME_COLUMNS = [
     "torque requirement [N m]",
     "stable",
 ]
-
-
-def close_with_perturbation(sys: LFR, normalized: dict, omega: float) -> LFR:
-    """Certain closed loop ``F_u(M, Delta)`` for normalized block values.
-
-    Parameters
-    ----------
-    sys : LFR
-        One uncertain model.
-    normalized : dict
-        Block name -> normalized value: float for ``ureal``, complex ``(p, q)`` matrix (its value
-        at ``omega``) for ``ultidyn``. Blocks not given stay nominal.
-    omega : float
-        Frequency [rad/s] the ultidyn values refer to.
-
-    Returns
-    -------
-    LFR
-        Without uncertain blocks (real-rational: ultidyn blocks are realized by stable all-pass
-        factors of the same norm).
-    """
-    from oos_drake.robust.lfr_analysis import realize_complex_matrix
-
-    kinds = {name: spec.kind for name, spec in sys.uncertainty.items()}
-    unknown = [k for k in normalized if k not in kinds]
-    if unknown:
-        raise ValueError(f"close_with_perturbation: unknown block(s) {unknown}")
-    reals = {
-        k: float(np.real(normalized.get(k, 0.0))) for k, kind in kinds.items() if kind == "ureal"
-    }
-    out = usubs(sys, reals, normalized=True) if reals else sys
-    # blocks left: ultidyn; those not given are nominal (zero)
-    left = [e for e in out.block_entries]
-    if not left:
-        return out
-    A, Bw, Bu = np.asarray(out.A), np.asarray(out.Bw), np.asarray(out.Bu)
-    Cz, Cy = np.asarray(out.Cz), np.asarray(out.Cy)
-    D = np.block(
-        [[np.asarray(out.Dzw), np.asarray(out.Dzu)], [np.asarray(out.Dyw), np.asarray(out.Dyu)]]
-    )
-    open_sys = LFR.from_ss(A, np.hstack([Bw, Bu]), np.vstack([Cz, Cy]), D)
-    import control
-
-    parts = []
-    for entry in left:
-        spec = entry.spec
-        p, q = spec.shape
-        value = normalized.get(spec.name)
-        if value is None:
-            parts.append(control.ss([], [], [], np.zeros((p, q))))
-        else:
-            value = spec.bound * np.asarray(value, complex).reshape(p, q)
-            parts.append(realize_complex_matrix(value, omega))
-    delta_sys = control.append(*parts) if len(parts) > 1 else parts[0]
-    nw, nz = out.nw, out.nz
-    return lft(delta_sys, open_sys, nw, nz).with_names(
-        inputs=sys.input_names, outputs=sys.output_names
-    )
 
 
 def simulate(closed: LFR, frequency_hz: float, *, duration: float = 600.0, dt: float = 0.05):
@@ -135,7 +77,9 @@ def check_case(
     dt: float = 0.05,
 ):
     """Simulate one perturbed closed loop and summarize APE and torque (a table row + signals)."""
-    closed = close_with_perturbation(sys, normalized, omega)
+    from oos_drake.analysis.performance_twin import perturbed_loop
+
+    closed = perturbed_loop(sys, normalized, omega)
     f_hz = omega / (2 * np.pi) if np.isfinite(omega) and omega > 0 else 0.01
     t, e, stable = simulate(closed, f_hz, duration=duration, dt=dt)
     phi = e[:, :3] * spec.pointing_requirement
