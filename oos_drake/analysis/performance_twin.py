@@ -172,9 +172,7 @@ def perturbed_loop(sys, normalized: dict, omega: float):
     if unknown:
         raise ValueError(f"perturbed_loop: unknown block(s) {unknown}")
     kinds = {name: spec.kind for name, spec in sys.uncertainty.items()}
-    normalized = {
-        k: float(np.real(v)) if kinds[k] == "ureal" else v for k, v in normalized.items()
-    }
+    normalized = {k: float(np.real(v)) if kinds[k] == "ureal" else v for k, v in normalized.items()}
     peak = Peak("", "", math.nan, math.nan, omega, 1.0, 1.0, normalized)
     return usubs(sys, substitution(peak, sys.uncertainty, 1.0), normalized=True)
 
