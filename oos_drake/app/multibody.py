@@ -36,7 +36,7 @@ def _validate(args: argparse.Namespace) -> int:
         return validate_tree(args)
     import numpy as np
 
-    from oos_drake.multibody.cross_check import format_table, run_validation, validation_cases
+    from oos_drake.multibody.cross_check import run_validation, validation_cases
     from oos_drake.robust.lfr_analysis import frequency_grid
     from oos_drake.scenario.data import load_scenario
 
@@ -59,9 +59,24 @@ def _validate(args: argparse.Namespace) -> int:
         root_tolerance=args.root_tolerance,
         sdf_directory=args.sdf_dir,
     )
+    return print_verdict(results, time.perf_counter() - start)
+
+
+def print_verdict(results, elapsed: float) -> int:
+    """Print the validation table and its verdict; exit status 0 when every configuration
+    passes, else 1 (``oos validate`` of a schema-1 scenario and of a tree).
+
+    Parameters
+    ----------
+    results : list of cross_check results
+        One per configuration (``label``, ``passed``).
+    elapsed : float
+        Wall time of the validation [s].
+    """
+    from oos_drake.multibody.cross_check import format_table
+
     print(format_table(results))
     failed = [r.label for r in results if not r.passed]
-    elapsed = time.perf_counter() - start
     if failed:
         print(
             f"FAILED: {len(failed)} of {len(results)} configurations ({', '.join(failed)}); "

@@ -70,7 +70,6 @@ def validate_tree(args: argparse.Namespace) -> int:
     import numpy as np
 
     tree = load_tree(args.scenario)  # invalid data: ScenarioError -> exit status 2
-    from oos_drake.multibody.cross_check import format_table
     from oos_drake.multibody.tree_ik import mission_timeline
     from oos_drake.multibody.tree_plant import (
         build_captured_diagram,
@@ -134,17 +133,9 @@ def validate_tree(args: argparse.Namespace) -> int:
         if docked:
             label += f" [{'~'.join(docked.connection)}]"
         results.append(dataclasses.replace(seen[key], label=label))
-    print(format_table(results))
-    failed = [r.label for r in results if not r.passed]
-    elapsed = time.perf_counter() - start
-    if failed:
-        print(
-            f"FAILED: {len(failed)} of {len(results)} configurations ({', '.join(failed)}); "
-            f"{elapsed:.1f} s"
-        )
-        return 1
-    print(f"all {len(results)} configurations pass ({elapsed:.1f} s)")
-    return 0
+    from oos_drake.app.multibody import print_verdict
+
+    return print_verdict(results, time.perf_counter() - start)
 
 
 def _convert(args: argparse.Namespace) -> int:
