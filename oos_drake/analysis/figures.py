@@ -21,13 +21,16 @@ def pyplot():
 
 
 def save_figure(fig, path, *, dpi: int = 120, tight: bool = True) -> Path:
-    """Write ``fig`` to ``path`` (PNG at ``dpi``), after ``tight_layout`` if ``tight``; close
-    it and return the path."""
+    """Write ``fig`` to ``path`` (PNG at ``dpi``, atomically), after ``tight_layout`` if
+    ``tight``; close it and return the path."""
+    from oos_drake.files import atomic_write_bytes
+
     if tight:
         fig.tight_layout()
-    fig.savefig(path, dpi=dpi)
-    pyplot().close(fig)
-    return Path(path)
+    try:
+        return atomic_write_bytes(path, lambda stream: fig.savefig(stream, dpi=dpi, format="png"))
+    finally:
+        pyplot().close(fig)
 
 
 def _ordered(names):
@@ -149,13 +152,17 @@ def performance_figure(table: pd.DataFrame, path) -> Path:
 
 
 def docking_figure(sweeps: dict, peaks: dict, path) -> Path:
-    """Side views of mu (Delta_tot) over the swept stiffness and over frequency, per phase."""
+    """Side views of mu (Delta_tot) over the swept stiffness and over frequency, per phase.
+
+    ``sweeps``: phase -> the ``docking_<phase>`` table (``stiffness [N/m or N m/rad]``);
+    ``peaks``: phase -> the docking peak's numbers of ``summary.json``.
+    """
     plt = pyplot()
     n = len(sweeps)
     fig, axes = plt.subplots(n, 2, figsize=(13, 4.2 * n), squeeze=False)
     for row, (phase, sweep) in enumerate(sweeps.items()):
         part = sweep[sweep["subset"] == "total"]
-        by_k = part.groupby("time [s]")["mu upper [-]"].max()
+        by_k = part.groupby("stiffness [N/m or N m/rad]")["mu upper [-]"].max()
         by_f = part.groupby("frequency [Hz]")["mu upper [-]"].max()
         ax1, ax2 = axes[row]
         ax1.semilogx(by_k.index, by_k.to_numpy(), lw=1.3)
@@ -242,3 +249,34 @@ def open_loop_figure(table: pd.DataFrame, title: str, path) -> Path:
         ax.set_visible(False)
     fig.suptitle(title)
     return save_figure(fig, path)
+
+
+def analysis_figures(result, out) -> dict[str, Path]:
+    """Every figure of an :class:`~oos_drake.analysis.results.AnalysisResult` in ``out``.
+
+    Returns
+    -------
+    dict
+        Name (``"mu_mission_png"``, ...) -> path, for ``summary.json``'s files.
+    """
+    out = Path(out)
+    paths = {}
+    if result.time_signals is not None:
+        paths["time_check_png"] = time_check_figure(
+            result.time_signals, result.time_check, out / "time_check.png"
+        )
+    if result.open_loop is not None:
+        paths["open_loop_png"] = open_loop_figure(
+            result.open_loop, result.open_loop_title, out / "open_loop_effects.png"
+        )
+    paths["mu_mission_png"] = mu_mission_figure(
+        result.mission, result.grid_hz, result.mission_peaks, out / "mu_mission.png"
+    )
+    paths["performance_png"] = performance_figure(result.performance, out / "performance.png")
+    if result.docking:
+        paths["docking_png"] = docking_figure(
+            result.docking, result.docking_peaks, out / "mu_docking.png"
+        )
+    if result.sensitivity is not None:
+        paths["sensitivity_png"] = sensitivity_figure(result.sensitivity, out / "sensitivity.png")
+    return paths

@@ -1,4 +1,6 @@
-"""The whole worst-case analysis (paper section 4) as one function: tables, figures, summary.
+"""The whole worst-case analysis (paper section 4): :func:`compute_analysis` returns an
+:class:`~oos_drake.analysis.results.AnalysisResult` (no file written),
+:func:`~oos_drake.analysis.writers.write_analysis` writes it, :func:`run_analysis` does both.
 
 Files written in ``out_dir`` (Parquet tables are tidy, units in column names):
 
@@ -27,31 +29,16 @@ Files written in ``out_dir`` (Parquet tables are tidy, units in column names):
 
 from __future__ import annotations
 
-import json
 import time as _time
-from dataclasses import asdict, dataclass, field
-from pathlib import Path
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
 from oos_drake.analysis.controller import Controller
+from oos_drake.analysis.results import PAPER, AnalysisResult, Certificate  # noqa: F401 (PAPER)
 from oos_drake.analysis.stability import SweepOptions
 from oos_drake.analysis.tightening import TightenOptions
-from oos_drake.files import atomic_write_bytes
-
-#: The paper's published numbers (section 4), written to the summary under ``"paper"`` for the
-#: comparison only: none of them is a default or an input of our analysis or campaign (its
-#: 0.55 Hz mission peak frequency is not listed: it used to stand in for ours in the campaign).
-PAPER = {
-    "mission_mu_peak": 0.79,
-    "mission_peak_time_s": 275.0,
-    "mission_margin_percent": 26.0,
-    "docking7_mu_peak": 1.04,
-    "docking7_peak_stiffness": 2.5e3,
-    "docking7_peak_frequency_hz": 0.58,
-    "performance_ep_peak_frequency_hz": 0.08,
-}
 
 
 @dataclass(frozen=True)
@@ -208,7 +195,9 @@ def _certify(array, study, subsets, *, configuration_label):
             }
         )
         normalized = cert.worst_case_normalized
-        certificates[name] = (model, cert.frequency, lower, upper, normalized)
+        certificates[name] = Certificate(
+            int(model), float(cert.frequency), lower, upper, normalized
+        )
         one = sys.model(model) if sys.batch_shape else sys
         specs = one.uncertainty
         phys_unit = physical_values(one, normalized, lower)
@@ -260,23 +249,6 @@ def peak_upper(cert, guarantee) -> tuple[float, str]:
     if guarantee is not None and np.isfinite(guarantee.mu_upper):
         return max(float(guarantee.mu_upper), float(cert.mu_lower)), "whole axis"
     return max(float(cert.mu_upper), float(cert.mu_lower)), "analyzed points"
-
-
-def _write_perturbations(path: Path, study_certs: dict) -> Path:
-    """The whole normalized destabilizing perturbation of every certified peak, for re-checks.
-
-    Keys ``"<study>|<subset>|<block>"`` hold the block's normalized value (a float for a
-    ``ureal``, the complex matrix of an ``ultidyn``); ``"<study>|<subset>|model"`` and
-    ``"<study>|<subset>|omega [rad/s]"`` the critical model and frequency.
-    """
-    arrays = {}
-    for study, certs in study_certs.items():
-        for subset, (model, frequency, _, _, normalized) in certs.items():
-            arrays[f"{study}|{subset}|model"] = np.int64(model)
-            arrays[f"{study}|{subset}|omega [rad/s]"] = np.float64(2 * np.pi * frequency)
-            for block, value in normalized.items():
-                arrays[f"{study}|{subset}|{block}"] = np.asarray(value)
-    return atomic_write_bytes(path, lambda stream: np.savez(stream, **arrays))
 
 
 def _guarantee_columns(guarantee, lower, n_configurations) -> dict:
@@ -352,7 +324,9 @@ def run_analysis(
     scenario,
     log=print,
 ) -> dict:
-    """Run the worst-case analysis and write every table and figure in ``out_dir``.
+    """Compute the worst-case analysis and write every table and figure in ``out_dir``.
+
+    :func:`compute_analysis` then :func:`~oos_drake.analysis.writers.write_analysis`.
 
     Parameters
     ----------
@@ -371,28 +345,47 @@ def run_analysis(
     dict
         The summary written to ``summary.json`` (key numbers, paths, timings).
     """
-    from oos_drake.analysis import figures
+    from oos_drake.analysis.writers import write_analysis
+
+    result = compute_analysis(controller, options, scenario=scenario, log=log)
+    return write_analysis(result, out_dir, log=log)
+
+
+def compute_analysis(
+    controller: Controller,
+    options: AnalysisOptions | None = None,
+    *,
+    scenario,
+    log=print,
+) -> AnalysisResult:
+    """Compute the worst-case analysis (paper section 4); nothing is written.
+
+    Parameters
+    ----------
+    controller : Controller
+        From :func:`~oos_drake.analysis.controller.load_controller` (or the labeled baseline).
+    options : AnalysisOptions, optional
+    scenario : Scenario
+        The analyzed scenario (its models and timeline).
+    log : callable
+        Progress messages.
+
+    Returns
+    -------
+    AnalysisResult
+        Tables, certificates, worst-case regions, key numbers and timings [s].
+    """
     from oos_drake.analysis.models import docking_closed_loop, mission_closed_loop, mission_times
-    from oos_drake.analysis.stability import certified_sweep
     from oos_drake.analysis.subsets import uncertainty_subsets
-    from oos_drake.analysis.worst_cases import block_parameters, physical_values
+    from oos_drake.analysis.worst_cases import block_parameters
     from oos_drake.blas import limit_blas_threads
-    from oos_drake.campaign.worst_cases import WorstCaseRegion, write_worst_cases
     from oos_drake.processes import make_executor
 
     limit_blas_threads(1)
     options = options or AnalysisOptions()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     timings = {}
-    paths = {}
     clock = _time.perf_counter()
     t_start = clock
-
-    def save(table: pd.DataFrame, name: str) -> None:
-        """``table`` as ``<name>.parquet``, listed in the summary's files as ``name``."""
-        paths[name] = out / f"{name}.parquet"
-        table.to_parquet(paths[name], index=False)
 
     def lap(name):
         nonlocal clock
@@ -420,39 +413,18 @@ def run_analysis(
         f"mission: {times.size} configurations, {omega.size} grid frequencies, "
         f"subsets {list(subsets)}; nominal loops stable: {int((abscissa < 0).sum())}/{times.size}"
     )
-
-    spike_seconds = [0.0]
-
-    def study(system, sets, grid, description):
-        """mu bounds on the common grid, spikes resolved, a certified peak per subset."""
-        res = certified_sweep(
-            system,
-            omega,
-            sets,
-            times=grid,
-            options=options.sweep,
-            tighten=options.tighten,
-            critical_iterations=options.certify_iterations,
-            progress=options.progress,
-            description=description,
-            time_budget=max(options.spike_budget - spike_seconds[0], 1e-3),
-            guarantee=options.guarantee,
-            guarantee_gap=options.tighten.target_gap,
-        )
-        spike_seconds[0] += sum(r.seconds for r in res.reports.values())
-        return res
-
+    study = _Studies(options, omega)
     result = study(mission.system, subsets, times, "mu mission")
-    sweep = result.table
-    save(sweep, "mu_mission")
     lap("mu sweep mission (grid + certified peaks)")
     timings["mu mission detail"] = {k: round(v, 2) for k, v in result.timings.items()}
     label = _moment_label(times, scenario)
     peaks, perturbations, certs = _certify(mission, result, subsets, configuration_label=label)
-    guaranteed_rows = [guaranteed_table("mission", result, "time [s]", times)]
+    peak_tables = {"mission": peaks}
+    perturbation_tables = [perturbations]
+    guaranteed_tables = [guaranteed_table("mission", result, "time [s]", times)]
+    certificates = {"mission": certs}
     # ------------------------------------------------------------------ docking
-    docking_sweeps, docking_peaks, docking_tables = {}, {}, []
-    docking_perturbations, docking_certs = [], {}
+    docking_sweeps, docking_peaks = {}, {}
     stiffness = np.geomspace(*options.stiffness_range, options.docking_points)
     for phase in options.docking_phases:
         arr = docking_closed_loop(
@@ -460,63 +432,138 @@ def run_analysis(
         )
         tot = {"total": uncertainty_subsets(arr.system.uncertainty)["total"]}
         dres = study(arr.system, tot, stiffness, f"mu docking {phase}")
-        dsweep = dres.table.rename(columns={"time [s]": "stiffness [N/m or N m/rad]"})
-        save(dsweep, f"docking_{phase}")
+        docking_sweeps[phase] = dres.table.rename(
+            columns={"time [s]": "stiffness [N/m or N m/rad]"}
+        )
         dp, dpert, dc = _certify(
             arr,
             dres,
             tot,
             configuration_label=lambda m, ph=phase: f"docking-{ph} k={stiffness[m]:.3g}",
         )
-        docking_tables.append(dp)
-        guaranteed_rows.append(
+        peak_tables[f"docking-{phase}"] = dp
+        guaranteed_tables.append(
             guaranteed_table(f"docking-{phase}", dres, "stiffness [N/m or N m/rad]", stiffness)
         )
-        docking_perturbations.append(dpert)
-        docking_certs[phase] = (arr, dc["total"])
-        docking_sweeps[phase] = dres.table
-        row = dp.iloc[0]
-        docking_peaks[phase] = {
-            "stiffness": float(row["stiffness [N/m or N m/rad]"]),
-            "gap [%]": float(row["gap [%]"]),
-            "mu_upper_grid": float(row["mu upper grid [-]"]),
-            "frequency [Hz]": float(row["frequency [Hz]"]),
-            "mu_lower": float(row["mu lower [-]"]),
-            "mu_upper": float(row["mu upper [-]"]),
-            "mu_upper_scope": str(row["mu upper scope"]),
-            "peak_stiffness": float(row["peak stiffness [N/m or N m/rad]"]),
-            "peak frequency [Hz]": float(row["peak frequency [Hz]"]),
-            "spikes left": int(row["spikes left"]),
-            "spike stop": str(row["spike stop"]),
-            "budget exhausted": bool(row["budget exhausted"]),
-            "mu_upper_guaranteed": float(row.get("mu upper guaranteed [-]", np.nan)),
-        }
+        perturbation_tables.append(dpert)
+        certificates[f"docking-{phase}"] = {"total": dc["total"]}
+        docking_peaks[phase] = _docking_peak(dp.iloc[0])
         timings[f"docking {phase} detail"] = {k: round(v, 2) for k, v in dres.timings.items()}
         lap(f"docking phase {phase}")
-    all_peaks = pd.concat([peaks] + docking_tables, ignore_index=True)
-    save(all_peaks, "stability_peaks")
-    guaranteed_rows = [t for t in guaranteed_rows if not t.empty]
-    if guaranteed_rows:
-        save(pd.concat(guaranteed_rows, ignore_index=True), "stability_guaranteed")
-    all_pert = pd.concat([perturbations] + docking_perturbations, ignore_index=True)
-    save(all_pert, "worst_perturbations")
-    study_certs = {"mission": certs}
-    study_certs.update({f"docking-{ph}": {"total": c} for ph, (_, c) in docking_certs.items()})
-    paths["peak_perturbations"] = _write_perturbations(out / "peak_perturbations.npz", study_certs)
     # ------------------------------------------------------------------ performance
-    # the critical configuration, every region's (for the campaign's like-for-like comparison)
-    # and equally spaced ones
-    crit_model = certs["total"][0]
-    region_models = [certs[name][0] for name in peaks["subset"]]
+    perf, perf_deltas, perf_models = _performance(mission, times, subsets, certs, peaks, options)
+    lap("worst-case performance")
+    regions = _regions(mission, times, subsets, certs, peaks, perf, label)
+    # ------------------------------------------------------------------ sensitivity
+    sens = None
+    if options.sensitivity:
+        sens = _sensitivity(mission, result.table, certs, options)
+        lap("sensitivity")
+    # ------------------------------------------------------------------ time-domain check
+    tsum, signals = pd.DataFrame(), None
+    if options.time_check:
+        tsum, signals = _time_check(
+            mission, controller, times, certs, perf, perf_deltas, perf_models, options
+        )
+        lap("time-domain check")
+    # ------------------------------------------------------------------ open-loop effects
+    effects, effects_title = None, ""
+    if options.open_loop_samples > 0:
+        effects, effects_title = _open_loop(controller, scenario, options)
+        lap("open-loop effects")
+    return AnalysisResult(
+        controller=controller,
+        scenario=scenario,
+        options=options,
+        grid_hz=omega / (2 * np.pi),
+        mission=result.table,
+        docking=docking_sweeps,
+        peak_tables=peak_tables,
+        guaranteed_tables=tuple(guaranteed_tables),
+        perturbation_tables=tuple(perturbation_tables),
+        certificates=certificates,
+        performance=perf,
+        regions=tuple(regions),
+        parameters=tuple(block_parameters(mission.system)),
+        docking_peaks=docking_peaks,
+        configurations=int(times.size),
+        nominal_stable_models=int((abscissa < 0).sum()),
+        sensitivity=sens,
+        time_check=tsum,
+        time_signals=signals,
+        open_loop=effects,
+        open_loop_title=effects_title,
+        timings=timings,
+        spike_seconds=study.spike_seconds,
+        seconds=_time.perf_counter() - t_start,
+    )
+
+
+class _Studies:
+    """The analysis' certified sweeps, sharing one spike-resolution budget
+    (:attr:`AnalysisOptions.spike_budget`) in the order they run."""
+
+    def __init__(self, options: AnalysisOptions, omega: np.ndarray):
+        self.options = options
+        self.omega = omega
+        self.spike_seconds = 0.0
+
+    def __call__(self, system, sets, grid, description):
+        """mu bounds on the common grid, spikes resolved, a certified peak per subset."""
+        from oos_drake.analysis.stability import certified_sweep
+
+        options = self.options
+        res = certified_sweep(
+            system,
+            self.omega,
+            sets,
+            times=grid,
+            options=options.sweep,
+            tighten=options.tighten,
+            critical_iterations=options.certify_iterations,
+            progress=options.progress,
+            description=description,
+            time_budget=max(options.spike_budget - self.spike_seconds, 1e-3),
+            guarantee=options.guarantee,
+            guarantee_gap=options.tighten.target_gap,
+        )
+        self.spike_seconds += sum(r.seconds for r in res.reports.values())
+        return res
+
+
+def _docking_peak(row) -> dict:
+    """``summary.json``'s numbers of a docking phase's peak (its peak table's row)."""
+    return {
+        "stiffness": float(row["stiffness [N/m or N m/rad]"]),
+        "gap [%]": float(row["gap [%]"]),
+        "mu_upper_grid": float(row["mu upper grid [-]"]),
+        "frequency [Hz]": float(row["frequency [Hz]"]),
+        "mu_lower": float(row["mu lower [-]"]),
+        "mu_upper": float(row["mu upper [-]"]),
+        "mu_upper_scope": str(row["mu upper scope"]),
+        "peak_stiffness": float(row["peak stiffness [N/m or N m/rad]"]),
+        "peak frequency [Hz]": float(row["peak frequency [Hz]"]),
+        "spikes left": int(row["spikes left"]),
+        "spike stop": str(row["spike stop"]),
+        "budget exhausted": bool(row["budget exhausted"]),
+        "mu_upper_guaranteed": float(row.get("mu upper guaranteed [-]", np.nan)),
+    }
+
+
+def _performance(mission, times, subsets, certs, peaks, options):
+    """Worst-case gains at the critical configuration, every region's (for the campaign's
+    like-for-like comparison) and equally spaced ones: ``(table, deltas, models)``."""
+    from oos_drake.analysis.performance import worst_case_gains
+
+    crit_model = certs["total"].model
+    region_models = [certs[name].model for name in peaks["subset"]]
     spread = np.linspace(0, times.size - 1, max(options.performance_models - 1, 1)).round()
     models = np.unique(np.concatenate([[crit_model], region_models, spread.astype(int)]))
     lo_hz, hi_hz = options.frequency_range_hz
     w_perf = (
         2 * np.pi * np.geomspace(max(lo_hz, 0.005), min(hi_hz, 3.0), options.performance_points)
     )
-    w_perf = np.unique(np.concatenate([w_perf, [2 * np.pi * certs["total"][1]]]))
-    from oos_drake.analysis.performance import peak_gains, worst_case_gains
-
+    w_perf = np.unique(np.concatenate([w_perf, [2 * np.pi * certs["total"].frequency_hz]]))
     perf, perf_deltas = worst_case_gains(
         mission.system,
         models,
@@ -527,193 +574,115 @@ def run_analysis(
         scheduler=options.sweep.scheduler,
         progress=options.progress,
     )
-    save(perf, "performance")
-    lap("worst-case performance")
-    # ------------------------------------------------------------------ worst cases file
+    return perf, perf_deltas, models
+
+
+def _regions(mission, times, subsets, certs, peaks, perf, label) -> list:
+    """The critical regions of the mu-guided campaign, one per subset's certified peak."""
+    from oos_drake.analysis.performance import peak_gains
+    from oos_drake.analysis.worst_cases import physical_values
+    from oos_drake.campaign.worst_cases import WorstCaseRegion
+
     regions = []
     for index, subset in enumerate(peaks["subset"]):
-        model, freq, lower, upper, normalized = certs[subset]
+        c = certs[subset]
         regions.append(
             WorstCaseRegion(
                 index,
-                label(model),
-                max(float(times[model]), 0.0),
-                float(freq),
-                float(upper),
-                float(min(lower, upper)),
+                label(c.model),
+                max(float(times[c.model]), 0.0),
+                float(c.frequency_hz),
+                float(c.mu_upper),
+                float(min(c.mu_lower, c.mu_upper)),
                 ",".join(subsets[subset]),
-                physical_values(mission.system, normalized, lower),
-                peak_gains(perf, subset, int(model)),
+                physical_values(mission.system, c.normalized, c.mu_lower),
+                peak_gains(perf, subset, int(c.model)),
             )
         )
-    parameters = block_parameters(mission.system)
-    paths["worst_cases"] = write_worst_cases(regions, parameters, out / "worst_cases.parquet")
-    # ------------------------------------------------------------------ sensitivity
-    sens = None
-    if options.sensitivity:
-        from oos_drake.analysis.sensitivity import mu_sensitivity
+    return regions
 
-        part = sweep[(sweep["subset"] == "total") & (sweep["model"] == crit_model)]
-        top = part.nlargest(6, "mu upper [-]")["frequency [Hz]"].to_numpy()
-        w_crit = 2 * np.pi * certs["total"][1]
-        w_s = np.unique(np.concatenate([2 * np.pi * top, w_crit * np.geomspace(0.97, 1.03, 3)]))
-        sens = mu_sensitivity(
-            mission.system, crit_model, w_s, iterations=options.sensitivity_iterations
-        )
-        save(sens, "sensitivity")
-        lap("sensitivity")
-    # ------------------------------------------------------------------ time-domain check
-    tsum = pd.DataFrame()
-    if options.time_check:
-        from oos_drake.analysis.time_check import check_case
 
-        rows, signals = [], []
-        one = mission.system.model(crit_model)
-        model, freq, lower, upper, normalized = certs["total"]
-        w_c = 2 * np.pi * freq
-        cases = [("nominal", {}, 1.0, w_c), ("worst stability (unit size)", normalized, lower, w_c)]
-        pk = perf[
-            (perf["channel"] == "e_p") & (perf["subset"] == "total") & (perf["model"] == crit_model)
-        ]
-        if len(pk):
-            j = int(np.argmax(pk["gain lower [-]"].to_numpy()))
-            wj = 2 * np.pi * float(pk["frequency [Hz]"].iloc[j])
-            k_model = int(np.flatnonzero(models == crit_model)[0])
-            dl = perf_deltas[("e_p", "total")][k_model, j]
-            from oos_drake.robust.blocks import parse_blk
-            from oos_drake.robust.lfr_analysis import block_map, normalized_worst_case
+def _sensitivity(mission, sweep, certs, options) -> pd.DataFrame:
+    """Which block moves the worst-case mu most, at the critical configuration."""
+    from oos_drake.analysis.sensitivity import mu_sensitivity
 
-            bmap = block_map(one)
-            norm_p = normalized_worst_case(bmap, parse_blk(bmap.blk), dl)
-            cases.append(("worst APE gain (unit size)", norm_p, 1.0, wj))
-        for case, values, scale, w in cases:
-            scaled = {k: v * scale for k, v in values.items()}  # unit size: inside the set
-            row, sig = check_case(
-                one,
-                scaled,
-                w,
-                controller.spec,
-                case=case,
-                study="mission",
-                model=crit_model,
-                time=float(times[crit_model]),
-                scale=scale,
-                duration=options.time_check_duration,
-            )
-            rows.append(row)
-            signals.append(sig)
-        tsum = pd.DataFrame(rows)
-        save(tsum, "time_check")
-        sig_all = pd.concat(signals, ignore_index=True)
-        sig_all.to_parquet(out / "time_signals.parquet", index=False)
-        paths["time_check_png"] = figures.time_check_figure(sig_all, tsum, out / "time_check.png")
-        lap("time-domain check")
-    # ------------------------------------------------------------------ open-loop effects
-    if options.open_loop_samples > 0:
-        from oos_drake.analysis.models import mission_plants
-        from oos_drake.analysis.open_loop import uncertainty_effects
-        from oos_drake.control.analysis_model import uncertain_plant
-        from oos_drake.scenario.timeline import mission_timeline
-
-        t_moment = float(mission_timeline(scenario).moments["2"].time)
-        plant = mission_plants([t_moment], scenario, source=options.plant).model(0)
-        p_hat = uncertain_plant(plant, controller.spec)
-        effects = uncertainty_effects(
-            p_hat,
-            uncertainty_subsets(p_hat.uncertainty),
-            2 * np.pi * np.geomspace(0.05, 20.0, 300),
-            samples=options.open_loop_samples,
-            rng=np.random.default_rng(0),
-        )
-        save(effects, "open_loop_effects")
-        paths["open_loop_png"] = figures.open_loop_figure(
-            effects,
-            f"T_ext,G1{{1}} -> wdot{{1}} at moment 2 (t = {t_moment:g} s): samples of "
-            "each uncertainty set",
-            out / "open_loop_effects.png",
-        )
-        lap("open-loop effects")
-    # ------------------------------------------------------------------ figures
-    common_hz = omega / (2 * np.pi)
-    paths["mu_mission_png"] = figures.mu_mission_figure(
-        sweep, common_hz, peaks, out / "mu_mission.png"
+    crit_model = certs["total"].model
+    part = sweep[(sweep["subset"] == "total") & (sweep["model"] == crit_model)]
+    top = part.nlargest(6, "mu upper [-]")["frequency [Hz]"].to_numpy()
+    w_crit = 2 * np.pi * certs["total"].frequency_hz
+    w_s = np.unique(np.concatenate([2 * np.pi * top, w_crit * np.geomspace(0.97, 1.03, 3)]))
+    return mu_sensitivity(
+        mission.system, crit_model, w_s, iterations=options.sensitivity_iterations
     )
-    paths["performance_png"] = figures.performance_figure(perf, out / "performance.png")
-    if docking_sweeps:
-        paths["docking_png"] = figures.docking_figure(
-            docking_sweeps, docking_peaks, out / "mu_docking.png"
+
+
+def _time_check(mission, controller, times, certs, perf, perf_deltas, models, options):
+    """The nominal, worst-stability and worst-APE loops at the critical configuration
+    simulated: ``(summary table, signals)``."""
+    from oos_drake.analysis.time_check import check_case
+
+    rows, signals = [], []
+    crit = certs["total"]
+    crit_model = crit.model
+    one = mission.system.model(crit_model)
+    w_c = 2 * np.pi * crit.frequency_hz
+    cases = [
+        ("nominal", {}, 1.0, w_c),
+        ("worst stability (unit size)", crit.normalized, crit.mu_lower, w_c),
+    ]
+    pk = perf[
+        (perf["channel"] == "e_p") & (perf["subset"] == "total") & (perf["model"] == crit_model)
+    ]
+    if len(pk):
+        j = int(np.argmax(pk["gain lower [-]"].to_numpy()))
+        wj = 2 * np.pi * float(pk["frequency [Hz]"].iloc[j])
+        k_model = int(np.flatnonzero(models == crit_model)[0])
+        dl = perf_deltas[("e_p", "total")][k_model, j]
+        from oos_drake.robust.blocks import parse_blk
+        from oos_drake.robust.lfr_analysis import block_map, normalized_worst_case
+
+        bmap = block_map(one)
+        norm_p = normalized_worst_case(bmap, parse_blk(bmap.blk), dl)
+        cases.append(("worst APE gain (unit size)", norm_p, 1.0, wj))
+    for case, values, scale, w in cases:
+        scaled = {k: v * scale for k, v in values.items()}  # unit size: inside the set
+        row, sig = check_case(
+            one,
+            scaled,
+            w,
+            controller.spec,
+            case=case,
+            study="mission",
+            model=crit_model,
+            time=float(times[crit_model]),
+            scale=scale,
+            duration=options.time_check_duration,
         )
-    if sens is not None:
-        paths["sensitivity_png"] = figures.sensitivity_figure(sens, out / "sensitivity.png")
-    lap("figures")
-    timings["spike resolution, all studies"] = round(spike_seconds[0], 2)
-    timings["total"] = round(_time.perf_counter() - t_start, 2)
-    tot = peaks[peaks["subset"] == "total"].iloc[0]
-    ep = perf[perf["channel"] == "e_p"]
-    ep_peak = ep.loc[ep["gain upper [-]"].idxmax()]
-    from oos_drake.scenario.data import scenario_record
-
-    summary = {
-        "scenario": scenario_record(scenario),
-        "controller": {
-            "label": controller.label,
-            "source": controller.source,
-            "gamma": controller.gamma,
-            "structure": controller.structure,
-            **({"K": controller.K.tolist()} if controller.is_static else {}),
-            "state_space": controller.system.record(),
-        },
-        "loop": {
-            "sampled": controller.spec.sampled,
-            "sample_rate_hz": controller.spec.flight_software_rate_hz,
-            "delay_s": controller.spec.computation_delay_s,
-            "hold_order": controller.spec.hold_order,
-        },
-        "mission": {
-            "configurations": int(times.size),
-            "grid_frequencies": int(omega.size),
-            "nominal_stable_models": int((abscissa < 0).sum()),
-            "mu_peak_upper": float(tot["mu upper [-]"]),
-            "mu_peak_upper_scope": str(tot["mu upper scope"]),
-            "mu_peak_upper_grid": float(tot["mu upper grid [-]"]),
-            "mu_peak_upper_refined": float(tot["mu upper grid [-]"]),
-            "mu_peak_lower": float(tot["mu lower [-]"]),
-            "mu_upper_at_critical": float(tot["mu upper at critical [-]"]),
-            "gap_percent": float(tot["gap [%]"]),
-            "gap_at_critical_percent": float(tot["gap at critical [%]"]),
-            "peak_time_s": float(tot["time [s]"]),
-            "peak_frequency_hz": float(tot["frequency [Hz]"]),
-            "upper_peak_time_s": float(tot["peak time [s]"]),
-            "upper_peak_frequency_hz": float(tot["peak frequency [Hz]"]),
-            "stability_margin": float(tot["margin [-]"]),
-            "spikes_left": int(tot["spikes left"]),
-            "spike_stop": str(tot["spike stop"]),
-            "budget_exhausted": bool(tot["budget exhausted"]),
-        },
-        "subsets": peaks.drop(columns=["study"]).to_dict(orient="records"),
-        "docking": docking_peaks,
-        "performance": {
-            "e_p_peak_gain_upper": float(ep_peak["gain upper [-]"]),
-            "e_p_peak_frequency_hz": float(ep_peak["frequency [Hz]"]),
-            "e_u_peak_gain_upper": float(
-                perf.loc[perf["channel"] == "e_u", "gain upper [-]"].max()
-            ),
-        },
-        "time_check": tsum.to_dict(orient="records"),
-        "paper": PAPER,
-        "options": asdict(options),
-        "timings_s": timings,
-        "files": {k: Path(v).name for k, v in paths.items()},  # relative to the output folder
-    }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
-    return summary
+        rows.append(row)
+        signals.append(sig)
+    return pd.DataFrame(rows), pd.concat(signals, ignore_index=True)
 
 
-def _json_default(value):
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, (np.bool_,)):
-        return bool(value)
-    return str(value)
+def _open_loop(controller, scenario, options) -> tuple[pd.DataFrame, str]:
+    """Sampled open-loop gains per uncertainty set at moment 2, and their description."""
+    from oos_drake.analysis.models import mission_plants
+    from oos_drake.analysis.open_loop import uncertainty_effects
+    from oos_drake.analysis.subsets import uncertainty_subsets
+    from oos_drake.control.analysis_model import uncertain_plant
+    from oos_drake.scenario.timeline import mission_timeline
+
+    t_moment = float(mission_timeline(scenario).moments["2"].time)
+    plant = mission_plants([t_moment], scenario, source=options.plant).model(0)
+    p_hat = uncertain_plant(plant, controller.spec)
+    effects = uncertainty_effects(
+        p_hat,
+        uncertainty_subsets(p_hat.uncertainty),
+        2 * np.pi * np.geomspace(0.05, 20.0, 300),
+        samples=options.open_loop_samples,
+        rng=np.random.default_rng(0),
+    )
+    title = (
+        f"T_ext,G1{{1}} -> wdot{{1}} at moment 2 (t = {t_moment:g} s): samples of "
+        "each uncertainty set"
+    )
+    return effects, title
