@@ -33,9 +33,7 @@ WALL_CLOCK = ("spike time [s]", "guarantee time [s]", "timings_s", "wall time [s
 def _strip(value):
     """``value`` without the wall-clock keys (recursively) and the scenario's file path."""
     if isinstance(value, dict):
-        return {
-            k: _strip(v) for k, v in value.items() if k not in WALL_CLOCK
-        }
+        return {k: _strip(v) for k, v in value.items() if k not in WALL_CLOCK}
     if isinstance(value, list):
         return [_strip(v) for v in value]
     return value
@@ -45,8 +43,9 @@ def compare(before: Path, after: Path) -> list[str]:
     """The differences between two analysis folders (empty: the same results)."""
     problems = []
     names = sorted(p.name for p in before.glob("*.parquet"))
-    if names != sorted(p.name for p in after.glob("*.parquet")):
-        problems.append(f"tables differ: {names} vs {sorted(p.name for p in after.glob('*.parquet'))}")
+    others = sorted(p.name for p in after.glob("*.parquet"))
+    if names != others:
+        problems.append(f"tables differ: {names} vs {others}")
     for name in names:
         if not (after / name).is_file():
             continue
@@ -87,7 +86,7 @@ def main(argv=None) -> int:
     if problems:
         print("\n".join(problems))
         return 1
-    print(f"equal: {tables} tables (assert_frame_equal, exact), peak_perturbations.npz, summary.json")
+    print(f"equal: {tables} tables (assert_frame_equal, exact), perturbations, summary.json")
     return 0
 
 
