@@ -403,6 +403,11 @@ def resolve_spikes(
     work is bounded by :attr:`TightenOptions.max_work` (point-iterations, deterministic),
     ``max_searches`` and ``time_budget`` (wall clock); the report says what stopped it.
 
+    Each round (:class:`_SpikeResolution`): the budgets checked, the peak refined between grid
+    points (the first ``peak_levels`` rounds), then either the open spikes re-solved, searched
+    and refined around (:meth:`~_SpikeResolution.warm_round`), or, with no open spike, the
+    searches spread on the models far from those searched (:meth:`~_SpikeResolution.settle`).
+
     Parameters
     ----------
     pool : ModelPool
@@ -431,185 +436,271 @@ def resolve_spikes(
     import time as _time
 
     start = _time.perf_counter()
-    searched: list[int] = []
-    spikes_hist = []
-    added = 0
-    evaluations = 0
-    work = 0.0
-    rounds_run = 0
-    levels = 0
-    stop = "rounds"
+    state = _SpikeResolution(pool, pts, parts, lower, search, options, start)
     pts.sort()
+    state.seed(hints)
+    for rnd in range(options.rounds):
+        pts.sort()
+        state.spikes.append(int(np.sum(pts.upper > state.threshold())))
+        if progress is not None:
+            progress(rnd, state.spikes[-1])
+        stop = state.budget_spent()
+        if stop:
+            state.stop = stop
+            break
+        if state.levels < options.peak_levels:
+            state.refine_peak()
+        act = state.open_spikes()
+        if act.size == 0:
+            if state.levels >= options.peak_levels and state.settle():
+                break
+            continue
+        state.warm_round(rnd, act)
+    else:
+        state.stop = state.stop_after_rounds()
+    return state.lower, state.report()
 
-    def threshold():
-        return (1.0 + options.target_gap) * lower.value
 
-    def open_spikes():
+class _SpikeResolution:
+    """The state of one subset's spike resolution (:func:`resolve_spikes`) and its steps.
+
+    Attributes
+    ----------
+    lower : LowerCertificate
+        Best lower bound so far.
+    searched : list of int
+        Models given the direct search, in order.
+    spikes : list of int
+        Spikes at the start of each round.
+    added, evaluations, rounds_run, levels : int
+        Refinement points added, upper-bound problems solved, warm rounds run, peak
+        refinements done.
+    work : float
+        Point-iterations spent.
+    stop : str
+        Why the resolution stopped (:attr:`TightenReport.stop`).
+    """
+
+    def __init__(self, pool, pts, parts, lower, search, options, start):
+        self.pool, self.pts, self.parts, self.search = pool, pts, parts, search
+        self.options = options
+        self.start = start
+        self.lower = lower
+        self.searched: list[int] = []
+        self.spikes: list[int] = []
+        self.added = 0
+        self.evaluations = 0
+        self.work = 0.0
+        self.rounds_run = 0
+        self.levels = 0
+        self.stop = "rounds"
+
+    def threshold(self) -> float:
+        """``(1 + target) L*``: upper bounds above it are spikes."""
+        return (1.0 + self.options.target_gap) * self.lower.value
+
+    def open_spikes(self) -> np.ndarray:
         """Unconverged spikes clearly above every converged spike (the only ones that matter:
         resolving the others could lower the gap of the peak by ``settle_ratio`` at most)."""
-        above = pts.upper > threshold()
+        pts = self.pts
+        above = pts.upper > self.threshold()
         done = above & pts.converged
         floor = (
-            float(np.max(pts.upper[done])) * (1.0 + options.settle_ratio)
+            float(np.max(pts.upper[done])) * (1.0 + self.options.settle_ratio)
             if np.any(done)
             else -np.inf
         )
         return np.flatnonzero(above & ~pts.converged & (pts.upper > floor))
 
-    def run_search(requests):
-        nonlocal lower
-        for cand in search(requests) if requests else []:
-            if cand.value > lower.value:
-                lower = cand
+    def improve(self, found) -> None:
+        """Keep ``found`` (a :class:`LowerCertificate` or None) if it raises ``L*``."""
+        if found is not None and found.value > self.lower.value:
+            self.lower = found
 
-    def next_requests(order, count=None):
+    def run_search(self, requests) -> None:
+        """The direct searches ``requests`` (``(model, omega)``); the best result kept."""
+        for cand in self.search(requests) if requests else []:
+            self.improve(cand)
+
+    def next_requests(self, order, count=None) -> list:
+        """Searches for the models of the points ``order`` not searched yet (at most
+        ``count``, default ``search_models``, and ``max_searches`` in all)."""
         requests = []
-        count = options.search_models if count is None else count
+        count = self.options.search_models if count is None else count
         for i in order:
-            if len(requests) >= count or len(searched) >= options.max_searches:
+            if len(requests) >= count or len(self.searched) >= self.options.max_searches:
                 break
-            m = int(pts.model[i])
-            if m in searched:
+            m = int(self.pts.model[i])
+            if m in self.searched:
                 continue
-            searched.append(m)
-            requests.append((m, float(pts.omega[i])))
+            self.searched.append(m)
+            requests.append((m, float(self.pts.omega[i])))
         return requests
 
-    def spread_requests(order):
+    def spread_requests(self, order) -> list:
         """Direct searches for the spikes ``order`` (highest first): half on the highest spikes'
         models, half on models far from every model searched so far (the best grid lower
         bound there, else the highest upper bound): on a ridge of mu that is flat over the
         models, the exact peak need not be under the largest upper bound."""
+        pts, options = self.pts, self.options
         half = max(options.search_models // 2, 1)
-        requests = next_requests(order, half)
+        requests = self.next_requests(order, half)
         count = options.search_models - len(requests)
         if count <= 0:
             return requests
         models = np.unique(pts.model)
         span = max(int(np.ceil(models.size / 20)), 1)  # 5 % of the models
-        taken = np.array(searched) if searched else np.zeros(0, int)
+        taken = np.array(self.searched) if self.searched else np.zeros(0, int)
         far = np.ones(pts.model.size, dtype=bool)
         for m in taken:
             far &= np.abs(pts.model - m) > span
-        cand = np.flatnonzero(far & (pts.upper > threshold()))
+        cand = np.flatnonzero(far & (pts.upper > self.threshold()))
         if cand.size:
             key = np.lexsort((-pts.upper[cand], -pts.lower[cand]))
-            requests += next_requests(cand[key], count)
+            requests += self.next_requests(cand[key], count)
         return requests
 
-    if (
-        pts.upper.size
-        and options.search_models > 0
-        and options.max_searches > 0
-        and np.max(pts.upper) > lower.value
-    ):
-        # seed: the direct search on the model of the largest upper bound (and the hints)
-        seed = next_requests([int(np.argmax(pts.upper))], 1)
+    def seed(self, hints) -> None:
+        """The first direct search: on the model of the largest upper bound, and the hints."""
+        pts, options = self.pts, self.options
+        if not (
+            pts.upper.size
+            and options.search_models > 0
+            and options.max_searches > 0
+            and np.max(pts.upper) > self.lower.value
+        ):
+            return
+        seed = self.next_requests([int(np.argmax(pts.upper))], 1)
         for m, w in hints:
-            if len(seed) > options.search_models or len(searched) >= options.max_searches:
+            if len(seed) > options.search_models or len(self.searched) >= options.max_searches:
                 break
-            if 0 <= int(m) and int(m) in set(pts.model.tolist()) and int(m) not in searched:
-                searched.append(int(m))
+            if 0 <= int(m) and int(m) in set(pts.model.tolist()) and int(m) not in self.searched:
+                self.searched.append(int(m))
                 seed.append((int(m), float(w)))
-        run_search(seed)
-    converged_rule = (options.converged_ratio, options.converged_iterations, options.iterations[-1])
-    for rnd in range(options.rounds):
+        self.run_search(seed)
+
+    def budget_spent(self) -> str | None:
+        """``"time budget"`` or ``"work budget"`` when spent, else None."""
+        import time as _time
+
+        if _time.perf_counter() - self.start > self.options.time_budget:
+            return "time budget"
+        if self.work >= self.options.max_work:
+            return "work budget"
+        return None
+
+    def _count(self, evaluations: int, iterations: int, points: int = 0) -> None:
+        self.added += points
+        self.evaluations += evaluations
+        self.work += evaluations * iterations
+
+    def refine_peak(self) -> None:
+        """The peak may sit between grid points: midpoints around the largest upper bound."""
+        pts, iterations = self.pts, self.options.iterations[-1]
+        top = np.array([int(np.argmax(pts.upper))])
+        n_new, found = _refine(
+            self.pool, pts, top, self.parts, iterations, self.options, self.lower.value
+        )
+        self.levels += 1
+        self._count(n_new, iterations, n_new)
+        self.improve(found)
         pts.sort()
-        spikes_hist.append(int(np.sum(pts.upper > threshold())))
-        if progress is not None:
-            progress(rnd, spikes_hist[-1])
-        if _time.perf_counter() - start > options.time_budget:
-            stop = "time budget"
-            break
-        if work >= options.max_work:
-            stop = "work budget"
-            break
-        if levels < options.peak_levels:
-            # the peak may sit between grid points: midpoints around the largest upper bound
-            top = np.array([int(np.argmax(pts.upper))])
-            n_new, found = _refine(
-                pool, pts, top, parts, options.iterations[-1], options, lower.value
-            )
-            levels += 1
-            added += n_new
-            evaluations += n_new
-            work += n_new * options.iterations[-1]
-            if found is not None and found.value > lower.value:
-                lower = found
-            pts.sort()
-        act = open_spikes()
-        if act.size == 0:
-            if levels >= options.peak_levels:
-                stop = "target met" if not np.any(pts.upper > threshold()) else "converged"
-                pending = np.flatnonzero(pts.upper > threshold())
-                pending = pending[np.argsort(-pts.upper[pending])]
-                requests = spread_requests(pending) if stop == "converged" else []
-                if not requests:
-                    if stop == "converged" and len(searched) >= options.max_searches:
-                        stop = "search budget"  # more models could still raise L*
-                    break
-                run_search(requests)
-            continue
+
+    def settle(self) -> bool:
+        """No open spike: stop (True) with the reason, unless searches on models far from the
+        searched ones are left to run (they are run; False)."""
+        pts = self.pts
+        self.stop = "target met" if not np.any(pts.upper > self.threshold()) else "converged"
+        pending = np.flatnonzero(pts.upper > self.threshold())
+        pending = pending[np.argsort(-pts.upper[pending])]
+        requests = self.spread_requests(pending) if self.stop == "converged" else []
+        if not requests:
+            if self.stop == "converged" and len(self.searched) >= self.options.max_searches:
+                self.stop = "search budget"  # more models could still raise L*
+            return True
+        self.run_search(requests)
+        return False
+
+    def warm_round(self, rnd: int, act: np.ndarray) -> None:
+        """Round ``rnd`` on the open spikes ``act``: re-solved warm (the ``max_points``
+        highest), marked converged when a long pass did not move the peak, searched, and
+        refined around (distinct models) where they survive."""
+        pts, options = self.pts, self.options
         act = act[np.argsort(-pts.upper[act])][: options.max_points]
-        rounds_run += 1
+        self.rounds_run += 1
         iterations = options.iterations[min(rnd, len(options.iterations) - 1)]
-        top_before, lower_before = float(np.max(pts.upper)), lower.value
+        top_before, lower_before = float(np.max(pts.upper)), self.lower.value
+        converged_rule = (
+            options.converged_ratio,
+            options.converged_iterations,
+            options.iterations[-1],
+        )
         n_eval, found = _warm_pass(
-            pool,
+            self.pool,
             pts,
             act,
-            parts,
+            self.parts,
             iterations,
-            (threshold(), options.lower_restarts, options.lower_iterations) if rnd > 0 else None,
+            (self.threshold(), options.lower_restarts, options.lower_iterations)
+            if rnd > 0
+            else None,
             converged_rule,
         )
-        evaluations += n_eval
-        work += n_eval * iterations
-        if found is not None and found.value > lower.value:
-            lower = found
+        self._count(n_eval, iterations)
+        self.improve(found)
         if (
             iterations >= options.converged_iterations
             and float(np.max(pts.upper)) > top_before * (1.0 - options.settle_ratio)
-            and lower.value <= lower_before
+            and self.lower.value <= lower_before
         ):
             # a pass of converged_iterations did not move the peak: the ridge has settled,
             # more passes would lower the gap by less than settle_ratio
-            pts.converged[pts.upper > threshold()] = True
+            pts.converged[pts.upper > self.threshold()] = True
         # direct search on the models of the highest surviving spikes
-        still = act[pts.upper[act] > threshold()]
+        still = act[pts.upper[act] > self.threshold()]
         if still.size:
-            run_search(spread_requests(still[np.argsort(-pts.upper[still])]))
-            still = act[pts.upper[act] > threshold()]
+            self.run_search(self.spread_requests(still[np.argsort(-pts.upper[still])]))
+            still = act[pts.upper[act] > self.threshold()]
         if still.size and rnd > 0 and options.refine_spikes > 0:
             # local refinement around the highest surviving spikes only (distinct models)
             order = still[np.argsort(-pts.upper[still])]
             _, first = np.unique(pts.model[order], return_index=True)
             chosen = order[np.sort(first)][: options.refine_spikes]
-            n_new, found = _refine(pool, pts, chosen, parts, iterations, options, lower.value)
-            added += n_new
-            evaluations += n_new
-            work += n_new * iterations
-            if found is not None and found.value > lower.value:
-                lower = found
-    else:
-        if not np.any(pts.upper > threshold()):
-            stop = "target met"
-        elif open_spikes().size == 0:
-            stop = "converged" if len(searched) < options.max_searches else "search budget"
-    pts.sort()
-    left = pts.upper > threshold()
-    spikes_hist.append(int(np.sum(left)))
-    if not np.any(left):
-        stop = "target met"
-    return lower, TightenReport(
-        rounds_run,
-        tuple(spikes_hist),
-        added,
-        tuple(searched),
-        evaluations,
-        work=float(work),
-        converged=int(np.sum(left & pts.converged)),
-        points_left=int(np.sum(left)),
-        stop=stop,
-        seconds=_time.perf_counter() - start,
-    )
+            n_new, found = _refine(
+                self.pool, pts, chosen, self.parts, iterations, options, self.lower.value
+            )
+            self._count(n_new, iterations, n_new)
+            self.improve(found)
+
+    def stop_after_rounds(self) -> str:
+        """Why the rounds ended when all were run."""
+        if not np.any(self.pts.upper > self.threshold()):
+            return "target met"
+        if self.open_spikes().size == 0:
+            return (
+                "converged" if len(self.searched) < self.options.max_searches else "search budget"
+            )
+        return self.stop
+
+    def report(self) -> TightenReport:
+        """The :class:`TightenReport` of the resolution (the points sorted, spikes counted)."""
+        import time as _time
+
+        pts = self.pts
+        pts.sort()
+        left = pts.upper > self.threshold()
+        self.spikes.append(int(np.sum(left)))
+        if not np.any(left):
+            self.stop = "target met"
+        return TightenReport(
+            self.rounds_run,
+            tuple(self.spikes),
+            self.added,
+            tuple(self.searched),
+            self.evaluations,
+            work=float(self.work),
+            converged=int(np.sum(left & pts.converged)),
+            points_left=int(np.sum(left)),
+            stop=self.stop,
+            seconds=_time.perf_counter() - self.start,
+        )

@@ -64,8 +64,7 @@ def write_analysis(result: AnalysisResult, out_dir, *, log=print) -> dict:
     timings["spike resolution, all studies"] = round(result.spike_seconds, 2)
     timings["total"] = round(result.seconds + seconds, 2)
     summary["files"] = {k: Path(v).name for k, v in paths.items()}  # relative to out_dir
-    text = json.dumps(summary, indent=2, default=_json_default)
-    atomic_write_text(text, out / "summary.json")
+    atomic_write_text(summary_json(summary), out / "summary.json")
     return summary
 
 
@@ -91,6 +90,11 @@ def write_perturbations(path: Path, certificates: dict) -> Path:
             for block, value in cert.normalized.items():
                 arrays[f"{study}|{subset}|{block}"] = np.asarray(value)
     return atomic_write_bytes(path, lambda stream: np.savez(stream, **arrays))
+
+
+def summary_json(summary: dict) -> str:
+    """The text of ``summary.json`` (NumPy scalars and arrays as JSON numbers and lists)."""
+    return json.dumps(summary, indent=2, default=_json_default)
 
 
 def _json_default(value):

@@ -8,9 +8,10 @@ import pandas as pd
 import pytest
 
 from oos_drake.analysis.controller import baseline_controller
-from oos_drake.analysis.run import AnalysisOptions, run_analysis
+from oos_drake.analysis.run import AnalysisOptions, compute_analysis
 from oos_drake.analysis.stability import SweepOptions
 from oos_drake.analysis.tightening import TightenOptions
+from oos_drake.analysis.writers import summary_json, write_analysis
 from oos_drake.control.analysis_model import rotational_channels
 from oos_drake.scenario.data import load_scenario
 
@@ -45,16 +46,50 @@ FAST = AnalysisOptions(
 
 
 @pytest.fixture(scope="module")
-def analysis(tmp_path_factory, paper_scenario):
+def analysis_result(paper_scenario):
+    """The computed analysis (:class:`AnalysisResult`), nothing written."""
     from oos_drake.lfr import usubs
     from oos_drake.scenario.model import build_mission_model, mission_values
 
     model = build_mission_model(paper_scenario)
     plant = usubs(model, mission_values([255.0], paper_scenario)).model(0)
     controller = baseline_controller(rotational_channels(plant).nominal)
+    return compute_analysis(controller, FAST, scenario=paper_scenario, log=lambda *_: None)
+
+
+@pytest.fixture(scope="module")
+def analysis(tmp_path_factory, analysis_result):
+    """The analysis written by :func:`write_analysis`: ``(folder, summary, controller)``."""
     out = tmp_path_factory.mktemp("analysis")
-    summary = run_analysis(controller, out, FAST, scenario=paper_scenario, log=lambda *_: None)
-    return out, summary, controller
+    summary = write_analysis(analysis_result, out, log=lambda *_: None)
+    return out, summary, analysis_result.controller
+
+
+def test_written_files_are_the_result(analysis, analysis_result):
+    """The writer adds nothing and loses nothing: every table read back equals the result's
+    (exactly, dtypes included), ``summary.json`` is the result's summary plus the files and
+    the figures' time, and every listed file exists."""
+    out, summary, _ = analysis
+    tables = analysis_result.tables()
+    assert {p.stem for p in out.glob("*.parquet")} == set(tables) | {"worst_cases"}
+    for name, table in tables.items():
+        pd.testing.assert_frame_equal(
+            pd.read_parquet(out / f"{name}.parquet"), table, check_exact=True
+        )
+    saved = json.loads((out / "summary.json").read_text())
+    expected = json.loads(summary_json(analysis_result.summary()))
+    for key in set(saved) | set(expected):
+        if key not in ("files", "timings_s"):
+            assert saved[key] == expected[key], key
+    assert set(saved["timings_s"]) == set(expected["timings_s"]) | {
+        "figures",
+        "spike resolution, all studies",
+        "total",
+    }
+    assert saved == json.loads(summary_json(summary))  # what write_analysis returned
+    for name in saved["files"].values():
+        assert (out / name).is_file(), name
+    assert "time_signals" not in saved["files"]  # written, not listed (as before the split)
 
 
 def test_files_and_summary(analysis):
