@@ -31,18 +31,26 @@ def _read_summary(analysis) -> dict:
 
 
 def run_analyze(args) -> int:
-    """Run the analysis; exit status 0."""
-    from oos_drake.analysis.run import AnalysisOptions, run_analysis
+    """``oos analyze``: :func:`analyze` with the command line's options; exit status 0."""
     from oos_drake.scenario.data import load_scenario
 
     scenario = load_scenario(args.scenario)
-    controller = scenario_controller(args.controller, scenario)
-    controller = dataclasses.replace(controller, spec=loop_specification(controller.spec, args))
-    if controller.label == "baseline":
-        print(
-            "WARNING: no --controller given: analyzing the BASELINE PD controller "
-            "(paper section 3.1), not a synthesized one"
-        )
+    controller = analysis_controller(args.controller, scenario, args)
+    options = analysis_options(args, scenario)
+    atomic_folder(
+        args.out,
+        lambda tmp: analyze(scenario, controller, options, tmp),
+        marker="summary.json",
+        what="an analysis",
+    )
+    print(f"outputs in {args.out}")
+    return 0
+
+
+def analysis_options(args, scenario):
+    """The :class:`~oos_drake.analysis.run.AnalysisOptions` of ``oos analyze``'s arguments
+    ``args`` (``--docking`` default: ``scenario``'s docking phases)."""
+    from oos_drake.analysis.run import AnalysisOptions
     from oos_drake.analysis.tightening import TightenOptions
 
     sweep = SweepOptions(
@@ -52,7 +60,7 @@ def run_analyze(args) -> int:
         refine_iterations=args.refine_iterations,
     )
     tighten = TightenOptions(target_gap=args.target_gap, rounds=args.spike_rounds)
-    options = AnalysisOptions(
+    return AnalysisOptions(
         configurations=args.configurations,
         frequency_range_hz=(args.f_min, args.f_max),
         points_per_decade=args.points_per_decade,
@@ -69,16 +77,62 @@ def run_analyze(args) -> int:
         progress=not args.quiet,
         plant=args.plant,
     )
-    summary = atomic_folder(
-        args.out,
-        lambda tmp: run_analysis(controller, tmp, options, scenario=scenario),
-        marker="summary.json",
-        what="an analysis",
+
+
+def analysis_controller(path, scenario, loop=None):
+    """The controller ``oos analyze`` and ``oos run`` analyze: ``path`` (a ``controller.json``;
+    None: the BASELINE PD) on ``scenario``'s design data, with the loop model of ``loop``
+    (``--sampled`` / ``--delay``; None: the continuous loop)."""
+    loop = loop or argparse.Namespace(sampled=False, delay=None)
+    controller = scenario_controller(path, scenario)
+    return dataclasses.replace(controller, spec=loop_specification(controller.spec, loop))
+
+
+def pipeline_analysis_options(
+    scenario, *, quick: bool, workers: int, scheduler=None, grid_only: bool = False
+):
+    """The analysis options of ``oos run``: ``oos analyze``'s defaults, 40 configurations with
+    ``quick``, the whole-axis guarantee unless ``grid_only``."""
+    from oos_drake.analysis.run import AnalysisOptions
+
+    return AnalysisOptions(
+        configurations=40 if quick else AnalysisOptions.configurations,
+        sweep=SweepOptions(n_jobs=workers, scheduler=scheduler),
+        docking_phases=_docking_phases(None, scenario),
+        guarantee=not grid_only,
     )
+
+
+def analyze(scenario, controller, options, out):
+    """The analysis stage: compute the analysis, write it in ``out``, print its peaks.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    controller : Controller
+        From :func:`analysis_controller`.
+    options : AnalysisOptions
+    out : Path
+        The (new) output folder.
+
+    Returns
+    -------
+    AnalysisResult
+    """
+    from oos_drake.analysis.run import compute_analysis
+    from oos_drake.analysis.writers import write_analysis
+
+    if controller.label == "baseline":
+        print(
+            "WARNING: no --controller given: analyzing the BASELINE PD controller "
+            "(paper section 3.1), not a synthesized one"
+        )
+    result = compute_analysis(controller, options, scenario=scenario)
+    summary = write_analysis(result, out)
     print(f"scenario: {scenario.name} ({scenario.source})")
     loop = summary["loop"]
     print(
-        f"controller: {controller.label} ({controller.source}); plants: {args.plant}; loop: "
+        f"controller: {controller.label} ({controller.source}); plants: {options.plant}; loop: "
         + (
             f"sampled at {loop['sample_rate_hz']:g} Hz (hold order {loop['hold_order']}, delay "
             f"{loop['delay_s']:g} s)"
@@ -88,8 +142,8 @@ def run_analyze(args) -> int:
     )
     for line in peak_lines(summary):
         print(line)
-    print(f"total time {summary['timings_s']['total']:.1f} s; outputs in {args.out}")
-    return 0
+    print(f"total time {summary['timings_s']['total']:.1f} s")
+    return result
 
 
 def _docking_phases(value: str | None, scenario) -> tuple[str, ...]:
