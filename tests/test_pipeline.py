@@ -118,6 +118,18 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(quick_run):
     assert "0 run now" in second.stdout
 
 
+def _record_analyses(monkeypatch, analyses):
+    """Replace the analysis stage's computation by a recorder of ``(controller, options)``."""
+    import oos_drake.app.analyze as analyze
+
+    monkeypatch.setattr(analyze, "analysis_controller", lambda path, scenario, loop=None: path)
+    monkeypatch.setattr(
+        analyze,
+        "analyze",
+        lambda scenario, controller, options, out: analyses.append((controller, options)),
+    )
+
+
 def test_oos_run_passes_the_scheduler_to_the_stages_with_parallel_work(tmp_path, monkeypatch):
     """``oos run --scheduler dask --workers 3``: the stages that run on the executors
     (synthesis, analysis, confirmation, campaign) get both, the report runs as without them
@@ -125,13 +137,17 @@ def test_oos_run_passes_the_scheduler_to_the_stages_with_parallel_work(tmp_path,
     import oos_drake.app.pipeline as pipeline
     from oos_drake.app.main import build_parser
 
-    calls = []
+    calls, analyses = [], []
     monkeypatch.setattr(pipeline, "_oos", lambda *argv: calls.append([str(a) for a in argv]))
     monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: None)
+    _record_analyses(monkeypatch, analyses)
     argv = ["run", "--out", str(tmp_path), "--scheduler", "dask", "--workers", "3"]
     assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
+    ((controller, options),) = analyses  # the analysis stage: a function call, not argv
+    assert controller == tmp_path / "controller" / "controller.json"
+    assert (options.sweep.scheduler, options.sweep.n_jobs) == ("dask", 3)
     by_command = {tuple(c[:2]) if c[0] == "campaign" else (c[0],): c for c in calls}
-    for key in [("synth",), ("analyze",), ("confirm",), ("campaign", "run")]:
+    for key in [("synth",), ("confirm",), ("campaign", "run")]:
         argv = by_command[key]
         assert argv[argv.index("--scheduler") + 1] == "dask", key
         assert argv[argv.index("--workers") + 1] == "3", key
@@ -146,7 +162,8 @@ def test_oos_run_proves_the_whole_axis_unless_grid_only(tmp_path, monkeypatch):
     import oos_drake.app.pipeline as pipeline
     from oos_drake.app.main import build_parser
 
-    analyze = []
+    analyses = []
+    _record_analyses(monkeypatch, analyses)
     for i, extra in enumerate(([], ["--grid-only"])):
         calls = []
         monkeypatch.setattr(
@@ -155,10 +172,8 @@ def test_oos_run_proves_the_whole_axis_unless_grid_only(tmp_path, monkeypatch):
         monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: None)
         argv = ["run", "--out", str(tmp_path / str(i)), *extra]
         assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
-        (command,) = [c for c in calls if c[0] == "analyze"]
-        analyze.append(command)
-        assert all("--grid-only" not in c for c in calls if c[0] != "analyze")
-    assert "--grid-only" not in analyze[0] and "--grid-only" in analyze[1]
+        assert all("--grid-only" not in c for c in calls)
+    assert [options.guarantee for _, options in analyses] == [True, False]
     from oos_drake.scenario.data import scenario_path
 
     scenario, campaign = scenario_path(None), pipeline.DEFAULT_CAMPAIGN

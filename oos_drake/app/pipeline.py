@@ -209,7 +209,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
     analyzed = ["--analysis", out / "analysis", "--controller", controller]
     commands = {  # in order: each stage reads the folders of those before it
         "controller": ["synth", *workers, *quick],
-        "analysis": ["analyze", "--controller", controller, *workers, *quick, *grid_only],
+        "analysis": _analysis_stage(args, scenario, controller, grid_only=bool(grid_only)),
         "confirm": ["confirm", *analyzed, *workers],
         "margins": ["margins", *analyzed, "--configurations", MARGIN_CONFIGURATIONS, "--quiet"],
     }
@@ -218,7 +218,10 @@ def run_pipeline(args: argparse.Namespace) -> int:
             continue
 
         def work(folder, argv=argv):
-            _oos(*argv, "--out", folder, *on_scenario)
+            if callable(argv):  # a stage function (typed result), not a command line
+                argv(folder)
+            else:
+                _oos(*argv, "--out", folder, *on_scenario)
 
         run_stage(name, out / name, keys[name], work, timings)
 
@@ -299,6 +302,29 @@ def run_pipeline(args: argparse.Namespace) -> int:
     print()
     _print_headlines(out, campaign, report)
     return 0
+
+
+def _analysis_stage(args, scenario: Path, controller: Path, *, grid_only: bool):
+    """The analysis stage of ``oos run``: ``work(folder)`` computing the
+    :class:`~oos_drake.analysis.results.AnalysisResult` of the stage's controller
+    (:func:`oos_drake.app.analyze.analyze`, what ``oos analyze --controller CONTROLLER
+    --workers N [--configurations 40] [--grid-only]`` runs) and writing it in ``folder``."""
+
+    def work(folder: Path):
+        from oos_drake.app.analyze import analysis_controller, analyze, pipeline_analysis_options
+        from oos_drake.scenario.data import load_scenario
+
+        loaded = load_scenario(str(scenario))
+        options = pipeline_analysis_options(
+            loaded,
+            quick=args.quick,
+            workers=args.workers,
+            scheduler=getattr(args, "scheduler", None),
+            grid_only=grid_only,
+        )
+        return analyze(loaded, analysis_controller(controller, loaded), options, folder)
+
+    return work
 
 
 def _replay_worst_run(campaign: Path) -> Path | None:
