@@ -5,6 +5,7 @@ before/after numbers come from one script::
 
     python benchmarks/code_size.py --rev d9bfc71   # before
     python benchmarks/code_size.py                 # after (the working tree)
+    python benchmarks/code_size.py --before d9bfc71   # both, per folder with the change
 
 Lines are physical lines of ``*.py`` files (blank lines and docstrings included). A function's
 length is ``end_lineno - lineno + 1`` of its ``def`` (decorators excluded, nested functions
@@ -71,15 +72,32 @@ def longest_functions(files: dict[str, str], count: int = 10) -> list[tuple[int,
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rev", default=None, help="a git commit (default: the working tree)")
+    parser.add_argument(
+        "--before", default=None, help="a git commit to compare with (columns before, after)"
+    )
     parser.add_argument("--top", type=int, default=10, help="how many longest functions")
     args = parser.parse_args(argv)
     files = sources(args.rev)
     counts = lines_per_folder(files)
-    print(f"lines per folder ({args.rev or 'working tree'})")
-    for folder, lines in sorted(counts.items()):
-        print(f"  {folder:<28} {lines:>7}")
-    print(f"  {'total':<28} {sum(counts.values()):>7}")
-    print(f"longest functions ({args.top})")
+    after = args.rev or "working tree"
+    if args.before is None:
+        print(f"lines per folder ({after})")
+        for folder, lines in sorted(counts.items()):
+            print(f"  {folder:<28} {lines:>7}")
+        print(f"  {'total':<28} {sum(counts.values()):>7}")
+    else:
+        old_files = sources(args.before)
+        old = lines_per_folder(old_files)
+        print(f"lines per folder: before ({args.before}), after ({after}), change")
+        for folder in sorted(set(counts) | set(old)):
+            a, b = old.get(folder, 0), counts.get(folder, 0)
+            print(f"  {folder:<28} {a:>7} {b:>7} {b - a:>+7}")
+        a, b = sum(old.values()), sum(counts.values())
+        print(f"  {'total':<28} {a:>7} {b:>7} {b - a:>+7}")
+        print(f"longest functions before ({args.top})")
+        for lines, where in longest_functions(old_files, args.top):
+            print(f"  {lines:>5}  {where}")
+    print(f"longest functions ({after}, {args.top})")
     for lines, where in longest_functions(files, args.top):
         print(f"  {lines:>5}  {where}")
     return 0
