@@ -375,7 +375,7 @@ def compute_analysis(
     AnalysisResult
         Tables, certificates, worst-case regions, key numbers and timings [s].
     """
-    from oos_drake.analysis.models import docking_closed_loop, mission_closed_loop, mission_times
+    from oos_drake.analysis.models import mission_closed_loop, mission_times
     from oos_drake.analysis.subsets import uncertainty_subsets
     from oos_drake.analysis.worst_cases import block_parameters
     from oos_drake.blas import limit_blas_threads
@@ -427,27 +427,14 @@ def compute_analysis(
     docking_sweeps, docking_peaks = {}, {}
     stiffness = np.geomspace(*options.stiffness_range, options.docking_points)
     for phase in options.docking_phases:
-        arr = docking_closed_loop(
-            controller, phase, stiffness, scenario=scenario, source=options.plant
+        study_name = f"docking-{phase}"
+        dres, tables, certificates[study_name] = _docking_study(
+            controller, scenario, phase, stiffness, study, options
         )
-        tot = {"total": uncertainty_subsets(arr.system.uncertainty)["total"]}
-        dres = study(arr.system, tot, stiffness, f"mu docking {phase}")
-        docking_sweeps[phase] = dres.table.rename(
-            columns={"time [s]": "stiffness [N/m or N m/rad]"}
-        )
-        dp, dpert, dc = _certify(
-            arr,
-            dres,
-            tot,
-            configuration_label=lambda m, ph=phase: f"docking-{ph} k={stiffness[m]:.3g}",
-        )
-        peak_tables[f"docking-{phase}"] = dp
-        guaranteed_tables.append(
-            guaranteed_table(f"docking-{phase}", dres, "stiffness [N/m or N m/rad]", stiffness)
-        )
-        perturbation_tables.append(dpert)
-        certificates[f"docking-{phase}"] = {"total": dc["total"]}
-        docking_peaks[phase] = _docking_peak(dp.iloc[0])
+        docking_sweeps[phase], peak_tables[study_name] = tables[0], tables[1]
+        guaranteed_tables.append(tables[2])
+        perturbation_tables.append(tables[3])
+        docking_peaks[phase] = _docking_peak(tables[1].iloc[0])
         timings[f"docking {phase} detail"] = {k: round(v, 2) for k, v in dres.timings.items()}
         lap(f"docking phase {phase}")
     # ------------------------------------------------------------------ performance
@@ -529,6 +516,26 @@ class _Studies:
         )
         self.spike_seconds += sum(r.seconds for r in res.reports.values())
         return res
+
+
+def _docking_study(controller, scenario, phase, stiffness, study, options):
+    """The certified sweep of the total set over the stiffness of docking ``phase``:
+    ``(study result, (sweep, peaks, guaranteed, perturbations) tables, {"total": cert})``."""
+    from oos_drake.analysis.models import docking_closed_loop
+    from oos_drake.analysis.subsets import uncertainty_subsets
+
+    arr = docking_closed_loop(controller, phase, stiffness, scenario=scenario, source=options.plant)
+    tot = {"total": uncertainty_subsets(arr.system.uncertainty)["total"]}
+    dres = study(arr.system, tot, stiffness, f"mu docking {phase}")
+    sweep = dres.table.rename(columns={"time [s]": "stiffness [N/m or N m/rad]"})
+    peaks, perturbations, certs = _certify(
+        arr,
+        dres,
+        tot,
+        configuration_label=lambda m: f"docking-{phase} k={stiffness[m]:.3g}",
+    )
+    guaranteed = guaranteed_table(f"docking-{phase}", dres, "stiffness [N/m or N m/rad]", stiffness)
+    return dres, (sweep, peaks, guaranteed, perturbations), {"total": certs["total"]}
 
 
 def _docking_peak(row) -> dict:
