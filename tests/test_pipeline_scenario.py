@@ -33,6 +33,14 @@ def stubbed(monkeypatch):
 
     monkeypatch.setattr(pipeline, "_oos", fake_oos)
     monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: calls.append(["validate"]))
+    import oos_drake.app.analyze as analyze  # the analysis stage: a function call, no argv
+
+    monkeypatch.setattr(analyze, "analysis_controller", lambda path, scenario, loop=None: path)
+    monkeypatch.setattr(
+        analyze,
+        "analyze",
+        lambda scenario, controller, options, out: calls.append(["analyze", scenario.source]),
+    )
 
     def fake_report(folder, out, campaign):
         calls.append(["report"])

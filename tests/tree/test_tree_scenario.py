@@ -193,13 +193,33 @@ def test_oos_run_on_a_tree_end_to_end(tmp_path, monkeypatch, capsys):
     smaller = {
         "synth": ["--configurations", "4", "--restarts", "0", "--max-iterations", "25",
                   "--worst-case-rounds", "1"],
-        "analyze": ["--configurations", "4", "--points-per-decade", "3", "--no-sensitivity",
-                    "--no-time-check", "--performance-models", "1", "--performance-points", "5",
-                    "--spike-budget", "5", "--iterations", "20"],
         "margins": ["--configurations", "2"],
     }  # fmt: skip
     real = pipeline._oos
     monkeypatch.setattr(pipeline, "_oos", lambda *argv: real(*argv, *smaller.get(argv[0], [])))
+    import dataclasses
+
+    import oos_drake.app.analyze as analyze  # the analysis stage: a function call, no argv
+
+    pipeline_options = analyze.pipeline_analysis_options
+
+    def smaller_analysis(*args, **kwargs):  # oos analyze --configurations 4 --points-per-decade 3
+        # --no-sensitivity --no-time-check --performance-models 1 --performance-points 5
+        # --spike-budget 5 --iterations 20, as the stage ran on the command line before
+        options = pipeline_options(*args, **kwargs)
+        return dataclasses.replace(
+            options,
+            configurations=4,
+            points_per_decade=3,
+            sensitivity=False,
+            time_check=False,
+            performance_models=1,
+            performance_points=5,
+            spike_budget=5.0,
+            sweep=dataclasses.replace(options.sweep, upper_iterations=20),
+        )
+
+    monkeypatch.setattr(analyze, "pipeline_analysis_options", smaller_analysis)
     out = tmp_path / "out"
     argv = ["run", "--scenario", "flexible_satellite", "--quick", "--out", str(out)]
     assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
