@@ -1,4 +1,4 @@
-"""The first level of the analysis' whole-axis covers (:func:`oos_drake.analysis.stability.axis_guarantee`).
+"""The first level of the whole-axis covers of :func:`~oos_drake.analysis.stability.axis_guarantee`.
 
 Example with a closed form: a lightly damped oscillator ``x'' + (c0 + c1 dc) x' + (k0 + k1 dk) x
 = 0`` with real ``|dk|, |dc| <= 1 / alpha``. The loop has a pole on the imaginary axis only when
