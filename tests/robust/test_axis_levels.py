@@ -152,3 +152,33 @@ def test_no_fallback_for_a_pole_on_the_axis(monkeypatch):
     assert "pole on the imaginary axis" in out.reason
     assert calls == [1.005 * MU]
     assert stability.TIGHT_GAP > 0
+
+
+def test_warm_starts_that_are_wrong_do_not_make_a_wrong_bound():
+    """:func:`mu_solver` starts each point from the nearest point's scalings: from scalings
+    that fit another problem (random parameters, a far frequency), every returned bound is
+    still above the exact mu there (closed form), its scalings prove ``(1 + slack)`` times it
+    at the point (dense LMI, :func:`lmi_residual`), and the bound is as good as from a cold
+    start to the optimizer's tolerance."""
+    from oos_drake.robust.mu_upper import lmi_residual
+
+    A, B, C, D = oscillator()
+    real = mu_intervals.Realization(A, B, C, D)
+    omega = np.array([0.5, 0.95, 0.995, 1.0, 1.004, 1.2, 3.0])
+    n_params = mu_upper_bound(real.response(omega[:1]), parse_blk(BLK), max_iter=1).params.shape[1]
+    rng = np.random.default_rng(1)
+    cold = mu_intervals.mu_solver(real, BLK, polish_above=0.0)(omega)
+    for starts in (
+        (np.array([2.0, 40.0]), 5.0 * rng.standard_normal((2, n_params))),  # nonsense scalings
+        (np.array([100.0]), np.full((1, n_params), 30.0)),
+    ):
+        upper, level, scalings = mu_intervals.mu_solver(
+            real, BLK, polish_above=0.0, starts=starts
+        )(omega)
+        assert np.all(upper >= mu_exact(omega) * (1 - 1e-9)), (upper, mu_exact(omega))
+        assert np.all(upper <= cold[0] * 1.01 + 1e-9), (upper, cold[0])
+        M = real.response(omega)
+        for i, sc in enumerate(scalings):
+            res = lmi_residual(M[i : i + 1], level[i], sc.D_left[None], sc.D_right[None],
+                               sc.G[None])  # fmt: skip
+            assert res[0] < 0, (omega[i], res)
