@@ -172,9 +172,9 @@ def test_warm_starts_that_are_wrong_do_not_make_a_wrong_bound():
         (np.array([2.0, 40.0]), 5.0 * rng.standard_normal((2, n_params))),  # nonsense scalings
         (np.array([100.0]), np.full((1, n_params), 30.0)),
     ):
-        upper, level, scalings = mu_intervals.mu_solver(
-            real, BLK, polish_above=0.0, starts=starts
-        )(omega)
+        upper, level, scalings = mu_intervals.mu_solver(real, BLK, polish_above=0.0, starts=starts)(
+            omega
+        )
         assert np.all(upper >= mu_exact(omega) * (1 - 1e-9)), (upper, mu_exact(omega))
         assert np.all(upper <= cold[0] * 1.01 + 1e-9), (upper, cold[0])
         M = real.response(omega)
