@@ -154,7 +154,7 @@ def _analysis_model(sys, model: int, members):
 CHUNKS_PER_WORKER = 3
 #: Default ``tight`` of :func:`axis_guarantee`: the first level of the covers is at most this
 #: relative margin above the largest bound found on the grid (or the lower bound, if higher).
-TIGHT_GAP = 0.005
+TIGHT_GAP = 0.01
 
 
 @dataclass(frozen=True)
@@ -327,7 +327,7 @@ class GuaranteeSubset:
     parts : tuple
         ``(z rows, w columns, BLK)`` of the subset.
     lower : float
-        The subset's certified lower bound: the common level starts at ``(1 + gap) lower``.
+        The subset's certified lower bound (the levels of :func:`axis_guarantee` start from it).
     model_matrices : callable
         ``model -> (A, Bw, Cz, Dzw)`` of the subset's Delta channels.
     """
