@@ -106,7 +106,7 @@ def mission(first, last, subset, controller, level=None, ranges=(2, 4, 8)):
     configurations = []  # as axis_guarantee gives them to its tasks
     for A, Bw, Cz, Dzw, w, params, up, lo in problems:
         peaks = np.unique([np.argmax(up), np.argmax(lo)])
-        seeds = w[peaks[up[peaks] * (1.0 + SLACK) > floor]]
+        seeds = (w[peaks], up[peaks])  # solved where above the level (_range_covers)
         configurations.append((A, Bw, Cz, Dzw, seeds, w, params, up))
     print(f"mission configurations {first}..{last - 1}, subset {subset}, level {floor:.5g}")
     head = ("CPU [s]", 8), ("ratio", 6), ("solved", 7), ("tested", 7), ("max level", 10)

@@ -152,6 +152,9 @@ def _analysis_model(sys, model: int, members):
 #: Contiguous ranges of configurations per worker and subset in :func:`axis_guarantee` (each
 #: range starts its continuation cold).
 CHUNKS_PER_WORKER = 3
+#: Default ``tight`` of :func:`axis_guarantee`: the first level of the covers is at most this
+#: relative margin above the largest bound found on the grid (or the lower bound, if higher).
+TIGHT_GAP = 0.01
 
 
 @dataclass(frozen=True)
@@ -169,8 +172,8 @@ class AxisGuarantee:
     mu_upper : float
         ``max`` over configurations of the proved level (``inf`` if one has no certificate).
     floor : float
-        The common starting level ``(1 + gap) mu_lower`` [-] (``gap``: see
-        :func:`axis_guarantee`).
+        The common starting level [-]: ``min((1 + gap) mu_lower, (1 + tight) max(mu_lower,
+        largest grid upper bound))`` (``gap``, ``tight``: see :func:`axis_guarantee`).
     levels : numpy.ndarray
         ``(N,)`` level proved for each configuration.
     points : numpy.ndarray
@@ -189,6 +192,11 @@ class AxisGuarantee:
         ``(N,)`` the configurations (model indices) of ``levels``.
     grid_upper, grid_lower : numpy.ndarray
         ``(N,)`` each configuration's largest upper / lower bound on the analyzed frequencies.
+    fallback : float
+        The level ``(1 + gap) mu_lower`` covers restart from when they do not close at
+        ``floor`` (NaN when ``floor`` is that level already).
+    fell_back : numpy.ndarray
+        ``(N,)`` True for the configurations whose cover was done again from ``fallback``.
     """
 
     mu_upper: float
@@ -202,6 +210,8 @@ class AxisGuarantee:
     grid_upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
     grid_lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
     solved: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    fallback: float = float("nan")
+    fell_back: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     @property
     def covered(self) -> bool:
@@ -230,12 +240,18 @@ def _axis_task(task):
     return out, _time.perf_counter() - clock
 
 
-def _range_covers(blk, floor, slack, configurations, lazy_polish=True):
+def _range_covers(blk, floor, slack, configurations, lazy_polish=True, fallback=None):
     """The covers of a range of neighbouring configurations, one after the other ->
-    ``[(level, tested points, failure, solved points), ...]``.
+    ``[(level, tested points, failure, solved points, fell back), ...]``.
 
     ``lazy_polish``: see :func:`~oos_drake.robust.mu_intervals.mu_solver` (False: the cost
     reference of ``benchmarks/bench_axis_guarantee.py``).
+
+    ``fallback``: a higher starting level tried when a cover at ``floor`` does not close for
+    want of scalings (``max_rounds`` rounds without a proof in a gap: a level so close to mu
+    over a band that the intervals stay too narrow); not for a pole on the axis or an
+    infinite level, which no level closes. The configuration's result is then the fallback
+    cover's (``fell back`` True), a bound still proved on the whole axis.
 
     Each cover tries first the scalings that covered the previous configuration (its
     :meth:`~oos_drake.robust.mu_intervals.AxisCertificate.essential` points: neighbouring
@@ -251,33 +267,52 @@ def _range_covers(blk, floor, slack, configurations, lazy_polish=True):
         def grid_scalings(rows, real=real, w=grid_omega, params=grid_params):
             return scalings_at(real, blk, w[rows], params[rows])
 
-        try:
+        known = (grid_omega, grid_upper, grid_scalings)
+        starts = (grid_omega, grid_params)
+
+        def cover(level, seeds=seeds, real=real, prior=prior, known=known, starts=starts):
             # the grid's own scalings are the next candidates: no second optimization there
-            # (evaluated only where the cover tries them)
-            cert = cover_axis(
+            # (evaluated only where the cover tries them); the peaks are solved only where
+            # their grid bound is above the level
+            peaks = seeds[0][seeds[1] * (1.0 + slack) > level]
+            return cover_axis(
                 real,
                 mu_solver(
                     real,
                     blk,
                     slack=slack,
-                    polish_above=floor / (1 + slack),
-                    starts=(grid_omega, grid_params),
+                    polish_above=level / (1 + slack),
+                    starts=starts,
                     lazy_polish=lazy_polish,
                 ),
-                seeds,
-                floor=floor,
+                peaks,
+                floor=level,
                 slack=slack,
-                known=(grid_omega, grid_upper, grid_scalings),
+                known=known,
                 prior=prior,
             )
+
+        try:
+            cert = cover(floor)
+            fell_back = False
+            if (
+                not cert.covered
+                and fallback is not None
+                and fallback > floor
+                and not np.any(np.isposinf(cert.optimal))  # no level closes it
+                and not real.axis_poles().size
+            ):
+                cert, fell_back = cover(fallback), True
         except ValueError as err:
-            out.append((np.inf, 0, str(err), 0))
+            out.append((np.inf, 0, str(err), 0, False))
             prior = None
             continue
         keep = cert.essential()
         prior = (cert.omega[keep], [cert.scalings[i] for i in keep]) if keep.size else None
         failure = cert.reason
-        out.append((float(cert.upper), int(cert.omega.size), failure, int(cert.added.sum())))
+        out.append(
+            (float(cert.upper), int(cert.omega.size), failure, int(cert.added.sum()), fell_back)
+        )
     return out
 
 
@@ -292,7 +327,7 @@ class GuaranteeSubset:
     parts : tuple
         ``(z rows, w columns, BLK)`` of the subset.
     lower : float
-        The subset's certified lower bound: the common level starts at ``(1 + gap) lower``.
+        The subset's certified lower bound (the levels of :func:`axis_guarantee` start from it).
     model_matrices : callable
         ``model -> (A, Bw, Cz, Dzw)`` of the subset's Delta channels.
     """
@@ -303,7 +338,7 @@ class GuaranteeSubset:
     model_matrices: object
 
 
-def axis_guarantee(pool, subsets: dict, slack=None, gap=None) -> dict:
+def axis_guarantee(pool, subsets: dict, slack=None, gap=None, tight=None) -> dict:
     """Prove the peak of mu of every configuration of each subset on the whole frequency axis.
 
     Parameters
@@ -320,6 +355,15 @@ def axis_guarantee(pool, subsets: dict, slack=None, gap=None) -> dict:
         The cost of the covers falls fast as it grows (a level close to mu over a wide band
         needs many narrow intervals); the analysis uses its target gap, so the guaranteed
         peak is within the target of the lower bound unless a configuration's mu is above it.
+    tight : float, optional
+        Relative margin of the first level tried above the subset's largest bound found so
+        far, ``max(lower, largest grid upper bound)`` (default :data:`TIGHT_GAP`): each
+        configuration's cover starts from ``min((1 + gap) lower, (1 + tight) max(...))`` and
+        only a cover that does not close at it is done again from ``(1 + gap) lower``. Where
+        the grid's upper bound is below the lower bound (the grid missed the peak, the lower
+        bound found it) or close to it, the guaranteed level is then within about ``tight``
+        of the peak instead of ``gap`` above the lower bound. None of the levels is assumed
+        to hold: each configuration's cover raises its own level where its points need it.
 
     Returns
     -------
@@ -338,6 +382,7 @@ def axis_guarantee(pool, subsets: dict, slack=None, gap=None) -> dict:
 
     slack = SLACK if slack is None else float(slack)
     gap = slack if gap is None else max(float(gap), slack)
+    tight = TIGHT_GAP if tight is None else float(tight)
     tasks, owner, prepared = [], [], {}
     # largest M first: the costly covers start first and the cheap ones fill the end
     order = sorted(subsets, key=lambda name: -len(subsets[name].parts[0]))
@@ -345,28 +390,31 @@ def axis_guarantee(pool, subsets: dict, slack=None, gap=None) -> dict:
         sub = subsets[name]
         pts, blk = sub.points, sub.parts[2]
         models = np.unique(pts.model)
-        floor = (1.0 + gap) * max(float(sub.lower), 0.0)
+        loose = (1.0 + gap) * max(float(sub.lower), 0.0)
+        found = max(float(sub.lower), float(np.max(pts.upper, initial=0.0)), 0.0)
+        floor = min(loose, (1.0 + tight) * found)
+        fallback = loose if loose > floor * (1 + 1e-12) else None
         configurations = []
         for m in models:
             mine = pts.model == m
             w, up, lo = pts.omega[mine], pts.upper[mine], pts.lower[mine]
-            # the peaks are solved (long runs where their bound is above the floor) unless
-            # their grid scalings prove the floor already
+            # the peaks are solved (long runs where their bound is above the level) unless
+            # their grid scalings prove the level already (:func:`_range_covers`)
             peaks = np.unique([np.argmax(up), np.argmax(lo)])
-            seeds = w[peaks[up[peaks] * (1.0 + slack) > floor]]
+            seeds = (w[peaks], up[peaks])
             configurations.append((*sub.model_matrices(int(m)), seeds, w, pts.params[mine], up))
         # contiguous ranges (continuation from one configuration to the next), a few per
         # worker so that the costly ranges (configurations near the peak) spread over them
         n_ranges = min(len(configurations), CHUNKS_PER_WORKER * pool.n_jobs)
         bounds = np.linspace(0, len(configurations), n_ranges + 1).round().astype(int)
         for a, b in zip(bounds[:-1], bounds[1:], strict=True):
-            tasks.append((blk, floor, slack, configurations[a:b]))
+            tasks.append((blk, floor, slack, configurations[a:b], True, fallback))
             owner.append(name)
-        prepared[name] = (models, floor)
+        prepared[name] = (models, floor, fallback)
     done = pool.map(_axis_task, tasks)
     result = {}
     for name in subsets:
-        models, floor = prepared[name]
+        models, floor, fallback = prepared[name]
         mine = [d for d, o in zip(done, owner, strict=True) if o == name]
         out = [o for chunk, _ in mine for o in chunk]
         pts = subsets[name].points
@@ -384,6 +432,8 @@ def axis_guarantee(pool, subsets: dict, slack=None, gap=None) -> dict:
             grid_upper=np.array([pts.upper[pts.model == m].max() for m in models], dtype=float),
             grid_lower=np.array([pts.lower[pts.model == m].max() for m in models], dtype=float),
             solved=np.array([o[3] for o in out], dtype=int),
+            fallback=np.nan if fallback is None else fallback,
+            fell_back=np.array([o[4] for o in out], dtype=bool),
         )
     return result
 
@@ -428,6 +478,7 @@ def certified_sweep(
     time_budget: float = float("inf"),
     guarantee: bool = False,
     guarantee_gap: float | None = None,
+    guarantee_tight: float | None = None,
 ) -> StudyResult:
     """Grid sweep, spike resolution and certified peak of every subset.
 
@@ -462,6 +513,8 @@ def certified_sweep(
         ``gap`` of :func:`axis_guarantee`: the level starts at ``(1 + guarantee_gap)`` times
         the certified lower bound (default the slack: tightest, most points; the analysis
         passes its target gap).
+    guarantee_tight : float, optional
+        ``tight`` of :func:`axis_guarantee` (default :data:`TIGHT_GAP`).
 
     Returns
     -------
@@ -585,6 +638,7 @@ def certified_sweep(
                     for name in parts
                 },
                 gap=guarantee_gap,
+                tight=guarantee_tight,
             )
             timings["guarantee"] = _time.perf_counter() - clock
     return StudyResult(sweep_table_of(points, times), certificates, reports, timings, guarantees)

@@ -69,7 +69,13 @@ import scipy.linalg
 
 from oos_drake.robust.blocks import parse_blk
 from oos_drake.robust.lfr_analysis import delta_channel_response
-from oos_drake.robust.mu import UPPER_ITERATIONS, UPPER_TOL, _upper_bound
+from oos_drake.robust.mu import (
+    CONTINUATION_PATIENCE,
+    CONTINUATION_TEMPERATURE,
+    UPPER_ITERATIONS,
+    UPPER_TOL,
+    _upper_bound,
+)
 from oos_drake.robust.mu_upper import LMI_ROUNDOFF, mu_upper_bound
 
 #: Eigenvalues of the Hamiltonian within this distance of the imaginary axis (relative to the
@@ -1007,6 +1013,16 @@ POLISH_OPTIONS = dict(
 QUICK_POLISH_OPTIONS = dict(max_iter=150, tol=1e-6, patience=3, temperatures=(30.0, 300.0, 3000.0))
 
 
+#: First run of a point of :func:`mu_solver` from the scalings of the nearest point solved
+#: before (the continuation stage of a sweep's grid, ``mussv``'s iterations and tolerance).
+WARM_OPTIONS = dict(
+    max_iter=UPPER_ITERATIONS,
+    tol=UPPER_TOL,
+    temperatures=(CONTINUATION_TEMPERATURE,),
+    patience=CONTINUATION_PATIENCE,
+)
+
+
 def mu_solver(
     real: Realization,
     blk,
@@ -1028,6 +1044,11 @@ def mu_solver(
 
     ``starts`` : ``(omega, params)`` raw D-G parameters at frequencies [rad/s] (e.g. a grid
     sweep's ``UpperBoundResult.params``), extra warm starts only.
+
+    The first run of each point starts from the scalings of the nearest point solved before
+    or given in ``starts`` where they beat Osborne balancing (:data:`WARM_OPTIONS`; ``mussv``'s
+    cold run when there is none): any scalings give an exact bound at their point, so the
+    start changes the cost and the bound's value, never its validity.
 
     ``lazy_polish`` (default): the threshold is also the level already reached, over
     ``1 + slack``: the largest ``level_min`` this solver returned so far and, within a call,
@@ -1062,7 +1083,14 @@ class _MuSolver:
         :func:`cover_axis`)."""
         omega = np.asarray(omega, dtype=float).reshape(-1)
         M = self.real.response(omega)
-        res = _upper_bound(M, self.structure, UPPER_ITERATIONS, UPPER_TOL)  # mussv's bound
+        if self.solved_omega:
+            # from the scalings of the nearest point solved before or given (a gap's edge is
+            # where a neighbour's scalings stop proving the level: its optimum is close), where
+            # they start lower than the balancing: a continuation run, as along a sweep
+            x0 = np.array([self._nearest_start(w) for w in omega])
+            res = mu_upper_bound(M, self.structure, x0=x0, **WARM_OPTIONS)
+        else:
+            res = _upper_bound(M, self.structure, UPPER_ITERATIONS, UPPER_TOL)  # mussv's bound
         upper, params = res.upper.copy(), res.params.copy()
         Dl, Dr, G = res.D_left.copy(), res.D_right.copy(), res.G.copy()
         state = (M, omega, upper, params, Dl, Dr, G)

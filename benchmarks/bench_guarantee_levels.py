@@ -1,0 +1,108 @@
+"""Level strategy and cost of the analysis' whole-axis guarantee, against the grid-only analysis.
+
+Run: ``.venv/bin/python benchmarks/bench_guarantee_levels.py [--configurations 24]
+[--tight 0.005,0.01,1] [--subsets total,mechanical] [--controller controller.json]``
+
+The mission study of ``oos analyze`` at reduced size (``--configurations`` equally spaced
+mission configurations of the paper's scenario, the analysis' grid, sweep and tightening
+options, the make-run controller given by ``--controller``, default the baseline PD), all in
+this process (one worker: CPU time is ``time.process_time``), back to back:
+
+* ``grid only``: :func:`~oos_drake.analysis.stability.certified_sweep` without the guarantee;
+* for each ``tight`` of ``--tight``: the same with the whole-axis guarantee
+  (:func:`~oos_drake.analysis.stability.axis_guarantee` with ``gap`` the target gap, as the
+  analysis calls it, and that ``tight``; ``tight = 1`` or more is the level of the code before
+  the tight first level, ``(1 + gap)`` times the certified lower bound, since the first level
+  is the smaller of the two).
+
+Printed: CPU of each run and its ratio to the grid-only run, the guarantee's own CPU (the
+difference: the grid and the spike resolution are the same computation in every run), and
+per subset the certified lower bound, the largest grid upper bound, the starting level, the
+guaranteed level, its gap above the lower bound, the configurations whose level was raised or
+whose cover fell back to the looser level, tested and solved points, and failures. Timings on
+a shared machine are noisy: read the ratios of the same run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+
+import numpy as np
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--configurations", type=int, default=24)
+    parser.add_argument("--tight", default="0.005,1", help="comma-separated tight values [-]")
+    parser.add_argument("--subsets", default="", help="comma-separated subsets (default: all)")
+    parser.add_argument("--controller", default=None, help="controller JSON (default: baseline)")
+    args = parser.parse_args()
+
+    from oos_drake.analysis.controller import scenario_controller
+    from oos_drake.analysis.models import mission_closed_loop, mission_times
+    from oos_drake.analysis.run import AnalysisOptions
+    from oos_drake.analysis.stability import certified_sweep
+    from oos_drake.analysis.subsets import uncertainty_subsets
+    from oos_drake.blas import limit_blas_threads
+    from oos_drake.scenario.data import load_scenario
+
+    limit_blas_threads(1)
+    scenario = load_scenario("paper")
+    options = AnalysisOptions(configurations=args.configurations)
+    times = mission_times(options.configurations, scenario)
+    system = mission_closed_loop(scenario_controller(args.controller, scenario), times, scenario)
+    named = uncertainty_subsets(system.system.uncertainty)
+    wanted = [s for s in args.subsets.split(",") if s] or list(named)
+    subsets = {k: named[k] for k in wanted}
+    omega = options.grid()
+    sweep = dataclasses.replace(options.sweep, n_jobs=1)
+
+    def run(guarantee, tight=None):
+        clock = time.process_time()
+        out = certified_sweep(
+            system.system,
+            omega,
+            subsets,
+            times=times,
+            options=sweep,
+            tighten=options.tighten,
+            critical_iterations=options.certify_iterations,
+            progress=False,
+            time_budget=options.spike_budget,
+            guarantee=guarantee,
+            guarantee_gap=options.tighten.target_gap,
+            guarantee_tight=tight,
+        )
+        return out, time.process_time() - clock
+
+    _, base = run(False)
+    print(
+        f"{times.size} mission configurations, {omega.size} frequencies, "
+        f"target gap {options.tighten.target_gap}; grid only: CPU {base:.1f} s"
+    )
+    head = (
+        f"{'tight':>6s} {'subset':15s} {'lower':>9s} {'grid up':>9s} {'start':>9s} "
+        f"{'guaranteed':>10s} {'gap [%]':>7s} {'raised':>6s} {'fell back':>9s} "
+        f"{'tested':>6s} {'solved':>6s} {'fail':>4s}"
+    )
+    for tight in (float(t) for t in args.tight.split(",")):
+        study, cpu = run(True, tight)
+        print(
+            f"tight {tight:g}: CPU {cpu:.1f} s = {cpu / base:.2f} x grid only; "
+            f"guarantee {cpu - base:.1f} s"
+        )
+        print(head)
+        for name, g in study.guarantees.items():
+            lower = study.certificates[name].mu_lower
+            print(
+                f"{tight:6g} {name:15s} {lower:9.5g} {np.max(g.grid_upper):9.5g} "
+                f"{g.floor:9.5g} {g.mu_upper:10.5g} {100 * (g.mu_upper - lower) / g.mu_upper:7.2f} "
+                f"{g.raised:6d} {int(g.fell_back.sum()):9d} {int(g.points.sum()):6d} "
+                f"{int(g.solved.sum()):6d} {len(g.failures):4d}"
+            )
+
+
+if __name__ == "__main__":
+    main()
