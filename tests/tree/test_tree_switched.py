@@ -1,0 +1,175 @@
+"""A mission that captures and docks a target as ONE model (switch blocks ``delta_<PORT>``), and
+its tip waypoints solved into joint waypoints at the application floor.
+
+Fast: the switched model against closed forms (the static gain is the inverse of the rigid
+spatial inertia of the bodies the phase connects, summed over the bodies by
+``rigid_inertia_at_root``, at the timeline's angles) and against the TITOP model of the welded
+tree (``captured_tree``: another assembly). Drake: the switched model, substituted by the
+pipeline's ``mission_values``, against the Drake twin welded by ``WeldFrames`` at the capture
+and at the docking port; the joint-space file's waypoint against Drake's forward kinematics.
+"""
+
+from __future__ import annotations
+
+import tomllib
+
+import numpy as np
+import pytest
+import tomli_w
+from tree_documents import shipped_document
+
+from oos_drake.lfr import usubs
+from oos_drake.scenario.data import load_scenario
+from oos_drake.scenario.tree import captured_tree, load_tree, port_pose
+from oos_drake.scenario.tree_model import (
+    build_mission_tree_model,
+    build_tree_model,
+    mission_connections,
+    rigid_inertia_at_root,
+    tree_values,
+)
+
+#: servicer_7dof's phases: stow 0-300 s, approach 300-700 s, grasp_hold 700-900 s (GRASP welded
+#: to T_GRASP), berthed 900-1200 s (T_DOCK on DOCK)
+MID_PHASE = {"stow": 150.0, "approach": 500.0, "grasp_hold": 800.0, "berthed": 1050.0}
+ARM_ANGLES = {"A1": 0.2, "A2": 0.9, "A3": -0.3, "A4": -1.4, "A5": 0.4, "A6": 0.8, "A7": -0.5}
+
+
+@pytest.fixture(scope="module")
+def servicer(tmp_path_factory):
+    """servicer_7dof with its tip waypoint replaced by fixed arm angles (no Drake needed)."""
+    document = shipped_document("servicer_7dof")
+    approach = document["mission"]["phases"][1]
+    del approach["tip"]
+    approach["joints"].update(ARM_ANGLES)
+    path = tmp_path_factory.mktemp("switched") / "servicer_joints.toml"
+    path.write_text(tomli_w.dumps(document))
+    return load_scenario(path)
+
+
+def _welded(scenario, time):
+    """The tree the phase at ``time`` connects: the target welded at its port, or none."""
+    timeline, tree = scenario.timeline, scenario.tree
+    docked = timeline.docked_at(time)
+    pair = timeline.captured_at(time) if docked is None else docked.connection
+    return tree if pair is None else captured_tree(tree, *pair)
+
+
+def test_switch_values_follow_the_phases(servicer):
+    times = [0.0, *MID_PHASE.values(), 700.0, 900.0, 1200.0]
+    values = servicer.mission_values(times)
+    assert mission_connections(servicer.tree) == (("GRASP", "T_GRASP"), ("DOCK", "T_DOCK"))
+    # at a boundary: the phase ending there (700: approach, 900: grasp_hold, 1200: berthed)
+    np.testing.assert_array_equal(values["delta_GRASP"], [0, 0, 0, 1, 0, 0, 1, 0])
+    np.testing.assert_array_equal(values["delta_DOCK"], [0, 0, 0, 0, 1, 0, 0, 1])
+    occurrences = servicer.mission_model().occurrences
+    assert occurrences["delta_GRASP"] == occurrences["delta_DOCK"] == 12 + 4
+
+
+def test_static_gain_is_the_inverse_rigid_inertia_of_the_connected_bodies(servicer):
+    """One model over the four phases: its static gain is ``M^-1``, ``M`` the 6x6 rigid
+    spatial inertia at the hub's centre of mass of the hub, arrays and arm, plus the target
+    where the phase welds it (a closed form over the bodies)."""
+    times = np.array(list(MID_PHASE.values()))
+    model = usubs(servicer.mission_model(), servicer.mission_values(times)).nominal
+    gains = model.freqresp(np.array([0.0]))
+    for k, t in enumerate(times):
+        M = rigid_inertia_at_root(_welded(servicer, t), servicer.timeline.angles(t))
+        G0 = np.real(np.asarray(gains[k]).reshape(6, 6))
+        np.testing.assert_allclose(G0 @ M, np.eye(6), atol=1e-9)
+    masses = [rigid_inertia_at_root(_welded(servicer, t))[0, 0] for t in times]
+    np.testing.assert_allclose(np.diff(masses), [0.0, 120.0, 0.0])  # the 120 kg target
+
+
+def test_switched_model_equals_the_welded_trees_model(servicer):
+    """Frequency responses of the switched model and of ``build_tree_model`` of the tree the
+    phase connects (the target a body of the tree on a fixed joint): two assemblies."""
+    omega = 2 * np.pi * np.geomspace(0.01, 30.0, 40)
+    times = np.array(list(MID_PHASE.values()))
+    switched = usubs(servicer.mission_model(), servicer.mission_values(times)).nominal
+    H = switched.freqresp(omega)
+    for k, t in enumerate(times):
+        tree = _welded(servicer, t)
+        reference = usubs(build_tree_model(tree), tree_values(tree, servicer.timeline.angles(t)))
+        expected = np.asarray(reference.nominal.freqresp(omega))
+        scale = np.abs(expected).max()
+        np.testing.assert_allclose(np.asarray(H[k]), expected, rtol=0, atol=1e-11 * scale)
+
+
+def test_a_mission_without_target_keeps_its_model():
+    tree = load_tree("flexible_satellite")
+    assert build_mission_tree_model(tree) is build_tree_model(tree)
+
+
+def test_one_port_mated_with_two_target_ports_is_refused(tmp_path):
+    from oos_drake.scenario.tree import parse_tree
+
+    document = shipped_document("servicer_7dof")
+    document["mission"]["phases"][3] = {
+        "name": "regrasp",
+        "duration": 100.0,
+        "captured": ["GRASP", "T_DOCK"],
+    }
+    with pytest.raises(ValueError, match=r"^mission\.regrasp: port GRASP is mated with T_DOCK"):
+        build_mission_tree_model(parse_tree(document))
+
+
+# ---------------------------------------------------------------------------------- Drake
+@pytest.fixture(scope="module")
+def solved(tmp_path_factory):
+    pytest.importorskip("pydrake")
+    from oos_drake.app.tree import joint_space_scenario
+
+    folder = tmp_path_factory.mktemp("solved")
+    return joint_space_scenario("servicer_7dof", folder)
+
+
+@pytest.mark.drake
+def test_joint_space_file_reaches_the_tip_pose_by_drake_forward_kinematics(solved):
+    """The written file's approach waypoint puts GRASP at the shipped tip pose: Drake's forward
+    kinematics and the tree's own (two implementations) within 1e-6 m and rad; the rest of the
+    document is the shipped file's."""
+    from oos_drake.multibody.tree_ik import port_pose_drake
+    from oos_drake.multibody.tree_plant import build_tree_diagram
+
+    original = shipped_document("servicer_7dof")
+    written = tomllib.loads(solved.read_text())
+    tip = original["mission"]["phases"][1].pop("tip")
+    approach = written["mission"]["phases"][1]
+    assert set(approach["joints"]) == {"SA1", "SA2", *ARM_ANGLES}
+    original["mission"]["phases"][1]["joints"] = approach["joints"]
+    assert written == original
+    scenario = load_scenario(solved)
+    angles = scenario.timeline.angles(700.0)  # the end of approach
+    tree = load_tree("servicer_7dof")
+    for R, p in (port_pose_drake(build_tree_diagram(tree), "GRASP", angles),
+                 port_pose(tree, "GRASP", angles)):  # fmt: skip
+        assert np.linalg.norm(p - np.asarray(tip["p_G_D"])) <= 1e-6
+        E = np.asarray(tip["R_G_D"]).T @ R
+        assert np.arccos(np.clip((np.trace(E) - 1) / 2, -1, 1)) <= 1e-6
+
+
+@pytest.mark.drake
+@pytest.mark.parametrize(("time", "pair"), [(800.0, ("GRASP", "T_GRASP")),
+                                            (1050.0, ("DOCK", "T_DOCK")),
+                                            (500.0, None)])  # fmt: skip
+def test_switched_model_against_the_welded_drake_twin(solved, time, pair):
+    """What the controller and the analysis read (``mission_model``, ``mission_values`` of the
+    joint-space file) against the Drake twin with the target welded at the phase's ports by
+    ``WeldFrames`` (free phase: the twin without target)."""
+    from oos_drake.multibody.cross_check import VALIDATION_OMEGA, compare_systems
+    from oos_drake.multibody.tree_plant import (
+        build_captured_diagram,
+        build_tree_diagram,
+        linearize_tree,
+    )
+
+    scenario = load_scenario(solved)
+    tree = scenario.tree
+    handles = build_tree_diagram(tree) if pair is None else build_captured_diagram(tree, *pair)
+    drake = linearize_tree(handles, scenario.timeline.angles(time))
+    titop = usubs(scenario.mission_model(), scenario.mission_values([time])).nominal
+    result = compare_systems(
+        f"t={time:g}", drake, titop.model(0).to_ss(), VALIDATION_OMEGA
+    )
+    assert result.passed and result.max_relative_error <= 1e-6, result
