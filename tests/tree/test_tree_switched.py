@@ -173,3 +173,68 @@ def test_switched_model_against_the_welded_drake_twin(solved, time, pair):
         f"t={time:g}", drake, titop.model(0).to_ss(), VALIDATION_OMEGA
     )
     assert result.passed and result.max_relative_error <= 1e-6, result
+
+
+# ---------------------------------------------------------------------------------- oos run
+@pytest.mark.slow
+def test_oos_run_on_the_servicer_runs_controller_analysis_and_margins(tmp_path, monkeypatch):
+    """``oos run --scenario servicer_7dof --quick`` at reduced sizes (each stage's options
+    appended): the tip waypoint solved into ``OUT/scenario/servicer_7dof.toml``, the
+    controller, the analysis and the margins run over the four phases (capture and docking
+    included); the controller's gamma checked by a dense frequency sweep of its closed loops,
+    the analysis' closed loops by their eigenvalues in every phase."""
+    import json
+
+    import oos_drake.app.pipeline as pipeline
+    from oos_drake.analysis.controller import scenario_controller
+    from oos_drake.analysis.models import mission_closed_loop
+    from oos_drake.app.main import build_parser
+
+    smaller = {
+        "synth": ["--configurations", "4", "--restarts", "0", "--max-iterations", "25",
+                  "--worst-case-rounds", "1"],
+        "analyze": ["--configurations", "4", "--points-per-decade", "3", "--no-sensitivity",
+                    "--no-time-check", "--performance-models", "1", "--performance-points", "5",
+                    "--spike-budget", "5", "--iterations", "20"],
+        "margins": ["--configurations", "2"],
+    }  # fmt: skip
+    real = pipeline._oos
+    monkeypatch.setattr(pipeline, "_oos", lambda *argv: real(*argv, *smaller.get(argv[0], [])))
+    out = tmp_path / "out"
+    argv = ["run", "--scenario", "servicer_7dof", "--quick", "--out", str(out)]
+    assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
+    timings = json.loads((out / "timings.json").read_text())
+    assert set(timings["skipped"]) == {"model figures", "confirm", "campaign"}
+    assert {"controller", "analysis", "margins"} <= set(timings["stages_s"])
+    solved = out / "scenario" / "servicer_7dof.toml"
+    assert timings["scenario"] == str(solved)
+    assert (out / "margins").is_dir() and (out / "report.html").is_file()
+
+    record = json.loads((out / "controller" / "controller.json").read_text())
+    loops = np.load(out / "controller" / "closed_loop.npz")
+    assert np.linalg.eigvals(loops["A"]).real.max() < 0
+    near_peaks = loops["omega_peak_rad_s"][:, None] * np.geomspace(0.98, 1.02, 81)
+    w = np.unique(np.concatenate([np.geomspace(1e-4, 1e3, 4000), near_peaks.ravel()]))
+    peak = 0.0
+    n = loops["A"].shape[1]
+    for A, B, C, D in zip(loops["A"], loops["B"], loops["C"], loops["D"], strict=True):
+        H = C @ np.linalg.solve(1j * w[:, None, None] * np.eye(n) - A, B) + D
+        peak = max(peak, float(np.linalg.svd(H, compute_uv=False)[:, 0].max()))
+    assert record["gamma"] * (1 - 1e-3) <= peak <= record["gamma"] * (1 + 1e-6)
+
+    # the analysis' closed loops with the synthesized gain, one configuration per phase (free,
+    # target welded at GRASP, at DOCK): stable, nominal and at the corners of the ranges
+    scenario = load_scenario(solved)
+    controller = scenario_controller(out / "controller" / "controller.json", scenario)
+    times = np.array(list(MID_PHASE.values()))
+    closed = mission_closed_loop(controller, times, scenario).system
+    for corner in (0, 1):
+        values = {
+            name: np.full(times.size, block.range[corner])
+            for name, block in closed.uncertainty.items()
+            if block.kind == "ureal"
+        }
+        A = np.asarray(usubs(closed, values).nominal.A)
+        assert np.linalg.eigvals(A).real.max() < 0, corner
+    summary = json.loads((out / "analysis" / "summary.json").read_text())
+    assert summary["scenario"]["name"] == "servicer_7dof"
