@@ -287,10 +287,10 @@ def _tree_model(tree: SpacecraftTree) -> LFR:
     )
 
 
-def switch_block_name(port: str) -> str:
-    """Name of the switch block of the connections at port ``port`` of the tree:
-    ``delta_<port>``."""
-    return f"delta_{port}"
+def switch_block_name(tree: SpacecraftTree, port: str) -> str:
+    """Name of the switch block of the connections at port ``port`` of the tree: the port's
+    ``block``, else ``delta_<port>``."""
+    return tree.ports[port].block or f"delta_{port}"
 
 
 def mission_connections(tree: SpacecraftTree) -> tuple[tuple[str, str], ...]:
@@ -333,7 +333,7 @@ def _target_components(tree: SpacecraftTree, target: SpacecraftTree, pairs) -> l
                 f"ports.{target_port}: a captured or docked port must be on the target's root "
                 f"body '{name}', not on '{mate.body}'"
             )
-        delta = connection_parameter(switch_block_name(port))
+        delta = connection_parameter(switch_block_name(tree, port))
         terms.append((delta, offset + np.asarray(mate.p_B_D, dtype=float)))
         dcm_T_B = np.asarray(mate.R_B_D) @ np.asarray(spec.R_B_D).T  # v_T = dcm v_B
         links.append((delta, dcm_T_B, f"S{port}_{spec.body}"))

@@ -205,7 +205,8 @@ class TreeScenario:
     def mission_values(self, times) -> dict[str, np.ndarray]:
         """Scheduled block values at mission ``times`` [s]: ``tau_<body> = tan(angle / 4)`` of
         the timeline's joint angles and each switch ``delta_<PORT>`` (``1`` in the phases that
-        capture or dock a target at ``PORT``, else ``0``; at a boundary: the phase ending there).
+        capture or dock a target at ``PORT``, else ``0``; at a boundary: the phase ending there);
+        the revolute joints of a mated target at their file angles.
 
         Raises
         ------
@@ -235,10 +236,16 @@ class TreeScenario:
         for t in times:
             docked = timeline.docked_at(t)
             mated.append(timeline.captured_at(t) if docked is None else docked.connection)
+        targets = {}
         for port, target_port in mission_connections(self.tree):
-            values[switch_block_name(port)] = np.array(
+            values[switch_block_name(self.tree, port)] = np.array(
                 [1.0 if pair == (port, target_port) else 0.0 for pair in mated]
             )
+            owner = next(t for t in self.tree.targets.values() if target_port in t.ports)
+            targets[owner.name] = owner
+        for target in targets.values():  # a target's own drives hold their file angles
+            for body, angle in target.operating_angles().items():
+                values[target.angle_block(body)] = np.full(times.size, float(angle_to_tau(angle)))
         return values
 
     def bodies_table(self):
