@@ -118,7 +118,8 @@ def _mission_table(scenario: Scenario) -> dict:
     for state in mission.connection_states:
         instants.update((float(state.start), float(state.end)))
     instants = sorted(t for t in instants if t0 < t <= float(mission.t_end))
-    labels = dict(zip(map(float, mission.arm_waypoints.times), mission.arm_waypoints.labels))
+    arm = mission.arm_waypoints
+    labels = dict(zip(map(float, arm.times), arm.labels, strict=True))
     docking = scenario.docking
     phases, names, start = [], set(), t0
     for end in instants:

@@ -54,12 +54,12 @@ from oos_drake.scenario.model import hub_parameters, spring_damper_between
 from oos_drake.scenario.tree import SpacecraftTree, body_poses
 from oos_drake.titop import (
     Component,
-    connection_parameter,
-    repeat,
     angle_parameter,
     assemble,
+    connection_parameter,
     fixed_connection,
     flexible_appendage,
+    repeat,
     revolute_connection,
     rigid_body_direct,
     rigid_body_inverse,

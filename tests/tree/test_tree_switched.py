@@ -169,9 +169,7 @@ def test_switched_model_against_the_welded_drake_twin(solved, time, pair):
     handles = build_tree_diagram(tree) if pair is None else build_captured_diagram(tree, *pair)
     drake = linearize_tree(handles, scenario.timeline.angles(time))
     titop = usubs(scenario.mission_model(), scenario.mission_values([time])).nominal
-    result = compare_systems(
-        f"t={time:g}", drake, titop.model(0).to_ss(), VALIDATION_OMEGA
-    )
+    result = compare_systems(f"t={time:g}", drake, titop.model(0).to_ss(), VALIDATION_OMEGA)
     assert result.passed and result.max_relative_error <= 1e-6, result
 
 
