@@ -236,3 +236,33 @@ def test_oos_run_on_the_servicer_runs_controller_analysis_and_margins(tmp_path, 
         assert np.linalg.eigvals(A).real.max() < 0, corner
     summary = json.loads((out / "analysis" / "summary.json").read_text())
     assert summary["scenario"]["name"] == "servicer_7dof"
+
+
+def test_synth_on_tip_waypoints_names_the_solve_command(tmp_path, capsys):
+    from oos_drake.app.main import main
+
+    out = tmp_path / "synth"
+    assert main(["synth", "--scenario", "servicer_7dof", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "mission phases approach place a port" in err
+    assert "oos tree solve" in err and not out.exists()
+
+
+@pytest.mark.drake
+def test_tree_solve_command_writes_the_joint_space_file_or_one_line(tmp_path, capsys):
+    pytest.importorskip("pydrake")
+    from oos_drake.app.main import main
+
+    out = tmp_path / "solved.toml"
+    assert main(["tree", "solve", "servicer_7dof", str(out)]) == 0
+    assert "tip waypoint approach: port GRASP within" in capsys.readouterr().out
+    assert load_scenario(out).timeline is not None
+    document = shipped_document("servicer_7dof")
+    document["mission"]["phases"][1]["tip"]["p_G_D"] = [6.0, 0.0, 0.0]  # beyond the arm
+    far = tmp_path / "far.toml"
+    far.write_text(tomli_w.dumps(document))
+    bad = tmp_path / "bad.toml"
+    assert main(["tree", "solve", str(far), str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "mission.approach.tip: inverse kinematics misses" in err
+    assert not bad.exists()
