@@ -248,6 +248,61 @@ class TreeScenario:
                 values[target.angle_block(body)] = np.full(times.size, float(angle_to_tau(angle)))
         return values
 
+    @property
+    def docked_phases(self) -> tuple[str, ...]:
+        """Names of the mission phases that hold a target by a spring-damper (``docked``)."""
+        phases = () if self.tree.mission is None else self.tree.mission.phases
+        return tuple(p.name for p in phases if p.docked is not None)
+
+    def docking_model(self, phase: str):
+        """The uncertain plant of docked phase ``phase``: the target held by its spring-damper
+        (:func:`~oos_drake.scenario.tree.docked_tree`, blocks ``k_shear_<PORT>``,
+        ``k_tors_<PORT>``, ``d_shear_<PORT>``, ``d_tors_<PORT>`` over their declared ranges),
+        where the mission model (:meth:`mission_model`) welds it rigid. Substitute
+        :meth:`docking_values`. The docked phase's subset of its own, for the analysis.
+
+        Raises
+        ------
+        ValueError
+            ``phase`` is not a docked phase (one line naming them).
+        """
+        from oos_drake.scenario.tree import docked_tree
+        from oos_drake.scenario.tree_model import build_tree_model
+
+        return build_tree_model(docked_tree(self.tree, self._docking(phase)))
+
+    def docking_values(self, phase: str, times) -> dict[str, np.ndarray]:
+        """Scheduled block values ``tau_<body>`` of :meth:`docking_model` at mission ``times``
+        [s] within docked phase ``phase`` (the timeline's angles; the target's drives at their
+        file angles).
+
+        Raises
+        ------
+        ValueError
+            ``phase`` is not a docked phase, or a time outside it.
+        """
+        from oos_drake.scenario.tree import docked_tree
+        from oos_drake.scenario.tree_model import tree_values
+
+        docked = docked_tree(self.tree, self._docking(phase))
+        times = np.atleast_1d(np.asarray(times, dtype=float))
+        rows = []
+        for t in times:
+            if self.timeline.phase_at(t) != phase:
+                raise ValueError(f"docking_values: t = {t:g} s is not in phase {phase!r}")
+            rows.append(tree_values(docked, self.timeline.angles(t)))
+        return {name: np.array([row[name] for row in rows]) for name in rows[0]}
+
+    def _docking(self, phase: str):
+        phases = () if self.tree.mission is None else self.tree.mission.phases
+        found = next((p.docked for p in phases if p.name == phase and p.docked), None)
+        if found is None:
+            raise ValueError(
+                f"scenario {self.name}: {phase!r} is not a docked phase (docked phases: "
+                f"{', '.join(self.docked_phases) or 'none'})"
+            )
+        return found
+
     def bodies_table(self):
         """One row per body of the tree (and of each target): ``body``, ``kind``,
         ``description``, ``mass [kg]``, ``Jxx [kg m^2]`` .. ``Jzz [kg m^2]`` (rigid: at the

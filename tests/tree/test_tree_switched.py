@@ -266,3 +266,43 @@ def test_tree_solve_command_writes_the_joint_space_file_or_one_line(tmp_path, ca
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "mission.approach.tip: inverse kinematics misses" in err
     assert not bad.exists()
+
+
+def test_docking_model_of_the_berthed_phase(servicer):
+    """The docked phase's own plant: the target on its spring-damper, blocks of the declared
+    stiffness and damping (+-50 %); its static gain is the welded tree's (a spring at rest
+    transmits the rigid motion at zero frequency), its nominal response is not (the spring)."""
+    assert servicer.docked_phases == ("berthed",)
+    model = servicer.docking_model("berthed")
+    blocks = model.uncertainty
+    for name, nominal in (("k_shear_DOCK", 5e4), ("k_tors_DOCK", 5e4), ("d_shear_DOCK", 500.0)):
+        assert blocks[name].nominal == nominal
+        np.testing.assert_allclose(blocks[name].range, [0.5 * nominal, 1.5 * nominal])
+    times = np.array([950.0, 1100.0])
+    plant = usubs(model, servicer.docking_values("berthed", times)).nominal
+    G0 = np.asarray(plant.freqresp(np.array([0.0]))).reshape(times.size, 6, 6).real
+    for k, t in enumerate(times):
+        M = rigid_inertia_at_root(_welded(servicer, t), servicer.timeline.angles(t))
+        np.testing.assert_allclose(G0[k] @ M, np.eye(6), atol=1e-8)
+    with pytest.raises(ValueError, match=r"'grasp_hold' is not a docked phase \(docked phases: "):
+        servicer.docking_model("grasp_hold")
+    with pytest.raises(ValueError, match=r"t = 800 s is not in phase 'berthed'"):
+        servicer.docking_values("berthed", [800.0])
+
+
+@pytest.mark.drake
+def test_docking_model_against_the_drake_twin_on_its_bushing(solved):
+    """The docked phase's plant (``docking_model``, ``docking_values``) against the Drake twin
+    with the target on its floating joint and a ``LinearBushingRollPitchYaw`` between the
+    ports."""
+    from oos_drake.multibody.cross_check import VALIDATION_OMEGA, compare_systems
+    from oos_drake.multibody.tree_plant import build_docked_diagram, linearize_tree
+
+    scenario = load_scenario(solved)
+    time = 1100.0
+    angles = scenario.timeline.angles(time)
+    docking = scenario.timeline.docked_at(time)
+    drake = linearize_tree(build_docked_diagram(scenario.tree, docking, angles), angles)
+    titop = usubs(scenario.docking_model("berthed"), scenario.docking_values("berthed", [time]))
+    result = compare_systems("berthed", drake, titop.nominal.model(0).to_ss(), VALIDATION_OMEGA)
+    assert result.passed and result.max_relative_error <= 1e-6, result
