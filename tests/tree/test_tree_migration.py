@@ -155,3 +155,34 @@ def test_converted_paper_mission_lfr_equals_schema_1s_at_the_analysis_configurat
         b = usubs(expected, {k: v[picked] for k, v in schema1.items()} | fixed).nominal
         Ha, Hb = np.asarray(a.freqresp(omega)), np.asarray(b.freqresp(omega))
         assert np.abs(Ha - Hb).max() <= 1e-10 * np.abs(Hb).max()
+
+
+@pytest.mark.drake
+def test_converted_paper_docked_twin_rests_with_its_ports_together():
+    """The converted paper's docked twin (a target with its own drives, SA3 and SA4, on a
+    floating joint and a bushing): at the twin's operating point the target's D3 frame is the
+    chaser's D1 frame (Drake's forward kinematics, position and axes)."""
+    pytest.importorskip("pydrake")
+    from oos_drake.multibody.tree_plant import build_docked_diagram
+    from oos_drake.multibody.tree_sdf import TREE_ASSEMBLY_MODEL
+    from oos_drake.scenario.tree_mission import build_timeline
+
+    tree = parse_tree(tree_document_from_v1("paper")[0])
+    timeline = build_timeline(tree)
+    time = 1200.0
+    docking = timeline.docked_at(time)
+    assert docking.connection == ("D1", "D3")
+    angles = timeline.angles(time)
+    handles = build_docked_diagram(tree, docking, angles)
+    plant = handles.plant
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, np.zeros(plant.num_positions()))
+    chosen = handles.tree.joint_angles(angles)
+    for name, joint in handles.revolute_joints.items():
+        joint.set_angle(context, chosen[name])
+    chaser = plant.GetModelInstanceByName(TREE_ASSEMBLY_MODEL)
+    target = plant.GetModelInstanceByName(f"RH2::{TREE_ASSEMBLY_MODEL}")
+    X_D1 = plant.GetFrameByName("D1", chaser).CalcPoseInWorld(context)
+    X_D3 = plant.GetFrameByName("D3", target).CalcPoseInWorld(context)
+    np.testing.assert_allclose(X_D3.translation(), X_D1.translation(), atol=1e-12)
+    np.testing.assert_allclose(X_D3.rotation().matrix(), X_D1.rotation().matrix(), atol=1e-12)
