@@ -60,6 +60,7 @@ RUNNABLE = {
     "tree check",
     "tree sdf",
     "tree convert",
+    "tree solve",
     "campaign run",
     "campaign resume",
     "campaign rerun",

@@ -168,6 +168,7 @@ def _check_campaign_scenario(campaign_spec: Path, scenario: Path) -> None:
 
 def run_pipeline(args: argparse.Namespace) -> int:
     """Run every stage of the main job into ``args.out``; returns the exit status."""
+    from oos_drake.app.tree import joint_space_scenario
     from oos_drake.scenario.data import scenario_path
     from oos_drake.scenario.tree_scenario import unsupported_stages
 
@@ -175,6 +176,8 @@ def run_pipeline(args: argparse.Namespace) -> int:
     if not campaign_spec.is_file():
         raise ValueError(f"campaign spec {campaign_spec}: file not found")
     scenario = scenario_path(args.scenario)
+    # a tree's tip-pose waypoints solved by inverse kinematics: the stages read the joint-space copy
+    scenario = joint_space_scenario(scenario, Path(args.out) / "scenario")
     skipped = unsupported_stages(scenario)  # a schema-2 tree: said, never silent
     if "campaign" not in skipped:
         _check_campaign_scenario(campaign_spec, scenario)

@@ -5,6 +5,7 @@ Usage::
     oos tree check FILE_OR_NAME [--angle BODY=RAD ...]   # TITOP vs Drake at one configuration
     oos tree sdf FILE_OR_NAME DIRECTORY                  # write the tree's SDF files
     oos tree convert V1_FILE_OR_NAME OUT.toml            # schema-1 scenario -> schema-2 tree
+    oos tree solve FILE_OR_NAME OUT.toml                 # tip waypoints -> joint waypoints (IK)
     oos validate --scenario FILE_OR_NAME                 # every configuration of its timeline
 
 ``check`` loads the tree, builds its TITOP LFR and its Drake twin (SDF generated from the same
@@ -12,6 +13,10 @@ file into a temporary folder) and prints the comparison (max relative response e
 zero errors); exit status 0 when it passes, 1 when it does not. ``sdf`` writes the tree's SDF
 files. ``convert`` writes the schema-2 tree of a schema-1 scenario's chaser
 (:func:`oos_drake.scenario.tree_migration.tree_document_from_v1`) and names what it left out.
+``solve`` writes the same tree with every tip-pose waypoint replaced by the joint angles its
+inverse kinematics gives (:func:`joint_space_document`): the scenario layer, below the Drake
+twin, reads such a file's timeline directly, so ``oos synth``, ``oos analyze`` and ``oos margins``
+run on it; ``oos run`` does this itself (:func:`joint_space_scenario`).
 ``oos validate`` on a schema-2 file (:func:`validate_tree`) checks the TITOP LFR against the
 tree's own twin on every configuration of the mission timeline
 (:meth:`oos_drake.scenario.tree_mission.Timeline.configurations`). Invalid data: one line
@@ -29,7 +34,13 @@ from pathlib import Path
 from oos_drake.scenario.data import ScenarioError
 from oos_drake.scenario.tree import TREE_SCHEMA_VERSION, load_tree, tree_path
 
-__all__ = ["register", "is_tree_scenario", "validate_tree"]
+__all__ = [
+    "register",
+    "is_tree_scenario",
+    "validate_tree",
+    "joint_space_document",
+    "joint_space_scenario",
+]
 
 
 def _angles(items: list[str]) -> dict[str, float]:
@@ -151,6 +162,106 @@ def _convert(args: argparse.Namespace) -> int:
     return 0
 
 
+def joint_space_document(scenario: str | Path) -> tuple[dict, dict]:
+    """The tree file ``scenario`` with its tip-pose waypoints solved into joint waypoints.
+
+    Each ``[mission.phases.tip]`` is solved once on the tree's Drake twin
+    (:func:`oos_drake.multibody.tree_ik.mission_timeline`: from the previous waypoint, residual
+    within 1e-6 m and rad) and replaced by the chain's angles in the phase's ``joints``
+    [rad]; everything else is the file's. The result loads as a tree whose timeline the
+    scenario layer builds without inverse kinematics, with the same joint angles at every
+    instant.
+
+    Parameters
+    ----------
+    scenario : str or Path
+        A schema-2 tree file or a shipped tree's name.
+
+    Returns
+    -------
+    document : dict
+        The TOML document (``tomli_w.dumps``); the file's own when it has no tip waypoint.
+    solutions : dict
+        ``{phase: IkSolution}`` of the solved waypoints (with their residuals).
+
+    Raises
+    ------
+    ScenarioError
+        Invalid tree, or ``mission.<phase>.tip: inverse kinematics misses the pose by ...``.
+    """
+    from oos_drake.scenario.tree import parse_tree
+
+    source = tree_path(scenario)
+    with source.open("rb") as stream:
+        document = tomllib.load(stream)
+    tree = load_tree(source)
+    if tree.mission is None or not tree.mission.has_tip_waypoints:
+        return document, {}
+    from oos_drake.multibody.tree_ik import mission_timeline
+
+    timeline = mission_timeline(tree)
+    for raw, phase in zip(document["mission"]["phases"], tree.mission.phases, strict=True):
+        if phase.tip is not None:
+            del raw["tip"]
+            raw["joints"] = {**raw.get("joints", {}), **timeline.tip_solutions[phase.name].angles}
+    parse_tree(document, source)  # what is written must load
+    return document, dict(timeline.tip_solutions)
+
+
+def joint_space_scenario(scenario: str | Path, folder: str | Path) -> Path:
+    """The tree file the stages of ``oos run`` read: ``scenario`` itself when its mission has
+    no tip-pose waypoint (or it is a schema-1 file), else its joint-space copy
+    (:func:`joint_space_document`) written to ``folder/<file name>`` (a comment gives the
+    source and each waypoint's residual).
+
+    Parameters
+    ----------
+    scenario : str or Path
+        Scenario file (any schema) or shipped name.
+    folder : str or Path
+        Where the joint-space copy goes (created).
+
+    Returns
+    -------
+    Path
+    """
+    import tomli_w
+
+    if not is_tree_scenario(scenario):
+        return Path(scenario)
+    source = tree_path(scenario)
+    document, solutions = joint_space_document(source)
+    if not solutions:
+        return source
+    lines = [
+        f"# {source}: its tip-pose waypoints solved into joint waypoints by oos_drake.app.tree"
+        ".joint_space_document (inverse kinematics on the tree's Drake twin)"
+    ]
+    lines += [
+        f"# {phase}: port {s.port} within {s.position_error:.3g} m, {s.orientation_error:.3g} rad"
+        for phase, s in solutions.items()
+    ]
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / source.name
+    path.write_text("\n".join(lines) + "\n" + tomli_w.dumps(document))
+    return path
+
+
+def _solve(args: argparse.Namespace) -> int:
+    import tomli_w
+
+    document, solutions = joint_space_document(args.tree)
+    Path(args.output).write_text(tomli_w.dumps(document))
+    for phase, s in solutions.items():
+        print(
+            f"tip waypoint {phase}: port {s.port} within {s.position_error:.2e} m, "
+            f"{s.orientation_error:.2e} rad"
+        )
+    print(f"wrote {args.output} ({len(solutions)} tip waypoint(s) solved)")
+    return 0
+
+
 def _sdf(args: argparse.Namespace) -> int:
     tree = load_tree(args.tree)
     from oos_drake.multibody.tree_sdf import write_tree_sdf  # Drake only past validation
@@ -173,10 +284,10 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def register(subparsers) -> None:
-    """Add ``tree check|sdf|convert`` to the ``oos`` command line."""
+    """Add ``tree check|sdf|convert|solve`` to the ``oos`` command line."""
     tree = subparsers.add_parser(
         "tree",
-        help="spacecraft trees (scenario schema 2): check, sdf, convert",
+        help="spacecraft trees (scenario schema 2): check, sdf, convert, solve",
         description="Commands on a scenario file of schema version 2 (the spacecraft as a tree "
         "of bodies). `oos validate --scenario TREE` checks every configuration of its timeline.",
     )
@@ -194,3 +305,9 @@ def register(subparsers) -> None:
     convert.add_argument("scenario", help="schema-1 scenario file or shipped name")
     convert.add_argument("output", help="tree file to write (.toml)")
     convert.set_defaults(func=_convert)
+    solve = commands.add_parser(
+        "solve", help="tree with its tip-pose waypoints solved into joint waypoints (IK)"
+    )
+    solve.add_argument("tree", help="tree scenario file or shipped name")
+    solve.add_argument("output", help="tree file to write (.toml)")
+    solve.set_defaults(func=_solve)

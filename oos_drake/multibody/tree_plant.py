@@ -258,11 +258,13 @@ def build_docked_diagram(
 
 
 def _port_pose_in_world(handles: TreeDiagram, port: str, angles) -> RigidTransform:
-    """Pose of a port frame in the world (the root's centre-of-mass frame at rest), Drake FK."""
+    """Pose of a port frame in the world (the root's centre-of-mass frame at rest), Drake FK;
+    ``angles`` [rad] by body over the file's (a target's drives included)."""
     plant = handles.plant
     context = plant.CreateDefaultContext()
+    chosen = handles.tree.joint_angles(angles)
     for name, joint in handles.revolute_joints.items():
-        joint.set_angle(context, float(angles[name]))
+        joint.set_angle(context, float(chosen[name]))
     frame = plant.GetFrameByName(port, plant.GetModelInstanceByName(TREE_ASSEMBLY_MODEL))
     return frame.CalcPoseInWorld(context)
 

@@ -34,7 +34,9 @@ section naming the attitude-controlled body, and optional ports::
 
     [ports.DOCK]
     body = "HUB"
-    p_B_D = [0.0, 0.0, -0.9]
+    p_B_D = [0.0, 0.0, -0.9]          # [m]; optional R_B_D [-] (port axes in body axes) and
+                                      # block: name of the switch block of the connections a
+                                      # mission makes at this port (default delta_DOCK)
 
     [mission]                         # optional: phases and waypoints, see tree_mission
     [[mission.phases]]
@@ -335,12 +337,17 @@ class TreePort:
         Body frame origin -> port ``D`` in body axes [m].
     R_B_D : (3, 3) ndarray
         Port axes in body axes [-].
+    block : str
+        Name of the switch block of the connections a mission makes at this port of the tree
+        (``block`` in the file, e.g. ``"delta_C1"`` to keep a schema-1 scenario's name;
+        "": ``delta_<port>``, :func:`oos_drake.scenario.tree_model.switch_block_name`).
     """
 
     name: str
     body: str
     p_B_D: np.ndarray
     R_B_D: np.ndarray
+    block: str = ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -800,6 +807,7 @@ def _read_ports(raw: Any, bodies: Mapping[str, Any]) -> dict[str, TreePort]:
             body=body,
             p_B_D=t.array("p_B_D", (3,), [0.0, 0.0, 0.0]),
             R_B_D=t.array("R_B_D", (3, 3), np.eye(3).tolist()),
+            block=t.text("block", ""),
         )
         t.close()
         check_rotation(where, "R_B_D", port.R_B_D)

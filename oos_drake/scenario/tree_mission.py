@@ -5,7 +5,7 @@ its end, waypoints for the revolute joints of the tree (arm links, array drives,
 revolute joint)::
 
     [mission]
-    interpolation = "smooth"                # or "linear" (see below)
+    interpolation = "smooth"                # or "linear", "quintic" (see below)
 
     [[mission.phases]]
     name = "observation"
@@ -46,8 +46,10 @@ revolute joint)::
   :func:`oos_drake.scenario.tree.docked_tree`.
 - Between waypoints the angles are interpolated per phase: ``"smooth"`` (default) is the cubic
   ``q = q0 + (3 s^2 - 2 s^3) (q1 - q0)``, ``s = (t - t0) / (t1 - t0)``, so every joint starts and
-  ends each phase at rest; ``"linear"`` is ``q0 + s (q1 - q0)`` (constant rate in a phase). Both
-  stay between the two waypoints, hence within the joint limits.
+  ends each phase at rest; ``"quintic"`` is ``q0 + (10 s^3 - 15 s^4 + 6 s^5) (q1 - q0)`` (at
+  rest with zero acceleration at both ends: schema 1's joint trajectories,
+  :mod:`oos_drake.scenario.timeline`); ``"linear"`` is ``q0 + s (q1 - q0)`` (constant rate in a
+  phase). All stay between the two waypoints, hence within the joint limits.
 
 Without ``[mission]`` the timeline is the single instant ``t = 0`` at the file's angles.
 
@@ -97,7 +99,7 @@ __all__ = [
 ]
 
 #: Interpolation of the joint angles between two waypoints (see the module docstring).
-INTERPOLATIONS = ("smooth", "linear")
+INTERPOLATIONS = ("smooth", "linear", "quintic")
 #: Evenly spaced instants of :meth:`Timeline.configurations` by default (the phase boundaries
 #: are added): the configurations that ``oos validate`` checks.
 ANALYSIS_INSTANTS = 5
@@ -199,7 +201,7 @@ class TreeMission:
     phases : tuple of MissionPhase
         Phases in order, the first starting at ``t = 0``.
     interpolation : str
-        ``"smooth"`` or ``"linear"``.
+        ``"smooth"``, ``"linear"`` or ``"quintic"``.
     """
 
     phases: tuple[MissionPhase, ...]
@@ -283,7 +285,7 @@ class Timeline:
     phase_names : tuple of str
         The K phases.
     interpolation : str
-        ``"smooth"`` or ``"linear"``.
+        ``"smooth"``, ``"linear"`` or ``"quintic"``.
     tip_solutions : Mapping[str, IkSolution]
         Inverse-kinematics solution of each phase with a tip waypoint, by phase name (with the
         residual left).
@@ -328,7 +330,12 @@ class Timeline:
             return dict(zip(self.joint_names, self.waypoints[0].tolist(), strict=True))
         t0, t1 = self.boundaries[index], self.boundaries[index + 1]
         s = float(np.clip((time - t0) / (t1 - t0), 0.0, 1.0))
-        h = s if self.interpolation == "linear" else s * s * (3.0 - 2.0 * s)
+        if self.interpolation == "linear":
+            h = s
+        elif self.interpolation == "quintic":
+            h = s**3 * (10.0 + s * (-15.0 + 6.0 * s))
+        else:
+            h = s * s * (3.0 - 2.0 * s)
         q0, q1 = self.waypoints[index], self.waypoints[index + 1]
         # (1 - h) q0 + h q1: exactly the waypoint at either end of the phase
         return dict(zip(self.joint_names, ((1.0 - h) * q0 + h * q1).tolist(), strict=True))

@@ -21,6 +21,26 @@ from the wrench ``[F; T]`` at ``G`` [N, N m] to the acceleration twist ``[a; wdo
 from the bodies: ``w<i>_<appendage>`` (mode frequency [rad/s], 2 occurrences), ``m_<body>`` (3),
 ``Jxx_<body>``, ``Jyy_<body>``, ``Jzz_<body>`` (1 each), ``tau_<body>`` (``tan(angle/4)`` of a
 revolute joint, 16 occurrences). Substitute the joints' angles with :func:`tree_values`.
+
+A mission that captures or docks a target (``captured``, ``docked`` phases,
+:mod:`oos_drake.scenario.tree_mission`) has ONE model over all its phases,
+:func:`build_mission_tree_model`, as schema 1's mission LFR (``scenario.model``,
+``delta_C1``/``delta_C2``): each target is in it as a rigid body (direct model) whose parent
+acceleration is switched between the tree's ports it connects to,
+
+.. math::
+
+    \\ddot x_{D,T} = \\sum_k \\delta_k\\, T_k\\, \\ddot x_{D_k}, \\qquad
+    W_{D_k} = \\delta_k\\, T_k^T W_{D,T}, \\qquad
+    \\overrightarrow{G_T D} = \\sum_k \\delta_k\\, \\overrightarrow{G_T D'_k}
+
+(``T_k`` the frame change from the tree body of port ``D_k`` to the target at the mated ports,
+``D'_k`` the target's port), with one switch block ``delta_<PORT>`` in ``[0, 1]`` per port of
+the tree (12 + 4 occurrences): ``1`` through the phases that capture or dock the target at that
+port (a rigid weld), ``0`` otherwise (the target free: its wrench does not reach the tree).
+A docked phase is welded rigid in this model, like schema 1's mission LFR after its second
+docking; its spring-damper is the docking model of that phase
+(:func:`oos_drake.scenario.tree.docked_tree`).
 """
 
 from __future__ import annotations
@@ -36,18 +56,23 @@ from oos_drake.titop import (
     Component,
     angle_parameter,
     assemble,
+    connection_parameter,
     fixed_connection,
     flexible_appendage,
+    repeat,
     revolute_connection,
     rigid_body_direct,
     rigid_body_inverse,
 )
 from oos_drake.titop.parameters import mode_frequency_name, relative_parameter
-from oos_drake.titop.spatial import angle_to_tau
+from oos_drake.titop.spatial import angle_to_tau, frame_change_matrix
 
 __all__ = [
     "angle_block_name",
     "build_tree_model",
+    "build_mission_tree_model",
+    "mission_connections",
+    "switch_block_name",
     "tree_values",
     "tree_blocks",
     "mode_frequency_blocks",
@@ -134,17 +159,36 @@ def _docking_blocks(docking) -> dict:
     return blocks
 
 
-def _components(tree: SpacecraftTree) -> list[Component]:
+def _components(
+    tree: SpacecraftTree, extra_ports=None, *, skip_root: bool = False
+) -> list[Component]:
+    """Components of every body and joint of ``tree``.
+
+    ``extra_ports``: ``{body: [(signal suffix, p_B_D [m]), ...]}``, more ports of rigid bodies
+    (inputs ``W_<suffix>``, outputs ``xdd_<suffix>``); ``skip_root``: leave the root body out
+    (a target, whose root :func:`_target_components` models)."""
     components = []
     root = tree.root
+    extra_ports = extra_ports or {}
     for body in tree.bodies:
         name = body.name
         children = [tree.body(c) for c in tree.children(name)]
+        if name in extra_ports and body.kind != "rigid":
+            raise ValueError(
+                f"{name}: a target connects to a port of this flexible body: capture and "
+                "docking ports must be on rigid bodies"
+            )
+        if skip_root and name == root:
+            continue
         if body.kind == "rigid":
             offset = _origin_offset(body)
             ports_GP = [offset + _joint_point(tree, c) for c in children]
             child_in = [f"W_J{c.name}_{name}" for c in children]
             child_out = [f"xdd_J{c.name}_{name}" for c in children]
+            for suffix, p_B_D in extra_ports.get(name, ()):
+                ports_GP.append(offset + np.asarray(p_B_D, dtype=float))
+                child_in.append(f"W_{suffix}")
+                child_out.append(f"xdd_{suffix}")
             mass, inertia = hub_parameters(body)
             if name == root:
                 system = rigid_body_inverse(mass, inertia, ports_GP, body=name)
@@ -238,6 +282,136 @@ def _tree_model(tree: SpacecraftTree) -> LFR:
     """One assembly per tree object (trees and LFRs are immutable)."""
     root = tree.root
     model = assemble(_components(tree), inputs=[f"W_ext_{root}"], outputs=[f"xdd_G_{root}"])
+    return model.with_names(
+        inputs=[f"{n}_{root}" for n in _INPUTS], outputs=[f"{n}_{root}" for n in _OUTPUTS]
+    )
+
+
+def switch_block_name(tree: SpacecraftTree, port: str) -> str:
+    """Name of the switch block of the connections at port ``port`` of the tree: the port's
+    ``block``, else ``delta_<port>``."""
+    return tree.ports[port].block or f"delta_{port}"
+
+
+def mission_connections(tree: SpacecraftTree) -> tuple[tuple[str, str], ...]:
+    """The ``(port, target port)`` pairs the mission's phases capture or dock, in mission order
+    (each once).
+
+    Raises
+    ------
+    ValueError
+        A port of the tree mated with two different target ports (its switch block would mean
+        two things).
+    """
+    phases = () if tree.mission is None else tree.mission.phases
+    pairs: list[tuple[str, str]] = []
+    for phase in phases:
+        pair = phase.captured if phase.docked is None else phase.docked.connection
+        if pair is None or tuple(pair) in pairs:
+            continue
+        other = [p for p in pairs if p[0] == pair[0]]
+        if other:
+            raise ValueError(
+                f"mission.{phase.name}: port {pair[0]} is mated with {pair[1]} here and with "
+                f"{other[0][1]} in another phase: one target port per port of the tree"
+            )
+        pairs.append(tuple(pair))
+    return tuple(pairs)
+
+
+def _target_components(tree: SpacecraftTree, target: SpacecraftTree, pairs) -> list[Component]:
+    """A target, switched between the tree's ports it mates with (module docstring)."""
+    body = target.bodies[0]
+    name = body.name
+    offset = _origin_offset(body)
+    children = [target.body(c) for c in target.children(name)]
+    terms, links = [], []
+    for port, target_port in pairs:
+        spec, mate = tree.ports[port], target.ports[target_port]
+        if mate.body != name:
+            raise ValueError(
+                f"ports.{target_port}: a captured or docked port must be on the target's root "
+                f"body '{name}', not on '{mate.body}'"
+            )
+        delta = connection_parameter(switch_block_name(tree, port))
+        terms.append((delta, offset + np.asarray(mate.p_B_D, dtype=float)))
+        dcm_T_B = np.asarray(mate.R_B_D) @ np.asarray(spec.R_B_D).T  # v_T = dcm v_B
+        links.append((delta, dcm_T_B, f"S{port}_{spec.body}"))
+    mass, inertia = hub_parameters(body)
+    root = Component(
+        name,
+        rigid_body_direct(
+            mass,
+            inertia,
+            [offset + _joint_point(target, c) for c in children],
+            np.zeros(3),
+            parent_terms=terms,
+            body=name,
+        ),
+        inputs=[f"W_J{c.name}_{name}" for c in children] + [f"xdd_S_{name}"],
+        outputs=[f"xdd_J{c.name}_{name}" for c in children] + [f"W_S_{name}"],
+    )
+    n = len(links)
+    size = 6 * n + 6
+    switches = None
+    for k, (delta, dcm, _) in enumerate(links):
+        t = frame_change_matrix(dcm)
+        select = np.zeros((12, size))  # [T xdd_k; T^T W_T]
+        select[:6, 6 * k : 6 * k + 6] = t
+        select[6:, 6 * n :] = t.T
+        spread = np.zeros((size, 12))  # -> [xdd_T; W_1 .. W_n]
+        spread[:6, :6] = np.eye(6)
+        spread[6 + 6 * k : 12 + 6 * k, 6:] = np.eye(6)
+        term = spread @ repeat(delta, 12) @ select
+        switches = term if switches is None else switches + term
+    switch = Component(
+        f"switches_{name}",
+        switches,
+        inputs=[f"xdd_{suffix}" for *_, suffix in links] + [f"W_S_{name}"],
+        outputs=[f"xdd_S_{name}"] + [f"W_{suffix}" for *_, suffix in links],
+    )
+    return [root, switch, *_components(target, skip_root=True)]
+
+
+def build_mission_tree_model(tree: SpacecraftTree) -> LFR:
+    """One LFR of ``tree`` over all its mission's phases, targets included by switch blocks.
+
+    Without captured or docked phases: :func:`build_tree_model`. Otherwise every target the
+    mission mates is in the model, switched between the tree's ports it mates with (module
+    docstring): blocks ``delta_<PORT>`` (range ``[0, 1]``, 12 + 4 occurrences), substituted
+    by :meth:`oos_drake.scenario.tree_scenario.TreeScenario.mission_values` (``1`` through the
+    phases that capture or dock at ``PORT``). With one ``delta_<PORT> = 1`` its nominal model
+    is :func:`build_tree_model` of :func:`~oos_drake.scenario.tree.captured_tree` (the target
+    welded at that port); with all ``0`` that of ``tree`` (plus the free target's uncoupled
+    modes, if it has flexible bodies). Cached per tree object.
+
+    Raises
+    ------
+    ValueError
+        A mated port on a flexible body, a target port off its target's root body, or one port
+        mated with two target ports.
+    """
+    if not mission_connections(tree):
+        return build_tree_model(tree)
+    return _mission_tree_model(tree)
+
+
+@functools.lru_cache(maxsize=8)
+def _mission_tree_model(tree: SpacecraftTree) -> LFR:
+    pairs = mission_connections(tree)
+    by_target: dict[str, list] = {}
+    for port, target_port in pairs:
+        owner = next(t for t, sub in tree.targets.items() if target_port in sub.ports)
+        by_target.setdefault(owner, []).append((port, target_port))
+    extra: dict[str, list] = {}
+    for port, _ in pairs:
+        spec = tree.ports[port]
+        extra.setdefault(spec.body, []).append((f"S{port}_{spec.body}", spec.p_B_D))
+    components = _components(tree, extra)
+    for owner, owned in by_target.items():
+        components += _target_components(tree, tree.targets[owner], owned)
+    root = tree.root
+    model = assemble(components, inputs=[f"W_ext_{root}"], outputs=[f"xdd_G_{root}"])
     return model.with_names(
         inputs=[f"{n}_{root}" for n in _INPUTS], outputs=[f"{n}_{root}" for n in _OUTPUTS]
     )

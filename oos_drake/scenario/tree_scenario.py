@@ -24,8 +24,12 @@ quantity), the scheduled blocks ``tau_<body> = tan(angle / 4)`` of the timeline'
 What a tree does not provide (yet) is refused by name: the schema-1 data of the paper's
 topology (``hubs``, ``arrays``, ``arm``, ``ports``, ``docking``, ...: the Drake mission twin
 of the confirmation and the campaign's Drake simulator read them) raise :class:`NotForTrees`,
-a ``ValueError`` with a one-line message; and a mission whose phases capture or dock a target
-(the model changes shape with the phase) is refused by :meth:`TreeScenario.mission_values`.
+a ``ValueError`` with a one-line message. A mission whose phases capture or dock a target has
+one model over all its phases (switch blocks ``delta_<PORT>``,
+:func:`~oos_drake.scenario.tree_model.build_mission_tree_model`); a mission with tip-pose
+waypoints has no timeline here (their inverse kinematics is the Drake twin's, a layer above):
+``oos run`` solves them into a joint-space copy of the file
+(:func:`oos_drake.app.tree.joint_space_scenario`) and runs the stages on it.
 
 Examples
 --------
@@ -138,8 +142,8 @@ class TreeScenario:
         The validated tree.
     timeline : Timeline or None
         Its mission's timeline; None when the mission has tip-pose waypoints (their inverse
-        kinematics is the Drake twin's, a layer above the scenario's: ``oos validate`` solves
-        them; the model arrays of such a tree are not available yet).
+        kinematics is the Drake twin's, a layer above the scenario's: ``oos tree solve`` and
+        ``oos run`` write the joint-space file whose timeline this is).
     mission : TreeMissionSpan
         The mission interval.
     source : Path
@@ -190,21 +194,28 @@ class TreeScenario:
         return _unpickle, (str(self.source), digest)
 
     def mission_model(self):
-        """The uncertain plant ``[F; T]_G -> [a; wdot]_G`` of the controlled body
-        (:func:`~oos_drake.scenario.tree_model.build_tree_model`; scheduled blocks
-        ``tau_<body>``)."""
-        from oos_drake.scenario.tree_model import build_tree_model
+        """The uncertain plant ``[F; T]_G -> [a; wdot]_G`` of the controlled body over the
+        whole mission (:func:`~oos_drake.scenario.tree_model.build_mission_tree_model`:
+        scheduled blocks ``tau_<body>`` and, when the mission captures or docks a target, the
+        switch blocks ``delta_<PORT>``)."""
+        from oos_drake.scenario.tree_model import build_mission_tree_model
 
-        return build_tree_model(self.tree)
+        return build_mission_tree_model(self.tree)
 
     def mission_values(self, times) -> dict[str, np.ndarray]:
-        """Scheduled block values ``tau_<body> = tan(angle / 4)`` at mission ``times`` [s].
+        """Scheduled block values at mission ``times`` [s]: ``tau_<body> = tan(angle / 4)`` of
+        the timeline's joint angles and each switch ``delta_<PORT>`` (``1`` in the phases that
+        capture or dock a target at ``PORT``, else ``0``; at a boundary: the phase ending there);
+        the revolute joints of a mated target at their file angles.
 
         Raises
         ------
         ValueError
-            A time in a phase that captures or docks a target (one line, naming the phase).
+            The mission has tip-pose waypoints (no timeline: their inverse kinematics is the
+            Drake twin's; ``oos tree solve`` writes the joint-space file, ``oos run`` does it
+            itself).
         """
+        from oos_drake.scenario.tree_model import mission_connections, switch_block_name
         from oos_drake.titop.spatial import angle_to_tau
 
         times = np.atleast_1d(np.asarray(times, dtype=float))
@@ -213,22 +224,84 @@ class TreeScenario:
             tips = [p.name for p in self.tree.mission.phases if p.tip is not None]
             raise ValueError(
                 f"scenario {self.name}: mission phases {', '.join(tips)} place a port by "
-                "inverse kinematics (the Drake twin's): the model arrays of a tree with "
-                "tip-pose waypoints are not available yet (oos validate solves them)"
+                "inverse kinematics (the Drake twin's): solve them first with "
+                f"`oos tree solve {self.source} OUT.toml` and use OUT.toml (oos run does it)"
             )
-        for t in times:
-            if timeline.captured_at(t) is not None or timeline.docked_at(t) is not None:
-                raise ValueError(
-                    f"scenario {self.name}: mission phase {timeline.phase_at(t)!r} "
-                    f"(t = {t:g} s) holds a target: the model arrays of the synthesis and "
-                    "the analysis over captured or docked phases of a tree are not available "
-                    "yet (oos validate checks them)"
-                )
         angles = [timeline.angles(t) for t in times]
-        return {
+        values = {
             self.tree.angle_block(body): np.array([float(angle_to_tau(a[body])) for a in angles])
             for body in timeline.joint_names
         }
+        mated = []
+        for t in times:
+            docked = timeline.docked_at(t)
+            mated.append(timeline.captured_at(t) if docked is None else docked.connection)
+        targets = {}
+        for port, target_port in mission_connections(self.tree):
+            values[switch_block_name(self.tree, port)] = np.array(
+                [1.0 if pair == (port, target_port) else 0.0 for pair in mated]
+            )
+            owner = next(t for t in self.tree.targets.values() if target_port in t.ports)
+            targets[owner.name] = owner
+        for target in targets.values():  # a target's own drives hold their file angles
+            for body, angle in target.operating_angles().items():
+                values[target.angle_block(body)] = np.full(times.size, float(angle_to_tau(angle)))
+        return values
+
+    @property
+    def docked_phases(self) -> tuple[str, ...]:
+        """Names of the mission phases that hold a target by a spring-damper (``docked``)."""
+        phases = () if self.tree.mission is None else self.tree.mission.phases
+        return tuple(p.name for p in phases if p.docked is not None)
+
+    def docking_model(self, phase: str):
+        """The uncertain plant of docked phase ``phase``: the target held by its spring-damper
+        (:func:`~oos_drake.scenario.tree.docked_tree`, blocks ``k_shear_<PORT>``,
+        ``k_tors_<PORT>``, ``d_shear_<PORT>``, ``d_tors_<PORT>`` over their declared ranges),
+        where the mission model (:meth:`mission_model`) welds it rigid. Substitute
+        :meth:`docking_values`. The docked phase's subset of its own, for the analysis.
+
+        Raises
+        ------
+        ValueError
+            ``phase`` is not a docked phase (one line naming them).
+        """
+        from oos_drake.scenario.tree import docked_tree
+        from oos_drake.scenario.tree_model import build_tree_model
+
+        return build_tree_model(docked_tree(self.tree, self._docking(phase)))
+
+    def docking_values(self, phase: str, times) -> dict[str, np.ndarray]:
+        """Scheduled block values ``tau_<body>`` of :meth:`docking_model` at mission ``times``
+        [s] within docked phase ``phase`` (the timeline's angles; the target's drives at their
+        file angles).
+
+        Raises
+        ------
+        ValueError
+            ``phase`` is not a docked phase, or a time outside it.
+        """
+        from oos_drake.scenario.tree import docked_tree
+        from oos_drake.scenario.tree_model import tree_values
+
+        docked = docked_tree(self.tree, self._docking(phase))
+        times = np.atleast_1d(np.asarray(times, dtype=float))
+        rows = []
+        for t in times:
+            if self.timeline.phase_at(t) != phase:
+                raise ValueError(f"docking_values: t = {t:g} s is not in phase {phase!r}")
+            rows.append(tree_values(docked, self.timeline.angles(t)))
+        return {name: np.array([row[name] for row in rows]) for name in rows[0]}
+
+    def _docking(self, phase: str):
+        phases = () if self.tree.mission is None else self.tree.mission.phases
+        found = next((p.docked for p in phases if p.name == phase and p.docked), None)
+        if found is None:
+            raise ValueError(
+                f"scenario {self.name}: {phase!r} is not a docked phase (docked phases: "
+                f"{', '.join(self.docked_phases) or 'none'})"
+            )
+        return found
 
     def bodies_table(self):
         """One row per body of the tree (and of each target): ``body``, ``kind``,
@@ -334,9 +407,11 @@ def unsupported_stages(scenario_file: str | Path) -> dict[str, str]:
     dict
         ``{}`` for a schema-1 file; for a schema-2 tree: ``"model figures"`` (the paper's
         section-2 figures), ``"confirm"`` (the Drake mission twin with its flight software is
-        the paper's topology) and ``"campaign"`` (no campaign simulator models a tree); and
-        ``"controller"``, ``"analysis"``, ``"margins"`` when its mission captures or docks a
-        target or has tip-pose waypoints (``servicer_7dof``).
+        the paper's topology) and ``"campaign"`` (no campaign simulator models a tree). A
+        mission that captures or docks a target runs every other stage on its switched model
+        (:func:`~oos_drake.scenario.tree_model.build_mission_tree_model`); one with tip-pose
+        waypoints too, once ``oos run`` has solved them
+        (:func:`oos_drake.app.tree.joint_space_scenario`).
     """
     import tomllib
 
@@ -344,27 +419,7 @@ def unsupported_stages(scenario_file: str | Path) -> dict[str, str]:
         document = tomllib.load(stream)
     if document.get("schema_version") != 2:
         return {}
-    phases = document.get("mission", {}).get("phases", [])
-    phases = [p for p in (phases if isinstance(phases, list) else []) if isinstance(p, dict)]
-    held = [str(p.get("name")) for p in phases if "captured" in p or "docked" in p]
-    tips = [str(p.get("name")) for p in phases if "tip" in p]
-    why = []
-    if held:
-        why.append(
-            f"mission phases {', '.join(held)} hold a target: the model arrays over captured "
-            "or docked phases of a tree are not available yet"
-        )
-    if tips:
-        why.append(
-            f"mission phases {', '.join(tips)} place a port by inverse kinematics: the model "
-            "arrays of a tree with tip-pose waypoints are not available yet"
-        )
-    model_arrays = {}
-    if why:  # the stages on the model arrays over the mission
-        reason = "; ".join(why) + " (the validate stage checks every configuration)"
-        model_arrays = {name: reason for name in ("controller", "analysis", "margins")}
     return {
-        **model_arrays,
         "model figures": "the paper's section-2 figures (moments, docking sweeps, arm) need "
         "its topology; a tree has its block table only",
         "confirm": "the Drake mission twin with the flight software (multibody/mission.py) is "

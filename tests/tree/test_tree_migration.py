@@ -1,4 +1,5 @@
-"""Schema-1 -> schema-2: the paper's chaser as a tree gives the paper's LFR with the target free."""
+"""Schema-1 -> schema-2: the paper's chaser as a tree gives the paper's LFR with the target free;
+the converted file with its target and mission gives schema 1's mission LFR over the mission."""
 
 from __future__ import annotations
 
@@ -33,9 +34,16 @@ def test_paper_chaser_tree_equals_paper_model_with_target_free():
 def test_convert_command_writes_a_loadable_tree(tmp_path, capsys):
     out = tmp_path / "paper_tree.toml"
     assert main(["tree", "convert", "paper", str(out)]) == 0
-    assert "not converted (no place in schema 2 yet): hubs.RH2" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "not converted (no place in schema 2 yet): docking.stiffness_sweep" in printed
     tree = load_tree(out)
     assert tree.root == "RH1" and tree.ports["J7"].body == "L6"
+    assert list(tree.targets) == ["RH2"] and [b.name for b in tree.targets["RH2"].bodies] == [
+        "RH2",
+        "SA3",
+        "SA4",
+    ]
+    assert tree.mission.interpolation == "quintic" and tree.mission.duration == 1500.0
     assert tree.control.requirements == load_scenario("paper").control
 
 
@@ -107,3 +115,74 @@ def test_bad_block_names_are_one_line(edit, message):
     edit(document["bodies"])
     with pytest.raises(ScenarioError, match=message):
         parse_tree(document)
+
+
+def test_converted_paper_mission_lfr_equals_schema_1s_at_the_analysis_configurations():
+    """The converted file (target, captures, docking, quintic timeline) gives schema 1's mission
+    LFR: the same blocks with the same occurrences, the same scheduled values at the 330
+    analysis configurations (``linspace(0, 1500, 330)``: none on a switching instant), and the
+    same frequency responses there at random values of the uncertain blocks."""
+    from pathlib import Path
+
+    from oos_drake.scenario.model import mission_values
+    from oos_drake.scenario.tree_scenario import tree_scenario
+
+    paper = load_scenario("paper")
+    converted = tree_scenario(tree_document_from_v1(paper)[0], Path("paper_tree.toml"))
+    expected, model = build_mission_model(paper), converted.mission_model()
+    assert model.occurrences == expected.occurrences
+    times = np.linspace(paper.mission.t_start, paper.mission.t_end, 330)
+    values, schema1 = converted.mission_values(times), mission_values(times, paper)
+    assert sorted(values) == sorted(schema1)
+    for name in values:
+        np.testing.assert_allclose(values[name], schema1[name], rtol=0, atol=1e-15, err_msg=name)
+    assert set(zip(values["delta_C1"], values["delta_C2"], strict=True)) == {
+        (0.0, 0.0),
+        (1.0, 0.0),
+        (0.0, 1.0),
+    }
+    rng = np.random.default_rng(30)
+    picked = np.unique(np.r_[rng.choice(times.size, 10, replace=False), 0, times.size - 1])
+    omega = 2 * np.pi * np.logspace(-2, 2, 60)  # [rad/s]
+    for _ in range(2):
+        draw = {
+            name: rng.uniform(*block.range)
+            for name, block in expected.uncertainty.items()
+            if name not in values
+        }
+        fixed = {name: np.full(picked.size, value) for name, value in draw.items()}
+        a = usubs(model, {k: v[picked] for k, v in values.items()} | fixed).nominal
+        b = usubs(expected, {k: v[picked] for k, v in schema1.items()} | fixed).nominal
+        Ha, Hb = np.asarray(a.freqresp(omega)), np.asarray(b.freqresp(omega))
+        assert np.abs(Ha - Hb).max() <= 1e-10 * np.abs(Hb).max()
+
+
+@pytest.mark.drake
+def test_converted_paper_docked_twin_rests_with_its_ports_together():
+    """The converted paper's docked twin (a target with its own drives, SA3 and SA4, on a
+    floating joint and a bushing): at the twin's operating point the target's D3 frame is the
+    chaser's D1 frame (Drake's forward kinematics, position and axes)."""
+    pytest.importorskip("pydrake")
+    from oos_drake.multibody.tree_plant import build_docked_diagram
+    from oos_drake.multibody.tree_sdf import TREE_ASSEMBLY_MODEL
+    from oos_drake.scenario.tree_mission import build_timeline
+
+    tree = parse_tree(tree_document_from_v1("paper")[0])
+    timeline = build_timeline(tree)
+    time = 1200.0
+    docking = timeline.docked_at(time)
+    assert docking.connection == ("D1", "D3")
+    angles = timeline.angles(time)
+    handles = build_docked_diagram(tree, docking, angles)
+    plant = handles.plant
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, np.zeros(plant.num_positions()))
+    chosen = handles.tree.joint_angles(angles)
+    for name, joint in handles.revolute_joints.items():
+        joint.set_angle(context, chosen[name])
+    chaser = plant.GetModelInstanceByName(TREE_ASSEMBLY_MODEL)
+    target = plant.GetModelInstanceByName(f"RH2::{TREE_ASSEMBLY_MODEL}")
+    X_D1 = plant.GetFrameByName("D1", chaser).CalcPoseInWorld(context)
+    X_D3 = plant.GetFrameByName("D3", target).CalcPoseInWorld(context)
+    np.testing.assert_allclose(X_D3.translation(), X_D1.translation(), atol=1e-12)
+    np.testing.assert_allclose(X_D3.rotation().matrix(), X_D1.rotation().matrix(), atol=1e-12)

@@ -30,9 +30,12 @@ def test_timeline_meets_the_waypoints_at_phase_ends():
         assert timeline.phase_at(end) == phase["name"]
 
 
-@pytest.mark.parametrize(("interpolation", "h"), [("smooth", 0.15625), ("linear", 0.25)])
+@pytest.mark.parametrize(
+    ("interpolation", "h"), [("smooth", 0.15625), ("linear", 0.25), ("quintic", 0.103515625)]
+)
 def test_interpolation_by_hand(interpolation, h):
-    """A quarter into the slew: 3 s^2 - 2 s^3 = 0.15625 (smooth) or s = 0.25 (linear)."""
+    """A quarter into the slew: 3 s^2 - 2 s^3 = 0.15625 (smooth), s = 0.25 (linear) or
+    10 s^3 - 15 s^4 + 6 s^5 = 0.15625 - 0.05859375 + 0.005859375 (quintic)."""
     document = shipped_document("flexible_satellite")
     document["mission"]["interpolation"] = interpolation
     timeline = build_timeline(parse_tree(document))
@@ -78,7 +81,7 @@ BAD_MISSIONS = {
     ),
     "bad interpolation": (
         lambda m: m.update(interpolation="spline"),
-        r"^mission: interpolation must be one of \('smooth', 'linear'\), got 'spline'$",
+        r"^mission: interpolation must be one of \('smooth', 'linear', 'quintic'\), got 'spline'$",
     ),
     "tip port that does not exist": (
         lambda m: m["phases"][1].update(tip={"port": "GRAB", "p_G_D": [0, 0, 0]}),
