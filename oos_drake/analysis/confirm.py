@@ -745,6 +745,7 @@ def _Twin(peak: Peak, K, options: ConfirmOptions, scenario, near_hz, specs, desi
     twin = _TreeTwin if is_tree(scenario) else _MissionTwin
     return twin(peak, K, options, scenario, near_hz, specs, design)
 
+
 def _nonlinear_boundary(twin, guess: float, alpha_top: float):
     """Bisection of the decay rate's sign change near ``guess``, below ``alpha_top``."""
     o = twin.options

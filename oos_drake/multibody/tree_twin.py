@@ -307,4 +307,3 @@ def run_tree_twin(
         phi=np.asarray(states.data()[q : q + 3, :n]).T,
         torques=np.asarray(torques.data()[:, :n]).T,
     )
-

@@ -333,10 +333,9 @@ def unsupported_stages(scenario_file: str | Path) -> dict[str, str]:
     -------
     dict
         ``{}`` for a schema-1 file; for a schema-2 tree: ``"model figures"`` (the paper's
-        section-2 figures), ``"confirm"`` (the Drake mission twin with its flight software is
-        the paper's topology) and ``"campaign"`` (no campaign simulator models a tree); and
-        ``"controller"``, ``"analysis"``, ``"margins"`` when its mission captures or docks a
-        target or has tip-pose waypoints (``servicer_7dof``).
+        section-2 figures) and ``"campaign"`` (no campaign simulator models a tree); and
+        ``"controller"``, ``"analysis"``, ``"confirm"``, ``"margins"`` when its mission
+        captures or docks a target or has tip-pose waypoints (``servicer_7dof``).
     """
     import tomllib
 
@@ -360,15 +359,13 @@ def unsupported_stages(scenario_file: str | Path) -> dict[str, str]:
             "arrays of a tree with tip-pose waypoints are not available yet"
         )
     model_arrays = {}
-    if why:  # the stages on the model arrays over the mission
+    if why:  # the stages on the model arrays over the mission (and the confirmation of them)
         reason = "; ".join(why) + " (the validate stage checks every configuration)"
-        model_arrays = {name: reason for name in ("controller", "analysis", "margins")}
+        model_arrays = {name: reason for name in ("controller", "analysis", "confirm", "margins")}
     return {
         **model_arrays,
         "model figures": "the paper's section-2 figures (moments, docking sweeps, arm) need "
         "its topology; a tree has its block table only",
-        "confirm": "the Drake mission twin with the flight software (multibody/mission.py) is "
-        "the paper's topology; a tree's twin is checked by the validate stage",
         "campaign": "no campaign simulator models a schema-2 tree yet (the Drake mission "
         "simulator is the paper's topology)",
     }

@@ -174,8 +174,9 @@ def test_tree_twin_verdicts_match_the_eigenvalues_of_the_drake_sampled_loop(setu
     specs = closed.uncertainty
     # the sampled boundary by eigenvalues (Drake plant), then 5 % beyond it
     alpha_s = boundary_along_ray(
-        lambda a: _drake_sampled_growth(scenario, controller, peak, angles, a)[0]
-        > GROWTH_TOLERANCE,
+        lambda a: (
+            _drake_sampled_growth(scenario, controller, peak, angles, a)[0] > GROWTH_TOLERANCE
+        ),
         2.0,
         steps=8,
         rtol=1e-3,
