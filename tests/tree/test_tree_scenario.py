@@ -14,6 +14,7 @@ import re
 import tomllib
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from oos_drake.scenario.data import load_scenario, scenario_path
@@ -149,7 +150,6 @@ def test_what_a_tree_lacks_is_one_line_naming_it(flexible, tmp_path, capsys):
     assert unsupported_stages(scenario_path("paper")) == {}
     assert set(unsupported_stages(scenario_path("flexible_satellite"))) == {
         "model figures",
-        "confirm",
         "campaign",
     }
     assert set(unsupported_stages(scenario_path("servicer_7dof"))) == {
@@ -205,11 +205,17 @@ def test_oos_run_on_a_tree_end_to_end(tmp_path, monkeypatch, capsys):
     assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
     printed = capsys.readouterr().out
     timings = json.loads((out / "timings.json").read_text())
-    assert set(timings["skipped"]) == {"model figures", "confirm", "campaign"}
+    assert set(timings["skipped"]) == {"model figures", "campaign"}
     for stage in timings["skipped"]:
         assert f"[oos run] {stage}: SKIPPED for this scenario: " in printed
         assert re.search(rf"\n  {stage} +SKIPPED: ", printed)
-    assert not (out / "confirm").exists() and not list(out.glob("campaign-*"))
+    assert not list(out.glob("campaign-*"))
+    # the confirmation on the tree's own twin: every certified peak, the twin's boundary that
+    # of the sampled-data loop (tests/tree/test_tree_confirm.py checks those against eig)
+    confirmation = pd.read_parquet(out / "confirm" / "confirmation.parquet")
+    peaks = pd.read_parquet(out / "analysis" / "stability_peaks.parquet")
+    assert len(confirmation) == int((peaks["mu lower [-]"] > 0).sum()) >= 1
+    assert confirmation["status"].str.startswith("confirmed").all(), confirmation["status"]
     assert (out / "report.html").is_file()
 
     # the twin: every configuration of the timeline within 1e-6 (its own Drake model)
