@@ -38,7 +38,8 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import LogVectorOutput
+from pydrake.systems.primitives import Adder, LogVectorOutput, MatrixGain, TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
 
 from oos_drake.multibody.flight_software import FlightSoftware, FlightSoftwareDesign
 from oos_drake.multibody.plant_parts import add_floating_joint
@@ -46,7 +47,14 @@ from oos_drake.multibody.tree_plant import _parse_tree_sdf
 from oos_drake.multibody.tree_sdf import joint_name, write_tree_sdf
 from oos_drake.scenario.tree import SpacecraftTree
 
-__all__ = ["TreeTwin", "TreeRun", "build_tree_twin", "run_tree_twin", "tree_with_values"]
+__all__ = [
+    "TreeTwin",
+    "TreeRun",
+    "build_tree_twin",
+    "joint_trajectory",
+    "run_tree_twin",
+    "tree_with_values",
+]
 
 _MODE = re.compile(r"^w(\d+)_(.+)$")
 _INERTIA = {"Jxx": 0, "Jyy": 1, "Jzz": 2}
@@ -131,6 +139,9 @@ class TreeTwin:
         Plant state and the flight software's ``log`` output ``[u; T_rw; T; T_dist]`` [N m].
     tree : SpacecraftTree
         The (substituted) tree it was built from.
+    trajectory : PiecewisePolynomial or None
+        The joint angles the revolute joints follow (rows: ``revolute_joints`` in order)
+        [rad]; None: frozen at ``angles``.
     """
 
     diagram: Diagram
@@ -142,6 +153,7 @@ class TreeTwin:
     state_logger: object
     torque_logger: object
     tree: SpacecraftTree
+    trajectory: PiecewisePolynomial | None = None
 
 
 def build_tree_twin(
@@ -151,6 +163,9 @@ def build_tree_twin(
     *,
     log_rate: float = 10.0,
     perturbation_states: int = 0,
+    timeline=None,
+    joint_bandwidth: float = 200.0,
+    joint_damping_ratio: float = 0.7,
 ) -> TreeTwin:
     """Build the closed-loop twin of ``tree`` (its SDF generated into a temporary folder).
 
@@ -167,6 +182,15 @@ def build_tree_twin(
     perturbation_states : int
         States of the flight software's dynamic perturbation block
         (:func:`~oos_drake.multibody.flight_software.perturbation_block`).
+    timeline : Timeline, optional
+        The mission's joint angles (:class:`~oos_drake.scenario.tree_mission.Timeline`): the
+        revolute joints are then motion-driven along it (a stiff joint-space PD on each joint's
+        inertia, built from C++ primitives, as the paper's mission twin), and ``angles`` is
+        ignored. Default: frozen at ``angles``.
+    joint_bandwidth : float
+        Joint PD bandwidth [rad/s] (motion-driven joints).
+    joint_damping_ratio : float
+        Joint PD damping ratio [-].
     """
     chosen = tree.joint_angles(angles)
     builder = DiagramBuilder()
@@ -191,15 +215,24 @@ def build_tree_twin(
         ),
     )
     builder.Connect(plant.get_state_output_port(), fsw.get_input_port(0))
-    builder.Connect(
-        fsw.GetOutputPort("generalized_force"), plant.get_applied_generalized_force_input_port()
-    )
+    revolute = {name: plant.GetJointByName(joint_name(name)) for name in tree.revolute_bodies}
+    trajectory = None
+    if timeline is None or not revolute:
+        builder.Connect(
+            fsw.GetOutputPort("generalized_force"),
+            plant.get_applied_generalized_force_input_port(),
+        )
+    else:
+        trajectory = joint_trajectory(timeline, tuple(revolute))
+        forces = _add_joint_drives(
+            builder, plant, revolute, trajectory, joint_bandwidth, joint_damping_ratio, chosen,
+        )  # fmt: skip
+        builder.Connect(fsw.GetOutputPort("generalized_force"), forces.get_input_port(2))
     period = 1.0 / float(log_rate)
     state_logger = LogVectorOutput(plant.get_state_output_port(), builder, period)
     torque_logger = LogVectorOutput(fsw.GetOutputPort("log"), builder, period)
     diagram = builder.Build()
     diagram.set_name(f"tree_twin_{tree.name}")
-    revolute = {name: plant.GetJointByName(joint_name(name)) for name in tree.revolute_bodies}
     return TreeTwin(
         diagram=diagram,
         plant=plant,
@@ -210,7 +243,56 @@ def build_tree_twin(
         state_logger=state_logger,
         torque_logger=torque_logger,
         tree=tree,
+        trajectory=trajectory,
     )
+
+
+def joint_trajectory(timeline, bodies) -> PiecewisePolynomial:
+    """The timeline's joint angles of ``bodies`` as a Drake trajectory [rad] (exact: the
+    ``"smooth"`` interpolation is the cubic Hermite with zero rates at the waypoints, the
+    ``"linear"`` one the first-order hold)."""
+    index = [timeline.joint_names.index(b) for b in bodies]
+    breaks = np.asarray(timeline.boundaries, dtype=float)
+    samples = np.asarray(timeline.waypoints, dtype=float)[:, index].T
+    if breaks.size < 2:  # a mission of one instant: hold it
+        breaks = np.array([0.0, 1.0])
+        samples = np.hstack([samples, samples])
+    if timeline.interpolation == "linear":
+        return PiecewisePolynomial.FirstOrderHold(breaks, samples)
+    return PiecewisePolynomial.CubicHermite(breaks, samples, np.zeros_like(samples))
+
+
+def _add_joint_drives(builder, plant, revolute, trajectory, bandwidth, damping, angles):
+    """``tau = kp (q_ref - q) + kd (v_ref - v)`` on each joint of ``revolute`` (by body; kp,
+    kd on the joint's own inertia at ``angles`` [rad]) from C++ primitives; returns the
+    3-input adder of the generalized forces (inputs 0, 1: the PD terms; 2: free for the flight
+    software)."""
+    nq, nv = plant.num_positions(), plant.num_velocities()
+    context = plant.CreateDefaultContext()
+    for name, joint in revolute.items():
+        joint.set_angle(context, float(angles[name]))
+    M = plant.CalcMassMatrix(context)
+    joints = list(revolute.values())
+    n = len(joints)
+    K_state = np.zeros((nv, nq + nv))
+    K_ref = np.zeros((nv, 2 * n))
+    for i, joint in enumerate(joints):
+        qi, vi = joint.position_start(), joint.velocity_start()
+        kp, kd = bandwidth**2 * M[vi, vi], 2.0 * damping * bandwidth * M[vi, vi]
+        K_state[vi, qi], K_state[vi, nq + vi] = -kp, -kd
+        K_ref[vi, i], K_ref[vi, n + i] = kp, kd
+    source = builder.AddNamedSystem(
+        "joint_trajectory", TrajectorySource(trajectory, output_derivative_order=1)
+    )
+    state_gain = builder.AddNamedSystem("joint_pd_state", MatrixGain(K_state))
+    ref_gain = builder.AddNamedSystem("joint_pd_reference", MatrixGain(K_ref))
+    builder.Connect(plant.get_state_output_port(), state_gain.get_input_port())
+    builder.Connect(source.get_output_port(), ref_gain.get_input_port())
+    forces = builder.AddNamedSystem("generalized_forces", Adder(3, nv))
+    builder.Connect(state_gain.get_output_port(), forces.get_input_port(0))
+    builder.Connect(ref_gain.get_output_port(), forces.get_input_port(1))
+    builder.Connect(forces.get_output_port(), plant.get_applied_generalized_force_input_port())
+    return forces
 
 
 @dataclass(frozen=True)
@@ -226,68 +308,119 @@ class TreeRun:
         Log times [s] from the run's start.
     phi : ndarray, shape (n, 3)
         Controlled body's roll-pitch-yaw attitude [rad].
+    rate : ndarray, shape (n, 3)
+        Controlled body's angular rate in its own axes [rad/s].
     torques : ndarray, shape (n, 12)
         ``[u; T_rw; T; T_dist]`` of the flight software [N m].
+    metrics : Mapping[str, ndarray]
+        The flight software's running metrics at the end
+        (:meth:`~oos_drake.multibody.flight_software.FlightSoftware.metrics`).
+    joint_error : float
+        Largest deviation of a motion-driven joint from its trajectory at the log instants
+        [rad] (0 for frozen joints).
     """
 
     diverged: bool
     times: np.ndarray
     phi: np.ndarray
+    rate: np.ndarray
     torques: np.ndarray
+    metrics: Mapping[str, np.ndarray]
+    joint_error: float = 0.0
 
 
 def run_tree_twin(
     twin: TreeTwin,
     duration: float,
     *,
-    initial_attitude: float = 0.0,
+    start: float = 0.0,
+    initial_attitude=0.0,
+    initial_rate=0.0,
     noise_table: np.ndarray | None = None,
     dynamic=None,
+    perturbations: tuple | None = None,
     max_step: float = 0.05,
-    accuracy: float = 1e-8,
+    accuracy: float | None = None,
     divergence_limit: float = 0.5,
     check_interval: float = 1.0,
 ) -> TreeRun:
-    """Integrate the twin for ``duration`` [s] from rest with the joints frozen.
+    """Integrate the twin for ``duration`` [s] from mission time ``start`` [s].
+
+    Frozen joints (no ``timeline`` at the build): locked at their angles, error-controlled
+    third-order Runge-Kutta (accuracy 1e-8 by default) with steps of at most ``max_step``.
+    Motion-driven joints: started on their trajectory at ``start`` (angle and rate), Radau3
+    in fixed steps of ``max_step`` (the stiff joint PDs; accuracy 1e-7 by default, the
+    Newton tolerance of the paper's mission twin).
 
     Parameters
     ----------
     twin : TreeTwin
     duration : float
         Simulated time [s].
-    initial_attitude : float
+    start : float
+        Mission time of the run's start [s] (the joints' trajectory time).
+    initial_attitude : float or array_like (3,)
         Initial roll, pitch and yaw error of the controlled body [rad].
+    initial_rate : float or array_like (3,)
+        Initial body rate of the controlled body, its axes [rad/s].
     noise_table : ndarray, shape (n, 9), optional
         Unit ``[n_sst; n_gyro; d_ext]`` per flight-software sample (default: none).
     dynamic : DiscreteBlock, optional
         The flight software's dynamic perturbation of the run.
+    perturbations : tuple, optional
+        ``(delta_mul (3x3), delta_add, frequency_hz)`` of the flight software's all-pass LTI
+        perturbations (:meth:`FlightSoftware.set_perturbations`).
     max_step : float
-        Longest integrator step [s] (error-controlled third-order Runge-Kutta).
-    accuracy : float
+        Longest integrator step [s].
+    accuracy : float, optional
         Integrator target accuracy [-].
     divergence_limit : float
         Attitude [rad] beyond which the run stops as diverged.
     check_interval : float
         Simulated time between divergence checks [s].
     """
+    from pydrake.math import RollPitchYaw
+
     context = twin.diagram.CreateDefaultContext()
+    context.SetTime(float(start))
     plant_context = twin.plant.GetMyMutableContextFromRoot(context)
-    for name, joint in twin.revolute_joints.items():
-        joint.set_angle(plant_context, float(twin.angles[name]))
-        joint.Lock(plant_context)
-    twin.hub_joint.set_angles(plant_context, np.full(3, float(initial_attitude)))
+    driven = twin.trajectory is not None
+    for i, (name, joint) in enumerate(twin.revolute_joints.items()):
+        if driven:
+            joint.set_angle(plant_context, float(twin.trajectory.value(start)[i, 0]))
+            joint.set_angular_rate(
+                plant_context, float(twin.trajectory.EvalDerivative(start, 1)[i, 0])
+            )
+        else:
+            joint.set_angle(plant_context, float(twin.angles[name]))
+            joint.Lock(plant_context)
+    phi0 = np.broadcast_to(np.asarray(initial_attitude, dtype=float), (3,)).copy()
+    w0_B = np.broadcast_to(np.asarray(initial_rate, dtype=float), (3,)).copy()
+    twin.hub_joint.set_angles(plant_context, phi0)
+    R_WB = RollPitchYaw(phi0).ToRotationMatrix().matrix()
+    twin.hub_joint.set_angular_velocity(plant_context, R_WB @ w0_B)
     fsw = twin.flight_software
     fsw_context = fsw.GetMyMutableContextFromRoot(context)
     fsw.set_noise(fsw_context, np.zeros((1, 9)) if noise_table is None else noise_table)
     fsw.set_dynamic_perturbation(fsw_context, dynamic)
+    if perturbations is not None:
+        fsw.set_perturbations(fsw_context, *perturbations)
+    # sensor filters start at their steady state for the initial measurement
+    state = fsw_context.get_mutable_discrete_state(0).get_mutable_value()
+    slices, d = fsw.state_slices, fsw.design
+    for block, name, u in ((d.star_tracker, "star_tracker", phi0), (d.gyro, "gyro", w0_B)):
+        state[slices[name]] = np.linalg.solve(np.eye(block.nstates) - block.A, block.B @ u)
     simulator = Simulator(twin.diagram, context)
-    ResetIntegratorFromFlags(simulator, "runge_kutta3", max_step)
+    ResetIntegratorFromFlags(simulator, "radau3" if driven else "runge_kutta3", max_step)
     integrator = simulator.get_mutable_integrator()
-    integrator.set_target_accuracy(accuracy)
+    integrator.set_target_accuracy(accuracy or (1e-7 if driven else 1e-8))
     integrator.set_maximum_step_size(max_step)
+    integrator.set_fixed_step_mode(driven)
     simulator.Initialize()
     diverged = False
-    for stop in [*np.arange(check_interval, duration, check_interval), duration]:
+    end = float(start) + float(duration)
+    stops = np.arange(float(start) + check_interval, end, check_interval)
+    for stop in [*stops, end]:
         try:
             simulator.AdvanceTo(float(stop))
         except RuntimeError:
@@ -299,11 +432,27 @@ def run_tree_twin(
             break
     states = twin.state_logger.FindLog(context)
     torques = twin.torque_logger.FindLog(context)
-    q = twin.hub_joint.position_start()
+    nq = twin.plant.num_positions()
+    q, v = twin.hub_joint.position_start(), nq + twin.hub_joint.velocity_start()
     n = min(states.num_samples(), torques.num_samples())
+    x = np.asarray(states.data()[:, :n])
+    times = np.asarray(states.sample_times()[:n])
+    phi = x[q : q + 3].T
+    rate = np.empty_like(phi)
+    for k in range(n):
+        R = RollPitchYaw(phi[k]).ToRotationMatrix().matrix()
+        rate[k] = R.T @ x[v : v + 3, k]
+    joint_error = 0.0
+    if driven and n:
+        reference = np.column_stack([twin.trajectory.value(t)[:, 0] for t in times])
+        actual = np.array([x[j.position_start()] for j in twin.revolute_joints.values()])
+        joint_error = float(np.abs(actual - reference).max())
     return TreeRun(
         diverged=diverged,
-        times=np.asarray(states.sample_times()[:n]),
-        phi=np.asarray(states.data()[q : q + 3, :n]).T,
+        times=times - float(start),
+        phi=phi,
+        rate=rate,
         torques=np.asarray(torques.data()[:, :n]).T,
+        metrics=fsw.metrics(fsw_context),
+        joint_error=joint_error,
     )
