@@ -333,9 +333,9 @@ def unsupported_stages(scenario_file: str | Path) -> dict[str, str]:
     -------
     dict
         ``{}`` for a schema-1 file; for a schema-2 tree: ``"model figures"`` (the paper's
-        section-2 figures) and ``"campaign"`` (no campaign simulator models a tree); and
-        ``"controller"``, ``"analysis"``, ``"confirm"``, ``"margins"`` when its mission
-        captures or docks a target or has tip-pose waypoints (``servicer_7dof``).
+        section-2 figures); and ``"controller"``, ``"analysis"``, ``"confirm"``,
+        ``"margins"``, ``"campaign"`` when its mission captures or docks a target or has
+        tip-pose waypoints (``servicer_7dof``).
     """
     import tomllib
 
@@ -359,13 +359,12 @@ def unsupported_stages(scenario_file: str | Path) -> dict[str, str]:
             "arrays of a tree with tip-pose waypoints are not available yet"
         )
     model_arrays = {}
-    if why:  # the stages on the model arrays over the mission (and the confirmation of them)
+    if why:  # the stages on the model arrays over the mission (and those that read them)
         reason = "; ".join(why) + " (the validate stage checks every configuration)"
-        model_arrays = {name: reason for name in ("controller", "analysis", "confirm", "margins")}
+        stages = ("controller", "analysis", "confirm", "margins", "campaign")
+        model_arrays = {name: reason for name in stages}
     return {
         **model_arrays,
         "model figures": "the paper's section-2 figures (moments, docking sweeps, arm) need "
         "its topology; a tree has its block table only",
-        "campaign": "no campaign simulator models a schema-2 tree yet (the Drake mission "
-        "simulator is the paper's topology)",
     }
