@@ -148,10 +148,7 @@ def test_what_a_tree_lacks_is_one_line_naming_it(flexible, tmp_path, capsys):
         flexible.arm  # noqa: B018
     assert not hasattr(flexible, "hubs")
     assert unsupported_stages(scenario_path("paper")) == {}
-    assert set(unsupported_stages(scenario_path("flexible_satellite"))) == {
-        "model figures",
-        "campaign",
-    }
+    assert set(unsupported_stages(scenario_path("flexible_satellite"))) == {"model figures"}
     assert set(unsupported_stages(scenario_path("servicer_7dof"))) == {
         "model figures",
         "confirm",
@@ -201,15 +198,29 @@ def test_oos_run_on_a_tree_end_to_end(tmp_path, monkeypatch, capsys):
     real = pipeline._oos
     monkeypatch.setattr(pipeline, "_oos", lambda *argv: real(*argv, *smaller.get(argv[0], [])))
     out = tmp_path / "out"
+    # the shipped campaign (the default spec of this scenario) with 6 runs
+    spec = tmp_path / "campaign.toml"
+    shipped = pipeline.default_campaign(scenario_path("flexible_satellite"))
+    assert shipped.name == "flexible_satellite.toml"
+    text = shipped.read_text().replace("n_runs = 48", "n_runs = 6")
+    spec.write_text(
+        text.replace(
+            'scenario = "flexible_satellite"', f'scenario = "{scenario_path("flexible_satellite")}"'
+        )
+    )
     argv = ["run", "--scenario", "flexible_satellite", "--quick", "--out", str(out)]
+    argv += ["--campaign", str(spec)]
     assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
     printed = capsys.readouterr().out
     timings = json.loads((out / "timings.json").read_text())
-    assert set(timings["skipped"]) == {"model figures", "campaign"}
+    assert set(timings["skipped"]) == {"model figures"}
     for stage in timings["skipped"]:
         assert f"[oos run] {stage}: SKIPPED for this scenario: " in printed
         assert re.search(rf"\n  {stage} +SKIPPED: ", printed)
-    assert not list(out.glob("campaign-*"))
+    # the campaign on the tree's twin along its mission: every run simulated
+    (campaign,) = out.glob("campaign-*")
+    runs = pd.read_parquet(campaign / "runs.parquet")
+    assert len(runs) == 6 and (runs["status"] == "ok").all()
     # the confirmation on the tree's own twin: every certified peak, the twin's boundary that
     # of the sampled-data loop (tests/tree/test_tree_confirm.py checks those against eig)
     confirmation = pd.read_parquet(out / "confirm" / "confirmation.parquet")
