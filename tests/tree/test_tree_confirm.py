@@ -88,6 +88,22 @@ def test_tree_twin_with_the_worst_parameters_is_the_substituted_titop_lfr():
     assert compare_systems("nominal", nominal, titop, VALIDATION_OMEGA).max_relative_error > 1e-3
 
 
+def test_geo_satellite_twin_with_every_block_substituted_is_the_substituted_lfr():
+    """Four appendages, one with three uncertain modes, hub mass and inertias: every block at
+    a value drawn in its range, reflector booms and array drives at other angles."""
+    tree = load_tree("geo_satellite")
+    model = build_tree_model(tree)
+    blocks = {n: b for n, b in model.uncertainty.items() if not n.startswith("tau_")}
+    assert len(blocks) == 10
+    rng = np.random.default_rng(30)
+    values = {n: float(b.to_physical(rng.uniform(-1.0, 1.0))) for n, b in blocks.items()}
+    angles = {name: 0.5 * a + 0.2 for name, a in tree.operating_angles().items()}
+    drake = linearize_tree(build_tree_diagram(tree_with_values(tree, values)), angles)
+    titop = usubs(model, values | tree_values(tree, angles)).nominal.to_ss()
+    result = compare_systems("geo worst", drake, titop, VALIDATION_OMEGA)
+    assert result.max_relative_error <= 1e-6, result
+
+
 def test_tree_with_values_names_a_bad_block():
     tree = load_tree("flexible_satellite")
     for name in ("w4_SA1", "m_SA1", "Jxx_NOPE", "k_shear_DOCK"):
