@@ -661,7 +661,6 @@ class _TreeTwin:
     ``alpha``). The same interface as :class:`_MissionTwin` (``run``, ``forced_run``)."""
 
     def __init__(self, peak: Peak, K, options, scenario, near_hz, specs, design):
-        from oos_drake.multibody.flight_software import perturbation_block
         from oos_drake.multibody.mission import logging_rate
         from oos_drake.scenario.tree_scenario import NotForTrees
 
@@ -677,9 +676,6 @@ class _TreeTwin:
         self.angles = scenario.timeline.angles(peak.time)
         self.direction = {n: v for n, v in peak.perturbation.items() if specs[n].kind == "ureal"}
         self.complex = complex_values(peak)
-        self.states = (
-            perturbation_block(design, peak.omega, **self.complex).nstates if self.complex else 0
-        )
         self.log_rate = logging_rate(1.0 / design.period, CONFIRM_LOG_RATE_HZ)
         self.start = 0.0
         self._twins = {}
@@ -700,12 +696,16 @@ class _TreeTwin:
 
         if alpha not in self._twins:
             values = ray_values(self.specs, self.direction, alpha)
+            # the realization's state count may differ between alphas (an entry's phase at
+            # round-off from 0 or pi is a static gain in one SVD, a section in another): each
+            # alpha has its own twin, sized for its own realization
+            block = self.realization(alpha)
             self._twins[alpha] = build_tree_twin(
                 tree_with_values(self.tree, values),
                 self.design,
                 self.angles,
                 log_rate=self.log_rate,
-                perturbation_states=self.states,
+                perturbation_states=0 if block is None else block.nstates,
             )
         return self._twins[alpha]
 
