@@ -158,7 +158,8 @@ class TreeMissionSimulator:
     scenario : str
         Schema-2 scenario file or shipped tree name (a spec's ``scenario`` key).
     controller : str, optional
-        ``controller.json`` of ``oos synth`` (default: the baseline PD tuned on the scenario).
+        ``controller.json`` of ``oos synth`` (default: the baseline PD on the tree's rigid
+        inertia at its file angles, ``oos_drake.control.baseline.baseline_gains``).
     control_rate, torque_limit : float, optional
         Flight-software rate [Hz] and torque bound [N m] (default: the scenario's
         ``[control]``).
@@ -173,8 +174,9 @@ class TreeMissionSimulator:
     """
 
     def __init__(self, **options):
-        from oos_drake.analysis.controller import scenario_controller
+        from oos_drake.control.baseline import baseline_gains
         from oos_drake.control.components import DesignSpecification
+        from oos_drake.control.interconnection import ControllerSystem, read_controller
         from oos_drake.multibody.flight_software import FlightSoftwareDesign
         from oos_drake.multibody.mission import effective_inertia, logging_rate
         from oos_drake.scenario.data import load_scenario
@@ -199,14 +201,18 @@ class TreeMissionSimulator:
         self.scenario, self.tree, self.timeline = scenario, scenario.tree, scenario.timeline
         control = scenario.control
         rate = float(o["control_rate"] or control.flight_software_rate_hz)
-        self.controller = scenario_controller(o["controller"], scenario)
         J_ref = effective_inertia(rigid_inertia_at_root(self.tree))
+        J_ref = 0.5 * (J_ref + J_ref.T)
+        if o["controller"] is None:  # the baseline PD on the rigid inertia (file angles)
+            self.controller = ControllerSystem.static(baseline_gains(J_ref))
+        else:
+            self.controller = read_controller(o["controller"])[1]
         self.design = FlightSoftwareDesign.create(
-            self.controller.system,
+            self.controller,
             rate,
             spec=DesignSpecification.from_requirements(control),
             torque_limit=float(o["torque_limit"] or control.torque_limit),
-            J_ref=0.5 * (J_ref + J_ref.T),
+            J_ref=J_ref,
         )
         self.log_rate = logging_rate(rate, float(o["log_rate"]))
         self.max_step = float(o["max_step"] or self.design.period)
