@@ -92,9 +92,6 @@ AXES = ("x", "y", "z")
 #: this that divides the scenario's flight-software rate (``multibody.mission.logging_rate``:
 #: 10 Hz at the paper's 10 Hz, 5 Hz at 5 Hz, 10 Hz at 100 Hz).
 CONFIRM_LOG_RATE_HZ = 10.0
-#: Periods of the followed oscillation in the identification window of a tree twin's run
-#: (:class:`_TreeTwin`: the window is lengthened for a slow critical mode) [-].
-WINDOW_PERIODS = 6.0
 #: Growth rate below which a linear loop counts as stable [1/s]: the plants' structurally
 #: marginal rigid-body modes (translations of the free system, not seen by the attitude loop)
 #: come out of the eigenvalue solver at +-1e-6; a time constant of 1e5 s is no instability
@@ -674,12 +671,6 @@ class _TreeTwin:
                 f"confirm: scenario {scenario.name} has tip-pose waypoints: no timeline to "
                 "freeze its twin at"
             )
-        if np.isfinite(near_hz) and near_hz > 0:
-            # the identification window holds WINDOW_PERIODS periods of the oscillation
-            # followed: a slow critical mode (0.0127 Hz at the reduced-size analysis of
-            # flexible_satellite) is invisible in the default 37 s window
-            duration = max(options.duration, options.settle + WINDOW_PERIODS / near_hz)
-            options = dataclasses.replace(options, duration=duration)
         self.peak, self.specs, self.options, self.near_hz = peak, specs, options, near_hz
         self.tree, self.design = scenario.tree, design
         self.angles = scenario.timeline.angles(peak.time)
