@@ -487,7 +487,7 @@ def confirm_mission_options(scenario, options: ConfirmOptions):
     )
 
 
-class _Twin:
+class _MissionTwin:
     """One frozen Drake mission (built once per peak) and runs along the peak's ray.
 
     A mission peak freezes the arm and arrays at its time; a docking peak freezes them at its
@@ -624,30 +624,129 @@ class _Twin:
         ``growing`` when the run diverged, the dominant oscillation grows or, without any
         oscillation, the attitude's peak over the last quarter of the window exceeds that of
         the second."""
-        from oos_drake.analysis.oscillation import dominant_oscillation
-
         o = self.options
         diverged, context = self._simulate(alpha, np.zeros((1, 9)), o.initial_attitude)
         times, states = self.sim.state_log(context)
         phi = states[self.hub_q : self.hub_q + 3].T
-        history = pd.DataFrame(
-            {"time [s]": times - self.start}
-            | {f"phi_{a} [rad]": phi[:, i] for i, a in enumerate(AXES)}
+        return _verdict(times - self.start, phi, diverged, o, self.near_hz)
+
+
+def _verdict(times: np.ndarray, phi: np.ndarray, diverged: bool, o: ConfirmOptions, near_hz):
+    """``(growing, Oscillation or None, history)`` of a run's attitude ``phi`` [rad] (``(n,
+    3)``) at ``times`` [s] since the run's start (:meth:`_MissionTwin.run`)."""
+    from oos_drake.analysis.oscillation import dominant_oscillation
+
+    history = pd.DataFrame(
+        {"time [s]": times} | {f"phi_{a} [rad]": phi[:, i] for i, a in enumerate(AXES)}
+    )
+    window = (times >= o.settle) & np.all(np.isfinite(phi), axis=1)
+    oscillation = None
+    if np.count_nonzero(window) >= 40:
+        try:
+            oscillation = dominant_oscillation(times[window], phi[window], near_hz=near_hz)
+        except ValueError:
+            oscillation = None
+    if diverged or oscillation is not None:
+        return diverged or oscillation.decay_rate > 0, oscillation, history
+    quarters = np.array_split(np.abs(phi[window]).max(axis=1), 4)
+    return bool(quarters[3].max() > quarters[1].max()), None, history
+
+
+class _TreeTwin:
+    """The twin of a schema-2 tree for one peak (:mod:`oos_drake.multibody.tree_twin`): the
+    tree's SDF with the real parameters at ``alpha`` along the peak's ray written into its data
+    (rebuilt per ``alpha``), its revolute joints frozen at the timeline's angles at the peak's
+    time, closed by the scenario's flight software with the peak's complex blocks realized in
+    it (:func:`~oos_drake.multibody.flight_software.perturbation_block`, scaled with
+    ``alpha``). The same interface as :class:`_MissionTwin` (``run``, ``forced_run``)."""
+
+    def __init__(self, peak: Peak, K, options, scenario, near_hz, specs, design):
+        from oos_drake.multibody.mission import logging_rate
+        from oos_drake.scenario.tree_scenario import NotForTrees
+
+        if peak.study != "mission":
+            raise NotForTrees(f"confirm: a tree has no docking study ({peak.study})")
+        if scenario.timeline is None:
+            raise NotForTrees(
+                f"confirm: scenario {scenario.name} has tip-pose waypoints: no timeline to "
+                "freeze its twin at"
+            )
+        self.peak, self.specs, self.options, self.near_hz = peak, specs, options, near_hz
+        self.tree, self.design = scenario.tree, design
+        self.angles = scenario.timeline.angles(peak.time)
+        self.direction = {n: v for n, v in peak.perturbation.items() if specs[n].kind == "ureal"}
+        self.complex = complex_values(peak)
+        self.log_rate = logging_rate(1.0 / design.period, CONFIRM_LOG_RATE_HZ)
+        self.start = 0.0
+        self._twins = {}
+
+    def realization(self, alpha: float):
+        """The flight software's dynamic perturbation at ``alpha`` (None without complex
+        blocks)."""
+        from oos_drake.multibody.flight_software import perturbation_block
+
+        if not self.complex:
+            return None
+        scaled = {k: alpha * v for k, v in self.complex.items()}
+        return perturbation_block(self.design, self.peak.omega, **scaled)
+
+    def twin(self, alpha: float):
+        """The closed-loop tree twin with the real parameters at ``alpha`` (built once)."""
+        from oos_drake.multibody.tree_twin import build_tree_twin, tree_with_values
+
+        if alpha not in self._twins:
+            values = ray_values(self.specs, self.direction, alpha)
+            # the realization's state count may differ between alphas (an entry's phase at
+            # round-off from 0 or pi is a static gain in one SVD, a section in another): each
+            # alpha has its own twin, sized for its own realization
+            block = self.realization(alpha)
+            self._twins[alpha] = build_tree_twin(
+                tree_with_values(self.tree, values),
+                self.design,
+                self.angles,
+                log_rate=self.log_rate,
+                perturbation_states=0 if block is None else block.nstates,
+            )
+        return self._twins[alpha]
+
+    def _simulate(self, alpha: float, noise_table, phi0: float):
+        from oos_drake.multibody.tree_twin import run_tree_twin
+
+        o = self.options
+        return run_tree_twin(
+            self.twin(alpha),
+            o.duration,
+            initial_attitude=phi0,
+            noise_table=noise_table,
+            dynamic=self.realization(alpha),
+            max_step=min(o.max_step, self.design.period),
         )
-        window = (times - self.start >= o.settle) & np.all(np.isfinite(phi), axis=1)
-        oscillation = None
-        if np.count_nonzero(window) >= 40:
-            try:
-                oscillation = dominant_oscillation(times[window], phi[window], near_hz=self.near_hz)
-            except ValueError:
-                oscillation = None
-        if diverged or oscillation is not None:
-            return diverged or oscillation.decay_rate > 0, oscillation, history
-        quarters = np.array_split(np.abs(phi[window]).max(axis=1), 4)
-        return bool(quarters[3].max() > quarters[1].max()), None, history
+
+    def forced_run(self, alpha: float, noise_table: np.ndarray):
+        """As :meth:`_MissionTwin.forced_run`: ``(times, phi, T_rw, u)``."""
+        from oos_drake.multibody.mission_sim import MissionDiverged
+
+        run = self._simulate(alpha, noise_table, 0.0)
+        if run.diverged:
+            raise MissionDiverged(f"the forced run at alpha = {alpha:g} diverged")
+        return run.times, run.phi, run.torques[:, 3:6], run.torques[:, 0:3]
+
+    def run(self, alpha: float):
+        """As :meth:`_MissionTwin.run`."""
+        run = self._simulate(alpha, np.zeros((1, 9)), self.options.initial_attitude)
+        return _verdict(run.times, run.phi, run.diverged, self.options, self.near_hz)
 
 
-def _nonlinear_boundary(twin: _Twin, guess: float, alpha_top: float):
+def _Twin(peak: Peak, K, options: ConfirmOptions, scenario, near_hz, specs, design):  # noqa: N802
+    """The twin of a peak: :class:`_TreeTwin` for a schema-2 tree, else
+    :class:`_MissionTwin` (the paper's Drake mission)."""
+    from oos_drake.scenario.tree_scenario import is_tree
+
+    twin = _TreeTwin if is_tree(scenario) else _MissionTwin
+    return twin(peak, K, options, scenario, near_hz, specs, design)
+
+
+def _nonlinear_boundary(twin, guess: float, alpha_top: float):
     """Bisection of the decay rate's sign change near ``guess``, below ``alpha_top``."""
     o = twin.options
     runs = {}
@@ -688,9 +787,22 @@ def _peak_models(peak: Peak, controller, scenario):
     )
 
 
-def _target_body(scenario) -> BodyInertia:
+def _inertia_bodies(scenario) -> tuple[BodyInertia, ...]:
+    """The rigid bodies whose inertia blocks the physical check follows: the target hub RH2
+    of the paper's topology, every rigid body of a tree."""
+    from oos_drake.scenario.tree_scenario import is_tree
+
+    if is_tree(scenario):
+        return tuple(
+            BodyInertia(
+                (f"Jxx_{b.name}", f"Jyy_{b.name}", f"Jzz_{b.name}"),
+                np.asarray(b.inertia, dtype=float),
+            )
+            for b in scenario.tree.bodies
+            if b.kind == "rigid"
+        )
     hub = scenario.hubs["RH2"]
-    return BodyInertia(("Jxx_RH2", "Jyy_RH2", "Jzz_RH2"), np.asarray(hub.inertia, dtype=float))
+    return (BodyInertia(("Jxx_RH2", "Jyy_RH2", "Jzz_RH2"), np.asarray(hub.inertia, dtype=float)),)
 
 
 def confirm_peak(peak: Peak, controller, scenario, options: ConfirmOptions):
@@ -805,7 +917,7 @@ def confirm_peak(peak: Peak, controller, scenario, options: ConfirmOptions):
         )
     # 3. physical limit of the real parameters
     alpha_phys, reason = physical_alpha_max(
-        specs, direction, (_target_body(scenario),), alpha_limit=options.alpha_limit
+        specs, direction, _inertia_bodies(scenario), alpha_limit=options.alpha_limit
     )
     row = {
         "study": peak.study,

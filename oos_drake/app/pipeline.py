@@ -166,16 +166,23 @@ def _check_campaign_scenario(campaign_spec: Path, scenario: Path) -> None:
         )
 
 
+def default_campaign(scenario: Path) -> Path:
+    """The shipped campaign spec of a scenario file: ``specs/<file stem>.toml`` when the
+    package ships one (``heavy_target``, ``flexible_satellite``), else ``paper.toml``."""
+    own = DEFAULT_CAMPAIGN.parent / f"{Path(scenario).stem}.toml"
+    return own if own.is_file() else DEFAULT_CAMPAIGN
+
+
 def run_pipeline(args: argparse.Namespace) -> int:
     """Run every stage of the main job into ``args.out``; returns the exit status."""
     from oos_drake.app.tree import joint_space_scenario
     from oos_drake.scenario.data import scenario_path
     from oos_drake.scenario.tree_scenario import unsupported_stages
 
-    campaign_spec = Path(args.campaign)
+    scenario = scenario_path(args.scenario)
+    campaign_spec = Path(args.campaign or default_campaign(scenario))
     if not campaign_spec.is_file():
         raise ValueError(f"campaign spec {campaign_spec}: file not found")
-    scenario = scenario_path(args.scenario)
     # a tree's tip-pose waypoints solved by inverse kinematics: the stages read the joint-space copy
     scenario = joint_space_scenario(scenario, Path(args.out) / "scenario")
     skipped = unsupported_stages(scenario)  # a schema-2 tree: said, never silent
@@ -407,7 +414,10 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--out", default="out", help="output folder (default: out)")
     parser.add_argument(
-        "--campaign", default=str(DEFAULT_CAMPAIGN), help="campaign spec (default: paper.toml)"
+        "--campaign",
+        default=None,
+        help="campaign spec (default: the shipped spec named as the scenario file, e.g. "
+        "flexible_satellite.toml, else paper.toml)",
     )
     add_parallel_arguments(
         parser,

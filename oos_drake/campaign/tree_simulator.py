@@ -1,0 +1,324 @@
+"""The Drake twin of a schema-2 tree following its mission, as a campaign simulator.
+
+Adapter between :mod:`oos_drake.multibody.tree_twin` (the tree's own Drake twin, its revolute
+joints motion-driven along the timeline's joint angles, closed by the scenario's flight
+software) and the campaign's :class:`~oos_drake.campaign.simulator.Simulator` protocol. Use it
+in a spec with::
+
+    scenario = "flexible_satellite"
+    [simulator]
+    name = "oos_drake.campaign.tree_simulator:make_simulator"
+    options = { log_rate = 1.0 }
+
+Parameters are keyed by the tree's uncertain-block names (``m_<body>``, ``Jxx_<body>``,
+``w<i>_<body>``: the LFR's, so the analysis' ``worst_cases.parquet`` columns map onto them one
+to one), with the ranges the scenario declares (the campaign's default dispersions); the
+initial errors ``phi0_*`` [rad], ``w0_*`` [rad/s], ``noise_seed`` and the normalized all-pass
+scalars ``Delta_mul_*``, ``Delta_add`` as for the paper's mission simulator
+(:mod:`oos_drake.campaign.drake_simulator`). A run with other real-block values than the last
+rebuilds the twin from the tree with those values written into its data
+(:func:`~oos_drake.multibody.tree_twin.tree_with_values`, a fraction of a second); a run is a
+pure function of its case. Events: the start of each mission phase (``start:<phase>``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from types import MappingProxyType
+
+import numpy as np
+import pandas as pd
+
+from oos_drake.campaign.simulator import (
+    Parameter,
+    ParameterKind,
+    RunCase,
+    RunOutput,
+    SimulationDiverged,
+    check_options,
+)
+
+__all__ = ["TreeMissionSimulator", "make_simulator", "FACTORY_PATH", "METRIC_UNITS"]
+
+#: Import path of the factory (usable as ``[simulator] name`` in a spec).
+FACTORY_PATH = "oos_drake.campaign.tree_simulator:make_simulator"
+
+AXES = ("x", "y", "z")
+
+#: Metrics of a run and their units.
+METRIC_UNITS = MappingProxyType(
+    {
+        "ape": "rad",
+        "rms_attitude": "rad",
+        "peak_torque": "N m",
+        "peak_applied_torque": "N m",
+        "max_tracking_error": "rad",
+    }
+)
+
+_SIGNALS = (("phi", "rad"), ("w", "rad/s"), ("u", "N m"), ("T_rw", "N m"), ("T", "N m"),
+            ("T_dist", "N m"))  # fmt: skip
+_METRIC_SIGNALS = {"ape": "phi_y", "peak_torque": "u_y", "peak_applied_torque": "T_y"}
+
+#: Options of the factory (and their defaults).
+OPTIONS = {
+    "scenario": None,
+    "controller": None,
+    "control_rate": None,
+    "torque_limit": None,
+    "log_rate": 1.0,
+    "max_step": None,
+    "joint_bandwidth": 200.0,
+    "joint_damping_ratio": 0.7,
+    "divergence_limit": 0.5,
+}
+
+
+def tree_parameters(tree) -> tuple[Parameter, ...]:
+    """The dispersible parameters of a tree's mission (see the module docstring)."""
+    from oos_drake.scenario.tree_model import tree_blocks
+
+    params = []
+    for name, block in tree_blocks(tree).items():
+        low, high = (float(v) for v in block.range)
+        params.append(
+            Parameter(
+                name,
+                block.unit,
+                float(block.nominal),
+                low,
+                high,
+                ParameterKind.of_quantity(block.quantity),
+                f"{block.quantity} {name}",
+                uncertainty=(low, high),
+            )
+        )
+    for prefix, unit, bound, what in (
+        ("phi0", "rad", 0.05, "attitude error"),
+        ("w0", "rad/s", 0.01, "body rate error"),
+    ):
+        params += [
+            Parameter(
+                f"{prefix}_{a}",
+                unit,
+                0.0,
+                -bound,
+                bound,
+                ParameterKind.INITIAL_CONDITION,
+                f"initial {what} of the controlled body ({a})",
+            )
+            for a in AXES
+        ]
+    params.append(
+        Parameter(
+            "noise_seed",
+            "-",
+            0.0,
+            0.0,
+            2.0**31,
+            ParameterKind.SEED,
+            "seed of sensor noise and disturbances (0: the run seed)",
+        )
+    )
+    params += [
+        Parameter(
+            f"Delta_mul_{r}{c}",
+            "-",
+            0.0,
+            -1.0,
+            1.0,
+            ParameterKind.LTI,
+            f"entry {r}{c} of the multiplicative actuator all-pass perturbation",
+            uncertainty=(-1.0, 1.0),
+        )
+        for r in AXES
+        for c in AXES
+    ]
+    params.append(
+        Parameter(
+            "Delta_add",
+            "-",
+            0.0,
+            -1.0,
+            1.0,
+            ParameterKind.LTI,
+            "scale of the additive plant all-pass perturbation",
+            uncertainty=(-1.0, 1.0),
+        )
+    )
+    return tuple(params)
+
+
+class TreeMissionSimulator:
+    """Campaign simulator running a tree's Drake twin along its mission.
+
+    Parameters
+    ----------
+    scenario : str
+        Schema-2 scenario file or shipped tree name (a spec's ``scenario`` key).
+    controller : str, optional
+        ``controller.json`` of ``oos synth`` (default: the baseline PD on the tree's rigid
+        inertia at its file angles, ``oos_drake.control.baseline.baseline_gains``).
+    control_rate, torque_limit : float, optional
+        Flight-software rate [Hz] and torque bound [N m] (default: the scenario's
+        ``[control]``).
+    log_rate : float
+        Logging rate [Hz] (the fastest rate at most this that divides the control rate).
+    max_step : float, optional
+        Integrator step [s] (default: one flight-software period).
+    joint_bandwidth, joint_damping_ratio : float
+        Joint PD of the motion-driven joints [rad/s], [-].
+    divergence_limit : float
+        Attitude beyond which a run is diverged [rad].
+    """
+
+    def __init__(self, **options):
+        from oos_drake.control.baseline import baseline_gains
+        from oos_drake.control.components import DesignSpecification
+        from oos_drake.control.interconnection import ControllerSystem, read_controller
+        from oos_drake.multibody.flight_software import FlightSoftwareDesign
+        from oos_drake.multibody.mission import effective_inertia, logging_rate
+        from oos_drake.scenario.data import load_scenario
+        from oos_drake.scenario.tree_model import rigid_inertia_at_root
+        from oos_drake.scenario.tree_scenario import NotForTrees, is_tree
+
+        check_options("tree-mission", options, set(OPTIONS))
+        o = OPTIONS | options
+        scenario = load_scenario(o["scenario"])
+        if not is_tree(scenario):
+            raise ValueError(
+                f"tree-mission: scenario {scenario.name} is not a schema-2 tree "
+                "(its simulator: oos_drake.campaign.drake_simulator:make_simulator)"
+            )
+        if scenario.timeline is None or any(
+            p.captured or p.docked for p in scenario.tree.mission.phases
+        ):
+            raise NotForTrees(
+                f"tree-mission: scenario {scenario.name}: capture, docking and tip-pose "
+                "phases are not simulated yet"
+            )
+        self.scenario, self.tree, self.timeline = scenario, scenario.tree, scenario.timeline
+        control = scenario.control
+        rate = float(o["control_rate"] or control.flight_software_rate_hz)
+        J_ref = effective_inertia(rigid_inertia_at_root(self.tree))
+        J_ref = 0.5 * (J_ref + J_ref.T)
+        if o["controller"] is None:  # the baseline PD on the rigid inertia (file angles)
+            self.controller = ControllerSystem.static(baseline_gains(J_ref))
+        else:
+            self.controller = read_controller(o["controller"])[1]
+        self.design = FlightSoftwareDesign.create(
+            self.controller,
+            rate,
+            spec=DesignSpecification.from_requirements(control),
+            torque_limit=float(o["torque_limit"] or control.torque_limit),
+            J_ref=J_ref,
+        )
+        self.log_rate = logging_rate(rate, float(o["log_rate"]))
+        self.max_step = float(o["max_step"] or self.design.period)
+        self.joint_pd = (float(o["joint_bandwidth"]), float(o["joint_damping_ratio"]))
+        self.divergence_limit = float(o["divergence_limit"])
+        self._parameters = tree_parameters(self.tree)
+        self._real = tuple(p.name for p in self._parameters if p.kind == ParameterKind.REAL_BLOCK)
+        self._twin_key, self._twin = None, None
+
+    def parameters(self) -> tuple[Parameter, ...]:
+        """Dispersible parameters (uncertain blocks, initial errors, seed, LTI scalars)."""
+        return self._parameters
+
+    def metric_units(self) -> Mapping[str, str]:
+        """``ape``, ``rms_attitude`` [rad], ``peak_torque``, ``peak_applied_torque`` [N m],
+        ``max_tracking_error`` [rad] (joints against their trajectory)."""
+        return dict(METRIC_UNITS)
+
+    def signal_units(self) -> Mapping[str, str]:
+        """Attitude, body rate and the flight software's torques, per axis."""
+        return {f"{p}_{a}": unit for p, unit in _SIGNALS for a in AXES}
+
+    def metric_signals(self) -> Mapping[str, str]:
+        """Metric -> the signal the report draws it on."""
+        return dict(_METRIC_SIGNALS)
+
+    def events(self) -> Mapping[str, float]:
+        """``start:<phase>`` -> the phase's start [s]."""
+        phases = self.tree.mission.phases if self.tree.mission else ()
+        starts = np.asarray(self.timeline.boundaries, dtype=float)[:-1]
+        return {f"start:{p.name}": float(t) for p, t in zip(phases, starts, strict=False)}
+
+    def duration(self) -> float:
+        """Mission length [s]."""
+        return float(self.timeline.boundaries[-1])
+
+    def twin(self, values: Mapping[str, float]):
+        """The twin with the real blocks at ``values`` [their units] (rebuilt on a change)."""
+        from oos_drake.multibody.tree_twin import build_tree_twin, tree_with_values
+
+        nominal = {p.name: p.nominal for p in self._parameters}
+        real = {n: float(values.get(n, nominal[n])) for n in self._real}
+        key = tuple(real.values())
+        if key != self._twin_key:
+            changed = {n: v for n, v in real.items() if v != nominal[n]}
+            self._twin = build_tree_twin(
+                tree_with_values(self.tree, changed),
+                self.design,
+                log_rate=self.log_rate,
+                timeline=self.timeline,
+                joint_bandwidth=self.joint_pd[0],
+                joint_damping_ratio=self.joint_pd[1],
+            )
+            self._twin_key = key
+        return self._twin
+
+    def run(self, case: RunCase) -> RunOutput:
+        """Simulate the case's window; divergence raises :class:`SimulationDiverged`."""
+        from oos_drake.multibody.flight_software import NOISE_CHANNELS
+        from oos_drake.multibody.tree_twin import run_tree_twin
+
+        values = {p.name: p.nominal for p in self._parameters} | dict(case.values)
+        start, end = float(case.window.start), float(case.window.end)
+        if not (0.0 <= start < end <= self.duration() + 1e-9):
+            raise ValueError(
+                f"tree-mission: window [{start}, {end}] s outside [0, {self.duration()}] s"
+            )
+        noise_seed = int(values["noise_seed"]) or int(case.seed)
+        n = int(math.ceil((end - start) / self.design.period)) + 2
+        noise = np.random.default_rng(noise_seed).standard_normal((n, NOISE_CHANNELS))
+        delta_mul = np.array([[values[f"Delta_mul_{r}{c}"] for c in AXES] for r in AXES])
+        delta_add = float(values["Delta_add"])
+        frequency = float(case.frequency)  # NaN with nonzero scalars: refused, by name
+        run = run_tree_twin(
+            self.twin(values),
+            end - start,
+            start=start,
+            initial_attitude=[values[f"phi0_{a}"] for a in AXES],
+            initial_rate=[values[f"w0_{a}"] for a in AXES],
+            noise_table=noise,
+            perturbations=(delta_mul, delta_add, frequency),
+            max_step=self.max_step,
+            divergence_limit=self.divergence_limit,
+        )
+        if run.diverged:
+            raise SimulationDiverged(
+                f"tree-mission: attitude beyond {self.divergence_limit} rad (or the integrator "
+                f"failed) in [{start}, {end}] s"
+            )
+        m = run.metrics
+        samples = max(float(m["samples"]), 1.0)
+        metrics = {
+            "ape": float(m["max_phi"].max()),
+            "rms_attitude": float(np.sqrt(m["sumsq_phi"].sum() / (3.0 * samples))),
+            "peak_torque": float(m["max_u"].max()),
+            "peak_applied_torque": float(m["max_T"].max()),
+            "max_tracking_error": run.joint_error,
+        }
+        columns = {"time [s]": run.times + start}
+        signals = np.hstack([run.phi, run.rate, run.torques])
+        for j, (prefix, unit) in enumerate(_SIGNALS):
+            for i, a in enumerate(AXES):
+                columns[f"{prefix}_{a} [{unit}]"] = signals[:, 3 * j + i]
+        return RunOutput(metrics=metrics, timeseries=pd.DataFrame(columns))
+
+
+def make_simulator(**options) -> TreeMissionSimulator:
+    """Factory for :class:`~oos_drake.campaign.simulator.SimulatorRecipe` (options as keywords)."""
+    return TreeMissionSimulator(**options)
