@@ -21,6 +21,9 @@ Files written in ``DIR/report/``:
   nonlinear runs drawn around it;
 - ``confirmation.parquet`` (when the ``oos confirm`` table is found): the nonlinear stability
   boundary of each certified peak against mu;
+- ``performance_confirmation.parquet`` (when ``oos confirm`` wrote one): the analysis'
+  worst-case gains run on the twin (worst perturbation and worst input), printed with the
+  worst performance ratio on the twin beside the campaign's worst run;
 - ``metric_distributions.png`` (histograms of unweighted runs; for importance-weighted runs the
   weighted empirical CDF, the estimate under the dispersions, beside the runs as drawn),
   ``worst_runs.png``, ``pass_fail_vs_parameters.png``, ``regions_performance.png`` (mu-guided,
@@ -437,6 +440,62 @@ def find_confirmation(directory: Path, confirm: str | Path | None = None) -> Pat
     return path if path.is_file() else None
 
 
+def find_performance_confirmation(
+    directory: Path, confirm: str | Path | None = None
+) -> Path | None:
+    """The ``oos confirm`` performance table (``performance_confirmation.parquet``) of a
+    campaign: in the ``--confirm`` folder (or beside the given file), else in the ``oos run``
+    layout; None when there is none."""
+    from oos_drake.analysis.performance_twin import PERFORMANCE_CONFIRMATION_FILE
+
+    if confirm is not None:
+        folder = Path(confirm) if Path(confirm).is_dir() else Path(confirm).parent
+    else:
+        folder = Path(directory).resolve().parent / CONFIRMATION_FOLDER
+    path = folder / PERFORMANCE_CONFIRMATION_FILE
+    return path if path.is_file() else None
+
+
+def performance_sentences(table: pd.DataFrame, worst_ratio: float) -> str:
+    """The performance confirmation against the campaign: the twin's largest requirement ratio
+    under the analysis' worst case (perturbation and input) beside the analysis' bounds, and the
+    campaign's worst run.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        ``performance_confirmation.parquet``.
+    worst_ratio : float
+        Largest requirement ratio of the campaign's runs [-] (NaN: none).
+    """
+    from oos_drake.report.results import worst_performance_on_twin
+
+    lines = [
+        "worst-case performance on the twin (oos confirm; ratio to the requirement, > 1 "
+        "violates it):"
+    ]
+    for _, row in table.iterrows():
+        lines.append(
+            f"  {row['channel']} {row['subset']:>14s} t = {row['time [s]']:7.1f} s "
+            f"f = {row['frequency [Hz]']:.4g} Hz: analysis [{row['gain lower [-]']:.4g}, "
+            f"{row['gain upper [-]']:.4g}], sampled {row['gain linear sampled [-]']:.4g}, "
+            f"twin {row['gain twin [-]']:.4g} ({row['status']})"
+        )
+    worst = worst_performance_on_twin(table)
+    if worst is not None:
+        lines.append(
+            f"worst performance ratio on the twin: {worst.value:.4g} ({worst.where}); the "
+            f"campaign's worst run: {worst_ratio:.4g}"
+            + (
+                " (the campaign's random disturbances stay below the worst-case input's "
+                "ratio; oos campaign falsify searches for it)"
+                if math.isfinite(worst_ratio) and worst_ratio < worst.value
+                else ""
+            )
+        )
+    return "\n".join(lines)
+
+
 def read_confirmation(path: Path) -> pd.DataFrame:
     """The confirmation table with mu's linear boundary as perturbation scales.
 
@@ -681,6 +740,8 @@ def write_report(
     spec, plan = load_campaign(directory)
     confirmation_path = find_confirmation(directory, confirm)
     confirmation = read_confirmation(confirmation_path) if confirmation_path else None
+    performance_path = find_performance_confirmation(directory, confirm)
+    performance = pd.read_parquet(performance_path) if performance_path else None
     runs = store.load_runs(directory)
     if runs.empty:
         raise ValueError(f"{directory}: no finished run to report")
@@ -701,6 +762,10 @@ def write_report(
         tables["regions"] = _regions_table(spec, runs)
     if confirmation is not None:
         tables["confirmation"] = confirmation
+    if performance is not None:
+        tables["performance_confirmation"] = performance
+    else:  # a table of an earlier report whose confirmation is gone is not this report's
+        (out / "performance_confirmation.parquet").unlink(missing_ok=True)
     for name, table in tables.items():
         atomic_write_parquet(table, out / f"{name}.parquet")
 
@@ -770,6 +835,13 @@ def write_report(
             parts.append(
                 "stability boundary: no oos confirm table (give --confirm DIR); mu is not "
                 "compared with the campaign's performance metrics."
+            )
+        if performance is not None:
+            ratios = requirement_ratio(spec, runs)
+            parts.append(
+                performance_sentences(
+                    performance, float(ratios.max()) if ratios.notna().any() else math.nan
+                )
             )
         if spec.window.kind == "critical":
             parts.append(

@@ -14,7 +14,7 @@ Folder layout read (``OUT`` = ``oos run --out``)::
     OUT/controller/controller.json   gains, gamma, requirement met, design specification
     OUT/analysis/summary.json        scenario record (file, SHA-256), key numbers
     OUT/analysis/stability_peaks.parquet, worst_perturbations.parquet, *.png
-    OUT/confirm/confirmation.parquet, *.png
+    OUT/confirm/confirmation.parquet, performance_confirmation.parquet, *.png
     OUT/margins/margins.parquet, margins.png
     OUT/campaign-<key>/report/summary.parquet, worst_runs.parquet, regions.parquet, *.png
     OUT/campaign-<key>/replay/case_<N>.html
@@ -28,6 +28,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
+
+from oos_drake.analysis.performance_twin import PERFORMANCE_CONFIRMATION_FILE as PERFORMANCE_FILE
 
 #: Stage folders of ``oos run``, in the order they run.
 STAGES = ("model", "validate", "controller", "analysis", "confirm", "margins")
@@ -44,6 +46,9 @@ FIGURE_ORDER = (
     "metric_distributions",
     "worst_runs",
 )
+#: Performance channels of the analysis -> the requirement their unit gain is
+#: (``performance_confirmation.parquet``: a gain > 1 violates it).
+PERFORMANCE_REQUIREMENTS = {"e_p": "APE requirement", "e_u": "torque limit"}
 #: Row of the campaign summary that counts a run as failed for any reason.
 ANY_FAILURE = "any (requirement or run failure)"
 #: Margin columns of ``margins.parquet`` whose mission-wide minimum is a headline: column ->
@@ -103,6 +108,9 @@ class RunResults:
         ``worst_perturbations.parquet``.
     confirmation : pandas.DataFrame or None
         ``confirm/confirmation.parquet``.
+    performance : pandas.DataFrame or None
+        ``confirm/performance_confirmation.parquet``: the analysis' worst-case gains run on
+        the twin (:mod:`oos_drake.analysis.performance_twin`).
     margins : pandas.DataFrame or None
         ``margins/margins.parquet``.
     campaign : pathlib.Path or None
@@ -128,6 +136,7 @@ class RunResults:
     guaranteed: pd.DataFrame | None
     perturbations: pd.DataFrame | None
     confirmation: pd.DataFrame | None
+    performance: pd.DataFrame | None
     margins: pd.DataFrame | None
     campaign: Path | None
     campaign_summary: pd.DataFrame | None
@@ -224,6 +233,7 @@ def load_run(out: str | Path, campaign: str | Path | None = None) -> RunResults:
         guaranteed=_parquet(out / "analysis" / "stability_guaranteed.parquet"),
         perturbations=_parquet(out / "analysis" / "worst_perturbations.parquet"),
         confirmation=_parquet(out / "confirm" / "confirmation.parquet"),
+        performance=_parquet(out / "confirm" / PERFORMANCE_FILE),
         margins=_parquet(out / "margins" / "margins.parquet"),
         campaign=campaign,
         campaign_summary=_parquet(report / "summary.parquet") if report else None,
@@ -276,7 +286,9 @@ def headline_numbers(results: RunResults) -> list[Headline]:
 
     gamma of the controller; the guaranteed peak of mu of every subset of the mission study;
     the worst gain and phase margins over the mission (every loop model and configuration);
-    the upper end of the 95 % interval of the campaign's probability that a run fails. A
+    the worst performance ratio the twin reached when driven by the analysis' worst-case
+    perturbation and input (:func:`worst_performance_on_twin`); the upper end of the 95 %
+    interval of the campaign's probability that a run fails. A
     number whose table is missing is left out.
 
     Parameters
@@ -338,6 +350,9 @@ def headline_numbers(results: RunResults) -> list[Headline]:
                     f"{row.get('loop', '?')} loop, t = {time_s:.4g} s",
                 )
             )
+    worst = worst_performance_on_twin(results.performance)
+    if worst is not None:
+        numbers.append(worst)
     summary = results.campaign_summary
     if summary is not None and "P 95 % high" in summary.columns:
         rows = summary[summary["metric"] == ANY_FAILURE]
@@ -354,6 +369,46 @@ def headline_numbers(results: RunResults) -> list[Headline]:
                 )
             )
     return numbers
+
+
+def worst_performance_on_twin(table: pd.DataFrame | None) -> Headline | None:
+    """The largest requirement ratio the Drake twin reached in ``oos confirm``'s performance
+    confirmation (``gain twin [-]``: the pointing error, or the wheel command, of the twin
+    driven by the worst-case perturbation and input, over its requirement; > 1 violates it),
+    with the channel, the configuration, the frequency and the analysis' bounds of that gain.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame or None
+        ``confirm/performance_confirmation.parquet``.
+
+    Returns
+    -------
+    Headline or None
+        None without a table or without a finished twin run.
+    """
+    column = "gain twin [-]"
+    if table is None or column not in table.columns:
+        return None
+    finite = pd.to_numeric(table[column], errors="coerce")
+    if not finite.notna().any():
+        return None
+    row = table.loc[finite.idxmax()]
+    channel = str(row.get("channel", "?"))
+    requirement = PERFORMANCE_REQUIREMENTS.get(channel, "requirement")
+    verdict = "violated" if float(row[column]) > 1 else "met"
+    return Headline(
+        "performance_twin",
+        f"worst performance ratio on the twin ({channel} / {requirement}; > 1 violates it)",
+        float(row[column]),
+        "-",
+        f"confirm/{PERFORMANCE_FILE}: max of {column}",
+        f"{requirement} {verdict}: {channel} {row.get('subset', '?')}, "
+        f"t = {float(row.get('time [s]', math.nan)):.4g} s, "
+        f"f = {float(row.get('frequency [Hz]', math.nan)):.4g} Hz; analysis "
+        f"[{float(row.get('gain lower [-]', math.nan)):.4g}, "
+        f"{float(row.get('gain upper [-]', math.nan)):.4g}]",
+    )
 
 
 def format_number(value, unit: str = "-", digits: int = 4) -> str:
