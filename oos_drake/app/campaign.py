@@ -187,7 +187,7 @@ def register(subparsers) -> None:
     run.add_argument(
         "spec",
         help="campaign spec (TOML file), or the name of a shipped spec: demo, demo_mu, paper, "
-        "paper_mc",
+        "paper_mc, paper_phases, heavy_target",
     )
     add_out_argument(
         run,
