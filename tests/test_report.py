@@ -155,6 +155,16 @@ def results_folder(tmp_path) -> Path:
             "interval": ["clopper-pearson", "clopper-pearson"],
         }
     ).to_parquet(campaign / "report" / "summary.parquet")
+    pd.DataFrame(
+        {
+            "run_id": [3, 7, 9],
+            "requirement": ["ape <= 0.0079 rad"] * 3,
+            "phase": ["start-capture", "start-capture", "capture-docking"],
+            "first violation time [s]": [96.0, 41.0, 601.0],
+            "window": ["phase:start-capture"] * 2 + ["phase:capture-docking"],
+            "status": ["ok"] * 3,
+        }
+    ).to_parquet(campaign / "report" / "violations.parquet")
     _png(campaign / "report" / "regions_performance.png", 80, 50)
     (campaign / "replay").mkdir()
     (campaign / "replay" / "case_3.html").write_text("<html></html>")
@@ -241,6 +251,10 @@ def test_report_of_a_synthetic_folder_in_chromium(results_folder, tmp_path):
     assert "http://" not in text and "https://" not in text
     assert "Worst-case performance on the Drake twin" in text
     assert "twin violated (1.28)" in text  # the performance table, row by row
+    # violations per phase (2 in start-capture, 1 in capture-docking) and their times
+    assert '<td>start-capture</td><td class="num">2</td>' in text
+    assert '<td>capture-docking</td><td class="num">1</td>' in text
+    assert '<td class="num">601</td>' in text
 
 
 def test_worst_performance_headline_names_channel_requirement_and_bounds(results_folder):

@@ -16,7 +16,8 @@ Folder layout read (``OUT`` = ``oos run --out``)::
     OUT/analysis/stability_peaks.parquet, worst_perturbations.parquet, *.png
     OUT/confirm/confirmation.parquet, performance_confirmation.parquet, *.png
     OUT/margins/margins.parquet, margins.png
-    OUT/campaign-<key>/report/summary.parquet, worst_runs.parquet, regions.parquet, *.png
+    OUT/campaign-<key>/report/summary.parquet, worst_runs.parquet, regions.parquet,
+                                     violations.parquet, *.png
     OUT/campaign-<key>/replay/case_<N>.html
 """
 
@@ -117,6 +118,9 @@ class RunResults:
         The campaign folder (``campaign-<key>``).
     campaign_summary, worst_runs, regions, campaign_status : pandas.DataFrame or None
         The campaign report's ``summary``, ``worst_runs``, ``regions`` and ``status`` tables.
+    violations : pandas.DataFrame or None
+        The campaign report's ``violations`` table: every violation with its requirement,
+        mission phase and the time of the first violation.
     campaign_environment : dict or None
         ``environment.json`` of the campaign (versions of the packages that ran it).
     blocks : pandas.DataFrame or None
@@ -143,6 +147,7 @@ class RunResults:
     worst_runs: pd.DataFrame | None
     regions: pd.DataFrame | None
     campaign_status: pd.DataFrame | None
+    violations: pd.DataFrame | None
     campaign_environment: dict | None
     blocks: pd.DataFrame | None
     validation: str | None
@@ -240,6 +245,7 @@ def load_run(out: str | Path, campaign: str | Path | None = None) -> RunResults:
         worst_runs=_parquet(report / "worst_runs.parquet") if report else None,
         regions=_parquet(report / "regions.parquet") if report else None,
         campaign_status=_parquet(report / "status.parquet") if report else None,
+        violations=_parquet(report / "violations.parquet") if report else None,
         campaign_environment=_json(campaign / "environment.json") if campaign else None,
         blocks=_parquet(out / "model" / "blocks.parquet"),
         validation=validation.read_text(encoding="utf-8") if validation.is_file() else None,
