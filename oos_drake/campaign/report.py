@@ -245,8 +245,11 @@ def violations_table(directory: Path, spec, runs: pd.DataFrame) -> pd.DataFrame:
     The time is the first logged instant at which the signal a metric bounds (the simulator's
     ``metric_signals``) leaves the requirement's max bound in one of the requirement's phases,
     read from the run's retained time series; without one it is NaN and the phase column lists
-    the phases the run's window overlaps. A run that did not finish is listed once, with its
-    status.
+    the phases the run's window overlaps. The metric is computed at the flight-software rate and
+    the series is logged at ``log_rate``: a violation between two logged samples has no first
+    logged instant, and ``peak time (logged) [s]`` (the logged sample of the largest magnitude
+    within the requirement's phases) then says when it happened, to one log period. A run that
+    did not finish is listed once, with its status.
     """
     phases = mission_phases(spec.info)
     rows = []
@@ -263,7 +266,7 @@ def violations_table(directory: Path, spec, runs: pd.DataFrame) -> pd.DataFrame:
         for requirement in spec.requirements:
             if bool(run[requirement.column]):
                 continue
-            time, phase = math.nan, overlapped
+            time, peak_time, phase = math.nan, math.nan, overlapped
             signal = spec.info.metric_signals.get(requirement.metric)
             path = store.timeseries_file(directory, int(run["run_id"]))
             if signal and requirement.max is not None and path.is_file():
@@ -276,9 +279,10 @@ def violations_table(directory: Path, spec, runs: pd.DataFrame) -> pd.DataFrame:
                         inside = np.zeros(t.size, bool)
                         for a, b in requirement.spans:
                             inside |= (t >= a) & (t <= b)
-                    beyond = np.flatnonzero(
-                        inside & (np.abs(series[column].to_numpy()) > requirement.max)
-                    )
+                    magnitude = np.abs(series[column].to_numpy())
+                    beyond = np.flatnonzero(inside & (magnitude > requirement.max))
+                    if inside.any():
+                        peak_time = float(t[inside][np.argmax(magnitude[inside])])
                     if beyond.size:
                         time = float(t[beyond[0]])
                         phase = next(
@@ -292,12 +296,21 @@ def violations_table(directory: Path, spec, runs: pd.DataFrame) -> pd.DataFrame:
                     "requirement": requirement.label,
                     "phase": phase,
                     "first violation time [s]": time,
+                    "peak time (logged) [s]": peak_time,
                     metric_column(spec, requirement.metric): float(
                         run[metric_column(spec, requirement.metric)]
                     ),
                 }
             )
-    columns = ["run_id", "requirement", "phase", "first violation time [s]", "window", "status"]
+    columns = [
+        "run_id",
+        "requirement",
+        "phase",
+        "first violation time [s]",
+        "peak time (logged) [s]",
+        "window",
+        "status",
+    ]
     table = pd.DataFrame(rows)
     if table.empty:
         return pd.DataFrame(columns=columns)
