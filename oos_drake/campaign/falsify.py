@@ -218,8 +218,12 @@ class FalsificationResult:
         """One line: the worst run found and its parameters."""
         best = self.best
         verdict = "VIOLATES" if best[RATIO_COLUMN] > 1 else "meets"
+        generations = int(self.table["generation"].max()) + 1 if len(self.table) else 0
         lines = [
-            f"falsification: {len(self.table)} runs; worst requirement ratio "
+            f"falsification: {len(self.table)} runs in {generations} generation"
+            f"{'s' if generations != 1 else ''}"
+            + (" (the first only: the starting points)" if generations == 1 else "")
+            + "; worst requirement ratio "
             f"{best[RATIO_COLUMN]:.4g} (point {int(best['point_id'])}, {best['status']}): "
             f"{verdict} the requirements"
         ]

@@ -178,6 +178,8 @@ def test_comparison_gives_the_performance_confirmation_of_the_metric(write_spec,
     worst = result.table["ape [rad]"].max() / REQUIREMENT
     assert row["worst found / requirement [-]"] == pytest.approx(worst, rel=1e-12)
     assert "certified worst-case gain [1.179, 1.199]" in result.sentence()
+    # 8 runs < the population (9 for 3 parameters): the first generation only, and it says so
+    assert "8 runs in 1 generation (the first only" in result.sentence()
     # a --confirm folder without the table: exit 2, one line, the search folder not written
     spec = write_spec(_spec(), name="other")
     args = ["campaign", "falsify", str(spec), "--out", str(tmp_path / "g"), "--budget", "8"]
