@@ -499,7 +499,7 @@ def _performance_table(confirm: str | Path | None) -> pd.DataFrame | None:
     ValueError
         ``confirm`` given but no table there.
     """
-    from oos_drake.analysis.performance_twin import PERFORMANCE_CONFIRMATION_FILE
+    from oos_drake.campaign.performance import PERFORMANCE_CONFIRMATION_FILE
 
     if confirm is None:
         return None
@@ -517,7 +517,7 @@ def _performance_columns(performance: pd.DataFrame | None, metric: str) -> dict:
     the largest certified interval of the analysis (row of the largest lower bound) and the
     largest ratio of the twin run with the worst perturbation and the worst input (NaN without
     a table, a channel or a twin run)."""
-    from oos_drake.analysis.performance import REQUIREMENT_METRICS
+    from oos_drake.campaign.performance import REQUIREMENT_METRICS
 
     out = {
         "performance lower [-]": math.nan,

@@ -58,6 +58,11 @@ import pandas as pd  # noqa: E402
 from oos_drake.campaign import estimators, store  # noqa: E402
 from oos_drake.campaign.distributions import Fixed  # noqa: E402
 from oos_drake.campaign.executors import execute_case  # noqa: E402
+from oos_drake.campaign.performance import (  # noqa: E402
+    PERFORMANCE_CONFIRMATION_FILE,
+    worst_twin_row,
+    worst_twin_where,
+)
 from oos_drake.campaign.runner import (  # noqa: E402
     case_from_plan_row,
     load_campaign,
@@ -459,8 +464,6 @@ def find_performance_confirmation(
     """The ``oos confirm`` performance table (``performance_confirmation.parquet``) of a
     campaign: in the ``--confirm`` folder (or beside the given file), else in the ``oos run``
     layout; None when there is none."""
-    from oos_drake.analysis.performance_twin import PERFORMANCE_CONFIRMATION_FILE
-
     if confirm is not None:
         folder = Path(confirm) if Path(confirm).is_dir() else Path(confirm).parent
     else:
@@ -481,8 +484,6 @@ def performance_sentences(table: pd.DataFrame, worst_ratio: float) -> str:
     worst_ratio : float
         Largest requirement ratio of the campaign's runs [-] (NaN: none).
     """
-    from oos_drake.report.results import worst_performance_on_twin
-
     lines = [
         "worst-case performance on the twin (oos confirm; ratio to the requirement, > 1 "
         "violates it):"
@@ -494,15 +495,16 @@ def performance_sentences(table: pd.DataFrame, worst_ratio: float) -> str:
             f"{row['gain upper [-]']:.4g}], sampled {row['gain linear sampled [-]']:.4g}, "
             f"twin {row['gain twin [-]']:.4g} ({row['status']})"
         )
-    worst = worst_performance_on_twin(table)
+    worst = worst_twin_row(table)
     if worst is not None:
+        value = float(worst["gain twin [-]"])
         lines.append(
-            f"worst performance ratio on the twin: {worst.value:.4g} ({worst.where}); the "
+            f"worst performance ratio on the twin: {value:.4g} ({worst_twin_where(worst)}); the "
             f"campaign's worst run: {worst_ratio:.4g}"
             + (
                 " (the campaign's random disturbances stay below the worst-case input's "
                 "ratio; oos campaign falsify searches for it)"
-                if math.isfinite(worst_ratio) and worst_ratio < worst.value
+                if math.isfinite(worst_ratio) and worst_ratio < value
                 else ""
             )
         )

@@ -30,7 +30,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from oos_drake.analysis.performance_twin import PERFORMANCE_CONFIRMATION_FILE as PERFORMANCE_FILE
+from oos_drake.campaign.performance import PERFORMANCE_CONFIRMATION_FILE as PERFORMANCE_FILE
+from oos_drake.campaign.performance import REQUIREMENT_NAMES, worst_twin_row, worst_twin_where
 
 #: Stage folders of ``oos run``, in the order they run.
 STAGES = ("model", "validate", "controller", "analysis", "confirm", "margins")
@@ -47,9 +48,6 @@ FIGURE_ORDER = (
     "metric_distributions",
     "worst_runs",
 )
-#: Performance channels of the analysis -> the requirement their unit gain is
-#: (``performance_confirmation.parquet``: a gain > 1 violates it).
-PERFORMANCE_REQUIREMENTS = {"e_p": "APE requirement", "e_u": "torque limit"}
 #: Row of the campaign summary that counts a run as failed for any reason.
 ANY_FAILURE = "any (requirement or run failure)"
 #: Margin columns of ``margins.parquet`` whose mission-wide minimum is a headline: column ->
@@ -393,27 +391,18 @@ def worst_performance_on_twin(table: pd.DataFrame | None) -> Headline | None:
     Headline or None
         None without a table or without a finished twin run.
     """
-    column = "gain twin [-]"
-    if table is None or column not in table.columns:
+    row = worst_twin_row(table)
+    if row is None:
         return None
-    finite = pd.to_numeric(table[column], errors="coerce")
-    if not finite.notna().any():
-        return None
-    row = table.loc[finite.idxmax()]
     channel = str(row.get("channel", "?"))
-    requirement = PERFORMANCE_REQUIREMENTS.get(channel, "requirement")
-    verdict = "violated" if float(row[column]) > 1 else "met"
+    requirement = REQUIREMENT_NAMES.get(channel, "requirement")
     return Headline(
         "performance_twin",
         f"worst performance ratio on the twin ({channel} / {requirement}; > 1 violates it)",
-        float(row[column]),
+        float(row["gain twin [-]"]),
         "-",
-        f"confirm/{PERFORMANCE_FILE}: max of {column}",
-        f"{requirement} {verdict}: {channel} {row.get('subset', '?')}, "
-        f"t = {float(row.get('time [s]', math.nan)):.4g} s, "
-        f"f = {float(row.get('frequency [Hz]', math.nan)):.4g} Hz; analysis "
-        f"[{float(row.get('gain lower [-]', math.nan)):.4g}, "
-        f"{float(row.get('gain upper [-]', math.nan)):.4g}]",
+        f"confirm/{PERFORMANCE_FILE}: max of gain twin [-]",
+        worst_twin_where(row),
     )
 
 
