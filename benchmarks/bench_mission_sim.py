@@ -23,9 +23,8 @@ Run as a script (the machine is shared: the default is short)::
    joint PDs and bushings. ``--accuracy-study`` adds the attitude error of Radau3 settings
    against a converged reference on three windows (arm motion, capture, second docking).
    ``--window-start-study`` compares windows that start with the hub at rest with the mission
-   run from t = 0.
-``--pointing-by-phase``: the nominal mission from t = 0 against the APE requirement, phase by
-phase (largest logged attitude error and the logged samples above the requirement).
+   run from t = 0. ``--pointing-by-phase`` runs the nominal mission from t = 0 against the
+   APE requirement, phase by phase (largest logged attitude error, logged samples above it).
 
 4. Parallel efficiency of the campaign's process pool with this simulator, 2 workers against 1,
    on wall time and on processor time (``bench_campaign.parallel_efficiency``).
