@@ -112,6 +112,21 @@ def results_folder(tmp_path) -> Path:
             "status": ["confirmed"],
         }
     ).to_parquet(out / "confirm" / "confirmation.parquet")
+    pd.DataFrame(
+        {
+            "channel": ["e_p", "e_p", "e_u"],
+            "subset": ["total", "real", "total"],
+            "time [s]": [269.2, 269.2, 0.0],
+            "frequency [Hz]": [0.0807, 0.0611, 0.1407],
+            "gain lower [-]": [1.179, 0.762, 0.655],
+            "gain upper [-]": [1.199, 0.768, 0.662],
+            "gain linear twin [-]": [1.1789, 0.7618, 0.6546],
+            "gain linear sampled [-]": [1.2803, 0.7739, 0.7681],
+            "gain twin [-]": [1.2809, 0.7738, np.nan],
+            "peak ratio twin [-]": [1.2572, 0.6282, np.nan],
+            "status": ["twin violated (1.28)", "twin met (0.774)", "no twin run: too long"],
+        }
+    ).to_parquet(out / "confirm" / "performance_confirmation.parquet")
     (out / "margins").mkdir()
     margins = pd.DataFrame(
         {
@@ -140,6 +155,16 @@ def results_folder(tmp_path) -> Path:
             "interval": ["clopper-pearson", "clopper-pearson"],
         }
     ).to_parquet(campaign / "report" / "summary.parquet")
+    pd.DataFrame(
+        {
+            "run_id": [3, 7, 9],
+            "requirement": ["ape <= 0.0079 rad"] * 3,
+            "phase": ["start-capture", "start-capture", "capture-docking"],
+            "first violation time [s]": [96.0, 41.0, 601.0],
+            "window": ["phase:start-capture"] * 2 + ["phase:capture-docking"],
+            "status": ["ok"] * 3,
+        }
+    ).to_parquet(campaign / "report" / "violations.parquet")
     _png(campaign / "report" / "regions_performance.png", 80, 50)
     (campaign / "replay").mkdir()
     (campaign / "replay" / "case_3.html").write_text("<html></html>")
@@ -166,6 +191,11 @@ def expected_headlines(out: Path) -> dict[str, float]:
     margins = pd.read_parquet(out / "margins" / "margins.parquet")
     expected["gain_margin"] = float(margins["gain margin upper [dB]"].min())
     expected["phase_margin"] = float(margins["phase margin [deg]"].min())
+    performance = out / "confirm" / "performance_confirmation.parquet"
+    if performance.is_file():
+        gains = pd.read_parquet(performance)["gain twin [-]"].dropna()
+        if len(gains):
+            expected["performance_twin"] = float(gains.max())
     (campaign,) = [p for p in out.glob("campaign-*") if (p / "plan.parquet").is_file()]
     summary = pd.read_parquet(campaign / "report" / "summary.parquet").set_index("metric")
     expected["p_fail_bound"] = float(summary.loc["any (requirement or run failure)", "P 95 % high"])
@@ -210,7 +240,7 @@ def test_report_of_a_synthetic_folder_in_chromium(results_folder, tmp_path):
     shot = screenshot(page, tmp_path / "top.png", tmp_path / "browser")
     with Image.open(shot) as image:  # a page was drawn, not a blank window
         assert image.size == (1400, 1400) and len(image.getcolors(1 << 16) or range(99)) > 20
-    assert len(seen["headlines"]) == 10
+    assert len(seen["headlines"]) == 11
     assert len(seen["images"]) == 3  # the PNG files of the folder
     sections = {s["id"]: s["notRun"] for s in seen["sections"]}
     for section in ("headlines", "controller", "analysis", "validation", "replays"):
@@ -219,6 +249,27 @@ def test_report_of_a_synthetic_folder_in_chromium(results_folder, tmp_path):
     assert "<td>modal frequency</td><td>rad/s</td>" in text  # the block table, with units
     assert 'href="campaign-0123456789/replay/case_3.html"' in text
     assert "http://" not in text and "https://" not in text
+    assert "Worst-case performance on the Drake twin" in text
+    assert "twin violated (1.28)" in text  # the performance table, row by row
+    # violations per phase (2 in start-capture, 1 in capture-docking) and their times
+    assert '<td>start-capture</td><td class="num">2</td>' in text
+    assert '<td>capture-docking</td><td class="num">1</td>' in text
+    assert '<td class="num">601</td>' in text
+
+
+def test_worst_performance_headline_names_channel_requirement_and_bounds(results_folder):
+    """The headline is the largest finite twin gain (1.2809 of the e_p total row, the e_u row
+    without a twin run skipped), with the analysis' interval and the verdict against 1."""
+    numbers = headline_numbers(load_run(results_folder))
+    (worst,) = [h for h in numbers if h.key == "performance_twin"]
+    assert worst.value == 1.2809
+    assert "APE requirement violated" in worst.where and "e_p total" in worst.where
+    assert "[1.179, 1.199]" in worst.where and "t = 269.2 s" in worst.where
+    path = results_folder / "confirm" / "performance_confirmation.parquet"
+    table = pd.read_parquet(path)
+    table["gain twin [-]"] = np.nan  # no twin run finished: no headline
+    table.to_parquet(path)
+    assert "performance_twin" not in [h.key for h in headline_numbers(load_run(results_folder))]
 
 
 def test_the_browser_check_sees_a_broken_figure(results_folder, tmp_path):

@@ -14,14 +14,15 @@ import numpy as np
 import pandas as pd
 
 from oos_drake.blas import limit_blas_threads
+from oos_drake.campaign.performance import REQUIREMENT_METRICS
 from oos_drake.processes import make_executor
 from oos_drake.robust.lfr_analysis import delta_channel_response, model_matrices, subset_parts
 
 #: Performance channels: name -> rows of ``e``.
 CHANNELS = {"e_p": (0, 1, 2), "e_u": (3, 4, 5)}
-#: Channel -> the campaign metric of the Drake mission whose requirement is its unit gain
-#: (``e_p``: the APE bound, ``e_u``: the 2 N m wheel command bound).
-REQUIREMENT_METRICS = {"e_p": "ape", "e_u": "peak_torque"}
+# REQUIREMENT_METRICS (imported above, defined once in oos_drake.campaign.performance): channel
+# -> the campaign metric of the Drake mission whose requirement is its unit gain (``e_p``: the
+# APE bound, ``e_u``: the 2 N m wheel command bound).
 
 #: Columns of the performance table.
 PERFORMANCE_COLUMNS = [

@@ -40,6 +40,8 @@ import numpy as np
 import pandas as pd
 import scipy.signal
 
+from oos_drake.campaign.performance import PERFORMANCE_CONFIRMATION_FILE
+
 __all__ = [
     "GainCase",
     "PERFORMANCE_CONFIRMATION_FILE",
@@ -52,7 +54,6 @@ __all__ = [
     "worst_gain_cases",
 ]
 
-PERFORMANCE_CONFIRMATION_FILE = "performance_confirmation.parquet"
 #: Periods of the critical oscillation the phasors are fitted over [-].
 FIT_PERIODS = 4
 #: Longest settling time simulated before the fit [s].

@@ -147,6 +147,7 @@ def _falsify(args: argparse.Namespace) -> int:
         worst_cases=args.worst_cases,
         progress=not args.quiet,
         simulator_options=_parse_options(args.simulator_option),
+        confirm=args.confirm,
     )
     print(result.sentence())
     if result.reused:
@@ -186,7 +187,7 @@ def register(subparsers) -> None:
     run.add_argument(
         "spec",
         help="campaign spec (TOML file), or the name of a shipped spec: demo, demo_mu, paper, "
-        "paper_mc",
+        "paper_mc, paper_phases, heavy_target",
     )
     add_out_argument(
         run,
@@ -249,6 +250,13 @@ def register(subparsers) -> None:
         default=None,
         metavar="PARQUET",
         help="the analysis' worst_cases.parquet: its worst cases start the search",
+    )
+    falsify.add_argument(
+        "--confirm",
+        default=None,
+        metavar="DIR",
+        help="oos confirm folder: compare the worst found with the certified worst-case gains "
+        "and the twin run of the worst perturbation and input (performance_confirmation.parquet)",
     )
     falsify.add_argument(
         "--simulator-option",

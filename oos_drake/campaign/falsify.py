@@ -218,8 +218,12 @@ class FalsificationResult:
         """One line: the worst run found and its parameters."""
         best = self.best
         verdict = "VIOLATES" if best[RATIO_COLUMN] > 1 else "meets"
+        generations = int(self.table["generation"].max()) + 1 if len(self.table) else 0
         lines = [
-            f"falsification: {len(self.table)} runs; worst requirement ratio "
+            f"falsification: {len(self.table)} runs in {generations} generation"
+            f"{'s' if generations != 1 else ''}"
+            + (" (the first only: the starting points)" if generations == 1 else "")
+            + "; worst requirement ratio "
             f"{best[RATIO_COLUMN]:.4g} (point {int(best['point_id'])}, {best['status']}): "
             f"{verdict} the requirements"
         ]
@@ -230,6 +234,12 @@ class FalsificationResult:
                     f" of the requirement; the analysis' worst-case gain lies in "
                     f"[{row['wcgain lower [-]']:.4g}, {row['wcgain upper [-]']:.4g}] "
                     f"(region {int(row['region'])})"
+                )
+            if np.isfinite(row.get("performance upper [-]", math.nan)):
+                line += (
+                    f"; certified worst-case gain [{row['performance lower [-]']:.4g}, "
+                    f"{row['performance upper [-]']:.4g}], twin with the worst perturbation "
+                    f"and input {row['twin worst input / requirement [-]']:.4g}"
                 )
             lines.append(line)
         return "\n".join(lines)
@@ -390,6 +400,7 @@ def falsify(
     worst_cases: str | Path | None = None,
     progress: bool = True,
     simulator_options: Mapping[str, Any] | None = None,
+    confirm: str | Path | None = None,
 ) -> FalsificationResult:
     """Search the spec's dispersion box for the largest requirement ratio (module docstring).
 
@@ -409,6 +420,10 @@ def falsify(
         Show a progress bar.
     simulator_options : dict, optional
         Update the spec's simulator options (``--simulator-option``, e.g. a ``controller``).
+    confirm : path, optional
+        ``oos confirm`` folder (or its ``performance_confirmation.parquet``): the comparison
+        then also gives, per requirement, the analysis' certified worst-case gain and the twin
+        run with the worst perturbation and the worst input (:func:`linear_comparison`).
 
     Raises
     ------
@@ -419,6 +434,7 @@ def falsify(
 
     if budget < 1:
         raise ValueError(f"--budget {budget}: need at least 1 run")
+    performance = _performance_table(confirm)
     spec = resolve_spec(spec_path, worst_cases, simulator_options)
     if not any(r.max is not None and r.max > 0 for r in spec.requirements):
         raise ValueError(f"spec {spec.name}: falsification needs a requirement with a max bound")
@@ -468,16 +484,69 @@ def falsify(
     table = table[table["point_id"] < budget].reset_index(drop=True)
     atomic_write_parquet(table, directory / TABLE_FILE)
     best = table.loc[table[RATIO_COLUMN].idxmax()]
-    comparison = linear_comparison(spec, table)
+    comparison = linear_comparison(spec, table, performance)
     atomic_write_parquet(comparison, directory / COMPARISON_FILE)
     return FalsificationResult(
         directory, table, best, evaluator.evaluated, evaluator.reused, comparison
     )
 
 
-def linear_comparison(spec: CampaignSpec, table: pd.DataFrame) -> pd.DataFrame:
-    """Per max-requirement metric: worst metric / requirement among the finished points, and
-    the largest worst-case gain bounds of the analysis' regions for it (NaN without gains)."""
+def _performance_table(confirm: str | Path | None) -> pd.DataFrame | None:
+    """``oos confirm``'s performance table (a folder or the file), None when not given.
+
+    Raises
+    ------
+    ValueError
+        ``confirm`` given but no table there.
+    """
+    from oos_drake.campaign.performance import PERFORMANCE_CONFIRMATION_FILE
+
+    if confirm is None:
+        return None
+    path = Path(confirm)
+    path = path / PERFORMANCE_CONFIRMATION_FILE if path.is_dir() else path
+    if not path.is_file():
+        raise ValueError(
+            f"--confirm {confirm}: no {PERFORMANCE_CONFIRMATION_FILE} (written by oos confirm)"
+        )
+    return pd.read_parquet(path)
+
+
+def _performance_columns(performance: pd.DataFrame | None, metric: str) -> dict:
+    """The performance confirmation of the channel whose unit gain is ``metric``'s requirement:
+    the largest certified interval of the analysis (row of the largest lower bound) and the
+    largest ratio of the twin run with the worst perturbation and the worst input (NaN without
+    a table, a channel or a twin run)."""
+    from oos_drake.campaign.performance import REQUIREMENT_METRICS
+
+    out = {
+        "performance lower [-]": math.nan,
+        "performance upper [-]": math.nan,
+        "twin worst input / requirement [-]": math.nan,
+    }
+    channels = [c for c, m in REQUIREMENT_METRICS.items() if m == metric]
+    if performance is None or not channels:
+        return out
+    rows = performance[performance["channel"].isin(channels)]
+    lower = pd.to_numeric(rows["gain lower [-]"], errors="coerce")
+    if lower.notna().any():
+        row = rows.loc[lower.idxmax()]
+        out["performance lower [-]"] = float(row["gain lower [-]"])
+        out["performance upper [-]"] = float(row["gain upper [-]"])
+    twin = pd.to_numeric(rows["gain twin [-]"], errors="coerce")
+    if twin.notna().any():
+        out["twin worst input / requirement [-]"] = float(twin.max())
+    return out
+
+
+def linear_comparison(
+    spec: CampaignSpec, table: pd.DataFrame, performance: pd.DataFrame | None = None
+) -> pd.DataFrame:
+    """Per max-requirement metric: worst metric / requirement among the finished points, the
+    largest worst-case gain bounds of the analysis' regions for it (NaN without gains) and,
+    given ``oos confirm``'s performance table, the analysis' certified worst-case gain of its
+    channel and the twin's ratio under the worst perturbation and input
+    (:func:`_performance_columns`)."""
     rows = []
     ok = table["status"] == "ok"
     for requirement in spec.requirements:
@@ -495,5 +564,6 @@ def linear_comparison(spec: CampaignSpec, table: pd.DataFrame) -> pd.DataFrame:
                 "wcgain upper [-]": float(high),
                 "region": region.region if region else -1,
             }
+            | _performance_columns(performance, requirement.metric)
         )
     return pd.DataFrame(rows)

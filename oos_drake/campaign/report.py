@@ -21,6 +21,9 @@ Files written in ``DIR/report/``:
   nonlinear runs drawn around it;
 - ``confirmation.parquet`` (when the ``oos confirm`` table is found): the nonlinear stability
   boundary of each certified peak against mu;
+- ``performance_confirmation.parquet`` (when ``oos confirm`` wrote one): the analysis'
+  worst-case gains run on the twin (worst perturbation and worst input), printed with the
+  worst performance ratio on the twin beside the campaign's worst run;
 - ``metric_distributions.png`` (histograms of unweighted runs; for importance-weighted runs the
   weighted empirical CDF, the estimate under the dispersions, beside the runs as drawn),
   ``worst_runs.png``, ``pass_fail_vs_parameters.png``, ``regions_performance.png`` (mu-guided,
@@ -55,6 +58,11 @@ import pandas as pd  # noqa: E402
 from oos_drake.campaign import estimators, store  # noqa: E402
 from oos_drake.campaign.distributions import Fixed  # noqa: E402
 from oos_drake.campaign.executors import execute_case  # noqa: E402
+from oos_drake.campaign.performance import (  # noqa: E402
+    PERFORMANCE_CONFIRMATION_FILE,
+    worst_twin_row,
+    worst_twin_where,
+)
 from oos_drake.campaign.runner import (  # noqa: E402
     case_from_plan_row,
     load_campaign,
@@ -242,8 +250,11 @@ def violations_table(directory: Path, spec, runs: pd.DataFrame) -> pd.DataFrame:
     The time is the first logged instant at which the signal a metric bounds (the simulator's
     ``metric_signals``) leaves the requirement's max bound in one of the requirement's phases,
     read from the run's retained time series; without one it is NaN and the phase column lists
-    the phases the run's window overlaps. A run that did not finish is listed once, with its
-    status.
+    the phases the run's window overlaps. The metric is computed at the flight-software rate and
+    the series is logged at ``log_rate``: a violation between two logged samples has no first
+    logged instant, and ``peak time (logged) [s]`` (the logged sample of the largest magnitude
+    within the requirement's phases) then says when it happened, to one log period. A run that
+    did not finish is listed once, with its status.
     """
     phases = mission_phases(spec.info)
     rows = []
@@ -260,7 +271,7 @@ def violations_table(directory: Path, spec, runs: pd.DataFrame) -> pd.DataFrame:
         for requirement in spec.requirements:
             if bool(run[requirement.column]):
                 continue
-            time, phase = math.nan, overlapped
+            time, peak_time, phase = math.nan, math.nan, overlapped
             signal = spec.info.metric_signals.get(requirement.metric)
             path = store.timeseries_file(directory, int(run["run_id"]))
             if signal and requirement.max is not None and path.is_file():
@@ -273,9 +284,10 @@ def violations_table(directory: Path, spec, runs: pd.DataFrame) -> pd.DataFrame:
                         inside = np.zeros(t.size, bool)
                         for a, b in requirement.spans:
                             inside |= (t >= a) & (t <= b)
-                    beyond = np.flatnonzero(
-                        inside & (np.abs(series[column].to_numpy()) > requirement.max)
-                    )
+                    magnitude = np.abs(series[column].to_numpy())
+                    beyond = np.flatnonzero(inside & (magnitude > requirement.max))
+                    if inside.any():
+                        peak_time = float(t[inside][np.argmax(magnitude[inside])])
                     if beyond.size:
                         time = float(t[beyond[0]])
                         phase = next(
@@ -289,12 +301,21 @@ def violations_table(directory: Path, spec, runs: pd.DataFrame) -> pd.DataFrame:
                     "requirement": requirement.label,
                     "phase": phase,
                     "first violation time [s]": time,
+                    "peak time (logged) [s]": peak_time,
                     metric_column(spec, requirement.metric): float(
                         run[metric_column(spec, requirement.metric)]
                     ),
                 }
             )
-    columns = ["run_id", "requirement", "phase", "first violation time [s]", "window", "status"]
+    columns = [
+        "run_id",
+        "requirement",
+        "phase",
+        "first violation time [s]",
+        "peak time (logged) [s]",
+        "window",
+        "status",
+    ]
     table = pd.DataFrame(rows)
     if table.empty:
         return pd.DataFrame(columns=columns)
@@ -435,6 +456,59 @@ def find_confirmation(directory: Path, confirm: str | Path | None = None) -> Pat
         return path
     path = Path(directory).resolve().parent / CONFIRMATION_FOLDER / CONFIRMATION_FILE
     return path if path.is_file() else None
+
+
+def find_performance_confirmation(
+    directory: Path, confirm: str | Path | None = None
+) -> Path | None:
+    """The ``oos confirm`` performance table (``performance_confirmation.parquet``) of a
+    campaign: in the ``--confirm`` folder (or beside the given file), else in the ``oos run``
+    layout; None when there is none."""
+    if confirm is not None:
+        folder = Path(confirm) if Path(confirm).is_dir() else Path(confirm).parent
+    else:
+        folder = Path(directory).resolve().parent / CONFIRMATION_FOLDER
+    path = folder / PERFORMANCE_CONFIRMATION_FILE
+    return path if path.is_file() else None
+
+
+def performance_sentences(table: pd.DataFrame, worst_ratio: float) -> str:
+    """The performance confirmation against the campaign: the twin's largest requirement ratio
+    under the analysis' worst case (perturbation and input) beside the analysis' bounds, and the
+    campaign's worst run.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        ``performance_confirmation.parquet``.
+    worst_ratio : float
+        Largest requirement ratio of the campaign's runs [-] (NaN: none).
+    """
+    lines = [
+        "worst-case performance on the twin (oos confirm; ratio to the requirement, > 1 "
+        "violates it):"
+    ]
+    for _, row in table.iterrows():
+        lines.append(
+            f"  {row['channel']} {row['subset']:>14s} t = {row['time [s]']:7.1f} s "
+            f"f = {row['frequency [Hz]']:.4g} Hz: analysis [{row['gain lower [-]']:.4g}, "
+            f"{row['gain upper [-]']:.4g}], sampled {row['gain linear sampled [-]']:.4g}, "
+            f"twin {row['gain twin [-]']:.4g} ({row['status']})"
+        )
+    worst = worst_twin_row(table)
+    if worst is not None:
+        value = float(worst["gain twin [-]"])
+        lines.append(
+            f"worst performance ratio on the twin: {value:.4g} ({worst_twin_where(worst)}); the "
+            f"campaign's worst run: {worst_ratio:.4g}"
+            + (
+                " (the campaign's random disturbances stay below the worst-case input's "
+                "ratio; oos campaign falsify searches for it)"
+                if math.isfinite(worst_ratio) and worst_ratio < value
+                else ""
+            )
+        )
+    return "\n".join(lines)
 
 
 def read_confirmation(path: Path) -> pd.DataFrame:
@@ -681,6 +755,8 @@ def write_report(
     spec, plan = load_campaign(directory)
     confirmation_path = find_confirmation(directory, confirm)
     confirmation = read_confirmation(confirmation_path) if confirmation_path else None
+    performance_path = find_performance_confirmation(directory, confirm)
+    performance = pd.read_parquet(performance_path) if performance_path else None
     runs = store.load_runs(directory)
     if runs.empty:
         raise ValueError(f"{directory}: no finished run to report")
@@ -701,6 +777,10 @@ def write_report(
         tables["regions"] = _regions_table(spec, runs)
     if confirmation is not None:
         tables["confirmation"] = confirmation
+    if performance is not None:
+        tables["performance_confirmation"] = performance
+    else:  # a table of an earlier report whose confirmation is gone is not this report's
+        (out / "performance_confirmation.parquet").unlink(missing_ok=True)
     for name, table in tables.items():
         atomic_write_parquet(table, out / f"{name}.parquet")
 
@@ -770,6 +850,13 @@ def write_report(
             parts.append(
                 "stability boundary: no oos confirm table (give --confirm DIR); mu is not "
                 "compared with the campaign's performance metrics."
+            )
+        if performance is not None:
+            ratios = requirement_ratio(spec, runs)
+            parts.append(
+                performance_sentences(
+                    performance, float(ratios.max()) if ratios.notna().any() else math.nan
+                )
             )
         if spec.window.kind == "critical":
             parts.append(

@@ -1,7 +1,8 @@
 """Campaign specs: TOML files, validated before any run starts.
 
 The specs shipped with the package (the top-level ``campaigns/``, linked into the package as
-``oos_drake/campaign/specs``: ``demo``, ``demo_mu``, ``paper``, ``paper_mc``) can be named
+``oos_drake/campaign/specs``: ``demo``, ``demo_mu``, ``paper``, ``paper_mc``, ``paper_phases``,
+``heavy_target``) can be named
 without a path: ``oos campaign run demo``.
 
 A spec names a simulator, disperses some of its parameters, chooses a sampler, a number of runs, a

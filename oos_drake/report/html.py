@@ -523,6 +523,34 @@ def confirmation_section(results: RunResults) -> str:
         )
     )
     parts.append(figures_html(results.figures("confirm"), "confirmation figures"))
+    parts.append("<h3>Worst-case performance on the Drake twin</h3>")
+    parts.append(
+        "<p>Per channel and uncertainty subset, the analysis' worst-case gain (its certified "
+        "interval), the linear twin and the sampled-data prediction, and the Drake twin run "
+        "with the worst perturbation and the worst input (a sinusoid at the critical frequency "
+        "along the worst direction). Gains are ratios to the requirement (e_p: the APE "
+        "requirement, e_u: the torque limit): above 1 the requirement is violated.</p>"
+    )
+    parts.append(
+        table_html(
+            results.performance,
+            [
+                "channel",
+                "subset",
+                "time [s]",
+                "frequency [Hz]",
+                "gain nominal [-]",
+                "gain lower [-]",
+                "gain upper [-]",
+                "gain linear twin [-]",
+                "gain linear sampled [-]",
+                "gain twin [-]",
+                "peak ratio twin [-]",
+                "status",
+            ],
+            what="performance confirmation (confirm/performance_confirmation.parquet)",
+        )
+    )
     parts.append("<h3>Margins over the mission</h3>")
     margins = results.margins
     if margins is None:
@@ -591,6 +619,19 @@ def campaign_section(results: RunResults) -> str:
     )
     parts.append("<h3>Runs per status</h3>")
     parts.append(table_html(results.campaign_status, what="report/status.parquet"))
+    parts.append("<h3>Violations: mission phase and time of the first violation</h3>")
+    violations = results.violations
+    if violations is not None and not violations.empty and "phase" in violations.columns:
+        per_phase = violations.groupby("phase").size().rename("violations").reset_index()
+        parts.append(table_html(per_phase))
+        shown = violations.head(50)
+        if len(violations) > 50:
+            parts.append(f"<p>first 50 of {len(violations)} (all in report/violations.parquet)</p>")
+        parts.append(table_html(shown))
+    elif violations is not None and violations.empty:
+        parts.append("<p>no run violated a requirement</p>")
+    else:
+        parts.append(not_run("report/violations.parquet"))
     parts.append("<h3>Worst runs (their dispersed values: report/worst_runs.parquet)</h3>")
     worst = results.worst_runs
     metrics = []

@@ -14,9 +14,10 @@ Folder layout read (``OUT`` = ``oos run --out``)::
     OUT/controller/controller.json   gains, gamma, requirement met, design specification
     OUT/analysis/summary.json        scenario record (file, SHA-256), key numbers
     OUT/analysis/stability_peaks.parquet, worst_perturbations.parquet, *.png
-    OUT/confirm/confirmation.parquet, *.png
+    OUT/confirm/confirmation.parquet, performance_confirmation.parquet, *.png
     OUT/margins/margins.parquet, margins.png
-    OUT/campaign-<key>/report/summary.parquet, worst_runs.parquet, regions.parquet, *.png
+    OUT/campaign-<key>/report/summary.parquet, worst_runs.parquet, regions.parquet,
+                                     violations.parquet, *.png
     OUT/campaign-<key>/replay/case_<N>.html
 """
 
@@ -28,6 +29,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
+
+from oos_drake.campaign.performance import PERFORMANCE_CONFIRMATION_FILE as PERFORMANCE_FILE
+from oos_drake.campaign.performance import REQUIREMENT_NAMES, worst_twin_row, worst_twin_where
 
 #: Stage folders of ``oos run``, in the order they run.
 STAGES = ("model", "validate", "controller", "analysis", "confirm", "margins")
@@ -103,12 +107,18 @@ class RunResults:
         ``worst_perturbations.parquet``.
     confirmation : pandas.DataFrame or None
         ``confirm/confirmation.parquet``.
+    performance : pandas.DataFrame or None
+        ``confirm/performance_confirmation.parquet``: the analysis' worst-case gains run on
+        the twin (:mod:`oos_drake.analysis.performance_twin`).
     margins : pandas.DataFrame or None
         ``margins/margins.parquet``.
     campaign : pathlib.Path or None
         The campaign folder (``campaign-<key>``).
     campaign_summary, worst_runs, regions, campaign_status : pandas.DataFrame or None
         The campaign report's ``summary``, ``worst_runs``, ``regions`` and ``status`` tables.
+    violations : pandas.DataFrame or None
+        The campaign report's ``violations`` table: every violation with its requirement,
+        mission phase and the time of the first violation.
     campaign_environment : dict or None
         ``environment.json`` of the campaign (versions of the packages that ran it).
     blocks : pandas.DataFrame or None
@@ -128,12 +138,14 @@ class RunResults:
     guaranteed: pd.DataFrame | None
     perturbations: pd.DataFrame | None
     confirmation: pd.DataFrame | None
+    performance: pd.DataFrame | None
     margins: pd.DataFrame | None
     campaign: Path | None
     campaign_summary: pd.DataFrame | None
     worst_runs: pd.DataFrame | None
     regions: pd.DataFrame | None
     campaign_status: pd.DataFrame | None
+    violations: pd.DataFrame | None
     campaign_environment: dict | None
     blocks: pd.DataFrame | None
     validation: str | None
@@ -224,12 +236,14 @@ def load_run(out: str | Path, campaign: str | Path | None = None) -> RunResults:
         guaranteed=_parquet(out / "analysis" / "stability_guaranteed.parquet"),
         perturbations=_parquet(out / "analysis" / "worst_perturbations.parquet"),
         confirmation=_parquet(out / "confirm" / "confirmation.parquet"),
+        performance=_parquet(out / "confirm" / PERFORMANCE_FILE),
         margins=_parquet(out / "margins" / "margins.parquet"),
         campaign=campaign,
         campaign_summary=_parquet(report / "summary.parquet") if report else None,
         worst_runs=_parquet(report / "worst_runs.parquet") if report else None,
         regions=_parquet(report / "regions.parquet") if report else None,
         campaign_status=_parquet(report / "status.parquet") if report else None,
+        violations=_parquet(report / "violations.parquet") if report else None,
         campaign_environment=_json(campaign / "environment.json") if campaign else None,
         blocks=_parquet(out / "model" / "blocks.parquet"),
         validation=validation.read_text(encoding="utf-8") if validation.is_file() else None,
@@ -276,7 +290,9 @@ def headline_numbers(results: RunResults) -> list[Headline]:
 
     gamma of the controller; the guaranteed peak of mu of every subset of the mission study;
     the worst gain and phase margins over the mission (every loop model and configuration);
-    the upper end of the 95 % interval of the campaign's probability that a run fails. A
+    the worst performance ratio the twin reached when driven by the analysis' worst-case
+    perturbation and input (:func:`worst_performance_on_twin`); the upper end of the 95 %
+    interval of the campaign's probability that a run fails. A
     number whose table is missing is left out.
 
     Parameters
@@ -338,6 +354,9 @@ def headline_numbers(results: RunResults) -> list[Headline]:
                     f"{row.get('loop', '?')} loop, t = {time_s:.4g} s",
                 )
             )
+    worst = worst_performance_on_twin(results.performance)
+    if worst is not None:
+        numbers.append(worst)
     summary = results.campaign_summary
     if summary is not None and "P 95 % high" in summary.columns:
         rows = summary[summary["metric"] == ANY_FAILURE]
@@ -354,6 +373,37 @@ def headline_numbers(results: RunResults) -> list[Headline]:
                 )
             )
     return numbers
+
+
+def worst_performance_on_twin(table: pd.DataFrame | None) -> Headline | None:
+    """The largest requirement ratio the Drake twin reached in ``oos confirm``'s performance
+    confirmation (``gain twin [-]``: the pointing error, or the wheel command, of the twin
+    driven by the worst-case perturbation and input, over its requirement; > 1 violates it),
+    with the channel, the configuration, the frequency and the analysis' bounds of that gain.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame or None
+        ``confirm/performance_confirmation.parquet``.
+
+    Returns
+    -------
+    Headline or None
+        None without a table or without a finished twin run.
+    """
+    row = worst_twin_row(table)
+    if row is None:
+        return None
+    channel = str(row.get("channel", "?"))
+    requirement = REQUIREMENT_NAMES.get(channel, "requirement")
+    return Headline(
+        "performance_twin",
+        f"worst performance ratio on the twin ({channel} / {requirement}; > 1 violates it)",
+        float(row["gain twin [-]"]),
+        "-",
+        f"confirm/{PERFORMANCE_FILE}: max of gain twin [-]",
+        worst_twin_where(row),
+    )
 
 
 def format_number(value, unit: str = "-", digits: int = 4) -> str:

@@ -97,7 +97,7 @@ def test_cli_refuses_a_contradicting_spec_and_writes_nothing(write_spec, tmp_pat
 
 
 @pytest.mark.drake
-@pytest.mark.parametrize("name", ["paper", "paper_mc", "heavy_target"])
+@pytest.mark.parametrize("name", ["paper", "paper_mc", "paper_phases", "heavy_target"])
 def test_shipped_specs_disperse_the_scenario_ranges(name):
     """The shipped Drake specs no longer repeat the ranges: the dispersions of the target hub
     and of the arrays' first modes are nominal +- percent of the scenario file."""

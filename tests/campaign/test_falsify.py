@@ -155,3 +155,33 @@ def test_search_starts_from_the_analysis_worst_cases(write_spec, tmp_path):
     assert (row["wcgain lower [-]"], row["wcgain upper [-]"], row["region"]) == (1.1, 1.3, 0)
     assert row["worst found / requirement [-]"] == pytest.approx(1.2, rel=1e-12)
     assert "the analysis' worst-case gain lies in [1.1, 1.3] (region 0)" in result.sentence()
+
+
+def test_comparison_gives_the_performance_confirmation_of_the_metric(write_spec, tmp_path):
+    """With oos confirm's performance table: the e_p rows (ape's channel) give the certified
+    interval of the largest lower bound and the largest twin ratio; e_u rows are not ape's."""
+    confirm = tmp_path / "confirm"
+    confirm.mkdir()
+    pd.DataFrame(
+        {
+            "channel": ["e_p", "e_p", "e_u"],
+            "subset": ["total", "real", "total"],
+            "gain lower [-]": [1.179, 0.762, 5.0],
+            "gain upper [-]": [1.199, 0.768, 6.0],
+            "gain twin [-]": [1.281, np.nan, 7.0],
+        }
+    ).to_parquet(confirm / "performance_confirmation.parquet")
+    result = falsify(write_spec(_spec()), tmp_path / "f", budget=8, progress=False, confirm=confirm)
+    (row,) = result.comparison.to_dict("records")
+    assert (row["performance lower [-]"], row["performance upper [-]"]) == (1.179, 1.199)
+    assert row["twin worst input / requirement [-]"] == 1.281
+    worst = result.table["ape [rad]"].max() / REQUIREMENT
+    assert row["worst found / requirement [-]"] == pytest.approx(worst, rel=1e-12)
+    assert "certified worst-case gain [1.179, 1.199]" in result.sentence()
+    # 8 runs < the population (9 for 3 parameters): the first generation only, and it says so
+    assert "8 runs in 1 generation (the first only" in result.sentence()
+    # a --confirm folder without the table: exit 2, one line, the search folder not written
+    spec = write_spec(_spec(), name="other")
+    args = ["campaign", "falsify", str(spec), "--out", str(tmp_path / "g"), "--budget", "8"]
+    assert main([*args, "--confirm", str(tmp_path / "nothing"), "--quiet"]) == 2
+    assert not (tmp_path / "g").exists()

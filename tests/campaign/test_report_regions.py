@@ -140,6 +140,40 @@ def test_confirmation_is_read_from_the_run_layout_or_given(tmp_path, capsys):
     assert len(err.splitlines()) == 1 and "confirmation.parquet" in err
 
 
+def test_performance_confirmation_is_reported_beside_the_campaigns_worst_run(tmp_path):
+    """oos confirm's performance table is copied into the campaign report and its largest twin
+    ratio printed with the analysis' bounds and the campaign's worst run (from the inputs)."""
+    directory, _, ape = _synthetic_campaign(tmp_path)
+    _confirmation(tmp_path / "elsewhere")
+    given = pd.DataFrame(
+        {
+            "channel": ["e_p", "e_u"],
+            "subset": ["total", "total"],
+            "time [s]": [269.2, 0.0],
+            "frequency [Hz]": [0.0807, 0.1407],
+            "gain lower [-]": [1.179, 0.655],
+            "gain upper [-]": [1.199, 0.662],
+            "gain linear sampled [-]": [1.2803, 0.7681],
+            "gain twin [-]": [1.2809, 0.7],
+            "status": ["twin violated (1.28)", "twin met (0.7)"],
+        }
+    )
+    given.to_parquet(tmp_path / "elsewhere" / "performance_confirmation.parquet")
+    report = write_report(directory, worst=0, confirm=tmp_path / "elsewhere")
+    pd.testing.assert_frame_equal(report.tables["performance_confirmation"], given)
+    assert (directory / "report" / "performance_confirmation.parquet").is_file()
+    assert "worst performance ratio on the twin: 1.281" in report.text
+    assert "APE requirement violated: e_p total" in report.text
+    assert "[1.179, 1.199]" in report.text
+    assert f"the campaign's worst run: {ape.max() / 0.0079:.4g}" in report.text
+    # without the file: no table, no sentence
+    (tmp_path / "elsewhere" / "performance_confirmation.parquet").unlink()
+    report = write_report(directory, worst=0, confirm=tmp_path / "elsewhere")
+    assert "performance_confirmation" not in report.tables
+    assert not (directory / "report" / "performance_confirmation.parquet").exists()
+    assert "worst performance ratio" not in report.text
+
+
 def test_weighted_ecdf_equals_the_ecdf_of_repeated_samples():
     values = np.array([3.0, 1.0, 2.0, 4.0, np.nan])
     weights = np.array([1.0, 2.0, 1.0, 0.0, 5.0])  # the sample [1, 1, 2, 3]

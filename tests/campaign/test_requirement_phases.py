@@ -53,6 +53,8 @@ def test_requirement_applies_only_in_its_phases(write_spec, tmp_path):
         t, theta = series["time [s]"].to_numpy(), series["theta_hub [rad]"].to_numpy()
         expected = t[np.flatnonzero((np.abs(theta) > BOUND) & (t >= start))[0]]
         assert row["first violation time [s]"] == expected
+        inside = (t >= start) & (t <= end)
+        assert row["peak time (logged) [s]"] == t[inside][np.argmax(np.abs(theta[inside]))]
 
 
 def test_unknown_phase_is_refused(write_spec):

@@ -134,6 +134,41 @@ def test_paper_campaign_specs_load_and_plan(name, synthetic_worst_cases, tmp_pat
         assert (plan["frequency [Hz]"] == SYNTHETIC_REGIONS[1][0]).all()
 
 
+def test_paper_phases_covers_the_whole_timeline(synthetic_worst_cases):
+    """paper_phases.toml: every run simulates one whole phase of the mission; the phases, read
+    from the scenario's events, tile [0, duration] and get runs in proportion to their
+    durations (largest remainders); pointing applies in every phase, stated in the spec."""
+    import tomllib
+
+    from oos_drake.campaign.runner import plan_campaign
+    from oos_drake.scenario.data import scenario_path
+
+    spec, plan = plan_campaign(CAMPAIGNS / "paper_phases.toml", synthetic_worst_cases)
+    mission = tomllib.loads(scenario_path("paper").read_text())["mission"]
+    events = sorted(
+        [mission["first_docking_time"], mission["second_docking_time"], mission["tilt_start_time"]]
+    )
+    edges = [0.0, *events, spec.info.duration]
+    windows = plan.groupby("window")[["window start [s]", "window end [s]"]].first()
+    np.testing.assert_array_equal(np.sort(windows.to_numpy(), axis=0), np.c_[edges[:-1], edges[1:]])
+    counts = plan.groupby("window start [s]").size().sort_index().to_numpy()
+    share = np.diff(edges) / edges[-1] * spec.n_runs
+    assert counts.sum() == spec.n_runs and np.all(np.abs(counts - share) < 1)
+    (ape,) = [r for r in spec.requirements if r.metric == "ape"]
+    assert sorted(ape.spans) == list(zip(edges[:-1], edges[1:], strict=True))
+    assert ape.max == 0.0079
+
+
+@pytest.mark.parametrize("name", ["paper", "paper_mc", "heavy_target"])
+def test_shipped_specs_state_where_pointing_applies(name):
+    """The pointing requirement names its phases (every one: the arm's motion included)."""
+    import tomllib
+
+    document = tomllib.loads((CAMPAIGNS / f"{name}.toml").read_text())
+    phases = document["requirements"]["ape"]["phases"]
+    assert phases == ["start-capture", "capture-docking", "docking-tilt", "tilt-end"]
+
+
 @pytest.mark.parametrize("name", ["paper", "paper_mc"])
 def test_paper_campaigns_without_worst_cases_are_refused(name, tmp_path, capsys):
     """Through the CLI: exit 2, one line naming the missing worst_cases.parquet, nothing written
