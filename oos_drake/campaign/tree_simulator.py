@@ -312,10 +312,13 @@ class TreeMissionSimulator:
             "max_tracking_error": run.joint_error,
         }
         columns = {"time [s]": run.times + start}
-        signals = np.hstack([run.phi, run.rate, run.torques])
-        for j, (prefix, unit) in enumerate(_SIGNALS):
+        for i, a in enumerate(AXES):
+            columns[f"phi_{a} [rad]"] = run.phi[:, i]
+        for i, a in enumerate(AXES):
+            columns[f"w_{a} [rad/s]"] = run.rate[:, i]
+        for j, (prefix, _) in enumerate(_SIGNALS[2:]):  # the torques, in N m
             for i, a in enumerate(AXES):
-                columns[f"{prefix}_{a} [{unit}]"] = signals[:, 3 * j + i]
+                columns[f"{prefix}_{a} [N m]"] = run.torques[:, 3 * j + i]
         return RunOutput(metrics=metrics, timeseries=pd.DataFrame(columns))
 
 
