@@ -315,7 +315,8 @@ class TreeMissionSimulator:
         signals = np.hstack([run.phi, run.rate, run.torques])
         for j, (prefix, unit) in enumerate(_SIGNALS):
             for i, a in enumerate(AXES):
-                columns[f"{prefix}_{a} [{unit}]"] = signals[:, 3 * j + i]
+                signal = f"{prefix}_{a}"  # the campaign's signal name (signal_units)
+                columns[f"{signal} [{unit}]"] = signals[:, 3 * j + i]
         return RunOutput(metrics=metrics, timeseries=pd.DataFrame(columns))
 
 
