@@ -18,7 +18,9 @@ zero-order hold, filters by their bilinear transforms): the flight software then
 tuned controller as it is (:meth:`ControllerSystem.discretize` keeps a discrete controller), and
 each goal's value is its value on the exact sampled-data loop (the margins that ``oos margins``
 measures on it). A continuous controller discretized afterwards by the flight software is not
-what was tuned (a PID's derivative at ``Tf = T`` grows by 58 % under a zero-order hold).
+what was tuned: the zero-order hold of a PID's derivative ``Kd s / (Tf s + 1)`` at
+``Tf = T`` has the gain ``1.46 Kd / Tf`` at the Nyquist frequency (continuous: at most
+``Kd / Tf``), ``1.57`` times the continuous one at a quarter of the sample rate.
 
 Structures (``[control] structure``): ``"static"`` -- the 3x6 gain ``u_K = [K_p K_d] y``
 started at the baseline; ``"pid"`` -- a PID per axis on the attitude error ``y_att`` with a

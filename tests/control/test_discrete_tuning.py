@@ -163,3 +163,15 @@ def test_pid_tuned_at_the_rate_is_what_flies_and_meets_its_margins(tmp_path):
         assert goal.details["phase_margin_deg"] >= 30.0 - 1e-4
     json.loads(path.read_text())  # valid JSON
     assert control.isdtime(result.controller, strict=True)
+
+
+def test_zero_order_hold_inflates_a_pid_derivative():
+    """Why the flight software must not re-discretize a continuous PID: at ``Tf = T`` the
+    hold of ``s / (Tf s + 1)`` is ``(z - 1) / (Tf (z - e^-1))`` (closed form), gain
+    ``2 / (1 + e^-1) = 1.462`` times ``1 / Tf`` at the Nyquist frequency, where the
+    continuous derivative never exceeds ``1 / Tf``."""
+    held = control.c2d(control.tf([1.0, 0.0], [T, 1.0]), T, "zoh")
+    assert abs(held(-1.0)) * T == pytest.approx(2.0 / (1.0 + np.exp(-1.0)), rel=1e-12)
+    w = np.pi / (2 * T)  # a quarter of the sample rate
+    ratio = abs(held(np.exp(1j * w * T))) / abs(1j * w / (1j * w * T + 1.0))
+    assert ratio == pytest.approx(1.57, abs=0.005)
