@@ -173,7 +173,8 @@ def tuning_record(result, requirements, K0, plants: PlantArray, spec, options=No
         Baseline (start) gain [N m/rad, N m s/rad].
     plants : PlantArray
     spec : DesignSpecification
-        The specification the goals were evaluated with (``sampled`` when ``rate_hz`` given).
+        The specification the goals were evaluated with (at ``rate_hz`` when given: the
+        discrete design).
     options : SystuneOptions, optional
 
     ``status`` is the tuning result's: ``"infeasible"`` means a hard goal is NOT met and the

@@ -11,10 +11,16 @@ scenario's ``[control]`` asks for margins or a minimum damping
 
 over the mission configurations at the nominal values of the real parameters (the worst-case
 search of :func:`~oos_drake.control.synthesis.synthesize` is not run on this path). When
-``rate_hz`` is given, the loop of every goal carries the flight software's sample-and-hold
-(``DesignSpecification.sampled``, the rational hold model of ``oos synth --sampled``,
-:func:`~oos_drake.control.components.sample_hold`); the exact sampled-data margins are measured
-by ``oos margins`` (:mod:`oos_drake.control.sampled`).
+``rate_hz`` is given (it equals the flight software's rate), the controller is tuned
+**discrete** at that rate on the loop exactly as the flight software runs it
+(:func:`~oos_drake.control.sampled.sampled_interconnection`: plant discretized with its
+zero-order hold, filters by their bilinear transforms): the flight software then executes the
+tuned controller as it is (:meth:`ControllerSystem.discretize` keeps a discrete controller), and
+each goal's value is its value on the exact sampled-data loop (the margins that ``oos margins``
+measures on it). A continuous controller discretized afterwards by the flight software is not
+what was tuned: the zero-order hold of a PID's derivative ``Kd s / (Tf s + 1)`` at
+``Tf = T`` has the gain ``1.46 Kd / Tf`` at the Nyquist frequency (continuous: at most
+``Kd / Tf``), ``1.57`` times the continuous one at a quarter of the sample rate.
 
 Structures (``[control] structure``): ``"static"`` -- the 3x6 gain ``u_K = [K_p K_d] y``
 started at the baseline; ``"pid"`` -- a PID per axis on the attitude error ``y_att`` with a
@@ -26,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import control
 import numpy as np
 
 from oos_drake.control.components import DesignSpecification
@@ -37,6 +44,7 @@ from oos_drake.control.interconnection import (
     MEASUREMENTS,
     weighted_interconnection,
 )
+from oos_drake.control.sampled import sampled_interconnection
 from oos_drake.control.systune import SystuneOptions, TuningResult, systune
 from oos_drake.control.tunable import TunableGain, TunablePID, TunableSS
 
@@ -47,10 +55,16 @@ LOOP_OPENING_SIGNALS = {"wheel_input": CONTROLS, "measurements": MEASUREMENTS}
 
 
 def tuning_specification(spec: DesignSpecification, requirements) -> DesignSpecification:
-    """``spec`` with the sample-and-hold in the loop when ``requirements.rate_hz`` is given."""
+    """``spec`` at the controller's rate when ``requirements.rate_hz`` is given (the
+    flight software's rate: the discrete design of :func:`tune_to_requirements`)."""
     if requirements.rate_hz is None:
         return spec
-    return dataclasses.replace(spec, sampled=True)
+    return dataclasses.replace(spec, flight_software_rate_hz=float(requirements.rate_hz))
+
+
+def sampling_time(requirements) -> float:
+    """Controller sample time ``1 / rate_hz`` [s], ``0`` for a continuous design."""
+    return 0.0 if requirements.rate_hz is None else 1.0 / float(requirements.rate_hz)
 
 
 def requirement_goals(requirements) -> list:
@@ -89,8 +103,9 @@ def requirement_controller(requirements, K0):
         start the PID's ``kp`` and ``kd``).
     """
     K0 = np.asarray(K0, dtype=float)
+    ts = sampling_time(requirements)
     if requirements.structure == "static":
-        return TunableGain("K", MEASUREMENTS, CONTROLS, initial=K0)
+        return TunableGain("K", MEASUREMENTS, CONTROLS, initial=K0, sampling_time=ts)
     if requirements.structure == "pid":
         kp, kd = np.diag(K0[:, :3]), np.diag(K0[:, 3:])
         return TunablePID(
@@ -104,9 +119,10 @@ def requirement_controller(requirements, K0):
             tf=0.1,
             rolloff_order=requirements.order or 0,
             rolloff_frequency=2 * np.pi * 2.0,
+            sampling_time=ts,
         )
     if requirements.structure == "state-space":
-        return TunableSS("C", MEASUREMENTS, CONTROLS, order=requirements.order)
+        return TunableSS("C", MEASUREMENTS, CONTROLS, order=requirements.order, sampling_time=ts)
     raise ValueError(f"control.structure: unknown structure {requirements.structure!r}")
 
 
@@ -122,8 +138,8 @@ def tune_to_requirements(
     K0 : array_like, shape (3, 6)
         Baseline gain [N m/rad, N m s/rad].
     spec : DesignSpecification
-        Weights and components (:func:`tuning_specification` adds the hold when
-        ``requirements.rate_hz`` is given).
+        Weights and components (with ``requirements.rate_hz``: the discrete loop of
+        :func:`~oos_drake.control.sampled.sampled_interconnection` at that rate).
     requirements : oos_drake.scenario.data.ControlRequirements
     options : SystuneOptions
 
@@ -135,7 +151,16 @@ def tune_to_requirements(
     spec = tuning_specification(spec, requirements)
     N, P = plants.size, len(plants.parameters)
     nominal = np.broadcast_to(plants.nominal_values, (N, P))
-    system = weighted_interconnection(plants.evaluate(np.arange(N), nominal), spec).system
+    models = plants.evaluate(np.arange(N), nominal)
+    ts = sampling_time(requirements)
+    if ts > 0:
+        P = sampled_interconnection(models, spec)
+        system = [
+            control.ss(P.A[i], P.B[i], P.C[i], P.D[i], ts, inputs=P.inputs, outputs=P.outputs)
+            for i in range(N)
+        ]
+    else:
+        system = weighted_interconnection(models, spec).system
     return systune(
         system,
         requirement_controller(requirements, K0),

@@ -40,17 +40,24 @@ import scipy.signal
 
 from oos_drake.control import components as comp
 from oos_drake.control.interconnection import (
+    CONTROLS,
+    DISTURBANCES,
+    ERRORS,
+    MEASUREMENTS,
+    PLANT_INPUTS,
+    PLANT_OUTPUTS,
     ControllerSystem,
     as_controller,
     plant_statespace,
     weighted_interconnection,
 )
-from oos_drake.control.statespace import BatchedStateSpace
+from oos_drake.control.statespace import BatchedStateSpace, channel_names, connect, sum_block
 
 __all__ = [
     "SampledLoop",
     "continuous_poles",
     "discrete_controller_chain",
+    "sampled_interconnection",
     "sampled_loop",
     "spectral_abscissa",
 ]
@@ -106,9 +113,100 @@ def discrete_controller_chain(K, spec: comp.DesignSpecification) -> tuple[np.nda
             return block
         return scipy.signal.cont2discrete(block, T, method="bilinear")[:4]
 
-    return _series(
-        _series(tustin(sensors), _negated(controller)), tustin(_series(rolloff, wheels))
+    return _series(_series(tustin(sensors), _negated(controller)), tustin(_series(rolloff, wheels)))
+
+
+def _tustin_axes(siso, period: float, name_in: str, name_out: str) -> BatchedStateSpace:
+    """A SISO filter on three axes, discretized with the bilinear transform at ``period`` [s]
+    (as the flight software's ``discretize``)."""
+    A, B, C, D = comp.per_axis(siso)
+    if A.size:
+        A, B, C, D, _ = scipy.signal.cont2discrete((A, B, C, D), period, method="bilinear")
+    return BatchedStateSpace(A, B, C, D, channel_names(name_in, 3), channel_names(name_out, 3))
+
+
+def sampled_interconnection(
+    plant: BatchedStateSpace, spec: comp.DesignSpecification | None = None
+) -> BatchedStateSpace:
+    r"""The weighted interconnection ``P_tot`` as the flight software runs it, discrete at ``T``.
+
+    Same signals as :func:`~oos_drake.control.interconnection.weighted_interconnection`
+    (inputs ``d`` and ``u_K``, outputs ``e`` and ``y``), every block as the Drake mission's
+    flight software has it at ``T = 1 / spec.flight_software_rate_hz``: the sensors, the
+    roll-off, the wheels and the disturbance weight ``W_n,ext`` by the bilinear transform, the
+    torque ``T = T_rw + T_dist`` held over the period, the plant ``T -> [phi; w]`` (``P(s)``
+    with its two integrators) discretized **exactly** with that zero-order hold. A discrete
+    controller ``y -> u_K`` at ``T`` closed on it is exactly the loop of :func:`sampled_loop`
+    (same poles, same loop gain at the wheel input), so goals tuned on it hold for the
+    flight software; ``d_ext`` enters as a held sequence and ``e_p`` is ``phi`` at the
+    sample instants.
+
+    Parameters
+    ----------
+    plant : BatchedStateSpace
+        Plant array ``T [N m] -> wdot [rad/s^2]`` (3x3, batch dimensions allowed).
+    spec : DesignSpecification, optional
+        Components, weights and ``flight_software_rate_hz`` [Hz]; ``computation_delay_s`` must
+        be 0 (``sampled`` is not read).
+
+    Returns
+    -------
+    BatchedStateSpace
+        The discrete model ``x_{k+1} = A x_k + B [d; u_K]_k``, ``[e; y]_k = C x_k + D [d; u_K]_k``.
+
+    Raises
+    ------
+    ValueError
+        A nonzero computation delay (not modelled here).
+    """
+    spec = spec or comp.DesignSpecification()
+    if spec.computation_delay_s != 0:
+        raise ValueError(
+            f"sampled_interconnection: computation_delay_s = {spec.computation_delay_s} s is not "
+            "modelled (the discrete design assumes the torque held from the sample instant)"
+        )
+    T = 1.0 / spec.flight_software_rate_hz
+    v = channel_names
+    if plant.inputs != PLANT_INPUTS or plant.outputs != PLANT_OUTPUTS:
+        plant = plant_statespace(plant.A, plant.B, plant.C, plant.D)
+    continuous = connect(
+        [plant, comp.integrator("wdot", "w"), comp.integrator("w", "phi")],
+        PLANT_INPUTS,
+        v("phi", 3) + v("w", 3),
     )
+    A, B = (np.asarray(M, dtype=float) for M in (continuous.A, continuous.B))
+    n, m = A.shape[-1], B.shape[-1]
+    M = np.zeros(A.shape[:-2] + (n + m, n + m))
+    M[..., :n, :n], M[..., :n, n:] = A, B
+    E = np.stack([scipy.linalg.expm(Mi * T) for Mi in M.reshape((-1, n + m, n + m))])
+    E = E.reshape(M.shape)
+    held = BatchedStateSpace(
+        E[..., :n, :n],
+        E[..., :n, n:],
+        continuous.C,
+        continuous.D,
+        continuous.inputs,
+        continuous.outputs,
+    )
+    sst, gyro, rolloff, wheels = comp.filters(spec)
+    W_ext = comp.disturbance_weight(spec, "d_ext", "T_dist")
+    Wd = scipy.signal.cont2discrete((W_ext.A, W_ext.B, W_ext.C, W_ext.D), T, method="bilinear")
+    parts = [
+        held,
+        _tustin_axes(sst, T, "phi", "phi_sst"),
+        _tustin_axes(gyro, T, "w", "w_gyro"),
+        _tustin_axes(rolloff, T, "u_K", "u"),
+        _tustin_axes(wheels, T, "u", "T_rw"),
+        BatchedStateSpace(*Wd[:4], v("d_ext", 3), v("T_dist", 3)),
+        sum_block(v("T", 3), [v("T_rw", 3), v("T_dist", 3)], [1.0, 1.0]),
+        comp.static_gain(spec.noise_star_tracker, "n_sst", "n_sst_w"),
+        comp.static_gain(spec.noise_gyro, "n_gyro", "n_gyro_w"),
+        sum_block(v("y_att", 3), [v("phi_sst", 3), v("n_sst_w", 3)], [-1.0, -1.0]),
+        sum_block(v("y_rate", 3), [v("w_gyro", 3), v("n_gyro_w", 3)], [-1.0, -1.0]),
+        comp.static_gain(1.0 / spec.pointing_requirement, "phi", "e_p"),
+        comp.static_gain(spec.control_weight, "u", "e_u"),
+    ]
+    return connect(parts, DISTURBANCES + CONTROLS, ERRORS + MEASUREMENTS)
 
 
 def plant_with_integrators(A, B, C, D) -> tuple[np.ndarray, ...]:

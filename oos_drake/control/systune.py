@@ -626,13 +626,26 @@ class _Structure:
         return np.concatenate([t.linear_parameters for t in self.tunables])
 
     def scale(self, x0) -> np.ndarray:
-        """Per-parameter scale of the optimization variables: a gain's own magnitude (its
-        block's mean when it starts near zero), ``1`` for logarithms and pole coordinates."""
+        """Per-parameter scale of the optimization variables: a gain's own magnitude, ``1``
+        for logarithms and pole coordinates.
+
+        A gain that starts at zero gets the mean magnitude of its *family* (``kp[0..2]``,
+        ``B[...]``: the same name before the index, same unit), else of its block's nonzero
+        gains. Each gain keeps its own magnitude however small: a PID's ``ki`` (1e-3) beside
+        its ``kd`` (1e2) in one block-wide scale takes steps 1e5 times its size, and the
+        line search ends at the first stability boundary (the integrator pole).
+        """
         out = np.ones(self.nx)
         for t, sl in zip(self.tunables, self.slices, strict=True):
             x, linear = np.abs(x0[sl]), t.linear_parameters
+            families = np.array([n.split("[", 1)[0] for n in t.parameter_names])
             typical = np.mean(x[linear & (x > 0)]) if np.any(linear & (x > 0)) else 1.0
-            out[sl] = np.where(linear, np.where(x > 1e-3 * typical, x, typical), 1.0)
+            own = np.ones_like(x)
+            nonzero = linear & (x > 1e-9 * typical)
+            for i in np.flatnonzero(linear):
+                same = nonzero & (families == families[i])
+                own[i] = x[i] if nonzero[i] else (np.mean(x[same]) if np.any(same) else typical)
+            out[sl] = own
         return out
 
 

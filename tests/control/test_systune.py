@@ -448,3 +448,17 @@ def test_lfr_model_array_is_the_list_of_plants():
     from_list = systune(PLANTS, pid(), [WeightedGain("d", "y")], options=options)
     np.testing.assert_allclose(from_array.x, from_list.x, rtol=1e-12)
     np.testing.assert_allclose(from_array.goals[0].per_model, from_list.goals[0].per_model)
+
+
+def test_pid_started_with_a_tiny_integral_gain_still_reaches_the_grid_optimum(grid):
+    """From a start whose gains span four decades (``ki`` 1e4 times below ``kd``, as a PID
+    started from the paper's baseline with ``ki = 0.01 kp``), the tuning still reaches the
+    brute-force optimum: each gain is scaled by its own magnitude, not its block's mean."""
+    start = TunablePID("C", "e", "u", kp=0.1, ki=1e-5, kd=0.3, tf=1.0)
+    result = systune(
+        PLANTS, start, [WeightedGain("d", "y")], options=SystuneOptions(max_iterations=100)
+    )
+    params, hinf, _ = grid
+    assert result.status == "ok"
+    assert result.soft <= np.min(hinf) * (1 + 1e-6)
+    assert result.soft <= _exact_hinf(params[np.argmin(hinf)]) * (1 + 1e-6)
