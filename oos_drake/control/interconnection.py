@@ -88,8 +88,7 @@ class ControllerSystem:
         C = np.array(self.C, dtype=float).reshape((-1, n) if n else (D.shape[0], 0))
         if D.shape != (3, 6) or B.shape != (n, 6) or C.shape != (3, n):
             raise ValueError(
-                f"controller: must map y (6) to u_K (3), got B {B.shape}, C {C.shape}, "
-                f"D {D.shape}"
+                f"controller: must map y (6) to u_K (3), got B {B.shape}, C {C.shape}, D {D.shape}"
             )
         if not all(np.all(np.isfinite(M)) for M in (A, B, C, D)):
             raise ValueError("controller: A, B, C, D must be finite")
@@ -386,7 +385,6 @@ def _dynamic_system(path: Path, gains: dict) -> ControllerSystem:
         return ControllerSystem.from_named(*args, *names, ts)
     except ValueError as exc:
         raise ValueError(f"controller file {path}: controller.state_space: {exc}") from exc
-
 
 
 @dataclass(frozen=True)

@@ -469,9 +469,7 @@ def make_mission_diagram(
         sdf_directory, _ = scenario_sdf_directory(scenario)
     mission = mission_timeline(scenario)
     timeline = mission if timeline is None else timeline
-    controller = (
-        mission_controller(options.controller, scenario) if K is None else as_controller(K)
-    )
+    controller = mission_controller(options.controller, scenario) if K is None else as_controller(K)
     builder = DiagramBuilder()
     parts = _add_plant(builder, Path(sdf_directory))
     plant = parts["plant"]

@@ -703,9 +703,7 @@ def _lane_vectors(nsteps, rot_k, rot_c, rot_s, sel, K, Ar, Ai, taur, taui, Vr, V
             sr = _ld(Vr[q, o])  # s = v^* y
             si = _ld(Vi[q, o])
             for i in range(o + 1, n):
-                sr, si = _cjmac(
-                    _ld(Ar[i, k]), _ld(Ai[i, k]), _ld(Vr[q, i]), _ld(Vi[q, i]), sr, si
-                )
+                sr, si = _cjmac(_ld(Ar[i, k]), _ld(Ai[i, k]), _ld(Vr[q, i]), _ld(Vi[q, i]), sr, si)
             cr = _fnma(ti, si, _mul(tr, sr))  # y -= tau s v
             ci = _fma(ti, sr, _mul(tr, si))
             _st(Vr[q, o], _sub(_ld(Vr[q, o]), cr))
@@ -772,9 +770,7 @@ def _lane_gradient(Mr, Mi, x, K, lay, ws, g):
             ar = zero
             ai = zero
             for j in range(r):
-                ar, ai = _cmac(
-                    _ld(Mr[i, j]), _ld(Mi[i, j]), _ld(TVr[q, j]), _ld(TVi[q, j]), ar, ai
-                )
+                ar, ai = _cmac(_ld(Mr[i, j]), _ld(Mi[i, j]), _ld(TVr[q, j]), _ld(TVi[q, j]), ar, ai)
             _st(XVr[q, i], ar)
             _st(XVi[q, i], ai)
         _block_rows_times(Tlr, Tli, cs, XVr[q], XVi[q], MVr[q], MVi[q])
@@ -833,9 +829,7 @@ def _lane_eval(Mr, Mi, Mc, x, tq, lay, ws, f, g, lmax):
     _lane_scalings(x, lay, ws)
     _lane_form_h(Mr, Mi, lay, ws)
     _lane_tridiag(Hr, Hi, d, ws.offdiag, taur, taui, ws.p_re, ws.p_im, ws.v_re, ws.v_im)
-    nsteps = _lane_qr(
-        d, ws.offdiag, rot_k, rot_c, rot_s, ws.qr_lo, ws.qr_hi, ws.qr_x, ws.qr_z, okq
-    )
+    nsteps = _lane_qr(d, ws.offdiag, rot_k, rot_c, rot_s, ws.qr_lo, ws.qr_hi, ws.qr_x, ws.qr_z, okq)
     t = np.empty(W)
     kw = np.zeros(W, dtype=np.int64)
     K = 1

@@ -268,6 +268,17 @@ def robstab(
     else:
         wc = float("nan")
     return RobStabResult(
-        lower, upper, wc, worst, worst_norm, True, omega, up, lo, guarantee, covered, reason,
+        lower,
+        upper,
+        wc,
+        worst,
+        worst_norm,
+        True,
+        omega,
+        up,
+        lo,
+        guarantee,
+        covered,
+        reason,
         source,
     )

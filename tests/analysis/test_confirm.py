@@ -51,9 +51,9 @@ def test_the_verdict_follows_the_expected_oscillation_not_a_larger_slower_one():
     # a large, lightly damped attitude mode (0.13 Hz) decaying beside a small critical mode
     # (0.77 Hz) that grows: the largest oscillation says "stable", the expected one "growing"
     t = np.arange(0.0, 37.0, 0.1) + 8.0
-    y = 2e-3 * np.exp(-0.05 * t) * np.cos(2 * np.pi * 0.134 * t) + 1e-5 * np.exp(
-        0.02 * t
-    ) * np.cos(2 * np.pi * 0.77 * t + 0.4)
+    y = 2e-3 * np.exp(-0.05 * t) * np.cos(2 * np.pi * 0.134 * t) + 1e-5 * np.exp(0.02 * t) * np.cos(
+        2 * np.pi * 0.77 * t + 0.4
+    )
     largest = dominant_oscillation(t, y)
     assert largest.frequency == pytest.approx(0.134, rel=1e-6)
     assert largest.decay_rate < 0

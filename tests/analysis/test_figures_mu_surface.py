@@ -11,7 +11,7 @@ def _sweep():
     times = np.linspace(0.0, 1500.0, 6)
     hz = np.geomspace(0.005, 5.0, 13)
     T, F = np.meshgrid(times, hz, indexing="ij")
-    mu = 0.2 + 0.2 * np.exp(-np.log10(F / 0.8) ** 2 / 0.02)  # a ridge at 0.8 Hz
+    mu = 0.2 + 0.2 * np.exp(-(np.log10(F / 0.8) ** 2) / 0.02)  # a ridge at 0.8 Hz
     rows = pd.DataFrame(
         {
             "subset": "total",

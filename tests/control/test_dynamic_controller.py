@@ -265,8 +265,12 @@ def test_static_gain_is_the_degenerate_case():
         assert M.shape == R.shape
     omega = np.array([0.01, 0.3, 2.0, 9.0])
     z = np.exp(1j * omega * T)
-    chain_mine = [mine.controller[2] @ np.linalg.solve(zk * np.eye(Ac.shape[0])
-                  - mine.controller[0], mine.controller[1]) + mine.controller[3] for zk in z]
+    chain_mine = [
+        mine.controller[2]
+        @ np.linalg.solve(zk * np.eye(Ac.shape[0]) - mine.controller[0], mine.controller[1])
+        + mine.controller[3]
+        for zk in z
+    ]
     chain_ref = [Cc @ np.linalg.solve(zk * np.eye(Ac.shape[0]) - Ac, Bc) + Dc for zk in z]
     np.testing.assert_allclose(chain_mine, chain_ref, rtol=1e-12, atol=1e-12 * np.abs(Dc).max())
     z_mine = np.linalg.eigvals(mine.closed_loop())

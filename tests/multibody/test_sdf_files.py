@@ -26,8 +26,8 @@ def test_committed_sdf_is_up_to_date():
 
 def test_sdf_check_ignores_round_off_but_not_changes():
     # the last digits of generated values depend on the BLAS/LAPACK build (numpy 2.4 vs 2.3)
-    ref = '<pose>2.418265431944897e-06 -3.0481731553550655 0 0 0 0</pose><mass>8.393</mass>'
-    ulps = '<pose>2.4182654319448973e-06 -3.048173155355067 0 0 0 0</pose><mass>8.393</mass>'
+    ref = "<pose>2.418265431944897e-06 -3.0481731553550655 0 0 0 0</pose><mass>8.393</mass>"
+    ulps = "<pose>2.4182654319448973e-06 -3.048173155355067 0 0 0 0</pose><mass>8.393</mass>"
     assert same_sdf_text(ulps, ref)
     assert not same_sdf_text(ulps.replace("8.393", "8.394"), ref)  # a changed mass
     assert not same_sdf_text(ulps.replace("-3.048173155355067", "-3.0481"), ref)
