@@ -211,15 +211,6 @@ def test_oos_run_on_a_tree_end_to_end(tmp_path, monkeypatch, capsys):
         )
 
     monkeypatch.setattr(analyze, "pipeline_analysis_options", smaller_analysis)
-    # the confirmation searches the twin's boundary up to alpha = 2 (default 4; the real and
-    # modal peaks' physical limit is 1.6 here)
-    import functools
-
-    import oos_drake.analysis.confirm as confirm
-
-    monkeypatch.setattr(
-        confirm, "ConfirmOptions", functools.partial(confirm.ConfirmOptions, alpha_limit=2.0)
-    )
     out = tmp_path / "out"
     # the shipped campaign (the default spec of this scenario) with 6 runs
     spec = tmp_path / "campaign.toml"
