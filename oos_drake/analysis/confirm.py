@@ -134,7 +134,8 @@ class ConfirmOptions:
     alpha_limit: float = 4.0
 
     def __post_init__(self):
-        for name in ("duration", "settle", "initial_attitude", "rtol", "max_step", "bracket"):
+        names = ("duration", "settle", "initial_attitude", "rtol", "max_step", "bracket")
+        for name in (*names, "alpha_limit"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"confirm option {name} must be > 0, got {value!r}")

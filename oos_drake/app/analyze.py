@@ -381,7 +381,7 @@ def run_confirm(args) -> int:
             peaks,
             controller,
             scenario,
-            ConfirmOptions(),
+            ConfirmOptions(alpha_limit=args.alpha_limit),
             workers=args.workers,
             scheduler=args.scheduler,
             quiet=args.quiet,
@@ -690,6 +690,13 @@ def register(subparsers) -> None:
     )
     add_out_argument(
         confirm, required=False, help="output directory (default: ANALYSIS/../confirm)"
+    )
+    confirm.add_argument(
+        "--alpha-limit",
+        type=float,
+        default=4.0,
+        help="largest perturbation scale alpha searched on the twin [-] (the boundary beyond it "
+        "is reported as not reached)",
     )
     add_scenario_argument(confirm)
     add_parallel_arguments(confirm)

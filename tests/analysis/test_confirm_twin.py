@@ -354,3 +354,10 @@ def test_dynamic_perturbation_of_the_wrong_size_is_refused():
         fsw.set_dynamic_perturbation(fsw.CreateDefaultContext(), block)
     with pytest.raises(ValueError, match="Delta_mul and Delta_add must be 3x3"):
         perturbation_block(design, 5.0, delta_add=np.ones((2, 2)))
+
+
+@pytest.mark.parametrize("limit", [0.0, -1.0, float("nan")])
+def test_confirm_rejects_a_search_limit_that_is_not_positive(limit):
+    """``oos confirm --alpha-limit``: a limit <= 0 or NaN is one line naming the option."""
+    with pytest.raises(ValueError, match="alpha_limit"):
+        ConfirmOptions(alpha_limit=limit)

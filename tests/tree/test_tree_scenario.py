@@ -185,6 +185,7 @@ def test_oos_run_on_a_tree_end_to_end(tmp_path, monkeypatch, capsys):
         "synth": ["--configurations", "4", "--restarts", "0", "--max-iterations", "25",
                   "--worst-case-rounds", "1"],
         "margins": ["--configurations", "2"],
+        "confirm": ["--alpha-limit", "2"],  # the real and modal peaks' physical limit is 1.6
     }  # fmt: skip
     real = pipeline._oos
     monkeypatch.setattr(pipeline, "_oos", lambda *argv: real(*argv, *smaller.get(argv[0], [])))
