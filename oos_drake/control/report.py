@@ -117,10 +117,7 @@ def write_synthesis(
     out.mkdir(parents=True, exist_ok=True)
     paths = {}
     record = controller_record(result, plants, options)
-    if scenario_record is not None:
-        record["scenario"] = _json_ready(scenario_record)
-    text = json.dumps(record, indent=2).encode()
-    paths["controller"] = atomic_write_bytes(out / "controller.json", lambda s: s.write(text))
+    paths["controller"] = write_controller(out, record, scenario_record=scenario_record)
     M = closed_loop_array(result, plants)
     table = result.models
     arrays = {
@@ -248,15 +245,22 @@ def tuning_record(result, requirements, K0, plants: PlantArray, spec, options=No
     )
 
 
-def write_tuning(out_dir, record: dict, *, scenario_record: dict | None = None) -> dict[str, Path]:
-    """Write ``controller.json`` of :func:`tuning_record` in ``out_dir``; return name -> path.
+def write_controller(out_dir, record: dict, *, scenario_record: dict | None = None) -> Path:
+    """Write ``record`` as ``controller.json`` in ``out_dir`` (created), atomically: the one
+    writer of that file (its reader: :func:`oos_drake.control.interconnection.read_controller`).
 
     ``scenario_record`` (:func:`oos_drake.scenario.data.scenario_record`) is recorded as
-    ``"scenario"``, as in :func:`write_synthesis`.
+    ``"scenario"``. Returns the file's path.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if scenario_record is not None:
         record = {**record, "scenario": _json_ready(scenario_record)}
     text = json.dumps(record, indent=2).encode()
-    return {"controller": atomic_write_bytes(out / "controller.json", lambda s: s.write(text))}
+    return atomic_write_bytes(out / "controller.json", lambda s: s.write(text))
+
+
+def write_tuning(out_dir, record: dict, *, scenario_record: dict | None = None) -> dict[str, Path]:
+    """Write ``controller.json`` of :func:`tuning_record` in ``out_dir``; return name -> path
+    (:func:`write_controller`, as :func:`write_synthesis` does)."""
+    return {"controller": write_controller(out_dir, record, scenario_record=scenario_record)}
