@@ -524,7 +524,6 @@ def diagram_parts(spec: comp.DesignSpecification) -> list[BatchedStateSpace]:
     The plant to add reads ``T[0..2]`` and produces ``wdot[0..2]`` (it may have more channels,
     e.g. the ``w``/``z`` channels of its uncertain blocks, passed as external signals).
     """
-    v = channel_names
     return [
         comp.integrator("wdot", "w"),
         comp.integrator("w", "phi"),
@@ -537,6 +536,16 @@ def diagram_parts(spec: comp.DesignSpecification) -> list[BatchedStateSpace]:
             else [comp.reaction_wheels(spec, "u", "T_rw")]
         ),
         comp.disturbance_weight(spec, "d_ext", "T_dist"),
+        *signal_sums_and_weights(spec),
+    ]
+
+
+def signal_sums_and_weights(spec: comp.DesignSpecification) -> list[BatchedStateSpace]:
+    """The static blocks of Fig. controldesign, the same in continuous and sampled time: the
+    torque sum ``T = T_rw + T_dist``, the weighted sensor noises, the measurements ``y_att``,
+    ``y_rate`` (negative feedback) and the error weights ``e_p`` [1/rad], ``e_u`` [1/(N m)]."""
+    v = channel_names
+    return [
         sum_block(v("T", 3), [v("T_rw", 3), v("T_dist", 3)], [1.0, 1.0]),
         comp.static_gain(spec.noise_star_tracker, "n_sst", "n_sst_w"),
         comp.static_gain(spec.noise_gyro, "n_gyro", "n_gyro_w"),

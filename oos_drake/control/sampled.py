@@ -49,9 +49,10 @@ from oos_drake.control.interconnection import (
     ControllerSystem,
     as_controller,
     plant_statespace,
+    signal_sums_and_weights,
     weighted_interconnection,
 )
-from oos_drake.control.statespace import BatchedStateSpace, channel_names, connect, sum_block
+from oos_drake.control.statespace import BatchedStateSpace, channel_names, connect
 
 __all__ = [
     "SampledLoop",
@@ -198,13 +199,7 @@ def sampled_interconnection(
         _tustin_axes(rolloff, T, "u_K", "u"),
         _tustin_axes(wheels, T, "u", "T_rw"),
         BatchedStateSpace(*Wd[:4], v("d_ext", 3), v("T_dist", 3)),
-        sum_block(v("T", 3), [v("T_rw", 3), v("T_dist", 3)], [1.0, 1.0]),
-        comp.static_gain(spec.noise_star_tracker, "n_sst", "n_sst_w"),
-        comp.static_gain(spec.noise_gyro, "n_gyro", "n_gyro_w"),
-        sum_block(v("y_att", 3), [v("phi_sst", 3), v("n_sst_w", 3)], [-1.0, -1.0]),
-        sum_block(v("y_rate", 3), [v("w_gyro", 3), v("n_gyro_w", 3)], [-1.0, -1.0]),
-        comp.static_gain(1.0 / spec.pointing_requirement, "phi", "e_p"),
-        comp.static_gain(spec.control_weight, "u", "e_u"),
+        *signal_sums_and_weights(spec),
     ]
     return connect(parts, DISTURBANCES + CONTROLS, ERRORS + MEASUREMENTS)
 
