@@ -214,6 +214,10 @@ def _estimate(spec, runs, weights, events) -> dict:
     target = spec.estimation.target
     values = weights * np.asarray(events, bool)
     n = len(values)
+    decision = est.decides(target)
+    # runs without violation that would show P <= target: none more once that is shown, and
+    # no number at all once P > target is shown (no run count can show P <= target then)
+    more = {"undecided": est.runs_to_decide(target), f"P <= {target:g}": 0}.get(decision)
     return {
         "P(violation)": est.estimate,
         "se": float(np.std(values, ddof=1) / math.sqrt(n)) if n > 1 else math.nan,
@@ -221,8 +225,8 @@ def _estimate(spec, runs, weights, events) -> dict:
         "P 95 % high": est.high,
         "interval": est.method,
         "P 95 % upper (one-sided)": est.upper,
-        "decision": est.decides(target),
-        "more runs to show P <= target": est.runs_to_decide(target),
+        "decision": decision,
+        "more runs to show P <= target": math.nan if more is None else float(more),
     }
 
 

@@ -133,3 +133,34 @@ def test_weighted_interval_covers_the_true_probability():
         est = importance_sampling(fails, weights, weight_bound=1 / alpha)
         covered += est.low <= p_true <= est.high
     assert covered / campaigns >= 0.95
+
+
+@pytest.mark.parametrize(
+    "k, n, decision, more",
+    [
+        (0, 400, "P <= 0.01", 0.0),  # (0.99)^400 < 0.05: shown
+        (0, 100, "undecided", 199.0),  # 299 runs without violation in all (closed form below)
+        (20, 100, "P > 0.01", None),  # the lower bound is above the target: no run count helps
+    ],
+)
+def test_summary_gives_more_runs_only_while_undecided(k, n, decision, more):
+    """``summary.parquet``: "more runs to show P <= target" is 0 once that is shown, empty
+    (NaN) once P > target is shown, and the closed-form count while undecided."""
+    from types import SimpleNamespace
+
+    from oos_drake.campaign.report import _estimate
+
+    spec = SimpleNamespace(
+        estimation=SimpleNamespace(target=0.01, confidence=0.95),
+        sampler=SimpleNamespace(kind="monte-carlo"),
+    )
+    events = np.zeros(n, bool)
+    events[:k] = True
+    row = _estimate(spec, pd.DataFrame({"run_id": range(n)}), np.ones(n), events)
+    assert row["decision"] == decision
+    if more is None:
+        assert np.isnan(row["more runs to show P <= target"])
+    else:
+        # no violation: the smallest N with (1 - target)^N <= 1 - confidence is 299
+        assert int(np.ceil(np.log(0.05) / np.log(0.99))) == 299
+        assert row["more runs to show P <= target"] == more
