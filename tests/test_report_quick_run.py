@@ -20,12 +20,14 @@ def test_report_of_a_quick_run_in_chromium(quick_run, tmp_path):
     assert result.returncode == 0, result.stderr[-3000:]
     page = out / "report.html"
     seen = check_page(page, out, tmp_path / "browser", tmp_path / "shots")
-    assert len(seen["headlines"]) == 10
+    # gamma, six guaranteed mu, two margins, the worst performance ratio on the twin (oos
+    # confirm's performance confirmation) and the campaign's bound
+    assert len(seen["headlines"]) == len(expected_headlines(out)) == 11
     (campaign,) = out.glob("campaign-*")
     figures = [p for folder in FIGURE_FOLDERS for p in (out / folder).glob("*.png")]
     figures += list((campaign / "report").glob("*.png"))
     assert len(seen["images"]) == len(figures)
-    # the end of `oos run` prints the same ten numbers, with their units
+    # the end of `oos run` prints the same eleven numbers, with their units
     printed = result.stdout[result.stdout.index("headline numbers:") :]
     units = {"gain_margin": "dB", "phase_margin": "deg"}
     for key, value in expected_headlines(out).items():

@@ -374,7 +374,7 @@ def _publish_report(out: Path) -> Path:
 
 
 def _print_headlines(out: Path, campaign: Path, report: Path) -> None:
-    """The ten headline numbers of the run and the report's path."""
+    """The headline numbers of the run and the report's path."""
     from oos_drake.app.report import print_headlines
     from oos_drake.report import headline_numbers, load_run
 

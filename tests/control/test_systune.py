@@ -393,12 +393,21 @@ def test_static_gain_problem_is_today_synthesis_problem():
 
 @pytest.mark.slow
 def test_static_gain_synthesis_reproduced_at_convergence():
+    from oos_drake.control.interconnection import CONTROLS, DISTURBANCES, ERRORS, MEASUREMENTS
     from oos_drake.control.synthesis import SynthesisOptions, synthesize
 
     plants, K0, system = _static_gain_problem(2, 1)
     options = SynthesisOptions(restarts=0, max_iterations=300, worst_case_rounds=0, working_set=0)
     reference = synthesize(plants, K0, options=options)
-    tuned = _systune_static(system, K0, 300)
+    # From K0 alone the nonsmooth descent can stop in another local minimum: with one BLAS
+    # thread it stops at 1.0027 x the synthesis' gamma, with two at 0.9996 x (the round-off
+    # takes another path). Two seeded restarts, as systune is meant to be run, reach it.
+    tuned = systune(
+        system,
+        TunableGain("K", MEASUREMENTS, CONTROLS, initial=K0),
+        [WeightedGain(DISTURBANCES, ERRORS)],
+        options=SystuneOptions(max_iterations=300, restarts=2),
+    )
     assert tuned.soft == pytest.approx(reference.gamma, rel=1e-3)
 
 
