@@ -151,37 +151,28 @@ def recorded_controller(record: dict, default: ControllerSystem) -> ControllerSy
     return default
 
 
-def baseline_controller(plant_rotational, spec: DesignSpecification | None = None) -> Controller:
-    """The paper's baseline PD (section 3.1) tuned on the inertia of a plant ``T -> wdot``.
+def baseline_controller(scenario, spec: DesignSpecification | None = None) -> Controller:
+    """The paper's baseline PD (section 3.1) on ``scenario``, labeled ``"baseline"``.
+
+    The gain is :func:`oos_drake.control.baseline.scenario_baseline_gains` (the one derivation,
+    shared with the Drake mission's :func:`~oos_drake.multibody.mission.mission_controller`).
 
     Parameters
     ----------
-    plant_rotational : LFR
-        Nominal, certain 3x3 plant ``T_ext,G1 -> wdot`` at the tuning configuration (the first
-        docking, t = 255 s); its static gain is ``J_tot^-1``.
+    scenario : Scenario
+        Loaded scenario; the baseline is tuned at its first docking.
     spec : DesignSpecification, optional
         Paper values by default.
     """
-    from oos_drake.control.baseline import (
-        OMEGA_ATT,
-        TUNING_TIME_S,
-        XI_ATT,
-        baseline_gains,
-        inertia_from_plant,
-    )
-    from oos_drake.control.interconnection import plant_statespace
+    from oos_drake.control.baseline import scenario_baseline_gains
 
-    n = plant_rotational.nstates
-    M = np.asarray(plant_rotational.M, dtype=float)
-    sys = plant_statespace(M[:n, :n], M[:n, n:], M[n:, :n], M[n:, n:])
-    J = inertia_from_plant(sys)
-    K = baseline_gains(J, OMEGA_ATT, XI_ATT)
+    tuning_time = float(scenario.mission.first_docking_time)
     return Controller(
-        ControllerSystem.static(K),
+        ControllerSystem.static(scenario_baseline_gains(scenario)),
         spec or DesignSpecification(),
         "baseline",
         f"baseline PD (omega_att = 0.01 Hz, xi_att = 1) tuned at t = "
-        f"{TUNING_TIME_S:g} s; NOT a synthesized controller",
+        f"{tuning_time:g} s; NOT a synthesized controller",
     )
 
 
@@ -213,10 +204,4 @@ def scenario_controller(path, scenario) -> Controller:
                 f"({', '.join(changed)}); analyzing it with scenario {scenario.name}'s [control]"
             )
         return dataclasses.replace(controller, spec=spec)
-    from oos_drake.control.analysis_model import rotational_channels
-    from oos_drake.lfr import usubs
-    from oos_drake.scenario.model import build_mission_model, mission_values
-
-    tuning_time = scenario.mission.first_docking_time
-    plant = usubs(build_mission_model(scenario), mission_values([tuning_time], scenario)).model(0)
-    return baseline_controller(rotational_channels(plant).nominal, spec)
+    return baseline_controller(scenario, spec)

@@ -79,3 +79,38 @@ def baseline_for(plants, tuning_time: float = TUNING_TIME_S) -> np.ndarray:
         k = 0
     J = inertia_from_plant(plants.evaluate([k]))[0]
     return baseline_gains(J)
+
+
+def scenario_baseline_gains(scenario) -> np.ndarray:
+    """The paper's baseline gain (section 3.1) on ``scenario``: the one derivation.
+
+    ``K_att = [omega_att^2 J_tot, 2 xi_att omega_att J_tot]`` (:func:`baseline_gains`,
+    ``omega_att = 2 pi 0.01`` rad/s, ``xi_att = 1``) with ``J_tot = G(0)^-1`` the total inertia
+    seen by the torques (:func:`inertia_from_plant`) of the scenario's nominal model
+    ``T_ext,G1 -> wdot`` at its first docking (``mission.first_docking_time``). On the paper's
+    scenario this equals the Schur complement of the rigid spatial inertia at G1 to 1e-14
+    (``tests/test_baseline_once.py``). Both the analysis (``oos analyze`` without
+    ``--controller``) and the Drake mission (``oos mission`` without ``--controller``) call it.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Loaded scenario (paper or tree).
+
+    Returns
+    -------
+    numpy.ndarray, shape (3, 6)
+        ``[K_p, K_d]``: ``K_p`` [N m/rad], ``K_d`` [N m s/rad].
+    """
+    from oos_drake.control.analysis_model import rotational_channels
+    from oos_drake.control.interconnection import plant_statespace
+    from oos_drake.lfr import usubs
+    from oos_drake.scenario.model import build_mission_model, mission_values
+
+    tuning_time = float(scenario.mission.first_docking_time)
+    plant = usubs(build_mission_model(scenario), mission_values([tuning_time], scenario)).model(0)
+    nominal = rotational_channels(plant).nominal
+    n = nominal.nstates
+    M = np.asarray(nominal.M, dtype=float)
+    J = inertia_from_plant(plant_statespace(M[:n, :n], M[:n, n:], M[n:, :n], M[n:, n:]))
+    return baseline_gains(J, OMEGA_ATT, XI_ATT)

@@ -62,7 +62,7 @@ from pydrake.systems.primitives import (
 )
 from pydrake.trajectories import PiecewisePolynomial
 
-from oos_drake.control.baseline import baseline_gains
+from oos_drake.control.baseline import scenario_baseline_gains
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.interconnection import ControllerSystem, as_controller, read_controller
 from oos_drake.multibody.flight_software import FlightSoftware, FlightSoftwareDesign
@@ -362,8 +362,8 @@ def mission_controller(path: str | Path | None, scenario: Scenario) -> Controlle
     path : str, Path or None
         ``controller.json`` written by ``oos synth`` (any structure, read by
         :func:`oos_drake.control.interconnection.read_controller`); ``None``: the paper's baseline
-        (``omega = 2 pi 0.01 rad/s``, ``xi = 1``) on the scenario's rigid coupled inertia at
-        the first docking.
+        (``omega = 2 pi 0.01 rad/s``, ``xi = 1``) tuned at the first docking,
+        :func:`oos_drake.control.baseline.scenario_baseline_gains` (the analysis' baseline).
     scenario : Scenario
         The scenario of the baseline (unused with a file).
 
@@ -373,10 +373,7 @@ def mission_controller(path: str | Path | None, scenario: Scenario) -> Controlle
         Missing file or malformed controller (the message names the file and the field).
     """
     if path is None:
-        timeline = mission_timeline(scenario)
-        configuration = timeline.configuration(float(scenario.mission.first_docking_time))
-        J = effective_inertia(rigid_spatial_inertia_at_G1(scenario, configuration))
-        return ControllerSystem.static(baseline_gains(0.5 * (J + J.T)))
+        return ControllerSystem.static(scenario_baseline_gains(scenario))
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"controller file {path} not found")

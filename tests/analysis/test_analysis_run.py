@@ -12,7 +12,6 @@ from oos_drake.analysis.run import AnalysisOptions, compute_analysis
 from oos_drake.analysis.stability import SweepOptions
 from oos_drake.analysis.tightening import TightenOptions
 from oos_drake.analysis.writers import summary_json, write_analysis
-from oos_drake.control.analysis_model import rotational_channels
 from oos_drake.scenario.data import load_scenario
 
 PAPER = load_scenario("paper")
@@ -48,12 +47,7 @@ FAST = AnalysisOptions(
 @pytest.fixture(scope="module")
 def analysis_result(paper_scenario):
     """The computed analysis (:class:`AnalysisResult`), nothing written."""
-    from oos_drake.lfr import usubs
-    from oos_drake.scenario.model import build_mission_model, mission_values
-
-    model = build_mission_model(paper_scenario)
-    plant = usubs(model, mission_values([255.0], paper_scenario)).model(0)
-    controller = baseline_controller(rotational_channels(plant).nominal)
+    controller = baseline_controller(paper_scenario)
     return compute_analysis(controller, FAST, scenario=paper_scenario, log=lambda *_: None)
 
 
