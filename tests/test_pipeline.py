@@ -118,15 +118,23 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(quick_run):
     assert "0 run now" in second.stdout
 
 
-def _record_analyses(monkeypatch, analyses):
-    """Replace the analysis stage's computation by a recorder of ``(controller, options)``."""
+def _record_analyses(monkeypatch, analyses, margins=None):
+    """Replace the analysis stage's computation by a recorder of ``(controller, options)``,
+    the margins stage's likewise (into ``margins``, when given)."""
     import oos_drake.app.analyze as analyze
 
+    margins = [] if margins is None else margins
     monkeypatch.setattr(analyze, "analysis_controller", lambda path, scenario, loop=None: path)
     monkeypatch.setattr(
         analyze,
         "analyze",
         lambda scenario, controller, options, out: analyses.append((controller, options)),
+    )
+    monkeypatch.setattr(analyze, "margins_controller", lambda path, scenario, delay_s=None: path)
+    monkeypatch.setattr(
+        analyze,
+        "margins",
+        lambda scenario, controller, options, out: margins.append((controller, options)),
     )
 
 
@@ -137,14 +145,18 @@ def test_oos_run_passes_the_scheduler_to_the_stages_with_parallel_work(tmp_path,
     import oos_drake.app.pipeline as pipeline
     from oos_drake.app.main import build_parser
 
-    calls, analyses = [], []
+    calls, analyses, margins = [], [], []
     monkeypatch.setattr(pipeline, "_oos", lambda *argv: calls.append([str(a) for a in argv]))
     monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: None)
-    _record_analyses(monkeypatch, analyses)
+    _record_analyses(monkeypatch, analyses, margins)
     argv = ["run", "--out", str(tmp_path), "--scheduler", "dask", "--workers", "3"]
     assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
     ((controller, options),) = analyses  # the analysis stage: a function call, not argv
     assert controller == tmp_path / "controller" / "controller.json"
+    ((broken, margin_options),) = margins  # the margins stage too: no workers, no scheduler
+    assert broken == tmp_path / "controller" / "controller.json"
+    assert margin_options.analysis == tmp_path / "analysis"
+    assert margin_options.configurations == pipeline.MARGIN_CONFIGURATIONS
     assert (options.sweep.scheduler, options.sweep.n_jobs) == ("dask", 3)
     by_command = {tuple(c[:2]) if c[0] == "campaign" else (c[0],): c for c in calls}
     for key in [("synth",), ("confirm",), ("campaign", "run")]:

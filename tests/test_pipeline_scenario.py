@@ -41,6 +41,12 @@ def stubbed(monkeypatch):
         "analyze",
         lambda scenario, controller, options, out: calls.append(["analyze", scenario.source]),
     )
+    monkeypatch.setattr(analyze, "margins_controller", lambda path, scenario, delay_s=None: path)
+    monkeypatch.setattr(
+        analyze,
+        "margins",
+        lambda scenario, controller, options, out: calls.append(["margins", scenario.source]),
+    )
 
     def fake_report(folder, out, campaign):
         calls.append(["report"])

@@ -280,3 +280,53 @@ def analysis_figures(result, out) -> dict[str, Path]:
     if result.sensitivity is not None:
         paths["sensitivity_png"] = sensitivity_figure(result.sensitivity, out / "sensitivity.png")
     return paths
+
+
+def margins_figure(table: pd.DataFrame, path, rate_hz: float) -> Path:
+    """Margins over the mission: gain, phase, delay and disk margins, continuous (solid),
+    exact sampled (dashed), per channel; the multiloop disk margin in black."""
+    plt = pyplot()
+
+    fig, axes = plt.subplots(2, 2, figsize=(13, 8), sharex=True)
+    panels = [
+        ("gain margin upper [dB]", "gain margin, gain increase [dB]"),
+        ("phase margin [deg]", "phase margin [deg]"),
+        ("delay margin [s]", "delay margin [s]"),
+        ("disk margin [-]", "balanced disk margin alpha [-]"),
+    ]
+    styles = {"continuous": "-", "sampled": "--"}
+    colors = {"u_x": "C0", "u_y": "C1", "u_z": "C2"}
+    for ax, (column, label) in zip(axes.ravel(), panels, strict=True):
+        for loop, ls in styles.items():
+            part = table[table["loop"] == loop]
+            for channel, color in colors.items():
+                one = part[part["channel"] == channel]
+                ax.plot(
+                    one["time [s]"],
+                    one[column],
+                    ls=ls,
+                    color=color,
+                    lw=1.1,
+                    label=f"{channel}, {loop}",
+                )
+            if column == "disk margin [-]":
+                one = part[part["channel"] == "u_x"]
+                ax.plot(
+                    one["time [s]"],
+                    one["multiloop disk margin [-]"],
+                    ls=ls,
+                    color="k",
+                    lw=1.3,
+                    label=f"multiloop, {loop}",
+                )
+        ax.set_ylabel(label)
+        ax.grid(True, alpha=0.3)
+    for ax in axes[1]:
+        ax.set_xlabel("mission time [s]")
+    axes[0, 0].legend(fontsize=7, ncol=2)
+    axes[1, 1].legend(fontsize=7, ncol=2)
+    fig.suptitle(
+        "Loop-at-a-time margins at the wheel input (others closed) and disk margins: "
+        f"continuous loop (solid) vs exact {rate_hz:g} Hz sampled-data loop (dashed)"
+    )
+    return save_figure(fig, path)

@@ -43,6 +43,82 @@ F_MIN_HZ = 1e-3
 F_MAX_HZ = 20.0
 
 
+#: Columns of the worst margins over the mission in ``summary.json`` (``"worst"``).
+WORST_COLUMNS = (
+    "gain margin upper [dB]",
+    "phase margin [deg]",
+    "delay margin [s]",
+    "disk margin [-]",
+    "multiloop disk margin [-]",
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class MarginsResult:
+    """The margins stage of one controller on one scenario (:func:`compute_margins`): what
+    ``oos margins`` writes, as one frozen object (no file, no figure).
+
+    Attributes
+    ----------
+    controller : Controller
+        The controller whose loops are broken.
+    scenario : Scenario
+        The scenario of the plants.
+    options : MarginsOptions
+        What was computed.
+    times_s : numpy.ndarray
+        The mission times [s].
+    margins : pandas.DataFrame
+        One row per time, loop and channel (:func:`mission_margins`).
+    ray_boundaries : pandas.DataFrame or None
+        Stability boundaries of the three loops along the analysis' rays
+        (:func:`ray_boundaries`; None without ``options.analysis`` or without rays).
+    seconds : float
+        Wall time of the computation [s].
+    """
+
+    controller: Controller
+    scenario: object
+    options: MarginsOptions
+    times_s: np.ndarray
+    margins: pd.DataFrame
+    ray_boundaries: pd.DataFrame | None
+    seconds: float
+
+    def tables(self) -> dict[str, pd.DataFrame]:
+        """File stem -> table: ``margins`` and, with rays, ``ray_boundaries``."""
+        tables = {"margins": self.margins}
+        if self.ray_boundaries is not None:
+            tables["ray_boundaries"] = self.ray_boundaries
+        return tables
+
+    def worst(self) -> dict[str, dict[str, float]]:
+        """Loop -> the smallest value over the mission of each of :data:`WORST_COLUMNS`."""
+        table = self.margins
+        columns = list(WORST_COLUMNS)
+        return {loop: table.loc[table["loop"] == loop, columns].min().to_dict() for loop in LOOPS}
+
+    def summary(self) -> dict:
+        """The record of ``summary.json``: scenario, controller, sampled loop, configurations,
+        worst margins per loop, the ray boundaries (with rays) and the wall time [s]."""
+        spec = self.controller.spec
+        record = {
+            "scenario": str(self.scenario.source),
+            "controller": {"label": self.controller.label, "source": self.controller.source},
+            "loop": {
+                "sample_rate_hz": spec.flight_software_rate_hz,
+                "delay_s": spec.computation_delay_s,
+                "hold_order": spec.hold_order,
+            },
+            "configurations": int(self.times_s.size),
+            "worst": self.worst(),
+        }
+        if self.ray_boundaries is not None:
+            record["rays"] = self.ray_boundaries.to_dict(orient="records")
+        record["time_s"] = round(self.seconds, 2)
+        return record
+
+
 def _grid(f_max_hz: float, plant_poles) -> np.ndarray:
     """Log grid [rad/s] with the frequencies of the plant's modes (and +-0.2 % around them)."""
     omega = 2 * np.pi * np.geomspace(F_MIN_HZ, f_max_hz, GRID_POINTS)
@@ -254,53 +330,64 @@ def _boundary(abscissa, scale_max: float) -> float:
     return boundary_along_ray(lambda s: abscissa(s) >= 0, scale_max, steps=60, rtol=1e-12)
 
 
-def margins_figure(table: pd.DataFrame, path, rate_hz: float) -> Path:
-    """Margins over the mission: gain, phase, delay and disk margins, continuous (solid),
-    exact sampled (dashed), per channel; the multiloop disk margin in black."""
-    from oos_drake.analysis.figures import pyplot, save_figure
+@dataclasses.dataclass(frozen=True)
+class MarginsOptions:
+    """What the margins stage computes (``oos margins``' options, the controller apart).
 
-    plt = pyplot()
+    Attributes
+    ----------
+    configurations : int
+        Equally spaced mission configurations (``--configurations``).
+    analysis : Path or None
+        An ``oos analyze`` folder: also the stability boundaries along its worst
+        real-parameter perturbations (``--analysis``; :func:`analysis_rays`).
+    progress : bool
+        tqdm progress bar (``not --quiet``).
+    """
 
-    fig, axes = plt.subplots(2, 2, figsize=(13, 8), sharex=True)
-    panels = [
-        ("gain margin upper [dB]", "gain margin, gain increase [dB]"),
-        ("phase margin [deg]", "phase margin [deg]"),
-        ("delay margin [s]", "delay margin [s]"),
-        ("disk margin [-]", "balanced disk margin alpha [-]"),
-    ]
-    styles = {"continuous": "-", "sampled": "--"}
-    colors = {"u_x": "C0", "u_y": "C1", "u_z": "C2"}
-    for ax, (column, label) in zip(axes.ravel(), panels, strict=True):
-        for loop, ls in styles.items():
-            part = table[table["loop"] == loop]
-            for channel, color in colors.items():
-                one = part[part["channel"] == channel]
-                ax.plot(
-                    one["time [s]"],
-                    one[column],
-                    ls=ls,
-                    color=color,
-                    lw=1.1,
-                    label=f"{channel}, {loop}",
-                )
-            if column == "disk margin [-]":
-                one = part[part["channel"] == "u_x"]
-                ax.plot(
-                    one["time [s]"],
-                    one["multiloop disk margin [-]"],
-                    ls=ls,
-                    color="k",
-                    lw=1.3,
-                    label=f"multiloop, {loop}",
-                )
-        ax.set_ylabel(label)
-        ax.grid(True, alpha=0.3)
-    for ax in axes[1]:
-        ax.set_xlabel("mission time [s]")
-    axes[0, 0].legend(fontsize=7, ncol=2)
-    axes[1, 1].legend(fontsize=7, ncol=2)
-    fig.suptitle(
-        "Loop-at-a-time margins at the wheel input (others closed) and disk margins: "
-        f"continuous loop (solid) vs exact {rate_hz:g} Hz sampled-data loop (dashed)"
+    configurations: int = 60
+    analysis: Path | None = None
+    progress: bool = True
+
+    def __post_init__(self):
+        if self.configurations < 1:
+            raise ValueError(f"--configurations must be >= 1, got {self.configurations}")
+        if self.analysis is not None:
+            object.__setattr__(self, "analysis", Path(self.analysis))
+
+
+def compute_margins(controller: Controller, scenario, options: MarginsOptions) -> MarginsResult:
+    """The margins stage: :func:`mission_margins` at ``options.configurations`` mission times
+    and, with ``options.analysis``, :func:`ray_boundaries` along its rays; nothing written
+    (:func:`~oos_drake.analysis.writers.write_margins` writes the result).
+
+    Parameters
+    ----------
+    controller : Controller
+        Controller and design specification (rate and delay of the sampled loops).
+    scenario : Scenario
+        The scenario of the plants (and of the analysis' rays).
+    options : MarginsOptions
+
+    Returns
+    -------
+    MarginsResult
+    """
+    import time
+
+    from oos_drake.analysis.models import mission_times
+
+    rays = analysis_rays(options.analysis, scenario) if options.analysis is not None else {}
+    times = mission_times(options.configurations, scenario)
+    start = time.perf_counter()
+    table = mission_margins(controller, times, scenario, progress=options.progress)
+    boundaries = ray_boundaries(controller, rays, scenario) if rays else None
+    return MarginsResult(
+        controller=controller,
+        scenario=scenario,
+        options=options,
+        times_s=np.asarray(times, dtype=float),
+        margins=table,
+        ray_boundaries=boundaries,
+        seconds=time.perf_counter() - start,
     )
-    return save_figure(fig, path)

@@ -105,3 +105,27 @@ def _json_default(value):
     if isinstance(value, (np.bool_,)):
         return bool(value)
     return str(value)
+
+
+def write_margins(result, out_dir) -> dict:
+    """Write a :class:`~oos_drake.analysis.margins.MarginsResult` in ``out_dir`` (created):
+    its tables (``margins.parquet``, ``ray_boundaries.parquet`` with rays), ``margins.png``
+    (:func:`~oos_drake.analysis.figures.margins_figure`) and ``summary.json``
+    (:meth:`~oos_drake.analysis.margins.MarginsResult.summary`), each atomically.
+
+    Returns
+    -------
+    dict
+        The summary written.
+    """
+    from oos_drake.analysis.figures import margins_figure
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    for name, table in result.tables().items():
+        atomic_write_parquet(table, out / f"{name}.parquet")
+    rate_hz = result.controller.spec.flight_software_rate_hz
+    margins_figure(result.margins, out / "margins.png", rate_hz)
+    summary = result.summary()
+    atomic_write_text(summary_json(summary), out / "summary.json")
+    return summary

@@ -217,17 +217,7 @@ def _peak_line(lower, upper, scope, grid_upper, peak: dict, where: str) -> str:
 
 
 def run_margins(args) -> int:
-    """Margins over the mission, continuous and sampled loops; exit status 0."""
-    import time
-
-    from oos_drake.analysis.margins import (
-        LOOPS,
-        analysis_rays,
-        margins_figure,
-        mission_margins,
-        ray_boundaries,
-    )
-    from oos_drake.analysis.models import mission_times
+    """``oos margins``: :func:`margins` with the command line's options; exit status 0."""
     from oos_drake.scenario.data import load_scenario
 
     scenario_file = args.scenario
@@ -236,49 +226,70 @@ def run_margins(args) -> int:
         recorded = _read_summary(args.analysis).get("scenario")
         scenario_file = _analysis_scenario(recorded, args.analysis, args.scenario)
     scenario = load_scenario(scenario_file)
-    controller = scenario_controller(args.controller, scenario)
-    if args.delay is not None:
-        if args.delay < 0:
-            raise ValueError(f"--delay must be >= 0 s, got {args.delay}")
+    controller = margins_controller(args.controller, scenario, args.delay)
+    options = margins_options(args)
+    atomic_folder(
+        args.out,
+        lambda tmp: margins(scenario, controller, options, tmp),
+        marker="summary.json",
+        what="an analysis",
+    )
+    print(f"outputs in {args.out}")
+    return 0
+
+
+def margins_options(args):
+    """The :class:`~oos_drake.analysis.margins.MarginsOptions` of ``oos margins``' arguments."""
+    from oos_drake.analysis.margins import MarginsOptions
+
+    analysis = Path(args.analysis) if args.analysis else None
+    return MarginsOptions(args.configurations, analysis, progress=not args.quiet)
+
+
+def pipeline_margins_options(analysis, configurations: int):
+    """The margins options of ``oos run``: ``configurations`` mission configurations, the rays
+    of the ``analysis`` folder, no progress bar (what ``oos margins --analysis ANALYSIS
+    --configurations N --quiet`` builds)."""
+    from oos_drake.analysis.margins import MarginsOptions
+
+    return MarginsOptions(configurations, Path(analysis), progress=False)
+
+
+def margins_controller(path, scenario, delay_s=None):
+    """The controller ``oos margins`` and ``oos run`` break: ``path`` (a ``controller.json``;
+    None: the BASELINE PD) on ``scenario``'s design data, the computation delay ``delay_s``
+    [s] of its sampled loops (``--delay``; None: the specification's)."""
+    controller = scenario_controller(path, scenario)
+    if delay_s is not None:
+        if delay_s < 0:
+            raise ValueError(f"--delay must be >= 0 s, got {delay_s}")
         controller = dataclasses.replace(
-            controller, spec=dataclasses.replace(controller.spec, computation_delay_s=args.delay)
+            controller, spec=dataclasses.replace(controller.spec, computation_delay_s=delay_s)
         )
-    rays = analysis_rays(args.analysis, scenario) if args.analysis else {}
-    times = mission_times(args.configurations, scenario)
-    start = time.perf_counter()
+    return controller
 
-    def work(tmp):
-        table = mission_margins(controller, times, scenario, progress=not args.quiet)
-        table.to_parquet(tmp / "margins.parquet", index=False)
-        margins_figure(table, tmp / "margins.png", controller.spec.flight_software_rate_hz)
-        columns = [
-            "gain margin upper [dB]",
-            "phase margin [deg]",
-            "delay margin [s]",
-            "disk margin [-]",
-            "multiloop disk margin [-]",
-        ]
-        worst = {loop: table.loc[table["loop"] == loop, columns].min().to_dict() for loop in LOOPS}
-        record = {
-            "scenario": str(scenario.source),
-            "controller": {"label": controller.label, "source": controller.source},
-            "loop": {
-                "sample_rate_hz": controller.spec.flight_software_rate_hz,
-                "delay_s": controller.spec.computation_delay_s,
-                "hold_order": controller.spec.hold_order,
-            },
-            "configurations": int(times.size),
-            "worst": worst,
-        }
-        if rays:
-            boundaries = ray_boundaries(controller, rays, scenario)
-            boundaries.to_parquet(tmp / "ray_boundaries.parquet", index=False)
-            record["rays"] = boundaries.to_dict(orient="records")
-        record["time_s"] = round(time.perf_counter() - start, 2)
-        (tmp / "summary.json").write_text(json.dumps(record, indent=2))
-        return table, record
 
-    table, record = atomic_folder(args.out, work, marker="summary.json", what="an analysis")
+def margins(scenario, controller, options, out):
+    """The margins stage: compute the margins, write them in ``out``, print the worst.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    controller : Controller
+        From :func:`margins_controller`.
+    options : MarginsOptions
+    out : Path
+        The (new) output folder.
+
+    Returns
+    -------
+    MarginsResult
+    """
+    from oos_drake.analysis.margins import compute_margins
+    from oos_drake.analysis.writers import write_margins
+
+    result = compute_margins(controller, scenario, options)
+    record = write_margins(result, out)
     for loop, values in record["worst"].items():
         print(
             f"{loop:>14s}: worst over the mission: GM {values['gain margin upper [dB]']:.3g} dB, "
@@ -293,8 +304,8 @@ def run_margins(args) -> int:
             f"{ray['boundary sampled model [-]']:.4g}, exact sampled "
             f"{ray['boundary sampled [-]']:.4g}"
         )
-    print(f"{record['time_s']:.1f} s; outputs in {args.out}")
-    return 0
+    print(f"{record['time_s']:.1f} s")
+    return result
 
 
 def _analysis_scenario(record, analysis, given) -> str | None:

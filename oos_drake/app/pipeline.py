@@ -221,7 +221,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
         "controller": ["synth", *workers, *quick],
         "analysis": _analysis_stage(args, scenario, controller, grid_only=bool(grid_only)),
         "confirm": ["confirm", *analyzed, *workers],
-        "margins": ["margins", *analyzed, "--configurations", MARGIN_CONFIGURATIONS, "--quiet"],
+        "margins": _margins_stage(scenario, controller, out / "analysis"),
     }
     for name, argv in commands.items():
         if name in skipped:
@@ -333,6 +333,24 @@ def _analysis_stage(args, scenario: Path, controller: Path, *, grid_only: bool):
             grid_only=grid_only,
         )
         return analyze(loaded, analysis_controller(controller, loaded), options, folder)
+
+    return work
+
+
+def _margins_stage(scenario: Path, controller: Path, analysis: Path):
+    """The margins stage of ``oos run``: ``work(folder)`` computing the
+    :class:`~oos_drake.analysis.margins.MarginsResult` of the stage's controller at
+    :data:`MARGIN_CONFIGURATIONS` mission configurations with the rays of ``analysis``
+    (:func:`oos_drake.app.analyze.margins`, what ``oos margins --analysis ANALYSIS
+    --controller CONTROLLER --configurations 12 --quiet`` runs) and writing it in ``folder``."""
+
+    def work(folder: Path):
+        from oos_drake.app.analyze import margins, margins_controller, pipeline_margins_options
+        from oos_drake.scenario.data import load_scenario
+
+        loaded = load_scenario(str(scenario))
+        options = pipeline_margins_options(analysis, MARGIN_CONFIGURATIONS)
+        return margins(loaded, margins_controller(controller, loaded), options, folder)
 
     return work
 

@@ -83,7 +83,6 @@ __all__ = [
     "IMPLICIT_INTEGRATORS",
     "MissionDiagram",
     "MissionOptions",
-    "controller_gain",
     "effective_inertia",
     "mission_controller",
     "logging_rate",
@@ -378,21 +377,6 @@ def mission_controller(path: str | Path | None, scenario: Scenario) -> Controlle
     if not path.is_file():
         raise ValueError(f"controller file {path} not found")
     return read_controller(path)[1]
-
-
-def controller_gain(path: str | Path | None, scenario: Scenario) -> np.ndarray:
-    """Static gain ``[K_p, K_d]`` (3x6) of :func:`mission_controller` (a static controller).
-
-    Raises
-    ------
-    ValueError
-        As :func:`mission_controller`, or a dynamic controller (it has no static gain).
-    """
-    system = mission_controller(path, scenario)
-    try:
-        return system.K
-    except ValueError as exc:
-        raise ValueError(f"controller file {path}: {exc}") from exc
 
 
 def _add_plant(builder: DiagramBuilder, sdf_directory: Path):

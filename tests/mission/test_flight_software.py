@@ -16,8 +16,8 @@ from oos_drake.multibody.flight_software import (  # noqa: E402
 )
 from oos_drake.multibody.mission import (  # noqa: E402
     MissionOptions,
-    controller_gain,
     effective_inertia,
+    mission_controller,
     quintic_piecewise_polynomial,
 )
 from oos_drake.scenario.timeline import mission_timeline  # noqa: E402
@@ -113,7 +113,7 @@ def test_quintic_polynomial_equals_the_timeline_trajectory(paper_scenario):
 
 
 def test_baseline_gain_from_the_coupled_inertia(tmp_path, paper_scenario):
-    K = controller_gain(None, paper_scenario)
+    K = mission_controller(None, paper_scenario).K
     omega = 2 * np.pi * 0.01
     Kp, Kd = K[:, :3], K[:, 3:]
     np.testing.assert_allclose(Kd, 2 * omega * Kp / omega**2, rtol=1e-12)
@@ -130,10 +130,11 @@ def test_baseline_gain_from_the_coupled_inertia(tmp_path, paper_scenario):
         ' "K_d": {"value": [[2,0,0],[0,2,0],[0,0,2]]}}}'
     )
     np.testing.assert_allclose(
-        controller_gain(tmp_path / "c.json", paper_scenario), np.hstack([np.eye(3), 2 * np.eye(3)])
+        mission_controller(tmp_path / "c.json", paper_scenario).K,
+        np.hstack([np.eye(3), 2 * np.eye(3)]),
     )
     with pytest.raises(ValueError, match="not found"):
-        controller_gain(tmp_path / "missing.json", paper_scenario)
+        mission_controller(tmp_path / "missing.json", paper_scenario)
 
 
 def test_merged_stages_equal_the_block_by_block_chain():

@@ -184,11 +184,18 @@ def test_oos_run_on_a_tree_end_to_end(tmp_path, monkeypatch, capsys):
     smaller = {
         "synth": ["--configurations", "4", "--restarts", "0", "--max-iterations", "25",
                   "--worst-case-rounds", "1"],
-        "margins": ["--configurations", "2"],
         "confirm": ["--alpha-limit", "2"],  # the real and modal peaks' physical limit is 1.6
     }  # fmt: skip
     real = pipeline._oos
     monkeypatch.setattr(pipeline, "_oos", lambda *argv: real(*argv, *smaller.get(argv[0], [])))
+    import oos_drake.app.analyze as margins_stage  # the margins stage: a function call, no argv
+    from oos_drake.analysis.margins import MarginsOptions
+
+    monkeypatch.setattr(  # oos margins --configurations 2, as the stage ran on the command line
+        margins_stage,
+        "pipeline_margins_options",
+        lambda analysis, configurations: MarginsOptions(2, analysis, False),
+    )
     import dataclasses
 
     import oos_drake.app.analyze as analyze  # the analysis stage: a function call, no argv

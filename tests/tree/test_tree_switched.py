@@ -194,10 +194,17 @@ def test_oos_run_on_the_servicer_runs_controller_analysis_and_margins(tmp_path, 
         "analyze": ["--configurations", "4", "--points-per-decade", "3", "--no-sensitivity",
                     "--no-time-check", "--performance-models", "1", "--performance-points", "5",
                     "--spike-budget", "5", "--iterations", "20"],
-        "margins": ["--configurations", "2"],
     }  # fmt: skip
     real = pipeline._oos
     monkeypatch.setattr(pipeline, "_oos", lambda *argv: real(*argv, *smaller.get(argv[0], [])))
+    import oos_drake.app.analyze as margins_stage  # the margins stage: a function call, no argv
+    from oos_drake.analysis.margins import MarginsOptions
+
+    monkeypatch.setattr(  # oos margins --configurations 2, as the stage ran on the command line
+        margins_stage,
+        "pipeline_margins_options",
+        lambda analysis, configurations: MarginsOptions(2, analysis, False),
+    )
     out = tmp_path / "out"
     argv = ["run", "--scenario", "servicer_7dof", "--quick", "--out", str(out)]
     assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
