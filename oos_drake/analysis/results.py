@@ -147,9 +147,13 @@ class AnalysisResult:
     def tables(self) -> dict[str, pd.DataFrame]:
         """Every table of the analysis, by file stem, in the order they are written.
 
-        ``worst_cases.parquet`` (the campaign schema, from :attr:`regions`) and the whole
-        perturbations (``peak_perturbations.npz``, from :attr:`certificates`) are not tables.
+        ``worst_cases`` is the campaign's schema
+        (:func:`~oos_drake.campaign.worst_cases.worst_cases_table` of :attr:`regions`); the
+        whole perturbations (``peak_perturbations.npz``, from :attr:`certificates`) are not a
+        table.
         """
+        from oos_drake.campaign.worst_cases import worst_cases_table
+
         tables = {"mu_mission": self.mission}
         tables.update({f"docking_{phase}": sweep for phase, sweep in self.docking.items()})
         tables["stability_peaks"] = self.peaks
@@ -165,6 +169,7 @@ class AnalysisResult:
             tables["time_signals"] = self.time_signals
         if self.open_loop is not None:
             tables["open_loop_effects"] = self.open_loop
+        tables["worst_cases"] = worst_cases_table(self.regions, self.parameters)
         return tables
 
     def summary(self) -> dict:

@@ -115,12 +115,16 @@ def worst_case_column(parameter: Parameter) -> str:
     return f"wc:{parameter.name} [{parameter.unit}]"
 
 
-def write_worst_cases(
-    regions: Sequence[WorstCaseRegion], parameters: Sequence[Parameter], path: str | Path
-) -> Path:
-    """Write regions to ``path`` in the schema above (atomically: temp file + rename)."""
-    from oos_drake.files import atomic_write_parquet
+def worst_cases_table(
+    regions: Sequence[WorstCaseRegion], parameters: Sequence[Parameter]
+) -> pd.DataFrame:
+    """The regions as a table in the schema above (one row per region).
 
+    Raises
+    ------
+    ValueError
+        A region's perturbation names a block that is not in ``parameters``.
+    """
     by_name = {p.name: p for p in parameters}
     names = sorted({n for r in regions for n in r.perturbation})
     for name in names:
@@ -146,7 +150,17 @@ def write_worst_cases(
             table[gain_column(metric, bound)] = [
                 float(r.gains[metric][index]) if metric in r.gains else np.nan for r in regions
             ]
-    return atomic_write_parquet(table, Path(path))
+    return table
+
+
+def write_worst_cases(
+    regions: Sequence[WorstCaseRegion], parameters: Sequence[Parameter], path: str | Path
+) -> Path:
+    """Write :func:`worst_cases_table` of the regions to ``path`` (atomically: temp file +
+    rename)."""
+    from oos_drake.files import atomic_write_parquet
+
+    return atomic_write_parquet(worst_cases_table(regions, parameters), Path(path))
 
 
 def read_worst_cases(
