@@ -29,7 +29,6 @@ __all__ = [
     "rigid_spatial_inertia",
     "residual_mass",
     "angle_to_tau",
-    "tau_to_angle",
     "rank2_factors",
 ]
 
@@ -144,11 +143,6 @@ def angle_to_tau(angle):
     # keep +pi as +pi (remainder sends it to -pi): same rotation, nicer value
     wrapped = np.where(np.isclose(wrapped, -np.pi) & (angle > 0), np.pi, wrapped)
     return np.tan(wrapped / 4.0)
-
-
-def tau_to_angle(tau):
-    """Inverse of :func:`angle_to_tau`: ``angle = 4 atan(tau)`` [rad]."""
-    return 4.0 * np.arctan(np.asarray(tau, dtype=float))
 
 
 def rank2_factors(vector) -> tuple[np.ndarray, np.ndarray]:
