@@ -104,6 +104,19 @@ def single_threaded_blas():
             setter(int(previous))
 
 
+@contextlib.contextmanager
+def preserved_blas_threads():
+    """Context manager: every OpenBLAS's process-wide thread count as it was on entry, restored
+    on exit (whatever :func:`limit_blas_threads` did inside)."""
+    pairs = [pair for lib in _libraries() if (pair := _global_pair(lib)) is not None]
+    before = [(setter, getter()) for setter, getter in pairs]
+    try:
+        yield
+    finally:
+        for setter, previous in before:
+            setter(int(previous))
+
+
 def with_single_threaded_blas(function):
     """Decorator form of :func:`single_threaded_blas`."""
 

@@ -33,6 +33,7 @@ Every process pool is made by :func:`process_pool`. Its workers
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import multiprocessing
 import os
 import threading
@@ -40,7 +41,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 
-from oos_drake.blas import limit_blas_threads, with_single_threaded_blas
+from oos_drake.blas import limit_blas_threads, preserved_blas_threads, with_single_threaded_blas
 
 #: Seconds between two checks of the parent process id in a worker.
 PARENT_POLL_S = 0.25
@@ -157,6 +158,9 @@ class SerialExecutor:
     kind = "serial"
 
     def __init__(self, initializer: Callable | None = None, initargs: tuple = ()):
+        # the initializer runs in this process: what it sets for BLAS lasts until shutdown only
+        self._blas = contextlib.ExitStack()
+        self._blas.enter_context(preserved_blas_threads())
         if initializer is not None:
             initializer(*initargs)
 
@@ -173,7 +177,8 @@ class SerialExecutor:
         return iter(list(futures))
 
     def shutdown(self) -> None:
-        pass
+        """Restore this process's BLAS thread counts (set by the initializer)."""
+        self._blas.close()
 
     def __enter__(self):
         return self
@@ -193,6 +198,9 @@ class _LocalPoolExecutor(SerialExecutor):
 
     def shutdown(self) -> None:
         self.pool.shutdown(wait=True, cancel_futures=True)
+        blas = getattr(self, "_blas", None)  # the process pool runs no initializer here
+        if blas is not None:
+            blas.close()
 
 
 class ThreadExecutor(_LocalPoolExecutor):

@@ -30,3 +30,27 @@ def test_context_manager_restores_the_previous_setting():
 
     inside()
     assert _counts() == before
+
+
+def test_a_serial_executor_restores_what_its_initializer_set():
+    """``--workers 1`` runs the workers' initializer (one BLAS thread) in this process; after
+    the executor the process has its own thread counts back (the in-process leak that made a
+    later synthesis take another optimizer path)."""
+    from oos_drake.processes import make_executor
+
+    blas.limit_blas_threads(2)
+    before = _counts()
+    with make_executor(1, initializer=blas.limit_blas_threads, initargs=(1,)):
+        assert all(count == 1 for count in _counts())
+    assert _counts() == before
+    with make_executor(2, "threads", initializer=blas.limit_blas_threads, initargs=(1,)):
+        pass
+    assert _counts() == before
+
+
+def test_preserved_blas_threads_undoes_a_global_limit():
+    blas.limit_blas_threads(2)
+    before = _counts()
+    with blas.preserved_blas_threads():
+        blas.limit_blas_threads(1)
+    assert _counts() == before

@@ -39,6 +39,7 @@ from oos_drake.analysis.controller import Controller
 from oos_drake.analysis.results import PAPER, AnalysisResult, Certificate  # noqa: F401 (PAPER)
 from oos_drake.analysis.stability import SweepOptions
 from oos_drake.analysis.tightening import TightenOptions
+from oos_drake.blas import with_single_threaded_blas
 
 
 @dataclass(frozen=True)
@@ -351,6 +352,7 @@ def run_analysis(
     return write_analysis(result, out_dir, log=log)
 
 
+@with_single_threaded_blas  # restored on return: callers keep their BLAS threads
 def compute_analysis(
     controller: Controller,
     options: AnalysisOptions | None = None,
@@ -378,10 +380,8 @@ def compute_analysis(
     from oos_drake.analysis.models import mission_closed_loop, mission_times
     from oos_drake.analysis.subsets import uncertainty_subsets
     from oos_drake.analysis.worst_cases import block_parameters
-    from oos_drake.blas import limit_blas_threads
     from oos_drake.processes import make_executor
 
-    limit_blas_threads(1)
     options = options or AnalysisOptions()
     timings = {}
     clock = _time.perf_counter()
