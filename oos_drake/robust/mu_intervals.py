@@ -709,6 +709,11 @@ def _level_problem(real: Realization, performance_rows: int, level: float):
     return real.scale_rows(slice(c - performance_rows, c), 1.0 / level), 1.0
 
 
+def _inside(w: float, spans) -> bool:
+    """True if ``w`` lies strictly inside one of the closed intervals ``spans`` (NaN: none)."""
+    return any(lo < w < hi for lo, hi in spans if np.isfinite(lo))
+
+
 def _gaps(intervals: np.ndarray, end: float) -> list:
     """Uncovered pieces ``(a, b)`` of ``[0, end]`` by closed intervals (NaN rows: none)."""
     spans = intervals[np.all(np.isfinite(intervals) | np.isposinf(intervals), axis=1)]
@@ -820,18 +825,64 @@ def cover_axis(
     # an interval proved at a lower level also proves any higher one (Phi only decreases), so
     # each point keeps the interval of the level current when it was solved: no recomputation
     proved = {}
+    # lazy tests: a point inside an interval proved already is not tested (its Hamiltonian
+    # eigenvalues are the cover's main cost); it is tested later only where a gap is left
+    # next to it (once per gap edge, nearest point first), or at the end if the cover did not
+    # close. Skipping a test never proves anything, so the proof is unchanged in kind.
+    deferred = set()
+    woken = set()  # gap edges that woke a deferred point already
+
+    def test(i):
+        deferred.discard(i)
+        proved[i] = (level, _interval_at(real, performance_rows, scs[i], level, omega[i]))
+
+    def test_pending():
+        pending = [i for i in range(len(omega)) if i not in proved]
+        pending.sort(key=lambda i: (i < first_prior or i >= first_prior + n_prior, i))
+        for i in pending:  # prior points first (the neighbour's cover: wide intervals)
+            if _inside(omega[i], [proved[j][1] for j in proved if j not in deferred]):
+                deferred.add(i)
+                proved[i] = (level, (np.nan, np.nan))
+            else:
+                test(i)
+
+    def wake(gaps):
+        """Test the deferred point nearest to each gap edge (each edge once); True if any."""
+        rows = np.array(sorted(deferred), dtype=int)
+        if not rows.size:
+            return False
+        w = np.asarray(omega, dtype=float)[rows]
+        chosen = set()
+        for a, b in gaps:
+            for edge, side in ((a, w < a), (b, w > b)):
+                if edge in woken or not np.any(side) or not np.isfinite(edge):
+                    continue
+                woken.add(edge)
+                near = rows[side][np.argmin(np.abs(w[side] - edge))]
+                chosen.add(int(near))
+        for i in sorted(chosen):
+            test(i)
+        return bool(chosen)
+
+    n_prior = 0 if prior is None else len(prior[0])
     covered = False
     rounds = 0  # rounds that solved new points (the known points' rounds are free)
-    while rounds < max_rounds:
-        for i, w in enumerate(omega):
-            if i not in proved:
-                proved[i] = (level, _interval_at(real, performance_rows, scs[i], level, w))
+    while True:
+        test_pending()
         gaps = _gaps(np.array([proved[i][1] for i in range(len(omega))]).reshape(-1, 2), end)
         if not gaps:
             covered = True
             break
         gaps = [(a, b) for a, b in gaps if not np.any((stuck >= a) & (stuck <= b))]
         if not gaps:  # only the gaps around poles on the axis are left
+            break
+        if wake(gaps):  # lazily skipped points next to a gap first: one test each
+            continue
+        if rounds >= max_rounds:
+            if deferred:  # before giving up: every skipped point
+                for i in sorted(deferred):
+                    test(i)
+                continue
             break
         take = spare.take(gaps, level / (1.0 + slack))
         if take:  # known scalings first: an interval test, no optimization
@@ -844,7 +895,11 @@ def cover_axis(
             continue
         # not again where a point was solved or proved an interval (a known or prior point
         # whose scalings proved nothing there does not stop a solve at its frequency)
-        tried = [w for i, w in enumerate(omega) if added[i] or np.isfinite(proved[i][1][0])]
+        tried = [
+            w
+            for i, w in enumerate(omega)
+            if added[i] or i in deferred or np.isfinite(proved[i][1][0])
+        ]
         new = _new_points(gaps, end, tried)
         if rounds == 0 and prior is not None:
             # the prior points whose scalings prove nothing here (a band where mu is close to
@@ -854,11 +909,17 @@ def cover_axis(
                 [
                     omega[i]
                     for i in range(first_prior, first_prior + len(prior[0]))
-                    if not np.isfinite(proved[i][1][0]) and any(a <= omega[i] <= b for a, b in gaps)
+                    if i not in deferred
+                    and not np.isfinite(proved[i][1][0])
+                    and any(a <= omega[i] <= b for a, b in gaps)
                 ]
             )
             new = np.union1d(new, retry)
         if new.size == 0:
+            if deferred:  # before giving up: every skipped point
+                for i in sorted(deferred):
+                    test(i)
+                continue
             break
         rounds += 1
         o2, l2, s2 = solve(new)
