@@ -38,6 +38,12 @@ def main() -> None:
     parser.add_argument("--tight", default="0.005,1", help="comma-separated tight values [-]")
     parser.add_argument("--subsets", default="", help="comma-separated subsets (default: all)")
     parser.add_argument("--controller", default=None, help="controller JSON (default: baseline)")
+    parser.add_argument(
+        "--eager",
+        action="store_true",
+        help="also run every guarantee with cover_axis(lazy=False) (every point tested with the "
+        "Hamiltonian: the code before the lazy tests) and print the ratio",
+    )
     args = parser.parse_args()
 
     from oos_drake.analysis.controller import scenario_controller
@@ -59,7 +65,34 @@ def main() -> None:
     omega = options.grid()
     sweep = dataclasses.replace(options.sweep, n_jobs=1)
 
-    def run(guarantee, tight=None):
+    import functools
+
+    import oos_drake.robust.mu_intervals as mu_intervals
+
+    counts = {"hamiltonian": 0, "gap": 0, "gap proved": 0}
+    dg_interval, gap_interval, cover_axis = (
+        mu_intervals.dg_interval,
+        mu_intervals.gap_interval,
+        mu_intervals.cover_axis,
+    )
+
+    def counted_dg(*a, **k):
+        counts["hamiltonian"] += 1
+        return dg_interval(*a, **k)
+
+    def counted_gap(*a, **k):
+        counts["gap"] += 1
+        out = gap_interval(*a, **k)
+        counts["gap proved"] += out is not None
+        return out
+
+    # the analysis calls them through the module: counted here
+    mu_intervals.dg_interval, mu_intervals.gap_interval = counted_dg, counted_gap
+
+    def run(guarantee, tight=None, lazy=True):
+        mu_intervals.cover_axis = functools.partial(cover_axis, lazy=lazy)
+        for k in counts:
+            counts[k] = 0
         clock = time.process_time()
         out = certified_sweep(
             system.system,
@@ -88,11 +121,21 @@ def main() -> None:
         f"{'tested':>6s} {'solved':>6s} {'fail':>4s}"
     )
     for tight in (float(t) for t in args.tight.split(",")):
+        if args.eager:
+            _, eager = run(True, tight, lazy=False)
+            tests = counts["hamiltonian"]
         study, cpu = run(True, tight)
         print(
             f"tight {tight:g}: CPU {cpu:.1f} s = {cpu / base:.2f} x grid only; "
-            f"guarantee {cpu - base:.1f} s"
+            f"guarantee {cpu - base:.1f} s; Hamiltonian tests {counts['hamiltonian']}, "
+            f"gap tests {counts['gap']} ({counts['gap proved']} proved their gap)"
         )
+        if args.eager:
+            print(
+                f"  eager (lazy=False, same run): CPU {eager:.1f} s = {eager / base:.2f} x grid "
+                f"only; guarantee {eager - base:.1f} s; Hamiltonian tests {tests}; guarantee "
+                f"lazy / eager {(cpu - base) / max(eager - base, 1e-9):.2f}"
+            )
         print(head)
         for name, g in study.guarantees.items():
             lower = study.certificates[name].mu_lower

@@ -414,6 +414,11 @@ class _Multiplier:
 
     def max_eig(self, nu) -> np.ndarray:
         """``lambda_max(Phi(j nu))`` relative to the size of its terms (``nu`` may hold inf)."""
+        value, size, _ = self.phi_terms(nu)
+        return value / size
+
+    def phi_terms(self, nu) -> tuple:
+        """``(lambda_max(Phi), size of its terms, ||M||_2)`` at each ``j nu``."""
         M = self.response(nu)
         MH = np.conj(np.swapaxes(M, -1, -2))
         cross = MH @ self.P12
@@ -423,7 +428,7 @@ class _Multiplier:
         aM, aMH = np.abs(M), np.abs(MH)
         size = aMH @ np.abs(self.P11) @ aM + 2.0 * aMH @ np.abs(self.P12) + np.abs(self.P22)
         size = np.linalg.norm(size, axis=(-2, -1))
-        return np.linalg.eigvalsh(Phi)[:, -1] / size
+        return np.linalg.eigvalsh(Phi)[:, -1], size, np.linalg.norm(M, 2, axis=(-2, -1))
 
     def crossings(self, shift: float | None = None) -> np.ndarray:
         """Candidate ``nu >= 0`` where ``Phi(j nu)`` may be singular (Hamiltonian eigenvalues).
@@ -513,15 +518,7 @@ def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: floa
     ValueError
         If the LMI does not hold strictly at ``omega0``, or ``Phi(inf)`` is singular.
     """
-    for name, Dx in (("D_left", scalings.D_left), ("D_right", scalings.D_right)):
-        Dx = 0.5 * (Dx + np.conj(np.asarray(Dx).T))
-        low, high = _block_conditions(Dx)
-        ev = np.linalg.eigvalsh(Dx)
-        if not (low > 0.1 * CONDITION_FLOOR * high and ev[0] > 0.1 * SPREAD_FLOORS[-1] * ev[-1]):
-            raise ValueError(
-                f"dg_interval: a block of {name} is not positive definite to round-off "
-                f"(eigenvalues {low:.3g} .. {high:.3g}); use Scalings.conditioned()"
-            )
+    _check_definite(scalings)
     mult = _Multiplier(real, scalings, beta)
     nu0 = float(real.to_nu(omega0))
     if mult.max_eig([nu0])[0] >= -STRICT:
@@ -560,6 +557,96 @@ def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: floa
     nu_hi = _inner_end(mult, bounds[right + 1], mids[right]) if right + 1 < ok.size else np.inf
     lo, hi = float(real.from_nu(nu_lo)), float(real.from_nu(nu_hi))
     return lo, min(hi, real.nyquist)
+
+
+def _check_definite(scalings: Scalings) -> None:
+    """``ValueError`` unless every diagonal block of the D scalings is positive definite to
+    round-off (the precondition of :func:`dg_interval` and :func:`gap_interval`)."""
+    for name, Dx in (("D_left", scalings.D_left), ("D_right", scalings.D_right)):
+        Dx = 0.5 * (Dx + np.conj(np.asarray(Dx).T))
+        low, high = _block_conditions(Dx)
+        ev = np.linalg.eigvalsh(Dx)
+        if not (low > 0.1 * CONDITION_FLOOR * high and ev[0] > 0.1 * SPREAD_FLOORS[-1] * ev[-1]):
+            raise ValueError(
+                f"dg_interval: a block of {name} is not positive definite to round-off "
+                f"(eigenvalues {low:.3g} .. {high:.3g}); use Scalings.conditioned()"
+            )
+
+
+#: Evaluations of ``Phi`` that :func:`gap_interval` may spend before giving up (each costs
+#: one ``r x r`` Hermitian eigenvalue problem; a Hamiltonian test costs about 100 of them on
+#: the mission's subsets).
+GAP_TEST_BUDGET = 24
+
+
+def gap_interval(real: Realization, scalings: Scalings, beta: float, gap, budget=None):
+    r"""``gap`` if the scalings prove ``mu <= beta`` on all of it by a Lipschitz bound, else None.
+
+    A cheaper sufficient test than :func:`dg_interval` (no Hamiltonian eigenvalues), for a
+    closed piece ``gap = (a, b)`` [rad/s] of the axis (finite ends). With the modal form
+    ``M(j nu) = D + sum_k c_k b_k / (j nu - lambda_k)`` and ``E = M(j nu) - M(j m)``,
+
+    .. math::
+
+        \|E\| \le |\nu - m| \sum_k \frac{\|c_k\| \|b_k\|}
+            {|j\nu - \lambda_k|\,|j m - \lambda_k|},\qquad
+        \lambda_{\max}(\Phi(\nu)) \le \lambda_{\max}(\Phi(m))
+            + \|P_{11}\| (2 \|M(j m)\| e + e^2) + 2 \|P_{12}\| e
+
+    for ``|E| <= e``: a piece ``[m - h, m + h]`` is proved when that bound (with
+    ``|j nu - lambda_k|`` replaced by the distance of ``lambda_k`` to the piece) stays below
+    ``-STRICT`` times the size of ``Phi``'s terms at ``m`` (the round-off allowance of every
+    evaluation of ``Phi`` in :func:`dg_interval`). Pieces that fail are halved, all of the
+    same generation evaluated at once, until the budget (:data:`GAP_TEST_BUDGET` evaluations)
+    is spent or a midpoint is not negative.
+
+    Raises
+    ------
+    ValueError
+        For scalings that are not positive definite to round-off (as :func:`dg_interval`).
+    """
+    _check_definite(scalings)
+    budget = GAP_TEST_BUDGET if budget is None else int(budget)
+    mult = _Multiplier(real, scalings, beta)
+    a, b = (float(x) for x in real.to_nu(np.asarray(gap, dtype=float)))
+    if not (np.isfinite(a) and np.isfinite(b) and 0.0 <= a <= b):
+        return None
+    if mult.A.shape[0] and mult._modal is None:
+        return None  # no usable modal form: no Lipschitz bound
+    if mult.A.shape[0]:
+        lam, CV, VB = mult._modal
+        weight = np.linalg.norm(CV, axis=0) * np.linalg.norm(VB, axis=1)
+    p11 = float(np.linalg.norm(mult.P11, 2))
+    p12 = float(np.linalg.norm(mult.P12, 2))
+    pieces = np.array([[a, b]])
+    spent = 0
+    while pieces.size:
+        if spent + len(pieces) > budget:
+            return None
+        spent += len(pieces)
+        m = 0.5 * (pieces[:, 0] + pieces[:, 1])
+        h = 0.5 * (pieces[:, 1] - pieces[:, 0])
+        value, size, norm_m = mult.phi_terms(m)
+        if np.any(value >= -STRICT * size):
+            return None  # not negative at a midpoint: the Hamiltonian test decides
+        if mult.A.shape[0]:
+            near = np.clip(lam.imag[None, :], pieces[:, :1], pieces[:, 1:])
+            dist = np.abs(lam[None, :] - 1j * near)
+            at_m = np.abs(lam[None, :] - 1j * m[:, None])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                e = h * np.sum(weight[None, :] / (dist * at_m), axis=1)
+            e = np.where(np.isfinite(e), e * (1.0 + 1e-8), np.inf)
+        else:
+            e = np.zeros_like(m)
+        rise = p11 * (2.0 * norm_m * e + e * e) + 2.0 * p12 * e
+        bad = ~(value + rise < -STRICT * size)
+        pieces = np.concatenate(
+            [
+                np.stack([pieces[bad, 0], m[bad]], axis=1),
+                np.stack([m[bad], pieces[bad, 1]], axis=1),
+            ]
+        )
+    return float(real.from_nu(a)), float(min(real.from_nu(b), real.nyquist))
 
 
 def _inner_end(mult, end, inside):
@@ -709,11 +796,6 @@ def _level_problem(real: Realization, performance_rows: int, level: float):
     return real.scale_rows(slice(c - performance_rows, c), 1.0 / level), 1.0
 
 
-def _inside(w: float, spans) -> bool:
-    """True if ``w`` lies strictly inside one of the closed intervals ``spans`` (NaN: none)."""
-    return any(lo < w < hi for lo, hi in spans if np.isfinite(lo))
-
-
 def _gaps(intervals: np.ndarray, end: float) -> list:
     """Uncovered pieces ``(a, b)`` of ``[0, end]`` by closed intervals (NaN rows: none)."""
     spans = intervals[np.all(np.isfinite(intervals) | np.isposinf(intervals), axis=1)]
@@ -758,6 +840,7 @@ def cover_axis(
     progress=None,
     known=None,
     prior=None,
+    lazy: bool = True,
 ) -> AxisCertificate:
     """Cover the frequency axis with intervals proved by D-G scalings.
 
@@ -797,6 +880,12 @@ def cover_axis(
         neighbouring configurations are close problems). Like ``known`` they never raise the
         level; one that does not prove it here proves nothing. Their ``optimal`` is NaN (not
         solved for this ``M``).
+    lazy : bool
+        Skip the interval test of a point that lies inside the intervals proved so far (it is
+        tested later only if a gap is left next to it; its interval is NaN otherwise), and
+        try :func:`gap_interval` (no Hamiltonian) on the gap a point lies in before
+        :func:`dg_interval`. False tests every point with :func:`dg_interval` (the
+        reference of ``benchmarks/bench_guarantee_levels.py --eager``).
 
     Returns
     -------
@@ -832,19 +921,26 @@ def cover_axis(
     deferred = set()
     woken = set()  # gap edges that woke a deferred point already
 
-    def test(i):
+    def gap_of(w):
+        """The gap ``(a, b)`` of the intervals proved so far whose closure holds ``w``."""
+        spans = np.array([proved[j][1] for j in proved if j not in deferred]).reshape(-1, 2)
+        return next(((a, b) for a, b in _gaps(spans, end) if a <= w <= b), None)
+
+    def test(i, gap=None):
         deferred.discard(i)
-        proved[i] = (level, _interval_at(real, performance_rows, scs[i], level, omega[i]))
+        span = _interval_at(real, performance_rows, scs[i], level, omega[i], gap=gap)
+        proved[i] = (level, span)
 
     def test_pending():
         pending = [i for i in range(len(omega)) if i not in proved]
         pending.sort(key=lambda i: (i < first_prior or i >= first_prior + n_prior, i))
         for i in pending:  # prior points first (the neighbour's cover: wide intervals)
-            if _inside(omega[i], [proved[j][1] for j in proved if j not in deferred]):
+            gap = gap_of(omega[i]) if lazy else None
+            if lazy and gap is None:  # inside the intervals proved so far (or where two meet)
                 deferred.add(i)
                 proved[i] = (level, (np.nan, np.nan))
             else:
-                test(i)
+                test(i, gap)
 
     def wake(gaps):
         """Test the deferred point nearest to each gap edge (each edge once); True if any."""
@@ -1048,13 +1144,21 @@ def scalings_at(real: Realization, blk, omega, params) -> tuple:
     return res.upper, scalings
 
 
-def _interval_at(real, performance_rows, sc, level, omega0):
+def _interval_at(real, performance_rows, sc, level, omega0, gap=None):
     """:func:`dg_interval` at ``level``; an empty (NaN) interval where it cannot be proved
-    (e.g. ``Phi(inf)`` singular at exactly this level): the cover then adds points there."""
+    (e.g. ``Phi(inf)`` singular at exactly this level): the cover then adds points there.
+
+    With ``gap = (a, b)`` (finite, holding ``omega0``: a piece of the axis not proved yet)
+    :func:`gap_interval` is tried first: where it proves the whole gap, that is the
+    interval (no Hamiltonian eigenvalues: the gap is closed either way)."""
     if not np.isfinite(level) or sc is None:
         return (np.nan, np.nan)
     r, beta = _level_problem(real, performance_rows, level)
     try:
+        if gap is not None and np.all(np.isfinite(gap)) and gap[0] <= omega0 <= gap[1]:
+            span = gap_interval(r, sc, beta, gap)
+            if span is not None:
+                return span
         return dg_interval(r, sc, beta, omega0)
     except ValueError:
         return (np.nan, np.nan)
