@@ -49,6 +49,10 @@ what stopped the points there, e.g. a ``Phi(inf)`` too ill-conditioned for the H
 test) end with ``covered`` False, the unproved ``gaps``, a one-line ``reason`` and the bound
 :attr:`AxisCertificate.upper_on_cover` that holds everywhere else.
 
+The cover tests lazily (``cover_axis(lazy=True)``, the default): a point that lies in no gap
+of the intervals proved so far is not tested (its interval stays NaN unless a gap is left
+next to it). Every interval of the certificate is still one of :func:`dg_interval`.
+
 The scalings of each point are conditioned block by block and, across blocks, with the largest
 spread of :data:`SPREAD_FLOORS` that still proves the level at the point
 (:func:`proving_scalings`): the optimal scalings of an LFR with badly scaled channels are far
@@ -414,11 +418,6 @@ class _Multiplier:
 
     def max_eig(self, nu) -> np.ndarray:
         """``lambda_max(Phi(j nu))`` relative to the size of its terms (``nu`` may hold inf)."""
-        value, size, _ = self.phi_terms(nu)
-        return value / size
-
-    def phi_terms(self, nu) -> tuple:
-        """``(lambda_max(Phi), size of its terms, ||M||_2)`` at each ``j nu``."""
         M = self.response(nu)
         MH = np.conj(np.swapaxes(M, -1, -2))
         cross = MH @ self.P12
@@ -428,7 +427,7 @@ class _Multiplier:
         aM, aMH = np.abs(M), np.abs(MH)
         size = aMH @ np.abs(self.P11) @ aM + 2.0 * aMH @ np.abs(self.P12) + np.abs(self.P22)
         size = np.linalg.norm(size, axis=(-2, -1))
-        return np.linalg.eigvalsh(Phi)[:, -1], size, np.linalg.norm(M, 2, axis=(-2, -1))
+        return np.linalg.eigvalsh(Phi)[:, -1] / size
 
     def crossings(self, shift: float | None = None) -> np.ndarray:
         """Candidate ``nu >= 0`` where ``Phi(j nu)`` may be singular (Hamiltonian eigenvalues).
@@ -518,7 +517,15 @@ def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: floa
     ValueError
         If the LMI does not hold strictly at ``omega0``, or ``Phi(inf)`` is singular.
     """
-    _check_definite(scalings)
+    for name, Dx in (("D_left", scalings.D_left), ("D_right", scalings.D_right)):
+        Dx = 0.5 * (Dx + np.conj(np.asarray(Dx).T))
+        low, high = _block_conditions(Dx)
+        ev = np.linalg.eigvalsh(Dx)
+        if not (low > 0.1 * CONDITION_FLOOR * high and ev[0] > 0.1 * SPREAD_FLOORS[-1] * ev[-1]):
+            raise ValueError(
+                f"dg_interval: a block of {name} is not positive definite to round-off "
+                f"(eigenvalues {low:.3g} .. {high:.3g}); use Scalings.conditioned()"
+            )
     mult = _Multiplier(real, scalings, beta)
     nu0 = float(real.to_nu(omega0))
     if mult.max_eig([nu0])[0] >= -STRICT:
@@ -557,96 +564,6 @@ def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: floa
     nu_hi = _inner_end(mult, bounds[right + 1], mids[right]) if right + 1 < ok.size else np.inf
     lo, hi = float(real.from_nu(nu_lo)), float(real.from_nu(nu_hi))
     return lo, min(hi, real.nyquist)
-
-
-def _check_definite(scalings: Scalings) -> None:
-    """``ValueError`` unless every diagonal block of the D scalings is positive definite to
-    round-off (the precondition of :func:`dg_interval` and :func:`gap_interval`)."""
-    for name, Dx in (("D_left", scalings.D_left), ("D_right", scalings.D_right)):
-        Dx = 0.5 * (Dx + np.conj(np.asarray(Dx).T))
-        low, high = _block_conditions(Dx)
-        ev = np.linalg.eigvalsh(Dx)
-        if not (low > 0.1 * CONDITION_FLOOR * high and ev[0] > 0.1 * SPREAD_FLOORS[-1] * ev[-1]):
-            raise ValueError(
-                f"dg_interval: a block of {name} is not positive definite to round-off "
-                f"(eigenvalues {low:.3g} .. {high:.3g}); use Scalings.conditioned()"
-            )
-
-
-#: Evaluations of ``Phi`` that :func:`gap_interval` may spend before giving up (each costs
-#: one ``r x r`` Hermitian eigenvalue problem; a Hamiltonian test costs about 100 of them on
-#: the mission's subsets).
-GAP_TEST_BUDGET = 24
-
-
-def gap_interval(real: Realization, scalings: Scalings, beta: float, gap, budget=None):
-    r"""``gap`` if the scalings prove ``mu <= beta`` on all of it by a Lipschitz bound, else None.
-
-    A cheaper sufficient test than :func:`dg_interval` (no Hamiltonian eigenvalues), for a
-    closed piece ``gap = (a, b)`` [rad/s] of the axis (finite ends). With the modal form
-    ``M(j nu) = D + sum_k c_k b_k / (j nu - lambda_k)`` and ``E = M(j nu) - M(j m)``,
-
-    .. math::
-
-        \|E\| \le |\nu - m| \sum_k \frac{\|c_k\| \|b_k\|}
-            {|j\nu - \lambda_k|\,|j m - \lambda_k|},\qquad
-        \lambda_{\max}(\Phi(\nu)) \le \lambda_{\max}(\Phi(m))
-            + \|P_{11}\| (2 \|M(j m)\| e + e^2) + 2 \|P_{12}\| e
-
-    for ``|E| <= e``: a piece ``[m - h, m + h]`` is proved when that bound (with
-    ``|j nu - lambda_k|`` replaced by the distance of ``lambda_k`` to the piece) stays below
-    ``-STRICT`` times the size of ``Phi``'s terms at ``m`` (the round-off allowance of every
-    evaluation of ``Phi`` in :func:`dg_interval`). Pieces that fail are halved, all of the
-    same generation evaluated at once, until the budget (:data:`GAP_TEST_BUDGET` evaluations)
-    is spent or a midpoint is not negative.
-
-    Raises
-    ------
-    ValueError
-        For scalings that are not positive definite to round-off (as :func:`dg_interval`).
-    """
-    _check_definite(scalings)
-    budget = GAP_TEST_BUDGET if budget is None else int(budget)
-    mult = _Multiplier(real, scalings, beta)
-    a, b = (float(x) for x in real.to_nu(np.asarray(gap, dtype=float)))
-    if not (np.isfinite(a) and np.isfinite(b) and 0.0 <= a <= b):
-        return None
-    if mult.A.shape[0] and mult._modal is None:
-        return None  # no usable modal form: no Lipschitz bound
-    if mult.A.shape[0]:
-        lam, CV, VB = mult._modal
-        weight = np.linalg.norm(CV, axis=0) * np.linalg.norm(VB, axis=1)
-    p11 = float(np.linalg.norm(mult.P11, 2))
-    p12 = float(np.linalg.norm(mult.P12, 2))
-    pieces = np.array([[a, b]])
-    spent = 0
-    while pieces.size:
-        if spent + len(pieces) > budget:
-            return None
-        spent += len(pieces)
-        m = 0.5 * (pieces[:, 0] + pieces[:, 1])
-        h = 0.5 * (pieces[:, 1] - pieces[:, 0])
-        value, size, norm_m = mult.phi_terms(m)
-        if np.any(value >= -STRICT * size):
-            return None  # not negative at a midpoint: the Hamiltonian test decides
-        if mult.A.shape[0]:
-            near = np.clip(lam.imag[None, :], pieces[:, :1], pieces[:, 1:])
-            dist = np.abs(lam[None, :] - 1j * near)
-            at_m = np.abs(lam[None, :] - 1j * m[:, None])
-            with np.errstate(divide="ignore", invalid="ignore"):
-                e = h * np.sum(weight[None, :] / (dist * at_m), axis=1)
-            e = np.where(np.isfinite(e), e * (1.0 + 1e-8), np.inf)
-        else:
-            e = np.zeros_like(m)
-        rise = p11 * (2.0 * norm_m * e + e * e) + 2.0 * p12 * e
-        bad = ~(value + rise < -STRICT * size)
-        pieces = np.concatenate(
-            [
-                np.stack([pieces[bad, 0], m[bad]], axis=1),
-                np.stack([m[bad], pieces[bad, 1]], axis=1),
-            ]
-        )
-    return float(real.from_nu(a)), float(min(real.from_nu(b), real.nyquist))
 
 
 def _inner_end(mult, end, inside):
@@ -881,11 +798,10 @@ def cover_axis(
         level; one that does not prove it here proves nothing. Their ``optimal`` is NaN (not
         solved for this ``M``).
     lazy : bool
-        Skip the interval test of a point that lies inside the intervals proved so far (it is
-        tested later only if a gap is left next to it; its interval is NaN otherwise), and
-        try :func:`gap_interval` (no Hamiltonian) on the gap a point lies in before
-        :func:`dg_interval`. False tests every point with :func:`dg_interval` (the
-        reference of ``benchmarks/bench_guarantee_levels.py --eager``).
+        Skip the interval test of a point that lies in no gap of the intervals proved so far
+        (inside one, or where two meet): it is tested later only if a gap is left next to it
+        (its interval is NaN otherwise). False tests every point (the reference of
+        ``benchmarks/bench_guarantee_levels.py --eager``).
 
     Returns
     -------
@@ -914,33 +830,31 @@ def cover_axis(
     # an interval proved at a lower level also proves any higher one (Phi only decreases), so
     # each point keeps the interval of the level current when it was solved: no recomputation
     proved = {}
-    # lazy tests: a point inside an interval proved already is not tested (its Hamiltonian
-    # eigenvalues are the cover's main cost); it is tested later only where a gap is left
-    # next to it (once per gap edge, nearest point first), or at the end if the cover did not
-    # close. Skipping a test never proves anything, so the proof is unchanged in kind.
+    # lazy tests: a point in no gap of the intervals proved already is not tested (its
+    # Hamiltonian eigenvalues are the cover's main cost); it is tested later only where a gap
+    # is left next to it (once per gap edge, nearest point first), or at the end if the cover
+    # did not close. Skipping a test proves nothing: every interval kept is a dg_interval.
     deferred = set()
     woken = set()  # gap edges that woke a deferred point already
 
-    def gap_of(w):
-        """The gap ``(a, b)`` of the intervals proved so far whose closure holds ``w``."""
+    def in_no_gap(w):
+        """True if ``w`` lies in no (closed) gap of the intervals proved so far."""
         spans = np.array([proved[j][1] for j in proved if j not in deferred]).reshape(-1, 2)
-        return next(((a, b) for a, b in _gaps(spans, end) if a <= w <= b), None)
+        return not any(a <= w <= b for a, b in _gaps(spans, end))
 
-    def test(i, gap=None):
+    def test(i):
         deferred.discard(i)
-        span = _interval_at(real, performance_rows, scs[i], level, omega[i], gap=gap)
-        proved[i] = (level, span)
+        proved[i] = (level, _interval_at(real, performance_rows, scs[i], level, omega[i]))
 
     def test_pending():
         pending = [i for i in range(len(omega)) if i not in proved]
         pending.sort(key=lambda i: (i < first_prior or i >= first_prior + n_prior, i))
         for i in pending:  # prior points first (the neighbour's cover: wide intervals)
-            gap = gap_of(omega[i]) if lazy else None
-            if lazy and gap is None:  # inside the intervals proved so far (or where two meet)
+            if lazy and in_no_gap(omega[i]):
                 deferred.add(i)
                 proved[i] = (level, (np.nan, np.nan))
             else:
-                test(i, gap)
+                test(i)
 
     def wake(gaps):
         """Test the deferred point nearest to each gap edge (each edge once); True if any."""
@@ -1144,21 +1058,13 @@ def scalings_at(real: Realization, blk, omega, params) -> tuple:
     return res.upper, scalings
 
 
-def _interval_at(real, performance_rows, sc, level, omega0, gap=None):
+def _interval_at(real, performance_rows, sc, level, omega0):
     """:func:`dg_interval` at ``level``; an empty (NaN) interval where it cannot be proved
-    (e.g. ``Phi(inf)`` singular at exactly this level): the cover then adds points there.
-
-    With ``gap = (a, b)`` (finite, holding ``omega0``: a piece of the axis not proved yet)
-    :func:`gap_interval` is tried first: where it proves the whole gap, that is the
-    interval (no Hamiltonian eigenvalues: the gap is closed either way)."""
+    (e.g. ``Phi(inf)`` singular at exactly this level): the cover then adds points there."""
     if not np.isfinite(level) or sc is None:
         return (np.nan, np.nan)
     r, beta = _level_problem(real, performance_rows, level)
     try:
-        if gap is not None and np.all(np.isfinite(gap)) and gap[0] <= omega0 <= gap[1]:
-            span = gap_interval(r, sc, beta, gap)
-            if span is not None:
-                return span
         return dg_interval(r, sc, beta, omega0)
     except ValueError:
         return (np.nan, np.nan)

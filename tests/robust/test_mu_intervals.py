@@ -19,7 +19,6 @@ from oos_drake.robust.mu_intervals import (
     _gaps,
     cover_axis,
     dg_interval,
-    gap_interval,
     mu_solver,
     scalings_at,
 )
@@ -381,37 +380,6 @@ def test_cover_evaluates_known_scalings_only_where_it_tries_them():
     assert 0 < len(asked) < grid.size and len(set(asked)) == len(asked)
     assert 0.5 <= cert.upper <= 1.02 * 0.5
     assert_every_frequency_proved(real, cert, np.linspace(0.0, 6.0, 6001))
-
-
-@pytest.mark.parametrize("make", [two_modes, lambda: oscillator(c0=0.006, cpm=0.003)])
-def test_gap_interval_never_claims_past_a_crossing(make):
-    """The Lipschitz test of a gap (no Hamiltonian, issue 29 item 4): on pieces inside a
-    point's Hamiltonian interval it proves some (not vacuous), and every piece it proves holds
-    on a dense sample of the LMI; on pieces that run 0.1 % past an end of that interval (where
-    ``Phi`` has a positive eigenvalue just outside) it never claims anything."""
-    real, blk = delta_realization(make())
-    cert = cover_axis(real, mu_solver(real, blk), [0.0, 1.0, 3.0], lazy=False)
-    assert cert.covered
-    proved = claimed_past = 0
-    for i in np.flatnonzero(np.isfinite(cert.interval[:, 0])):
-        w, sc, level = cert.omega[i], cert.scalings[i], cert.level[i]
-        lo, hi = dg_interval(real, sc, level, w)
-        for frac in (0.05, 0.3, 0.9):
-            if np.isfinite(hi):
-                piece = (w, w + frac * (hi - w))
-                span = gap_interval(real, sc, level, piece, budget=64)
-                if span is not None:
-                    proved += 1
-                    assert span == pytest.approx(piece)
-                    grid = np.linspace(*piece, 400)
-                    lmi = lmi_residual(real.response(grid), level, sc.D_left, sc.D_right, sc.G)
-                    assert np.all(lmi <= 0.0), w
-            if np.isfinite(hi):
-                claimed_past += gap_interval(real, sc, level, (w, hi * (1 + 1e-3)), 256) is not None
-            if lo > 0:
-                claimed_past += gap_interval(real, sc, level, (lo * (1 - 1e-3), w), 256) is not None
-    assert proved >= 3
-    assert claimed_past == 0
 
 
 def test_lazy_cover_proves_the_same_level_with_fewer_hamiltonian_tests(monkeypatch):
