@@ -1,7 +1,7 @@
 """Level strategy and cost of the analysis' whole-axis guarantee, against the grid-only analysis.
 
 Run: ``.venv/bin/python benchmarks/bench_guarantee_levels.py [--configurations 24]
-[--tight 0.005,0.01,1] [--subsets total,mechanical] [--controller controller.json]``
+[--tight 0.005,0.01,1] [--subsets total,mechanical] [--controller controller.json] [--eager]``
 
 The mission study of ``oos analyze`` at reduced size (``--configurations`` equally spaced
 mission configurations of the paper's scenario, the analysis' grid, sweep and tightening
@@ -14,6 +14,10 @@ this process (one worker: CPU time is ``time.process_time``), back to back:
   analysis calls it, and that ``tight``; ``tight = 1`` or more is the level of the code before
   the tight first level, ``(1 + gap)`` times the certified lower bound, since the first level
   is the smaller of the two).
+
+``--eager``: each guarantee also with ``cover_axis(lazy=False)`` (every point's interval by
+the Hamiltonian test: the cover before its lazy tests), same run, and the ratio of the two
+guarantees' CPU; the counts of Hamiltonian interval tests are printed for both.
 
 Printed: CPU of each run and its ratio to the grid-only run, the guarantee's own CPU (the
 difference: the grid and the spike resolution are the same computation in every run), and
@@ -38,6 +42,12 @@ def main() -> None:
     parser.add_argument("--tight", default="0.005,1", help="comma-separated tight values [-]")
     parser.add_argument("--subsets", default="", help="comma-separated subsets (default: all)")
     parser.add_argument("--controller", default=None, help="controller JSON (default: baseline)")
+    parser.add_argument(
+        "--eager",
+        action="store_true",
+        help="also run every guarantee with cover_axis(lazy=False) (every point tested with the "
+        "Hamiltonian: the code before the lazy tests) and print the ratio",
+    )
     args = parser.parse_args()
 
     from oos_drake.analysis.controller import scenario_controller
@@ -59,7 +69,24 @@ def main() -> None:
     omega = options.grid()
     sweep = dataclasses.replace(options.sweep, n_jobs=1)
 
-    def run(guarantee, tight=None):
+    import functools
+
+    import oos_drake.robust.mu_intervals as mu_intervals
+
+    counts = {"hamiltonian": 0}
+    dg_interval, cover_axis = mu_intervals.dg_interval, mu_intervals.cover_axis
+
+    def counted_dg(*a, **k):
+        counts["hamiltonian"] += 1
+        return dg_interval(*a, **k)
+
+    # the analysis calls them through the module: counted here
+    mu_intervals.dg_interval = counted_dg
+
+    def run(guarantee, tight=None, lazy=True):
+        mu_intervals.cover_axis = functools.partial(cover_axis, lazy=lazy)
+        for k in counts:
+            counts[k] = 0
         clock = time.process_time()
         out = certified_sweep(
             system.system,
@@ -88,11 +115,20 @@ def main() -> None:
         f"{'tested':>6s} {'solved':>6s} {'fail':>4s}"
     )
     for tight in (float(t) for t in args.tight.split(",")):
+        if args.eager:
+            _, eager = run(True, tight, lazy=False)
+            tests = counts["hamiltonian"]
         study, cpu = run(True, tight)
         print(
             f"tight {tight:g}: CPU {cpu:.1f} s = {cpu / base:.2f} x grid only; "
-            f"guarantee {cpu - base:.1f} s"
+            f"guarantee {cpu - base:.1f} s; Hamiltonian tests {counts['hamiltonian']}"
         )
+        if args.eager:
+            print(
+                f"  eager (lazy=False, same run): CPU {eager:.1f} s = {eager / base:.2f} x grid "
+                f"only; guarantee {eager - base:.1f} s; Hamiltonian tests {tests}; guarantee "
+                f"lazy / eager {(cpu - base) / max(eager - base, 1e-9):.2f}"
+            )
         print(head)
         for name, g in study.guarantees.items():
             lower = study.certificates[name].mu_lower

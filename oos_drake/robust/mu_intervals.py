@@ -49,6 +49,10 @@ what stopped the points there, e.g. a ``Phi(inf)`` too ill-conditioned for the H
 test) end with ``covered`` False, the unproved ``gaps``, a one-line ``reason`` and the bound
 :attr:`AxisCertificate.upper_on_cover` that holds everywhere else.
 
+The cover tests lazily (``cover_axis(lazy=True)``, the default): a point that lies in no gap
+of the intervals proved so far is not tested (its interval stays NaN unless a gap is left
+next to it). Every interval of the certificate is still one of :func:`dg_interval`.
+
 The scalings of each point are conditioned block by block and, across blocks, with the largest
 spread of :data:`SPREAD_FLOORS` that still proves the level at the point
 (:func:`proving_scalings`): the optimal scalings of an LFR with badly scaled channels are far
@@ -753,6 +757,7 @@ def cover_axis(
     progress=None,
     known=None,
     prior=None,
+    lazy: bool = True,
 ) -> AxisCertificate:
     """Cover the frequency axis with intervals proved by D-G scalings.
 
@@ -792,6 +797,11 @@ def cover_axis(
         neighbouring configurations are close problems). Like ``known`` they never raise the
         level; one that does not prove it here proves nothing. Their ``optimal`` is NaN (not
         solved for this ``M``).
+    lazy : bool
+        Skip the interval test of a point that lies in no gap of the intervals proved so far
+        (inside one, or where two meet): it is tested later only if a gap is left next to it
+        (its interval is NaN otherwise). False tests every point (the reference of
+        ``benchmarks/bench_guarantee_levels.py --eager``).
 
     Returns
     -------
@@ -820,18 +830,69 @@ def cover_axis(
     # an interval proved at a lower level also proves any higher one (Phi only decreases), so
     # each point keeps the interval of the level current when it was solved: no recomputation
     proved = {}
+    # lazy tests: a point in no gap of the intervals proved already is not tested (its
+    # Hamiltonian eigenvalues are the cover's main cost); it is tested later only where a gap
+    # is left next to it (once per gap edge, nearest point first), or at the end if the cover
+    # did not close. Skipping a test proves nothing: every interval kept is a dg_interval.
+    deferred = set()
+    woken = set()  # gap edges that woke a deferred point already
+
+    def in_no_gap(w):
+        """True if ``w`` lies in no (closed) gap of the intervals proved so far."""
+        spans = np.array([proved[j][1] for j in proved if j not in deferred]).reshape(-1, 2)
+        return not any(a <= w <= b for a, b in _gaps(spans, end))
+
+    def test(i):
+        deferred.discard(i)
+        proved[i] = (level, _interval_at(real, performance_rows, scs[i], level, omega[i]))
+
+    def test_pending():
+        pending = [i for i in range(len(omega)) if i not in proved]
+        pending.sort(key=lambda i: (i < first_prior or i >= first_prior + n_prior, i))
+        for i in pending:  # prior points first (the neighbour's cover: wide intervals)
+            if lazy and in_no_gap(omega[i]):
+                deferred.add(i)
+                proved[i] = (level, (np.nan, np.nan))
+            else:
+                test(i)
+
+    def wake(gaps):
+        """Test the deferred point nearest to each gap edge (each edge once); True if any."""
+        rows = np.array(sorted(deferred), dtype=int)
+        if not rows.size:
+            return False
+        w = np.asarray(omega, dtype=float)[rows]
+        chosen = set()
+        for a, b in gaps:
+            for edge, side in ((a, w < a), (b, w > b)):
+                if edge in woken or not np.any(side) or not np.isfinite(edge):
+                    continue
+                woken.add(edge)
+                near = rows[side][np.argmin(np.abs(w[side] - edge))]
+                chosen.add(int(near))
+        for i in sorted(chosen):
+            test(i)
+        return bool(chosen)
+
+    n_prior = 0 if prior is None else len(prior[0])
     covered = False
     rounds = 0  # rounds that solved new points (the known points' rounds are free)
-    while rounds < max_rounds:
-        for i, w in enumerate(omega):
-            if i not in proved:
-                proved[i] = (level, _interval_at(real, performance_rows, scs[i], level, w))
+    while True:
+        test_pending()
         gaps = _gaps(np.array([proved[i][1] for i in range(len(omega))]).reshape(-1, 2), end)
         if not gaps:
             covered = True
             break
         gaps = [(a, b) for a, b in gaps if not np.any((stuck >= a) & (stuck <= b))]
         if not gaps:  # only the gaps around poles on the axis are left
+            break
+        if wake(gaps):  # lazily skipped points next to a gap first: one test each
+            continue
+        if rounds >= max_rounds:
+            if deferred:  # before giving up: every skipped point
+                for i in sorted(deferred):
+                    test(i)
+                continue
             break
         take = spare.take(gaps, level / (1.0 + slack))
         if take:  # known scalings first: an interval test, no optimization
@@ -844,7 +905,11 @@ def cover_axis(
             continue
         # not again where a point was solved or proved an interval (a known or prior point
         # whose scalings proved nothing there does not stop a solve at its frequency)
-        tried = [w for i, w in enumerate(omega) if added[i] or np.isfinite(proved[i][1][0])]
+        tried = [
+            w
+            for i, w in enumerate(omega)
+            if added[i] or i in deferred or np.isfinite(proved[i][1][0])
+        ]
         new = _new_points(gaps, end, tried)
         if rounds == 0 and prior is not None:
             # the prior points whose scalings prove nothing here (a band where mu is close to
@@ -854,11 +919,17 @@ def cover_axis(
                 [
                     omega[i]
                     for i in range(first_prior, first_prior + len(prior[0]))
-                    if not np.isfinite(proved[i][1][0]) and any(a <= omega[i] <= b for a, b in gaps)
+                    if i not in deferred
+                    and not np.isfinite(proved[i][1][0])
+                    and any(a <= omega[i] <= b for a, b in gaps)
                 ]
             )
             new = np.union1d(new, retry)
         if new.size == 0:
+            if deferred:  # before giving up: every skipped point
+                for i in sorted(deferred):
+                    test(i)
+                continue
             break
         rounds += 1
         o2, l2, s2 = solve(new)

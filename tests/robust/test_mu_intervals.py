@@ -380,3 +380,26 @@ def test_cover_evaluates_known_scalings_only_where_it_tries_them():
     assert 0 < len(asked) < grid.size and len(set(asked)) == len(asked)
     assert 0.5 <= cert.upper <= 1.02 * 0.5
     assert_every_frequency_proved(real, cert, np.linspace(0.0, 6.0, 6001))
+
+
+def test_lazy_cover_proves_the_same_level_with_fewer_hamiltonian_tests(monkeypatch):
+    """The lazy cover (default) against ``lazy=False`` on the same problem: both close, the
+    lazy one with fewer Hamiltonian tests, both proved on a dense sample, same level."""
+    import oos_drake.robust.mu_intervals as mi
+
+    real, blk = delta_realization(two_modes())
+    tests = []
+    dg = mi.dg_interval
+    monkeypatch.setattr(mi, "dg_interval", lambda *a: tests.append(1) or dg(*a))
+    certs = {}
+    for lazy in (False, True):
+        tests.clear()
+        seeds = np.r_[0.0, np.linspace(0.5, 4.0, 15)]
+        certs[lazy] = (cover_axis(real, mu_solver(real, blk), seeds, lazy=lazy), len(tests))
+    (eager, n_eager), (lazy, n_lazy) = certs[False], certs[True]
+    assert eager.covered and lazy.covered
+    assert n_lazy < n_eager
+    assert lazy.upper == pytest.approx(eager.upper, rel=1e-9)
+    dense = np.concatenate([np.linspace(0.0, 6.0, 20001), np.logspace(0.8, 4, 200)])
+    assert_every_frequency_proved(real, lazy, dense)
+    assert lazy.check()["intervals_hold"] and lazy.check()["covered"]
