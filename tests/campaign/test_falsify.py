@@ -239,8 +239,8 @@ def test_search_from_the_worst_input_reaches_the_linear_twins_worst_case(write_s
     # the seed: the analysis' worst input at the nominal p (another metric, another p)
     f0, gain, v = _linear_analysis(1.0)
     values = {"p": 1.0, "noise_scale": 0.0, "sine_amplitude": 1.0, "sine_frequency": f0}
-    values |= {f"sine_re_{ch}": float(x.real) for ch, x in zip(sine_sim.CHANNELS, v)}
-    values |= {f"sine_im_{ch}": float(x.imag) for ch, x in zip(sine_sim.CHANNELS, v)}
+    values |= {f"sine_re_{ch}": float(x.real) for ch, x in zip(sine_sim.CHANNELS, v, strict=True)}
+    values |= {f"sine_im_{ch}": float(x.imag) for ch, x in zip(sine_sim.CHANNELS, v, strict=True)}
     row = {
         "channel": "e_p",
         "subset": "total",
