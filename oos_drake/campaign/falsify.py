@@ -241,8 +241,13 @@ def disturbance_dimensions(spec: CampaignSpec, seed: dict) -> tuple[list, dict]:
 def starting_points(spec: CampaignSpec, box: SearchBox, seeds=()) -> np.ndarray:
     """Unit-cube points of the analysis' worst cases (the performance ``seeds`` first, then the
     regions by decreasing ``mu_upper``) and the nominal point; parameters a worst case does not
-    give stay at their nominal values."""
+    give stay at their nominal values, the input (parameters of kind ``disturbance``) at the
+    first seed's (a region carries no input: it is then driven by the worst one)."""
     nominal = np.array([spec.info.by_name[n].nominal for n in box.names])
+    if seeds:
+        for j, name in enumerate(box.names):
+            if spec.info.by_name[name].kind == ParameterKind.DISTURBANCE and name in seeds[0]:
+                nominal[j] = seeds[0][name]
     points = []
     for seed in seeds:
         x = nominal.copy()
