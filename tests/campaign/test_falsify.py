@@ -94,6 +94,10 @@ def test_cli_refuses_bad_input_and_writes_nothing(write_spec, tmp_path, capsys):
     out = tmp_path / "nothing"
     assert main(["campaign", "falsify", str(spec), "--out", str(out), "--budget", "0"]) == 2
     assert "--budget 0" in capsys.readouterr().err and not out.exists()
+    for window, message in (("5", "expected START,END"), ("30,10", "need 0 <= start < end")):
+        argv = ["campaign", "falsify", str(spec), "--out", str(out), "--window", window]
+        assert main(argv) == 2
+        assert message in capsys.readouterr().err and not out.exists()
     no_requirement = write_spec(_spec().split("[requirements]")[0], name="noreq")
     assert main(["campaign", "falsify", str(no_requirement), "--out", str(out)]) == 2
     assert "max bound" in capsys.readouterr().err and not out.exists()
