@@ -114,7 +114,7 @@ def efficiency_cases(simulator: str, n_runs: int, window: float) -> list[RunCase
 
 #: Simulator options of the efficiency benchmark (the campaign's defaults for each simulator).
 SIMULATOR_OPTIONS = {
-    "drake-mission": {"control_rate": 10.0, "log_rate": 1.0},
+    "drake-mission": {"scenario": "paper", "control_rate": 10.0, "log_rate": 1.0},
     "flexible-attitude": {"control_rate": 50.0, "log_every": 5},
 }
 

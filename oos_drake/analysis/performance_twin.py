@@ -27,6 +27,13 @@ and uncertainty subset, the row of largest certified lower bound) this module
    ``max_t max_axis |phi| / APE requirement`` over the same periods (the campaign's metric for
    that input).
 
+The row also stores the worst case itself, for the falsification that starts from it
+(``oos campaign falsify --confirm``): ``worst perturbation`` (JSON: block -> normalized value,
+complex values as ``[re, im]`` pairs), ``worst input`` (JSON: the nine ``[re, im]`` entries of
+``v`` in the flight software's noise-table order ``[n_sst; n_gyro; d_ext]``) and
+``worst values`` (JSON: the Drake mission's campaign parameters that realize the worst case,
+:func:`mission_values`).
+
 A gain ``> 1`` is a requirement violation: a unit disturbance (2-norm over the channels) makes
 the pointing error (2-norm over the axes) exceed the APE requirement.
 """
@@ -48,6 +55,7 @@ __all__ = [
     "confirm_gain_case",
     "confirm_performance",
     "linear_twin_gain",
+    "mission_values",
     "perturbed_loop",
     "phasor",
     "sampled_gain",
@@ -77,6 +85,9 @@ PERFORMANCE_CONFIRMATION_COLUMNS = [
     "settle [s]",
     "simulated [s]",
     "status",
+    "worst perturbation",
+    "worst input",
+    "worst values",
 ]
 #: LFR disturbance order ``[d_ext; n_sst; n_gyro]`` -> the flight software's noise-table column.
 _TABLE_COLUMNS = np.r_[6:9, 0:6]
@@ -305,6 +316,77 @@ def _channel_output(channel: str, spec) -> tuple[list, float]:
     return [3, 4, 5], spec.control_weight
 
 
+# -- the worst case as data ---------------------------------------------------------------------
+def _pairs(value):
+    """``[re, im]`` pairs of a complex scalar or array (nested lists, JSON-ready)."""
+    a = np.asarray(value, dtype=complex)
+    return np.stack([a.real, a.imag], axis=-1).tolist()
+
+
+def mission_values(normalized: dict, specs, v, omega: float) -> dict:
+    """The Drake mission's campaign parameters that realize a worst case (the falsification's
+    starting point).
+
+    - real blocks: their physical values (:func:`oos_drake.analysis.worst_cases.physical_values`
+      at scale 1, clipped to the ranges);
+    - complex blocks (``Delta_add``, ``Delta_mul_*``): the mission realizes each as a signed
+      scalar ``s`` times an all-pass whose value at the run's frequency is ``-j``; the seed is
+      ``s`` of the block's size (2-norm, at most 1) and of the sign of ``Re(j c)`` (for a 3x3
+      block ``c``: its trace), the nearest realizable value of that size (the block's phase is
+      otherwise lost: the search explores the rest);
+    - the input: ``sine_amplitude = 1``, ``sine_frequency = omega / 2 pi``, ``sine_re_*``,
+      ``sine_im_*`` the direction ``v`` (table order), ``noise_scale = 0`` (the analysis' unit
+      input alone).
+
+    Parameters
+    ----------
+    normalized : dict
+        Block -> normalized worst value (complex blocks complex).
+    specs : dict
+        The loop's block specs (``sys.uncertainty``).
+    v : array_like, shape (9,)
+        Worst input direction in the LFR order ``[d_ext; n_sst; n_gyro]`` (complex).
+    omega : float
+        Critical frequency [rad/s].
+    """
+    from types import SimpleNamespace
+
+    from oos_drake.analysis.worst_cases import physical_values
+    from oos_drake.multibody.mission_sim import SINE_CHANNELS
+
+    real = {k: x for k, x in normalized.items() if specs[k].kind == "ureal"}
+    out = physical_values(SimpleNamespace(uncertainty=specs), real, 1.0) if real else {}
+    for name, value in normalized.items():
+        if name in real:
+            continue
+        c = np.atleast_2d(np.asarray(value, dtype=complex))
+        size = min(float(np.linalg.norm(c, ord=2)), 1.0)
+        sign = 1.0 if np.real(1j * np.trace(c)) >= 0 else -1.0
+        out[name] = sign * size
+    table = np.zeros(9, dtype=complex)
+    table[_TABLE_COLUMNS] = np.asarray(v, dtype=complex)
+    table = table / np.linalg.norm(table)
+    out |= {"noise_scale": 0.0, "sine_amplitude": 1.0, "sine_frequency": omega / (2 * np.pi)}
+    for channel, entry in zip(SINE_CHANNELS, table, strict=True):
+        out[f"sine_re_{channel}"] = float(entry.real)
+        out[f"sine_im_{channel}"] = float(entry.imag)
+    return {k: float(x) for k, x in out.items()}
+
+
+def worst_case_columns(normalized: dict, specs, v, omega: float) -> dict:
+    """The row's ``worst perturbation``, ``worst input`` and ``worst values`` (JSON texts,
+    module docstring)."""
+    import json
+
+    table = np.zeros(9, dtype=complex)
+    table[_TABLE_COLUMNS] = np.asarray(v, dtype=complex)
+    return {
+        "worst perturbation": json.dumps({k: _pairs(x) for k, x in normalized.items()}),
+        "worst input": json.dumps(_pairs(table)),
+        "worst values": json.dumps(mission_values(normalized, specs, v, omega)),
+    }
+
+
 # -- one case ------------------------------------------------------------------------------------
 def confirm_gain_case(case: GainCase, controller, scenario, subsets, options=None):
     """Linear, sampled-data and Drake-twin gains of one worst case (a table row).
@@ -363,7 +445,7 @@ def confirm_gain_case(case: GainCase, controller, scenario, subsets, options=Non
         "settle [s]": settle,
         "simulated [s]": math.nan,
         "status": "",
-    }
+    } | worst_case_columns(normalized, closed.uncertainty, v, case.omega)
     spec = DesignSpecification.from_requirements(scenario.control)
     design = FlightSoftwareDesign.create(
         controller.K,

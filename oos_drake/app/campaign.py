@@ -131,6 +131,17 @@ def _report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _parse_window(text: str | None) -> tuple[float, float] | None:
+    """``"START,END"`` [s] -> ``(start, end)``; a bad text is a ``ValueError`` naming it."""
+    if text is None:
+        return None
+    try:
+        start, end = (float(x) for x in text.split(","))
+    except ValueError:
+        raise ValueError(f"--window {text!r}: expected START,END in seconds") from None
+    return start, end
+
+
 def _falsify(args: argparse.Namespace) -> int:
     from oos_drake.campaign.falsify import falsify
     from oos_drake.campaign.spec import load_spec
@@ -148,6 +159,7 @@ def _falsify(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         simulator_options=_parse_options(args.simulator_option),
         confirm=args.confirm,
+        window=_parse_window(args.window),
     )
     print(result.sentence())
     if result.reused:
@@ -256,7 +268,15 @@ def register(subparsers) -> None:
         default=None,
         metavar="DIR",
         help="oos confirm folder: compare the worst found with the certified worst-case gains "
-        "and the twin run of the worst perturbation and input (performance_confirmation.parquet)",
+        "and the twin run of the worst perturbation and input (performance_confirmation.parquet); "
+        "its worst cases (perturbation and sinusoidal input) start the search",
+    )
+    falsify.add_argument(
+        "--window",
+        default=None,
+        metavar="START,END",
+        help="simulated window of every run [s] instead of the spec's (a sinusoidal input needs "
+        "time to reach its steady state)",
     )
     falsify.add_argument(
         "--simulator-option",

@@ -8,6 +8,8 @@ a run is a pure function of its case (values, seed, window) and ``rerun`` reprod
 
 Use it in a spec with::
 
+    scenario = "paper"                  # the scenario the mission is built from (required)
+
     [simulator]
     name = "oos_drake.campaign.drake_simulator:make_simulator"
     options = { control_rate = 10.0, log_rate = 1.0 }
@@ -77,8 +79,8 @@ class DrakeMissionSimulator:
 
     Parameters
     ----------
-    scenario : str, optional
-        Scenario data file (a spec's ``scenario`` key; default: the paper's). The twin is
+    scenario : str
+        Scenario data file or shipped scenario name (a spec's ``scenario`` key). The twin is
         parsed from SDF files generated from it (the package's when they match it), and its
         ``[control]`` section gives the default ``control_rate`` (flight software rate [Hz]) and
         ``torque_limit`` [N m]; options given here override them.
@@ -87,7 +89,7 @@ class DrakeMissionSimulator:
         ``log_rate``, ``controller``, ``integrator``, ...).
     """
 
-    def __init__(self, scenario: str | None = None, **options):
+    def __init__(self, scenario: str, **options):
         from oos_drake.multibody.mission import MissionOptions, make_mission_diagram
         from oos_drake.multibody.mission_sim import MissionSimulation
         from oos_drake.multibody.scenario_sdf import scenario_sdf_directory
@@ -151,5 +153,16 @@ class DrakeMissionSimulator:
 
 
 def make_simulator(**options) -> DrakeMissionSimulator:
-    """Factory for :class:`~oos_drake.campaign.simulator.SimulatorRecipe` (options as keywords)."""
+    """Factory for :class:`~oos_drake.campaign.simulator.SimulatorRecipe` (options as keywords).
+
+    Raises
+    ------
+    ValueError
+        No ``scenario`` option: the spec names none (its top-level ``scenario`` key).
+    """
+    if "scenario" not in options:
+        raise ValueError(
+            'drake-mission: the spec names no scenario; add the top-level key scenario = "paper" '
+            "(or another scenario file)"
+        )
     return DrakeMissionSimulator(**options)

@@ -27,6 +27,19 @@ widened by :data:`EDGE_MARGIN` and clipped back (faces and vertices are reachabl
 generation holds the analysis' worst cases (the regions' perturbations, other parameters at their
 nominal values, all clipped to the box) and the nominal point, filled up by a Latin hypercube.
 
+Started from the worst input: given ``oos confirm``'s performance table (``--confirm``), whose
+rows store the analysis' worst cases as simulator values (``worst values``: the worst
+perturbation, and the worst input as a sinusoid of unit amplitude, its frequency and complex
+direction, see :mod:`oos_drake.analysis.performance_twin`), the first generation starts with
+them (largest certified lower bound first, before the regions' perturbations), and the search
+box gains the sinusoid's parameters the spec does not disperse: its frequency within a factor
+:data:`SINE_FREQUENCY_FACTOR` of the worst case's (log coordinates) and its direction (real and
+imaginary parts in ``[-1, 1]``, normalized by the simulator); its amplitude and the scale of
+the random noise stay at the worst case's (1 and 0: the analysis' unit input alone) unless the
+spec disperses them. The LTI blocks are then realized at the worst case's frequency and a
+``critical`` window is centred on its time. ``--window START,END`` replaces the spec's window
+(a sinusoid needs time to build up its steady state).
+
 Resume: every evaluated point is written atomically as soon as its run finishes
 (``points/point_NNNNNN.parquet``). The search is deterministic given its seed and the values it
 sees, so a resumed search replays the optimizer, takes the recorded values of the points already
@@ -52,7 +65,7 @@ from oos_drake.campaign.distributions import Choice, Fixed, LogUniform, Truncate
 from oos_drake.campaign.executors import make_executor
 from oos_drake.campaign.runner import metric_column, resolve_spec
 from oos_drake.campaign.samplers import run_seeds
-from oos_drake.campaign.simulator import ParameterKind, RunCase
+from oos_drake.campaign.simulator import MissionWindow, ParameterKind, RunCase
 from oos_drake.campaign.spec import CampaignSpec, spec_to_toml
 from oos_drake.files import atomic_write_parquet, atomic_write_text
 
@@ -69,6 +82,13 @@ POINTS_DIR = "points"
 TABLE_FILE = "falsification.parquet"
 COMPARISON_FILE = "comparison.parquet"
 RATIO_COLUMN = "requirement ratio [-]"
+#: The sinusoid's frequency is searched within ``[f / factor, f * factor]`` of the worst case's.
+SINE_FREQUENCY_FACTOR = 2.0
+#: Started from a performance worst case, half of the first generation's fill-up is drawn
+#: around it (normal, this standard deviation in unit-cube coordinates), half over the box.
+SEED_SPREAD = 0.1
+#: Column of the performance table holding the worst case as simulator values (JSON).
+WORST_VALUES_COLUMN = "worst values"
 
 
 @dataclass(frozen=True)
@@ -94,9 +114,16 @@ class SearchBox:
     choices: tuple
 
     @classmethod
-    def of_spec(cls, spec: CampaignSpec) -> SearchBox:
-        """The box of the spec's dispersions (see the module docstring)."""
+    def of_spec(cls, spec: CampaignSpec, extra=()) -> SearchBox:
+        """The box of the spec's dispersions (see the module docstring) and the ``extra``
+        dimensions ``(name, low, high, log)``."""
         names, low, high, log, choices = [], [], [], [], []
+        for name, lo, hi, logarithmic in extra:
+            names.append(name)
+            low.append(lo)
+            high.append(hi)
+            log.append(logarithmic)
+            choices.append(None)
         for name, law in spec.dispersions.items():
             if isinstance(law, Fixed):
                 continue
@@ -153,22 +180,81 @@ def requirement_ratio(spec: CampaignSpec, status: str, metrics: dict) -> float:
     return max(ratios)
 
 
-def _window_and_frequency(spec: CampaignSpec):
-    """The window every search run simulates and the frequency of its LTI perturbations."""
-    frequency = math.nan
+def _window_and_frequency(spec: CampaignSpec, seed: pd.Series | None = None, window=None):
+    """The window every search run simulates and the frequency of its LTI perturbations: the
+    worst case ``seed``'s (a performance row) or the peak region's; ``window`` ``(start,
+    end)`` [s] replaces the spec's."""
+    frequency, centre = math.nan, None
     peak = max(spec.regions, key=lambda r: r.mu_upper) if spec.regions else None
-    if peak is not None:
-        frequency = peak.frequency
+    if seed is not None:
+        frequency, centre = float(seed["frequency [Hz]"]), float(seed["time [s]"])
+    elif peak is not None:
+        frequency, centre = peak.frequency, peak.time
+    if window is not None:
+        return MissionWindow(float(window[0]), float(window[1]), "falsify"), frequency
     if spec.window.kind == "critical":
-        return spec.window.resolve(spec.info, peak.time), frequency
+        return spec.window.resolve(spec.info, centre), frequency
     return spec.window.resolve(spec.info), frequency
 
 
-def starting_points(spec: CampaignSpec, box: SearchBox) -> np.ndarray:
-    """Unit-cube points of the analysis' worst cases (regions by decreasing ``mu_upper``) and the
-    nominal point; parameters a region does not give stay at their nominal values."""
+def performance_seeds(spec: CampaignSpec, performance: pd.DataFrame | None) -> list[dict]:
+    """The performance table's worst cases for the spec's max-requirements, as simulator
+    values (``worst values``), largest certified lower bound first; each dict also holds the
+    row under ``"row"``. Empty without a table or without that column."""
+    from oos_drake.campaign.performance import REQUIREMENT_METRICS
+
+    if performance is None or WORST_VALUES_COLUMN not in performance.columns:
+        return []
+    metrics = {r.metric for r in spec.requirements if r.max is not None and r.max > 0}
+    rows = performance[performance["channel"].map(REQUIREMENT_METRICS).isin(metrics)]
+    rows = rows[rows[WORST_VALUES_COLUMN].notna()]
+    rows = rows.sort_values("gain lower [-]", ascending=False, kind="stable")
+    known = spec.info.by_name
+    seeds = []
+    for _, row in rows.iterrows():
+        values = json.loads(row[WORST_VALUES_COLUMN])
+        seeds.append({k: float(v) for k, v in values.items() if k in known} | {"row": row})
+    return seeds
+
+
+def disturbance_dimensions(spec: CampaignSpec, seed: dict) -> tuple[list, dict]:
+    """Search dimensions ``(name, low, high, log)`` and fixed values of the sinusoidal input
+    the spec does not disperse (module docstring), around the worst case ``seed``."""
+    dimensions, fixed = [], {}
+    for name, value in seed.items():
+        if name == "row" or name in spec.dispersions:
+            continue
+        parameter = spec.info.by_name[name]
+        if parameter.kind != ParameterKind.DISTURBANCE:
+            continue
+        if name == "sine_frequency":
+            low = max(parameter.lower, value / SINE_FREQUENCY_FACTOR)
+            high = min(parameter.upper, value * SINE_FREQUENCY_FACTOR)
+            dimensions.append((name, low, high, True))
+        elif name.startswith(("sine_re_", "sine_im_")):
+            dimensions.append((name, parameter.lower, parameter.upper, False))
+        else:  # amplitude, noise scale: the worst case's
+            fixed[name] = value
+    return dimensions, fixed
+
+
+def starting_points(spec: CampaignSpec, box: SearchBox, seeds=()) -> np.ndarray:
+    """Unit-cube points of the analysis' worst cases (the performance ``seeds`` first, then the
+    regions by decreasing ``mu_upper``) and the nominal point; parameters a worst case does not
+    give stay at their nominal values, the input (parameters of kind ``disturbance``) at the
+    first seed's (a region carries no input: it is then driven by the worst one)."""
     nominal = np.array([spec.info.by_name[n].nominal for n in box.names])
+    if seeds:
+        for j, name in enumerate(box.names):
+            if spec.info.by_name[name].kind == ParameterKind.DISTURBANCE and name in seeds[0]:
+                nominal[j] = seeds[0][name]
     points = []
+    for seed in seeds:
+        x = nominal.copy()
+        for j, name in enumerate(box.names):
+            if name in seed:
+                x[j] = seed[name]
+        points.append(box.to_unit(x))
     for region in sorted(spec.regions, key=lambda r: -r.mu_upper):
         x = nominal.copy()
         for j, name in enumerate(box.names):
@@ -252,10 +338,11 @@ class _BudgetSpent(Exception):
 class _Evaluator:
     """The optimizer's batch map: replays recorded points, runs the new ones on the executor."""
 
-    def __init__(self, directory, spec, box, budget, executor, progress, seed):
+    def __init__(self, directory, spec, box, budget, executor, progress, seed, where, fixed):
         self.directory, self.spec, self.box, self.budget = directory, spec, box, budget
         self.executor = executor
-        self.window, self.frequency = _window_and_frequency(spec)
+        self.window, self.frequency = where
+        self.fixed = dict(fixed)
         self.seed = seed
         self.recorded = _read_points(directory)
         self.next_id = 0
@@ -296,6 +383,7 @@ class _Evaluator:
             for name, law in self.spec.dispersions.items():
                 if isinstance(law, Fixed):
                     values[name] = float(law.value)
+            values.update(self.fixed)
             values.update(zip(self.box.names, self.box.to_physical(u).tolist(), strict=True))
             cases[point_id] = (
                 i,
@@ -401,6 +489,7 @@ def falsify(
     progress: bool = True,
     simulator_options: Mapping[str, Any] | None = None,
     confirm: str | Path | None = None,
+    window: tuple[float, float] | None = None,
 ) -> FalsificationResult:
     """Search the spec's dispersion box for the largest requirement ratio (module docstring).
 
@@ -423,12 +512,17 @@ def falsify(
     confirm : path, optional
         ``oos confirm`` folder (or its ``performance_confirmation.parquet``): the comparison
         then also gives, per requirement, the analysis' certified worst-case gain and the twin
-        run with the worst perturbation and the worst input (:func:`linear_comparison`).
+        run with the worst perturbation and the worst input (:func:`linear_comparison`); its
+        worst cases (``worst values``) start the search, which then also searches the
+        sinusoidal input (module docstring).
+    window : (float, float), optional
+        Simulated window ``(start, end)`` [s] of every run instead of the spec's.
 
     Raises
     ------
     ValueError
-        Bad spec, no max-requirement, a folder holding another search, a budget < 1.
+        Bad spec, no max-requirement, a folder holding another search, a budget < 1, a bad
+        window.
     """
     from scipy.optimize import differential_evolution
 
@@ -438,8 +532,16 @@ def falsify(
     spec = resolve_spec(spec_path, worst_cases, simulator_options)
     if not any(r.max is not None and r.max > 0 for r in spec.requirements):
         raise ValueError(f"spec {spec.name}: falsification needs a requirement with a max bound")
-    box = SearchBox.of_spec(spec)
-    _, frequency = _window_and_frequency(spec)
+    seeds = performance_seeds(spec, performance)
+    dimensions, fixed = disturbance_dimensions(spec, seeds[0]) if seeds else ([], {})
+    box = SearchBox.of_spec(spec, dimensions)
+    if window is not None and not (0.0 <= window[0] < window[1] <= spec.info.duration):
+        raise ValueError(
+            f"--window {window[0]:g},{window[1]:g}: need 0 <= start < end <= "
+            f"{spec.info.duration:g} s"
+        )
+    where = _window_and_frequency(spec, seeds[0]["row"] if seeds else None, window)
+    frequency = where[1]
     lti = [n for n in box.names if spec.info.by_name[n].kind == ParameterKind.LTI]
     if lti and math.isnan(frequency):
         raise ValueError(
@@ -447,20 +549,31 @@ def falsify(
             "worst_cases.parquet for their frequency (--worst-cases FILE)"
         )
     size = population_size(len(box.names))
-    seeds, _ = run_seeds(spec.random_seed, 1)
+    run_seed, _ = run_seeds(spec.random_seed, 1)
     settings = {"seed": spec.random_seed, "population": size, "budget": budget}
+    if window is not None:
+        settings["window [s]"] = [float(window[0]), float(window[1])]
+    if seeds:
+        settings["worst values"] = [{k: v for k, v in s.items() if k != "row"} for s in seeds]
     directory = Path(out)
     _prepare_directory(directory, spec, settings)
 
-    starts = starting_points(spec, box)[:size]
+    starts = starting_points(spec, box, seeds)[:size]
     rng = np.random.default_rng(np.random.SeedSequence([spec.random_seed, 0xFA15]))
     fill = size - len(starts)
     if fill > 0:
         from scipy.stats import qmc
 
-        starts = np.vstack([starts, qmc.LatinHypercube(len(box.names), rng=rng).random(fill)])
+        cloud = fill // 2 if seeds else 0  # around the first worst case (module docstring)
+        around = np.clip(
+            starts[0] + SEED_SPREAD * rng.standard_normal((cloud, len(box.names))), 0, 1
+        )
+        spread = qmc.LatinHypercube(len(box.names), rng=rng).random(fill - cloud)
+        starts = np.vstack([starts, around, spread])
     executor = make_executor(workers, scheduler, spec.run_timeout)
-    evaluator = _Evaluator(directory, spec, box, budget, executor, progress, int(seeds[0]))
+    evaluator = _Evaluator(
+        directory, spec, box, budget, executor, progress, int(run_seed[0]), where, fixed
+    )
     try:
         differential_evolution(
             lambda u: 0.0,  # never called: the batch map evaluates

@@ -53,13 +53,16 @@ class ParameterKind(enum.StrEnum):
     SEED = "seed"
     #: a scalar that scales a stable LTI perturbation block (Delta_add, Delta_mul)
     LTI = "lti"
+    #: a parameter of the disturbance and noise inputs (a sinusoid's amplitude, frequency and
+    #: direction, the scale of the random sequences)
+    DISTURBANCE = "disturbance"
 
     @classmethod
     def of_quantity(cls, quantity: str) -> ParameterKind:
         """The kind of a parameter that stands for ``quantity``.
 
         ``quantity`` is an uncertain block's (:data:`oos_drake.lfr.blocks.QUANTITIES`) or
-        ``"initial condition"`` / ``"seed"``.
+        ``"initial condition"`` / ``"seed"`` / ``"disturbance"``.
         """
         if quantity in ("stiffness", "damping"):
             return cls.STIFFNESS
@@ -69,6 +72,8 @@ class ParameterKind(enum.StrEnum):
             return cls.INITIAL_CONDITION
         if quantity == "seed":
             return cls.SEED
+        if quantity == "disturbance":
+            return cls.DISTURBANCE
         return cls.REAL_BLOCK
 
 

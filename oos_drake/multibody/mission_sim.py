@@ -64,7 +64,10 @@ __all__ = [
     "MissionSimulation",
     "METRIC_UNITS",
     "SIGNAL_UNITS",
+    "SINE_CHANNELS",
+    "disturbance_parameters",
     "mission_parameters",
+    "sine_table",
 ]
 
 AXES = ("x", "y", "z")
@@ -177,7 +180,102 @@ def mission_parameters(scenario) -> tuple[MissionParameter, ...]:
     ]
     description = "scale of the additive plant all-pass perturbation"
     params.append(centred("Delta_add", "-", 1.0, "additive dynamics", description))
+    return tuple(params) + disturbance_parameters()
+
+
+#: Noise-table channels (the flight software's order: star tracker, gyro, external torque).
+SINE_CHANNELS = tuple(f"{source}_{a}" for source in ("n_sst", "n_gyro", "d_ext") for a in AXES)
+#: Largest sinusoid frequency [Hz] (the flight software samples it: above its Nyquist
+#: frequency the sinusoid aliases).
+SINE_MAX_FREQUENCY = 50.0
+
+
+def disturbance_parameters() -> tuple[MissionParameter, ...]:
+    """The parameters of the run's disturbance and noise inputs (module :func:`noise_table`).
+
+    ``noise_scale`` scales the random unit sequences (1: the paper's noise levels, 0: none);
+    ``sine_amplitude`` [-], ``sine_frequency`` [Hz] and the complex direction
+    ``sine_re_<channel>``, ``sine_im_<channel>`` (channels :data:`SINE_CHANNELS`) define the
+    sinusoid added to them (nominal: none).
+    """
+    quantity = "disturbance"
+    params = [
+        MissionParameter(
+            "noise_scale",
+            "-",
+            1.0,
+            0.0,
+            10.0,
+            quantity,
+            "scale of the random sensor noise and disturbance sequences (1: the scenario's)",
+        ),
+        MissionParameter(
+            "sine_amplitude",
+            "-",
+            0.0,
+            0.0,
+            10.0,
+            quantity,
+            "amplitude of the sinusoidal input over its unit direction (1: the analysis' "
+            "unit input, shaped by the noise and disturbance weights)",
+        ),
+        MissionParameter(
+            "sine_frequency",
+            "Hz",
+            0.1,
+            1.0e-4,
+            SINE_MAX_FREQUENCY,
+            quantity,
+            "frequency of the sinusoidal input",
+        ),
+    ]
+    for part, what in (("re", "real"), ("im", "imaginary")):
+        params += [
+            MissionParameter(
+                f"sine_{part}_{channel}",
+                "-",
+                0.0,
+                -1.0,
+                1.0,
+                quantity,
+                f"{what} part of the sinusoid's direction on {channel} (normalized to unit norm)",
+            )
+            for channel in SINE_CHANNELS
+        ]
     return tuple(params)
+
+
+def sine_table(values: Mapping[str, float], times: np.ndarray) -> np.ndarray:
+    """The sinusoidal input at the flight software's samples (unit noise-table columns).
+
+    .. math::
+
+        d(t_k) = a \\, \\mathrm{Re}\\left(\\frac{c}{\\|c\\|_2} e^{j 2 \\pi f t_k}\\right)
+
+    with ``a`` = ``sine_amplitude``, ``f`` = ``sine_frequency`` [Hz], ``c`` the complex
+    direction of the ``sine_re_*``, ``sine_im_*`` values and ``t_k`` the mission time of the
+    sample [s]; zero when ``a = 0`` or ``c = 0``. A unit amplitude is a unit 2-norm phasor over
+    the nine unit inputs: the analysis' normalized disturbance ``d`` (the flight software scales
+    the columns with the noise and disturbance weights, as it scales the random sequences).
+
+    Parameters
+    ----------
+    values : mapping
+        Resolved parameter values (:meth:`MissionSimulation.resolve`).
+    times : numpy.ndarray, shape (n,)
+        Sample times [s].
+
+    Returns
+    -------
+    numpy.ndarray, shape (n, 9)
+    """
+    c = np.array([values[f"sine_re_{ch}"] + 1j * values[f"sine_im_{ch}"] for ch in SINE_CHANNELS])
+    norm = float(np.linalg.norm(c))
+    amplitude = float(values["sine_amplitude"])
+    if amplitude == 0.0 or norm == 0.0:
+        return np.zeros((np.size(times), NOISE_CHANNELS))
+    phase = np.exp(2j * np.pi * float(values["sine_frequency"]) * np.asarray(times, float))
+    return amplitude * np.real(np.outer(phase, c / norm))
 
 
 METRIC_UNITS = MappingProxyType(
@@ -450,7 +548,9 @@ class MissionSimulation:
         """A root context at the window start with every value applied (see the module doc).
 
         ``noise_table`` (``(n, 9)``: unit ``[n_sst; n_gyro; d_ext]`` per sample) replaces the
-        seeded Gaussian noise (deterministic inputs for tests); ``perturbation_frequency_hz``,
+        seeded Gaussian noise (deterministic inputs for tests); either is scaled by
+        ``noise_scale`` and the sinusoid of :func:`sine_table` (row ``k`` at ``start + k /
+        control_rate``) is added; ``perturbation_frequency_hz``,
         ``bushings``: see :meth:`run`; ``within_ranges`` as in :meth:`resolve`.
         """
         h = self.handles
@@ -496,6 +596,12 @@ class MissionSimulation:
         n = int(math.ceil((end - start) * self.options.control_rate)) + 2
         if noise_table is None:
             noise_table = np.random.default_rng(noise_seed).standard_normal((n, NOISE_CHANNELS))
+        noise_table = np.asarray(noise_table, dtype=float)
+        if values["noise_scale"] != 1.0:
+            noise_table = values["noise_scale"] * noise_table
+        if values["sine_amplitude"] != 0.0:
+            times = start + np.arange(noise_table.shape[0]) / self.options.control_rate
+            noise_table = noise_table + sine_table(values, times)
         fsw.set_noise(fsw_context, noise_table)
         # sensor filters start at their steady state for the initial measurement
         state = fsw_context.get_mutable_discrete_state(0).get_mutable_value()

@@ -94,6 +94,10 @@ def test_cli_refuses_bad_input_and_writes_nothing(write_spec, tmp_path, capsys):
     out = tmp_path / "nothing"
     assert main(["campaign", "falsify", str(spec), "--out", str(out), "--budget", "0"]) == 2
     assert "--budget 0" in capsys.readouterr().err and not out.exists()
+    for window, message in (("5", "expected START,END"), ("30,10", "need 0 <= start < end")):
+        argv = ["campaign", "falsify", str(spec), "--out", str(out), "--window", window]
+        assert main(argv) == 2
+        assert message in capsys.readouterr().err and not out.exists()
     no_requirement = write_spec(_spec().split("[requirements]")[0], name="noreq")
     assert main(["campaign", "falsify", str(no_requirement), "--out", str(out)]) == 2
     assert "max bound" in capsys.readouterr().err and not out.exists()
@@ -185,3 +189,92 @@ def test_comparison_gives_the_performance_confirmation_of_the_metric(write_spec,
     args = ["campaign", "falsify", str(spec), "--out", str(tmp_path / "g"), "--budget", "8"]
     assert main([*args, "--confirm", str(tmp_path / "nothing"), "--quiet"]) == 2
     assert not (tmp_path / "g").exists()
+
+
+def _sine_spec() -> str:
+    return textwrap.dedent(
+        f"""
+        name = "linear-twin"
+        n_runs = 10
+        random_seed = 5
+        metrics = ["ape"]
+
+        [simulator]
+        name = "tests.campaign.sine_sim:make_simulator"
+
+        [window]
+        kind = "event"
+        event = "capture"
+        before = 5.0
+        after = 20.0
+
+        [requirements]
+        ape = {{ max = {REQUIREMENT} }}
+        """
+    )
+
+
+def _linear_analysis(p: float):
+    """What the performance analysis of the linear twin gives at ``p`` (independently of the
+    falsification): the peak frequency of the largest singular value of ``G_p`` (2-norm over the
+    outputs, not the campaign's peak of the larger one) and its right singular vector."""
+    from . import sine_sim
+
+    grid = np.geomspace(0.02, 1.0, 4001)
+    gains = [np.linalg.svd(sine_sim.response(p, f), compute_uv=False)[0] for f in grid]
+    f0 = grid[int(np.argmax(gains))]
+    _, s, Vh = np.linalg.svd(sine_sim.response(p, f0))
+    return f0, s[0], Vh[0].conj()
+
+
+@pytest.mark.slow
+def test_search_from_the_worst_input_reaches_the_linear_twins_worst_case(write_spec, tmp_path):
+    import json
+
+    from oos_drake.campaign.falsify import SINE_FREQUENCY_FACTOR
+
+    from . import sine_sim
+
+    # the known worst case: brute force over p, f (and the best complex direction per output
+    # row: its conjugate, the row's 2-norm)
+    ps = np.linspace(0.8, 1.2, 161)
+    fs = np.geomspace(0.02, 1.0, 2001)
+    known = max(np.linalg.norm(sine_sim.response(p, f), axis=1).max() for p in ps for f in fs)
+    # the seed: the analysis' worst input at the nominal p (another metric, another p)
+    f0, gain, v = _linear_analysis(1.0)
+    values = {"p": 1.0, "noise_scale": 0.0, "sine_amplitude": 1.0, "sine_frequency": f0}
+    values |= {f"sine_re_{ch}": float(x.real) for ch, x in zip(sine_sim.CHANNELS, v, strict=True)}
+    values |= {f"sine_im_{ch}": float(x.imag) for ch, x in zip(sine_sim.CHANNELS, v, strict=True)}
+    row = {
+        "channel": "e_p",
+        "subset": "total",
+        "time [s]": 10.0,
+        "frequency [Hz]": f0,
+        "gain lower [-]": gain / REQUIREMENT,
+        "gain upper [-]": 1.01 * gain / REQUIREMENT,
+        "gain twin [-]": np.nan,
+        "worst values": json.dumps(values),
+    }
+    confirm = tmp_path / "confirm"
+    confirm.mkdir()
+    pd.DataFrame([row]).to_parquet(confirm / "performance_confirmation.parquet")
+    budget = 24 * 24  # 24 generations of 24 points (the first: seed, cloud, spread)
+    result = falsify(
+        write_spec(_sine_spec()), tmp_path / "f", budget=budget, confirm=confirm, progress=False
+    )
+    table = result.table
+    # the first point is the seed: its metric recomputed in closed form
+    first = table.iloc[0]
+    assert first["sine_frequency [Hz]"] == pytest.approx(f0, rel=1e-12)
+    assert first["noise_scale [-]"] == 0.0 and first["sine_amplitude [-]"] == 1.0
+    seeded = np.abs(sine_sim.response(1.0, f0) @ v).max()
+    assert first[RATIO_COLUMN] == pytest.approx(seeded / REQUIREMENT, rel=1e-9)
+    # the search covers the sinusoid (frequency within the factor, the direction) and p
+    assert table["sine_frequency [Hz]"].between(f0 / SINE_FREQUENCY_FACTOR, f0 * 2).all()
+    assert table["sine_re_d_y [-]"].nunique() > 10 and table["p [-]"].nunique() > 10
+    assert (table["noise_scale [-]"] == 0).all()  # the analysis' unit input alone
+    best = result.best[RATIO_COLUMN] * REQUIREMENT
+    print(f"seed {seeded:.6g}, known worst {known:.6g}, found {best:.6g}")
+    assert seeded < 0.97 * known  # the seed is not the worst case ...
+    assert best == pytest.approx(known, rel=0.01)  # ... the search reaches it
+    assert best <= known * (1 + 1e-3)  # (the grid's maximum, up to its resolution)

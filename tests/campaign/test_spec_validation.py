@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import textwrap
 
 import pytest
 
@@ -190,3 +191,21 @@ def test_shipped_demo_specs_are_valid(name):
     spec = load_spec(SPEC_DIRECTORY / name)
     assert spec.simulator.name == "flexible-attitude" and spec.n_runs > 0
     assert [r.label for r in spec.requirements] == ["ape <= 0.0079 rad", "peak_torque <= 2 N m"]
+
+
+def test_a_drake_mission_spec_must_name_its_scenario(write_spec):
+    """No library default: the Drake mission is built from the scenario the spec names."""
+    text = textwrap.dedent(
+        """
+        name = "unnamed"
+        n_runs = 2
+        random_seed = 1
+
+        [simulator]
+        name = "oos_drake.campaign.drake_simulator:make_simulator"
+        """
+    )
+    with pytest.raises(
+        ValueError, match='names no scenario; add the top-level key scenario = "paper"'
+    ):
+        load_spec(write_spec(text))

@@ -35,7 +35,7 @@ LFR_BLOCKS = (
 
 @pytest.fixture(scope="module")
 def simulator():
-    return build_simulator(SimulatorRecipe.create(FACTORY_PATH, {}))
+    return build_simulator(SimulatorRecipe.create(FACTORY_PATH, {"scenario": "paper"}))
 
 
 def test_declarations_cover_every_uncertain_block(simulator):
@@ -77,7 +77,7 @@ def test_rerun_reproduces_metrics_exactly(simulator):
 
 
 def test_divergence_is_reported():
-    diverging = DrakeMissionSimulator(divergence_limit=1e-4, check_interval=5.0)
+    diverging = DrakeMissionSimulator("paper", divergence_limit=1e-4, check_interval=5.0)
     case = RunCase(0, 1, {"w0_y": 0.005}, MissionWindow(1050.0, 1070.0))
     with pytest.raises(SimulationDiverged, match="beyond"):
         diverging.run(case)
@@ -85,7 +85,7 @@ def test_divergence_is_reported():
 
 def test_bad_options_and_values_are_rejected(simulator):
     with pytest.raises(ValueError, match="unknown option"):
-        DrakeMissionSimulator(control_rat=5.0)
+        DrakeMissionSimulator("paper", control_rat=5.0)
     with pytest.raises(ValueError, match="m_RH2"):
         simulator.run(RunCase(0, 1, {"m_RH2": 1.0}, MissionWindow(0.0, 1.0)))
     with pytest.raises(ValueError, match="unknown parameter"):

@@ -22,6 +22,7 @@ BEFORE, AFTER = 2.0, 4.0  # [s] around the capture (255 s)
 
 SPEC = textwrap.dedent(
     f"""
+    scenario = "paper"
     name = "tiny_replay"
     n_runs = 2
     random_seed = 7

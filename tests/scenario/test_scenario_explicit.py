@@ -19,11 +19,9 @@ from oos_drake.scenario.data import Scenario, load_scenario
 PACKAGE = Path(oos_drake.__file__).parent
 #: The application floor: where the paper's default may be chosen.
 APPLICATION = PACKAGE / "app"
-#: Documented exceptions, ``(file, function) -> why``. A campaign spec is user input: a spec
-#: without a ``scenario`` key runs the paper's (its simulator factory receives the file name).
-EXCEPTIONS = {
-    ("campaign/drake_simulator.py", "__init__"): "campaign spec without `scenario`: the paper's",
-}
+#: Documented exceptions, ``(file, function) -> why`` (none: a campaign spec of the Drake
+#: mission names its scenario, the simulator requires it).
+EXCEPTIONS: dict[tuple[str, str], str] = {}
 
 
 def scenario_defaults(source: str, filename: str = "<string>") -> list[str]:
