@@ -554,10 +554,10 @@ def _drake_twin_gain(worst, controller, scenario, options, design, dynamic, v, s
 
 
 def _gain_task(args):
-    from oos_drake.blas import limit_blas_threads
+    from oos_drake.blas import single_threaded_blas
 
-    limit_blas_threads(1)
-    return confirm_gain_case(*args)
+    with single_threaded_blas():  # restored after: ``--workers 1`` runs it in this process
+        return confirm_gain_case(*args)
 
 
 def confirm_performance(
