@@ -212,7 +212,10 @@ def joint_space_scenario(scenario: str | Path, folder: str | Path) -> Path:
     """The tree file the stages of ``oos run`` read: ``scenario`` itself when its mission has
     no tip-pose waypoint (or it is a schema-1 file), else its joint-space copy
     (:func:`joint_space_document`) written to ``folder/<file name>`` (a comment gives the
-    source and each waypoint's residual).
+    source and each waypoint's residual). The copy's first line is a key (hash of the source
+    file's bytes and of the code that solves it, ``oos_drake.multibody`` and
+    ``oos_drake.scenario``): a copy with the current key is reused without solving again
+    (``oos run`` resuming), any other is rewritten.
 
     Parameters
     ----------
@@ -230,22 +233,35 @@ def joint_space_scenario(scenario: str | Path, folder: str | Path) -> Path:
     if not is_tree_scenario(scenario):
         return Path(scenario)
     source = tree_path(scenario)
+    key = f"# joint-space key {_joint_space_key(source)}"
+    path = Path(folder) / source.name
+    if path.is_file() and path.read_text().partition("\n")[0] == key:
+        return path  # solved from the same file by the same code
     document, solutions = joint_space_document(source)
     if not solutions:
         return source
     lines = [
+        key,
         f"# {source}: its tip-pose waypoints solved into joint waypoints by oos_drake.app.tree"
-        ".joint_space_document (inverse kinematics on the tree's Drake twin)"
+        ".joint_space_document (inverse kinematics on the tree's Drake twin)",
     ]
     lines += [
         f"# {phase}: port {s.port} within {s.position_error:.3g} m, {s.orientation_error:.3g} rad"
         for phase, s in solutions.items()
     ]
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / source.name
+    path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n" + tomli_w.dumps(document))
     return path
+
+
+def _joint_space_key(source: Path) -> str:
+    """Hash of a tree file's bytes and of the sources that solve its tip waypoints."""
+    import hashlib
+
+    from oos_drake.app.pipeline import source_key
+
+    code = source_key("multibody", "scenario").encode()
+    return hashlib.sha256(source.read_bytes() + b"\0" + code).hexdigest()
 
 
 def _solve(args: argparse.Namespace) -> int:

@@ -159,11 +159,18 @@ def _build(
                 plant.GetFrameByName(port, top), plant.GetFrameByName(target_port, target_top)
             )
         else:  # free, held by a bushing between the ports, at rest at X_W_target
+            # on a floating joint relative to the chaser's root (zero = world at rest), as the
+            # paper's twin (scenario_plant): the bushing force then does not depend on the
+            # root's pose, so the global rigid-body motion is exactly the root's own (q, v) and
+            # drops out structurally. Relative to the world, the common motion of the two
+            # bodies stays in the linearization as near-cancelling states (~1e-3 rad/s) that a
+            # minimal realization cannot remove reliably.
             add_floating_joint(
                 plant,
                 plant.GetBodyByName(target.root, target_top),
                 X_W_target,
                 name=f"{target.root}_floating",
+                parent=plant.GetBodyByName(tree.root, top).body_frame(),
             )
             k = [docking.k_shear] * 3, [docking.k_tors] * 3
             d = [docking.d_shear] * 3, [docking.d_tors] * 3

@@ -186,3 +186,88 @@ def test_converted_paper_docked_twin_rests_with_its_ports_together():
     X_D3 = plant.GetFrameByName("D3", target).CalcPoseInWorld(context)
     np.testing.assert_allclose(X_D3.translation(), X_D1.translation(), atol=1e-12)
     np.testing.assert_allclose(X_D3.rotation().matrix(), X_D1.rotation().matrix(), atol=1e-12)
+
+
+@pytest.mark.drake
+def test_converted_paper_docked_configuration_matches_its_twin_with_the_same_minimal_order():
+    """``oos validate`` of the converted paper on a docked configuration (target on the D1-D3
+    spring-damper after the arm released it): TITOP of the docked tree vs the twin's bushing.
+    The twin's target floats relative to the chaser's root (as in the paper's twin), so the
+    global rigid-body motion drops out structurally and both minimal realizations have the
+    same order (with the target floating relative to the world Drake kept 72 states vs 60,
+    near-cancelling poles of the common motion at ~1e-3 rad/s)."""
+    pytest.importorskip("pydrake")
+    from oos_drake.multibody.tree_plant import build_docked_diagram, check_tree
+    from oos_drake.scenario.tree import docked_tree
+    from oos_drake.scenario.tree_mission import build_timeline
+
+    tree = parse_tree(tree_document_from_v1("paper")[0])
+    timeline = build_timeline(tree)
+    time = 1050.0  # parked, docked D1~D3, the arm released
+    docking, angles = timeline.docked_at(time), dict(timeline.angles(time))
+    assert docking.connection == ("D1", "D3")
+    handles = build_docked_diagram(tree, docking, angles)
+    result = check_tree(docked_tree(tree, docking), angles, handles=handles)
+    assert result.passed and result.max_relative_error <= 1e-9, result
+    assert result.pole_error <= 1e-9 and result.zero_error <= 1e-9, result
+    # 48 states of the welded assembly (chaser's and target's array modes, as in the captured
+    # configurations) + 12 of the spring-damper's six relative coordinates
+    assert result.n_states == (48 + 12, 48 + 12), result
+
+
+def test_converted_paper_synthesis_and_analysis_inputs_equal_schema_1s():
+    """What ``oos synth`` and ``oos analyze`` read of the converted paper is schema 1's: the
+    mission LFR's realization (its whole matrix ``M`` and its block table, entry by entry, not
+    only its frequency response), the synthesis model array at ``oos run --quick``'s 40
+    configurations (A, B, C, D at the nominal and at random values of the real parameters; same
+    parameters, bounds and nominal values), the analysis model array there, the requirements,
+    the baseline's tuning time and the analysis options apart from the docking studies (schema
+    1's phases 7 and 8; none on a tree yet). The scheduled values at the 330 configurations of
+    the full analysis: the test above."""
+    import dataclasses
+    from pathlib import Path
+
+    from oos_drake.analysis.models import mission_plants
+    from oos_drake.app.analyze import pipeline_analysis_options
+    from oos_drake.control.plants import scenario_plants
+    from oos_drake.scenario.tree_scenario import tree_scenario
+
+    paper = load_scenario("paper")
+    converted = tree_scenario(tree_document_from_v1(paper)[0], Path("paper_tree.toml"))
+
+    def assert_close(a, b, what):
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.shape == b.shape, what
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * np.abs(b).max(), err_msg=what)
+
+    expected, model = build_mission_model(paper), converted.mission_model()
+    assert model.blocks.equals(expected.blocks)
+    # the same channels in the same order (named after the controlled body RH1, schema 1 after
+    # its centre of mass G1: the names are labels, the synthesis takes channels by position)
+    assert model.nstates == expected.nstates
+    assert [n.replace("RH1", "G1") for n in model.input_names + model.output_names] == list(
+        expected.input_names + expected.output_names
+    )
+    assert_close(model.M, expected.M, "mission LFR M")
+    rng = np.random.default_rng(2)
+    for configurations in (40,):
+        a, b = scenario_plants(configurations, converted), scenario_plants(configurations, paper)
+        assert a.parameters == b.parameters and a.configurations.equals(b.configurations)
+        lower, upper = b.bounds
+        index = np.arange(configurations)
+        nominal = np.broadcast_to(b.nominal_values, (configurations, lower.size))
+        for values in (nominal, rng.uniform(lower, upper, (configurations, lower.size))):
+            x, y = a.evaluate(index, values), b.evaluate(index, values)
+            for name in "ABCD":
+                assert_close(getattr(x, name), getattr(y, name), f"{configurations}: {name}")
+    times = np.linspace(paper.mission.t_start, paper.mission.t_end, 40)
+    x, y = mission_plants(times, converted), mission_plants(times, paper)
+    assert x.blocks.equals(y.blocks)
+    assert_close(x.M, y.M, "analysis model array M")
+    assert converted.control == paper.control
+    assert converted.mission.first_docking_time == paper.mission.first_docking_time
+    options = [
+        pipeline_analysis_options(s, quick=True, workers=1, scheduler=None, grid_only=False)
+        for s in (converted, paper)
+    ]
+    assert options[0] == dataclasses.replace(options[1], docking_phases=())

@@ -313,3 +313,28 @@ def test_docking_model_against_the_drake_twin_on_its_bushing(solved):
     titop = usubs(scenario.docking_model("berthed"), scenario.docking_values("berthed", [time]))
     result = compare_systems("berthed", drake, titop.nominal.model(0).to_ss(), VALIDATION_OMEGA)
     assert result.passed and result.max_relative_error <= 1e-6, result
+
+
+@pytest.mark.drake
+def test_joint_space_copy_is_reused_for_the_same_file_and_solved_again_for_another(
+    solved, tmp_path, monkeypatch
+):
+    """``oos run`` resuming does not solve the inverse kinematics again: the joint-space copy
+    written from the same file by the same code is returned as it is; a changed file (same
+    name) is solved again."""
+    import oos_drake.multibody.tree_ik as tree_ik
+    from oos_drake.app.tree import joint_space_scenario
+    from oos_drake.scenario.tree import tree_path
+
+    def no_solving(*args, **kwargs):
+        raise AssertionError("inverse kinematics solved again")
+
+    written = solved.read_text()
+    monkeypatch.setattr(tree_ik, "mission_timeline", no_solving)
+    assert joint_space_scenario("servicer_7dof", solved.parent) == solved
+    assert solved.read_text() == written
+    changed = tmp_path / solved.name
+    text = tree_path("servicer_7dof").read_text()
+    changed.write_text(text + "\n# edited\n")  # other bytes, same content
+    with pytest.raises(AssertionError, match="solved again"):
+        joint_space_scenario(changed, solved.parent)
