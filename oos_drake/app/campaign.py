@@ -63,13 +63,45 @@ def _parse_options(pairs: list[str] | None) -> dict:
     return options
 
 
+#: Simulators whose ``controller`` option is the flown controller (default: the baseline PD).
+_FLY_A_CONTROLLER = (
+    "oos_drake.campaign.drake_simulator:make_simulator",
+    "oos_drake.campaign.tree_simulator:make_simulator",
+)
+
+
+def _simulator_options(args: argparse.Namespace, spec) -> dict:
+    """The simulator options of ``--simulator-option`` and ``--controller``; says on stderr when
+    a simulator that flies a controller gets none (it then flies the scenario's baseline PD,
+    not the loop the analysis certified)."""
+    options = _parse_options(args.simulator_option)
+    if args.controller is not None:
+        if "controller" in options:
+            raise ValueError("--controller and --simulator-option controller=...: give one")
+        path = Path(args.controller)
+        if not path.is_file():
+            raise ValueError(f"--controller {args.controller}: no such file")
+        options["controller"] = str(path.resolve())
+    recipe = spec.simulator
+    if recipe.factory in _FLY_A_CONTROLLER and "controller" not in {
+        **recipe.option_dict,
+        **options,
+    }:
+        print(
+            "note: no --controller: the mission flies the scenario's baseline PD, not a "
+            "synthesized controller",
+            file=sys.stderr,
+        )
+    return options
+
+
 def _run(args: argparse.Namespace) -> int:
     from oos_drake.campaign.runner import run_campaign
     from oos_drake.campaign.spec import load_spec
 
-    out = args.out
-    if out is None:
-        out = Path("out") / "campaigns" / load_spec(args.spec).name
+    spec = load_spec(args.spec)
+    out = args.out if args.out is not None else Path("out") / "campaigns" / spec.name
+    simulator_options = _simulator_options(args, spec)
     summary = run_campaign(
         args.spec,
         out,
@@ -77,7 +109,7 @@ def _run(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         progress=not args.quiet,
         worst_cases=args.worst_cases,
-        simulator_options=_parse_options(args.simulator_option),
+        simulator_options=simulator_options,
     )
     _print_summary(summary)
     return 0
@@ -146,9 +178,9 @@ def _falsify(args: argparse.Namespace) -> int:
     from oos_drake.campaign.falsify import falsify
     from oos_drake.campaign.spec import load_spec
 
-    out = args.out
-    if out is None:
-        out = Path("out") / "falsify" / load_spec(args.spec, worst_cases=args.worst_cases).name
+    spec = load_spec(args.spec, worst_cases=args.worst_cases)
+    out = args.out if args.out is not None else Path("out") / "falsify" / spec.name
+    simulator_options = _simulator_options(args, spec)
     result = falsify(
         args.spec,
         out,
@@ -157,7 +189,7 @@ def _falsify(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         worst_cases=args.worst_cases,
         progress=not args.quiet,
-        simulator_options=_parse_options(args.simulator_option),
+        simulator_options=simulator_options,
         confirm=args.confirm,
         window=_parse_window(args.window),
     )
@@ -211,6 +243,13 @@ def register(subparsers) -> None:
         default=None,
         metavar="PARQUET",
         help="mu-guided: use this worst_cases.parquet (e.g. from oos analyze), not the spec's",
+    )
+    run.add_argument(
+        "--controller",
+        default=None,
+        metavar="JSON",
+        help="controller.json flown by the simulator (its 'controller' option; default: the "
+        "scenario's baseline PD)",
     )
     run.add_argument(
         "--simulator-option",
@@ -277,6 +316,13 @@ def register(subparsers) -> None:
         metavar="START,END",
         help="simulated window of every run [s] instead of the spec's (a sinusoidal input needs "
         "time to reach its steady state)",
+    )
+    falsify.add_argument(
+        "--controller",
+        default=None,
+        metavar="JSON",
+        help="controller.json flown by the simulator (its 'controller' option; default: the "
+        "scenario's baseline PD)",
     )
     falsify.add_argument(
         "--simulator-option",
