@@ -26,7 +26,9 @@ Algorithm (Apkarian-Noll nonsmooth descent, the package's optimizer):
    finite differences anywhere. Every goal's generalized plant has the same ``A, B2, C2``
    (plants, fixed blocks, controller states; the goals differ in their exogenous channels),
    so the closed-loop eigendecomposition is computed once per evaluation and shared by the
-   goals' peak searches and the stability test (``SystuneOptions.shared_modes``).
+   goals' peak searches and the stability test (``SystuneOptions.shared_modes``; a discrete
+   loop's bilinear image ``(A + I)^-1 (A - I)`` keeps the eigenvectors, its eigenvalues are
+   ``(lambda - 1)/(lambda + 1)``: no inverse, no second decomposition).
 3. **Phases** from each start (the given values and ``restarts`` seeded log-normal
    perturbations): (0) if a closed loop is unstable, minimize the spectral abscissa (of
    ``s = ln(z)/T_s`` for discrete loops) below ``-stability_floor``; (1) if a hard goal
@@ -106,9 +108,10 @@ class SystuneOptions:
         ``SynthesisOptions.qp``).
     shared_modes : bool
         Decompose the closed-loop ``A`` once per evaluation for every goal and the stability
-        test (continuous loops: the goals' generalized plants share it). ``False``: each goal
-        decomposes its own (the earlier sessions' path, the baseline of
-        ``benchmarks/bench_systune.py``; same values).
+        test (the goals' generalized plants share it; a discrete loop's bilinear images
+        keep its eigenvectors). ``False``: each goal decomposes its own (the earlier
+        sessions' path, the baseline of ``benchmarks/bench_systune.py``; same values up to
+        round-off).
     workers : int
         Threads of that eigendecomposition (LAPACK without the GIL; 2 on the 2-core target).
     """
@@ -324,11 +327,10 @@ class _ClosedModes:
         self._key, self._value = None, None
 
     def shares(self, loop: _Loop) -> bool:
-        """Whether ``loop`` has this ``A, B2, C2`` (continuous loops only)."""
+        """Whether ``loop`` has this ``A, B2, C2`` and sampling time."""
         mine = self.loop
         return (
-            loop.sampling_time == 0
-            and mine.sampling_time == 0
+            loop.sampling_time == mine.sampling_time
             and all(
                 np.array_equal(a, b)
                 for a, b in ((loop.A, mine.A), (loop.B2, mine.B2), (loop.C2, mine.C2))
@@ -357,8 +359,18 @@ class _HinfTerm:
         self.points = None if loop.sampling_time == 0 else loop.points
         self.modes = modes if modes is not None and modes.shares(loop) else None
 
-    def pieces(self, K, eps):
+    def _eigen(self, K):
+        """The shared decomposition for :meth:`_Loop.close`'s ``A``: a discrete loop's
+        bilinear image ``(A + I)^-1 (A - I)`` has the eigenvectors of ``A`` and the
+        eigenvalues ``(lambda - 1) / (lambda + 1)``."""
         eigen = None if self.modes is None else self.modes(K)
+        if eigen is None or self.loop.sampling_time == 0:
+            return eigen
+        lam, V, W = eigen
+        return (lam - 1.0) / (lam + 1.0), V, W
+
+    def pieces(self, K, eps):
+        eigen = self._eigen(K)
         a = active_set(self.loop, K, eps=eps, points=self.points, eigen=eigen)
         if not np.isfinite(a.gamma):
             return None
@@ -372,7 +384,7 @@ class _HinfTerm:
     def exact(self, K):
         """``(scale * norm per model, peak frequency per model [rad/s])``, certified."""
         M = self.loop.close(K)
-        eigen = None if self.modes is None else self.modes(K)
+        eigen = self._eigen(K)
         modal = None if eigen is None else ModalResponse(M.A, M.B, M.C, M.D, eigen=eigen)
         peaks = peak_gain(M.A, M.B, M.C, M.D, certify=True, modal=modal)
         return self.scale * peaks.gamma, self.loop.physical_frequency(peaks.omega)
@@ -704,8 +716,7 @@ class _Problem:
         self.states = [tuple(f"{t.name}.x[{i}]" for i in range(t.nstates)) for t in self.tunables]
         self.loop = self.loops((), ())
         self.stability = _PoleTerm(self.loop, None, min_decay)
-        continuous = self.sampling_time == 0
-        self.modes = _ClosedModes(self.loop, workers) if continuous and shared_modes else None
+        self.modes = _ClosedModes(self.loop, workers) if shared_modes else None
 
     def stable(self, K) -> np.ndarray:
         """Per model: the closed loop at ``K`` is stable (see :meth:`_PoleTerm.stable`)."""
