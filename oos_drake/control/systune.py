@@ -254,17 +254,19 @@ class _Loop:
             self.D11 + D12K @ self.D21,
         )
 
-    def close(self, K) -> _ClosedLoop:
+    def close(self, K, image=None) -> _ClosedLoop:
         """The closed loop as a continuous model with the same H-infinity norm (for a discrete
-        loop its bilinear image ``z = (1 + s)/(1 - s)``, frequency ``w_c = tan(w T_s / 2)``)."""
+        loop its bilinear image ``z = (1 + s)/(1 - s)``, frequency ``w_c = tan(w T_s / 2)``).
+
+        ``image``: ``(F, F (A_cl - I))`` with ``F = (A_cl + I)^-1`` when already computed
+        (loops sharing ``A, B2, C2``: :meth:`_ClosedModes.image`)."""
         M = self.closed(K)
         if self.sampling_time == 0:
             return M
-        eye = np.eye(M.A.shape[-1])
-        F = np.linalg.inv(M.A + eye)
-        return _ClosedLoop(
-            F @ (M.A - eye), np.sqrt(2) * F @ M.B, np.sqrt(2) * M.C @ F, M.D - M.C @ F @ M.B
-        )
+        if image is None:
+            image = _bilinear(M.A)
+        F, A = image
+        return _ClosedLoop(A, np.sqrt(2) * F @ M.B, np.sqrt(2) * M.C @ F, M.D - M.C @ F @ M.B)
 
     def points(self, omega):
         """Evaluation points of :meth:`close`'s frequencies in the loop's own domain."""
@@ -302,6 +304,14 @@ class _Loop:
         )
 
 
+def _bilinear(A_cl):
+    """``(F, F (A_cl - I))``, ``F = (A_cl + I)^-1``: the pieces of a discrete loop's bilinear
+    image (:meth:`_Loop.close`)."""
+    eye = np.eye(A_cl.shape[-1])
+    F = np.linalg.inv(A_cl + eye)
+    return F, F @ (A_cl - eye)
+
+
 def _poles_s(A_cl, sampling_time):
     """Closed-loop eigenvalues and eigenvectors (right ``V``, left rows ``W = V^-1``) and the
     equivalent continuous poles ``s`` (``ln(z)/T_s`` for a discrete loop)."""
@@ -324,7 +334,7 @@ class _ClosedModes:
 
     def __init__(self, loop: _Loop, workers: int = 1):
         self.loop, self.workers = loop, workers
-        self._key, self._value = None, None
+        self._key, self._value, self._image = None, None, None
 
     def shares(self, loop: _Loop) -> bool:
         """Whether ``loop`` has this ``A, B2, C2`` and sampling time."""
@@ -346,8 +356,16 @@ class _ClosedModes:
                 value = eigendecompose(A_cl, self.workers)
             except np.linalg.LinAlgError:  # defective: each term decomposes its own
                 value = None
-            self._key, self._value = key, value
+            self._key, self._value, self._image = key, value, None
         return self._value
+
+    def image(self, K):
+        """:func:`_bilinear` of the closed-loop ``A`` at ``K`` (a discrete loop; computed once
+        per ``K`` for every goal)."""
+        self(K)
+        if self._image is None:
+            self._image = _bilinear(self.loop.closed(K).A)
+        return self._image
 
 
 class _HinfTerm:
@@ -369,9 +387,17 @@ class _HinfTerm:
         lam, V, W = eigen
         return (lam - 1.0) / (lam + 1.0), V, W
 
+    def _close(self, K) -> _ClosedLoop:
+        """:meth:`_Loop.close`, the bilinear image's inverse shared by the goals."""
+        if self.modes is None or self.loop.sampling_time == 0:
+            return self.loop.close(K)
+        return self.loop.close(K, self.modes.image(K))
+
     def pieces(self, K, eps):
         eigen = self._eigen(K)
-        a = active_set(self.loop, K, eps=eps, points=self.points, eigen=eigen)
+        a = active_set(
+            self.loop, K, eps=eps, points=self.points, eigen=eigen, closed=self._close(K)
+        )
         if not np.isfinite(a.gamma):
             return None
         which = a.which if a.which is not None else np.zeros(a.values.size, int)
@@ -383,7 +409,7 @@ class _HinfTerm:
 
     def exact(self, K):
         """``(scale * norm per model, peak frequency per model [rad/s])``, certified."""
-        M = self.loop.close(K)
+        M = self._close(K)
         eigen = self._eigen(K)
         modal = None if eigen is None else ModalResponse(M.A, M.B, M.C, M.D, eigen=eigen)
         peaks = peak_gain(M.A, M.B, M.C, M.D, certify=True, modal=modal)
