@@ -339,12 +339,9 @@ class _ClosedModes:
     def shares(self, loop: _Loop) -> bool:
         """Whether ``loop`` has this ``A, B2, C2`` and sampling time."""
         mine = self.loop
-        return (
-            loop.sampling_time == mine.sampling_time
-            and all(
-                np.array_equal(a, b)
-                for a, b in ((loop.A, mine.A), (loop.B2, mine.B2), (loop.C2, mine.C2))
-            )
+        return loop.sampling_time == mine.sampling_time and all(
+            np.array_equal(a, b)
+            for a, b in ((loop.A, mine.A), (loop.B2, mine.B2), (loop.C2, mine.C2))
         )
 
     def __call__(self, K):
