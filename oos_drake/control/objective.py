@@ -87,13 +87,19 @@ def peak_gradients(
         the closed loop.
     """
     index = np.atleast_1d(np.asarray(index, dtype=int))
+    which = np.zeros(index.size, dtype=int) if which is None else np.asarray(which, dtype=int)
+    return _gradients(*_sensitivities(interconnection, K, index, omega, points), which)
+
+
+def _sensitivities(interconnection, K, index, omega, points=None):
+    """``(T, G12, G21)`` at (model ``index``, frequency ``omega``): the closed loop and the
+    pieces of its differential ``dT = G12 dK G21`` (see :func:`peak_gradients`)."""
+    index = np.atleast_1d(np.asarray(index, dtype=int))
     omega = np.atleast_1d(np.asarray(omega, dtype=float))
     K = np.asarray(K, dtype=float)
-    which = np.zeros(index.size, dtype=int) if which is None else np.asarray(which, dtype=int)
     loop = interconnection.loop
     if loop is not None and points is None:
-        T, G12, G21 = loop.gain_sensitivity(K, omega, index)
-        return _gradients(T, G12, G21, which)
+        return loop.gain_sensitivity(K, omega, index)
     A, B1, B2, C1, C2, D11, D12, D21 = (M[index] for M in interconnection.partitions())
     A_cl = A + B2 @ K @ C2
     B_cl = B1 + B2 @ K @ D21
@@ -107,12 +113,13 @@ def peak_gradients(
     T = C_cl @ X[..., :nd] + D_cl
     G12 = C_cl @ X[..., nd:] + D12
     G21 = C2 @ X[..., :nd] + D21
-    return _gradients(T, G12, G21, which)
+    return T, G12, G21
 
 
-def _gradients(T, G12, G21, which):
-    """Singular value ``which`` of ``T`` and its gradient ``Re(G21 v u^H G12)^T``."""
-    U, S, Vh = np.linalg.svd(T)
+def _gradients(T, G12, G21, which, svd=None):
+    """Singular value ``which`` of ``T`` and its gradient ``Re(G21 v u^H G12)^T``
+    (``svd``: ``numpy.linalg.svd(T)`` when already computed)."""
+    U, S, Vh = np.linalg.svd(T) if svd is None else svd
     rows = np.arange(T.shape[0])
     u, v = U[rows, :, which], np.conj(Vh[rows, which, :])
     M = (G21 @ v[..., None]) @ (np.conj(u)[..., None, :] @ G12)
@@ -155,15 +162,17 @@ def active_set(
     workers: int = 1,
     points=None,
     eigen=None,
+    closed=None,
 ) -> ActiveSet:
     """Evaluate ``gamma(K)`` and collect every local peak within ``eps`` (relative) of it.
 
     ``workers``: threads of the eigendecompositions (see :func:`peak_gain`); ``points``: see
     :func:`peak_gradients` (the peaks are searched on ``interconnection.close(K)``);
     ``eigen``: ``(lambda, V, V^-1)`` of the closed loop's ``A`` when already computed (see
-    :class:`~oos_drake.robust.peak_gain.ModalResponse`).
+    :class:`~oos_drake.robust.peak_gain.ModalResponse`); ``closed``: ``interconnection.close(K)``
+    when already formed.
     """
-    M = interconnection.close(K)
+    M = interconnection.close(K) if closed is None else closed
     peaks = peak_gain(
         M.A,
         M.B,
@@ -198,17 +207,19 @@ def active_set(
     models, omegas = models[keep], omegas[keep]
     # second singular values close to the first: a multiple sigma_max is nonsmooth even at a
     # fixed frequency, its subdifferential is spanned by the pieces of each singular pair
+    # (one closed-loop solve per peak: the second singular values and every gradient come
+    # from the same T, G12, G21 and the same SVD)
+    T, G12, G21 = _sensitivities(interconnection, K, models, omegas, points)
+    svd = np.linalg.svd(T)
     if min(M.B.shape[-1], M.C.shape[-2]) > 1:
-        second, _ = peak_gradients(
-            interconnection, K, models, omegas, np.ones(models.size, int), points=points
-        )
-        multiple = second >= (1.0 - eps) * gamma
+        multiple = svd[1][:, 1] >= (1.0 - eps) * gamma
     else:  # one singular value only
         multiple = np.zeros(models.size, dtype=bool)
-    models = np.concatenate([models, models[multiple]])
-    omegas = np.concatenate([omegas, omegas[multiple]])
+    rows = np.concatenate([np.arange(models.size), np.flatnonzero(multiple)])
+    models, omegas = models[rows], omegas[rows]
     which = np.concatenate([np.zeros(keep.sum(), int), np.ones(int(multiple.sum()), int)])
-    values, grads = peak_gradients(interconnection, K, models, omegas, which, points=points)
+    svd = tuple(part[rows] for part in svd)
+    values, grads = _gradients(T[rows], G12[rows], G21[rows], which, svd)
     values[0] = gamma
     # configurations often share a peak (e.g. the DC disturbance rejection does not depend on
     # the inertia): keep one copy of each (value, gradient) so the cap keeps distinct pieces

@@ -26,7 +26,9 @@ Algorithm (Apkarian-Noll nonsmooth descent, the package's optimizer):
    finite differences anywhere. Every goal's generalized plant has the same ``A, B2, C2``
    (plants, fixed blocks, controller states; the goals differ in their exogenous channels),
    so the closed-loop eigendecomposition is computed once per evaluation and shared by the
-   goals' peak searches and the stability test (``SystuneOptions.shared_modes``).
+   goals' peak searches and the stability test (``SystuneOptions.shared_modes``; a discrete
+   loop's bilinear image ``(A + I)^-1 (A - I)`` keeps the eigenvectors, its eigenvalues are
+   ``(lambda - 1)/(lambda + 1)``: no inverse, no second decomposition).
 3. **Phases** from each start (the given values and ``restarts`` seeded log-normal
    perturbations): (0) if a closed loop is unstable, minimize the spectral abscissa (of
    ``s = ln(z)/T_s`` for discrete loops) below ``-stability_floor``; (1) if a hard goal
@@ -106,9 +108,10 @@ class SystuneOptions:
         ``SynthesisOptions.qp``).
     shared_modes : bool
         Decompose the closed-loop ``A`` once per evaluation for every goal and the stability
-        test (continuous loops: the goals' generalized plants share it). ``False``: each goal
-        decomposes its own (the earlier sessions' path, the baseline of
-        ``benchmarks/bench_systune.py``; same values).
+        test (the goals' generalized plants share it; a discrete loop's bilinear images
+        keep its eigenvectors). ``False``: each goal decomposes its own (the earlier
+        sessions' path, the baseline of ``benchmarks/bench_systune.py``; same values up to
+        round-off).
     workers : int
         Threads of that eigendecomposition (LAPACK without the GIL; 2 on the 2-core target).
     """
@@ -251,17 +254,19 @@ class _Loop:
             self.D11 + D12K @ self.D21,
         )
 
-    def close(self, K) -> _ClosedLoop:
+    def close(self, K, image=None) -> _ClosedLoop:
         """The closed loop as a continuous model with the same H-infinity norm (for a discrete
-        loop its bilinear image ``z = (1 + s)/(1 - s)``, frequency ``w_c = tan(w T_s / 2)``)."""
+        loop its bilinear image ``z = (1 + s)/(1 - s)``, frequency ``w_c = tan(w T_s / 2)``).
+
+        ``image``: ``(F, F (A_cl - I))`` with ``F = (A_cl + I)^-1`` when already computed
+        (loops sharing ``A, B2, C2``: :meth:`_ClosedModes.image`)."""
         M = self.closed(K)
         if self.sampling_time == 0:
             return M
-        eye = np.eye(M.A.shape[-1])
-        F = np.linalg.inv(M.A + eye)
-        return _ClosedLoop(
-            F @ (M.A - eye), np.sqrt(2) * F @ M.B, np.sqrt(2) * M.C @ F, M.D - M.C @ F @ M.B
-        )
+        if image is None:
+            image = _bilinear(M.A)
+        F, A = image
+        return _ClosedLoop(A, np.sqrt(2) * F @ M.B, np.sqrt(2) * M.C @ F, M.D - M.C @ F @ M.B)
 
     def points(self, omega):
         """Evaluation points of :meth:`close`'s frequencies in the loop's own domain."""
@@ -299,6 +304,14 @@ class _Loop:
         )
 
 
+def _bilinear(A_cl):
+    """``(F, F (A_cl - I))``, ``F = (A_cl + I)^-1``: the pieces of a discrete loop's bilinear
+    image (:meth:`_Loop.close`)."""
+    eye = np.eye(A_cl.shape[-1])
+    F = np.linalg.inv(A_cl + eye)
+    return F, F @ (A_cl - eye)
+
+
 def _poles_s(A_cl, sampling_time):
     """Closed-loop eigenvalues and eigenvectors (right ``V``, left rows ``W = V^-1``) and the
     equivalent continuous poles ``s`` (``ln(z)/T_s`` for a discrete loop)."""
@@ -321,18 +334,14 @@ class _ClosedModes:
 
     def __init__(self, loop: _Loop, workers: int = 1):
         self.loop, self.workers = loop, workers
-        self._key, self._value = None, None
+        self._key, self._value, self._image = None, None, None
 
     def shares(self, loop: _Loop) -> bool:
-        """Whether ``loop`` has this ``A, B2, C2`` (continuous loops only)."""
+        """Whether ``loop`` has this ``A, B2, C2`` and sampling time."""
         mine = self.loop
-        return (
-            loop.sampling_time == 0
-            and mine.sampling_time == 0
-            and all(
-                np.array_equal(a, b)
-                for a, b in ((loop.A, mine.A), (loop.B2, mine.B2), (loop.C2, mine.C2))
-            )
+        return loop.sampling_time == mine.sampling_time and all(
+            np.array_equal(a, b)
+            for a, b in ((loop.A, mine.A), (loop.B2, mine.B2), (loop.C2, mine.C2))
         )
 
     def __call__(self, K):
@@ -344,8 +353,16 @@ class _ClosedModes:
                 value = eigendecompose(A_cl, self.workers)
             except np.linalg.LinAlgError:  # defective: each term decomposes its own
                 value = None
-            self._key, self._value = key, value
+            self._key, self._value, self._image = key, value, None
         return self._value
+
+    def image(self, K):
+        """:func:`_bilinear` of the closed-loop ``A`` at ``K`` (a discrete loop; computed once
+        per ``K`` for every goal)."""
+        self(K)
+        if self._image is None:
+            self._image = _bilinear(self.loop.closed(K).A)
+        return self._image
 
 
 class _HinfTerm:
@@ -357,9 +374,27 @@ class _HinfTerm:
         self.points = None if loop.sampling_time == 0 else loop.points
         self.modes = modes if modes is not None and modes.shares(loop) else None
 
-    def pieces(self, K, eps):
+    def _eigen(self, K):
+        """The shared decomposition for :meth:`_Loop.close`'s ``A``: a discrete loop's
+        bilinear image ``(A + I)^-1 (A - I)`` has the eigenvectors of ``A`` and the
+        eigenvalues ``(lambda - 1) / (lambda + 1)``."""
         eigen = None if self.modes is None else self.modes(K)
-        a = active_set(self.loop, K, eps=eps, points=self.points, eigen=eigen)
+        if eigen is None or self.loop.sampling_time == 0:
+            return eigen
+        lam, V, W = eigen
+        return (lam - 1.0) / (lam + 1.0), V, W
+
+    def _close(self, K) -> _ClosedLoop:
+        """:meth:`_Loop.close`, the bilinear image's inverse shared by the goals."""
+        if self.modes is None or self.loop.sampling_time == 0:
+            return self.loop.close(K)
+        return self.loop.close(K, self.modes.image(K))
+
+    def pieces(self, K, eps):
+        eigen = self._eigen(K)
+        a = active_set(
+            self.loop, K, eps=eps, points=self.points, eigen=eigen, closed=self._close(K)
+        )
         if not np.isfinite(a.gamma):
             return None
         which = a.which if a.which is not None else np.zeros(a.values.size, int)
@@ -371,8 +406,8 @@ class _HinfTerm:
 
     def exact(self, K):
         """``(scale * norm per model, peak frequency per model [rad/s])``, certified."""
-        M = self.loop.close(K)
-        eigen = None if self.modes is None else self.modes(K)
+        M = self._close(K)
+        eigen = self._eigen(K)
         modal = None if eigen is None else ModalResponse(M.A, M.B, M.C, M.D, eigen=eigen)
         peaks = peak_gain(M.A, M.B, M.C, M.D, certify=True, modal=modal)
         return self.scale * peaks.gamma, self.loop.physical_frequency(peaks.omega)
@@ -704,8 +739,7 @@ class _Problem:
         self.states = [tuple(f"{t.name}.x[{i}]" for i in range(t.nstates)) for t in self.tunables]
         self.loop = self.loops((), ())
         self.stability = _PoleTerm(self.loop, None, min_decay)
-        continuous = self.sampling_time == 0
-        self.modes = _ClosedModes(self.loop, workers) if continuous and shared_modes else None
+        self.modes = _ClosedModes(self.loop, workers) if shared_modes else None
 
     def stable(self, K) -> np.ndarray:
         """Per model: the closed loop at ``K`` is stable (see :meth:`_PoleTerm.stable`)."""

@@ -471,3 +471,27 @@ def test_pid_started_with_a_tiny_integral_gain_still_reaches_the_grid_optimum(gr
     assert result.status == "ok"
     assert result.soft <= np.min(hinf) * (1 + 1e-6)
     assert result.soft <= _exact_hinf(params[np.argmin(hinf)]) * (1 + 1e-6)
+
+
+def test_discrete_goals_share_one_decomposition():
+    # a discrete loop's bilinear image keeps its eigenvectors: the goals' peaks from the one
+    # shared decomposition equal those of each goal decomposing its own image, and ab13dd's
+    from oos_drake.control.systune import _Problem
+
+    controller = pid(sampling_time=0.2, rolloff_order=1, rolloff_frequency=3.0)
+    goals = [WeightedGain("d", "y"), Margins("u", 6.0, 30.0, kind="hard")]
+    shared, own = (_Problem(PLANTS, controller, shared_modes=flag) for flag in (True, False))
+    x = shared.structure.initial()
+    K = shared.structure.K(x)
+    assert shared.modes is not None and own.modes is None
+    for g, goal in enumerate(goals):
+        (a, _, _), (b, _, _) = shared.terms(goal, g)[0], own.terms(goal, g)[0]
+        assert a.modes is not None
+        np.testing.assert_allclose(a.exact(K)[0], b.exact(K)[0], rtol=1e-9)
+        pa, pb = a.pieces(K, 0.1), b.pieces(K, 0.1)
+        np.testing.assert_allclose(pa[0][0], pb[0][0], rtol=1e-9)  # the maximum
+    plant_controller = controller.statespace(x)
+    for i, P in enumerate(PLANTS):
+        T = closed_loop(control.c2d(P, 0.2, "zoh"), plant_controller, "d", "y")
+        weighted = shared.terms(goals[0], 0)[0][0]
+        assert weighted.exact(K)[0][i] == pytest.approx(ab13dd_norm(T), rel=1e-6)
