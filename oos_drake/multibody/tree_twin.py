@@ -14,14 +14,25 @@ are the attitude error), and closes it with the
 controller, roll-off, wheels, torque bound, at its flight-software rate), whose held torque is
 the generalized force of the floating joint's rotation. The revolute joints are **frozen** at
 the given angles (Drake joint locking, in the run's context): the configuration of one instant
-of the mission, as the analysis' frozen models see it. C++ loggers record the plant state and
-the flight software's torques.
+of the mission, as the analysis' frozen models see it; or **motion-driven** along the mission's
+timeline (``timeline=``: a stiff joint PD on a Drake trajectory equal to the timeline's
+interpolation, the campaign's twin). C++ loggers record the plant state and the flight
+software's torques.
+
+A mission that captures or docks a target: the twin of an instant welds the target where the
+mission model (:func:`~oos_drake.scenario.tree_model.build_mission_tree_model`) welds it
+(``mating=``, :func:`mating_at`: the target's own SDF parsed as a second model and welded port
+to port by Drake's ``WeldFrames``, through a captured phase and a docked one alike; a free
+target is in neither). :func:`open_loop_twin` is the same plant with the wrench input and hub
+output of the validation, for checks against the TITOP LFR
+(``tests/tree/test_tree_mated_twin.py``).
 
 :func:`run_tree_twin` integrates one run from a small attitude error (or driven by a noise
-table) and reports whether the attitude left the model's domain.
-
-Unlike the paper's mission twin (:mod:`oos_drake.multibody.mission`), nothing moves along the
-timeline here: the twin of a tree follows no joint trajectory yet.
+table, or from the :class:`TwinState` a previous run ended in) and reports whether the attitude
+left the model's domain. :func:`run_mission_twin` runs a window that crosses a capture, a
+docking or a release in segments (:func:`mating_segments`), each on the twin of its phase, the
+chaser's state and the flight software's carried over: the mission model's instantaneous switch
+(the target welded at rest relative to its port, no contact impulse).
 """
 
 from __future__ import annotations
@@ -51,8 +62,13 @@ from oos_drake.scenario.tree import SpacecraftTree
 __all__ = [
     "TreeTwin",
     "TreeRun",
+    "TwinState",
     "build_tree_twin",
     "joint_trajectory",
+    "mating_at",
+    "mating_segments",
+    "open_loop_twin",
+    "run_mission_twin",
     "run_tree_twin",
     "tree_with_values",
 ]
@@ -147,9 +163,8 @@ def mating_segments(timeline, start: float, end: float) -> tuple[tuple[float, fl
         ):
             cuts.append(float(b))
     cuts.append(float(end))
-    return tuple(
-        (t0, t1, mating_at(timeline, 0.5 * (t0 + t1))) for t0, t1 in zip(cuts[:-1], cuts[1:])
-    )
+    pairs = zip(cuts[:-1], cuts[1:], strict=True)
+    return tuple((t0, t1, mating_at(timeline, 0.5 * (t0 + t1))) for t0, t1 in pairs)
 
 
 @dataclass(frozen=True, eq=False)
@@ -308,9 +323,7 @@ def _add_twin_plant(builder, tree: SpacecraftTree, mating):
                 raise ValueError(f"tree twin: no target port {target_port!r} on tree {tree.name}")
             target = owner[0]
             write_tree_sdf(target, Path(folder) / "target")
-            target_top = _parse_tree_sdf(
-                plant, target, Path(folder) / "target", prefix=target.name
-            )
+            target_top = _parse_tree_sdf(plant, target, Path(folder) / "target", prefix=target.name)
             plant.WeldFrames(
                 plant.GetFrameByName(port, top), plant.GetFrameByName(target_port, target_top)
             )
@@ -684,9 +697,7 @@ def run_mission_twin(twin_for, timeline, duration: float, *, start: float = 0.0,
     start = float(start)
     parts, state = [], None
     for t0, t1, mating in mating_segments(timeline, start, start + float(duration)):
-        run = run_tree_twin(
-            twin_for(mating), t1 - t0, start=t0, initial_state=state, **options
-        )
+        run = run_tree_twin(twin_for(mating), t1 - t0, start=t0, initial_state=state, **options)
         parts.append((t0, run))
         state = run.final_state
         if run.diverged:

@@ -111,9 +111,7 @@ def test_twin_linearized_is_the_switched_titop_lfr(servicer, time):
     and inertia written into the welded target's own SDF) against the mission LFR with the same
     blocks and the pipeline's switch values."""
     model = servicer.mission_model()
-    blocks = {
-        n: b for n, b in model.uncertainty.items() if b.quantity not in ("angle", "switch")
-    }
+    blocks = {n: b for n, b in model.uncertainty.items() if b.quantity not in ("angle", "switch")}
     assert set(blocks) == {"w1_SA1", "w1_SA2", "m_TGT", "Jxx_TGT", "Jyy_TGT", "Jzz_TGT"}
     rng = np.random.default_rng(int(time))
     values = {n: float(b.to_physical(rng.uniform(-1.0, 1.0))) for n, b in blocks.items()}
@@ -128,7 +126,9 @@ def test_twin_linearized_is_the_switched_titop_lfr(servicer, time):
     if mating is not None:  # the target's blocks reached the welded twin
         nominal = linearize_tree(open_loop_twin(servicer.tree, mating), handles.tree.joint_angles(
             servicer.timeline.angles(time)))  # fmt: skip
-        assert compare_systems("nominal", nominal, titop, VALIDATION_OMEGA).max_relative_error > 1e-3
+        assert (
+            compare_systems("nominal", nominal, titop, VALIDATION_OMEGA).max_relative_error > 1e-3
+        )
 
 
 def test_confirmation_twin_at_a_capture_is_the_target_hung_on_a_fixed_joint(servicer):
@@ -242,9 +242,7 @@ def test_twin_trajectory_is_the_timeline(tmp_path_factory, interpolation):
             continue  # the linear interpolation's rate jumps there
         up, down = timeline.angles(t + h), timeline.angles(t - h)
         rate = [(up[n] - down[n]) / (2 * h) for n in names]
-        np.testing.assert_allclose(
-            trajectory.EvalDerivative(t, 1)[:, 0], rate, rtol=0, atol=1e-7
-        )
+        np.testing.assert_allclose(trajectory.EvalDerivative(t, 1)[:, 0], rate, rtol=0, atol=1e-7)
 
 
 def test_campaign_run_through_the_capture_tracks_the_timeline(simulator):
