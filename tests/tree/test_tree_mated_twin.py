@@ -291,3 +291,34 @@ def test_a_run_cut_at_an_instant_is_the_run_in_one_piece(simulator):
     assert second.metrics["samples"] == whole.metrics["samples"] == 20.0 / design.period
     joined = run_mission_twin(lambda mating: twin, simulator.timeline, 20.0, start=400.0, **kwargs)
     np.testing.assert_allclose(joined.phi, whole.phi)
+
+
+@pytest.mark.slow
+def test_shipped_servicer_campaign_runs_across_the_capture(tmp_path):
+    """``oos campaign run`` of the shipped spec on the shipped file (tip waypoint solved by
+    the simulator itself), three runs in a window across the capture: every run simulated,
+    the arm on its trajectory."""
+    import pandas as pd
+
+    from oos_drake.app.main import main
+    from oos_drake.campaign.tree_simulator import METRIC_UNITS
+    from oos_drake.resources import package_path
+
+    text = package_path("oos_drake.campaign", "specs", "servicer_7dof.toml").read_text()
+    text = text.replace("n_runs = 48", "n_runs = 3")
+    head, _, tail = text.partition("[sampler]")
+    _, _, tail = tail.partition("[estimation]")
+    head = head.replace(
+        'scenario = "servicer_7dof"', 'scenario = "servicer_7dof"\nsampler = "monte-carlo"'
+    )
+    window = '[window]\nkind = "event"\nevent = "start:grasp_hold"\nbefore = 10.0\nafter = 10.0\n'
+    text = head + "[estimation]" + tail
+    start, end = text.index("[window]"), text.index("[dispersions]")
+    spec = tmp_path / "servicer_short.toml"
+    spec.write_text(text[:start] + window + "\n" + text[end:])
+    out = tmp_path / "campaign"
+    assert main(["campaign", "run", str(spec), "--out", str(out), "--workers", "1"]) == 0
+    runs = pd.read_parquet(out / "runs.parquet")
+    assert len(runs) == 3 and (runs["status"] == "ok").all()
+    tracking = runs[f"max_tracking_error [{METRIC_UNITS['max_tracking_error']}]"]
+    assert (tracking < 1e-6).all()
