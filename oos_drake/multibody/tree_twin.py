@@ -348,8 +348,13 @@ def open_loop_twin(tree: SpacecraftTree, mating: tuple[str, str] | None = None):
     -------
     TreeDiagram
         Handles for :func:`~oos_drake.multibody.tree_plant.linearize_tree` (the chaser's
-        revolute joints; a welded target's drives are locked at their file angles there only
-        when it has none, as in the shipped trees).
+        revolute joints).
+
+    Raises
+    ------
+    ValueError
+        A welded target with revolute joints of its own (not supported here), or an unknown
+        port.
     """
     from oos_drake.multibody.linearization import add_hub_io
     from oos_drake.multibody.tree_plant import TreeDiagram
