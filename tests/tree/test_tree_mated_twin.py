@@ -322,3 +322,23 @@ def test_shipped_servicer_campaign_runs_across_the_capture(tmp_path):
     assert len(runs) == 3 and (runs["status"] == "ok").all()
     tracking = runs[f"max_tracking_error [{METRIC_UNITS['max_tracking_error']}]"]
     assert (tracking < 1e-6).all()
+
+
+def test_every_shipped_tree_has_its_own_campaign_spec():
+    """``oos run --scenario NAME`` takes ``specs/NAME.toml``: written for that very file, its
+    requirements the file's pointing requirement and torque bound."""
+    import tomllib
+
+    from oos_drake.app.pipeline import _check_campaign_scenario, default_campaign
+    from oos_drake.scenario.data import scenario_path
+    from oos_drake.scenario.tree import shipped_trees, tree_path
+
+    for name in shipped_trees():
+        spec = default_campaign(scenario_path(name))
+        assert spec.stem == name
+        _check_campaign_scenario(spec, scenario_path(name))
+        document = tomllib.loads(spec.read_text())
+        with tree_path(name).open("rb") as stream:
+            control = tomllib.load(stream)["control"]
+        assert document["requirements"]["ape"]["max"] == control["pointing_requirement"]
+        assert document["requirements"]["peak_torque"]["max"] == control["torque_limit"]
