@@ -657,12 +657,15 @@ class _TreeTwin:
     """The twin of a schema-2 tree for one peak (:mod:`oos_drake.multibody.tree_twin`): the
     tree's SDF with the real parameters at ``alpha`` along the peak's ray written into its data
     (rebuilt per ``alpha``), its revolute joints frozen at the timeline's angles at the peak's
-    time, closed by the scenario's flight software with the peak's complex blocks realized in
-    it (:func:`~oos_drake.multibody.flight_software.perturbation_block`, scaled with
-    ``alpha``). The same interface as :class:`_MissionTwin` (``run``, ``forced_run``)."""
+    time, the target welded at its port when the phase at that time captures or docks it (as
+    the mission model welds it: :func:`~oos_drake.multibody.tree_twin.mating_at`), closed by
+    the scenario's flight software with the peak's complex blocks realized in it
+    (:func:`~oos_drake.multibody.flight_software.perturbation_block`, scaled with ``alpha``).
+    The same interface as :class:`_MissionTwin` (``run``, ``forced_run``)."""
 
     def __init__(self, peak: Peak, K, options, scenario, near_hz, specs, design):
         from oos_drake.multibody.mission import logging_rate
+        from oos_drake.multibody.tree_twin import mating_at
         from oos_drake.scenario.tree_scenario import NotForTrees
 
         if peak.study != "mission":
@@ -675,6 +678,7 @@ class _TreeTwin:
         self.peak, self.specs, self.options, self.near_hz = peak, specs, options, near_hz
         self.tree, self.design = scenario.tree, design
         self.angles = scenario.timeline.angles(peak.time)
+        self.mating = mating_at(scenario.timeline, peak.time)
         self.direction = {n: v for n, v in peak.perturbation.items() if specs[n].kind == "ureal"}
         self.complex = complex_values(peak)
         self.log_rate = logging_rate(1.0 / design.period, CONFIRM_LOG_RATE_HZ)
@@ -707,6 +711,7 @@ class _TreeTwin:
                 self.angles,
                 log_rate=self.log_rate,
                 perturbation_states=0 if block is None else block.nstates,
+                mating=self.mating,
             )
         return self._twins[alpha]
 
@@ -790,16 +795,18 @@ def _peak_models(peak: Peak, controller, scenario):
 
 def _inertia_bodies(scenario) -> tuple[BodyInertia, ...]:
     """The rigid bodies whose inertia blocks the physical check follows: the target hub RH2
-    of the paper's topology, every rigid body of a tree."""
+    of the paper's topology, every rigid body of a tree (and of its targets)."""
     from oos_drake.scenario.tree_scenario import is_tree
 
     if is_tree(scenario):
+        trees = (scenario.tree, *scenario.tree.targets.values())
         return tuple(
             BodyInertia(
                 (f"Jxx_{b.name}", f"Jyy_{b.name}", f"Jzz_{b.name}"),
                 np.asarray(b.inertia, dtype=float),
             )
-            for b in scenario.tree.bodies
+            for tree in trees
+            for b in tree.bodies
             if b.kind == "rigid"
         )
     hub = scenario.hubs["RH2"]

@@ -179,15 +179,15 @@ def run_pipeline(args: argparse.Namespace) -> int:
     from oos_drake.scenario.data import scenario_path
     from oos_drake.scenario.tree_scenario import unsupported_stages
 
-    scenario = scenario_path(args.scenario)
+    source = scenario = scenario_path(args.scenario)
     campaign_spec = Path(args.campaign or default_campaign(scenario))
     if not campaign_spec.is_file():
         raise ValueError(f"campaign spec {campaign_spec}: file not found")
     # a tree's tip-pose waypoints solved by inverse kinematics: the stages read the joint-space copy
     scenario = joint_space_scenario(scenario, Path(args.out) / "scenario")
     skipped = unsupported_stages(scenario)  # a schema-2 tree: said, never silent
-    if "campaign" not in skipped:
-        _check_campaign_scenario(campaign_spec, scenario)
+    if "campaign" not in skipped:  # (the spec names the file given; its simulator solves tips)
+        _check_campaign_scenario(campaign_spec, source)
     # (a namespace made by a caller before --grid-only existed proves the whole axis)
     grid_only = ["--grid-only"] if getattr(args, "grid_only", False) else []
     keys = stage_keys(scenario, campaign_spec, args.quick, grid_only=bool(grid_only))

@@ -405,6 +405,11 @@ def _plot_regions(spec, regions: pd.DataFrame, path: Path) -> Path | None:
         low = guided[f"wcgain {metric} lower [-]"].to_numpy(float)
         high = guided[f"wcgain {metric} upper [-]"].to_numpy(float)
         nonlinear = guided[f"worst {metric} / requirement (nonlinear) [-]"].to_numpy(float)
+        # an unbounded worst-case gain (mu > 1 in the region) drawn to the axis' end, labelled
+        values = np.r_[low, high, nonlinear, 0.0]
+        right = 1.12 * max(1.0, float(np.max(values[np.isfinite(values)])))
+        unbounded = np.isinf(high)
+        low, high = np.minimum(low, right), np.minimum(high, right)
         ax.barh(y + 0.2, high, height=0.38, color="lightgray", label="worst-case gain: upper")
         ax.barh(y + 0.2, low, height=0.38, color="tab:blue", label="worst-case gain: lower")
         ax.barh(
@@ -416,13 +421,14 @@ def _plot_regions(spec, regions: pd.DataFrame, path: Path) -> Path | None:
         )
         ax.axvline(1.0, color="tab:red", ls="--", lw=1, label="requirement")
         # the values at the bar ends: the bars of one region are read without a ruler
-        for row_y, value in zip(y + 0.2, high, strict=True):
+        for row_y, value, inf in zip(y + 0.2, high, unbounded, strict=True):
             if np.isfinite(value):
-                ax.text(value, row_y, f" {value:.2f}", va="center", fontsize=7, color="dimgray")
+                label = " unbounded" if inf else f" {value:.2f}"
+                ax.text(value, row_y, label, va="center", fontsize=7, color="dimgray")
         for row_y, value in zip(y - 0.2, nonlinear, strict=True):
             if np.isfinite(value):
                 ax.text(value, row_y, f" {value:.2f}", va="center", fontsize=7, color="tab:orange")
-        ax.set_xlim(0.0, 1.12 * max(1.0, np.nanmax(np.r_[high, nonlinear, 0.0])))
+        ax.set_xlim(0.0, right)
         ax.set_xlabel(f"{metric} / requirement [-]")
         ax.set_title(metric, fontsize=10)
         ax.grid(alpha=0.3, axis="x")

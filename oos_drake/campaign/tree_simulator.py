@@ -19,6 +19,13 @@ scalars ``Delta_mul_*``, ``Delta_add`` as for the paper's mission simulator
 rebuilds the twin from the tree with those values written into its data
 (:func:`~oos_drake.multibody.tree_twin.tree_with_values`, a fraction of a second); a run is a
 pure function of its case. Events: the start of each mission phase (``start:<phase>``).
+
+A mission that captures or docks a target: the twin welds it at the mated ports through the
+phases that mate it (a docked phase welded rigid, as the mission model), and a window that
+crosses a capture, docking or release runs in segments, each on the twin of its phase, the
+state carried over (:func:`~oos_drake.multibody.tree_twin.run_mission_twin`). Tip-pose
+waypoints are solved on the twin (:func:`~oos_drake.multibody.tree_ik.mission_timeline`: the
+angles of the joint-space copy ``oos run`` writes, ``oos tree solve``).
 """
 
 from __future__ import annotations
@@ -75,12 +82,14 @@ OPTIONS = {
 }
 
 
-def tree_parameters(tree) -> tuple[Parameter, ...]:
-    """The dispersible parameters of a tree's mission (see the module docstring)."""
-    from oos_drake.scenario.tree_model import tree_blocks
-
+def tree_parameters(scenario) -> tuple[Parameter, ...]:
+    """The dispersible parameters of a tree scenario's mission (see the module docstring): the
+    uncertain blocks of its mission model (a mated target's included), not the scheduled
+    ones (``tau_<body>``, ``delta_<PORT>``: the mission's values)."""
     params = []
-    for name, block in tree_blocks(tree).items():
+    for name, block in sorted(scenario.mission_model().uncertainty.items()):
+        if block.quantity in ("angle", "switch"):  # scheduled along the mission
+            continue
         low, high = (float(v) for v in block.range)
         params.append(
             Parameter(
@@ -181,7 +190,7 @@ class TreeMissionSimulator:
         from oos_drake.multibody.mission import effective_inertia, logging_rate
         from oos_drake.scenario.data import load_scenario
         from oos_drake.scenario.tree_model import rigid_inertia_at_root
-        from oos_drake.scenario.tree_scenario import NotForTrees, is_tree
+        from oos_drake.scenario.tree_scenario import is_tree
 
         check_options("tree-mission", options, set(OPTIONS))
         o = OPTIONS | options
@@ -191,14 +200,11 @@ class TreeMissionSimulator:
                 f"tree-mission: scenario {scenario.name} is not a schema-2 tree "
                 "(its simulator: oos_drake.campaign.drake_simulator:make_simulator)"
             )
-        if scenario.timeline is None or any(
-            p.captured or p.docked for p in scenario.tree.mission.phases
-        ):
-            raise NotForTrees(
-                f"tree-mission: scenario {scenario.name}: capture, docking and tip-pose "
-                "phases are not simulated yet"
-            )
         self.scenario, self.tree, self.timeline = scenario, scenario.tree, scenario.timeline
+        if self.timeline is None:  # tip-pose waypoints: solved on the twin, as `oos run` does
+            from oos_drake.multibody.tree_ik import mission_timeline
+
+            self.timeline = mission_timeline(self.tree)
         control = scenario.control
         rate = float(o["control_rate"] or control.flight_software_rate_hz)
         J_ref = effective_inertia(rigid_inertia_at_root(self.tree))
@@ -218,9 +224,9 @@ class TreeMissionSimulator:
         self.max_step = float(o["max_step"] or self.design.period)
         self.joint_pd = (float(o["joint_bandwidth"]), float(o["joint_damping_ratio"]))
         self.divergence_limit = float(o["divergence_limit"])
-        self._parameters = tree_parameters(self.tree)
+        self._parameters = tree_parameters(scenario)
         self._real = tuple(p.name for p in self._parameters if p.kind == ParameterKind.REAL_BLOCK)
-        self._twin_key, self._twin = None, None
+        self._twin_key, self._twins = None, {}
 
     def parameters(self) -> tuple[Parameter, ...]:
         """Dispersible parameters (uncertain blocks, initial errors, seed, LTI scalars)."""
@@ -249,30 +255,34 @@ class TreeMissionSimulator:
         """Mission length [s]."""
         return float(self.timeline.boundaries[-1])
 
-    def twin(self, values: Mapping[str, float]):
-        """The twin with the real blocks at ``values`` [their units] (rebuilt on a change)."""
+    def twin(self, values: Mapping[str, float], mating: tuple[str, str] | None = None):
+        """The twin with the real blocks at ``values`` [their units] and the target welded at
+        ``mating`` (``(port, target port)`` or None; built once per mating, rebuilt on a
+        change of values)."""
         from oos_drake.multibody.tree_twin import build_tree_twin, tree_with_values
 
         nominal = {p.name: p.nominal for p in self._parameters}
         real = {n: float(values.get(n, nominal[n])) for n in self._real}
         key = tuple(real.values())
         if key != self._twin_key:
+            self._twins, self._twin_key = {}, key
+        if mating not in self._twins:
             changed = {n: v for n, v in real.items() if v != nominal[n]}
-            self._twin = build_tree_twin(
+            self._twins[mating] = build_tree_twin(
                 tree_with_values(self.tree, changed),
                 self.design,
                 log_rate=self.log_rate,
                 timeline=self.timeline,
                 joint_bandwidth=self.joint_pd[0],
                 joint_damping_ratio=self.joint_pd[1],
+                mating=mating,
             )
-            self._twin_key = key
-        return self._twin
+        return self._twins[mating]
 
     def run(self, case: RunCase) -> RunOutput:
         """Simulate the case's window; divergence raises :class:`SimulationDiverged`."""
         from oos_drake.multibody.flight_software import NOISE_CHANNELS
-        from oos_drake.multibody.tree_twin import run_tree_twin
+        from oos_drake.multibody.tree_twin import run_mission_twin
 
         values = {p.name: p.nominal for p in self._parameters} | dict(case.values)
         start, end = float(case.window.start), float(case.window.end)
@@ -286,8 +296,9 @@ class TreeMissionSimulator:
         delta_mul = np.array([[values[f"Delta_mul_{r}{c}"] for c in AXES] for r in AXES])
         delta_add = float(values["Delta_add"])
         frequency = float(case.frequency)  # NaN with nonzero scalars: refused, by name
-        run = run_tree_twin(
-            self.twin(values),
+        run = run_mission_twin(
+            lambda mating: self.twin(values, mating),
+            self.timeline,
             end - start,
             start=start,
             initial_attitude=[values[f"phi0_{a}"] for a in AXES],

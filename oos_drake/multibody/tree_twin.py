@@ -14,14 +14,25 @@ are the attitude error), and closes it with the
 controller, roll-off, wheels, torque bound, at its flight-software rate), whose held torque is
 the generalized force of the floating joint's rotation. The revolute joints are **frozen** at
 the given angles (Drake joint locking, in the run's context): the configuration of one instant
-of the mission, as the analysis' frozen models see it. C++ loggers record the plant state and
-the flight software's torques.
+of the mission, as the analysis' frozen models see it; or **motion-driven** along the mission's
+timeline (``timeline=``: a stiff joint PD on a Drake trajectory equal to the timeline's
+interpolation, the campaign's twin). C++ loggers record the plant state and the flight
+software's torques.
+
+A mission that captures or docks a target: the twin of an instant welds the target where the
+mission model (:func:`~oos_drake.scenario.tree_model.build_mission_tree_model`) welds it
+(``mating=``, :func:`mating_at`: the target's own SDF parsed as a second model and welded port
+to port by Drake's ``WeldFrames``, through a captured phase and a docked one alike; a free
+target is in neither). :func:`open_loop_twin` is the same plant with the wrench input and hub
+output of the validation, for checks against the TITOP LFR
+(``tests/tree/test_tree_mated_twin.py``).
 
 :func:`run_tree_twin` integrates one run from a small attitude error (or driven by a noise
-table) and reports whether the attitude left the model's domain.
-
-Unlike the paper's mission twin (:mod:`oos_drake.multibody.mission`), nothing moves along the
-timeline here: the twin of a tree follows no joint trajectory yet.
+table, or from the :class:`TwinState` a previous run ended in) and reports whether the attitude
+left the model's domain. :func:`run_mission_twin` runs a window that crosses a capture, a
+docking or a release in segments (:func:`mating_segments`), each on the twin of its phase, the
+chaser's state and the flight software's carried over: the mission model's instantaneous switch
+(the target welded at rest relative to its port, no contact impulse).
 """
 
 from __future__ import annotations
@@ -32,6 +43,7 @@ import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 
 import numpy as np
 from pydrake.math import RigidTransform
@@ -50,8 +62,13 @@ from oos_drake.scenario.tree import SpacecraftTree
 __all__ = [
     "TreeTwin",
     "TreeRun",
+    "TwinState",
     "build_tree_twin",
     "joint_trajectory",
+    "mating_at",
+    "mating_segments",
+    "open_loop_twin",
+    "run_mission_twin",
     "run_tree_twin",
     "tree_with_values",
 ]
@@ -66,7 +83,7 @@ def tree_with_values(tree: SpacecraftTree, values: Mapping[str, float]) -> Space
     Parameters
     ----------
     tree : SpacecraftTree
-        The tree.
+        The tree (its free targets' bodies included: a mission model's ``m_<target>``, ...).
     values : Mapping[str, float]
         Physical value by block name: ``m_<body>`` mass [kg] (rigid body), ``Jxx_<body>``,
         ``Jyy_<body>``, ``Jzz_<body>`` diagonal of the inertia at the centre of mass [kg m^2]
@@ -82,9 +99,12 @@ def tree_with_values(tree: SpacecraftTree, values: Mapping[str, float]) -> Space
     Raises
     ------
     ValueError
-        A block name that is none of these, or names no body (or mode) of the tree.
+        A block name that is none of these, or names no body (or mode) of the tree or of its
+        targets.
     """
     bodies = {b.name: b for b in tree.bodies}
+    for target in tree.targets.values():
+        bodies.update({b.name: b for b in target.bodies})
     changes: dict[str, dict] = {}
     for name, value in values.items():
         value = float(value)
@@ -113,10 +133,38 @@ def tree_with_values(tree: SpacecraftTree, values: Mapping[str, float]) -> Space
             )
     if not changes:
         return tree
+    return _replace_bodies(tree, changes)
+
+
+def _replace_bodies(tree: SpacecraftTree, changes: Mapping[str, dict]) -> SpacecraftTree:
     new = tuple(
         dataclasses.replace(b, **changes[b.name]) if b.name in changes else b for b in tree.bodies
     )
-    return dataclasses.replace(tree, bodies=new)
+    targets = {name: _replace_bodies(t, changes) for name, t in tree.targets.items()}
+    return dataclasses.replace(tree, bodies=new, targets=MappingProxyType(targets))
+
+
+def mating_at(timeline, time: float) -> tuple[str, str] | None:
+    """The ports mated at mission ``time`` [s]: ``(port, target port)`` of the phase's capture
+    or docking (both welded rigid, as in the mission model
+    :func:`~oos_drake.scenario.tree_model.build_mission_tree_model`; at a boundary: the phase
+    ending there), or None (every target free)."""
+    docked = timeline.docked_at(time)
+    return timeline.captured_at(time) if docked is None else tuple(docked.connection)
+
+
+def mating_segments(timeline, start: float, end: float) -> tuple[tuple[float, float, object], ...]:
+    """``[start, end]`` [s] cut where the mated ports change: ``(t0, t1, mating)`` in time
+    order, ``mating`` as :func:`mating_at` over ``(t0, t1]``."""
+    cuts = [float(start)]
+    for b in np.asarray(timeline.boundaries, dtype=float)[1:-1]:
+        if start < b < end and mating_at(timeline, b) != mating_at(
+            timeline, min(b + 1e-6 * max(timeline.duration, 1.0), end)
+        ):
+            cuts.append(float(b))
+    cuts.append(float(end))
+    pairs = zip(cuts[:-1], cuts[1:], strict=True)
+    return tuple((t0, t1, mating_at(timeline, 0.5 * (t0 + t1))) for t0, t1 in pairs)
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,6 +190,10 @@ class TreeTwin:
     trajectory : PiecewisePolynomial or None
         The joint angles the revolute joints follow (rows: ``revolute_joints`` in order)
         [rad]; None: frozen at ``angles``.
+    mating : tuple of str or None
+        ``(port, target port)`` welded, or None.
+    held_joints : Mapping[Joint, float]
+        The welded target's revolute joints and their file angles [rad] (locked in a run).
     """
 
     diagram: Diagram
@@ -154,6 +206,8 @@ class TreeTwin:
     torque_logger: object
     tree: SpacecraftTree
     trajectory: PiecewisePolynomial | None = None
+    mating: tuple[str, str] | None = None
+    held_joints: Mapping[object, float] = dataclasses.field(default_factory=dict)
 
 
 def build_tree_twin(
@@ -166,6 +220,7 @@ def build_tree_twin(
     timeline=None,
     joint_bandwidth: float = 200.0,
     joint_damping_ratio: float = 0.7,
+    mating: tuple[str, str] | None = None,
 ) -> TreeTwin:
     """Build the closed-loop twin of ``tree`` (its SDF generated into a temporary folder).
 
@@ -191,18 +246,16 @@ def build_tree_twin(
         Joint PD bandwidth [rad/s] (motion-driven joints).
     joint_damping_ratio : float
         Joint PD damping ratio [-].
+    mating : tuple of str, optional
+        ``(port, target port)``: the target owning ``target port`` (one of ``tree.targets``)
+        parsed from its own SDF and welded to the tree port to port (Drake's ``WeldFrames``),
+        as the mission model welds a captured or docked target (:func:`mating_at`); its own
+        revolute joints held at their file angles. Default: every target free, not in the
+        twin (as in the model).
     """
     chosen = tree.joint_angles(angles)
     builder = DiagramBuilder()
-    plant = builder.AddNamedSystem("plant", MultibodyPlant(time_step=0.0))
-    plant.mutable_gravity_field().set_gravity_vector(np.zeros(3))
-    with tempfile.TemporaryDirectory(prefix="oos-tree-twin-") as folder:
-        write_tree_sdf(tree, folder)
-        top = _parse_tree_sdf(plant, tree, Path(folder))
-    hub_joint = add_floating_joint(
-        plant, plant.GetBodyByName(tree.root, top), RigidTransform(), name=f"{tree.root}_floating"
-    )
-    plant.Finalize()
+    plant, hub_joint, held = _add_twin_plant(builder, tree, mating)
     fsw = builder.AddNamedSystem(
         "flight_software",
         FlightSoftware(
@@ -244,13 +297,90 @@ def build_tree_twin(
         torque_logger=torque_logger,
         tree=tree,
         trajectory=trajectory,
+        mating=None if mating is None else tuple(mating),
+        held_joints=held,
+    )
+
+
+def _add_twin_plant(builder, tree: SpacecraftTree, mating):
+    """The continuous plant of the twin (no gravity), the controlled body on its floating
+    joint; with ``mating = (port, target port)`` the target's own SDF parsed as a second model
+    and welded port to port (Drake's ``WeldFrames``: ports coinciding, axes aligned), its
+    revolute joints returned with their file angles (held locked). Returns
+    ``(plant, hub_joint, held)``."""
+    plant = builder.AddNamedSystem("plant", MultibodyPlant(time_step=0.0))
+    plant.mutable_gravity_field().set_gravity_vector(np.zeros(3))
+    held = {}
+    with tempfile.TemporaryDirectory(prefix="oos-tree-twin-") as folder:
+        write_tree_sdf(tree, Path(folder) / "tree")
+        top = _parse_tree_sdf(plant, tree, Path(folder) / "tree")
+        if mating is not None:
+            port, target_port = mating
+            if port not in tree.ports:
+                raise ValueError(f"tree twin: no port {port!r} on tree {tree.name}")
+            owner = [t for t in tree.targets.values() if target_port in t.ports]
+            if not owner:
+                raise ValueError(f"tree twin: no target port {target_port!r} on tree {tree.name}")
+            target = owner[0]
+            write_tree_sdf(target, Path(folder) / "target")
+            target_top = _parse_tree_sdf(plant, target, Path(folder) / "target", prefix=target.name)
+            plant.WeldFrames(
+                plant.GetFrameByName(port, top), plant.GetFrameByName(target_port, target_top)
+            )
+            held = {
+                plant.GetJointByName(joint_name(body)): float(angle)
+                for body, angle in target.operating_angles().items()
+            }
+    hub_joint = add_floating_joint(
+        plant, plant.GetBodyByName(tree.root, top), RigidTransform(), name=f"{tree.root}_floating"
+    )
+    plant.Finalize()
+    return plant, hub_joint, held
+
+
+def open_loop_twin(tree: SpacecraftTree, mating: tuple[str, str] | None = None):
+    """The twin's plant (built as :func:`build_tree_twin` builds it, target welded at
+    ``mating``) with the wrench input and hub output of
+    :func:`~oos_drake.multibody.tree_plant.linearize_tree` instead of the flight software: the
+    open-loop ``[F; T]_G -> [a; wdot]_G`` of the twin, for checks against the TITOP LFR.
+
+    Returns
+    -------
+    TreeDiagram
+        Handles for :func:`~oos_drake.multibody.tree_plant.linearize_tree` (the chaser's
+        revolute joints).
+
+    Raises
+    ------
+    ValueError
+        A welded target with revolute joints of its own (not supported here), or an unknown
+        port.
+    """
+    from oos_drake.multibody.linearization import add_hub_io
+    from oos_drake.multibody.tree_plant import TreeDiagram
+
+    builder = DiagramBuilder()
+    plant, hub_joint, held = _add_twin_plant(builder, tree, mating)
+    if held:
+        raise ValueError("open_loop_twin: a welded target with revolute joints is not supported")
+    ports = add_hub_io(builder, plant, hub_joint)
+    diagram = builder.Build()
+    revolute = {name: plant.GetJointByName(joint_name(name)) for name in tree.revolute_bodies}
+    return TreeDiagram(
+        diagram=diagram,
+        plant=plant,
+        tree=tree,
+        ports=ports,
+        hub_joint=hub_joint,
+        revolute_joints=MappingProxyType(revolute),
     )
 
 
 def joint_trajectory(timeline, bodies) -> PiecewisePolynomial:
     """The timeline's joint angles of ``bodies`` as a Drake trajectory [rad] (exact: the
     ``"smooth"`` interpolation is the cubic Hermite with zero rates at the waypoints, the
-    ``"linear"`` one the first-order hold)."""
+    ``"linear"`` one the first-order hold, the ``"quintic"`` one the quintic with zero rates
+    and accelerations at the waypoints)."""
     index = [timeline.joint_names.index(b) for b in bodies]
     breaks = np.asarray(timeline.boundaries, dtype=float)
     samples = np.asarray(timeline.waypoints, dtype=float)[:, index].T
@@ -259,6 +389,11 @@ def joint_trajectory(timeline, bodies) -> PiecewisePolynomial:
         samples = np.hstack([samples, samples])
     if timeline.interpolation == "linear":
         return PiecewisePolynomial.FirstOrderHold(breaks, samples)
+    if timeline.interpolation == "quintic":
+        from oos_drake.multibody.mission import quintic_piecewise_polynomial
+        from oos_drake.scenario.timeline import QuinticTrajectory
+
+        return quintic_piecewise_polynomial(QuinticTrajectory(breaks, samples.T))
     return PiecewisePolynomial.CubicHermite(breaks, samples, np.zeros_like(samples))
 
 
@@ -327,6 +462,73 @@ class TreeRun:
     torques: np.ndarray
     metrics: Mapping[str, np.ndarray]
     joint_error: float = 0.0
+    final_state: TwinState | None = None
+
+
+@dataclass(frozen=True)
+class TwinState:
+    """The state of a twin at one instant, portable to a twin with other welds.
+
+    Attributes
+    ----------
+    time : float
+        Mission time [s].
+    joints : Mapping[tuple[str, str], tuple[ndarray, ndarray]]
+        Positions and velocities of every joint with degrees of freedom, keyed by
+        ``(model instance name, joint name)`` (so a twin whose target is welded or free finds
+        the chaser's joints: the floating joint, the revolute joints, the appendages' modal
+        coordinates).
+    flight_software : ndarray
+        The flight software's discrete state (filters, held torque, metrics, sample counter,
+        dynamic perturbation).
+    """
+
+    time: float
+    joints: Mapping[tuple[str, str], tuple[np.ndarray, np.ndarray]]
+    flight_software: np.ndarray
+
+
+def _dof_joints(plant):
+    from pydrake.multibody.tree import JointIndex
+
+    for i in range(plant.num_joints()):
+        joint = plant.get_joint(JointIndex(i))
+        if joint.num_positions() + joint.num_velocities():
+            yield (plant.GetModelInstanceName(joint.model_instance()), joint.name()), joint
+
+
+def _capture_state(twin: TreeTwin, context) -> TwinState:
+    plant_context = twin.plant.GetMyContextFromRoot(context)
+    q, v = twin.plant.GetPositions(plant_context), twin.plant.GetVelocities(plant_context)
+    joints = {
+        key: (
+            q[j.position_start() : j.position_start() + j.num_positions()].copy(),
+            v[j.velocity_start() : j.velocity_start() + j.num_velocities()].copy(),
+        )
+        for key, j in _dof_joints(twin.plant)
+    }
+    fsw_context = twin.flight_software.GetMyContextFromRoot(context)
+    return TwinState(
+        float(context.get_time()),
+        MappingProxyType(joints),
+        np.array(fsw_context.get_discrete_state(0).get_value()),
+    )
+
+
+def _restore_state(twin: TreeTwin, context, state: TwinState) -> None:
+    """Write ``state`` into ``context``: the joints found by key (others keep their default
+    state: a target welded anew has no degrees of freedom if rigid, its modes start at rest)."""
+    plant_context = twin.plant.GetMyMutableContextFromRoot(context)
+    q, v = twin.plant.GetPositions(plant_context), twin.plant.GetVelocities(plant_context)
+    for key, j in _dof_joints(twin.plant):
+        if key in state.joints:
+            qj, vj = state.joints[key]
+            q[j.position_start() : j.position_start() + j.num_positions()] = qj
+            v[j.velocity_start() : j.velocity_start() + j.num_velocities()] = vj
+    twin.plant.SetPositions(plant_context, q)
+    twin.plant.SetVelocities(plant_context, v)
+    fsw_context = twin.flight_software.GetMyMutableContextFromRoot(context)
+    fsw_context.get_mutable_discrete_state(0).SetFromVector(state.flight_software)
 
 
 def run_tree_twin(
@@ -343,6 +545,7 @@ def run_tree_twin(
     accuracy: float | None = None,
     divergence_limit: float = 0.5,
     check_interval: float = 1.0,
+    initial_state: TwinState | None = None,
 ) -> TreeRun:
     """Integrate the twin for ``duration`` [s] from mission time ``start`` [s].
 
@@ -378,6 +581,9 @@ def run_tree_twin(
         Attitude [rad] beyond which the run stops as diverged.
     check_interval : float
         Simulated time between divergence checks [s].
+    initial_state : TwinState, optional
+        Start from this state (a previous run's ``final_state``, at ``start``) instead of the
+        initial errors; the motion-driven joints keep their state from it.
     """
     from pydrake.math import RollPitchYaw
 
@@ -394,6 +600,9 @@ def run_tree_twin(
         else:
             joint.set_angle(plant_context, float(twin.angles[name]))
             joint.Lock(plant_context)
+    for joint, angle in twin.held_joints.items():
+        joint.set_angle(plant_context, angle)
+        joint.Lock(plant_context)
     phi0 = np.broadcast_to(np.asarray(initial_attitude, dtype=float), (3,)).copy()
     w0_B = np.broadcast_to(np.asarray(initial_rate, dtype=float), (3,)).copy()
     twin.hub_joint.set_angles(plant_context, phi0)
@@ -405,11 +614,14 @@ def run_tree_twin(
     fsw.set_dynamic_perturbation(fsw_context, dynamic)
     if perturbations is not None:
         fsw.set_perturbations(fsw_context, *perturbations)
-    # sensor filters start at their steady state for the initial measurement
-    state = fsw_context.get_mutable_discrete_state(0).get_mutable_value()
-    slices, d = fsw.state_slices, fsw.design
-    for block, name, u in ((d.star_tracker, "star_tracker", phi0), (d.gyro, "gyro", w0_B)):
-        state[slices[name]] = np.linalg.solve(np.eye(block.nstates) - block.A, block.B @ u)
+    if initial_state is None:
+        # sensor filters start at their steady state for the initial measurement
+        state = fsw_context.get_mutable_discrete_state(0).get_mutable_value()
+        slices, d = fsw.state_slices, fsw.design
+        for block, name, u in ((d.star_tracker, "star_tracker", phi0), (d.gyro, "gyro", w0_B)):
+            state[slices[name]] = np.linalg.solve(np.eye(block.nstates) - block.A, block.B @ u)
+    else:
+        _restore_state(twin, context, initial_state)
     simulator = Simulator(twin.diagram, context)
     ResetIntegratorFromFlags(simulator, "radau3" if driven else "runge_kutta3", max_step)
     integrator = simulator.get_mutable_integrator()
@@ -455,4 +667,64 @@ def run_tree_twin(
         torques=np.asarray(torques.data()[:, :n]).T,
         metrics=fsw.metrics(fsw_context),
         joint_error=joint_error,
+        final_state=_capture_state(twin, context),
+    )
+
+
+def run_mission_twin(twin_for, timeline, duration: float, *, start: float = 0.0, **options):
+    """Integrate a tree's twin along its mission for ``duration`` [s] from ``start`` [s],
+    switching the welded target where the mission's phases mate or release it.
+
+    The window is cut where the mated ports change (:func:`mating_segments`); each segment
+    runs on ``twin_for(mating)`` (a motion-driven twin built with that ``mating``), started
+    from the previous segment's final state (:class:`TwinState`: the chaser's joints and the
+    flight software carried over, the target welded rigidly at rest relative to its port or
+    released: the switch of the mission model, no contact impulse).
+
+    Parameters
+    ----------
+    twin_for : callable
+        ``mating (tuple or None) -> TreeTwin``.
+    timeline : Timeline
+        The mission's timeline (its captures and dockings).
+    duration, start : float
+        Window [s].
+    **options
+        Of :func:`run_tree_twin` (``initial_attitude``, ``noise_table``, ...), the same for
+        every segment.
+
+    Returns
+    -------
+    TreeRun
+        The segments' logs joined (times from ``start``), the metrics at the end, the largest
+        joint error.
+    """
+    start = float(start)
+    parts, state = [], None
+    for t0, t1, mating in mating_segments(timeline, start, start + float(duration)):
+        run = run_tree_twin(twin_for(mating), t1 - t0, start=t0, initial_state=state, **options)
+        parts.append((t0, run))
+        state = run.final_state
+        if run.diverged:
+            break
+    if len(parts) == 1:
+        return parts[0][1]
+    times, keep, last = [], [], -np.inf
+    for t0, run in parts:
+        absolute = run.times + t0
+        mask = absolute > last + 1e-9
+        times.append(absolute[mask] - start)
+        keep.append((run, mask))
+        if absolute.size:
+            last = max(last, float(absolute[-1]))
+    final = parts[-1][1]
+    return TreeRun(
+        diverged=final.diverged,
+        times=np.concatenate(times),
+        phi=np.concatenate([r.phi[m] for r, m in keep]),
+        rate=np.concatenate([r.rate[m] for r, m in keep]),
+        torques=np.concatenate([r.torques[m] for r, m in keep]),
+        metrics=final.metrics,
+        joint_error=max(r.joint_error for _, r in parts),
+        final_state=final.final_state,
     )

@@ -406,12 +406,11 @@ def unsupported_stages(scenario_file: str | Path) -> dict[str, str]:
     -------
     dict
         ``{}`` for a schema-1 file; for a schema-2 tree: ``"model figures"`` (the paper's
-        section-2 figures); and ``"confirm"``, ``"campaign"`` when its mission captures or
-        docks a target or has tip-pose waypoints (``servicer_7dof``): the tree twin with its
-        flight software models a free tree. Such a mission runs the controller, the analysis and
-        the margins on its switched model
-        (:func:`~oos_drake.scenario.tree_model.build_mission_tree_model`), tip-pose waypoints
-        once ``oos run`` has solved them (:func:`oos_drake.app.tree.joint_space_scenario`).
+        section-2 figures). A mission that captures or docks a target runs every other stage on
+        its switched model (:func:`~oos_drake.scenario.tree_model.build_mission_tree_model`)
+        and its twin with the target welded where the model welds it
+        (:mod:`oos_drake.multibody.tree_twin`), tip-pose waypoints once ``oos run`` has solved
+        them (:func:`oos_drake.app.tree.joint_space_scenario`).
     """
     import tomllib
 
@@ -419,27 +418,7 @@ def unsupported_stages(scenario_file: str | Path) -> dict[str, str]:
         document = tomllib.load(stream)
     if document.get("schema_version") != 2:
         return {}
-    phases = document.get("mission", {}).get("phases", [])
-    phases = [p for p in (phases if isinstance(phases, list) else []) if isinstance(p, dict)]
-    held = [str(p.get("name")) for p in phases if "captured" in p or "docked" in p]
-    tips = [str(p.get("name")) for p in phases if "tip" in p]
-    why = []
-    if held:
-        why.append(
-            f"mission phases {', '.join(held)} hold a target: the tree twin with its flight "
-            "software models a free tree (no capture or docking yet)"
-        )
-    if tips:
-        why.append(
-            f"mission phases {', '.join(tips)} place a port by inverse kinematics: the tree "
-            "twin's trajectories follow joint-space waypoints only"
-        )
-    model_arrays = {}
-    if why:  # the stages on the tree twin with its flight software
-        reason = "; ".join(why) + " (the validate stage checks every configuration)"
-        model_arrays = {name: reason for name in ("confirm", "campaign")}
     return {
-        **model_arrays,
         "model figures": "the paper's section-2 figures (moments, docking sweeps, arm) need "
         "its topology; a tree has its block table only",
     }

@@ -149,12 +149,8 @@ def test_what_a_tree_lacks_is_one_line_naming_it(flexible, tmp_path, capsys):
     assert not hasattr(flexible, "hubs")
     assert unsupported_stages(scenario_path("paper")) == {}
     assert set(unsupported_stages(scenario_path("flexible_satellite"))) == {"model figures"}
-    # capture, docking and tip waypoints run the controller, the analysis and the margins
-    assert set(unsupported_stages(scenario_path("servicer_7dof"))) == {
-        "model figures",
-        "confirm",
-        "campaign",
-    }
+    # capture, docking and tip waypoints run every stage (the twin welds the target)
+    assert set(unsupported_stages(scenario_path("servicer_7dof"))) == {"model figures"}
     out = tmp_path / "figures"
     assert main(["model", "figures", "--out", str(out), "--scenario", "flexible_satellite"]) == 2
     err = capsys.readouterr().err
