@@ -1014,10 +1014,10 @@ def _status(row: Mapping, alpha_n: float, finite: bool) -> str:
 
 
 def _confirm_task(args):
-    from oos_drake.blas import limit_blas_threads
+    from oos_drake.blas import single_threaded_blas
 
-    limit_blas_threads(1)
-    return confirm_peak(*args)
+    with single_threaded_blas():  # restored after: ``--workers 1`` runs it in this process
+        return confirm_peak(*args)
 
 
 def confirm_peaks(
