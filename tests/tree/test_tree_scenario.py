@@ -16,6 +16,7 @@ import tomllib
 import numpy as np
 import pandas as pd
 import pytest
+from reduced_run import reduce_run_stages
 
 from oos_drake.scenario.data import load_scenario, scenario_path
 
@@ -177,44 +178,7 @@ def test_oos_run_on_a_tree_end_to_end(tmp_path, monkeypatch, capsys):
     from oos_drake.analysis.models import mission_closed_loop
     from oos_drake.app.main import build_parser
 
-    smaller = {
-        "synth": ["--configurations", "4", "--restarts", "0", "--max-iterations", "25",
-                  "--worst-case-rounds", "1"],
-        "confirm": ["--alpha-limit", "2"],  # the real and modal peaks' physical limit is 1.6
-    }  # fmt: skip
-    real = pipeline._oos
-    monkeypatch.setattr(pipeline, "_oos", lambda *argv: real(*argv, *smaller.get(argv[0], [])))
-    import oos_drake.app.analyze as margins_stage  # the margins stage: a function call, no argv
-    from oos_drake.analysis.margins import MarginsOptions
-
-    monkeypatch.setattr(  # oos margins --configurations 2, as the stage ran on the command line
-        margins_stage,
-        "pipeline_margins_options",
-        lambda analysis, configurations: MarginsOptions(2, analysis, False),
-    )
-    import dataclasses
-
-    import oos_drake.app.analyze as analyze  # the analysis stage: a function call, no argv
-
-    pipeline_options = analyze.pipeline_analysis_options
-
-    def smaller_analysis(*args, **kwargs):  # oos analyze --configurations 4 --points-per-decade 3
-        # --no-sensitivity --no-time-check --performance-models 1 --performance-points 5
-        # --spike-budget 5 --iterations 20, as the stage ran on the command line before
-        options = pipeline_options(*args, **kwargs)
-        return dataclasses.replace(
-            options,
-            configurations=4,
-            points_per_decade=3,
-            sensitivity=False,
-            time_check=False,
-            performance_models=1,
-            performance_points=5,
-            spike_budget=5.0,
-            sweep=dataclasses.replace(options.sweep, upper_iterations=20),
-        )
-
-    monkeypatch.setattr(analyze, "pipeline_analysis_options", smaller_analysis)
+    reduce_run_stages(monkeypatch)
     out = tmp_path / "out"
     # the shipped campaign (the default spec of this scenario) with 6 runs
     spec = tmp_path / "campaign.toml"

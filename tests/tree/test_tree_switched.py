@@ -16,6 +16,7 @@ import tomllib
 import numpy as np
 import pytest
 import tomli_w
+from reduced_run import reduce_run_stages
 from tree_documents import shipped_document
 
 from oos_drake.lfr import usubs
@@ -188,23 +189,10 @@ def test_oos_run_on_the_servicer_runs_controller_analysis_and_margins(tmp_path, 
     from oos_drake.analysis.models import mission_closed_loop
     from oos_drake.app.main import build_parser
 
-    smaller = {
-        "synth": ["--configurations", "4", "--restarts", "0", "--max-iterations", "25",
-                  "--worst-case-rounds", "1"],
-        "analyze": ["--configurations", "4", "--points-per-decade", "3", "--no-sensitivity",
-                    "--no-time-check", "--performance-models", "1", "--performance-points", "5",
-                    "--spike-budget", "5", "--iterations", "20"],
-    }  # fmt: skip
-    real = pipeline._oos
-    monkeypatch.setattr(pipeline, "_oos", lambda *argv: real(*argv, *smaller.get(argv[0], [])))
-    import oos_drake.app.analyze as margins_stage  # the margins stage: a function call, no argv
-    from oos_drake.analysis.margins import MarginsOptions
-
-    monkeypatch.setattr(  # oos margins --configurations 2, as the stage ran on the command line
-        margins_stage,
-        "pipeline_margins_options",
-        lambda analysis, configurations: MarginsOptions(2, analysis, False),
-    )
+    # confirm and campaign of a mated tree: tests/tree/test_tree_mated_twin.py (their cost here
+    # would exceed the slow suite's budget)
+    covered = "covered by tests/tree/test_tree_mated_twin.py"
+    reduce_run_stages(monkeypatch, skip={"confirm": covered, "campaign": covered})
     out = tmp_path / "out"
     argv = ["run", "--scenario", "servicer_7dof", "--quick", "--out", str(out)]
     assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0

@@ -1,0 +1,54 @@
+"""``oos run`` at reduced sizes for the trees' end-to-end tests: every stage's options made
+smaller, as the stages' command lines were before they became function calls."""
+
+from __future__ import annotations
+
+import dataclasses
+
+#: Appended to the argv of the stages that still run as ``oos`` commands.
+SMALLER_ARGV = {
+    "synth": ["--configurations", "4", "--restarts", "0", "--max-iterations", "25",
+              "--worst-case-rounds", "1"],
+    "confirm": ["--alpha-limit", "2"],  # flexible_satellite's real and modal limit is 1.6
+}  # fmt: skip
+
+
+def reduce_run_stages(monkeypatch, *, skip: dict[str, str] | None = None) -> None:
+    """Make ``oos run``'s stages small: synthesis on 4 configurations; analysis as
+    ``oos analyze --configurations 4 --points-per-decade 3 --no-sensitivity --no-time-check
+    --performance-models 1 --performance-points 5 --spike-budget 5 --iterations 20``; margins
+    on 2 configurations; ``skip`` adds stages the run leaves out (name -> reason)."""
+    import oos_drake.app.analyze as analyze
+    import oos_drake.app.pipeline as pipeline
+    import oos_drake.scenario.tree_scenario as tree_scenario
+    from oos_drake.analysis.margins import MarginsOptions
+
+    real = pipeline._oos
+    monkeypatch.setattr(pipeline, "_oos", lambda *argv: real(*argv, *SMALLER_ARGV.get(argv[0], [])))
+    monkeypatch.setattr(
+        analyze,
+        "pipeline_margins_options",
+        lambda analysis, configurations: MarginsOptions(2, analysis, False),
+    )
+    full = analyze.pipeline_analysis_options
+
+    def smaller_analysis(*args, **kwargs):
+        options = full(*args, **kwargs)
+        return dataclasses.replace(
+            options,
+            configurations=4,
+            points_per_decade=3,
+            sensitivity=False,
+            time_check=False,
+            performance_models=1,
+            performance_points=5,
+            spike_budget=5.0,
+            sweep=dataclasses.replace(options.sweep, upper_iterations=20),
+        )
+
+    monkeypatch.setattr(analyze, "pipeline_analysis_options", smaller_analysis)
+    if skip:
+        unsupported = tree_scenario.unsupported_stages
+        monkeypatch.setattr(
+            tree_scenario, "unsupported_stages", lambda scenario: {**unsupported(scenario), **skip}
+        )
