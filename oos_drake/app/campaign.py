@@ -70,10 +70,8 @@ _FLY_A_CONTROLLER = (
 )
 
 
-def _simulator_options(args: argparse.Namespace, spec) -> dict:
-    """The simulator options of ``--simulator-option`` and ``--controller``; says on stderr when
-    a simulator that flies a controller gets none (it then flies the scenario's baseline PD,
-    not the loop the analysis certified)."""
+def _simulator_options(args: argparse.Namespace) -> dict:
+    """The simulator options of ``--simulator-option`` and ``--controller``."""
     options = _parse_options(args.simulator_option)
     if args.controller is not None:
         if "controller" in options:
@@ -82,26 +80,31 @@ def _simulator_options(args: argparse.Namespace, spec) -> dict:
         if not path.is_file():
             raise ValueError(f"--controller {args.controller}: no such file")
         options["controller"] = str(path.resolve())
+    return options
+
+
+def _controller_note(spec, options: dict) -> str | None:
+    """What to say when a simulator that flies a controller got none: it then flies the
+    scenario's baseline PD, not the loop the analysis certified."""
     recipe = spec.simulator
     if recipe.factory in _FLY_A_CONTROLLER and "controller" not in {
         **recipe.option_dict,
         **options,
     }:
-        print(
-            "note: no --controller: the mission flies the scenario's baseline PD, not a "
-            "synthesized controller",
-            file=sys.stderr,
+        return (
+            "note: no --controller was given: the mission flew the scenario's baseline PD, not "
+            "a synthesized controller"
         )
-    return options
+    return None
 
 
 def _run(args: argparse.Namespace) -> int:
     from oos_drake.campaign.runner import run_campaign
     from oos_drake.campaign.spec import load_spec
 
-    spec = load_spec(args.spec)
+    spec = load_spec(args.spec, worst_cases=args.worst_cases)
     out = args.out if args.out is not None else Path("out") / "campaigns" / spec.name
-    simulator_options = _simulator_options(args, spec)
+    simulator_options = _simulator_options(args)
     summary = run_campaign(
         args.spec,
         out,
@@ -112,6 +115,8 @@ def _run(args: argparse.Namespace) -> int:
         simulator_options=simulator_options,
     )
     _print_summary(summary)
+    if note := _controller_note(spec, simulator_options):
+        print(note)
     return 0
 
 
@@ -180,7 +185,7 @@ def _falsify(args: argparse.Namespace) -> int:
 
     spec = load_spec(args.spec, worst_cases=args.worst_cases)
     out = args.out if args.out is not None else Path("out") / "falsify" / spec.name
-    simulator_options = _simulator_options(args, spec)
+    simulator_options = _simulator_options(args)
     result = falsify(
         args.spec,
         out,
@@ -199,6 +204,8 @@ def _falsify(args: argparse.Namespace) -> int:
     with pd.option_context("display.width", 160, "display.float_format", "{:.6g}".format):
         print(result.best.drop(labels=["unit coordinates", "error"]).to_string())
     print(f"every evaluated point: {Path(result.directory) / 'falsification.parquet'}")
+    if note := _controller_note(spec, simulator_options):
+        print(note)
     return 0
 
 
