@@ -29,6 +29,16 @@ from oos_drake.app.args import (
 )
 
 
+def _add_controller_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--controller",
+        default=None,
+        metavar="JSON",
+        help="controller.json flown by the simulator (its 'controller' option; default: the "
+        "scenario's baseline PD)",
+    )
+
+
 def _add_executor_options(parser: argparse.ArgumentParser) -> None:
     add_parallel_arguments(
         parser,
@@ -251,13 +261,7 @@ def register(subparsers) -> None:
         metavar="PARQUET",
         help="mu-guided: use this worst_cases.parquet (e.g. from oos analyze), not the spec's",
     )
-    run.add_argument(
-        "--controller",
-        default=None,
-        metavar="JSON",
-        help="controller.json flown by the simulator (its 'controller' option; default: the "
-        "scenario's baseline PD)",
-    )
+    _add_controller_option(run)
     run.add_argument(
         "--simulator-option",
         action="append",
@@ -324,13 +328,7 @@ def register(subparsers) -> None:
         help="simulated window of every run [s] instead of the spec's (a sinusoidal input needs "
         "time to reach its steady state)",
     )
-    falsify.add_argument(
-        "--controller",
-        default=None,
-        metavar="JSON",
-        help="controller.json flown by the simulator (its 'controller' option; default: the "
-        "scenario's baseline PD)",
-    )
+    _add_controller_option(falsify)
     falsify.add_argument(
         "--simulator-option",
         action="append",
