@@ -122,9 +122,11 @@ def docking_springs(phase: str, stiffness, *, scenario, damping=None) -> dict:
 def docking_plant(phase: str, stiffness, *, scenario, damping=None, source="lfr") -> LFR:
     """Uncertain plant (``Delta_real`` blocks) of docking phase 7 or 8 for each swept stiffness.
 
-    Phase 7: SM1 (arm tip J7 / target port D2) has stiffness ``k`` (shear [N/m] and torsion
-    [N m/rad] alike) and damping ``damping``; SM2 is open. Phase 8: SM2 (D1 / D3) is swept, SM1
-    is the already rigid connection (scenario ``rigid_stiffness``, ``rigid_damping``).
+    A tree (schema 2): ``phase`` is a docking event of its mission
+    (:meth:`oos_drake.scenario.tree_scenario.TreeScenario.docking_plant`, ``damping`` default
+    the file's). Phase 7: SM1 (arm tip J7 / target port D2) has stiffness ``k`` (shear [N/m]
+    and torsion [N m/rad] alike) and damping ``damping``; SM2 is open. Phase 8: SM2 (D1 / D3)
+    is swept, SM1 is the already rigid connection (scenario ``rigid_stiffness``, ``rigid_damping``).
 
     Parameters
     ----------
@@ -139,9 +141,14 @@ def docking_plant(phase: str, stiffness, *, scenario, damping=None, source="lfr"
         substituted: :func:`oos_drake.multibody.mission_lfr.twin_docking_plants`).
     """
     from oos_drake.scenario.model import build_docking_model, configuration_values
+    from oos_drake.scenario.tree_scenario import NotForTrees, is_tree
 
     _check_source(source)
     phase = str(phase)
+    if is_tree(scenario):  # a tree's docking event: TreeScenario.docking_plant
+        if source == "drake":
+            raise NotForTrees("docking: --plant drake is not available for a tree's docking")
+        return scenario.docking_plant(phase, stiffness, damping=damping)
     stiffness = np.atleast_1d(np.asarray(stiffness, dtype=float))
     if np.any(stiffness < 0) or not np.all(np.isfinite(stiffness)):
         raise ValueError("docking: stiffness values must be finite and >= 0")

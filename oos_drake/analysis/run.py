@@ -57,7 +57,8 @@ class AnalysisOptions:
     sweep : SweepOptions
         Accuracy and parallelism of the mu sweeps.
     docking_phases : tuple of str
-        Docking phases studied (``"7"``, ``"8"``).
+        Docking phases studied (schema 1: ``"7"``, ``"8"``; a tree: its docking events,
+        ``scenario.mission.docking_phases``); checked against the scenario's before any work.
     docking_points : int
         Stiffness values per phase (paper: 300).
     stiffness_range : tuple of float
@@ -131,9 +132,6 @@ class AnalysisOptions:
             raise ValueError(
                 f"frequency_range_hz must be 0 < low < high, got {self.frequency_range_hz}"
             )
-        unknown = [p for p in self.docking_phases if str(p) not in ("7", "8")]
-        if unknown:
-            raise ValueError(f"--docking: unknown docking phase {unknown[0]!r} (phases: 7, 8)")
         for name in ("configurations", "points_per_decade", "docking_points"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
@@ -383,6 +381,11 @@ def compute_analysis(
     from oos_drake.processes import make_executor
 
     options = options or AnalysisOptions()
+    known = [str(p.name) for p in scenario.mission.docking_phases]
+    unknown = [p for p in options.docking_phases if str(p) not in known]
+    if unknown:
+        listed = ", ".join(known) or "none"
+        raise ValueError(f"--docking: unknown docking phase {unknown[0]!r} (phases: {listed})")
     timings = {}
     clock = _time.perf_counter()
     t_start = clock

@@ -394,6 +394,10 @@ class SpacecraftTree:
         ``control`` is None): not part of the models until captured (:func:`captured_tree`).
     source : Path or None
         File the tree was read from.
+    closures : tuple
+        Spring-dampers (:class:`~oos_drake.scenario.tree_mission.Docking`) that close a loop
+        between two bodies of the tree besides its joints (made by :func:`docked_tree`, not read
+        from files): the target of a docking event still held at another port.
     """
 
     name: str
@@ -406,6 +410,7 @@ class SpacecraftTree:
         default_factory=lambda: MappingProxyType({})
     )
     source: Path | None = None
+    closures: tuple = ()
 
     @property
     def root(self) -> str:
@@ -845,7 +850,9 @@ def _components(bodies: tuple) -> dict[str, tuple]:
     return {root: tuple(members) for root, members in groups.items()}
 
 
-def _attach_target(tree: SpacecraftTree, port: str, target_port: str, docking=None):
+def _attach_target(
+    tree: SpacecraftTree, port: str, target_port: str, docking=None, closures: tuple = ()
+):
     if port not in tree.ports:
         raise KeyError(f"no port {port!r} (ports: {', '.join(tree.ports)})")
     owner = [t for t in tree.targets.values() if target_port in t.ports]
@@ -869,6 +876,7 @@ def _attach_target(tree: SpacecraftTree, port: str, target_port: str, docking=No
         ports=MappingProxyType({**tree.ports, **target.ports}),
         targets=MappingProxyType(others),
         mission=None,
+        closures=tuple(closures),
     )
 
 
@@ -893,15 +901,39 @@ def captured_tree(tree: SpacecraftTree, port: str, target_port: str) -> Spacecra
     return _attach_target(tree, port, target_port)
 
 
-def docked_tree(tree: SpacecraftTree, docking) -> SpacecraftTree:
+def docked_tree(tree: SpacecraftTree, docking, also: tuple = ()) -> SpacecraftTree:
     """The tree with a target held by a spring-damper between two ports
     (:class:`oos_drake.scenario.tree_mission.Docking`), at rest where the ports coincide.
 
     As :func:`captured_tree`, but the target's root hangs on a ``"bushing"`` joint carrying
     ``docking``: the TITOP model keeps the target as a free rigid body (inverse model) and
     connects the two ports through the spring-damper.
+
+    ``also``: more spring-dampers holding the same target at other ports at the same time
+    (a closed loop, schema 1's docking phase 8: the arm still holds the target when it docks),
+    each at rest where its ports coincide, between the target's root and a rigid body of the
+    tree (:attr:`SpacecraftTree.closures`).
+
+    Raises
+    ------
+    ValueError
+        A spring-damper of ``also`` on another target, off the target's root, or on a port
+        that is not the tree's.
     """
-    return _attach_target(tree, docking.port, docking.target_port, docking)
+    target = next((t for t in tree.targets.values() if docking.target_port in t.ports), None)
+    for extra in also:
+        if target is None or extra.target_port not in target.ports:
+            raise ValueError(
+                f"docking {extra.port}-{extra.target_port}: not the target held at "
+                f"{docking.target_port}"
+            )
+        if target.ports[extra.target_port].body != target.root:
+            raise ValueError(
+                f"ports.{extra.target_port}: must be on the target's root body '{target.root}'"
+            )
+        if extra.port not in tree.ports:
+            raise ValueError(f"docking {extra.port}: not a port of the tree")
+    return _attach_target(tree, docking.port, docking.target_port, docking, tuple(also))
 
 
 def _check_block_names(bodies: tuple) -> None:

@@ -8,9 +8,16 @@ its arrays ``SA3``, ``SA4`` (drives at ``target_array_angles``) and its ports ``
 The mission: one phase between consecutive instants of the arm's and the arrays' waypoints and
 of the connection states (``interpolation = "quintic"``, schema 1's joint trajectories; a
 waypoint segment split by another instant must be constant), each phase's ``joints`` the
-angles at its end; ``delta_C1 = 1`` is ``captured = ["J7", "D2"]``, ``delta_C2 = 1`` is
-``docked = { ports = ["D1", "D3"], ... }`` with the ``[docking]`` rigid stiffness and damping
-(no uncertainty), the switch blocks named ``delta_C1`` (port ``J7``) and ``delta_C2`` (``D1``).
+angles at its end; ``delta_C1 = 1`` is ``docked = { ports = ["J7", "D2"], name = "SM1", ... }``,
+``delta_C2 = 1`` is ``docked = { ports = ["D1", "D3"], name = "SM2", ... }``, both with the
+``[docking]`` rigid stiffness and damping (no uncertainty; schema 1's spring-dampers SM1 and
+SM2, welded rigid in the mission model as schema 1's ``delta_C1``, ``delta_C2``), the switch
+blocks named ``delta_C1`` (port ``J7``) and ``delta_C2`` (``D1``). The two docking events are
+schema 1's docking phases: the start of the J7-D2 phase (t = 255 s) is phase 7 (SM1 swept), the
+start of the D1-D3 phase (880 s) phase 8 (SM2 swept while SM1 still holds the target at its
+rigid values): ``oos analyze`` studies them as ``docking-<phase name>`` with the same plants
+(``TreeScenario.docking_plant``; the swept damping is the file's, the ``[docking]`` rigid
+damping, schema 1's ``damping`` being dropped).
 At a phase boundary a tree's timeline is in the phase ending there, schema 1's connection
 states in the one starting there: the two differ at the switching instants only. The moments,
 the docking studies (phases 7, 8 and their stiffness sweep) and the mission's CHOICE numbers
@@ -39,7 +46,6 @@ V1_DROPPED = (
     "docking.stiffness_sweep",
     "docking.damping",
     "mission.moments",
-    "mission.docking_phases",
     "mission.first_docking_standoff",
     "mission.grasp_approach_distance",
 )
@@ -141,16 +147,17 @@ def _mission_table(scenario: Scenario) -> dict:
                 f"mission.connection_states: {state.start:g}-{state.end:g} s connects both "
                 "J7/D2 and D1/D3: one connection per tree phase"
             )
-        if state.delta_C1:
-            phase["captured"] = ["J7", "D2"]
-        elif state.delta_C2:
-            phase["docked"] = {
-                "ports": ["D1", "D3"],
-                "k_shear": float(docking.rigid_stiffness),
-                "k_tors": float(docking.rigid_stiffness),
-                "d_shear": float(docking.rigid_damping),
-                "d_tors": float(docking.rigid_damping),
-            }
+        for flag, ports, name in ((state.delta_C1, ["J7", "D2"], "SM1"),
+                                  (state.delta_C2, ["D1", "D3"], "SM2")):  # fmt: skip
+            if flag:
+                phase["docked"] = {
+                    "ports": ports,
+                    "name": name,
+                    "k_shear": float(docking.rigid_stiffness),
+                    "k_tors": float(docking.rigid_stiffness),
+                    "d_shear": float(docking.rigid_damping),
+                    "d_tors": float(docking.rigid_damping),
+                }
         phases.append(phase)
         start = end
     return {"interpolation": "quintic", "phases": phases}

@@ -42,8 +42,11 @@ revolute joint)::
   d_tors = ..., stiffness_percent = ..., damping_percent = ... }``: through the phase a target is
   held by a 6-DOF spring-damper between the two ports (at rest where they coincide, axes
   aligned; stiffness [N/m, N m/rad], damping [N s/m, N m s/rad], uncertain by the percentages:
-  blocks ``k_shear_<PORT>``, ``k_tors_<PORT>``, ``d_shear_<PORT>``, ``d_tors_<PORT>``);
-  :func:`oos_drake.scenario.tree.docked_tree`.
+  blocks ``k_shear_<PORT>``, ``k_tors_<PORT>``, ``d_shear_<PORT>``, ``d_tors_<PORT>``, or
+  ``..._<NAME>`` with the optional ``name = NAME``); :func:`oos_drake.scenario.tree.docked_tree`.
+  The phase's start is a docking event (unless the previous phase holds the target at the same
+  ports): ``oos analyze`` studies it (``docking-<phase>``, the stiffness swept as schema 1's
+  phases 7 and 8, :meth:`oos_drake.scenario.tree_scenario.TreeScenario.docking_plant`).
 - Between waypoints the angles are interpolated per phase: ``"smooth"`` (default) is the cubic
   ``q = q0 + (3 s^2 - 2 s^3) (q1 - q0)``, ``s = (t - t0) / (t1 - t0)``, so every joint starts and
   ends each phase at rest; ``"quintic"`` is ``q0 + (10 s^3 - 15 s^4 + 6 s^5) (q1 - q0)`` (at
@@ -66,6 +69,7 @@ Examples
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -146,6 +150,9 @@ class Docking:
         Rotational damping [N m s/rad] (``d_tors_<port>``).
     stiffness_percent, damping_percent : float
         Relative half-ranges of the stiffness and damping blocks [%] (0: known).
+    name : str or None
+        Name of the spring-damper in its blocks' names (``k_shear_<name>``, ...); None: the
+        port's (``oos tree convert`` names schema 1's ``SM1``, ``SM2``).
     """
 
     port: str
@@ -156,6 +163,12 @@ class Docking:
     d_tors: float
     stiffness_percent: float = 0.0
     damping_percent: float = 0.0
+    name: str | None = None
+
+    @property
+    def label(self) -> str:
+        """The spring-damper's name in its blocks' names: ``name``, else the port."""
+        return self.name or self.port
 
     @property
     def connection(self) -> tuple[str, str]:
@@ -421,12 +434,15 @@ def _read_docked(raw: Any, where: str, tree: SpacecraftTree) -> Docking:
         )
     values = {key: t.number(key) for key in ("k_shear", "k_tors", "d_shear", "d_tors")}
     percents = {key: t.number(key, 0.0) for key in ("stiffness_percent", "damping_percent")}
+    name = t.text("name", "") or None
     t.close()
+    if name is not None and not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", name):
+        raise ScenarioError(f"{where}.name", f"{name!r}: letters, digits and _ only")
     for key, value in values.items():
         check_positive(where, key, value)
     for key, value in percents.items():
         check_percent(where, key, value, 100.0)
-    return Docking(port, target_port, **values, **percents)
+    return Docking(port, target_port, **values, **percents, name=name)
 
 
 def _read_phase(raw: Any, index: int, tree: SpacecraftTree) -> MissionPhase:

@@ -71,6 +71,7 @@ __all__ = [
     "angle_block_name",
     "build_tree_model",
     "build_mission_tree_model",
+    "docking_block_names",
     "mission_connections",
     "switch_block_name",
     "tree_values",
@@ -139,8 +140,15 @@ def _joint_point(tree: SpacecraftTree, child) -> np.ndarray:
 
 def _docking_blocks(docking) -> dict:
     """Stiffness [N/m, N m/rad] and damping [N s/m, N m s/rad] of a docking spring-damper:
-    ureal blocks ``k_shear_<port>``, ... over their declared ranges, numbers when known."""
+    ureal blocks ``k_shear_<name>``, ``k_tors_<name>``, ``d_shear_<name>``, ``d_tors_<name>``
+    (``name``: :attr:`~oos_drake.scenario.tree_mission.Docking.label`), nominal the file's
+    values, over the declared ranges (``stiffness_percent``, ``damping_percent``); a known one
+    (no percent) spans ``[0, 2 x nominal]``, schema 1's default spring-damper blocks
+    (:func:`oos_drake.titop.spring_damper_parameters`): the docking study sweeps the stiffness
+    there, every other use substitutes the file's value
+    (:meth:`oos_drake.scenario.tree_scenario.TreeScenario.docking_values`)."""
     blocks = {}
+    units = {"k_shear": "N/m", "k_tors": "N m/rad", "d_shear": "N s/m", "d_tors": "N m s/rad"}
     for key, percent in (
         ("k_shear", docking.stiffness_percent),
         ("k_tors", docking.stiffness_percent),
@@ -148,15 +156,52 @@ def _docking_blocks(docking) -> dict:
         ("d_tors", docking.damping_percent),
     ):
         nominal = float(getattr(docking, key))
-        unit = {"k_shear": "N/m", "k_tors": "N m/rad", "d_shear": "N s/m", "d_tors": "N m s/rad"}
+        name = f"{key}_{docking.label}"
         quantity = "stiffness" if key.startswith("k") else "damping"
         blocks[key] = (
-            relative_parameter(f"{key}_{docking.port}", nominal, percent, unit=unit[key],
-                               quantity=quantity)
+            relative_parameter(name, nominal, percent, unit=units[key], quantity=quantity)
             if percent > 0
-            else nominal
+            else ureal(name, nominal, range=(0.0, 2.0 * nominal), unit=units[key],
+                       quantity=quantity)
         )  # fmt: skip
     return blocks
+
+
+def docking_block_names(docking) -> dict[str, str]:
+    """``{"k_shear": "k_shear_<name>", ...}``: the block names of a docking spring-damper."""
+    return {key: f"{key}_{docking.label}" for key in ("k_shear", "k_tors", "d_shear", "d_tors")}
+
+
+def _closure_ports(tree: SpacecraftTree) -> dict[str, list]:
+    """The ports of :attr:`SpacecraftTree.closures` as extra ports of their bodies:
+    ``{body: [(signal suffix, p_B_D [m])]}``."""
+    extra: dict[str, list] = {}
+    for closure in tree.closures:
+        for port in (closure.port, closure.target_port):
+            spec = tree.ports[port]
+            extra.setdefault(spec.body, []).append((f"C{port}_{spec.body}", spec.p_B_D))
+    return extra
+
+
+def _closure_components(tree: SpacecraftTree) -> list[Component]:
+    """A spring-damper per closure, C = the target at its port (its axes), P = the tree's
+    body at its port (its axes); at rest the ports coincide, axes aligned, so the frame change
+    is ``R_TB = R_TD' R_BD^T`` whatever the joint angles."""
+    components = []
+    for closure in tree.closures:
+        chaser, target = tree.ports[closure.port], tree.ports[closure.target_port]
+        dcm = np.asarray(target.R_B_D) @ np.asarray(chaser.R_B_D).T  # v_T = dcm v_B
+        c = f"C{closure.target_port}_{target.body}"
+        p = f"C{closure.port}_{chaser.body}"
+        components.append(
+            Component(
+                f"closure_{closure.label}",
+                spring_damper_between(_docking_blocks(closure), dcm),
+                inputs=(f"xdd_{c}", f"xdd_{p}"),
+                outputs=(f"W_{c}", f"W_{p}"),
+            )
+        )
+    return components
 
 
 def _components(
@@ -169,7 +214,9 @@ def _components(
     (a target, whose root :func:`_target_components` models)."""
     components = []
     root = tree.root
-    extra_ports = extra_ports or {}
+    extra_ports = dict(extra_ports or {})
+    for body, ports in _closure_ports(tree).items():
+        extra_ports[body] = list(extra_ports.get(body, ())) + ports
     for body in tree.bodies:
         name = body.name
         children = [tree.body(c) for c in tree.children(name)]
@@ -241,7 +288,7 @@ def _components(
                     outputs=(f"xdd_J{name}_{name}", f"W_J{name}_{parent}"),
                 )
             )
-    return components
+    return components + _closure_components(tree)
 
 
 def build_tree_model(tree: SpacecraftTree, *, rotational: bool = False) -> LFR:

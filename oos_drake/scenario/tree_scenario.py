@@ -58,6 +58,7 @@ from oos_drake.scenario.tree_mission import Timeline
 
 __all__ = [
     "NotForTrees",
+    "TreeDockingPhase",
     "TreeMissionSpan",
     "TreeMoment",
     "TreeScenario",
@@ -87,14 +88,41 @@ class TreeMissionSpan:
     first_docking_time : float
         Where the baseline PD is tuned [s] (schema 1: the first docking): the start of the
         first phase that captures or docks a target, else ``0``.
-    docking_phases : tuple
-        The docking studies of ``oos analyze`` (none for a tree yet).
+    docking_phases : tuple of TreeDockingPhase
+        The docking events (``oos analyze``'s docking studies, schema 1's phases 7 and 8): the
+        start of each docked phase whose previous phase does not hold the target at the same
+        ports.
     """
 
     t_start: float
     t_end: float
     first_docking_time: float
     docking_phases: tuple = ()
+
+
+@dataclass(frozen=True)
+class TreeDockingPhase:
+    """A docking event of a tree's mission: the docking study of ``oos analyze``.
+
+    Attributes
+    ----------
+    name : str
+        The docked phase (the study ``docking-<name>``).
+    time : float
+        Its start [s]: the configuration the study freezes.
+    spring_dampers : tuple of str
+        Names of the spring-dampers holding the target then (their blocks'
+        ``k_shear_<name>``, ...): the phase's own (swept by the study) first, then the previous
+        phase's if it holds the same target by a spring-damper at other ports (a closed loop,
+        as schema 1's phase 8).
+    description : str
+        What the study models, one line.
+    """
+
+    name: str
+    time: float
+    spring_dampers: tuple
+    description: str = ""
 
 
 @dataclass(frozen=True)
@@ -274,7 +302,8 @@ class TreeScenario:
     def docking_values(self, phase: str, times) -> dict[str, np.ndarray]:
         """Scheduled block values ``tau_<body>`` of :meth:`docking_model` at mission ``times``
         [s] within docked phase ``phase`` (the timeline's angles; the target's drives at their
-        file angles).
+        file angles) and the spring-damper's known coefficients (those without a declared
+        range: blocks over ``[0, 2 x nominal]`` in the model, for the docking study's sweep).
 
         Raises
         ------
@@ -282,16 +311,118 @@ class TreeScenario:
             ``phase`` is not a docked phase, or a time outside it.
         """
         from oos_drake.scenario.tree import docked_tree
-        from oos_drake.scenario.tree_model import tree_values
+        from oos_drake.scenario.tree_model import docking_block_names, tree_values
 
-        docked = docked_tree(self.tree, self._docking(phase))
+        docking = self._docking(phase)
+        docked = docked_tree(self.tree, docking)
         times = np.atleast_1d(np.asarray(times, dtype=float))
         rows = []
         for t in times:
             if self.timeline.phase_at(t) != phase:
                 raise ValueError(f"docking_values: t = {t:g} s is not in phase {phase!r}")
             rows.append(tree_values(docked, self.timeline.angles(t)))
-        return {name: np.array([row[name] for row in rows]) for name in rows[0]}
+        values = {name: np.array([row[name] for row in rows]) for name in rows[0]}
+        known = [
+            ("k_shear", docking.stiffness_percent),
+            ("k_tors", docking.stiffness_percent),
+            ("d_shear", docking.damping_percent),
+            ("d_tors", docking.damping_percent),
+        ]
+        names = docking_block_names(docking)
+        values.update(
+            {names[k]: np.full(times.size, getattr(docking, k)) for k, p in known if p == 0}
+        )  # fmt: skip
+        return values
+
+    def docking_event(self, phase: str):
+        """``(docking, held)``: the spring-damper docked phase ``phase`` starts with and the
+        previous phase's spring-damper still holding the same target at other ports (a tuple,
+        empty or one :class:`~oos_drake.scenario.tree_mission.Docking`): the plant of the
+        docking study (:meth:`docking_plant`). A previous phase that holds the target welded
+        (``captured``) is released at the docking instant in that plant (a weld inside a loop
+        is not modelled: declare that hold ``docked`` to keep it).
+
+        Raises
+        ------
+        ValueError
+            ``phase`` is not a docked phase.
+        """
+        docking = self._docking(phase)
+        phases = self.tree.mission.phases
+        index = next(i for i, p in enumerate(phases) if p.name == phase)
+        previous = phases[index - 1].docked if index > 0 else None
+        if previous is None or previous.connection == docking.connection:
+            return docking, ()
+        same = _same_target(self.tree, previous.target_port, docking.target_port)
+        return docking, ((previous,) if same else ())
+
+    def docking_plant(self, phase: str, stiffness, *, damping=None):
+        """The uncertain plants of the docking study of phase ``phase`` (``docking-<phase>``,
+        schema 1's :func:`oos_drake.analysis.models.docking_plant`): the configuration frozen
+        at the phase's start, the target held by the phase's spring-damper, whose stiffness
+        (shear [N/m] and torsion [N m/rad] alike) takes each value of ``stiffness``, and by the
+        previous phase's spring-damper at other ports if it still holds it
+        (:meth:`docking_event`, at its file values: schema 1's phase 8).
+
+        Parameters
+        ----------
+        phase : str
+            A docking event (``mission.docking_phases``).
+        stiffness : array_like
+            Swept stiffness values [N/m = N m/rad], >= 0.
+        damping : float, optional
+            Damping of the swept spring-damper [N s/m = N m s/rad], shear and torsion; default:
+            the file's (its blocks stay uncertain when the file declares them so).
+
+        Returns
+        -------
+        LFR
+            Model array ``(len(stiffness),)`` ``[F; T]_G -> [a; wdot]_G``; blocks: the tree's
+            and the target's uncertain ones, the declared-uncertain spring-damper ones.
+        """
+        from oos_drake.lfr import usubs
+        from oos_drake.scenario.tree import docked_tree
+        from oos_drake.scenario.tree_model import (
+            build_tree_model,
+            docking_block_names,
+            tree_values,
+        )
+
+        if phase not in [p.name for p in self.mission.docking_phases]:
+            raise ValueError(
+                f"scenario {self.name}: {phase!r} is not a docking event (docking phases: "
+                f"{', '.join(p.name for p in self.mission.docking_phases) or 'none'})"
+            )
+        stiffness = np.atleast_1d(np.asarray(stiffness, dtype=float))
+        if np.any(stiffness < 0) or not np.all(np.isfinite(stiffness)):
+            raise ValueError("docking: stiffness values must be finite and >= 0")
+        docking, held = self.docking_event(phase)
+        tree = docked_tree(self.tree, docking, held)
+        event = next(p for p in self.mission.docking_phases if p.name == phase)
+        n = stiffness.size
+        values = {
+            k: np.full(n, v) for k, v in tree_values(tree, self.timeline.angles(event.time)).items()
+        }
+        names = docking_block_names(docking)
+        values[names["k_shear"]] = values[names["k_tors"]] = stiffness
+        if damping is not None:
+            values[names["d_shear"]] = values[names["d_tors"]] = np.full(n, float(damping))
+        elif docking.damping_percent == 0:
+            values.update(
+                {names[k]: np.full(n, getattr(docking, k)) for k in ("d_shear", "d_tors")}
+            )
+        for spring in held:
+            known = [
+                ("k_shear", spring.stiffness_percent),
+                ("k_tors", spring.stiffness_percent),
+                ("d_shear", spring.damping_percent),
+                ("d_tors", spring.damping_percent),
+            ]
+            names = docking_block_names(spring)
+            values.update(
+                {names[k]: np.full(n, getattr(spring, k)) for k, percent in known if percent == 0}
+            )  # fmt: skip
+        return usubs(build_tree_model(tree), values)
 
     def _docking(self, phase: str):
         phases = () if self.tree.mission is None else self.tree.mission.phases
@@ -388,10 +519,46 @@ def tree_scenario(document: Mapping[str, Any], source: Path) -> TreeScenario:
         ),
         0.0,
     )
-    span = TreeMissionSpan(0.0, float(starts[-1]), first_hold)
+    span = TreeMissionSpan(
+        0.0, float(starts[-1]), first_hold, _docking_events(tree, phases, starts)
+    )
     if tree.control is None:  # parse_tree requires [control]; defensive for the type checker
         raise ScenarioError(source.name, "[control] is required")
     return TreeScenario(tree, timeline, span, Path(source))
+
+
+def _same_target(tree: SpacecraftTree, port: str, other: str) -> bool:
+    """Whether two target ports are on one target."""
+    return any(port in t.ports and other in t.ports for t in tree.targets.values())
+
+
+def _docking_events(tree, phases, starts) -> tuple[TreeDockingPhase, ...]:
+    """The docking events of a mission's phases (:attr:`TreeMissionSpan.docking_phases`)."""
+    events = []
+    for index, phase in enumerate(phases):
+        docking = phase.docked
+        previous = phases[index - 1] if index > 0 else None
+        if docking is None or (
+            previous is not None
+            and previous.docked is not None
+            and previous.docked.connection == docking.connection
+        ):
+            continue
+        names = [docking.label]
+        line = f"{docking.port}-{docking.target_port} docks through {docking.label}"
+        held = None if previous is None else (previous.docked or previous.captured)
+        if previous is not None and previous.captured is not None:
+            held = previous.captured if _same_target(tree, held[1], docking.target_port) else None
+        if previous is not None and previous.docked is not None:
+            if not _same_target(tree, previous.docked.target_port, docking.target_port):
+                held = None
+        if held is not None and previous.docked is not None:
+            names.append(previous.docked.label)
+            line += f" while {previous.docked.label} still holds it (closed loop)"
+        elif held is not None:
+            line += f" (the capture {held[0]}-{held[1]} released at this instant)"
+        events.append(TreeDockingPhase(phase.name, float(starts[index]), tuple(names), line))
+    return tuple(events)
 
 
 def unsupported_stages(scenario_file: str | Path) -> dict[str, str]:
