@@ -143,6 +143,7 @@ def _build(
     target_directory: Path | None = None,
     weld: tuple[str, str] | None = None,
     docking=None,
+    also: tuple = (),
     X_W_target: RigidTransform | None = None,
     model_tree: SpacecraftTree | None = None,
 ) -> TreeDiagram:
@@ -172,15 +173,16 @@ def _build(
                 name=f"{target.root}_floating",
                 parent=plant.GetBodyByName(tree.root, top).body_frame(),
             )
-            k = [docking.k_shear] * 3, [docking.k_tors] * 3
-            d = [docking.d_shear] * 3, [docking.d_tors] * 3
-            plant.AddForceElement(
-                LinearBushingRollPitchYaw(
-                    plant.GetFrameByName(docking.port, top),
-                    plant.GetFrameByName(docking.target_port, target_top),
-                    k[1], d[1], k[0], d[0],
-                )
-            )  # fmt: skip
+            for spring in (docking, *also):  # also: more bushings on the same target
+                k = [spring.k_shear] * 3, [spring.k_tors] * 3
+                d = [spring.d_shear] * 3, [spring.d_tors] * 3
+                plant.AddForceElement(
+                    LinearBushingRollPitchYaw(
+                        plant.GetFrameByName(spring.port, top),
+                        plant.GetFrameByName(spring.target_port, target_top),
+                        k[1], d[1], k[0], d[0],
+                    )
+                )  # fmt: skip
     root = plant.GetBodyByName(tree.root, top)
     hub_joint = add_floating_joint(plant, root, RigidTransform(), name=f"{tree.root}_floating")
     plant.Finalize()
@@ -233,7 +235,10 @@ def build_captured_diagram(tree: SpacecraftTree, port: str, target_port: str) ->
 
 
 def build_docked_diagram(
-    tree: SpacecraftTree, docking, angles: Mapping[str, float] | None = None
+    tree: SpacecraftTree,
+    docking,
+    angles: Mapping[str, float] | None = None,
+    also: tuple = (),
 ) -> TreeDiagram:
     """The Drake twin of ``tree`` with a target held by a spring-damper: the tree's SDF and the
     target's own SDF parsed as two models, the target on its own floating joint, a
@@ -243,8 +248,12 @@ def build_docked_diagram(
     The target's rest pose (ports coinciding, axes aligned, at the joint ``angles`` [rad]) is
     found by Drake's forward kinematics of the tree's twin and of the target's; the handles'
     ``tree`` is :func:`oos_drake.scenario.tree.docked_tree` (for the joint names).
+
+    ``also``: more spring-dampers holding the same target (one more bushing each, between its
+    port frames; a closed loop: at ``angles`` their ports are expected to coincide too, as in
+    a docking event's configuration, else the bushing is preloaded).
     """
-    model_tree = docked_tree(tree, docking)  # KeyError on unknown ports
+    model_tree = docked_tree(tree, docking, tuple(also))  # KeyError on unknown ports
     target = next(t for t in tree.targets.values() if docking.target_port in t.ports)
     chosen = tree.joint_angles(angles)
     X_W_D = _port_pose_in_world(build_tree_diagram(tree), docking.port, chosen)
@@ -259,6 +268,7 @@ def build_docked_diagram(
             target=target,
             target_directory=target_directory,
             docking=docking,
+            also=tuple(also),
             X_W_target=X_W_D @ X_T_D.inverse(),
             model_tree=model_tree,
         )
