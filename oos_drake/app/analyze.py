@@ -147,7 +147,8 @@ def analyze(scenario, controller, options, out):
 
 
 def _docking_phases(value: str | None, scenario) -> tuple[str, ...]:
-    """``--docking``'s phases; None: every docking phase of the scenario (none for a tree)."""
+    """``--docking``'s phases; None: every docking phase of the scenario (a tree's: the docked
+    phases that start a docking, ``TreeMissionSpan.docking_phases``)."""
     if value is None:
         return tuple(str(p.name) for p in scenario.mission.docking_phases)
     return tuple(p for p in value.split(",") if p)
@@ -602,7 +603,7 @@ def register(subparsers) -> None:
         "--docking",
         default=None,
         help="docking phases (comma-separated; default: the scenario's, the paper's 7,8; "
-        "none for a schema-2 tree)",
+        "a schema-2 tree's: its docked phases that start a docking)",
     )
     parser.add_argument("--docking-points", type=int, default=300, help="stiffness values")
     parser.add_argument(

@@ -43,6 +43,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -397,6 +398,25 @@ class TreeScenario:
         if np.any(stiffness < 0) or not np.all(np.isfinite(stiffness)):
             raise ValueError("docking: stiffness values must be finite and >= 0")
         docking, held = self.docking_event(phase)
+        # the swept coefficients are values, not uncertain: their blocks must span the sweep
+        # (a known one's block spans [0, 2 x nominal], schema 1's; the nominal is not used)
+        top = float(stiffness.max())
+        if docking.stiffness_percent > 0 or 2.0 * min(docking.k_shear, docking.k_tors) < top:
+            docking = dataclasses.replace(
+                docking,
+                stiffness_percent=0.0,
+                k_shear=max(docking.k_shear, top),
+                k_tors=max(docking.k_tors, top),
+            )
+        if damping is not None and (
+            docking.damping_percent > 0 or 2.0 * min(docking.d_shear, docking.d_tors) < damping
+        ):
+            docking = dataclasses.replace(
+                docking,
+                damping_percent=0.0,
+                d_shear=max(docking.d_shear, float(damping)),
+                d_tors=max(docking.d_tors, float(damping)),
+            )
         tree = docked_tree(self.tree, docking, held)
         event = next(p for p in self.mission.docking_phases if p.name == phase)
         n = stiffness.size

@@ -221,9 +221,9 @@ def test_converted_paper_synthesis_and_analysis_inputs_equal_schema_1s():
     only its frequency response), the synthesis model array at ``oos run --quick``'s 40
     configurations (A, B, C, D at the nominal and at random values of the real parameters; same
     parameters, bounds and nominal values), the analysis model array there, the requirements,
-    the baseline's tuning time and the analysis options apart from the docking studies (schema
-    1's phases 7 and 8; none on a tree yet). The scheduled values at the 330 configurations of
-    the full analysis: the test above."""
+    the baseline's tuning time and the analysis options apart from the names of the docking
+    studies (schema 1's phases 7 and 8 at the same instants). The scheduled values at the 330
+    configurations of the full analysis: the test above."""
     import dataclasses
     from pathlib import Path
 
@@ -270,4 +270,8 @@ def test_converted_paper_synthesis_and_analysis_inputs_equal_schema_1s():
         pipeline_analysis_options(s, quick=True, workers=1, scheduler=None, grid_only=False)
         for s in (converted, paper)
     ]
-    assert options[0] == dataclasses.replace(options[1], docking_phases=())
+    # the docking studies: schema 1's phases 7, 8 are the tree's docking events (named after
+    # their phases; their plants: tests/tree/test_tree_docking.py)
+    events = {p.name: p.time for p in converted.mission.docking_phases}
+    assert list(events.values()) == [p.time for p in paper.mission.docking_phases]
+    assert options[0] == dataclasses.replace(options[1], docking_phases=tuple(events))
