@@ -16,7 +16,8 @@ SMALLER_ARGV = {
 def reduce_run_stages(monkeypatch, *, skip: dict[str, str] | None = None) -> None:
     """Make ``oos run``'s stages small: synthesis on 4 configurations; analysis as
     ``oos analyze --configurations 4 --points-per-decade 3 --no-sensitivity --no-time-check
-    --performance-models 1 --performance-points 5 --spike-budget 5 --iterations 20``; margins
+    --performance-models 1 --performance-points 5 --docking-points 3 --spike-budget 5
+    --iterations 20``; margins
     on 2 configurations; ``skip`` adds stages the run leaves out (name -> reason)."""
     import oos_drake.app.analyze as analyze
     import oos_drake.app.pipeline as pipeline
@@ -42,6 +43,7 @@ def reduce_run_stages(monkeypatch, *, skip: dict[str, str] | None = None) -> Non
             time_check=False,
             performance_models=1,
             performance_points=5,
+            docking_points=3,
             spike_budget=5.0,
             sweep=dataclasses.replace(options.sweep, upper_iterations=20),
         )
