@@ -347,29 +347,32 @@ def open_loop_twin(tree: SpacecraftTree, mating: tuple[str, str] | None = None):
     Returns
     -------
     TreeDiagram
-        Handles for :func:`~oos_drake.multibody.tree_plant.linearize_tree` (the chaser's
-        revolute joints).
+        Handles for :func:`~oos_drake.multibody.tree_plant.linearize_tree`: its ``tree`` is
+        ``tree``, or with a ``mating`` :func:`~oos_drake.scenario.tree.captured_tree` (the
+        welded target's revolute joints among the handles' joints, so that
+        ``linearize_tree`` locks them too: at their file angles unless given).
 
     Raises
     ------
     ValueError
-        A welded target with revolute joints of its own (not supported here), or an unknown
-        port.
+        An unknown port.
     """
     from oos_drake.multibody.linearization import add_hub_io
     from oos_drake.multibody.tree_plant import TreeDiagram
+    from oos_drake.scenario.tree import captured_tree
 
     builder = DiagramBuilder()
-    plant, hub_joint, held = _add_twin_plant(builder, tree, mating)
-    if held:
-        raise ValueError("open_loop_twin: a welded target with revolute joints is not supported")
+    plant, hub_joint, _ = _add_twin_plant(builder, tree, mating)
     ports = add_hub_io(builder, plant, hub_joint)
     diagram = builder.Build()
-    revolute = {name: plant.GetJointByName(joint_name(name)) for name in tree.revolute_bodies}
+    model_tree = tree if mating is None else captured_tree(tree, *mating)
+    revolute = {
+        name: plant.GetJointByName(joint_name(name)) for name in model_tree.revolute_bodies
+    }
     return TreeDiagram(
         diagram=diagram,
         plant=plant,
-        tree=tree,
+        tree=model_tree,
         ports=ports,
         hub_joint=hub_joint,
         revolute_joints=MappingProxyType(revolute),

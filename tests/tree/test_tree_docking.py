@@ -276,3 +276,32 @@ def test_oos_analyze_studies_a_trees_docking(pair, tmp_path, capsys):
     row = peaks[peaks["study"] == "docking-soft_dock"]
     assert list(row["subset"]) == ["total"]
     assert 0 < float(row["mu lower [-]"].iloc[0]) <= float(row["mu upper [-]"].iloc[0])
+
+
+@pytest.mark.drake
+@pytest.mark.parametrize("time", [500.0, 1200.0])
+def test_open_loop_twin_welds_a_target_with_its_own_drives(converted, time):
+    """The converted paper's target has two array drives (SA3, SA4): the open-loop twin welds it
+    at J7 (500 s) or D1 (1200 s) with those joints locked at their file angles, against the
+    switched mission LFR with every real block at a random value in its range (the target's
+    mass, inertias and array modes written into its own SDF)."""
+    pytest.importorskip("pydrake")
+    from oos_drake.multibody.cross_check import VALIDATION_OMEGA, compare_systems
+    from oos_drake.multibody.tree_plant import linearize_tree
+    from oos_drake.multibody.tree_twin import mating_at, open_loop_twin, tree_with_values
+
+    model = converted.mission_model()
+    blocks = {n: b for n, b in model.uncertainty.items() if b.quantity not in ("angle", "switch")}
+    assert {"m_RH2", "w1_SA3", "w1_SA4"} <= set(blocks)
+    rng = np.random.default_rng(int(time))
+    values = _draw(blocks, rng)
+    scheduled = {n: float(v[0]) for n, v in converted.mission_values([time]).items()}
+    titop = usubs(model, values | scheduled).nominal.to_ss()
+    mating = mating_at(converted.timeline, time)
+    assert mating == (("J7", "D2") if time < 880 else ("D1", "D3"))
+    handles = open_loop_twin(tree_with_values(converted.tree, values), mating)
+    assert {"SA3", "SA4"} <= set(handles.revolute_joints)
+    drake = linearize_tree(handles, converted.timeline.angles(time))
+    result = compare_systems(f"t = {time}", drake, titop, VALIDATION_OMEGA)
+    assert result.passed and result.max_relative_error <= 1e-8, result
+    assert result.n_states == (48, 48), result

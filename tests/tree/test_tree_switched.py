@@ -14,6 +14,7 @@ from __future__ import annotations
 import tomllib
 
 import numpy as np
+import pandas as pd
 import pytest
 import tomli_w
 from reduced_run import reduce_run_stages
@@ -231,6 +232,9 @@ def test_oos_run_on_the_servicer_runs_controller_analysis_and_margins(tmp_path, 
         assert np.linalg.eigvals(A).real.max() < 0, corner
     summary = json.loads((out / "analysis" / "summary.json").read_text())
     assert summary["scenario"]["name"] == "servicer_7dof"
+    # the berthing is a docking study (its stiffness sweep: 3 values at reduced size)
+    sweep = pd.read_parquet(out / "analysis" / "docking_berthed.parquet")
+    assert sweep["stiffness [N/m or N m/rad]"].nunique() == 3
 
 
 def test_synth_on_tip_waypoints_names_the_solve_command(tmp_path, capsys):
