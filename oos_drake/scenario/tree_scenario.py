@@ -21,6 +21,11 @@ unchanged: the plant is :func:`~oos_drake.scenario.tree_model.build_tree_model` 
 ``w<i>_<body>``, ``m_<body>``, ``J.._<body>``: the analysis subsets follow from each block's
 quantity), the scheduled blocks ``tau_<body> = tan(angle / 4)`` of the timeline's joint angles.
 
+Each docking event of the mission (a docked phase that starts a docking) is a docking study of
+``oos analyze``, as schema 1's phases 7 and 8: :attr:`TreeMissionSpan.docking_phases`,
+:meth:`TreeScenario.docking_plant` (the stiffness swept at the event's configuration, a
+spring-damper still holding the target kept: a closed loop).
+
 What a tree does not provide (yet) is refused by name: the schema-1 data of the paper's
 topology (``hubs``, ``arrays``, ``arm``, ``ports``, ``docking``, ...: the Drake mission twin
 of the confirmation and the campaign's Drake simulator read them) raise :class:`NotForTrees`,
@@ -154,7 +159,9 @@ class TreeMoments:
     moments : Mapping[str, TreeMoment]
         Phase boundaries ``"1"`` .. ``"K+1"``.
     docking_phases : Mapping
-        Empty (no docking studies on a tree yet).
+        Empty: a tree's docking studies are ``scenario.mission.docking_phases``
+        (:class:`TreeDockingPhase`, their plants :meth:`TreeScenario.docking_plant`), not
+        schema 1's named configurations.
     """
 
     moments: Mapping[str, TreeMoment]
