@@ -573,17 +573,13 @@ def _docking_events(tree, phases, starts) -> tuple[TreeDockingPhase, ...]:
             continue
         names = [docking.label]
         line = f"{docking.port}-{docking.target_port} docks through {docking.label}"
-        held = None if previous is None else (previous.docked or previous.captured)
-        if previous is not None and previous.captured is not None:
-            held = previous.captured if _same_target(tree, held[1], docking.target_port) else None
-        if previous is not None and previous.docked is not None:
-            if not _same_target(tree, previous.docked.target_port, docking.target_port):
-                held = None
-        if held is not None and previous.docked is not None:
-            names.append(previous.docked.label)
-            line += f" while {previous.docked.label} still holds it (closed loop)"
-        elif held is not None:
-            line += f" (the capture {held[0]}-{held[1]} released at this instant)"
+        spring = None if previous is None else previous.docked
+        weld = None if previous is None else previous.captured
+        if spring is not None and _same_target(tree, spring.target_port, docking.target_port):
+            names.append(spring.label)
+            line += f" while {spring.label} still holds it (closed loop)"
+        elif weld is not None and _same_target(tree, weld[1], docking.target_port):
+            line += f" (the capture {weld[0]}-{weld[1]} released at this instant)"
         events.append(TreeDockingPhase(phase.name, float(starts[index]), tuple(names), line))
     return tuple(events)
 
