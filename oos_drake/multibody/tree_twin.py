@@ -366,9 +366,7 @@ def open_loop_twin(tree: SpacecraftTree, mating: tuple[str, str] | None = None):
     ports = add_hub_io(builder, plant, hub_joint)
     diagram = builder.Build()
     model_tree = tree if mating is None else captured_tree(tree, *mating)
-    revolute = {
-        name: plant.GetJointByName(joint_name(name)) for name in model_tree.revolute_bodies
-    }
+    revolute = {name: plant.GetJointByName(joint_name(name)) for name in model_tree.revolute_bodies}
     return TreeDiagram(
         diagram=diagram,
         plant=plant,
