@@ -118,12 +118,20 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(quick_run):
     assert "0 run now" in second.stdout
 
 
-def _record_analyses(monkeypatch, analyses, margins=None):
+def _record_analyses(monkeypatch, analyses, margins=None, confirms=None):
     """Replace the analysis stage's computation by a recorder of ``(controller, options)``,
-    the margins stage's likewise (into ``margins``, when given)."""
+    the margins and confirmation stages' likewise (into ``margins``, ``confirms``, when
+    given)."""
     import oos_drake.app.analyze as analyze
 
     margins = [] if margins is None else margins
+    confirms = [] if confirms is None else confirms
+    monkeypatch.setattr(analyze, "confirm_inputs", lambda *args: args)
+    monkeypatch.setattr(
+        analyze,
+        "confirm",
+        lambda analysis, controller, scenario, options, out: confirms.append((controller, options)),
+    )
     monkeypatch.setattr(analyze, "analysis_controller", lambda path, scenario, loop=None: path)
     monkeypatch.setattr(
         analyze,
@@ -145,10 +153,10 @@ def test_oos_run_passes_the_scheduler_to_the_stages_with_parallel_work(tmp_path,
     import oos_drake.app.pipeline as pipeline
     from oos_drake.app.main import build_parser
 
-    calls, analyses, margins = [], [], []
+    calls, analyses, margins, confirms = [], [], [], []
     monkeypatch.setattr(pipeline, "_oos", lambda *argv: calls.append([str(a) for a in argv]))
     monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: None)
-    _record_analyses(monkeypatch, analyses, margins)
+    _record_analyses(monkeypatch, analyses, margins, confirms)
     argv = ["run", "--out", str(tmp_path), "--scheduler", "dask", "--workers", "3"]
     assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
     ((controller, options),) = analyses  # the analysis stage: a function call, not argv
@@ -158,8 +166,11 @@ def test_oos_run_passes_the_scheduler_to_the_stages_with_parallel_work(tmp_path,
     assert margin_options.analysis == tmp_path / "analysis"
     assert margin_options.configurations == pipeline.MARGIN_CONFIGURATIONS
     assert (options.sweep.scheduler, options.sweep.n_jobs) == ("dask", 3)
+    ((confirmed, confirm_options),) = confirms  # the confirmation stage: a function call
+    assert confirmed == tmp_path / "controller" / "controller.json"
+    assert (confirm_options.scheduler, confirm_options.workers) == ("dask", 3)
     by_command = {tuple(c[:2]) if c[0] == "campaign" else (c[0],): c for c in calls}
-    for key in [("synth",), ("confirm",), ("campaign", "run")]:
+    for key in [("synth",), ("campaign", "run")]:
         argv = by_command[key]
         assert argv[argv.index("--scheduler") + 1] == "dask", key
         assert argv[argv.index("--workers") + 1] == "3", key

@@ -47,6 +47,10 @@ def stubbed(monkeypatch):
         "margins",
         lambda scenario, controller, options, out: calls.append(["margins", scenario.source]),
     )
+    monkeypatch.setattr(analyze, "confirm_inputs", lambda analysis, path, scenario: (scenario,))
+    monkeypatch.setattr(
+        analyze, "confirm", lambda scenario, options, out: calls.append(["confirm", scenario])
+    )
 
     def fake_report(folder, out, campaign):
         calls.append(["report"])
@@ -82,7 +86,7 @@ def test_scenario_edits_recompute_exactly_the_dependent_stages(tmp_path, stubbed
     synth = next(c for c in stubbed if c[0] == "synth")
     assert synth[-2:] == ["--scenario", str(scenario.resolve())]
     confirm = next(c for c in stubbed if c[0] == "confirm")
-    assert confirm[-2:] == ["--scenario", str(scenario.resolve())]
+    assert confirm == ["confirm", str(scenario.resolve())]
 
     _run(out, scenario, campaign)
     assert _ran(out) == []

@@ -73,8 +73,11 @@ import scipy.signal
 __all__ = [
     "BodyInertia",
     "ConfirmOptions",
+    "ConfirmationOptions",
+    "ConfirmationResult",
     "Peak",
     "boundary_along_ray",
+    "compute_confirmation",
     "confirm_peaks",
     "physical_alpha_max",
     "physical_violation",
@@ -1059,47 +1062,176 @@ def confirm_peaks(
     return table, pd.concat(histories, ignore_index=True) if histories else pd.DataFrame()
 
 
-def confirmation_figure(
-    histories: pd.DataFrame, row: Mapping, path: Path, *, settle: float = ConfirmOptions.settle
-) -> None:
-    """Hub attitude on both sides of the nonlinear boundary of one peak (PNG): the window the
-    oscillation is identified on (after ``settle`` [s]), each axis about its mean over the second
-    half (given in the legend), scaled to the critical oscillation there (the transient leaves
-    the plot)."""
-    from oos_drake.analysis.figures import pyplot, save_figure
+#: Columns of each peak's record in the confirmation summary (:meth:`ConfirmationResult.summary`).
+PEAK_SUMMARY_COLUMNS = (
+    "study",
+    "subset",
+    "critical frequency [Hz]",
+    "alpha linear continuous [-]",
+    "alpha linear sampled [-]",
+    "alpha physical max [-]",
+    "alpha nonlinear [-]",
+    "oscillation frequency [Hz]",
+    "status",
+)
 
-    plt = pyplot()
 
-    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True, constrained_layout=True)
-    for ax, side in zip(axes, ("stable", "unstable"), strict=True):
-        part = histories[(histories["side"] == side) & (histories["time [s]"] >= settle)]
-        if part.empty:
-            ax.text(0.5, 0.5, f"no {side} run", ha="center", transform=ax.transAxes)
-            continue
-        alpha = float(part["alpha [-]"].iloc[0])
-        # zoom on the second half of the window: the critical oscillation, not the transient,
-        # about its mean (a realized Delta_add leaves the hub attitude at an offset)
-        tail = part[part["time [s]"] >= 0.5 * (settle + part["time [s]"].max())]
-        columns = [f"phi_{a} [rad]" for a in AXES]
-        offset = tail[columns].mean()
-        for a, column in zip(AXES, columns, strict=True):
-            ax.plot(
-                part["time [s]"],
-                1e6 * (part[column] - offset[column]),
-                label=f"{a} axis ({1e6 * offset[column]:+.0f} urad)",
-            )
-        top = 1.5e6 * float(np.abs((tail[columns] - offset).to_numpy()).max())
-        if top > 0:
-            ax.set_ylim(-top, top)
-        ax.set_ylabel("hub attitude error - mean [urad]")
-        ax.set_title(f"{side} side: alpha = {alpha:.4f}", fontsize=10)
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="upper right", fontsize=8)
-    axes[-1].set_xlabel(f"time since the window start [s] (first {settle:g} s of transient cut)")
-    fig.suptitle(
-        f"{row['study']} / {row['subset']}: nonlinear boundary alpha = "
-        f"{row['alpha nonlinear [-]']:.4f} (linear sampled {row['alpha linear sampled [-]']:.4f}, "
-        f"continuous {row['alpha linear continuous [-]']:.4f})",
-        fontsize=10,
+@dataclass(frozen=True)
+class ConfirmationOptions:
+    """What the confirmation stage computes (``oos confirm``'s options; the analysis folder,
+    the controller and the scenario apart).
+
+    Attributes
+    ----------
+    twin : ConfirmOptions
+        The nonlinear confirmation's runs (``--alpha-limit``; the rest at their defaults).
+    workers : int
+        Worker processes, one peak or worst-case gain each (``--workers``).
+    scheduler : str or None
+        Where they run (``--scheduler``; :func:`oos_drake.processes.make_executor`).
+    progress : bool
+        tqdm progress bar of the peaks (``not --quiet``).
+    """
+
+    twin: ConfirmOptions = field(default_factory=ConfirmOptions)
+    workers: int = 1
+    scheduler: str | None = None
+    progress: bool = True
+
+    def __post_init__(self):
+        if not self.workers >= 1:
+            raise ValueError(f"--workers {self.workers}: need at least 1 worker")
+
+
+@dataclass(frozen=True)
+class ConfirmationResult:
+    """The confirmation stage of one analysis (:func:`compute_confirmation`): what
+    ``oos confirm`` writes, as one frozen object (no file, no figure).
+
+    Attributes
+    ----------
+    controller : Controller
+        The analysis' controller.
+    scenario : Scenario
+        The analysis' scenario (the twin's).
+    options : ConfirmationOptions
+        What was computed.
+    confirmation : pandas.DataFrame
+        One row per certified peak (:func:`confirm_peak`; ``confirmation.parquet``).
+    histories : pandas.DataFrame
+        Hub attitude histories on both sides of each nonlinear boundary
+        (``confirmation_histories.parquet``; empty without nonlinear runs).
+    performance : pandas.DataFrame
+        One row per worst-case gain of the analysis
+        (:func:`oos_drake.analysis.performance_twin.confirm_performance`;
+        ``performance_confirmation.parquet``).
+    seconds : float
+        Wall time of the computation [s].
+    """
+
+    controller: object
+    scenario: object
+    options: ConfirmationOptions
+    confirmation: pd.DataFrame
+    histories: pd.DataFrame
+    performance: pd.DataFrame
+    seconds: float
+
+    def tables(self) -> dict[str, pd.DataFrame]:
+        """File stem -> table: ``confirmation``, ``confirmation_histories`` and
+        ``performance_confirmation`` (each written, empty ones included)."""
+        return {
+            Path(CONFIRMATION_FILE).stem: self.confirmation,
+            Path(HISTORIES_FILE).stem: self.histories,
+            "performance_confirmation": self.performance,
+        }
+
+    def peak_histories(self) -> list[tuple[pd.Series, pd.DataFrame]]:
+        """``(row, histories)`` of each peak of :attr:`confirmation` with nonlinear runs, in
+        table order (one figure each)."""
+        pairs = []
+        if self.histories.empty:
+            return pairs
+        for _, row in self.confirmation.iterrows():
+            part = self.histories[
+                (self.histories["study"] == row["study"])
+                & (self.histories["subset"] == row["subset"])
+            ]
+            if not part.empty:
+                pairs.append((row, part))
+        return pairs
+
+    def warnings(self) -> list[str]:
+        """One line per crossing the analysis missed (a note saying ``ABOVE`` its upper
+        bound): ``"<study> <subset>: <note>"``."""
+        lines = []
+        for _, row in self.confirmation.iterrows():
+            for note in str(row["notes"]).split("; "):
+                if "ABOVE" in note:
+                    lines.append(f"{row['study']} {row['subset']}: {note}")
+        return lines
+
+    def summary(self) -> dict:
+        """The record of the stage (what ``oos confirm`` prints): scenario, controller, each
+        peak's boundaries and status (:data:`PEAK_SUMMARY_COLUMNS`), the warnings, each
+        worst-case gain on the twin and the wall time [s]."""
+        from oos_drake.analysis.performance_twin import PERFORMANCE_SUMMARY_COLUMNS
+
+        peaks = self.confirmation
+        performance = self.performance
+        return {
+            "scenario": {"name": self.scenario.name, "source": str(self.scenario.source)},
+            "controller": {"label": self.controller.label, "source": self.controller.source},
+            "peaks": peaks[list(PEAK_SUMMARY_COLUMNS)].to_dict(orient="records")
+            if not peaks.empty
+            else [],
+            "warnings": self.warnings(),
+            "performance": performance[list(PERFORMANCE_SUMMARY_COLUMNS)].to_dict(orient="records"),
+            "time_s": round(self.seconds, 2),
+        }
+
+
+def compute_confirmation(
+    peaks, gain_cases, controller, scenario, options: ConfirmationOptions
+) -> ConfirmationResult:
+    """The confirmation stage: :func:`confirm_peaks` for the certified ``peaks`` and
+    :func:`~oos_drake.analysis.performance_twin.confirm_performance` for the worst-case
+    ``gain_cases``, on ``options.workers`` processes; nothing written
+    (:func:`~oos_drake.analysis.writers.write_confirmation` writes the result).
+
+    Parameters
+    ----------
+    peaks : list of Peak
+        The analysis' certified peaks (:func:`read_peaks`).
+    gain_cases : list of GainCase
+        Its worst-case gains
+        (:func:`~oos_drake.analysis.performance_twin.read_gain_cases`).
+    controller : Controller
+        The analysis' controller.
+    scenario : Scenario
+        The analysis' scenario: the twin and the linear models are built from it.
+    options : ConfirmationOptions
+
+    Returns
+    -------
+    ConfirmationResult
+    """
+    import time
+
+    from oos_drake.analysis.performance_twin import confirm_performance
+
+    start = time.perf_counter()
+    parallel = {"workers": options.workers, "scheduler": options.scheduler}
+    table, histories = confirm_peaks(
+        peaks, controller, scenario, options.twin, quiet=not options.progress, **parallel
     )
-    save_figure(fig, path, dpi=110, tight=False)
+    performance = confirm_performance(gain_cases, controller, scenario, **parallel)
+    return ConfirmationResult(
+        controller=controller,
+        scenario=scenario,
+        options=options,
+        confirmation=table,
+        histories=histories,
+        performance=performance,
+        seconds=time.perf_counter() - start,
+    )

@@ -1,4 +1,5 @@
-"""PNG figures of the analysis (paper Figs. muanalysis, performance, mu_analysis_SM, ...)."""
+"""PNG figures of the analysis (paper Figs. muanalysis, performance, mu_analysis_SM, ...), the
+margins and the confirmation on the twin."""
 
 from __future__ import annotations
 
@@ -330,3 +331,60 @@ def margins_figure(table: pd.DataFrame, path, rate_hz: float) -> Path:
         f"continuous loop (solid) vs exact {rate_hz:g} Hz sampled-data loop (dashed)"
     )
     return save_figure(fig, path)
+
+
+def confirmation_figures(result, out) -> list[Path]:
+    """One :func:`confirmation_figure` per peak of a
+    :class:`~oos_drake.analysis.confirm.ConfirmationResult` with nonlinear runs:
+    ``out/confirmation_<study>_<subset>.png``; their paths."""
+    settle = result.options.twin.settle
+    return [
+        confirmation_figure(
+            part, row, Path(out) / f"confirmation_{row['study']}_{row['subset']}.png", settle
+        )
+        for row, part in result.peak_histories()
+    ]
+
+
+def confirmation_figure(histories: pd.DataFrame, row, path, settle: float) -> Path:
+    """Hub attitude on both sides of the nonlinear boundary of one peak (PNG): the window the
+    oscillation is identified on (after ``settle`` [s]), each axis about its mean over the second
+    half (given in the legend), scaled to the critical oscillation there (the transient leaves
+    the plot)."""
+    from oos_drake.analysis.confirm import AXES
+
+    plt = pyplot()
+
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True, constrained_layout=True)
+    for ax, side in zip(axes, ("stable", "unstable"), strict=True):
+        part = histories[(histories["side"] == side) & (histories["time [s]"] >= settle)]
+        if part.empty:
+            ax.text(0.5, 0.5, f"no {side} run", ha="center", transform=ax.transAxes)
+            continue
+        alpha = float(part["alpha [-]"].iloc[0])
+        # zoom on the second half of the window: the critical oscillation, not the transient,
+        # about its mean (a realized Delta_add leaves the hub attitude at an offset)
+        tail = part[part["time [s]"] >= 0.5 * (settle + part["time [s]"].max())]
+        columns = [f"phi_{a} [rad]" for a in AXES]
+        offset = tail[columns].mean()
+        for a, column in zip(AXES, columns, strict=True):
+            ax.plot(
+                part["time [s]"],
+                1e6 * (part[column] - offset[column]),
+                label=f"{a} axis ({1e6 * offset[column]:+.0f} urad)",
+            )
+        top = 1.5e6 * float(np.abs((tail[columns] - offset).to_numpy()).max())
+        if top > 0:
+            ax.set_ylim(-top, top)
+        ax.set_ylabel("hub attitude error - mean [urad]")
+        ax.set_title(f"{side} side: alpha = {alpha:.4f}", fontsize=10)
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel(f"time since the window start [s] (first {settle:g} s of transient cut)")
+    fig.suptitle(
+        f"{row['study']} / {row['subset']}: nonlinear boundary alpha = "
+        f"{row['alpha nonlinear [-]']:.4f} (linear sampled {row['alpha linear sampled [-]']:.4f}, "
+        f"continuous {row['alpha linear continuous [-]']:.4f})",
+        fontsize=10,
+    )
+    return save_figure(fig, path, dpi=110, tight=False)

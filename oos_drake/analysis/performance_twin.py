@@ -55,6 +55,7 @@ __all__ = [
     "confirm_gain_case",
     "confirm_performance",
     "linear_twin_gain",
+    "read_gain_cases",
     "mission_values",
     "perturbed_loop",
     "phasor",
@@ -89,6 +90,20 @@ PERFORMANCE_CONFIRMATION_COLUMNS = [
     "worst input",
     "worst values",
 ]
+#: Columns of each worst-case gain's record in the confirmation summary (:func:`summary_line`).
+PERFORMANCE_SUMMARY_COLUMNS = (
+    "channel",
+    "subset",
+    "time [s]",
+    "frequency [Hz]",
+    "gain lower [-]",
+    "gain upper [-]",
+    "gain linear twin [-]",
+    "gain linear sampled [-]",
+    "gain twin [-]",
+    "peak ratio twin [-]",
+    "status",
+)
 #: LFR disturbance order ``[d_ext; n_sst; n_gyro]`` -> the flight software's noise-table column.
 _TABLE_COLUMNS = np.r_[6:9, 0:6]
 
@@ -560,27 +575,30 @@ def _gain_task(args):
         return confirm_gain_case(*args)
 
 
-def confirm_performance(
-    analysis, controller, scenario, options=None, *, workers=1, scheduler=None, quiet=False
-):
-    """:func:`confirm_gain_case` for every worst-case gain of an ``oos analyze`` folder, on
-    ``workers`` processes (``scheduler``: :func:`oos_drake.processes.make_executor`; spawned
+def read_gain_cases(analysis) -> list[GainCase]:
+    """The worst-case gains of an ``oos analyze`` folder (:func:`worst_gain_cases` of its
+    ``performance.parquet``; none without one)."""
+    from pathlib import Path
+
+    path = Path(analysis) / "performance.parquet"
+    return worst_gain_cases(pd.read_parquet(path)) if path.is_file() else []
+
+
+def confirm_performance(cases, controller, scenario, options=None, *, workers=1, scheduler=None):
+    """:func:`confirm_gain_case` for every worst-case gain ``cases`` (:func:`read_gain_cases`),
+    on ``workers`` processes (``scheduler``: :func:`oos_drake.processes.make_executor`; spawned
     workers, as :func:`oos_drake.analysis.confirm.confirm_peaks`).
 
     Returns
     -------
     pandas.DataFrame
         ``performance_confirmation.parquet`` (:data:`PERFORMANCE_CONFIRMATION_COLUMNS`; empty
-        when the folder has no ``performance.parquet``).
+        without cases).
     """
-    from pathlib import Path
-
     from oos_drake.analysis.confirm import Peak, _peak_models
     from oos_drake.analysis.subsets import uncertainty_subsets
     from oos_drake.processes import make_executor
 
-    path = Path(analysis) / "performance.parquet"
-    cases = worst_gain_cases(pd.read_parquet(path)) if path.is_file() else []
     if not cases:
         return pd.DataFrame(columns=PERFORMANCE_CONFIRMATION_COLUMNS)
     first = Peak("mission", "", cases[0].time, math.nan, cases[0].omega, 1.0, 1.0)
@@ -590,9 +608,6 @@ def confirm_performance(
     with make_executor(max(1, min(workers, len(tasks))), scheduler, method="spawn") as executor:
         futures = [executor.submit(_gain_task, task) for task in tasks]
         rows = [future.result() for future in futures]
-    if not quiet:
-        for row in rows:
-            print(summary_line(row))
     return pd.DataFrame(rows, columns=PERFORMANCE_CONFIRMATION_COLUMNS)
 
 
@@ -605,16 +620,3 @@ def summary_line(row) -> str:
         f"{row['gain linear sampled [-]']:6.3f}  twin {row['gain twin [-]']:6.3f}  (peak ratio "
         f"{row['peak ratio twin [-]']:.3f})  {row['status']}"
     )
-
-
-def print_performance_confirmation(folder) -> None:
-    """Print the performance confirmation of an ``oos confirm`` folder (nothing without one)."""
-    from pathlib import Path
-
-    path = Path(folder) / PERFORMANCE_CONFIRMATION_FILE
-    if not path.is_file():
-        return
-    table = pd.read_parquet(path)
-    print("worst-case gains on the twin (gain > 1: requirement violated):")
-    for _, row in table.iterrows():
-        print("  " + summary_line(row))

@@ -345,109 +345,125 @@ def _analysis_scenario(record, analysis, given) -> str | None:
     return str(path)
 
 
-def _confirm_controller(args):
-    """``(controller, scenario)`` of an analysis: the controller of ``--controller``, else
-    the one the analysis recorded (its gains must be the analysis', ``summary.json``), and the
-    scenario the analysis ran on (:func:`_analysis_scenario`)."""
+def confirm_inputs(analysis, path=None, scenario_file=None):
+    """What the confirmation of the ``oos analyze`` folder ``analysis`` reads: ``(peaks,
+    gain_cases, controller, scenario)``.
+
+    The certified peaks (:func:`~oos_drake.analysis.confirm.read_peaks`) and worst-case gains
+    (:func:`~oos_drake.analysis.performance_twin.read_gain_cases`) of the folder; the
+    controller of ``path`` (``--controller``), else the one the analysis recorded (its gains
+    must be the analysis', ``summary.json``); the scenario the analysis ran on
+    (:func:`_analysis_scenario`; ``scenario_file``, ``--scenario``, must be that one).
+
+    Raises
+    ------
+    ValueError
+        Not an analysis folder, a controller gone or with other gains, another scenario.
+    """
+    from oos_drake.analysis.confirm import read_peaks
+    from oos_drake.analysis.performance_twin import read_gain_cases
     from oos_drake.scenario.data import load_scenario
 
-    summary = _read_summary(args.analysis)
-    scenario = _analysis_scenario(summary.get("scenario"), args.analysis, args.scenario)
+    peaks = read_peaks(analysis)
+    summary = _read_summary(analysis)
+    scenario = _analysis_scenario(summary.get("scenario"), analysis, scenario_file)
     recorded = summary.get("controller", {})
-    path = args.controller
     if path is None and recorded.get("label") == "synthesized":
         path = recorded.get("source")
         if not path or not Path(path).exists():
             raise ValueError(
-                f"--analysis {args.analysis}: its controller {path} is gone; pass --controller"
+                f"--analysis {analysis}: its controller {path} is gone; pass --controller"
             )
     scenario = load_scenario(scenario)
     controller = scenario_controller(path, scenario)
     if not controller.system.equals(recorded_controller(recorded, controller.system)):
         raise ValueError(
-            f"--controller {path}: its gains differ from those the analysis {args.analysis} used"
+            f"--controller {path}: its gains differ from those the analysis {analysis} used"
         )
-    return controller, scenario
+    return peaks, read_gain_cases(analysis), controller, scenario
+
+
+def confirm_options(args):
+    """The :class:`~oos_drake.analysis.confirm.ConfirmationOptions` of ``oos confirm``'s
+    arguments."""
+    from oos_drake.analysis.confirm import ConfirmationOptions, ConfirmOptions
+
+    return ConfirmationOptions(
+        ConfirmOptions(alpha_limit=args.alpha_limit),
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=not args.quiet,
+    )
+
+
+def pipeline_confirm_options(workers: int, scheduler=None):
+    """The confirmation options of ``oos run``: ``oos confirm``'s defaults on ``workers``
+    processes of ``scheduler`` (what ``oos confirm --workers N [--scheduler S]`` builds)."""
+    from oos_drake.analysis.confirm import ConfirmationOptions
+
+    return ConfirmationOptions(workers=workers, scheduler=scheduler)
 
 
 def run_confirm(args) -> int:
-    """Confirm the analysis' certified peaks on the Drake twin; exit status 0."""
-    import time
+    """``oos confirm``: :func:`confirm` with the command line's options; exit status 0."""
+    from oos_drake.analysis.confirm import CONFIRMATION_FILE
 
-    from oos_drake.analysis.confirm import (
-        CONFIRMATION_FILE,
-        HISTORIES_FILE,
-        ConfirmOptions,
-        confirm_peaks,
-        confirmation_figure,
-        read_peaks,
-    )
-
-    peaks = read_peaks(args.analysis)
-    controller, scenario = _confirm_controller(args)
+    options = confirm_options(args)
+    inputs = confirm_inputs(args.analysis, args.controller, args.scenario)
     out = Path(args.out) if args.out else Path(args.analysis).parent / "confirm"
-    start = time.perf_counter()
+    atomic_folder(
+        out,
+        lambda tmp: confirm(*inputs, options, tmp),
+        marker=CONFIRMATION_FILE,
+        what="a confirmation",
+    )
+    print(f"outputs in {out}")
+    return 0
 
-    def work(tmp):
-        table, histories = confirm_peaks(
-            peaks,
-            controller,
-            scenario,
-            ConfirmOptions(alpha_limit=args.alpha_limit),
-            workers=args.workers,
-            scheduler=args.scheduler,
-            quiet=args.quiet,
-        )
-        table.to_parquet(tmp / CONFIRMATION_FILE)
-        histories.to_parquet(tmp / HISTORIES_FILE)
-        from oos_drake.analysis.performance_twin import (
-            PERFORMANCE_CONFIRMATION_FILE,
-            confirm_performance,
-        )
 
-        performance = confirm_performance(
-            args.analysis,
-            controller,
-            scenario,
-            workers=args.workers,
-            scheduler=args.scheduler,
-            quiet=True,
-        )
-        performance.to_parquet(tmp / PERFORMANCE_CONFIRMATION_FILE)
-        for _, row in table.iterrows():
-            if histories.empty:
-                continue
-            part = histories[
-                (histories["study"] == row["study"]) & (histories["subset"] == row["subset"])
-            ]
-            if not part.empty:
-                name = f"confirmation_{row['study']}_{row['subset']}.png"
-                confirmation_figure(part, row, tmp / name)
-        return table
+def confirm(peaks, gain_cases, controller, scenario, options, out):
+    """The confirmation stage: confirm the analysis' certified peaks and worst-case gains on
+    the Drake twin, write them in ``out``, print the table.
 
-    table = atomic_folder(out, work, marker=CONFIRMATION_FILE, what="a confirmation")
-    print(f"scenario: {scenario.name} ({scenario.source})")
+    Parameters
+    ----------
+    peaks, gain_cases, controller, scenario
+        From :func:`confirm_inputs`.
+    options : ConfirmationOptions
+    out : Path
+        The (new) output folder.
+
+    Returns
+    -------
+    ConfirmationResult
+    """
+    from oos_drake.analysis.confirm import compute_confirmation
+    from oos_drake.analysis.performance_twin import summary_line
+    from oos_drake.analysis.writers import write_confirmation
+
+    result = compute_confirmation(peaks, gain_cases, controller, scenario, options)
+    summary = write_confirmation(result, out)
+    print(f"scenario: {summary['scenario']['name']} ({summary['scenario']['source']})")
     print(f"controller: {controller.label} ({controller.source})")
     print(
         f"{'study':>10s} {'subset':>14s} {'f crit':>8s} {'a cont':>7s} {'a samp':>7s} "
         f"{'a phys':>7s} {'a nonl':>7s} {'f osc':>7s}  status"
     )
-    for _, r in table.iterrows():
+    for r in summary["peaks"]:
         print(
             f"{r['study']:>10s} {r['subset']:>14s} {r['critical frequency [Hz]']:8.4g} "
             f"{r['alpha linear continuous [-]']:7.4g} {r['alpha linear sampled [-]']:7.4g} "
             f"{r['alpha physical max [-]']:7.4g} {r['alpha nonlinear [-]']:7.4g} "
             f"{r['oscillation frequency [Hz]']:7.4g}  {r['status']}"
         )
-    for _, r in table.iterrows():
-        for note in str(r["notes"]).split("; "):
-            if "ABOVE" in note:  # a crossing the analysis missed: say it where it is read
-                print(f"WARNING {r['study']} {r['subset']}: {note}")
-    from oos_drake.analysis.performance_twin import print_performance_confirmation
-
-    print_performance_confirmation(out)
-    print(f"confirmation in {time.perf_counter() - start:.1f} s; outputs in {out}")
-    return 0
+    for warning in summary["warnings"]:  # a crossing the analysis missed: said where it is read
+        print(f"WARNING {warning}")
+    if summary["performance"]:
+        print("worst-case gains on the twin (gain > 1: requirement violated):")
+    for row in summary["performance"]:
+        print("  " + summary_line(row))
+    print(f"confirmation in {summary['time_s']:.1f} s")
+    return result
 
 
 def run_study_command(args) -> int:

@@ -216,11 +216,10 @@ def run_pipeline(args: argparse.Namespace) -> int:
         "validate", out / "validate", keys["validate"], lambda d: _validate(d, scenario), timings
     )
     controller = out / "controller" / "controller.json"
-    analyzed = ["--analysis", out / "analysis", "--controller", controller]
     commands = {  # in order: each stage reads the folders of those before it
         "controller": ["synth", *workers, *quick],
         "analysis": _analysis_stage(args, scenario, controller, grid_only=bool(grid_only)),
-        "confirm": ["confirm", *analyzed, *workers],
+        "confirm": _confirm_stage(args, scenario, controller, out / "analysis"),
         "margins": _margins_stage(scenario, controller, out / "analysis"),
     }
     for name, argv in commands.items():
@@ -351,6 +350,23 @@ def _margins_stage(scenario: Path, controller: Path, analysis: Path):
         loaded = load_scenario(str(scenario))
         options = pipeline_margins_options(analysis, MARGIN_CONFIGURATIONS)
         return margins(loaded, margins_controller(controller, loaded), options, folder)
+
+    return work
+
+
+def _confirm_stage(args, scenario: Path, controller: Path, analysis: Path):
+    """The confirmation stage of ``oos run``: ``work(folder)`` computing the
+    :class:`~oos_drake.analysis.confirm.ConfirmationResult` of the ``analysis`` folder with the
+    stage's controller on ``--workers`` processes (:func:`oos_drake.app.analyze.confirm`,
+    what ``oos confirm --analysis ANALYSIS --controller CONTROLLER --workers N [--scheduler S]``
+    runs) and writing it in ``folder``."""
+
+    def work(folder: Path):
+        from oos_drake.app.analyze import confirm, confirm_inputs, pipeline_confirm_options
+
+        options = pipeline_confirm_options(args.workers, getattr(args, "scheduler", None))
+        inputs = confirm_inputs(analysis, controller, str(scenario))
+        return confirm(*inputs, options, folder)
 
     return work
 

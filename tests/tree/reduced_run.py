@@ -9,7 +9,6 @@ import dataclasses
 SMALLER_ARGV = {
     "synth": ["--configurations", "4", "--restarts", "0", "--max-iterations", "25",
               "--worst-case-rounds", "1"],
-    "confirm": ["--alpha-limit", "2"],  # flexible_satellite's real and modal limit is 1.6
 }  # fmt: skip
 
 
@@ -17,11 +16,13 @@ def reduce_run_stages(monkeypatch, *, skip: dict[str, str] | None = None) -> Non
     """Make ``oos run``'s stages small: synthesis on 4 configurations; analysis as
     ``oos analyze --configurations 4 --points-per-decade 3 --no-sensitivity --no-time-check
     --performance-models 1 --performance-points 5 --docking-points 3 --spike-budget 5
-    --iterations 20``; margins
-    on 2 configurations; ``skip`` adds stages the run leaves out (name -> reason)."""
+    --iterations 20``; margins on 2 configurations; the confirmation searched up to
+    ``alpha = 2`` (``--alpha-limit 2``: flexible_satellite's real and modal physical limit is
+    1.6); ``skip`` adds stages the run leaves out (name -> reason)."""
     import oos_drake.app.analyze as analyze
     import oos_drake.app.pipeline as pipeline
     import oos_drake.scenario.tree_scenario as tree_scenario
+    from oos_drake.analysis.confirm import ConfirmOptions
     from oos_drake.analysis.margins import MarginsOptions
 
     real = pipeline._oos
@@ -30,6 +31,14 @@ def reduce_run_stages(monkeypatch, *, skip: dict[str, str] | None = None) -> Non
         analyze,
         "pipeline_margins_options",
         lambda analysis, configurations: MarginsOptions(2, analysis, False),
+    )
+    confirm_options = analyze.pipeline_confirm_options
+    monkeypatch.setattr(
+        analyze,
+        "pipeline_confirm_options",
+        lambda *args, **kwargs: dataclasses.replace(
+            confirm_options(*args, **kwargs), twin=ConfirmOptions(alpha_limit=2.0)
+        ),
     )
     full = analyze.pipeline_analysis_options
 
