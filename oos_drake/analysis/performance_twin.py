@@ -133,6 +133,18 @@ class GainCase:
     upper: float
 
 
+#: Columns of ``performance.parquet`` that :func:`worst_gain_cases` reads.
+GAIN_CASE_COLUMNS = (
+    "channel",
+    "subset",
+    "time [s]",
+    "frequency [Hz]",
+    "gain nominal [-]",
+    "gain lower [-]",
+    "gain upper [-]",
+)
+
+
 def worst_gain_cases(table: pd.DataFrame, channels=("e_p", "e_u")) -> list[GainCase]:
     """Per ``(channel, subset)`` the row of largest finite lower bound of ``performance.parquet``
     (an infinite one is a loop the perturbation destabilizes: a stability case, confirmed by
@@ -580,8 +592,13 @@ def read_gain_cases(analysis) -> list[GainCase]:
     ``performance.parquet``; none without one)."""
     from pathlib import Path
 
+    from oos_drake.campaign.store import read_table
+
     path = Path(analysis) / "performance.parquet"
-    return worst_gain_cases(pd.read_parquet(path)) if path.is_file() else []
+    if not path.is_file():
+        return []
+    # a folder written before the ``name [unit]`` convention has its columns renamed on read
+    return worst_gain_cases(read_table(path, GAIN_CASE_COLUMNS, str(path), legacy=True))
 
 
 def confirm_performance(cases, controller, scenario, options=None, *, workers=1, scheduler=None):
