@@ -1,7 +1,8 @@
 """Level strategy and cost of the analysis' whole-axis guarantee, against the grid-only analysis.
 
 Run: ``.venv/bin/python benchmarks/bench_guarantee_levels.py [--configurations 24]
-[--tight 0.005,0.01,1] [--subsets total,mechanical] [--controller controller.json] [--eager]``
+[--tight 0.005,0.01,1] [--subsets total,mechanical] [--controller controller.json] [--eager]
+[--before] [--perturb 1,2]``
 
 The mission study of ``oos analyze`` at reduced size (``--configurations`` equally spaced
 mission configurations of the paper's scenario, the analysis' grid, sweep and tightening
@@ -18,6 +19,16 @@ this process (one worker: CPU time is ``time.process_time``), back to back:
 ``--eager``: each guarantee also with ``cover_axis(lazy=False)`` (every point's interval by
 the Hamiltonian test: the cover before its lazy tests), same run, and the ratio of the two
 guarantees' CPU; the counts of Hamiltonian interval tests are printed for both.
+
+``--before``: each guarantee also with ``mu_solver(converge=False)`` (the cover's solver before
+the cold start and restarts of the points that raise the level), same run: its CPU, the ratio
+of the two guarantees' CPU, and per subset its guaranteed level next to the new one.
+
+``--perturb``: after the runs above, the guarantee (last ``tight``) again on the model array
+with its LFR matrix multiplied entry by entry by ``1 + 1e-15 R`` (``R`` uniform in [-1, 1],
+one run per seed), and per subset the guaranteed levels and certified lower bounds of all
+the inputs and their relative spread (round-off reproducibility; with ``--before`` for both
+solvers).
 
 Printed: CPU of each run and its ratio to the grid-only run, the guarantee's own CPU (the
 difference: the grid and the spike resolution are the same computation in every run), and
@@ -48,6 +59,18 @@ def main() -> None:
         help="also run every guarantee with cover_axis(lazy=False) (every point tested with the "
         "Hamiltonian: the code before the lazy tests) and print the ratio",
     )
+    parser.add_argument(
+        "--before",
+        action="store_true",
+        help="also run every guarantee with mu_solver(converge=False) (no cold start and "
+        "restarts of the points that raise the level) and print the ratio and the levels",
+    )
+    parser.add_argument(
+        "--perturb",
+        default="",
+        help="comma-separated seeds: the guarantee again with the LFR matrix times "
+        "(1 + 1e-15 R), and the spread of the guaranteed levels",
+    )
     args = parser.parse_args()
 
     from oos_drake.analysis.controller import scenario_controller
@@ -75,6 +98,7 @@ def main() -> None:
 
     counts = {"hamiltonian": 0}
     dg_interval, cover_axis = mu_intervals.dg_interval, mu_intervals.cover_axis
+    mu_solver = mu_intervals.mu_solver
 
     def counted_dg(*a, **k):
         counts["hamiltonian"] += 1
@@ -83,13 +107,14 @@ def main() -> None:
     # the analysis calls them through the module: counted here
     mu_intervals.dg_interval = counted_dg
 
-    def run(guarantee, tight=None, lazy=True):
+    def run(guarantee, tight=None, lazy=True, converge=True, model=system.system):
         mu_intervals.cover_axis = functools.partial(cover_axis, lazy=lazy)
+        mu_intervals.mu_solver = functools.partial(mu_solver, converge=converge)
         for k in counts:
             counts[k] = 0
         clock = time.process_time()
         out = certified_sweep(
-            system.system,
+            model,
             omega,
             subsets,
             times=times,
@@ -118,6 +143,8 @@ def main() -> None:
         if args.eager:
             _, eager = run(True, tight, lazy=False)
             tests = counts["hamiltonian"]
+        if args.before:
+            old_study, old = run(True, tight, converge=False)
         study, cpu = run(True, tight)
         print(
             f"tight {tight:g}: CPU {cpu:.1f} s = {cpu / base:.2f} x grid only; "
@@ -129,6 +156,19 @@ def main() -> None:
                 f"only; guarantee {eager - base:.1f} s; Hamiltonian tests {tests}; guarantee "
                 f"lazy / eager {(cpu - base) / max(eager - base, 1e-9):.2f}"
             )
+        if args.before:
+            print(
+                f"  before (converge=False, same run): CPU {old:.1f} s = {old / base:.2f} x grid "
+                f"only; guarantee {old - base:.1f} s; guarantee now / before "
+                f"{(cpu - base) / max(old - base, 1e-9):.2f}"
+            )
+            for name, g in old_study.guarantees.items():
+                print(
+                    f"  {name:15s} guaranteed before {g.mu_upper:.9g} now "
+                    f"{study.guarantees[name].mu_upper:.9g} (lower "
+                    f"{old_study.certificates[name].mu_lower:.9g} / "
+                    f"{study.certificates[name].mu_lower:.9g})"
+                )
         print(head)
         for name, g in study.guarantees.items():
             lower = study.certificates[name].mu_lower
@@ -138,6 +178,33 @@ def main() -> None:
                 f"{g.raised:6d} {int(g.fell_back.sum()):9d} {int(g.points.sum()):6d} "
                 f"{int(g.solved.sum()):6d} {len(g.failures):4d}"
             )
+
+    seeds = [int(k) for k in args.perturb.split(",") if k]
+    if seeds:
+        from oos_drake.lfr.core import LFR
+
+        lfr = system.system
+        for converge in (False, True) if args.before else (True,):
+            studies = {"M": run(True, tight, converge=converge)[0]}
+            for seed in seeds:
+                R = np.random.default_rng(seed).uniform(-1.0, 1.0, lfr._M.shape)
+                model = LFR(
+                    np.array(lfr._M) * (1 + 1e-15 * R),
+                    lfr._n,
+                    lfr._blocks,
+                    input_names=lfr._input_names,
+                    output_names=lfr._output_names,
+                )
+                studies[f"seed {seed}"] = run(True, tight, converge=converge, model=model)[0]
+            print(f"round-off (M times 1 + 1e-15 R), converge={converge}, tight {tight:g}:")
+            for name in subsets:
+                up = np.array([st.guarantees[name].mu_upper for st in studies.values()])
+                lo = np.array([st.certificates[name].mu_lower for st in studies.values()])
+                print(
+                    f"  {name:15s} guaranteed {' '.join(f'{u:.9g}' for u in up)} (spread "
+                    f"{up.max() / up.min() - 1:.2e}); lower {' '.join(f'{v:.9g}' for v in lo)} "
+                    f"(spread {lo.max() / lo.min() - 1:.2e})"
+                )
 
 
 if __name__ == "__main__":
