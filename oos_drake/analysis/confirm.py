@@ -126,6 +126,10 @@ class ConfirmOptions:
         Half-width of the first bracket around the sampled-data prediction [-] (relative).
     alpha_limit : float
         Largest ``alpha`` searched [-].
+    cycles : float
+        Fewest periods of the predicted oscillation in the identification window [-]: a peak
+        slower than ``cycles / (duration - settle)`` gets a longer run (and a settling time of
+        at least one period), see :meth:`for_frequency`.
     """
 
     duration: float = 45.0
@@ -135,9 +139,28 @@ class ConfirmOptions:
     max_step: float = 0.05
     bracket: float = 0.03
     alpha_limit: float = 4.0
+    cycles: float = 8.0
+
+    def for_frequency(self, frequency_hz: float) -> ConfirmOptions:
+        """These options with the run long enough for an oscillation at ``frequency_hz`` [Hz]:
+        ``settle >= 1 / f`` and ``duration - settle >= cycles / f`` (unchanged when already
+        so, or when the frequency is not finite and positive).
+
+        The decay rate of the dominant oscillation (:func:`_verdict`) is fitted on the window
+        after ``settle``; the default 37 s holds 13 periods of the paper's 0.36 Hz peaks but
+        half of one at 0.0125 Hz, where a decaying oscillation looks like growth.
+        """
+        if not (np.isfinite(frequency_hz) and frequency_hz > 0):
+            return self
+        period = 1.0 / frequency_hz
+        settle = max(self.settle, period)
+        duration = max(self.duration, settle + self.cycles * period)
+        if (settle, duration) == (self.settle, self.duration):
+            return self
+        return dataclasses.replace(self, settle=settle, duration=duration)
 
     def __post_init__(self):
-        names = ("duration", "settle", "initial_attitude", "rtol", "max_step", "bracket")
+        names = ("duration", "settle", "initial_attitude", "rtol", "max_step", "bracket", "cycles")
         for name in (*names, "alpha_limit"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
@@ -635,6 +658,19 @@ class _MissionTwin:
         return _verdict(times - self.start, phi, diverged, o, self.near_hz)
 
 
+#: Slowest oscillation the verdict counts [Hz] (slower poles are drifts), unless the expected
+#: oscillation is slower (:func:`_slowest_oscillation`).
+F_MIN_HZ = 0.02
+
+
+def _slowest_oscillation(near_hz) -> float:
+    """Lowest frequency counted as an oscillation [Hz]: :data:`F_MIN_HZ`, or half the expected
+    frequency ``near_hz`` [Hz] when that is slower (a 0.0125 Hz peak is not a drift)."""
+    if near_hz is not None and np.isfinite(near_hz) and near_hz > 0:
+        return min(F_MIN_HZ, 0.5 * float(near_hz))
+    return F_MIN_HZ
+
+
 def _verdict(times: np.ndarray, phi: np.ndarray, diverged: bool, o: ConfirmOptions, near_hz):
     """``(growing, Oscillation or None, history)`` of a run's attitude ``phi`` [rad] (``(n,
     3)``) at ``times`` [s] since the run's start (:meth:`_MissionTwin.run`)."""
@@ -647,7 +683,9 @@ def _verdict(times: np.ndarray, phi: np.ndarray, diverged: bool, o: ConfirmOptio
     oscillation = None
     if np.count_nonzero(window) >= 40:
         try:
-            oscillation = dominant_oscillation(times[window], phi[window], near_hz=near_hz)
+            oscillation = dominant_oscillation(
+                times[window], phi[window], near_hz=near_hz, f_min=_slowest_oscillation(near_hz)
+            )
         except ValueError:
             oscillation = None
     if diverged or oscillation is not None:
@@ -954,7 +992,10 @@ def confirm_peak(peak: Peak, controller, scenario, options: ConfirmOptions):
     if peak.has_complex and nyquist:
         row["status"] = "linear only: complex blocks beyond the flight software's Nyquist frequency"
     else:
-        twin = _Twin(peak, controller.system, options, scenario, f_s, specs, design)
+        near_hz = f_s if np.isfinite(f_s) else peak.omega / (2 * np.pi)
+        twin = _Twin(
+            peak, controller.system, options.for_frequency(near_hz), scenario, f_s, specs, design
+        )
         top = min(alpha_phys * (1 - 1e-3), options.alpha_limit)
         guess = alpha_s if np.isfinite(alpha_s) else 1.0
         if guess >= top:

@@ -104,6 +104,7 @@ def dominant_oscillation(
     near_hz: float | None = None,
     rtol: float = 1e-6,
     max_order: int = 24,
+    max_samples: int = 1500,
 ) -> Oscillation:
     """Frequency and decay rate of the oscillation that dominates the end of ``signal``.
 
@@ -121,6 +122,11 @@ def dominant_oscillation(
         decide the verdict); otherwise the largest of all.
     rtol, max_order
         See :func:`pencil_poles`.
+    max_samples : int
+        A longer signal is averaged over blocks of consecutive samples down to at most this
+        many (the pencil's SVD grows with the square of the length). A block average keeps
+        every pole ``s_i``: each ``r_i z_i^k`` becomes ``r_i z_i^k`` times the constant
+        ``(1 + z_i + ... + z_i^(b-1)) / b``; it damps the fast modes' residues.
 
     Raises
     ------
@@ -132,7 +138,14 @@ def dominant_oscillation(
     if t.ndim != 1 or t.size < 8 or np.ptp(steps) > 1e-6 * steps.mean():
         raise ValueError("dominant_oscillation: times must be uniform, at least 8 samples")
     dt = float(steps.mean())
-    poles, residues, error = pencil_poles(signal, dt, rtol=rtol, max_order=max_order)
+    y = np.asarray(signal, dtype=float)
+    block = -(-t.size // max_samples)  # ceil
+    if block > 1:
+        n = (t.size // block) * block
+        t = t[:n].reshape(-1, block).mean(axis=1)
+        y = y[:n].reshape(-1, block, *y.shape[1:]).mean(axis=1)
+        dt *= block
+    poles, residues, error = pencil_poles(y, dt, rtol=rtol, max_order=max_order)
     frequency = poles.imag / (2.0 * np.pi)
     keep = frequency >= f_min
     if not np.any(keep):
