@@ -159,6 +159,11 @@ class ConfirmOptions:
             return self
         return dataclasses.replace(self, settle=settle, duration=duration)
 
+    def for_peak(self, sampled_hz: float, critical_hz: float) -> ConfirmOptions:
+        """:meth:`for_frequency` of a peak's predicted oscillation: the sampled-data loop's
+        frequency at its boundary [Hz], else the critical frequency [Hz]."""
+        return self.for_frequency(sampled_hz if np.isfinite(sampled_hz) else critical_hz)
+
     def __post_init__(self):
         names = ("duration", "settle", "initial_attitude", "rtol", "max_step", "bracket", "cycles")
         for name in (*names, "alpha_limit"):
@@ -992,10 +997,8 @@ def confirm_peak(peak: Peak, controller, scenario, options: ConfirmOptions):
     if peak.has_complex and nyquist:
         row["status"] = "linear only: complex blocks beyond the flight software's Nyquist frequency"
     else:
-        near_hz = f_s if np.isfinite(f_s) else peak.omega / (2 * np.pi)
-        twin = _Twin(
-            peak, controller.system, options.for_frequency(near_hz), scenario, f_s, specs, design
-        )
+        run_options = options.for_peak(f_s, peak.omega / (2 * np.pi))
+        twin = _Twin(peak, controller.system, run_options, scenario, f_s, specs, design)
         top = min(alpha_phys * (1 - 1e-3), options.alpha_limit)
         guess = alpha_s if np.isfinite(alpha_s) else 1.0
         if guess >= top:

@@ -336,11 +336,17 @@ def margins_figure(table: pd.DataFrame, path, rate_hz: float) -> Path:
 def confirmation_figures(result, out) -> list[Path]:
     """One :func:`confirmation_figure` per peak of a
     :class:`~oos_drake.analysis.confirm.ConfirmationResult` with nonlinear runs:
-    ``out/confirmation_<study>_<subset>.png``; their paths."""
-    settle = result.options.twin.settle
+    ``out/confirmation_<study>_<subset>.png``; their paths (each cut at its run's settling
+    time, :meth:`~oos_drake.analysis.confirm.ConfirmOptions.for_peak`)."""
+    twin = result.options.twin
     return [
         confirmation_figure(
-            part, row, Path(out) / f"confirmation_{row['study']}_{row['subset']}.png", settle
+            part,
+            row,
+            Path(out) / f"confirmation_{row['study']}_{row['subset']}.png",
+            twin.for_peak(
+                row["frequency linear sampled [Hz]"], row["critical frequency [Hz]"]
+            ).settle,
         )
         for row, part in result.peak_histories()
     ]

@@ -68,3 +68,10 @@ def test_block_averaging_keeps_the_poles():
     assert averaged.frequency == pytest.approx(full.frequency, rel=1e-6)
     assert averaged.decay_rate == pytest.approx(full.decay_rate, rel=1e-6)
     assert full.decay_rate == pytest.approx(-0.01, rel=1e-6)
+
+
+def test_a_peak_run_follows_the_sampled_loops_frequency_else_the_critical_one():
+    options = ConfirmOptions()
+    assert options.for_peak(0.05, 0.3) == options.for_frequency(0.05)
+    assert options.for_peak(math.nan, 0.05) == options.for_frequency(0.05)
+    assert options.for_peak(math.nan, math.inf) is options
