@@ -3,6 +3,8 @@ margins and the confirmation on the twin."""
 
 from __future__ import annotations
 
+import math
+
 from pathlib import Path
 
 import numpy as np
@@ -345,7 +347,8 @@ def confirmation_figures(result, out) -> list[Path]:
             row,
             Path(out) / f"confirmation_{row['study']}_{row['subset']}.png",
             twin.for_peak(
-                row["frequency linear sampled [Hz]"], row["critical frequency [Hz]"]
+                row.get("frequency linear sampled [Hz]", math.nan),
+                row.get("critical frequency [Hz]", math.nan),
             ).settle,
         )
         for row, part in result.peak_histories()
