@@ -44,7 +44,11 @@ follow.
 Docking peaks: the twin is frozen at the docking phase's configuration (its time in the
 scenario) with the docking spring-dampers held at the peak's stiffness and the study's damping
 (:func:`oos_drake.analysis.models.docking_springs`: phase 7 SM1 swept, SM2 open; phase 8 SM2
-swept, SM1 rigid) for the whole run (``MissionSimulation.run(bushings=...)``).
+swept, SM1 rigid) for the whole run (``MissionSimulation.run(bushings=...)``). A tree's
+docking peak (``docking-<event>``): the tree's twin frozen at the event's configuration, the
+target on its floating joint held by one bushing per spring-damper of the event (the swept one
+at the peak's stiffness and the file's damping, one still holding the target at its file
+values; coefficients the file declares uncertain at their values along the ray).
 
 Physical validity: a worst perturbation may lie outside the physical domain (non-positive
 mass, an inertia breaking the triangle inequality, a non-positive modal frequency, negative

@@ -23,8 +23,13 @@ A mission that captures or docks a target: the twin of an instant welds the targ
 mission model (:func:`~oos_drake.scenario.tree_model.build_mission_tree_model`) welds it
 (``mating=``, :func:`mating_at`: the target's own SDF parsed as a second model and welded port
 to port by Drake's ``WeldFrames``, through a captured phase and a docked one alike; a free
-target is in neither). :func:`open_loop_twin` is the same plant with the wrench input and hub
-output of the validation, for checks against the TITOP LFR
+target is in neither). The twin of a docking study (``docking=``) holds the target on
+spring-dampers instead: its own floating joint relative to the controlled body, one
+``LinearBushingRollPitchYaw`` per spring-damper, at rest where the ports coincide
+(:func:`~oos_drake.multibody.tree_plant.add_docked_target`, as
+:func:`~oos_drake.multibody.tree_plant.build_docked_diagram`). :func:`open_loop_twin` is the
+same plant with the wrench input and hub output of the validation, for checks against the
+TITOP LFR
 (``tests/tree/test_tree_mated_twin.py``).
 
 :func:`run_tree_twin` integrates one run from a small attitude error (or driven by a noise

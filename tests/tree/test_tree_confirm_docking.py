@@ -110,9 +110,9 @@ def test_the_docking_twin_holds_the_target_on_the_peaks_bushing(setup):
     np.testing.assert_allclose(X.GetAsMatrix4(), np.eye(4), atol=1e-12)
 
 
-@pytest.mark.slow
 def test_a_trees_docking_peak_is_confirmed_on_its_twin(setup):
-    """confirm_peak end to end on the docking peak (short windows): the continuous boundary
+    """confirm_peak end to end on the docking peak (six 40 s runs of a small twin, a few
+    seconds): the continuous boundary
     at 1, the twin's boundary and oscillation frequency those of the sampled-data loop to
     :data:`AGREEMENT` (as the schema-1 docking confirmations), a decaying run below and a
     growing one above."""
@@ -129,3 +129,62 @@ def test_a_trees_docking_peak_is_confirmed_on_its_twin(setup):
     assert row["decay rate below [1/s]"] < 0 < row["decay rate above [1/s]"]
     assert row["status"].startswith("confirmed")
     assert set(histories["side"]) == {"stable", "unstable"}
+
+
+def test_a_closed_loop_docking_peak_holds_the_target_on_both_spring_dampers(tmp_path):
+    """The converted paper's second docking event (schema 1's phase 8: SM2 docks D1-D3 while
+    SM1 holds J7-D2): the twin of its peak has two bushings on the target, SM2 at the peak's
+    stiffness and the file's damping, SM1 at the file's rigid values (schema 1's
+    ``docking_springs``), the arm frozen at the event's configuration (schema 1's phase-8
+    angles), both pairs of port frames coinciding at rest."""
+    from oos_drake.analysis.models import docking_springs, phase_configuration
+    from oos_drake.scenario.tree_migration import tree_document_from_v1
+
+    path = tmp_path / "paper_tree.toml"
+    path.write_text(tomli_w.dumps(tree_document_from_v1("paper")[0]))
+    converted, paper = load_scenario(path), load_scenario("paper")
+    event = converted.mission.docking_phases[1]
+    stiffness = 3590.7
+    peak = Peak(f"docking-{event.name}", "total", np.nan, stiffness, 5.0, 0.3, 0.3, {})
+    design = FlightSoftwareDesign.create(np.zeros((3, 6)), 10.0)
+    twin = _Twin(peak, None, ConfirmOptions(), converted, np.nan, {}, design)
+    handles = twin.twin(1.0)
+    context = handles.diagram.CreateDefaultContext()
+    pc = handles.plant.GetMyMutableContextFromRoot(context)
+    expected = docking_springs("8", stiffness, scenario=paper)
+    assert sorted(handles.bushings) == sorted(expected) == ["SM1", "SM2"]
+    for name, (k, d) in expected.items():
+        bushing = handles.bushings[name]
+        np.testing.assert_allclose(bushing.GetForceStiffnessConstants(pc), [k] * 3)
+        np.testing.assert_allclose(bushing.GetTorqueStiffnessConstants(pc), [k] * 3)
+        np.testing.assert_allclose(bushing.GetForceDampingConstants(pc), [d] * 3)
+        np.testing.assert_allclose(bushing.GetTorqueDampingConstants(pc), [d] * 3)
+    alpha = phase_configuration("8", paper).configuration.alpha
+    arm = [twin.angles[f"L{i}"] for i in range(1, 7)]
+    np.testing.assert_allclose(arm, alpha, atol=1e-9)
+    for name, joint in handles.revolute_joints.items():
+        joint.set_angle(pc, twin.angles[name])
+    for joint, angle in handles.held_joints.items():
+        joint.set_angle(pc, angle)
+    plant = handles.plant
+    for port, target_port in (("J7", "D2"), ("D1", "D3")):
+        X = plant.GetFrameByName(target_port).CalcPose(pc, plant.GetFrameByName(port))
+        np.testing.assert_allclose(X.GetAsMatrix4(), np.eye(4), atol=1e-9)
+
+
+def test_confirm_peaks_keeps_a_trees_docking_peaks(setup, monkeypatch):
+    """``confirm_peaks`` on a tree sends its docking peaks to the twin (none left out): one
+    row per peak, each with its own study."""
+    import oos_drake.analysis.confirm as confirm
+
+    scenario, controller, _, peak, _ = setup
+    seen = []
+
+    def fake(peak, controller, scenario, options):
+        seen.append(peak.study)
+        return {"study": peak.study, "subset": peak.subset}, confirm.pd.DataFrame()
+
+    monkeypatch.setattr(confirm, "confirm_peak", fake)
+    mission = dataclasses.replace(peak, study="mission", time=100.0, perturbation={})
+    table, _ = confirm_peaks([mission, peak], controller, scenario, ConfirmOptions(), quiet=True)
+    assert list(table["study"]) == ["mission", peak.study] == seen
