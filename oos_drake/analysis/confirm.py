@@ -44,7 +44,11 @@ follow.
 Docking peaks: the twin is frozen at the docking phase's configuration (its time in the
 scenario) with the docking spring-dampers held at the peak's stiffness and the study's damping
 (:func:`oos_drake.analysis.models.docking_springs`: phase 7 SM1 swept, SM2 open; phase 8 SM2
-swept, SM1 rigid) for the whole run (``MissionSimulation.run(bushings=...)``).
+swept, SM1 rigid) for the whole run (``MissionSimulation.run(bushings=...)``). A tree's
+docking peak (``docking-<event>``): the tree's twin frozen at the event's configuration, the
+target on its floating joint held by one bushing per spring-damper of the event (the swept one
+at the peak's stiffness and the file's damping, one still holding the target at its file
+values; coefficients the file declares uncertain at their values along the ray).
 
 Physical validity: a worst perturbation may lie outside the physical domain (non-positive
 mass, an inertia breaking the triangle inequality, a non-positive modal frequency, negative
@@ -707,15 +711,21 @@ class _TreeTwin:
     the mission model welds it: :func:`~oos_drake.multibody.tree_twin.mating_at`), closed by
     the scenario's flight software with the peak's complex blocks realized in it
     (:func:`~oos_drake.multibody.flight_software.perturbation_block`, scaled with ``alpha``).
-    The same interface as :class:`_MissionTwin` (``run``, ``forced_run``)."""
+    The same interface as :class:`_MissionTwin` (``run``, ``forced_run``).
+
+    A docking peak (``docking-<phase>``, the study of a docking event,
+    :meth:`~oos_drake.scenario.tree_scenario.TreeScenario.docking_plant`): the joints frozen at
+    the event's configuration, the target on its floating joint held by one bushing per
+    spring-damper of the event (:meth:`~oos_drake.scenario.tree_scenario.TreeScenario.
+    docking_event`): the swept one at the peak's stiffness (shear and torsion) and the file's
+    damping, a spring-damper still holding the target at its file values; the coefficients the
+    file declares uncertain at their values along the ray, as the tree's own blocks."""
 
     def __init__(self, peak: Peak, K, options, scenario, near_hz, specs, design):
         from oos_drake.multibody.mission import logging_rate
         from oos_drake.multibody.tree_twin import mating_at
         from oos_drake.scenario.tree_scenario import NotForTrees
 
-        if peak.study != "mission":
-            raise NotForTrees(f"confirm: a tree has no docking study ({peak.study})")
         if scenario.timeline is None:
             raise NotForTrees(
                 f"confirm: scenario {scenario.name} has tip-pose waypoints: no timeline to "
@@ -723,13 +733,45 @@ class _TreeTwin:
             )
         self.peak, self.specs, self.options, self.near_hz = peak, specs, options, near_hz
         self.tree, self.design = scenario.tree, design
-        self.angles = scenario.timeline.angles(peak.time)
-        self.mating = mating_at(scenario.timeline, peak.time)
+        self.springs = ()
+        time = peak.time
+        if peak.study != "mission":
+            phase = peak.study.removeprefix("docking-")
+            events = {p.name: p for p in scenario.mission.docking_phases}
+            if phase not in events:
+                raise ValueError(
+                    f"confirm: {peak.study}: {phase!r} is not a docking event of scenario "
+                    f"{scenario.name} (docking phases: {', '.join(events) or 'none'})"
+                )
+            time = events[phase].time
+            docking, held = scenario.docking_event(phase)
+            swept = dataclasses.replace(docking, k_shear=peak.stiffness, k_tors=peak.stiffness)
+            self.springs = (swept, *held)
+        self.time = time
+        self.angles = scenario.timeline.angles(time)
+        self.mating = mating_at(scenario.timeline, time) if not self.springs else None
         self.direction = {n: v for n, v in peak.perturbation.items() if specs[n].kind == "ureal"}
         self.complex = complex_values(peak)
         self.log_rate = logging_rate(1.0 / design.period, CONFIRM_LOG_RATE_HZ)
         self.start = 0.0
         self._twins = {}
+
+    def parameters(self, alpha: float):
+        """``(tree values, springs)`` at ``alpha`` along the ray: the physical values of the
+        tree's and the target's blocks (masses, inertias, mode frequencies), and the docking
+        spring-dampers with their declared-uncertain coefficients (``k_shear_<label>``, ...)
+        at their values (the others as set in :meth:`__init__`)."""
+        from oos_drake.scenario.tree_model import docking_block_names
+
+        values = ray_values(self.specs, self.direction, alpha)
+        springs = []
+        for spring in self.springs:
+            names = docking_block_names(spring)
+            given = {k: values.pop(n) for k, n in names.items() if n in values}
+            if spring is self.springs[0]:  # the swept stiffness is the peak's, not a block's
+                given = {k: v for k, v in given.items() if k not in ("k_shear", "k_tors")}
+            springs.append(dataclasses.replace(spring, **given))
+        return values, tuple(springs)
 
     def realization(self, alpha: float):
         """The flight software's dynamic perturbation at ``alpha`` (None without complex
@@ -746,7 +788,7 @@ class _TreeTwin:
         from oos_drake.multibody.tree_twin import build_tree_twin, tree_with_values
 
         if alpha not in self._twins:
-            values = ray_values(self.specs, self.direction, alpha)
+            values, springs = self.parameters(alpha)
             # the realization's state count may differ between alphas (an entry's phase at
             # round-off from 0 or pi is a static gain in one SVD, a section in another): each
             # alpha has its own twin, sized for its own realization
@@ -758,6 +800,7 @@ class _TreeTwin:
                 log_rate=self.log_rate,
                 perturbation_states=0 if block is None else block.nstates,
                 mating=self.mating,
+                docking=springs,
             )
         return self._twins[alpha]
 
@@ -1086,13 +1129,7 @@ def confirm_peaks(
     from tqdm import tqdm
 
     from oos_drake.processes import make_executor
-    from oos_drake.scenario.tree_scenario import is_tree
 
-    if is_tree(scenario):  # a tree's docking studies have no twin on a bushing here yet
-        left = [f"{p.study}/{p.subset}" for p in peaks if p.study != "mission"]
-        if left and not quiet:
-            print(f"confirm: not confirmed (no twin of a tree's docking study): {', '.join(left)}")
-        peaks = [p for p in peaks if p.study == "mission"]
     tasks = [(peak, controller, scenario, options) for peak in peaks]
     with make_executor(max(1, min(workers, len(tasks))), scheduler, method="spawn") as executor:
         futures = [executor.submit(_confirm_task, task) for task in tasks]

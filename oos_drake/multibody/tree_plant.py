@@ -54,6 +54,8 @@ __all__ = [
     "build_tree_diagram",
     "build_captured_diagram",
     "build_docked_diagram",
+    "add_docked_target",
+    "docked_target_pose",
     "linearize_tree",
     "check_tree",
 ]
@@ -160,29 +162,7 @@ def _build(
                 plant.GetFrameByName(port, top), plant.GetFrameByName(target_port, target_top)
             )
         else:  # free, held by a bushing between the ports, at rest at X_W_target
-            # on a floating joint relative to the chaser's root (zero = world at rest), as the
-            # paper's twin (scenario_plant): the bushing force then does not depend on the
-            # root's pose, so the global rigid-body motion is exactly the root's own (q, v) and
-            # drops out structurally. Relative to the world, the common motion of the two
-            # bodies stays in the linearization as near-cancelling states (~1e-3 rad/s) that a
-            # minimal realization cannot remove reliably.
-            add_floating_joint(
-                plant,
-                plant.GetBodyByName(target.root, target_top),
-                X_W_target,
-                name=f"{target.root}_floating",
-                parent=plant.GetBodyByName(tree.root, top).body_frame(),
-            )
-            for spring in (docking, *also):  # also: more bushings on the same target
-                k = [spring.k_shear] * 3, [spring.k_tors] * 3
-                d = [spring.d_shear] * 3, [spring.d_tors] * 3
-                plant.AddForceElement(
-                    LinearBushingRollPitchYaw(
-                        plant.GetFrameByName(spring.port, top),
-                        plant.GetFrameByName(spring.target_port, target_top),
-                        k[1], d[1], k[0], d[0],
-                    )
-                )  # fmt: skip
+            add_docked_target(plant, tree, top, target, target_top, X_W_target, (docking, *also))
     root = plant.GetBodyByName(tree.root, top)
     hub_joint = add_floating_joint(plant, root, RigidTransform(), name=f"{tree.root}_floating")
     plant.Finalize()
@@ -201,6 +181,71 @@ def _build(
         revolute_joints=MappingProxyType(revolute),
         sdf_directory=sdf_directory,
     )
+
+
+def add_docked_target(plant, tree, top, target, target_top, X_W_target, springs) -> dict:
+    """Hold a parsed target by spring-dampers: its root on a roll-pitch-yaw floating joint
+    relative to the chaser's root whose zero is ``X_W_target`` (the rest pose with the chaser's
+    root at the world frame), one ``LinearBushingRollPitchYaw`` per spring-damper of
+    ``springs`` between its two port frames (shear and torsion coefficients of each, equal
+    on the three axes).
+
+    On a floating joint relative to the chaser's root, as the paper's twin (scenario_plant):
+    the bushing force then does not depend on the root's pose, so the global rigid-body motion
+    is exactly the root's own ``(q, v)`` and drops out structurally. Relative to the world, the
+    common motion of the two bodies stays in a linearization as near-cancelling states
+    (~1e-3 rad/s) that a minimal realization cannot remove reliably.
+
+    Parameters
+    ----------
+    plant : MultibodyPlant
+        Not finalized, holding the tree (model ``top``) and the target (model ``target_top``).
+    tree, target : SpacecraftTree
+    top, target_top : ModelInstanceIndex
+    X_W_target : RigidTransform
+        Rest pose of the target's root frame in the chaser's root frame [m].
+    springs : sequence of Docking
+        The spring-dampers (their ``k_shear`` [N/m], ``k_tors`` [N m/rad], ``d_shear``
+        [N s/m], ``d_tors`` [N m s/rad] as they are).
+
+    Returns
+    -------
+    dict
+        ``{label: LinearBushingRollPitchYaw}`` by spring-damper label.
+    """
+    add_floating_joint(
+        plant,
+        plant.GetBodyByName(target.root, target_top),
+        X_W_target,
+        name=f"{target.root}_floating",
+        parent=plant.GetBodyByName(tree.root, top).body_frame(),
+    )
+    bushings = {}
+    for spring in springs:
+        k = [spring.k_shear] * 3, [spring.k_tors] * 3
+        d = [spring.d_shear] * 3, [spring.d_tors] * 3
+        bushings[spring.label] = plant.AddForceElement(
+            LinearBushingRollPitchYaw(
+                plant.GetFrameByName(spring.port, top),
+                plant.GetFrameByName(spring.target_port, target_top),
+                k[1], d[1], k[0], d[0],
+            )
+        )  # fmt: skip
+    return bushings
+
+
+def docked_target_pose(
+    tree: SpacecraftTree, docking, angles: Mapping[str, float] | None = None
+) -> RigidTransform:
+    """Rest pose of the target held by ``docking`` relative to the chaser's root (the world
+    frame at rest): the ports coinciding, axes aligned, the tree's joints at ``angles`` [rad]
+    (default: the file's) and the target's at its file angles; Drake's forward kinematics of
+    the tree's twin and of the target's."""
+    target = next(t for t in tree.targets.values() if docking.target_port in t.ports)
+    chosen = tree.joint_angles(angles)
+    X_W_D = _port_pose_in_world(build_tree_diagram(tree), docking.port, chosen)
+    X_T_D = _port_pose_in_world(build_tree_diagram(target), docking.target_port, {})
+    return X_W_D @ X_T_D.inverse()
 
 
 def build_captured_diagram(tree: SpacecraftTree, port: str, target_port: str) -> TreeDiagram:
@@ -255,9 +300,7 @@ def build_docked_diagram(
     """
     model_tree = docked_tree(tree, docking, tuple(also))  # KeyError on unknown ports
     target = next(t for t in tree.targets.values() if docking.target_port in t.ports)
-    chosen = tree.joint_angles(angles)
-    X_W_D = _port_pose_in_world(build_tree_diagram(tree), docking.port, chosen)
-    X_T_D = _port_pose_in_world(build_tree_diagram(target), docking.target_port, {})
+    X_W_target = docked_target_pose(tree, docking, angles)
     with tempfile.TemporaryDirectory(prefix="oos-tree-sdf-") as folder:
         chaser_directory, target_directory = Path(folder) / "tree", Path(folder) / "target"
         write_tree_sdf(tree, chaser_directory)
@@ -269,7 +312,7 @@ def build_docked_diagram(
             target_directory=target_directory,
             docking=docking,
             also=tuple(also),
-            X_W_target=X_W_D @ X_T_D.inverse(),
+            X_W_target=X_W_target,
             model_tree=model_tree,
         )
 

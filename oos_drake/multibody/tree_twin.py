@@ -23,8 +23,13 @@ A mission that captures or docks a target: the twin of an instant welds the targ
 mission model (:func:`~oos_drake.scenario.tree_model.build_mission_tree_model`) welds it
 (``mating=``, :func:`mating_at`: the target's own SDF parsed as a second model and welded port
 to port by Drake's ``WeldFrames``, through a captured phase and a docked one alike; a free
-target is in neither). :func:`open_loop_twin` is the same plant with the wrench input and hub
-output of the validation, for checks against the TITOP LFR
+target is in neither). The twin of a docking study (``docking=``) holds the target on
+spring-dampers instead: its own floating joint relative to the controlled body, one
+``LinearBushingRollPitchYaw`` per spring-damper, at rest where the ports coincide
+(:func:`~oos_drake.multibody.tree_plant.add_docked_target`, as
+:func:`~oos_drake.multibody.tree_plant.build_docked_diagram`). :func:`open_loop_twin` is the
+same plant with the wrench input and hub output of the validation, for checks against the
+TITOP LFR
 (``tests/tree/test_tree_mated_twin.py``).
 
 :func:`run_tree_twin` integrates one run from a small attitude error (or driven by a noise
@@ -193,7 +198,10 @@ class TreeTwin:
     mating : tuple of str or None
         ``(port, target port)`` welded, or None.
     held_joints : Mapping[Joint, float]
-        The welded target's revolute joints and their file angles [rad] (locked in a run).
+        The welded or docked target's revolute joints and their file angles [rad] (locked in
+        a run).
+    bushings : Mapping[str, LinearBushingRollPitchYaw]
+        The docked target's spring-dampers by label (empty without ``docking``).
     """
 
     diagram: Diagram
@@ -208,6 +216,7 @@ class TreeTwin:
     trajectory: PiecewisePolynomial | None = None
     mating: tuple[str, str] | None = None
     held_joints: Mapping[object, float] = dataclasses.field(default_factory=dict)
+    bushings: Mapping[str, object] = dataclasses.field(default_factory=dict)
 
 
 def build_tree_twin(
@@ -221,6 +230,7 @@ def build_tree_twin(
     joint_bandwidth: float = 200.0,
     joint_damping_ratio: float = 0.7,
     mating: tuple[str, str] | None = None,
+    docking: tuple = (),
 ) -> TreeTwin:
     """Build the closed-loop twin of ``tree`` (its SDF generated into a temporary folder).
 
@@ -252,10 +262,16 @@ def build_tree_twin(
         as the mission model welds a captured or docked target (:func:`mating_at`); its own
         revolute joints held at their file angles. Default: every target free, not in the
         twin (as in the model).
+    docking : tuple of Docking, optional
+        Spring-dampers holding one target (a docking study's twin): the target parsed from its
+        own SDF on a floating joint relative to the controlled body, at rest where the ports
+        coincide at ``angles``, one ``LinearBushingRollPitchYaw`` per spring-damper with its
+        coefficients as given (:func:`~oos_drake.multibody.tree_plant.add_docked_target`);
+        its own revolute joints held at their file angles. Not with ``mating``.
     """
     chosen = tree.joint_angles(angles)
     builder = DiagramBuilder()
-    plant, hub_joint, held = _add_twin_plant(builder, tree, mating)
+    plant, hub_joint, held, bushings = _add_twin_plant(builder, tree, mating, docking, chosen)
     fsw = builder.AddNamedSystem(
         "flight_software",
         FlightSoftware(
@@ -299,34 +315,58 @@ def build_tree_twin(
         trajectory=trajectory,
         mating=None if mating is None else tuple(mating),
         held_joints=held,
+        bushings=MappingProxyType(bushings),
     )
 
 
-def _add_twin_plant(builder, tree: SpacecraftTree, mating):
+def _add_twin_plant(builder, tree: SpacecraftTree, mating, docking=(), angles=None):
     """The continuous plant of the twin (no gravity), the controlled body on its floating
     joint; with ``mating = (port, target port)`` the target's own SDF parsed as a second model
-    and welded port to port (Drake's ``WeldFrames``: ports coinciding, axes aligned), its
-    revolute joints returned with their file angles (held locked). Returns
-    ``(plant, hub_joint, held)``."""
+    and welded port to port (Drake's ``WeldFrames``: ports coinciding, axes aligned); with
+    ``docking`` (spring-dampers on one target) the target parsed the same way and held by one
+    bushing per spring-damper, at rest where the ports coincide at the tree's joint ``angles``
+    [rad] (:func:`~oos_drake.multibody.tree_plant.add_docked_target`). The target's revolute
+    joints are returned with their file angles (held locked). Returns
+    ``(plant, hub_joint, held, bushings)``."""
+    from oos_drake.multibody.tree_plant import add_docked_target, docked_target_pose
+
     plant = builder.AddNamedSystem("plant", MultibodyPlant(time_step=0.0))
     plant.mutable_gravity_field().set_gravity_vector(np.zeros(3))
-    held = {}
+    held, bushings = {}, {}
+    docking = tuple(docking)
+    if mating is not None and docking:
+        raise ValueError("tree twin: a target is either welded (mating) or docked, not both")
     with tempfile.TemporaryDirectory(prefix="oos-tree-twin-") as folder:
         write_tree_sdf(tree, Path(folder) / "tree")
         top = _parse_tree_sdf(plant, tree, Path(folder) / "tree")
-        if mating is not None:
-            port, target_port = mating
+        pairs = [mating] if mating is not None else [s.connection for s in docking]
+        target = None
+        for port, target_port in pairs:
             if port not in tree.ports:
                 raise ValueError(f"tree twin: no port {port!r} on tree {tree.name}")
             owner = [t for t in tree.targets.values() if target_port in t.ports]
             if not owner:
                 raise ValueError(f"tree twin: no target port {target_port!r} on tree {tree.name}")
+            if target is not None and owner[0] is not target:
+                raise ValueError(
+                    f"tree twin: docking {port}-{target_port} holds another target than "
+                    f"{target.name}"
+                )
             target = owner[0]
+        if target is not None:
             write_tree_sdf(target, Path(folder) / "target")
             target_top = _parse_tree_sdf(plant, target, Path(folder) / "target", prefix=target.name)
-            plant.WeldFrames(
-                plant.GetFrameByName(port, top), plant.GetFrameByName(target_port, target_top)
-            )
+            if mating is not None:
+                port, target_port = mating
+                plant.WeldFrames(
+                    plant.GetFrameByName(port, top),
+                    plant.GetFrameByName(target_port, target_top),
+                )
+            else:
+                X_W_target = docked_target_pose(tree, docking[0], angles)
+                bushings = add_docked_target(
+                    plant, tree, top, target, target_top, X_W_target, docking
+                )
             held = {
                 plant.GetJointByName(joint_name(body)): float(angle)
                 for body, angle in target.operating_angles().items()
@@ -335,7 +375,7 @@ def _add_twin_plant(builder, tree: SpacecraftTree, mating):
         plant, plant.GetBodyByName(tree.root, top), RigidTransform(), name=f"{tree.root}_floating"
     )
     plant.Finalize()
-    return plant, hub_joint, held
+    return plant, hub_joint, held, bushings
 
 
 def open_loop_twin(tree: SpacecraftTree, mating: tuple[str, str] | None = None):
@@ -362,7 +402,7 @@ def open_loop_twin(tree: SpacecraftTree, mating: tuple[str, str] | None = None):
     from oos_drake.scenario.tree import captured_tree
 
     builder = DiagramBuilder()
-    plant, hub_joint, _ = _add_twin_plant(builder, tree, mating)
+    plant, hub_joint, _, _ = _add_twin_plant(builder, tree, mating)
     ports = add_hub_io(builder, plant, hub_joint)
     diagram = builder.Build()
     model_tree = tree if mating is None else captured_tree(tree, *mating)
