@@ -114,7 +114,9 @@ def test_analyze_proves_the_whole_axis_unless_grid_only():
 
 def test_shared_options_come_from_the_argument_helper():
     """``--quiet`` and ``--scenario`` have one help text on every command (both are added by
-    :mod:`oos_drake.app.args`), and no command spells an output folder other than ``--out``."""
+    :mod:`oos_drake.app.args`; ``--scenario``'s names its default: the paper's, or for
+    ``oos confirm`` the analysis folder's), and no command spells an output folder other than
+    ``--out``."""
     from oos_drake.app.args import SCENARIO_HELP
 
     helps: dict[str, set[str]] = {"--quiet": set(), "--scenario": set()}
@@ -124,7 +126,10 @@ def test_shared_options_come_from_the_argument_helper():
                 helps[option].add(action.help)
         assert not {"--output-dir", "--outdir", "--out-dir"} & _visible_options(parser), path
     assert helps["--quiet"] == {"no progress bars"}
-    assert helps["--scenario"] == {SCENARIO_HELP}
+    assert helps["--scenario"] == {
+        SCENARIO_HELP.format(default="the paper's"),
+        SCENARIO_HELP.format(default="the one the analysis folder records"),
+    }
 
 
 def test_report_page_goes_to_out_and_output_is_a_hidden_alias():

@@ -726,7 +726,7 @@ def register(subparsers) -> None:
         help="largest perturbation scale alpha searched on the twin [-] (the boundary beyond it "
         "is reported as not reached)",
     )
-    add_scenario_argument(confirm)
+    add_scenario_argument(confirm, default="the one the analysis folder records")
     add_parallel_arguments(confirm)
     add_quiet_argument(confirm)
     confirm.set_defaults(func=run_confirm)

@@ -115,17 +115,21 @@ def add_parallel_arguments(
 
 SCENARIO_HELP = (
     "scenario data file (TOML: spacecraft, mission and [control] requirements) or the name of a "
-    "shipped one (paper, heavy_target); default: the paper's"
+    "shipped one (paper, heavy_target, flexible_satellite, geo_satellite, servicer_7dof); "
+    "default: {default}"
 )
 
 
-def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
+def add_scenario_argument(parser: argparse.ArgumentParser, *, default: str = "the paper's") -> None:
     """Add ``--scenario FILE`` (one name and help text for every command that builds a model).
 
-    The value stays a string (``None``: the paper's scenario) for
+    The value stays a string (``None``: the command's default, ``default`` in the help: the
+    paper's scenario, or the one an analysis folder records) for
     :func:`oos_drake.scenario.data.load_scenario`, which resolves shipped names.
     """
-    parser.add_argument("--scenario", default=None, metavar="FILE", help=SCENARIO_HELP)
+    parser.add_argument(
+        "--scenario", default=None, metavar="FILE", help=SCENARIO_HELP.format(default=default)
+    )
 
 
 def add_out_argument(
