@@ -118,14 +118,21 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(quick_run):
     assert "0 run now" in second.stdout
 
 
-def _record_analyses(monkeypatch, analyses, margins=None, confirms=None):
+def _record_analyses(monkeypatch, analyses, margins=None, confirms=None, campaigns=None):
     """Replace the analysis stage's computation by a recorder of ``(controller, options)``,
     the margins and confirmation stages' likewise (into ``margins``, ``confirms``, when
-    given)."""
+    given), the campaign stage and its report by a recorder of ``(options, folder)`` and
+    ``("report", folder)`` (into ``campaigns``)."""
     import oos_drake.app.analyze as analyze
+    import oos_drake.app.campaign as app_campaign
 
     margins = [] if margins is None else margins
     confirms = [] if confirms is None else confirms
+    campaigns = [] if campaigns is None else campaigns
+    monkeypatch.setattr(app_campaign, "campaign", lambda *args: campaigns.append(args))
+    monkeypatch.setattr(
+        app_campaign, "campaign_report", lambda folder: campaigns.append(("report", folder))
+    )
     monkeypatch.setattr(analyze, "confirm_inputs", lambda *args: args)
     monkeypatch.setattr(
         analyze,
@@ -151,12 +158,13 @@ def test_oos_run_passes_the_scheduler_to_the_stages_with_parallel_work(tmp_path,
     (synthesis, analysis, confirmation, campaign) get both, the report runs as without them
     (stages replaced by a recorder)."""
     import oos_drake.app.pipeline as pipeline
+    from oos_drake.app.campaign import pipeline_campaign_options
     from oos_drake.app.main import build_parser
 
-    calls, analyses, margins, confirms = [], [], [], []
+    calls, analyses, margins, confirms, campaigns = [], [], [], [], []
     monkeypatch.setattr(pipeline, "_oos", lambda *argv: calls.append([str(a) for a in argv]))
     monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: None)
-    _record_analyses(monkeypatch, analyses, margins, confirms)
+    _record_analyses(monkeypatch, analyses, margins, confirms, campaigns)
     argv = ["run", "--out", str(tmp_path), "--scheduler", "dask", "--workers", "3"]
     assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
     ((controller, options),) = analyses  # the analysis stage: a function call, not argv
@@ -169,13 +177,29 @@ def test_oos_run_passes_the_scheduler_to_the_stages_with_parallel_work(tmp_path,
     ((confirmed, confirm_options),) = confirms  # the confirmation stage: a function call
     assert confirmed == tmp_path / "controller" / "controller.json"
     assert (confirm_options.scheduler, confirm_options.workers) == ("dask", 3)
-    by_command = {tuple(c[:2]) if c[0] == "campaign" else (c[0],): c for c in calls}
-    for key in [("synth",), ("campaign", "run")]:
-        argv = by_command[key]
-        assert argv[argv.index("--scheduler") + 1] == "dask", key
-        assert argv[argv.index("--workers") + 1] == "3", key
-    for key in [("model",), ("campaign", "report")]:
-        assert "--scheduler" not in by_command[key], key
+    by_command = {c[0]: c for c in calls}
+    argv = by_command["synth"]
+    assert argv[argv.index("--scheduler") + 1] == "dask"
+    assert argv[argv.index("--workers") + 1] == "3"
+    assert "--scheduler" not in by_command["model"]
+    assert "campaign" not in by_command  # the campaign stage and its report: function calls
+    from oos_drake.scenario.data import scenario_path
+
+    key = pipeline.stage_keys(scenario_path(None), pipeline.DEFAULT_CAMPAIGN, False)["campaign"]
+    folder = tmp_path / f"campaign-{key[:10]}"
+    assert campaigns == [
+        (
+            pipeline_campaign_options(
+                pipeline.DEFAULT_CAMPAIGN,
+                tmp_path / "analysis" / "worst_cases.parquet",
+                tmp_path / "controller" / "controller.json",
+                3,
+                "dask",
+            ),
+            folder,
+        ),
+        ("report", folder),
+    ]
 
 
 def test_oos_run_proves_the_whole_axis_unless_grid_only(tmp_path, monkeypatch):

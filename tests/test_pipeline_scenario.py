@@ -52,6 +52,15 @@ def stubbed(monkeypatch):
         analyze, "confirm", lambda scenario, options, out: calls.append(["confirm", scenario])
     )
 
+    import oos_drake.app.campaign as app_campaign  # the campaign stage: a function call too
+
+    def fake_campaign(options, folder):
+        calls.append(["campaign", str(options.spec)])
+        folder.mkdir(parents=True, exist_ok=True)
+
+    monkeypatch.setattr(app_campaign, "campaign", fake_campaign)
+    monkeypatch.setattr(app_campaign, "campaign_report", lambda folder: calls.append(["report"]))
+
     def fake_report(folder, out, campaign):
         calls.append(["report"])
         (folder / "report.html").write_text("<html></html>")

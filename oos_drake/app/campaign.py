@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -108,25 +109,117 @@ def _controller_note(spec, options: dict) -> str | None:
     return None
 
 
-def _run(args: argparse.Namespace) -> int:
-    from oos_drake.campaign.runner import run_campaign
-    from oos_drake.campaign.spec import load_spec
+def campaign_options(args: argparse.Namespace):
+    """The :class:`~oos_drake.campaign.runner.CampaignOptions` of ``oos campaign run``'s
+    arguments (checked: nothing is written with a bad one)."""
+    from oos_drake.campaign.runner import CampaignOptions
 
-    spec = load_spec(args.spec, worst_cases=args.worst_cases)
-    out = args.out if args.out is not None else Path("out") / "campaigns" / spec.name
-    simulator_options = _simulator_options(args)
-    summary = run_campaign(
-        args.spec,
-        out,
+    return CampaignOptions(
+        spec=Path(args.spec),
+        worst_cases=Path(args.worst_cases) if args.worst_cases is not None else None,
+        simulator_options=_simulator_options(args),
         workers=args.workers,
         scheduler=args.scheduler,
         progress=not args.quiet,
-        worst_cases=args.worst_cases,
-        simulator_options=simulator_options,
+    )
+
+
+def pipeline_campaign_options(
+    spec: str | Path,
+    worst_cases: str | Path,
+    controller: str | Path,
+    workers: int,
+    scheduler: str | None = None,
+):
+    """The campaign options of ``oos run``: the campaign ``spec`` guided by the analysis'
+    ``worst_cases`` and flying ``controller`` on ``workers`` processes of ``scheduler`` (what
+    ``oos campaign run SPEC --worst-cases W --simulator-option controller=C --workers N
+    [--scheduler S]`` builds; ``controller`` made absolute)."""
+    from oos_drake.campaign.runner import CampaignOptions
+
+    return CampaignOptions(
+        spec=Path(spec),
+        worst_cases=Path(worst_cases),
+        simulator_options={"controller": str(Path(controller).resolve())},
+        workers=workers,
+        scheduler=scheduler,
+    )
+
+
+def _run_campaign(options, out: Path):
+    """Run the campaign of ``options`` into the new folder ``out``, print its summary;
+    returns the :class:`~oos_drake.campaign.runner.CampaignSummary`."""
+    from oos_drake.campaign.runner import run_campaign
+    from oos_drake.campaign.spec import load_spec
+
+    summary = run_campaign(
+        options.spec,
+        out,
+        workers=options.workers,
+        scheduler=options.scheduler,
+        progress=options.progress,
+        worst_cases=options.worst_cases,
+        simulator_options=options.simulator_options,
     )
     _print_summary(summary)
-    if note := _controller_note(spec, simulator_options):
+    spec = load_spec(options.spec, worst_cases=options.worst_cases)
+    if note := _controller_note(spec, options.simulator_options):
         print(note)
+    return summary
+
+
+def campaign(options, out: str | Path):
+    """The campaign stage of ``oos run``: resume the campaign in ``out`` when it holds one
+    (its ``spec.toml``: no finished run is lost or repeated), else run the campaign of
+    ``options`` into ``out`` (what a campaign killed before its spec was written left there
+    removed first); prints the summary.
+
+    Parameters
+    ----------
+    options : CampaignOptions
+        From :func:`pipeline_campaign_options` (a resumed campaign takes only its workers,
+        scheduler and progress bar: the rest is the folder's).
+    out : Path
+        The campaign folder.
+
+    Returns
+    -------
+    CampaignSummary
+    """
+    from oos_drake.campaign.runner import resume_campaign
+    from oos_drake.campaign.store import SPEC_FILE
+
+    out = Path(out)
+    if (out / SPEC_FILE).is_file():
+        print(f"campaign: resuming {out}")
+        summary = resume_campaign(
+            out, workers=options.workers, scheduler=options.scheduler, progress=options.progress
+        )
+        _print_summary(summary)
+        return summary
+    shutil.rmtree(out, ignore_errors=True)
+    print(f"campaign -> {out}")
+    return _run_campaign(options, out)
+
+
+def campaign_report(directory: str | Path, worst: int = 5, confirm: str | Path | None = None):
+    """Write the report of the campaign in ``directory`` (``DIR/report``), print its text;
+    returns the :class:`~oos_drake.campaign.report.CampaignReport`."""
+    from oos_drake.campaign.report import write_report
+
+    report = write_report(directory, worst=worst, confirm=confirm)
+    print(report.text)
+    print(f"report: {report.directory}")
+    return report
+
+
+def _run(args: argparse.Namespace) -> int:
+    from oos_drake.campaign.spec import load_spec
+
+    options = campaign_options(args)
+    spec = load_spec(options.spec, worst_cases=options.worst_cases)
+    out = args.out if args.out is not None else Path("out") / "campaigns" / spec.name
+    _run_campaign(options, Path(out))
     return 0
 
 
@@ -170,11 +263,7 @@ def _rerun(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from oos_drake.campaign.report import write_report
-
-    report = write_report(args.directory, worst=args.worst, confirm=args.confirm)
-    print(report.text)
-    print(f"report: {report.directory}")
+    campaign_report(args.directory, worst=args.worst, confirm=args.confirm)
     return 0
 
 

@@ -175,6 +175,7 @@ def default_campaign(scenario: Path) -> Path:
 
 def run_pipeline(args: argparse.Namespace) -> int:
     """Run every stage of the main job into ``args.out``; returns the exit status."""
+    from oos_drake.app.campaign import campaign_report, pipeline_campaign_options
     from oos_drake.app.tree import joint_space_scenario
     from oos_drake.scenario.data import scenario_path
     from oos_drake.scenario.tree_scenario import unsupported_stages
@@ -183,6 +184,14 @@ def run_pipeline(args: argparse.Namespace) -> int:
     campaign_spec = Path(args.campaign or default_campaign(scenario))
     if not campaign_spec.is_file():
         raise ValueError(f"campaign spec {campaign_spec}: file not found")
+    controller = Path(args.out) / "controller" / "controller.json"
+    campaign_options = pipeline_campaign_options(  # checked before anything is written
+        campaign_spec,
+        Path(args.out) / "analysis" / "worst_cases.parquet",
+        controller,
+        args.workers,
+        getattr(args, "scheduler", None),
+    )
     # a tree's tip-pose waypoints solved by inverse kinematics: the stages read the joint-space copy
     scenario = joint_space_scenario(scenario, Path(args.out) / "scenario")
     skipped = unsupported_stages(scenario)  # a schema-2 tree: said, never silent
@@ -215,7 +224,6 @@ def run_pipeline(args: argparse.Namespace) -> int:
     run_stage(
         "validate", out / "validate", keys["validate"], lambda d: _validate(d, scenario), timings
     )
-    controller = out / "controller" / "controller.json"
     commands = {  # in order: each stage reads the folders of those before it
         "controller": ["synth", *workers, *quick],
         "analysis": _analysis_stage(args, scenario, controller, grid_only=bool(grid_only)),
@@ -238,26 +246,9 @@ def run_pipeline(args: argparse.Namespace) -> int:
     campaign_start = time.perf_counter()
     if "campaign" in skipped:
         campaign = None
-    elif (campaign / "spec.toml").is_file():
-        print(f"[oos run] campaign: resuming {campaign}")
-        _oos("campaign", "resume", campaign, *workers)
     else:
-        shutil.rmtree(campaign, ignore_errors=True)
-        print(f"[oos run] campaign -> {campaign}")
-        _oos(
-            "campaign",
-            "run",
-            campaign_spec,
-            "--out",
-            campaign,
-            *workers,
-            "--worst-cases",
-            out / "analysis" / "worst_cases.parquet",
-            "--simulator-option",
-            f"controller={controller.resolve()}",
-        )
-    if campaign is not None:
-        _oos("campaign", "report", campaign)
+        _campaign_stage(campaign_options)(campaign)
+        campaign_report(campaign)
         _replay_worst_run(campaign)
         timings["campaign + report"] = time.perf_counter() - campaign_start
 
@@ -367,6 +358,22 @@ def _confirm_stage(args, scenario: Path, controller: Path, analysis: Path):
         options = pipeline_confirm_options(args.workers, getattr(args, "scheduler", None))
         inputs = confirm_inputs(analysis, controller, str(scenario))
         return confirm(*inputs, options, folder)
+
+    return work
+
+
+def _campaign_stage(options):
+    """The campaign stage of ``oos run``: ``work(folder)`` running the campaign of ``options``
+    (:func:`oos_drake.app.campaign.pipeline_campaign_options`) into ``folder``, or resuming
+    the one there (:func:`oos_drake.app.campaign.campaign`, what ``oos campaign run SPEC
+    --out FOLDER --worst-cases W --simulator-option controller=C --workers N [--scheduler S]``
+    or ``oos campaign resume FOLDER --workers N [--scheduler S]`` runs); returns its
+    :class:`~oos_drake.campaign.runner.CampaignSummary`."""
+
+    def work(folder: Path):
+        from oos_drake.app.campaign import campaign
+
+        return campaign(options, folder)
 
     return work
 

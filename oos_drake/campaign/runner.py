@@ -15,7 +15,7 @@ import json
 import math
 import sys
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -127,6 +127,48 @@ class CampaignSummary:
     skipped: int
     status_counts: dict
     n_pass: int
+
+
+@dataclass(frozen=True)
+class CampaignOptions:
+    """How a campaign is run (``oos campaign run``'s options, the output folder apart).
+
+    Attributes
+    ----------
+    spec : Path
+        Campaign spec file, or the bare name of a shipped spec (``Path("demo")``).
+    worst_cases : Path or None
+        ``worst_cases.parquet`` replacing the spec's (``--worst-cases``; e.g. ``oos analyze``'s).
+    simulator_options : dict
+        Simulator options replacing the spec's (``--simulator-option KEY=VALUE`` and
+        ``--controller``, whose value is ``{"controller": "/absolute/controller.json"}``).
+    workers : int
+        Worker processes (``--workers``; 1 runs in this process).
+    scheduler : str or None
+        Where they run (``--scheduler``; see :func:`~.executors.make_executor`).
+    progress : bool
+        tqdm progress bar of the runs (``not --quiet``).
+
+    Raises
+    ------
+    ValueError
+        ``workers`` below 1, an unknown ``scheduler`` (one line naming the option).
+    """
+
+    spec: Path
+    worst_cases: Path | None = None
+    simulator_options: dict = field(default_factory=dict)
+    workers: int = 1
+    scheduler: str | None = None
+    progress: bool = True
+
+    def __post_init__(self):
+        from oos_drake.processes import check_scheduler
+
+        if not self.workers >= 1:
+            raise ValueError(f"--workers {self.workers}: need at least 1 worker")
+        check_scheduler(self.scheduler)
+        object.__setattr__(self, "simulator_options", dict(self.simulator_options))
 
 
 def load_campaign(directory: str | Path) -> tuple[CampaignSpec, pd.DataFrame]:
