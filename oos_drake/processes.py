@@ -114,8 +114,7 @@ def process_pool(
     -------
     concurrent.futures.ProcessPoolExecutor
     """
-    if workers < 1:
-        raise ValueError(f"--workers {workers}: need at least 1 worker")
+    check_workers(workers)
     return ProcessPoolExecutor(
         workers,
         mp_context=multiprocessing.get_context(start_method(method)),
@@ -221,8 +220,7 @@ class ThreadExecutor(_LocalPoolExecutor):
     kind = "threads"
 
     def __init__(self, workers: int, initializer: Callable | None = None, initargs: tuple = ()):
-        if int(workers) < 1:
-            raise ValueError(f"--workers {workers}: need at least 1 worker")
+        check_workers(workers)
         super().__init__(initializer, initargs)
         self.workers = int(workers)
         self.pool = ThreadPoolExecutor(max_workers=self.workers, thread_name_prefix="oos")
@@ -315,8 +313,7 @@ class DaskExecutor(SerialExecutor):
             raise ValueError(
                 '--scheduler dask needs Dask: pip install "dask[distributed]"'
             ) from exc
-        if int(workers) < 1:
-            raise ValueError(f"--workers {workers}: need at least 1 worker")
+        check_workers(workers)
         self._cluster = None
         if address is None:
             self._cluster = LocalCluster(
@@ -409,8 +406,7 @@ def make_executor(
         Use it as a context manager (it shuts down at the end).
     """
     workers = int(workers)
-    if workers < 1:
-        raise ValueError(f"--workers {workers}: need at least 1 worker")
+    check_workers(workers)
     setup = {"initializer": initializer, "initargs": initargs}
     if scheduler in (None, "", "processes"):
         if workers == 1:
@@ -419,6 +415,19 @@ def make_executor(
     if scheduler == "threads":
         return SerialExecutor(**setup) if workers == 1 else ThreadExecutor(workers, **setup)
     return DaskExecutor(scheduler_address(scheduler), workers, **setup)
+
+
+def check_workers(workers) -> int:
+    """``workers`` as an int if it is at least 1 (one message for every ``--workers``).
+
+    Raises
+    ------
+    ValueError
+        ``"--workers N: need at least 1 worker"``.
+    """
+    if not int(workers) >= 1:
+        raise ValueError(f"--workers {workers}: need at least 1 worker")
+    return int(workers)
 
 
 def check_scheduler(scheduler: str | None) -> str | None:

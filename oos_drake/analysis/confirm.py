@@ -1180,8 +1180,9 @@ class ConfirmationOptions:
     progress: bool = True
 
     def __post_init__(self):
-        if not self.workers >= 1:
-            raise ValueError(f"--workers {self.workers}: need at least 1 worker")
+        from oos_drake.processes import check_workers
+
+        check_workers(self.workers)
 
 
 @dataclass(frozen=True)

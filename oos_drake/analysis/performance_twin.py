@@ -69,8 +69,8 @@ FIT_PERIODS = 4
 MAX_SETTLE = 500.0
 #: Settling time in time constants of the slowest closed-loop mode [-].
 SETTLE_TIME_CONSTANTS = 7.0
-#: Rows of the table (and the printed summary).
-PERFORMANCE_CONFIRMATION_COLUMNS = [
+#: Columns of ``performance.parquet`` that :func:`worst_gain_cases` reads.
+GAIN_CASE_COLUMNS = (
     "channel",
     "subset",
     "time [s]",
@@ -78,6 +78,12 @@ PERFORMANCE_CONFIRMATION_COLUMNS = [
     "gain nominal [-]",
     "gain lower [-]",
     "gain upper [-]",
+)
+
+
+#: Rows of the table (and the printed summary).
+PERFORMANCE_CONFIRMATION_COLUMNS = [
+    *GAIN_CASE_COLUMNS,
     "gain of the perturbation [-]",
     "gain linear twin [-]",
     "gain linear sampled [-]",
@@ -131,18 +137,6 @@ class GainCase:
     nominal: float
     lower: float
     upper: float
-
-
-#: Columns of ``performance.parquet`` that :func:`worst_gain_cases` reads.
-GAIN_CASE_COLUMNS = (
-    "channel",
-    "subset",
-    "time [s]",
-    "frequency [Hz]",
-    "gain nominal [-]",
-    "gain lower [-]",
-    "gain upper [-]",
-)
 
 
 def worst_gain_cases(table: pd.DataFrame, channels=("e_p", "e_u")) -> list[GainCase]:

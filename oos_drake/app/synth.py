@@ -29,7 +29,7 @@ from oos_drake.control.plants import (
 )
 from oos_drake.control.report import write_synthesis
 from oos_drake.control.synthesis import SynthesisOptions, synthesize
-from oos_drake.processes import make_executor
+from oos_drake.processes import check_workers, make_executor
 
 __all__ = ["baseline_for", "drake_plants", "make_plants", "mission_times", "scenario_plants"]
 
@@ -59,8 +59,7 @@ def run_synth(args) -> int:
     """Run the synthesis and write the outputs; exit status 0."""
     from oos_drake.scenario.data import load_scenario, scenario_record
 
-    if args.workers < 1:  # before the model array is built
-        raise ValueError(f"--workers {args.workers}: need at least 1 worker")
+    check_workers(args.workers)  # before the model array is built
     wall, cpu = time.perf_counter(), time.process_time()
     scenario = load_scenario(args.scenario)
     spec = loop_specification(DesignSpecification.from_requirements(scenario.control), args)

@@ -48,7 +48,7 @@ from oos_drake.campaign.simulator import (
     simulator_builds,
 )
 from oos_drake.processes import DaskExecutor as DaskTasks
-from oos_drake.processes import PoolExecutor, scheduler_address
+from oos_drake.processes import PoolExecutor, check_workers, scheduler_address
 
 
 @dataclass(frozen=True)
@@ -170,8 +170,7 @@ class ProcessPoolExecutor:
     """
 
     def __init__(self, workers: int, timeout: float | None = None):
-        if workers < 1:
-            raise ValueError(f"--workers {workers}: need at least 1 worker")
+        check_workers(workers)
         if timeout is not None and not timeout > 0:
             raise ValueError(f"run timeout {timeout} s must be positive")
         self.workers = workers
@@ -328,8 +327,7 @@ def make_executor(
     in a pool of one process rather than in this process. Dask does not stop running tasks, so
     the timeout is not enforced there (a warning says so).
     """
-    if workers < 1:
-        raise ValueError(f"--workers {workers}: need at least 1 worker")
+    check_workers(workers)
     if scheduler and scheduler != "processes":
         if timeout:
             warnings.warn(f"run_timeout = {timeout} s is not enforced on Dask", stacklevel=2)

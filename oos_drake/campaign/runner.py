@@ -163,10 +163,9 @@ class CampaignOptions:
     progress: bool = True
 
     def __post_init__(self):
-        from oos_drake.processes import check_scheduler
+        from oos_drake.processes import check_scheduler, check_workers
 
-        if not self.workers >= 1:
-            raise ValueError(f"--workers {self.workers}: need at least 1 worker")
+        check_workers(self.workers)
         check_scheduler(self.scheduler)
         object.__setattr__(self, "simulator_options", dict(self.simulator_options))
 
