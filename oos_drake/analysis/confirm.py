@@ -106,6 +106,11 @@ CONFIRM_LOG_RATE_HZ = 10.0
 GROWTH_TOLERANCE = 1e-5
 
 
+#: Largest share of the wheels' torque limit that the first command of a confirmation run may
+#: take [-] (:meth:`ConfirmOptions.within_torque_limit`): the run stays clear of the saturation.
+LINEAR_TORQUE_FRACTION = 0.25
+
+
 @dataclass(frozen=True)
 class ConfirmOptions:
     """Options of the nonlinear confirmation.
@@ -167,6 +172,26 @@ class ConfirmOptions:
         """:meth:`for_frequency` of a peak's predicted oscillation: the sampled-data loop's
         frequency at its boundary [Hz], else the critical frequency [Hz]."""
         return self.for_frequency(sampled_hz if np.isfinite(sampled_hz) else critical_hz)
+
+    def within_torque_limit(self, system, torque_limit: float) -> ConfirmOptions:
+        """These options with an initial attitude error whose first command stays within
+        :data:`LINEAR_TORQUE_FRACTION` of the wheels' ``torque_limit`` [N m].
+
+        The runs identify a linear loop's oscillation: a first command beyond the saturation
+        makes the loop nonlinear from the start (geo_satellite's gains, up to 781 N m/rad
+        against 0.2 N m, met 1e-3 rad with 0.6 N m). ``system`` is the controller
+        (:class:`~oos_drake.control.interconnection.ControllerSystem`); its direct
+        feedthrough from the attitude measurement gives the first command of an error of
+        ``initial_attitude`` on every axis (the worst axis counted). Unchanged when that is
+        already small enough.
+        """
+        gain = float(np.abs(np.asarray(system.D, dtype=float)[:, :3]).sum(axis=1).max())
+        if not (gain > 0 and np.isfinite(torque_limit)):
+            return self
+        attitude = LINEAR_TORQUE_FRACTION * float(torque_limit) / gain
+        if attitude >= self.initial_attitude:
+            return self
+        return dataclasses.replace(self, initial_attitude=attitude)
 
     def __post_init__(self):
         names = ("duration", "settle", "initial_attitude", "rtol", "max_step", "bracket", "cycles")
@@ -1040,7 +1065,9 @@ def confirm_peak(peak: Peak, controller, scenario, options: ConfirmOptions):
     if peak.has_complex and nyquist:
         row["status"] = "linear only: complex blocks beyond the flight software's Nyquist frequency"
     else:
-        run_options = options.for_peak(f_s, peak.omega / (2 * np.pi))
+        run_options = options.for_peak(f_s, peak.omega / (2 * np.pi)).within_torque_limit(
+            controller.system, design.torque_limit
+        )
         twin = _Twin(peak, controller.system, run_options, scenario, f_s, specs, design)
         top = min(alpha_phys * (1 - 1e-3), options.alpha_limit)
         guess = alpha_s if np.isfinite(alpha_s) else 1.0

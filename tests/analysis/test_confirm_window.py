@@ -75,3 +75,27 @@ def test_a_peak_run_follows_the_sampled_loops_frequency_else_the_critical_one():
     assert options.for_peak(0.05, 0.3) == options.for_frequency(0.05)
     assert options.for_peak(math.nan, 0.05) == options.for_frequency(0.05)
     assert options.for_peak(math.nan, math.inf) is options
+
+
+def test_the_first_command_stays_clear_of_the_wheels_saturation():
+    """With large gains against a small torque limit the initial error is reduced so that the
+    first command, D_att @ (e0 on every axis) computed here, is within the fraction of the limit;
+    with the paper's kind of gains the default 1e-3 rad is kept."""
+    from oos_drake.analysis.confirm import LINEAR_TORQUE_FRACTION
+    from oos_drake.control.interconnection import ControllerSystem
+
+    K_p = np.array([[78.1, 7.6, 81.9], [-75.3, 214.1, 574.9], [29.8, -47.7, -40.6]])
+    K_d = 10.0 * np.eye(3)
+    system = ControllerSystem.static(np.hstack([K_p, K_d]))
+    options = ConfirmOptions()
+    reduced = options.within_torque_limit(system, 0.2)
+    first = K_p @ np.full(3, reduced.initial_attitude)
+    assert reduced.initial_attitude < options.initial_attitude
+    assert np.abs(first).max() <= LINEAR_TORQUE_FRACTION * 0.2 * (1 + 1e-12)
+    # an error of the same size with the signs of the worst row reaches the fraction exactly
+    worst = np.abs(K_p).sum(axis=1).max() * reduced.initial_attitude
+    assert worst == pytest.approx(LINEAR_TORQUE_FRACTION * 0.2)
+    assert (
+        options.within_torque_limit(ControllerSystem.static(np.hstack([np.eye(3), K_d])), 2.0)
+        is options
+    )
