@@ -37,7 +37,7 @@ import pandas as pd
 
 from oos_drake.analysis.controller import Controller
 from oos_drake.analysis.results import PAPER, AnalysisResult, Certificate  # noqa: F401 (PAPER)
-from oos_drake.analysis.stability import SweepOptions
+from oos_drake.analysis.stability import TIGHT_GAP, SweepOptions
 from oos_drake.analysis.tightening import TightenOptions
 from oos_drake.blas import with_single_threaded_blas
 
@@ -97,6 +97,12 @@ class AnalysisOptions:
         On by default (``oos analyze --grid-only`` turns it off; cost: docs/ANALYSIS-RESULTS.md).
         Without it the upper bounds hold on the analyzed frequencies only (``oos confirm``
         found one broken between them, docs/CLAIMS.md A11).
+    guarantee_tight : float
+        Relative margin [-] of the guarantee's first level above the largest bound found
+        (``tight`` of :func:`~oos_drake.analysis.stability.axis_guarantee`, default
+        :data:`~oos_drake.analysis.stability.TIGHT_GAP`: 0.01, 1 %); a configuration whose
+        cover does not close there is covered again from ``(1 + tighten.target_gap)`` times
+        the certified lower bound (``guarantee fell back`` in the peaks table).
     progress : bool
         tqdm progress bars.
     plant : str
@@ -122,6 +128,7 @@ class AnalysisOptions:
     time_check: bool = True
     time_check_duration: float = 600.0
     guarantee: bool = True
+    guarantee_tight: float = TIGHT_GAP
     progress: bool = True
     plant: str = "lfr"
 
@@ -138,6 +145,11 @@ class AnalysisOptions:
         k_lo, k_hi = self.stiffness_range
         if not 0 < k_lo <= k_hi:
             raise ValueError(f"stiffness_range must be 0 < low <= high, got {self.stiffness_range}")
+        if not (np.isfinite(self.guarantee_tight) and self.guarantee_tight >= 0):
+            raise ValueError(
+                "guarantee_tight must be a finite relative margin >= 0 [-], got "
+                f"{self.guarantee_tight}"
+            )
         from oos_drake.analysis.models import PLANT_SOURCES
 
         if self.plant not in PLANT_SOURCES:
@@ -264,6 +276,7 @@ def _guarantee_columns(guarantee, lower, n_configurations) -> dict:
         "guarantee solved points": int(guarantee.solved.sum()),
         "guarantee raised configurations": guarantee.raised,
         "guarantee failures": len(guarantee.failures),
+        "guarantee fell back": bool(np.any(guarantee.fell_back)),
         "guarantee time [s]": round(guarantee.seconds, 2),
         "guarantee scope": (
             f"every frequency in [0, inf) at each of the {n_configurations} analyzed "
@@ -290,6 +303,7 @@ def guaranteed_table(study: str, result, label: str, values) -> pd.DataFrame:
                     "cover points": g.points,
                     "cover solved points": g.solved,
                     "level raised": g.levels > g.floor * (1 + 1e-12),
+                    "cover fell back": np.asarray(g.fell_back, dtype=bool),
                 }
             )
         )
@@ -516,6 +530,7 @@ class _Studies:
             time_budget=max(options.spike_budget - self.spike_seconds, 1e-3),
             guarantee=options.guarantee,
             guarantee_gap=options.tighten.target_gap,
+            guarantee_tight=options.guarantee_tight,
         )
         self.spike_seconds += sum(r.seconds for r in res.reports.values())
         return res
