@@ -10,10 +10,14 @@ Files written in ``out_dir`` (Parquet tables are tidy, units in column names):
                                 certified lower bound found (grid, refinement, searches) and the
                                 whole-axis guaranteed bound (``mu upper scope``: "whole axis";
                                 with --grid-only the analyzed points' bound, "analyzed points");
-                                the grid's largest upper bound is ``mu upper grid [-]``
+                                the grid's largest upper bound is ``mu upper grid [-]``;
+                                ``guarantee fell back``: a cover did not close at the first
+                                level (``--guarantee-tight``) and was done again from
+                                ``(1 + target gap)`` x the lower bound
 ``stability_guaranteed.parquet`` per study, subset and analyzed configuration: the peak of mu
                                 proved on the whole frequency axis beside the largest lower and
-                                upper bounds on the analyzed frequencies (not with ``--grid-only``)
+                                upper bounds on the analyzed frequencies, ``cover fell back``
+                                (not with ``--grid-only``)
 ``worst_perturbations.parquet`` destabilizing perturbation of every peak, per block (physical)
 ``peak_perturbations.npz``      the same perturbations whole and normalized (complex blocks too)
 ``performance.parquet``         worst-case gains of d -> e_p, d -> e_u per subset (Fig. performance)
