@@ -10,10 +10,14 @@ Files written in ``out_dir`` (Parquet tables are tidy, units in column names):
                                 certified lower bound found (grid, refinement, searches) and the
                                 whole-axis guaranteed bound (``mu upper scope``: "whole axis";
                                 with --grid-only the analyzed points' bound, "analyzed points");
-                                the grid's largest upper bound is ``mu upper grid [-]``
+                                the grid's largest upper bound is ``mu upper grid [-]``;
+                                ``guarantee fell back``: a cover did not close at the first
+                                level (``--guarantee-tight``) and was done again from
+                                ``(1 + target gap)`` x the lower bound
 ``stability_guaranteed.parquet`` per study, subset and analyzed configuration: the peak of mu
                                 proved on the whole frequency axis beside the largest lower and
-                                upper bounds on the analyzed frequencies (not with ``--grid-only``)
+                                upper bounds on the analyzed frequencies, ``cover fell back``
+                                (not with ``--grid-only``)
 ``worst_perturbations.parquet`` destabilizing perturbation of every peak, per block (physical)
 ``peak_perturbations.npz``      the same perturbations whole and normalized (complex blocks too)
 ``performance.parquet``         worst-case gains of d -> e_p, d -> e_u per subset (Fig. performance)
@@ -37,7 +41,7 @@ import pandas as pd
 
 from oos_drake.analysis.controller import Controller
 from oos_drake.analysis.results import PAPER, AnalysisResult, Certificate  # noqa: F401 (PAPER)
-from oos_drake.analysis.stability import SweepOptions
+from oos_drake.analysis.stability import TIGHT_GAP, SweepOptions
 from oos_drake.analysis.tightening import TightenOptions
 from oos_drake.blas import with_single_threaded_blas
 
@@ -97,6 +101,12 @@ class AnalysisOptions:
         On by default (``oos analyze --grid-only`` turns it off; cost: docs/ANALYSIS-RESULTS.md).
         Without it the upper bounds hold on the analyzed frequencies only (``oos confirm``
         found one broken between them, docs/CLAIMS.md A11).
+    guarantee_tight : float
+        Relative margin [-] of the guarantee's first level above the largest bound found
+        (``tight`` of :func:`~oos_drake.analysis.stability.axis_guarantee`, default
+        :data:`~oos_drake.analysis.stability.TIGHT_GAP`: 0.01, 1 %); a configuration whose
+        cover does not close there is covered again from ``(1 + tighten.target_gap)`` times
+        the certified lower bound (``guarantee fell back`` in the peaks table).
     progress : bool
         tqdm progress bars.
     plant : str
@@ -122,6 +132,7 @@ class AnalysisOptions:
     time_check: bool = True
     time_check_duration: float = 600.0
     guarantee: bool = True
+    guarantee_tight: float = TIGHT_GAP
     progress: bool = True
     plant: str = "lfr"
 
@@ -138,6 +149,11 @@ class AnalysisOptions:
         k_lo, k_hi = self.stiffness_range
         if not 0 < k_lo <= k_hi:
             raise ValueError(f"stiffness_range must be 0 < low <= high, got {self.stiffness_range}")
+        if not (np.isfinite(self.guarantee_tight) and self.guarantee_tight >= 0):
+            raise ValueError(
+                "guarantee_tight must be a finite relative margin >= 0 [-], got "
+                f"{self.guarantee_tight}"
+            )
         from oos_drake.analysis.models import PLANT_SOURCES
 
         if self.plant not in PLANT_SOURCES:
@@ -264,6 +280,7 @@ def _guarantee_columns(guarantee, lower, n_configurations) -> dict:
         "guarantee solved points": int(guarantee.solved.sum()),
         "guarantee raised configurations": guarantee.raised,
         "guarantee failures": len(guarantee.failures),
+        "guarantee fell back": bool(np.any(guarantee.fell_back)),
         "guarantee time [s]": round(guarantee.seconds, 2),
         "guarantee scope": (
             f"every frequency in [0, inf) at each of the {n_configurations} analyzed "
@@ -290,6 +307,7 @@ def guaranteed_table(study: str, result, label: str, values) -> pd.DataFrame:
                     "cover points": g.points,
                     "cover solved points": g.solved,
                     "level raised": g.levels > g.floor * (1 + 1e-12),
+                    "cover fell back": np.asarray(g.fell_back, dtype=bool),
                 }
             )
         )
@@ -516,6 +534,7 @@ class _Studies:
             time_budget=max(options.spike_budget - self.spike_seconds, 1e-3),
             guarantee=options.guarantee,
             guarantee_gap=options.tighten.target_gap,
+            guarantee_tight=options.guarantee_tight,
         )
         self.spike_seconds += sum(r.seconds for r in res.reports.values())
         return res

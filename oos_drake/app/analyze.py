@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 
 from oos_drake.analysis.controller import recorded_controller, scenario_controller
-from oos_drake.analysis.stability import SweepOptions
+from oos_drake.analysis.stability import TIGHT_GAP, SweepOptions
 from oos_drake.app.args import (
     add_deprecated_alias,
     add_frequency_range,
@@ -74,6 +74,7 @@ def analysis_options(args, scenario):
         sensitivity=not args.no_sensitivity,
         time_check=not args.no_time_check,
         guarantee=args.guarantee,
+        guarantee_tight=args.guarantee_tight,
         progress=not args.quiet,
         plant=args.plant,
     )
@@ -661,6 +662,15 @@ def register(subparsers) -> None:
         "default; explicit for scripts)",
     )
     parser.set_defaults(guarantee=True)
+    parser.add_argument(
+        "--guarantee-tight",
+        type=float,
+        default=TIGHT_GAP,
+        help="whole-axis guarantee: relative margin [-] of the first level of the covers above "
+        "the largest mu bound found (0.01: 1 %%); a configuration whose cover does not close "
+        "there is covered again from (1 + --target-gap) x the lower bound (stability_peaks: "
+        "'guarantee fell back')",
+    )
     add_loop_arguments(parser)
     add_quiet_argument(parser)
     add_scenario_argument(parser)

@@ -810,166 +810,230 @@ def cover_axis(
         a pole of ``M`` on the axis (never closed: ``M`` is unbounded there), a level that is
         infinite (mu unbounded at a frequency: ``I - M Delta`` singular for every size), or
         ``max_rounds`` rounds of added points without a proof of the level in a gap.
+
+    Each round: test the points not tested yet (:meth:`_Cover.test_pending`); stop when the
+    intervals close or only the gaps around poles on the axis are left; else, in this order,
+    wake a lazily skipped point next to a gap, try the known points in the gaps, or solve new
+    points in them (one round of ``max_rounds``); before giving up, test every skipped point.
     """
-    end = real.nyquist
-    stuck = real.axis_poles()  # M unbounded there: the gaps around them never close
-    omega = np.unique(np.clip(np.asarray(seeds, dtype=float), 0.0, end))
-    opt, lmin, scs = solve(omega) if omega.size else ([], [], [])
-    opt, lmin, scs = list(opt), list(lmin), list(scs)
-    omega, added = list(omega), [False] * len(omega)
-    level = max(float(floor), max(lmin, default=0.0))
-    spare = _Spare(known, omega)
-    first_prior = len(omega)
-    if prior is not None:
-        for w, sc in zip(*prior, strict=True):
-            omega.append(float(np.clip(w, 0.0, end)))
-            opt.append(np.nan)
-            lmin.append(0.0)
-            scs.append(sc)
-            added.append(False)
-    # an interval proved at a lower level also proves any higher one (Phi only decreases), so
-    # each point keeps the interval of the level current when it was solved: no recomputation
-    proved = {}
-    # lazy tests: a point in no gap of the intervals proved already is not tested (its
-    # Hamiltonian eigenvalues are the cover's main cost); it is tested later only where a gap
-    # is left next to it (once per gap edge, nearest point first), or at the end if the cover
-    # did not close. Skipping a test proves nothing: every interval kept is a dg_interval.
-    deferred = set()
-    woken = set()  # gap edges that woke a deferred point already
-
-    def in_no_gap(w):
-        """True if ``w`` lies in no (closed) gap of the intervals proved so far."""
-        spans = np.array([proved[j][1] for j in proved if j not in deferred]).reshape(-1, 2)
-        return not any(a <= w <= b for a, b in _gaps(spans, end))
-
-    def test(i):
-        deferred.discard(i)
-        proved[i] = (level, _interval_at(real, performance_rows, scs[i], level, omega[i]))
-
-    def test_pending():
-        pending = [i for i in range(len(omega)) if i not in proved]
-        pending.sort(key=lambda i: (i < first_prior or i >= first_prior + n_prior, i))
-        for i in pending:  # prior points first (the neighbour's cover: wide intervals)
-            if lazy and in_no_gap(omega[i]):
-                deferred.add(i)
-                proved[i] = (level, (np.nan, np.nan))
-            else:
-                test(i)
-
-    def wake(gaps):
-        """Test the deferred point nearest to each gap edge (each edge once); True if any."""
-        rows = np.array(sorted(deferred), dtype=int)
-        if not rows.size:
-            return False
-        w = np.asarray(omega, dtype=float)[rows]
-        chosen = set()
-        for a, b in gaps:
-            for edge, side in ((a, w < a), (b, w > b)):
-                if edge in woken or not np.any(side) or not np.isfinite(edge):
-                    continue
-                woken.add(edge)
-                near = rows[side][np.argmin(np.abs(w[side] - edge))]
-                chosen.add(int(near))
-        for i in sorted(chosen):
-            test(i)
-        return bool(chosen)
-
-    n_prior = 0 if prior is None else len(prior[0])
+    cover = _Cover(real, solve, seeds, floor, slack, performance_rows, known, prior, lazy)
     covered = False
     rounds = 0  # rounds that solved new points (the known points' rounds are free)
     while True:
-        test_pending()
-        gaps = _gaps(np.array([proved[i][1] for i in range(len(omega))]).reshape(-1, 2), end)
+        cover.test_pending()
+        gaps = cover.gaps()
         if not gaps:
             covered = True
             break
-        gaps = [(a, b) for a, b in gaps if not np.any((stuck >= a) & (stuck <= b))]
+        gaps = cover.away_from_poles(gaps)
         if not gaps:  # only the gaps around poles on the axis are left
             break
-        if wake(gaps):  # lazily skipped points next to a gap first: one test each
+        if cover.wake(gaps):  # lazily skipped points next to a gap first: one test each
             continue
         if rounds >= max_rounds:
-            if deferred:  # before giving up: every skipped point
-                for i in sorted(deferred):
-                    test(i)
+            if cover.test_deferred():  # before giving up: every skipped point
                 continue
             break
-        take = spare.take(gaps, level / (1.0 + slack))
-        if take:  # known scalings first: an interval test, no optimization
-            for w, o, sc in take:
-                omega.append(w)
-                opt.append(o)
-                lmin.append(o * (1.0 + slack))
-                scs.append(sc)
-                added.append(False)
+        if cover.take_known(gaps):  # known scalings first: an interval test, no optimization
             continue
-        # not again where a point was solved or proved an interval (a known or prior point
-        # whose scalings proved nothing there does not stop a solve at its frequency)
-        tried = [
-            w
-            for i, w in enumerate(omega)
-            if added[i] or i in deferred or np.isfinite(proved[i][1][0])
-        ]
-        new = _new_points(gaps, end, tried)
-        if rounds == 0 and prior is not None:
-            # the prior points whose scalings prove nothing here (a band where mu is close to
-            # the level: they covered it on the neighbouring model): solved in this first
-            # round, all together, instead of one gap edge per round
-            retry = np.array(
-                [
-                    omega[i]
-                    for i in range(first_prior, first_prior + len(prior[0]))
-                    if i not in deferred
-                    and not np.isfinite(proved[i][1][0])
-                    and any(a <= omega[i] <= b for a, b in gaps)
-                ]
-            )
-            new = np.union1d(new, retry)
+        new = cover.new_points(gaps, retry_prior=rounds == 0 and prior is not None)
         if new.size == 0:
-            if deferred:  # before giving up: every skipped point
-                for i in sorted(deferred):
-                    test(i)
+            if cover.test_deferred():  # before giving up: every skipped point
                 continue
             break
         rounds += 1
-        o2, l2, s2 = solve(new)
-        omega.extend(new.tolist())
-        opt.extend(list(o2))
-        lmin.extend(list(l2))
-        scs.extend(list(s2))
-        added.extend([True] * new.size)
-        level = max(level, max(l2))
-        if not np.isfinite(level):
+        cover.solve_points(new)
+        if not np.isfinite(cover.level):
             break
         if progress is not None:
-            progress(len(omega))
-    order = [i for i in np.argsort(omega, kind="stable") if i in proved]
-    spans = np.array([proved[i][1] for i in order]).reshape(-1, 2)
-    levels = np.array([proved[i][0] for i in order], dtype=float)
-    left = () if covered else tuple((float(a), float(b)) for a, b in _gaps(spans, end))
-    why = set()  # what stopped the points inside the gaps (dg_interval's errors, once each)
-    for w, sc in zip(omega, scs, strict=True):
-        if not covered and sc is not None and any(a <= w <= b for a, b in left):
-            r, beta = _level_problem(real, performance_rows, level)
-            try:
-                dg_interval(r, sc, beta, w)
-            except ValueError as err:
-                why.add(str(err).replace("dg_interval: ", "").split(" at omega")[0])
-    return AxisCertificate(
-        upper=float(np.max(levels)) if covered else np.inf,
-        omega=np.asarray(omega)[order],
-        optimal=np.asarray(opt, dtype=float)[order],
-        level=levels,
-        interval=spans,
-        added=np.asarray(added)[order],
-        scalings=tuple(scs[i] for i in order),
-        slack=slack,
-        covered=covered,
-        realization=real,
-        performance_rows=performance_rows,
-        reason="" if covered else _why_open(left, stuck, level, rounds, real, why),
-        gaps=left,
-    )
+            progress(len(cover.omega))
+    return cover.certificate(covered, rounds)
+
+
+class _Cover:
+    """The state of one :func:`cover_axis` and its steps.
+
+    The points (seeds, then ``prior``, then known and solved ones as they are added), each
+    with its bound ``opt``, the smallest level its scalings prove ``lmin``, its scalings and
+    whether it was solved for the cover (``added``); the current ``level``; and ``proved``:
+    point -> ``(level, interval)``. An interval proved at a lower level also proves any higher
+    one (Phi only decreases), so each point keeps the interval of the level current when it
+    was tested: no recomputation.
+
+    Lazy tests: a point in no gap of the intervals proved already is not tested (its
+    Hamiltonian eigenvalues are the cover's main cost: ``deferred``, interval NaN); it is
+    tested later only where a gap is left next to it (once per gap edge, nearest point
+    first: ``woken``), or at the end if the cover did not close. Skipping a test proves
+    nothing: every interval kept is a :func:`dg_interval`.
+    """
+
+    def __init__(self, real, solve, seeds, floor, slack, performance_rows, known, prior, lazy):
+        self.real, self.solve, self.slack = real, solve, slack
+        self.performance_rows, self.lazy = performance_rows, lazy
+        self.end = real.nyquist
+        self.stuck = real.axis_poles()  # M unbounded there: the gaps around them never close
+        omega = np.unique(np.clip(np.asarray(seeds, dtype=float), 0.0, self.end))
+        opt, lmin, scs = solve(omega) if omega.size else ([], [], [])
+        self.opt, self.lmin, self.scs = list(opt), list(lmin), list(scs)
+        self.omega, self.added = list(omega), [False] * len(omega)
+        self.level = max(float(floor), max(self.lmin, default=0.0))
+        self.spare = _Spare(known, self.omega)
+        self.first_prior = len(self.omega)
+        self.n_prior = 0 if prior is None else len(prior[0])
+        if prior is not None:
+            for w, sc in zip(*prior, strict=True):
+                self._append(float(np.clip(w, 0.0, self.end)), np.nan, 0.0, sc, False)
+        self.proved = {}
+        self.deferred = set()
+        self.woken = set()  # gap edges that woke a deferred point already
+
+    def _append(self, omega, optimal, level_min, scalings, added):
+        self.omega.append(omega)
+        self.opt.append(optimal)
+        self.lmin.append(level_min)
+        self.scs.append(scalings)
+        self.added.append(added)
+
+    def in_no_gap(self, w) -> bool:
+        """True if ``w`` lies in no (closed) gap of the intervals proved so far."""
+        spans = np.array([self.proved[j][1] for j in self.proved if j not in self.deferred])
+        return not any(a <= w <= b for a, b in _gaps(spans.reshape(-1, 2), self.end))
+
+    def test(self, i):
+        """The interval of point ``i`` at the current level."""
+        self.deferred.discard(i)
+        interval = _interval_at(
+            self.real, self.performance_rows, self.scs[i], self.level, self.omega[i]
+        )
+        self.proved[i] = (self.level, interval)
+
+    def test_pending(self):
+        """Test (or, lazily, skip) the points not tested yet, the prior points first (the
+        neighbour's cover: wide intervals)."""
+        pending = [i for i in range(len(self.omega)) if i not in self.proved]
+        first, last = self.first_prior, self.first_prior + self.n_prior
+        pending.sort(key=lambda i: (i < first or i >= last, i))
+        for i in pending:
+            if self.lazy and self.in_no_gap(self.omega[i]):
+                self.deferred.add(i)
+                self.proved[i] = (self.level, (np.nan, np.nan))
+            else:
+                self.test(i)
+
+    def gaps(self) -> list:
+        """The pieces of ``[0, end]`` the intervals proved so far leave uncovered."""
+        spans = np.array([self.proved[i][1] for i in range(len(self.omega))])
+        return _gaps(spans.reshape(-1, 2), self.end)
+
+    def away_from_poles(self, gaps) -> list:
+        """The gaps with no pole of ``M`` on the axis inside (the others never close)."""
+        return [(a, b) for a, b in gaps if not np.any((self.stuck >= a) & (self.stuck <= b))]
+
+    def wake(self, gaps) -> bool:
+        """Test the deferred point nearest to each gap edge (each edge once); True if any."""
+        rows = np.array(sorted(self.deferred), dtype=int)
+        if not rows.size:
+            return False
+        w = np.asarray(self.omega, dtype=float)[rows]
+        chosen = set()
+        for a, b in gaps:
+            for edge, side in ((a, w < a), (b, w > b)):
+                if edge in self.woken or not np.any(side) or not np.isfinite(edge):
+                    continue
+                self.woken.add(edge)
+                near = rows[side][np.argmin(np.abs(w[side] - edge))]
+                chosen.add(int(near))
+        for i in sorted(chosen):
+            self.test(i)
+        return bool(chosen)
+
+    def test_deferred(self) -> bool:
+        """Test every lazily skipped point (before giving up); True if there was one."""
+        if not self.deferred:
+            return False
+        for i in sorted(self.deferred):
+            self.test(i)
+        return True
+
+    def take_known(self, gaps) -> bool:
+        """Add the known points in ``gaps`` that may prove the level (:meth:`_Spare.take`);
+        True if any."""
+        take = self.spare.take(gaps, self.level / (1.0 + self.slack))
+        for w, o, sc in take:
+            self._append(w, o, o * (1.0 + self.slack), sc, False)
+        return bool(take)
+
+    def new_points(self, gaps, retry_prior: bool) -> np.ndarray:
+        """Frequencies to solve in ``gaps`` (:func:`_new_points`), not again where a point was
+        solved or proved an interval (a known or prior point whose scalings proved nothing
+        there does not stop a solve at its frequency).
+
+        ``retry_prior`` (the first round of a cover with ``prior``): also the prior points in
+        the gaps whose scalings prove nothing here (a band where mu is close to the level:
+        they covered it on the neighbouring model), all together, instead of one gap edge per
+        round."""
+        tried = [
+            w
+            for i, w in enumerate(self.omega)
+            if self.added[i] or i in self.deferred or np.isfinite(self.proved[i][1][0])
+        ]
+        new = _new_points(gaps, self.end, tried)
+        if retry_prior:
+            retry = np.array(
+                [
+                    self.omega[i]
+                    for i in range(self.first_prior, self.first_prior + self.n_prior)
+                    if i not in self.deferred
+                    and not np.isfinite(self.proved[i][1][0])
+                    and any(a <= self.omega[i] <= b for a, b in gaps)
+                ]
+            )
+            new = np.union1d(new, retry)
+        return new
+
+    def solve_points(self, new):
+        """Solve the points ``new`` and add them; the level rises to what they need."""
+        o2, l2, s2 = self.solve(new)
+        self.omega.extend(new.tolist())
+        self.opt.extend(list(o2))
+        self.lmin.extend(list(l2))
+        self.scs.extend(list(s2))
+        self.added.extend([True] * new.size)
+        self.level = max(self.level, max(l2))
+
+    def certificate(self, covered: bool, rounds: int) -> AxisCertificate:
+        """The :class:`AxisCertificate` of the points tested (by frequency); when the cover
+        did not close, its gaps and why (what stopped the points inside them, once each)."""
+        order = [i for i in np.argsort(self.omega, kind="stable") if i in self.proved]
+        spans = np.array([self.proved[i][1] for i in order]).reshape(-1, 2)
+        levels = np.array([self.proved[i][0] for i in order], dtype=float)
+        left = () if covered else tuple((float(a), float(b)) for a, b in _gaps(spans, self.end))
+        why = set()  # dg_interval's errors at the points inside the gaps
+        for w, sc in zip(self.omega, self.scs, strict=True):
+            if not covered and sc is not None and any(a <= w <= b for a, b in left):
+                r, beta = _level_problem(self.real, self.performance_rows, self.level)
+                try:
+                    dg_interval(r, sc, beta, w)
+                except ValueError as err:
+                    why.add(str(err).replace("dg_interval: ", "").split(" at omega")[0])
+        reason = ""
+        if not covered:
+            reason = _why_open(left, self.stuck, self.level, rounds, self.real, why)
+        return AxisCertificate(
+            upper=float(np.max(levels)) if covered else np.inf,
+            omega=np.asarray(self.omega)[order],
+            optimal=np.asarray(self.opt, dtype=float)[order],
+            level=levels,
+            interval=spans,
+            added=np.asarray(self.added)[order],
+            scalings=tuple(self.scs[i] for i in order),
+            slack=self.slack,
+            covered=covered,
+            realization=self.real,
+            performance_rows=self.performance_rows,
+            reason=reason,
+            gaps=left,
+        )
 
 
 def _why_open(gaps, stuck, level, rounds, real, why=()) -> str:

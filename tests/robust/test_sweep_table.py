@@ -30,6 +30,7 @@ def test_every_column_follows_the_name_unit_convention():
         "guarantee solved points",
         "guarantee raised configurations",
         "guarantee failures",
+        "guarantee fell back",
         "guarantee scope",
     }
     unit = re.compile(r"^[a-z][a-z ]*[a-z] \[[^\[\]]+\]$")
