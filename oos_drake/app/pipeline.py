@@ -176,6 +176,7 @@ def default_campaign(scenario: Path) -> Path:
 def run_pipeline(args: argparse.Namespace) -> int:
     """Run every stage of the main job into ``args.out``; returns the exit status."""
     from oos_drake.app.campaign import campaign_report, pipeline_campaign_options
+    from oos_drake.app.synth import pipeline_controller_options
     from oos_drake.app.tree import joint_space_scenario
     from oos_drake.scenario.data import scenario_path
     from oos_drake.scenario.tree_scenario import unsupported_stages
@@ -192,6 +193,9 @@ def run_pipeline(args: argparse.Namespace) -> int:
         args.workers,
         getattr(args, "scheduler", None),
     )
+    controller_options = pipeline_controller_options(  # checked before anything is written
+        quick=args.quick, workers=args.workers, scheduler=getattr(args, "scheduler", None)
+    )
     # a tree's tip-pose waypoints solved by inverse kinematics: the stages read the joint-space copy
     scenario = joint_space_scenario(scenario, Path(args.out) / "scenario")
     skipped = unsupported_stages(scenario)  # a schema-2 tree: said, never silent
@@ -204,11 +208,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float | None] = {}
     start = time.perf_counter()
-    quick = ["--configurations", "40"] if args.quick else []
     on_scenario = ["--scenario", scenario]
-    # (a namespace made by a caller before --scheduler existed runs on the default pool)
-    scheduler = ["--scheduler", args.scheduler] if getattr(args, "scheduler", None) else []
-    workers = ["--workers", args.workers, *scheduler]
     print(f"[oos run] scenario: {scenario}")
     for name, why in skipped.items():
         print(f"[oos run] {name}: SKIPPED for this scenario: {why}")
@@ -225,7 +225,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
         "validate", out / "validate", keys["validate"], lambda d: _validate(d, scenario), timings
     )
     commands = {  # in order: each stage reads the folders of those before it
-        "controller": ["synth", *workers, *quick],
+        "controller": _controller_stage(controller_options, scenario),
         "analysis": _analysis_stage(args, scenario, controller, grid_only=bool(grid_only)),
         "confirm": _confirm_stage(args, scenario, controller, out / "analysis"),
         "margins": _margins_stage(scenario, controller, out / "analysis"),
@@ -302,6 +302,26 @@ def run_pipeline(args: argparse.Namespace) -> int:
     print()
     _print_headlines(out, campaign, report)
     return 0
+
+
+def _controller_stage(options, scenario: Path):
+    """The controller stage of ``oos run``: ``work(folder)`` designing the controller of
+    ``scenario`` with ``options`` (:func:`oos_drake.app.synth.pipeline_controller_options`;
+    :func:`oos_drake.app.synth.controller`, what ``oos synth --workers N [--scheduler S]
+    [--configurations 40]`` runs) and writing it in ``folder``; returns its
+    :class:`~oos_drake.app.synth.ControllerResult`. An infeasible tuning stops the pipeline
+    (exit status 1, as the command's)."""
+
+    def work(folder: Path):
+        from oos_drake.app.synth import controller
+        from oos_drake.scenario.data import load_scenario
+
+        result = controller(load_scenario(str(scenario)), options, folder)
+        if result.status != "ok":
+            raise SystemExit(1)
+        return result
+
+    return work
 
 
 def _analysis_stage(args, scenario: Path, controller: Path, *, grid_only: bool):
