@@ -136,8 +136,9 @@ def _record_analyses(
     monkeypatch.setattr(
         synth,
         "controller",
-        lambda scenario, options, out: controllers.append((scenario.source, options))
-        or SimpleNamespace(status="ok"),
+        lambda scenario, options, out: (
+            controllers.append((scenario.source, options)) or SimpleNamespace(status="ok")
+        ),
     )
     margins = [] if margins is None else margins
     confirms = [] if confirms is None else confirms

@@ -38,8 +38,9 @@ def stubbed(monkeypatch):
     monkeypatch.setattr(
         synth,
         "controller",
-        lambda scenario, options, out: calls.append(["synth", scenario.source])
-        or SimpleNamespace(status="ok"),
+        lambda scenario, options, out: (
+            calls.append(["synth", scenario.source]) or SimpleNamespace(status="ok")
+        ),
     )
     import oos_drake.app.analyze as analyze  # the analysis stage: a function call, no argv
 

@@ -91,7 +91,7 @@ class ControllerOptions:
     restarts : int
         Random restarts besides the start point (``--restarts``), at least 0.
     max_iterations : int
-        Optimizer iterations per run (``--max-iterations``), at least 1.
+        Optimizer iterations per run (``--max-iterations``), at least 0 (0: the baseline).
     worst_case_rounds : int
         Rounds of worst-case search over the real uncertainty (``--worst-case-rounds``),
         at least 0.
@@ -124,19 +124,14 @@ class ControllerOptions:
         for option, value, least in (
             ("--configurations", self.configurations, 1),
             ("--restarts", self.restarts, 0),
-            ("--max-iterations", self.max_iterations, 1),
+            ("--max-iterations", self.max_iterations, 0),
             ("--worst-case-rounds", self.worst_case_rounds, 0),
         ):
             if not value >= least:
                 raise ValueError(f"{option} {value}: must be at least {least}")
         check_workers(self.workers)
         check_scheduler(self.scheduler)
-        if self.delay_s is not None and not self.sampled:
-            raise ValueError(
-                "--delay needs --sampled (the continuous loop has no computation delay)"
-            )
-        if self.delay_s is not None and not self.delay_s >= 0:
-            raise ValueError(f"--delay must be >= 0 s, got {self.delay_s}")
+        loop_specification(DesignSpecification(), self.loop())  # --delay without --sampled, < 0
 
     def loop(self) -> argparse.Namespace:
         """The loop model as :func:`~oos_drake.app.args.loop_specification` reads it."""
@@ -269,9 +264,7 @@ def compute_controller(scenario, options: ControllerOptions) -> ControllerResult
         result = synthesize(
             plants, K0, spec=spec, options=solver, progress=print, executor=executor
         )
-    return ControllerResult(
-        scenario, options, plants, K0, spec, solver, result, result.wall_time_s
-    )
+    return ControllerResult(scenario, options, plants, K0, spec, solver, result, result.wall_time_s)
 
 
 def write_controller_result(controller: ControllerResult, out) -> dict[str, Path]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 
+
 def reduce_run_stages(monkeypatch, *, skip: dict[str, str] | None = None) -> None:
     """Make ``oos run``'s stages small: synthesis on 4 configurations (no restart, 25
     iterations, one worst-case round); analysis as
