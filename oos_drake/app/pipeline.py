@@ -448,20 +448,17 @@ def _print_headlines(out: Path, campaign: Path, report: Path) -> None:
 
 
 def _validate(folder: Path, scenario: Path) -> None:
-    """``oos validate`` with its table saved next to the other results (the Drake twin is the
-    scenario's own: :func:`oos_drake.multibody.scenario_sdf.scenario_sdf_directory`)."""
-    import contextlib
-    import io
+    """The validation stage of ``oos run``: the Drake twin (the scenario's own:
+    :func:`oos_drake.multibody.scenario_sdf.scenario_sdf_directory`) against the TITOP LFR
+    (:func:`oos_drake.app.multibody.validate` with
+    :func:`~oos_drake.app.multibody.pipeline_validate_options`, what ``oos validate --scenario
+    FILE`` runs), its report saved as ``folder/validate.txt``; a failed configuration stops
+    the pipeline (exit status 1, as the command's)."""
+    from oos_drake.app.multibody import pipeline_validate_options, validate
 
-    from oos_drake.app.main import main
-
-    buffer = io.StringIO()
-    with contextlib.redirect_stdout(buffer):
-        status = main(["validate", "--scenario", str(scenario)])
-    (folder / "validate.txt").write_text(buffer.getvalue())
-    print(buffer.getvalue())
-    if status:
-        raise SystemExit(status)
+    result = validate(scenario, pipeline_validate_options(), folder)
+    if result.status:
+        raise SystemExit(result.status)
 
 
 def register(subparsers) -> None:
