@@ -224,23 +224,15 @@ def run_pipeline(args: argparse.Namespace) -> int:
     run_stage(
         "validate", out / "validate", keys["validate"], lambda d: _validate(d, scenario), timings
     )
-    commands = {  # in order: each stage reads the folders of those before it
+    stages = {  # in order: each stage reads the folders of those before it
         "controller": _controller_stage(controller_options, scenario),
         "analysis": _analysis_stage(args, scenario, controller, grid_only=bool(grid_only)),
         "confirm": _confirm_stage(args, scenario, controller, out / "analysis"),
         "margins": _margins_stage(scenario, controller, out / "analysis"),
     }
-    for name, argv in commands.items():
-        if name in skipped:
-            continue
-
-        def work(folder, argv=argv):
-            if callable(argv):  # a stage function (typed result), not a command line
-                argv(folder)
-            else:
-                _oos(*argv, "--out", folder, *on_scenario)
-
-        run_stage(name, out / name, keys[name], work, timings)
+    for name, work in stages.items():  # stage functions (typed results), no command lines
+        if name not in skipped:
+            run_stage(name, out / name, keys[name], work, timings)
 
     campaign = out / f"campaign-{keys['campaign'][:10]}"
     campaign_start = time.perf_counter()
