@@ -118,14 +118,28 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(quick_run):
     assert "0 run now" in second.stdout
 
 
-def _record_analyses(monkeypatch, analyses, margins=None, confirms=None, campaigns=None):
+def _record_analyses(
+    monkeypatch, analyses, margins=None, confirms=None, campaigns=None, controllers=None
+):
     """Replace the analysis stage's computation by a recorder of ``(controller, options)``,
     the margins and confirmation stages' likewise (into ``margins``, ``confirms``, when
     given), the campaign stage and its report by a recorder of ``(options, folder)`` and
-    ``("report", folder)`` (into ``campaigns``)."""
+    ``("report", folder)`` (into ``campaigns``), the controller stage by a recorder of
+    ``(scenario file, options)`` (into ``controllers``)."""
+    from types import SimpleNamespace
+
     import oos_drake.app.analyze as analyze
     import oos_drake.app.campaign as app_campaign
+    import oos_drake.app.synth as synth
 
+    controllers = [] if controllers is None else controllers
+    monkeypatch.setattr(
+        synth,
+        "controller",
+        lambda scenario, options, out: (
+            controllers.append((scenario.source, options)) or SimpleNamespace(status="ok")
+        ),
+    )
     margins = [] if margins is None else margins
     confirms = [] if confirms is None else confirms
     campaigns = [] if campaigns is None else campaigns
@@ -161,10 +175,10 @@ def test_oos_run_passes_the_scheduler_to_the_stages_with_parallel_work(tmp_path,
     from oos_drake.app.campaign import pipeline_campaign_options
     from oos_drake.app.main import build_parser
 
-    calls, analyses, margins, confirms, campaigns = [], [], [], [], []
+    calls, analyses, margins, confirms, campaigns, controllers = [], [], [], [], [], []
     monkeypatch.setattr(pipeline, "_oos", lambda *argv: calls.append([str(a) for a in argv]))
     monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: None)
-    _record_analyses(monkeypatch, analyses, margins, confirms, campaigns)
+    _record_analyses(monkeypatch, analyses, margins, confirms, campaigns, controllers)
     argv = ["run", "--out", str(tmp_path), "--scheduler", "dask", "--workers", "3"]
     assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
     ((controller, options),) = analyses  # the analysis stage: a function call, not argv
@@ -177,10 +191,10 @@ def test_oos_run_passes_the_scheduler_to_the_stages_with_parallel_work(tmp_path,
     ((confirmed, confirm_options),) = confirms  # the confirmation stage: a function call
     assert confirmed == tmp_path / "controller" / "controller.json"
     assert (confirm_options.scheduler, confirm_options.workers) == ("dask", 3)
+    ((_, controller_options),) = controllers  # the controller stage: a function call
+    assert (controller_options.scheduler, controller_options.workers) == ("dask", 3)
     by_command = {c[0]: c for c in calls}
-    argv = by_command["synth"]
-    assert argv[argv.index("--scheduler") + 1] == "dask"
-    assert argv[argv.index("--workers") + 1] == "3"
+    assert "synth" not in by_command
     assert "--scheduler" not in by_command["model"]
     assert "campaign" not in by_command  # the campaign stage and its report: function calls
     from oos_drake.scenario.data import scenario_path

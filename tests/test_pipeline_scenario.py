@@ -33,6 +33,15 @@ def stubbed(monkeypatch):
 
     monkeypatch.setattr(pipeline, "_oos", fake_oos)
     monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: calls.append(["validate"]))
+    import oos_drake.app.synth as synth  # the controller stage: a function call, no argv
+
+    monkeypatch.setattr(
+        synth,
+        "controller",
+        lambda scenario, options, out: (
+            calls.append(["synth", scenario.source]) or SimpleNamespace(status="ok")
+        ),
+    )
     import oos_drake.app.analyze as analyze  # the analysis stage: a function call, no argv
 
     monkeypatch.setattr(analyze, "analysis_controller", lambda path, scenario, loop=None: path)
@@ -93,7 +102,7 @@ def test_scenario_edits_recompute_exactly_the_dependent_stages(tmp_path, stubbed
     everything = ["analysis", "confirm", "controller", "margins", "model", "report", "validate"]
     assert _ran(out) == everything
     synth = next(c for c in stubbed if c[0] == "synth")
-    assert synth[-2:] == ["--scenario", str(scenario.resolve())]
+    assert synth == ["synth", scenario.resolve()]
     confirm = next(c for c in stubbed if c[0] == "confirm")
     assert confirm == ["confirm", str(scenario.resolve())]
 

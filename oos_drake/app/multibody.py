@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from oos_drake.app.args import add_frequency_range, add_out_argument, add_scenario_argument
@@ -29,42 +30,217 @@ def _select(cases, group: str):
     return cases if prefix is None else [c for c in cases if c.label.startswith(prefix)]
 
 
-def _validate(args: argparse.Namespace) -> int:
-    from oos_drake.app.tree import is_tree_scenario, validate_tree
+@dataclass(frozen=True)
+class ValidateOptions:
+    """Options of the validation stage (:func:`compute_validation`): what ``oos validate``'s
+    arguments hold (:func:`validate_options`; ``oos run`` passes the defaults,
+    :func:`pipeline_validate_options`). Checked when made: a bad value is a one-line
+    ``ValueError`` naming the option.
 
-    if is_tree_scenario(args.scenario):  # schema 2: the tree's own twin on its timeline
-        return validate_tree(args)
+    Attributes
+    ----------
+    cases : str
+        Configurations compared (``--cases``): one of :data:`CASE_GROUPS` (schema-1 scenarios).
+    frequencies : int
+        Number of frequencies (``--frequencies``), at least 1.
+    f_min_hz, f_max_hz : float
+        Frequency range [Hz] (``--f-min``, ``--f-max``), ``0 < f_min_hz <= f_max_hz``.
+    tolerance : float
+        Largest relative frequency-response error that passes (``--tolerance``), > 0.
+    root_tolerance : float
+        Largest relative pole/zero mismatch that passes (``--root-tolerance``), > 0.
+    sdf_dir : Path or None
+        SDF directory of the Drake twin (``--sdf-dir``; None: the scenario's own twin).
+    """
+
+    cases: str = "all"
+    frequencies: int = 400
+    f_min_hz: float = 0.01
+    f_max_hz: float = 100.0
+    tolerance: float = 1e-6
+    root_tolerance: float = 1e-4
+    sdf_dir: Path | None = None
+
+    def __post_init__(self):
+        if self.cases not in CASE_GROUPS:
+            raise ValueError(f"--cases must be one of {', '.join(CASE_GROUPS)}, got {self.cases!r}")
+        if not self.frequencies >= 1:
+            raise ValueError(f"--frequencies {self.frequencies}: must be at least 1")
+        if not 0 < self.f_min_hz <= self.f_max_hz:
+            raise ValueError(
+                f"--f-min {self.f_min_hz:g} / --f-max {self.f_max_hz:g} Hz: need 0 < f-min <= f-max"
+            )
+        for option, value in (
+            ("--tolerance", self.tolerance),
+            ("--root-tolerance", self.root_tolerance),
+        ):
+            if not value > 0:
+                raise ValueError(f"{option} {value:g}: must be > 0")
+
+    def namespace(self, scenario) -> argparse.Namespace:
+        """These options as ``oos validate``'s parsed arguments, on ``scenario`` (a file)."""
+        return argparse.Namespace(
+            scenario=None if scenario is None else str(scenario),
+            cases=self.cases,
+            frequencies=self.frequencies,
+            f_min=self.f_min_hz,
+            f_max=self.f_max_hz,
+            tolerance=self.tolerance,
+            root_tolerance=self.root_tolerance,
+            sdf_dir=self.sdf_dir,
+        )
+
+
+@dataclass(frozen=True)
+class ValidationResult:
+    """Outcome of the validation stage (:func:`compute_validation`).
+
+    Attributes
+    ----------
+    text : str
+        The report ``oos validate`` prints (header, table, verdict), as ``validate.txt``
+        holds it.
+    status : int
+        0 when every configuration passes, else 1 (``oos validate``'s exit status).
+    results : tuple of CaseResult
+        One per configuration (empty for a tree, whose report is its command's).
+    elapsed_s : float
+        Wall time of the comparison [s].
+    """
+
+    text: str
+    status: int
+    results: tuple = ()
+    elapsed_s: float = 0.0
+
+
+def validate_options(args: argparse.Namespace) -> ValidateOptions:
+    """The :class:`ValidateOptions` of ``oos validate``'s arguments ``args``."""
+    return ValidateOptions(
+        cases=args.cases,
+        frequencies=args.frequencies,
+        f_min_hz=args.f_min,
+        f_max_hz=args.f_max,
+        tolerance=args.tolerance,
+        root_tolerance=args.root_tolerance,
+        sdf_dir=args.sdf_dir,
+    )
+
+
+def pipeline_validate_options() -> ValidateOptions:
+    """The validation options of ``oos run``: ``oos validate``'s defaults (what
+    ``oos validate --scenario FILE`` builds)."""
+    return ValidateOptions()
+
+
+def compute_validation(scenario_file, options: ValidateOptions, progress=print):
+    """Compare the Drake twin with the TITOP LFR of ``scenario_file`` (``oos validate``).
+
+    Parameters
+    ----------
+    scenario_file : str or Path or None
+        The scenario (a file or a shipped name; None: the paper's). A schema-2 tree is
+        validated by :func:`oos_drake.app.tree.validate_tree` (its printed report captured).
+    options : ValidateOptions
+    progress : callable or None
+        Receives the header line before the (long) comparison starts.
+
+    Returns
+    -------
+    ValidationResult
+    """
+    from oos_drake.app.tree import is_tree_scenario
+
+    if is_tree_scenario(scenario_file):  # schema 2: the tree's own twin on its timeline
+        import contextlib
+        import io
+
+        from oos_drake.app.tree import validate_tree
+
+        buffer = io.StringIO()
+        with contextlib.redirect_stdout(buffer):
+            status = validate_tree(options.namespace(scenario_file))
+        return ValidationResult(buffer.getvalue(), status)
     import numpy as np
 
     from oos_drake.multibody.cross_check import run_validation, validation_cases
     from oos_drake.robust.lfr_analysis import frequency_grid
     from oos_drake.scenario.data import load_scenario
 
-    scenario = load_scenario(args.scenario)
-    cases = _select(validation_cases(scenario), args.cases)
+    scenario = load_scenario(None if scenario_file is None else str(scenario_file))
+    cases = _select(validation_cases(scenario), options.cases)
     omega = frequency_grid(
-        omega_range=(2 * np.pi * args.f_min, 2 * np.pi * args.f_max), points=args.frequencies
+        omega_range=(2 * np.pi * options.f_min_hz, 2 * np.pi * options.f_max_hz),
+        points=options.frequencies,
     )
-    print(
-        f"Drake twin vs TITOP LFR: 6x6 [F; T]@G1 -> [a; wdot]@G1, {args.frequencies} frequencies "
-        f"{args.f_min:g}-{args.f_max:g} Hz; pass: response error <= {args.tolerance:g}, "
-        f"poles/zeros <= {args.root_tolerance:g}"
+    header = (
+        f"Drake twin vs TITOP LFR: 6x6 [F; T]@G1 -> [a; wdot]@G1, {options.frequencies} "
+        f"frequencies {options.f_min_hz:g}-{options.f_max_hz:g} Hz; pass: response error <= "
+        f"{options.tolerance:g}, poles/zeros <= {options.root_tolerance:g}"
     )
+    if progress is not None:
+        progress(header)
     start = time.perf_counter()
     results = run_validation(
         scenario,
         cases=cases,
         omega=omega,
-        response_tolerance=args.tolerance,
-        root_tolerance=args.root_tolerance,
-        sdf_directory=args.sdf_dir,
+        response_tolerance=options.tolerance,
+        root_tolerance=options.root_tolerance,
+        sdf_directory=options.sdf_dir,
     )
-    return print_verdict(results, time.perf_counter() - start)
+    elapsed = time.perf_counter() - start
+    lines, status = verdict_lines(results, elapsed)
+    return ValidationResult("\n".join([header, *lines]) + "\n", status, tuple(results), elapsed)
 
 
-def print_verdict(results, elapsed: float) -> int:
-    """Print the validation table and its verdict; exit status 0 when every configuration
-    passes, else 1 (``oos validate`` of a schema-1 scenario and of a tree).
+def write_validation(result: ValidationResult, folder) -> Path:
+    """Write the validation report ``validate.txt`` in ``folder``; its path."""
+    from oos_drake.files import atomic_write_bytes
+
+    text = result.text.encode()
+    return atomic_write_bytes(Path(folder) / "validate.txt", lambda stream: stream.write(text))
+
+
+def validate(scenario_file, options: ValidateOptions, out) -> ValidationResult:
+    """The validation stage of ``oos run``: :func:`compute_validation` with its report printed
+    (as ``oos validate`` prints it) and written in ``out`` (``validate.txt``).
+
+    Returns
+    -------
+    ValidationResult
+        ``.status`` 1: a configuration failed (written all the same).
+    """
+    result = _printed_validation(scenario_file, options)
+    write_validation(result, out)
+    return result
+
+
+def _printed_validation(scenario_file, options: ValidateOptions) -> ValidationResult:
+    """:func:`compute_validation` printing its report: the header when the comparison starts,
+    the rest when it ends."""
+    printed = []
+
+    def progress(line: str) -> None:
+        print(line)
+        printed.append(line)
+
+    result = compute_validation(scenario_file, options, progress=progress)
+    print(result.text[sum(len(line) + 1 for line in printed) :], end="")
+    return result
+
+
+def _validate(args: argparse.Namespace) -> int:
+    from oos_drake.app.tree import is_tree_scenario, validate_tree
+
+    if is_tree_scenario(args.scenario):  # schema 2: the tree's own twin on its timeline
+        return validate_tree(args)
+    return _printed_validation(args.scenario, validate_options(args)).status
+
+
+def verdict_lines(results, elapsed: float) -> tuple[list[str], int]:
+    """The validation table and its verdict (lines), and the exit status: 0 when every
+    configuration passes, else 1 (``oos validate`` of a schema-1 scenario and of a tree).
 
     Parameters
     ----------
@@ -75,16 +251,24 @@ def print_verdict(results, elapsed: float) -> int:
     """
     from oos_drake.multibody.cross_check import format_table
 
-    print(format_table(results))
+    lines = [format_table(results)]
     failed = [r.label for r in results if not r.passed]
     if failed:
-        print(
+        lines.append(
             f"FAILED: {len(failed)} of {len(results)} configurations ({', '.join(failed)}); "
             f"{elapsed:.1f} s"
         )
-        return 1
-    print(f"all {len(results)} configurations pass ({elapsed:.1f} s)")
-    return 0
+        return lines, 1
+    lines.append(f"all {len(results)} configurations pass ({elapsed:.1f} s)")
+    return lines, 0
+
+
+def print_verdict(results, elapsed: float) -> int:
+    """Print :func:`verdict_lines` (the table and its verdict); the exit status."""
+    lines, status = verdict_lines(results, elapsed)
+    for line in lines:
+        print(line)
+    return status
 
 
 def _sdf_generate(args: argparse.Namespace) -> int:

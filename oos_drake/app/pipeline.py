@@ -176,6 +176,7 @@ def default_campaign(scenario: Path) -> Path:
 def run_pipeline(args: argparse.Namespace) -> int:
     """Run every stage of the main job into ``args.out``; returns the exit status."""
     from oos_drake.app.campaign import campaign_report, pipeline_campaign_options
+    from oos_drake.app.synth import pipeline_controller_options
     from oos_drake.app.tree import joint_space_scenario
     from oos_drake.scenario.data import scenario_path
     from oos_drake.scenario.tree_scenario import unsupported_stages
@@ -192,6 +193,9 @@ def run_pipeline(args: argparse.Namespace) -> int:
         args.workers,
         getattr(args, "scheduler", None),
     )
+    controller_options = pipeline_controller_options(  # checked before anything is written
+        quick=args.quick, workers=args.workers, scheduler=getattr(args, "scheduler", None)
+    )
     # a tree's tip-pose waypoints solved by inverse kinematics: the stages read the joint-space copy
     scenario = joint_space_scenario(scenario, Path(args.out) / "scenario")
     skipped = unsupported_stages(scenario)  # a schema-2 tree: said, never silent
@@ -204,11 +208,7 @@ def run_pipeline(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float | None] = {}
     start = time.perf_counter()
-    quick = ["--configurations", "40"] if args.quick else []
     on_scenario = ["--scenario", scenario]
-    # (a namespace made by a caller before --scheduler existed runs on the default pool)
-    scheduler = ["--scheduler", args.scheduler] if getattr(args, "scheduler", None) else []
-    workers = ["--workers", args.workers, *scheduler]
     print(f"[oos run] scenario: {scenario}")
     for name, why in skipped.items():
         print(f"[oos run] {name}: SKIPPED for this scenario: {why}")
@@ -224,23 +224,15 @@ def run_pipeline(args: argparse.Namespace) -> int:
     run_stage(
         "validate", out / "validate", keys["validate"], lambda d: _validate(d, scenario), timings
     )
-    commands = {  # in order: each stage reads the folders of those before it
-        "controller": ["synth", *workers, *quick],
+    stages = {  # in order: each stage reads the folders of those before it
+        "controller": _controller_stage(controller_options, scenario),
         "analysis": _analysis_stage(args, scenario, controller, grid_only=bool(grid_only)),
         "confirm": _confirm_stage(args, scenario, controller, out / "analysis"),
         "margins": _margins_stage(scenario, controller, out / "analysis"),
     }
-    for name, argv in commands.items():
-        if name in skipped:
-            continue
-
-        def work(folder, argv=argv):
-            if callable(argv):  # a stage function (typed result), not a command line
-                argv(folder)
-            else:
-                _oos(*argv, "--out", folder, *on_scenario)
-
-        run_stage(name, out / name, keys[name], work, timings)
+    for name, work in stages.items():  # stage functions (typed results), no command lines
+        if name not in skipped:
+            run_stage(name, out / name, keys[name], work, timings)
 
     campaign = out / f"campaign-{keys['campaign'][:10]}"
     campaign_start = time.perf_counter()
@@ -302,6 +294,26 @@ def run_pipeline(args: argparse.Namespace) -> int:
     print()
     _print_headlines(out, campaign, report)
     return 0
+
+
+def _controller_stage(options, scenario: Path):
+    """The controller stage of ``oos run``: ``work(folder)`` designing the controller of
+    ``scenario`` with ``options`` (:func:`oos_drake.app.synth.pipeline_controller_options`;
+    :func:`oos_drake.app.synth.controller`, what ``oos synth --workers N [--scheduler S]
+    [--configurations 40]`` runs) and writing it in ``folder``; returns its
+    :class:`~oos_drake.app.synth.ControllerResult`. An infeasible tuning stops the pipeline
+    (exit status 1, as the command's)."""
+
+    def work(folder: Path):
+        from oos_drake.app.synth import controller
+        from oos_drake.scenario.data import load_scenario
+
+        result = controller(load_scenario(str(scenario)), options, folder)
+        if result.status != "ok":
+            raise SystemExit(1)
+        return result
+
+    return work
 
 
 def _analysis_stage(args, scenario: Path, controller: Path, *, grid_only: bool):
@@ -428,20 +440,17 @@ def _print_headlines(out: Path, campaign: Path, report: Path) -> None:
 
 
 def _validate(folder: Path, scenario: Path) -> None:
-    """``oos validate`` with its table saved next to the other results (the Drake twin is the
-    scenario's own: :func:`oos_drake.multibody.scenario_sdf.scenario_sdf_directory`)."""
-    import contextlib
-    import io
+    """The validation stage of ``oos run``: the Drake twin (the scenario's own:
+    :func:`oos_drake.multibody.scenario_sdf.scenario_sdf_directory`) against the TITOP LFR
+    (:func:`oos_drake.app.multibody.validate` with
+    :func:`~oos_drake.app.multibody.pipeline_validate_options`, what ``oos validate --scenario
+    FILE`` runs), its report saved as ``folder/validate.txt``; a failed configuration stops
+    the pipeline (exit status 1, as the command's)."""
+    from oos_drake.app.multibody import pipeline_validate_options, validate
 
-    from oos_drake.app.main import main
-
-    buffer = io.StringIO()
-    with contextlib.redirect_stdout(buffer):
-        status = main(["validate", "--scenario", str(scenario)])
-    (folder / "validate.txt").write_text(buffer.getvalue())
-    print(buffer.getvalue())
-    if status:
-        raise SystemExit(status)
+    result = validate(scenario, pipeline_validate_options(), folder)
+    if result.status:
+        raise SystemExit(result.status)
 
 
 def register(subparsers) -> None:

@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -28,10 +30,28 @@ from oos_drake.control.plants import (
     synthetic_flexible_plants,
 )
 from oos_drake.control.report import write_synthesis
-from oos_drake.control.synthesis import SynthesisOptions, synthesize
-from oos_drake.processes import check_workers, make_executor
+from oos_drake.control.synthesis import SynthesisOptions, SynthesisResult, synthesize
+from oos_drake.processes import check_scheduler, check_workers, make_executor
 
-__all__ = ["baseline_for", "drake_plants", "make_plants", "mission_times", "scenario_plants"]
+__all__ = [
+    "ControllerOptions",
+    "ControllerResult",
+    "baseline_for",
+    "compute_controller",
+    "controller",
+    "controller_options",
+    "drake_plants",
+    "make_plants",
+    "mission_times",
+    "pipeline_controller_options",
+    "scenario_plants",
+    "write_controller_result",
+]
+
+#: ``--plant``'s choices: the sources of the model array (:func:`make_plants`).
+PLANTS = ("lfr", "drake", "synthetic")
+#: ``oos synth --workers``' default.
+DEFAULT_WORKERS = min(2, os.cpu_count() or 1)
 
 
 def drake_plants(configurations: int, scenario) -> PlantArray:
@@ -55,100 +75,294 @@ def make_plants(kind: str, configurations: int, scenario) -> PlantArray:
     raise ValueError(f"--plant must be lfr, drake or synthetic, got {kind!r}")
 
 
-def run_synth(args) -> int:
-    """Run the synthesis and write the outputs; exit status 0."""
-    from oos_drake.scenario.data import load_scenario, scenario_record
+@dataclass(frozen=True)
+class ControllerOptions:
+    """Options of the controller stage (:func:`controller`): what ``oos synth``'s arguments
+    hold (:func:`controller_options`) and ``oos run`` passes
+    (:func:`pipeline_controller_options`). Checked when made: a bad value is a one-line
+    ``ValueError`` naming the option, raised before anything is built or written.
 
-    check_workers(args.workers)  # before the model array is built
-    wall, cpu = time.perf_counter(), time.process_time()
-    scenario = load_scenario(args.scenario)
-    spec = loop_specification(DesignSpecification.from_requirements(scenario.control), args)
-    plants = make_plants(args.plant, args.configurations, scenario)
-    print(
-        f"model array: {plants.size} configurations from {plants.source!r}, "
-        f"{len(plants.parameters)} real parameter(s), built in {time.perf_counter() - wall:.1f} s "
-        f"({time.process_time() - cpu:.1f} s CPU)"
-    )
-    options = SynthesisOptions(
+    Attributes
+    ----------
+    plant : str
+        Source of the model array (``--plant``): ``"lfr"``, ``"drake"`` or ``"synthetic"``.
+    configurations : int
+        Equally spaced mission configurations (``--configurations``), at least 1.
+    restarts : int
+        Random restarts besides the start point (``--restarts``), at least 0.
+    max_iterations : int
+        Optimizer iterations per run (``--max-iterations``), at least 0 (0: the baseline).
+    worst_case_rounds : int
+        Rounds of worst-case search over the real uncertainty (``--worst-case-rounds``),
+        at least 0.
+    seed : int
+        Seed of the restarts and samples (``--seed``).
+    workers : int
+        Worker processes of the optimizer runs and threads of a run (``--workers``), at least 1.
+    scheduler : str or None
+        Where the runs execute (``--scheduler``; None: local processes).
+    sampled : bool
+        The sampled loop (``--sampled``; False: the continuous loop).
+    delay_s : float or None
+        Computation delay of the sampled loop [s] (``--delay``; None: the specification's).
+    """
+
+    plant: str = "lfr"
+    configurations: int = 200
+    restarts: int = 2
+    max_iterations: int = 150
+    worst_case_rounds: int = 4
+    seed: int = 0
+    workers: int = DEFAULT_WORKERS
+    scheduler: str | None = None
+    sampled: bool = False
+    delay_s: float | None = None
+
+    def __post_init__(self):
+        if self.plant not in PLANTS:
+            raise ValueError(f"--plant must be lfr, drake or synthetic, got {self.plant!r}")
+        for option, value, least in (
+            ("--configurations", self.configurations, 1),
+            ("--restarts", self.restarts, 0),
+            ("--max-iterations", self.max_iterations, 0),
+            ("--worst-case-rounds", self.worst_case_rounds, 0),
+        ):
+            if not value >= least:
+                raise ValueError(f"{option} {value}: must be at least {least}")
+        check_workers(self.workers)
+        check_scheduler(self.scheduler)
+        loop_specification(DesignSpecification(), self.loop())  # --delay without --sampled, < 0
+
+    def loop(self) -> argparse.Namespace:
+        """The loop model as :func:`~oos_drake.app.args.loop_specification` reads it."""
+        return argparse.Namespace(sampled=self.sampled, delay=self.delay_s)
+
+
+@dataclass(frozen=True)
+class ControllerResult:
+    """Outcome of the controller stage (:func:`compute_controller`); written by
+    :func:`write_controller_result`.
+
+    Attributes
+    ----------
+    scenario : Scenario
+        The scenario the controller is designed on.
+    options : ControllerOptions
+    plants : PlantArray
+        The model array designed on.
+    K0 : numpy.ndarray, shape (3, 6)
+        Baseline (start) gain [N m/rad, N m s/rad].
+    spec : DesignSpecification
+        The design specification (loop model included).
+    solver_options : SynthesisOptions or SystuneOptions
+        The optimizer's options (recorded in ``controller.json``).
+    result : SynthesisResult or TuningResult
+        :func:`~oos_drake.control.synthesis.synthesize`'s (static gain, no ``[control]``
+        goals) or :func:`~oos_drake.control.requirements.tune_to_requirements`'s.
+    wall_time_s : float
+        Wall time of the optimization [s].
+    """
+
+    scenario: object
+    options: ControllerOptions
+    plants: PlantArray
+    K0: np.ndarray
+    spec: DesignSpecification
+    solver_options: object
+    result: object
+    wall_time_s: float
+
+    @property
+    def tuned(self) -> bool:
+        """True when the ``[control]`` goals were tuned (a ``TuningResult``)."""
+        return not isinstance(self.result, SynthesisResult)
+
+    @property
+    def status(self) -> str:
+        """``"ok"``, or ``"infeasible"`` (tuned: a hard goal NOT met)."""
+        return self.result.status if self.tuned else "ok"
+
+
+def controller_options(args) -> ControllerOptions:
+    """The :class:`ControllerOptions` of ``oos synth``'s arguments ``args``."""
+    return ControllerOptions(
+        plant=args.plant,
+        configurations=args.configurations,
         restarts=args.restarts,
         max_iterations=args.max_iterations,
         worst_case_rounds=args.worst_case_rounds,
         seed=args.seed,
         workers=args.workers,
+        scheduler=args.scheduler,
+        sampled=args.sampled,
+        delay_s=args.delay,
+    )
+
+
+def pipeline_controller_options(
+    *, quick: bool, workers: int, scheduler: str | None = None
+) -> ControllerOptions:
+    """The controller options of ``oos run``: ``oos synth``'s defaults, 40 configurations with
+    ``quick`` (what ``oos synth --workers N [--scheduler S] [--configurations 40]`` builds)."""
+    configurations = 40 if quick else ControllerOptions.configurations
+    return ControllerOptions(
+        configurations=configurations, workers=workers, scheduler=scheduler or None
+    )
+
+
+def compute_controller(scenario, options: ControllerOptions) -> ControllerResult:
+    """Design the attitude controller of ``scenario``: the multi-model structured H-infinity
+    synthesis of the static gain, or the tuning to the scenario's ``[control]`` goals (a
+    dynamic structure or tuning goals). Prints the model array and the optimizer's progress;
+    writes nothing.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    options : ControllerOptions
+
+    Returns
+    -------
+    ControllerResult
+    """
+    wall, cpu = time.perf_counter(), time.process_time()
+    spec = loop_specification(
+        DesignSpecification.from_requirements(scenario.control), options.loop()
+    )
+    plants = make_plants(options.plant, options.configurations, scenario)
+    print(
+        f"model array: {plants.size} configurations from {plants.source!r}, "
+        f"{len(plants.parameters)} real parameter(s), built in {time.perf_counter() - wall:.1f} s "
+        f"({time.process_time() - cpu:.1f} s CPU)"
     )
     K0 = baseline_for(plants, scenario.mission.first_docking_time)
     if scenario.control.has_tuning_goals or scenario.control.structure != "static":
-        return _run_tuning(args, scenario, spec, plants, K0)
-    # the restarts run as executor tasks; spawned workers when this process holds Drake threads
-    method = "spawn" if args.plant == "drake" else None
-    with make_executor(args.workers, args.scheduler, method=method) as executor:
-        result = synthesize(
-            plants, K0, spec=spec, options=options, progress=print, executor=executor
+        from oos_drake.control.requirements import tune_to_requirements, tuning_specification
+        from oos_drake.control.systune import SystuneOptions
+
+        solver = SystuneOptions(
+            restarts=options.restarts,
+            max_iterations=options.max_iterations,
+            seed=options.seed,
+            workers=options.workers,
         )
-    record = scenario_record(scenario)
-    paths = write_synthesis(args.out, result, plants, options, scenario_record=record)
-    print(f"scenario: {scenario.name} ({scenario.source})")
-    active = result.models[result.models["active"]]
-    print(
-        f"gamma = {result.gamma:.6g} (baseline {result.gamma_start:.6g}), "
-        f"{len(active)} active model(s), {result.wall_time_s:.1f} s"
+        start = time.perf_counter()
+        result = tune_to_requirements(plants, K0, spec, scenario.control, solver)
+        elapsed = time.perf_counter() - start
+        spec = tuning_specification(spec, scenario.control)
+        return ControllerResult(scenario, options, plants, K0, spec, solver, result, elapsed)
+    solver = SynthesisOptions(
+        restarts=options.restarts,
+        max_iterations=options.max_iterations,
+        worst_case_rounds=options.worst_case_rounds,
+        seed=options.seed,
+        workers=options.workers,
     )
-    if plants.statistics is not None:
-        print(f"models: {plants.statistics()}")
-    print(f"K_p [N m/rad] =\n{np.array2string(result.K[:, :3], precision=5)}")
-    print(f"K_d [N m s/rad] =\n{np.array2string(result.K[:, 3:], precision=5)}")
-    for name, path in paths.items():
-        print(f"  {name}: {path}")
-    return 0
+    # the restarts run as executor tasks; spawned workers when this process holds Drake threads
+    method = "spawn" if options.plant == "drake" else None
+    with make_executor(options.workers, options.scheduler, method=method) as executor:
+        result = synthesize(
+            plants, K0, spec=spec, options=solver, progress=print, executor=executor
+        )
+    return ControllerResult(scenario, options, plants, K0, spec, solver, result, result.wall_time_s)
 
 
-def _run_tuning(args, scenario, spec, plants, K0) -> int:
-    """``oos synth`` with the ``[control]`` goals (:func:`tune_to_requirements`); exit status
-    0 (``ok``) or 1 (``infeasible``: written, with the best values reached)."""
+def write_controller_result(controller: ControllerResult, out) -> dict[str, Path]:
+    """Write the controller stage's files in ``out`` (created): ``controller.json``, and for
+    the synthesis ``closed_loop.npz``/``.mat``, ``models.parquet``/``.csv``, ``runs.csv``,
+    ``worst_cases.csv`` (:func:`oos_drake.control.report.write_synthesis`,
+    :func:`~oos_drake.control.report.write_tuning`); return name -> path."""
     from oos_drake.control.report import tuning_record, write_tuning
-    from oos_drake.control.requirements import tune_to_requirements, tuning_specification
-    from oos_drake.control.systune import SystuneOptions
     from oos_drake.scenario.data import scenario_record
 
-    requirements = scenario.control
-    options = SystuneOptions(
-        restarts=args.restarts,
-        max_iterations=args.max_iterations,
-        seed=args.seed,
-        workers=args.workers,
-    )
-    start = time.perf_counter()
-    result = tune_to_requirements(plants, K0, spec, requirements, options)
-    elapsed = time.perf_counter() - start
-    record = tuning_record(
-        result, requirements, K0, plants, tuning_specification(spec, requirements), options
-    )
-    record["wall_time_s"] = elapsed
-    paths = write_tuning(args.out, record, scenario_record=scenario_record(scenario))
-    print(f"scenario: {scenario.name} ({scenario.source})")
-    print(
-        f"structure {requirements.structure}: status {result.status}, "
-        f"{plants.size} configurations, {elapsed:.1f} s"
-    )
-    for goal in result.goals:
-        details = ", ".join(f"{k} = {v:.4g}" for k, v in goal.details.items())
-        print(
-            f"  {goal.kind} {goal.name}: {goal.value:.6g} "
-            f"({'met' if goal.met else 'NOT met'}; {details})"
+    record = scenario_record(controller.scenario)
+    if not controller.tuned:
+        return write_synthesis(
+            out,
+            controller.result,
+            controller.plants,
+            controller.solver_options,
+            scenario_record=record,
         )
-    if requirements.structure == "static":
-        K = np.asarray(result.parameters["K"]["D"])
-        print(f"K_p [N m/rad] =\n{np.array2string(K[:, :3], precision=5)}")
-        print(f"K_d [N m s/rad] =\n{np.array2string(K[:, 3:], precision=5)}")
+    tuned = tuning_record(
+        controller.result,
+        controller.scenario.control,
+        controller.K0,
+        controller.plants,
+        controller.spec,
+        controller.solver_options,
+    )
+    tuned["wall_time_s"] = controller.wall_time_s
+    return write_tuning(out, tuned, scenario_record=record)
+
+
+def controller(scenario, options: ControllerOptions, out) -> ControllerResult:
+    """The controller stage: design the controller (:func:`compute_controller`), write it in
+    ``out`` (:func:`write_controller_result`), print the result.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    options : ControllerOptions
+    out : Path
+        The output folder (created).
+
+    Returns
+    -------
+    ControllerResult
+        ``.status`` ``"infeasible"``: written, with the best values reached.
+    """
+    designed = compute_controller(scenario, options)
+    paths = write_controller_result(designed, out)
+    print(f"scenario: {scenario.name} ({scenario.source})")
+    plants, result = designed.plants, designed.result
+    if not designed.tuned:
+        active = result.models[result.models["active"]]
+        print(
+            f"gamma = {result.gamma:.6g} (baseline {result.gamma_start:.6g}), "
+            f"{len(active)} active model(s), {result.wall_time_s:.1f} s"
+        )
+        if plants.statistics is not None:
+            print(f"models: {plants.statistics()}")
+        _print_gain(result.K)
+    else:
+        requirements = scenario.control
+        print(
+            f"structure {requirements.structure}: status {result.status}, "
+            f"{plants.size} configurations, {designed.wall_time_s:.1f} s"
+        )
+        for goal in result.goals:
+            details = ", ".join(f"{k} = {v:.4g}" for k, v in goal.details.items())
+            print(
+                f"  {goal.kind} {goal.name}: {goal.value:.6g} "
+                f"({'met' if goal.met else 'NOT met'}; {details})"
+            )
+        if requirements.structure == "static":
+            _print_gain(np.asarray(result.parameters["K"]["D"]))
     for name, path in paths.items():
         print(f"  {name}: {path}")
-    if result.status != "ok":
+    if designed.status != "ok":
         print(
             "INFEASIBLE: the hard goals are NOT all met; controller.json holds the best values "
             "reached with status 'infeasible'"
         )
-        return 1
-    return 0
+    return designed
+
+
+def _print_gain(K) -> None:
+    print(f"K_p [N m/rad] =\n{np.array2string(K[:, :3], precision=5)}")
+    print(f"K_d [N m s/rad] =\n{np.array2string(K[:, 3:], precision=5)}")
+
+
+def run_synth(args) -> int:
+    """``oos synth``: :func:`controller` with the command line's options; exit status 0, or 1
+    when the ``[control]`` goals' tuning is infeasible (written, with the best values
+    reached)."""
+    from oos_drake.scenario.data import load_scenario
+
+    options = controller_options(args)  # checked before the model array is built
+    scenario = load_scenario(args.scenario)
+    return 0 if controller(scenario, options, args.out).status == "ok" else 1
 
 
 def register(subparsers) -> None:
@@ -165,7 +379,7 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--plant",
         default="lfr",
-        choices=["lfr", "drake", "synthetic"],
+        choices=list(PLANTS),
         help="source of the model array: lfr (TITOP LFR substitution), drake (the Drake twin: "
         "nominal linearizations, worst cases substituted into LFRs extracted by ulinearize; "
         "same configurations and real parameters), synthetic (test plants)",
@@ -190,7 +404,7 @@ def register(subparsers) -> None:
     add_scenario_argument(parser)
     add_parallel_arguments(
         parser,
-        workers=min(2, os.cpu_count() or 1),
+        workers=DEFAULT_WORKERS,
         help="worker processes of the independent optimizer runs (start point and random "
         "restarts), and threads of the per-model eigendecompositions of a single run",
     )

@@ -5,28 +5,33 @@ from __future__ import annotations
 
 import dataclasses
 
-#: Appended to the argv of the stages that still run as ``oos`` commands.
-SMALLER_ARGV = {
-    "synth": ["--configurations", "4", "--restarts", "0", "--max-iterations", "25",
-              "--worst-case-rounds", "1"],
-}  # fmt: skip
-
 
 def reduce_run_stages(monkeypatch, *, skip: dict[str, str] | None = None) -> None:
-    """Make ``oos run``'s stages small: synthesis on 4 configurations; analysis as
+    """Make ``oos run``'s stages small: synthesis on 4 configurations (no restart, 25
+    iterations, one worst-case round); analysis as
     ``oos analyze --configurations 4 --points-per-decade 3 --no-sensitivity --no-time-check
     --performance-models 1 --performance-points 5 --docking-points 3 --spike-budget 5
     --iterations 20``; margins on 2 configurations; the confirmation searched up to
     ``alpha = 2`` (``--alpha-limit 2``: flexible_satellite's real and modal physical limit is
     1.6); ``skip`` adds stages the run leaves out (name -> reason)."""
     import oos_drake.app.analyze as analyze
-    import oos_drake.app.pipeline as pipeline
+    import oos_drake.app.synth as synth
     import oos_drake.scenario.tree_scenario as tree_scenario
     from oos_drake.analysis.confirm import ConfirmOptions
     from oos_drake.analysis.margins import MarginsOptions
 
-    real = pipeline._oos
-    monkeypatch.setattr(pipeline, "_oos", lambda *argv: real(*argv, *SMALLER_ARGV.get(argv[0], [])))
+    controller_options = synth.pipeline_controller_options
+    monkeypatch.setattr(  # oos synth --configurations 4 --restarts 0 --max-iterations 25 ...
+        synth,
+        "pipeline_controller_options",
+        lambda **kwargs: dataclasses.replace(
+            controller_options(**kwargs),
+            configurations=4,
+            restarts=0,
+            max_iterations=25,
+            worst_case_rounds=1,
+        ),
+    )
     monkeypatch.setattr(
         analyze,
         "pipeline_margins_options",
