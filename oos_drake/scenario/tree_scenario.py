@@ -319,7 +319,7 @@ class TreeScenario:
             ``phase`` is not a docked phase, or a time outside it.
         """
         from oos_drake.scenario.tree import docked_tree
-        from oos_drake.scenario.tree_model import docking_block_names, tree_values
+        from oos_drake.scenario.tree_model import tree_values
 
         docking = self._docking(phase)
         docked = docked_tree(self.tree, docking)
@@ -330,16 +330,7 @@ class TreeScenario:
                 raise ValueError(f"docking_values: t = {t:g} s is not in phase {phase!r}")
             rows.append(tree_values(docked, self.timeline.angles(t)))
         values = {name: np.array([row[name] for row in rows]) for name in rows[0]}
-        known = [
-            ("k_shear", docking.stiffness_percent),
-            ("k_tors", docking.stiffness_percent),
-            ("d_shear", docking.damping_percent),
-            ("d_tors", docking.damping_percent),
-        ]
-        names = docking_block_names(docking)
-        values.update(
-            {names[k]: np.full(times.size, getattr(docking, k)) for k, p in known if p == 0}
-        )  # fmt: skip
+        values.update(_exact_coefficients(docking, times.size))
         return values
 
     def docking_event(self, phase: str):
@@ -439,16 +430,7 @@ class TreeScenario:
                 {names[k]: np.full(n, getattr(docking, k)) for k in ("d_shear", "d_tors")}
             )
         for spring in held:
-            known = [
-                ("k_shear", spring.stiffness_percent),
-                ("k_tors", spring.stiffness_percent),
-                ("d_shear", spring.damping_percent),
-                ("d_tors", spring.damping_percent),
-            ]
-            names = docking_block_names(spring)
-            values.update(
-                {names[k]: np.full(n, getattr(spring, k)) for k, percent in known if percent == 0}
-            )  # fmt: skip
+            values.update(_exact_coefficients(spring, n))
         return usubs(build_tree_model(tree), values)
 
     def _docking(self, phase: str):
@@ -612,3 +594,19 @@ def unsupported_stages(scenario_file: str | Path) -> dict[str, str]:
         "model figures": "the paper's section-2 figures (moments, docking sweeps, arm) need "
         "its topology; a tree has its block table only",
     }
+
+
+def _exact_coefficients(spring, n: int) -> dict[str, np.ndarray]:
+    """Block values of the coefficients of ``spring`` (a docking spring-damper) that the file
+    gives without a range (its block spans ``[0, 2 x nominal]`` in the model): each at its file
+    value [N/m, N m/rad, N s/m, N m s/rad], ``n`` times."""
+    from oos_drake.scenario.tree_model import docking_block_names
+
+    names = docking_block_names(spring)
+    percent = {
+        "k_shear": spring.stiffness_percent,
+        "k_tors": spring.stiffness_percent,
+        "d_shear": spring.damping_percent,
+        "d_tors": spring.damping_percent,
+    }
+    return {names[k]: np.full(n, getattr(spring, k)) for k, p in percent.items() if p == 0}
