@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from PIL import Image
+from scipy.stats import beta
 from report_browser import probe, screenshot, section_screenshots
 
 from oos_drake.report import headline_numbers, load_run, write_report
@@ -153,6 +154,8 @@ def results_folder(tmp_path) -> Path:
             "P 95 % low": [0.0, 0.000127],
             "P 95 % high": [0.01815, 0.02755],
             "interval": ["clopper-pearson", "clopper-pearson"],
+            # the one-sided Clopper-Pearson bound beta.ppf(0.95, k + 1, N - k), k = 0 and 1 of 200
+            "P 95 % upper (one-sided)": [beta.ppf(0.95, 1, 200), beta.ppf(0.95, 2, 199)],
         }
     ).to_parquet(campaign / "report" / "summary.parquet")
     pd.DataFrame(
@@ -198,7 +201,11 @@ def expected_headlines(out: Path) -> dict[str, float]:
             expected["performance_twin"] = float(gains.max())
     (campaign,) = [p for p in out.glob("campaign-*") if (p / "plan.parquet").is_file()]
     summary = pd.read_parquet(campaign / "report" / "summary.parquet").set_index("metric")
-    expected["p_fail_bound"] = float(summary.loc["any (requirement or run failure)", "P 95 % high"])
+    # the one-sided bound the campaign prints ("P <= p at 95 %"); summaries older than that
+    # column have only the two-sided interval
+    one_sided = "P 95 % upper (one-sided)"
+    column = one_sided if one_sided in summary.columns else "P 95 % high"
+    expected["p_fail_bound"] = float(summary.loc["any (requirement or run failure)", column])
     return expected
 
 
@@ -270,6 +277,21 @@ def test_worst_performance_headline_names_channel_requirement_and_bounds(results
     table["gain twin [-]"] = np.nan  # no twin run finished: no headline
     table.to_parquet(path)
     assert "performance_twin" not in [h.key for h in headline_numbers(load_run(results_folder))]
+
+
+def test_campaign_headline_is_the_one_sided_bound_the_campaign_prints(results_folder):
+    """The headline's P(a run fails) is the one-sided 95 % bound (1 failure in 200 runs:
+    beta.ppf(0.95, 2, 199) = 0.0235, the "P <= p at 95 %" of the campaign's own report), not the
+    upper end of the two-sided interval (0.0276); a summary written before the one-sided column
+    existed gives the two-sided end, and its label says so."""
+    (bound,) = [h for h in headline_numbers(load_run(results_folder)) if h.key == "p_fail_bound"]
+    assert bound.value == pytest.approx(beta.ppf(0.95, 2, 199), rel=1e-12)
+    assert "one-sided" in bound.label and "1 of 200 runs fail" in bound.where
+    (campaign,) = results_folder.glob("campaign-*")
+    path = campaign / "report" / "summary.parquet"
+    pd.read_parquet(path).drop(columns="P 95 % upper (one-sided)").to_parquet(path)
+    (bound,) = [h for h in headline_numbers(load_run(results_folder)) if h.key == "p_fail_bound"]
+    assert bound.value == 0.02755 and "two-sided" in bound.label
 
 
 def test_the_browser_check_sees_a_broken_figure(results_folder, tmp_path):

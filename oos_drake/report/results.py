@@ -358,21 +358,38 @@ def headline_numbers(results: RunResults) -> list[Headline]:
     if worst is not None:
         numbers.append(worst)
     summary = results.campaign_summary
-    if summary is not None and "P 95 % high" in summary.columns:
+    column = _p_fail_column(summary)
+    if column is not None:
         rows = summary[summary["metric"] == ANY_FAILURE]
         if not rows.empty:
             row = rows.iloc[0]
             numbers.append(
                 Headline(
                     "p_fail_bound",
-                    "campaign: 95 % upper bound of P(a run fails)",
-                    float(row["P 95 % high"]),
+                    f"campaign: 95 % {P_FAIL_COLUMNS[column]} of P(a run fails)",
+                    float(row[column]),
                     "-",
-                    f"{results.campaign.name}/report/summary.parquet: P 95 % high ({ANY_FAILURE})",
+                    f"{results.campaign.name}/report/summary.parquet: {column} ({ANY_FAILURE})",
                     f"{_count(row.get('violations'))} of {_count(row.get('runs'))} runs fail",
                 )
             )
     return numbers
+
+
+P_FAIL_COLUMNS = {
+    "P 95 % upper (one-sided)": "upper bound (one-sided)",
+    "P 95 % high": "interval's upper end (two-sided)",
+}
+"""The campaign summary's columns the headline reads, in order of preference, with their wording:
+the one-sided bound (the one the campaign prints, ``P <= p at 95 %``), else (summaries written
+before it existed) the upper end of the two-sided interval."""
+
+
+def _p_fail_column(summary: pd.DataFrame | None) -> str | None:
+    """The column of ``summary`` that :data:`P_FAIL_COLUMNS` prefers, or None."""
+    if summary is None:
+        return None
+    return next((c for c in P_FAIL_COLUMNS if c in summary.columns), None)
 
 
 def worst_performance_on_twin(table: pd.DataFrame | None) -> Headline | None:
