@@ -16,8 +16,8 @@ import numpy as np
 import pandas as pd
 import pytest
 from PIL import Image
-from scipy.stats import beta
 from report_browser import probe, screenshot, section_screenshots
+from scipy.stats import beta
 
 from oos_drake.report import headline_numbers, load_run, write_report
 from oos_drake.scenario.data import scenario_path

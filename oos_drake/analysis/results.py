@@ -221,6 +221,7 @@ class AnalysisResult:
                 "spikes_left": int(tot["spikes left"]),
                 "spike_stop": str(tot["spike stop"]),
                 "budget_exhausted": bool(tot["budget exhausted"]),
+                "guarantee_fell_back": bool(tot.get("guarantee fell back", False)),
             },
             "subsets": peaks.drop(columns=["study"]).to_dict(orient="records"),
             "docking": self.docking_peaks,

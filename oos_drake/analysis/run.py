@@ -576,6 +576,7 @@ def _docking_peak(row) -> dict:
         "spike stop": str(row["spike stop"]),
         "budget exhausted": bool(row["budget exhausted"]),
         "mu_upper_guaranteed": float(row.get("mu upper guaranteed [-]", np.nan)),
+        "guarantee_fell_back": bool(row.get("guarantee fell back", False)),
     }
 
 

@@ -155,6 +155,12 @@ def _docking_phases(value: str | None, scenario) -> tuple[str, ...]:
     return tuple(p for p in value.split(",") if p)
 
 
+FELL_BACK = "from a fallback cover: the tight level did not close (--guarantee-tight)"
+"""Printed beside a guaranteed bound whose cover fell back to a higher starting level at one
+configuration at least (``guarantee fell back`` in ``stability_peaks.parquet``): still proved
+on the whole axis, but less tight than asked."""
+
+
 def peak_lines(summary: dict) -> list[str]:
     """The printed peaks of an analysis summary: the mission's, each subset's, each docking
     phase's, one line each.
@@ -162,6 +168,7 @@ def peak_lines(summary: dict) -> list[str]:
     Every peak is shown as ``mu in [lower, upper]``: the best certified lower bound found
     (grid, refinement, searches) and the upper bound of its scope (the whole-axis guarantee,
     or the analyzed points with --grid-only); the grid's largest upper bound only beside it.
+    A guaranteed bound whose cover fell back to a higher level says so (:data:`FELL_BACK`).
 
     Parameters
     ----------
@@ -183,6 +190,8 @@ def peak_lines(summary: dict) -> list[str]:
             f"<= {m['mu_peak_upper']:.4g} on the analyzed frequencies only "
             "(--grid-only: not proved between them),"
         )
+    if m.get("guarantee_fell_back"):
+        scope += f" {FELL_BACK},"
     lines = [
         f"mission: mu peak {scope} "
         f"certified >= {m['mu_peak_lower']:.4g} (gap {m['gap_percent']:.2g} %) at "
@@ -210,6 +219,8 @@ def _peak_line(lower, upper, scope, grid_upper, peak: dict, where: str) -> str:
     ``[lower, upper]`` is the peak's interval: the best certified lower bound and the upper
     bound of ``scope`` (the whole-axis guarantee, or the analyzed points with --grid-only);
     the grid's largest upper bound is shown beside it, never as the peak's."""
+    fell_back = peak.get("guarantee fell back", peak.get("guarantee_fell_back", False))
+    scope = f"{scope}, {FELL_BACK}" if fell_back else scope
     axis = f"(upper: {scope}; largest on the grid {grid_upper:.4g}) "
     exhausted = ", BUDGET EXHAUSTED" if peak["budget exhausted"] else ""
     return (

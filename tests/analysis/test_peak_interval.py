@@ -72,3 +72,39 @@ def test_peak_interval_is_best_lower_and_guaranteed_upper():
     assert f"mu in [{lo:.4g}, {guaranteed:.4g}]" in lines[2]
     if not np.isclose(row["mu upper grid [-]"], guaranteed, rtol=1e-3):
         assert f"mu in [{lo:.4g}, {row['mu upper grid [-]']:.4g}]" not in lines[2]
+
+
+def test_a_fallback_cover_is_named_in_the_printed_peaks():
+    """A whole-axis bound proved by a fallback cover (its tight level did not close) says so on
+    the mission's, the subset's and the docking phase's lines, and only where it happened."""
+    from oos_drake.app.analyze import FELL_BACK
+
+    peak = {"gap [%]": 1.0, "spikes left": 0, "spike stop": "resolved", "budget exhausted": False}
+    subset = {
+        **peak, "subset": "total", "time [s]": 10.0, "frequency [Hz]": 0.5, "mu lower [-]": 0.3,
+        "mu upper [-]": 0.31, "mu upper scope": "whole axis", "mu upper grid [-]": 0.305,
+    }  # fmt: skip
+    docking = {
+        **peak, "stiffness": 1e3, "frequency [Hz]": 0.2, "mu_lower": 0.2, "mu_upper": 0.21,
+        "mu_upper_scope": "whole axis", "mu_upper_grid": 0.205,
+    }  # fmt: skip
+    mission = {
+        "mu_peak_upper": 0.31, "mu_peak_upper_scope": "whole axis", "mu_peak_upper_grid": 0.305,
+        "mu_peak_lower": 0.3, "gap_percent": 1.0, "peak_time_s": 10.0, "peak_frequency_hz": 0.5,
+        "upper_peak_time_s": 10.0, "upper_peak_frequency_hz": 0.5, "stability_margin": 3.2,
+    }  # fmt: skip
+
+    def lines(fell_back: bool) -> list[str]:
+        summary = {
+            "mission": {**mission, "guarantee_fell_back": fell_back},
+            "subsets": [{**subset, "guarantee fell back": fell_back}],
+            "docking": {"7": {**docking, "guarantee_fell_back": fell_back}},
+        }
+        return peak_lines(summary)
+
+    fell = lines(True)
+    assert FELL_BACK in fell[0] and FELL_BACK in fell[2] and FELL_BACK in fell[3]
+    assert not any(FELL_BACK in line for line in lines(False))
+    # a summary written before the key existed reads as no fallback
+    old = {"mission": mission, "subsets": [subset], "docking": {"7": docking}}
+    assert not any(FELL_BACK in line for line in peak_lines(old))
