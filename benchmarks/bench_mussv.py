@@ -16,10 +16,14 @@ in numpy (the tests' oracles) in the same run, the first-call compile time of th
 speed-up over cvxpy and the relative difference of the values (same run), the upper/lower gap
 and the certificate checks, and the per-matrix time of the upper bound on small batches (1, 2, 4
 and 8 matrices: lone calls, warm-started points), then issue 29's reference case (Gaussian 26 x 26
-matrices, batched and single calls, with the compiled D-G optimizer's share of the CPU time);
-``--frontier`` adds the time vs accuracy of the upper bound for several iteration budgets.
+matrices, batched and single calls, with the compiled D-G optimizer's share of the CPU time, the
+eigenvalue problems per matrix and the gap) for this checkout and for the ``oos_drake`` of the git
+revision ``--baseline`` (default ``main``, extracted with ``git archive``), in alternating fresh
+processes of the same run, with the ratios; ``--frontier`` adds the time vs accuracy of the upper
+bound for several iteration budgets.
 
-Run: ``.venv/bin/python benchmarks/bench_mussv.py [--matrices 200] [--lmi 3] [--frontier]``
+Run: ``.venv/bin/python benchmarks/bench_mussv.py [--matrices 200] [--lmi 3] [--frontier]``;
+issue 29's reference case alone: ``benchmarks/bench_mussv.py --gaussian-only [--baseline REV]``.
 
 Two checkouts back to back (same load; the bounds of the second against the first's)::
 
@@ -271,8 +275,10 @@ def baseline_checkout(ref: str) -> str:
                     )
                 st = os.stat(os.path.join(dirpath, f))
                 os.utime(target, ns=(st.st_atime_ns, st.st_mtime_ns))
-        os.makedirs(os.path.dirname(dest), exist_ok=True)
-        os.replace(tmp, dest)
+        try:
+            os.replace(tmp, dest)
+        except OSError:  # another run got there first
+            shutil.rmtree(tmp, ignore_errors=True)
     return dest
 
 
