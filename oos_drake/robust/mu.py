@@ -10,7 +10,7 @@ with ``mu = 0`` when no structured ``Delta`` makes ``I - M Delta`` singular.
 Cost (paper-sized problem: 26 x 26, 16 blocks, one core, ``benchmarks/bench_mussv.py``): the
 upper bound takes about 42-47 Hermitian eigenvalue problems per matrix (three smoothing
 stages, per-matrix stopping) and lands within ~0.2 % (at most ~0.4 %) of the fully converged
-D-G bound; with ``continuation=True`` (frequency responses) about 22-30. Matrices are optimized
+D-G bound; with ``continuation=True`` (frequency responses) about 18-30. Matrices are optimized
 eight at a time in SIMD lanes (:mod:`mu_lanes`, about 20 us per matrix and evaluation; a batch
 of fewer than eight leaves lanes idle). The lower
 bound runs two power-iteration starts per matrix and three more only where the gap still
