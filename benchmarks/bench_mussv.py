@@ -16,10 +16,14 @@ in numpy (the tests' oracles) in the same run, the first-call compile time of th
 speed-up over cvxpy and the relative difference of the values (same run), the upper/lower gap
 and the certificate checks, and the per-matrix time of the upper bound on small batches (1, 2, 4
 and 8 matrices: lone calls, warm-started points), then issue 29's reference case (Gaussian 26 x 26
-matrices, batched and single calls, with the compiled D-G optimizer's share of the CPU time);
-``--frontier`` adds the time vs accuracy of the upper bound for several iteration budgets.
+matrices, batched and single calls, with the compiled D-G optimizer's share of the CPU time, the
+eigenvalue problems per matrix and the gap) for this checkout and for the ``oos_drake`` of the git
+revision ``--baseline`` (default ``main``, extracted with ``git archive``), in alternating fresh
+processes of the same run, with the ratios; ``--frontier`` adds the time vs accuracy of the upper
+bound for several iteration budgets.
 
-Run: ``.venv/bin/python benchmarks/bench_mussv.py [--matrices 200] [--lmi 3] [--frontier]``
+Run: ``.venv/bin/python benchmarks/bench_mussv.py [--matrices 200] [--lmi 3] [--frontier]``;
+issue 29's reference case alone: ``benchmarks/bench_mussv.py --gaussian-only [--baseline REV]``.
 
 Two checkouts back to back (same load; the bounds of the second against the first's)::
 
@@ -38,6 +42,9 @@ import time
 import numpy as np
 
 from oos_drake.robust.blocks import REAL, parse_blk
+
+#: The two runs of issue 29's reference case (:func:`gaussian_case`).
+CASES = ("batched", "single")
 
 #: Sizes of the small batches timed matrix by matrix (lone matrices, warm-started points).
 SMALL_BATCHES = (1, 2, 4, 8)
@@ -145,50 +152,192 @@ def compile_times() -> tuple[float, float]:
     return out[0], out[1]
 
 
-def gaussian_split(reps: int, n: int = 64) -> None:
-    """Issue 29 item 6's reference case: Gaussian 26 x 26 complex matrices with the paper's
-    structure, one thread; CPU per matrix of ``mussv`` batched and in single-matrix calls,
-    and the share of the compiled D-G optimizer (``mu_lanes.dg_minimize_lanes``) in each (the
-    rest is the Python around it: balancing, certification, the lower bound's wrappers)."""
+def gaussian_case(reps: int, n: int = 64) -> dict:
+    """Issue 29 item 6's reference case, measured with whatever ``oos_drake`` is imported:
+    Gaussian 26 x 26 complex matrices with the paper's structure, one thread.
+
+    Returns CPU per matrix [s] of ``mussv`` batched (``batched``) and in single-matrix calls
+    (``single``), the share of the compiled D-G optimizer (``mu_lanes.dg_minimize_lanes``) in
+    each (``*_kernel``; the rest is the Python around it: balancing, certification, the lower
+    bound), the mean eigenvalue problems per matrix of the upper bound (``evaluations``) and
+    the gap ``upper / lower - 1`` of both runs (``*_gap_median``, ``*_gap_max``).
+    """
     from bench_robust_sweep import PAPER_BLK
 
     import oos_drake.robust.mu_lanes as mu_lanes
+    from oos_drake.blas import limit_blas_threads
     from oos_drake.robust import mussv
 
+    limit_blas_threads(1)
     rng = np.random.default_rng(0)
     M = (rng.standard_normal((n, 26, 26)) + 1j * rng.standard_normal((n, 26, 26))) / 5
     kernel = mu_lanes.dg_minimize_lanes
     spent = [0.0]
+    evals = []
 
     def timed_kernel(*a):
         t0 = time.process_time()
         kernel(*a)
         spent[0] += time.process_time() - t0
+        evals.append(a[-1].copy())  # n_evals of the call (per matrix)
 
     mussv(M[:8], PAPER_BLK)
     mussv(M[:1], PAPER_BLK)
-    rows = {}
+    out = {}
     mu_lanes.dg_minimize_lanes = timed_kernel  # mu_upper calls it through the module
     try:
         for name, run in (
-            ("batched", lambda: mussv(M, PAPER_BLK)),
-            ("single call", lambda: [mussv(M[k], PAPER_BLK) for k in range(n)]),
+            ("batched", lambda: [mussv(M, PAPER_BLK)]),
+            ("single", lambda: [mussv(M[k], PAPER_BLK) for k in range(n)]),
         ):
             best = None
             for _ in range(reps):
                 spent[0] = 0.0
+                evals.clear()
                 t0 = time.process_time()
-                run()
+                res = run()
                 total = (time.process_time() - t0) / n
                 if best is None or total < best[0]:
-                    best = (total, spent[0] / n)
-            rows[name] = best
+                    best = (total, spent[0] / n, np.concatenate(evals), res)
+            total, k, ev, res = best
+            gap = np.array([r.upper / r.lower - 1 for r in res]).ravel()
+            out[name] = total
+            out[name + "_kernel"] = k
+            out[name + "_gap_median"] = float(np.median(gap))
+            out[name + "_gap_max"] = float(np.max(gap))
+            if name == "batched":
+                out["evaluations"] = float(np.mean(ev))
     finally:
         mu_lanes.dg_minimize_lanes = kernel
-    print("Gaussian 26 x 26, paper structure, 1 thread (issue 29: <= 1 ms batched, <= 3 ms single)")
-    print(f"{'CPU per matrix [ms]':44}{'total':>10}{'D-G kernel':>12}{'rest':>10}")
-    for name, (total, k) in rows.items():
-        print(f"{'  mussv, ' + name:44}{total * 1e3:10.2f}{k * 1e3:12.2f}{(total - k) * 1e3:10.2f}")
+    return out
+
+
+def baseline_checkout(ref: str) -> str:
+    """A copy of ``oos_drake`` at git revision ``ref`` (``git archive`` into a directory of the
+    system's temporary directory named after the commit, reused by later runs); returns the
+    directory to put on ``PYTHONPATH``.
+
+    The numba caches of modules identical in ``ref`` and in this checkout are copied along with
+    the source's modification time (numba checks it): only changed kernels compile.
+    """
+    import shutil
+    import subprocess
+    import tempfile
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    git = ["git", "-C", root]
+    sha = subprocess.run(
+        git + ["rev-parse", "--verify", f"{ref}^{{commit}}"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.strip()
+    dest = os.path.join(tempfile.gettempdir(), "oos_bench_baseline", sha)
+    if not os.path.isdir(os.path.join(dest, "oos_drake")):
+        tmp = dest + f".part{os.getpid()}"
+        os.makedirs(tmp, exist_ok=True)
+        archive = subprocess.run(
+            git + ["archive", "--format=tar", sha, "oos_drake"], capture_output=True, check=True
+        ).stdout
+        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
+        changed = set(
+            subprocess.run(
+                git + ["diff", "--name-only", sha, "--", "oos_drake"],
+                capture_output=True,
+                text=True,
+                check=True,
+            ).stdout.split()
+        )
+        for dirpath, _dirs, files in os.walk(os.path.join(root, "oos_drake")):
+            cache = os.path.join(dirpath, "__pycache__")
+            for f in files:
+                rel = os.path.relpath(os.path.join(dirpath, f), root)
+                target = os.path.join(tmp, rel)
+                if not f.endswith(".py") or rel in changed or not os.path.isfile(target):
+                    continue
+                stem = f[:-3] + "."
+                nb = (
+                    [
+                        c
+                        for c in os.listdir(cache)
+                        if c.startswith(stem) and c.endswith((".nbi", ".nbc"))
+                    ]
+                    if os.path.isdir(cache)
+                    else []
+                )
+                if not nb:
+                    continue
+                os.makedirs(os.path.join(os.path.dirname(target), "__pycache__"), exist_ok=True)
+                for c in nb:
+                    shutil.copy2(
+                        os.path.join(cache, c),
+                        os.path.join(os.path.dirname(target), "__pycache__", c),
+                    )
+                st = os.stat(os.path.join(dirpath, f))
+                os.utime(target, ns=(st.st_atime_ns, st.st_mtime_ns))
+        try:
+            os.replace(tmp, dest)
+        except OSError:  # another run got there first
+            shutil.rmtree(tmp, ignore_errors=True)
+    return dest
+
+
+def _gaussian_in_process(pythonpath: str, reps: int) -> dict:
+    """:func:`gaussian_case` in a fresh process with ``oos_drake`` from ``pythonpath``."""
+    import json
+    import subprocess
+
+    bench_dir = os.path.dirname(os.path.abspath(__file__))
+    code = f"import json, bench_mussv; print(json.dumps(bench_mussv.gaussian_case({int(reps)})))"
+    env = dict(os.environ, PYTHONPATH=pythonpath)
+    res = subprocess.run(
+        [sys.executable, "-c", code], env=env, cwd=bench_dir, capture_output=True, text=True
+    )
+    if res.returncode != 0:
+        raise RuntimeError(f"gaussian case with PYTHONPATH={pythonpath} failed:\n{res.stderr}")
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def gaussian_vs_baseline(reps: int, baseline: str | None = "main", rounds: int = 2) -> None:
+    """Print issue 29 item 6's reference case (:func:`gaussian_case`) for this checkout and,
+    same run, for the git revision ``baseline`` (:func:`baseline_checkout`), in alternating
+    fresh processes (``rounds`` each, the fastest kept: a shared machine), with the ratios."""
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    runs = {"this checkout": here}
+    if baseline:
+        runs[f"baseline {baseline}"] = baseline_checkout(baseline)
+    got = {}
+    for _ in range(max(1, rounds)):  # alternating: both see the same load
+        for name, path in runs.items():
+            r = _gaussian_in_process(path, reps)
+            if name not in got or r["batched"] + r["single"] < sum(got[name][k] for k in CASES):
+                got[name] = r
+    print(
+        "Gaussian 26 x 26, paper structure, 1 thread, 64 matrices (issue 29: <= 1 ms batched, "
+        "<= 3 ms single; fresh processes, fastest of "
+        f"{max(1, rounds)} x {reps} runs)"
+    )
+    print(
+        f"{'CPU per matrix [ms]':36}{'total':>8}{'D-G kernel':>12}{'rest':>8}"
+        f"{'eig/matrix':>12}{'gap median':>12}{'gap max':>10}"
+    )
+    for name, r in got.items():
+        for case in CASES:
+            t, k = r[case], r[case + "_kernel"]
+            ev = f"{r['evaluations']:12.1f}" if case == "batched" else f"{'':12}"
+            print(
+                f"{'  ' + name + ', ' + case:36}{t * 1e3:8.2f}{k * 1e3:12.2f}{(t - k) * 1e3:8.2f}"
+                f"{ev}{r[case + '_gap_median'] * 100:11.2f}%{r[case + '_gap_max'] * 100:9.2f}%"
+            )
+    if baseline:
+        new, old = got["this checkout"], got[f"baseline {baseline}"]
+        print(
+            f"ratio this checkout / {baseline} (CPU): batched "
+            f"{new['batched'] / old['batched']:.2f}, "
+            f"single {new['single'] / old['single']:.2f}; D-G kernel batched "
+            f"{new['batched_kernel'] / old['batched_kernel']:.2f}, single "
+            f"{new['single_kernel'] / old['single_kernel']:.2f}"
+        )
 
 
 def main(argv=None):
@@ -225,6 +374,17 @@ def main(argv=None):
         help="skip the compile-time measurement (two fresh processes)",
     )
     parser.add_argument(
+        "--baseline",
+        default="main",
+        help="git revision whose oos_drake the issue-29 reference case is compared with, same "
+        "run ('' : none)",
+    )
+    parser.add_argument(
+        "--gaussian-only",
+        action="store_true",
+        help="only issue 29's reference case (Gaussian matrices) against --baseline",
+    )
+    parser.add_argument(
         "--frontier",
         action="store_true",
         help="also print time vs accuracy of the upper bound for several iteration budgets",
@@ -241,6 +401,9 @@ def main(argv=None):
         help="print the relative difference of the upper bounds to those saved by --save-values",
     )
     args = parser.parse_args(argv)
+    if args.gaussian_only:
+        gaussian_vs_baseline(max(1, args.repeats), args.baseline or None)
+        return
     limit_blas_threads(1)
     warnings.filterwarnings("ignore")
     lfr = paper_like_lfr(1)
@@ -409,7 +572,7 @@ def main(argv=None):
         f"{np.nanmax(chk['singularity']):.1e}, {np.nanmax(chk_c['singularity']):.1e}; "
         f"max | ||delta|| lower - 1 | {np.nanmax(np.abs(chk['delta_norm_error'])):.1e}"
     )
-    gaussian_split(reps)
+    gaussian_vs_baseline(reps, args.baseline or None)
     if args.frontier:
         ref = mu_upper_bound(
             M, s, max_iter=600, tol=1e-12, temperatures=(30.0, 300.0, 3000.0, 30000.0)

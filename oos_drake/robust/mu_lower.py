@@ -33,6 +33,7 @@ import numpy as np
 from oos_drake.robust import mu_lower_kernels
 from oos_drake.robust.blocks import FULL, REAL, BlockStructure
 from oos_drake.robust.memory import in_chunks, reuse_freed_memory
+from oos_drake.robust.mu_upper import _per_blk
 
 #: Matrices per internal batch of :func:`mu_lower_bound` (bounds the memory of huge batches).
 CHUNK = 1024
@@ -84,15 +85,11 @@ def _max_block_norm(structure: BlockStructure, delta: np.ndarray) -> np.ndarray:
     ``||B^* B||_F = ||B||_F^2`` to 1e-13 relative (``||B||_F`` is then at most 5e-14 relative
     above ``||B||_2``); the other blocks take an SVD.
     """
-    rep = [b for b in structure.blocks if b.repeated]
+    rows, cols, full = _per_blk("scalar_entries", structure, lambda: _scalar_entries(structure))
     out = np.zeros(delta.shape[0])
-    if rep:
-        rows = np.concatenate([np.arange(b.rows) + b.row_offset for b in rep])
-        cols = np.concatenate([np.arange(b.cols) + b.col_offset for b in rep])
+    if rows.size:
         out = np.max(np.abs(delta[:, rows, cols]), axis=1)
-    for b in structure.blocks:
-        if b.kind != FULL:
-            continue
+    for b in full:
         B = delta[:, b.r_slice, b.c_slice]
         fro2 = np.sum(B.real**2 + B.imag**2, axis=(1, 2))
         G = np.conj(np.swapaxes(B, 1, 2)) @ B
@@ -105,9 +102,26 @@ def _max_block_norm(structure: BlockStructure, delta: np.ndarray) -> np.ndarray:
     return out
 
 
+def _scalar_entries(structure: BlockStructure) -> tuple:
+    """``(rows, cols, full)``: the diagonal entries of the repeated blocks in ``delta`` and the
+    full blocks (:func:`_max_block_norm`; a function of the BLK alone)."""
+    rep = [b for b in structure.blocks if b.repeated]
+    rows = [np.arange(b.rows) + b.row_offset for b in rep]
+    cols = [np.arange(b.cols) + b.col_offset for b in rep]
+    full = tuple(b for b in structure.blocks if b.kind == FULL)
+    if not rep:
+        return np.zeros(0, dtype=int), np.zeros(0, dtype=int), full
+    return np.concatenate(rows), np.concatenate(cols), full
+
+
 def _kernel_blocks(structure: BlockStructure) -> np.ndarray:
     """Block description of the compiled kernels: ``(5, n_blocks)`` integers, kind (0 real,
-    1 repeated complex, 2 full), rows, columns, row offset, column offset."""
+    1 repeated complex, 2 full), rows, columns, row offset, column offset (cached per BLK:
+    the kernels only read it)."""
+    return _per_blk("kernel_blocks", structure, lambda: _build_kernel_blocks(structure))
+
+
+def _build_kernel_blocks(structure: BlockStructure) -> np.ndarray:
     kinds = {REAL: 0, FULL: 2}
     return np.array(
         [

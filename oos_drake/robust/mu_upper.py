@@ -288,7 +288,7 @@ class _Objective:
         self.MH = np.ascontiguousarray(np.conj(np.swapaxes(M, -1, -2)))
         self.s = structure
         self.L = layout
-        self.c_groups = _size_groups(structure, "cols")
+        self.c_groups = _per_blk("c_groups", structure, lambda: _size_groups(structure, "cols"))
         self.packed = _per_blk(
             "packed", structure, lambda: mu_kernels.pack_layout(layout, self.c_groups)
         )
@@ -452,7 +452,19 @@ def _osborne_init(M: np.ndarray, structure: BlockStructure, layout: _Layout, ite
 def _osborne_problem(M, structure, layout):
     """``(P, par)``: the ``(B, E, E)`` matrix of the balancing (``|M|^2`` summed over the channels
     of each scaling ``e``, zero diagonal) and the log-parameter of each scaling."""
-    c, r = M.shape[1:]
+    Sc, Sr, par = _per_blk("osborne", structure, lambda: _osborne_channels(structure, layout))
+    k = Sc.shape[1]
+    P = Sc.T @ (np.abs(M) ** 2) @ Sr  # (B, E, E) real
+    P[:, np.eye(k, dtype=bool)] = 0.0
+    P += 1e-300
+    return np.ascontiguousarray(P), par
+
+
+def _osborne_channels(structure, layout):
+    """``(Sc, Sr, par)``: the 0/1 ``(c, E)`` and ``(r, E)`` channel sums of each scaling ``e`` of
+    the balancing (one per full block, one per channel of a repeated block) and its
+    log-parameter (:func:`_osborne_problem`; a function of the BLK alone)."""
+    c, r = structure.n_cols, structure.n_rows
     Sc, Sr, par = [], [], []
     for block, pars in zip(structure.blocks, layout.block_log_par, strict=True):
         chans = range(block.rows) if block.repeated else [None]
@@ -465,12 +477,7 @@ def _osborne_problem(M, structure, layout):
             Sc.append(sc)
             Sr.append(sr)
             par.append(pars[0 if a is None else a])
-    Sc, Sr = np.array(Sc).T, np.array(Sr).T  # (c, E), (r, E)
-    k = Sc.shape[1]
-    P = Sc.T @ (np.abs(M) ** 2) @ Sr  # (B, E, E) real
-    P[:, np.eye(k, dtype=bool)] = 0.0
-    P += 1e-300
-    return np.ascontiguousarray(P), np.array(par, dtype=int)
+    return np.array(Sc).T, np.array(Sr).T, np.array(par, dtype=int)  # (c, E), (r, E), (E,)
 
 
 @dataclass(frozen=True)

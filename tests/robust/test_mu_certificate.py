@@ -181,11 +181,14 @@ def test_certification_raises_only_what_its_check_needs():
     Dl, Dr, G = res.D_left, res.D_right, res.G
     again, *_ = certified_upper(M, res.upper, Dl, Dr, G)
     np.testing.assert_array_equal(again, res.upper)  # already certified: unchanged
-    low, *_ = certified_upper(M, 0.5 * res.upper, Dl, Dr, G)  # too low: raised
+    # too low: raised (a raise above CERT_RAISE also tries the scalings conditioned, D + e I,
+    # and may return those: the check is on the scalings returned)
+    low, Dl2, Dr2, G2 = certified_upper(M, 0.5 * res.upper, Dl, Dr, G)
     assert np.all(low >= 0.5 * res.upper)
+    assert np.all(low <= res.upper)  # the given scalings already prove res.upper
     for k in range(len(M)):
-        assert _lmi_holds_exactly(M[k], low[k], Dl[k], Dr[k], G[k])
-        assert not _lmi_holds_exactly(M[k], low[k] * (1 - 1e-6), Dl[k], Dr[k], G[k])
+        assert _lmi_holds_exactly(M[k], low[k], Dl2[k], Dr2[k], G2[k])
+        assert not _lmi_holds_exactly(M[k], low[k] * (1 - 1e-6), Dl2[k], Dr2[k], G2[k])
 
 
 def test_scalings_without_a_cholesky_factor_fall_back_to_the_plain_bound():
