@@ -249,8 +249,7 @@ def model(scenario, out, *, figures: FigureOptions | None = FigureOptions()) -> 
         ``.status`` 1: the occurrence counts differ from the paper's (written all the same).
     """
     result = compute_model(scenario)
-    print("\n".join(result.lines()))
-    print(f"block table: {write_model(result, out)}")
+    _print_model(result, write_model(result, out))
     if figures is not None:
         _print_figures(write_model_figures(scenario, figures, out))
     return result
@@ -265,10 +264,17 @@ def _info(args: argparse.Namespace) -> int:
     from oos_drake.scenario.data import load_scenario
 
     result = compute_model(load_scenario(args.scenario), args.phase)
-    print("\n".join(result.lines()))
-    if args.out is not None:
-        print(f"block table: {write_model(result, args.out)}")
+    _print_model(result, None if args.out is None else write_model(result, args.out))
     return result.status
+
+
+def _print_model(result: ModelResult, written: Path | None) -> None:
+    """Print the report of ``result``, the path of its block table (``written``) after the
+    table."""
+    lines = result.lines()
+    if written is not None:
+        lines.insert(2, f"block table: {written}")
+    print("\n".join(lines))
 
 
 def _blocks_table(table):
