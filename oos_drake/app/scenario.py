@@ -246,11 +246,13 @@ def model(scenario, out, *, figures: FigureOptions | None = FigureOptions()) -> 
     Returns
     -------
     ModelResult
-        ``.status`` 1: the occurrence counts differ from the paper's (written all the same).
+        ``.status`` 1: the occurrence counts differ from the paper's (the block table written
+        all the same, no figures: ``oos run`` stops there, as it did on ``oos model info``'s
+        exit status).
     """
     result = compute_model(scenario)
     _print_model(result, write_model(result, out))
-    if figures is not None:
+    if figures is not None and not result.status:  # a failed check stops oos run: no figures
         _print_figures(write_model_figures(scenario, figures, out))
     return result
 

@@ -119,10 +119,10 @@ def test_the_pipeline_stage_is_the_function(paper_model, tmp_path, monkeypatch, 
     assert main(["model", "info"]) == 1
     assert "occurrence counts DIFFER FROM the paper's (total 206)" in capsys.readouterr().out
     with pytest.raises(SystemExit) as stop:
-        pipeline._model_stage(DEFAULT_SCENARIO_PATH, figures=False)(tmp_path / "again")
+        pipeline._model_stage(DEFAULT_SCENARIO_PATH, figures=True)(tmp_path / "again")
     assert stop.value.code == 1
     assert (tmp_path / "again" / "blocks.parquet").is_file()
-    assert not (tmp_path / "again" / "surface.png").exists()  # figures=False: none drawn
+    assert len(drawn) == 2  # stopped before the figures, as on the command's exit status
 
 
 @pytest.mark.parametrize(
