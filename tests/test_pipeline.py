@@ -118,6 +118,20 @@ def test_oos_run_quick_end_to_end_then_everything_up_to_date(quick_run):
     assert "0 run now" in second.stdout
 
 
+def _record_models(monkeypatch, models):
+    """Replace the model stage's function by a recorder of ``(scenario file, figure options)``
+    (into ``models``)."""
+    from types import SimpleNamespace
+
+    import oos_drake.app.scenario as app_scenario
+
+    def record(scenario, out, figures=None):
+        models.append((scenario.source, figures))
+        return SimpleNamespace(status=0)
+
+    monkeypatch.setattr(app_scenario, "model", record)
+
+
 def _record_analyses(
     monkeypatch, analyses, margins=None, confirms=None, campaigns=None, controllers=None
 ):
@@ -176,7 +190,7 @@ def test_oos_run_passes_the_scheduler_to_the_stages_with_parallel_work(tmp_path,
     from oos_drake.app.main import build_parser
 
     calls, analyses, margins, confirms, campaigns, controllers = [], [], [], [], [], []
-    monkeypatch.setattr(pipeline, "_oos", lambda *argv: calls.append([str(a) for a in argv]))
+    _record_models(monkeypatch, calls)
     monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: None)
     _record_analyses(monkeypatch, analyses, margins, confirms, campaigns, controllers)
     argv = ["run", "--out", str(tmp_path), "--scheduler", "dask", "--workers", "3"]
@@ -193,12 +207,11 @@ def test_oos_run_passes_the_scheduler_to_the_stages_with_parallel_work(tmp_path,
     assert (confirm_options.scheduler, confirm_options.workers) == ("dask", 3)
     ((_, controller_options),) = controllers  # the controller stage: a function call
     assert (controller_options.scheduler, controller_options.workers) == ("dask", 3)
-    by_command = {c[0]: c for c in calls}
-    assert "synth" not in by_command
-    assert "--scheduler" not in by_command["model"]
-    assert "campaign" not in by_command  # the campaign stage and its report: function calls
+    from oos_drake.app.scenario import FigureOptions
     from oos_drake.scenario.data import scenario_path
 
+    # the model stage: a function call on the scenario, the figures drawn (no parallel work)
+    assert calls == [(scenario_path(None), FigureOptions())]
     key = pipeline.stage_keys(scenario_path(None), pipeline.DEFAULT_CAMPAIGN, False)["campaign"]
     folder = tmp_path / f"campaign-{key[:10]}"
     assert campaigns == [
@@ -226,14 +239,10 @@ def test_oos_run_proves_the_whole_axis_unless_grid_only(tmp_path, monkeypatch):
     analyses = []
     _record_analyses(monkeypatch, analyses)
     for i, extra in enumerate(([], ["--grid-only"])):
-        calls = []
-        monkeypatch.setattr(
-            pipeline, "_oos", lambda *argv, c=calls: c.append([str(a) for a in argv])
-        )
+        _record_models(monkeypatch, [])
         monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: None)
         argv = ["run", "--out", str(tmp_path / str(i)), *extra]
         assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
-        assert all("--grid-only" not in c for c in calls)
     assert [options.guarantee for _, options in analyses] == [True, False]
     from oos_drake.scenario.data import scenario_path
 

@@ -20,18 +20,18 @@ def _ran(out):
 
 @pytest.fixture
 def stubbed(monkeypatch):
-    """Every ``oos`` command and the Drake check replaced by a file write; the calls recorded."""
+    """Every stage function and the Drake check replaced by a recorder (a folder made); the
+    calls recorded."""
     calls = []
 
-    def fake_oos(*argv):
-        calls.append([str(a) for a in argv])
-        if "--out" in argv:
-            folder = argv[list(argv).index("--out") + 1]
-            from pathlib import Path
+    import oos_drake.app.scenario as app_scenario  # the model stage: a function call, no argv
 
-            Path(folder).mkdir(parents=True, exist_ok=True)
+    def fake_model(scenario, out, figures=None):
+        calls.append(["model", scenario.source, figures is not None])
+        out.mkdir(parents=True, exist_ok=True)
+        return SimpleNamespace(status=0)
 
-    monkeypatch.setattr(pipeline, "_oos", fake_oos)
+    monkeypatch.setattr(app_scenario, "model", fake_model)
     monkeypatch.setattr(pipeline, "_validate", lambda folder, scenario: calls.append(["validate"]))
     import oos_drake.app.synth as synth  # the controller stage: a function call, no argv
 

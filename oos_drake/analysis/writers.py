@@ -131,15 +131,15 @@ def write_margins(result, out_dir) -> dict:
 def write_confirmation(result, out_dir) -> dict:
     """Write a :class:`~oos_drake.analysis.confirm.ConfirmationResult` in ``out_dir``
     (created): its tables (``confirmation.parquet``, ``confirmation_histories.parquet``,
-    ``performance_confirmation.parquet``) and one figure per peak with nonlinear runs
+    ``performance_confirmation.parquet``), one figure per peak with nonlinear runs
     (``confirmation_<study>_<subset>.png``:
-    :func:`~oos_drake.analysis.figures.confirmation_figures`), each atomically.
+    :func:`~oos_drake.analysis.figures.confirmation_figures`) and ``summary.json``
+    (:meth:`~oos_drake.analysis.confirm.ConfirmationResult.summary`), each atomically.
 
     Returns
     -------
     dict
-        :meth:`~oos_drake.analysis.confirm.ConfirmationResult.summary` (not written: the
-        stage's folder holds the tables and figures only).
+        The summary written.
     """
     from oos_drake.analysis.figures import confirmation_figures
 
@@ -148,4 +148,6 @@ def write_confirmation(result, out_dir) -> dict:
     for name, table in result.tables().items():
         atomic_write_parquet(table, out / f"{name}.parquet")
     confirmation_figures(result, out)
-    return result.summary()
+    summary = result.summary()
+    atomic_write_text(summary_json(summary), out / "summary.json")
+    return summary

@@ -308,10 +308,25 @@ def _falsify(args: argparse.Namespace) -> int:
     return 0
 
 
-def _replay(args: argparse.Namespace) -> int:
+def replay(directory: str | Path, run_id: int, *, speed: float | None = None):
+    """The 3-D replay of run ``run_id`` of the campaign in ``directory``
+    (:func:`oos_drake.campaign.replay.replay_case`: re-simulated, written as
+    ``DIR/replay/case_N.html``), its summary printed; what ``oos campaign replay DIR --case N``
+    runs and ``oos run`` calls for the campaign's worst run.
+
+    Returns
+    -------
+    ReplayResult
+
+    Raises
+    ------
+    ValueError
+        Not a campaign directory, an unknown run, a simulator without a 3-D model or a bad
+        ``speed`` (nothing written).
+    """
     from oos_drake.campaign.replay import replay_case
 
-    result = replay_case(args.directory, args.case, speed=args.speed)
+    result = replay_case(directory, run_id, speed=speed)
     span = f"t = {result.start:g} .. {result.end:g} s"
     print(
         f"run {result.run_id}: {span}, {result.frames} frames at {result.frame_rate:g} Hz, "
@@ -320,6 +335,11 @@ def _replay(args: argparse.Namespace) -> int:
     if result.status != "ok":
         print(f"note: run {result.run_id} {result.status}: {result.error}")
     print(f"replay: {result.path}")
+    return result
+
+
+def _replay(args: argparse.Namespace) -> int:
+    replay(args.directory, args.case, speed=args.speed)
     return 0
 
 

@@ -77,19 +77,6 @@ class ValidateOptions:
             if not value > 0:
                 raise ValueError(f"{option} {value:g}: must be > 0")
 
-    def namespace(self, scenario) -> argparse.Namespace:
-        """These options as ``oos validate``'s parsed arguments, on ``scenario`` (a file)."""
-        return argparse.Namespace(
-            scenario=None if scenario is None else str(scenario),
-            cases=self.cases,
-            frequencies=self.frequencies,
-            f_min=self.f_min_hz,
-            f_max=self.f_max_hz,
-            tolerance=self.tolerance,
-            root_tolerance=self.root_tolerance,
-            sdf_dir=self.sdf_dir,
-        )
-
 
 @dataclass(frozen=True)
 class ValidationResult:
@@ -103,7 +90,7 @@ class ValidationResult:
     status : int
         0 when every configuration passes, else 1 (``oos validate``'s exit status).
     results : tuple of CaseResult
-        One per configuration (empty for a tree, whose report is its command's).
+        One per configuration (of the mission timeline for a tree).
     elapsed_s : float
         Wall time of the comparison [s].
     """
@@ -140,10 +127,10 @@ def compute_validation(scenario_file, options: ValidateOptions, progress=print):
     ----------
     scenario_file : str or Path or None
         The scenario (a file or a shipped name; None: the paper's). A schema-2 tree is
-        validated by :func:`oos_drake.app.tree.validate_tree` (its printed report captured).
+        validated by :func:`oos_drake.app.tree.compute_tree_validation`.
     options : ValidateOptions
     progress : callable or None
-        Receives the header line before the (long) comparison starts.
+        Receives each header line before the (long) comparison starts.
 
     Returns
     -------
@@ -152,15 +139,9 @@ def compute_validation(scenario_file, options: ValidateOptions, progress=print):
     from oos_drake.app.tree import is_tree_scenario
 
     if is_tree_scenario(scenario_file):  # schema 2: the tree's own twin on its timeline
-        import contextlib
-        import io
+        from oos_drake.app.tree import compute_tree_validation
 
-        from oos_drake.app.tree import validate_tree
-
-        buffer = io.StringIO()
-        with contextlib.redirect_stdout(buffer):
-            status = validate_tree(options.namespace(scenario_file))
-        return ValidationResult(buffer.getvalue(), status)
+        return compute_tree_validation(scenario_file, options, progress)
     import numpy as np
 
     from oos_drake.multibody.cross_check import run_validation, validation_cases
@@ -211,14 +192,14 @@ def validate(scenario_file, options: ValidateOptions, out) -> ValidationResult:
     ValidationResult
         ``.status`` 1: a configuration failed (written all the same).
     """
-    result = _printed_validation(scenario_file, options)
+    result = print_validation(scenario_file, options)
     write_validation(result, out)
     return result
 
 
-def _printed_validation(scenario_file, options: ValidateOptions) -> ValidationResult:
-    """:func:`compute_validation` printing its report: the header when the comparison starts,
-    the rest when it ends."""
+def print_validation(scenario_file, options: ValidateOptions) -> ValidationResult:
+    """:func:`compute_validation` printing its report (``oos validate``, a schema-1 scenario
+    or a tree): the header when the comparison starts, the rest when it ends."""
     printed = []
 
     def progress(line: str) -> None:
@@ -231,11 +212,7 @@ def _printed_validation(scenario_file, options: ValidateOptions) -> ValidationRe
 
 
 def _validate(args: argparse.Namespace) -> int:
-    from oos_drake.app.tree import is_tree_scenario, validate_tree
-
-    if is_tree_scenario(args.scenario):  # schema 2: the tree's own twin on its timeline
-        return validate_tree(args)
-    return _printed_validation(args.scenario, validate_options(args)).status
+    return print_validation(args.scenario, validate_options(args)).status
 
 
 def verdict_lines(results, elapsed: float) -> tuple[list[str], int]:

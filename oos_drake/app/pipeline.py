@@ -141,15 +141,6 @@ def run_stage(
     return True
 
 
-def _oos(*argv: str) -> None:
-    """Run one ``oos`` command in this process; a non-zero status stops the pipeline."""
-    from oos_drake.app.main import main
-
-    status = main([str(a) for a in argv])
-    if status:
-        raise SystemExit(status)
-
-
 def _check_campaign_scenario(campaign_spec: Path, scenario: Path) -> None:
     """The campaign's dispersions are written for one scenario: it must be ``scenario``."""
     import tomllib
@@ -208,19 +199,19 @@ def run_pipeline(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float | None] = {}
     start = time.perf_counter()
-    on_scenario = ["--scenario", scenario]
     print(f"[oos run] scenario: {scenario}")
     for name, why in skipped.items():
         print(f"[oos run] {name}: SKIPPED for this scenario: {why}")
         if name in ("controller", "analysis", "confirm", "margins"):
             shutil.rmtree(out / name, ignore_errors=True)  # no stale results in the report
 
-    def model(folder):
-        _oos("model", "info", "--out", folder, *on_scenario)
-        if "model figures" not in skipped:
-            _oos("model", "figures", "--out", folder, *on_scenario)
-
-    run_stage("model", out / "model", keys["model"], model, timings)
+    run_stage(
+        "model",
+        out / "model",
+        keys["model"],
+        _model_stage(scenario, figures="model figures" not in skipped),
+        timings,
+    )
     run_stage(
         "validate", out / "validate", keys["validate"], lambda d: _validate(d, scenario), timings
     )
@@ -294,6 +285,28 @@ def run_pipeline(args: argparse.Namespace) -> int:
     print()
     _print_headlines(out, campaign, report)
     return 0
+
+
+def _model_stage(scenario: Path, *, figures: bool):
+    """The model stage of ``oos run``: ``work(folder)`` building the mission LFR of
+    ``scenario`` (:func:`oos_drake.app.scenario.model`, what ``oos model info --out FOLDER``
+    and, with ``figures``, ``oos model figures --out FOLDER`` run), its block table and figures
+    written in ``folder``; returns its :class:`~oos_drake.app.scenario.ModelResult`.
+    Occurrence counts that differ from the paper's stop the pipeline (exit status 1, as the
+    command's)."""
+
+    def work(folder: Path):
+        from oos_drake.app.scenario import FigureOptions, model
+        from oos_drake.scenario.data import load_scenario
+
+        result = model(
+            load_scenario(str(scenario)), folder, figures=FigureOptions() if figures else None
+        )
+        if result.status:
+            raise SystemExit(result.status)
+        return result
+
+    return work
 
 
 def _controller_stage(options, scenario: Path):
@@ -391,22 +404,28 @@ def _campaign_stage(options):
 
 
 def _replay_worst_run(campaign: Path) -> Path | None:
-    """The 3-D replay of the campaign's worst run (``replay/case_N.html``, for the report),
-    unless it is there already; a campaign whose simulator has no 3-D model gets none (the
-    command says why)."""
+    """The 3-D replay of the campaign's worst run (``replay/case_N.html``, for the report:
+    :func:`oos_drake.app.campaign.replay`), unless it is there already; its path. A campaign
+    whose simulator has no 3-D model gets none (one line says why; None)."""
     import pandas as pd
 
-    from oos_drake.app.main import main
+    from oos_drake.app.campaign import replay
     from oos_drake.campaign.replay import replay_path
 
     worst = campaign / "report" / "worst_runs.parquet"
     table = pd.read_parquet(worst) if worst.is_file() else pd.DataFrame()
     if table.empty or "run_id" not in table:
         return None
-    path = replay_path(campaign, int(table["run_id"].iloc[0]))
-    if not path.is_file() and main(["campaign", "replay", str(campaign), "--case", path.stem[5:]]):
+    run_id = int(table["run_id"].iloc[0])
+    path = replay_path(campaign, run_id)
+    if path.is_file():
+        return path
+    try:
+        return replay(campaign, run_id).path
+    except (ValueError, FileNotFoundError, KeyError) as error:  # as `oos campaign replay`: status 2
+        message = error.args[0] if error.args else error
+        print(f"oos campaign: error: {message}", file=sys.stderr)
         return None
-    return path
 
 
 def _report(folder: Path, out: Path, campaign: Path) -> None:

@@ -235,6 +235,13 @@ def compute_controller(scenario, options: ControllerOptions) -> ControllerResult
         f"{len(plants.parameters)} real parameter(s), built in {time.perf_counter() - wall:.1f} s "
         f"({time.process_time() - cpu:.1f} s CPU)"
     )
+    # The optimizer's start point: the baseline PD tuned on the model array's own
+    # configuration nearest the first docking (control.baseline.baseline_for), not the
+    # controller baseline (scenario_baseline_gains, the one derivation the analysis and the
+    # Drake mission use): with --plant drake/synthetic the array is not the scenario's LFR,
+    # and on the LFR its nearest grid point is not exactly the docking time. Kept on purpose:
+    # starting from scenario_baseline_gains was measured to move the synthesized gamma by
+    # 1.9e-4, i.e. `make run` results would change.
     K0 = baseline_for(plants, scenario.mission.first_docking_time)
     if scenario.control.has_tuning_goals or scenario.control.structure != "static":
         from oos_drake.control.requirements import tune_to_requirements, tuning_specification

@@ -17,7 +17,8 @@ files. ``convert`` writes the schema-2 tree of a schema-1 scenario's chaser
 inverse kinematics gives (:func:`joint_space_document`): the scenario layer, below the Drake
 twin, reads such a file's timeline directly, so ``oos synth``, ``oos analyze`` and ``oos margins``
 run on it; ``oos run`` does this itself (:func:`joint_space_scenario`).
-``oos validate`` on a schema-2 file (:func:`validate_tree`) checks the TITOP LFR against the
+``oos validate`` on a schema-2 file (:func:`compute_tree_validation`, printed by
+:func:`validate_tree`) checks the TITOP LFR against the
 tree's own twin on every configuration of the mission timeline
 (:meth:`oos_drake.scenario.tree_mission.Timeline.configurations`). Invalid data: one line
 ``oos <command>: error: <body>: <field> ...`` on stderr, exit status 2, nothing written.
@@ -37,6 +38,7 @@ from oos_drake.scenario.tree import TREE_SCHEMA_VERSION, load_tree, tree_path
 __all__ = [
     "register",
     "is_tree_scenario",
+    "compute_tree_validation",
     "validate_tree",
     "joint_space_document",
     "joint_space_scenario",
@@ -70,17 +72,38 @@ def is_tree_scenario(scenario: str | Path | None) -> bool:
         return False  # the schema-1 loader reports it
 
 
-def validate_tree(args: argparse.Namespace) -> int:
-    """``oos validate`` of a tree: TITOP LFR vs the tree's own Drake twin (generated from the
-    file) on every configuration of its mission timeline; exit status 1 if one fails.
+def compute_tree_validation(scenario, options, progress=None):
+    """``oos validate`` of a tree, computed: the TITOP LFR against the tree's own Drake twin
+    (generated from the file) on every configuration of its mission timeline. Writes nothing.
 
-    Uses ``args.scenario``, ``args.frequencies``, ``args.f_min``, ``args.f_max`` [Hz],
-    ``args.tolerance`` and ``args.root_tolerance``; the twin is always the tree's own
-    (``--sdf-dir`` and ``--cases`` are for schema-1 scenarios).
+    Parameters
+    ----------
+    scenario : str or Path
+        The tree (a schema-2 file or a shipped tree's name).
+    options : oos_drake.app.multibody.ValidateOptions
+        ``frequencies``, ``f_min_hz``, ``f_max_hz`` [Hz], ``tolerance`` and ``root_tolerance``;
+        the twin is always the tree's own (``sdf_dir`` and ``cases`` are for schema-1
+        scenarios).
+    progress : callable or None
+        Receives each line of the header (the comparison, then each tip waypoint reached)
+        before the (long) comparison starts.
+
+    Returns
+    -------
+    oos_drake.app.multibody.ValidationResult
+        The report (header, table, verdict), the exit status (1 if a configuration fails), one
+        result per configuration of the timeline and the wall time [s].
+
+    Raises
+    ------
+    ScenarioError
+        Invalid data, or a tip waypoint out of reach (exit status 2).
     """
     import numpy as np
 
-    tree = load_tree(args.scenario)  # invalid data: ScenarioError -> exit status 2
+    from oos_drake.app.multibody import ValidationResult, verdict_lines
+
+    tree = load_tree(scenario)  # invalid data: ScenarioError -> exit status 2
     from oos_drake.multibody.tree_ik import mission_timeline
     from oos_drake.multibody.tree_plant import (
         build_captured_diagram,
@@ -96,20 +119,23 @@ def validate_tree(args: argparse.Namespace) -> int:
     timeline = mission_timeline(tree, handles)  # out of reach: ScenarioError -> exit status 2
     configurations = timeline.configurations()
     omega = frequency_grid(
-        omega_range=(2 * np.pi * args.f_min, 2 * np.pi * args.f_max), points=args.frequencies
+        omega_range=(2 * np.pi * options.f_min_hz, 2 * np.pi * options.f_max_hz),
+        points=options.frequencies,
     )
-    print(
+    header = [
         f"{tree.name}: Drake twin of the tree vs TITOP LFR, 6x6 [F; T]@G -> [a; wdot]@G of "
         f"{tree.root}, {len(configurations)} configurations of the timeline "
-        f"({timeline.duration:g} s), {args.frequencies} frequencies {args.f_min:g}-"
-        f"{args.f_max:g} Hz; pass: response error <= {args.tolerance:g}, poles/zeros <= "
-        f"{args.root_tolerance:g}"
-    )
-    for phase, solution in timeline.tip_solutions.items():
-        print(
-            f"tip waypoint {phase}: port {solution.port} reached within "
-            f"{solution.position_error:.2e} m, {solution.orientation_error:.2e} rad"
-        )
+        f"({timeline.duration:g} s), {options.frequencies} frequencies {options.f_min_hz:g}-"
+        f"{options.f_max_hz:g} Hz; pass: response error <= {options.tolerance:g}, "
+        f"poles/zeros <= {options.root_tolerance:g}"
+    ]
+    header += [
+        f"tip waypoint {phase}: port {solution.port} reached within "
+        f"{solution.position_error:.2e} m, {solution.orientation_error:.2e} rad"
+        for phase, solution in timeline.tip_solutions.items()
+    ]
+    for line in header if progress is not None else ():
+        progress(line)
     models = {None: (tree, handles)}  # connection -> (model tree, twin)
     results, seen = [], {}
     for configuration in configurations:
@@ -135,8 +161,8 @@ def validate_tree(args: argparse.Namespace) -> int:
                 dict(configuration.angles),
                 handles=model_handles,
                 omega=omega,
-                response_tolerance=args.tolerance,
-                root_tolerance=args.root_tolerance,
+                response_tolerance=options.tolerance,
+                root_tolerance=options.root_tolerance,
             )
         label = f"t={configuration.time:g} s {configuration.phase}"
         if captured:
@@ -144,9 +170,18 @@ def validate_tree(args: argparse.Namespace) -> int:
         if docked:
             label += f" [{'~'.join(docked.connection)}]"
         results.append(dataclasses.replace(seen[key], label=label))
-    from oos_drake.app.multibody import print_verdict
+    elapsed = time.perf_counter() - start
+    lines, status = verdict_lines(results, elapsed)
+    return ValidationResult("\n".join([*header, *lines]) + "\n", status, tuple(results), elapsed)
 
-    return print_verdict(results, time.perf_counter() - start)
+
+def validate_tree(args: argparse.Namespace) -> int:
+    """``oos validate`` of a tree: :func:`compute_tree_validation` with ``oos validate``'s
+    options (``args``), its report printed (the header when the comparison starts, the table
+    and verdict when it ends); the exit status, 1 if a configuration fails."""
+    from oos_drake.app.multibody import print_validation, validate_options
+
+    return print_validation(args.scenario, validate_options(args)).status
 
 
 def _convert(args: argparse.Namespace) -> int:

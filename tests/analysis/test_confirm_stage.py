@@ -96,9 +96,12 @@ def test_compute_confirmation_writes_nothing(computed):
 
 def test_written_files_are_the_result(tmp_path, computed):
     """Every table read back equals ``result.tables()``; one figure per peak with histories;
-    nothing else (no summary file: the folder is what ``oos confirm`` always wrote)."""
+    ``summary.json`` read back equals ``result.summary()``; nothing else."""
+    import json
+
     result, _ = computed
     summary = write_confirmation(result, tmp_path)
+    assert json.loads((tmp_path / "summary.json").read_text()) == summary == result.summary()
     assert set(result.tables()) == {
         "confirmation",
         "confirmation_histories",
@@ -110,9 +113,9 @@ def test_written_files_are_the_result(tmp_path, computed):
     assert {p.name for p in tmp_path.iterdir()} == {
         *(f"{s}.parquet" for s in result.tables()),
         *figures,
+        "summary.json",
     }
     assert all((tmp_path / f).stat().st_size > 10_000 for f in figures)
-    assert summary == result.summary()
 
 
 def test_summary_is_the_tables(computed):
@@ -137,7 +140,8 @@ def test_an_empty_analysis_gives_empty_tables(tmp_path, paper_scenario):
     assert list(result.performance.columns) == PERFORMANCE_CONFIRMATION_COLUMNS
     assert result.summary()["peaks"] == [] and result.summary()["performance"] == []
     write_confirmation(result, tmp_path)
-    assert {p.name for p in tmp_path.iterdir()} == {f"{s}.parquet" for s in result.tables()}
+    files = {f"{s}.parquet" for s in result.tables()} | {"summary.json"}
+    assert {p.name for p in tmp_path.iterdir()} == files
 
 
 def test_a_real_peak_beyond_nyquist_goes_through_the_stage(tmp_path, paper_scenario):
@@ -158,6 +162,13 @@ def test_a_real_peak_beyond_nyquist_goes_through_the_stage(tmp_path, paper_scena
     pd.testing.assert_frame_equal(
         pd.read_parquet(tmp_path / "confirmation.parquet"), result.confirmation
     )
+    # summary.json: the table's summary columns (NaN where the table has NaN), read back
+    import json
+
+    (peak_summary,) = json.loads((tmp_path / "summary.json").read_text())["peaks"]
+    expected = result.confirmation[list(PEAK_SUMMARY_COLUMNS)]
+    pd.testing.assert_frame_equal(pd.DataFrame([peak_summary]), expected, check_dtype=False)
+    assert np.isnan(peak_summary["alpha linear sampled [-]"])
 
 
 @pytest.mark.parametrize("scheduler", [None, "dask"])

@@ -65,7 +65,7 @@ def test_the_pipeline_calls_the_stage_with_its_options(tmp_path, monkeypatch):
 
     calls = []
     monkeypatch.setattr(app_campaign, "campaign", lambda *args: calls.append(args) or "summary")
-    monkeypatch.setattr(pipeline, "_oos", lambda *argv: pytest.fail(f"argv {argv}"))
+    assert not hasattr(pipeline, "_oos")  # no command lines left in the pipeline
     options = CampaignOptions(tmp_path / "spec.toml", workers=2)
     assert pipeline._campaign_stage(options)(tmp_path / "c") == "summary"
     assert calls == [(options, tmp_path / "c")]
@@ -131,3 +131,48 @@ def test_bad_options_are_refused(tmp_path, capsys, write_spec):
         assert not out.exists()
     with pytest.raises(ValueError, match="--workers 0"):  # oos run: before any stage
         pipeline_campaign_options(spec, tmp_path / "w.parquet", tmp_path / "c.json", 0)
+
+
+def test_the_worst_runs_replay_is_a_function_call(tmp_path, monkeypatch, capsys):
+    """``oos run``'s replay of the campaign's worst run calls
+    :func:`oos_drake.app.campaign.replay` (no command line): a simulator without a 3-D model
+    gives the one line ``oos campaign replay`` prints (its exit status 2) and no file; a
+    replay made prints what the command prints, and one already there is not made again."""
+    import oos_drake.app.pipeline as pipeline
+    import oos_drake.campaign.replay as replay_module
+    from oos_drake.app.campaign import campaign_report
+    from oos_drake.campaign.replay import ReplayResult, replay_path
+
+    folder = tmp_path / "c"
+    spec = _mu_guided_spec(tmp_path)
+    campaign(
+        CampaignOptions(spec, SPEC_DIRECTORY / "demo_worst_cases.parquet", progress=False), folder
+    )
+    campaign_report(folder)
+    worst = int(pd.read_parquet(folder / "report" / "worst_runs.parquet")["run_id"].iloc[0])
+    capsys.readouterr()
+    assert main(["campaign", "replay", str(folder), "--case", str(worst)]) == 2
+    command = capsys.readouterr().err
+    assert "has no 3D model to replay" in command and command.count("\n") == 1
+    assert pipeline._replay_worst_run(folder) is None
+    assert capsys.readouterr().err == command
+    assert not (folder / "replay").exists()
+
+    made = []
+
+    def fake_replay(directory, run_id, *, speed=None, meshcat=None):
+        path = replay_path(directory, run_id)
+        path.parent.mkdir(exist_ok=True)
+        path.write_text("<html></html>")
+        made.append((Path(directory), run_id, speed))
+        return ReplayResult(path, run_id, 10.0, 20.0, 5.0, 51, 2.0, "diverged", "boom", 13)
+
+    monkeypatch.setattr(replay_module, "replay_case", fake_replay)
+    assert main(["campaign", "replay", str(folder), "--case", str(worst)]) == 0
+    printed = capsys.readouterr().out
+    assert "note: run" in printed and f"replay: {replay_path(folder, worst)}" in printed
+    replay_path(folder, worst).unlink()
+    assert pipeline._replay_worst_run(folder) == replay_path(folder, worst)
+    assert capsys.readouterr().out == printed
+    assert pipeline._replay_worst_run(folder) == replay_path(folder, worst)  # there: not made
+    assert made == [(folder, worst, None)] * 2

@@ -121,3 +121,35 @@ def test_validate_fails_when_the_twin_differs(tmp_path, capsys, monkeypatch):
     )
     assert main(["validate", "--scenario", str(_write(tmp_path, document))]) == 1
     assert "FAILED: 1 of 1 configurations (t=0 s )" in capsys.readouterr().out
+
+
+@pytest.mark.drake
+def test_the_trees_validation_is_computed_apart_from_printing(tmp_path, capsys, monkeypatch):
+    """:func:`~oos_drake.app.tree.compute_tree_validation` writes and prints nothing; its
+    report is what ``oos validate --scenario TREE`` prints (wall times aside), its results the
+    table's rows, its status the command's; the validation stage writes the same report
+    (``validate.txt``; the tree's report is no longer a captured printout)."""
+    pytest.importorskip("pydrake")
+    from oos_drake.app.multibody import ValidateOptions, validate
+    from oos_drake.app.tree import compute_tree_validation
+
+    assert main(["validate", "--scenario", "flexible_satellite", "--frequencies", "20"]) == 0
+    printed = capsys.readouterr().out
+    monkeypatch.chdir(tmp_path)
+    options = ValidateOptions(frequencies=20)
+    header = []
+    result = compute_tree_validation("flexible_satellite", options, progress=header.append)
+    assert list(tmp_path.iterdir()) == [] and capsys.readouterr().out == ""
+    untimed = re.compile(r"\d+\.\d s\b")
+    assert untimed.sub("T", result.text) == untimed.sub("T", printed)
+    assert printed.startswith("\n".join(header) + "\n") and len(header) == 1
+    assert result.status == 0 and [r.label for r in result.results] == list(_rows(printed))
+    assert [r.max_relative_error for r in result.results] == pytest.approx(
+        list(_rows(printed).values()), rel=1e-3
+    )
+    folder = tmp_path / "stage"
+    folder.mkdir()
+    staged = validate("flexible_satellite", options, folder).results
+    assert [(r.label, r.passed) for r in staged] == [(r.label, r.passed) for r in result.results]
+    assert untimed.sub("T", (folder / "validate.txt").read_text()) == untimed.sub("T", printed)
+    capsys.readouterr()
