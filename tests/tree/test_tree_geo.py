@@ -4,7 +4,7 @@ Fast: the total inertia written out here from the TOML (parallel-axis theorem, e
 its file angle) against the model's ``G(0)^-1``; the additive weight's share of ``1 / J`` and
 the gyro noise's torque through the baseline PD's rate gain (closed form), the design rules
 the file's comments state. Slow: ``oos run --scenario geo_satellite --quick`` at reduced
-sizes with the shipped campaign (3 runs).
+sizes with the shipped campaign (3 runs), the confirmation left out (its cost).
 """
 
 from __future__ import annotations
@@ -79,18 +79,23 @@ def test_geo_weights_are_scaled_to_its_inertia():
 
 @pytest.mark.slow
 def test_oos_run_on_geo_satellite_end_to_end(tmp_path, monkeypatch):
-    """``oos run --scenario geo_satellite --quick`` at reduced sizes: every stage (the
-    confirmation on the tree's twin and the shipped campaign with 3 runs included); the
-    validation within 1e-6 on every configuration; the controller's gamma the peak of a dense
-    frequency sweep of its closed loops; the analysis' closed loops stable at the corners of
-    the declared ranges (eigenvalues)."""
+    """``oos run --scenario geo_satellite --quick`` at reduced sizes: every stage but the
+    confirmation (the shipped campaign with 3 runs included); the validation within 1e-6 on
+    every configuration; the controller's gamma the peak of a dense frequency sweep of its
+    closed loops; the analysis' closed loops stable at the corners of the declared ranges
+    (eigenvalues). The confirmation is left out: its slow peaks (~0.016 Hz) need runs of
+    eight periods, 380 s of this test's 594 s at load 9 (measured with it); a tree's
+    confirmation is tested in tests/tree/test_tree_confirm.py (the geo twin with every block
+    substituted against the substituted LFR; a worst case confirmed end to end on
+    flexible_satellite), and geo's own in the full run of docs/TREE.md."""
     import oos_drake.app.pipeline as pipeline
     from oos_drake.analysis.controller import scenario_controller
     from oos_drake.analysis.models import mission_closed_loop
     from oos_drake.app.main import build_parser
     from oos_drake.lfr import usubs
 
-    reduce_run_stages(monkeypatch)
+    covered = "covered by tests/tree/test_tree_confirm.py"
+    reduce_run_stages(monkeypatch, skip={"confirm": covered})
     out = tmp_path / "out"
     spec = tmp_path / "campaign.toml"
     shipped = pipeline.default_campaign(scenario_path("geo_satellite"))
@@ -102,8 +107,8 @@ def test_oos_run_on_geo_satellite_end_to_end(tmp_path, monkeypatch):
     argv = ["run", "--scenario", "geo_satellite", "--quick", "--out", str(out)]
     assert pipeline.run_pipeline(build_parser().parse_args([*argv, "--campaign", str(spec)])) == 0
     timings = json.loads((out / "timings.json").read_text())
-    assert set(timings["skipped"]) == {"model figures"}
-    assert {"validate", "controller", "analysis", "confirm", "margins"} <= set(timings["stages_s"])
+    assert set(timings["skipped"]) == {"model figures", "confirm"}
+    assert {"validate", "controller", "analysis", "margins"} <= set(timings["stages_s"])
 
     validation = (out / "validate" / "validate.txt").read_text()
     errors = [float(m) for m in re.findall(r"^t=\S+ s \S+\s+(\S+)", validation, re.M)]
@@ -112,9 +117,6 @@ def test_oos_run_on_geo_satellite_end_to_end(tmp_path, monkeypatch):
     (campaign,) = out.glob("campaign-*")
     runs = pd.read_parquet(campaign / "runs.parquet")
     assert len(runs) == 3 and (runs["status"] == "ok").all()
-    confirmation = pd.read_parquet(out / "confirm" / "confirmation.parquet")
-    peaks = pd.read_parquet(out / "analysis" / "stability_peaks.parquet")
-    assert len(confirmation) == int((peaks["mu lower [-]"] > 0).sum()) >= 1
 
     record = json.loads((out / "controller" / "controller.json").read_text())
     loops = np.load(out / "controller" / "closed_loop.npz")
