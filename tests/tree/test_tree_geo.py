@@ -15,6 +15,7 @@ import re
 import numpy as np
 import pandas as pd
 import pytest
+import tomli_w
 from reduced_run import reduce_run_stages, sweep_peak
 from tree_documents import rotation, shipped_document
 
@@ -97,14 +98,20 @@ def test_oos_run_on_geo_satellite_end_to_end(tmp_path, monkeypatch):
     covered = "covered by tests/tree/test_tree_confirm.py"
     reduce_run_stages(monkeypatch, skip={"confirm": covered})
     out = tmp_path / "out"
+    # the shipped file without its hard margin goals: the reduced synthesis (4 configurations,
+    # 25 iterations) does not reach them (4.0 dB of 5 measured), and `oos run` stops on an
+    # infeasible controller; the full run reaches them (docs/TREE.md)
+    document = shipped_document("geo_satellite")
+    for goal in ("gain_margin_db", "phase_margin_deg"):
+        document["control"].pop(goal, None)
+    scenario_file = tmp_path / "geo_satellite.toml"
+    scenario_file.write_bytes(tomli_w.dumps(document).encode())
     spec = tmp_path / "campaign.toml"
     shipped = pipeline.default_campaign(scenario_path("geo_satellite"))
     assert shipped.name == "geo_satellite.toml"
     text = shipped.read_text().replace("n_runs = 48", "n_runs = 3")
-    spec.write_text(
-        text.replace('scenario = "geo_satellite"', f'scenario = "{scenario_path("geo_satellite")}"')
-    )
-    argv = ["run", "--scenario", "geo_satellite", "--quick", "--out", str(out)]
+    spec.write_text(text.replace('scenario = "geo_satellite"', f'scenario = "{scenario_file}"'))
+    argv = ["run", "--scenario", str(scenario_file), "--quick", "--out", str(out)]
     assert pipeline.run_pipeline(build_parser().parse_args([*argv, "--campaign", str(spec)])) == 0
     timings = json.loads((out / "timings.json").read_text())
     assert set(timings["skipped"]) == {"model figures", "confirm"}
@@ -124,7 +131,7 @@ def test_oos_run_on_geo_satellite_end_to_end(tmp_path, monkeypatch):
     peak = sweep_peak(loops)
     assert record["gamma"] * (1 - 1e-3) <= peak <= record["gamma"] * (1 + 1e-6)
 
-    scenario = load_scenario("geo_satellite")
+    scenario = load_scenario(str(scenario_file))
     controller = scenario_controller(out / "controller" / "controller.json", scenario)
     times = np.linspace(0.0, scenario.mission.t_end, 4)
     closed = mission_closed_loop(controller, times, scenario).system
