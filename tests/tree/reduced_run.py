@@ -85,3 +85,27 @@ def sweep_peak(loops) -> float:
         H = C @ np.linalg.solve(1j * w[:, None, None] * np.eye(n) - A, B) + D
         peak = max(peak, float(np.linalg.svd(H, compute_uv=False)[:, 0].max()))
     return peak
+
+
+def assert_stable_at_range_corners(controller_file, scenario, times) -> None:
+    """The analysis' closed loops (sensors, wheel, roll-off, the ``Delta_add``/``Delta_mul``
+    channels) with the controller of ``controller_file``, at configurations ``times`` [s]:
+    stable with every real uncertain block at the low end, then at the high end of its range
+    (eigenvalues of the substituted closed loop, computed here)."""
+    import numpy as np
+
+    from oos_drake.analysis.controller import scenario_controller
+    from oos_drake.analysis.models import mission_closed_loop
+    from oos_drake.lfr import usubs
+
+    controller = scenario_controller(controller_file, scenario)
+    times = np.asarray(times, dtype=float)
+    closed = mission_closed_loop(controller, times, scenario).system
+    for corner in (0, 1):
+        values = {
+            name: np.full(times.size, block.range[corner])
+            for name, block in closed.uncertainty.items()
+            if block.kind == "ureal"
+        }
+        A = np.asarray(usubs(closed, values).nominal.A)
+        assert np.linalg.eigvals(A).real.max() < 0, corner

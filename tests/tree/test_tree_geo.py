@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import tomli_w
-from reduced_run import reduce_run_stages, sweep_peak
+from reduced_run import assert_stable_at_range_corners, reduce_run_stages, sweep_peak
 from tree_documents import rotation, shipped_document
 
 from oos_drake.scenario.data import load_scenario, scenario_path
@@ -90,10 +90,7 @@ def test_oos_run_on_geo_satellite_end_to_end(tmp_path, monkeypatch):
     substituted against the substituted LFR; a worst case confirmed end to end on
     flexible_satellite), and geo's own in the full run of docs/TREE.md."""
     import oos_drake.app.pipeline as pipeline
-    from oos_drake.analysis.controller import scenario_controller
-    from oos_drake.analysis.models import mission_closed_loop
     from oos_drake.app.main import build_parser
-    from oos_drake.lfr import usubs
 
     covered = "covered by tests/tree/test_tree_confirm.py"
     reduce_run_stages(monkeypatch, skip={"confirm": covered})
@@ -132,14 +129,8 @@ def test_oos_run_on_geo_satellite_end_to_end(tmp_path, monkeypatch):
     assert record["gamma"] * (1 - 1e-3) <= peak <= record["gamma"] * (1 + 1e-6)
 
     scenario = load_scenario(str(scenario_file))
-    controller = scenario_controller(out / "controller" / "controller.json", scenario)
-    times = np.linspace(0.0, scenario.mission.t_end, 4)
-    closed = mission_closed_loop(controller, times, scenario).system
-    for corner in (0, 1):
-        values = {
-            name: np.full(times.size, block.range[corner])
-            for name, block in closed.uncertainty.items()
-            if block.kind == "ureal"
-        }
-        A = np.asarray(usubs(closed, values).nominal.A)
-        assert np.linalg.eigvals(A).real.max() < 0, corner
+    assert_stable_at_range_corners(
+        out / "controller" / "controller.json",
+        scenario,
+        np.linspace(0.0, scenario.mission.t_end, 4),
+    )

@@ -16,7 +16,7 @@ import tomllib
 import numpy as np
 import pandas as pd
 import pytest
-from reduced_run import reduce_run_stages, sweep_peak
+from reduced_run import assert_stable_at_range_corners, reduce_run_stages, sweep_peak
 
 from oos_drake.scenario.data import load_scenario, scenario_path
 
@@ -174,8 +174,6 @@ def test_oos_run_on_a_tree_end_to_end(tmp_path, monkeypatch, capsys):
     """``oos run --scenario flexible_satellite --quick`` at reduced sizes (each stage's
     options appended: synthesis and analysis on 4 configurations, a coarse grid)."""
     import oos_drake.app.pipeline as pipeline
-    from oos_drake.analysis.controller import scenario_controller
-    from oos_drake.analysis.models import mission_closed_loop
     from oos_drake.app.main import build_parser
 
     reduce_run_stages(monkeypatch)
@@ -236,19 +234,11 @@ def test_oos_run_on_a_tree_end_to_end(tmp_path, monkeypatch, capsys):
     # Delta_add/Delta_mul channels) with the synthesized gain: stable at every analyzed
     # configuration, nominal and at the corners of the declared frequency ranges
     scenario = load_scenario("flexible_satellite")
-    controller = scenario_controller(out / "controller" / "controller.json", scenario)
-    times = np.linspace(0.0, scenario.mission.t_end, 4)
-    closed = mission_closed_loop(controller, times, scenario).system
-    from oos_drake.lfr import usubs
-
-    for corner in (0, 1):
-        values = {
-            name: np.full(times.size, block.range[corner])
-            for name, block in closed.uncertainty.items()
-            if block.kind == "ureal"
-        }
-        A = np.asarray(usubs(closed, values).nominal.A)
-        assert np.linalg.eigvals(A).real.max() < 0, corner
+    assert_stable_at_range_corners(
+        out / "controller" / "controller.json",
+        scenario,
+        np.linspace(0.0, scenario.mission.t_end, 4),
+    )
     summary = json.loads((out / "analysis" / "summary.json").read_text())
     assert summary["scenario"]["name"] == "flexible_satellite"
     assert summary["docking"] == {}

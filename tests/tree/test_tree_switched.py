@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import tomli_w
-from reduced_run import reduce_run_stages, sweep_peak
+from reduced_run import assert_stable_at_range_corners, reduce_run_stages, sweep_peak
 from tree_documents import shipped_document
 
 from oos_drake.lfr import usubs
@@ -186,8 +186,6 @@ def test_oos_run_on_the_servicer_runs_controller_analysis_and_margins(tmp_path, 
     import json
 
     import oos_drake.app.pipeline as pipeline
-    from oos_drake.analysis.controller import scenario_controller
-    from oos_drake.analysis.models import mission_closed_loop
     from oos_drake.app.main import build_parser
 
     # confirm and campaign of a mated tree: tests/tree/test_tree_mated_twin.py (their cost here
@@ -213,17 +211,9 @@ def test_oos_run_on_the_servicer_runs_controller_analysis_and_margins(tmp_path, 
     # the analysis' closed loops with the synthesized gain, one configuration per phase (free,
     # target welded at GRASP, at DOCK): stable, nominal and at the corners of the ranges
     scenario = load_scenario(solved)
-    controller = scenario_controller(out / "controller" / "controller.json", scenario)
-    times = np.array(list(MID_PHASE.values()))
-    closed = mission_closed_loop(controller, times, scenario).system
-    for corner in (0, 1):
-        values = {
-            name: np.full(times.size, block.range[corner])
-            for name, block in closed.uncertainty.items()
-            if block.kind == "ureal"
-        }
-        A = np.asarray(usubs(closed, values).nominal.A)
-        assert np.linalg.eigvals(A).real.max() < 0, corner
+    assert_stable_at_range_corners(
+        out / "controller" / "controller.json", scenario, list(MID_PHASE.values())
+    )
     summary = json.loads((out / "analysis" / "summary.json").read_text())
     assert summary["scenario"]["name"] == "servicer_7dof"
     # the berthing is a docking study (its stiffness sweep: 3 values at reduced size)
