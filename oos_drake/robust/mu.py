@@ -47,7 +47,11 @@ from oos_drake.robust.mu_upper import (
     mu_upper_bound,
     power_of_two_scale,
 )
-from oos_drake.robust.worst_search import complex_phase_search
+from oos_drake.robust.worst_search import (
+    MIXED_MAX_REAL,
+    complex_phase_search,
+    mixed_real_search,
+)
 
 
 @dataclass(frozen=True)
@@ -145,6 +149,26 @@ CONTINUATION_LOWER_RESTARTS = 0
 CONTINUATION_LOWER_ITERATIONS = 60
 
 
+#: Largest ``sum(r)`` of the structures that get :func:`mixed_real_search` in :func:`mussv`.
+MIXED_MAX_SIZE = 12
+#: Gap ``upper / lower`` above which :func:`mussv` runs that search (it is cheap on the small
+#: structures it serves, and the power iteration may stop 2 % short where the gap is 2 %).
+MIXED_GAP = 1.001
+#: Half-width of that search's grid of real parameters, times ``1 / upper`` (the minimizer has
+#: ``||y|| <= 1 / mu``; the pattern search may leave the grid).
+MIXED_RADIUS = 2.0
+
+
+def _small_mixed(structure) -> bool:
+    """True for the structures :func:`mussv` hands to :func:`mixed_real_search`."""
+    n_real = sum(b.kind == REAL for b in structure.blocks)
+    return (
+        0 < n_real <= MIXED_MAX_REAL
+        and n_real < len(structure.blocks)
+        and structure.n_rows <= MIXED_MAX_SIZE
+    )
+
+
 def _upper_bound(part, structure, iterations, tol, *, continuation=False):
     """The D-G upper bound of :func:`mussv` (optionally with continuation along the batch)."""
     cold_options = dict(
@@ -223,6 +247,7 @@ def mussv(
     rng: np.random.Generator | None = None,
     continuation: bool = False,
     phase_search: bool = True,
+    mixed_search: bool = True,
 ) -> MuResult:
     """Upper and lower bounds of the mixed structured singular value.
 
@@ -261,6 +286,14 @@ def mussv(
         restart_gap``, also maximize ``rho(M Delta)`` over the blocks' phases
         (:func:`~oos_drake.robust.worst_search.complex_phase_search`; the power iteration alone
         may stop 10-15 % short there).
+    mixed_search : bool
+        For small mixed structures (real and complex blocks, at most
+        :data:`~oos_drake.robust.worst_search.MIXED_MAX_REAL` real blocks and
+        :data:`MIXED_MAX_SIZE` rows of ``Delta``) only: where ``upper / lower >`` :data:`MIXED_GAP`,
+        also search the real parameters on a grid and by a pattern search, each point closed
+        on the complex blocks (:func:`~oos_drake.robust.worst_search.mixed_real_search`; on
+        two real and one complex scalar the power iteration alone may return 0 or stop 60 %
+        short there).
 
     Returns
     -------
@@ -308,6 +341,17 @@ def mussv(
         for i in np.flatnonzero(up.upper * scale > restart_gap * lower):
             value, d, res = complex_phase_search(
                 flat[i] * scale[i], structure, start=delta[i], rng=rng
+            )
+            if res <= CERTIFICATE_RTOL and value > lower[i]:
+                lower[i], delta[i], resid[i] = value, d, res
+    if mixed_search and _small_mixed(structure):
+        lower, delta, resid = lower.copy(), delta.copy(), np.array(resid, dtype=float)
+        for i in np.flatnonzero(up.upper * scale > MIXED_GAP * lower):
+            radius = MIXED_RADIUS / (up.upper[i] * scale[i] + 1e-300)
+            if lower[i] > 0:
+                radius = min(radius, 1.0 / lower[i])
+            value, d, res = mixed_real_search(
+                flat[i] * scale[i], structure, radius=radius, start=delta[i], rng=rng
             )
             if res <= CERTIFICATE_RTOL and value > lower[i]:
                 lower[i], delta[i], resid[i] = value, d, res
