@@ -15,7 +15,10 @@ eight at a time in SIMD lanes (:mod:`mu_lanes`, about 20 us per matrix and evalu
 of fewer than eight leaves lanes idle). The lower
 bound runs two power-iteration starts per matrix and three more only where the gap still
 exceeds 2 %, polishes the most promising start of each matrix, and certifies each ``delta``
-with a residual vector (an SVD only when that is inconclusive).
+with a residual vector (an SVD only when that is inconclusive). On small mixed structures (at
+most three real blocks, ``sum(r) <= 12``; not the paper's) a search over the real parameters
+(:func:`~oos_drake.robust.worst_search.mixed_real_search`, tens of ms per matrix) runs where the
+gap exceeds 0.1 %: the power iteration alone may return 0 there.
 
 Example
 -------
