@@ -499,9 +499,13 @@ MIXED_STARTS = 3
 #: Points of each ray's scan in :func:`mixed_real_search`, and bisection steps of its crossing.
 MIXED_RAY_POINTS = 48
 MIXED_BISECTIONS = 40
-#: Scan points of the pattern search's trial rays (on ``[0, t]``, ``t`` the best crossing so
-#: far), and the step of its directions below which it stops.
+#: Scan points and bisection steps of the pattern search's trial rays (on ``[0, t]``, ``t`` the
+#: best crossing so far), and the step of its directions below which it stops (coarse: the
+#: search in parameter space polishes).
 MIXED_TRIAL_POINTS = 8
+MIXED_TRIAL_BISECTIONS = 20
+MIXED_RAY_STEP_TOL = 1e-3
+#: Step (relative to ``||y||_inf``) below which the search in parameter space stops.
 MIXED_STEP_TOL = 1e-6
 #: Largest number of rounds of one pattern search of :func:`mixed_real_search`.
 MIXED_ROUNDS = 200
@@ -632,7 +636,7 @@ def mixed_real_search(
 
     ts = np.linspace(0.0, radius, MIXED_RAY_POINTS + 1)[1:]
 
-    def first_crossing(U, ts):
+    def first_crossing(U, ts, bisections=MIXED_BISECTIONS):
         """``(t, delta_C)``: the first crossing along each ray ``t U[i]`` (inf if none before
         ``ts[-1]``), scanned at ``ts`` then bisected."""
         n = U.shape[0]
@@ -647,7 +651,7 @@ def mixed_real_search(
         if rows.size == 0:
             return hi, dC
         lo_r, hi_r, U_r = lo[rows], hi[rows], U[rows]
-        for _ in range(MIXED_BISECTIONS):
+        for _ in range(bisections):
             mid = 0.5 * (lo_r + hi_r)
             h, _ = crossed(mid[:, None] * U_r)
             hi_r, lo_r = np.where(h, mid, hi_r), np.where(h, lo_r, mid)
@@ -657,7 +661,8 @@ def mixed_real_search(
 
     def ray_value(U, t):
         # only a crossing before the current one is of use: scan [0, t] coarsely
-        return first_crossing(_unit(U), t * np.linspace(0.0, 1.0, MIXED_TRIAL_POINTS + 1)[1:])
+        ts = t * np.linspace(0.0, 1.0, MIXED_TRIAL_POINTS + 1)[1:]
+        return first_crossing(_unit(U), ts, MIXED_TRIAL_BISECTIONS)
 
     def point_value(y, t):
         size, dC, _, _ = close(y)
@@ -676,7 +681,9 @@ def mixed_real_search(
     found = []  # (size, y, delta_C)
     for i in np.argsort(t, kind="stable")[:MIXED_STARTS]:
         if np.isfinite(t[i]):
-            u, tu, du = _pattern_search(ray_value, dirs[i], t[i], dC[i], 0.25, rng, _unit)
+            u, tu, du = _pattern_search(
+                ray_value, dirs[i], t[i], dC[i], 0.25, MIXED_RAY_STEP_TOL, rng, _unit
+            )
             found.append((tu, tu * u, du))
     # the rays' first crossings are local minima along the directions; polish the best ones
     # (and the power iteration's parameters) in the parameter space itself
@@ -696,7 +703,7 @@ def mixed_real_search(
     for f0, y, d in starts:
         if np.isfinite(f0):
             step = 0.05 * max(np.max(np.abs(y)), 1e-3 * radius)
-            y, f, d = _pattern_search(point_value, y, f0, d, step, rng, None)
+            y, f, d = _pattern_search(point_value, y, f0, d, step, MIXED_STEP_TOL, rng, None)
             found.append((f, y, d))
     f, y, dC = min(found, key=lambda c: c[0], default=(np.inf, None, None))
     delta = np.zeros((structure.n_rows, structure.n_cols), dtype=complex)
@@ -713,17 +720,17 @@ def _unit(v):
     return v / np.maximum(np.max(np.abs(v), axis=-1, keepdims=True), 1e-300)
 
 
-def _pattern_search(value, x, f, d, step, rng, project):
+def _pattern_search(value, x, f, d, step, tol, rng, project):
     """Minimize ``value`` from ``x`` (value ``f``, attachment ``d``): each round tries the moves
     ``step * {-1, 0, 1}^k`` and ``2 k`` random ones at once (``value(X, f) -> (F, D)`` on the
     rows of ``X``, projected by ``project``), takes the best if it improves, else halves
-    ``step``; stops below :data:`MIXED_STEP_TOL` relative to ``||x||``. Returns ``(x, f, d)``."""
+    ``step``; stops below ``tol`` relative to ``||x||``. Returns ``(x, f, d)``."""
     k = x.size
     moves = np.stack([a.ravel() for a in np.meshgrid(*([[-1.0, 0.0, 1.0]] * k))], axis=1)
     moves = moves[np.any(moves != 0, axis=1)]
     scale = max(float(np.max(np.abs(x))), 1e-300)
     for _ in range(MIXED_ROUNDS):
-        if step <= MIXED_STEP_TOL * scale:
+        if step <= tol * scale:
             break
         rand = _unit(rng.standard_normal((2 * k, k)))
         trial = x + step * np.vstack([moves, rand])
