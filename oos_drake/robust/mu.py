@@ -18,7 +18,8 @@ exceeds 2 %, polishes the most promising start of each matrix, and certifies eac
 with a residual vector (an SVD only when that is inconclusive). On small mixed structures (at
 most three real blocks, ``sum(r) <= 12``; not the paper's) a search over the real parameters
 (:func:`~oos_drake.robust.worst_search.mixed_real_search`, tens of ms per matrix) runs where the
-gap exceeds 0.1 %: the power iteration alone may return 0 there.
+gap exceeds 0.1 % and the complex blocks are a single block (all mixed structures of that
+size with ``mixed_search=True``): the power iteration alone may return 0 there.
 
 Example
 -------
@@ -162,12 +163,15 @@ MIXED_GAP = 1.001
 MIXED_RADIUS = 2.0
 
 
-def _small_mixed(structure) -> bool:
-    """True for the structures :func:`mussv` hands to :func:`mixed_real_search`."""
+def _small_mixed(structure, mixed_search) -> bool:
+    """True for the structures :func:`mussv` hands to :func:`mixed_real_search` (argument
+    ``mixed_search`` of :func:`mussv`)."""
     n_real = sum(b.kind == REAL for b in structure.blocks)
+    n_complex = len(structure.blocks) - n_real
     return (
-        0 < n_real <= MIXED_MAX_REAL
-        and n_real < len(structure.blocks)
+        mixed_search is not False
+        and 0 < n_real <= MIXED_MAX_REAL
+        and 0 < n_complex <= (1 if mixed_search is None else n_complex)
         and structure.n_rows <= MIXED_MAX_SIZE
     )
 
@@ -250,7 +254,7 @@ def mussv(
     rng: np.random.Generator | None = None,
     continuation: bool = False,
     phase_search: bool = True,
-    mixed_search: bool = True,
+    mixed_search: bool | None = None,
 ) -> MuResult:
     """Upper and lower bounds of the mixed structured singular value.
 
@@ -289,14 +293,16 @@ def mussv(
         restart_gap``, also maximize ``rho(M Delta)`` over the blocks' phases
         (:func:`~oos_drake.robust.worst_search.complex_phase_search`; the power iteration alone
         may stop 10-15 % short there).
-    mixed_search : bool
+    mixed_search : bool or None
         For small mixed structures (real and complex blocks, at most
         :data:`~oos_drake.robust.worst_search.MIXED_MAX_REAL` real blocks and
         :data:`MIXED_MAX_SIZE` rows of ``Delta``) only: where ``upper / lower >`` :data:`MIXED_GAP`,
-        also search the real parameters on a grid and by a pattern search, each point closed
-        on the complex blocks (:func:`~oos_drake.robust.worst_search.mixed_real_search`; on
-        two real and one complex scalar the power iteration alone may return 0 or stop 60 %
-        short there).
+        also search the real parameters by rays and pattern searches, each point closed on the
+        complex blocks (:func:`~oos_drake.robust.worst_search.mixed_real_search`; on two real
+        and one complex scalar the power iteration alone may return 0 or stop 60 % short
+        there). None (default): only where the complex blocks are a single block (closed form
+        inside the search, tens of ms per matrix); True: also with several complex blocks (a
+        power iteration at each point, about ten times slower); False: never.
 
     Returns
     -------
@@ -347,17 +353,18 @@ def mussv(
             )
             if res <= CERTIFICATE_RTOL and value > lower[i]:
                 lower[i], delta[i], resid[i] = value, d, res
-    if mixed_search and _small_mixed(structure):
+    if _small_mixed(structure, mixed_search):
         lower, delta, resid = lower.copy(), delta.copy(), np.array(resid, dtype=float)
         for i in np.flatnonzero(up.upper * scale > MIXED_GAP * lower):
-            radius = MIXED_RADIUS / (up.upper[i] * scale[i] + 1e-300)
+            # on the scaled matrix (entries of order one); the residual is scale-invariant
+            radius = MIXED_RADIUS / (up.upper[i] + 1e-300)
             if lower[i] > 0:
-                radius = min(radius, 1.0 / lower[i])
+                radius = min(radius, scale[i] / lower[i])
             value, d, res = mixed_real_search(
-                flat[i] * scale[i], structure, radius=radius, start=delta[i], rng=rng
+                flat[i], structure, radius=radius, start=delta[i] * scale[i], rng=rng
             )
-            if res <= CERTIFICATE_RTOL and value > lower[i]:
-                lower[i], delta[i], resid[i] = value, d, res
+            if res <= CERTIFICATE_RTOL and value * scale[i] > lower[i]:
+                lower[i], delta[i], resid[i] = value * scale[i], d / scale[i], res
     upper = np.maximum(up.upper * scale, lower)
 
     def shape(x, tail=()):

@@ -117,7 +117,7 @@ def test_lower_bound_within_one_percent_of_brute_force(seeds, real_matrix):
 @pytest.mark.slow
 @pytest.mark.parametrize("real_matrix", [True, False])
 def test_lower_bound_within_one_percent_of_brute_force_many_seeds(real_matrix):
-    _check_lower_against_brute_force(range(100, 160), real_matrix)
+    _check_lower_against_brute_force(range(100, 140), real_matrix)
 
 
 def test_mixed_real_search_repeated_real_and_two_complex_blocks():
@@ -129,7 +129,7 @@ def test_mixed_real_search_repeated_real_and_two_complex_blocks():
     rng = np.random.default_rng(3)
     M = rng.standard_normal((6, 4, 4)) + 1j * rng.standard_normal((6, 4, 4))
     plain = mussv(M, blk, mixed_search=False)
-    res = mussv(M, blk)
+    res = mussv(M, blk, mixed_search=True)
     check = res.check(M)
     assert np.all(check["singularity"] <= 1e-7)
     assert np.all(np.abs(check["delta_norm_error"]) <= 1e-9)
@@ -147,3 +147,23 @@ def test_mixed_real_search_repeated_real_and_two_complex_blocks():
 def test_mixed_real_search_rejects_other_structures():
     with pytest.raises(ValueError, match="mixed_real_search"):
         mixed_real_search(np.eye(2), parse_blk([[1, 0], [1, 0]]), radius=1.0)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_one_real_scalar_and_a_full_block_against_a_fine_grid(seed):
+    """One real scalar ``y`` and a full 2 x 2 complex block: for fixed ``y`` the smallest
+    singular full block has norm ``1 / sigma_max`` of the loop closed on ``y`` (Packard & Doyle
+    1993), so a 20001-point grid of ``y`` gives mu to ~1e-4 without the search; the default
+    mussv (one complex block: the search runs) must come within 1 % of it, certified."""
+    blk = [[-1, 0], [2, 2]]
+    rng = np.random.default_rng(seed)
+    M = rng.standard_normal((3, 3)) + 1j * rng.standard_normal((3, 3))
+    res = mussv(M, blk)
+    y = np.linspace(-3.0 / res.upper, 3.0 / res.upper, 20001)
+    closed = M[1:, 1:] + M[1:, :1] * (y / (1.0 - M[0, 0] * y))[:, None, None] * M[:1, 1:]
+    sigma = np.linalg.svd(closed, compute_uv=False)[:, 0]
+    mu = 1.0 / np.min(np.maximum(np.abs(y), 1.0 / sigma))
+    check = res.check(M)
+    assert check["singularity"] <= 1e-7
+    assert abs(check["delta_norm_error"]) <= 1e-9
+    assert 0.99 * mu <= res.lower <= 1.001 * mu
