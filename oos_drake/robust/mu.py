@@ -158,8 +158,8 @@ MIXED_MAX_SIZE = 12
 #: Gap ``upper / lower`` above which :func:`mussv` runs that search (it is cheap on the small
 #: structures it serves, and the power iteration may stop 2 % short where the gap is 2 %).
 MIXED_GAP = 1.001
-#: Half-width of that search's grid of real parameters, times ``1 / upper`` (the minimizer has
-#: ``||y|| <= 1 / mu``; the pattern search may leave the grid).
+#: Length of that search's rays of real parameters, times ``1 / upper`` (capped at ``1 / lower``:
+#: the minimizer has ``||y|| <= 1 / mu <= 1 / lower``).
 MIXED_RADIUS = 2.0
 
 
