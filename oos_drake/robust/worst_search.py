@@ -719,6 +719,10 @@ def _single_block_mu(MC, block):
     """``(mu, delta)`` of a batch ``MC`` ``(N, c, r)`` for one complex block, exact: the
     spectral radius (repeated scalar, ``delta = I / lambda``) or the largest singular value
     (full, ``delta = v u^* / sigma``); ``delta`` is zero where ``mu`` is."""
+    if block.repeated and block.rows == 1:  # one complex scalar: mu = |M_C|
+        mu = np.abs(MC[:, 0, 0])
+        with np.errstate(all="ignore"):
+            return mu, np.where(mu > 0, 1.0 / MC[:, 0, 0], 0.0)[:, None, None]
     if block.repeated:
         ev = np.linalg.eigvals(MC)
         lam = ev[np.arange(ev.shape[0]), np.argmax(np.abs(ev), axis=1)]
