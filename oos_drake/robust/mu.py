@@ -15,7 +15,11 @@ eight at a time in SIMD lanes (:mod:`mu_lanes`, about 20 us per matrix and evalu
 of fewer than eight leaves lanes idle). The lower
 bound runs two power-iteration starts per matrix and three more only where the gap still
 exceeds 2 %, polishes the most promising start of each matrix, and certifies each ``delta``
-with a residual vector (an SVD only when that is inconclusive).
+with a residual vector (an SVD only when that is inconclusive). On small mixed structures (at
+most three real blocks, ``sum(r) <= 12``; not the paper's) a search over the real parameters
+(:func:`~oos_drake.robust.worst_search.mixed_real_search`, tens of ms per matrix) runs where the
+gap exceeds 0.1 % and the complex blocks are a single block (all mixed structures of that
+size with ``mixed_search=True``): the power iteration alone may return 0 there.
 
 Example
 -------
@@ -47,7 +51,11 @@ from oos_drake.robust.mu_upper import (
     mu_upper_bound,
     power_of_two_scale,
 )
-from oos_drake.robust.worst_search import complex_phase_search
+from oos_drake.robust.worst_search import (
+    MIXED_MAX_REAL,
+    complex_phase_search,
+    mixed_real_search,
+)
 
 
 @dataclass(frozen=True)
@@ -145,6 +153,29 @@ CONTINUATION_LOWER_RESTARTS = 0
 CONTINUATION_LOWER_ITERATIONS = 60
 
 
+#: Largest ``sum(r)`` of the structures that get :func:`mixed_real_search` in :func:`mussv`.
+MIXED_MAX_SIZE = 12
+#: Gap ``upper / lower`` above which :func:`mussv` runs that search (it is cheap on the small
+#: structures it serves, and the power iteration may stop 2 % short where the gap is 2 %).
+MIXED_GAP = 1.001
+#: Length of that search's rays of real parameters, times ``1 / upper`` (capped at ``1 / lower``:
+#: the minimizer has ``||y|| <= 1 / mu <= 1 / lower``).
+MIXED_RADIUS = 2.0
+
+
+def _small_mixed(structure, mixed_search) -> bool:
+    """True for the structures :func:`mussv` hands to :func:`mixed_real_search` (argument
+    ``mixed_search`` of :func:`mussv`)."""
+    n_real = sum(b.kind == REAL for b in structure.blocks)
+    n_complex = len(structure.blocks) - n_real
+    return (
+        mixed_search is not False
+        and 0 < n_real <= MIXED_MAX_REAL
+        and 0 < n_complex <= (1 if mixed_search is None else n_complex)
+        and structure.n_rows <= MIXED_MAX_SIZE
+    )
+
+
 def _upper_bound(part, structure, iterations, tol, *, continuation=False):
     """The D-G upper bound of :func:`mussv` (optionally with continuation along the batch)."""
     cold_options = dict(
@@ -223,6 +254,7 @@ def mussv(
     rng: np.random.Generator | None = None,
     continuation: bool = False,
     phase_search: bool = True,
+    mixed_search: bool | None = None,
 ) -> MuResult:
     """Upper and lower bounds of the mixed structured singular value.
 
@@ -261,6 +293,16 @@ def mussv(
         restart_gap``, also maximize ``rho(M Delta)`` over the blocks' phases
         (:func:`~oos_drake.robust.worst_search.complex_phase_search`; the power iteration alone
         may stop 10-15 % short there).
+    mixed_search : bool or None
+        For small mixed structures (real and complex blocks, at most
+        :data:`~oos_drake.robust.worst_search.MIXED_MAX_REAL` real blocks and
+        :data:`MIXED_MAX_SIZE` rows of ``Delta``) only: where ``upper / lower >`` :data:`MIXED_GAP`,
+        also search the real parameters by rays and pattern searches, each point closed on the
+        complex blocks (:func:`~oos_drake.robust.worst_search.mixed_real_search`; on two real
+        and one complex scalar the power iteration alone may return 0 or stop 60 % short
+        there). None (default): only where the complex blocks are a single block (closed form
+        inside the search, tens of ms per matrix); True: also with several complex blocks (a
+        power iteration at each point, about ten times slower); False: never.
 
     Returns
     -------
@@ -311,6 +353,18 @@ def mussv(
             )
             if res <= CERTIFICATE_RTOL and value > lower[i]:
                 lower[i], delta[i], resid[i] = value, d, res
+    if _small_mixed(structure, mixed_search):
+        lower, delta, resid = lower.copy(), delta.copy(), np.array(resid, dtype=float)
+        for i in np.flatnonzero(up.upper * scale > MIXED_GAP * lower):
+            # on the scaled matrix (entries of order one); the residual is scale-invariant
+            radius = MIXED_RADIUS / (up.upper[i] + 1e-300)
+            if lower[i] > 0:
+                radius = min(radius, scale[i] / lower[i])
+            value, d, res = mixed_real_search(
+                flat[i], structure, radius=radius, start=delta[i] * scale[i], rng=rng
+            )
+            if res <= CERTIFICATE_RTOL and value * scale[i] > lower[i]:
+                lower[i], delta[i], resid[i] = value * scale[i], d / scale[i], res
     upper = np.maximum(up.upper * scale, lower)
 
     def shape(x, tail=()):
