@@ -19,15 +19,16 @@ the batched fancy-indexing temporaries:
 * ``H`` is formed as a lower triangle with real and imaginary parts apart, and reduced to a
   real tridiagonal by our own Householder loop (the arithmetic of LAPACK's ``zhetd2``; split
   parts vectorize, LAPACK's level-2 calls on 26 x 26 are dominated by call overheads); all
-  eigenvalues by LAPACK's ``dsterf`` (scipy's ``cython_lapack``), eigenvectors only for the few
-  eigenvalues that carry the smoothed maximum (``dstein`` on the tridiagonal, then our own
-  back-transformation). About 36 us per 26 x 26 evaluation (LAPACK ``zhetrd``/``zunmtr``:
-  40 us; a full ``eigh``: 60 us).
+  eigenvalues by implicit QR on the tridiagonal with its rotations recorded, eigenvectors only
+  for the few eigenvalues that carry the smoothed maximum (those rotations applied to unit
+  vectors, then our own back-transformation, all vectors together). About 35-45 us per
+  26 x 26 evaluation near the optimum, where the top eigenvalues cluster (with LAPACK's
+  ``dsterf`` and ``dstein``: 35-55 us; a full ``eigh``: 60 us).
 
-If the eigenvector step fails (``dstein`` not converged) the kernel falls back to a full
-``numpy.linalg.eigh`` for that matrix. Whatever the kernel returns only steers the optimizer:
-every returned bound is proved at the final scalings by ``mu_upper.certified_upper`` (the LMI
-with an a priori bound on its own round-off).
+If the QR does not converge within its step budget (:data:`QR_STEP_BUDGET`) the kernel falls
+back to LAPACK's ``zheevd`` for that matrix. Whatever the kernel returns only steers the
+optimizer: every returned bound is proved at the final scalings by
+``mu_upper.certified_upper`` (the LMI with an a priori bound on its own round-off).
 
 The LAPACK routines are bound by symbol name (``llvmlite.binding.add_symbol``) so that the
 compiled code can be cached on disk (``cache=True``): the first call in a fresh checkout
@@ -46,7 +47,7 @@ try:  # numba is a dependency (pyproject): there is no slower copy to run withou
 except ImportError as err:  # pragma: no cover - exercised only without numba
     raise ImportError(f"oos_drake.robust needs numba (pip install numba): {err}") from err
 
-for _lib, _names in (("lapack", ("dsterf", "dstein", "zheevd")), ("blas", ("zherk", "zgemm"))):
+for _lib, _names in (("lapack", ("zheevd",)), ("blas", ("zherk", "zgemm"))):
     for _name in _names:
         _address = get_cython_function_address(f"scipy.linalg.cython_{_lib}", _name)
         _ll.add_symbol(f"oosd_{_name}", _address)
@@ -54,8 +55,6 @@ _P = types.voidptr
 _zheevd = types.ExternalFunction("oosd_zheevd", types.void(*([_P] * 13)))
 _zherk = types.ExternalFunction("oosd_zherk", types.void(*([_P] * 10)))
 _zgemm = types.ExternalFunction("oosd_zgemm", types.void(*([_P] * 13)))
-_dsterf = types.ExternalFunction("oosd_dsterf", types.void(*([_P] * 4)))
-_dstein = types.ExternalFunction("oosd_dstein", types.void(*([_P] * 13)))
 _jit = numba.njit(cache=True, nogil=True, fastmath=False)
 # reassociation lets LLVM vectorize the real dot products of the split complex products
 _jit_fast = numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
@@ -63,6 +62,9 @@ _jit_fast = numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
 
 #: Weight below which an eigenvalue is left out of the smoothed maximum's gradient.
 WEIGHT_FLOOR = 1e-5
+#: QR rotation steps allowed per tridiagonal eigenproblem, per row squared (about 1.1 n^2 are
+#: needed; beyond the budget the evaluation falls back to ``zheevd``).
+QR_STEP_BUDGET = 8
 
 
 @_jit
@@ -308,67 +310,169 @@ def _tridiag_split(Ar, Ai, d, e, taur, taui, pr, pi, vr, vi):
     e[n - 1] = 0.0
 
 
+@_jit
+def _tridiag_qr(d, e, rot_k, rot_c, rot_s):
+    """All eigenvalues of the symmetric tridiagonal ``(d, e)`` (``d`` receives them, unsorted;
+    ``e`` is destroyed) by implicit QR with Wilkinson shifts, deflating at the bottom.
+
+    The scalar form of ``mu_lanes._lane_qr`` (same steps and deflation test): step ``q``
+    rotates rows ``rot_k[q]``, ``rot_k[q] + 1`` by ``(rot_c[q], rot_s[q])``. Returns the number
+    of steps, or -1 when more than ``rot_k.size`` steps were needed.
+    """
+    n = d.shape[0]
+    cap = rot_k.size
+    nrm = 0.0
+    for i in range(n):
+        nrm = max(nrm, abs(d[i]) + abs(e[i]) + (abs(e[i - 1]) if i > 0 else 0.0))
+    tol = 4.0 * 2.220446049250313e-16 * nrm
+    nsteps = 0
+    m = n - 1
+    while True:
+        while m > 0 and abs(e[m - 1]) <= tol:
+            e[m - 1] = 0.0
+            m -= 1
+        if m == 0:
+            return nsteps
+        ll = m - 1
+        while ll > 0 and abs(e[ll - 1]) > tol:
+            ll -= 1
+        if nsteps + (m - ll) > cap:
+            return -1
+        a, b, c_ = d[m - 1], e[m - 1], d[m]
+        dd = 0.5 * (a - c_)
+        den = dd + np.copysign(np.sqrt(dd * dd + b * b), dd)
+        mu = c_ - b * b / den if den != 0.0 else c_
+        x = d[ll] - mu
+        z = e[ll]
+        for k in range(ll, m):
+            rr = np.sqrt(x * x + z * z)
+            c = 1.0
+            s = 0.0
+            if rr > 0.0:
+                c = x / rr
+                s = z / rr
+            if k > ll:
+                e[k - 1] = rr
+            dk = d[k]
+            dk1 = d[k + 1]
+            ek = e[k]
+            cc = c * c
+            ss = s * s
+            cs = c * s
+            d[k] = cc * dk + 2.0 * cs * ek + ss * dk1
+            d[k + 1] = ss * dk - 2.0 * cs * ek + cc * dk1
+            en = cs * (dk1 - dk) + (cc - ss) * ek
+            e[k] = en
+            bul = 0.0
+            if k + 1 < n - 1:
+                ek1 = e[k + 1]
+                bul = s * ek1
+                e[k + 1] = c * ek1
+            x = en
+            z = bul
+            rot_k[nsteps] = k
+            rot_c[nsteps] = c
+            rot_s[nsteps] = s
+            nsteps += 1
+
+
 @_jit_fast
-def _backtransform_split(Ar, Ai, taur, taui, Z, K, Vk):
-    """``Vk[q] = Q Z[q]`` for the first ``K`` rows of ``Z`` (real eigenvectors of the
-    tridiagonal, length ``n``), with ``Q`` the reflectors left by :func:`_tridiag_split`."""
+def _top_vectors(nsteps, rot_k, rot_c, rot_s, sel, K, Ar, Ai, taur, taui, Yr, Yi, sr, si):
+    """Eigenvectors ``Y = Yr + j Yi`` (``(n, K)``, one per column) of the Hermitian matrix
+    reduced by :func:`_tridiag_split` (reflectors in ``Ar``, ``Ai``, ``taur``, ``taui``) for
+    the eigenvalues at the unsorted positions ``sel[:K]`` of :func:`_tridiag_qr`: the recorded
+    rotations applied backwards to unit vectors, then the reflectors (``Y = Q Z``), the ``K``
+    columns together (``mu_lanes._lane_vectors`` in scalar form). ``sr``, ``si``: work, ``>= K``.
+    """
     n = Ar.shape[0]
-    yr = np.empty(n)
-    yi = np.empty(n)
+    for i in range(n):
+        for q in range(K):
+            Yr[i, q] = 0.0
+            Yi[i, q] = 0.0
     for q in range(K):
-        for i in range(n):
-            yr[i] = Z[q, i]
-            yi[i] = 0.0
-        for k in range(n - 2, -1, -1):  # y = H_0 (H_1 (... H_{n-2} z))
-            tr = taur[k]
-            ti = taui[k]
-            if tr == 0.0 and ti == 0.0:
-                continue
-            o = k + 1
-            sr = yr[o]  # s = v^* y
-            si = yi[o]
-            for i in range(o + 1, n):
-                a_r = Ar[i, k]
-                a_i = Ai[i, k]
-                sr += a_r * yr[i] + a_i * yi[i]
-                si += a_r * yi[i] - a_i * yr[i]
-            cr = tr * sr - ti * si  # y -= tau s v
-            ci = tr * si + ti * sr
-            yr[o] -= cr
-            yi[o] -= ci
-            for i in range(o + 1, n):
-                a_r = Ar[i, k]
-                a_i = Ai[i, k]
-                yr[i] -= cr * a_r - ci * a_i
-                yi[i] -= cr * a_i + ci * a_r
-        for i in range(n):
-            Vk[q, i] = yr[i] + 1j * yi[i]
+        Yr[sel[q], q] = 1.0
+    for st in range(nsteps - 1, -1, -1):  # Z e_j = G_1 ... G_N e_j: G_N first
+        k = rot_k[st]
+        c = rot_c[st]
+        s = rot_s[st]
+        ya = Yr[k]
+        yb = Yr[k + 1]
+        for q in range(K):
+            a = ya[q]
+            b = yb[q]
+            ya[q] = c * a - s * b
+            yb[q] = s * a + c * b
+    for k in range(n - 2, -1, -1):  # y = H_0 (H_1 (... H_{n-2} z))
+        tr = taur[k]
+        ti = taui[k]
+        if tr == 0.0 and ti == 0.0:
+            continue
+        o = k + 1
+        for q in range(K):  # s = v^* y (v[o] = 1)
+            sr[q] = Yr[o, q]
+            si[q] = Yi[o, q]
+        for i in range(o + 1, n):
+            a_r = Ar[i, k]
+            a_i = Ai[i, k]
+            yr = Yr[i]
+            yi = Yi[i]
+            for q in range(K):
+                sr[q] += a_r * yr[q] + a_i * yi[q]
+                si[q] += a_r * yi[q] - a_i * yr[q]
+        for q in range(K):  # y -= tau s v
+            cr = tr * sr[q] - ti * si[q]
+            ci = tr * si[q] + ti * sr[q]
+            sr[q] = cr
+            si[q] = ci
+            Yr[o, q] -= cr
+            Yi[o, q] -= ci
+        for i in range(o + 1, n):
+            a_r = Ar[i, k]
+            a_i = Ai[i, k]
+            yr = Yr[i]
+            yi = Yi[i]
+            for q in range(K):
+                yr[q] -= sr[q] * a_r - si[q] * a_i
+                yi[q] -= sr[q] * a_i + si[q] * a_r
 
 
 @_jit
 def _eig_top_split(
-    Hr, Hi, t, K_max, w_all, Vk, d, e, taur, taui, pr, pi, vr, vi, ev, wsel, zr, rwork,
-    iwork, ifail, ints,
+    Hr, Hi, t, K_max, w_all, Vk, d, e, taur, taui, pr, pi, vr, vi, ev, rot_k, rot_c, rot_s,
+    Yr, Yi, order,
 ):  # fmt: skip
     """Eigenvalues of the Hermitian matrix in the split lower triangle of
     :func:`_form_h_split` (overwritten) and eigenvectors of the top ones.
 
-    Own tridiagonalization (:func:`_tridiag_split`) and back-transformation, LAPACK's
-    ``dsterf`` (all eigenvalues, into ``w_all``, ascending) and ``dstein`` (eigenvectors of the
-    tridiagonal). Returns ``(K, ok)``: ``Vk[:K]`` holds the eigenvectors of the ``K`` largest
+    Own tridiagonalization (:func:`_tridiag_split`), implicit QR on the tridiagonal
+    (:func:`_tridiag_qr`: all eigenvalues, into ``w_all``, ascending) and eigenvectors from its
+    recorded rotations and the reflectors (:func:`_top_vectors`): on the clustered top
+    eigenvalues of the D-G optimum (4-11 within the smoothing) about 1.5 us per vector, where
+    LAPACK's ``dstein`` (inverse iteration, reorthogonalized in clusters) took about 3.
+    Returns ``(K, ok)``: ``Vk[:K]`` holds the eigenvectors of the ``K`` largest
     eigenvalues (ascending) whose smoothed-max weight at temperature ``t`` exceeds
     :data:`WEIGHT_FLOOR` (``K = 0`` when ``K_max = 0``: eigenvalues only); ``ok`` is False
-    when LAPACK failed.
+    when the QR needed more than ``rot_k.size`` steps.
     """
     n = Hr.shape[0]
     _tridiag_split(Hr, Hi, d, e, taur, taui, pr, pi, vr, vi)
-    ints[0] = n
-    ints[2] = 0
     w_all[:] = d
     ev[:] = e
-    _dsterf(ints[0:1].ctypes, w_all.ctypes, ev.ctypes, ints[2:3].ctypes)
-    if ints[2] != 0:
+    ns = _tridiag_qr(w_all, ev, rot_k, rot_c, rot_s)
+    if ns < 0:
         return 0, False
+    for i in range(n):  # ascending, with the QR's positions (insertion sort: n is small)
+        order[i] = i
+    for i in range(1, n):
+        v = w_all[i]
+        o = order[i]
+        j = i - 1
+        while j >= 0 and w_all[j] > v:
+            w_all[j + 1] = w_all[j]
+            order[j + 1] = order[j]
+            j -= 1
+        w_all[j + 1] = v
+        order[j + 1] = o
     if K_max == 0:
         return 0, True
     lmax = w_all[n - 1]
@@ -381,22 +485,10 @@ def _eig_top_split(
             K += 1
         else:
             break
-    for k in range(K):
-        wsel[k] = w_all[n - K + k]
-    ints[3] = K
-    iblock = iwork[n : n + K]
-    iblock[:] = 1
-    isplit = iwork[2 * n : 3 * n]
-    isplit[:] = 0
-    isplit[0] = n
-    _dstein(
-        ints[0:1].ctypes, d.ctypes, e.ctypes, ints[3:4].ctypes, wsel.ctypes, iblock.ctypes,
-        isplit.ctypes, zr.ctypes, ints[0:1].ctypes, rwork.ctypes, iwork.ctypes, ifail.ctypes,
-        ints[2:3].ctypes,
-    )  # fmt: skip
-    if ints[2] != 0:
-        return K, False
-    _backtransform_split(Hr, Hi, taur, taui, zr, K, Vk)
+    _top_vectors(ns, rot_k, rot_c, rot_s, order[n - K :], K, Hr, Hi, taur, taui, Yr, Yi, pr, pi)
+    for q in range(K):
+        for i in range(n):
+            Vk[q, i] = Yr[i, q] + 1j * Yi[i, q]
     return K, True
 
 
@@ -484,11 +576,13 @@ def dg_objective(M, x, t, need_grad, lay, f, grad, lmax, top, size=None):
     w_all = np.zeros(n)
     K_max = n
     Vk = np.zeros((K_max, n), dtype=np.complex128)
-    wsel = np.zeros(n)
-    zr = np.zeros((K_max, n))
-    rwork = np.zeros(5 * n)
-    iwork = np.zeros(3 * n, dtype=np.int32)
-    ifail = np.zeros(n, dtype=np.int32)
+    cap = QR_STEP_BUDGET * n * n + n
+    rot_k = np.zeros(cap, dtype=np.int64)
+    rot_c = np.zeros(cap)
+    rot_s = np.zeros(cap)
+    Yr = np.zeros((n, K_max))
+    Yi = np.zeros((n, K_max))
+    order = np.zeros(n, dtype=np.int64)
     ints = np.zeros(8, dtype=np.int32)
     ints[4] = ord("L")
     ints[7] = ord("N")
@@ -538,7 +632,7 @@ def dg_objective(M, x, t, need_grad, lay, f, grad, lmax, top, size=None):
         tb = t[b]
         K, ok = _eig_top_split(
             Hr, Hi, tb, K_max if need_grad else 0, w_all, Vk, d, e, taur, taui, pr, pi, vr,
-            vi, ev, wsel, zr, rwork, iwork, ifail, ints,
+            vi, ev, rot_k, rot_c, rot_s, Yr, Yi, order,
         )  # fmt: skip
         if not ok:  # rebuild H (overwritten) and use a full eigendecomposition
             fallbacks += 1

@@ -29,7 +29,7 @@ An eight-lane evaluation costs the same whatever the number of busy lanes (about
 per-matrix evaluations inside the optimizer, four in isolation). With at most
 ``LaneOptions.per_matrix_lanes`` busy lanes (a lone matrix, a small batch, the tail of a
 batch) the optimizer evaluates them one by one instead, with the
-per-matrix kernel :func:`mu_kernels.dg_objective` (the same function; LAPACK's eigen-solvers):
+per-matrix kernel :func:`mu_kernels.dg_objective` (the same function, scalar code):
 one optimizer, its state machine, line search and stopping rules unchanged, two evaluators.
 
 The 8-vectors are tuples handled by the small helpers below (``_ld``, ``_fma``, ..., inlined):
@@ -50,12 +50,10 @@ import numba
 import numpy as np
 
 from oos_drake.robust import mu_kernels
-from oos_drake.robust.mu_kernels import WEIGHT_FLOOR
+from oos_drake.robust.mu_kernels import QR_STEP_BUDGET, WEIGHT_FLOOR
 
 #: Matrices evaluated together (8 doubles: one AVX-512 register).
 W = 8
-#: QR rotation steps allowed per evaluation, per row squared (a lane needs about 1.1 n^2).
-QR_STEP_BUDGET = 8
 _FM = {"reassoc", "contract", "nsz", "arcp"}
 
 # The line search of the D-G optimizer, defined once: the lanes here and the numpy oracle of
@@ -888,7 +886,7 @@ def _lane_eval(Mr, Mi, Mc, x, tq, lay, ws, f, g, lmax):
 @_jit_exact
 def _eval_lane_alone(Mc, w, x, tq, lay, f, g, lmax, t, size):
     """What :func:`_lane_eval` computes, for lane ``w`` only, by the per-matrix kernel
-    :func:`mu_kernels.dg_objective` (LAPACK eigen-solvers): ``f[w]``, ``g[:, w]``,
+    :func:`mu_kernels.dg_objective` (scalar code): ``f[w]``, ``g[:, w]``,
     ``lmax[w]``, the temperature used ``t[w]`` and ``size[w]`` (``||M_hat||_F^2``).
 
     The evaluation of a lane whose QR did not converge, and of every busy lane when so few are
