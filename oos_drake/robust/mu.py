@@ -163,6 +163,24 @@ MIXED_GAP = 1.001
 MIXED_RADIUS = 2.0
 
 
+_PARSED: dict = {}  # BLK (shape, dtype, bytes) -> its BlockStructure (single calls repeat it)
+
+
+def _parsed(blk) -> BlockStructure:
+    """:func:`~oos_drake.robust.blocks.parse_blk`, once per BLK (its ``blk`` array read-only)."""
+    if isinstance(blk, BlockStructure):
+        return blk
+    arr = np.asarray(blk)
+    key = (arr.shape, arr.dtype.str, arr.tobytes())
+    if key not in _PARSED:
+        structure = parse_blk(arr)
+        structure.blk.flags.writeable = False
+        if len(_PARSED) > 256:
+            _PARSED.clear()
+        _PARSED[key] = structure
+    return _PARSED[key]
+
+
 def _small_mixed(structure, mixed_search) -> bool:
     """True for the structures :func:`mussv` hands to :func:`mixed_real_search` (argument
     ``mixed_search`` of :func:`mussv`)."""
@@ -313,7 +331,7 @@ def mussv(
     ValueError
         For a malformed BLK, an ``M`` whose shape does not match it, or a non-finite ``M``.
     """
-    structure = parse_blk(blk)
+    structure = _parsed(blk)
     M = check_matrix(M, structure)
     batch = M.shape[:-2]
     c, r = structure.m_shape
@@ -339,7 +357,11 @@ def mussv(
                 continuation=continuation,
             )
         )
-    up, lo = joined(UpperBoundResult, ups), joined(LowerBoundResult, los)
+    up, lo = (
+        (ups[0], los[0])
+        if len(ups) == 1
+        else (joined(UpperBoundResult, ups), joined(LowerBoundResult, los))
+    )
     lower = lo.lower * scale
     # both bounds are certified; where they meet (full block, rank one) round-off may put the
     # lower one a few ulps above: raising a valid upper bound keeps it valid

@@ -948,17 +948,19 @@ def lane_layout(packed, structure) -> LaneLayout:
 
 
 def lane_workspace(c: int, r: int, lay: LaneLayout) -> LaneWorkspace:
-    """Zeroed work arrays of :func:`_lane_eval` for ``c x r`` matrices with the layout ``lay``."""
+    """Work arrays of :func:`_lane_eval` for ``c x r`` matrices with the layout ``lay`` (zeroed,
+    but for the QR's rotation records: written before they are read, and the largest)."""
     n, bw, ne = r, lay.max_block, lay.n_entries
     cap = QR_STEP_BUDGET * n * n + n
     z = np.zeros
+    e = np.empty
     return LaneWorkspace(
         z((c, bw, W)), z((c, bw, W)), z((r, bw, W)), z((r, bw, W)), z((r, bw, W)),
         z((r, bw, W)), z((r, bw, W)), z((r, bw, W)), z((ne, W)), z((ne, W)),
         z((c, r, W)), z((c, r, W)), z((r, c, W)), z((r, c, W)), z((r, r, W)), z((r, r, W)),
         z((n, n, W)), z((n, n, W)), z((n, W)), z((n, W)), z((n, W)), z((n, W)),
         z((n, W)), z((n, W)), z((n, W)), z((n, W)),
-        z(cap, dtype=np.int64), z((cap, W)), z((cap, W)), z(W, dtype=np.int64),
+        e(cap, dtype=np.int64), e((cap, W)), e((cap, W)), z(W, dtype=np.int64),
         z(W, dtype=np.int64), z(W), z(W), np.ones(W, dtype=np.bool_),
         z((n, W), dtype=np.int64), z((n, W)), z((n, W)), z((n, n, W)), z((n, n, W)),
         z((n, r, W)), z((n, r, W)), z((n, c, W)), z((n, c, W)), z((n, c, W)), z((n, c, W)),

@@ -80,38 +80,20 @@ def _max_block_norm(structure: BlockStructure, delta: np.ndarray) -> np.ndarray:
     """``max_k ||Delta_k||_2`` of each ``delta`` (``(N, r, c)`` -> ``(N,)``), i.e.
     ``np.max(structure.block_norms(delta), axis=1)``, cheaper.
 
-    The scalar blocks take one gather. The full blocks of the power iteration are rank one (an
-    outer product times phases), where ``||B||_2 = ||B||_F``: that holds to round-off when
+    Compiled (:func:`mu_lower_kernels.max_block_norms`): the scalar blocks take their largest
+    diagonal modulus; the full blocks of the power iteration are rank one (an outer product
+    times phases), where ``||B||_2 = ||B||_F``: that holds to round-off when
     ``||B^* B||_F = ||B||_F^2`` to 1e-13 relative (``||B||_F`` is then at most 5e-14 relative
-    above ``||B||_2``); the other blocks take an SVD.
+    above ``||B||_2``); the perturbations with another full block take an SVD here.
     """
-    rows, cols, full = _per_blk("scalar_entries", structure, lambda: _scalar_entries(structure))
-    out = np.zeros(delta.shape[0])
-    if rows.size:
-        out = np.max(np.abs(delta[:, rows, cols]), axis=1)
-    for b in full:
-        B = delta[:, b.r_slice, b.c_slice]
-        fro2 = np.sum(B.real**2 + B.imag**2, axis=(1, 2))
-        G = np.conj(np.swapaxes(B, 1, 2)) @ B
-        g = np.sqrt(np.sum(G.real**2 + G.imag**2, axis=(1, 2)))
-        norm = np.sqrt(fro2)
-        svd = np.flatnonzero(fro2 - g > 1e-13 * fro2)
-        if svd.size:
-            norm[svd] = np.linalg.norm(B[svd], ord=2, axis=(1, 2))
-        out = np.maximum(out, norm)
+    delta = np.ascontiguousarray(delta, dtype=complex)
+    out = np.empty(delta.shape[0])
+    inexact = np.empty(delta.shape[0], dtype=np.bool_)
+    mu_lower_kernels.max_block_norms(delta, _kernel_blocks(structure), out, inexact)
+    svd = np.flatnonzero(inexact)
+    if svd.size:
+        out[svd] = np.max(structure.block_norms(delta[svd]), axis=1)
     return out
-
-
-def _scalar_entries(structure: BlockStructure) -> tuple:
-    """``(rows, cols, full)``: the diagonal entries of the repeated blocks in ``delta`` and the
-    full blocks (:func:`_max_block_norm`; a function of the BLK alone)."""
-    rep = [b for b in structure.blocks if b.repeated]
-    rows = [np.arange(b.rows) + b.row_offset for b in rep]
-    cols = [np.arange(b.cols) + b.col_offset for b in rep]
-    full = tuple(b for b in structure.blocks if b.kind == FULL)
-    if not rep:
-        return np.zeros(0, dtype=int), np.zeros(0, dtype=int), full
-    return np.concatenate(rows), np.concatenate(cols), full
 
 
 def _kernel_blocks(structure: BlockStructure) -> np.ndarray:
@@ -140,8 +122,8 @@ def _power_iteration(M, structure, a, z, iters, kappa, rng):
     start ``s`` runs on ``M[s % nb]`` (several starts per matrix).
     """
     nb = a.shape[0]
-    real0 = [rng.uniform(-1.0, 1.0, nb) for b in structure.blocks if b.kind == REAL]
-    real0 = np.stack(real0, axis=1) if real0 else np.zeros((nb, 0))
+    n_real = sum(b.kind == REAL for b in structure.blocks)
+    real0 = rng.uniform(-1.0, 1.0, (n_real, nb)).T.copy()  # one draw per block, in one
     delta = np.empty((nb, structure.n_rows, structure.n_cols), dtype=complex)
     a_out = np.empty((nb, structure.n_cols), dtype=complex)
     mu_lower_kernels.power_iteration(
@@ -255,13 +237,11 @@ def _starts(M, start_inputs, start_vectors, restarts, rng):
             a0 = _normalize(np.asarray(start_vectors[:, k], dtype=complex))
             starts_a.append(a0)
             starts_z.append(a0)
-    for _ in range(max(restarts, 0)):
-        starts_a.append(
-            _normalize(rng.standard_normal((nb, c)) + 1j * rng.standard_normal((nb, c)))
-        )
-        starts_z.append(
-            _normalize(rng.standard_normal((nb, c)) + 1j * rng.standard_normal((nb, c)))
-        )
+    if restarts > 0:  # one draw: the numbers of a draw per start and part, in that order
+        g = rng.standard_normal((restarts, 2, 2, nb, c))
+        g = _normalize((g[:, :, 0] + 1j * g[:, :, 1]).reshape(-1, c)).reshape(restarts, 2, nb, c)
+        starts_a.extend(g[:, 0])
+        starts_z.extend(g[:, 1])
     if not starts_a:
         starts_a.append(_normalize(np.ones((nb, c), dtype=complex)))
         starts_z.append(starts_a[0])
@@ -349,10 +329,23 @@ def _at_vertex(structure, delta):
     """A copy of the perturbations ``delta`` ``(B, r, c)`` with their real parameters pushed
     to the vertex of their sign (``+-1``)."""
     out = delta.copy()
-    for block in structure.blocks:
-        if block.kind == REAL:
-            idx = np.arange(block.rows)
-            d = out[:, block.row_offset, block.col_offset].real
-            sign = np.where(d < 0, -1.0, 1.0)[:, None]
-            out[:, block.row_offset + idx, block.col_offset + idx] = sign
+    first, rows, cols, owner = _per_blk("real_entries", structure, lambda: _real_entries(structure))
+    if first.size:
+        sign = np.where(out[:, rows[first], cols[first]].real < 0, -1.0, 1.0)
+        out[:, rows, cols] = sign[:, owner]
     return out
+
+
+def _real_entries(structure: BlockStructure) -> tuple:
+    """``(first, rows, cols, owner)``: the diagonal entries ``(rows, cols)`` of the real blocks
+    in ``delta``, the position of each block's first entry among them and the block of each
+    entry (:func:`_at_vertex`; a function of the BLK alone)."""
+    real = [b for b in structure.blocks if b.kind == REAL]
+    if not real:
+        empty = np.zeros(0, dtype=int)
+        return empty, empty, empty, empty
+    rows = np.concatenate([np.arange(b.rows) + b.row_offset for b in real])
+    cols = np.concatenate([np.arange(b.rows) + b.col_offset for b in real])
+    owner = np.concatenate([np.full(b.rows, k) for k, b in enumerate(real)])
+    first = np.cumsum([0] + [b.rows for b in real[:-1]])
+    return first, rows, cols, owner

@@ -978,3 +978,54 @@ def vector_residual(M, mat, delta, a, blocks, out):
             nd += e.real * e.real + e.imag * e.imag
         na = max(math.sqrt(na), 1e-300)
         out[s] = (math.sqrt(nd) / na) / (1.0 + math.sqrt(nm) / na)
+
+
+@_jit
+def max_block_norms(delta, blocks, out, inexact):
+    """``max_k ||Delta_k||_2`` of each perturbation (``mu_lower._max_block_norm``).
+
+    Repeated blocks: the largest modulus on their diagonal. Full blocks: ``||B||_F``, exact
+    for the rank-one blocks of the power iteration (``||B||_2 = ||B||_F`` there); a block
+    with ``||B||_F^2 - ||B^* B||_F > 1e-13 ||B||_F^2`` is not rank one to round-off and marks
+    its perturbation in ``inexact`` (the caller takes an SVD there).
+
+    Parameters
+    ----------
+    delta : complex array (N, r, c)
+    blocks : int array (5, n_blocks)
+    out : float array (N,)
+    inexact : bool array (N,)
+    """
+    kind, rows, cols, roff, coff = blocks[0], blocks[1], blocks[2], blocks[3], blocks[4]
+    for s in range(delta.shape[0]):
+        d = delta[s]
+        best = 0.0
+        seen = 0.0  # NaN if any entry is (propagated as np.max does)
+        bad = False
+        for k in range(kind.size):
+            ro, co = roff[k], coff[k]
+            if kind[k] != 2:
+                for i in range(rows[k]):
+                    v = abs(d[ro + i, co + i])
+                    seen += v
+                    best = max(best, v)
+                continue
+            m, n = rows[k], cols[k]
+            fro2 = 0.0
+            for i in range(m):
+                for q in range(n):
+                    x = d[ro + i, co + q]
+                    fro2 += x.real * x.real + x.imag * x.imag
+            g2 = 0.0  # ||B^* B||_F^2
+            for p in range(n):
+                for q in range(n):
+                    acc = 0.0j
+                    for i in range(m):
+                        acc += np.conj(d[ro + i, co + p]) * d[ro + i, co + q]
+                    g2 += acc.real * acc.real + acc.imag * acc.imag
+            if fro2 - math.sqrt(g2) > 1e-13 * fro2:
+                bad = True
+            seen += fro2
+            best = max(best, math.sqrt(fro2))
+        out[s] = best if seen == seen else np.nan
+        inexact[s] = bad
