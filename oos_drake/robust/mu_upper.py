@@ -321,9 +321,9 @@ class _Objective:
         nb = len(idx)
         c, r = self.s.n_cols, self.s.n_rows
         E = np.zeros((nb, L.n_entries), dtype=complex)
-        E[:, L.log_ent] = np.exp(np.clip(x[:, L.log_par], -60.0, 60.0))
+        E[:, L.log_ent] = np.exp(np.minimum(np.maximum(x[:, L.log_par], -60.0), 60.0))
         if len(L.lin_ent):
-            E[:, L.lin_ent] = np.exp(np.clip(x[:, L.lin_row_par], -60.0, 60.0)) * (
+            E[:, L.lin_ent] = np.exp(np.minimum(np.maximum(x[:, L.lin_row_par], -60.0), 60.0)) * (
                 x[:, L.lin_re_par] + 1j * x[:, L.lin_im_par]
             )
         Tl = np.zeros((nb, c, c), dtype=complex)
@@ -392,10 +392,10 @@ class _Balanced:
 
     def __init__(self, obj: _Objective, x_start: np.ndarray):
         L = obj.L
-        nb = len(x_start)
-        _, Tl, Tr, _ = obj.scalings(x_start, np.arange(nb))
-        tl = np.real(np.diagonal(Tl, axis1=1, axis2=2))
-        tr = np.real(np.diagonal(Tr, axis1=1, axis2=2))
+        # the diagonals of T_l and T_r: e^s of their log-parameters (what obj.scalings puts there)
+        l_par, r_par = _per_blk("diag_params", obj.s, lambda: _diag_params(L))
+        tl = np.exp(np.minimum(np.maximum(x_start[:, l_par], -60.0), 60.0))
+        tr = np.exp(np.minimum(np.maximum(x_start[:, r_par], -60.0), 60.0))
         self.M = tl[:, :, None] * obj.M / tr[:, None, :]
         lin_col_par, g_row_par, g_col_par = _per_blk("balance", obj.s, lambda: _balance_maps(L))
         log_t = x_start  # the start's log-scalings (its other parameters are zero)
@@ -414,6 +414,21 @@ class _Balanced:
 
     def to_absolute(self, x_b):
         return x_b / self.factor + self.shift
+
+
+def _diag_params(L: _Layout) -> tuple:
+    """``(l_par, r_par)``: the log-parameter of each diagonal entry of ``T_l`` and of ``T_r``."""
+    par_of_ent = np.full(L.n_entries, -1)
+    par_of_ent[L.log_ent] = L.log_par
+    out = []
+    for rows, cols, ents in ((L.l_row, L.l_col, L.l_ent), (L.r_row, L.r_col, L.r_ent)):
+        on_diag = rows == cols
+        par = np.full(int(rows.max(initial=-1)) + 1, -1)
+        par[rows[on_diag]] = par_of_ent[ents[on_diag]]
+        if np.any(par < 0):  # every diagonal entry of T is e^s of a log-parameter
+            raise AssertionError("mu_upper: a diagonal scaling without its log-parameter")
+        out.append(par)
+    return tuple(out)
 
 
 def _balance_maps(L: _Layout):
