@@ -563,31 +563,32 @@ def dg_objective(M, x, t, need_grad, lay, f, grad, lmax, top, size=None):
     rb_start, rb_size = lay.rb_start, lay.rb_size
     realb = lay.real_blocks
     n = r
+    # zeroed where only the structured entries get written (and the rest is read), else
+    # empty: written before read (a batch of one per evaluation in the lanes' per-matrix path)
     Tl = np.zeros((c, c), dtype=np.complex128)
     Tri = np.zeros((r, r), dtype=np.complex128)
     G = np.zeros((r, c), dtype=np.complex128)
-    X = np.zeros((c, r), dtype=np.complex128)
-    Mh = np.zeros((c, r), dtype=np.complex128)
-    GX = np.zeros((r, r), dtype=np.complex128)
-    H = np.zeros((r, r), dtype=np.complex128)
+    X = np.empty((c, r), dtype=np.complex128)
+    Mh = np.empty((c, r), dtype=np.complex128)
+    GX = np.empty((r, r), dtype=np.complex128)  # rows of the real blocks only
     d = np.zeros(n)
     e = np.zeros(n)
     ev = np.zeros(n)
     w_all = np.zeros(n)
     K_max = n
-    Vk = np.zeros((K_max, n), dtype=np.complex128)
+    Vk = np.empty((K_max, n), dtype=np.complex128)
     cap = QR_STEP_BUDGET * n * n + n
     rot_k = np.empty(cap, dtype=np.int64)  # written before read (no memset: 130 kB for n = 26)
     rot_c = np.empty(cap)
     rot_s = np.empty(cap)
-    Yr = np.zeros((n, K_max))
-    Yi = np.zeros((n, K_max))
+    Yr = np.empty((n, K_max))
+    Yi = np.empty((n, K_max))
     order = np.zeros(n, dtype=np.int64)
     ints = np.zeros(8, dtype=np.int32)
     ints[4] = ord("L")
     ints[7] = ord("N")
-    Hr = np.zeros((r, r))
-    Hi = np.zeros((r, r))
+    Hr = np.empty((r, r))  # lower triangles only
+    Hi = np.empty((r, r))
     taur = np.zeros(n)
     taui = np.zeros(n)
     pr = np.zeros(n)
@@ -636,6 +637,7 @@ def dg_objective(M, x, t, need_grad, lay, f, grad, lmax, top, size=None):
         )  # fmt: skip
         if not ok:  # rebuild H (overwritten) and use a full eigendecomposition
             fallbacks += 1
+            H = np.zeros((r, r), dtype=np.complex128)
             _form_h(Mh, Tri, GX, realb, H, ints, reals)
             K, ok = _eig_full(H, w_all, Vk, K_max if need_grad else 0, tb, ints)
             if not ok:  # not even zheevd: report an infinite objective (rejected step)
