@@ -449,10 +449,11 @@ def _eig_top_split(
     recorded rotations and the reflectors (:func:`_top_vectors`): on the clustered top
     eigenvalues of the D-G optimum (4-11 within the smoothing) about 1.5 us per vector, where
     LAPACK's ``dstein`` (inverse iteration, reorthogonalized in clusters) took about 3.
-    Returns ``(K, ok)``: ``Vk[:K]`` holds the eigenvectors of the ``K`` largest
+    Returns ``(K, ok, t)``: ``Vk[:K]`` holds the eigenvectors of the ``K`` largest
     eigenvalues (ascending) whose smoothed-max weight at temperature ``t`` exceeds
     :data:`WEIGHT_FLOOR` (``K = 0`` when ``K_max = 0``: eigenvalues only); ``ok`` is False
-    when the QR needed more than ``rot_k.size`` steps.
+    when the QR needed more than ``rot_k.size`` steps; a negative ``t`` is relative to the
+    largest eigenvalue (``-t / lambda_max``) and the absolute one is returned.
     """
     n = Hr.shape[0]
     _tridiag_split(Hr, Hi, d, e, taur, taui, pr, pi, vr, vi)
@@ -460,7 +461,7 @@ def _eig_top_split(
     ev[:] = e
     ns = _tridiag_qr(w_all, ev, rot_k, rot_c, rot_s)
     if ns < 0:
-        return 0, False
+        return 0, False, t
     for i in range(n):  # ascending, with the QR's positions (insertion sort: n is small)
         order[i] = i
     for i in range(1, n):
@@ -473,8 +474,10 @@ def _eig_top_split(
             j -= 1
         w_all[j + 1] = v
         order[j + 1] = o
+    if t < 0:  # relative to lambda_max
+        t = -t / max(w_all[n - 1], 1e-12)
     if K_max == 0:
-        return 0, True
+        return 0, True, t
     lmax = w_all[n - 1]
     K = 0
     ssum = 0.0
@@ -489,13 +492,13 @@ def _eig_top_split(
     for q in range(K):
         for i in range(n):
             Vk[q, i] = Yr[i, q] + 1j * Yi[i, q]
-    return K, True
+    return K, True, t
 
 
 @_jit
 def _eig_full(H, w_all, Vk, K_max, t, ints):
     """All eigenvalues and the top eigenvectors (weight > :data:`WEIGHT_FLOOR`) by ``zheevd``
-    (the fallback of :func:`_eig_top_split`). Returns ``(K, ok)``."""
+    (the fallback of :func:`_eig_top_split`). Returns ``(K, ok, t)`` as that does."""
     n = H.shape[0]
     lwork = 2 * n + n * n
     lrwork = 1 + 5 * n + 2 * n * n
@@ -510,9 +513,11 @@ def _eig_full(H, w_all, Vk, K_max, t, ints):
         iwork.ctypes, sizes[3:4].ctypes, sizes[4:5].ctypes,
     )  # fmt: skip
     if sizes[4] != 0:
-        return 0, False
+        return 0, False, t
+    if t < 0:  # relative to lambda_max
+        t = -t / max(w_all[n - 1], 1e-12)
     if K_max == 0:
-        return 0, True
+        return 0, True, t
     lm = w_all[n - 1]
     ss = 0.0
     for i in range(n):
@@ -527,7 +532,7 @@ def _eig_full(H, w_all, Vk, K_max, t, ints):
     for k in range(K):
         for i in range(n):
             Vk[k, i] = np.conj(H[n - K + k, i])
-    return K, True
+    return K, True, t
 
 
 @_jit
@@ -542,7 +547,9 @@ def dg_objective(M, x, t, need_grad, lay, f, grad, lmax, top, size=None):
         Scaling parameters (layout of ``mu_upper._layout``).
     t : float array (B,)
         Smoothing temperatures (absolute):
-        ``f = lambda_max + log(sum exp(t (lam - lambda_max))) / t``.
+        ``f = lambda_max + log(sum exp(t (lam - lambda_max))) / t``; a negative entry is
+        relative to that matrix's ``lambda_max`` (``-t / lambda_max``) and is replaced by the
+        absolute temperature used.
     need_grad : bool
         Also compute ``grad`` and ``top``.
     lay : mu_lanes.LaneLayout
@@ -631,7 +638,7 @@ def dg_objective(M, x, t, need_grad, lay, f, grad, lmax, top, size=None):
                         GX[ro + a, k] += gab * X[co + bb, k]
         _form_h_split(Mh, Tri, GX, realb, Hr, Hi)
         tb = t[b]
-        K, ok = _eig_top_split(
+        K, ok, tb = _eig_top_split(
             Hr, Hi, tb, K_max if need_grad else 0, w_all, Vk, d, e, taur, taui, pr, pi, vr,
             vi, ev, rot_k, rot_c, rot_s, Yr, Yi, order,
         )  # fmt: skip
@@ -639,7 +646,7 @@ def dg_objective(M, x, t, need_grad, lay, f, grad, lmax, top, size=None):
             fallbacks += 1
             H = np.zeros((r, r), dtype=np.complex128)
             _form_h(Mh, Tri, GX, realb, H, ints, reals)
-            K, ok = _eig_full(H, w_all, Vk, K_max if need_grad else 0, tb, ints)
+            K, ok, tb = _eig_full(H, w_all, Vk, K_max if need_grad else 0, t[b], ints)
             if not ok:  # not even zheevd: report an infinite objective (rejected step)
                 f[b] = np.inf
                 lmax[b] = np.inf
@@ -647,6 +654,7 @@ def dg_objective(M, x, t, need_grad, lay, f, grad, lmax, top, size=None):
                     grad[b, :] = 0.0
                     top[b, :] = 0.0
                 continue
+        t[b] = tb
         lm = w_all[n - 1]
         lmax[b] = lm
         ssum = 0.0

@@ -892,7 +892,7 @@ def _eval_lane_alone(Mc, w, x, tq, lay, f, g, lmax, t, size):
     The evaluation of a lane whose QR did not converge, and of every busy lane when so few are
     busy that one eight-lane evaluation costs more than theirs one by one
     (``LaneOptions.per_matrix_lanes``). A temperature relative to the lane's own
-    ``lambda_max`` (``tq[w] < 0``) costs one more evaluation, eigenvalues only.
+    ``lambda_max`` (``tq[w] < 0``) is resolved inside that evaluation.
     """
     p = x.shape[0]
     xw = np.empty((1, p))
@@ -903,14 +903,9 @@ def _eval_lane_alone(Mc, w, x, tq, lay, f, g, lmax, t, size):
     g1 = np.empty((1, p))
     s1 = np.empty(1)
     top1 = np.empty((1, Mc.shape[2]), dtype=np.complex128)
-    t1 = np.ones(1)
-    Mw = Mc[w : w + 1]
-    if tq[w] < 0:  # (size passed as below: one compiled signature of dg_objective, not two)
-        mu_kernels.dg_objective(Mw, xw, t1, False, lay, f1, g1, l1, top1, s1)
-        t1[0] = -tq[w] / max(l1[0], 1e-12)
-    else:
-        t1[0] = tq[w]
-    mu_kernels.dg_objective(Mw, xw, t1, True, lay, f1, g1, l1, top1, s1)
+    t1 = np.empty(1)
+    t1[0] = tq[w]  # negative: relative, dg_objective puts the absolute one there
+    mu_kernels.dg_objective(Mc[w : w + 1], xw, t1, True, lay, f1, g1, l1, top1, s1)
     f[w] = f1[0]
     lmax[w] = l1[0]
     t[w] = t1[0]

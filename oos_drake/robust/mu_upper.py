@@ -308,7 +308,7 @@ class _Objective:
         grad = np.empty((nb, self.L.n_params)) if need_grad else np.empty((0, self.L.n_params))
         top = np.empty((nb, self.s.n_rows), dtype=complex)
         x = np.ascontiguousarray(x, dtype=float)
-        t = np.ascontiguousarray(np.broadcast_to(t, (nb,)), dtype=float)
+        t = np.array(np.broadcast_to(t, (nb,)), dtype=float)  # writable (see dg_objective)
         with single_threaded_blas():  # threads on 26 x 26 LAPACK calls: 100x slower
             lay = self.lane_layout
             mu_kernels.dg_objective(M, x, t, bool(need_grad), lay, f, grad, lmax, top)

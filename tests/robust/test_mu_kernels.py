@@ -227,12 +227,54 @@ def test_full_eigendecomposition_fallback_matches_numpy():
     w = np.zeros(26)
     Vk = np.zeros((26, 26), dtype=complex)
     t = 1e3 / abs(w_ref[-1])
-    K, ok = mu_kernels._eig_full(H.copy(), w, Vk, 26, t, np.zeros(8, dtype=np.int32))
-    assert ok and K >= 1
+    K, ok, t_used = mu_kernels._eig_full(H.copy(), w, Vk, 26, t, np.zeros(8, dtype=np.int32))
+    assert ok and K >= 1 and t_used == t
     assert_allclose(w, w_ref, atol=1e-12 * np.max(np.abs(w_ref)))
     for k in range(K):  # ascending: row k of Vk is the eigenvector of eigenvalue 26 - K + k
         v = Vk[k]
         assert_allclose(abs(np.vdot(V_ref[:, 26 - K + k], v)), 1.0, atol=1e-10)
+
+
+def _eig_top(H, t, k_max):
+    """``mu_kernels._eig_top_split`` on the Hermitian ``H``: ``(K, ok, t_used, w, Vk)``."""
+    n = H.shape[0]
+    Hr, Hi = np.ascontiguousarray(np.tril(H.real)), np.ascontiguousarray(np.tril(H.imag))
+    w, Vk = np.zeros(n), np.zeros((n, n), dtype=complex)
+    vecs = [np.zeros(n) for _ in range(9)]  # d, e, taur, taui, pr, pi, vr, vi, ev
+    cap = mu_kernels.QR_STEP_BUDGET * n * n + n
+    rot = np.zeros(cap, dtype=np.int64), np.zeros(cap), np.zeros(cap)
+    work = np.zeros((n, n)), np.zeros((n, n)), np.zeros(n, dtype=np.int64)
+    K, ok, t_used = mu_kernels._eig_top_split(Hr, Hi, t, k_max, w, Vk, *vecs, *rot, *work)
+    return K, ok, t_used, w, Vk
+
+
+def test_tridiagonal_qr_eigenpairs_match_numpy_on_clustered_top_eigenvalues():
+    # the D-G optimum clusters the top eigenvalues (here five within 4 %, two 2e-9 apart): the
+    # QR's eigenvalues and the eigenvectors from its rotations against numpy's eigh
+    rng = np.random.default_rng(7)
+    n = 26
+    Q, _ = np.linalg.qr(_crandn(rng, n, n))
+    lam = np.r_[np.linspace(-0.5, 0.9, n - 5), [0.96, 0.99, 0.995, 1.0 - 2e-9, 1.0]]
+    H = (Q * lam) @ Q.conj().T
+    H = 0.5 * (H + H.conj().T)
+    w_ref = np.linalg.eigvalsh(H)
+    t = 30.0  # weights above WEIGHT_FLOOR down to about 0.62: several eigenvectors
+    K, ok, t_used, w, Vk = _eig_top(H, t, n)
+    assert ok and t_used == t
+    assert_allclose(w, w_ref, atol=1e-13)
+    weights = np.exp(t * (w_ref - w_ref[-1]))
+    assert K == np.sum(weights / weights.sum() > mu_kernels.WEIGHT_FLOOR) and K >= 5
+    V = Vk[:K].T
+    assert_allclose(V.conj().T @ V, np.eye(K), atol=1e-12)  # orthonormal within the cluster
+    assert_allclose(H @ V, V * w[n - K :], atol=1e-12)
+    # a negative temperature is relative to lambda_max: the same as its absolute value
+    K2, ok2, t2, _, Vk2 = _eig_top(H, -t, n)
+    assert ok2 and K2 == K and np.isclose(t2, t / w_ref[-1], rtol=1e-14, atol=0.0)
+    assert_allclose(np.abs(np.sum(Vk2[:K].conj() * Vk[:K], axis=1)), 1.0, atol=1e-12)
+    # eigenvalues only
+    K0, ok0, _, w0, _ = _eig_top(H, t, 0)
+    assert ok0 and K0 == 0
+    assert_allclose(w0, w_ref, atol=1e-13)
 
 
 @pytest.mark.parametrize("blk", [PAPER, MIXED, RECT])
