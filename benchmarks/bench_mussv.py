@@ -23,7 +23,8 @@ processes of the same run, with the ratios; ``--frontier`` adds the time vs accu
 bound for several iteration budgets.
 
 Run: ``.venv/bin/python benchmarks/bench_mussv.py [--matrices 200] [--lmi 3] [--frontier]``;
-issue 29's reference case alone: ``benchmarks/bench_mussv.py --gaussian-only [--baseline REV]``.
+issue 29's reference case alone: ``benchmarks/bench_mussv.py --gaussian-only [--baseline REV]
+[--rounds N]``.
 
 Two checkouts back to back (same load; the bounds of the second against the first's)::
 
@@ -380,6 +381,13 @@ def main(argv=None):
         "run ('' : none)",
     )
     parser.add_argument(
+        "--rounds",
+        type=int,
+        default=2,
+        help="alternating fresh processes per checkout in issue 29's reference case (the fastest "
+        "is kept: more rounds, less noise on a loaded machine)",
+    )
+    parser.add_argument(
         "--gaussian-only",
         action="store_true",
         help="only issue 29's reference case (Gaussian matrices) against --baseline",
@@ -402,7 +410,7 @@ def main(argv=None):
     )
     args = parser.parse_args(argv)
     if args.gaussian_only:
-        gaussian_vs_baseline(max(1, args.repeats), args.baseline or None)
+        gaussian_vs_baseline(max(1, args.repeats), args.baseline or None, args.rounds)
         return
     limit_blas_threads(1)
     warnings.filterwarnings("ignore")
@@ -572,7 +580,7 @@ def main(argv=None):
         f"{np.nanmax(chk['singularity']):.1e}, {np.nanmax(chk_c['singularity']):.1e}; "
         f"max | ||delta|| lower - 1 | {np.nanmax(np.abs(chk['delta_norm_error'])):.1e}"
     )
-    gaussian_vs_baseline(reps, args.baseline or None)
+    gaussian_vs_baseline(reps, args.baseline or None, args.rounds)
     if args.frontier:
         ref = mu_upper_bound(
             M, s, max_iter=600, tol=1e-12, temperatures=(30.0, 300.0, 3000.0, 30000.0)
