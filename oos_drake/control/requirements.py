@@ -127,7 +127,7 @@ def requirement_controller(requirements, K0):
 
 
 def tune_to_requirements(
-    plants, K0, spec: DesignSpecification, requirements, options: SystuneOptions
+    plants, K0, spec: DesignSpecification, requirements, options: SystuneOptions, progress=None
 ) -> TuningResult:
     """Tune ``requirements.structure`` against :func:`requirement_goals` over ``plants``.
 
@@ -142,6 +142,10 @@ def tune_to_requirements(
         :func:`~oos_drake.control.sampled.sampled_interconnection` at that rate).
     requirements : oos_drake.scenario.data.ControlRequirements
     options : SystuneOptions
+        With ``working_set``: tuned on that many configurations, each goal checked on every
+        configuration of ``plants`` and the violators added (see :func:`systune`).
+    progress : callable, optional
+        ``progress(message: str)`` for log lines.
 
     Returns
     -------
@@ -166,4 +170,5 @@ def tune_to_requirements(
         requirement_controller(requirements, K0),
         requirement_goals(requirements),
         options=options,
+        progress=progress,
     )
