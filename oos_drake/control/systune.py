@@ -117,7 +117,7 @@ class SystuneOptions:
         Threads of that eigendecomposition (LAPACK without the GIL; 2 on the 2-core target).
     working_set : int
         Models in the initial working set the optimizer tunes on (evenly spaced over the
-        array, plus the worst one at the start values); ``0`` (default) or at least the
+        array, its ends included); ``0`` (default) or at least the
         number of models: all of them. After each tuning every model is checked (every
         goal's exact value) and the violators join the set (the static synthesis' working
         set, :class:`~oos_drake.control.synthesis.SynthesisOptions`), so each goal's reported
@@ -1104,9 +1104,10 @@ def systune(
         starts.append(np.where(linear & (x0 != 0), x0 * np.exp(z), x0 + z * scale))
     log = progress or (lambda message: None)
     N = problem.size
-    working = _initial_working_set(problem, terms, hard, soft, x0, options.working_set)
+    working = _initial_working_set(options.working_set, N)
     runs, rounds, x, stable = [], [], x0, False
-    for round_ in range(max(1, options.max_rounds)):
+    max_rounds = max(1, options.max_rounds)
+    for round_ in range(max_rounds):
         sub = problem if working.size == N else problem.subset(working)
         sub_terms = terms if sub is problem else _goal_terms(sub, goals)[0]
         best = None
@@ -1124,18 +1125,21 @@ def systune(
             feasible = G <= 1.0 + options.feasibility_tolerance
             key = (not feasible, F if feasible else G)  # feasible first, then the lowest F
             if ok and (best is None or key < best[0]):
-                best = (key, xr, F)
+                best = (key, xr, F, G)
         if best is None:  # no stable point on the working set: report the start
             x, stable = (starts[0] if round_ == 0 else x), round_ > 0 and stable
             break
         x, stable, F_working = best[1], True, best[2]
         if working.size == N:
-            rounds.append(dict(round=round_, models=N, violators=0, added=0))
+            rounds.append(dict(round=round_, models=N, soft=F_working, hard=best[3]))
+            rounds[-1] |= dict(violators=0, added=0)
             break
         # every model: the exact values of the goals at x; the violators join the set
         add, violators, soft_all, hard_all = _violators(
             problem, terms, soft, hard, structure.K(x), working, F_working, options
         )
+        if round_ + 1 == max_rounds:  # the budget ends: the violators stay outside
+            add = add[:0]
         rounds.append(
             dict(round=round_, models=int(working.size), soft=soft_all, hard=hard_all)
             | dict(violators=int(violators), added=int(add.size))
@@ -1168,21 +1172,12 @@ def _per_model(problem: _Problem, terms, indices, K) -> np.ndarray:
     return np.max(values, axis=0) if values else np.full(problem.size, -np.inf)
 
 
-def _initial_working_set(problem: _Problem, terms, hard, soft, x0, size: int) -> np.ndarray:
-    """``size`` evenly spaced models plus the worst one at ``x0`` (hard goals, else soft);
-    every model when ``size`` is 0 or at least their number."""
-    N = problem.size
+def _initial_working_set(size: int, N: int) -> np.ndarray:
+    """``size`` evenly spaced models of ``N`` (the ends included); all of them when ``size``
+    is 0 or at least ``N``."""
     if not 0 < size < N:
         return np.arange(N)
-    spaced = np.round(np.linspace(0, N - 1, size)).astype(int)
-    K0 = problem.structure.K(x0)
-    stable = problem.stable(K0)
-    if np.all(stable):
-        with np.errstate(invalid="ignore", over="ignore"):
-            worst = int(np.argmax(_per_model(problem, terms, hard or soft, K0)))
-    else:
-        worst = int(np.flatnonzero(~stable)[0])
-    return np.unique(np.append(spaced, worst))
+    return np.unique(np.round(np.linspace(0, N - 1, size)).astype(int))
 
 
 def _violators(problem: _Problem, terms, soft, hard, K, working, F_working, options):
