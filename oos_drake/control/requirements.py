@@ -10,7 +10,11 @@ scenario's ``[control]`` asks for margins or a minimum damping
   ``loop_opening``) and :class:`~oos_drake.control.goals.Poles` (``min_damping``);
 
 over the mission configurations at the nominal values of the real parameters (the worst-case
-search of :func:`~oos_drake.control.synthesis.synthesize` is not run on this path). When
+search of :func:`~oos_drake.control.synthesis.synthesize` is not run on this path). With
+``SystuneOptions.working_set`` (``oos synth --working-set``, 25 by default) the optimizer
+tunes on that many configurations, every goal is checked on all of them and the violators are
+added (:func:`~oos_drake.control.systune.systune`, step 5): the values recorded in
+``controller.json`` hold on every configuration of the array. When
 ``rate_hz`` is given (it equals the flight software's rate), the controller is tuned
 **discrete** at that rate on the loop exactly as the flight software runs it
 (:func:`~oos_drake.control.sampled.sampled_interconnection`: plant discretized with its

@@ -46,6 +46,14 @@ Algorithm (Apkarian-Noll nonsmooth descent, the package's optimizer):
    unstable trial points rejected.
 4. The best run (feasible first, then lowest ``F``; else lowest ``G``) is re-evaluated
    exactly (certified H-infinity norms, all models) and reported per goal.
+5. **Working set** (``SystuneOptions.working_set``, as the static synthesis'
+   :func:`~oos_drake.control.synthesis.synthesize`): phases 0-2 run on a few evenly spaced
+   models; then every goal is evaluated exactly on every model, and the models outside the
+   set that are unstable, miss a hard goal or exceed the set's soft value join it (the worst
+   ``models_per_round`` first); phases 0-2 run again from the current parameters (warm
+   start), until no model violates or ``max_rounds`` ends. The goals' values reported are
+   always over every model, so a hard goal met between the tuned models is never assumed:
+   a budget that ends with a violator gives the status ``"infeasible"``.
 """
 
 from __future__ import annotations
