@@ -95,6 +95,11 @@ class ControllerOptions:
     worst_case_rounds : int
         Rounds of worst-case search over the real uncertainty (``--worst-case-rounds``),
         at least 0.
+    working_set : int
+        Configurations in the optimizer's initial working set (``--working-set``), at least 0
+        (0: all). Every configuration is checked after each tuning and the violators (of the
+        weighted gain, of a hard ``[control]`` goal, unstable) join the set, so the result
+        holds on all ``configurations``.
     seed : int
         Seed of the restarts and samples (``--seed``).
     workers : int
@@ -112,6 +117,7 @@ class ControllerOptions:
     restarts: int = 2
     max_iterations: int = 150
     worst_case_rounds: int = 4
+    working_set: int = 25
     seed: int = 0
     workers: int = DEFAULT_WORKERS
     scheduler: str | None = None
@@ -126,6 +132,7 @@ class ControllerOptions:
             ("--restarts", self.restarts, 0),
             ("--max-iterations", self.max_iterations, 0),
             ("--worst-case-rounds", self.worst_case_rounds, 0),
+            ("--working-set", self.working_set, 0),
         ):
             if not value >= least:
                 raise ValueError(f"{option} {value}: must be at least {least}")
@@ -191,6 +198,7 @@ def controller_options(args) -> ControllerOptions:
         restarts=args.restarts,
         max_iterations=args.max_iterations,
         worst_case_rounds=args.worst_case_rounds,
+        working_set=args.working_set,
         seed=args.seed,
         workers=args.workers,
         scheduler=args.scheduler,
@@ -252,9 +260,10 @@ def compute_controller(scenario, options: ControllerOptions) -> ControllerResult
             max_iterations=options.max_iterations,
             seed=options.seed,
             workers=options.workers,
+            working_set=options.working_set,
         )
         start = time.perf_counter()
-        result = tune_to_requirements(plants, K0, spec, scenario.control, solver)
+        result = tune_to_requirements(plants, K0, spec, scenario.control, solver, progress=print)
         elapsed = time.perf_counter() - start
         spec = tuning_specification(spec, scenario.control)
         return ControllerResult(scenario, options, plants, K0, spec, solver, result, elapsed)
@@ -264,6 +273,7 @@ def compute_controller(scenario, options: ControllerOptions) -> ControllerResult
         worst_case_rounds=options.worst_case_rounds,
         seed=options.seed,
         workers=options.workers,
+        working_set=options.working_set,
     )
     # the restarts run as executor tasks; spawned workers when this process holds Drake threads
     method = "spawn" if options.plant == "drake" else None
@@ -335,8 +345,9 @@ def controller(scenario, options: ControllerOptions, out) -> ControllerResult:
     else:
         requirements = scenario.control
         print(
-            f"structure {requirements.structure}: status {result.status}, "
-            f"{plants.size} configurations, {designed.wall_time_s:.1f} s"
+            f"structure {requirements.structure}: status {result.status}, goals checked on "
+            f"{result.models_checked} configurations (tuned on {len(result.working_set)}), "
+            f"{designed.wall_time_s:.1f} s"
         )
         for goal in result.goals:
             details = ", ".join(f"{k} = {v:.4g}" for k, v in goal.details.items())
@@ -406,6 +417,14 @@ def register(subparsers) -> None:
         type=int,
         default=4,
         help="rounds of worst-case search over the real uncertainty",
+    )
+    parser.add_argument(
+        "--working-set",
+        type=int,
+        default=25,
+        help="configurations in the optimizer's initial working set (0: all); every "
+        "configuration is checked after each tuning and the violators (weighted gain, hard "
+        "[control] goals, stability) join the set, so the result holds on all of them",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of restarts and samples")
     add_scenario_argument(parser)

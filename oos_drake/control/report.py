@@ -175,7 +175,9 @@ def tuning_record(result, requirements, K0, plants: PlantArray, spec, options=No
     options : SystuneOptions, optional
 
     ``status`` is the tuning result's: ``"infeasible"`` means a hard goal is NOT met and the
-    values recorded are the best reached.
+    values recorded are the best reached. Each goal's ``value`` and ``per_model`` are over
+    every configuration of ``plants`` (``models_checked`` of them), the optimizer's final
+    working set is ``working_set`` (configuration indices), ``rounds`` its growth.
     """
     controller = {
         "structure": requirements.structure,
@@ -236,6 +238,10 @@ def tuning_record(result, requirements, K0, plants: PlantArray, spec, options=No
             "gamma": weighted.value,
             "requirement_met": bool(weighted.value < 1.0 and result.status == "ok"),
             "runs": list(result.runs),
+            # every goal's value and per_model are over all the configurations below
+            "models_checked": result.models_checked,
+            "working_set": list(result.working_set),
+            "rounds": list(result.rounds),
             "configurations": plants.configurations.to_dict(orient="list"),
             "model_source": plants.source,
             "model_sha256": plants.fingerprint(),

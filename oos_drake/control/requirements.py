@@ -10,7 +10,11 @@ scenario's ``[control]`` asks for margins or a minimum damping
   ``loop_opening``) and :class:`~oos_drake.control.goals.Poles` (``min_damping``);
 
 over the mission configurations at the nominal values of the real parameters (the worst-case
-search of :func:`~oos_drake.control.synthesis.synthesize` is not run on this path). When
+search of :func:`~oos_drake.control.synthesis.synthesize` is not run on this path). With
+``SystuneOptions.working_set`` (``oos synth --working-set``, 25 by default) the optimizer
+tunes on that many configurations, every goal is checked on all of them and the violators are
+added (:func:`~oos_drake.control.systune.systune`, step 5): the values recorded in
+``controller.json`` hold on every configuration of the array. When
 ``rate_hz`` is given (it equals the flight software's rate), the controller is tuned
 **discrete** at that rate on the loop exactly as the flight software runs it
 (:func:`~oos_drake.control.sampled.sampled_interconnection`: plant discretized with its
@@ -127,7 +131,7 @@ def requirement_controller(requirements, K0):
 
 
 def tune_to_requirements(
-    plants, K0, spec: DesignSpecification, requirements, options: SystuneOptions
+    plants, K0, spec: DesignSpecification, requirements, options: SystuneOptions, progress=None
 ) -> TuningResult:
     """Tune ``requirements.structure`` against :func:`requirement_goals` over ``plants``.
 
@@ -142,6 +146,10 @@ def tune_to_requirements(
         :func:`~oos_drake.control.sampled.sampled_interconnection` at that rate).
     requirements : oos_drake.scenario.data.ControlRequirements
     options : SystuneOptions
+        With ``working_set``: tuned on that many configurations, each goal checked on every
+        configuration of ``plants`` and the violators added (see :func:`systune`).
+    progress : callable, optional
+        ``progress(message: str)`` for log lines.
 
     Returns
     -------
@@ -166,4 +174,5 @@ def tune_to_requirements(
         requirement_controller(requirements, K0),
         requirement_goals(requirements),
         options=options,
+        progress=progress,
     )

@@ -46,10 +46,19 @@ Algorithm (Apkarian-Noll nonsmooth descent, the package's optimizer):
    unstable trial points rejected.
 4. The best run (feasible first, then lowest ``F``; else lowest ``G``) is re-evaluated
    exactly (certified H-infinity norms, all models) and reported per goal.
+5. **Working set** (``SystuneOptions.working_set``, as the static synthesis'
+   :func:`~oos_drake.control.synthesis.synthesize`): phases 0-2 run on a few evenly spaced
+   models; then every goal is evaluated exactly on every model, and the models outside the
+   set that are unstable, miss a hard goal or exceed the set's soft value join it (the worst
+   ``models_per_round`` first); phases 0-2 run again from the current parameters (warm
+   start), until no model violates or ``max_rounds`` ends. The goals' values reported are
+   always over every model, so a hard goal met between the tuned models is never assumed:
+   a budget that ends with a violator gives the status ``"infeasible"``.
 """
 
 from __future__ import annotations
 
+import copy
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -114,6 +123,21 @@ class SystuneOptions:
         round-off).
     workers : int
         Threads of that eigendecomposition (LAPACK without the GIL; 2 on the 2-core target).
+    working_set : int
+        Models in the initial working set the optimizer tunes on (evenly spaced over the
+        array, its ends included); ``0`` (default) or at least the
+        number of models: all of them. After each tuning every model is checked (every
+        goal's exact value) and the violators join the set (the static synthesis' working
+        set, :class:`~oos_drake.control.synthesis.SynthesisOptions`), so each goal's reported
+        value holds on every model, not only on the tuned ones.
+    models_per_round : int
+        Largest number of violating models added per round (the worst ones first).
+    soft_rtol : float
+        Relative excess of a model's soft value over the working set's that makes it a
+        violator [-] (``inf``: the working set grows on the hard goals and stability only).
+    max_rounds : int
+        Largest number of rounds (tuning on the working set + check of every model). When it
+        ends with a model violating a hard goal, the result's status is ``"infeasible"``.
     """
 
     restarts: int = 0
@@ -130,6 +154,10 @@ class SystuneOptions:
     qp: str = "slsqp"
     shared_modes: bool = True
     workers: int = 1
+    working_set: int = 0
+    models_per_round: int = 5
+    soft_rtol: float = 1e-3
+    max_rounds: int = 12
 
 
 @dataclass(frozen=True)
@@ -191,7 +219,14 @@ class TuningResult:
     sampling_time : float
         Controller rate [s] (``0``: continuous).
     runs : tuple of dict
-        Per start: ``start``, ``soft``, ``hard``, ``stable``, ``iterations``, ``message``.
+        Per round and start: ``round``, ``start``, ``models`` (in the working set), ``soft``,
+        ``hard`` (over the working set), ``stable``, ``iterations``, ``message``.
+    working_set : tuple of int
+        The models the optimizer tuned on at the end (indices into the plant array; all of
+        them without a working set). The goals' values are over every model.
+    rounds : tuple of dict
+        Per round: ``round``, ``models`` (in the working set), ``soft``, ``hard`` (exact, over
+        every model), ``violators`` (models outside the set violating a goal), ``added``.
     """
 
     parameters: Mapping[str, Mapping[str, np.ndarray]]
@@ -204,6 +239,13 @@ class TuningResult:
     status: str
     sampling_time: float
     runs: tuple[dict, ...]
+    working_set: tuple[int, ...] = ()
+    rounds: tuple[dict, ...] = ()
+
+    @property
+    def models_checked(self) -> int:
+        """Number of models every goal was evaluated on (the whole plant array)."""
+        return int(self.goals[0].per_model.size) if self.goals else 0
 
     def goal(self, name: str) -> GoalValue:
         """The :class:`GoalValue` labelled ``name``."""
@@ -741,6 +783,23 @@ class _Problem:
         self.stability = _PoleTerm(self.loop, None, min_decay)
         self.modes = _ClosedModes(self.loop, workers) if shared_modes else None
 
+    @property
+    def size(self) -> int:
+        """Number of models."""
+        return int(self.plant.A.shape[0])
+
+    def subset(self, index) -> _Problem:
+        """The same problem over the models ``index`` only (a working set)."""
+        index = np.asarray(index, dtype=int)
+        sub = copy.copy(self)
+        p = self.plant
+        sub.plant = replace(p, A=p.A[index], B=p.B[index], C=p.C[index], D=p.D[index])
+        sub.loop = sub.loops((), ())
+        sub.stability = _PoleTerm(sub.loop, None, self.stability.min_decay)
+        if self.modes is not None:
+            sub.modes = _ClosedModes(sub.loop, self.modes.workers)
+        return sub
+
     def stable(self, K) -> np.ndarray:
         """Per model: the closed loop at ``K`` is stable (see :meth:`_PoleTerm.stable`)."""
         return self.stability.stable(K, self.modes)
@@ -970,7 +1029,9 @@ def _minimize(objective: _Objective, xi, options: SystuneOptions):
 # --------------------------------------------------------------------------- entry point
 
 
-def systune(plants, controller, goals, *, options: SystuneOptions | None = None) -> TuningResult:
+def systune(
+    plants, controller, goals, *, options: SystuneOptions | None = None, progress=None
+) -> TuningResult:
     """Tune the parameters of a structured controller over a plant array (MATLAB ``systune``).
 
     Minimizes the worst soft goal subject to every hard goal ``<= 1`` (normalized values, see
@@ -994,6 +1055,8 @@ def systune(plants, controller, goals, *, options: SystuneOptions | None = None)
     goals : sequence of WeightedGain, Margins, Poles, Variance
         Each ``kind="soft"`` or ``"hard"``.
     options : SystuneOptions, optional
+    progress : callable, optional
+        ``progress(message: str)`` for log lines (one per run and per check of every model).
 
     Returns
     -------
@@ -1031,13 +1094,10 @@ def systune(plants, controller, goals, *, options: SystuneOptions | None = None)
     if not goals:
         raise ValueError("systune: no goal given")
     problem = _Problem(plants, controller, options.min_decay, options.shared_modes, options.workers)
-    terms, owners = [], []
-    for g, goal in enumerate(goals):
+    for goal in goals:
         if not hasattr(goal, "kind"):
             raise ValueError(f"systune: unknown goal type {type(goal).__name__}")
-        for term, index, channel in problem.terms(goal, g):
-            terms.append(term)
-            owners.append((index, channel))
+    terms, owners = _goal_terms(problem, goals)
     soft = [i for i, (g, _) in enumerate(owners) if goals[g].kind == "soft"]
     hard = [i for i, (g, _) in enumerate(owners) if goals[g].kind == "hard"]
     structure = problem.structure
@@ -1050,19 +1110,106 @@ def systune(plants, controller, goals, *, options: SystuneOptions | None = None)
     for _ in range(options.restarts):
         z = options.restart_spread * rng.normal(size=x0.size)
         starts.append(np.where(linear & (x0 != 0), x0 * np.exp(z), x0 + z * scale))
-    runs, best = [], None
-    for r, start in enumerate(starts):
-        x, stable, iterations, message = _run(problem, terms, soft, hard, start, scale, options)
-        F, G = _soft_hard(problem, terms, soft, hard, structure.K(x))
-        runs.append(
-            dict(start=r, soft=F, hard=G, stable=stable, iterations=iterations, message=message)
+    log = progress or (lambda message: None)
+    N = problem.size
+    working = _initial_working_set(options.working_set, N)
+    runs, rounds, x, stable = [], [], x0, False
+    max_rounds = max(1, options.max_rounds)
+    for round_ in range(max_rounds):
+        sub = problem if working.size == N else problem.subset(working)
+        sub_terms = terms if sub is problem else _goal_terms(sub, goals)[0]
+        best = None
+        for r, start in enumerate(starts if round_ == 0 else [x]):
+            xr, ok, iterations, message = _run(sub, sub_terms, soft, hard, start, scale, options)
+            F, G = _soft_hard(sub, sub_terms, soft, hard, structure.K(xr))
+            runs.append(
+                dict(round=round_, start=r, models=int(working.size), soft=F, hard=G, stable=ok)
+                | dict(iterations=iterations, message=message)
+            )
+            log(
+                f"round {round_} run {r}: soft {F:.6g}, hard {G:.6g} over {working.size} "
+                f"models ({iterations} it, {message})"
+            )
+            feasible = G <= 1.0 + options.feasibility_tolerance
+            key = (not feasible, F if feasible else G)  # feasible first, then the lowest F
+            if ok and (best is None or key < best[0]):
+                best = (key, xr, F, G)
+        if best is None:  # no stable point on the working set: report the start
+            x, stable = (starts[0] if round_ == 0 else x), round_ > 0 and stable
+            break
+        x, stable, F_working = best[1], True, best[2]
+        if working.size == N:
+            rounds.append(dict(round=round_, models=N, soft=F_working, hard=best[3]))
+            rounds[-1] |= dict(violators=0, added=0)
+            break
+        # every model: the exact values of the goals at x; the violators join the set
+        add, violators, soft_all, hard_all = _violators(
+            problem, terms, soft, hard, structure.K(x), working, F_working, options
         )
-        feasible = G <= 1.0 + options.feasibility_tolerance
-        key = (not feasible, F if feasible else G)  # feasible first, then the lowest F
-        if stable and (best is None or key < best[0]):
-            best = (key, x)
-    x = starts[0] if best is None else best[1]
-    return _result(problem, goals, terms, owners, x, options, runs, best is not None)
+        if round_ + 1 == max_rounds:  # the budget ends: the violators stay outside
+            add = add[:0]
+        rounds.append(
+            dict(round=round_, models=int(working.size), soft=soft_all, hard=hard_all)
+            | dict(violators=int(violators), added=int(add.size))
+        )
+        log(
+            f"round {round_}: over all {N} models soft {soft_all:.6g}, hard {hard_all:.6g}; "
+            f"{violators} violator(s), {add.size} added"
+        )
+        if not add.size:
+            break
+        working = np.concatenate([working, add])
+    stable = stable and bool(np.all(problem.stable(structure.K(x))))  # on every model
+    result = _result(problem, goals, terms, owners, x, options, runs, stable)
+    return replace(result, working_set=tuple(int(i) for i in working), rounds=tuple(rounds))
+
+
+def _goal_terms(problem: _Problem, goals):
+    """Every goal's terms over ``problem``'s models and their owners ``(goal index, channel)``."""
+    terms, owners = [], []
+    for g, goal in enumerate(goals):
+        for term, index, channel in problem.terms(goal, g):
+            terms.append(term)
+            owners.append((index, channel))
+    return terms, owners
+
+
+def _per_model(problem: _Problem, terms, indices, K) -> np.ndarray:
+    """Exact max over the terms ``indices`` per model (``-inf`` without terms)."""
+    values = [np.asarray(terms[i].exact(K)[0], dtype=float) for i in indices]
+    return np.max(values, axis=0) if values else np.full(problem.size, -np.inf)
+
+
+def _initial_working_set(size: int, N: int) -> np.ndarray:
+    """``size`` evenly spaced models of ``N`` (the ends included); all of them when ``size``
+    is 0 or at least ``N``."""
+    if not 0 < size < N:
+        return np.arange(N)
+    return np.unique(np.round(np.linspace(0, N - 1, size)).astype(int))
+
+
+def _violators(problem: _Problem, terms, soft, hard, K, working, F_working, options):
+    """Models outside ``working`` that are unstable at ``K``, miss a hard goal, or exceed the
+    working set's soft value ``F_working`` by ``soft_rtol``: ``(the worst ones to add (at most
+    models_per_round), number of violators, soft max, hard max over every model)``."""
+    N = problem.size
+    stable = problem.stable(K)
+    soft_v = np.full(N, np.inf)
+    hard_v = np.full(N, np.inf)
+    if np.any(stable):
+        soft_v[stable] = _per_model(problem, terms, soft, K)[stable]
+        hard_v[stable] = _per_model(problem, terms, hard, K)[stable]
+    outside = np.ones(N, dtype=bool)
+    outside[working] = False
+    bad_hard = outside & (hard_v > 1.0 + options.feasibility_tolerance)
+    bad_soft = outside & (soft_v > F_working * (1.0 + options.soft_rtol))
+    bad = bad_hard | bad_soft
+    # the hard violators first (worst first), then the soft ones (worst first)
+    order = np.lexsort((-np.where(np.isfinite(soft_v), soft_v, np.inf), -hard_v, ~bad_hard))
+    order = order[bad[order]]
+    soft_max = float(soft_v.max()) if soft else 0.0
+    hard_max = float(hard_v.max()) if hard else (0.0 if np.all(stable) else np.inf)
+    return order[: options.models_per_round], int(bad.sum()), soft_max, hard_max
 
 
 def _run(problem: _Problem, terms, soft, hard, start, scale, options: SystuneOptions):

@@ -111,3 +111,25 @@ def test_unmeetable_hard_goals_are_written_infeasible(tmp_path, capsys):
     assert damping["value"] > 1 and damping["met"] is False
     # the recorded value is the damping of the recorded controller's closed loops, not a target
     assert damping["details"]["min_damping"] < 0.95
+
+
+def test_goals_are_recorded_over_every_configuration_not_the_working_set(tmp_path, capsys):
+    # tuned on 2 of the 6 configurations at first; every goal is evaluated on all 6 and
+    # controller.json says so (the values themselves are checked independently in
+    # test_systune_working_set.py)
+    scenario = _scenario_with(tmp_path, ["gain_margin_db = 6.0", "phase_margin_deg = 30.0"])
+    out = tmp_path / "out"
+    argv = ["synth", "--plant", "synthetic", "--configurations", "6", "--working-set", "2"]
+    argv += ["--restarts", "0", "--max-iterations", "5", "--scenario", str(scenario)]
+    assert main([*argv, "--out", str(out)]) in (0, 1)
+    printed = capsys.readouterr().out
+    assert "goals checked on 6 configurations" in printed
+    record = json.loads((out / "controller.json").read_text())
+    assert record["models_checked"] == 6
+    assert {0, 5} <= set(record["working_set"]) and len(record["rounds"]) >= 1
+    for goal in record["goals"]:
+        assert len(goal["per_model"]) == 6
+        assert goal["value"] == pytest.approx(max(goal["per_model"]))
+        assert goal["met"] == (goal["value"] <= 1)
+    hard = [g for g in record["goals"] if g["kind"] == "hard"]
+    assert record["status"] == ("ok" if all(g["met"] for g in hard) else "infeasible")

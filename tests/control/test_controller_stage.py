@@ -151,6 +151,7 @@ def test_compute_writes_nothing_and_the_writer_writes_the_commands_files(
         (["--restarts", "-1"], "--restarts -1"),
         (["--max-iterations", "-1"], "--max-iterations -1"),
         (["--worst-case-rounds", "-1"], "--worst-case-rounds -1"),
+        (["--working-set", "-1"], "--working-set -1"),
         (["--workers", "0"], "--workers 0"),
         (["--delay", "0.01"], "--delay needs --sampled"),
         (["--sampled", "--delay", "-1"], "computation_delay_s must be >= 0 s"),
