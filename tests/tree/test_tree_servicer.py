@@ -1,11 +1,14 @@
-"""``servicer_7dof``: its gyro noise and roll-off, the design rules its file's comments state.
+"""``servicer_7dof``: its gyro noise, roll-off and additive weight, the design rules its file's
+comments state.
 
 The shipped file had gamma 0.889 but a guaranteed mu of 1.55 at 0.71 Hz in the stow phase (the
 arrays' first mode, 0.5 Hz +- 20 % cantilever, near its upper bound): its gyro noise (the
 paper's 9e-4 rad/s) forced an attitude bandwidth of 0.057 Hz, and its roll-off at 1 Hz let that
 loop reach the arrays' lightly damped modes. The rules below are computed here in closed form
 from the TOML (the analog Butterworth written out from its poles), independently of the
-package; the former values fail them. The end-to-end run at reduced sizes is
+package; the former values fail them. The additive weight's share of ``1 / J`` (geo_satellite's
+rule) uses the servicer's inertia written out here from the TOML (checked against the
+package's rigid inertia of the tree). The end-to-end run at reduced sizes is
 ``tests/tree/test_tree_switched.py::test_oos_run_on_the_servicer_runs_controller_analysis_and_margins``.
 """
 
@@ -96,3 +99,74 @@ def test_servicer_gyro_noise_is_a_tactical_gyro_over_the_nyquist_band():
     rms = density * np.sqrt(control["flight_software_rate_hz"] / 2)
     assert control["sensors"]["gyro_noise"] == pytest.approx(rms, rel=0.05)
     assert FORMER_GYRO_NOISE > 9 * rms
+
+
+def _servicer_inertia() -> tuple[float, np.ndarray, np.ndarray]:
+    """``(mass [kg], centre of mass [m], inertia [kg m^2] about the hub's origin)`` of the
+    servicer at t = 0 from the TOML alone: hub, the two arrays at their file angles (0) and
+    the seven links at zero angles (every link frame parallel to the mount frame, ``z_J =
+    x_HUB``, the origins summed along the chain); the free target is no part of it."""
+    masses, centres, inertias = [], [], []
+    for body in shipped_document("servicer_7dof")["bodies"]:
+        if body.get("free"):
+            continue
+        if body["kind"] == "rigid":
+            R, centre = np.eye(3), np.asarray(body["p_B_G"], float)
+            masses.append(body["mass"])
+        elif body["kind"] == "flexible":
+            joint = body["joint"]
+            R = np.asarray(joint.get("R_parent_joint", np.eye(3)), float)
+            centre = np.asarray(joint["p_parent_joint"], float) + R @ np.asarray(body["p_P_S"])
+            masses.append(body["mass"])
+        else:  # the arm: its links
+            first = body["links"][0]["joint"]
+            R = np.asarray(first["R_parent_joint"], float)  # the mount frame, hub axes
+            origin = np.asarray(first["p_parent_joint"], float)  # joint A1, hub axes
+            for k, link in enumerate(body["links"]):
+                if k:  # the next joint, in the (parallel) previous link's frame
+                    origin = origin + R @ np.asarray(link["joint"]["p_parent_joint"], float)
+                masses.append(link["mass"])
+                centres.append(origin + R @ np.asarray(link["p_B_G"], float))
+                inertias.append(R @ np.asarray(link["inertia"], float) @ R.T)
+            continue
+        centres.append(centre)
+        inertias.append(R @ np.asarray(body["inertia"], float) @ R.T)
+    mass = float(np.sum(masses))
+    centre = np.sum(np.asarray(masses)[:, None] * np.asarray(centres), axis=0) / mass
+    J = sum(
+        inertia + m * (c @ c * np.eye(3) - np.outer(c, c))
+        for m, c, inertia in zip(masses, centres, inertias, strict=True)
+    )
+    return mass, centre, J
+
+
+def test_servicer_inertia_by_hand_is_the_trees():
+    """The hand computation above against the package's rigid inertia of the tree (its LFR's
+    static gain is the inverse of it), rotational block about the hub's centre of mass."""
+    from oos_drake.scenario.tree import load_tree
+    from oos_drake.scenario.tree_model import rigid_inertia_at_root
+
+    mass, _, J = _servicer_inertia()
+    M = rigid_inertia_at_root(load_tree("servicer_7dof"))
+    assert M[0, 0] == pytest.approx(mass, rel=1e-12)
+    np.testing.assert_allclose(M[3:, 3:], J, rtol=1e-9, atol=1e-9)
+
+
+def test_servicer_additive_weight_is_scaled_to_its_inertia():
+    """``Delta_add`` is an angular acceleration per torque: ``W_add`` relative to ``1 / J``
+    (geo_satellite's rule, ``tests/tree/test_tree_geo.py``). The servicer's share of its own
+    ``1 / J`` (principal inertias about its centre of mass at t = 0) lies within
+    flexible_satellite's; the paper's -75 dB, the file's former weight, exceeds it."""
+    from test_tree_geo import _total_inertia
+
+    from oos_drake.scenario.data import load_scenario
+
+    mass, centre, J_O = _servicer_inertia()
+    J = J_O - mass * (centre @ centre * np.eye(3) - np.outer(centre, centre))
+    principal = np.linalg.eigvalsh(J)[[0, -1]]
+    weight_db = shipped_document("servicer_7dof")["control"]["weights"]["additive_weight_db"]
+    flexible = load_scenario("flexible_satellite").control.additive_weight_db
+    reference = 10 ** (flexible / 20) * np.linalg.eigvalsh(_total_inertia("flexible_satellite"))
+    share = 10 ** (weight_db / 20) * principal
+    assert reference[0] <= share[0] and share[1] <= reference[-1]
+    assert 10 ** (-75 / 20) * principal[1] > reference[-1]  # the former weight
