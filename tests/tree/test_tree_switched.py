@@ -182,7 +182,10 @@ def test_oos_run_on_the_servicer_runs_controller_analysis_and_margins(tmp_path, 
     appended): the tip waypoint solved into ``OUT/scenario/servicer_7dof.toml``, the
     controller, the analysis and the margins run over the four phases (capture and docking
     included); the controller's gamma checked by a dense frequency sweep of its closed loops,
-    the analysis' closed loops by their eigenvalues in every phase."""
+    the analysis' closed loops by their eigenvalues in every phase. The shipped file without
+    its hard margin goals (as geo_satellite's test): with them the synthesis tunes by goals
+    and writes no ``closed_loop.npz`` for the sweep; its full run (goals met, 6.0 dB / 36.8
+    deg) is in docs/TREE.md."""
     import json
 
     import oos_drake.app.pipeline as pipeline
@@ -193,7 +196,12 @@ def test_oos_run_on_the_servicer_runs_controller_analysis_and_margins(tmp_path, 
     covered = "covered by tests/tree/test_tree_mated_twin.py"
     reduce_run_stages(monkeypatch, skip={"confirm": covered, "campaign": covered})
     out = tmp_path / "out"
-    argv = ["run", "--scenario", "servicer_7dof", "--quick", "--out", str(out)]
+    document = shipped_document("servicer_7dof")
+    for goal in ("gain_margin_db", "phase_margin_deg"):
+        document["control"].pop(goal, None)
+    scenario_file = tmp_path / "servicer_7dof.toml"
+    scenario_file.write_bytes(tomli_w.dumps(document).encode())
+    argv = ["run", "--scenario", str(scenario_file), "--quick", "--out", str(out)]
     assert pipeline.run_pipeline(build_parser().parse_args(argv)) == 0
     timings = json.loads((out / "timings.json").read_text())
     assert set(timings["skipped"]) == {"model figures", "confirm", "campaign"}
