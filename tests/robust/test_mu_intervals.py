@@ -328,8 +328,9 @@ def test_hamiltonian_test_leaves_out_the_modes_M_does_not_see():
     channels miss: 1e-31 of the largest) are left out; the unobservable ones, whose trace in
     the computed modal form is round-off of 1e-11 amplified by their light damping, are kept
     (only modes below the modal form's own round-off go). The response is unchanged and every
-    interval equals the one of the realization without the hidden modes (whose Hamiltonian
-    keeps every mode: a second computation), checked against dense sampling of the LMI on the
+    interval is that of the realization without the hidden modes (whose Hamiltonian keeps
+    every mode: a second computation) to 1e-4 (the reduced test of DROP_BUDGET leaves weakly
+    seen modes out of both, at a margin), checked against dense sampling of the LMI on the
     larger realization."""
     real, blk = delta_realization(two_modes())
     big = with_hidden_modes(real)
@@ -349,8 +350,9 @@ def test_hamiltonian_test_leaves_out_the_modes_M_does_not_see():
         beta = 1.005 * float(res.upper[0])
         lo, hi = dg_interval(real, sc, beta, w0)
         lo_b, hi_b = dg_interval(big, sc, beta, w0)
-        assert lo_b == pytest.approx(lo, rel=1e-6, abs=1e-9)
-        assert hi_b == pytest.approx(hi, rel=1e-6) or (np.isinf(hi) and np.isinf(hi_b))
+        # the reduced tests (DROP_BUDGET) of both prove intervals barely shorter than exact
+        assert lo_b == pytest.approx(lo, rel=1e-4, abs=1e-9)
+        assert hi_b == pytest.approx(hi, rel=1e-4) or (np.isinf(hi) and np.isinf(hi_b))
         inner = np.linspace(lo_b, min(hi_b, 1e3), 2001)
         assert np.all(lmi_residual(big.response(inner), beta, sc.D_left, sc.D_right, sc.G) <= 0)
 
