@@ -353,6 +353,22 @@ def _diagonal_blocks(D: np.ndarray) -> list:
     return [np.arange(a, b + 1) for a, b in zip(starts, ends, strict=True)]
 
 
+def _block_extremes(D: np.ndarray, blocks: list) -> tuple:
+    """``(smallest, largest)`` eigenvalues of each diagonal block ``D[idx, idx]`` of ``blocks``
+    (arrays in the order of ``blocks``): the blocks of one size in one batched ``eigvalsh``."""
+    low, high = np.empty(len(blocks)), np.empty(len(blocks))
+    sizes = np.array([idx.size for idx in blocks])
+    for size in np.unique(sizes):
+        which = np.flatnonzero(sizes == size)
+        rows = np.array([blocks[k] for k in which])  # (blocks, size)
+        if size == 1:
+            ev = np.real(D[rows[:, 0], rows[:, 0]])[:, None]
+        else:
+            ev = np.linalg.eigvalsh(D[rows[:, :, None], rows[:, None, :]])
+        low[which], high[which] = ev[:, 0], ev[:, -1]
+    return low, high
+
+
 def _floor_blocks(D: np.ndarray, floor: float, least: float = 0.0) -> np.ndarray:
     """``D`` with ``max(floor * lambda_max(D_b), least) I`` added to each diagonal block
     ``D_b``."""
@@ -362,20 +378,24 @@ def _floor_blocks(D: np.ndarray, floor: float, least: float = 0.0) -> np.ndarray
     if not np.any(D - np.diag(np.diagonal(D))):  # scalar blocks only: one entry each
         out[np.diag_indices_from(out)] += np.maximum(floor * np.maximum(diagonal, 0.0), least)
         return out
-    for idx in _diagonal_blocks(D):
-        block = D[np.ix_(idx, idx)]
-        top = float(np.max(np.linalg.eigvalsh(block))) if idx.size > 1 else float(block[0, 0].real)
-        out[idx, idx] += max(floor * max(top, 0.0), least)
+    blocks = _diagonal_blocks(D)
+    _, top = _block_extremes(D, blocks)
+    add = np.maximum(floor * np.maximum(top, 0.0), least)
+    for idx, a in zip(blocks, add, strict=True):
+        out[idx, idx] += a
     return out
 
 
 def _block_conditions(D: np.ndarray) -> tuple:
     """``(smallest, largest)`` eigenvalue of the worst-conditioned diagonal block of ``D``."""
-    worst = (1.0, 1.0)
-    for idx in _diagonal_blocks(D):
-        ev = np.linalg.eigvalsh(np.asarray(D)[np.ix_(idx, idx)])
-        if ev[0] * worst[1] < worst[0] * ev[-1]:  # ev[0] / ev[-1] < worst ratio
-            worst = (float(ev[0]), float(ev[-1]))
+    D = np.asarray(D)
+    worst = (1.0, 1.0)  # a 1 x 1 block has ratio 1
+    if not np.any(D - np.diag(np.diagonal(D))):
+        return worst
+    blocks = [idx for idx in _diagonal_blocks(D) if idx.size > 1]
+    for lo, hi in zip(*_block_extremes(D, blocks), strict=True):
+        if lo * worst[1] < worst[0] * hi:  # lo / hi < worst ratio
+            worst = (float(lo), float(hi))
     return worst
 
 
