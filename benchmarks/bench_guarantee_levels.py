@@ -252,7 +252,8 @@ def compare(args) -> None:
     paths = {"this checkout": root, f"baseline {args.baseline}": baseline_checkout(args.baseline)}
     cmd = [sys.executable, os.path.abspath(__file__), "--json"]
     cmd += ["--configurations", str(args.configurations), "--tight", args.tight]
-    cmd += ["--subsets", args.subsets] + (["--controller", args.controller] if args.controller else [])
+    cmd += ["--subsets", args.subsets]
+    cmd += ["--controller", args.controller] if args.controller else []
     results = {name: [] for name in paths}
     for k in range(max(args.repeat, 1)):
         for name in list(paths)[:: 1 if k % 2 else -1]:  # the baseline first, then alternating

@@ -483,7 +483,7 @@ def test_reduced_hamiltonian_test_without_its_margin_is_caught(monkeypatch):
     Ms = big.response(dense)
     rows = reduced_and_exact_intervals(monkeypatch, big, blk, 1e2, (0.2, 0.4, 0.5, 0.6))
     wrong = 0
-    for w0, sc, beta, (lo, hi), (lo0, hi0), _ in rows:
+    for _, sc, beta, (lo, hi), (lo0, hi0), _ in rows:
         inside = (dense >= lo) & (dense <= hi)
         bad = np.any(lmi_residual(Ms[inside], beta, sc.D_left, sc.D_right, sc.G) > 0.0)
         wrong += bool(bad) and (lo < lo0 * (1 - 1e-6) or hi > hi0 * (1 + 1e-6))
