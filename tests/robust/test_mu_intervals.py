@@ -488,3 +488,16 @@ def test_reduced_hamiltonian_test_without_its_margin_is_caught(monkeypatch):
         bad = np.any(lmi_residual(Ms[inside], beta, sc.D_left, sc.D_right, sc.G) > 0.0)
         wrong += bool(bad) and (lo < lo0 * (1 - 1e-6) or hi > hi0 * (1 + 1e-6))
     assert wrong
+
+
+def test_a_narrow_gap_gets_its_middle_only():
+    """``_new_points``: a gap narrower than NARROW_GAP (relative) is solved at its middle only;
+    a wider one at both edges and in between; the infinite gap at its start and beyond."""
+    from oos_drake.robust.mu_intervals import NARROW_GAP, _new_points
+
+    narrow = (2.0, 2.0 * (1 + 0.5 * NARROW_GAP))
+    wide = (3.0, 3.0 * (1 + 4 * NARROW_GAP))
+    pts = _new_points([narrow, wide, (10.0, np.inf)], np.inf, [])
+    np.testing.assert_allclose(
+        pts, [0.5 * sum(narrow), wide[0], 0.5 * sum(wide), wide[1], 10.0, 20.0, 100.0]
+    )
