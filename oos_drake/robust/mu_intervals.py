@@ -806,17 +806,22 @@ def _gaps(intervals: np.ndarray, end: float) -> list:
 
 #: A gap ``(a, b)`` with ``b <= (1 + NARROW_GAP) a`` gets its middle solved only, not its edges
 #: too (the intervals of the paper's covers near their peak are about 1 % wide: one point
-#: closes such a gap; if it does not, the next round adds points in what is left).
+#: closes such a gap); if its middle was tried already, its edges and middle as any gap's.
 NARROW_GAP = 0.005
 
 
 def _new_points(gaps, end, known):
     """Frequencies to solve in the gaps: both edges and an interior point (the middle only of
-    a gap narrower than :data:`NARROW_GAP`)."""
+    a gap narrower than :data:`NARROW_GAP` whose middle was not tried yet)."""
+    known = np.asarray(known, dtype=float)
+
+    def tried(w):
+        return known.size and np.min(np.abs(w - known)) <= 1e-12 * max(w, 1e-300)
+
     pts = []
     for a, b in gaps:
-        if a > 0 and np.isfinite(b) and b <= (1.0 + NARROW_GAP) * a:
-            pts.append(0.5 * (a + b))
+        if a > 0 and np.isfinite(b) and b <= (1.0 + NARROW_GAP) * a and not tried(0.5 * (a + b)):
+            pts.append(0.5 * (a + b))  # its edges too once the middle was tried
             continue
         pts.append(a)
         if np.isfinite(b):
@@ -825,7 +830,6 @@ def _new_points(gaps, end, known):
         else:
             pts.extend([max(2.0 * a, 1e-3), max(10.0 * a, 1e-2)])
     pts = np.unique(np.clip(np.array(pts, dtype=float), 0.0, end if np.isfinite(end) else None))
-    known = np.asarray(known, dtype=float)
     if known.size:
         dist = np.min(np.abs(pts[:, None] - known[None, :]), axis=1)
         pts = pts[dist > 1e-12 * np.maximum(pts, 1e-300)]

@@ -492,7 +492,9 @@ def test_reduced_hamiltonian_test_without_its_margin_is_caught(monkeypatch):
 
 def test_a_narrow_gap_gets_its_middle_only():
     """``_new_points``: a gap narrower than NARROW_GAP (relative) is solved at its middle only;
-    a wider one at both edges and in between; the infinite gap at its start and beyond."""
+    a wider one at both edges and in between; the infinite gap at its start and beyond; a
+    narrow gap whose middle was tried (and left it open) at its edges, as any gap (else the
+    cover would stop there: ``tests/robust/test_robstab.py``'s sweep did)."""
     from oos_drake.robust.mu_intervals import NARROW_GAP, _new_points
 
     narrow = (2.0, 2.0 * (1 + 0.5 * NARROW_GAP))
@@ -501,3 +503,6 @@ def test_a_narrow_gap_gets_its_middle_only():
     np.testing.assert_allclose(
         pts, [0.5 * sum(narrow), wide[0], 0.5 * sum(wide), wide[1], 10.0, 20.0, 100.0]
     )
+    # its middle tried already (a round that did not close it): its edges and middle again
+    again = _new_points([narrow], np.inf, [0.5 * sum(narrow)])
+    np.testing.assert_allclose(again, [narrow[0], narrow[1]])
