@@ -30,6 +30,13 @@ one run per seed), and per subset the guaranteed levels and certified lower boun
 the inputs and their relative spread (round-off reproducibility; with ``--before`` for both
 solvers).
 
+``--baseline REV``: the grid-only run and the guarantee of each ``tight`` with ``oos_drake``
+of this checkout and of the git revision ``REV`` (``git archive``, as
+``benchmarks/bench_mussv.py``), each in a fresh process (``--repeat`` pairs, alternating which
+goes first; the shared machine's load changes between them), and per checkout the ratio of
+the guarantee's CPU to its own grid-only CPU (the median over the repeats), the guaranteed
+level and the certified lower bound of every subset. Nothing else is run then.
+
 Printed: CPU of each run and its ratio to the grid-only run, the guarantee's own CPU (the
 difference: the grid and the spike resolution are the same computation in every run), and
 per subset the certified lower bound, the largest grid upper bound, the starting level, the
@@ -71,7 +78,17 @@ def main() -> None:
         help="comma-separated seeds: the guarantee again with the LFR matrix times "
         "(1 + 1e-15 R), and the spread of the guaranteed levels",
     )
+    parser.add_argument(
+        "--baseline",
+        default="",
+        help="git revision: ratios and levels of this checkout and of REV, fresh processes",
+    )
+    parser.add_argument("--repeat", type=int, default=1, help="pairs of runs with --baseline")
+    parser.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.baseline:
+        compare(args)
+        return
 
     from oos_drake.analysis.controller import scenario_controller
     from oos_drake.analysis.models import mission_closed_loop, mission_times
@@ -130,6 +147,21 @@ def main() -> None:
         return out, time.process_time() - clock
 
     _, base = run(False)
+    if args.json:  # one process of --baseline: CPU and levels as one JSON line
+        import json
+
+        out = {"grid": base, "runs": {}}
+        for tight in (float(t) for t in args.tight.split(",")):
+            study, cpu = run(True, tight)
+            out["runs"][str(tight)] = {
+                "cpu": cpu,
+                "levels": {
+                    name: [g.mu_upper, study.certificates[name].mu_lower]
+                    for name, g in study.guarantees.items()
+                },
+            }
+        print(json.dumps(out))
+        return
     print(
         f"{times.size} mission configurations, {omega.size} frequencies, "
         f"target gap {options.tighten.target_gap}; grid only: CPU {base:.1f} s"
@@ -205,6 +237,55 @@ def main() -> None:
                     f"{up.max() / up.min() - 1:.2e}); lower {' '.join(f'{v:.9g}' for v in lo)} "
                     f"(spread {lo.max() / lo.min() - 1:.2e})"
                 )
+
+
+def compare(args) -> None:
+    """``--baseline``: this checkout and ``args.baseline`` in fresh processes, alternating."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from bench_mussv import baseline_checkout
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    paths = {"this checkout": root, f"baseline {args.baseline}": baseline_checkout(args.baseline)}
+    cmd = [sys.executable, os.path.abspath(__file__), "--json"]
+    cmd += ["--configurations", str(args.configurations), "--tight", args.tight]
+    cmd += ["--subsets", args.subsets]
+    cmd += ["--controller", args.controller] if args.controller else []
+    results = {name: [] for name in paths}
+    for k in range(max(args.repeat, 1)):
+        for name in list(paths)[:: 1 if k % 2 else -1]:  # the baseline first, then alternating
+            env = dict(os.environ, PYTHONPATH=paths[name])
+            res = subprocess.run(cmd, env=env, capture_output=True, text=True)
+            if res.returncode != 0:
+                raise RuntimeError(f"{name} failed:\n{res.stderr[-3000:]}")
+            results[name].append(json.loads(res.stdout.strip().splitlines()[-1]))
+    print(
+        f"{args.configurations} mission configurations, controller {args.controller or 'baseline'};"
+        f" {max(args.repeat, 1)} run(s) per checkout, CPU seconds, one process each"
+    )
+    for tight in args.tight.split(","):
+        key = str(float(tight))
+        print(f"tight {tight}:")
+        for name, runs in results.items():
+            grid = [r["grid"] for r in runs]
+            cpu = [r["runs"][key]["cpu"] for r in runs]
+            ratio = float(np.median([c / g for c, g in zip(cpu, grid, strict=True)]))
+            print(
+                f"  {name:28s} grid only {np.median(grid):6.1f} s, guaranteed "
+                f"{np.median(cpu):6.1f} s: ratio {ratio:.2f} (runs: "
+                f"{', '.join(f'{c / g:.2f}' for c, g in zip(cpu, grid, strict=True))})"
+            )
+        print(f"    {'subset':15s} " + " ".join(f"{n[:22]:>34s}" for n in results))
+        print(f"    {'':15s} " + " ".join(f"{'guaranteed  lower  gap [%]':>34s}" for _ in results))
+        for sub in results["this checkout"][0]["runs"][key]["levels"]:
+            cells = []
+            for runs in results.values():
+                up, lo = runs[0]["runs"][key]["levels"][sub]
+                cells.append(f"{up:>12.6g} {lo:>10.6g} {100 * (up - lo) / lo:>9.2f}")
+            print(f"    {sub:15s} " + " ".join(f"{c:>34s}" for c in cells))
 
 
 if __name__ == "__main__":
