@@ -3,6 +3,7 @@
 import os
 import subprocess
 import sys
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -49,6 +50,29 @@ def quick_run(tmp_path_factory):
     command = [sys.executable, "-m", "oos_drake.app.main", "run", "--out", str(out), "--quick"]
     result = subprocess.run(command, capture_output=True, text=True, timeout=3000)
     return SimpleNamespace(out=out, command=command, result=result)
+
+
+@pytest.fixture(scope="session")
+def default_synthesis(tmp_path_factory):
+    """``make run``'s controller stage on the paper (``oos synth``, default options: 200
+    configurations), shared by the slow tests that read it (one such synthesis per session: CI
+    time is tight).
+
+    With ``OOS_HEADLINE_OUT=DIR`` (an existing ``make run`` output) its ``DIR/controller``.
+
+    Returns
+    -------
+    pathlib.Path
+        The folder holding ``controller.json``, ``closed_loop.npz``, ``models.parquet``, ...
+    """
+    from oos_drake.app.main import main
+
+    existing = os.environ.get("OOS_HEADLINE_OUT")
+    if existing:
+        return Path(existing) / "controller"
+    out = tmp_path_factory.mktemp("default-synthesis") / "controller"
+    assert main(["synth", "--out", str(out)]) == 0
+    return out
 
 
 # Property tests draw new examples on every developer run; CI replays a fixed set (derandomized)

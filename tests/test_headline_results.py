@@ -47,8 +47,9 @@ PAPER = load_scenario("paper")
 
 
 @pytest.fixture(scope="module")
-def default_run(tmp_path_factory):
-    """``make run``'s controller and analysis stages, with their default options.
+def default_run(default_synthesis, tmp_path_factory):
+    """``make run``'s controller and analysis stages, with their default options: the
+    session's default synthesis (``tests/conftest.py``), analysed here.
 
     With ``OOS_HEADLINE_OUT=DIR`` the checks run on an existing ``make run`` output instead
     (``DIR/controller``, ``DIR/analysis``): ``OOS_HEADLINE_OUT=out make test-slow``.
@@ -57,7 +58,7 @@ def default_run(tmp_path_factory):
     if existing:
         return Path(existing)
     out = tmp_path_factory.mktemp("headline")
-    assert main(["synth", "--out", str(out / "controller")]) == 0
+    (out / "controller").symlink_to(default_synthesis, target_is_directory=True)
     controller = out / "controller" / "controller.json"
     assert main(["analyze", "--controller", str(controller), "--out", str(out / "analysis")]) == 0
     return out

@@ -18,7 +18,12 @@ import pytest
 pytest.importorskip("pydrake")
 
 from oos_drake.app.main import main  # noqa: E402
-from oos_drake.app.synth import baseline_for, make_plants  # noqa: E402
+from oos_drake.app.synth import (  # noqa: E402
+    ControllerOptions,
+    baseline_for,
+    compute_controller,
+    make_plants,
+)
 from oos_drake.scenario.data import load_scenario  # noqa: E402
 
 PAPER = load_scenario("paper")
@@ -49,24 +54,6 @@ def compare_sources(configurations, options):
         plants[kind] = make_plants(kind, configurations, PAPER)
         results[kind] = synthesize(plants[kind], baseline_for(plants[kind]), options=options)
     return plants, results
-
-
-def check_same_controller(plants, results, gamma_rtol, gain_tol):
-    lfr, drake = results["lfr"], results["drake"]
-    np.testing.assert_allclose(drake.K_start, lfr.K_start, rtol=1e-9)
-    np.testing.assert_allclose(drake.gamma_start, lfr.gamma_start, rtol=1e-8)
-    assert abs(drake.gamma - lfr.gamma) <= gamma_rtol * lfr.gamma, (lfr.gamma, drake.gamma)
-    # each gain on the other source's plants (nominal configurations): identical closed loops
-    N = plants["lfr"].size
-    for K in (lfr.K, drake.K):
-        per_source = [
-            gamma_over(
-                p, ModelSet(np.arange(N), np.broadcast_to(p.nominal_values, (N, 8))), K
-            ).gamma
-            for p in plants.values()
-        ]
-        np.testing.assert_allclose(per_source[1], per_source[0], rtol=1e-6)
-    assert gain_difference(lfr.K, drake.K) < gain_tol
 
 
 def test_the_optimizer_takes_the_same_steps_on_both_sources():
@@ -114,28 +101,47 @@ def test_worst_case_search_runs_on_perturbed_drake_plants():
     )
 
 
+def _nominal(plants):
+    N = plants.size
+    return ModelSet(np.arange(N), np.broadcast_to(plants.nominal_values, (N, 8)))
+
+
 @pytest.mark.slow
-def test_full_mission_lfr_and_drake_give_the_same_controller():
-    # the CLI's default options (2 restarts, up to 4 worst-case rounds); measured: gamma
-    # 0.353987 (lfr) vs 0.353999 (drake), gains 12.9 % of their block scale apart, and every gain
-    # on the segment between them within 1 % of gamma: one flat optimal valley. (With 1 restart:
-    # 0.35399 vs 0.35886, 1.4 % apart -- the optimizer's own spread, not the plant source.)
-    options = SynthesisOptions()
-    plants, results = compare_sources(200, options)
-    assert results["drake"].gamma < 1.0
-    lfr, drake = results["lfr"], results["drake"]
+def test_full_mission_lfr_and_drake_give_the_same_controller(default_synthesis):
+    # `oos synth` and `oos synth --plant drake`, default options (200 configurations, 2
+    # restarts, up to 4 worst-case rounds); the LFR one is the session's default synthesis
+    # (tests/conftest.py), shared with the headline checks. Measured (synthesize() directly):
+    # gamma 0.353987 (lfr) vs 0.353999 (drake), gains 12.9 % of their block scale apart, and
+    # every gain on the segment between them within 1 % of gamma: one flat optimal valley.
+    # (With 1 restart: 0.35399 vs 0.35886, 1.4 % apart -- the optimizer's own spread.)
+    record = json.loads((default_synthesis / "controller.json").read_text())
+    gains = record["controller"]
+    K_lfr = np.hstack([gains["K_p"]["value"], gains["K_d"]["value"]])
+    gamma_lfr = record["gamma"]
+    drake = compute_controller(PAPER, ControllerOptions(plant="drake"))
+    K_drake, gamma_drake = drake.result.K, drake.result.gamma
+    plants = {"lfr": make_plants("lfr", 200, PAPER), "drake": drake.plants}
     print(
-        f"gamma lfr {lfr.gamma:.6g} drake {drake.gamma:.6g}; gain difference "
-        f"{gain_difference(lfr.K, drake.K):.3g} of the block scale; wall {lfr.wall_time_s:.0f} s, "
+        f"gamma lfr {gamma_lfr:.6g} drake {gamma_drake:.6g}; gain difference "
+        f"{gain_difference(K_lfr, K_drake):.3g} of the block scale; drake wall "
         f"{drake.wall_time_s:.0f} s"
     )
-    check_same_controller(plants, results, gamma_rtol=0.01, gain_tol=0.3)
-    N = plants["lfr"].size
-    nominal = ModelSet(np.arange(N), np.broadcast_to(plants["lfr"].nominal_values, (N, 8)))
+    assert gamma_drake < 1.0
+    # the same start: the baseline tuned on either array's configuration nearest the docking
+    K0_lfr = baseline_for(plants["lfr"], PAPER.mission.first_docking_time)
+    np.testing.assert_allclose(drake.K0, K0_lfr, rtol=1e-9)
+    # the same gamma within the optimizer's own reproducibility (perturbed starts: 1 %)
+    assert abs(gamma_drake - gamma_lfr) <= 0.01 * gamma_lfr, (gamma_lfr, gamma_drake)
+    # each gain (and the start) on the other source's plants: identical closed loops
+    for K in (K0_lfr, K_lfr, K_drake):
+        per_source = [gamma_over(p, _nominal(p), K).gamma for p in plants.values()]
+        np.testing.assert_allclose(per_source[1], per_source[0], rtol=1e-6)
+    assert gain_difference(K_lfr, K_drake) < 0.3
+    # one flat valley: every gain on the segment between them within 1 % of gamma
     for t in (0.25, 0.5, 0.75):
-        K = (1 - t) * lfr.K + t * drake.K
-        gamma = gamma_over(plants["lfr"], nominal, K).gamma.max()
-        assert gamma <= 1.01 * max(lfr.gamma, drake.gamma)
+        K = (1 - t) * K_lfr + t * K_drake
+        gamma = gamma_over(plants["lfr"], _nominal(plants["lfr"]), K).gamma.max()
+        assert gamma <= 1.01 * max(gamma_lfr, gamma_drake)
 
 
 def test_synth_with_drake_plants_end_to_end(tmp_path):
