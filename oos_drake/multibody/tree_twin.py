@@ -73,6 +73,7 @@ __all__ = [
     "mating_at",
     "mating_segments",
     "open_loop_twin",
+    "phase_mating",
     "run_mission_twin",
     "run_tree_twin",
     "tree_with_values",
@@ -158,18 +159,32 @@ def mating_at(timeline, time: float) -> tuple[str, str] | None:
     return timeline.captured_at(time) if docked is None else tuple(docked.connection)
 
 
-def mating_segments(timeline, start: float, end: float) -> tuple[tuple[float, float, object], ...]:
-    """``[start, end]`` [s] cut where the mated ports change: ``(t0, t1, mating)`` in time
-    order, ``mating`` as :func:`mating_at` over ``(t0, t1]``."""
+def phase_mating(timeline, time: float):
+    """The mating at mission ``time`` [s] as the mission twin flies it: the phase's
+    :class:`~oos_drake.scenario.tree_mission.Docking` in a docked phase (the target on its
+    spring-damper), else :func:`mating_at` (a capture's ``(port, target port)``, welded, or
+    None); at a boundary: the phase ending there."""
+    docked = timeline.docked_at(time)
+    return timeline.captured_at(time) if docked is None else docked
+
+
+def mating_segments(
+    timeline, start: float, end: float, *, springs: bool = False
+) -> tuple[tuple[float, float, object], ...]:
+    """``[start, end]`` [s] cut where the mating changes: ``(t0, t1, mating)`` in time order,
+    ``mating`` as :func:`mating_at` over ``(t0, t1]`` (``springs``: as :func:`phase_mating`,
+    a docked phase's spring-damper; a cut also between two docked phases with their own
+    spring-dampers at the same ports)."""
+    at = phase_mating if springs else mating_at
     cuts = [float(start)]
     for b in np.asarray(timeline.boundaries, dtype=float)[1:-1]:
-        if start < b < end and mating_at(timeline, b) != mating_at(
+        if start < b < end and at(timeline, b) != at(
             timeline, min(b + 1e-6 * max(timeline.duration, 1.0), end)
         ):
             cuts.append(float(b))
     cuts.append(float(end))
     pairs = zip(cuts[:-1], cuts[1:], strict=True)
-    return tuple((t0, t1, mating_at(timeline, 0.5 * (t0 + t1))) for t0, t1 in pairs)
+    return tuple((t0, t1, at(timeline, 0.5 * (t0 + t1))) for t0, t1 in pairs)
 
 
 @dataclass(frozen=True, eq=False)
@@ -202,6 +217,11 @@ class TreeTwin:
         a run).
     bushings : Mapping[str, LinearBushingRollPitchYaw]
         The docked target's spring-dampers by label (empty without ``docking``).
+    docked_target : tuple or None
+        ``(floating joint, port frame, target port frame)`` of the docked target (its
+        floating joint relative to the controlled body, the first spring-damper's two port
+        frames), or None without ``docking``: where :func:`run_tree_twin` places the target
+        when a run does not carry its state.
     """
 
     diagram: Diagram
@@ -217,6 +237,7 @@ class TreeTwin:
     mating: tuple[str, str] | None = None
     held_joints: Mapping[object, float] = dataclasses.field(default_factory=dict)
     bushings: Mapping[str, object] = dataclasses.field(default_factory=dict)
+    docked_target: tuple | None = None
 
 
 def build_tree_twin(
@@ -271,7 +292,9 @@ def build_tree_twin(
     """
     chosen = tree.joint_angles(angles)
     builder = DiagramBuilder()
-    plant, hub_joint, held, bushings = _add_twin_plant(builder, tree, mating, docking, chosen)
+    plant, hub_joint, held, bushings, docked = _add_twin_plant(
+        builder, tree, mating, docking, chosen
+    )
     fsw = builder.AddNamedSystem(
         "flight_software",
         FlightSoftware(
@@ -316,6 +339,7 @@ def build_tree_twin(
         mating=None if mating is None else tuple(mating),
         held_joints=held,
         bushings=MappingProxyType(bushings),
+        docked_target=docked,
     )
 
 
@@ -327,12 +351,13 @@ def _add_twin_plant(builder, tree: SpacecraftTree, mating, docking=(), angles=No
     bushing per spring-damper, at rest where the ports coincide at the tree's joint ``angles``
     [rad] (:func:`~oos_drake.multibody.tree_plant.add_docked_target`). The target's revolute
     joints are returned with their file angles (held locked). Returns
-    ``(plant, hub_joint, held, bushings)``."""
+    ``(plant, hub_joint, held, bushings, docked)``, ``docked`` the docked target's
+    ``(floating joint, port frame, target port frame)`` or None."""
     from oos_drake.multibody.tree_plant import add_docked_target, docked_target_pose
 
     plant = builder.AddNamedSystem("plant", MultibodyPlant(time_step=0.0))
     plant.mutable_gravity_field().set_gravity_vector(np.zeros(3))
-    held, bushings = {}, {}
+    held, bushings, docked = {}, {}, None
     docking = tuple(docking)
     if mating is not None and docking:
         raise ValueError("tree twin: a target is either welded (mating) or docked, not both")
@@ -367,6 +392,11 @@ def _add_twin_plant(builder, tree: SpacecraftTree, mating, docking=(), angles=No
                 bushings = add_docked_target(
                     plant, tree, top, target, target_top, X_W_target, docking
                 )
+                docked = (
+                    plant.GetJointByName(f"{target.root}_floating", target_top),
+                    plant.GetFrameByName(docking[0].port, top),
+                    plant.GetFrameByName(docking[0].target_port, target_top),
+                )
             held = {
                 plant.GetJointByName(joint_name(body)): float(angle)
                 for body, angle in target.operating_angles().items()
@@ -375,12 +405,19 @@ def _add_twin_plant(builder, tree: SpacecraftTree, mating, docking=(), angles=No
         plant, plant.GetBodyByName(tree.root, top), RigidTransform(), name=f"{tree.root}_floating"
     )
     plant.Finalize()
-    return plant, hub_joint, held, bushings
+    return plant, hub_joint, held, bushings, docked
 
 
-def open_loop_twin(tree: SpacecraftTree, mating: tuple[str, str] | None = None):
+def open_loop_twin(
+    tree: SpacecraftTree,
+    mating: tuple[str, str] | None = None,
+    *,
+    docking: tuple = (),
+    angles: Mapping[str, float] | None = None,
+):
     """The twin's plant (built as :func:`build_tree_twin` builds it, target welded at
-    ``mating``) with the wrench input and hub output of
+    ``mating`` or held by the spring-dampers ``docking`` at rest at the joint ``angles``
+    [rad]) with the wrench input and hub output of
     :func:`~oos_drake.multibody.tree_plant.linearize_tree` instead of the flight software: the
     open-loop ``[F; T]_G -> [a; wdot]_G`` of the twin, for checks against the TITOP LFR.
 
@@ -388,9 +425,10 @@ def open_loop_twin(tree: SpacecraftTree, mating: tuple[str, str] | None = None):
     -------
     TreeDiagram
         Handles for :func:`~oos_drake.multibody.tree_plant.linearize_tree`: its ``tree`` is
-        ``tree``, or with a ``mating`` :func:`~oos_drake.scenario.tree.captured_tree` (the
-        welded target's revolute joints among the handles' joints, so that
-        ``linearize_tree`` locks them too: at their file angles unless given).
+        ``tree``, or with a ``mating`` :func:`~oos_drake.scenario.tree.captured_tree`, with a
+        ``docking`` :func:`~oos_drake.scenario.tree.docked_tree` (the mated target's revolute
+        joints among the handles' joints, so that ``linearize_tree`` locks them too: at their
+        file angles unless given).
 
     Raises
     ------
@@ -399,13 +437,19 @@ def open_loop_twin(tree: SpacecraftTree, mating: tuple[str, str] | None = None):
     """
     from oos_drake.multibody.linearization import add_hub_io
     from oos_drake.multibody.tree_plant import TreeDiagram
-    from oos_drake.scenario.tree import captured_tree
+    from oos_drake.scenario.tree import captured_tree, docked_tree
 
     builder = DiagramBuilder()
-    plant, hub_joint, _, _ = _add_twin_plant(builder, tree, mating)
+    docking = tuple(docking)
+    chosen = tree.joint_angles(angles)
+    plant, hub_joint, _, _, _ = _add_twin_plant(builder, tree, mating, docking, chosen)
     ports = add_hub_io(builder, plant, hub_joint)
     diagram = builder.Build()
-    model_tree = tree if mating is None else captured_tree(tree, *mating)
+    model_tree = tree
+    if mating is not None:
+        model_tree = captured_tree(tree, *mating)
+    elif docking:
+        model_tree = docked_tree(tree, docking[0], docking[1:])
     revolute = {name: plant.GetJointByName(joint_name(name)) for name in model_tree.revolute_bodies}
     return TreeDiagram(
         diagram=diagram,
@@ -572,6 +616,22 @@ def _restore_state(twin: TreeTwin, context, state: TwinState) -> None:
     fsw_context.get_mutable_discrete_state(0).SetFromVector(state.flight_software)
 
 
+def _place_docked_target(twin: TreeTwin, plant_context) -> None:
+    """Put the docked target's port frame Q on the tree's port frame P and move it rigidly
+    with P: the target's floating joint (parent frame F on the controlled body) at
+    ``X_FM = X_FP X_QM`` with the spatial velocity of P in F shifted to M's origin."""
+    joint, port, target_port = twin.docked_target
+    F = joint.frame_on_parent()
+    X_FP = port.CalcPose(plant_context, F)
+    X_MQ = target_port.GetFixedPoseInBodyFrame()
+    X_FM = X_FP @ X_MQ.inverse()
+    joint.SetPose(plant_context, X_FM)
+    V_FP_F = port.CalcSpatialVelocity(plant_context, F, F)
+    V_FM_F = V_FP_F.Shift(X_FM.translation() - X_FP.translation())
+    joint.set_angular_velocity(plant_context, V_FM_F.rotational())
+    joint.set_translational_velocity(plant_context, V_FM_F.translational())
+
+
 def run_tree_twin(
     twin: TreeTwin,
     duration: float,
@@ -587,6 +647,7 @@ def run_tree_twin(
     divergence_limit: float = 0.5,
     check_interval: float = 1.0,
     initial_state: TwinState | None = None,
+    spring_dampers: Mapping[str, tuple] | None = None,
 ) -> TreeRun:
     """Integrate the twin for ``duration`` [s] from mission time ``start`` [s].
 
@@ -625,6 +686,19 @@ def run_tree_twin(
     initial_state : TwinState, optional
         Start from this state (a previous run's ``final_state``, at ``start``) instead of the
         initial errors; the motion-driven joints keep their state from it.
+    spring_dampers : Mapping[str, tuple], optional
+        ``{label: (k_shear, k_tors, d_shear, d_tors)}`` [N/m, N m/rad, N s/m, N m s/rad]:
+        the coefficients of the twin's bushings of those labels in this run (Context
+        parameters, as the paper's mission twin:
+        :func:`~oos_drake.multibody.scenario_plant.set_bushing`); labels the twin does not
+        have are ignored (a segment without them); default: the coefficients it was built with.
+
+    Notes
+    -----
+    A docked target (``docking`` at the build) whose state the run does not carry (no
+    ``initial_state``, or one from a twin where the target was welded or free) starts with
+    its port frame on the tree's port and moving with it (rigidly, at that instant): no
+    initial spring load, the mission model's instantaneous switch.
     """
     from pydrake.math import RollPitchYaw
 
@@ -663,6 +737,19 @@ def run_tree_twin(
             state[slices[name]] = np.linalg.solve(np.eye(block.nstates) - block.A, block.B @ u)
     else:
         _restore_state(twin, context, initial_state)
+    if spring_dampers:
+        from oos_drake.multibody.scenario_plant import set_bushing
+
+        for label, bushing in twin.bushings.items():
+            if label in spring_dampers:
+                set_bushing(bushing, plant_context, tuple(float(x) for x in spring_dampers[label]))
+    if twin.docked_target is not None:
+        key = (
+            twin.plant.GetModelInstanceName(twin.docked_target[0].model_instance()),
+            twin.docked_target[0].name(),
+        )
+        if initial_state is None or key not in initial_state.joints:
+            _place_docked_target(twin, plant_context)
     simulator = Simulator(twin.diagram, context)
     ResetIntegratorFromFlags(simulator, "radau3" if driven else "runge_kutta3", max_step)
     integrator = simulator.get_mutable_integrator()
@@ -712,9 +799,11 @@ def run_tree_twin(
     )
 
 
-def run_mission_twin(twin_for, timeline, duration: float, *, start: float = 0.0, **options):
+def run_mission_twin(
+    twin_for, timeline, duration: float, *, start: float = 0.0, springs: bool = False, **options
+):
     """Integrate a tree's twin along its mission for ``duration`` [s] from ``start`` [s],
-    switching the welded target where the mission's phases mate or release it.
+    switching the welded (or docked) target where the mission's phases mate or release it.
 
     The window is cut where the mated ports change (:func:`mating_segments`); each segment
     runs on ``twin_for(mating)`` (a motion-driven twin built with that ``mating``), started
@@ -725,11 +814,16 @@ def run_mission_twin(twin_for, timeline, duration: float, *, start: float = 0.0,
     Parameters
     ----------
     twin_for : callable
-        ``mating (tuple or None) -> TreeTwin``.
+        ``mating (tuple or None) -> TreeTwin``; with ``springs``, a docked phase's mating is
+        its :class:`~oos_drake.scenario.tree_mission.Docking` (:func:`phase_mating`: the
+        twin built with ``docking=``).
     timeline : Timeline
         The mission's timeline (its captures and dockings).
     duration, start : float
         Window [s].
+    springs : bool
+        Docked phases on their spring-dampers (:func:`phase_mating`); default: welded as
+        the mission model (:func:`mating_at`).
     **options
         Of :func:`run_tree_twin` (``initial_attitude``, ``noise_table``, ...), the same for
         every segment.
@@ -742,7 +836,9 @@ def run_mission_twin(twin_for, timeline, duration: float, *, start: float = 0.0,
     """
     start = float(start)
     parts, state = [], None
-    for t0, t1, mating in mating_segments(timeline, start, start + float(duration)):
+    for t0, t1, mating in mating_segments(
+        timeline, start, start + float(duration), springs=springs
+    ):
         run = run_tree_twin(twin_for(mating), t1 - t0, start=t0, initial_state=state, **options)
         parts.append((t0, run))
         state = run.final_state
