@@ -325,9 +325,14 @@ class TreeMissionSimulator:
         if mating not in self._twins:
             changed = {n: v for n, v in real.items() if v != nominal[n]}
             docked = isinstance(mating, Docking)
+            rest = None  # a docked target's joint zero: its rest pose at the phase's start
+            if docked:
+                index = next(i for i, d in enumerate(self.timeline.dockings) if d is mating)
+                rest = self.timeline.angles(self.timeline.boundaries[index])
             self._twins[mating] = build_tree_twin(
                 tree_with_values(self.tree, changed),
                 self.design,
+                rest,
                 log_rate=self.log_rate,
                 timeline=self.timeline,
                 joint_bandwidth=self.joint_pd[0],

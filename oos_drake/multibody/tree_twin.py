@@ -27,17 +27,20 @@ target is in neither). The twin of a docking study (``docking=``) holds the targ
 spring-dampers instead: its own floating joint relative to the controlled body, one
 ``LinearBushingRollPitchYaw`` per spring-damper, at rest where the ports coincide
 (:func:`~oos_drake.multibody.tree_plant.add_docked_target`, as
-:func:`~oos_drake.multibody.tree_plant.build_docked_diagram`). :func:`open_loop_twin` is the
-same plant with the wrench input and hub output of the validation, for checks against the
-TITOP LFR
-(``tests/tree/test_tree_mated_twin.py``).
+:func:`~oos_drake.multibody.tree_plant.build_docked_diagram`); the mission's twin of a docked
+phase is that twin too (:func:`phase_mating`: the campaign flies a docked phase on its
+spring-damper, the run's coefficients set in the bushings' Context parameters as the paper's
+mission twin does). :func:`open_loop_twin` is the same plant with the wrench input and hub
+output of the validation, for checks against the TITOP LFR
+(``tests/tree/test_tree_mated_twin.py``, ``tests/tree/test_tree_docked_mission.py``).
 
 :func:`run_tree_twin` integrates one run from a small attitude error (or driven by a noise
 table, or from the :class:`TwinState` a previous run ended in) and reports whether the attitude
 left the model's domain. :func:`run_mission_twin` runs a window that crosses a capture, a
 docking or a release in segments (:func:`mating_segments`), each on the twin of its phase, the
 chaser's state and the flight software's carried over: the mission model's instantaneous switch
-(the target welded at rest relative to its port, no contact impulse).
+(the target welded at rest relative to its port, or on its spring-damper with its port on the
+tree's and moving with it: no spring load; no contact impulse).
 """
 
 from __future__ import annotations
@@ -262,7 +265,9 @@ def build_tree_twin(
     design : FlightSoftwareDesign
         The flight software (rate, components, controller, torque bound).
     angles : Mapping[str, float], optional
-        Revolute joint angles [rad] by body, frozen for the whole run (default: the file's).
+        Revolute joint angles [rad] by body, frozen for the whole run (default: the file's);
+        with ``timeline``, only where a docked target's floating joint has its zero (the rest
+        pose at those angles).
     log_rate : float
         Logging rate [Hz] (should divide the flight-software rate).
     perturbation_states : int
@@ -271,8 +276,8 @@ def build_tree_twin(
     timeline : Timeline, optional
         The mission's joint angles (:class:`~oos_drake.scenario.tree_mission.Timeline`): the
         revolute joints are then motion-driven along it (a stiff joint-space PD on each joint's
-        inertia, built from C++ primitives, as the paper's mission twin), and ``angles`` is
-        ignored. Default: frozen at ``angles``.
+        inertia at the file's angles, built from C++ primitives, as the paper's mission twin).
+        Default: frozen at ``angles``.
     joint_bandwidth : float
         Joint PD bandwidth [rad/s] (motion-driven joints).
     joint_damping_ratio : float
@@ -317,7 +322,8 @@ def build_tree_twin(
     else:
         trajectory = joint_trajectory(timeline, tuple(revolute))
         forces = _add_joint_drives(
-            builder, plant, revolute, trajectory, joint_bandwidth, joint_damping_ratio, chosen,
+            builder, plant, revolute, trajectory, joint_bandwidth, joint_damping_ratio,
+            tree.joint_angles(None),
         )  # fmt: skip
         builder.Connect(fsw.GetOutputPort("generalized_force"), forces.get_input_port(2))
     period = 1.0 / float(log_rate)
