@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 import tomli_w
 from test_tree_docking import docking_document
+from tree_documents import rotation
 
 pytestmark = pytest.mark.drake
 pytest.importorskip("pydrake")
@@ -37,6 +38,7 @@ from oos_drake.multibody.cross_check import VALIDATION_OMEGA, compare_systems  #
 from oos_drake.multibody.flight_software import NOISE_CHANNELS  # noqa: E402
 from oos_drake.multibody.tree_plant import linearize_tree  # noqa: E402
 from oos_drake.multibody.tree_twin import (  # noqa: E402
+    _restore_state,
     build_tree_twin,
     mating_segments,
     open_loop_twin,
@@ -249,3 +251,93 @@ def test_servicer_window_across_the_berthing_runs(tmp_path):
         peaks.append(out.metrics["ape"])
     assert any(isinstance(m, Docking) for m in simulator._twins)
     assert all(p < 0.01 for p in peaks)
+
+
+def _boom_docking_document() -> dict:
+    """The docking tree with its docking port on a rigid boom on a skewed revolute joint of
+    the hub, the boom turning through the docked phase (0.9 -> 1.2 rad; 0.6 at the start)."""
+    document = docking_document()
+    axis = (np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])).tolist()
+    boom = {
+        "name": "BOOM",
+        "kind": "rigid",
+        "parent": "HUB",
+        "joint": {
+            "type": "revolute",
+            "p_parent_joint": [0.4, -0.2, -0.9],
+            "R_parent_joint": rotation([1.0, 1.0, 1.0], 0.7),
+            "axis": axis,
+            "angle": 0.6,
+        },
+        "mass": 12.0,
+        "inertia": [[3.0, 0.1, 0.0], [0.1, 2.5, -0.05], [0.0, -0.05, 1.2]],
+        "p_B_G": [0.1, 0.05, 0.6],
+    }
+    document["bodies"].insert(2, boom)
+    document["ports"]["DOCK"]["body"] = "BOOM"
+    document["ports"]["DOCK"]["p_B_D"] = [0.0, 0.2, 1.3]
+    phases = document["mission"]["phases"]
+    phases[0]["joints"]["BOOM"] = 0.9
+    phases[1]["joints"]["BOOM"] = 1.2
+    return document
+
+
+def test_a_target_docked_on_a_turning_boom(tmp_path):
+    """The docking port on a boom that turns through the docked phase: the mission twin's
+    plant at 450 s (boom and array moving) linearized by Drake vs the TITOP docking LFR
+    (<= 1e-6, every block in range), and a window across the docking: the target starts on
+    the port at 300 s (the boom's angle 0.9 rad there, not the file's 0.6) and follows the
+    turning boom on its spring-damper: port frames within 1e-6 m and 1e-6 rad 1 s after the
+    docking (Drake's kinematics of the carried state; measured ~4e-8), the boom turned."""
+    path = tmp_path / "boom_docking.toml"
+    path.write_text(tomli_w.dumps(_boom_docking_document()))
+    scenario = load_scenario(path)
+    time = 450.0
+    phase = scenario.timeline.phase_at(time)
+    model = scenario.docking_model(phase)
+    scheduled = {n: float(v[0]) for n, v in scenario.docking_values(phase, [time]).items()}
+    rng = np.random.default_rng(5)
+    drawn = {
+        n: float(rng.uniform(*b.range))
+        for n, b in model.uncertainty.items()
+        if b.quantity not in ("angle", "switch")
+    }
+    spring = scenario.timeline.docked_at(time)
+    coefficients = {k: drawn[f"{k}_DOCK"] for k in COEFFICIENTS}
+    angles = scenario.timeline.angles(time)
+    s = (time - 300.0) / 400.0  # the smooth interpolation's 3 s^2 - 2 s^3, written out
+    assert angles["BOOM"] == pytest.approx(0.9 + 0.3 * (3 * s**2 - 2 * s**3), abs=1e-12)
+    handles = open_loop_twin(
+        tree_with_values(
+            scenario.tree, {n: v for n, v in drawn.items() if not n.startswith(("k_", "d_"))}
+        ),
+        docking=(dataclasses.replace(spring, **coefficients),),
+        angles=angles,
+    )
+    titop = usubs(model, scheduled | drawn).nominal.to_ss()
+    result = compare_systems("boom", linearize_tree(handles, angles), titop, VALIDATION_OMEGA)
+    assert result.max_relative_error <= 1e-6, result
+
+    simulator = make_simulator(scenario=str(path))
+    values = {"phi0_y": 1e-3}
+    window = MissionWindow(295.0, 330.0)
+    out = simulator.run(RunCase(1, 3, values, window))
+    assert out.metrics["max_tracking_error"] < 1e-6
+    run = run_mission_twin(
+        lambda mating: simulator.twin({}, mating),
+        scenario.timeline,
+        6.0,
+        start=295.0,
+        springs=True,
+        initial_attitude=[0.0, 1e-3, 0.0],
+        max_step=simulator.max_step,
+    )
+    twin = simulator.twin({}, spring)
+    _, port, target_port = twin.docked_target
+    root = twin.diagram.CreateDefaultContext()
+    _restore_state(twin, root, run.final_state)
+    context = twin.plant.GetMyContextFromRoot(root)
+    X = target_port.CalcPose(context, port)
+    assert np.linalg.norm(X.translation()) < 1e-6
+    assert np.abs(X.rotation().ToRollPitchYaw().vector()).max() < 1e-6
+    assert twin.revolute_joints["BOOM"].get_angle(context) - 0.9 > 1e-6  # it turned
