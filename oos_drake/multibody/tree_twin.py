@@ -572,11 +572,16 @@ class TwinState:
     flight_software : ndarray
         The flight software's discrete state (filters, held torque, metrics, sample counter,
         dynamic perturbation).
+    docked : tuple or None
+        A docked target's ``(joint key, (port, target port), X_RM, V_RM_R)``: its pose and
+        spatial velocity relative to the controlled body's frame R (the joint's own zero is
+        its twin's rest pose, another twin's may differ), or None.
     """
 
     time: float
     joints: Mapping[tuple[str, str], tuple[np.ndarray, np.ndarray]]
     flight_software: np.ndarray
+    docked: tuple | None = None
 
 
 def _dof_joints(plant):
@@ -599,16 +604,36 @@ def _capture_state(twin: TreeTwin, context) -> TwinState:
         for key, j in _dof_joints(twin.plant)
     }
     fsw_context = twin.flight_software.GetMyContextFromRoot(context)
+    docked = None
+    if twin.docked_target is not None:
+        joint, port, target_port = twin.docked_target
+        R = joint.frame_on_parent().body().body_frame()
+        M = joint.frame_on_child()
+        docked = (
+            _docked_key(twin),
+            (port.name(), target_port.name()),
+            M.CalcPose(plant_context, R),
+            M.CalcSpatialVelocity(plant_context, R, R),
+        )
     return TwinState(
         float(context.get_time()),
         MappingProxyType(joints),
         np.array(fsw_context.get_discrete_state(0).get_value()),
+        docked,
     )
+
+
+def _docked_key(twin: TreeTwin) -> tuple[str, str]:
+    joint = twin.docked_target[0]
+    return (twin.plant.GetModelInstanceName(joint.model_instance()), joint.name())
 
 
 def _restore_state(twin: TreeTwin, context, state: TwinState) -> None:
     """Write ``state`` into ``context``: the joints found by key (others keep their default
-    state: a target welded anew has no degrees of freedom if rigid, its modes start at rest)."""
+    state: a target welded anew has no degrees of freedom if rigid, its modes start at rest).
+    A docked target: held at the same ports in ``state``, its pose and velocity relative to
+    the controlled body carried over (the spring-damper's deflection continues); else placed
+    on its port (:func:`_place_docked_target`)."""
     plant_context = twin.plant.GetMyMutableContextFromRoot(context)
     q, v = twin.plant.GetPositions(plant_context), twin.plant.GetVelocities(plant_context)
     for key, j in _dof_joints(twin.plant):
@@ -620,6 +645,19 @@ def _restore_state(twin: TreeTwin, context, state: TwinState) -> None:
     twin.plant.SetVelocities(plant_context, v)
     fsw_context = twin.flight_software.GetMyMutableContextFromRoot(context)
     fsw_context.get_mutable_discrete_state(0).SetFromVector(state.flight_software)
+    if twin.docked_target is None:
+        return
+    joint, port, target_port = twin.docked_target
+    carried = state.docked
+    if carried is None or carried[:2] != (_docked_key(twin), (port.name(), target_port.name())):
+        _place_docked_target(twin, plant_context)
+        return
+    X_RM, V_RM_R = carried[2:]
+    X_RF = joint.frame_on_parent().GetFixedPoseInBodyFrame()
+    joint.SetPose(plant_context, X_RF.inverse() @ X_RM)
+    R_FR = X_RF.rotation().inverse().matrix()  # F is fixed in R: M's velocity in F is in R's
+    joint.set_angular_velocity(plant_context, R_FR @ V_RM_R.rotational())
+    joint.set_translational_velocity(plant_context, R_FR @ V_RM_R.translational())
 
 
 def _place_docked_target(twin: TreeTwin, plant_context) -> None:
@@ -702,9 +740,11 @@ def run_tree_twin(
     Notes
     -----
     A docked target (``docking`` at the build) whose state the run does not carry (no
-    ``initial_state``, or one from a twin where the target was welded or free) starts with
-    its port frame on the tree's port and moving with it (rigidly, at that instant): no
-    initial spring load, the mission model's instantaneous switch.
+    ``initial_state``, or one where the target was welded, free or docked at other ports)
+    starts with its port frame on the tree's port and moving with it (rigidly, at that
+    instant): no initial spring load, the mission model's instantaneous switch. Docked at the
+    same ports in ``initial_state`` (another docked phase of the same spring-damper): its
+    pose and velocity relative to the controlled body carried over.
     """
     from pydrake.math import RollPitchYaw
 
@@ -749,13 +789,8 @@ def run_tree_twin(
         for label, bushing in twin.bushings.items():
             if label in spring_dampers:
                 set_bushing(bushing, plant_context, tuple(float(x) for x in spring_dampers[label]))
-    if twin.docked_target is not None:
-        key = (
-            twin.plant.GetModelInstanceName(twin.docked_target[0].model_instance()),
-            twin.docked_target[0].name(),
-        )
-        if initial_state is None or key not in initial_state.joints:
-            _place_docked_target(twin, plant_context)
+    if initial_state is None and twin.docked_target is not None:
+        _place_docked_target(twin, plant_context)
     simulator = Simulator(twin.diagram, context)
     ResetIntegratorFromFlags(simulator, "radau3" if driven else "runge_kutta3", max_step)
     integrator = simulator.get_mutable_integrator()
@@ -806,7 +841,14 @@ def run_tree_twin(
 
 
 def run_mission_twin(
-    twin_for, timeline, duration: float, *, start: float = 0.0, springs: bool = False, **options
+    twin_for,
+    timeline,
+    duration: float,
+    *,
+    start: float = 0.0,
+    springs: bool = False,
+    initial_state: TwinState | None = None,
+    **options,
 ):
     """Integrate a tree's twin along its mission for ``duration`` [s] from ``start`` [s],
     switching the welded (or docked) target where the mission's phases mate or release it.
@@ -830,6 +872,8 @@ def run_mission_twin(
     springs : bool
         Docked phases on their spring-dampers (:func:`phase_mating`); default: welded as
         the mission model (:func:`mating_at`).
+    initial_state : TwinState, optional
+        The first segment's start (a previous run's ``final_state`` at ``start``).
     **options
         Of :func:`run_tree_twin` (``initial_attitude``, ``noise_table``, ...), the same for
         every segment.
@@ -841,7 +885,7 @@ def run_mission_twin(
         joint error.
     """
     start = float(start)
-    parts, state = [], None
+    parts, state = [], initial_state
     for t0, t1, mating in mating_segments(
         timeline, start, start + float(duration), springs=springs
     ):

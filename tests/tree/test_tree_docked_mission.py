@@ -44,6 +44,7 @@ from oos_drake.multibody.tree_twin import (  # noqa: E402
     open_loop_twin,
     phase_mating,
     run_mission_twin,
+    run_tree_twin,
     tree_with_values,
 )
 from oos_drake.scenario.data import load_scenario  # noqa: E402
@@ -232,25 +233,24 @@ def test_campaign_runs_fly_the_dispersed_spring_damper(simulator, pair):
 def test_servicer_window_across_the_berthing_runs(tmp_path):
     """servicer_7dof (its tip waypoint replaced by fixed arm angles): 890-920 s crosses the
     berthing at 900 s (the capture at GRASP released, the 120 kg target on the DOCK
-    spring-damper); at the declared range's stiff and soft ends the run finishes (the
-    integrator does not fail), the arm tracks its trajectory, the docked twin was used."""
+    spring-damper); at the declared range's stiff end with the damping at its low end (the
+    stiffest, least damped docking: ~4 Hz against fixed steps of one 10 Hz period) the run
+    finishes (the integrator does not fail), the arm tracks its trajectory, the docked twin
+    was used."""
     from test_tree_mated_twin import _servicer_document
 
     path = tmp_path / "servicer_joints.toml"
     path.write_text(tomli_w.dumps(_servicer_document()))
     simulator = make_simulator(scenario=str(path))
     params = {p.name: p for p in simulator.parameters()}
-    low, high = params["k_shear_DOCK"].uncertainty
-    assert (low, high) == pytest.approx((2.5e4, 7.5e4))
-    peaks = []
-    for k, d in ((high, 250.0), (low, 750.0)):
-        values = {"phi0_y": 2e-3, "k_shear_DOCK": k, "k_tors_DOCK": k, "d_shear_DOCK": d}
-        out = simulator.run(RunCase(1, 5, values, MissionWindow(890.0, 920.0)))
-        assert out.metrics["max_tracking_error"] < 1e-6
-        assert len(out.timeseries) == 31
-        peaks.append(out.metrics["ape"])
+    assert params["k_shear_DOCK"].uncertainty == pytest.approx((2.5e4, 7.5e4))
+    assert params["d_shear_DOCK"].uncertainty == pytest.approx((250.0, 750.0))
+    values = {"phi0_y": 2e-3, "k_shear_DOCK": 7.5e4, "k_tors_DOCK": 7.5e4}
+    values |= {"d_shear_DOCK": 250.0, "d_tors_DOCK": 250.0}
+    out = simulator.run(RunCase(1, 5, values, MissionWindow(890.0, 920.0)))
+    assert out.metrics["max_tracking_error"] < 1e-6
+    assert len(out.timeseries) == 31 and out.metrics["ape"] < 0.01
     assert any(isinstance(m, Docking) for m in simulator._twins)
-    assert all(p < 0.01 for p in peaks)
 
 
 def _boom_docking_document() -> dict:
@@ -341,3 +341,42 @@ def test_a_target_docked_on_a_turning_boom(tmp_path):
     assert np.linalg.norm(X.translation()) < 1e-6
     assert np.abs(X.rotation().ToRollPitchYaw().vector()).max() < 1e-6
     assert twin.revolute_joints["BOOM"].get_angle(context) - 0.9 > 1e-6  # it turned
+
+
+def test_two_docked_phases_of_one_spring_damper_are_one_run(tmp_path):
+    """The boom tree across 700 s (soft_dock -> hold: the same ports, the same coefficients,
+    two twins whose target joints have their zeros at the boom's 0.9 and 1.2 rad): the run
+    in two segments, the target's pose and velocity relative to the hub carried from one
+    twin to the other, equals the run of soft_dock's twin in one piece (to the Newton
+    tolerance), and the target's joint positions differ between the two twins (the carry is
+    not a copy of the coordinates)."""
+    path = tmp_path / "boom_docking.toml"
+    path.write_text(tomli_w.dumps(_boom_docking_document()))
+    scenario = load_scenario(path)
+    simulator = make_simulator(scenario=str(path))
+    timeline = scenario.timeline
+    soft, hold = timeline.docked_at(450.0), timeline.docked_at(800.0)
+    assert soft is not hold and soft.connection == hold.connection
+    kwargs = {"initial_attitude": [0.0, 1e-3, 0.0], "max_step": simulator.max_step}
+    kwargs["accuracy"] = 1e-10
+    first = run_tree_twin(simulator.twin({}, soft), 5.0, start=690.0, **kwargs)
+    whole = run_tree_twin(
+        simulator.twin({}, soft), 15.0, start=695.0, initial_state=first.final_state, **kwargs
+    )
+    cut = run_mission_twin(
+        lambda mating: simulator.twin({}, mating),
+        timeline,
+        15.0,
+        start=695.0,
+        springs=True,
+        initial_state=first.final_state,
+        **kwargs,
+    )
+    np.testing.assert_allclose(cut.times, whole.times)
+    scale = np.abs(whole.phi).max()
+    # measured 9e-14; the target placed anew on the port instead (its deflection dropped):
+    # 6e-6; the target's coordinates copied from one twin to the other: 37
+    assert np.abs(cut.phi - whole.phi).max() <= 1e-9 * scale
+    key = next(k for k in cut.final_state.joints if k[1].endswith("_floating") and "CLIENT" in k[1])
+    q_cut, q_whole = cut.final_state.joints[key][0], whole.final_state.joints[key][0]
+    assert np.abs(q_cut - q_whole).max() > 0.1  # other zeros: 0.3 rad of boom apart
