@@ -20,10 +20,18 @@ rebuilds the twin from the tree with those values written into its data
 (:func:`~oos_drake.multibody.tree_twin.tree_with_values`, a fraction of a second); a run is a
 pure function of its case. Events: the start of each mission phase (``start:<phase>``).
 
-A mission that captures or docks a target: the twin welds it at the mated ports through the
-phases that mate it (a docked phase welded rigid, as the mission model), and a window that
-crosses a capture, docking or release runs in segments, each on the twin of its phase, the
-state carried over (:func:`~oos_drake.multibody.tree_twin.run_mission_twin`). Tip-pose
+A mission that captures or docks a target: the twin welds a captured target at the mated
+ports through the phases that capture it, and holds a docked one on its spring-damper (a
+``LinearBushingRollPitchYaw`` between the two ports, the docking studies' twin:
+``build_tree_twin(..., docking=)``) whose coefficients are the run's parameters
+``k_shear_<name>``, ``k_tors_<name>``, ``d_shear_<name>``, ``d_tors_<name>`` (the
+spring-damper's blocks; the declared ranges, ``stiffness_percent`` and ``damping_percent``,
+are their default dispersions; a coefficient without one is dispersed only by a spec, over
+:data:`~oos_drake.multibody.mission_sim.BUSHING_RANGES`, as the paper's; one value per name,
+so the docked phases of one spring-damper fly the same). A window that crosses a capture,
+docking or release runs in segments, each on the twin of its phase, the state carried over
+(:func:`~oos_drake.multibody.tree_twin.run_mission_twin`; a docked target starts on its port,
+moving with it: no initial spring load). Tip-pose
 waypoints are solved on the twin (:func:`~oos_drake.multibody.tree_ik.mission_timeline`: the
 angles of the joint-space copy ``oos run`` writes, ``oos tree solve``).
 """
@@ -87,6 +95,7 @@ def tree_parameters(scenario) -> tuple[Parameter, ...]:
     uncertain blocks of its mission model (a mated target's included), not the scheduled
     ones (``tau_<body>``, ``delta_<PORT>``: the mission's values)."""
     params = []
+    params += _spring_damper_parameters(scenario)
     for name, block in sorted(scenario.mission_model().uncertainty.items()):
         if block.quantity in ("angle", "switch"):  # scheduled along the mission
             continue
@@ -159,6 +168,45 @@ def tree_parameters(scenario) -> tuple[Parameter, ...]:
     return tuple(params)
 
 
+def _spring_damper_parameters(scenario) -> list[Parameter]:
+    """The coefficients of the docked phases' spring-dampers (blocks of
+    :meth:`~oos_drake.scenario.tree_scenario.TreeScenario.docking_model`, the first docked
+    phase declaring a name giving its nominal): declared uncertain (a percent) -> that range
+    is the default dispersion; else none. Valid range: :data:`BUSHING_RANGES` (and the
+    declared one)."""
+    from oos_drake.multibody.mission_sim import BUSHING_RANGES
+    from oos_drake.scenario.tree_model import docking_block_names
+
+    phases = () if scenario.tree.mission is None else scenario.tree.mission.phases
+    found: dict[str, Parameter] = {}
+    for phase in phases:
+        spring = phase.docked
+        if spring is None or docking_block_names(spring)["k_shear"] in found:
+            continue
+        blocks = scenario.docking_model(phase.name).uncertainty
+        for key, name in docking_block_names(spring).items():
+            block = blocks[name]
+            percent = spring.stiffness_percent if key[0] == "k" else spring.damping_percent
+            low, high = BUSHING_RANGES[block.quantity]
+            declared = tuple(float(v) for v in block.range) if percent > 0 else None
+            if declared is not None:
+                low, high = min(low, declared[0]), max(high, declared[1])
+            what = "stiffness" if key[0] == "k" else "damping"
+            axis = "shear" if "shear" in key else "torsional"
+            found[name] = Parameter(
+                name,
+                block.unit,
+                float(getattr(spring, key)),
+                low,
+                high,
+                ParameterKind.STIFFNESS,
+                f"{axis} {what} of spring-damper {spring.label} "
+                f"({spring.port}-{spring.target_port})",
+                uncertainty=declared,
+            )
+    return list(found.values())
+
+
 class TreeMissionSimulator:
     """Campaign simulator running a tree's Drake twin along its mission.
 
@@ -189,7 +237,7 @@ class TreeMissionSimulator:
         from oos_drake.multibody.flight_software import FlightSoftwareDesign
         from oos_drake.multibody.mission import effective_inertia, logging_rate
         from oos_drake.scenario.data import load_scenario
-        from oos_drake.scenario.tree_model import rigid_inertia_at_root
+        from oos_drake.scenario.tree_model import docking_block_names, rigid_inertia_at_root
         from oos_drake.scenario.tree_scenario import is_tree
 
         check_options("tree-mission", options, set(OPTIONS))
@@ -226,6 +274,11 @@ class TreeMissionSimulator:
         self.divergence_limit = float(o["divergence_limit"])
         self._parameters = tree_parameters(scenario)
         self._real = tuple(p.name for p in self._parameters if p.kind == ParameterKind.REAL_BLOCK)
+        self._springs = {
+            phase.docked.label: docking_block_names(phase.docked)
+            for phase in (self.tree.mission.phases if self.tree.mission else ())
+            if phase.docked is not None
+        }
         self._twin_key, self._twins = None, {}
 
     def parameters(self) -> tuple[Parameter, ...]:
@@ -255,11 +308,14 @@ class TreeMissionSimulator:
         """Mission length [s]."""
         return float(self.timeline.boundaries[-1])
 
-    def twin(self, values: Mapping[str, float], mating: tuple[str, str] | None = None):
+    def twin(self, values: Mapping[str, float], mating=None):
         """The twin with the real blocks at ``values`` [their units] and the target welded at
-        ``mating`` (``(port, target port)`` or None; built once per mating, rebuilt on a
-        change of values)."""
+        ``mating`` (``(port, target port)``), or held by a docked phase's spring-damper
+        (``mating`` its :class:`~oos_drake.scenario.tree_mission.Docking`: its file
+        coefficients in the twin's defaults, a run sets its own), or free (None); built once
+        per mating, rebuilt on a change of the real blocks' values."""
         from oos_drake.multibody.tree_twin import build_tree_twin, tree_with_values
+        from oos_drake.scenario.tree_mission import Docking
 
         nominal = {p.name: p.nominal for p in self._parameters}
         real = {n: float(values.get(n, nominal[n])) for n in self._real}
@@ -268,14 +324,21 @@ class TreeMissionSimulator:
             self._twins, self._twin_key = {}, key
         if mating not in self._twins:
             changed = {n: v for n, v in real.items() if v != nominal[n]}
+            docked = isinstance(mating, Docking)
+            rest = None  # a docked target's joint zero: its rest pose at the phase's start
+            if docked:
+                index = next(i for i, d in enumerate(self.timeline.dockings) if d is mating)
+                rest = self.timeline.angles(self.timeline.boundaries[index])
             self._twins[mating] = build_tree_twin(
                 tree_with_values(self.tree, changed),
                 self.design,
+                rest,
                 log_rate=self.log_rate,
                 timeline=self.timeline,
                 joint_bandwidth=self.joint_pd[0],
                 joint_damping_ratio=self.joint_pd[1],
-                mating=mating,
+                mating=None if docked else mating,
+                docking=(mating,) if docked else (),
             )
         return self._twins[mating]
 
@@ -296,11 +359,17 @@ class TreeMissionSimulator:
         delta_mul = np.array([[values[f"Delta_mul_{r}{c}"] for c in AXES] for r in AXES])
         delta_add = float(values["Delta_add"])
         frequency = float(case.frequency)  # NaN with nonzero scalars: refused, by name
+        springs = {  # {label: (k_shear, k_tors, d_shear, d_tors)}: the run's coefficients
+            label: tuple(float(values[name]) for name in names.values())
+            for label, names in self._springs.items()
+        }
         run = run_mission_twin(
             lambda mating: self.twin(values, mating),
             self.timeline,
             end - start,
             start=start,
+            springs=True,
+            spring_dampers=springs,
             initial_attitude=[values[f"phi0_{a}"] for a in AXES],
             initial_rate=[values[f"w0_{a}"] for a in AXES],
             noise_table=noise,

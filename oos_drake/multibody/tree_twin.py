@@ -27,17 +27,20 @@ target is in neither). The twin of a docking study (``docking=``) holds the targ
 spring-dampers instead: its own floating joint relative to the controlled body, one
 ``LinearBushingRollPitchYaw`` per spring-damper, at rest where the ports coincide
 (:func:`~oos_drake.multibody.tree_plant.add_docked_target`, as
-:func:`~oos_drake.multibody.tree_plant.build_docked_diagram`). :func:`open_loop_twin` is the
-same plant with the wrench input and hub output of the validation, for checks against the
-TITOP LFR
-(``tests/tree/test_tree_mated_twin.py``).
+:func:`~oos_drake.multibody.tree_plant.build_docked_diagram`); the mission's twin of a docked
+phase is that twin too (:func:`phase_mating`: the campaign flies a docked phase on its
+spring-damper, the run's coefficients set in the bushings' Context parameters as the paper's
+mission twin does). :func:`open_loop_twin` is the same plant with the wrench input and hub
+output of the validation, for checks against the TITOP LFR
+(``tests/tree/test_tree_mated_twin.py``, ``tests/tree/test_tree_docked_mission.py``).
 
 :func:`run_tree_twin` integrates one run from a small attitude error (or driven by a noise
 table, or from the :class:`TwinState` a previous run ended in) and reports whether the attitude
 left the model's domain. :func:`run_mission_twin` runs a window that crosses a capture, a
 docking or a release in segments (:func:`mating_segments`), each on the twin of its phase, the
 chaser's state and the flight software's carried over: the mission model's instantaneous switch
-(the target welded at rest relative to its port, no contact impulse).
+(the target welded at rest relative to its port, or on its spring-damper with its port on the
+tree's and moving with it: no spring load; no contact impulse).
 """
 
 from __future__ import annotations
@@ -73,6 +76,7 @@ __all__ = [
     "mating_at",
     "mating_segments",
     "open_loop_twin",
+    "phase_mating",
     "run_mission_twin",
     "run_tree_twin",
     "tree_with_values",
@@ -158,18 +162,32 @@ def mating_at(timeline, time: float) -> tuple[str, str] | None:
     return timeline.captured_at(time) if docked is None else tuple(docked.connection)
 
 
-def mating_segments(timeline, start: float, end: float) -> tuple[tuple[float, float, object], ...]:
-    """``[start, end]`` [s] cut where the mated ports change: ``(t0, t1, mating)`` in time
-    order, ``mating`` as :func:`mating_at` over ``(t0, t1]``."""
+def phase_mating(timeline, time: float):
+    """The mating at mission ``time`` [s] as the mission twin flies it: the phase's
+    :class:`~oos_drake.scenario.tree_mission.Docking` in a docked phase (the target on its
+    spring-damper), else :func:`mating_at` (a capture's ``(port, target port)``, welded, or
+    None); at a boundary: the phase ending there."""
+    docked = timeline.docked_at(time)
+    return timeline.captured_at(time) if docked is None else docked
+
+
+def mating_segments(
+    timeline, start: float, end: float, *, springs: bool = False
+) -> tuple[tuple[float, float, object], ...]:
+    """``[start, end]`` [s] cut where the mating changes: ``(t0, t1, mating)`` in time order,
+    ``mating`` as :func:`mating_at` over ``(t0, t1]`` (``springs``: as :func:`phase_mating`,
+    a docked phase's spring-damper; a cut also between two docked phases with their own
+    spring-dampers at the same ports)."""
+    at = phase_mating if springs else mating_at
     cuts = [float(start)]
     for b in np.asarray(timeline.boundaries, dtype=float)[1:-1]:
-        if start < b < end and mating_at(timeline, b) != mating_at(
+        if start < b < end and at(timeline, b) != at(
             timeline, min(b + 1e-6 * max(timeline.duration, 1.0), end)
         ):
             cuts.append(float(b))
     cuts.append(float(end))
     pairs = zip(cuts[:-1], cuts[1:], strict=True)
-    return tuple((t0, t1, mating_at(timeline, 0.5 * (t0 + t1))) for t0, t1 in pairs)
+    return tuple((t0, t1, at(timeline, 0.5 * (t0 + t1))) for t0, t1 in pairs)
 
 
 @dataclass(frozen=True, eq=False)
@@ -202,6 +220,11 @@ class TreeTwin:
         a run).
     bushings : Mapping[str, LinearBushingRollPitchYaw]
         The docked target's spring-dampers by label (empty without ``docking``).
+    docked_target : tuple or None
+        ``(floating joint, port frame, target port frame)`` of the docked target (its
+        floating joint relative to the controlled body, the first spring-damper's two port
+        frames), or None without ``docking``: where :func:`run_tree_twin` places the target
+        when a run does not carry its state.
     """
 
     diagram: Diagram
@@ -217,6 +240,7 @@ class TreeTwin:
     mating: tuple[str, str] | None = None
     held_joints: Mapping[object, float] = dataclasses.field(default_factory=dict)
     bushings: Mapping[str, object] = dataclasses.field(default_factory=dict)
+    docked_target: tuple | None = None
 
 
 def build_tree_twin(
@@ -241,7 +265,9 @@ def build_tree_twin(
     design : FlightSoftwareDesign
         The flight software (rate, components, controller, torque bound).
     angles : Mapping[str, float], optional
-        Revolute joint angles [rad] by body, frozen for the whole run (default: the file's).
+        Revolute joint angles [rad] by body, frozen for the whole run (default: the file's);
+        with ``timeline``, only where a docked target's floating joint has its zero (the rest
+        pose at those angles).
     log_rate : float
         Logging rate [Hz] (should divide the flight-software rate).
     perturbation_states : int
@@ -250,8 +276,8 @@ def build_tree_twin(
     timeline : Timeline, optional
         The mission's joint angles (:class:`~oos_drake.scenario.tree_mission.Timeline`): the
         revolute joints are then motion-driven along it (a stiff joint-space PD on each joint's
-        inertia, built from C++ primitives, as the paper's mission twin), and ``angles`` is
-        ignored. Default: frozen at ``angles``.
+        inertia at the file's angles, built from C++ primitives, as the paper's mission twin).
+        Default: frozen at ``angles``.
     joint_bandwidth : float
         Joint PD bandwidth [rad/s] (motion-driven joints).
     joint_damping_ratio : float
@@ -271,7 +297,9 @@ def build_tree_twin(
     """
     chosen = tree.joint_angles(angles)
     builder = DiagramBuilder()
-    plant, hub_joint, held, bushings = _add_twin_plant(builder, tree, mating, docking, chosen)
+    plant, hub_joint, held, bushings, docked = _add_twin_plant(
+        builder, tree, mating, docking, chosen
+    )
     fsw = builder.AddNamedSystem(
         "flight_software",
         FlightSoftware(
@@ -294,7 +322,8 @@ def build_tree_twin(
     else:
         trajectory = joint_trajectory(timeline, tuple(revolute))
         forces = _add_joint_drives(
-            builder, plant, revolute, trajectory, joint_bandwidth, joint_damping_ratio, chosen,
+            builder, plant, revolute, trajectory, joint_bandwidth, joint_damping_ratio,
+            tree.joint_angles(None),
         )  # fmt: skip
         builder.Connect(fsw.GetOutputPort("generalized_force"), forces.get_input_port(2))
     period = 1.0 / float(log_rate)
@@ -316,6 +345,7 @@ def build_tree_twin(
         mating=None if mating is None else tuple(mating),
         held_joints=held,
         bushings=MappingProxyType(bushings),
+        docked_target=docked,
     )
 
 
@@ -327,12 +357,13 @@ def _add_twin_plant(builder, tree: SpacecraftTree, mating, docking=(), angles=No
     bushing per spring-damper, at rest where the ports coincide at the tree's joint ``angles``
     [rad] (:func:`~oos_drake.multibody.tree_plant.add_docked_target`). The target's revolute
     joints are returned with their file angles (held locked). Returns
-    ``(plant, hub_joint, held, bushings)``."""
+    ``(plant, hub_joint, held, bushings, docked)``, ``docked`` the docked target's
+    ``(floating joint, port frame, target port frame)`` or None."""
     from oos_drake.multibody.tree_plant import add_docked_target, docked_target_pose
 
     plant = builder.AddNamedSystem("plant", MultibodyPlant(time_step=0.0))
     plant.mutable_gravity_field().set_gravity_vector(np.zeros(3))
-    held, bushings = {}, {}
+    held, bushings, docked = {}, {}, None
     docking = tuple(docking)
     if mating is not None and docking:
         raise ValueError("tree twin: a target is either welded (mating) or docked, not both")
@@ -367,6 +398,11 @@ def _add_twin_plant(builder, tree: SpacecraftTree, mating, docking=(), angles=No
                 bushings = add_docked_target(
                     plant, tree, top, target, target_top, X_W_target, docking
                 )
+                docked = (
+                    plant.GetJointByName(f"{target.root}_floating", target_top),
+                    plant.GetFrameByName(docking[0].port, top),
+                    plant.GetFrameByName(docking[0].target_port, target_top),
+                )
             held = {
                 plant.GetJointByName(joint_name(body)): float(angle)
                 for body, angle in target.operating_angles().items()
@@ -375,12 +411,19 @@ def _add_twin_plant(builder, tree: SpacecraftTree, mating, docking=(), angles=No
         plant, plant.GetBodyByName(tree.root, top), RigidTransform(), name=f"{tree.root}_floating"
     )
     plant.Finalize()
-    return plant, hub_joint, held, bushings
+    return plant, hub_joint, held, bushings, docked
 
 
-def open_loop_twin(tree: SpacecraftTree, mating: tuple[str, str] | None = None):
+def open_loop_twin(
+    tree: SpacecraftTree,
+    mating: tuple[str, str] | None = None,
+    *,
+    docking: tuple = (),
+    angles: Mapping[str, float] | None = None,
+):
     """The twin's plant (built as :func:`build_tree_twin` builds it, target welded at
-    ``mating``) with the wrench input and hub output of
+    ``mating`` or held by the spring-dampers ``docking`` at rest at the joint ``angles``
+    [rad]) with the wrench input and hub output of
     :func:`~oos_drake.multibody.tree_plant.linearize_tree` instead of the flight software: the
     open-loop ``[F; T]_G -> [a; wdot]_G`` of the twin, for checks against the TITOP LFR.
 
@@ -388,9 +431,10 @@ def open_loop_twin(tree: SpacecraftTree, mating: tuple[str, str] | None = None):
     -------
     TreeDiagram
         Handles for :func:`~oos_drake.multibody.tree_plant.linearize_tree`: its ``tree`` is
-        ``tree``, or with a ``mating`` :func:`~oos_drake.scenario.tree.captured_tree` (the
-        welded target's revolute joints among the handles' joints, so that
-        ``linearize_tree`` locks them too: at their file angles unless given).
+        ``tree``, or with a ``mating`` :func:`~oos_drake.scenario.tree.captured_tree`, with a
+        ``docking`` :func:`~oos_drake.scenario.tree.docked_tree` (the mated target's revolute
+        joints among the handles' joints, so that ``linearize_tree`` locks them too: at their
+        file angles unless given).
 
     Raises
     ------
@@ -399,13 +443,19 @@ def open_loop_twin(tree: SpacecraftTree, mating: tuple[str, str] | None = None):
     """
     from oos_drake.multibody.linearization import add_hub_io
     from oos_drake.multibody.tree_plant import TreeDiagram
-    from oos_drake.scenario.tree import captured_tree
+    from oos_drake.scenario.tree import captured_tree, docked_tree
 
     builder = DiagramBuilder()
-    plant, hub_joint, _, _ = _add_twin_plant(builder, tree, mating)
+    docking = tuple(docking)
+    chosen = tree.joint_angles(angles)
+    plant, hub_joint, _, _, _ = _add_twin_plant(builder, tree, mating, docking, chosen)
     ports = add_hub_io(builder, plant, hub_joint)
     diagram = builder.Build()
-    model_tree = tree if mating is None else captured_tree(tree, *mating)
+    model_tree = tree
+    if mating is not None:
+        model_tree = captured_tree(tree, *mating)
+    elif docking:
+        model_tree = docked_tree(tree, docking[0], docking[1:])
     revolute = {name: plant.GetJointByName(joint_name(name)) for name in model_tree.revolute_bodies}
     return TreeDiagram(
         diagram=diagram,
@@ -522,11 +572,16 @@ class TwinState:
     flight_software : ndarray
         The flight software's discrete state (filters, held torque, metrics, sample counter,
         dynamic perturbation).
+    docked : tuple or None
+        A docked target's ``(joint key, (port, target port), X_RM, V_RM_R)``: its pose and
+        spatial velocity relative to the controlled body's frame R (the joint's own zero is
+        its twin's rest pose, another twin's may differ), or None.
     """
 
     time: float
     joints: Mapping[tuple[str, str], tuple[np.ndarray, np.ndarray]]
     flight_software: np.ndarray
+    docked: tuple | None = None
 
 
 def _dof_joints(plant):
@@ -549,16 +604,36 @@ def _capture_state(twin: TreeTwin, context) -> TwinState:
         for key, j in _dof_joints(twin.plant)
     }
     fsw_context = twin.flight_software.GetMyContextFromRoot(context)
+    docked = None
+    if twin.docked_target is not None:
+        joint, port, target_port = twin.docked_target
+        R = joint.frame_on_parent().body().body_frame()
+        M = joint.frame_on_child()
+        docked = (
+            _docked_key(twin),
+            (port.name(), target_port.name()),
+            M.CalcPose(plant_context, R),
+            M.CalcSpatialVelocity(plant_context, R, R),
+        )
     return TwinState(
         float(context.get_time()),
         MappingProxyType(joints),
         np.array(fsw_context.get_discrete_state(0).get_value()),
+        docked,
     )
+
+
+def _docked_key(twin: TreeTwin) -> tuple[str, str]:
+    joint = twin.docked_target[0]
+    return (twin.plant.GetModelInstanceName(joint.model_instance()), joint.name())
 
 
 def _restore_state(twin: TreeTwin, context, state: TwinState) -> None:
     """Write ``state`` into ``context``: the joints found by key (others keep their default
-    state: a target welded anew has no degrees of freedom if rigid, its modes start at rest)."""
+    state: a target welded anew has no degrees of freedom if rigid, its modes start at rest).
+    A docked target: held at the same ports in ``state``, its pose and velocity relative to
+    the controlled body carried over (the spring-damper's deflection continues); else placed
+    on its port (:func:`_place_docked_target`)."""
     plant_context = twin.plant.GetMyMutableContextFromRoot(context)
     q, v = twin.plant.GetPositions(plant_context), twin.plant.GetVelocities(plant_context)
     for key, j in _dof_joints(twin.plant):
@@ -570,6 +645,35 @@ def _restore_state(twin: TreeTwin, context, state: TwinState) -> None:
     twin.plant.SetVelocities(plant_context, v)
     fsw_context = twin.flight_software.GetMyMutableContextFromRoot(context)
     fsw_context.get_mutable_discrete_state(0).SetFromVector(state.flight_software)
+    if twin.docked_target is None:
+        return
+    joint, port, target_port = twin.docked_target
+    carried = state.docked
+    if carried is None or carried[:2] != (_docked_key(twin), (port.name(), target_port.name())):
+        _place_docked_target(twin, plant_context)
+        return
+    X_RM, V_RM_R = carried[2:]
+    X_RF = joint.frame_on_parent().GetFixedPoseInBodyFrame()
+    joint.SetPose(plant_context, X_RF.inverse() @ X_RM)
+    R_FR = X_RF.rotation().inverse().matrix()  # F is fixed in R: M's velocity in F is in R's
+    joint.set_angular_velocity(plant_context, R_FR @ V_RM_R.rotational())
+    joint.set_translational_velocity(plant_context, R_FR @ V_RM_R.translational())
+
+
+def _place_docked_target(twin: TreeTwin, plant_context) -> None:
+    """Put the docked target's port frame Q on the tree's port frame P and move it rigidly
+    with P: the target's floating joint (parent frame F on the controlled body) at
+    ``X_FM = X_FP X_QM`` with the spatial velocity of P in F shifted to M's origin."""
+    joint, port, target_port = twin.docked_target
+    F = joint.frame_on_parent()
+    X_FP = port.CalcPose(plant_context, F)
+    X_MQ = target_port.GetFixedPoseInBodyFrame()
+    X_FM = X_FP @ X_MQ.inverse()
+    joint.SetPose(plant_context, X_FM)
+    V_FP_F = port.CalcSpatialVelocity(plant_context, F, F)
+    V_FM_F = V_FP_F.Shift(X_FM.translation() - X_FP.translation())
+    joint.set_angular_velocity(plant_context, V_FM_F.rotational())
+    joint.set_translational_velocity(plant_context, V_FM_F.translational())
 
 
 def run_tree_twin(
@@ -587,6 +691,7 @@ def run_tree_twin(
     divergence_limit: float = 0.5,
     check_interval: float = 1.0,
     initial_state: TwinState | None = None,
+    spring_dampers: Mapping[str, tuple] | None = None,
 ) -> TreeRun:
     """Integrate the twin for ``duration`` [s] from mission time ``start`` [s].
 
@@ -625,6 +730,21 @@ def run_tree_twin(
     initial_state : TwinState, optional
         Start from this state (a previous run's ``final_state``, at ``start``) instead of the
         initial errors; the motion-driven joints keep their state from it.
+    spring_dampers : Mapping[str, tuple], optional
+        ``{label: (k_shear, k_tors, d_shear, d_tors)}`` [N/m, N m/rad, N s/m, N m s/rad]:
+        the coefficients of the twin's bushings of those labels in this run (Context
+        parameters, as the paper's mission twin:
+        :func:`~oos_drake.multibody.scenario_plant.set_bushing`); labels the twin does not
+        have are ignored (a segment without them); default: the coefficients it was built with.
+
+    Notes
+    -----
+    A docked target (``docking`` at the build) whose state the run does not carry (no
+    ``initial_state``, or one where the target was welded, free or docked at other ports)
+    starts with its port frame on the tree's port and moving with it (rigidly, at that
+    instant): no initial spring load, the mission model's instantaneous switch. Docked at the
+    same ports in ``initial_state`` (another docked phase of the same spring-damper): its
+    pose and velocity relative to the controlled body carried over.
     """
     from pydrake.math import RollPitchYaw
 
@@ -663,6 +783,14 @@ def run_tree_twin(
             state[slices[name]] = np.linalg.solve(np.eye(block.nstates) - block.A, block.B @ u)
     else:
         _restore_state(twin, context, initial_state)
+    if spring_dampers:
+        from oos_drake.multibody.scenario_plant import set_bushing
+
+        for label, bushing in twin.bushings.items():
+            if label in spring_dampers:
+                set_bushing(bushing, plant_context, tuple(float(x) for x in spring_dampers[label]))
+    if initial_state is None and twin.docked_target is not None:
+        _place_docked_target(twin, plant_context)
     simulator = Simulator(twin.diagram, context)
     ResetIntegratorFromFlags(simulator, "radau3" if driven else "runge_kutta3", max_step)
     integrator = simulator.get_mutable_integrator()
@@ -712,9 +840,18 @@ def run_tree_twin(
     )
 
 
-def run_mission_twin(twin_for, timeline, duration: float, *, start: float = 0.0, **options):
+def run_mission_twin(
+    twin_for,
+    timeline,
+    duration: float,
+    *,
+    start: float = 0.0,
+    springs: bool = False,
+    initial_state: TwinState | None = None,
+    **options,
+):
     """Integrate a tree's twin along its mission for ``duration`` [s] from ``start`` [s],
-    switching the welded target where the mission's phases mate or release it.
+    switching the welded (or docked) target where the mission's phases mate or release it.
 
     The window is cut where the mated ports change (:func:`mating_segments`); each segment
     runs on ``twin_for(mating)`` (a motion-driven twin built with that ``mating``), started
@@ -725,11 +862,18 @@ def run_mission_twin(twin_for, timeline, duration: float, *, start: float = 0.0,
     Parameters
     ----------
     twin_for : callable
-        ``mating (tuple or None) -> TreeTwin``.
+        ``mating (tuple or None) -> TreeTwin``; with ``springs``, a docked phase's mating is
+        its :class:`~oos_drake.scenario.tree_mission.Docking` (:func:`phase_mating`: the
+        twin built with ``docking=``).
     timeline : Timeline
         The mission's timeline (its captures and dockings).
     duration, start : float
         Window [s].
+    springs : bool
+        Docked phases on their spring-dampers (:func:`phase_mating`); default: welded as
+        the mission model (:func:`mating_at`).
+    initial_state : TwinState, optional
+        The first segment's start (a previous run's ``final_state`` at ``start``).
     **options
         Of :func:`run_tree_twin` (``initial_attitude``, ``noise_table``, ...), the same for
         every segment.
@@ -741,8 +885,10 @@ def run_mission_twin(twin_for, timeline, duration: float, *, start: float = 0.0,
         joint error.
     """
     start = float(start)
-    parts, state = [], None
-    for t0, t1, mating in mating_segments(timeline, start, start + float(duration)):
+    parts, state = [], initial_state
+    for t0, t1, mating in mating_segments(
+        timeline, start, start + float(duration), springs=springs
+    ):
         run = run_tree_twin(twin_for(mating), t1 - t0, start=t0, initial_state=state, **options)
         parts.append((t0, run))
         state = run.final_state
