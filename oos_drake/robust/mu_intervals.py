@@ -53,6 +53,12 @@ The cover tests lazily (``cover_axis(lazy=True)``, the default): a point that li
 of the intervals proved so far is not tested (its interval stays NaN unless a gap is left
 next to it). Every interval of the certificate is still one of :func:`dg_interval`.
 
+A gap is filled by solving points at its edges (moved into the gap by a fraction of the
+neighbouring intervals' width, :data:`EDGE_SHIFT`) and in its middle. ``cover_axis(bands=True)``
+first tries, in the narrow gaps, one scaling chosen for the whole gap (:func:`band_scalings`:
+the D-G bound minimized over several frequencies at once); it only changes which scalings are
+tested, and is off by default (it costs more than it saves on the analysis' covers).
+
 The scalings of each point are conditioned block by block and, across blocks, with the largest
 spread of :data:`SPREAD_FLOORS` that still proves the level at the point
 (:func:`proving_scalings`): the optimal scalings of an LFR with badly scaled channels are far
