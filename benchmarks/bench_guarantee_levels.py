@@ -20,6 +20,11 @@ this process (one worker: CPU time is ``time.process_time``), back to back:
 the Hamiltonian test: the cover before its lazy tests), same run, and the ratio of the two
 guarantees' CPU; the counts of Hamiltonian interval tests are printed for both.
 
+``--bands``: each guarantee also with ``cover_axis(bands=True)`` (scalings chosen for a whole
+narrow gap tried before solving points in it), same run: its CPU, the ratio of the two
+guarantees' CPU, the Hamiltonian tests, the band scalings tried, proved and their intervals'
+mean width, and per subset its guaranteed level next to the default's.
+
 ``--before``: each guarantee also with ``mu_solver(converge=False)`` (the cover's solver before
 the cold start and restarts of the points that raise the level), same run: its CPU, the ratio
 of the two guarantees' CPU, and per subset its guaranteed level next to the new one.
@@ -65,6 +70,11 @@ def main() -> None:
         action="store_true",
         help="also run every guarantee with cover_axis(lazy=False) (every point tested with the "
         "Hamiltonian: the code before the lazy tests) and print the ratio",
+    )
+    parser.add_argument(
+        "--bands",
+        action="store_true",
+        help="also run every guarantee with cover_axis(bands=True) and print the ratio",
     )
     parser.add_argument(
         "--before",
@@ -113,22 +123,39 @@ def main() -> None:
 
     import oos_drake.robust.mu_intervals as mu_intervals
 
-    counts = {"hamiltonian": 0}
+    counts = {"hamiltonian": 0, "bands": 0, "band intervals": 0, "band width": 0.0}
     dg_interval, cover_axis = mu_intervals.dg_interval, mu_intervals.cover_axis
     mu_solver = mu_intervals.mu_solver
 
     def counted_dg(*a, **k):
         counts["hamiltonian"] += 1
-        return dg_interval(*a, **k)
+        out = dg_interval(*a, **k)
+        if len(a) > 1 and any(a[1] is sc for sc in band_made):
+            counts["band intervals"] += 1
+            counts["band width"] += out[1] / out[0] - 1.0 if out[0] > 0 else 0.0
+        return out
+
+    band_made = []  # the scalings the bands gave (their intervals are counted)
+    band = getattr(mu_intervals._MuSolver, "band", None)  # None: a checkout before the bands
+
+    def counted_band(self, *a, **k):
+        counts["bands"] += 1
+        bound, sc = band(self, *a, **k)
+        band_made.append(sc)
+        return bound, sc
 
     # the analysis calls them through the module: counted here
     mu_intervals.dg_interval = counted_dg
+    if band is not None:
+        mu_intervals._MuSolver.band = counted_band
 
-    def run(guarantee, tight=None, lazy=True, converge=True, model=system.system):
-        mu_intervals.cover_axis = functools.partial(cover_axis, lazy=lazy)
+    def run(guarantee, tight=None, lazy=True, converge=True, model=system.system, bands=False):
+        extra = {"bands": bands} if bands else {}  # a checkout before the bands has none
+        mu_intervals.cover_axis = functools.partial(cover_axis, lazy=lazy, **extra)
         mu_intervals.mu_solver = functools.partial(mu_solver, converge=converge)
         for k in counts:
             counts[k] = 0
+        band_made.clear()
         clock = time.process_time()
         out = certified_sweep(
             model,
@@ -175,6 +202,9 @@ def main() -> None:
         if args.eager:
             _, eager = run(True, tight, lazy=False)
             tests = counts["hamiltonian"]
+        if args.bands:
+            band_study, banded = run(True, tight, bands=True)
+            band_counts = dict(counts)
         if args.before:
             old_study, old = run(True, tight, converge=False)
         study, cpu = run(True, tight)
@@ -188,6 +218,21 @@ def main() -> None:
                 f"only; guarantee {eager - base:.1f} s; Hamiltonian tests {tests}; guarantee "
                 f"lazy / eager {(cpu - base) / max(eager - base, 1e-9):.2f}"
             )
+        if args.bands:
+            n = max(band_counts["band intervals"], 1)
+            print(
+                f"  bands (bands=True, same run): CPU {banded:.1f} s = {banded / base:.2f} x grid "
+                f"only; guarantee {banded - base:.1f} s; guarantee bands / default "
+                f"{(banded - base) / max(cpu - base, 1e-9):.2f}; Hamiltonian tests "
+                f"{band_counts['hamiltonian']}; bands tried {band_counts['bands']}, their "
+                f"intervals {band_counts['band intervals']} (mean width "
+                f"{100 * band_counts['band width'] / n:.2f} %)"
+            )
+            for name, g in band_study.guarantees.items():
+                print(
+                    f"  {name:15s} guaranteed with bands {g.mu_upper:.9g} default "
+                    f"{study.guarantees[name].mu_upper:.9g}"
+                )
         if args.before:
             print(
                 f"  before (converge=False, same run): CPU {old:.1f} s = {old / base:.2f} x grid "
