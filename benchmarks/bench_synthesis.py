@@ -29,7 +29,9 @@ of this checkout and of the git revision ``REV`` (``git archive``, as
 goes first), and per checkout: gamma, the synthesis' CPU time (this process and its worker
 processes, ``resource.getrusage``) and wall time, and the CPU ratio of this checkout to the
 baseline (the median over the pairs). The machine is shared: read the CPU times; the wall
-times depend on the load. Nothing else is run then. ``--profile FILE``: the same synthesis
+times depend on the load. Nothing else is run then. ``--json [--qp active-set]``: one such
+synthesis in this process, printed as a JSON line (``--qp``: the bundle step's QP solver,
+``SynthesisOptions.qp``; ``active-set`` is another design). ``--profile FILE``: the same synthesis
 in this process under cProfile, with one worker (every run in this process), the stats in
 ``FILE``.
 """
@@ -71,7 +73,7 @@ def best_of(fn, repeats):
     return min(walls), min(cpus), result
 
 
-def default_synthesis(plant: str, models: int, workers: int) -> dict:
+def default_synthesis(plant: str, models: int, workers: int, qp: str = "slsqp") -> dict:
     """``oos synth``'s synthesis (its defaults, ``workers`` processes): gamma, CPU of this
     process and its children [s], wall time [s] (the model array's build excluded)."""
     import resource
@@ -92,6 +94,7 @@ def default_synthesis(plant: str, models: int, workers: int) -> dict:
         seed=defaults.seed,
         workers=workers,
         working_set=defaults.working_set,
+        qp=qp,
     )
     spec = DesignSpecification.from_requirements(scenario.control)
 
@@ -158,10 +161,16 @@ def main(argv=None):
     )
     parser.add_argument("--repeat", type=int, default=1, help="pairs of runs with --baseline")
     parser.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--qp",
+        default="slsqp",
+        help="with --json: the bundle step's QP solver (SynthesisOptions.qp; 'active-set' "
+        "changes the design)",
+    )
     parser.add_argument("--profile", default=None, help="cProfile stats file of one synthesis")
     args = parser.parse_args(argv)
     if args.json:  # one process of --baseline
-        print(json.dumps(default_synthesis(args.plant, args.models, args.workers)))
+        print(json.dumps(default_synthesis(args.plant, args.models, args.workers, args.qp)))
         return
     if args.baseline:
         compare(args)

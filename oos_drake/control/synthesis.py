@@ -325,7 +325,8 @@ def _final_peaks(plants, models: ModelSet, N: int, K, spec, workers: int, checke
     """Certified peaks of ``models`` (the ``N`` nominal configurations, then the worst cases)
     at ``K``. ``checked``: ``(K', peaks of the N nominal configurations at K')`` of the last
     check; when ``K'`` is ``K`` those are reused and only the worst cases are evaluated (the
-    values of a model do not depend on the others in the batch: the same numbers)."""
+    values of a model do not depend on the others in the batch: the same numbers, up to
+    round-off)."""
     if checked is None or not np.array_equal(checked[0], K):
         return gamma_over(plants, models, K, spec, certify=True, workers=workers)
     nominal = checked[1]
