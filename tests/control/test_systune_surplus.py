@@ -3,7 +3,7 @@
 A family of two-mass plants (``test_systune.two_mass``, spring ``k`` [N/m]) along a parameter
 ``p`` in [0, 1], softest at ``p = 0.525``, between two checked models:
 ``k(p) = 0.3 + 2.7 (2 p - 1.05)^2``. A PID is tuned with hard margins (6 dB, 30 deg) on 17
-evenly spaced models (working set from the two ends, every model checked) and verified on the
+evenly spaced models (working set from 3 of them, every model checked) and verified on the
 16 midpoints; the test recomputes the disk margin on a grid 4x denser than the checked one
 (65 models) independently of systune: the balanced disk margin's closed form
 ``1 / max |1 / (1 + L) - 1/2|`` with python-control's own loop ``L`` on 20000 frequencies,
@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from test_systune import OMEGA, loop_at_u, pid, two_mass  # tests/control is on sys.path
 
+from oos_drake.blas import single_threaded_blas
 from oos_drake.control.goals import Margins, WeightedGain, disk_alpha
 from oos_drake.control.systune import SystuneOptions, systune
 
@@ -36,10 +37,13 @@ def spring(p):
 
 
 def tune(surplus):
-    options = SystuneOptions(working_set=2, max_iterations=60, hard_surplus=surplus)
+    """Working set from 3 evenly spaced models; one BLAS thread (the optimizer's path on this
+    family depends on round-off: with another BLAS thread count it may end elsewhere)."""
+    options = SystuneOptions(working_set=3, max_iterations=60, hard_surplus=surplus)
     plants = [two_mass(k) for k in spring(CHECKED)]
     verify = [two_mass(k) for k in spring(MIDPOINTS)]
-    return systune(plants, pid(), GOALS, options=options, verify=verify)
+    with single_threaded_blas():
+        return systune(plants, pid(), GOALS, options=options, verify=verify)
 
 
 def disk_margins(controller, p):
