@@ -21,11 +21,25 @@ largest relative difference of the norms. Rows:
 
 It also prints the model-array build time and, with ``--synthesis``, the synthesis wall and CPU
 time. Every computation uses one OpenBLAS thread per worker (see :mod:`oos_drake.blas`).
+
+``--baseline REV``: ``oos synth``'s default synthesis (``--models`` configurations, 200 by
+default, ``oos synth``'s options and executor with ``--workers`` processes) with ``oos_drake``
+of this checkout and of the git revision ``REV`` (``git archive``, as
+``benchmarks/bench_mussv.py``), each in a fresh process (``--repeat`` pairs, alternating which
+goes first), and per checkout: gamma, the synthesis' CPU time (this process and its worker
+processes, ``resource.getrusage``) and wall time, and the CPU ratio of this checkout to the
+baseline (the median over the pairs). The machine is shared: read the CPU times; the wall
+times depend on the load. Nothing else is run then. ``--json [--qp active-set]``: one such
+synthesis in this process, printed as a JSON line (``--qp``: the bundle step's QP solver,
+``SynthesisOptions.qp``; ``active-set`` is another design). ``--profile FILE``: the same synthesis
+in this process under cProfile, with one worker (every run in this process), the stats in
+``FILE``.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import time
 
 import numpy as np
@@ -59,6 +73,80 @@ def best_of(fn, repeats):
     return min(walls), min(cpus), result
 
 
+def default_synthesis(plant: str, models: int, workers: int, qp: str = "slsqp") -> dict:
+    """``oos synth``'s synthesis (its defaults, ``workers`` processes): gamma, CPU of this
+    process and its children [s], wall time [s] (the model array's build excluded)."""
+    import resource
+
+    from oos_drake.app.synth import ControllerOptions
+    from oos_drake.control.components import DesignSpecification
+    from oos_drake.processes import make_executor
+    from oos_drake.scenario.data import load_scenario
+
+    scenario = load_scenario("paper")
+    plants = make_plants(plant, models, scenario)
+    K0 = baseline_for(plants, scenario.mission.first_docking_time)
+    defaults = ControllerOptions()
+    options = SynthesisOptions(
+        restarts=defaults.restarts,
+        max_iterations=defaults.max_iterations,
+        worst_case_rounds=defaults.worst_case_rounds,
+        seed=defaults.seed,
+        workers=workers,
+        working_set=defaults.working_set,
+        qp=qp,
+    )
+    spec = DesignSpecification.from_requirements(scenario.control)
+
+    def cpu():
+        own = resource.getrusage(resource.RUSAGE_SELF)
+        children = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+    w, c = time.perf_counter(), cpu()
+    with make_executor(workers) as executor:
+        result = synthesize(plants, K0, spec=spec, options=options, executor=executor)
+    return dict(gamma=result.gamma, cpu=cpu() - c, wall=time.perf_counter() - w)
+
+
+def compare(args) -> None:
+    """``--baseline``: this checkout and ``args.baseline`` in fresh processes, alternating."""
+    import os
+    import subprocess
+    import sys
+
+    from bench_mussv import baseline_checkout
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    paths = {"this checkout": root, f"baseline {args.baseline}": baseline_checkout(args.baseline)}
+    cmd = [sys.executable, os.path.abspath(__file__), "--json", "--plant", args.plant]
+    cmd += ["--models", str(args.models), "--workers", str(args.workers)]
+    results = {name: [] for name in paths}
+    for k in range(max(args.repeat, 1)):
+        for name in list(paths)[:: 1 if k % 2 else -1]:  # the baseline first, then alternating
+            env = dict(os.environ, PYTHONPATH=paths[name])
+            res = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=paths[name])
+            if res.returncode != 0:
+                raise RuntimeError(f"{name} failed:\n{res.stderr[-3000:]}")
+            results[name].append(json.loads(res.stdout.strip().splitlines()[-1]))
+            print(f"{name}: {results[name][-1]}", flush=True)
+    base = results[f"baseline {args.baseline}"]
+    print(
+        f"oos synth's default synthesis, plant {args.plant}, {args.models} configurations, "
+        f"{args.workers} worker(s); {max(args.repeat, 1)} run(s) per checkout"
+    )
+    for name, runs in results.items():
+        ratio = float(np.median([r["cpu"] / b["cpu"] for r, b in zip(runs, base, strict=True)]))
+        print(
+            f"  {name:28s} gamma {runs[0]['gamma']:.6f}, "
+            f"CPU {np.median([r['cpu'] for r in runs]):7.1f}"
+            f" s, wall {np.median([r['wall'] for r in runs]):7.1f} s, CPU ratio to the baseline "
+            f"{ratio:.3f}"
+        )
+    gammas = [runs[0]["gamma"] for runs in results.values()]
+    print(f"  relative gamma difference {abs(gammas[0] - gammas[1]) / gammas[1]:.2e}")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--plant", default="lfr", choices=["synthetic", "lfr", "drake"])
@@ -66,7 +154,37 @@ def main(argv=None):
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--workers", type=int, default=2, help="threads of the 2-worker rows")
     parser.add_argument("--synthesis", action="store_true", help="also time a full synthesis")
+    parser.add_argument(
+        "--baseline",
+        default=None,
+        help="git revision: oos synth's default synthesis with this checkout and REV",
+    )
+    parser.add_argument("--repeat", type=int, default=1, help="pairs of runs with --baseline")
+    parser.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--qp",
+        default="slsqp",
+        help="with --json: the bundle step's QP solver (SynthesisOptions.qp; 'active-set' "
+        "changes the design)",
+    )
+    parser.add_argument("--profile", default=None, help="cProfile stats file of one synthesis")
     args = parser.parse_args(argv)
+    if args.json:  # one process of --baseline
+        print(json.dumps(default_synthesis(args.plant, args.models, args.workers, args.qp)))
+        return
+    if args.baseline:
+        compare(args)
+        return
+    if args.profile:
+        import cProfile
+
+        cProfile.runctx(
+            "default_synthesis(plant, models, 1)",
+            globals(),
+            dict(plant=args.plant, models=args.models),
+            args.profile,
+        )
+        return
 
     w, c = time.perf_counter(), time.process_time()
     from oos_drake.scenario.data import load_scenario

@@ -31,12 +31,14 @@ from oos_drake.control.plants import (
 )
 from oos_drake.control.report import write_synthesis
 from oos_drake.control.synthesis import SynthesisOptions, SynthesisResult, synthesize
+from oos_drake.control.systune import SystuneOptions
 from oos_drake.processes import check_scheduler, check_workers, make_executor
 
 __all__ = [
     "ControllerOptions",
     "ControllerResult",
     "baseline_for",
+    "between_plants",
     "compute_controller",
     "controller",
     "controller_options",
@@ -75,6 +77,18 @@ def make_plants(kind: str, configurations: int, scenario) -> PlantArray:
     raise ValueError(f"--plant must be lfr, drake or synthetic, got {kind!r}")
 
 
+def between_plants(plants: PlantArray, options, scenario) -> PlantArray | None:
+    """The configurations between those of ``plants`` where the hard goals are checked:
+    ``options.check_density - 1`` evenly spaced in each interval (the array built on
+    ``(N - 1) * check_density + 1`` mission times, those of ``plants`` left out); None with
+    ``check_density`` 1 or a single configuration."""
+    d, N = options.check_density, plants.size
+    if d <= 1 or N <= 1:
+        return None
+    dense = make_plants(options.plant, (N - 1) * d + 1, scenario)
+    return dense.subset([i for i in range(dense.size) if i % d])
+
+
 @dataclass(frozen=True)
 class ControllerOptions:
     """Options of the controller stage (:func:`controller`): what ``oos synth``'s arguments
@@ -110,6 +124,14 @@ class ControllerOptions:
         The sampled loop (``--sampled``; False: the continuous loop).
     delay_s : float or None
         Computation delay of the sampled loop [s] (``--delay``; None: the specification's).
+    hard_surplus : float
+        Relative surplus the tuning keeps on the hard ``[control]`` goals (``--hard-surplus``,
+        :attr:`~oos_drake.control.systune.SystuneOptions.hard_surplus`), at least 0.
+    check_density : int
+        The hard ``[control]`` goals are also checked on ``check_density - 1`` configurations
+        evenly spaced between each pair of neighbouring ``configurations``
+        (``--check-density``; 1: none), never tuned on; a goal missed there makes the design
+        ``infeasible``. At least 1.
     """
 
     plant: str = "lfr"
@@ -123,6 +145,8 @@ class ControllerOptions:
     scheduler: str | None = None
     sampled: bool = False
     delay_s: float | None = None
+    hard_surplus: float = SystuneOptions.hard_surplus
+    check_density: int = 2
 
     def __post_init__(self):
         if self.plant not in PLANTS:
@@ -133,6 +157,8 @@ class ControllerOptions:
             ("--max-iterations", self.max_iterations, 0),
             ("--worst-case-rounds", self.worst_case_rounds, 0),
             ("--working-set", self.working_set, 0),
+            ("--hard-surplus", self.hard_surplus, 0),
+            ("--check-density", self.check_density, 1),
         ):
             if not value >= least:
                 raise ValueError(f"{option} {value}: must be at least {least}")
@@ -204,6 +230,8 @@ def controller_options(args) -> ControllerOptions:
         scheduler=args.scheduler,
         sampled=args.sampled,
         delay_s=args.delay,
+        hard_surplus=args.hard_surplus,
+        check_density=args.check_density,
     )
 
 
@@ -253,7 +281,6 @@ def compute_controller(scenario, options: ControllerOptions) -> ControllerResult
     K0 = baseline_for(plants, scenario.mission.first_docking_time)
     if scenario.control.has_tuning_goals or scenario.control.structure != "static":
         from oos_drake.control.requirements import tune_to_requirements, tuning_specification
-        from oos_drake.control.systune import SystuneOptions
 
         solver = SystuneOptions(
             restarts=options.restarts,
@@ -261,9 +288,13 @@ def compute_controller(scenario, options: ControllerOptions) -> ControllerResult
             seed=options.seed,
             workers=options.workers,
             working_set=options.working_set,
+            hard_surplus=options.hard_surplus,
         )
+        between = between_plants(plants, options, scenario)
         start = time.perf_counter()
-        result = tune_to_requirements(plants, K0, spec, scenario.control, solver, progress=print)
+        result = tune_to_requirements(
+            plants, K0, spec, scenario.control, solver, progress=print, between=between
+        )
         elapsed = time.perf_counter() - start
         spec = tuning_specification(spec, scenario.control)
         return ControllerResult(scenario, options, plants, K0, spec, solver, result, elapsed)
@@ -285,11 +316,13 @@ def compute_controller(scenario, options: ControllerOptions) -> ControllerResult
 
 
 def write_controller_result(controller: ControllerResult, out) -> dict[str, Path]:
-    """Write the controller stage's files in ``out`` (created): ``controller.json``, and for
-    the synthesis ``closed_loop.npz``/``.mat``, ``models.parquet``/``.csv``, ``runs.csv``,
-    ``worst_cases.csv`` (:func:`oos_drake.control.report.write_synthesis`,
+    """Write the controller stage's files in ``out`` (created): ``controller.json``,
+    ``closed_loop.npz``/``.mat`` (the loops ``d -> e``), and for the synthesis
+    ``models.parquet``/``.csv``, ``runs.csv``, ``worst_cases.csv``
+    (:func:`oos_drake.control.report.write_synthesis`,
     :func:`~oos_drake.control.report.write_tuning`); return name -> path."""
-    from oos_drake.control.report import tuning_record, write_tuning
+    from oos_drake.control.report import tuning_closed_loop_arrays, tuning_record, write_tuning
+    from oos_drake.control.requirements import performance_closed_loops
     from oos_drake.scenario.data import scenario_record
 
     record = scenario_record(controller.scenario)
@@ -310,7 +343,11 @@ def write_controller_result(controller: ControllerResult, out) -> dict[str, Path
         controller.solver_options,
     )
     tuned["wall_time_s"] = controller.wall_time_s
-    return write_tuning(out, tuned, scenario_record=record)
+    requirements, plants = controller.scenario.control, controller.plants
+    loops = performance_closed_loops(plants, controller.result, controller.spec, requirements)
+    arrays = tuning_closed_loop_arrays(controller.result, plants, loops)
+    names = [p.name for p in plants.parameters]
+    return write_tuning(out, tuned, scenario_record=record, loops=arrays, parameter_names=names)
 
 
 def controller(scenario, options: ControllerOptions, out) -> ControllerResult:
@@ -346,7 +383,8 @@ def controller(scenario, options: ControllerOptions, out) -> ControllerResult:
         requirements = scenario.control
         print(
             f"structure {requirements.structure}: status {result.status}, goals checked on "
-            f"{result.models_checked} configurations (tuned on {len(result.working_set)}), "
+            f"{result.models_checked} configurations (tuned on {len(result.working_set)}) and "
+            f"{result.models_verified - result.models_checked} between them, "
             f"{designed.wall_time_s:.1f} s"
         )
         for goal in result.goals:
@@ -355,6 +393,9 @@ def controller(scenario, options: ControllerOptions, out) -> ControllerResult:
                 f"  {goal.kind} {goal.name}: {goal.value:.6g} "
                 f"({'met' if goal.met else 'NOT met'}; {details})"
             )
+        for goal in result.verified:
+            details = ", ".join(f"{k} = {v:.4g}" for k, v in goal.details.items())
+            print(f"  between: {goal.kind} {goal.name}: {goal.value:.6g} ({details})")
         if requirements.structure == "static":
             _print_gain(np.asarray(result.parameters["K"]["D"]))
     for name, path in paths.items():
@@ -425,6 +466,20 @@ def register(subparsers) -> None:
         help="configurations in the optimizer's initial working set (0: all); every "
         "configuration is checked after each tuning and the violators (weighted gain, hard "
         "[control] goals, stability) join the set, so the result holds on all of them",
+    )
+    parser.add_argument(
+        "--hard-surplus",
+        type=float,
+        default=SystuneOptions.hard_surplus,
+        help="relative surplus the tuning keeps on the hard [control] goals (each tuned to "
+        "<= 1/(1 + surplus)) so that they hold between the checked configurations",
+    )
+    parser.add_argument(
+        "--check-density",
+        type=int,
+        default=2,
+        help="the hard [control] goals are also checked on check_density - 1 configurations "
+        "between each pair of neighbouring ones (1: none); a goal missed there: infeasible",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of restarts and samples")
     add_scenario_argument(parser)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -116,6 +116,18 @@ class PlantArray:
                 f"value of uncertain parameter {self.parameters[bad].name!r} out of range"
             )
         return plant_statespace(*self.build(index, values))
+
+    def subset(self, config_index) -> PlantArray:
+        """The array of the configurations ``config_index`` only (renumbered from 0)."""
+        index = np.atleast_1d(np.asarray(config_index, dtype=int))
+        if index.size and (index.min() < 0 or index.max() >= self.size):
+            raise ValueError(f"configuration index out of range 0..{self.size - 1}: {index}")
+        build = self.build
+        return replace(
+            self,
+            configurations=self.configurations.iloc[index].reset_index(drop=True),
+            build=lambda i, values: build(index[np.asarray(i, dtype=int)], values),
+        )
 
     def nominal(self) -> BatchedStateSpace:
         """All configurations at nominal parameters."""

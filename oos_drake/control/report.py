@@ -131,23 +131,7 @@ def write_synthesis(
         "gamma": table["gamma [-]"].to_numpy(),
         "omega_peak_rad_s": 2 * np.pi * table["peak frequency [Hz]"].to_numpy(),
     }
-    names = {
-        "inputs": np.array(DISTURBANCES),
-        "outputs": np.array(ERRORS),
-        "parameter_names": np.array(result.parameter_names, dtype=str),
-    }
-    paths["npz"] = out / "closed_loop.npz"
-    atomic_write_bytes(paths["npz"], lambda stream: np.savez_compressed(stream, **arrays, **names))
-    paths["mat"] = write_mat(
-        out / "closed_loop.mat",
-        {
-            **arrays,
-            "inputs": np.array(DISTURBANCES, dtype=object),
-            "outputs": np.array(ERRORS, dtype=object),
-            "parameter_names": np.array(result.parameter_names, dtype=object),
-        },
-        matrices="ABCD",
-    )
+    paths.update(write_closed_loops(out, arrays, result.parameter_names))
     tables = {
         "parquet": ("models.parquet", table.to_parquet),
         "csv": ("models.csv", table.to_csv),
@@ -157,6 +141,70 @@ def write_synthesis(
     for key, (name, write) in tables.items():
         paths[key] = atomic_write_bytes(out / name, lambda s, write=write: write(s, index=False))
     return paths
+
+
+def write_closed_loops(out_dir, arrays: dict, parameter_names) -> dict[str, Path]:
+    """Write ``closed_loop.npz`` and ``closed_loop.mat`` (``arrays`` and the channel and
+    parameter names) in ``out_dir``; return ``{"npz": path, "mat": path}``."""
+    out = Path(out_dir)
+    names = {
+        "inputs": np.array(DISTURBANCES),
+        "outputs": np.array(ERRORS),
+        "parameter_names": np.array(parameter_names, dtype=str),
+    }
+    npz = out / "closed_loop.npz"
+    atomic_write_bytes(npz, lambda stream: np.savez_compressed(stream, **arrays, **names))
+    mat = write_mat(
+        out / "closed_loop.mat",
+        {**arrays, **{key: np.array(value, dtype=object) for key, value in names.items()}},
+        matrices="ABCD",
+    )
+    return {"npz": npz, "mat": mat}
+
+
+def tuning_closed_loop_arrays(result, plants: PlantArray, loops) -> dict:
+    """``closed_loop.npz``'s arrays for a tuned controller (the keys of
+    :func:`write_synthesis`'s): ``A, B, C, D`` of the loops ``d -> e`` of every configuration
+    (``loops``: :func:`~oos_drake.control.requirements.performance_closed_loops`, discrete
+    when ``sampling_time_s`` > 0), ``config``, ``parameter_values`` (nominal), ``gamma``
+    (each loop's certified H-infinity norm; for a discrete loop, of its bilinear image
+    ``z = (1 + s) / (1 - s)``, the same norm), ``omega_peak_rad_s`` (its peak frequency),
+    ``sampling_time_s``, and ``K`` [N m/rad, N m s/rad] when the controller is the static
+    3x6 gain, else the whole controller's ``controller_A`` ... ``controller_D``."""
+    from oos_drake.robust.peak_gain import peak_gain
+
+    A, B, C, D = (np.asarray(M, dtype=float) for M in (loops.A, loops.B, loops.C, loops.D))
+    ts = float(result.sampling_time)
+    if ts > 0:  # the bilinear image: same H-infinity norm, frequency tan(w T / 2)
+        eye = np.eye(A.shape[-1])
+        F = np.linalg.inv(A + eye)
+        peaks = peak_gain(
+            F @ (A - eye), np.sqrt(2) * F @ B, np.sqrt(2) * C @ F, D - C @ F @ B, certify=True
+        )
+        omega = 2 * np.arctan(peaks.omega) / ts
+    else:
+        peaks = peak_gain(A, B, C, D, certify=True)
+        omega = peaks.omega
+    N = plants.size
+    arrays = {
+        "A": A,
+        "B": B,
+        "C": C,
+        "D": D,
+        "config": np.arange(N),
+        "parameter_values": np.broadcast_to(
+            plants.nominal_values, (N, len(plants.parameters))
+        ).copy(),
+        "gamma": np.asarray(peaks.gamma, dtype=float),
+        "omega_peak_rad_s": np.asarray(omega, dtype=float),
+        "sampling_time_s": np.array(ts),
+    }
+    if "K" in result.parameters and set(result.parameters["K"]) == {"D"}:
+        arrays["K"] = np.asarray(result.parameters["K"]["D"], dtype=float)
+    else:
+        sys = result.controller
+        arrays |= {f"controller_{m}": np.asarray(getattr(sys, m), float) for m in "ABCD"}
+    return arrays
 
 
 def tuning_record(result, requirements, K0, plants: PlantArray, spec, options=None) -> dict:
@@ -242,6 +290,7 @@ def tuning_record(result, requirements, K0, plants: PlantArray, spec, options=No
             "models_checked": result.models_checked,
             "working_set": list(result.working_set),
             "rounds": list(result.rounds),
+            "verification": verification_record(result, options),
             "configurations": plants.configurations.to_dict(orient="list"),
             "model_source": plants.source,
             "model_sha256": plants.fingerprint(),
@@ -249,6 +298,38 @@ def tuning_record(result, requirements, K0, plants: PlantArray, spec, options=No
             "options": asdict(options) if options is not None else None,
         }
     )
+
+
+def verification_record(result, options=None) -> dict:
+    """Where the goals of a :class:`~oos_drake.control.systune.TuningResult` were verified:
+    the configurations of the array (``configurations_checked``, the working set's check) and
+    those between them (``configurations_between``, checked after the tuning only), and per
+    goal its worst value over all of them (for margins: the smallest disk margin and the
+    gain and phase margins it implies). Nothing is claimed between these configurations;
+    ``hard_surplus`` is the relative surplus the hard goals were tuned with."""
+    goals = []
+    for checked in result.goals:
+        between = [g for g in result.verified if g.name == checked.name]
+        worst = max([checked, *between], key=lambda g: g.value)
+        goals.append(
+            {
+                "name": checked.name,
+                "kind": checked.kind,
+                "value": worst.value,
+                "met": worst.met,
+                "where": "between" if between and worst is between[0] else "checked",
+                "details": dict(worst.details),
+                "value_checked": checked.value,
+                "value_between": between[0].value if between else None,
+            }
+        )
+    return {
+        "configurations_checked": result.models_checked,
+        "configurations_between": result.models_verified - result.models_checked,
+        "configurations_verified": result.models_verified,
+        "hard_surplus": getattr(options, "hard_surplus", None),
+        "goals": goals,
+    }
 
 
 def write_controller(out_dir, record: dict, *, scenario_record: dict | None = None) -> Path:
@@ -266,7 +347,18 @@ def write_controller(out_dir, record: dict, *, scenario_record: dict | None = No
     return atomic_write_bytes(out / "controller.json", lambda s: s.write(text))
 
 
-def write_tuning(out_dir, record: dict, *, scenario_record: dict | None = None) -> dict[str, Path]:
-    """Write ``controller.json`` of :func:`tuning_record` in ``out_dir``; return name -> path
-    (:func:`write_controller`, as :func:`write_synthesis` does)."""
-    return {"controller": write_controller(out_dir, record, scenario_record=scenario_record)}
+def write_tuning(
+    out_dir,
+    record: dict,
+    *,
+    scenario_record: dict | None = None,
+    loops: dict | None = None,
+    parameter_names=(),
+) -> dict[str, Path]:
+    """Write ``controller.json`` of :func:`tuning_record` in ``out_dir`` and, with ``loops``
+    (:func:`tuning_closed_loop_arrays`), ``closed_loop.npz``/``.mat`` as
+    :func:`write_synthesis` does; return name -> path."""
+    paths = {"controller": write_controller(out_dir, record, scenario_record=scenario_record)}
+    if loops is not None:
+        paths.update(write_closed_loops(out_dir, loops, parameter_names))
+    return paths

@@ -49,10 +49,17 @@ from oos_drake.control.interconnection import (
     weighted_interconnection,
 )
 from oos_drake.control.sampled import sampled_interconnection
+from oos_drake.control.statespace import BatchedStateSpace, connect
 from oos_drake.control.systune import SystuneOptions, TuningResult, systune
 from oos_drake.control.tunable import TunableGain, TunablePID, TunableSS
 
-__all__ = ["WEIGHTED_GAIN", "requirement_goals", "requirement_controller", "tune_to_requirements"]
+__all__ = [
+    "WEIGHTED_GAIN",
+    "performance_closed_loops",
+    "requirement_goals",
+    "requirement_controller",
+    "tune_to_requirements",
+]
 
 WEIGHTED_GAIN = "weighted gain d->e"
 LOOP_OPENING_SIGNALS = {"wheel_input": CONTROLS, "measurements": MEASUREMENTS}
@@ -130,8 +137,60 @@ def requirement_controller(requirements, K0):
     raise ValueError(f"control.structure: unknown structure {requirements.structure!r}")
 
 
+def _interconnection(plants, spec: DesignSpecification, requirements) -> BatchedStateSpace:
+    """The weighted interconnection of every configuration of ``plants`` (nominal parameter
+    values), discrete at ``requirements.rate_hz`` when given (batched)."""
+    N, P = plants.size, len(plants.parameters)
+    models = plants.evaluate(np.arange(N), np.broadcast_to(plants.nominal_values, (N, P)))
+    if sampling_time(requirements) > 0:
+        return sampled_interconnection(models, spec)
+    return weighted_interconnection(models, spec).system
+
+
+def _systems(plants, spec: DesignSpecification, requirements):
+    """:func:`_interconnection` as :func:`~oos_drake.control.systune.systune`'s plants."""
+    P, ts = _interconnection(plants, spec, requirements), sampling_time(requirements)
+    if ts > 0:
+        return [
+            control.ss(P.A[i], P.B[i], P.C[i], P.D[i], ts, inputs=P.inputs, outputs=P.outputs)
+            for i in range(P.A.shape[0])
+        ]
+    return P
+
+
+def performance_closed_loops(
+    plants, result: TuningResult, spec: DesignSpecification, requirements
+) -> BatchedStateSpace:
+    """The tuned loops ``d -> e`` (the weighted gain goal's channel) of every configuration
+    of ``plants``, at nominal parameter values, in the controller's time domain (discrete at
+    ``result.sampling_time`` when it is not 0): the interconnection tuned on, closed with
+    ``result.controller``.
+
+    Parameters
+    ----------
+    plants : oos_drake.control.plants.PlantArray
+    result : TuningResult
+        :func:`tune_to_requirements`' result on ``plants``.
+    spec : DesignSpecification
+        The specification tuned with (:func:`tuning_specification`'s).
+    requirements : oos_drake.scenario.data.ControlRequirements
+    """
+    P = _interconnection(plants, spec, requirements)
+    sys = result.controller
+    K = BatchedStateSpace(
+        sys.A, sys.B, sys.C, sys.D, tuple(sys.input_labels), tuple(sys.output_labels)
+    )
+    return connect([P, K], DISTURBANCES, ERRORS)
+
+
 def tune_to_requirements(
-    plants, K0, spec: DesignSpecification, requirements, options: SystuneOptions, progress=None
+    plants,
+    K0,
+    spec: DesignSpecification,
+    requirements,
+    options: SystuneOptions,
+    progress=None,
+    between=None,
 ) -> TuningResult:
     """Tune ``requirements.structure`` against :func:`requirement_goals` over ``plants``.
 
@@ -150,6 +209,11 @@ def tune_to_requirements(
         configuration of ``plants`` and the violators added (see :func:`systune`).
     progress : callable, optional
         ``progress(message: str)`` for log lines.
+    between : oos_drake.control.plants.PlantArray, optional
+        Configurations between those of ``plants`` (e.g. the midpoints) on which the tuned
+        controller is only checked (:func:`~oos_drake.control.systune.systune`'s ``verify``:
+        ``TuningResult.verified``; a hard goal missed there gives the status
+        ``"infeasible"``).
 
     Returns
     -------
@@ -157,22 +221,12 @@ def tune_to_requirements(
         ``status`` ``"infeasible"`` when a hard goal is not met (best values reached).
     """
     spec = tuning_specification(spec, requirements)
-    N, P = plants.size, len(plants.parameters)
-    nominal = np.broadcast_to(plants.nominal_values, (N, P))
-    models = plants.evaluate(np.arange(N), nominal)
-    ts = sampling_time(requirements)
-    if ts > 0:
-        P = sampled_interconnection(models, spec)
-        system = [
-            control.ss(P.A[i], P.B[i], P.C[i], P.D[i], ts, inputs=P.inputs, outputs=P.outputs)
-            for i in range(N)
-        ]
-    else:
-        system = weighted_interconnection(models, spec).system
+    verify = None if between is None or between.size == 0 else _systems(between, spec, requirements)
     return systune(
-        system,
+        _systems(plants, spec, requirements),
         requirement_controller(requirements, K0),
         requirement_goals(requirements),
         options=options,
         progress=progress,
+        verify=verify,
     )

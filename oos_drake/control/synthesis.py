@@ -50,7 +50,7 @@ from oos_drake.control.nonsmooth_bfgs import (
 )
 from oos_drake.control.objective import active_set, evaluate, loop_sigma, peak_gradients
 from oos_drake.control.plants import PlantArray
-from oos_drake.robust.peak_gain import peak_gain
+from oos_drake.robust.peak_gain import PeakGain, peak_gain
 
 
 @dataclass(frozen=True)
@@ -321,6 +321,28 @@ def _worst_case_search(plants: PlantArray, configs, K, spec, options, rng):
     return x, fx
 
 
+def _final_peaks(plants, models: ModelSet, N: int, K, spec, workers: int, checked):
+    """Certified peaks of ``models`` (the ``N`` nominal configurations, then the worst cases)
+    at ``K``. ``checked``: ``(K', peaks of the N nominal configurations at K')`` of the last
+    check; when ``K'`` is ``K`` those are reused and only the worst cases are evaluated (the
+    values of a model do not depend on the others in the batch: the same numbers, up to
+    round-off)."""
+    if checked is None or not np.array_equal(checked[0], K):
+        return gamma_over(plants, models, K, spec, certify=True, workers=workers)
+    nominal = checked[1]
+    if models.config_index.size == N:
+        return nominal
+    worst = ModelSet(models.config_index[N:], models.values[N:])
+    more = gamma_over(plants, worst, K, spec, certify=True, workers=workers)
+    return PeakGain(
+        *(np.concatenate([getattr(nominal, f), getattr(more, f)]) for f in FINAL_FIELDS)
+    )
+
+
+#: The :class:`PeakGain` fields of the final table (its refined local maxima are not kept).
+FINAL_FIELDS = ("gamma", "omega", "spectral_abscissa")
+
+
 @with_single_threaded_blas
 def _tune_start(interconnection: WeightedInterconnection, K_start, scale, options, threads: int):
     """One optimizer run of a round (an executor task): ``(gamma at the start, tune's result)``,
@@ -414,7 +436,7 @@ def synthesize(
     worst = ModelSet(np.zeros(0, dtype=int), np.zeros((0, P)))
     scale = _gain_scale(K0)
     runs, worst_rows = [], []
-    K_best, gamma_best = K0, gamma_start
+    K_best, gamma_best, checked = K0, gamma_start, None
     worst_case_rounds = 0
     for round_ in range(options.max_rounds):
         W = _interconnect(plants, working, spec)
@@ -438,6 +460,7 @@ def synthesize(
                 K_best, gamma_best = K, g
         # 1. every configuration at nominal parameters: add the violators to the working set
         peaks = gamma_over(plants, all_configs, K_best, spec, certify=True, workers=workers)
+        checked = (K_best, peaks)  # the final table reuses it when K_best stays
         in_set = np.zeros(N, dtype=bool)
         in_set[
             working.config_index[np.all(working.values == nominal[working.config_index], axis=1)]
@@ -478,7 +501,7 @@ def synthesize(
 
     models = all_configs.extend(worst.config_index, worst.values)
     added = np.concatenate([np.zeros(N, dtype=bool), np.ones(worst.config_index.size, dtype=bool)])
-    final = gamma_over(plants, models, K_best, spec, certify=True, workers=workers)
+    final = _final_peaks(plants, models, N, K_best, spec, workers, checked)
     gamma = float(np.max(final.gamma))
     table = pd.DataFrame({"config": models.config_index})
     for j, p in enumerate(plants.parameters):

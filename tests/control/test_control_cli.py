@@ -133,3 +133,56 @@ def test_goals_are_recorded_over_every_configuration_not_the_working_set(tmp_pat
         assert goal["met"] == (goal["value"] <= 1)
     hard = [g for g in record["goals"] if g["kind"] == "hard"]
     assert record["status"] == ("ok" if all(g["met"] for g in hard) else "infeasible")
+
+
+def _ab13dd(A, B, C, D, discrete):
+    from slycot import ab13dd
+
+    n, m, p = A.shape[0], B.shape[1], C.shape[0]
+    dico = "D" if discrete else "C"
+    return ab13dd(dico, "I", "N", "D", n, m, p, A, np.eye(n), B, C, D, tol=1e-10)[0]
+
+
+@pytest.mark.parametrize("rate", [None, 10.0])
+def test_a_goal_design_writes_its_closed_loops_and_where_it_was_verified(tmp_path, rate):
+    # the goal path writes closed_loop.npz like the static synthesis (same keys): every loop
+    # d -> e re-evaluated with slycot's ab13dd (discrete loops with dico "D"), and
+    # controller.json states where the goals were verified: 3 configurations and the 2
+    # midpoints (--check-density 2, the default)
+    lines = ["gain_margin_db = 3.0", "phase_margin_deg = 20.0"]
+    lines += [f"rate_hz = {rate}"] if rate else []
+    scenario = _scenario_with(tmp_path, lines)
+    status, out = _synth(tmp_path, scenario, "--configurations", "3", "--max-iterations", "5")
+    assert status in (0, 1)
+    record = json.loads((out / "controller.json").read_text())
+    loops = np.load(out / "closed_loop.npz")
+    assert {"A", "B", "C", "D", "K", "config", "gamma", "omega_peak_rad_s"} <= set(loops)
+    assert loops["A"].shape[0] == 3 and list(loops["config"]) == [0, 1, 2]
+    assert float(loops["sampling_time_s"]) == (1 / rate if rate else 0.0)
+    np.testing.assert_array_equal(
+        loops["K"],
+        np.hstack([record["controller"]["K_p"]["value"], record["controller"]["K_d"]["value"]]),
+    )
+    norms = [_ab13dd(*(loops[m][k] for m in "ABCD"), rate) for k in range(3)]
+    np.testing.assert_allclose(norms, loops["gamma"], rtol=1e-4)
+    weighted = record["goals"][0]
+    np.testing.assert_allclose(weighted["per_model"], norms, rtol=1e-4)
+    assert record["gamma"] == pytest.approx(max(norms), rel=1e-4)
+    verification = record["verification"]
+    assert verification["configurations_checked"] == 3
+    assert verification["configurations_between"] == 2
+    assert verification["configurations_verified"] == 5
+    # the midpoints are the configurations of the array built on 5 mission times
+    from oos_drake.app.synth import make_plants
+
+    midpoints = make_plants("synthetic", 5, None).subset([1, 3])
+    assert list(midpoints.configurations["time [s]"]) == [375.0, 1125.0]
+    every = make_plants("synthetic", 5, None).nominal()
+    np.testing.assert_array_equal(midpoints.nominal().A, every.A[[1, 3]])
+    mat = scipy.io.loadmat(out / "closed_loop.mat")
+    assert mat["A"].shape == loops["A"].shape[1:] + (3,)
+    between = next(g for g in verification["goals"] if g["name"] == weighted["name"])
+    assert between["value_checked"] == pytest.approx(weighted["value"])
+    assert between["value"] == pytest.approx(
+        max(between["value_checked"], between["value_between"])
+    )

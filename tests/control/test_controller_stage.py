@@ -113,14 +113,17 @@ def test_compute_writes_nothing_and_the_writer_writes_the_commands_files(
     assert designed.tuned is tuned and designed.status == "ok"
     stage = tmp_path / "stage"
     paths = write_controller_result(designed, stage)
-    expected = ["controller.json"]
+    expected = ["controller.json", "closed_loop.mat", "closed_loop.npz"]
     if not tuned:
-        expected += ["closed_loop.mat", "closed_loop.npz", "models.csv", "models.parquet"]
-        expected += ["runs.csv", "worst_cases.csv"]
+        expected += ["models.csv", "models.parquet", "runs.csv", "worst_cases.csv"]
     assert sorted(p.name for p in paths.values()) == sorted(expected)
     assert sorted(p.name for p in command.iterdir()) == sorted(expected)
     assert _without_wall_time(stage) == _without_wall_time(command)
     if tuned:
+        written, again = (np.load(folder / "closed_loop.npz") for folder in (stage, command))
+        assert sorted(written) == sorted(again)
+        for key in written:
+            np.testing.assert_array_equal(written[key], again[key], err_msg=key)
         return
     pd.testing.assert_frame_equal(
         pd.read_parquet(stage / "models.parquet"), pd.read_parquet(command / "models.parquet")

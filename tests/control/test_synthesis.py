@@ -66,6 +66,22 @@ def test_reported_norms_agree_with_ab13dd(small_problem, small_result):
     assert small_result.gamma == pytest.approx(reported.max(), rel=1e-12)
 
 
+def test_the_final_table_is_one_evaluation_of_every_model(small_problem, small_result):
+    # the final table reuses the last check's peaks of the nominal configurations when the
+    # gain did not change since: the same numbers as one certified evaluation of every model
+    # (to round-off: a model's peak frequency moved by 1 ulp in a batch of another size)
+    from oos_drake.control.synthesis import ModelSet, gamma_over
+
+    plants, _ = small_problem
+    table = small_result.models
+    values = table[list(small_result.parameter_names)].to_numpy(dtype=float)
+    models = ModelSet(table["config"].to_numpy(), values)
+    fresh = gamma_over(plants, models, small_result.K, small_result.spec, certify=True)
+    np.testing.assert_allclose(table["gamma [-]"].to_numpy(), fresh.gamma, rtol=1e-12, atol=0)
+    hz = table["peak frequency [Hz]"].to_numpy()
+    np.testing.assert_allclose(hz, fresh.omega / (2 * np.pi), rtol=1e-12, atol=0)
+
+
 def test_worst_cases_enter_the_model_set(small_result):
     wc = small_result.worst_cases
     assert len(wc) >= 1

@@ -97,7 +97,10 @@ def test_oos_run_on_geo_satellite_end_to_end(tmp_path, monkeypatch):
     out = tmp_path / "out"
     # the shipped file without its hard margin goals: the reduced synthesis (4 configurations,
     # 25 iterations) does not reach them (4.0 dB of 5 measured), and `oos run` stops on an
-    # infeasible controller; the full run reaches them (docs/TREE.md)
+    # infeasible controller; the full run reaches them (docs/TREE.md). Measured (branch sy5):
+    # at 60 iterations the reduced synthesis meets them (5.005 dB, 5.008 dB at the midpoints,
+    # 9.3 s CPU) and this test passes with them, but its analysis stage then takes 902 s (the
+    # whole test 1116 s at load 10-11): over the slow suite's budget, so they stay stripped
     document = shipped_document("geo_satellite")
     for goal in ("gain_margin_db", "phase_margin_deg"):
         document["control"].pop(goal, None)
