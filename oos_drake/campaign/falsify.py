@@ -37,7 +37,10 @@ box gains the sinusoid's parameters the spec does not disperse: its frequency wi
 imaginary parts in ``[-1, 1]``, normalized by the simulator); its amplitude and the scale of
 the random noise stay at the worst case's (1 and 0: the analysis' unit input alone) unless the
 spec disperses them. The LTI blocks are then realized at the worst case's frequency and a
-``critical`` window is centred on its time. ``--window START,END`` replaces the spec's window
+``critical`` window is centred on its time. On the Drake mission the first worst case's complex
+blocks are realized with their phase (:func:`realize_worst_perturbation`: the mission's own
+realization, a signed scalar times an all-pass, loses it), scaled by the searched
+``worst_scale`` in [0, 1]; the scalar LTI parameters it replaces stay at 0. ``--window START,END`` replaces the spec's window
 (a sinusoid needs time to build up its steady state).
 
 Resume: every evaluated point is written atomically as soon as its run finishes
@@ -62,6 +65,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from oos_drake.campaign.distributions import Choice, Fixed, LogUniform, TruncatedNormal
+from oos_drake.campaign.drake_simulator import FACTORY_PATH, WORST_SCALE
 from oos_drake.campaign.executors import make_executor
 from oos_drake.campaign.runner import metric_column, resolve_spec
 from oos_drake.campaign.samplers import run_seeds
@@ -114,9 +118,9 @@ class SearchBox:
     choices: tuple
 
     @classmethod
-    def of_spec(cls, spec: CampaignSpec, extra=()) -> SearchBox:
-        """The box of the spec's dispersions (see the module docstring) and the ``extra``
-        dimensions ``(name, low, high, log)``."""
+    def of_spec(cls, spec: CampaignSpec, extra=(), exclude=()) -> SearchBox:
+        """The box of the spec's dispersions (see the module docstring) but ``exclude`` and the
+        ``extra`` dimensions ``(name, low, high, log)``."""
         names, low, high, log, choices = [], [], [], [], []
         for name, lo, hi, logarithmic in extra:
             names.append(name)
@@ -125,7 +129,7 @@ class SearchBox:
             log.append(logarithmic)
             choices.append(None)
         for name, law in spec.dispersions.items():
-            if isinstance(law, Fixed):
+            if isinstance(law, Fixed) or name in exclude:
                 continue
             lo, hi = law.support
             if isinstance(law, TruncatedNormal):
@@ -217,6 +221,46 @@ def performance_seeds(spec: CampaignSpec, performance: pd.DataFrame | None) -> l
     return seeds
 
 
+def realize_worst_perturbation(spec, spec_path, worst_cases, simulator_options, seeds):
+    """The spec whose Drake mission realizes the first seed's complex blocks with their phase.
+
+    The mission realizes a complex block as a signed real scalar times an all-pass (the phase of
+    the analysis' worst value is lost: on heavy_target the seed's run reaches 1.026 of the
+    pointing requirement that way, 1.138 with the phase). The seed's row (``worst
+    perturbation``, ``frequency [Hz]``) becomes the simulator option ``worst_perturbation``
+    (:func:`~oos_drake.campaign.drake_simulator.worst_perturbation_option`), its scale
+    ``worst_scale`` a searched parameter (1 at the seed); the scalar blocks it realizes are
+    fixed at 0 and left out of the search (the perturbation stays in the analysis' unit ball).
+
+    Returns
+    -------
+    spec : CampaignSpec
+        The spec with the option (``spec`` itself when the row has no complex block).
+    seeds : list of dict
+        The seeds, the first with ``worst_scale = 1``.
+    realized : list of str
+        The scalar blocks the realization replaces (fixed at 0).
+    """
+    from oos_drake.campaign.drake_simulator import worst_perturbation_option
+
+    row = seeds[0]["row"]
+    perturbation = row.get("worst perturbation")
+    if not isinstance(perturbation, str):
+        return spec, seeds, []
+    by_name = spec.info.by_name
+    realized = sorted(
+        n for n in json.loads(perturbation) if n in by_name and by_name[n].kind == ParameterKind.LTI
+    )
+    if not realized:
+        return spec, seeds, []
+    option = worst_perturbation_option(perturbation, float(row["frequency [Hz]"]))
+    spec = resolve_spec(
+        spec_path, worst_cases, {**(simulator_options or {}), "worst_perturbation": option}
+    )
+    first = {k: v for k, v in seeds[0].items() if k not in realized} | {WORST_SCALE: 1.0}
+    return spec, [first, *seeds[1:]], realized
+
+
 def disturbance_dimensions(spec: CampaignSpec, seed: dict) -> tuple[list, dict]:
     """Search dimensions ``(name, low, high, log)`` and fixed values of the sinusoidal input
     the spec does not disperse (module docstring), around the worst case ``seed``."""
@@ -241,12 +285,14 @@ def disturbance_dimensions(spec: CampaignSpec, seed: dict) -> tuple[list, dict]:
 def starting_points(spec: CampaignSpec, box: SearchBox, seeds=()) -> np.ndarray:
     """Unit-cube points of the analysis' worst cases (the performance ``seeds`` first, then the
     regions by decreasing ``mu_upper``) and the nominal point; parameters a worst case does not
-    give stay at their nominal values, the input (parameters of kind ``disturbance``) at the
-    first seed's (a region carries no input: it is then driven by the worst one)."""
+    give stay at their nominal values, the input (parameters of kind ``disturbance``) and the
+    scale of the realized worst perturbation (``worst_scale``) at the first seed's (a region
+    carries neither: it is then driven by the worst ones)."""
     nominal = np.array([spec.info.by_name[n].nominal for n in box.names])
     if seeds:
         for j, name in enumerate(box.names):
-            if spec.info.by_name[name].kind == ParameterKind.DISTURBANCE and name in seeds[0]:
+            kind = spec.info.by_name[name].kind
+            if (kind == ParameterKind.DISTURBANCE or name == WORST_SCALE) and name in seeds[0]:
                 nominal[j] = seeds[0][name]
     points = []
     for seed in seeds:
@@ -533,8 +579,16 @@ def falsify(
     if not any(r.max is not None and r.max > 0 for r in spec.requirements):
         raise ValueError(f"spec {spec.name}: falsification needs a requirement with a max bound")
     seeds = performance_seeds(spec, performance)
+    realized = []
+    if seeds and spec.simulator.factory == FACTORY_PATH:
+        spec, seeds, realized = realize_worst_perturbation(
+            spec, spec_path, worst_cases, simulator_options, seeds
+        )
     dimensions, fixed = disturbance_dimensions(spec, seeds[0]) if seeds else ([], {})
-    box = SearchBox.of_spec(spec, dimensions)
+    fixed |= dict.fromkeys(realized, 0.0)
+    box = SearchBox.of_spec(spec, dimensions, exclude=realized)
+    if realized and WORST_SCALE not in box.names:  # not dispersed: the worst case's, whole
+        fixed[WORST_SCALE] = 1.0
     if window is not None and not (0.0 <= window[0] < window[1] <= spec.info.duration):
         raise ValueError(
             f"--window {window[0]:g},{window[1]:g}: need 0 <= start < end <= "
@@ -555,6 +609,8 @@ def falsify(
         settings["window [s]"] = [float(window[0]), float(window[1])]
     if seeds:
         settings["worst values"] = [{k: v for k, v in s.items() if k != "row"} for s in seeds]
+    if realized:
+        settings["realized with their phase"] = realized
     directory = Path(out)
     _prepare_directory(directory, spec, settings)
 
