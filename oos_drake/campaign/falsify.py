@@ -40,8 +40,9 @@ spec disperses them. The LTI blocks are then realized at the worst case's freque
 ``critical`` window is centred on its time. On the Drake mission the first worst case's complex
 blocks are realized with their phase (:func:`realize_worst_perturbation`: the mission's own
 realization, a signed scalar times an all-pass, loses it), scaled by the searched
-``worst_scale`` in [0, 1]; the scalar LTI parameters it replaces stay at 0. ``--window START,END`` replaces the spec's window
-(a sinusoid needs time to build up its steady state).
+``worst_scale`` in [0, 1]; the scalar LTI parameters it replaces stay at 0.
+``--window START,END`` replaces the spec's window (a sinusoid needs time to build up its
+steady state).
 
 Resume: every evaluated point is written atomically as soon as its run finishes
 (``points/point_NNNNNN.parquet``). The search is deterministic given its seed and the values it
