@@ -613,30 +613,40 @@ def twin_gain(times, phi, T_rw, u, v, omega, design, dynamic, out, settle) -> di
     dict
         ``gain twin [-]`` (phasor 2-norm over the channel's rows, scaled, over ``||v||``) and
         ``peak ratio twin [-]`` (largest centred ``|phi|`` / ``|u|`` after ``settle``, scaled;
-        the hub's attitude only).
+        with ``dynamic``, ``phi`` is the hub's without its drift plus the realized
+        ``Delta_add``'s steady oscillation: the analysis' attitude).
     """
     fit = (times >= settle - 1e-9) & np.all(np.isfinite(phi), axis=1)
+    t = times[fit]
+    attitude = phi[fit]
     if dynamic is None:
-        Phi = phasor(times[fit], phi[fit], omega)
+        Phi = phasor(t, attitude, omega)
     else:
         # The realization's Delta_add attitude is added to the measurement only: its double
         # integrator is unobservable, so the hub drifts by its ramp (the measured sum is
         # regulated): the hub's drift is fitted and left out.
-        Phi = phasor(times[fit], phi[fit], omega, trend=True)
+        Phi = phasor(t, attitude, omega, trend=True)
         # Its input is the plant-input torque T_rw + T_dist: the wheel torque from the log
         # (which at t_k holds the update of t_k - dt: Drake publishes before the discrete
         # update of the same time, hence the factor z), the external disturbance from the
         # flight software's filter on the input's d_ext entries.
         z = np.exp(1j * omega * design.period)
         T_in = (
-            z * phasor(times[fit], T_rw[fit], omega)
+            z * phasor(t, T_rw[fit], omega)
             + _response(design.disturbance, z) @ (np.asarray(v, dtype=complex)[0:3])
         )
-        Phi = Phi + _response(dynamic, z, rows=slice(3, 6)) @ T_in
+        added = _response(dynamic, z, rows=slice(3, 6)) @ T_in
+        # the analysis' attitude over the fit, for the peak ratio: the hub's without its drift
+        # plus the realized Delta_add's steady oscillation
+        oscillation = np.real(np.outer(np.exp(1j * omega * t), Phi))
+        drift = np.polynomial.polynomial.polyfit(t - t.mean(), attitude - oscillation, 1)
+        attitude = attitude - np.polynomial.polynomial.polyval(t - t.mean(), drift).T
+        attitude = attitude + np.real(np.outer(np.exp(1j * omega * t), added))
+        Phi = Phi + added
     rows, scale = out
-    U = phasor(times[fit], u[fit], omega)
+    U = phasor(t, u[fit], omega)
     gain = np.linalg.norm(np.concatenate([Phi, U])[rows]) * scale
-    signal = np.concatenate([phi[fit], u[fit]], axis=1)[:, rows]
+    signal = np.concatenate([attitude, u[fit]], axis=1)[:, rows]
     centred = signal - signal.mean(axis=0)
     return {
         "gain twin [-]": float(gain / np.linalg.norm(v)),

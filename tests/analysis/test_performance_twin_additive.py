@@ -149,6 +149,13 @@ def test_drake_twin_gain_equals_the_sampled_prediction_with_the_additive_block(c
     predicted = pt.predicted_gain(plant_hat, worst, design, v, out)
     assert twin["gain twin [-]"] == pytest.approx(predicted, rel=1e-3)
     assert twin["gain twin [-]"] == pytest.approx(gain, rel=0.01)  # and the analysis' loop
+    # the peak ratio is the analysis' attitude's (hub without its drift plus the realized
+    # Delta_add's): the largest axis amplitude of the continuous loop's response to v
+    n = loop.nstates
+    M = np.real(np.asarray(loop.M))
+    G = M[n:, :n] @ np.linalg.solve(1j * OMEGA * np.eye(n) - M[:n, :n], M[:n, n:]) + M[n:, n:]
+    axes = np.abs(np.squeeze(G)[list(CHANNELS["e_p"])] @ v)
+    assert twin["peak ratio twin [-]"] == pytest.approx(axes.max(), rel=0.01)
     # the hub alone drifts (the realized Delta_add's integrators are unobservable): a slope
     # the fit leaves out, large enough to matter if it did not
     fit = times >= settle
