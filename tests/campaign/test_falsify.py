@@ -173,12 +173,15 @@ def test_comparison_gives_the_performance_confirmation_of_the_metric(write_spec,
             "gain lower [-]": [1.179, 0.762, 5.0],
             "gain upper [-]": [1.199, 0.768, 6.0],
             "gain twin [-]": [1.281, np.nan, 7.0],
+            "peak ratio twin [-]": [1.142, np.nan, 7.0],
         }
     ).to_parquet(confirm / "performance_confirmation.parquet")
     result = falsify(write_spec(_spec()), tmp_path / "f", budget=8, progress=False, confirm=confirm)
     (row,) = result.comparison.to_dict("records")
     assert (row["performance lower [-]"], row["performance upper [-]"]) == (1.179, 1.199)
     assert row["twin worst input / requirement [-]"] == 1.281
+    assert row["twin worst input, largest axis / requirement [-]"] == 1.142
+    assert "its largest axis, what a peak metric sees: 1.142" in result.sentence()
     worst = result.table["ape [rad]"].max() / REQUIREMENT
     assert row["worst found / requirement [-]"] == pytest.approx(worst, rel=1e-12)
     assert "certified worst-case gain [1.179, 1.199]" in result.sentence()
