@@ -652,6 +652,10 @@ def falsify(
         )
     except _BudgetSpent:
         pass
+    except RuntimeError as exc:  # scipy wraps the batch map's refusal: give it back as is
+        if isinstance(exc.__cause__, ValueError):
+            raise exc.__cause__ from None
+        raise
     finally:
         evaluator.bar.close()
         executor.close()

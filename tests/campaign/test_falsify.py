@@ -89,6 +89,22 @@ def test_resume_after_interruption_loses_no_run(write_spec, tmp_path):
     assert (more.reused, more.evaluated, len(more.table)) == (40, 20, 60)
 
 
+def test_resuming_another_search_is_refused_in_one_line(write_spec, tmp_path):
+    """A recorded point that is not the one the replayed search asks for (another search's
+    folder): the evaluator's ValueError, not scipy's RuntimeError around it."""
+    import json
+
+    falsify(write_spec(_spec()), tmp_path / "f", budget=12, progress=False)
+    path = tmp_path / "f" / "points" / "point_000001.parquet"
+    point = pd.read_parquet(path)
+    u = json.loads(point.loc[0, "unit coordinates"])
+    point.loc[0, "unit coordinates"] = json.dumps([min(1.0, x + 0.01) for x in u])
+    point.to_parquet(path)
+    with pytest.raises(ValueError, match="point 1 differs from the recorded one") as info:
+        falsify(write_spec(_spec()), tmp_path / "f", budget=12, progress=False)
+    assert "\n" not in str(info.value)
+
+
 def test_cli_refuses_bad_input_and_writes_nothing(write_spec, tmp_path, capsys):
     spec = write_spec(_spec())
     out = tmp_path / "nothing"
