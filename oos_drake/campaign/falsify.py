@@ -96,6 +96,8 @@ SEED_SPREAD = 0.1
 PEAK_RATIO = "peak ratio twin [-]"
 #: Column of the performance table holding the worst case as simulator values (JSON).
 WORST_VALUES_COLUMN = "worst values"
+#: The same perturbation with the input that is worst for a single axis (JSON).
+AXIS_VALUES_COLUMN = "worst values, largest axis"
 
 
 @dataclass(frozen=True)
@@ -206,8 +208,10 @@ def _window_and_frequency(spec: CampaignSpec, seed: pd.Series | None = None, win
 
 def performance_seeds(spec: CampaignSpec, performance: pd.DataFrame | None) -> list[dict]:
     """The performance table's worst cases for the spec's max-requirements, as simulator
-    values (``worst values``), largest certified lower bound first; each dict also holds the
-    row under ``"row"``. Empty without a table or without that column."""
+    values (``worst values``, then the same perturbation with the input that is worst for one
+    axis, ``worst values, largest axis``: a peak requirement bounds each axis), largest
+    certified lower bound first; each dict also holds the row under ``"row"``. Empty without a
+    table or without that column."""
     from oos_drake.campaign.performance import REQUIREMENT_METRICS
 
     if performance is None or WORST_VALUES_COLUMN not in performance.columns:
@@ -219,8 +223,11 @@ def performance_seeds(spec: CampaignSpec, performance: pd.DataFrame | None) -> l
     known = spec.info.by_name
     seeds = []
     for _, row in rows.iterrows():
-        values = json.loads(row[WORST_VALUES_COLUMN])
-        seeds.append({k: float(v) for k, v in values.items() if k in known} | {"row": row})
+        for column in (WORST_VALUES_COLUMN, AXIS_VALUES_COLUMN):
+            if not isinstance(row.get(column), str):
+                continue  # a table written before the largest-axis input
+            values = json.loads(row[column])
+            seeds.append({k: float(v) for k, v in values.items() if k in known} | {"row": row})
     return seeds
 
 
@@ -260,8 +267,11 @@ def realize_worst_perturbation(spec, spec_path, worst_cases, simulator_options, 
     spec = resolve_spec(
         spec_path, worst_cases, {**(simulator_options or {}), "worst_perturbation": option}
     )
-    first = {k: v for k, v in seeds[0].items() if k not in realized} | {WORST_SCALE: 1.0}
-    return spec, [first, *seeds[1:]], realized
+    same = [s for s in seeds if s["row"] is row]  # the first row's seeds (both inputs)
+    realized_seeds = [
+        {k: v for k, v in s.items() if k not in realized} | {WORST_SCALE: 1.0} for s in same
+    ]
+    return spec, [*realized_seeds, *seeds[len(same) :]], realized
 
 
 def disturbance_dimensions(spec: CampaignSpec, seed: dict) -> tuple[list, dict]:

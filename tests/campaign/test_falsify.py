@@ -297,3 +297,30 @@ def test_search_from_the_worst_input_reaches_the_linear_twins_worst_case(write_s
     assert seeded < 0.97 * known  # the seed is not the worst case ...
     assert best == pytest.approx(known, rel=0.01)  # ... the search reaches it
     assert best <= known * (1 + 1e-3)  # (the grid's maximum, up to its resolution)
+
+
+def test_each_performance_worst_case_seeds_both_of_its_inputs(write_spec):
+    """The stored worst case, then the same perturbation with the input worst for one axis
+    (``worst values, largest axis``), largest certified lower bound first; a table written
+    before that column gives the first only."""
+    import json
+
+    from oos_drake.campaign.falsify import performance_seeds
+    from oos_drake.campaign.spec import load_spec
+
+    spec = load_spec(write_spec(_spec()))
+    table = pd.DataFrame(
+        {
+            "channel": ["e_p", "e_p", "e_u"],
+            "gain lower [-]": [0.7, 1.1, 5.0],
+            "worst values": [json.dumps({"a": 0.1}), json.dumps({"a": 0.2}), json.dumps({})],
+            "worst values, largest axis": [None, json.dumps({"a": 0.3, "b": 0.4}), None],
+        }
+    )
+    seeds = performance_seeds(spec, table)
+    assert [{k: v for k, v in s.items() if k != "row"} for s in seeds] == [
+        {"a": 0.2},
+        {"a": 0.3, "b": 0.4},
+        {"a": 0.1},
+    ]
+    assert seeds[0]["row"] is seeds[1]["row"]
