@@ -85,7 +85,7 @@ def _complex_blocks(option: str) -> tuple[float, dict]:
 
     import numpy as np
 
-    from oos_drake.analysis.confirm import Peak, complex_values
+    from oos_drake.multibody.flight_software import complex_blocks
 
     try:
         data = json.loads(option)
@@ -104,7 +104,7 @@ def _complex_blocks(option: str) -> tuple[float, dict]:
             f"drake-mission: option worst_perturbation: frequency {frequency} Hz must be > 0"
         )
     omega = 2 * math.pi * frequency
-    blocks = complex_values(Peak("mission", "", math.nan, math.nan, omega, 1.0, 1.0, perturbation))
+    blocks = complex_blocks(perturbation)
     if not blocks:
         raise ValueError("drake-mission: option worst_perturbation has no complex block")
     return omega, blocks

@@ -90,6 +90,7 @@ __all__ = [
     "METRIC_SLOTS",
     "allpass",
     "allpass_block",
+    "complex_blocks",
     "discretize",
     "perturbation_block",
     "rpy_to_rotation",
@@ -409,6 +410,32 @@ def perturbation_block(
     D = np.zeros((9, 3))
     D[:3] = Dm
     return DiscreteBlock(A, B, C, D)
+
+
+def complex_blocks(perturbation) -> dict:
+    """The analysis' worst complex blocks of a perturbation as :func:`perturbation_block` takes
+    them: ``{"delta_mul": 3x3, "delta_add": 3x3}`` (normalized [-]; a block the perturbation
+    leaves out is absent).
+
+    Parameters
+    ----------
+    perturbation : Mapping
+        Block name -> normalized value (``Delta_add`` a 3x3 complex, ``Delta_mul_xy`` a
+        complex scalar or 1x1; real blocks ignored).
+    """
+    from oos_drake.control.analysis_model import ADDITIVE_BLOCK, MULTIPLICATIVE_BLOCKS
+
+    axes = ("x", "y", "z")
+    out = {}
+    if ADDITIVE_BLOCK in perturbation:
+        out["delta_add"] = np.asarray(perturbation[ADDITIVE_BLOCK], dtype=complex)
+    if any(n in perturbation for n in MULTIPLICATIVE_BLOCKS):
+        mul = np.zeros((3, 3), dtype=complex)
+        for name in MULTIPLICATIVE_BLOCKS:
+            i, j = axes.index(name[-2]), axes.index(name[-1])
+            mul[i, j] = complex(np.ravel(perturbation.get(name, 0.0))[0])
+        out["delta_mul"] = mul
+    return out
 
 
 def _consecutive(sizes) -> tuple[slice, ...]:
