@@ -451,19 +451,11 @@ def _continuous_abscissa(closed, peak: Peak, alpha: float) -> tuple[float, float
 
 def complex_values(peak: Peak) -> dict:
     """The peak's worst complex blocks as the flight software takes them: ``{"delta_mul":
-    3x3, "delta_add": 3x3}`` (normalized [-]; a block the subset leaves out is absent)."""
-    from oos_drake.control.analysis_model import ADDITIVE_BLOCK, MULTIPLICATIVE_BLOCKS
+    3x3, "delta_add": 3x3}`` (normalized [-]; a block the subset leaves out is absent;
+    :func:`~oos_drake.multibody.flight_software.complex_blocks`)."""
+    from oos_drake.multibody.flight_software import complex_blocks
 
-    out = {}
-    if ADDITIVE_BLOCK in peak.perturbation:
-        out["delta_add"] = np.asarray(peak.perturbation[ADDITIVE_BLOCK], dtype=complex)
-    if any(n in peak.perturbation for n in MULTIPLICATIVE_BLOCKS):
-        mul = np.zeros((3, 3), dtype=complex)
-        for name in MULTIPLICATIVE_BLOCKS:
-            i, j = AXES.index(name[-2]), AXES.index(name[-1])
-            mul[i, j] = complex(np.ravel(peak.perturbation.get(name, 0.0))[0])
-        out["delta_mul"] = mul
-    return out
+    return complex_blocks(peak.perturbation)
 
 
 def sampled_loop_poles(plant_hat, peak: Peak, alpha: float, software, mul_block=None):

@@ -40,6 +40,7 @@ the pointing error (2-norm over the axes) exceed the APE requirement.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 
@@ -59,7 +60,12 @@ __all__ = [
     "mission_values",
     "perturbed_loop",
     "phasor",
+    "axis_direction",
+    "predicted_gain",
+    "predicted_response",
+    "sampled_response",
     "sampled_gain",
+    "twin_gain",
     "worst_gain_cases",
 ]
 
@@ -95,6 +101,8 @@ PERFORMANCE_CONFIRMATION_COLUMNS = [
     "worst perturbation",
     "worst input",
     "worst values",
+    "gain largest axis sampled [-]",
+    "worst values, largest axis",
 ]
 #: Columns of each worst-case gain's record in the confirmation summary (:func:`summary_line`).
 PERFORMANCE_SUMMARY_COLUMNS = (
@@ -210,8 +218,9 @@ def perturbed_loop(sys, normalized: dict, omega: float):
     return usubs(sys, substitution(peak, sys.uncertainty, 1.0), normalized=True)
 
 
-def phasor(t, y, omega: float) -> np.ndarray:
-    """Complex amplitudes ``Y`` of ``y(t) ~ c + Re(Y e^{j omega t})`` (least squares, per column).
+def phasor(t, y, omega: float, *, trend: bool = False) -> np.ndarray:
+    """Complex amplitudes ``Y`` of ``y(t) ~ c + Re(Y e^{j omega t})`` (least squares, per column);
+    ``trend``: of ``y(t) ~ c + r t + Re(Y e^{j omega t})`` (a drift fitted and left out).
 
     Parameters
     ----------
@@ -220,11 +229,15 @@ def phasor(t, y, omega: float) -> np.ndarray:
     y : array_like, shape (n,) or (n, m)
     omega : float
         Frequency [rad/s].
+    trend : bool
+        Fit a linear drift too.
     """
     t = np.asarray(t, dtype=float)
     y = np.asarray(y, dtype=float)
-    basis = np.column_stack([np.ones_like(t), np.cos(omega * t), -np.sin(omega * t)])
-    coef, *_ = np.linalg.lstsq(basis, y, rcond=None)
+    columns = [np.ones_like(t), np.cos(omega * t), -np.sin(omega * t)]
+    if trend:
+        columns.append(t - t.mean())
+    coef, *_ = np.linalg.lstsq(np.column_stack(columns), y, rcond=None)
     return coef[1] + 1j * coef[2]
 
 
@@ -286,10 +299,10 @@ def _loop_step(plant_d, software, dynamic):
             measured = measured + dynamic.C[3:] @ xp
         out1 = M1 @ np.concatenate([x1, measured, d[0:6]])
         out2 = M2 @ np.concatenate([x2, out1[n1:], d[6:9]])
-        T_rw, T = out2[n2 : n2 + 3], out2[n2 + 12 :]
+        T_in, T = out2[n2 : n2 + 3] + out2[n2 + 3 : n2 + 6], out2[n2 + 12 :]  # T_rw + T_dist
         if np_:
-            T = T + dynamic.C[:3] @ xp + dynamic.D[:3] @ T_rw
-            xp = dynamic.A @ xp + dynamic.B @ T_rw
+            T = T + dynamic.C[:3] @ xp + dynamic.D[:3] @ T_in
+            xp = dynamic.A @ xp + dynamic.B @ T_in
         X1 = np.concatenate([Ad @ xg + Bd @ T, out1[:n1], out2[:n2], xp])
         return X1, np.concatenate([(Cg @ xg)[:3], out1[n1:]])
 
@@ -302,16 +315,15 @@ def _loop_step(plant_d, software, dynamic):
     return A, B, C, D
 
 
-def sampled_gain(plant_hat, values, software, dynamic, v, omega: float, requirement_rows):
-    """Gain of the sampled-data loop at ``omega`` for the input direction ``v`` (LFR order).
+def sampled_response(plant_hat, values, software, dynamic, omega: float, requirement_rows):
+    """The sampled-data loop's response ``H(e^{j omega dt})`` from the nine unit inputs (LFR
+    order) to the channel's rows, scaled (``rows x 9``, complex).
 
     ``plant_hat``: the uncertain plant ``T -> wdot`` with ``values`` (normalized, complex blocks
     as interpolants) substituted, discretized with a zero-order hold at the flight software's
     period; ``dynamic``: the flight software's realization of ``Delta_mul`` (None without);
     ``requirement_rows``: ``(rows of [phi; u], scale)`` of the channel (``e_p``: phi over
-    the APE requirement; ``e_u``: the command, see :func:`_channel_output`). The input is
-    ``d_k = Re(v e^{j omega k dt})``: the steady-state phasor at the samples is ``H(e^{j omega
-    dt}) v``.
+    the APE requirement; ``e_u``: the command, see :func:`_channel_output`).
     """
     from oos_drake.control.sampled import plant_with_integrators
     from oos_drake.lfr import usubs
@@ -322,11 +334,64 @@ def sampled_gain(plant_hat, values, software, dynamic, v, omega: float, requirem
     Ad, Bd, *_ = scipy.signal.cont2discrete((Ag, Bg, Cg, np.zeros((6, 3))), period, method="zoh")
     A, B, C, D = _loop_step((Ad, Bd, Cg), software, dynamic)
     z = np.exp(1j * omega * period)
-    V = np.zeros(9, dtype=complex)
-    V[_TABLE_COLUMNS] = v
     rows, scale = requirement_rows
     H = C[rows] @ np.linalg.solve(z * np.eye(A.shape[0]) - A, B) + D[rows]
-    return float(np.linalg.norm(H @ V) * scale / np.linalg.norm(v))
+    return H[:, _TABLE_COLUMNS] * scale  # columns in the LFR order
+
+
+def sampled_gain(plant_hat, values, software, dynamic, v, omega: float, requirement_rows):
+    """Gain of the sampled-data loop at ``omega`` for the input direction ``v`` (LFR order):
+    ``||H v|| / ||v||`` with ``H`` of :func:`sampled_response`. The input is ``d_k = Re(v
+    e^{j omega k dt})``: the steady-state phasor at the samples is ``H(e^{j omega dt}) v``."""
+    H = sampled_response(plant_hat, values, software, dynamic, omega, requirement_rows)
+    v = np.asarray(v, dtype=complex)
+    return float(np.linalg.norm(H @ v) / np.linalg.norm(v))
+
+
+def predicted_gain(plant_hat, worst, design, v, out) -> float:
+    """The sampled-data prediction of a worst case for the input ``v``: ``||H v|| / ||v||``
+    with ``H`` of :func:`predicted_response`."""
+    H = predicted_response(plant_hat, worst, design, out)
+    v = np.asarray(v, dtype=complex)
+    return float(np.linalg.norm(H @ v) / np.linalg.norm(v))
+
+
+def predicted_response(plant_hat, worst, design, out) -> np.ndarray:
+    """The sampled-data response of a worst case (:func:`sampled_response`): ``Delta_add`` and
+    the real blocks in the plant ``plant_hat`` (the analysis' uncertain plant), ``Delta_mul`` in
+    the flight software (:func:`~oos_drake.multibody.flight_software.perturbation_block`).
+
+    Parameters
+    ----------
+    plant_hat : LFR
+        The analysis' uncertain plant ``T -> wdot`` at the configuration.
+    worst : Peak
+        The worst perturbation (normalized) and its frequency ``omega`` [rad/s].
+    design : FlightSoftwareDesign
+    out : (list, float)
+        Rows of ``[phi; u]`` and scale of the channel (:func:`_channel_output`).
+    """
+    from oos_drake.analysis.confirm import complex_values, substitution
+    from oos_drake.control.analysis_model import MULTIPLICATIVE_BLOCKS
+    from oos_drake.multibody.flight_software import FlightSoftware, perturbation_block
+
+    mul = complex_values(worst).get("delta_mul")
+    mul_block = None if mul is None else perturbation_block(design, worst.omega, delta_mul=mul)
+    values = substitution(worst, plant_hat.uncertainty, 1.0)
+    if mul_block is not None:
+        for name in MULTIPLICATIVE_BLOCKS:
+            values[name] = np.zeros((1, 1))
+    software = FlightSoftware(design, 6, 6, 0, 0)
+    return sampled_response(plant_hat, values, software, mul_block, worst.omega, out)
+
+
+def axis_direction(H) -> tuple[float, np.ndarray]:
+    """The input direction (unit 2-norm, LFR order) that maximizes the largest single row of
+    ``H`` (one axis: what a peak requirement on each axis sees) and that row's gain."""
+    H = np.asarray(H, dtype=complex)
+    norms = np.linalg.norm(H, axis=1)
+    row = H[int(np.argmax(norms))]
+    return float(norms.max()), np.conj(row) / np.linalg.norm(row)
 
 
 def _channel_output(channel: str, spec) -> tuple[list, float]:
@@ -432,12 +497,10 @@ def confirm_gain_case(case: GainCase, controller, scenario, subsets, options=Non
         Peak,
         _peak_models,
         complex_values,
-        substitution,
     )
     from oos_drake.analysis.performance import CHANNELS
     from oos_drake.control.components import DesignSpecification
     from oos_drake.multibody.flight_software import (
-        FlightSoftware,
         FlightSoftwareDesign,
         perturbation_block,
     )
@@ -461,6 +524,8 @@ def confirm_gain_case(case: GainCase, controller, scenario, subsets, options=Non
         "gain of the perturbation [-]": gain_p,
         "gain linear twin [-]": linear_twin_gain(loop, v, case.omega, rows, settle=settle),
         "gain linear sampled [-]": math.nan,
+        "gain largest axis sampled [-]": math.nan,
+        "worst values, largest axis": None,
         "gain twin [-]": math.nan,
         "peak ratio twin [-]": math.nan,
         "settle [s]": settle,
@@ -480,18 +545,13 @@ def confirm_gain_case(case: GainCase, controller, scenario, subsets, options=Non
     worst = Peak("mission", case.subset, case.time, math.nan, case.omega, 1.0, 1.0, normalized)
     blocks = complex_values(worst)
     dynamic = perturbation_block(design, case.omega, **blocks) if blocks else None
-    mul = blocks.get("delta_mul")
-    mul_block = perturbation_block(design, case.omega, delta_mul=mul) if mul is not None else None
-    software = FlightSoftware(design, 6, 6, 0, 0)
-    values = substitution(worst, plant_hat.uncertainty, 1.0)
-    if mul_block is not None:
-        from oos_drake.control.analysis_model import MULTIPLICATIVE_BLOCKS
-
-        for name in MULTIPLICATIVE_BLOCKS:
-            values[name] = np.zeros((1, 1))
     out_rows = _channel_output(case.channel, spec)
-    row["gain linear sampled [-]"] = sampled_gain(
-        plant_hat, values, software, mul_block, v, case.omega, out_rows
+    H = predicted_response(plant_hat, worst, design, out_rows)
+    row["gain linear sampled [-]"] = float(np.linalg.norm(H @ v) / np.linalg.norm(v))
+    # the same perturbation, the input that is worst for one axis (a peak metric's worst case)
+    row["gain largest axis sampled [-]"], axis_v = axis_direction(H)
+    row["worst values, largest axis"] = json.dumps(
+        mission_values(normalized, closed.uncertainty, axis_v, case.omega)
     )
     twin = _drake_twin_gain(
         worst,
@@ -552,26 +612,90 @@ def _drake_twin_gain(worst, controller, scenario, options, design, dynamic, v, s
         times, phi, T_rw, u = twin.forced_run(1.0, table)
     except MissionDiverged as exc:
         return {"status": f"twin diverged: {exc}", "simulated [s]": duration}
-    fit = (times >= n_settle * cycle - 1e-9) & np.all(np.isfinite(phi), axis=1)
-    Phi = phasor(times[fit], phi[fit], omega)
-    Trw = phasor(times[fit], T_rw[fit], omega)
-    if dynamic is not None:  # the attitude the realized Delta_add adds to the measurement
-        z = np.exp(1j * omega * period)
-        Phi = Phi + dynamic.C[3:6] @ np.linalg.solve(
-            z * np.eye(dynamic.A.shape[0]) - dynamic.A, dynamic.B @ Trw
-        )
-    rows, scale = out
-    U = phasor(times[fit], u[fit], omega)
-    gain = np.linalg.norm(np.concatenate([Phi, U])[rows]) * scale
-    signal = np.concatenate([phi[fit], u[fit]], axis=1)[:, rows]
-    centred = signal - signal.mean(axis=0)
-    return {
-        "gain twin [-]": float(gain / np.linalg.norm(v)),
-        "peak ratio twin [-]": float(np.abs(centred).max() * scale),
+    return twin_gain(times, phi, T_rw, u, v, omega, design, dynamic, out, n_settle * cycle) | {
         "settle [s]": n_settle * cycle,
         "simulated [s]": duration,
         "status": note,
     }
+
+
+def twin_gain(times, phi, T_rw, u, v, omega, design, dynamic, out, settle) -> dict:
+    """The twin's gain and peak ratio from a forced run's logs (a partial row).
+
+    Parameters
+    ----------
+    times : ndarray, shape (n,)
+        Log times since the run's start [s] (at flight-software samples).
+    phi, T_rw, u : ndarray, shape (n, 3)
+        Hub roll-pitch-yaw attitude [rad], wheel torque and torque command [N m].
+    v : array_like, shape (9,)
+        The input direction (LFR order ``[d_ext; n_sst; n_gyro]``, complex).
+    omega : float
+        Input frequency [rad/s].
+    design : FlightSoftwareDesign
+        The run's flight software (its period and disturbance filter).
+    dynamic : DiscreteBlock or None
+        The run's dynamic perturbation (:func:`~oos_drake.multibody.flight_software.
+        perturbation_block`); its ``Delta_add`` attitude is added to the hub's (it is part of
+        what the analysis' plant ``P_hat`` calls the attitude).
+    out : (list, float)
+        Rows of ``[phi; u]`` and the scale of the channel (:func:`_channel_output`).
+    settle : float
+        Logs before this time [s] are the transient (not fitted).
+
+    Returns
+    -------
+    dict
+        ``gain twin [-]`` (phasor 2-norm over the channel's rows, scaled, over ``||v||``) and
+        ``peak ratio twin [-]`` (largest centred ``|phi|`` / ``|u|`` after ``settle``, scaled;
+        with ``dynamic``, ``phi`` is the hub's without its drift plus the realized
+        ``Delta_add``'s steady oscillation: the analysis' attitude).
+    """
+    fit = (times >= settle - 1e-9) & np.all(np.isfinite(phi), axis=1)
+    t = times[fit]
+    attitude = phi[fit]
+    if dynamic is None:
+        Phi = phasor(t, attitude, omega)
+    else:
+        # The realization's Delta_add attitude is added to the measurement only: its double
+        # integrator is unobservable, so the hub drifts by its ramp (the measured sum is
+        # regulated): the hub's drift is fitted and left out.
+        Phi = phasor(t, attitude, omega, trend=True)
+        # Its input is the plant-input torque T_rw + T_dist: the wheel torque from the log
+        # (which at t_k holds the update of t_k - dt: Drake publishes before the discrete
+        # update of the same time, hence the factor z), the external disturbance from the
+        # flight software's filter on the input's d_ext entries.
+        z = np.exp(1j * omega * design.period)
+        T_in = (
+            z * phasor(t, T_rw[fit], omega)
+            + _response(design.disturbance, z) @ (np.asarray(v, dtype=complex)[0:3])
+        )
+        added = _response(dynamic, z, rows=slice(3, 6)) @ T_in
+        # the analysis' attitude over the fit, for the peak ratio: the hub's without its drift
+        # plus the realized Delta_add's steady oscillation
+        oscillation = np.real(np.outer(np.exp(1j * omega * t), Phi))
+        drift = np.polynomial.polynomial.polyfit(t - t.mean(), attitude - oscillation, 1)
+        attitude = attitude - np.polynomial.polynomial.polyval(t - t.mean(), drift).T
+        attitude = attitude + np.real(np.outer(np.exp(1j * omega * t), added))
+        Phi = Phi + added
+    rows, scale = out
+    U = phasor(t, u[fit], omega)
+    gain = np.linalg.norm(np.concatenate([Phi, U])[rows]) * scale
+    signal = np.concatenate([attitude, u[fit]], axis=1)[:, rows]
+    centred = signal - signal.mean(axis=0)
+    return {
+        "gain twin [-]": float(gain / np.linalg.norm(v)),
+        "peak ratio twin [-]": float(np.abs(centred).max() * scale),
+    }
+
+
+def _response(block, z: complex, rows=slice(None)) -> np.ndarray:
+    """Frequency response ``C (z I - A)^-1 B + D`` of a discrete block's ``rows`` at ``z``."""
+    n = block.A.shape[0]
+    C, D = block.C[rows], block.D[rows]
+    if n == 0:
+        return D.astype(complex)
+    return C @ np.linalg.solve(z * np.eye(n) - block.A, block.B) + D
 
 
 def _gain_task(args):

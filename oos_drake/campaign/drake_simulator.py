@@ -17,12 +17,23 @@ Use it in a spec with::
 Parameters are keyed by the uncertain-block names of the LFR model (``m_RH2``, ``Jxx_RH2``,
 ``w1_SA1``, ``k_shear_SM1``, ...), so the analysis' ``worst_cases.parquet`` columns map onto them
 one to one; see :func:`oos_drake.multibody.mission_sim.mission_parameters` for the list.
+
+The mission realizes each complex block (``Delta_add``, ``Delta_mul_*``) as a signed real
+scalar times an all-pass at -90 deg: the phase of the analysis' worst complex values is lost.
+The option ``worst_perturbation`` (:func:`worst_perturbation_option`: the analysis' worst
+perturbation and its frequency, as ``oos confirm``'s performance table stores them) realizes
+them with their phase instead, as ``oos confirm`` does (the flight software's dynamic
+perturbation, :func:`~oos_drake.multibody.flight_software.perturbation_block`), scaled by the
+parameter ``worst_scale`` in [0, 1] (0 by default: not applied). The falsification
+(``oos campaign falsify --confirm``) uses it.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import fields
+
+import numpy as np
 
 from oos_drake.campaign.simulator import (
     Parameter,
@@ -33,10 +44,71 @@ from oos_drake.campaign.simulator import (
     check_options,
 )
 
-__all__ = ["DrakeMissionSimulator", "campaign_parameters", "make_simulator", "FACTORY_PATH"]
+__all__ = [
+    "DrakeMissionSimulator",
+    "FACTORY_PATH",
+    "WORST_SCALE",
+    "campaign_parameters",
+    "make_simulator",
+    "worst_perturbation_option",
+]
 
 #: Import path of the factory (usable as ``[simulator] name`` in a spec).
 FACTORY_PATH = "oos_drake.campaign.drake_simulator:make_simulator"
+#: Parameter scaling the realized worst perturbation (option ``worst_perturbation``) [-].
+WORST_SCALE = "worst_scale"
+
+
+def worst_perturbation_option(perturbation: str, frequency_hz: float) -> str:
+    """The ``worst_perturbation`` option (JSON text) of a worst case: ``perturbation`` is the
+    ``worst perturbation`` JSON of ``oos confirm``'s performance table (block -> normalized
+    value, complex values as ``[re, im]`` pairs), ``frequency_hz`` its critical frequency [Hz]."""
+    import json
+
+    return json.dumps(
+        {"frequency [Hz]": float(frequency_hz), "perturbation": json.loads(perturbation)},
+        sort_keys=True,
+    )
+
+
+def _complex_blocks(option: str) -> tuple[float, dict]:
+    """``(omega [rad/s], {"delta_mul": 3x3, "delta_add": 3x3})`` of a ``worst_perturbation``
+    option (its complex blocks; real ones ignored).
+
+    Raises
+    ------
+    ValueError
+        Not the JSON of :func:`worst_perturbation_option`, a bad frequency, no complex block.
+    """
+    import json
+    import math
+
+    import numpy as np
+
+    from oos_drake.multibody.flight_software import complex_blocks
+
+    try:
+        data = json.loads(option)
+        frequency = float(data["frequency [Hz]"])
+        perturbation = {
+            name: np.asarray(pairs, dtype=float)[..., 0]
+            + 1j * np.asarray(pairs, dtype=float)[..., 1]
+            for name, pairs in data["perturbation"].items()
+        }
+    except (TypeError, KeyError, IndexError, ValueError) as exc:
+        raise ValueError(
+            f"drake-mission: option worst_perturbation is not a worst case's JSON ({exc})"
+        ) from exc
+    if not (math.isfinite(frequency) and frequency > 0):
+        raise ValueError(
+            f"drake-mission: option worst_perturbation: frequency {frequency} Hz must be > 0"
+        )
+    omega = 2 * math.pi * frequency
+    blocks = complex_blocks(perturbation)
+    if not blocks:
+        raise ValueError("drake-mission: option worst_perturbation has no complex block")
+    return omega, blocks
+
 
 _METRIC_SIGNALS = {"ape": "phi_y", "peak_torque": "u_y", "peak_applied_torque": "T_y"}
 
@@ -84,12 +156,15 @@ class DrakeMissionSimulator:
         parsed from SDF files generated from it (the package's when they match it), and its
         ``[control]`` section gives the default ``control_rate`` (flight software rate [Hz]) and
         ``torque_limit`` [N m]; options given here override them.
+    worst_perturbation : str, optional
+        The analysis' worst complex blocks realized with their phase, scaled by the parameter
+        ``worst_scale`` (:func:`worst_perturbation_option`, module docstring).
     **options
         Fields of :class:`oos_drake.multibody.mission.MissionOptions` (``control_rate``,
         ``log_rate``, ``controller``, ``integrator``, ...).
     """
 
-    def __init__(self, scenario: str, **options):
+    def __init__(self, scenario: str, worst_perturbation: str | None = None, **options):
         from oos_drake.multibody.mission import MissionOptions, make_mission_diagram
         from oos_drake.multibody.mission_sim import MissionSimulation
         from oos_drake.multibody.scenario_sdf import scenario_sdf_directory
@@ -103,9 +178,42 @@ class DrakeMissionSimulator:
             **options,
         }
         sdf, self._sdf = scenario_sdf_directory(data)  # the folder lives with the simulator
-        handles = make_mission_diagram(MissionOptions(**options), scenario=data, sdf_directory=sdf)
+        self._worst = None
+        states = 0
+        if worst_perturbation is not None:
+            from oos_drake.control.components import DesignSpecification
+            from oos_drake.multibody.flight_software import FlightSoftwareDesign, perturbation_block
+
+            self._worst = _complex_blocks(str(worst_perturbation))
+            # the state count depends on the blocks' structure only, not on the controller
+            probe = FlightSoftwareDesign.create(
+                np.zeros((3, 6)),
+                float(options["control_rate"]),
+                spec=DesignSpecification.from_requirements(data.control),
+            )
+            states = perturbation_block(probe, self._worst[0], **self._worst[1]).nstates
+        handles = make_mission_diagram(
+            MissionOptions(**options),
+            scenario=data,
+            sdf_directory=sdf,
+            perturbation_states=states,
+        )
         self.simulation = MissionSimulation(handles=handles)
         self._parameters = campaign_parameters(self.simulation.parameters)
+        if self._worst is not None:
+            self._parameters += (
+                Parameter(
+                    WORST_SCALE,
+                    "-",
+                    0.0,
+                    0.0,
+                    1.0,
+                    ParameterKind.LTI,
+                    "scale of the analysis' worst complex perturbation realized with its phase "
+                    "(option worst_perturbation)",
+                    uncertainty=(0.0, 1.0),
+                ),
+            )
 
     def parameters(self) -> tuple[Parameter, ...]:
         """Dispersible parameters (uncertain blocks, dockings, initial errors, seed, LTI)."""
@@ -139,13 +247,31 @@ class DrakeMissionSimulator:
         """Simulate the case's window; divergence raises :class:`SimulationDiverged`."""
         from oos_drake.multibody.mission_sim import MissionDiverged
 
+        values = dict(case.values)
+        on_start = None
+        if self._worst is not None:
+            from oos_drake.multibody.flight_software import perturbation_block
+
+            scale = float(values.pop(WORST_SCALE))
+            omega, blocks = self._worst
+            fsw = self.simulation.handles.flight_software
+            block = (
+                perturbation_block(fsw.design, omega, **{k: scale * v for k, v in blocks.items()})
+                if scale != 0.0
+                else None
+            )
+
+            def on_start(context):
+                fsw.set_dynamic_perturbation(fsw.GetMyMutableContextFromRoot(context), block)
+
         try:
             result = self.simulation.run(
-                dict(case.values),
+                values,
                 seed=case.seed,
                 start=case.window.start,
                 end=case.window.end,
                 perturbation_frequency_hz=case.frequency,
+                on_start=on_start,
             )
         except MissionDiverged as exc:
             raise SimulationDiverged(str(exc)) from exc

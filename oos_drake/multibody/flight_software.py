@@ -52,13 +52,17 @@ small matrix products.
 
 A run may also carry a *dynamic perturbation* (:func:`perturbation_block`,
 :meth:`FlightSoftware.set_dynamic_perturbation`, states declared with the system): a discrete
-block from ``T_rw`` to a torque added to ``T`` and to an attitude and rate added to the
-measurements. ``oos confirm`` realizes the analysis' worst complex blocks with it, at the
-peak's frequency (``Delta_mul`` as the torque part, ``Delta_add`` as the exact sampled
-response of the acceleration it stands for).
+block from the plant-input torque ``T_rw + T_dist`` (the analysis' ``T``, whose ``P_hat``
+perturbs the external disturbance as well) to a torque added to ``T`` and to an attitude and
+rate added to the measurements. ``oos confirm`` realizes the analysis' worst complex blocks
+with it, at the peak's frequency (``Delta_mul`` as the torque part, ``Delta_add`` as the exact
+sampled response of the acceleration it stands for).
 
 The discrete state also carries the run's metrics (running maxima of ``|phi|`` and ``|u|``,
-sum of squares), so they are computed at the control rate without any logging.
+sum of squares), so they are computed at the control rate without any logging. With a dynamic
+perturbation, ``phi`` there is the hub's attitude plus the realized ``Delta_add``'s (the
+output of the analysis' ``P_hat``; the hub alone drifts by that part's ramp, see
+:func:`perturbation_block`).
 """
 
 from __future__ import annotations
@@ -86,6 +90,7 @@ __all__ = [
     "METRIC_SLOTS",
     "allpass",
     "allpass_block",
+    "complex_blocks",
     "discretize",
     "perturbation_block",
     "rpy_to_rotation",
@@ -335,7 +340,10 @@ def perturbation_block(
     here as stable systems taking that value there
     (:func:`oos_drake.robust.interpolant.lti_interpolant`, MATLAB ``wcu``'s interpolation):
 
-    - ``Delta_mul`` acts on the torque: ``T_m = T_rw + Delta_m(z) T_rw`` with ``Delta_m(z)``
+    The blocks act on the plant-input torque ``T_in = T_rw + T_dist`` (wheels and external
+    disturbance), as ``P_hat`` acts on the analysis' ``T = RW u + W_n,ext d_ext``.
+
+    - ``Delta_mul`` acts on the torque: ``T_m = T_in + Delta_m(z) T_in`` with ``Delta_m(z)``
       the discrete interpolant of ``W_mul o Delta_mul`` (Tustin, pre-warped:
       ``Delta_m(e^{j omega dt}) = W_mul o Delta_mul`` exactly), computed at the sample and held
       with the torque.
@@ -363,7 +371,8 @@ def perturbation_block(
     Returns
     -------
     DiscreteBlock
-        Input ``T_rw`` [N m] (3), outputs ``[dT [N m]; dphi [rad]; dw [rad/s]]`` (9), for
+        Input ``T_in = T_rw + T_dist`` [N m] (3), outputs ``[dT [N m]; dphi [rad]; dw
+        [rad/s]]`` (9), for
         :meth:`FlightSoftware.set_dynamic_perturbation`.
     """
     T = design.period
@@ -389,7 +398,7 @@ def perturbation_block(
             (Ac, Bc, Cc, np.zeros((6, 3))), T, method="zoh"
         )
     n = nm + Ad.shape[0]
-    # T_m = Cm x_m + (I + Dm) T_rw drives the additive part
+    # T_m = Cm x_m + (I + Dm) T_in drives the additive part
     A = np.zeros((n, n))
     A[:nm, :nm] = Am
     A[nm:, :nm] = Bd @ Cm
@@ -401,6 +410,32 @@ def perturbation_block(
     D = np.zeros((9, 3))
     D[:3] = Dm
     return DiscreteBlock(A, B, C, D)
+
+
+def complex_blocks(perturbation) -> dict:
+    """The analysis' worst complex blocks of a perturbation as :func:`perturbation_block` takes
+    them: ``{"delta_mul": 3x3, "delta_add": 3x3}`` (normalized [-]; a block the perturbation
+    leaves out is absent).
+
+    Parameters
+    ----------
+    perturbation : Mapping
+        Block name -> normalized value (``Delta_add`` a 3x3 complex, ``Delta_mul_xy`` a
+        complex scalar or 1x1; real blocks ignored).
+    """
+    from oos_drake.control.analysis_model import ADDITIVE_BLOCK, MULTIPLICATIVE_BLOCKS
+
+    axes = ("x", "y", "z")
+    out = {}
+    if ADDITIVE_BLOCK in perturbation:
+        out["delta_add"] = np.asarray(perturbation[ADDITIVE_BLOCK], dtype=complex)
+    if any(n in perturbation for n in MULTIPLICATIVE_BLOCKS):
+        mul = np.zeros((3, 3), dtype=complex)
+        for name in MULTIPLICATIVE_BLOCKS:
+            i, j = axes.index(name[-2]), axes.index(name[-1])
+            mul[i, j] = complex(np.ravel(perturbation.get(name, 0.0))[0])
+        out["delta_mul"] = mul
+    return out
 
 
 def _consecutive(sizes) -> tuple[slice, ...]:
@@ -535,7 +570,8 @@ class FlightSoftware(LeafSystem):
     def set_dynamic_perturbation(self, context, block: DiscreteBlock | None) -> None:
         """Set the dynamic perturbation of a run (None: zero).
 
-        ``block`` (:func:`perturbation_block`) has input ``T_rw`` [N m] (3) and outputs
+        ``block`` (:func:`perturbation_block`) has input ``T_rw + T_dist`` [N m] (3: the
+        wheel torque and the external disturbance, the analysis' plant input) and outputs
         ``[dT; dphi; dw]`` (9): ``dT`` [N m] is added to the hub torque, ``dphi`` [rad] and ``dw``
         [rad/s] to the measured attitude and rate; its state count is the constructor's
         ``perturbation_states`` and the measurement rows have no feedthrough.
@@ -594,11 +630,14 @@ class FlightSoftware(LeafSystem):
         A1, B1 = self._M1[:n1, :n1], self._M1[:n1, n1 : n1 + 6]
         C1, D1 = self._M1[n1:, :n1], self._M1[n1:, n1 : n1 + 6]
         A2, B2 = M2[:n2, :n2], M2[:n2, n2 : n2 + 3]
-        Cw, Dw = M2[n2 : n2 + 3, :n2], M2[n2 : n2 + 3, n2 : n2 + 3]  # T_rw
+        # T_in = T_rw + T_dist, the dynamic perturbation's input (no noise: T_dist is the
+        # disturbance filter's free response)
+        Cw = M2[n2 : n2 + 3, :n2] + M2[n2 + 3 : n2 + 6, :n2]
+        Dw = M2[n2 : n2 + 3, n2 : n2 + 3] + M2[n2 + 3 : n2 + 6, n2 : n2 + 3]
         C2, D2 = M2[n2 + 12 :, :n2], M2[n2 + 12 :, n2 : n2 + 3]  # T
         Ap, Bp, Cp, Dp = dynamic.A, dynamic.B, dynamic.C, dynamic.D
         Ct, Dt, Cm = Cp[:3], Dp[:3], Cp[3:]  # dT; [dphi; dw] (no feedthrough)
-        # measurements z + Cm xp; u = C1 x1 + D1 (z + Cm xp); T_rw = Cw x2 + Dw u
+        # measurements z + Cm xp; u = C1 x1 + D1 (z + Cm xp); T_in = Cw x2 + Dw u
         zero = np.zeros
         A = np.block(
             [
@@ -727,9 +766,11 @@ class FlightSoftware(LeafSystem):
         n1, n2 = self._n1, self._n2
         xp = x[self._slices["perturbation"]]
         measured = np.concatenate([rpy, w_B])
+        attitude = rpy  # what the metrics see: the analysis' attitude (P_hat's output)
         if xp.size:
             dynamic = context.get_abstract_parameter(self._dynamic_index).get_value()
             measured = measured + dynamic.C[3:] @ xp
+            attitude = measured[0:3]  # the hub's plus the realized Delta_add's
         out1 = self._M1 @ np.concatenate([x[self._x1], measured, noise[0:6]])
         u = out1[n1:]
         limit = self._design.torque_limit
@@ -738,15 +779,16 @@ class FlightSoftware(LeafSystem):
         )
         # out2 = [x2+; T_rw; T_dist; a_mul; a_add; T]
         T_rw, T_dist, T = out2[n2 : n2 + 3], out2[n2 + 3 : n2 + 6], out2[n2 + 12 :]
-        if xp.size:
-            T = T + dynamic.C[:3] @ xp + dynamic.D[:3] @ T_rw
-            xp = dynamic.A @ xp + dynamic.B @ T_rw
+        if xp.size:  # the analysis' P_hat perturbs the plant-input torque T_rw + T_dist
+            T_in = T_rw + T_dist
+            T = T + dynamic.C[:3] @ xp + dynamic.D[:3] @ T_in
+            xp = dynamic.A @ xp + dynamic.B @ T_in
         m = x[self._metrics]
         metrics = np.concatenate(
             [
-                np.maximum(m[0:3], np.abs(rpy)),
+                np.maximum(m[0:3], np.abs(attitude)),
                 np.maximum(m[3:6], np.abs(u)),
-                m[6:9] + rpy * rpy,
+                m[6:9] + attitude * attitude,
                 np.maximum(m[9:12], np.abs(T)),
             ]
         )

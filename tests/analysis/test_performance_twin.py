@@ -131,3 +131,18 @@ def test_perturbed_loop_equals_the_loop_rebuilt_with_the_realized_blocks():
         assert np.allclose(got, ref, rtol=1e-9, atol=1e-12)
     with pytest.raises(ValueError, match="unknown block"):
         perturbed_loop(sys, {"kk": 0.1}, omega)
+
+
+def test_axis_direction_is_the_worst_input_for_one_axis():
+    """Against 20000 random unit inputs: none gives a larger single-axis response."""
+    from oos_drake.analysis.performance_twin import axis_direction
+
+    rng = np.random.default_rng(4)
+    H = rng.standard_normal((3, 9)) + 1j * rng.standard_normal((3, 9))
+    gain, v = axis_direction(H)
+    assert np.linalg.norm(v) == pytest.approx(1.0)
+    assert np.abs(H @ v).max() == pytest.approx(gain, rel=1e-12)
+    V = rng.standard_normal((9, 20000)) + 1j * rng.standard_normal((9, 20000))
+    V /= np.linalg.norm(V, axis=0)
+    assert np.abs(H @ V).max() <= gain * (1 + 1e-12)
+    assert np.abs(H @ V).max() > 0.75 * gain  # the sampling comes close (18 real dimensions)

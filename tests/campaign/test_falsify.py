@@ -89,6 +89,22 @@ def test_resume_after_interruption_loses_no_run(write_spec, tmp_path):
     assert (more.reused, more.evaluated, len(more.table)) == (40, 20, 60)
 
 
+def test_resuming_another_search_is_refused_in_one_line(write_spec, tmp_path):
+    """A recorded point that is not the one the replayed search asks for (another search's
+    folder): the evaluator's ValueError, not scipy's RuntimeError around it."""
+    import json
+
+    falsify(write_spec(_spec()), tmp_path / "f", budget=12, progress=False)
+    path = tmp_path / "f" / "points" / "point_000001.parquet"
+    point = pd.read_parquet(path)
+    u = json.loads(point.loc[0, "unit coordinates"])
+    point.loc[0, "unit coordinates"] = json.dumps([min(1.0, x + 0.01) for x in u])
+    point.to_parquet(path)
+    with pytest.raises(ValueError, match="point 1 differs from the recorded one") as info:
+        falsify(write_spec(_spec()), tmp_path / "f", budget=12, progress=False)
+    assert "\n" not in str(info.value)
+
+
 def test_cli_refuses_bad_input_and_writes_nothing(write_spec, tmp_path, capsys):
     spec = write_spec(_spec())
     out = tmp_path / "nothing"
@@ -173,12 +189,15 @@ def test_comparison_gives_the_performance_confirmation_of_the_metric(write_spec,
             "gain lower [-]": [1.179, 0.762, 5.0],
             "gain upper [-]": [1.199, 0.768, 6.0],
             "gain twin [-]": [1.281, np.nan, 7.0],
+            "peak ratio twin [-]": [1.142, np.nan, 7.0],
         }
     ).to_parquet(confirm / "performance_confirmation.parquet")
     result = falsify(write_spec(_spec()), tmp_path / "f", budget=8, progress=False, confirm=confirm)
     (row,) = result.comparison.to_dict("records")
     assert (row["performance lower [-]"], row["performance upper [-]"]) == (1.179, 1.199)
     assert row["twin worst input / requirement [-]"] == 1.281
+    assert row["twin worst input, largest axis / requirement [-]"] == 1.142
+    assert "its largest axis, what a peak metric sees: 1.142" in result.sentence()
     worst = result.table["ape [rad]"].max() / REQUIREMENT
     assert row["worst found / requirement [-]"] == pytest.approx(worst, rel=1e-12)
     assert "certified worst-case gain [1.179, 1.199]" in result.sentence()
@@ -278,3 +297,30 @@ def test_search_from_the_worst_input_reaches_the_linear_twins_worst_case(write_s
     assert seeded < 0.97 * known  # the seed is not the worst case ...
     assert best == pytest.approx(known, rel=0.01)  # ... the search reaches it
     assert best <= known * (1 + 1e-3)  # (the grid's maximum, up to its resolution)
+
+
+def test_each_performance_worst_case_seeds_both_of_its_inputs(write_spec):
+    """The stored worst case, then the same perturbation with the input worst for one axis
+    (``worst values, largest axis``), largest certified lower bound first; a table written
+    before that column gives the first only."""
+    import json
+
+    from oos_drake.campaign.falsify import performance_seeds
+    from oos_drake.campaign.spec import load_spec
+
+    spec = load_spec(write_spec(_spec()))
+    table = pd.DataFrame(
+        {
+            "channel": ["e_p", "e_p", "e_u"],
+            "gain lower [-]": [0.7, 1.1, 5.0],
+            "worst values": [json.dumps({"a": 0.1}), json.dumps({"a": 0.2}), json.dumps({})],
+            "worst values, largest axis": [None, json.dumps({"a": 0.3, "b": 0.4}), None],
+        }
+    )
+    seeds = performance_seeds(spec, table)
+    assert [{k: v for k, v in s.items() if k != "row"} for s in seeds] == [
+        {"a": 0.2},
+        {"a": 0.3, "b": 0.4},
+        {"a": 0.1},
+    ]
+    assert seeds[0]["row"] is seeds[1]["row"]
