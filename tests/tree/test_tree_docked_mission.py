@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 import tomli_w
 from test_tree_docking import docking_document
-from tree_documents import rotation
+from tree_documents import boom_body
 
 pytestmark = pytest.mark.drake
 pytest.importorskip("pydrake")
@@ -257,22 +257,7 @@ def _boom_docking_document() -> dict:
     """The docking tree with its docking port on a rigid boom on a skewed revolute joint of
     the hub, the boom turning through the docked phase (0.9 -> 1.2 rad; 0.6 at the start)."""
     document = docking_document()
-    axis = (np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])).tolist()
-    boom = {
-        "name": "BOOM",
-        "kind": "rigid",
-        "parent": "HUB",
-        "joint": {
-            "type": "revolute",
-            "p_parent_joint": [0.4, -0.2, -0.9],
-            "R_parent_joint": rotation([1.0, 1.0, 1.0], 0.7),
-            "axis": axis,
-            "angle": 0.6,
-        },
-        "mass": 12.0,
-        "inertia": [[3.0, 0.1, 0.0], [0.1, 2.5, -0.05], [0.0, -0.05, 1.2]],
-        "p_B_G": [0.1, 0.05, 0.6],
-    }
+    boom = boom_body([0.4, -0.2, -0.9], angle=0.6)
     document["bodies"].insert(2, boom)
     document["ports"]["DOCK"]["body"] = "BOOM"
     document["ports"]["DOCK"]["p_B_D"] = [0.0, 0.2, 1.3]

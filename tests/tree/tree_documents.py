@@ -24,29 +24,34 @@ def rotation(axis, angle) -> list[list[float]]:
     return R.tolist()
 
 
-def boom_document() -> dict:
-    """Hub + rigid boom on a skewed revolute joint + a flexible panel fixed to the boom at a
-    non-trivial rotation + a flexible array on the hub at a skewed fixed mount + ports."""
-    document = shipped_document("flexible_satellite")
-    hub, array = document["bodies"][0], document["bodies"][1]
-    tilted = rotation([1.0, 1.0, 1.0], 0.7)
+def boom_body(p_parent_joint, angle: float) -> dict:
+    """A rigid boom ``BOOM`` on the hub ``HUB``: a revolute joint at ``p_parent_joint`` [m]
+    (mount rotated 0.7 rad about (1, 1, 1), skewed axis), at ``angle`` [rad]."""
     axis = (np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])).tolist()
-    boom = {
+    return {
         "name": "BOOM",
         "kind": "rigid",
         "parent": "HUB",
         "joint": {
             "type": "revolute",
-            "p_parent_joint": [0.4, -0.2, 1.5],
-            "R_parent_joint": tilted,
+            "p_parent_joint": list(p_parent_joint),
+            "R_parent_joint": rotation([1.0, 1.0, 1.0], 0.7),
             "axis": axis,
-            "angle": 0.9,
+            "angle": angle,
         },
         "mass": 12.0,
         "inertia": [[3.0, 0.1, 0.0], [0.1, 2.5, -0.05], [0.0, -0.05, 1.2]],
         "p_B_G": [0.1, 0.05, 0.6],
-        "mass_uncertainty_percent": 10.0,
     }
+
+
+def boom_document() -> dict:
+    """Hub + rigid boom on a skewed revolute joint + a flexible panel fixed to the boom at a
+    non-trivial rotation + a flexible array on the hub at a skewed fixed mount + ports."""
+    document = shipped_document("flexible_satellite")
+    hub, array = document["bodies"][0], document["bodies"][1]
+    boom = boom_body([0.4, -0.2, 1.5], angle=0.9)
+    boom["mass_uncertainty_percent"] = 10.0
     panel = copy.deepcopy(array)
     panel.update(
         name="PANEL",
