@@ -15,7 +15,7 @@ and uncertainty subset, the row of largest certified lower bound) this module
    lower bound, :func:`linear_twin_gain`);
 3. predicts the **sampled-data** gain: the exact zero-order-hold loop with the twin's flight
    software (Tustin filters, ``d`` sampled at the flight-software rate as the twin takes it) at
-   ``z = e^{j omega dt}`` (:func:`sampled_gain`);
+   ``z = e^{j omega dt}`` (:func:`predicted_gain`);
 4. runs the **Drake twin** (the nonlinear mission, arm and arrays frozen at the configuration,
    the real parameters at their worst values, the complex blocks as the flight software's
    dynamic perturbation) with the sampled sinusoid ``d_k = Re(v e^{j omega k dt})`` as the
@@ -64,7 +64,6 @@ __all__ = [
     "predicted_gain",
     "predicted_response",
     "sampled_response",
-    "sampled_gain",
     "twin_gain",
     "worst_gain_cases",
 ]
@@ -339,19 +338,14 @@ def sampled_response(plant_hat, values, software, dynamic, omega: float, require
     return H[:, _TABLE_COLUMNS] * scale  # columns in the LFR order
 
 
-def sampled_gain(plant_hat, values, software, dynamic, v, omega: float, requirement_rows):
-    """Gain of the sampled-data loop at ``omega`` for the input direction ``v`` (LFR order):
-    ``||H v|| / ||v||`` with ``H`` of :func:`sampled_response`. The input is ``d_k = Re(v
-    e^{j omega k dt})``: the steady-state phasor at the samples is ``H(e^{j omega dt}) v``."""
-    H = sampled_response(plant_hat, values, software, dynamic, omega, requirement_rows)
-    v = np.asarray(v, dtype=complex)
-    return float(np.linalg.norm(H @ v) / np.linalg.norm(v))
-
-
 def predicted_gain(plant_hat, worst, design, v, out) -> float:
     """The sampled-data prediction of a worst case for the input ``v``: ``||H v|| / ||v||``
     with ``H`` of :func:`predicted_response`."""
-    H = predicted_response(plant_hat, worst, design, out)
+    return _gain(predicted_response(plant_hat, worst, design, out), v)
+
+
+def _gain(H, v) -> float:
+    """``||H v|| / ||v||`` [-] (``v`` complex)."""
     v = np.asarray(v, dtype=complex)
     return float(np.linalg.norm(H @ v) / np.linalg.norm(v))
 
@@ -547,7 +541,7 @@ def confirm_gain_case(case: GainCase, controller, scenario, subsets, options=Non
     dynamic = perturbation_block(design, case.omega, **blocks) if blocks else None
     out_rows = _channel_output(case.channel, spec)
     H = predicted_response(plant_hat, worst, design, out_rows)
-    row["gain linear sampled [-]"] = float(np.linalg.norm(H @ v) / np.linalg.norm(v))
+    row["gain linear sampled [-]"] = _gain(H, v)
     # the same perturbation, the input that is worst for one axis (a peak metric's worst case)
     row["gain largest axis sampled [-]"], axis_v = axis_direction(H)
     row["worst values, largest axis"] = json.dumps(

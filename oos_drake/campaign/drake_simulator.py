@@ -83,8 +83,6 @@ def _complex_blocks(option: str) -> tuple[float, dict]:
     import json
     import math
 
-    import numpy as np
-
     from oos_drake.multibody.flight_software import complex_blocks
 
     try:
