@@ -296,6 +296,7 @@ def _falsify(args: argparse.Namespace) -> int:
         simulator_options=simulator_options,
         confirm=args.confirm,
         window=_parse_window(args.window),
+        search=args.search,
     )
     print(result.sentence())
     if result.reused:
@@ -436,6 +437,13 @@ def register(subparsers) -> None:
         metavar="START,END",
         help="simulated window of every run [s] instead of the spec's (a sinusoidal input needs "
         "time to reach its steady state)",
+    )
+    falsify.add_argument(
+        "--search",
+        choices=("evolution", "local"),
+        default="evolution",
+        help="evolution: differential evolution over the box (default); local: gradient ascent "
+        "with a line search from the best starting point (climbs past the worst cases)",
     )
     _add_controller_option(falsify)
     falsify.add_argument(

@@ -71,9 +71,26 @@ def worst_perturbation_option(perturbation: str, frequency_hz: float) -> str:
     )
 
 
-def _complex_blocks(option: str) -> tuple[float, dict]:
+def worst_scale_parameter() -> Parameter:
+    """The parameter ``worst_scale`` of a simulator given the option ``worst_perturbation``
+    (this one's and the tree's, :mod:`oos_drake.campaign.tree_simulator`)."""
+    return Parameter(
+        WORST_SCALE,
+        "-",
+        0.0,
+        0.0,
+        1.0,
+        ParameterKind.LTI,
+        "scale of the analysis' worst complex perturbation realized with its phase "
+        "(option worst_perturbation)",
+        uncertainty=(0.0, 1.0),
+    )
+
+
+def _complex_blocks(option: str, simulator: str = "drake-mission") -> tuple[float, dict]:
     """``(omega [rad/s], {"delta_mul": 3x3, "delta_add": 3x3})`` of a ``worst_perturbation``
-    option (its complex blocks; real ones ignored).
+    option (its complex blocks; real ones ignored); ``simulator`` names the simulator in the
+    errors.
 
     Raises
     ------
@@ -95,16 +112,16 @@ def _complex_blocks(option: str) -> tuple[float, dict]:
         }
     except (TypeError, KeyError, IndexError, ValueError) as exc:
         raise ValueError(
-            f"drake-mission: option worst_perturbation is not a worst case's JSON ({exc})"
+            f"{simulator}: option worst_perturbation is not a worst case's JSON ({exc})"
         ) from exc
     if not (math.isfinite(frequency) and frequency > 0):
         raise ValueError(
-            f"drake-mission: option worst_perturbation: frequency {frequency} Hz must be > 0"
+            f"{simulator}: option worst_perturbation: frequency {frequency} Hz must be > 0"
         )
     omega = 2 * math.pi * frequency
     blocks = complex_blocks(perturbation)
     if not blocks:
-        raise ValueError("drake-mission: option worst_perturbation has no complex block")
+        raise ValueError(f"{simulator}: option worst_perturbation has no complex block")
     return omega, blocks
 
 
@@ -199,19 +216,7 @@ class DrakeMissionSimulator:
         self.simulation = MissionSimulation(handles=handles)
         self._parameters = campaign_parameters(self.simulation.parameters)
         if self._worst is not None:
-            self._parameters += (
-                Parameter(
-                    WORST_SCALE,
-                    "-",
-                    0.0,
-                    0.0,
-                    1.0,
-                    ParameterKind.LTI,
-                    "scale of the analysis' worst complex perturbation realized with its phase "
-                    "(option worst_perturbation)",
-                    uncertainty=(0.0, 1.0),
-                ),
-            )
+            self._parameters += (worst_scale_parameter(),)
 
     def parameters(self) -> tuple[Parameter, ...]:
         """Dispersible parameters (uncertain blocks, dockings, initial errors, seed, LTI)."""

@@ -27,6 +27,20 @@ widened by :data:`EDGE_MARGIN` and clipped back (faces and vertices are reachabl
 generation holds the analysis' worst cases (the regions' perturbations, other parameters at their
 nominal values, all clipped to the box) and the nominal point, filled up by a Latin hypercube.
 
+Local search (``search="local"``, ``oos campaign falsify --search local``): differential evolution
+over some 37 dimensions does not climb past its seeds in a few generations (heavy_target: 90
+runs, generation bests 1.168, 1.154, 1.142, the first the seed). The local search climbs from
+the best starting point instead: its first batch is the starting points alone (the worst cases
+and the nominal point, no fill-up), then projected gradient ascent in the unit cube
+(:func:`local_search`): one batch of finite differences, one coordinate each (step
+:data:`LOCAL_STEP`, backwards on the upper face), then one batch of a line search along the
+normalized gradient at :data:`LINE_STEPS` times a trust radius (first :data:`LOCAL_RADIUS`;
+doubled when the longest step was best, halved when the shortest was, quartered without
+progress, the gradient then kept). The best point of the two batches becomes the centre when it
+improves on it. A gradient costs one run per dimension: the search pays for it only on a smooth
+objective (common random numbers make it deterministic); a failed run, :data:`FAILED_RATIO`,
+is a finding and becomes the centre like any other.
+
 Started from the worst input: given ``oos confirm``'s performance table (``--confirm``), whose
 rows store the analysis' worst cases as simulator values (``worst values``: the worst
 perturbation, and the worst input as a sinusoid of unit amplitude, its frequency and complex
@@ -37,10 +51,11 @@ box gains the sinusoid's parameters the spec does not disperse: its frequency wi
 imaginary parts in ``[-1, 1]``, normalized by the simulator); its amplitude and the scale of
 the random noise stay at the worst case's (1 and 0: the analysis' unit input alone) unless the
 spec disperses them. The LTI blocks are then realized at the worst case's frequency and a
-``critical`` window is centred on its time. On the Drake mission the first worst case's complex
-blocks are realized with their phase (:func:`realize_worst_perturbation`: the mission's own
-realization, a signed scalar times an all-pass, loses it), scaled by the searched
-``worst_scale`` in [0, 1]; the scalar LTI parameters it replaces stay at 0.
+``critical`` window is centred on its time. On a Drake mission (the paper's or a tree's) the
+first worst case's complex blocks are realized with their phase
+(:func:`realize_worst_perturbation`: the mission's own realization, a signed scalar times an
+all-pass, loses it), scaled by the searched ``worst_scale`` in [0, 1]; the scalar LTI
+parameters it replaces stay at 0.
 ``--window START,END`` replaces the spec's window (a sinusoid needs time to build up its
 steady state).
 
@@ -72,6 +87,7 @@ from oos_drake.campaign.runner import metric_column, resolve_spec
 from oos_drake.campaign.samplers import run_seeds
 from oos_drake.campaign.simulator import MissionWindow, ParameterKind, RunCase
 from oos_drake.campaign.spec import CampaignSpec, spec_to_toml
+from oos_drake.campaign.tree_simulator import FACTORY_PATH as TREE_FACTORY_PATH
 from oos_drake.files import atomic_write_parquet, atomic_write_text
 
 #: Requirement ratio given to a run that diverged or failed (the optimizer's objective) [-].
@@ -92,6 +108,16 @@ SINE_FREQUENCY_FACTOR = 2.0
 #: Started from a performance worst case, half of the first generation's fill-up is drawn
 #: around it (normal, this standard deviation in unit-cube coordinates), half over the box.
 SEED_SPREAD = 0.1
+#: Searches of :func:`falsify` (``--search``): differential evolution, local gradient ascent.
+SEARCHES = ("evolution", "local")
+#: Local search: finite-difference step in unit-cube coordinates [-].
+LOCAL_STEP = 0.01
+#: Local search: first trust radius of the line search in unit-cube coordinates [-].
+LOCAL_RADIUS = 0.05
+#: Local search: the line search's steps, in trust radii [-].
+LINE_STEPS = (0.25, 0.5, 1.0, 2.0, 4.0)
+#: Local search: it stops (converged) when the finite-difference step falls below this [-].
+SMALLEST_STEP = 1.0e-4
 #: Column of the performance table: the twin run's largest centred axis over the requirement.
 PEAK_RATIO = "peak ratio twin [-]"
 #: Column of the performance table holding the worst case as simulator values (JSON).
@@ -325,6 +351,60 @@ def starting_points(spec: CampaignSpec, box: SearchBox, seeds=()) -> np.ndarray:
     return np.array(points)[np.sort(first)]  # duplicates dropped, order kept
 
 
+def local_search(evaluate, starts: np.ndarray) -> tuple[np.ndarray, float]:
+    """Projected gradient ascent with a line search in the unit cube (module docstring).
+
+    Parameters
+    ----------
+    evaluate : callable
+        ``evaluate(points) -> ratios``: runs a batch of unit-cube points (rows) and returns their
+        requirement ratios [-]; it stops the search by raising (the budget is spent).
+    starts : numpy.ndarray
+        The starting points (rows), run as the first batch; the search climbs from the best.
+
+    Returns
+    -------
+    centre : numpy.ndarray
+        The best point found (unit cube).
+    value : float
+        Its ratio [-]; returned when the step fell below :data:`SMALLEST_STEP` (converged).
+    """
+    values = np.asarray(evaluate(starts), float)
+    best = int(np.argmax(values))
+    centre, value = np.array(starts[best], float), float(values[best])
+    radius, step, direction = LOCAL_RADIUS, LOCAL_STEP, None
+    line = np.array(LINE_STEPS)
+    while step >= SMALLEST_STEP:
+        pool, pool_values = [], []
+        if direction is None:
+            steps = np.where(centre + step <= 1.0, step, -step)
+            points = centre + np.diag(steps)
+            differences = np.asarray(evaluate(points), float)
+            gradient = (differences - value) / steps
+            outward = ((centre >= 1.0) & (gradient > 0)) | ((centre <= 0.0) & (gradient < 0))
+            gradient[outward] = 0.0  # projected: the box's faces hold
+            pool, pool_values = list(points), list(differences)
+            norm = float(np.linalg.norm(gradient))
+            if not norm > 0.0 or not np.isfinite(norm):
+                step /= 2.0  # flat at this resolution: a finer difference
+                continue
+            direction = gradient / norm
+        trials = np.clip(centre + radius * line[:, None] * direction, 0.0, 1.0)
+        found = np.asarray(evaluate(trials), float)
+        pool, pool_values = [*pool, *trials], [*pool_values, *found]
+        best = int(np.argmax(pool_values))
+        if pool_values[best] > value:
+            centre, value = np.array(pool[best]), float(pool_values[best])
+            along = best - (len(pool) - len(trials))  # index in the line, < 0: a difference
+            radius *= 2.0 if along == len(line) - 1 else 0.5 if along == 0 else 1.0
+            direction = None
+        else:
+            radius /= 4.0  # the same gradient, shorter steps
+            if radius * line[0] < step:
+                step, radius, direction = step / 2.0, max(radius, step), None
+    return centre, value
+
+
 def population_size(dimension: int) -> int:
     """Points per generation: ``3 d`` within [8, 30]."""
     return int(min(max(3 * dimension, 8), 30))
@@ -350,6 +430,8 @@ class FalsificationResult:
         Per max-requirement metric: the worst ratio metric / requirement the search found beside
         the analysis' worst-case gain bounds (largest over the regions; NaN without gains), both
         normalized by the requirement (``comparison.parquet``).
+    search : str
+        The optimizer (:data:`SEARCHES`).
     """
 
     directory: Path
@@ -358,16 +440,22 @@ class FalsificationResult:
     evaluated: int
     reused: int
     comparison: pd.DataFrame
+    search: str = "evolution"
 
     def sentence(self) -> str:
         """One line: the worst run found and its parameters."""
         best = self.best
         verdict = "VIOLATES" if best[RATIO_COLUMN] > 1 else "meets"
         generations = int(self.table["generation"].max()) + 1 if len(self.table) else 0
+        unit = "generation" if self.search == "evolution" else "batch"
+        plural = "" if generations == 1 else "es" if unit == "batch" else "s"
+        climbed = ""
+        if self.search == "local" and len(self.table):
+            starts = self.table.loc[self.table["generation"] == 0, RATIO_COLUMN].max()
+            climbed = f" (local search; best starting point {starts:.4g})"
         lines = [
-            f"falsification: {len(self.table)} runs in {generations} generation"
-            f"{'s' if generations != 1 else ''}"
-            + (" (the first only: the starting points)" if generations == 1 else "")
+            f"falsification: {len(self.table)} runs in {generations} {unit}{plural}"
+            + (" (the first only: the starting points)" if generations == 1 else climbed)
             + "; worst requirement ratio "
             f"{best[RATIO_COLUMN]:.4g} (point {int(best['point_id'])}, {best['status']}): "
             f"{verdict} the requirements"
@@ -552,6 +640,7 @@ def falsify(
     simulator_options: Mapping[str, Any] | None = None,
     confirm: str | Path | None = None,
     window: tuple[float, float] | None = None,
+    search: str = "evolution",
 ) -> FalsificationResult:
     """Search the spec's dispersion box for the largest requirement ratio (module docstring).
 
@@ -579,24 +668,29 @@ def falsify(
         sinusoidal input (module docstring).
     window : (float, float), optional
         Simulated window ``(start, end)`` [s] of every run instead of the spec's.
+    search : {"evolution", "local"}
+        Differential evolution, or the local search from the best starting point
+        (:func:`local_search`, module docstring).
 
     Raises
     ------
     ValueError
         Bad spec, no max-requirement, a folder holding another search, a budget < 1, a bad
-        window.
+        window, an unknown search.
     """
     from scipy.optimize import differential_evolution
 
     if budget < 1:
         raise ValueError(f"--budget {budget}: need at least 1 run")
+    if search not in SEARCHES:
+        raise ValueError(f"--search {search}: expected one of {', '.join(SEARCHES)}")
     performance = _performance_table(confirm)
     spec = resolve_spec(spec_path, worst_cases, simulator_options)
     if not any(r.max is not None and r.max > 0 for r in spec.requirements):
         raise ValueError(f"spec {spec.name}: falsification needs a requirement with a max bound")
     seeds = performance_seeds(spec, performance)
     realized = []
-    if seeds and spec.simulator.factory == FACTORY_PATH:
+    if seeds and spec.simulator.factory in (FACTORY_PATH, TREE_FACTORY_PATH):
         spec, seeds, realized = realize_worst_perturbation(
             spec, spec_path, worst_cases, simulator_options, seeds
         )
@@ -627,12 +721,15 @@ def falsify(
         settings["worst values"] = [{k: v for k, v in s.items() if k != "row"} for s in seeds]
     if realized:
         settings["realized with their phase"] = realized
+    if search != "evolution":  # (a folder written before the option holds an evolution)
+        settings["search"] = search
     directory = Path(out)
     _prepare_directory(directory, spec, settings)
 
-    starts = starting_points(spec, box, seeds)[:size]
+    starts = starting_points(spec, box, seeds)
+    starts = starts if search == "local" else starts[:size]
     rng = np.random.default_rng(np.random.SeedSequence([spec.random_seed, 0xFA15]))
-    fill = size - len(starts)
+    fill = size - len(starts) if search == "evolution" else 0
     if fill > 0:
         from scipy.stats import qmc
 
@@ -647,19 +744,22 @@ def falsify(
         directory, spec, box, budget, executor, progress, int(run_seed[0]), where, fixed
     )
     try:
-        differential_evolution(
-            lambda u: 0.0,  # never called: the batch map evaluates
-            bounds=[(-EDGE_MARGIN, 1.0 + EDGE_MARGIN)] * len(box.names),
-            init=starts,
-            maxiter=max(1, math.ceil(budget / size)),
-            popsize=size,
-            tol=0.0,
-            atol=0.0,
-            polish=False,
-            updating="deferred",
-            workers=evaluator,
-            rng=rng,
-        )
+        if search == "local":
+            local_search(lambda points: -np.array(evaluator(None, points)), starts)
+        else:
+            differential_evolution(
+                lambda u: 0.0,  # never called: the batch map evaluates
+                bounds=[(-EDGE_MARGIN, 1.0 + EDGE_MARGIN)] * len(box.names),
+                init=starts,
+                maxiter=max(1, math.ceil(budget / size)),
+                popsize=size,
+                tol=0.0,
+                atol=0.0,
+                polish=False,
+                updating="deferred",
+                workers=evaluator,
+                rng=rng,
+            )
     except _BudgetSpent:
         pass
     except RuntimeError as exc:  # scipy wraps the batch map's refusal: give it back as is
@@ -676,7 +776,7 @@ def falsify(
     comparison = linear_comparison(spec, table, performance)
     atomic_write_parquet(comparison, directory / COMPARISON_FILE)
     return FalsificationResult(
-        directory, table, best, evaluator.evaluated, evaluator.reused, comparison
+        directory, table, best, evaluator.evaluated, evaluator.reused, comparison, search
     )
 
 

@@ -19,6 +19,9 @@ scalars ``Delta_mul_*``, ``Delta_add`` as for the paper's mission simulator
 rebuilds the twin from the tree with those values written into its data
 (:func:`~oos_drake.multibody.tree_twin.tree_with_values`, a fraction of a second); a run is a
 pure function of its case. Events: the start of each mission phase (``start:<phase>``).
+The option ``worst_perturbation`` realizes the analysis' worst complex blocks with their phase,
+scaled by the parameter ``worst_scale``, as the paper's mission simulator does (what ``oos
+campaign falsify --confirm`` runs).
 
 A mission that captures or docks a target: the twin welds a captured target at the mated
 ports through the phases that capture it, and holds a docked one on its spring-damper (a
@@ -87,6 +90,7 @@ OPTIONS = {
     "joint_bandwidth": 200.0,
     "joint_damping_ratio": 0.7,
     "divergence_limit": 0.5,
+    "worst_perturbation": None,
 }
 
 
@@ -228,6 +232,12 @@ class TreeMissionSimulator:
         Joint PD of the motion-driven joints [rad/s], [-].
     divergence_limit : float
         Attitude beyond which a run is diverged [rad].
+    worst_perturbation : str, optional
+        The analysis' worst complex blocks realized with their phase in the flight software,
+        scaled by the parameter ``worst_scale`` (0 by default: not applied): the paper's
+        mission simulator's option, the same realization
+        (:func:`~oos_drake.campaign.drake_simulator.worst_perturbation_option`,
+        :func:`~oos_drake.multibody.flight_software.perturbation_block`).
     """
 
     def __init__(self, **options):
@@ -273,6 +283,15 @@ class TreeMissionSimulator:
         self.joint_pd = (float(o["joint_bandwidth"]), float(o["joint_damping_ratio"]))
         self.divergence_limit = float(o["divergence_limit"])
         self._parameters = tree_parameters(scenario)
+        self._worst, self._perturbation_states = None, 0
+        if o["worst_perturbation"] is not None:  # as the paper's mission simulator
+            from oos_drake.campaign.drake_simulator import _complex_blocks, worst_scale_parameter
+            from oos_drake.multibody.flight_software import perturbation_block
+
+            self._worst = _complex_blocks(str(o["worst_perturbation"]), "tree-mission")
+            block = perturbation_block(self.design, self._worst[0], **self._worst[1])
+            self._perturbation_states = block.nstates
+            self._parameters += (worst_scale_parameter(),)
         self._real = tuple(p.name for p in self._parameters if p.kind == ParameterKind.REAL_BLOCK)
         self._springs = {
             phase.docked.label: docking_block_names(phase.docked)
@@ -334,6 +353,7 @@ class TreeMissionSimulator:
                 self.design,
                 rest,
                 log_rate=self.log_rate,
+                perturbation_states=self._perturbation_states,
                 timeline=self.timeline,
                 joint_bandwidth=self.joint_pd[0],
                 joint_damping_ratio=self.joint_pd[1],
@@ -348,6 +368,15 @@ class TreeMissionSimulator:
         from oos_drake.multibody.tree_twin import run_mission_twin
 
         values = {p.name: p.nominal for p in self._parameters} | dict(case.values)
+        dynamic = None
+        if self._worst is not None:
+            from oos_drake.campaign.drake_simulator import WORST_SCALE
+            from oos_drake.multibody.flight_software import perturbation_block
+
+            scale, (omega, blocks) = float(values.pop(WORST_SCALE)), self._worst
+            if scale != 0.0:
+                scaled = {k: scale * v for k, v in blocks.items()}
+                dynamic = perturbation_block(self.design, omega, **scaled)
         start, end = float(case.window.start), float(case.window.end)
         if not (0.0 <= start < end <= self.duration() + 1e-9):
             raise ValueError(
@@ -374,6 +403,7 @@ class TreeMissionSimulator:
             initial_rate=[values[f"w0_{a}"] for a in AXES],
             noise_table=noise,
             perturbations=(delta_mul, delta_add, frequency),
+            dynamic=dynamic,
             max_step=self.max_step,
             divergence_limit=self.divergence_limit,
         )

@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
+
 from oos_drake.campaign.simulator import Parameter, ParameterKind, RunOutput
 
 WORST = (0.73, 0.21)
@@ -89,3 +91,38 @@ class DeclaredSimulator(SyntheticSimulator):
 
 def make_declared_simulator(**options) -> DeclaredSimulator:
     return DeclaredSimulator(**options)
+
+
+#: :class:`BumpSimulator`: its parameters' number, the worst case (one value per parameter, all
+#: inside the box, spread over it) and the curvatures of the bump (condition number 16).
+BUMP_DIMENSION = 20
+BUMP_WORST = tuple(
+    0.15 + 0.7 * ((7 * i) % BUMP_DIMENSION) / (BUMP_DIMENSION - 1) for i in range(BUMP_DIMENSION)
+)
+BUMP_CURVATURE = tuple(np.geomspace(0.5, 8.0, BUMP_DIMENSION).tolist())
+
+
+def many_bump(x) -> float:
+    """The metric of :class:`BumpSimulator` [rad]: ``PEAK exp(-sum_j c_j (x_j - x*_j)^2)``,
+    largest (``PEAK``) at ``BUMP_WORST``."""
+    x, worst = np.asarray(x, float), np.asarray(BUMP_WORST)
+    return PEAK * math.exp(-float(np.sum(np.asarray(BUMP_CURVATURE) * (x - worst) ** 2)))
+
+
+class BumpSimulator(SyntheticSimulator):
+    """``BUMP_DIMENSION`` parameters ``x00``, ``x01``, ... in [0, 1] (nominal 0.5), one smooth
+    anisotropic bump of known maximum ``PEAK`` at ``BUMP_WORST``: a search in many dimensions
+    from a start off the optimum (the nominal point: ``many_bump`` there is 0.096 PEAK)."""
+
+    def parameters(self):
+        return tuple(Parameter(f"x{i:02d}", "-", 0.5, 0.0, 1.0) for i in range(BUMP_DIMENSION))
+
+    def run(self, case):
+        self.calls += 1
+        return RunOutput(
+            metrics={"ape": many_bump([case.values[f"x{i:02d}"] for i in range(BUMP_DIMENSION)])}
+        )
+
+
+def make_bump_simulator(**options) -> BumpSimulator:
+    return BumpSimulator(**options)
