@@ -13,8 +13,9 @@ in a spec with::
 Parameters are keyed by the tree's uncertain-block names (``m_<body>``, ``Jxx_<body>``,
 ``w<i>_<body>``: the LFR's, so the analysis' ``worst_cases.parquet`` columns map onto them one
 to one), with the ranges the scenario declares (the campaign's default dispersions); the
-initial errors ``phi0_*`` [rad], ``w0_*`` [rad/s], ``noise_seed`` and the normalized all-pass
-scalars ``Delta_mul_*``, ``Delta_add`` as for the paper's mission simulator
+initial errors ``phi0_*`` [rad], ``w0_*`` [rad/s], ``noise_seed``, the normalized all-pass
+scalars ``Delta_mul_*``, ``Delta_add`` and the disturbance inputs (``noise_scale``, the
+sinusoid ``sine_*`` of the analysis' worst input) as for the paper's mission simulator
 (:mod:`oos_drake.campaign.drake_simulator`). A run with other real-block values than the last
 rebuilds the twin from the tree with those values written into its data
 (:func:`~oos_drake.multibody.tree_twin.tree_with_values`, a fraction of a second); a run is a
@@ -97,7 +98,12 @@ OPTIONS = {
 def tree_parameters(scenario) -> tuple[Parameter, ...]:
     """The dispersible parameters of a tree scenario's mission (see the module docstring): the
     uncertain blocks of its mission model (a mated target's included), not the scheduled
-    ones (``tau_<body>``, ``delta_<PORT>``: the mission's values)."""
+    ones (``tau_<body>``, ``delta_<PORT>``: the mission's values), and the disturbance inputs
+    of the paper's mission (``noise_scale``, the sinusoid ``sine_*``:
+    :func:`~oos_drake.multibody.mission_sim.disturbance_parameters`)."""
+    from oos_drake.campaign.drake_simulator import campaign_parameters
+    from oos_drake.multibody.mission_sim import disturbance_parameters
+
     params = []
     params += _spring_damper_parameters(scenario)
     for name, block in sorted(scenario.mission_model().uncertainty.items()):
@@ -169,6 +175,7 @@ def tree_parameters(scenario) -> tuple[Parameter, ...]:
             uncertainty=(-1.0, 1.0),
         )
     )
+    params += campaign_parameters(disturbance_parameters())
     return tuple(params)
 
 
@@ -365,6 +372,7 @@ class TreeMissionSimulator:
     def run(self, case: RunCase) -> RunOutput:
         """Simulate the case's window; divergence raises :class:`SimulationDiverged`."""
         from oos_drake.multibody.flight_software import NOISE_CHANNELS
+        from oos_drake.multibody.mission_sim import disturbance_table
         from oos_drake.multibody.tree_twin import run_mission_twin
 
         values = {p.name: p.nominal for p in self._parameters} | dict(case.values)
@@ -385,6 +393,7 @@ class TreeMissionSimulator:
         noise_seed = int(values["noise_seed"]) or int(case.seed)
         n = int(math.ceil((end - start) / self.design.period)) + 2
         noise = np.random.default_rng(noise_seed).standard_normal((n, NOISE_CHANNELS))
+        noise = disturbance_table(values, noise, start, 1.0 / self.design.period)
         delta_mul = np.array([[values[f"Delta_mul_{r}{c}"] for c in AXES] for r in AXES])
         delta_add = float(values["Delta_add"])
         frequency = float(case.frequency)  # NaN with nonzero scalars: refused, by name

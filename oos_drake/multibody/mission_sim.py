@@ -66,6 +66,7 @@ __all__ = [
     "SIGNAL_UNITS",
     "SINE_CHANNELS",
     "disturbance_parameters",
+    "disturbance_table",
     "mission_parameters",
     "sine_table",
 ]
@@ -276,6 +277,33 @@ def sine_table(values: Mapping[str, float], times: np.ndarray) -> np.ndarray:
         return np.zeros((np.size(times), NOISE_CHANNELS))
     phase = np.exp(2j * np.pi * float(values["sine_frequency"]) * np.asarray(times, float))
     return amplitude * np.real(np.outer(phase, c / norm))
+
+
+def disturbance_table(
+    values: Mapping[str, float], noise_table: np.ndarray, start: float, rate: float
+) -> np.ndarray:
+    """The flight software's unit input table of a run: the random ``noise_table`` (rows: one
+    per sample) scaled by ``noise_scale``, plus the sinusoid of :func:`sine_table` (row ``k`` at
+    ``start + k / rate`` [s]); the mission's and a tree twin's
+    (:mod:`oos_drake.campaign.tree_simulator`).
+
+    Parameters
+    ----------
+    values : mapping
+        ``noise_scale``, ``sine_amplitude`` and the sinusoid's parameters (:func:`sine_table`).
+    noise_table : numpy.ndarray, shape (n, 9)
+        Unit ``[n_sst; n_gyro; d_ext]`` per flight-software sample.
+    start : float
+        Mission time of the first row [s].
+    rate : float
+        Flight-software rate [Hz].
+    """
+    table = np.asarray(noise_table, dtype=float)
+    if values["noise_scale"] != 1.0:
+        table = values["noise_scale"] * table
+    if values["sine_amplitude"] != 0.0:
+        table = table + sine_table(values, float(start) + np.arange(table.shape[0]) / rate)
+    return table
 
 
 METRIC_UNITS = MappingProxyType(
@@ -596,12 +624,7 @@ class MissionSimulation:
         n = int(math.ceil((end - start) * self.options.control_rate)) + 2
         if noise_table is None:
             noise_table = np.random.default_rng(noise_seed).standard_normal((n, NOISE_CHANNELS))
-        noise_table = np.asarray(noise_table, dtype=float)
-        if values["noise_scale"] != 1.0:
-            noise_table = values["noise_scale"] * noise_table
-        if values["sine_amplitude"] != 0.0:
-            times = start + np.arange(noise_table.shape[0]) / self.options.control_rate
-            noise_table = noise_table + sine_table(values, times)
+        noise_table = disturbance_table(values, noise_table, start, self.options.control_rate)
         fsw.set_noise(fsw_context, noise_table)
         # sensor filters start at their steady state for the initial measurement
         state = fsw_context.get_mutable_discrete_state(0).get_mutable_value()
