@@ -380,3 +380,20 @@ def test_differential_evolution_does_not_climb_there_in_the_same_budget(write_sp
         synthetic_sim.many_bump([0.5] * synthetic_sim.BUMP_DIMENSION) / REQUIREMENT, rel=1e-12
     )
     assert result.best[RATIO_COLUMN] < 0.8 * synthetic_sim.PEAK / REQUIREMENT
+
+
+def test_derivatives_are_the_parabolas():
+    """The local search's differences: the first and second derivatives at 0 of any parabola,
+    exactly, from central points and from one-sided points (a face of the box)."""
+    from oos_drake.campaign.falsify import _derivatives
+
+    a, b, c = np.array([3.0, -0.5, 7.0]), np.array([-2.0, 0.3, 0.0]), np.array([1.0, 2.0, -1.0])
+
+    def f(x):
+        return a * x**2 + b * x + c
+
+    for h1, h2 in ((0.01, -0.01), (-0.01, -0.02), (0.01, 0.02)):
+        h1, h2 = np.full(3, h1), np.full(3, h2)
+        first, second = _derivatives(f(0.0), h1, f(h1), h2, f(h2))
+        np.testing.assert_allclose(first, b, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(second, 2 * a, rtol=1e-9)
