@@ -143,6 +143,9 @@ def test_cli_refuses_bad_input_and_writes_nothing(write_spec, tmp_path, capsys):
         == 0
     )
     assert "worst requirement ratio" in capsys.readouterr().out
+    local = ["campaign", "falsify", str(spec), "--out", str(tmp_path / "local"), "--quiet"]
+    assert main([*local, "--budget", "9", "--search", "local"]) == 0
+    assert "(local search; best starting point" in capsys.readouterr().out
     other = write_spec(_spec().replace("random_seed = 11", "random_seed = 12"), name="other")
     assert main(["campaign", "falsify", str(other), "--out", str(out), "--budget", "9"]) == 2
     assert "another falsification" in capsys.readouterr().err
