@@ -35,13 +35,15 @@ and the nominal point, no fill-up), then projected gradient ascent in the unit c
 (:func:`local_search`): one batch of central differences, two runs a coordinate (step
 :data:`LOCAL_STEP`, one-sided of second order on a face: a forward difference reads the
 curvature as a slope where the start is near a maximum, as the analysis' worst input is), then
-one batch of a line search along the
-normalized gradient at :data:`LINE_STEPS` times a trust radius (first :data:`LOCAL_RADIUS`;
-doubled when the longest step was best, halved when the shortest was, quartered without
-progress, the gradient then kept). The best point of the two batches becomes the centre when it
-improves on it. A gradient costs two runs per dimension: the search pays for it only on a smooth
-objective (common random numbers make it deterministic); a failed run, :data:`FAILED_RATIO`,
-is a finding and becomes the centre like any other.
+one batch of a line search along the gradient divided by each coordinate's curvature (a
+diagonal Newton direction; the curvature at least the largest over :data:`CURVATURE_SPAN`),
+normalized, at :data:`LINE_STEPS` times a trust radius (first :data:`LOCAL_RADIUS`; doubled
+when the longest step was best, halved when the shortest was, quartered without progress, the
+direction then kept). The best point of the two batches becomes the centre when it improves on
+it. A gradient costs two runs per dimension: the search pays for it only on a smooth objective
+(common random numbers make it deterministic) started near a worst case (from the regions alone
+differential evolution explores better: docs/ANALYSIS-RESULTS.md); a failed run,
+:data:`FAILED_RATIO`, is a finding and becomes the centre like any other.
 
 Started from the worst input: given ``oos confirm``'s performance table (``--confirm``), whose
 rows store the analysis' worst cases as simulator values (``worst values``: the worst
