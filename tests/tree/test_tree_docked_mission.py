@@ -359,9 +359,11 @@ def test_two_docked_phases_of_one_spring_damper_are_one_run(tmp_path):
     )
     np.testing.assert_allclose(cut.times, whole.times)
     scale = np.abs(whole.phi).max()
-    # measured 9e-14; the target placed anew on the port instead (its deflection dropped):
-    # 6e-6; the target's coordinates copied from one twin to the other: 37
-    assert np.abs(cut.phi - whole.phi).max() <= 1e-9 * scale
+    # measured 9e-14 (session 19's machine) and 9e-12 = 9e-9 of the scale (drake 1.51.1, numpy
+    # 2.4.6): the second segment restarts the error-controlled integrator's step history; the
+    # target placed anew on the port instead (its deflection dropped): 6e-6; the target's
+    # coordinates copied from one twin to the other: 37
+    assert np.abs(cut.phi - whole.phi).max() <= 1e-7 * scale
     key = next(k for k in cut.final_state.joints if k[1].endswith("_floating") and "CLIENT" in k[1])
     q_cut, q_whole = cut.final_state.joints[key][0], whole.final_state.joints[key][0]
     assert np.abs(q_cut - q_whole).max() > 0.1  # other zeros: 0.3 rad of boom apart
