@@ -143,6 +143,17 @@ def _ab13dd(A, B, C, D, discrete):
     return ab13dd(dico, "I", "N", "D", n, m, p, A, np.eye(n), B, C, D, tol=1e-10)[0]
 
 
+def _max_singular_value(A, B, C, D, dt):
+    """``w -> sigma_max(G(jw))`` (``G(e^{jw dt})`` for ``dt > 0``) of one model, by hand."""
+    n = A.shape[0]
+
+    def gain(w):
+        s = np.exp(1j * w * dt) if dt else 1j * w
+        return np.linalg.svd(C @ np.linalg.solve(s * np.eye(n) - A, B) + D, compute_uv=False)[0]
+
+    return gain
+
+
 @pytest.mark.parametrize("rate", [None, 10.0])
 def test_a_goal_design_writes_its_closed_loops_and_where_it_was_verified(tmp_path, rate):
     # the goal path writes closed_loop.npz like the static synthesis (same keys): every loop
@@ -164,10 +175,24 @@ def test_a_goal_design_writes_its_closed_loops_and_where_it_was_verified(tmp_pat
         np.hstack([record["controller"]["K_p"]["value"], record["controller"]["K_d"]["value"]]),
     )
     norms = [_ab13dd(*(loops[m][k] for m in "ABCD"), rate) for k in range(3)]
-    np.testing.assert_allclose(norms, loops["gamma"], rtol=1e-4)
+    # ab13dd's discrete norm is accurate to about 1e-4 here: a peak at 0.026 rad/s (z within
+    # 0.003 rad of 1) read 1.02e-4 low (drake 1.51.1 / numpy 2.4.6 machine), below a dense
+    # sweep's refined maximum; the recorded value is also checked directly, below
+    np.testing.assert_allclose(norms, loops["gamma"], rtol=2e-4)
+    for k in range(3):
+        A, B, C, D = (loops[m][k] for m in "ABCD")
+        gain = _max_singular_value(A, B, C, D, 1 / rate if rate else 0.0)
+        # the recorded peak is the gain at its recorded frequency, and no frequency of a dense
+        # sweep (log-spaced, up to Nyquist) exceeds it
+        assert gain(float(loops["omega_peak_rad_s"][k])) == pytest.approx(
+            loops["gamma"][k], rel=1e-9
+        )
+        top = np.pi * rate if rate else 1e3
+        sweep = max(gain(w) for w in np.geomspace(1e-4, top, 4000))
+        assert sweep <= loops["gamma"][k] * (1 + 1e-9)
     weighted = record["goals"][0]
-    np.testing.assert_allclose(weighted["per_model"], norms, rtol=1e-4)
-    assert record["gamma"] == pytest.approx(max(norms), rel=1e-4)
+    np.testing.assert_allclose(weighted["per_model"], loops["gamma"], rtol=1e-9)
+    assert record["gamma"] == pytest.approx(max(norms), rel=2e-4)
     verification = record["verification"]
     assert verification["configurations_checked"] == 3
     assert verification["configurations_between"] == 2
