@@ -892,20 +892,34 @@ def _eval_lane_alone(Mc, w, x, tq, lay, f, g, lmax, t, size):
     The evaluation of a lane whose QR did not converge, and of every busy lane when so few are
     busy that one eight-lane evaluation costs more than theirs one by one
     (``LaneOptions.per_matrix_lanes``). A temperature relative to the lane's own
-    ``lambda_max`` (``tq[w] < 0``) is resolved inside that evaluation.
+    ``lambda_max`` (``tq[w] < 0``) is resolved inside that evaluation. Allocates its work
+    arrays; :func:`_eval_lane_alone_ws` takes them from :func:`_alone_workspace`.
     """
+    aw = _alone_workspace(Mc.shape[1], Mc.shape[2], x.shape[0], lay.n_entries)
+    _eval_lane_alone_ws(Mc, w, x, tq, lay, f, g, lmax, t, size, aw)
+
+
+@_jit_exact
+def _alone_workspace(c, r, p, n_entries):
+    """Work arrays of :func:`_eval_lane_alone_ws`: the one-matrix inputs and outputs of
+    :func:`mu_kernels.dg_objective_ws` and its :data:`mu_kernels.ScalarWorkspace`."""
+    return (
+        np.empty((1, p)), np.empty(1), np.empty(1), np.empty((1, p)), np.empty(1),
+        np.empty((1, r), dtype=np.complex128), np.empty(1),
+        mu_kernels.scalar_workspace(c, r, n_entries),
+    )  # fmt: skip
+
+
+@_jit_exact
+def _eval_lane_alone_ws(Mc, w, x, tq, lay, f, g, lmax, t, size, aw):
+    """:func:`_eval_lane_alone` with its work arrays ``aw`` (:func:`_alone_workspace`, reused
+    from evaluation to evaluation: the same arithmetic, no allocation)."""
+    xw, f1, l1, g1, s1, top1, t1, sws = aw
     p = x.shape[0]
-    xw = np.empty((1, p))
     for i in range(p):
         xw[0, i] = x[i, w]
-    f1 = np.empty(1)
-    l1 = np.empty(1)
-    g1 = np.empty((1, p))
-    s1 = np.empty(1)
-    top1 = np.empty((1, Mc.shape[2]), dtype=np.complex128)
-    t1 = np.empty(1)
     t1[0] = tq[w]  # negative: relative, dg_objective puts the absolute one there
-    mu_kernels.dg_objective(Mc[w : w + 1], xw, t1, True, lay, f1, g1, l1, top1, s1)
+    mu_kernels.dg_objective_ws(Mc[w : w + 1], xw, t1, True, lay, f1, g1, l1, top1, s1, sws)
     f[w] = f1[0]
     lmax[w] = l1[0]
     t[w] = t1[0]
@@ -1125,13 +1139,14 @@ def dg_minimize_lanes(M, x0, opts, lay, ws, best_x, best_l, iters, evals):
             _load_lane(w, b, M, x0, Mr, Mi, Mc, xc, xq, tq, temps)
             active += 1
     tused = np.zeros(W)
+    aw = _alone_workspace(c, r, p, lay.n_entries)  # the per-matrix path's work arrays
     while active > 0:
         if active > opts.per_matrix_lanes:
             tused = _lane_eval(Mr, Mi, Mc, xq, tq, lay, ws, f, g, lm)
         else:  # few busy lanes (a lone matrix, a batch's tail): cheaper one by one
             for w in range(W):
                 if mat[w] >= 0:
-                    _eval_lane_alone(Mc, w, xq, tq, lay, f, g, lm, tused, ws.size)
+                    _eval_lane_alone_ws(Mc, w, xq, tq, lay, f, g, lm, tused, ws.size, aw)
         for w in range(W):
             b = mat[w]
             if b < 0:
