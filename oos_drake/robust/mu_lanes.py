@@ -1020,28 +1020,38 @@ def _dot(a, b):
 
 
 @_jit_lbfgs
-def _lbfgs_dir(g, S, Y, rho, count, head, out):
+def _lbfgs_dir(g, S, Y, rho, count, head, out, q, alpha):
     """``out = -H g`` by the L-BFGS two-loop recursion over the ``count`` newest pairs
-    (circular buffers ``S``, ``Y``, ``rho`` with the newest at ``head``)."""
+    (circular buffers ``S``, ``Y``, ``rho`` with the newest at ``head``). ``q`` (like ``g``)
+    and ``alpha`` (like ``rho``): work arrays (element loops, no temporaries: the arithmetic
+    of the array expressions, in the same order)."""
     m = S.shape[0]
-    q = g.copy()
-    alpha = np.zeros(m)
+    n = g.size
+    for i in range(n):
+        q[i] = g[i]
     for i in range(count):
         k = (head - i) % m
         alpha[k] = rho[k] * _dot(S[k], q)
-        q -= alpha[k] * Y[k]
+        a = alpha[k]
+        Yk = Y[k]
+        for j in range(n):
+            q[j] -= a * Yk[j]
     gamma = 1.0
     if count > 0:
         yy = _dot(Y[head], Y[head])
         if yy > 0:
             gamma = _dot(S[head], Y[head]) / yy
-    rr = gamma * q
+    for j in range(n):  # r = gamma q, in place
+        q[j] = gamma * q[j]
     for i in range(count - 1, -1, -1):
         k = (head - i) % m
-        beta = rho[k] * _dot(Y[k], rr)
-        rr += S[k] * (alpha[k] - beta)
-    for i in range(g.size):
-        out[i] = -rr[i]
+        beta = rho[k] * _dot(Y[k], q)
+        c = alpha[k] - beta
+        Sk = S[k]
+        for j in range(n):
+            q[j] += Sk[j] * c
+    for i in range(n):
+        out[i] = -q[i]
 
 
 @_jit_exact
@@ -1113,6 +1123,8 @@ def dg_minimize_lanes(M, x0, opts, lay, ws, best_x, best_l, iters, evals):
     count = np.zeros(W, dtype=np.int64)
     head = np.full(W, memory - 1, dtype=np.int64)
     dtmp = np.zeros(p)
+    lq = np.zeros(p)  # work of _lbfgs_dir
+    la = np.zeros(memory)
     best_v = np.zeros(nb)  # the value that picks the best point (lambda_max + size)
     sw = opts.size_weight
     # which matrices each lane takes
@@ -1301,7 +1313,7 @@ def dg_minimize_lanes(M, x0, opts, lay, ws, best_x, best_l, iters, evals):
                 it_stage[w] += 1
                 for i in range(p):
                     dtmp[i] = gc[w, i]
-                _lbfgs_dir(dtmp, S[w], Y[w], rho[w], count[w], head[w], dv[w])
+                _lbfgs_dir(dtmp, S[w], Y[w], rho[w], count[w], head[w], dv[w], lq, la)
                 sl = 0.0
                 for i in range(p):
                     sl += dv[w, i] * gc[w, i]
