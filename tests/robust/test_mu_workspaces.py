@@ -126,3 +126,100 @@ def test_single_calls_match_the_numpy_optimizer_and_their_certificates_break_at_
         assert low.check(m)["lmi_max_eig"] > 0
         high = dataclasses.replace(res, lower=1.01 * res.lower)
         assert abs(high.check(m)["delta_norm_error"]) > 1e-3
+
+
+def _old_finish(obj, x, idx, scale):
+    """``mu_upper._finish`` as it was before the single-call cuts (``eigvalsh`` on every group
+    of ``D_r``'s diagonal blocks, 1 x 1 ones included): the oracle of the cut."""
+    nb = len(idx)
+    _, Tl, Tr, Gh = obj.scalings(x, idx)
+    _, _, lmax, top = obj(x, idx, np.full(nb, 1e300))
+    upper = scale * np.sqrt(np.maximum(lmax, 0.0))
+    Dl = np.conj(np.swapaxes(Tl, -1, -2)) @ Tl
+    Dr = np.conj(np.swapaxes(Tr, -1, -2)) @ Tr
+    G = scale[:, None, None] * Gh
+    dnorm = np.zeros(nb)
+    d_min = np.full(nb, np.inf)
+    for _n, rows in obj.L.inv_groups:
+        ii, jj = rows[:, :, None], rows[:, None, :]
+        ev = np.linalg.eigvalsh(Dr[:, ii, jj])
+        dnorm = np.maximum(dnorm, ev.max(axis=(1, 2)))
+        d_min = np.minimum(d_min, ev.min(axis=(1, 2)))
+    Dl, Dr, G = Dl / dnorm[:, None, None], Dr / dnorm[:, None, None], G / dnorm[:, None, None]
+    return upper, Dl, Dr, G, top, d_min / np.maximum(dnorm, 1e-300)
+
+
+def test_one_by_one_hermitian_eigenvalue_is_the_real_part_bit_for_bit():
+    """The cut of ``mu_upper._finish``: ``eigvalsh`` of a 1 x 1 Hermitian matrix (LAPACK's
+    ``zheevd`` with ``N = 1``) is the real part of its entry plus ``0.0``, bit for bit, for any
+    entry (both signs, subnormals, huge values, -0.0 (which it returns as 0.0), inf, NaN, an
+    imaginary part that round-off left there)."""
+    rng = np.random.default_rng(3)
+    re = np.concatenate(
+        [
+            rng.standard_normal(2000) * 10.0 ** rng.integers(-320, 308, 2000),
+            [0.0, -0.0, 5e-324, -5e-324, 1e308, -1e308, 1.0, np.inf, -np.inf, np.nan],
+        ]
+    )
+    a = (re + 1j * rng.standard_normal(re.size) * 1e-17)[:, None, None]
+    ev = np.linalg.eigvalsh(a)[:, 0]
+    cut = a[:, 0, 0].real + 0.0
+    assert np.array_equal(ev, cut, equal_nan=True)
+    assert np.array_equal(np.signbit(ev), np.signbit(cut))
+
+
+def _mussv_fields(res):
+    return [res.upper, res.lower, res.delta, res.D_left, res.D_right, res.G]
+
+
+def test_single_calls_equal_the_full_lane_workspace_and_the_old_finish_bit_for_bit(monkeypatch):
+    """Single ``mussv`` calls (and batches of 2 and 3: still per matrix) with the thin lane
+    workspace (``mu_lanes.thin_workspace``) and the cut ``_finish`` against the same calls with
+    the full eight-lane workspace and the old ``_finish`` (:func:`_old_finish`): every bound,
+    perturbation and scaling identical bit for bit (the cuts change no arithmetic)."""
+    cases = []
+    for blk, k in ((PAPER, 2), (MIXED, 3)):
+        s = parse_blk(blk)
+        rng = np.random.default_rng(21)
+        cases += [(blk, _crandn(rng, s.n_cols, s.n_rows) / 5) for _ in range(k)]
+        cases.append((blk, _crandn(rng, 3, s.n_cols, s.n_rows) / 5))
+    new = [_mussv_fields(mussv(m, blk)) for blk, m in cases]
+    thin_calls = []
+
+    def full_workspace():  # what mu_upper_bound allocated before the cut (any lane count)
+        thin_calls.append(1)
+        c, r = current["shape"]
+        return mu_lanes.lane_workspace(c, r, current["lay"])
+
+    current = {}
+    monkeypatch.setattr(mu_lanes, "thin_workspace", full_workspace)
+    monkeypatch.setattr(mu, "_finish", _old_finish)
+    old = []
+    for blk, m in cases:
+        s = parse_blk(blk)
+        current["shape"] = (s.n_cols, s.n_rows)
+        current["lay"] = mu._Objective(
+            np.zeros((1, s.n_cols, s.n_rows), dtype=complex), s, mu._layout(s)
+        ).lane_layout
+        old.append(_mussv_fields(mussv(m, blk)))
+    assert len(thin_calls) == len(cases)  # every case took the per-matrix path
+    for a, b in zip(new, old, strict=True):
+        for x, y in zip(a, b, strict=True):
+            assert np.array_equal(x, y)
+
+
+def test_per_structure_cache_follows_the_object_not_its_address():
+    """``mu_upper._per_blk`` answers from the structure object (no BLK bytes per call): block
+    structures built and dropped one after the other (whose ``id`` Python reuses) each get
+    their own layout, the one built from scratch."""
+    rng = np.random.default_rng(5)
+    for _ in range(40):
+        rows = rng.integers(1, 4, rng.integers(1, 5))
+        blk = [[-int(n), 0] if rng.random() < 0.5 else [int(n), 0] for n in rows]
+        s = parse_blk(np.array(blk))
+        got = mu._layout(s)
+        fresh = mu._build_layout(s)
+        assert got.n_params == fresh.n_params
+        assert np.array_equal(got.log_par, fresh.log_par)
+        assert mu._layout(s) is got
+        del s
