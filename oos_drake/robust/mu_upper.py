@@ -811,7 +811,7 @@ def _finish(obj, x, idx, scale):
             ev = Dr[:, rows[:, 0], rows[:, 0]].real + 0.0  # (-0.0 -> 0.0 as there)
         else:
             ii, jj = rows[:, :, None], rows[:, None, :]
-            ev = np.linalg.eigvalsh(Dr[:, ii, jj]).reshape(nb, -1)
+            ev = np.linalg.eigvalsh(Dr[:, ii, jj]).reshape(nb, rows.size)
         dnorm = np.maximum(dnorm, ev.max(axis=1))
         d_min = np.minimum(d_min, ev.min(axis=1))
     Dl, Dr, G = Dl / dnorm[:, None, None], Dr / dnorm[:, None, None], G / dnorm[:, None, None]

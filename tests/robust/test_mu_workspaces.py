@@ -223,3 +223,19 @@ def test_per_structure_cache_follows_the_object_not_its_address():
         assert np.array_equal(got.log_par, fresh.log_par)
         assert mu._layout(s) is got
         del s
+
+
+@pytest.mark.parametrize("nb", [0, 1, 4])
+def test_finish_equals_the_old_finish_bit_for_bit(nb):
+    """``mu_upper._finish`` (1 x 1 blocks of ``D_r`` read off, larger ones by ``eigvalsh``)
+    against :func:`_old_finish` at random scalings, for an empty batch too (robstab asks for
+    one): every output identical."""
+    s = parse_blk(PAPER)
+    rng = np.random.default_rng(nb)
+    M = _crandn(rng, max(nb, 1), s.n_cols, s.n_rows)[:nb] / 5
+    obj = mu._Objective(M, s, mu._layout(s))
+    x = rng.standard_normal((nb, obj.L.n_params))
+    idx, scale = np.arange(nb), rng.uniform(0.5, 2.0, nb)
+    for a, b in zip(mu._finish(obj, x, idx, scale), _old_finish(obj, x, idx, scale), strict=True):
+        assert a.shape == b.shape
+        assert np.array_equal(a, b)
