@@ -253,6 +253,8 @@ def _lower_bound(part, structure, up, *, restarts, iters, rng, restart_gap, cont
             part[redo], structure, restarts=restarts - 1, iters=iters, rng=rng, polish_starts=1
         )
     better = more.lower > first.lower[redo]
+    if not better.any():  # (a lone matrix: no merging, the same values)
+        return first
     rows = redo[better]
     merged = {}
     for f in fields(LowerBoundResult):
