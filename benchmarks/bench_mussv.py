@@ -161,7 +161,8 @@ def gaussian_case(reps: int, n: int = 64) -> dict:
     (``single``), the share of the compiled D-G optimizer (``mu_lanes.dg_minimize_lanes``) in
     each (``*_kernel``; the rest is the Python around it: balancing, certification, the lower
     bound), the mean eigenvalue problems per matrix of the upper bound (``evaluations``) and
-    the gap ``upper / lower - 1`` of both runs (``*_gap_median``, ``*_gap_max``).
+    the gap ``upper / lower - 1`` of both runs (``*_gap_median``, ``*_gap_max``) and the bounds
+    themselves (``*_upper``, ``*_lower``: lists, one entry per matrix).
     """
     from bench_robust_sweep import PAPER_BLK
 
@@ -201,7 +202,11 @@ def gaussian_case(reps: int, n: int = 64) -> dict:
                 if best is None or total < best[0]:
                     best = (total, spent[0] / n, np.concatenate(evals), res)
             total, k, ev, res = best
-            gap = np.array([r.upper / r.lower - 1 for r in res]).ravel()
+            upper = np.concatenate([np.ravel(r.upper) for r in res])
+            lower = np.concatenate([np.ravel(r.lower) for r in res])
+            gap = upper / lower - 1
+            out[name + "_upper"] = upper.tolist()  # the baseline's bounds, compared with
+            out[name + "_lower"] = lower.tolist()  # this checkout's (gaussian_vs_baseline)
             out[name] = total
             out[name + "_kernel"] = k
             out[name + "_gap_median"] = float(np.median(gap))
@@ -339,6 +344,20 @@ def gaussian_vs_baseline(reps: int, baseline: str | None = "main", rounds: int =
             f"{new['batched_kernel'] / old['batched_kernel']:.2f}, single "
             f"{new['single_kernel'] / old['single_kernel']:.2f}"
         )
+        for case in CASES:  # same matrices: the bounds must not move beyond round-off
+            ch = {
+                k: np.asarray(new[f"{case}_{k}"]) / np.asarray(old[f"{case}_{k}"]) - 1
+                for k in ("upper", "lower")
+            }
+            gap_new = np.asarray(new[f"{case}_upper"]) / np.asarray(new[f"{case}_lower"])
+            gap_old = np.asarray(old[f"{case}_upper"]) / np.asarray(old[f"{case}_lower"])
+            ch["gap"] = gap_new / gap_old - 1
+            print(
+                f"bounds vs {baseline}, {case} (relative change per matrix, median / max |.|): "
+                + ", ".join(
+                    f"{k} {np.median(v):+.1e} / {np.max(np.abs(v)):.1e}" for k, v in ch.items()
+                )
+            )
 
 
 def main(argv=None):

@@ -47,6 +47,7 @@ from oos_drake.robust.mu_lower import (
 )
 from oos_drake.robust.mu_upper import (
     UpperBoundResult,
+    _per_blk,
     lmi_residual,
     mu_upper_bound,
     power_of_two_scale,
@@ -181,10 +182,15 @@ def _parsed(blk) -> BlockStructure:
     return _PARSED[key]
 
 
+def _complex_scalars(structure) -> bool:
+    """True if every block is a repeated complex scalar (:func:`mussv`'s phase search)."""
+    return all(b.repeated and b.kind != REAL for b in structure.blocks)
+
+
 def _small_mixed(structure, mixed_search) -> bool:
     """True for the structures :func:`mussv` hands to :func:`mixed_real_search` (argument
     ``mixed_search`` of :func:`mussv`)."""
-    n_real = sum(b.kind == REAL for b in structure.blocks)
+    n_real = _per_blk("n_real", structure, lambda: sum(b.kind == REAL for b in structure.blocks))
     n_complex = len(structure.blocks) - n_real
     return (
         mixed_search is not False
@@ -247,6 +253,8 @@ def _lower_bound(part, structure, up, *, restarts, iters, rng, restart_gap, cont
             part[redo], structure, restarts=restarts - 1, iters=iters, rng=rng, polish_starts=1
         )
     better = more.lower > first.lower[redo]
+    if not better.any():  # (a lone matrix: no merging, the same values)
+        return first
     rows = redo[better]
     merged = {}
     for f in fields(LowerBoundResult):
@@ -367,7 +375,7 @@ def mussv(
     # lower one a few ulps above: raising a valid upper bound keeps it valid
     delta = lo.delta / scale[:, None, None]
     resid = lo.residual
-    if phase_search and all(b.repeated and b.kind != REAL for b in structure.blocks):
+    if phase_search and _per_blk("complex_scalars", structure, lambda: _complex_scalars(structure)):
         lower, delta, resid = lower.copy(), delta.copy(), np.array(resid, dtype=float)
         for i in np.flatnonzero(up.upper * scale > restart_gap * lower):
             value, d, res = complex_phase_search(

@@ -122,7 +122,7 @@ def _power_iteration(M, structure, a, z, iters, kappa, rng):
     start ``s`` runs on ``M[s % nb]`` (several starts per matrix).
     """
     nb = a.shape[0]
-    n_real = sum(b.kind == REAL for b in structure.blocks)
+    n_real = _per_blk("n_real", structure, lambda: sum(b.kind == REAL for b in structure.blocks))
     real0 = rng.uniform(-1.0, 1.0, (n_real, nb)).T.copy()  # one draw per block, in one
     delta = np.empty((nb, structure.n_rows, structure.n_cols), dtype=complex)
     a_out = np.empty((nb, structure.n_cols), dtype=complex)

@@ -96,16 +96,23 @@ class _Layout:
 
 
 _PER_BLK: dict = {}  # (what, BLK) -> what _per_blk built
+_PER_OBJ: dict = {}  # (what, id(structure)) -> (structure, the same): no BLK bytes per call
 
 
 def _per_blk(what: str, structure: BlockStructure, build):
     """``build()``, once per block structure and ``what`` (layouts and index maps: single-matrix
     calls repeat them; every entry is a function of the BLK alone)."""
+    seen = _PER_OBJ.get((what, id(structure)))
+    if seen is not None and seen[0] is structure:  # the same object (mussv's parsed BLKs)
+        return seen[1]
     key = (what, structure.blk.shape, structure.blk.tobytes())
     if key not in _PER_BLK:
         if len(_PER_BLK) > 256:
             _PER_BLK.clear()
         _PER_BLK[key] = build()
+    if len(_PER_OBJ) > 256:
+        _PER_OBJ.clear()
+    _PER_OBJ[(what, id(structure))] = (structure, _PER_BLK[key])
     return _PER_BLK[key]
 
 
@@ -285,7 +292,7 @@ class _Objective:
     def __init__(self, M: np.ndarray, structure: BlockStructure, layout: _Layout):
         self.M = np.ascontiguousarray(M)
         self.count = np.zeros(M.shape[0], dtype=np.int64)  # evaluations per matrix
-        self.MH = np.ascontiguousarray(np.conj(np.swapaxes(M, -1, -2)))
+        self._mh = None  # M^H, formed by matrix() (the trust check) only
         self.s = structure
         self.L = layout
         self.c_groups = _per_blk("c_groups", structure, lambda: _size_groups(structure, "cols"))
@@ -373,7 +380,9 @@ class _Objective:
             GhH = np.zeros((nb, c, r), dtype=complex)
             GhH[:, L.g_col, L.g_row] = np.conj(Gh[:, L.g_row, L.g_col])
             Z -= 1j * _times_blockdiag(GhH, rg, tri_b)
-        W = _blockdiag_times(tri_b, rg, self.MH[idx], adjoint=True) @ Z
+        if self._mh is None:
+            self._mh = np.ascontiguousarray(np.conj(np.swapaxes(self.M, -1, -2)))
+        W = _blockdiag_times(tri_b, rg, self._mh[idx], adjoint=True) @ Z
         H = W + np.conj(np.swapaxes(W, -1, -2))
         return H, E, Tri, Mh
 
@@ -601,7 +610,9 @@ def mu_upper_bound(
         size_weight=float(CERT_SIZE_FACTOR * check_roundoff(r)),
     )
     lay = balanced.lane_layout
-    work = mu_lanes.lane_workspace(c, r, lay)
+    # at most per_matrix_lanes matrices: every evaluation per matrix, the lanes' arrays unused
+    few = nb <= options.per_matrix_lanes
+    work = mu_lanes.thin_workspace() if few else mu_lanes.lane_workspace(c, r, lay)
     # one BLAS thread: threads on 26 x 26 LAPACK calls are 100x slower
     with single_threaded_blas(), mu_lanes.compile_with_slp():
         mu_lanes.dg_minimize_lanes(
@@ -795,11 +806,14 @@ def _finish(obj, x, idx, scale):
     # an eigenvalue of zero (mu = 0 bound) keeps its sign; normalize D so that max eig(D_r) = 1
     dnorm = np.zeros(nb)  # largest eigenvalue of the block-diagonal D_r, block size by size
     d_min = np.full(nb, np.inf)
-    for _n, rows in obj.L.inv_groups:
-        ii, jj = rows[:, :, None], rows[:, None, :]
-        ev = np.linalg.eigvalsh(Dr[:, ii, jj])
-        dnorm = np.maximum(dnorm, ev.max(axis=(1, 2)))
-        d_min = np.minimum(d_min, ev.min(axis=(1, 2)))
+    for n, rows in obj.L.inv_groups:
+        if n == 1:  # 1 x 1 blocks: what eigvalsh (zheevd) returns, the entry's real part
+            ev = Dr[:, rows[:, 0], rows[:, 0]].real + 0.0  # (-0.0 -> 0.0 as there)
+        else:
+            ii, jj = rows[:, :, None], rows[:, None, :]
+            ev = np.linalg.eigvalsh(Dr[:, ii, jj]).reshape(nb, rows.size)
+        dnorm = np.maximum(dnorm, ev.max(axis=1))
+        d_min = np.minimum(d_min, ev.min(axis=1))
     Dl, Dr, G = Dl / dnorm[:, None, None], Dr / dnorm[:, None, None], G / dnorm[:, None, None]
     return upper, Dl, Dr, G, top, d_min / np.maximum(dnorm, 1e-300)
 
@@ -808,6 +822,7 @@ def _finish(obj, x, idx, scale):
 #: the size of the LMI's terms. A piece of the frequency axis counts as proved where the scaled
 #: LMI eigenvalue is below minus this (``mu_intervals.STRICT``).
 LMI_ROUNDOFF = 1e-13
+_EPS = float(np.finfo(float).eps)  # (np.finfo costs microseconds per call)
 
 
 def check_roundoff(n: int) -> float:
@@ -821,7 +836,7 @@ def check_roundoff(n: int) -> float:
     ``n - 1`` reflectors of ``n eps`` each) and its tridiagonal eigensolver (``n eps``):
     ``(n + 4)^2 eps`` in all, and never below :data:`LMI_ROUNDOFF` (2e-13 for ``n = 26``).
     """
-    return max(LMI_ROUNDOFF, (n + 4.0) ** 2 * np.finfo(float).eps)
+    return max(LMI_ROUNDOFF, (n + 4.0) ** 2 * _EPS)
 
 
 def certified_upper(M, beta, D_left, D_right, G):
@@ -889,7 +904,7 @@ def _certified_at(M, beta, Dl, Dr, G):
     sc = power_of_two_scale(M)
     lam, size = _scaled_lmi(M / sc[:, None, None], Dl, Dr, G / sc[:, None, None])
     e = check_roundoff(M.shape[2])
-    need = (lam + e * size) / (1.0 - e) * (1.0 + 8.0 * np.finfo(float).eps)
+    need = (lam + e * size) / (1.0 - e) * (1.0 + 8.0 * _EPS)
     out = np.maximum(beta, sc * np.sqrt(np.maximum(need, 0.0)))
     return np.where(np.isfinite(lam) & np.isfinite(size), out, np.inf)
 
