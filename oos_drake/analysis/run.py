@@ -104,7 +104,7 @@ class AnalysisOptions:
     guarantee_tight : float
         Relative margin [-] of the guarantee's first level above the largest bound found
         (``tight`` of :func:`~oos_drake.analysis.stability.axis_guarantee`, default
-        :data:`~oos_drake.analysis.stability.TIGHT_GAP`: 0.01, 1 %); a configuration whose
+        :data:`~oos_drake.analysis.stability.TIGHT_GAP`: 0.015, 1.5 %); a configuration whose
         cover does not close there is covered again from ``(1 + tighten.target_gap)`` times
         the certified lower bound (``guarantee fell back`` in the peaks table).
     progress : bool

@@ -678,7 +678,7 @@ def register(subparsers) -> None:
         type=float,
         default=TIGHT_GAP,
         help="whole-axis guarantee: relative margin [-] of the first level of the covers above "
-        "the largest mu bound found (0.01: 1 %%); a configuration whose cover does not close "
+        "the largest mu bound found (0.015: 1.5 %%); a configuration whose cover does not close "
         "there is covered again from (1 + --target-gap) x the lower bound (stability_peaks: "
         "'guarantee fell back')",
     )

@@ -86,7 +86,7 @@ def test_the_option_reaches_axis_guarantee(monkeypatch):
 def test_the_default_is_unchanged_from_the_cli_to_the_pipeline():
     scenario = _scenario()
     args = build_parser().parse_args(["analyze", "--out", "x"])
-    assert analysis_options(args, scenario).guarantee_tight == TIGHT_GAP == 0.01
+    assert analysis_options(args, scenario).guarantee_tight == TIGHT_GAP == 0.015
     pipeline = pipeline_analysis_options(scenario, quick=True, workers=1)
     assert pipeline.guarantee_tight == TIGHT_GAP
     assert AnalysisOptions().guarantee_tight == TIGHT_GAP
