@@ -156,9 +156,9 @@ CHUNKS_PER_WORKER = 3
 #: relative margin above the largest bound found on the grid (or the lower bound, if higher).
 #: The covers' cost falls as it grows (where mu stays within a few percent of the level over a
 #: band, each point's scalings prove an interval about as wide as the margin): 0.015 instead
-#: of 0.01 takes 10 % of the Hamiltonian tests and 15 % of the guarantee's CPU off the
-#: make-run mission study (12 configurations, ``benchmarks/bench_guarantee_levels.py``), its
-#: guaranteed levels 2.2-2.6 % above the certified lower bounds instead of 1.7-2.1 % (the
+#: of 0.01 takes 10 % of the Hamiltonian tests and 15 % of the covers' CPU off the make-run
+#: mission study (12 configurations, ``benchmarks/bench_guarantee_levels.py``), its
+#: guaranteed levels 1.5-2.6 % above the certified lower bounds instead of 1.0-2.1 % (the
 #: target gap, 3 %, is the ceiling of the first level anyway).
 TIGHT_GAP = 0.015
 
