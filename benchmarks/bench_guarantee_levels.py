@@ -62,7 +62,11 @@ import numpy as np
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--configurations", type=int, default=24)
-    parser.add_argument("--tight", default="0.005,1", help="comma-separated tight values [-]")
+    parser.add_argument(
+        "--tight",
+        default="0.005,1",
+        help="comma-separated tight values [-] ('default': each checkout's own TIGHT_GAP)",
+    )
     parser.add_argument("--subsets", default="", help="comma-separated subsets (default: all)")
     parser.add_argument("--controller", default=None, help="controller JSON (default: baseline)")
     parser.add_argument(
@@ -178,9 +182,9 @@ def main() -> None:
         import json
 
         out = {"grid": base, "runs": {}}
-        for tight in (float(t) for t in args.tight.split(",")):
+        for key, tight in _tights(args.tight):
             study, cpu = run(True, tight)
-            out["runs"][str(tight)] = {
+            out["runs"][key] = {
                 "cpu": cpu,
                 "levels": {
                     name: [g.mu_upper, study.certificates[name].mu_lower]
@@ -198,7 +202,7 @@ def main() -> None:
         f"{'guaranteed':>10s} {'gap [%]':>7s} {'raised':>6s} {'fell back':>9s} "
         f"{'tested':>6s} {'solved':>6s} {'fail':>4s}"
     )
-    for tight in (float(t) for t in args.tight.split(",")):
+    for label, tight in _tights(args.tight):
         if args.eager:
             _, eager = run(True, tight, lazy=False)
             tests = counts["hamiltonian"]
@@ -209,7 +213,7 @@ def main() -> None:
             old_study, old = run(True, tight, converge=False)
         study, cpu = run(True, tight)
         print(
-            f"tight {tight:g}: CPU {cpu:.1f} s = {cpu / base:.2f} x grid only; "
+            f"tight {label}: CPU {cpu:.1f} s = {cpu / base:.2f} x grid only; "
             f"guarantee {cpu - base:.1f} s; Hamiltonian tests {counts['hamiltonian']}"
         )
         if args.eager:
@@ -250,7 +254,7 @@ def main() -> None:
         for name, g in study.guarantees.items():
             lower = study.certificates[name].mu_lower
             print(
-                f"{tight:6g} {name:15s} {lower:9.5g} {np.max(g.grid_upper):9.5g} "
+                f"{label:>6s} {name:15s} {lower:9.5g} {np.max(g.grid_upper):9.5g} "
                 f"{g.floor:9.5g} {g.mu_upper:10.5g} {100 * (g.mu_upper - lower) / g.mu_upper:7.2f} "
                 f"{g.raised:6d} {int(g.fell_back.sum()):9d} {int(g.points.sum()):6d} "
                 f"{int(g.solved.sum()):6d} {len(g.failures):4d}"
@@ -273,7 +277,7 @@ def main() -> None:
                     output_names=lfr._output_names,
                 )
                 studies[f"seed {seed}"] = run(True, tight, converge=converge, model=model)[0]
-            print(f"round-off (M times 1 + 1e-15 R), converge={converge}, tight {tight:g}:")
+            print(f"round-off (M times 1 + 1e-15 R), converge={converge}, tight {label}:")
             for name in subsets:
                 up = np.array([st.guarantees[name].mu_upper for st in studies.values()])
                 lo = np.array([st.certificates[name].mu_lower for st in studies.values()])
@@ -282,6 +286,15 @@ def main() -> None:
                     f"{up.max() / up.min() - 1:.2e}); lower {' '.join(f'{v:.9g}' for v in lo)} "
                     f"(spread {lo.max() / lo.min() - 1:.2e})"
                 )
+
+
+def _tights(text: str) -> list:
+    """``--tight``: ``(label, value)`` pairs; ``default`` is None (the checkout's TIGHT_GAP)."""
+    out = []
+    for t in text.split(","):
+        t = t.strip()
+        out.append(("default", None) if t == "default" else (str(float(t)), float(t)))
+    return out
 
 
 def compare(args) -> None:
@@ -311,9 +324,8 @@ def compare(args) -> None:
         f"{args.configurations} mission configurations, controller {args.controller or 'baseline'};"
         f" {max(args.repeat, 1)} run(s) per checkout, CPU seconds, one process each"
     )
-    for tight in args.tight.split(","):
-        key = str(float(tight))
-        print(f"tight {tight}:")
+    for key, _ in _tights(args.tight):
+        print(f"tight {key}:")
         for name, runs in results.items():
             grid = [r["grid"] for r in runs]
             cpu = [r["runs"][key]["cpu"] for r in runs]

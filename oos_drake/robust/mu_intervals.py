@@ -441,7 +441,8 @@ class _Multiplier:
             if V is not None:
                 self._modal = (lam, C @ V, V_inv @ B)
                 self._keep = real.hamiltonian_modes()
-        self.ref = np.linalg.norm(self.P22, 2)
+        # ||P22||: beta^2 in the scaled form (P22 = -beta^2 I), no SVD
+        self.ref = float(beta**2) if scaled else np.linalg.norm(self.P22, 2)
         if reduce and self._modal is not None and scaled:
             self._reduce()
 
@@ -455,7 +456,7 @@ class _Multiplier:
         with np.errstate(divide="ignore"):
             reach = np.linalg.norm(CV, axis=0) * np.linalg.norm(VB, axis=1) / np.abs(lam.real)
         reach = np.where(np.isfinite(reach), reach, np.inf)
-        p11, p12 = np.linalg.norm(self.P11, 2), np.linalg.norm(self.P12, 2)
+        p11, p12 = 1.0, np.linalg.norm(self.P12, 2)  # scaled form only: P11 = I
         s = np.sqrt(self.ref / max(p11, 1e-300))
 
         def margin(e):
@@ -598,15 +599,9 @@ def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: floa
     ValueError
         If the LMI does not hold strictly at ``omega0``, or ``Phi(inf)`` is singular.
     """
-    for name, Dx in (("D_left", scalings.D_left), ("D_right", scalings.D_right)):
-        Dx = 0.5 * (Dx + np.conj(np.asarray(Dx).T))
-        low, high = _block_conditions(Dx)
-        ev = np.linalg.eigvalsh(Dx)
-        if not (low > 0.1 * CONDITION_FLOOR * high and ev[0] > 0.1 * SPREAD_FLOORS[-1] * ev[-1]):
-            raise ValueError(
-                f"dg_interval: a block of {name} is not positive definite to round-off "
-                f"(eigenvalues {low:.3g} .. {high:.3g}); use Scalings.conditioned()"
-            )
+    problem = _definiteness(scalings)
+    if problem:
+        raise ValueError(f"dg_interval: {problem}; use Scalings.conditioned()")
     mult = _Multiplier(real, scalings, beta, reduce=True)
     nu0 = float(real.to_nu(omega0))
     if mult.dropped and mult.max_eig([nu0])[0] >= -STRICT:  # the margin of the modes left out
@@ -628,9 +623,11 @@ def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: floa
     rho = float(np.max(np.abs(mult.poles))) if mult.poles.size else 0.0
     tail = 2.0 * lo_b + max(1.0, rho)
     mids = np.where(last, tail, 0.5 * (lo_b + np.where(last, 0.0, hi_b)))
-    ok = mult.max_eig(mids) < -STRICT
+    # the test points and nu = inf in one evaluation
+    values = mult.max_eig(np.append(mids, np.inf) if last[-1] else mids)
+    ok = values[: mids.size] < -STRICT
     if last[-1]:
-        ok[-1] &= mult.max_eig([np.inf])[0] < -STRICT
+        ok[-1] &= values[-1] < -STRICT
     k = int(np.searchsorted(bounds, nu0, side="right") - 1)
     k = min(max(k, 0), ok.size - 1)
     if not ok[k]:  # nu0 sits on a spurious candidate: the piece to its right holds it too
@@ -643,13 +640,57 @@ def dg_interval(real: Realization, scalings: Scalings, beta: float, omega0: floa
         left -= 1
     # the ends are eigenvalues of H, accurate to its round-off: move each end inside to the
     # last point where lambda_max is strictly negative (bisection from the piece's test point)
-    nu_lo = _inner_end(mult, bounds[left], mids[left]) if left > 0 else 0.0
-    nu_hi = _inner_end(mult, bounds[right + 1], mids[right]) if right + 1 < ok.size else np.inf
+    nu_lo, nu_hi = _inner_ends(
+        mult,
+        (bounds[left] if left > 0 else 0.0, bounds[right + 1] if right + 1 < ok.size else np.inf),
+        (mids[left], mids[right]),
+    )
     lo, hi = float(real.from_nu(nu_lo)), float(real.from_nu(nu_hi))
     return lo, min(hi, real.nyquist)
 
 
-def _inner_end(mult, end, inside):
+def _definiteness(scalings) -> str:
+    """Why ``D_left`` or ``D_right`` of ``scalings`` is not positive definite to round-off for
+    :func:`dg_interval` (block conditions and spread of :data:`CONDITION_FLOOR` and
+    :data:`SPREAD_FLOORS`), "" if both are; computed once per :class:`Scalings` (a cover tests
+    the same scalings at several levels, and on the next configuration as prior points)."""
+    if "_definiteness" in scalings.__dict__:
+        return scalings.__dict__["_definiteness"]
+    problem = ""
+    for name, Dx in (("D_left", scalings.D_left), ("D_right", scalings.D_right)):
+        Dx = 0.5 * (Dx + np.conj(np.asarray(Dx).T))
+        low, high = _block_conditions(Dx)
+        ev = np.linalg.eigvalsh(Dx)
+        if not (low > 0.1 * CONDITION_FLOOR * high and ev[0] > 0.1 * SPREAD_FLOORS[-1] * ev[-1]):
+            problem = (
+                f"a block of {name} is not positive definite to round-off "
+                f"(eigenvalues {low:.3g} .. {high:.3g})"
+            )
+            break
+    object.__setattr__(scalings, "_definiteness", problem)
+    return problem
+
+
+def _inner_ends(mult, ends, insides):
+    """:func:`_inner_end` of the two ends ``(lower, upper)`` of a piece, their first steps in
+    one evaluation (an end at 0 or infinity is kept as it is)."""
+    steps = np.array([0.0, 1e-10, 1e-8, 1e-6, 1e-4])
+    todo = [k for k in (0, 1) if np.isfinite(ends[k]) and not (k == 0 and ends[k] == 0.0)]
+    out = list(ends)
+    if not todo:
+        return tuple(out)
+    nus = np.concatenate([ends[k] + steps * (insides[k] - ends[k]) for k in todo])
+    values = mult.max_eig(nus).reshape(len(todo), steps.size)
+    for row, k in zip(values, todo, strict=True):
+        good = np.flatnonzero(row < -STRICT)
+        if good.size:
+            out[k] = ends[k] + steps[good[0]] * (insides[k] - ends[k])
+        else:
+            out[k] = _inner_end(mult, ends[k], insides[k], first=False)
+    return tuple(out)
+
+
+def _inner_end(mult, end, inside, first=True):
     """``end`` if ``Phi(end) < 0`` strictly, else the point nearest to ``end`` (towards
     ``inside``, where ``Phi < 0``) at which it is: the crossing itself (``lambda_max = 0``) is
     only known to the round-off of the Hamiltonian's eigenvalues. Tries steps of 1e-10 .. 1e-4
@@ -657,7 +698,8 @@ def _inner_end(mult, end, inside):
     if not np.isfinite(end):
         return end
     steps = np.array([0.0, 1e-10, 1e-8, 1e-6, 1e-4])
-    for t, value in zip(steps, mult.max_eig(end + steps * (inside - end)), strict=True):
+    values = mult.max_eig(end + steps * (inside - end)) if first else np.zeros(steps.size)
+    for t, value in zip(steps, values, strict=True):
         if value < -STRICT:
             return end + t * (inside - end)
     a, b = inside, end

@@ -182,3 +182,22 @@ def test_warm_starts_that_are_wrong_do_not_make_a_wrong_bound():
             res = lmi_residual(M[i : i + 1], level[i], sc.D_left[None], sc.D_right[None],
                                sc.G[None])  # fmt: skip
             assert res[0] < 0, (omega[i], res)
+
+
+def test_default_first_level_is_a_bound_within_the_target_gap():
+    """At the default ``tight`` (:data:`~oos_drake.analysis.stability.TIGHT_GAP`) the
+    guaranteed bound is above the exact peak (closed form, and the exact mu on a dense grid
+    through the plateau) and within ``TIGHT_GAP`` plus the slack of it, inside the target gap;
+    a lower bound 1 % too low (a first level 1 % below the peak) is not taken as the bound: the
+    covers raise their level above the exact peak."""
+    tight = stability.TIGHT_GAP
+    assert 0 < tight < GAP
+    out = axis_guarantee(SerialPool(), {"s": subset(MU)}, gap=GAP)["s"]
+    assert out.covered and not out.fell_back.any()
+    assert out.floor == (1 + tight) * MU
+    dense = np.linspace(0.9, 1.1, 20001)  # the plateau 0.99 .. 1.01 rad/s, step 1e-5
+    assert np.max(mu_exact(dense)) <= MU <= out.mu_upper
+    assert out.mu_upper <= (1 + tight) * (1 + mu_intervals.SLACK) * MU < (1 + GAP) * MU
+    low = axis_guarantee(SerialPool(), {"s": subset(0.99 * MU / (1 + tight))}, gap=GAP)["s"]
+    assert low.covered and low.floor < MU
+    assert low.mu_upper >= MU and low.raised == low.levels.size

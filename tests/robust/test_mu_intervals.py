@@ -506,3 +506,24 @@ def test_a_narrow_gap_gets_its_middle_only():
     # its middle tried already (a round that did not close it): its edges and middle again
     again = _new_points([narrow], np.inf, [0.5 * sum(narrow)])
     np.testing.assert_allclose(again, [narrow[0], narrow[1]])
+
+
+def test_scalings_that_are_not_definite_are_refused_every_time():
+    """The definiteness check of :func:`dg_interval` is done once per :class:`Scalings` (kept
+    on it): a second test of the same scalings is refused for the same reason, and the
+    conditioned scalings (a new object) prove an interval that dense sampling confirms."""
+    real, blk = delta_realization(oscillator())
+    res = mussv(real.response([1.0]), blk)
+    D_left = np.array(res.D_left[0], dtype=complex)
+    D_left[0, 0] = -abs(D_left[0, 0])  # one scalar block negative: not a D scaling
+    bad = Scalings(D_left, res.D_right[0], res.G[0])
+    beta = 1.005 * float(res.upper[0])
+    for _ in range(2):
+        with pytest.raises(ValueError, match="not positive definite"):
+            dg_interval(real, bad, beta, 1.0)
+    good = Scalings(res.D_left[0], res.D_right[0], res.G[0]).conditioned()
+    lo, hi = dg_interval(real, good, beta, 1.0)
+    assert lo < 1.0 < hi
+    inner = np.linspace(lo, min(hi, 1e3), 4001)
+    lmi = lmi_residual(real.response(inner), beta, good.D_left, good.D_right, good.G)
+    assert np.all(lmi <= 0.0)
