@@ -258,7 +258,7 @@ def _components(
     assembly's algebraic loop is solved by one LU factorization whose rounding depends on the
     order of the components' channels.
     """
-    components = []
+    components, springs = [], []
     root = tree.root
     extra_ports = dict(extra_ports or {})
     for body, ports in _closure_ports(tree).items():
@@ -306,14 +306,22 @@ def _components(
                 inputs = [f"W_ext_{name}"] + child_in
                 outputs = [f"xdd_G_{name}"] + child_out
             elif joint.type == "bushing":
-                # a free body held by a spring-damper: inverse model, no external wrench, its
-                # first port at the target port where the spring-damper acts
+                # a free body held by a spring-damper: inverse model, no external wrench; its
+                # spring-damper ports in the order of docking (those of the closures, docked
+                # before, then its own): the first before the children's ports, the others
+                # after (schema 1's RH2: D2, its arrays, D3)
                 port = tree.ports[joint.docking.target_port]
-                p_G_port = offset + np.asarray(port.p_B_D, dtype=float)
-                system = rigid_body_inverse(mass, inertia, [p_G_port] + ports_GP, body=name)
-                system = system[6:, 6:]
-                inputs = [f"W_J{name}_{name}"] + child_in
-                outputs = [f"xdd_J{name}_{name}"] + child_out
+                n_child = len(children)
+                ports_GP.append(offset + np.asarray(port.p_B_D, dtype=float))
+                child_in.append(f"W_J{name}_{name}")
+                child_out.append(f"xdd_J{name}_{name}")
+                spring = range(n_child, len(ports_GP))  # the closures', then its own
+                order = [spring[0], *range(n_child), *spring[1:]]
+                ports_GP = [ports_GP[k] for k in order]
+                child_in = [child_in[k] for k in order]
+                child_out = [child_out[k] for k in order]
+                system = rigid_body_inverse(mass, inertia, ports_GP, body=name)[6:, 6:]
+                inputs, outputs = child_in, child_out
             else:
                 system = rigid_body_direct(mass, inertia, ports_GP, offset, body=name)
                 inputs = child_in + [f"xdd_J{name}_{name}"]
@@ -322,9 +330,10 @@ def _components(
             if joint is not None and joint.type == "fixed":
                 continue
         if joint is not None and joint.type == "bushing":
-            # C = the target at its port (its axes), P = the parent at its port (parent axes)
+            # C = the target at its port (its axes), P = the parent at its port (parent axes);
+            # after the closures' spring-dampers (docked before it: schema 1's SM1, SM2)
             blocks = _docking_blocks(joint.docking)
-            components.append(
+            springs.append(
                 Component(
                     f"joint_{name}",
                     spring_damper_between(blocks, np.asarray(joint.R_parent_joint).T),
@@ -334,7 +343,7 @@ def _components(
             )
         elif joint is not None:
             components.append(_joint_component(body))
-    return components + _closure_components(tree)
+    return components + _closure_components(tree) + springs
 
 
 def build_tree_model(tree: SpacecraftTree, *, rotational: bool = False) -> LFR:
