@@ -229,12 +229,10 @@ def test_converted_synthesis_and_analysis_inputs_are_schema_1s_bit_for_bit(name)
     import dataclasses
     from pathlib import Path
 
-    from oos_drake.analysis.models import mission_plants
+    from oos_drake.analysis.models import docking_plant, mission_plants
     from oos_drake.app.analyze import pipeline_analysis_options
     from oos_drake.control.plants import scenario_plants
     from oos_drake.scenario.tree_scenario import tree_scenario
-
-    from oos_drake.analysis.models import docking_plant
 
     paper = load_scenario(name)
     converted = tree_scenario(tree_document_from_v1(paper)[0], Path(f"{name}_tree.toml"))
