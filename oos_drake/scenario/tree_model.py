@@ -6,9 +6,10 @@
   at its centre of mass ``G`` and one port per child joint;
 - every other rigid body as a rigid body with its inverted port at its joint (direct model), one
   more port per child joint;
-- every flexible appendage as the one-port ``-M_P(s)`` at its attachment point;
-- every joint as a connection at the joint point: ``fixed_connection(R_parent_child^T)`` or the
-  motion-driven ``revolute_connection(tau_<body>, axis, R_parent_joint^T)``,
+- every flexible appendage as the one-port ``-M_P(s)`` at its attachment point, seen from its
+  parent through its joint, ``T^T (-M_P(s)) T`` (one component);
+- every other joint as a connection at the joint point: ``fixed_connection(R_parent_child^T)``
+  or the motion-driven ``revolute_connection(tau_<body>, axis, R_parent_joint^T)``,
 
 into the direct-dynamics model of the controlled body
 
