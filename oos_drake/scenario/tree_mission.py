@@ -337,12 +337,24 @@ class Timeline:
 
     def angles(self, time: float) -> dict[str, float]:
         """Angle [rad] of every revolute joint at mission time ``time`` [s], by body."""
-        time = float(time)
-        index = self._phase_index(time)
-        if index < 0:
-            return dict(zip(self.joint_names, self.waypoints[0].tolist(), strict=True))
+        row = self.angle_table(np.array([float(time)]))[0]
+        return dict(zip(self.joint_names, row.tolist(), strict=True))
+
+    def angle_table(self, times) -> np.ndarray:
+        """Angles [rad] of the revolute joints (columns: :attr:`joint_names`) at mission
+        ``times`` [s] (rows).
+
+        ``q0 + h(s) (q1 - q0)`` in the phase at each time (at a boundary: the phase ending
+        there, whose end waypoint it returns exactly), in numpy's arithmetic in this order, as
+        schema 1's :class:`~oos_drake.scenario.timeline.QuinticTrajectory`: a schema-1 file
+        converted to a tree has its angles to the last bit.
+        """
+        times = np.atleast_1d(np.asarray(times, dtype=float))
+        if len(self.phase_names) == 0:
+            return np.broadcast_to(self.waypoints[0], (times.size, len(self.joint_names))).copy()
+        index = np.array([self._phase_index(float(t)) for t in times], dtype=int)
         t0, t1 = self.boundaries[index], self.boundaries[index + 1]
-        s = float(np.clip((time - t0) / (t1 - t0), 0.0, 1.0))
+        s = np.clip((times - t0) / (t1 - t0), 0.0, 1.0)
         if self.interpolation == "linear":
             h = s
         elif self.interpolation == "quintic":
@@ -350,8 +362,7 @@ class Timeline:
         else:
             h = s * s * (3.0 - 2.0 * s)
         q0, q1 = self.waypoints[index], self.waypoints[index + 1]
-        # (1 - h) q0 + h q1: exactly the waypoint at either end of the phase
-        return dict(zip(self.joint_names, ((1.0 - h) * q0 + h * q1).tolist(), strict=True))
+        return np.where(h[:, None] == 1.0, q1, q0 + (q1 - q0) * h[:, None])
 
     def configurations(self, n: int = ANALYSIS_INSTANTS) -> tuple[Configuration, ...]:
         """Configurations for the analysis: ``n`` instants evenly spaced over the mission and

@@ -6,9 +6,10 @@
   at its centre of mass ``G`` and one port per child joint;
 - every other rigid body as a rigid body with its inverted port at its joint (direct model), one
   more port per child joint;
-- every flexible appendage as the one-port ``-M_P(s)`` at its attachment point;
-- every joint as a connection at the joint point: ``fixed_connection(R_parent_child^T)`` or the
-  motion-driven ``revolute_connection(tau_<body>, axis, R_parent_joint^T)``,
+- every flexible appendage as the one-port ``-M_P(s)`` at its attachment point, seen from its
+  parent through its joint, ``T^T (-M_P(s)) T`` (one component);
+- every other joint as a connection at the joint point: ``fixed_connection(R_parent_child^T)``
+  or the motion-driven ``revolute_connection(tau_<body>, axis, R_parent_joint^T)``,
 
 into the direct-dynamics model of the controlled body
 
@@ -61,6 +62,7 @@ from oos_drake.titop import (
     flexible_appendage,
     repeat,
     revolute_connection,
+    revolute_frame_changes,
     rigid_body_direct,
     rigid_body_inverse,
 )
@@ -204,6 +206,42 @@ def _closure_components(tree: SpacecraftTree) -> list[Component]:
     return components
 
 
+def _joint_component(body) -> Component:
+    """The connection of ``body`` to its parent at the joint point (fixed or revolute)."""
+    name, parent = body.name, body.parent
+    return Component(
+        f"joint_{name}",
+        _connection(body),
+        inputs=(f"xdd_J{name}_{parent}", f"W_J{name}_{name}"),
+        outputs=(f"xdd_J{name}_{name}", f"W_J{name}_{parent}"),
+    )
+
+
+def _appendage_component(body) -> Component:
+    """A flexible appendage seen from its parent through its joint, one component:
+    ``T^T (-M_P(s)) T`` from the parent's acceleration twist at the joint point to the wrench
+    on the parent there, both in the parent's axes (``T`` the joint's frame change; schema 1's
+    array block ``T0^T T_theta^T (-M_P(s)) T_theta T0``, 16 occurrences of ``tau``)."""
+    name, joint = body.name, body.joint
+    system = flexible_appendage(
+        body.rigid_spatial_inertia,
+        np.asarray(body.participation).T,  # data: one row per mode
+        body.omega,
+        body.damping_ratios,
+        uncertain_frequencies=mode_frequency_blocks(body),
+        name=name,
+    )
+    dcm = np.asarray(joint.R_parent_joint).T
+    if joint.type == "fixed":
+        t = frame_change_matrix(dcm)
+        system = t.T @ system @ t
+    else:
+        tau = angle_parameter(joint.block or angle_block_name(name))
+        forward, backward = revolute_frame_changes(tau, joint.axis, dcm)
+        system = backward @ system @ forward
+    return Component(name, system, (f"xdd_J{name}_{body.parent}",), (f"W_J{name}_{body.parent}",))
+
+
 def _components(
     tree: SpacecraftTree, extra_ports=None, *, skip_root: bool = False
 ) -> list[Component]:
@@ -211,8 +249,17 @@ def _components(
 
     ``extra_ports``: ``{body: [(signal suffix, p_B_D [m]), ...]}``, more ports of rigid bodies
     (inputs ``W_<suffix>``, outputs ``xdd_<suffix>``); ``skip_root``: leave the root body out
-    (a target, whose root :func:`_target_components` models)."""
-    components = []
+    (a target, whose root :func:`_target_components` models).
+
+    In the order of ``tree.bodies``: a flexible appendage is one component with its joint
+    (:func:`_appendage_component`); a rigid body's fixed joint comes before the body, a revolute
+    joint or a spring-damper after it. The order and the grouping are schema 1's
+    (:func:`oos_drake.scenario.model.build_mission_model`: hub, arrays, ``J0``, ``L0``, then
+    each link and its joint), so the converted paper's LFR is schema 1's to the last bit: the
+    assembly's algebraic loop is solved by one LU factorization whose rounding depends on the
+    order of the components' channels.
+    """
+    components, springs = [], []
     root = tree.root
     extra_ports = dict(extra_ports or {})
     for body, ports in _closure_ports(tree).items():
@@ -227,7 +274,25 @@ def _components(
             )
         if skip_root and name == root:
             continue
-        if body.kind == "rigid":
+        joint = body.joint
+        if body.kind != "rigid":
+            if joint is not None and joint.type in ("fixed", "revolute"):
+                components.append(_appendage_component(body))
+                continue
+            system = flexible_appendage(
+                body.rigid_spatial_inertia,
+                np.asarray(body.participation).T,  # data: one row per mode
+                body.omega,
+                body.damping_ratios,
+                uncertain_frequencies=mode_frequency_blocks(body),
+                name=name,
+            )
+            components.append(
+                Component(name, system, (f"xdd_J{name}_{name}",), (f"W_J{name}_{name}",))
+            )
+        else:
+            if joint is not None and joint.type == "fixed":
+                components.append(_joint_component(body))
             offset = _origin_offset(body)
             ports_GP = [offset + _joint_point(tree, c) for c in children]
             child_in = [f"W_J{c.name}_{name}" for c in children]
@@ -241,54 +306,45 @@ def _components(
                 system = rigid_body_inverse(mass, inertia, ports_GP, body=name)
                 inputs = [f"W_ext_{name}"] + child_in
                 outputs = [f"xdd_G_{name}"] + child_out
-            elif body.joint.type == "bushing":
-                # a free body held by a spring-damper: inverse model, no external wrench, its
-                # first port at the target port where the spring-damper acts
-                port = tree.ports[body.joint.docking.target_port]
-                p_G_port = offset + np.asarray(port.p_B_D, dtype=float)
-                system = rigid_body_inverse(mass, inertia, [p_G_port] + ports_GP, body=name)
-                system = system[6:, 6:]
-                inputs = [f"W_J{name}_{name}"] + child_in
-                outputs = [f"xdd_J{name}_{name}"] + child_out
+            elif joint.type == "bushing":
+                # a free body held by a spring-damper: inverse model, no external wrench; its
+                # spring-damper ports in the order of docking (those of the closures, docked
+                # before, then its own): the first before the children's ports, the others
+                # after (schema 1's RH2: D2, its arrays, D3)
+                port = tree.ports[joint.docking.target_port]
+                n_child = len(children)
+                ports_GP.append(offset + np.asarray(port.p_B_D, dtype=float))
+                child_in.append(f"W_J{name}_{name}")
+                child_out.append(f"xdd_J{name}_{name}")
+                spring = range(n_child, len(ports_GP))  # the closures', then its own
+                order = [spring[0], *range(n_child), *spring[1:]]
+                ports_GP = [ports_GP[k] for k in order]
+                child_in = [child_in[k] for k in order]
+                child_out = [child_out[k] for k in order]
+                system = rigid_body_inverse(mass, inertia, ports_GP, body=name)[6:, 6:]
+                inputs, outputs = child_in, child_out
             else:
                 system = rigid_body_direct(mass, inertia, ports_GP, offset, body=name)
                 inputs = child_in + [f"xdd_J{name}_{name}"]
                 outputs = child_out + [f"W_J{name}_{name}"]
             components.append(Component(name, system, inputs, outputs))
-        else:
-            system = flexible_appendage(
-                body.rigid_spatial_inertia,
-                np.asarray(body.participation).T,  # data: one row per mode
-                body.omega,
-                body.damping_ratios,
-                uncertain_frequencies=mode_frequency_blocks(body),
-                name=name,
-            )
-            components.append(
-                Component(name, system, (f"xdd_J{name}_{name}",), (f"W_J{name}_{name}",))
-            )
-        if body.joint is not None and body.joint.type == "bushing":
-            # C = the target at its port (its axes), P = the parent at its port (parent axes)
-            blocks = _docking_blocks(body.joint.docking)
-            components.append(
+            if joint is not None and joint.type == "fixed":
+                continue
+        if joint is not None and joint.type == "bushing":
+            # C = the target at its port (its axes), P = the parent at its port (parent axes);
+            # after the closures' spring-dampers (docked before it: schema 1's SM1, SM2)
+            blocks = _docking_blocks(joint.docking)
+            springs.append(
                 Component(
                     f"joint_{name}",
-                    spring_damper_between(blocks, np.asarray(body.joint.R_parent_joint).T),
+                    spring_damper_between(blocks, np.asarray(joint.R_parent_joint).T),
                     inputs=(f"xdd_J{name}_{name}", f"xdd_J{name}_{body.parent}"),
                     outputs=(f"W_J{name}_{name}", f"W_J{name}_{body.parent}"),
                 )
             )
-        elif body.joint is not None:
-            parent = body.parent
-            components.append(
-                Component(
-                    f"joint_{name}",
-                    _connection(body),
-                    inputs=(f"xdd_J{name}_{parent}", f"W_J{name}_{name}"),
-                    outputs=(f"xdd_J{name}_{name}", f"W_J{name}_{parent}"),
-                )
-            )
-    return components + _closure_components(tree)
+        elif joint is not None:
+            components.append(_joint_component(body))
+    return components + _closure_components(tree) + springs
 
 
 def build_tree_model(tree: SpacecraftTree, *, rotational: bool = False) -> LFR:
@@ -417,7 +473,8 @@ def _target_components(tree: SpacecraftTree, target: SpacecraftTree, pairs) -> l
         inputs=[f"xdd_{suffix}" for *_, suffix in links] + [f"W_S_{name}"],
         outputs=[f"xdd_S_{name}"] + [f"W_{suffix}" for *_, suffix in links],
     )
-    return [root, switch, *_components(target, skip_root=True)]
+    # schema 1's order: the target's root, its bodies, then the switches
+    return [root, *_components(target, skip_root=True), switch]
 
 
 def build_mission_tree_model(tree: SpacecraftTree) -> LFR:

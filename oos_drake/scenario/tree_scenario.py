@@ -263,10 +263,10 @@ class TreeScenario:
                 "inverse kinematics (the Drake twin's): solve them first with "
                 f"`oos tree solve {self.source} OUT.toml` and use OUT.toml (oos run does it)"
             )
-        angles = [timeline.angles(t) for t in times]
+        angles = timeline.angle_table(times)
         values = {
-            self.tree.angle_block(body): np.array([float(angle_to_tau(a[body])) for a in angles])
-            for body in timeline.joint_names
+            self.tree.angle_block(body): angle_to_tau(angles[:, k])
+            for k, body in enumerate(timeline.joint_names)
         }
         mated = []
         for t in times:

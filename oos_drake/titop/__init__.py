@@ -23,6 +23,7 @@ from oos_drake.titop.assembly import Component, assemble
 from oos_drake.titop.connection import (
     fixed_connection,
     revolute_connection,
+    revolute_frame_changes,
     spring_damper,
     spring_damper_parameters,
 )
@@ -52,6 +53,7 @@ __all__ = [
     "relative_parameter",
     "repeat",
     "revolute_connection",
+    "revolute_frame_changes",
     "rigid_body_direct",
     "rigid_body_inverse",
     "rigid_link",

@@ -27,6 +27,7 @@ from oos_drake.titop.spatial import frame_change_matrix
 __all__ = [
     "fixed_connection",
     "revolute_connection",
+    "revolute_frame_changes",
     "spring_damper",
     "spring_damper_parameters",
 ]
@@ -65,10 +66,30 @@ def revolute_connection(tau: LFR, axis, dcm_fixed=None) -> LFR:
     LFR
         12 x 12 static: ``[xdd_child; W_parent] = [[T, 0], [0, T^T]] [xdd_parent; W_child]``.
     """
+    return append(*revolute_frame_changes(tau, axis, dcm_fixed))
+
+
+def revolute_frame_changes(tau: LFR, axis, dcm_fixed=None) -> tuple[LFR, LFR]:
+    """The two halves of :func:`revolute_connection`: ``T = T_theta T_0`` and ``T^T``.
+
+    A one-port hanging on the joint (an appendage ``W = -M_P(s) xdd_P`` in the child frame) is
+    seen from the parent as ``T^T (-M_P(s)) T``: ``backward @ system @ forward``.
+
+    Parameters
+    ----------
+    tau, axis, dcm_fixed
+        As :func:`revolute_connection`.
+
+    Returns
+    -------
+    forward, backward : LFR (6x6)
+        ``xdd_child = forward xdd_parent``, ``W_parent = backward W_child`` (8 occurrences of
+        ``tau`` each).
+    """
     t0 = frame_change_matrix(np.eye(3) if dcm_fixed is None else dcm_fixed)
     forward = rotation_frame_change(tau, axis) @ t0
     backward = t0.T @ rotation_frame_change(tau, axis, transpose=True)
-    return append(forward, backward)
+    return forward, backward
 
 
 def spring_damper_parameters(
