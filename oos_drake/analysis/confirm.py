@@ -515,7 +515,7 @@ def _mission_window(sim, t_peak: float, duration: float) -> float:
             start = a - duration - 0.5
     if start < 0.0 or start + duration > sim.duration:
         raise ValueError(
-            f"confirm: no {duration} s window without a docking event near t = {t_peak} s"
+            f"confirm: no {duration:.4g} s window without a docking event near t = {t_peak:.6g} s"
         )
     return start
 
