@@ -237,12 +237,20 @@ def tune(
     scale = _gain_scale(K0) if scale is None else scale
     x0 = (K0 / scale).ravel()
     if method == "bundle":
+        recent = {}  # the last evaluations: each metric cycle and kick restarts from a point
+        # evaluated shortly before (the same x, bit for bit; the optimizer does not modify results)
 
         def fun_active(x):
+            key = x.tobytes()
+            if key in recent:
+                return recent[key]
             a = active_set(interconnection, x.reshape(3, 6) * scale, eps=eps, workers=workers)
             grads = (a.gradients * scale).reshape(a.values.size, -1)
             which = a.which if a.which is not None else np.zeros(a.values.size, int)
-            return a.gamma, a.values, grads, (a.models, a.omegas, which)
+            if len(recent) >= 8:
+                del recent[next(iter(recent))]
+            recent[key] = result = (a.gamma, a.values, grads, (a.models, a.omegas, which))
+            return result
 
         def regrad(x, pieces):
             models, omegas, which = pieces
@@ -364,15 +372,20 @@ def _tune_start(interconnection: WeightedInterconnection, K_start, scale, option
 
 def _tune_starts(interconnection, starts, scale, options: SynthesisOptions, executor) -> list:
     """:func:`_tune_start` of every start, in order: one start runs here with
-    ``options.workers`` threads; several (the restarts) run as tasks of ``executor``, the
-    threads shared among its workers."""
+    ``options.workers`` threads; several: the restarts run as tasks of ``executor``, the
+    threads shared among its workers, and the first start runs here meanwhile (this process
+    would otherwise only wait: with 3 starts on 2 workers the three runs share the 2 cores
+    instead of one worker running two of them one after the other). Each run's numbers do not
+    depend on where it runs."""
     if len(starts) == 1 or executor is None or executor.workers == 1:
         return [_tune_start(interconnection, Ks, scale, options, options.workers) for Ks in starts]
     threads = max(1, options.workers // executor.workers)
     tasks = [
-        executor.submit(_tune_start, interconnection, Ks, scale, options, threads) for Ks in starts
+        executor.submit(_tune_start, interconnection, Ks, scale, options, threads)
+        for Ks in starts[1:]
     ]
-    return [task.result() for task in tasks]
+    first = _tune_start(interconnection, starts[0], scale, options, threads)
+    return [first] + [task.result() for task in tasks]
 
 
 @with_single_threaded_blas
