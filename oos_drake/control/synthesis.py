@@ -99,8 +99,9 @@ class SynthesisOptions:
         QP_SOLVERS`): ``"slsqp"`` (default, SciPy's SLSQP: the published gamma) or
         ``"active-set"`` (exact, :func:`~oos_drake.control.nonsmooth_bfgs.simplex_qp`; the
         optimizer stops at its iteration limit, so the other steps give another, not
-        necessarily worse, local result: 0.353841 vs 0.353956 on the paper's scenario, at
-        about half the CPU time; docs/ANALYSIS-RESULTS.md, synthesis speed).
+        necessarily better, local result: 0.353841 vs 0.353956 on the paper's scenario,
+        0.354226 vs 0.353961 on 40 of its configurations, at 0.5-0.6x the CPU time;
+        docs/ANALYSIS-RESULTS.md, synthesis speed).
     """
 
     restarts: int = 2
