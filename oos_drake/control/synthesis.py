@@ -98,8 +98,8 @@ class SynthesisOptions:
         Solver of the bundle step's dual QP (:data:`~oos_drake.control.nonsmooth_bfgs.
         QP_SOLVERS`): ``"slsqp"`` (default, SciPy's SLSQP: the published gamma) or
         ``"active-set"`` (exact, :func:`~oos_drake.control.nonsmooth_bfgs.simplex_qp`; the
-        optimizer stops at its iteration limit, so the other steps give another, not
-        necessarily better, local result: 0.353841 vs 0.353956 on the paper's scenario,
+        optimizer stops at its iteration limit, so the other steps give another local result,
+        lower or higher: 0.353841 vs 0.353956 on the paper's scenario,
         0.354226 vs 0.353961 on 40 of its configurations, at 0.5-0.6x the CPU time;
         docs/ANALYSIS-RESULTS.md, synthesis speed).
     """
