@@ -374,20 +374,15 @@ def _tune_start(interconnection: WeightedInterconnection, K_start, scale, option
 
 def _tune_starts(interconnection, starts, scale, options: SynthesisOptions, executor) -> list:
     """:func:`_tune_start` of every start, in order: one start runs here with
-    ``options.workers`` threads; several: the restarts run as tasks of ``executor``, the
-    threads shared among its workers, and the first start runs here meanwhile (this process
-    would otherwise only wait: with 3 starts on 2 workers the three runs share the 2 cores
-    instead of one worker running two of them one after the other). Each run's numbers do not
-    depend on where it runs."""
+    ``options.workers`` threads; several (the restarts) run as tasks of ``executor``, the
+    threads shared among its workers."""
     if len(starts) == 1 or executor is None or executor.workers == 1:
         return [_tune_start(interconnection, Ks, scale, options, options.workers) for Ks in starts]
     threads = max(1, options.workers // executor.workers)
     tasks = [
-        executor.submit(_tune_start, interconnection, Ks, scale, options, threads)
-        for Ks in starts[1:]
+        executor.submit(_tune_start, interconnection, Ks, scale, options, threads) for Ks in starts
     ]
-    first = _tune_start(interconnection, starts[0], scale, options, threads)
-    return [first] + [task.result() for task in tasks]
+    return [task.result() for task in tasks]
 
 
 @with_single_threaded_blas
