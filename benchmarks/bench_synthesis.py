@@ -31,9 +31,9 @@ processes, ``resource.getrusage``) and wall time, and the CPU ratio of this chec
 baseline (the median over the pairs). The machine is shared: read the CPU times; the wall
 times depend on the load. Nothing else is run then. ``--json [--qp active-set]``: one such
 synthesis in this process, printed as a JSON line (``--qp``: the bundle step's QP solver,
-``SynthesisOptions.qp``; ``active-set`` is another design). ``--profile FILE``: the same synthesis
-in this process under cProfile, with one worker (every run in this process), the stats in
-``FILE``.
+``SynthesisOptions.qp``; ``active-set`` is another design; ``--seed``: the restarts' seed).
+``--profile FILE``: the same synthesis in this process under cProfile, with one worker (every
+run in this process), the stats in ``FILE``.
 """
 
 from __future__ import annotations
@@ -73,9 +73,12 @@ def best_of(fn, repeats):
     return min(walls), min(cpus), result
 
 
-def default_synthesis(plant: str, models: int, workers: int, qp: str = "slsqp") -> dict:
-    """``oos synth``'s synthesis (its defaults, ``workers`` processes): gamma, CPU of this
-    process and its children [s], wall time [s] (the model array's build excluded)."""
+def default_synthesis(
+    plant: str, models: int, workers: int, qp: str = "slsqp", seed: int | None = None
+) -> dict:
+    """``oos synth``'s synthesis (its defaults, ``workers`` processes; ``seed``: another seed of
+    the restarts): gamma, CPU of this process and its children [s], wall time [s] (the model
+    array's build excluded)."""
     import resource
 
     from oos_drake.app.synth import ControllerOptions
@@ -91,7 +94,7 @@ def default_synthesis(plant: str, models: int, workers: int, qp: str = "slsqp") 
         restarts=defaults.restarts,
         max_iterations=defaults.max_iterations,
         worst_case_rounds=defaults.worst_case_rounds,
-        seed=defaults.seed,
+        seed=defaults.seed if seed is None else seed,
         workers=workers,
         working_set=defaults.working_set,
         qp=qp,
@@ -167,10 +170,14 @@ def main(argv=None):
         help="with --json: the bundle step's QP solver (SynthesisOptions.qp; 'active-set' "
         "changes the design)",
     )
+    parser.add_argument(
+        "--seed", type=int, default=None, help="with --json: the restarts' seed (oos synth's)"
+    )
     parser.add_argument("--profile", default=None, help="cProfile stats file of one synthesis")
     args = parser.parse_args(argv)
     if args.json:  # one process of --baseline
-        print(json.dumps(default_synthesis(args.plant, args.models, args.workers, args.qp)))
+        result = default_synthesis(args.plant, args.models, args.workers, args.qp, args.seed)
+        print(json.dumps(result))
         return
     if args.baseline:
         compare(args)

@@ -180,11 +180,15 @@ class LoopResponse:
         index : array_like of int, optional
             Models (default all); ``omega`` has one row per model.
         """
-        t = self._terms(K, omega, index)
+        return self._response(self._terms(K, omega, index))
+
+    @staticmethod
+    def _response(t) -> np.ndarray:
+        """:meth:`response` from the pieces :meth:`_terms` gave."""
         Q, S, c, w_ext, to_e_p, u_gain = (
             t[k] for k in ("Q", "S", "c", "w_ext", "to_e_p", "u_gain")
         )
-        out = np.empty(np.shape(omega) + (6, 9), dtype=complex)
+        out = np.empty(np.shape(t["s"]) + (6, 9), dtype=complex)
         out[..., :3, :3] = Q * (w_ext * to_e_p[..., None])[..., None, :]
         out[..., :3, 3:] = (Q @ t["N"]) * (c * to_e_p)[..., None, None]
         out[..., 3:, :3] = -(t["Kg"] @ Q) * (u_gain[..., None] * w_ext)[..., None, :]
@@ -228,8 +232,8 @@ class LoopResponse:
             Models.
         """
         omega = np.asarray(omega, dtype=float)[:, None]
-        M = self.response(K, omega, index)[:, 0]
         t = self._terms(K, omega, index)
+        M = self._response(t)[:, 0]
         Q, S = t["Q"][:, 0], t["S"][:, 0]
         s, c, ro = t["s"][:, 0], t["c"][:, 0], t["ro"][:, 0]
         G12 = np.concatenate(

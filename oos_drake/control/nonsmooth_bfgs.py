@@ -196,7 +196,104 @@ def simplex_qp(Q, c):
 
 def simplex_qp_slsqp(Q, c):
     """:func:`simplex_qp` by SciPy's SLSQP (the default of the bundle method: the published
-    results; and the fallback of the active-set method)."""
+    results; and the fallback of the active-set method).
+
+    Calls SLSQP's compiled routine directly, with the arguments and the sequence of function,
+    gradient and constraint values that ``scipy.optimize.minimize(method="SLSQP")`` gives it
+    (start ``1/k``, bounds ``[0, 1]``, ``sum = 1``, ``maxiter=200``, ``ftol=1e-14``): the
+    same iterates bit for bit (``tests/control/test_nonsmooth_bfgs.py`` compares them with
+    ``minimize``), without ``minimize``'s per-iteration wrapper costs. Falls back to
+    ``minimize`` when that routine is not importable (another SciPy version).
+    """
+    k = c.size
+    if k == 1:
+        return np.ones(1)
+    try:
+        from scipy.optimize._slsqplib import slsqp
+    except ImportError:  # pragma: no cover - another SciPy: the public path, same problem
+        return _simplex_qp_minimize(Q, c)
+    lam = _slsqp_simplex(slsqp, np.asarray(Q, dtype=float), np.asarray(c, dtype=float))
+    lam = np.clip(lam, 0.0, None)
+    return lam / lam.sum()
+
+
+def _simplex_objective(lam, Q, c):
+    return 0.5 * lam @ Q @ lam - c @ lam
+
+
+def _slsqp_simplex(slsqp, Q, c, maxiter: int = 200, ftol: float = 1e-14):
+    """SLSQP's iterations on ``min 1/2 lam^T Q lam - c^T lam``, ``0 <= lam <= 1``,
+    ``sum(lam) = 1`` from ``lam = 1/k``, as SciPy 1.16+'s ``_minimize_slsqp`` drives them
+    (one equality constraint, no inequality; its workspace sizes; function and gradient
+    recomputed only when ``x`` changed, on copies, as its ``ScalarFunction`` does)."""
+    n, m, meq = c.size, 1, 1
+    x = np.full(n, 1.0 / n)
+    xs = x.copy()  # the point of the cached f, g
+    f = _simplex_objective(xs.copy(), Q, c)
+    g = np.atleast_1d(Q @ xs.copy() - c)
+    f_current = g_current = True
+    state = {
+        "acc": ftol,
+        "alpha": 0.0,
+        "f0": 0.0,
+        "gs": 0.0,
+        "h1": 0.0,
+        "h2": 0.0,
+        "h3": 0.0,
+        "h4": 0.0,
+        "t": 0.0,
+        "t0": 0.0,
+        "tol": 10.0 * ftol,
+        "exact": 0,
+        "inconsistent": 0,
+        "reset": 0,
+        "iter": 0,
+        "itermax": int(maxiter),
+        "line": 0,
+        "m": m,
+        "meq": meq,
+        "mode": 0,
+        "n": n,
+    }
+    indices = np.zeros(max(m + 2 * n + 2, 1), dtype=np.int32)
+    size = (
+        n * (n + 1) // 2
+        + 3 * m * n
+        - (m + 5 * n + 7) * meq
+        + 9 * m
+        + 8 * n * n
+        + 35 * n
+        + meq * meq
+        + 28
+        + 2 * n * (n + 1)  # no inequality constraint: SciPy's top-up
+    )
+    buffer = np.zeros(max(size, 1))
+    mult = np.zeros(max(1, m + 2 * n + 2))
+    normals = np.ones((1, n), order="F")  # the constraint's gradient
+    constraint = np.array([x.sum() - 1.0])
+    lower, upper = np.zeros(n), np.ones(n)
+    while True:
+        slsqp(state, f, g, normals, constraint, x, mult, lower, upper, buffer, indices)
+        mode = state["mode"]
+        if abs(mode) != 1:
+            return x
+        if not np.array_equal(x, xs):
+            xs = x.astype(float)  # a copy
+            f_current = g_current = False
+        if mode == 1:  # objective and constraint
+            if not f_current:
+                f = _simplex_objective(xs.copy(), Q, c)
+                f_current = True
+            constraint[0] = x.sum() - 1.0
+        else:  # gradients
+            if not g_current:
+                g = np.atleast_1d(Q @ xs.copy() - c)
+                g_current = True
+            normals[0] = 1.0
+
+
+def _simplex_qp_minimize(Q, c):
+    """:func:`simplex_qp_slsqp` through ``scipy.optimize.minimize`` (the reference)."""
     from scipy.optimize import minimize
 
     k = c.size

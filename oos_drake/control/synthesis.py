@@ -98,8 +98,10 @@ class SynthesisOptions:
         Solver of the bundle step's dual QP (:data:`~oos_drake.control.nonsmooth_bfgs.
         QP_SOLVERS`): ``"slsqp"`` (default, SciPy's SLSQP: the published gamma) or
         ``"active-set"`` (exact, :func:`~oos_drake.control.nonsmooth_bfgs.simplex_qp`; the
-        optimizer stops at its iteration limit, so the other steps give another, not
-        necessarily worse, local result: 0.353973 vs 0.354278 on the paper's scenario).
+        optimizer stops at its iteration limit, so the other steps give another local result,
+        lower or higher: 0.353841 vs 0.353956 on the paper's scenario,
+        0.354226 vs 0.353961 on 40 of its configurations, at 0.5-0.6x the CPU time;
+        docs/ANALYSIS-RESULTS.md, synthesis speed).
     """
 
     restarts: int = 2
@@ -237,12 +239,20 @@ def tune(
     scale = _gain_scale(K0) if scale is None else scale
     x0 = (K0 / scale).ravel()
     if method == "bundle":
+        recent = {}  # the last evaluations: each metric cycle and kick restarts from a point
+        # evaluated shortly before (the same x, bit for bit; the optimizer does not modify results)
 
         def fun_active(x):
+            key = x.tobytes()
+            if key in recent:
+                return recent[key]
             a = active_set(interconnection, x.reshape(3, 6) * scale, eps=eps, workers=workers)
             grads = (a.gradients * scale).reshape(a.values.size, -1)
             which = a.which if a.which is not None else np.zeros(a.values.size, int)
-            return a.gamma, a.values, grads, (a.models, a.omegas, which)
+            if len(recent) >= 8:
+                del recent[next(iter(recent))]
+            recent[key] = result = (a.gamma, a.values, grads, (a.models, a.omegas, which))
+            return result
 
         def regrad(x, pieces):
             models, omegas, which = pieces
