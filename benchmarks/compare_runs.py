@@ -34,8 +34,9 @@ PLACES = ("file", "path", "out", "folder", "directory", "created", "version", "k
 
 
 def _is_clock(name: str) -> bool:
+    """A wall-clock measurement or the worker process that ran a task (not results)."""
     name = name.lower()
-    return any(w in name for w in WALL_CLOCK) or name in ("time [s] (wall)",)
+    return any(w in name for w in WALL_CLOCK) or name in ("worker", "host", "pid")
 
 
 def _folder(root: Path, name: str) -> Path | None:
