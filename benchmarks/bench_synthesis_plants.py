@@ -30,16 +30,32 @@ def main(argv=None) -> int:
     parser.add_argument("--points", type=int, default=40, help="parameter points per configuration")
     args = parser.parse_args(argv)
 
+    import pandas as pd
+
     from oos_drake.app.synth import mission_times, scenario_plants
     from oos_drake.control.interconnection import plant_statespace
-    from oos_drake.multibody.synthesis_plants import DrakePlantSource, _pad, rotational_plant
+    from oos_drake.control.plants import _pad, lfr_source_plants
+    from oos_drake.multibody.synthesis_plants import (
+        PADDING_POLE,
+        DrakePlantSource,
+        rotational_plant,
+    )
 
     n = 9  # the array: free target, arm-held, docked, tilted arrays among them
     from oos_drake.scenario.data import load_scenario
 
     scenario = load_scenario("paper")
     source = DrakePlantSource(mission_times(n, scenario), scenario)
-    drake, titop = source.plant_array(), scenario_plants(n, scenario)
+    drake = lfr_source_plants(
+        pd.DataFrame({"time [s]": source.times}),
+        source.nominal,
+        source.lfr,
+        source.parameters,
+        padding_pole=PADDING_POLE,
+        source="drake",
+    )
+    titop = scenario_plants(n, scenario)
+    order = drake.nominal().A.shape[-1]
     configs = np.linspace(0, n - 1, args.configurations).round().astype(int)
     lower, upper = drake.bounds
     rng = np.random.default_rng(0)
@@ -52,7 +68,8 @@ def main(argv=None) -> int:
     relinearized = [
         _pad(
             *rotational_plant(source.configurations[i], scenario, dict(zip(names, v, strict=True))),
-            source.order,
+            order,
+            PADDING_POLE,
         )
         for i, v in zip(index, flat, strict=True)
     ]

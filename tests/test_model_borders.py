@@ -29,20 +29,16 @@ MODEL_TYPES = {
 
 #: Model types other than LFR imported by another package: (type, importing package).
 CROSSINGS = {
-    ("PlantArray", "multibody"),  # the Drake twin's plants for the synthesis (synthesis_plants)
-    ("PlantArray", "app"),  # oos synth picks the plant source (lfr, drake, synthetic)
     ("Realization", "analysis"),  # the whole-axis cover's worker tasks (analysis.stability)
 }
 
-#: Raw-matrix functions imported by another package: (function, importing package).
+#: Raw-matrix functions imported by another package: (function, importing package). Kernels
+#: only, called on the batched matrices a kernel or a worker task already holds.
 RAW_CROSSINGS = {
     ("peak_gain", "control"),  # the synthesis' H-infinity norm (kernel)
     ("sweep_models", "analysis"),  # the mu sweep's batched kernel input
     ("real_destabilizing", "analysis"),
     ("delta_channel_response", "analysis"),
-    ("plant_with_integrators", "analysis"),
-    ("plant_with_integrators", "multibody"),
-    ("plant_statespace", "analysis"),
 }
 
 
@@ -105,3 +101,14 @@ def test_the_design_page_lists_every_crossing():
     section = page.split("### Model types at package borders", 1)[1].split("\n### ", 1)[0]
     for name, package in CROSSINGS | RAW_CROSSINGS:
         assert re.search(rf"\b{name}\b", section) and package in section, (name, package)
+
+
+def test_one_connect():
+    # one interconnection routine by signal name: control.statespace.connect
+    found = [
+        package
+        for package, tree in _modules()
+        for node in ast.walk(tree)
+        if isinstance(node, ast.FunctionDef) and node.name == "connect"
+    ]
+    assert found == ["control"]

@@ -492,7 +492,7 @@ def sampled_loop_poles(plant_hat, peak: Peak, alpha: float, software, mul_block=
         dynamic = DiscreteBlock(b.A, b.B, alpha * b.C, alpha * b.D)
     fsw = software.linear_update(dynamic=dynamic)
     P = usubs(plant_hat, values, normalized=True).to_ss()
-    Ag, Bg, Cg = plant_with_integrators(P.A, P.B, P.C, P.D)  # T -> [phi; w]
+    Ag, Bg, Cg = plant_with_integrators(P)  # T -> [phi; w]
     Ad, Bd, *_ = scipy.signal.cont2discrete((Ag, Bg, Cg, np.zeros((6, 3))), period, method="zoh")
     Ac, Bc, Cc, Dc = fsw.A, fsw.B, fsw.C, fsw.D
     closed = np.block([[Ad + Bd @ Dc @ Cg, Bd @ Cc], [Bc @ Cg, Ac]])

@@ -28,7 +28,6 @@ import numpy as np
 import pandas as pd
 
 from oos_drake.analysis.controller import Controller
-from oos_drake.control.interconnection import plant_statespace
 from oos_drake.control.loop_response import LoopResponse
 from oos_drake.control.margins import disk_gain_phase, margins
 from oos_drake.control.sampled import continuous_poles, sampled_loop, spectral_abscissa
@@ -156,15 +155,15 @@ def _rows(result, time_s: float, loop: str) -> list[dict]:
 
 
 def nominal_plants(times, scenario):
-    """Nominal rotational plants ``T -> wdot`` at mission ``times`` [s] (a BatchedStateSpace)."""
+    """Nominal rotational plants ``T -> wdot`` at mission ``times`` [s]: a certain LFR model
+    array, one model per time."""
     from oos_drake.analysis.models import mission_plants
     from oos_drake.control.analysis_model import rotational_channels
 
     P = rotational_channels(mission_plants(times, scenario).nominal)
-    A, B, C, D = (np.asarray(m, dtype=float) for m in (P.A, P.B, P.C, P.D))
-    if A.ndim == 2:
-        A, B, C, D = (m[None] for m in (A, B, C, D))
-    return plant_statespace(A, B, C, D)
+    if not P.batch_shape:
+        P = P.model(np.zeros(np.size(times), dtype=int))
+    return P
 
 
 def mission_margins(
@@ -208,9 +207,7 @@ def mission_margins(
                 return response.loop_gain(system, np.atleast_1d(w)[None, :], [k])[0]
 
             rows += _rows(margins(loop, _grid(F_MAX_HZ, poles)), times[k], name)
-        exact = sampled_loop(
-            (plants.A[k], plants.B[k], plants.C[k], plants.D[k]), system, controller.spec
-        )
+        exact = sampled_loop(plants.model(k), system, controller.spec)
         grid = _grid(nyquist_hz, poles)
         grid[-1] = 2 * np.pi * nyquist_hz
         rows += _rows(margins(exact.loop_gain, grid), times[k], "sampled")

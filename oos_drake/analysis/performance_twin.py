@@ -329,7 +329,7 @@ def sampled_response(plant_hat, values, software, dynamic, omega: float, require
 
     period = software.design.period
     P = usubs(plant_hat, values, normalized=True).to_ss()
-    Ag, Bg, Cg = plant_with_integrators(P.A, P.B, P.C, P.D)
+    Ag, Bg, Cg = plant_with_integrators(P)
     Ad, Bd, *_ = scipy.signal.cont2discrete((Ag, Bg, Cg, np.zeros((6, 3))), period, method="zoh")
     A, B, C, D = _loop_step((Ad, Bd, Cg), software, dynamic)
     z = np.exp(1j * omega * period)

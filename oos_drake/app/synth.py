@@ -1,7 +1,10 @@
 """``oos synth``: multi-model structured H-infinity synthesis of the attitude controller.
 
-``scenario_plants``, ``mission_times`` (:mod:`oos_drake.control.plants`) and ``baseline_for``
-(:mod:`oos_drake.control.baseline`) are imported here for the callers that know them from here.
+The command names the source of the model array (``--plant``); the control package builds the
+array (:func:`oos_drake.control.plants.make_plants`), from the Drake twin's LFRs for
+``--plant drake`` (:func:`drake_plants`). ``scenario_plants``, ``mission_times``
+(:mod:`oos_drake.control.plants`) and ``baseline_for`` (:mod:`oos_drake.control.baseline`) are
+imported here for the callers that know them from here.
 """
 
 from __future__ import annotations
@@ -21,13 +24,14 @@ from oos_drake.app.args import (
     add_scenario_argument,
     loop_specification,
 )
+from oos_drake.control import plants as plant_arrays
 from oos_drake.control.baseline import baseline_for
 from oos_drake.control.components import DesignSpecification
 from oos_drake.control.plants import (
-    PlantArray,
+    PLANTS,
+    lfr_source_plants,
     mission_times,
     scenario_plants,
-    synthetic_flexible_plants,
 )
 from oos_drake.control.report import write_synthesis
 from oos_drake.control.synthesis import SynthesisOptions, SynthesisResult, synthesize
@@ -50,43 +54,51 @@ __all__ = [
     "write_controller_result",
 ]
 
-#: ``--plant``'s choices: the sources of the model array (:func:`make_plants`).
-PLANTS = ("lfr", "drake", "synthetic")
 #: ``oos synth --workers``' default.
 DEFAULT_WORKERS = min(2, os.cpu_count() or 1)
 
 
-def drake_plants(configurations: int, scenario) -> PlantArray:
-    """The same model array from the Drake twin (imports pydrake lazily): nominal
-    linearizations, and LFRs extracted per configuration for the worst-case search."""
+def drake_plants(times, scenario):
+    """The model array of the Drake twin at mission ``times`` [s] (imports pydrake lazily): the
+    twin's nominal linearizations and, for the worst-case search, the LFRs it extracts per
+    configuration (:class:`~oos_drake.multibody.synthesis_plants.DrakePlantSource`), made into
+    a plant array by :func:`~oos_drake.control.plants.lfr_source_plants`."""
+    import pandas as pd
+
     try:
-        from oos_drake.multibody.synthesis_plants import drake_plant_array
+        from oos_drake.multibody.synthesis_plants import PADDING_POLE, DrakePlantSource
     except ModuleNotFoundError as exc:
         raise ValueError(f"--plant drake needs pydrake ({exc}); use --plant lfr") from exc
-    return drake_plant_array(mission_times(configurations, scenario), scenario)
+    source = DrakePlantSource(times, scenario)
+    return lfr_source_plants(
+        pd.DataFrame({"time [s]": source.times}),
+        source.nominal,
+        source.lfr,
+        source.parameters,
+        padding_pole=PADDING_POLE,
+        source="drake",
+        statistics=source.statistics,
+    )
 
 
-def make_plants(kind: str, configurations: int, scenario) -> PlantArray:
-    """Plant array for ``--plant`` (``lfr``, ``drake`` or ``synthetic``) of ``scenario``."""
-    if kind == "lfr":
-        return scenario_plants(configurations, scenario)
-    if kind == "drake":
-        return drake_plants(configurations, scenario)
-    if kind == "synthetic":
-        return synthetic_flexible_plants(configurations)
-    raise ValueError(f"--plant must be lfr, drake or synthetic, got {kind!r}")
+def make_plants(kind: str, configurations: int, scenario):
+    """The model array (a :class:`~oos_drake.control.plants.PlantArray`) for ``--plant``
+    (``lfr``, ``drake`` or ``synthetic``) of ``scenario``
+    (:func:`~oos_drake.control.plants.make_plants`)."""
+    return plant_arrays.make_plants(kind, configurations, scenario, drake=_drake(scenario))
 
 
-def between_plants(plants: PlantArray, options, scenario) -> PlantArray | None:
-    """The configurations between those of ``plants`` where the hard goals are checked:
-    ``options.check_density - 1`` evenly spaced in each interval (the array built on
-    ``(N - 1) * check_density + 1`` mission times, those of ``plants`` left out); None with
-    ``check_density`` 1 or a single configuration."""
-    d, N = options.check_density, plants.size
-    if d <= 1 or N <= 1:
-        return None
-    dense = make_plants(options.plant, (N - 1) * d + 1, scenario)
-    return dense.subset([i for i in range(dense.size) if i % d])
+def between_plants(plants, options, scenario):
+    """The configurations between those of ``plants`` where the hard goals are checked
+    (:func:`~oos_drake.control.plants.between_plants` with ``options.check_density`` and
+    ``options.plant``); None with ``check_density`` 1 or a single configuration."""
+    return plant_arrays.between_plants(
+        plants, options.check_density, options.plant, scenario, drake=_drake(scenario)
+    )
+
+
+def _drake(scenario):
+    return lambda times: drake_plants(times, scenario)
 
 
 @dataclass(frozen=True)
@@ -181,7 +193,7 @@ class ControllerResult:
     scenario : Scenario
         The scenario the controller is designed on.
     options : ControllerOptions
-    plants : PlantArray
+    plants : oos_drake.control.plants.PlantArray
         The model array designed on.
     K0 : numpy.ndarray, shape (3, 6)
         Baseline (start) gain [N m/rad, N m s/rad].
@@ -198,7 +210,7 @@ class ControllerResult:
 
     scenario: object
     options: ControllerOptions
-    plants: PlantArray
+    plants: object
     K0: np.ndarray
     spec: DesignSpecification
     solver_options: object

@@ -35,6 +35,7 @@ import numpy as np
 
 from oos_drake.control import components as comp
 from oos_drake.control.statespace import BatchedStateSpace
+from oos_drake.lfr import LFR
 
 #: Eigenvector basis condition number of a plant above which its response uses LU solves.
 PLANT_CONDITION_LIMIT = 1e10
@@ -78,8 +79,9 @@ class LoopResponse:
 
     Parameters
     ----------
-    plant : BatchedStateSpace
-        Plant array ``T -> wdot`` (3x3), leading dimension N.
+    plant : LFR or BatchedStateSpace
+        Plant array ``T -> wdot`` (3x3), leading dimension N: a certain LFR model array (what
+        other packages pass) or the control package's own state space.
     spec : DesignSpecification
         Weights and components (the same as the interconnection's).
 
@@ -89,11 +91,18 @@ class LoopResponse:
     ``WeightedInterconnection.close(K).freqresp`` (a second, independent method).
     """
 
-    def __init__(self, plant: BatchedStateSpace, spec: comp.DesignSpecification):
-        A = np.asarray(plant.A, dtype=float)
+    def __init__(self, plant: BatchedStateSpace | LFR, spec: comp.DesignSpecification):
+        A, B, C, D = plant.A, plant.B, plant.C, plant.D
+        if isinstance(plant, LFR):  # a certain LFR model array (the border type)
+            if plant.uncertainty:
+                raise ValueError("LoopResponse: the plant still has uncertain blocks")
+            if plant.shape != (3, 3):
+                raise ValueError(f"LoopResponse: the plant must be 3x3, got {plant.shape}")
+            A, B, C, D = (np.array(M, dtype=float) for M in (A, B, C, D))  # contiguous copies
+        A = np.asarray(A, dtype=float)
         if A.ndim == 2:
             raise ValueError("LoopResponse: the plant must be an array (leading dimension N)")
-        self.A, self.B, self.C, self.D = A, plant.B, plant.C, plant.D
+        self.A, self.B, self.C, self.D = A, B, C, D
         N, n = A.shape[0], A.shape[-1]
         self.spec = spec
         if n:

@@ -5,6 +5,12 @@ real uncertain parameters ``delta`` (physical values inside their ranges), the 3
 plant ``T_ext,G1 -> wdot`` as state-space matrices. :class:`PlantArray` provides that through
 one vectorized callable, whatever the source (LFR substitution, Drake linearization, or the
 synthetic flexible spacecraft of :func:`synthetic_flexible_plants` used in tests).
+
+A :class:`PlantArray` is built here and does not leave the synthesis' callers: other packages
+hand this module LFRs (:func:`from_lfr`: an uncertain LFR and its schedule;
+:func:`lfr_source_plants`: certain LFRs per configuration and a callable returning a
+configuration's uncertain LFR, the Drake twin's form), and the application names a source
+(:func:`make_plants`: ``"lfr"``, ``"drake"``, ``"synthetic"``).
 """
 
 from __future__ import annotations
@@ -340,6 +346,145 @@ def from_lfr(
         configurations if configurations is not None else pd.DataFrame({"index": np.arange(N)})
     )
     return PlantArray(configurations, parameters, build, source)
+
+
+def _pad(A, B, C, D, order: int, pole: float):
+    """Pad ``(A, B, C, D)`` (leading batch dimensions allowed) to ``order`` states with
+    decoupled states at ``pole`` [rad/s] (``B = 0``, ``C = 0``: the transfer function is
+    unchanged)."""
+    n = A.shape[-1]
+    if n > order:
+        raise ValueError(f"plant has {n} states, more than the array order {order}")
+    if n == order:
+        return A, B, C, D
+    batch = A.shape[:-2]
+    A2 = np.zeros(batch + (order, order))
+    A2[..., :n, :n] = A
+    A2[..., n:, n:] = pole * np.eye(order - n)
+    B2 = np.zeros(batch + (order, B.shape[-1]))
+    B2[..., :n, :] = B
+    C2 = np.zeros(batch + (C.shape[-2], order))
+    C2[..., :n] = C
+    return A2, B2, C2, D
+
+
+def lfr_source_plants(
+    configurations: pd.DataFrame,
+    nominal,
+    uncertain: Callable,
+    parameters: tuple[UncertainParameter, ...],
+    *,
+    padding_pole: float,
+    source: str,
+    statistics: Callable | None = None,
+) -> PlantArray:
+    """A :class:`PlantArray` from certain LFRs per configuration and, lazily, their uncertain
+    LFRs (the Drake twin's form: nominal linearizations, LFRs extracted on demand).
+
+    Parameters
+    ----------
+    configurations : pandas.DataFrame
+        One row per configuration (e.g. ``time [s]``).
+    nominal : sequence of oos_drake.lfr.LFR
+        Configuration ``i``'s certain plant ``T -> wdot`` at the nominal parameter values (no
+        uncertain block; orders may differ).
+    uncertain : callable
+        ``uncertain(i) -> LFR``: configuration ``i``'s uncertain plant ``T -> wdot`` (``ureal``
+        blocks named as ``parameters``; the ones that do not act there may be absent; at most
+        the array's order), called when a plant of ``i`` away from the nominal values is needed
+        (the source may cache it).
+    parameters : tuple of UncertainParameter
+        The real uncertain parameters (physical nominal values and ranges).
+    padding_pole : float
+        Pole [rad/s] of the decoupled states that bring every model to the largest order of
+        ``nominal`` (the transfer functions are unchanged).
+    source : str
+        Label stored with the results (e.g. ``"drake"``).
+    statistics : callable, optional
+        ``statistics() -> dict``: what building the models has cost so far.
+
+    Returns
+    -------
+    PlantArray
+        Rows at the nominal values are the ``nominal`` plants; the others are their
+        configuration's uncertain LFR with the values substituted (:func:`lfr_statespace`).
+    """
+    models = list(nominal)
+    if not models or any(not isinstance(m, LFR) or m.uncertainty for m in models):
+        raise ValueError("lfr_source_plants: nominal must be certain LFRs, at least one")
+    order = max(m.nstates for m in models)
+    padded = [
+        _pad(*(np.asarray(M, dtype=float) for M in (m.A, m.B, m.C, m.D)), order, padding_pole)
+        for m in models
+    ]
+    matrices = tuple(np.stack([m[k] for m in padded]) for k in range(4))
+    nominal_values = np.array([p.nominal for p in parameters], dtype=float)
+    names = [p.name for p in parameters]
+
+    def build(index, values):
+        index = np.asarray(index, dtype=int).ravel()
+        values = np.asarray(values, dtype=float).reshape(index.size, len(parameters))
+        A, B, C, D = (M[index] for M in matrices)  # copies (fancy indexing)
+        perturbed = np.any(values != nominal_values, axis=1)
+        for i in np.unique(index[perturbed]):
+            rows = np.flatnonzero(perturbed & (index == i))
+            model = uncertain(i)
+            present = model.uncertainty
+            substituted = lfr_statespace(
+                model, {n: values[rows, j] for j, n in enumerate(names) if n in present}
+            )
+            for M, S in zip((A, B, C, D), _pad(*substituted, order, padding_pole), strict=True):
+                M[rows] = S
+        return A, B, C, D
+
+    return PlantArray(configurations, tuple(parameters), build, source, statistics)
+
+
+#: The sources of a synthesis model array (:func:`make_plants`, ``oos synth --plant``).
+PLANTS = ("lfr", "drake", "synthetic")
+
+
+def make_plants(
+    kind: str, configurations: int, scenario, *, drake: Callable | None = None
+) -> PlantArray:
+    """The synthesis model array of ``scenario`` from source ``kind``.
+
+    Parameters
+    ----------
+    kind : str
+        ``"lfr"`` (the scenario's LFR, :func:`scenario_plants`), ``"drake"`` (the Drake twin,
+        through ``drake``) or ``"synthetic"`` (:func:`synthetic_flexible_plants`, tests).
+    configurations : int
+        Equally spaced mission configurations (:func:`mission_times`), at least 1.
+    scenario : Scenario
+        Unused by ``"synthetic"``.
+    drake : callable, optional
+        ``drake(times) -> PlantArray`` for ``"drake"`` (the application passes the twin's
+        LFRs through :func:`lfr_source_plants`; this package never imports pydrake).
+    """
+    if kind == "lfr":
+        return scenario_plants(configurations, scenario)
+    if kind == "drake":
+        if drake is None:
+            raise ValueError("--plant drake: no Drake source given")
+        return drake(mission_times(configurations, scenario))
+    if kind == "synthetic":
+        return synthetic_flexible_plants(configurations)
+    raise ValueError(f"--plant must be lfr, drake or synthetic, got {kind!r}")
+
+
+def between_plants(
+    plants: PlantArray, check_density: int, kind: str, scenario, *, drake: Callable | None = None
+) -> PlantArray | None:
+    """The configurations between those of ``plants`` where the hard goals are checked:
+    ``check_density - 1`` evenly spaced in each interval (the array of source ``kind``
+    (:func:`make_plants`) built on ``(N - 1) * check_density + 1`` mission times, those of
+    ``plants`` left out); None with ``check_density`` 1 or a single configuration."""
+    d, N = check_density, plants.size
+    if d <= 1 or N <= 1:
+        return None
+    dense = make_plants(kind, (N - 1) * d + 1, scenario, drake=drake)
+    return dense.subset([i for i in range(dense.size) if i % d])
 
 
 def scenario_plants(configurations: int, scenario) -> PlantArray:

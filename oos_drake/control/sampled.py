@@ -204,9 +204,19 @@ def sampled_interconnection(
     return connect(parts, DISTURBANCES + CONTROLS, ERRORS + MEASUREMENTS)
 
 
-def plant_with_integrators(A, B, C, D) -> tuple[np.ndarray, ...]:
-    """``(A, B, C)`` of ``T -> [phi; w]`` from a plant ``T -> wdot`` (states ``[x; w; phi]``)."""
-    A, B, C, D = (np.asarray(m, dtype=float) for m in (A, B, C, D))
+def plant_with_integrators(plant) -> tuple[np.ndarray, ...]:
+    """``(A, B, C)`` of ``T -> [phi; w]`` from a certain plant ``T -> wdot`` (states
+    ``[x; w; phi]``).
+
+    Parameters
+    ----------
+    plant : LFR without uncertain blocks, state space, or tuple ``(A, B, C, D)``
+        Certain 3x3 plant ``T [N m] -> wdot [rad/s^2]``.
+    """
+    return _with_integrators(*_matrices(plant, "plant_with_integrators"))
+
+
+def _with_integrators(A, B, C, D) -> tuple[np.ndarray, ...]:
     n = A.shape[0]
     Aa = np.zeros((n + 6, n + 6))
     Aa[:n, :n] = A
@@ -337,7 +347,7 @@ def sampled_loop(plant, K, spec: comp.DesignSpecification | None = None) -> Samp
         controller = as_controller(K).discretize(T)
     except ValueError as exc:
         raise ValueError(f"sampled_loop: {exc}") from exc
-    Aa, Ba, Ca = plant_with_integrators(A, B, C, D)
+    Aa, Ba, Ca = _with_integrators(A, B, C, D)
     shift = int(np.floor(spec.computation_delay_s / T + 1e-12))
     frac = max(spec.computation_delay_s - shift * T, 0.0)
     E_late, Gamma0 = _hold_integral(Aa, Ba, T - frac)
@@ -348,17 +358,17 @@ def sampled_loop(plant, K, spec: comp.DesignSpecification | None = None) -> Samp
     return SampledLoop(T, Phi, Gamma0, Gamma1, Ca, shift, chain, controller, spec)
 
 
-def _matrices(plant) -> tuple[np.ndarray, ...]:
+def _matrices(plant, who: str = "sampled_loop") -> tuple[np.ndarray, ...]:
     """``(A, B, C, D)`` of a certain 3x3 plant (a tuple, a state space or an LFR w/o blocks)."""
     if isinstance(plant, tuple):
         A, B, C, D = plant
     else:
         if getattr(plant, "nw", 0):
-            raise ValueError("sampled_loop: the plant still has uncertain blocks; substitute them")
+            raise ValueError(f"{who}: the plant still has uncertain blocks; substitute them")
         A, B, C, D = plant.A, plant.B, plant.C, plant.D
     A, B, C, D = (np.asarray(m, dtype=float) for m in (A, B, C, D))
     if D.shape != (3, 3):
-        raise ValueError(f"sampled_loop: the plant must be 3x3 (T -> wdot), got {D.shape}")
+        raise ValueError(f"{who}: the plant must be 3x3 (T -> wdot), got {D.shape}")
     return A, B, C, D
 
 

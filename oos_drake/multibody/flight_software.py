@@ -393,7 +393,7 @@ def perturbation_block(
         Ad, Bd, Cd = np.zeros((0, 0)), np.zeros((0, 3)), np.zeros((6, 0))
     else:
         a = lti_interpolant(design.W_add * add, omega)
-        Ac, Bc, Cc = plant_with_integrators(a.A, a.B, a.C, a.D)  # outputs [dphi; dw]
+        Ac, Bc, Cc = plant_with_integrators(a)  # outputs [dphi; dw]
         Ad, Bd, Cd, _, _ = scipy.signal.cont2discrete(
             (Ac, Bc, Cc, np.zeros((6, 3))), T, method="zoh"
         )

@@ -2,17 +2,19 @@
 
 The synthesis (:mod:`oos_drake.control.synthesis`) needs, for every mission configuration ``i``
 and every value of the real uncertain parameters ``Delta_real``, the rotational plant
-``T_ext,G1 -> wdot`` as state-space matrices (a :class:`oos_drake.control.plants.PlantArray`).
-This module builds it from the Drake twin instead of the TITOP LFR, the same way:
+``T_ext,G1 -> wdot`` as state-space matrices. This module gives it, as LFRs, from the Drake twin
+instead of the TITOP LFR (:class:`DrakePlantSource`; the control package makes the plant array
+of them: :func:`oos_drake.control.plants.lfr_source_plants`), the same way:
 
 - nominal plants: the twin is placed at configuration ``i`` (mission time ``t_i``; arm and array
   drive angles locked, connection from the docking switches) and linearized once by
   :func:`oos_drake.multibody.operating_point.linearize_at`; the unreachable and unobservable
   states (chaser rigid-body motion, a free target) are pruned structurally and the 3x3 block
-  ``[T] -> [wdot]`` is kept (~10 ms per configuration);
+  ``[T] -> [wdot]`` is kept (~10 ms per configuration): :attr:`DrakePlantSource.nominal`, one
+  certain LFR per configuration;
 - plants at other parameter values (the worst-case search): configuration ``i``'s uncertain LFR
-  is extracted from the twin by ``ulinearize``
-  (:func:`oos_drake.multibody.mission_lfr.twin_lfr`, the TITOP block names, nominal values and
+  is extracted from the twin by ``ulinearize`` (:meth:`DrakePlantSource.lfr`,
+  :func:`oos_drake.multibody.mission_lfr.twin_lfr`, the TITOP block names, nominal values and
   ranges) the first time the search visits ``i``, kept, and the values are substituted into it
   (:func:`oos_drake.control.plants.lfr_statespace`), exactly as the TITOP path substitutes them
   into its LFR. An extraction (29 Taylor linearizations and the acceleration probes) costs as
@@ -21,7 +23,8 @@ This module builds it from the Drake twin instead of the TITOP LFR, the same way
   (a few per round) and later rounds reuse the extraction. Nothing is relinearized per point.
 - every model of the array has the same number of states (the largest pruned order, 48 for the
   paper): models with fewer states (free target: the target's modes are not reachable) are padded
-  with decoupled states at ``-1 rad/s`` (``B = 0``, ``C = 0``): the transfer function, hence every
+  with decoupled states at :data:`PADDING_POLE` ``= -1 rad/s`` (``B = 0``, ``C = 0``; done by the
+  control package's plant array): the transfer function, hence every
   closed-loop H-infinity norm, is unchanged. The LFR array carries those target modes as
   decoupled states too.
 
@@ -46,9 +49,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
-import pandas as pd
 
-from oos_drake.control.plants import PlantArray, lfr_statespace
 from oos_drake.lfr import LFR
 from oos_drake.multibody.appendage_sdf import MODE_JOINT
 from oos_drake.multibody.linearization import structural_prune
@@ -74,7 +75,6 @@ __all__ = [
     "apply_physical_values",
     "rotational_plant",
     "DrakePlantSource",
-    "drake_plant_array",
 ]
 
 
@@ -166,26 +166,9 @@ def rotational_plant(
     return tuple(np.asarray(M, dtype=float) for M in (system.A, system.B, system.C, system.D))
 
 
-def _pad(A, B, C, D, order: int):
-    """Pad ``(A, B, C, D)`` (leading batch dimensions allowed) with decoupled states."""
-    n = A.shape[-1]
-    if n > order:
-        raise ValueError(f"Drake plant has {n} states, more than the array order {order}")
-    if n == order:
-        return A, B, C, D
-    batch = A.shape[:-2]
-    A2 = np.zeros(batch + (order, order))
-    A2[..., :n, :n] = A
-    A2[..., n:, n:] = PADDING_POLE * np.eye(order - n)
-    B2 = np.zeros(batch + (order, B.shape[-1]))
-    B2[..., :n, :] = B
-    C2 = np.zeros(batch + (C.shape[-2], order))
-    C2[..., :n] = C
-    return A2, B2, C2, D
-
-
 class DrakePlantSource:
-    """Drake twin plants per configuration: nominal linearizations, extracted LFRs elsewhere.
+    """Drake twin plants per configuration as LFRs: nominal linearizations (certain LFRs) and,
+    on demand, the uncertain LFR extracted by ``ulinearize``.
 
     Parameters
     ----------
@@ -199,8 +182,11 @@ class DrakePlantSource:
 
     Attributes
     ----------
-    nominal_matrices : tuple of numpy.ndarray
-        ``(A, B, C, D)`` batched over the configurations (padded to :attr:`order`).
+    nominal : tuple of oos_drake.lfr.LFR
+        Each configuration's pruned plant ``T -> wdot`` at the nominal parameter values (a
+        certain LFR; orders differ with the pruning).
+    parameters : tuple of oos_drake.control.plants.UncertainParameter
+        The scenario's real uncertain parameters.
     build_time_s : float
         Wall time of the nominal linearizations [s].
     extractions : int
@@ -235,9 +221,7 @@ class DrakePlantSource:
             if progress is not None:
                 progress(i + 1, self.times.size)
         self.linearizations = len(raw)
-        self.order = max(m[0].shape[0] for m in raw)
-        padded = [_pad(*m, self.order) for m in raw]
-        self.nominal_matrices = tuple(np.stack([m[k] for m in padded]) for k in range(4))
+        self.nominal = tuple(LFR.from_ss(*m) for m in raw)
         self.build_time_s = time.perf_counter() - wall
 
     def lfr(self, index: int) -> LFR:
@@ -256,33 +240,6 @@ class DrakePlantSource:
             self.extraction_time_s += time.perf_counter() - wall
         return self._lfrs[index]
 
-    def build(self, index, values):
-        """The :class:`~oos_drake.control.plants.PlantArray` ``build`` callable (batched).
-
-        Rows at the nominal values are the nominal linearizations; the others are their
-        configuration's extracted LFR with ``values`` substituted.
-        """
-        index = np.asarray(index, dtype=int).ravel()
-        values = np.asarray(values, dtype=float).reshape(index.size, len(self.parameters))
-        A, B, C, D = (M[index] for M in self.nominal_matrices)  # copies (fancy indexing)
-        perturbed = np.any(values != self.nominal_values, axis=1)
-        names = [p.name for p in self.parameters]
-        for i in np.unique(index[perturbed]):
-            rows = np.flatnonzero(perturbed & (index == i))
-            model = self.lfr(i)
-            present = model.uncertainty
-            substituted = lfr_statespace(
-                model, {n: values[rows, j] for j, n in enumerate(names) if n in present}
-            )
-            for M, S in zip((A, B, C, D), _pad(*substituted, self.order), strict=True):
-                M[rows] = S
-        return A, B, C, D
-
-    @property
-    def nominal_values(self) -> np.ndarray:
-        """Nominal parameter values (P,)."""
-        return np.array([p.nominal for p in self.parameters], dtype=float)
-
     def statistics(self) -> dict:
         """Cost of the models so far: linearizations, extractions and their times [s]."""
         return {
@@ -291,18 +248,3 @@ class DrakePlantSource:
             "lfr_extractions": self.extractions,
             "lfr_extraction_time_s": round(self.extraction_time_s, 3),
         }
-
-    def plant_array(self) -> PlantArray:
-        """The synthesis' plant array (configurations table with ``time_s``)."""
-        return PlantArray(
-            pd.DataFrame({"time [s]": self.times}),
-            self.parameters,
-            self.build,
-            source="drake",
-            statistics=self.statistics,
-        )
-
-
-def drake_plant_array(times, scenario, *, progress=None) -> PlantArray:
-    """Plant array of the Drake twin at mission ``times`` [s] (see :class:`DrakePlantSource`)."""
-    return DrakePlantSource(times, scenario, progress=progress).plant_array()

@@ -86,7 +86,7 @@ def test_discrete_closed_loop_matches_a_simulation_of_the_hybrid_loop(delay):
     # independent hybrid simulation
     from oos_drake.control.sampled import plant_with_integrators
 
-    Aa, Ba, Ca = plant_with_integrators(*P)
+    Aa, Ba, Ca = plant_with_integrators(P)
     Ac, Bc, Cc, Dc = loop.controller
     xc, xp = np.zeros(Ac.shape[0]), x0[:n].copy()
     commands = []  # (time it reaches the plant, torque)

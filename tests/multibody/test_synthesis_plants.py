@@ -8,6 +8,7 @@ norms (Hamiltonian bisection, not the synthesis' modal evaluation).
 """
 
 import numpy as np
+import pandas as pd
 import pytest
 
 pytestmark = pytest.mark.drake
@@ -19,13 +20,13 @@ from oos_drake.control.interconnection import (  # noqa: E402
     plant_statespace,
     weighted_interconnection,
 )
+from oos_drake.control.plants import _pad, lfr_source_plants  # noqa: E402
 from oos_drake.control.synthesis import SynthesisOptions, _worst_case_search, tune  # noqa: E402
 from oos_drake.multibody.mission_lfr import uncertain_parameters  # noqa: E402
 from oos_drake.multibody.scenario_plant import twin_diagram  # noqa: E402
 from oos_drake.multibody.synthesis_plants import (  # noqa: E402
     PADDING_POLE,
     DrakePlantSource,
-    _pad,
     apply_physical_values,
     rotational_plant,
 )
@@ -41,6 +42,19 @@ def sources(paper_scenario):
     return DrakePlantSource(times, paper_scenario), scenario_plants(CONFIGURATIONS, paper_scenario)
 
 
+def plant_array(drake):
+    """The synthesis' plant array of a Drake source (as ``oos synth --plant drake`` makes it)."""
+    return lfr_source_plants(
+        pd.DataFrame({"time [s]": drake.times}),
+        drake.nominal,
+        drake.lfr,
+        drake.parameters,
+        padding_pole=PADDING_POLE,
+        source="drake",
+        statistics=drake.statistics,
+    )
+
+
 def relative_error(a, b):
     Ha, Hb = a.freqresp(OMEGA), b.freqresp(OMEGA)
     worst = np.linalg.norm(Ha - Hb, ord=2, axis=(-2, -1)).max(axis=-1)
@@ -49,7 +63,7 @@ def relative_error(a, b):
 
 def test_parameters_are_the_lfr_blocks(sources):
     drake, lfr = sources
-    plants = drake.plant_array()
+    plants = plant_array(drake)
     assert [p.name for p in plants.parameters] == [p.name for p in lfr.parameters]
     for ours, theirs in zip(plants.parameters, lfr.parameters, strict=True):
         np.testing.assert_allclose(
@@ -63,13 +77,13 @@ def test_parameters_are_the_lfr_blocks(sources):
 def test_nominal_plants_agree_with_the_lfr(sources):
     drake, lfr = sources
     index = np.arange(CONFIGURATIONS)
-    error = relative_error(drake.plant_array().evaluate(index), lfr.evaluate(index))
+    error = relative_error(plant_array(drake).evaluate(index), lfr.evaluate(index))
     assert error.max() < 1e-8, error
 
 
 def test_perturbed_plants_agree_with_the_lfr(sources):
     drake, lfr = sources
-    plants = drake.plant_array()
+    plants = plant_array(drake)
     lower, upper = plants.bounds
     rng = np.random.default_rng(3)
     index = np.array([0, 2, 5, 7])  # free, arm-held, docked, tilted
@@ -86,8 +100,10 @@ def test_perturbed_plants_agree_with_the_lfr(sources):
 
 def test_free_target_models_are_padded_with_decoupled_states(sources):
     drake, _ = sources
-    A, B, C, _ = (M[0] for M in drake.nominal_matrices)  # t = 0: target free, 24 states
-    assert drake.order == 48
+    assert drake.nominal[0].nstates == 24  # t = 0: target free
+    nominal = plant_array(drake).nominal()
+    A, B, C = nominal.A[0], nominal.B[0], nominal.C[0]
+    assert A.shape == (48, 48)
     padded = np.flatnonzero(np.all(B == 0, axis=1) & np.all(C == 0, axis=0))
     assert padded.size == 24
     np.testing.assert_array_equal(A[np.ix_(padded, padded)], PADDING_POLE * np.eye(24))
@@ -97,7 +113,7 @@ def test_free_target_models_are_padded_with_decoupled_states(sources):
 
 def test_each_configuration_is_extracted_once_and_nothing_is_relinearized(paper_scenario):
     drake = DrakePlantSource(mission_times(3, paper_scenario), paper_scenario)
-    plants = drake.plant_array()
+    plants = plant_array(drake)
     lower, upper = plants.bounds
     plants.evaluate([1, 1], np.vstack([lower, upper]))
     plants.evaluate([1, 1, 2], np.vstack([upper, lower, plants.nominal_values]))
@@ -120,7 +136,7 @@ def _poles_match(a, b, rtol):
 def test_extracted_plants_equal_the_twin_relinearized_with_the_values(sources):
     # the independent reference: the values written into the twin's Context, relinearized
     drake, _ = sources
-    plants = drake.plant_array()
+    plants = plant_array(drake)
     lower, upper = plants.bounds
     rng = np.random.default_rng(7)
     index = np.array([0, 5, 5])  # free target (its blocks absent from its LFR), docked
@@ -132,6 +148,7 @@ def test_extracted_plants_equal_the_twin_relinearized_with_the_values(sources):
                 drake.configurations[i], drake.scenario, dict(zip(names, v, strict=True))
             ),
             48,
+            PADDING_POLE,
         )
         for i, v in zip(index, values, strict=True)
     ]
@@ -147,7 +164,7 @@ def test_worst_case_search_equals_the_titop_path_and_drake_relinearized(sources)
     # it finds, closed with the gain, against the twin relinearized with the values in its
     # Context (independent of the LFR extraction) and the TITOP LFR substituted
     drake, lfr = sources
-    plants = {"drake": drake.plant_array(), "lfr": lfr}
+    plants = {"drake": plant_array(drake), "lfr": lfr}
     # a gain tuned a little (the baseline's peak, gamma ~11, does not depend on Delta_real)
     K0 = baseline_gains(inertia_from_plant(lfr.evaluate([2]))[0])
     K = tune(weighted_interconnection(lfr.nominal()), K0, max_iterations=15)[0]
@@ -160,7 +177,7 @@ def test_worst_case_search_equals_the_titop_path_and_drake_relinearized(sources)
     np.testing.assert_allclose(found["drake"][1], found["lfr"][1], rtol=1e-7)
     assert drake.statistics()["nominal_linearizations"] == CONFIGURATIONS  # no relinearization
     # off-nominal points everywhere: the search's, else (nominal worst case) the upper corner
-    off = np.any(found["drake"][0] != drake.nominal_values, axis=1)
+    off = np.any(found["drake"][0] != plants["drake"].nominal_values, axis=1)
     assert off.sum() >= 2, found["drake"][0]
     values = np.where(off[:, None], found["drake"][0], plants["drake"].bounds[1])
     names = [p.name for p in plants["drake"].parameters]
@@ -171,7 +188,8 @@ def test_worst_case_search_equals_the_titop_path_and_drake_relinearized(sources)
             *rotational_plant(
                 drake.configurations[c], drake.scenario, dict(zip(names, values[k], strict=True))
             ),
-            drake.order,
+            48,
+            PADDING_POLE,
         )
         loops = {
             "drake": _closed_loops(ours.A[k], ours.B[k], ours.C[k], ours.D[k], K),
