@@ -217,20 +217,25 @@ def _joint_component(body) -> Component:
     )
 
 
+def _appendage_model(body) -> LFR:
+    """The flexible appendage ``body`` at its port, in its own axes (TITOP ``M_P(s)``)."""
+    return flexible_appendage(
+        body.rigid_spatial_inertia,
+        np.asarray(body.participation).T,  # data: one row per mode
+        body.omega,
+        body.damping_ratios,
+        uncertain_frequencies=mode_frequency_blocks(body),
+        name=body.name,
+    )
+
+
 def _appendage_component(body) -> Component:
     """A flexible appendage seen from its parent through its joint, one component:
     ``T^T (-M_P(s)) T`` from the parent's acceleration twist at the joint point to the wrench
     on the parent there, both in the parent's axes (``T`` the joint's frame change; schema 1's
     array block ``T0^T T_theta^T (-M_P(s)) T_theta T0``, 16 occurrences of ``tau``)."""
     name, joint = body.name, body.joint
-    system = flexible_appendage(
-        body.rigid_spatial_inertia,
-        np.asarray(body.participation).T,  # data: one row per mode
-        body.omega,
-        body.damping_ratios,
-        uncertain_frequencies=mode_frequency_blocks(body),
-        name=name,
-    )
+    system = _appendage_model(body)
     dcm = np.asarray(joint.R_parent_joint).T
     if joint.type == "fixed":
         t = frame_change_matrix(dcm)
@@ -279,16 +284,10 @@ def _components(
             if joint is not None and joint.type in ("fixed", "revolute"):
                 components.append(_appendage_component(body))
                 continue
-            system = flexible_appendage(
-                body.rigid_spatial_inertia,
-                np.asarray(body.participation).T,  # data: one row per mode
-                body.omega,
-                body.damping_ratios,
-                uncertain_frequencies=mode_frequency_blocks(body),
-                name=name,
-            )
             components.append(
-                Component(name, system, (f"xdd_J{name}_{name}",), (f"W_J{name}_{name}",))
+                Component(
+                    name, _appendage_model(body), (f"xdd_J{name}_{name}",), (f"W_J{name}_{name}",)
+                )
             )
         else:
             if joint is not None and joint.type == "fixed":
