@@ -401,14 +401,19 @@ def test_static_gain_synthesis_reproduced_at_convergence():
     reference = synthesize(plants, K0, options=options)
     # From K0 alone the nonsmooth descent can stop in another local minimum: with one BLAS
     # thread it stops at 1.0027 x the synthesis' gamma, with two at 0.9996 x (the round-off
-    # takes another path). Two seeded restarts, as systune is meant to be run, reach it.
+    # takes another path). Two seeded restarts, as systune is meant to be run, reach it or a
+    # lower one (0.9989 x with drake 1.51.1 / numpy 2.4.6 / scipy 1.17.1).
     tuned = systune(
         system,
         TunableGain("K", MEASUREMENTS, CONTROLS, initial=K0),
         [WeightedGain(DISTURBANCES, ERRORS)],
         options=SystuneOptions(max_iterations=300, restarts=2),
     )
-    assert tuned.soft == pytest.approx(reference.gamma, rel=1e-3)
+    assert tuned.soft <= reference.gamma * (1 + 1e-3)
+    # and the synthesis, started at systune's gain, finds nothing lower there: systune's point
+    # is converged, its value the synthesis' own evaluation of that gain
+    again = synthesize(plants, tuned.parameters["K"]["D"], options=options)
+    assert again.gamma == pytest.approx(tuned.soft, rel=1e-3)
 
 
 def test_multiloop_and_loop_at_a_time_margins_on_a_coupled_plant():
