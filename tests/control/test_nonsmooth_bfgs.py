@@ -51,24 +51,3 @@ def test_simplex_qp_single_piece_and_vertex():
     # a dominant linear term: the optimum is the vertex of the largest c
     lam = simplex_qp(np.eye(3) * 1e-3, np.array([0.0, 5.0, 1.0]))
     np.testing.assert_allclose(lam, [0.0, 1.0, 0.0])
-
-
-def test_the_direct_slsqp_driver_gives_minimizes_iterates_bit_for_bit():
-    """The bundle step's QP calls SLSQP's compiled routine directly: its answer must be the one
-    of ``scipy.optimize.minimize(method="SLSQP")`` on the same problem, bit for bit, for the
-    bundle's shapes (up to ~100 pieces of an 18-gain problem: rank-deficient ``Q``, repeated
-    pieces, zero ``c``, a single piece)."""
-    from oos_drake.blas import single_threaded_blas
-    from oos_drake.control.nonsmooth_bfgs import _simplex_qp_minimize
-
-    rng = np.random.default_rng(7)
-    for trial in range(40):
-        k, r = int(rng.integers(2, 60 if trial else 100)), int(rng.integers(1, 19))
-        G = rng.normal(size=(k, r)) * 10.0 ** rng.uniform(-3, 2)
-        if trial % 4 == 0:  # repeated pieces (the merges of null steps)
-            G[k // 2 :] = G[: k - k // 2]
-        Q = G @ G.T
-        c = np.zeros(k) if trial % 5 == 0 else -rng.random(k) * 10.0 ** rng.uniform(-4, 0)
-        with single_threaded_blas():  # the synthesis' setting (and fast on a loaded machine)
-            assert np.array_equal(simplex_qp_slsqp(Q, c), _simplex_qp_minimize(Q, c)), trial
-    assert simplex_qp_slsqp(np.eye(1), np.zeros(1)).tolist() == [1.0]
