@@ -30,11 +30,9 @@ def main(argv=None) -> int:
     parser.add_argument("--points", type=int, default=40, help="parameter points per configuration")
     args = parser.parse_args(argv)
 
-    import pandas as pd
-
-    from oos_drake.app.synth import mission_times, scenario_plants
+    from oos_drake.app.synth import mission_times, scenario_plants, source_plants
     from oos_drake.control.interconnection import plant_statespace
-    from oos_drake.control.plants import _pad, lfr_source_plants
+    from oos_drake.control.plants import _pad
     from oos_drake.multibody.synthesis_plants import (
         PADDING_POLE,
         DrakePlantSource,
@@ -46,14 +44,7 @@ def main(argv=None) -> int:
 
     scenario = load_scenario("paper")
     source = DrakePlantSource(mission_times(n, scenario), scenario)
-    drake = lfr_source_plants(
-        pd.DataFrame({"time [s]": source.times}),
-        source.nominal,
-        source.lfr,
-        source.parameters,
-        padding_pole=PADDING_POLE,
-        source="drake",
-    )
+    drake = source_plants(source, PADDING_POLE)
     titop = scenario_plants(n, scenario)
     order = drake.nominal().A.shape[-1]
     configs = np.linspace(0, n - 1, args.configurations).round().astype(int)

@@ -62,20 +62,26 @@ def drake_plants(times, scenario):
     """The model array of the Drake twin at mission ``times`` [s] (imports pydrake lazily): the
     twin's nominal linearizations and, for the worst-case search, the LFRs it extracts per
     configuration (:class:`~oos_drake.multibody.synthesis_plants.DrakePlantSource`), made into
-    a plant array by :func:`~oos_drake.control.plants.lfr_source_plants`."""
-    import pandas as pd
-
+    a plant array by :func:`source_plants`."""
     try:
         from oos_drake.multibody.synthesis_plants import PADDING_POLE, DrakePlantSource
     except ModuleNotFoundError as exc:
         raise ValueError(f"--plant drake needs pydrake ({exc}); use --plant lfr") from exc
-    source = DrakePlantSource(times, scenario)
+    return source_plants(DrakePlantSource(times, scenario), PADDING_POLE)
+
+
+def source_plants(source, padding_pole: float):
+    """The plant array of a Drake plant source (``DrakePlantSource``: its nominal LFRs and,
+    lazily, each configuration's uncertain LFR), padded to one order with poles at
+    ``padding_pole`` [rad/s] (:func:`~oos_drake.control.plants.lfr_source_plants`)."""
+    import pandas as pd
+
     return lfr_source_plants(
         pd.DataFrame({"time [s]": source.times}),
         source.nominal,
         source.lfr,
         source.parameters,
-        padding_pole=PADDING_POLE,
+        padding_pole=padding_pole,
         source="drake",
         statistics=source.statistics,
     )

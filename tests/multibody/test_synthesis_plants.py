@@ -8,19 +8,18 @@ norms (Hamiltonian bisection, not the synthesis' modal evaluation).
 """
 
 import numpy as np
-import pandas as pd
 import pytest
 
 pytestmark = pytest.mark.drake
 pytest.importorskip("pydrake")
 
-from oos_drake.app.synth import mission_times, scenario_plants  # noqa: E402
+from oos_drake.app.synth import mission_times, scenario_plants, source_plants  # noqa: E402
 from oos_drake.control.baseline import baseline_gains, inertia_from_plant  # noqa: E402
 from oos_drake.control.interconnection import (  # noqa: E402
     plant_statespace,
     weighted_interconnection,
 )
-from oos_drake.control.plants import _pad, lfr_source_plants  # noqa: E402
+from oos_drake.control.plants import _pad  # noqa: E402
 from oos_drake.control.synthesis import SynthesisOptions, _worst_case_search, tune  # noqa: E402
 from oos_drake.multibody.mission_lfr import uncertain_parameters  # noqa: E402
 from oos_drake.multibody.scenario_plant import twin_diagram  # noqa: E402
@@ -44,15 +43,7 @@ def sources(paper_scenario):
 
 def plant_array(drake):
     """The synthesis' plant array of a Drake source (as ``oos synth --plant drake`` makes it)."""
-    return lfr_source_plants(
-        pd.DataFrame({"time [s]": drake.times}),
-        drake.nominal,
-        drake.lfr,
-        drake.parameters,
-        padding_pole=PADDING_POLE,
-        source="drake",
-        statistics=drake.statistics,
-    )
+    return source_plants(drake, PADDING_POLE)
 
 
 def relative_error(a, b):
