@@ -87,6 +87,18 @@ def worst_scale_parameter() -> Parameter:
     )
 
 
+def scaled_worst_block(design, worst: tuple[float, dict], scale: float):
+    """The flight software's dynamic perturbation for ``worst_scale = scale``: the worst complex
+    blocks ``worst`` (:func:`_complex_blocks`) scaled by ``scale`` at their frequency, or None
+    at 0 (the plain mission)."""
+    if scale == 0.0:
+        return None
+    from oos_drake.multibody.flight_software import perturbation_block
+
+    omega, blocks = worst
+    return perturbation_block(design, omega, **{k: scale * v for k, v in blocks.items()})
+
+
 def _complex_blocks(option: str, simulator: str = "drake-mission") -> tuple[float, dict]:
     """``(omega [rad/s], {"delta_mul": 3x3, "delta_add": 3x3})`` of a ``worst_perturbation``
     option (its complex blocks; real ones ignored); ``simulator`` names the simulator in the
@@ -253,16 +265,8 @@ class DrakeMissionSimulator:
         values = dict(case.values)
         on_start = None
         if self._worst is not None:
-            from oos_drake.multibody.flight_software import perturbation_block
-
-            scale = float(values.pop(WORST_SCALE))
-            omega, blocks = self._worst
             fsw = self.simulation.handles.flight_software
-            block = (
-                perturbation_block(fsw.design, omega, **{k: scale * v for k, v in blocks.items()})
-                if scale != 0.0
-                else None
-            )
+            block = scaled_worst_block(fsw.design, self._worst, float(values.pop(WORST_SCALE)))
 
             def on_start(context):
                 fsw.set_dynamic_perturbation(fsw.GetMyMutableContextFromRoot(context), block)

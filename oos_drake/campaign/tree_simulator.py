@@ -378,13 +378,9 @@ class TreeMissionSimulator:
         values = {p.name: p.nominal for p in self._parameters} | dict(case.values)
         dynamic = None
         if self._worst is not None:
-            from oos_drake.campaign.drake_simulator import WORST_SCALE
-            from oos_drake.multibody.flight_software import perturbation_block
+            from oos_drake.campaign.drake_simulator import WORST_SCALE, scaled_worst_block
 
-            scale, (omega, blocks) = float(values.pop(WORST_SCALE)), self._worst
-            if scale != 0.0:
-                scaled = {k: scale * v for k, v in blocks.items()}
-                dynamic = perturbation_block(self.design, omega, **scaled)
+            dynamic = scaled_worst_block(self.design, self._worst, float(values.pop(WORST_SCALE)))
         start, end = float(case.window.start), float(case.window.end)
         if not (0.0 <= start < end <= self.duration() + 1e-9):
             raise ValueError(
